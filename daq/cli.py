@@ -1,0 +1,67 @@
+"""The ``windrig`` command line: the operator's and the reprocessing engineer's entry point.
+
+Each subcommand is a thin shell over library calls: argument parsing, printing and file output
+live here, numerics live in :mod:`ident` and physics in :mod:`simulators`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from daq import demo
+
+__all__ = ["main"]
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="windrig",
+        description="Wind-tunnel section-model acquisition and flutter identification.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    p_demo = sub.add_parser(
+        "demo",
+        help="run the numerical core on the embedded flat-plate section and write plots",
+    )
+    p_demo.add_argument("--out", type=Path, default=Path("demo_output"),
+                        help="output folder (created if missing; default: demo_output)")
+
+    p_flutter = sub.add_parser(
+        "flutter", help="flutter speed of a section with a rational-function model (JSON files)"
+    )
+    p_flutter.add_argument("--section", type=Path, required=True,
+                           help="JSON of SectionModel fields (B, m, I, fh, fa, zeta_h, zeta_a, ...)")
+    p_flutter.add_argument("--model", type=Path, required=True,
+                           help='JSON of a RationalFunctionModel ({"A": ..., "d": ...})')
+    p_flutter.add_argument("--u-max", type=float, default=None,
+                           help="upper wind speed of the search, m/s (default: K down to 0.2)")
+    return parser
+
+
+def _flutter(args: argparse.Namespace) -> int:
+    from ident import RationalFunctionModel, SectionModel, flutter
+
+    section = SectionModel.from_dict(json.loads(args.section.read_text()))
+    model = RationalFunctionModel.from_dict(json.loads(args.model.read_text()))
+    result = flutter.analyze(section, model, U_max=args.u_max)
+    print(result.summary())
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the ``windrig`` command line; returns the process exit code."""
+    args = _build_parser().parse_args(argv)
+    if args.command == "demo":
+        return demo.run(args.out)
+    if args.command == "flutter":
+        return _flutter(args)
+    raise AssertionError(f"unhandled command {args.command!r}")  # argparse rejects unknown ones
+
+
+if __name__ == "__main__":  # pragma: no cover - exercised through the console script
+    sys.exit(main())

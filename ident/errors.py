@@ -1,0 +1,31 @@
+"""Exceptions raised by the identification package.
+
+Every exception subclasses a builtin as well (``ValueError``), so that callers who only know the
+standard library can still catch bad input, while callers who know windrig can catch the specific
+cause. This follows python-control's ``ControlDimension(ValueError)`` pattern.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "IdentError",
+    "InsufficientDataError",
+    "NonUniformSamplingError",
+    "RankDeficiencyError",
+]
+
+
+class IdentError(Exception):
+    """Base class of every error raised by :mod:`ident`."""
+
+
+class InsufficientDataError(IdentError, ValueError):
+    """The data cannot determine what was asked for (too short, too few releases, ...)."""
+
+
+class NonUniformSamplingError(IdentError, ValueError):
+    """A time vector is not uniformly sampled within the stated tolerance."""
+
+
+class RankDeficiencyError(InsufficientDataError):
+    """A least-squares problem is rank deficient: the data cannot determine the unknowns."""

@@ -1,0 +1,159 @@
+"""Surface-pressure taps around a section outline, and their integration into lift and moment.
+
+A tap is a point of the outline with an outward unit normal and a tributary length. The pressure
+``p`` (Pa, relative to the free-stream static pressure) acts on the surface as ``-p n ds`` per unit
+span. Axes: ``x`` downstream along the chord, ``z`` downward (the direction of h), origin at the
+elastic axis. Then (Scanlan's signs, DESIGN.md)::
+
+    L = -sum p_i nz_i ds_i              (positive downward)
+    M =  sum (x_i dFz_i - z_i dFx_i)    (positive nose-up), with dF_i = -p_i n_i ds_i
+
+Nose-up is the rotation that takes +x towards +z here (the leading edge, at x < 0, moves to z < 0).
+This module is shared by the acquisition (pressures to forces) and the simulators (forces to
+pressures), so both sides use the same geometry and signs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from ident import _validate as v
+
+__all__ = ["TapLayout"]
+
+
+@dataclass(frozen=True, eq=False)
+class TapLayout:
+    """Positions, outward normals and tributary lengths of the pressure taps of a section.
+
+    Parameters
+    ----------
+    x, z : array_like, shape (n,)
+        Tap coordinates, m (x downstream, z downward, origin at the elastic axis).
+    nx, nz : array_like, shape (n,)
+        Outward unit normal of the surface at each tap (normalised within 1e-6).
+    length : array_like, shape (n,)
+        Tributary length of each tap along the outline, m, > 0.
+    """
+
+    x: npt.NDArray[np.float64]
+    z: npt.NDArray[np.float64]
+    nx: npt.NDArray[np.float64]
+    nz: npt.NDArray[np.float64]
+    length: npt.NDArray[np.float64]
+
+    def __post_init__(self) -> None:
+        arrays = {name: v.finite_array(name, getattr(self, name), ndim=1) for name in
+                  ("x", "z", "nx", "nz", "length")}
+        sizes = {a.size for a in arrays.values()}
+        if len(sizes) != 1:
+            raise ValueError(f"tap arrays must have equal lengths, got { {k: a.size for k, a in arrays.items()} }")
+        if arrays["x"].size < 2:
+            raise ValueError("a tap layout needs at least 2 taps")
+        norm = np.hypot(arrays["nx"], arrays["nz"])
+        if np.any(np.abs(norm - 1.0) > 1e-6):
+            worst = int(np.argmax(np.abs(norm - 1.0)))
+            raise ValueError(f"tap normals must be unit vectors; tap {worst} has |n| = {norm[worst]!r}")
+        v.positive_array("length", arrays["length"])
+        for name, arr in arrays.items():
+            arr.flags.writeable = False
+            object.__setattr__(self, name, arr)
+
+    @property
+    def n_taps(self) -> int:
+        """Number of taps."""
+        return int(self.x.size)
+
+    def integration_matrix(self) -> npt.NDArray[np.float64]:
+        """Matrix ``G`` with ``[L, M] = G p``, shape (2, n); L in N/m and M in N m/m for p in Pa."""
+        dFx = -self.nx * self.length  # force per unit pressure, N/m per Pa
+        dFz = -self.nz * self.length
+        return np.vstack([dFz, self.x * dFz - self.z * dFx])
+
+    def integrate(self, pressures: Any) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """Lift and moment from tap pressures.
+
+        Parameters
+        ----------
+        pressures : array_like, shape (n_samples, n_taps)
+            Pa. A NaN at any tap makes that sample's lift and moment NaN (a marked gap, never a
+            silently wrong force).
+
+        Returns
+        -------
+        lift, moment : ndarray, shape (n_samples,)
+            N/m and N m/m.
+        """
+        p = np.asarray(pressures, dtype=float)
+        if p.ndim != 2 or p.shape[1] != self.n_taps:
+            raise ValueError(f"pressures must have shape (n_samples, {self.n_taps}), got {p.shape}")
+        forces = p @ self.integration_matrix().T  # NaN propagates through the sum
+        return forces[:, 0], forces[:, 1]
+
+    def pressures_for(
+        self, lift: Any, moment: Any, mean: Any = None
+    ) -> npt.NDArray[np.float64]:
+        """Tap pressures that integrate exactly to the given lift and moment.
+
+        The dynamic part is the minimum-norm distribution (pseudo-inverse of the integration
+        matrix); ``mean`` adds a steady distribution with its lift and moment removed, so that
+        the integral is unchanged.
+
+        Parameters
+        ----------
+        lift, moment : array_like, shape (n_samples,)
+            N/m and N m/m.
+        mean : array_like, shape (n_taps,), optional
+            Steady pressure distribution, Pa (e.g. ``qd * Cp_mean``).
+
+        Returns
+        -------
+        ndarray, shape (n_samples, n_taps)
+            Pa.
+        """
+        forces = np.column_stack([v.finite_array("lift", lift, ndim=1),
+                                  v.finite_array("moment", moment, ndim=1)])
+        G = self.integration_matrix()
+        G_pinv = np.linalg.pinv(G)
+        p = forces @ G_pinv.T
+        if mean is not None:
+            steady = v.finite_array("mean", mean, ndim=1)
+            if steady.shape != (self.n_taps,):
+                raise ValueError(f"mean must have shape ({self.n_taps},), got {steady.shape}")
+            p = p + (steady - G_pinv @ (G @ steady))
+        return np.asarray(p, dtype=float)
+
+    @classmethod
+    def rectangle(cls, B: float, D: float, taps_per_face: int) -> TapLayout:
+        """Taps evenly spread on the upper and lower faces and the two ends of a B x D rectangle.
+
+        Parameters
+        ----------
+        B, D : float
+            Width (chord) and depth, m; the origin is the rectangle's centre.
+        taps_per_face : int
+            Taps on each horizontal face (>= 2); each vertical end gets ``max(1, taps_per_face//8)``.
+        """
+        B = v.positive("B", B)
+        D = v.positive("D", D)
+        if not isinstance(taps_per_face, int) or taps_per_face < 2:
+            raise ValueError(f"taps_per_face must be an integer >= 2, got {taps_per_face!r}")
+        n_end = max(1, taps_per_face // 8)
+        ds = B / taps_per_face
+        xs = -B / 2 + ds * (np.arange(taps_per_face) + 0.5)
+        dz = D / n_end
+        zs = -D / 2 + dz * (np.arange(n_end) + 0.5)
+        ones, zeros = np.ones(taps_per_face), np.zeros(taps_per_face)
+        e1, e0 = np.ones(n_end), np.zeros(n_end)
+        # Upper face (z = -D/2, normal -z), lower face (z = +D/2, normal +z), then the two ends.
+        return cls(
+            x=np.concatenate([xs, xs, -B / 2 * e1, B / 2 * e1]),
+            z=np.concatenate([-D / 2 * ones, D / 2 * ones, zs, zs]),
+            nx=np.concatenate([zeros, zeros, -e1, e1]),
+            nz=np.concatenate([-ones, ones, e0, e0]),
+            length=np.concatenate([ds * ones, ds * ones, dz * e1, dz * e1]),
+        )

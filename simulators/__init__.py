@@ -1,0 +1,12 @@
+"""The virtual tunnel: section-model physics in the wind, and (later) simulated instruments.
+
+:mod:`simulators.tunnel` simulates free-vibration releases; :mod:`simulators.effects` holds the
+named physical effects that can be added to them. This package may import :mod:`ident` (for the
+aerodynamic model) but never :mod:`daq`.
+"""
+
+from simulators import effects, tunnel
+from simulators.effects import EFFECT_NAMES
+from simulators.tunnel import SimulatedRelease, simulate_release
+
+__all__ = ["EFFECT_NAMES", "SimulatedRelease", "effects", "simulate_release", "tunnel"]

@@ -1,0 +1,225 @@
+"""Each named effect changes a simulated release the way its physics says it should.
+
+Structural effects are checked on a still-air release (no aerodynamic force) against the classical
+single-degree-of-freedom results, so that the expectation is independent of the simulator's code.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.linalg import eigh, expm
+from scipy.signal import find_peaks
+
+from ident import AeroelasticSystem, RationalFunctionModel, SectionModel, flat_plate, flutter
+from simulators import EFFECT_NAMES, simulate_release
+from simulators.effects import (
+    ChannelDelay,
+    CoulombFriction,
+    CubicStiffness,
+    QuadraticDamping,
+    SensorCrosstalk,
+    StaticUnbalance,
+    VortexShedding,
+)
+
+UNDAMPED = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.0, zeta_a=0.0)
+SECTION = UNDAMPED.replace(zeta_h=0.005, zeta_a=0.005)
+STILL_AIR = RationalFunctionModel(np.zeros((3, 2, 2)), [])
+K_H = UNDAMPED.m * UNDAMPED.omega_h**2  # heave spring, N/m per m span
+
+
+def heave_peaks(effect, *, section=UNDAMPED, h0=0.005, duration=8.0, fs=2000.0):
+    rel = simulate_release(section, STILL_AIR, 0.0, h0, 0.0, duration=duration, fs=fs,
+                           effects=[effect])
+    peaks, _ = find_peaks(rel.h)
+    return rel, peaks
+
+
+def test_the_seven_design_names_are_all_there():
+    """The effect registry holds exactly the names of DESIGN.md."""
+    assert set(EFFECT_NAMES) == {
+        "coulomb_friction", "quadratic_damping", "cubic_stiffness", "channel_delay",
+        "vortex_shedding", "static_unbalance", "sensor_crosstalk",
+    }
+
+
+def test_coulomb_friction_gives_a_linear_envelope():
+    """Dry friction removes 4 F / k of amplitude per cycle: a straight-line envelope."""
+    friction = 0.05  # N/m
+    rel, peaks = heave_peaks(CoulombFriction(force_h=friction))
+    amplitudes = rel.h[peaks]
+    amplitudes = amplitudes[amplitudes > 5 * 4 * friction / K_H]  # before sticking sets in
+    cycles = np.arange(amplitudes.size)
+    slope, intercept = np.polyfit(cycles, amplitudes, 1)
+    # Smoothing the sign over 1e-4 m/s (0.2 % of the peak velocity) takes < 3 % off the loss.
+    assert -slope == pytest.approx(4 * friction / K_H, rel=0.03)
+    linear_misfit = np.abs(amplitudes - (intercept + slope * cycles)).max()
+    log_fit = np.polyval(np.polyfit(cycles, np.log(amplitudes), 1), cycles)
+    exponential_misfit = np.abs(amplitudes - np.exp(log_fit)).max()
+    assert linear_misfit < 0.2 * exponential_misfit  # clearly linear, not exponential
+
+
+def test_quadratic_damping_loses_amplitude_in_proportion_to_its_square():
+    """Velocity-squared damping: dA per cycle = (8/3) (c2/m) A^2, i.e. damping grows with A."""
+    c2 = 20.0  # N s^2/m^3
+    rel, peaks = heave_peaks(QuadraticDamping(c2_h=c2), h0=0.01)
+    amplitudes = rel.h[peaks]
+    loss = -np.diff(amplitudes)
+    mean_amplitude = 0.5 * (amplitudes[:-1] + amplitudes[1:])
+    expected = (8 / 3) * (c2 / UNDAMPED.m) * mean_amplitude**2
+    # The first-order energy balance is accurate to O(loss/A) ~ 5 % for these amplitudes.
+    np.testing.assert_allclose(loss, expected, rtol=0.06)
+    # Relative loss per cycle falls with amplitude (here A falls ~3x): not exponential decay.
+    assert loss[0] / amplitudes[0] > 2 * loss[-1] / amplitudes[-1]
+
+
+def test_cubic_stiffness_makes_the_frequency_depend_on_amplitude():
+    """Hardening spring: f(A) = f0 (1 + 3/8 (k3/k) A^2) (Duffing backbone), falling as A decays."""
+    k3 = 2.5e6  # N/m^4: a 5 % frequency rise at 5 mm
+    section = UNDAMPED.replace(zeta_h=0.02)
+    rel, peaks = heave_peaks(CubicStiffness(k3_h=k3), section=section, duration=20.0)
+    periods = np.diff(rel.t[peaks])
+    amplitude = rel.h[peaks[:-1]] * np.exp(-0.5 * 0.02 * 2 * np.pi)  # mid-cycle amplitude
+    f_linear = section.fh * np.sqrt(1 - 0.02**2)
+    shift = 1 / periods / f_linear - 1
+    expected = 3 / 8 * k3 / K_H * amplitude**2
+    assert shift[0] > 0.03 and shift[-1] < 0.005  # visibly amplitude dependent
+    # Lindstedt's first-order backbone errs by O(shift^2) and the damped-amplitude estimate by
+    # ~1 %: within 0.003 absolute (10 % of the largest shift).
+    np.testing.assert_allclose(shift, expected, atol=3e-3)
+
+
+def test_channel_delay_shifts_the_forces_only():
+    """Delayed forces equal the exact forces at t - tau; displacements are untouched."""
+    model, U, tau = flat_plate.jones_model(), 7.0, 0.0033
+    args = (SECTION, model, U, 0.004, 0.015)
+    plain = simulate_release(*args, duration=4.0, fs=500.0)
+    delayed = simulate_release(*args, duration=4.0, fs=500.0, effects=[ChannelDelay(tau)])
+    np.testing.assert_array_equal(delayed.h, plain.h)
+    system = AeroelasticSystem(SECTION, model, U)
+    z0 = system.initial_state(0.004, 0.015)
+    for k in (10, 333, 1999):
+        exact = system.force_matrix() @ expm(system.matrix() * (delayed.t[k] - tau)) @ z0
+        # Cubic-spline interpolation at 500 Hz of a ~3 Hz signal: error ~ (w dt)^4 / 384 ~ 1e-8.
+        assert delayed.lift[k] == pytest.approx(exact[0] / SECTION.B, rel=1e-5, abs=1e-9)
+        assert delayed.moment[k] == pytest.approx(exact[1], rel=1e-5, abs=1e-9)
+    before = delayed.t < tau
+    static = system.forces(z0, np.zeros(2))
+    np.testing.assert_allclose(delayed.lift[before], static[0] / SECTION.B, rtol=1e-12)
+
+
+def test_vortex_shedding_adds_a_line_at_the_strouhal_frequency():
+    """Harmonic forcing at St U / D appears in the lift spectrum with amplitude qd B cl."""
+    U, vortex = 6.0, VortexShedding(strouhal=0.12, depth=0.03, cl=0.05, cm=0.01)
+    fs, duration = 500.0, 20.0
+    model = flat_plate.jones_model()
+    forced = simulate_release(SECTION, model, U, 0.0, 0.01, duration=duration, fs=fs,
+                              effects=[vortex])
+    plain = simulate_release(SECTION, model, U, 0.0, 0.01, duration=duration, fs=fs)
+    f_v = vortex.frequency(U)
+    assert f_v == pytest.approx(24.0)
+    freqs = np.fft.rfftfreq(forced.t.size, 1 / fs)
+    line = np.argmin(np.abs(freqs - f_v))
+    amp_forced = 2 * np.abs(np.fft.rfft(forced.lift)) / forced.t.size
+    amp_plain = 2 * np.abs(np.fft.rfft(plain.lift)) / plain.t.size
+    qd_B = 0.5 * SECTION.rho * U**2 * SECTION.B
+    # The structure's forced response feeds back ~3 % (added mass at 24 Hz): 10 % tolerance.
+    assert amp_forced[line] == pytest.approx(qd_B * vortex.cl, rel=0.1)
+    assert amp_plain[line] < 0.01 * amp_forced[line]
+    still = simulate_release(SECTION, STILL_AIR, 0.0, 0.0, 0.01, duration=2.0, fs=fs,
+                             effects=[vortex])
+    assert np.all(still.lift == 0.0)  # no wind, no shedding
+
+
+def test_static_unbalance_couples_heave_and_pitch_in_still_air():
+    """With S != 0 a pure heave release excites pitch at zero wind, at the coupled frequencies."""
+    S = 0.05  # kg m/m: centre of mass 17 mm off the axis
+    rel = simulate_release(UNDAMPED, STILL_AIR, 0.0, 0.005, 0.0, duration=40.0, fs=200.0,
+                           effects=[StaticUnbalance(S)])
+    assert np.abs(rel.alpha).max() > 1e-3
+    assert rel.section.S == S
+    coupled = UNDAMPED.replace(S=S)
+    omega2 = eigh(coupled.stiffness_matrix(), coupled.mass_matrix(), eigvals_only=True)
+    spectrum = np.abs(np.fft.rfft(rel.alpha * np.hanning(rel.t.size)))
+    freqs = np.fft.rfftfreq(rel.t.size, 1 / 200.0)
+    peaks, _ = find_peaks(spectrum, height=0.1 * spectrum.max())
+    # 40 s records resolve 0.025 Hz; the two coupled modes must be the two spectral lines.
+    np.testing.assert_allclose(np.sort(freqs[peaks]), np.sqrt(omega2) / (2 * np.pi), atol=0.03)
+
+
+def test_sensor_crosstalk_mixes_the_measured_displacements_only():
+    """h_measured = h + c_ha alpha and alpha_measured = alpha + c_ah h, forces untouched."""
+    effect = SensorCrosstalk(h_from_alpha=0.01, alpha_from_h=0.2)
+    rel = simulate_release(SECTION, flat_plate.jones_model(), 6.0, 0.004, 0.02, duration=3.0,
+                           fs=200.0, effects=[effect])
+    np.testing.assert_allclose(rel.h, rel.clean["h"] + 0.01 * rel.clean["alpha"], rtol=1e-14)
+    np.testing.assert_allclose(rel.alpha, rel.clean["alpha"] + 0.2 * rel.clean["h"], rtol=1e-14)
+    np.testing.assert_array_equal(rel.lift, rel.clean["lift"])
+
+
+@pytest.mark.parametrize(
+    "effect",
+    [
+        CoulombFriction(force_h=0.05, moment_a=0.001),
+        QuadraticDamping(c2_h=20.0, c2_a=0.05),
+        CubicStiffness(k3_h=2.5e6, k3_a=50.0),
+        ChannelDelay(0.005),
+        VortexShedding(cl=0.05, cm=0.01),
+        StaticUnbalance(0.05),
+        SensorCrosstalk(h_from_alpha=0.01, alpha_from_h=0.2),
+    ],
+    ids=lambda e: e.name,
+)
+def test_every_effect_works_in_the_wind(effect):
+    """At 70 % of the flutter speed every effect visibly changes a noisy release."""
+    model = flat_plate.jones_model()
+    U = 0.7 * flutter.analyze(SECTION, model).speed
+    args = (SECTION, model, U, 0.004, 0.02)
+    kw = {"duration": 10.0, "fs": 500.0, "noise": 0.02, "rng": 3}
+    base = simulate_release(*args, **kw)
+    changed = simulate_release(*args, effects=[effect], **kw)
+    difference = max(
+        np.sqrt(np.mean((getattr(changed, ch) - getattr(base, ch)) ** 2))
+        / np.sqrt(np.mean(base.clean[ch] ** 2))
+        for ch in ("h", "alpha", "lift", "moment")
+    )
+    assert difference > 0.05  # larger than the 2 % noise: visible
+    assert all(np.all(np.isfinite(getattr(changed, ch))) for ch in ("h", "alpha", "lift", "moment"))
+
+
+@pytest.mark.parametrize(
+    ("make", "match"),
+    [
+        (lambda: CoulombFriction(force_h=-1.0), "force_h must be >= 0"),
+        (lambda: CoulombFriction(v_smooth_h=0.0), "v_smooth_h must be > 0"),
+        (lambda: QuadraticDamping(c2_a=-1.0), "c2_a must be >= 0"),
+        (lambda: CubicStiffness(k3_h=float("inf")), "k3_h must be finite"),
+        (lambda: ChannelDelay(-0.1), "delay_s must be >= 0"),
+        (lambda: VortexShedding(depth=0.0), "depth must be > 0"),
+        (lambda: VortexShedding(cl=-0.1), "cl must be >= 0"),
+        (lambda: StaticUnbalance(float("nan")), "S must be finite"),
+        (lambda: SensorCrosstalk(h_from_alpha=float("nan")), "h_from_alpha must be finite"),
+    ],
+)
+def test_effect_parameters_are_validated(make, match):
+    """Out-of-range effect parameters raise ValueError naming the parameter."""
+    with pytest.raises(ValueError, match=match):
+        make()
+
+
+def test_repeated_or_foreign_effects_are_refused():
+    """Two effects of one kind, or something that is not an effect, raise."""
+    args = (SECTION, STILL_AIR, 0.0, 0.001, 0.0)
+    with pytest.raises(ValueError, match="repeated"):
+        simulate_release(*args, duration=1.0, fs=100.0,
+                         effects=[ChannelDelay(0.1), ChannelDelay(0.2)])
+    with pytest.raises(TypeError, match="Effect instances"):
+        simulate_release(*args, duration=1.0, fs=100.0, effects=["coulomb_friction"])
+
+
+def test_static_unbalance_beyond_the_mass_matrix_limit_is_refused():
+    """S^2 >= m I would make the mass matrix singular: a clear error, not a NaN record."""
+    with pytest.raises(ValueError, match="positive-definite"):
+        simulate_release(SECTION, STILL_AIR, 0.0, 0.001, 0.0, duration=1.0, fs=100.0,
+                         effects=[StaticUnbalance(0.4)])
