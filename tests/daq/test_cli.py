@@ -1,0 +1,55 @@
+"""The ``windrig`` command line: demo and flutter subcommands, run in-process."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import pytest
+
+from daq.cli import main
+from ident import SectionModel, flat_plate, flutter
+
+
+def test_demo_prints_flutter_speeds_and_writes_its_plots(tmp_path, capsys):
+    """The demo reports both flutter speeds (agreeing within 1.5 %) and writes its files."""
+    assert main(["demo", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    speeds = [float(x) for x in re.findall(r"^(?:state-space|frequency-domain).*?\s(\d+\.\d+)\s",
+                                           out, flags=re.M)]
+    assert len(speeds) == 2
+    assert speeds[0] == pytest.approx(speeds[1], rel=0.015)  # the Jones gap, as in the issue
+    for name in ("flutter.png", "releases.png", "summary.json"):
+        assert (tmp_path / name).stat().st_size > 1000 or name == "summary.json"
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["critical_mode"] == "pitch"
+    assert summary["flutter_speed_state_space"] == pytest.approx(speeds[0], abs=5e-4)
+
+
+def test_flutter_command_reads_json_section_and_model(tmp_path, capsys):
+    """`windrig flutter` gives the same speed as the library call."""
+    section = SectionModel(B=0.4, m=8.0, I=0.12, fh=1.5, fa=3.5, zeta_h=0.003, zeta_a=0.003)
+    (tmp_path / "s.json").write_text(json.dumps(section.to_dict()))
+    (tmp_path / "m.json").write_text(json.dumps(flat_plate.jones_model().to_dict()))
+    assert main(["flutter", "--section", str(tmp_path / "s.json"),
+                 "--model", str(tmp_path / "m.json")]) == 0
+    expected = flutter.analyze(section, flat_plate.jones_model()).speed
+    assert f"flutter at U = {expected:.4g} m/s" in capsys.readouterr().out
+
+
+def test_flutter_command_refuses_an_unknown_section_key(tmp_path):
+    """A misspelt key in the section file is an error naming it, not a silent default."""
+    data = SectionModel(B=0.4, m=8.0, I=0.12, fh=1.5, fa=3.5, zeta_h=0.0, zeta_a=0.0).to_dict()
+    data["zeta_alpha"] = 0.01
+    (tmp_path / "s.json").write_text(json.dumps(data))
+    (tmp_path / "m.json").write_text(json.dumps(flat_plate.jones_model().to_dict()))
+    with pytest.raises(TypeError, match="zeta_alpha"):
+        main(["flutter", "--section", str(tmp_path / "s.json"), "--model", str(tmp_path / "m.json")])
+
+
+def test_unknown_subcommand_exits_with_usage(capsys):
+    """argparse rejects unknown commands with exit status 2."""
+    with pytest.raises(SystemExit) as exc:
+        main(["fly"])
+    assert exc.value.code == 2
+    assert "invalid choice" in capsys.readouterr().err
