@@ -43,6 +43,9 @@ def in_range(name: str, value: Any, lo: float, hi: float, *, hi_open: bool = Tru
 
 def finite_array(name: str, value: Any, *, ndim: int | None = None) -> npt.NDArray[np.float64]:
     """Return ``value`` as a float64 array after checking it is finite (and of ``ndim`` dims)."""
+    if np.iscomplexobj(value):
+        # np.asarray(..., dtype=float) would drop the imaginary part with only a warning.
+        raise TypeError(f"{name} must be real, got a complex array")
     arr = np.asarray(value, dtype=float)
     if ndim is not None and arr.ndim != ndim:
         raise ValueError(f"{name} must be a {ndim}-D array, got shape {arr.shape}")

@@ -11,6 +11,7 @@ the only route for flutter-derivative tables that have no rational-function mode
 from __future__ import annotations
 
 import math
+import operator
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -32,6 +33,9 @@ MODE_NAMES: tuple[str, str] = ("heave", "pitch")
 #: Lowest reduced frequency the default search range reaches for the faster structural mode.
 #: Below K ~ 0.2 almost no section-model test has data, so a prediction there is extrapolation.
 _K_MIN_DEFAULT = 0.2
+
+#: Real part, relative to |lambda|, above which a grid point counts as unstable.
+_UNSTABLE_RTOL = 1e-9
 
 
 @dataclass(frozen=True)
@@ -196,8 +200,7 @@ def analyze(
     ('pitch', 11.75)
     """
     U_max = default_U_max(section) if U_max is None else v.positive("U_max", U_max)
-    if not isinstance(n_points, int) or n_points < 20:
-        raise ValueError(f"n_points must be an integer >= 20, got {n_points!r}")
+    n_points = _grid_size(n_points)
     U = np.linspace(0.0, U_max, n_points)
     branches = np.empty((n_points, 2), dtype=complex)
     branches[0] = _initial_branches(section, model, 0.0)
@@ -209,7 +212,10 @@ def analyze(
 
     speed = frequency = None
     critical: str | None = None
-    unstable = (branches.real > 0.0) & (branches.imag > 0.0)
+    # A relative threshold keeps round-off (|Re| ~ 1e-16 |lambda| for an undamped structure in
+    # still air) from counting as instability; the crossing itself is then refined exactly.
+    unstable = (branches.real > _UNSTABLE_RTOL * np.abs(branches)) & (branches.imag > 0.0)
+    unstable[0] = False  # still air: structural damping >= 0 cannot be unstable
     if unstable.any():
         i, j = (int(x) for x in np.argwhere(unstable)[np.argmin(np.argwhere(unstable)[:, 0])])
 
@@ -243,6 +249,17 @@ def _reduced_frequency(
     if speed is None or frequency is None:
         return None
     return 2.0 * math.pi * frequency * section.B / speed
+
+
+def _grid_size(n_points: Any) -> int:
+    """Validate a grid size: an integer (Python or numpy) >= 20."""
+    try:
+        n = operator.index(n_points)
+    except TypeError:
+        raise ValueError(f"n_points must be an integer >= 20, got {n_points!r}") from None
+    if n < 20:
+        raise ValueError(f"n_points must be an integer >= 20, got {n_points!r}")
+    return n
 
 
 def _divergence_speed(
@@ -324,6 +341,7 @@ def frequency_domain(
     K_lo, K_hi = (v.positive("K_range", k) for k in K_range)
     if not K_lo < K_hi:
         raise ValueError(f"K_range must be increasing, got {K_range!r}")
+    n_points = _grid_size(n_points)
     K = np.geomspace(K_hi, K_lo, n_points)  # wind speed rises as K falls
 
     def roots(k: float) -> npt.NDArray[np.complex128]:
