@@ -1,0 +1,84 @@
+# windrig: set-up and entry points.
+#
+# `make test` and `make demo` each do the whole set-up on a fresh machine that has only Python 3.11,
+# make and git: a virtualenv in .venv, the package installed editable with its test extra, and the
+# Debian libraries the Qt binding needs to start offscreen. Re-runs skip what is already done.
+#
+#   make test            run the test suite (pytest; extra arguments in PYTEST_ARGS="...")
+#   make demo            run a whole simulated campaign, results in demo_output/
+#   make lint            ruff check (ruff is installed into .venv for this target only)
+#   make typecheck       mypy (likewise installed for this target only)
+#   make clean           remove .venv, demo_output and caches
+#
+# PYTHON=/path/to/python3.11 picks the interpreter that builds the venv.
+
+SHELL := /bin/bash
+.DEFAULT_GOAL := test
+.DELETE_ON_ERROR:
+
+VENV := .venv
+PY := $(VENV)/bin/python
+PIP := $(PY) -m pip
+STAMP := $(VENV)/.installed
+RUFF_VERSION := 0.17.5
+MYPY_VERSION := 2.4.1
+
+# python3.11 first, else python3; the version is checked when the venv is made.
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+
+# Tests and the demo never open a window, and never need a display.
+test demo: export QT_QPA_PLATFORM := offscreen
+test demo: export MPLBACKEND := Agg
+
+.PHONY: test demo lint typecheck setup qt-libs clean
+
+test: setup
+	$(PY) -m pytest -q -p no:cacheprovider $(PYTEST_ARGS)
+
+demo: setup
+	$(VENV)/bin/windrig demo --out demo_output
+
+setup: $(STAMP) qt-libs
+
+# Quiet when nothing is missing; installs the Debian packages (apt-get) when something is.
+qt-libs: $(STAMP)
+	@bash .ci/ensure_qt_libs.sh $(PY)
+
+$(PY):
+	@py="$(PYTHON)"; \
+	if [ -z "$$py" ]; then \
+	  echo "error: no python3.11 or python3 on PATH; windrig needs Python >= 3.11" >&2; exit 1; \
+	fi; \
+	if ! "$$py" -c 'import sys; sys.exit(sys.version_info < (3, 11))'; then \
+	  echo "error: windrig needs Python >= 3.11, but $$py is $$("$$py" -V 2>&1)." >&2; \
+	  echo "       Install python3.11, or run: make PYTHON=/path/to/python3.11 ..." >&2; exit 1; \
+	fi; \
+	echo "creating $(VENV) with $$py ($$("$$py" -V 2>&1))"; \
+	if ! "$$py" -m venv $(VENV); then \
+	  rm -rf $(VENV); \
+	  echo "error: '$$py -m venv' failed (on Debian: apt-get install python3-venv)" >&2; exit 1; \
+	fi
+
+# Re-install when the metadata changes, or when a top-level package first appears (the editable
+# install maps the packages that exist at install time).
+$(STAMP): pyproject.toml $(wildcard daq/__init__.py ident/__init__.py simulators/__init__.py) | $(PY)
+	$(PIP) install -q --progress-bar off -e '.[test]'
+	@touch $@
+
+lint: $(VENV)/.ruff-$(RUFF_VERSION)
+	$(VENV)/bin/ruff check .
+
+$(VENV)/.ruff-$(RUFF_VERSION): | $(PY)
+	$(PIP) install -q --progress-bar off 'ruff==$(RUFF_VERSION)'
+	@touch $@
+
+typecheck: $(STAMP) $(VENV)/.mypy-$(MYPY_VERSION)
+	$(VENV)/bin/mypy
+
+$(VENV)/.mypy-$(MYPY_VERSION): | $(PY)
+	$(PIP) install -q --progress-bar off 'mypy==$(MYPY_VERSION)'
+	@touch $@
+
+clean:
+	rm -rf $(VENV) demo_output build .pytest_cache .hypothesis .mypy_cache .ruff_cache *.egg-info
+	find . -path ./.git -prune -o -type d -name __pycache__ -prune -exec rm -rf {} +

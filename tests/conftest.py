@@ -1,0 +1,82 @@
+"""Suite-wide pytest hygiene for windrig.
+
+- Every test must stop the threads it starts (autouse ``no_leaked_threads``), in the manner of
+  pymodbus's ``system_health_check``: a leaked reader thread keeps a port open and makes later
+  tests flaky.
+- Hardware tests (``@pytest.mark.hardware``) run only with ``--rig-config PATH``; without it they
+  are skipped, and the ``rig_config`` fixture gives them the path (pymeasure's ``conftest.py``).
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+# Headless by default, so that a bare `pytest` behaves like `make test` on a machine without a
+# display (Qt aborts the whole process when it cannot open its platform). An explicit setting wins.
+os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+#: How long a test's threads get to finish after the test before they count as leaked, in s.
+THREAD_GRACE_S = 2.0
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    """Add ``--rig-config PATH``, the rig description that hardware tests talk to."""
+    parser.addoption(
+        "--rig-config",
+        metavar="PATH",
+        default=None,
+        help="TOML rig config of the real rig; enables tests marked 'hardware'",
+    )
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Skip tests marked ``hardware`` when no ``--rig-config`` was given."""
+    if config.getoption("--rig-config") is not None:
+        return
+    skip = pytest.mark.skip(reason="hardware test: needs --rig-config PATH")
+    for item in items:
+        if item.get_closest_marker("hardware") is not None:
+            item.add_marker(skip)
+
+
+@pytest.fixture(scope="session")
+def rig_config(pytestconfig: pytest.Config) -> Path:
+    """Path of the rig config given with ``--rig-config``; skips the test when there is none."""
+    value = pytestconfig.getoption("--rig-config")
+    if value is None:
+        pytest.skip("hardware test: needs --rig-config PATH")
+    path = Path(value)
+    if not path.is_file():
+        raise pytest.UsageError(f"--rig-config: no such file: {path}")
+    return path
+
+
+@pytest.fixture(autouse=True)
+def no_leaked_threads() -> Iterator[None]:
+    """Fail the test if it leaves threads alive (daemon or not) that were not there before it.
+
+    Threads that existed before the test (for example those of a session-scoped fixture, which is
+    set up before this one) are ignored. New threads get ``THREAD_GRACE_S`` in total to finish.
+    ``threading._DummyThread`` objects stand for threads started outside Python (e.g. by Qt) that
+    merely called into Python; they cannot be joined and never report finished, so they are skipped.
+    """
+    before = set(threading.enumerate())
+    yield
+    deadline = time.monotonic() + THREAD_GRACE_S
+    leaked = []
+    for thread in threading.enumerate():
+        if thread in before or isinstance(thread, threading._DummyThread):
+            continue
+        thread.join(timeout=max(0.0, deadline - time.monotonic()))
+        if thread.is_alive():
+            leaked.append(thread)
+    if leaked:
+        names = ", ".join(f"{t.name} (daemon={t.daemon})" for t in leaked)
+        pytest.fail(f"test left {len(leaked)} thread(s) running: {names}", pytrace=False)
