@@ -34,8 +34,10 @@ def _build_parser() -> argparse.ArgumentParser:
     p_flutter = sub.add_parser(
         "flutter", help="flutter speed of a section with a rational-function model (JSON files)"
     )
-    p_flutter.add_argument("--section", type=Path, required=True,
-                           help="JSON of SectionModel fields (B, m, I, fh, fa, zeta_h, zeta_a, ...)")
+    p_flutter.add_argument(
+        "--section", type=Path, required=True,
+        help="JSON of SectionModel fields (B, m, I, fh, fa, zeta_h, zeta_a, ...)",
+    )
     p_flutter.add_argument("--model", type=Path, required=True,
                            help='JSON of a RationalFunctionModel ({"A": ..., "d": ...})')
     p_flutter.add_argument("--u-max", type=float, default=None,

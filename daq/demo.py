@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Mapping
 from pathlib import Path
 
 import matplotlib
@@ -19,7 +20,7 @@ import matplotlib.pyplot as plt  # noqa: E402 - the backend must be chosen first
 import numpy as np  # noqa: E402
 
 from ident import SectionModel, flat_plate, flutter  # noqa: E402
-from simulators import simulate_release  # noqa: E402
+from simulators import SimulatedRelease, simulate_release  # noqa: E402
 
 #: The embedded default section: a 0.3 m flat-plate section model on a typical spring rig.
 DEMO_SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
@@ -95,11 +96,11 @@ def _plot_modes(result: flutter.FlutterResult, path: Path) -> None:
     plt.close(fig)
 
 
-def _plot_releases(releases: dict[str, object], path: Path) -> None:
+def _plot_releases(releases: Mapping[str, SimulatedRelease], path: Path) -> None:
     fig, axes = plt.subplots(2, 1, sharex=True, figsize=(7, 5))
     for label, rel in releases.items():
-        axes[0].plot(rel.t, 1000 * rel.h, lw=0.8, label=label)  # type: ignore[attr-defined]
-        axes[1].plot(rel.t, np.degrees(rel.alpha), lw=0.8, label=label)  # type: ignore[attr-defined]
+        axes[0].plot(rel.t, 1000 * rel.h, lw=0.8, label=label)
+        axes[1].plot(rel.t, np.degrees(rel.alpha), lw=0.8, label=label)
     axes[0].set_ylabel("h (mm)")
     axes[1].set_ylabel("alpha (deg)")
     axes[1].set_xlabel("time after release (s)")

@@ -125,7 +125,7 @@ def flutter_derivatives(K: Any, *, jones: bool = False) -> dict[str, npt.NDArray
 
 
 def jones_model() -> RationalFunctionModel:
-    """The flat plate with Jones's approximation, as an exact Roger model with two lags.
+    """Return the flat plate with Jones's approximation, as an exact Roger model with two lags.
 
     Returns
     -------

@@ -143,7 +143,7 @@ def _follow(
 def _initial_branches(
     section: SectionModel, model: RationalFunctionModel, U0: float
 ) -> npt.NDArray[np.complex128]:
-    """The two structural eigenvalues at ``U0``, ordered (heave, pitch)."""
+    """Return the two structural eigenvalues at ``U0``, ordered (heave, pitch)."""
     system = AeroelasticSystem(section, model, U0)
     lam, vec = np.linalg.eig(system.matrix())
     # Lag states have real eigenvalues; the structural ones are the complex pairs.
@@ -224,7 +224,8 @@ def analyze(
             return float(_follow(branches[i - 1 : i, j], lam_u)[0].real)
 
         speed = float(brentq(real_part, U[i - 1], U[i], xtol=1e-12 * U_max, rtol=1e-12))
-        lam_f = _follow(branches[i : i + 1, j], AeroelasticSystem(section, model, speed).eigenvalues())
+        lam_speed = AeroelasticSystem(section, model, speed).eigenvalues()
+        lam_f = _follow(branches[i : i + 1, j], lam_speed)
         frequency = float(lam_f[0].imag / (2 * math.pi))
         critical = MODE_NAMES[j]
 
@@ -364,17 +365,17 @@ def frequency_domain(
     for j in range(2):
         growth = branches[:, j].imag
         flips = np.flatnonzero((growth[:-1] > 0.0) & (growth[1:] <= 0.0))
-        for i in flips:
+        for i in (int(x) for x in flips):
 
-            def damping(k: float, i: int = int(i), j: int = j) -> float:
+            def damping(k: float, i: int = i, j: int = j) -> float:
                 omega = roots(k)
                 return float(omega[np.argmin(np.abs(omega - branches[i, j]))].imag)
 
             K_f = float(brentq(damping, K[i + 1], K[i], xtol=1e-14, rtol=1e-12))
             omega_f = roots(K_f)
             omega_f = omega_f[np.argmin(np.abs(omega_f - branches[i, j]))]
-            candidates.append((section.B * omega_f.real / K_f, omega_f.real / (2 * math.pi),
-                               MODE_NAMES[j]))
+            U_f = section.B * omega_f.real / K_f
+            candidates.append((U_f, omega_f.real / (2 * math.pi), MODE_NAMES[j]))
     U_grid = section.B * branches.real / K[:, None]
     U_max = float(U_grid.max())
     speed = frequency = None
@@ -397,7 +398,7 @@ def frequency_domain(
 def _frequency_domain_names(
     section: SectionModel, omega: npt.NDArray[np.complex128]
 ) -> list[int]:
-    """Order (heave, pitch) of two roots at the highest K (near still air) by frequency proximity."""
+    """Order (heave, pitch) two roots at the highest K (near still air) by frequency proximity."""
     structural = np.array([section.omega_h, section.omega_a])
     _, cols = linear_sum_assignment(np.abs(structural[:, None] - omega.real[None, :]))
     return [int(c) for c in cols]

@@ -113,7 +113,8 @@ def roger_fit(
     A = np.zeros((3 + d_arr.size, 2, 2))
     for i in range(2):
         for j in range(2):
-            target = np.concatenate([Q[:, i, j].real * sqrt_w[:, 0], Q[:, i, j].imag * sqrt_w[:, 0]])
+            entry = Q[:, i, j] * sqrt_w[:, 0]
+            target = np.concatenate([entry.real, entry.imag])
             coef, *_ = np.linalg.lstsq(design, target, rcond=None)
             A[keep, i, j] = coef
     return RationalFunctionModel(A, d_arr)

@@ -82,7 +82,7 @@ class AeroelasticSystem:
         return (stiffness, damping, *lags)
 
     def matrix(self) -> npt.NDArray[np.float64]:
-        """The state matrix ``A(U)``, shape (n, n), 1/s."""
+        """Return the state matrix ``A(U)``, shape (n, n), 1/s."""
         s = self.section
         n = self.n_states
         stiffness, damping, *lag_gains = self._aero_terms()
@@ -101,7 +101,8 @@ class AeroelasticSystem:
     def force_matrix(self) -> npt.NDArray[np.float64]:
         """Output matrix ``F`` with ``[L B, M] = F z``, shape (2, n).
 
-        The added-mass term needs ``q''``, which is itself linear in the state (rows 2:4 of ``A z``).
+        The added-mass term needs ``q''``, which is itself linear in the state
+        (rows 2:4 of ``A z``).
         """
         s = self.section
         stiffness, damping, *lag_gains = self._aero_terms()

@@ -51,13 +51,16 @@ class TapLayout:
                   ("x", "z", "nx", "nz", "length")}
         sizes = {a.size for a in arrays.values()}
         if len(sizes) != 1:
-            raise ValueError(f"tap arrays must have equal lengths, got { {k: a.size for k, a in arrays.items()} }")
+            lengths = {k: a.size for k, a in arrays.items()}
+            raise ValueError(f"tap arrays must have equal lengths, got {lengths}")
         if arrays["x"].size < 2:
             raise ValueError("a tap layout needs at least 2 taps")
         norm = np.hypot(arrays["nx"], arrays["nz"])
         if np.any(np.abs(norm - 1.0) > 1e-6):
             worst = int(np.argmax(np.abs(norm - 1.0)))
-            raise ValueError(f"tap normals must be unit vectors; tap {worst} has |n| = {norm[worst]!r}")
+            raise ValueError(
+                f"tap normals must be unit vectors; tap {worst} has |n| = {float(norm[worst])!r}"
+            )
         v.positive_array("length", arrays["length"])
         for name, arr in arrays.items():
             arr.flags.writeable = False
@@ -136,7 +139,8 @@ class TapLayout:
         B, D : float
             Width (chord) and depth, m; the origin is the rectangle's centre.
         taps_per_face : int
-            Taps on each horizontal face (>= 2); each vertical end gets ``max(1, taps_per_face//8)``.
+            Taps on each horizontal face (>= 2); each vertical end gets
+            ``max(1, taps_per_face // 8)``.
         """
         B = v.positive("B", B)
         D = v.positive("D", D)

@@ -42,11 +42,11 @@ class Effect:
     def structural_force(
         self, q: npt.NDArray[np.float64], qd: npt.NDArray[np.float64], B: float
     ) -> npt.NDArray[np.float64]:
-        """Extra generalised structural force ``[F_h B, M]`` (N m/m) at ``q``, ``q'`` (linear: 0)."""
+        """Return the extra generalised force ``[F_h B, M]``, N m/m, at ``q``, ``q'`` (here 0)."""
         return np.zeros(2)
 
     def stiffness_rate(self, effective_mass: npt.NDArray[np.float64], B: float) -> float:
-        """Largest rate (1/s) at which this effect's force changes with velocity, for step sizing."""
+        """Return the largest rate (1/s) at which the force changes with velocity (step sizing)."""
         return 0.0
 
 
@@ -87,7 +87,10 @@ class CoulombFriction(Effect):
         return max(self.force_h / (self.v_smooth_h * m_h),
                    self.moment_a / (self.v_smooth_a * effective_mass[1, 1]))
 
-    def structural_force(self, q, qd, B):  # type: ignore[no-untyped-def]  # see base class
+    def structural_force(
+        self, q: npt.NDArray[np.float64], qd: npt.NDArray[np.float64], B: float
+    ) -> npt.NDArray[np.float64]:
+        """Return the extra generalised force ``[F_h B, M]``, N m/m (see :class:`Effect`)."""
         h_dot, a_dot = qd[0] * B, qd[1]
         return np.array([
             -self.force_h * np.tanh(h_dot / self.v_smooth_h) * B,
@@ -119,7 +122,10 @@ class QuadraticDamping(Effect):
             if v.finite(name, getattr(self, name)) < 0.0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
 
-    def structural_force(self, q, qd, B):  # type: ignore[no-untyped-def]  # see base class
+    def structural_force(
+        self, q: npt.NDArray[np.float64], qd: npt.NDArray[np.float64], B: float
+    ) -> npt.NDArray[np.float64]:
+        """Return the extra generalised force ``[F_h B, M]``, N m/m (see :class:`Effect`)."""
         h_dot, a_dot = qd[0] * B, qd[1]
         return np.array([-self.c2_h * abs(h_dot) * h_dot * B, -self.c2_a * abs(a_dot) * a_dot])
 
@@ -147,7 +153,10 @@ class CubicStiffness(Effect):
         v.finite("k3_h", self.k3_h)
         v.finite("k3_a", self.k3_a)
 
-    def structural_force(self, q, qd, B):  # type: ignore[no-untyped-def]  # see base class
+    def structural_force(
+        self, q: npt.NDArray[np.float64], qd: npt.NDArray[np.float64], B: float
+    ) -> npt.NDArray[np.float64]:
+        """Return the extra generalised force ``[F_h B, M]``, N m/m (see :class:`Effect`)."""
         h, a = q[0] * B, q[1]
         return np.array([-self.k3_h * h**3 * B, -self.k3_a * a**3])
 

@@ -56,7 +56,8 @@ class SimulatedRelease:
     t : ndarray, shape (n,)
         Time from the release, s (negative during the optional hold before it).
     h, alpha : ndarray, shape (n,)
-        Heave (m, positive down) and pitch (rad, positive nose-up), with measurement effects and noise.
+        Heave (m, positive down) and pitch (rad, positive nose-up), with measurement effects and
+        noise.
     lift, moment : ndarray, shape (n,)
         Self-excited (plus vortex) lift, N/m, and moment, N m/m, with measurement effects and noise.
     U, rho, fs : float
@@ -184,7 +185,7 @@ def simulate_release(
         z, qdd = plant.integrate_nonlinear(z0, n, dt, oversample)
     else:
         z, qdd = plant.integrate_linear(z0, n, dt)
-    t = np.arange(n) * dt
+    t = np.asarray(np.arange(n) * dt, dtype=np.float64)
     forces = plant.forces(z, qdd, t)
     clean = {
         "h": z[:, 0] * section.B,
@@ -195,7 +196,7 @@ def simulate_release(
     static_force = plant.static_force(z0)
     if pre_s > 0.0:
         n_pre = int(round(pre_s * fs))
-        t_pre = -np.arange(n_pre, 0, -1) * dt
+        t_pre = np.asarray(-np.arange(n_pre, 0, -1) * dt, dtype=np.float64)
         held = plant.vortex_force(t_pre) + static_force
         t = np.concatenate([t_pre, t])
         clean = {

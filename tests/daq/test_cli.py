@@ -44,11 +44,12 @@ def test_flutter_command_refuses_an_unknown_section_key(tmp_path):
     (tmp_path / "s.json").write_text(json.dumps(data))
     (tmp_path / "m.json").write_text(json.dumps(flat_plate.jones_model().to_dict()))
     with pytest.raises(TypeError, match="zeta_alpha"):
-        main(["flutter", "--section", str(tmp_path / "s.json"), "--model", str(tmp_path / "m.json")])
+        main(["flutter", "--section", str(tmp_path / "s.json"),
+              "--model", str(tmp_path / "m.json")])
 
 
 def test_unknown_subcommand_exits_with_usage(capsys):
-    """argparse rejects unknown commands with exit status 2."""
+    """An unknown command is rejected by argparse with exit status 2."""
     with pytest.raises(SystemExit) as exc:
         main(["fly"])
     assert exc.value.code == 2

@@ -45,7 +45,8 @@ def test_still_air_flat_plate_feels_its_added_mass():
     _, period = log_decrement(rel.h)
     m_added = np.pi * SECTION.rho * SECTION.B**2 / 4
     f_expected = SECTION.fh * np.sqrt(SECTION.m / (SECTION.m + m_added))
-    f_damped = f_expected * np.sqrt(1 - (SECTION.zeta_h * np.sqrt(SECTION.m / (SECTION.m + m_added)))**2)
+    zeta_still_air = SECTION.zeta_h * np.sqrt(SECTION.m / (SECTION.m + m_added))
+    f_damped = f_expected * np.sqrt(1 - zeta_still_air**2)
     assert 1000.0 / period == pytest.approx(f_damped, rel=2e-3)  # one-sample quantisation
     # The still-air force is the added-mass force only: L = -m_a h''.
     h_dd = np.gradient(np.gradient(rel.h, rel.t), rel.t)
