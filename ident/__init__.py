@@ -19,6 +19,7 @@ from ident.rfc import RationalFunctionModel
 from ident.roger import roger_fit
 from ident.section import SectionModel
 from ident.statespace import AeroelasticSystem
+from ident.taps import TapLayout
 
 __all__ = [
     "AeroelasticSystem",
@@ -28,6 +29,7 @@ __all__ = [
     "RankDeficiencyError",
     "RationalFunctionModel",
     "SectionModel",
+    "TapLayout",
     "conventions",
     "flat_plate",
     "flutter",

@@ -15,6 +15,7 @@ pressures), so both sides use the same geometry and signs.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -129,6 +130,28 @@ class TapLayout:
                 raise ValueError(f"mean must have shape ({self.n_taps},), got {steady.shape}")
             p = p + (steady - G_pinv @ (G @ steady))
         return np.asarray(p, dtype=float)
+
+    @classmethod
+    def from_table(cls, table: Mapping[str, Any]) -> TapLayout:
+        """Build a layout from a config table (e.g. ``[taps]`` of a rig TOML).
+
+        Two forms: explicit arrays ``{x, z, nx, nz, length}``, or a generated rectangle
+        ``{shape = "rectangle", B, D, taps_per_face}``. Unknown or missing keys raise ``ValueError``
+        naming them.
+        """
+        keys = set(table)
+        if table.get("shape") == "rectangle":
+            expected = {"shape", "B", "D", "taps_per_face"}
+        elif "shape" in table:
+            raise ValueError(f"taps.shape must be 'rectangle' (or absent), got {table['shape']!r}")
+        else:
+            expected = {"x", "z", "nx", "nz", "length"}
+        if keys != expected:
+            missing, unknown = sorted(expected - keys), sorted(keys - expected)
+            raise ValueError(f"taps table: missing keys {missing}, unknown keys {unknown}")
+        if "shape" in table:
+            return cls.rectangle(table["B"], table["D"], table["taps_per_face"])
+        return cls(**{name: np.asarray(table[name], dtype=float) for name in expected})
 
     @classmethod
     def rectangle(cls, B: float, D: float, taps_per_face: int) -> TapLayout:
