@@ -11,9 +11,7 @@ PLATE = TapLayout.rectangle(B=0.3, D=0.01, taps_per_face=32)
 
 
 def test_signs_follow_scanlan():
-    """Suction on the upper face lifts the deck (L < 0, L positive down); on its front half only
-    it also pitches the nose up (M > 0).
-    """
+    """Suction on the upper face lifts the deck (L < 0); on the front half it pitches nose-up."""
     p = np.zeros((2, PLATE.n_taps))
     upper = PLATE.nz < 0
     p[0, upper] = -100.0  # Pa, suction on the whole upper face
