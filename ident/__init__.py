@@ -8,13 +8,14 @@ self-excited forces ``f = rho U^2 / 2 B^2 Q(p) q`` with Roger's rational form of
 This package imports nothing from :mod:`daq`; it reads recorded files through one thin module only.
 """
 
-from ident import conventions, flat_plate, flutter
+from ident import conventions, e2rfc, flat_plate, flutter, modal
 from ident.errors import (
     IdentError,
     InsufficientDataError,
     NonUniformSamplingError,
     RankDeficiencyError,
 )
+from ident.release import Release
 from ident.rfc import RationalFunctionModel
 from ident.roger import roger_fit
 from ident.section import SectionModel
@@ -28,10 +29,13 @@ __all__ = [
     "NonUniformSamplingError",
     "RankDeficiencyError",
     "RationalFunctionModel",
+    "Release",
     "SectionModel",
     "TapLayout",
     "conventions",
+    "e2rfc",
     "flat_plate",
     "flutter",
+    "modal",
     "roger_fit",
 ]

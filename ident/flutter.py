@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+from scipy.linalg import eig
 from scipy.optimize import brentq, linear_sum_assignment
 
 from ident import _validate as v
@@ -26,7 +27,7 @@ from ident.rfc import RationalFunctionModel
 from ident.section import SectionModel
 from ident.statespace import AeroelasticSystem
 
-__all__ = ["FlutterResult", "analyze", "frequency_domain", "default_U_max"]
+__all__ = ["FlutterResult", "analyze", "default_U_max", "frequency_domain", "speed_sensitivity"]
 
 MODE_NAMES: tuple[str, str] = ("heave", "pitch")
 
@@ -402,3 +403,65 @@ def _frequency_domain_names(
     structural = np.array([section.omega_h, section.omega_a])
     _, cols = linear_sum_assignment(np.abs(structural[:, None] - omega.real[None, :]))
     return [int(c) for c in cols]
+
+
+def speed_sensitivity(
+    section: SectionModel, model: RationalFunctionModel, speed: float, frequency: float
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Gradient of the flutter speed with respect to the RFCs and lag roots.
+
+    At flutter the critical eigenvalue crosses the imaginary axis; to first order a parameter change
+    ``dp`` moves its real part by ``Re(w^H dS/dp v) / (w^H v)`` (left and right eigenvectors ``w``,
+    ``v`` of the state matrix ``S``), and the flutter speed moves by that amount divided by
+    ``-dRe(lambda)/dU``. Used to propagate identification uncertainty to the flutter speed.
+
+    Parameters
+    ----------
+    section, model :
+        As for :func:`analyze`.
+    speed, frequency : float
+        Flutter speed (m/s) and frequency (Hz) from :func:`analyze`.
+
+    Returns
+    -------
+    dU_dA : ndarray, shape (3 + m, 2, 2)
+        m/s per unit change of each coefficient.
+    dU_dd : ndarray, shape (m,)
+        m/s per unit change of each lag root.
+    """
+
+    def state(m: RationalFunctionModel, u: float) -> npt.NDArray[np.float64]:
+        return AeroelasticSystem(section, m, u).matrix()
+
+    S = state(model, speed)
+    lam, w, v = eig(S, left=True, right=True)
+    k = int(np.argmin(np.abs(lam - 2j * math.pi * frequency)))
+    w_k, v_k = w[:, k], v[:, k]
+    norm = w_k.conj() @ v_k
+
+    def d_real(dS: npt.NDArray[np.float64]) -> float:
+        return float((w_k.conj() @ dS @ v_k / norm).real)
+
+    h_U = 1e-6 * speed
+    slope = d_real((state(model, speed + h_U) - state(model, speed - h_U)) / (2 * h_U))
+    if slope <= 0.0:
+        raise ValueError("the critical eigenvalue does not cross into the right half plane here")
+    dU_dA = np.zeros_like(model.A)
+    for idx in np.ndindex(*model.A.shape):
+        h = 1e-6 * max(1.0, abs(model.A[idx]))
+        A_plus, A_minus = model.A.copy(), model.A.copy()
+        A_plus[idx] += h
+        A_minus[idx] -= h
+        dS = (state(RationalFunctionModel(A_plus, model.d), speed)
+              - state(RationalFunctionModel(A_minus, model.d), speed)) / (2 * h)
+        dU_dA[idx] = -d_real(dS) / slope
+    dU_dd = np.zeros(model.n_lags)
+    for l in range(model.n_lags):
+        h = 1e-6 * model.d[l]
+        d_plus, d_minus = model.d.copy(), model.d.copy()
+        d_plus[l] += h
+        d_minus[l] -= h
+        dS = (state(RationalFunctionModel(model.A, d_plus), speed)
+              - state(RationalFunctionModel(model.A, d_minus), speed)) / (2 * h)
+        dU_dd[l] = -d_real(dS) / slope
+    return dU_dA, dU_dd

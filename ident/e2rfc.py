@@ -1,0 +1,511 @@
+"""E2RFC: Rational Function Coefficients directly from free-vibration releases.
+
+Experimental Extraction of Rational Function Coefficients (Chowdhury and Sarkar, 2005): the
+measured self-excited forces of releases at a few wind speeds are regressed on the measured motion
+through Roger's time-domain form of the forces (see :mod:`ident._regressors`). The RFCs do not
+depend on U, so all releases are stacked into one least-squares problem; the wind speed enters only
+through the regressors, and releases at two or more wind speeds are what make it determined. One
+decay holds just two complex frequencies, so a single wind speed can never determine the model:
+that case is refused, never answered with numbers.
+
+How noise is handled: regressors come from a modal fit of the displacements (no differentiated
+noise, no noise in the regressors to bias the fit); each release and force channel is weighted by
+the inverse of its own noise level; per-release intercepts absorb static forces.
+
+Lag roots are found by variable projection: for fixed lag roots the coefficients follow from a
+linear least-squares solve, so the nonlinear search runs over log(d) alone (scipy's trust-region
+least squares, several starts spread over the reduced frequencies the data cover). The number of
+lags (0 to 3) and whether the added-mass matrix A3 is fitted are chosen by five-fold held-out
+error (folds of interleaved one-period blocks of every release), with the one-standard-error rule:
+the simplest model whose held-out error is within one standard error of the best.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+from scipy.optimize import least_squares
+
+from ident import flutter as _flutter
+from ident._regressors import PreparedRelease, prepare
+from ident._threads import single_threaded_blas
+from ident.errors import RankDeficiencyError
+from ident.modal import ModalFit
+from ident.release import Release
+from ident.rfc import RationalFunctionModel
+from ident.section import SectionModel
+
+__all__ = ["Candidate", "E2RFCDiagnostics", "IdentifiedModel", "identify"]
+
+FloatArray = npt.NDArray[np.float64]
+
+#: Wind speeds closer than this (relative) count as one wind speed.
+DISTINCT_U_RTOL = 0.02
+#: Largest condition number of the column-scaled design accepted as determined.
+MAX_CONDITION = 1e8
+#: Folds of the held-out error.
+N_FOLDS = 5
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One model structure tried during selection.
+
+    Attributes
+    ----------
+    n_lags : int
+    with_A3 : bool
+    d : tuple of float
+        Lag roots found for this structure.
+    cv_error : float
+        Held-out weighted mean squared force error (1 = noise level).
+    cv_se : float
+        Its standard error over the folds.
+    n_params : int
+        Coefficients fitted (both force rows, lag roots included).
+    note : str
+        Why it was skipped, when it was.
+    """
+
+    n_lags: int
+    with_A3: bool
+    d: tuple[float, ...]
+    cv_error: float
+    cv_se: float
+    n_params: int
+    note: str = ""
+
+
+@dataclass(frozen=True, eq=False)
+class E2RFCDiagnostics:
+    """What an E2RFC identification found besides the coefficients.
+
+    Attributes
+    ----------
+    n_lags, with_A3 :
+        The chosen structure.
+    reason : str
+        Why it was chosen (or "given by the caller").
+    candidates : tuple of Candidate
+        Every structure tried, with its held-out error.
+    release_residuals : ndarray, shape (n_releases, 2)
+        RMS force residual of each release and force channel relative to that channel's RMS.
+    wind_speeds : ndarray, shape (n_releases,)
+        m/s.
+    condition_number : float
+        Of the column-scaled design matrix of the final fit.
+    covariance : ndarray, shape (p, p)
+        Of the fitted parameters: ``A`` entries (see ``parameter_index``) then ``log d``.
+    parameter_index : tuple of (int, int, int)
+        ``(k, i, j)`` of ``A[k, i, j]`` for each of the first covariance rows.
+    modal_fits : tuple of ModalFit
+        Modal fit of each release's displacements ``[h/B, alpha]`` (frequencies, damping).
+    """
+
+    n_lags: int
+    with_A3: bool
+    reason: str
+    candidates: tuple[Candidate, ...]
+    release_residuals: FloatArray
+    wind_speeds: FloatArray
+    condition_number: float
+    covariance: FloatArray = field(repr=False)
+    parameter_index: tuple[tuple[int, int, int], ...] = field(repr=False)
+    modal_fits: tuple[ModalFit, ...] = field(repr=False)
+
+
+class IdentifiedModel(RationalFunctionModel):
+    """A :class:`RationalFunctionModel` identified from data, with its diagnostics."""
+
+    __slots__ = ("diagnostics",)
+
+    def __init__(self, A: FloatArray, d: FloatArray, diagnostics: E2RFCDiagnostics) -> None:
+        super().__init__(A, d)
+        self.diagnostics = diagnostics
+
+    def flutter(
+        self, section: SectionModel, U_max: float | None = None
+    ) -> tuple[_flutter.FlutterResult, float | None]:
+        """Flutter analysis with this model, and the standard deviation of the flutter speed.
+
+        The standard deviation propagates the parameter covariance (coefficients and lag roots)
+        through the first-order sensitivity of the flutter speed
+        (:func:`ident.flutter.speed_sensitivity`).
+
+        Returns
+        -------
+        result : FlutterResult
+        speed_std : float or None
+            m/s; None without flutter below ``U_max``.
+        """
+        result = _flutter.analyze(section, self, U_max)
+        if result.speed is None or result.frequency is None:
+            return result, None
+        dU_dA, dU_dd = _flutter.speed_sensitivity(section, self, result.speed, result.frequency)
+        gradient = np.array(
+            [dU_dA[k, i, j] for k, i, j in self.diagnostics.parameter_index]
+            + list(dU_dd * self.d)  # the covariance is in log(d)
+        )
+        variance = float(gradient @ self.diagnostics.covariance @ gradient)
+        return result, math.sqrt(max(variance, 0.0))
+
+
+@single_threaded_blas
+def identify(
+    releases: Sequence[Release],
+    section: SectionModel,
+    n_lags: int | None = None,
+    with_A3: bool | None = None,
+) -> IdentifiedModel:
+    """Identify the rational-function model of the self-excited forces from releases (E2RFC).
+
+    Parameters
+    ----------
+    releases : sequence of Release
+        Free decays with measured forces, at two or more wind speeds.
+    section : SectionModel
+        The structure (its width B and, where a release has none, the air density).
+    n_lags : int, optional
+        Number of lag terms (0 to 3); None chooses by held-out error.
+    with_A3 : bool, optional
+        Fit the added-mass matrix A3; None chooses by held-out error.
+
+    Returns
+    -------
+    IdentifiedModel
+        A :class:`RationalFunctionModel` with ``.diagnostics`` (:class:`E2RFCDiagnostics`) and
+        ``.flutter(section)`` giving the flutter speed with its standard deviation.
+
+    Raises
+    ------
+    RankDeficiencyError
+        Releases at fewer than two wind speeds, or data that cannot determine the requested model.
+    TypeError
+        If ``releases`` holds something other than :class:`Release` objects.
+
+    References
+    ----------
+    M. Gan Chowdhury and P. P. Sarkar, "Experimental identification of rational function
+    coefficients for time-domain flutter analysis", Engineering Structures 27 (2005) 1349-1364.
+    G. H. Golub and V. Pereyra, "Separable nonlinear least squares: the variable projection
+    method and its applications", Inverse Problems 19 (2003).
+
+    Examples
+    --------
+    >>> from ident import SectionModel, flat_plate
+    >>> from simulators import simulate_release
+    >>> s = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+    >>> truth = flat_plate.jones_model()
+    >>> sims = [simulate_release(s, truth, U, 0.004, 0.02, duration=10.0, fs=200.0)
+    ...         for U in (5.0, 8.0)]
+    >>> model = identify([Release.from_simulation(r) for r in sims], s, n_lags=2, with_A3=True)
+    >>> bool(np.allclose(model.d, truth.d, rtol=1e-3))
+    True
+    >>> identify([Release.from_simulation(sims[0])], s)
+    Traceback (most recent call last):
+    ...
+    ident.errors.RankDeficiencyError: releases at one wind speed (5 m/s) cannot determine ...
+    """
+    releases = list(releases)
+    for r in releases:
+        if not isinstance(r, Release):
+            raise TypeError(f"releases must be ident.Release objects, got {type(r).__name__}")
+    _check_wind_speeds(releases)
+    if n_lags is not None and (not isinstance(n_lags, int) or not 0 <= n_lags <= 3):
+        raise ValueError(f"n_lags must be an integer in 0..3 or None, got {n_lags!r}")
+    prepared = [prepare(r, section) for r in releases]
+    problem = _Problem(prepared)
+
+    lags = range(4) if n_lags is None else [n_lags]
+    a3_options = (True, False) if with_A3 is None else (with_A3,)
+    candidates: list[Candidate] = []
+    for m in lags:
+        d_start: FloatArray | None = None
+        for a3 in a3_options:
+            candidate, d_found = problem.candidate(m, a3, d_start)
+            candidates.append(candidate)
+            d_start = d_found if d_found is not None else d_start
+    usable = [c for c in candidates if not c.note]
+    if not usable:
+        notes = "; ".join(f"n_lags={c.n_lags}, A3={c.with_A3}: {c.note}" for c in candidates)
+        raise RankDeficiencyError(f"no model structure is determined by these releases ({notes})")
+    chosen, reason = _select(usable, given=n_lags is not None and with_A3 is not None)
+    return problem.final(chosen, tuple(candidates), reason)
+
+
+def _check_wind_speeds(releases: list[Release]) -> None:
+    if not releases:
+        raise RankDeficiencyError("no releases given: E2RFC needs releases at two or more wind speeds")
+    speeds = sorted(r.U for r in releases)
+    distinct = [speeds[0]]
+    for u in speeds[1:]:
+        if u > distinct[-1] * (1 + DISTINCT_U_RTOL):
+            distinct.append(u)
+    if len(distinct) < 2:
+        raise RankDeficiencyError(
+            f"releases at one wind speed ({speeds[0]:.3g} m/s) cannot determine the rational "
+            "function model: one decay holds only two complex frequencies. Record releases at "
+            "two or more wind speeds (E2RFC is designed for 2 to 5)."
+        )
+
+
+def _select(usable: list[Candidate], *, given: bool) -> tuple[Candidate, str]:
+    """The one-standard-error rule over held-out errors."""
+    if given:
+        return usable[0], "given by the caller"
+    best = min(usable, key=lambda c: c.cv_error)
+    threshold = best.cv_error + best.cv_se
+    simple = min((c for c in usable if c.cv_error <= threshold), key=lambda c: c.n_params)
+    reason = (
+        f"n_lags={simple.n_lags}, A3={'fitted' if simple.with_A3 else 'zero'}: the simplest "
+        f"structure whose held-out error ({simple.cv_error:.4g}) is within one standard error of "
+        f"the best ({best.cv_error:.4g} +/- {best.cv_se:.2g}, n_lags={best.n_lags}, "
+        f"A3={'fitted' if best.with_A3 else 'zero'})"
+    )
+    return simple, reason
+
+
+class _Problem:
+    """The stacked weighted least-squares problem over all releases, for any structure."""
+
+    def __init__(self, prepared: list[PreparedRelease]) -> None:
+        self.prepared = prepared
+        self.weights = np.array([1.0 / p.force_noise for p in prepared])  # (n_releases, 2)
+        # Reduced frequencies the data cover, from the modal frequencies: where lags can live.
+        K = np.concatenate([2 * math.pi * p.fit.frequencies * p.B / p.U for p in prepared])
+        self.K_range = (float(K.min()), float(K.max()))
+
+    # -- linear part -------------------------------------------------------------------------
+    def _blocks(
+        self, d: FloatArray, with_A3: bool, which: str, rows: list[FloatArray] | None = None
+    ) -> list[tuple[FloatArray, FloatArray]]:
+        """Per release: design (n, k) and normalised forces (n, 2) on a view, or rows of it."""
+        out = []
+        for n, p in enumerate(self.prepared):
+            view = p.view(which)
+            fixed = view.fixed if with_A3 else view.fixed[:, :4]
+            design = np.hstack([fixed, view.lag_columns(d)])
+            force = view.force
+            if rows is not None:
+                design, force = design[rows[n]], force[rows[n]]
+            out.append((design, force))
+        return out
+
+    def _solve(
+        self, blocks: list[tuple[FloatArray, FloatArray]], *, exact: bool = False
+    ) -> tuple[FloatArray, list[FloatArray], list[FloatArray]]:
+        """Coefficients (k, 2), per-release intercepts and weighted residuals.
+
+        Per-release intercepts are profiled out by demeaning each release (Frisch-Waugh). The
+        many solves of the lag-root search and of cross-validation use column-scaled normal
+        equations (fast; candidates are accepted only when well conditioned); the final fit uses
+        an SVD-based solve of the stacked system (``exact=True``).
+        """
+        centred = [(X - X.mean(axis=0), y - y.mean(axis=0)) for X, y in blocks]
+        k = blocks[0][0].shape[1]
+        coef = np.empty((k, 2))
+        for i in range(2):
+            if exact:
+                M = np.vstack([w[i] * Xc for (Xc, _), w in zip(centred, self.weights)])
+                b = np.concatenate([w[i] * yc[:, i] for (_, yc), w in zip(centred, self.weights)])
+                coef[:, i], *_ = np.linalg.lstsq(M, b, rcond=None)
+                continue
+            G = np.zeros((k, k))
+            b = np.zeros(k)
+            for (Xc, yc), w in zip(centred, self.weights):
+                G += w[i] ** 2 * (Xc.T @ Xc)
+                b += w[i] ** 2 * (Xc.T @ yc[:, i])
+            scale = np.sqrt(np.diag(G))
+            scale[scale == 0.0] = 1.0
+            coef[:, i] = np.linalg.lstsq(G / np.outer(scale, scale), b / scale, rcond=None)[0] / scale
+        intercepts = [y.mean(axis=0) - X.mean(axis=0) @ coef for X, y in blocks]
+        residuals = [w * (y - X @ coef - c)
+                     for (X, y), c, w in zip(blocks, intercepts, self.weights)]
+        return coef, intercepts, residuals
+
+    def condition(self, d: FloatArray, with_A3: bool) -> float:
+        """Condition number of the column-scaled, demeaned, stacked design."""
+        blocks = self._blocks(d, with_A3, "search")
+        M = np.vstack([X - X.mean(axis=0) for X, _ in blocks])
+        norms = np.linalg.norm(M, axis=0)
+        if np.any(norms == 0.0):
+            return math.inf
+        return float(np.linalg.cond(M / norms))
+
+    # -- lag-root search ---------------------------------------------------------------------
+    def _search(self, n_lags: int, with_A3: bool, start: FloatArray | None) -> FloatArray:
+        if n_lags == 0:
+            return np.zeros(0)
+        K_lo, K_hi = self.K_range
+        lo, hi = math.log(K_lo / 20.0), math.log(20.0 * K_hi)
+
+        def residual(theta: FloatArray) -> FloatArray:
+            blocks = self._blocks(np.exp(theta), with_A3, "search")
+            _, _, res = self._solve(blocks)
+            return np.concatenate([r.ravel() for r in res])
+
+        if start is not None and start.size == n_lags:
+            starts = [np.log(start)]
+        else:
+            grid = np.geomspace(K_lo / 3.0, 3.0 * K_hi, n_lags + 2)[1:-1]
+            spread = [grid, grid * 0.3, grid * 3.0]
+            starts = [np.log(np.sort(s)) for s in spread]
+        best = None
+        for theta0 in starts:
+            theta0 = np.clip(theta0, lo + 1e-6, hi - 1e-6)
+            sol = least_squares(residual, theta0, bounds=(lo, hi), xtol=1e-10, ftol=1e-12,
+                                max_nfev=60 * (n_lags + 1))
+            if best is None or sol.cost < best.cost:
+                best = sol
+        assert best is not None
+        return np.sort(np.exp(best.x))
+
+    # -- structures ----------------------------------------------------------------------------
+    def candidate(
+        self, n_lags: int, with_A3: bool, d_start: FloatArray | None
+    ) -> tuple[Candidate, FloatArray | None]:
+        """Search the lag roots of one structure and score it by held-out error."""
+        k = 2 * ((6 if with_A3 else 4) + 2 * n_lags) + n_lags
+        d = self._search(n_lags, with_A3, d_start)
+        if n_lags and np.min(np.diff(np.concatenate([[0.0], d]))) <= 1e-6 * d.max():
+            return Candidate(n_lags, with_A3, tuple(d), math.inf, math.inf, k,
+                             "lag roots merged: fewer lags describe the data"), None
+        cond = self.condition(d, with_A3)
+        if cond > MAX_CONDITION:
+            return Candidate(n_lags, with_A3, tuple(d), math.inf, math.inf, k,
+                             f"rank deficient (condition number {cond:.2g})"), None
+        errors = self._cross_validate(d, with_A3)
+        return Candidate(n_lags, with_A3, tuple(d), float(errors.mean()),
+                         float(errors.std(ddof=1) / math.sqrt(errors.size)), k), d
+
+    def _cross_validate(self, d: FloatArray, with_A3: bool) -> FloatArray:
+        """Held-out weighted mean squared force error per fold."""
+        folds = [self._folds(p) for p in self.prepared]
+        errors = np.empty(N_FOLDS)
+        blocks = self._blocks(d, with_A3, "search")
+        for k in range(N_FOLDS):
+            train = [np.concatenate([f[j] for j in range(N_FOLDS) if j != k]) for f in folds]
+            coef, intercepts, _ = self._solve([(X[r], y[r]) for (X, y), r in zip(blocks, train)])
+            sq, n = 0.0, 0
+            for (X, y), f, c, w in zip(blocks, folds, intercepts, self.weights):
+                e = w * (y[f[k]] - X[f[k]] @ coef - c)
+                sq += float(np.sum(e**2))
+                n += e.size
+            errors[k] = sq / n
+        return errors
+
+    @staticmethod
+    def _folds(p: PreparedRelease) -> list[FloatArray]:
+        """Split a release's search rows into folds of interleaved blocks, each one period long.
+
+        Contiguous folds would hold out the large-amplitude start of a decay in one fold and
+        judge it by coefficients fitted to the small tail; interleaving gives every fold the
+        whole decay, and one-period blocks keep neighbouring (correlated) samples together.
+        """
+        t = p.view("search").t
+        period = 1.0 / float(p.fit.frequencies.min())
+        labels = (np.floor((t - t[0]) / period).astype(int)) % N_FOLDS
+        return [np.flatnonzero(labels == k) for k in range(N_FOLDS)]
+
+    def final(
+        self, chosen: Candidate, candidates: tuple[Candidate, ...], reason: str
+    ) -> IdentifiedModel:
+        """Fit the chosen structure on every sample and assemble the model and diagnostics."""
+        d = np.array(chosen.d)
+        blocks = self._blocks(d, chosen.with_A3, "full")
+        coef, _, residuals = self._solve(blocks, exact=True)
+        terms = [0, 1, 2] if chosen.with_A3 else [0, 1]
+        terms += [3 + l for l in range(d.size)]
+        A = np.zeros((3 + d.size, 2, 2))
+        index: list[tuple[int, int, int]] = []
+        for i in range(2):
+            for col, (term, j) in enumerate((t, j) for t in terms for j in range(2)):
+                A[term, i, j] = coef[col, i]
+                index.append((term, i, j))
+        release_residuals = np.array([
+            np.sqrt(np.mean((r / w) ** 2, axis=0)) / np.sqrt(np.mean(y**2, axis=0))
+            for r, w, (_, y) in zip(residuals, self.weights, blocks)
+        ])
+        covariance = self._covariance(d, chosen.with_A3, blocks, coef, residuals)
+        diagnostics = E2RFCDiagnostics(
+            n_lags=d.size,
+            with_A3=chosen.with_A3,
+            reason=reason,
+            candidates=candidates,
+            release_residuals=release_residuals,
+            wind_speeds=np.array([p.U for p in self.prepared]),
+            condition_number=self.condition(d, chosen.with_A3),
+            covariance=covariance,
+            parameter_index=tuple(index),
+            modal_fits=tuple(p.fit for p in self.prepared),
+        )
+        return IdentifiedModel(A, d, diagnostics)
+
+    def _covariance(
+        self, d: FloatArray, with_A3: bool, blocks: list[tuple[FloatArray, FloatArray]],
+        coef: FloatArray, residuals: list[FloatArray],
+    ) -> FloatArray:
+        """Gauss-Newton covariance of [A entries (row 0, row 1), log d], corrected for residual
+        autocorrelation by the effective sample size."""
+        k = coef.shape[0]
+        cols = []
+        for i in range(2):
+            block = np.zeros((0, 2 * k))
+            parts = []
+            for (X, _), w in zip(blocks, self.weights):
+                J = np.zeros((X.shape[0], 2 * k))
+                J[:, i * k : (i + 1) * k] = -w[i] * (X - X.mean(axis=0))
+                parts.append(J)
+            block = np.vstack(parts)
+            cols.append(block)
+        J_lin = np.vstack(cols)  # rows: all releases for force row 0, then for row 1
+        if d.size:
+            J_lag = np.zeros((J_lin.shape[0], d.size))
+            for l in range(d.size):
+                h = 1e-6
+                d_plus, d_minus = d.copy(), d.copy()
+                d_plus[l] *= math.exp(h)
+                d_minus[l] *= math.exp(-h)
+                r_plus = self._residual_vector(d_plus, with_A3, coef)
+                r_minus = self._residual_vector(d_minus, with_A3, coef)
+                J_lag[:, l] = (r_plus - r_minus) / (2 * h)
+            J = np.hstack([J_lin, J_lag])
+        else:
+            J = J_lin
+        r = np.concatenate([np.concatenate([res[:, i] for res in residuals]) for i in range(2)])
+        dof = max(r.size - J.shape[1], 1)
+        sigma2 = float(r @ r) / dof * _autocorrelation_inflation(residuals)
+        return np.asarray(sigma2 * np.linalg.pinv(J.T @ J), dtype=float)
+
+    def _residual_vector(self, d: FloatArray, with_A3: bool, coef: FloatArray) -> FloatArray:
+        """Weighted residuals at fixed coefficients (intercepts re-profiled), ordered as in J."""
+        blocks = self._blocks(d, with_A3, "full")
+        out = []
+        for i in range(2):
+            for (X, y), w in zip(blocks, self.weights):
+                e = y[:, i] - X @ coef[:, i]
+                out.append(w[i] * (e - e.mean()))
+        return np.concatenate(out)
+
+
+def _autocorrelation_inflation(residuals: list[FloatArray]) -> float:
+    """Variance inflation ``1 + 2 sum (1 - k/(L+1)) rho_k`` (Bartlett window, L = 50 lags).
+
+    Least-squares covariances assume white residuals; model error makes them coloured, and
+    ignoring that would understate the uncertainty of the flutter speed.
+    """
+    factors = []
+    L = 50
+    for res in residuals:
+        for e in res.T:
+            e = e - e.mean()
+            var = float(e @ e)
+            if var == 0.0 or e.size <= 2 * L:
+                continue
+            rho = np.array([float(e[:-k] @ e[k:]) / var for k in range(1, L + 1)])
+            factors.append(1.0 + 2.0 * float(np.sum((1 - np.arange(1, L + 1) / (L + 1)) * rho)))
+    return max(1.0, float(np.median(factors))) if factors else 1.0

@@ -1,0 +1,149 @@
+"""One free-vibration release as a validated container (the input of every identification).
+
+The checks here are the boundary where recorded or simulated data enters :mod:`ident`: after
+them, arrays are 1-D, equally long, finite and uniformly sampled, and U is positive. Each failure
+is a specific exception (a ``ValueError`` subclass) whose message names the problem.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from ident import _validate as v
+from ident.errors import InsufficientDataError, NonUniformSamplingError
+
+__all__ = ["Release", "SAMPLING_RTOL", "MIN_PERIODS"]
+
+#: Largest deviation of any time step from the mean step, relative to it. Host-resampled and
+#: simulated time bases are uniform to round-off; 1e-6 also admits float32 device clocks.
+SAMPLING_RTOL = 1e-6
+#: Fewest oscillation periods (counted on the displacements) a release must hold.
+MIN_PERIODS = 3
+#: Fewest samples per release, whatever the rate.
+MIN_SAMPLES = 64
+
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True, eq=False)
+class Release:
+    """One free decay after a release from rest, in SI units.
+
+    Parameters
+    ----------
+    t : array_like, shape (n,)
+        Time since the release instant, s; uniformly sampled, starting at or just after 0 (the lag
+        states of the aerodynamic model are zero at t = 0).
+    h, alpha : array_like, shape (n,)
+        Heave (m, positive down) and pitch (rad, positive nose-up).
+    lift, moment : array_like, shape (n,)
+        Self-excited lift (N/m, positive down) and moment (N m/m, positive nose-up), e.g. from
+        integrated surface pressures.
+    U : float
+        Mean wind speed, m/s, > 0.
+    rho : float, optional
+        Air density, kg/m^3 (None: use the section's).
+    meta : dict, optional
+        Provenance (file, release index, ...), carried along untouched.
+
+    Raises
+    ------
+    ValueError
+        Wrong shapes or lengths, non-finite values (NaN marks a gap: cut the release before it),
+        U <= 0.
+    NonUniformSamplingError
+        Time steps differ by more than ``SAMPLING_RTOL`` of the mean step, or t is not increasing.
+    InsufficientDataError
+        Fewer than 64 samples or fewer than ``MIN_PERIODS`` oscillation periods.
+    """
+
+    t: FloatArray
+    h: FloatArray
+    alpha: FloatArray
+    lift: FloatArray
+    moment: FloatArray
+    U: float
+    rho: float | None = None
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        arrays = {}
+        for name in ("t", "h", "alpha", "lift", "moment"):
+            arr = np.array(getattr(self, name), dtype=float)  # a private copy
+            if arr.ndim != 1:
+                raise ValueError(f"{name} must be a 1-D array, got shape {arr.shape}")
+            arrays[name] = arr
+        lengths = {name: arr.size for name, arr in arrays.items()}
+        if len(set(lengths.values())) != 1:
+            raise ValueError(f"release channels must have equal lengths, got {lengths}")
+        for name, arr in arrays.items():
+            v.finite_array(name, arr)
+        if arrays["t"].size < MIN_SAMPLES:
+            raise InsufficientDataError(
+                f"a release needs at least {MIN_SAMPLES} samples, got {arrays['t'].size}"
+            )
+        steps = np.diff(arrays["t"])
+        dt = float(steps.mean())
+        if not dt > 0.0 or np.any(steps <= 0.0):
+            raise NonUniformSamplingError("t must be strictly increasing")
+        worst = float(np.abs(steps - dt).max())
+        if worst > SAMPLING_RTOL * dt:
+            raise NonUniformSamplingError(
+                f"t is not uniformly sampled: a step deviates by {worst:.3g} s from the mean "
+                f"step {dt:.6g} s (tolerance {SAMPLING_RTOL:g} of the step); resample first"
+            )
+        U = v.positive("U", self.U)
+        rho = None if self.rho is None else v.positive("rho", self.rho)
+        for name, arr in arrays.items():
+            arr.flags.writeable = False
+            object.__setattr__(self, name, arr)
+        object.__setattr__(self, "U", U)
+        object.__setattr__(self, "rho", rho)
+        object.__setattr__(self, "meta", dict(self.meta))
+        periods = max(_periods(arrays["h"]), _periods(arrays["alpha"]))
+        if periods < MIN_PERIODS:
+            raise InsufficientDataError(
+                f"a release must hold at least {MIN_PERIODS} oscillation periods; the "
+                f"displacements show about {periods:.1f} in {self.duration:.3g} s"
+            )
+
+    @property
+    def dt(self) -> float:
+        """Sampling interval, s."""
+        return float((self.t[-1] - self.t[0]) / (self.t.size - 1))
+
+    @property
+    def fs(self) -> float:
+        """Sampling rate, Hz."""
+        return 1.0 / self.dt
+
+    @property
+    def duration(self) -> float:
+        """Length of the record, s."""
+        return float(self.t[-1] - self.t[0])
+
+    @classmethod
+    def from_simulation(cls, sim: Any, *, meta: dict[str, Any] | None = None) -> Release:
+        """Build a release from a :class:`simulators.tunnel.SimulatedRelease` (t >= 0 part only)."""
+        after = sim.t >= 0.0
+        return cls(
+            t=sim.t[after], h=sim.h[after], alpha=sim.alpha[after], lift=sim.lift[after],
+            moment=sim.moment[after], U=sim.U, rho=sim.rho, meta=dict(meta or {}),
+        )
+
+
+def _periods(x: FloatArray) -> float:
+    """Oscillation periods in a signal, counted as half the number of mean crossings.
+
+    A 5-sample moving average first keeps noise from adding crossings near the end of a decay.
+    """
+    smooth = np.convolve(x - x.mean(), np.ones(5) / 5, mode="valid")
+    if smooth.size < 2 or not np.any(smooth):
+        return 0.0
+    crossings = np.count_nonzero(np.signbit(smooth[1:]) != np.signbit(smooth[:-1]))
+    return math.floor(crossings / 2)
