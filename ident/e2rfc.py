@@ -223,12 +223,24 @@ def identify(
     lags = range(4) if n_lags is None else [n_lags]
     a3_options = (True, False) if with_A3 is None else (with_A3,)
     candidates: list[Candidate] = []
+    previous: FloatArray | None = None
+    history: list[list[Candidate]] = []
     for m in lags:
-        d_start: FloatArray | None = None
+        starts = problem.starts(m, previous)
+        tried = []
         for a3 in a3_options:
-            candidate, d_found = problem.candidate(m, a3, d_start)
-            candidates.append(candidate)
-            d_start = d_found if d_found is not None else d_start
+            candidate, d_found = problem.candidate(m, a3, starts)
+            tried.append(candidate)
+            if d_found is not None:
+                starts = [d_found]  # the other A3 option starts from these roots
+                previous = d_found if a3 == a3_options[0] else previous
+        candidates.extend(tried)
+        history.append(tried)
+        # Two lag counts in a row that beat nothing simpler: more lags will not either.
+        if n_lags is None and m >= 2 and not any(
+            _improves(history[j], [c for h in history[:j] for c in h]) for j in (m - 1, m)
+        ):
+            break
     usable = [c for c in candidates if not c.note]
     if not usable:
         notes = "; ".join(f"n_lags={c.n_lags}, A3={c.with_A3}: {c.note}" for c in candidates)
@@ -239,7 +251,9 @@ def identify(
 
 def _check_wind_speeds(releases: list[Release]) -> None:
     if not releases:
-        raise RankDeficiencyError("no releases given: E2RFC needs releases at two or more wind speeds")
+        raise RankDeficiencyError(
+            "no releases given: E2RFC needs releases at two or more wind speeds"
+        )
     speeds = sorted(r.U for r in releases)
     distinct = [speeds[0]]
     for u in speeds[1:]:
@@ -253,8 +267,19 @@ def _check_wind_speeds(releases: list[Release]) -> None:
         )
 
 
+def _improves(new: list[Candidate], old: list[Candidate]) -> bool:
+    """Tell whether the best new candidate beats the best old one by more than its std error."""
+    new_ok = [c for c in new if not c.note]
+    old_ok = [c for c in old if not c.note]
+    if not new_ok or not old_ok:
+        return bool(new_ok)
+    best_new = min(new_ok, key=lambda c: c.cv_error)
+    best_old = min(old_ok, key=lambda c: c.cv_error)
+    return best_new.cv_error < best_old.cv_error - best_old.cv_se
+
+
 def _select(usable: list[Candidate], *, given: bool) -> tuple[Candidate, str]:
-    """The one-standard-error rule over held-out errors."""
+    """Choose by the one-standard-error rule over held-out errors."""
     if given:
         return usable[0], "given by the caller"
     best = min(usable, key=lambda c: c.cv_error)
@@ -310,21 +335,24 @@ class _Problem:
         coef = np.empty((k, 2))
         for i in range(2):
             if exact:
-                M = np.vstack([w[i] * Xc for (Xc, _), w in zip(centred, self.weights)])
-                b = np.concatenate([w[i] * yc[:, i] for (_, yc), w in zip(centred, self.weights)])
+                M = np.vstack([w[i] * Xc for (Xc, _), w in zip(centred, self.weights, strict=True)])
+                b = np.concatenate(
+                    [w[i] * yc[:, i] for (_, yc), w in zip(centred, self.weights, strict=True)]
+                )
                 coef[:, i], *_ = np.linalg.lstsq(M, b, rcond=None)
                 continue
             G = np.zeros((k, k))
             b = np.zeros(k)
-            for (Xc, yc), w in zip(centred, self.weights):
+            for (Xc, yc), w in zip(centred, self.weights, strict=True):
                 G += w[i] ** 2 * (Xc.T @ Xc)
                 b += w[i] ** 2 * (Xc.T @ yc[:, i])
             scale = np.sqrt(np.diag(G))
             scale[scale == 0.0] = 1.0
-            coef[:, i] = np.linalg.lstsq(G / np.outer(scale, scale), b / scale, rcond=None)[0] / scale
+            scaled, *_ = np.linalg.lstsq(G / np.outer(scale, scale), b / scale, rcond=None)
+            coef[:, i] = scaled / scale
         intercepts = [y.mean(axis=0) - X.mean(axis=0) @ coef for X, y in blocks]
         residuals = [w * (y - X @ coef - c)
-                     for (X, y), c, w in zip(blocks, intercepts, self.weights)]
+                     for (X, y), c, w in zip(blocks, intercepts, self.weights, strict=True)]
         return coef, intercepts, residuals
 
     def condition(self, d: FloatArray, with_A3: bool) -> float:
@@ -337,7 +365,21 @@ class _Problem:
         return float(np.linalg.cond(M / norms))
 
     # -- lag-root search ---------------------------------------------------------------------
-    def _search(self, n_lags: int, with_A3: bool, start: FloatArray | None) -> FloatArray:
+    def starts(self, n_lags: int, previous: FloatArray | None) -> list[FloatArray]:
+        """Start values of the lag-root search for ``n_lags`` lags.
+
+        Lags found with one lag fewer are kept and one new root is tried at three places across
+        the covered reduced frequencies (nested starts converge fast); one evenly spread start
+        guards against a poor previous solution.
+        """
+        K_lo, K_hi = self.K_range
+        spread = np.geomspace(K_lo / 3.0, 3.0 * K_hi, n_lags + 2)[1:-1]
+        if previous is None or previous.size != n_lags - 1:
+            return [spread, spread * 0.3, spread * 3.0]
+        new_roots = np.geomspace(K_lo / 3.0, 3.0 * K_hi, 3)
+        return [np.sort(np.append(previous, r)) for r in new_roots] + [spread]
+
+    def _search(self, n_lags: int, with_A3: bool, starts: list[FloatArray]) -> FloatArray:
         if n_lags == 0:
             return np.zeros(0)
         K_lo, K_hi = self.K_range
@@ -348,17 +390,11 @@ class _Problem:
             _, _, res = self._solve(blocks)
             return np.concatenate([r.ravel() for r in res])
 
-        if start is not None and start.size == n_lags:
-            starts = [np.log(start)]
-        else:
-            grid = np.geomspace(K_lo / 3.0, 3.0 * K_hi, n_lags + 2)[1:-1]
-            spread = [grid, grid * 0.3, grid * 3.0]
-            starts = [np.log(np.sort(s)) for s in spread]
         best = None
-        for theta0 in starts:
-            theta0 = np.clip(theta0, lo + 1e-6, hi - 1e-6)
+        for start in starts:
+            theta0 = np.clip(np.log(start), lo + 1e-6, hi - 1e-6)
             sol = least_squares(residual, theta0, bounds=(lo, hi), xtol=1e-10, ftol=1e-12,
-                                max_nfev=60 * (n_lags + 1))
+                                max_nfev=40 * (n_lags + 1))
             if best is None or sol.cost < best.cost:
                 best = sol
         assert best is not None
@@ -366,11 +402,11 @@ class _Problem:
 
     # -- structures ----------------------------------------------------------------------------
     def candidate(
-        self, n_lags: int, with_A3: bool, d_start: FloatArray | None
+        self, n_lags: int, with_A3: bool, starts: list[FloatArray]
     ) -> tuple[Candidate, FloatArray | None]:
         """Search the lag roots of one structure and score it by held-out error."""
         k = 2 * ((6 if with_A3 else 4) + 2 * n_lags) + n_lags
-        d = self._search(n_lags, with_A3, d_start)
+        d = self._search(n_lags, with_A3, starts)
         if n_lags and np.min(np.diff(np.concatenate([[0.0], d]))) <= 1e-6 * d.max():
             return Candidate(n_lags, with_A3, tuple(d), math.inf, math.inf, k,
                              "lag roots merged: fewer lags describe the data"), None
@@ -389,9 +425,10 @@ class _Problem:
         blocks = self._blocks(d, with_A3, "search")
         for k in range(N_FOLDS):
             train = [np.concatenate([f[j] for j in range(N_FOLDS) if j != k]) for f in folds]
-            coef, intercepts, _ = self._solve([(X[r], y[r]) for (X, y), r in zip(blocks, train)])
+            training = [(X[r], y[r]) for (X, y), r in zip(blocks, train, strict=True)]
+            coef, intercepts, _ = self._solve(training)
             sq, n = 0.0, 0
-            for (X, y), f, c, w in zip(blocks, folds, intercepts, self.weights):
+            for (X, y), f, c, w in zip(blocks, folds, intercepts, self.weights, strict=True):
                 e = w * (y[f[k]] - X[f[k]] @ coef - c)
                 sq += float(np.sum(e**2))
                 n += e.size
@@ -399,7 +436,7 @@ class _Problem:
         return errors
 
     @staticmethod
-    def _folds(p: PreparedRelease) -> list[FloatArray]:
+    def _folds(p: PreparedRelease) -> list[npt.NDArray[np.intp]]:
         """Split a release's search rows into folds of interleaved blocks, each one period long.
 
         Contiguous folds would hold out the large-amplitude start of a decay in one fold and
@@ -428,9 +465,9 @@ class _Problem:
                 index.append((term, i, j))
         release_residuals = np.array([
             np.sqrt(np.mean((r / w) ** 2, axis=0)) / np.sqrt(np.mean(y**2, axis=0))
-            for r, w, (_, y) in zip(residuals, self.weights, blocks)
+            for r, w, (_, y) in zip(residuals, self.weights, blocks, strict=True)
         ])
-        covariance = self._covariance(d, chosen.with_A3, blocks, coef, residuals)
+        covariance = self._covariance(d, chosen.with_A3, coef, residuals)
         diagnostics = E2RFCDiagnostics(
             n_lags=d.size,
             with_A3=chosen.with_A3,
@@ -446,47 +483,46 @@ class _Problem:
         return IdentifiedModel(A, d, diagnostics)
 
     def _covariance(
-        self, d: FloatArray, with_A3: bool, blocks: list[tuple[FloatArray, FloatArray]],
-        coef: FloatArray, residuals: list[FloatArray],
+        self, d: FloatArray, with_A3: bool, coef: FloatArray, residuals: list[FloatArray]
     ) -> FloatArray:
-        """Gauss-Newton covariance of [A entries (row 0, row 1), log d], corrected for residual
-        autocorrelation by the effective sample size."""
+        """Gauss-Newton covariance of [A entries (force row 0, row 1), log d].
+
+        The residual variance and its autocorrelation inflation come from the full-rate
+        residuals; the curvature ``J^T J`` from the search subsample, scaled by the ratio of
+        sample counts (the rows are an even subsample of the same decays).
+        """
+        blocks = self._blocks(d, with_A3, "search")
         k = coef.shape[0]
-        cols = []
+        n_search = sum(X.shape[0] for X, _ in blocks)
+        n_full = sum(r.shape[0] for r in residuals)
+        # Linear part: block diagonal over the two force rows.
+        J_lin = np.zeros((2 * n_search, 2 * k))
         for i in range(2):
-            block = np.zeros((0, 2 * k))
-            parts = []
-            for (X, _), w in zip(blocks, self.weights):
-                J = np.zeros((X.shape[0], 2 * k))
-                J[:, i * k : (i + 1) * k] = -w[i] * (X - X.mean(axis=0))
-                parts.append(J)
-            block = np.vstack(parts)
-            cols.append(block)
-        J_lin = np.vstack(cols)  # rows: all releases for force row 0, then for row 1
-        if d.size:
-            J_lag = np.zeros((J_lin.shape[0], d.size))
-            for l in range(d.size):
-                h = 1e-6
-                d_plus, d_minus = d.copy(), d.copy()
-                d_plus[l] *= math.exp(h)
-                d_minus[l] *= math.exp(-h)
-                r_plus = self._residual_vector(d_plus, with_A3, coef)
-                r_minus = self._residual_vector(d_minus, with_A3, coef)
-                J_lag[:, l] = (r_plus - r_minus) / (2 * h)
-            J = np.hstack([J_lin, J_lag])
-        else:
-            J = J_lin
+            J_lin[i * n_search : (i + 1) * n_search, i * k : (i + 1) * k] = np.vstack(
+                [-w[i] * (X - X.mean(axis=0))
+                 for (X, _), w in zip(blocks, self.weights, strict=True)]
+            )
+        columns = [J_lin]
+        for l in range(d.size):
+            h = 1e-6
+            d_plus, d_minus = d.copy(), d.copy()
+            d_plus[l] *= math.exp(h)
+            d_minus[l] *= math.exp(-h)
+            r_plus = self._residual_vector(d_plus, with_A3, coef)
+            r_minus = self._residual_vector(d_minus, with_A3, coef)
+            columns.append(((r_plus - r_minus) / (2 * h))[:, None])
+        J = np.hstack(columns)
         r = np.concatenate([np.concatenate([res[:, i] for res in residuals]) for i in range(2)])
         dof = max(r.size - J.shape[1], 1)
         sigma2 = float(r @ r) / dof * _autocorrelation_inflation(residuals)
-        return np.asarray(sigma2 * np.linalg.pinv(J.T @ J), dtype=float)
+        return np.asarray(sigma2 * np.linalg.pinv(J.T @ J) * n_search / n_full, dtype=float)
 
     def _residual_vector(self, d: FloatArray, with_A3: bool, coef: FloatArray) -> FloatArray:
-        """Weighted residuals at fixed coefficients (intercepts re-profiled), ordered as in J."""
-        blocks = self._blocks(d, with_A3, "full")
+        """Weighted search-row residuals at fixed coefficients (intercepts re-profiled)."""
+        blocks = self._blocks(d, with_A3, "search")
         out = []
         for i in range(2):
-            for (X, y), w in zip(blocks, self.weights):
+            for (X, y), w in zip(blocks, self.weights, strict=True):
                 e = y[:, i] - X @ coef[:, i]
                 out.append(w[i] * (e - e.mean()))
         return np.concatenate(out)

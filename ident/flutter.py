@@ -448,7 +448,7 @@ def speed_sensitivity(
         raise ValueError("the critical eigenvalue does not cross into the right half plane here")
     dU_dA = np.zeros_like(model.A)
     for idx in np.ndindex(*model.A.shape):
-        h = 1e-6 * max(1.0, abs(model.A[idx]))
+        h = 1e-6 * max(1.0, abs(float(model.A[idx])))
         A_plus, A_minus = model.A.copy(), model.A.copy()
         A_plus[idx] += h
         A_minus[idx] -= h

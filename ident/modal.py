@@ -86,7 +86,7 @@ class ModalFit:
         return self.amplitudes[order]
 
     def evaluate(self, t: FloatArray, derivative: int = 0) -> FloatArray:
-        """The fitted signal (or its ``derivative``-th time derivative) at times ``t``, (n, ch)."""
+        """Evaluate the fit (or its ``derivative``-th time derivative) at times ``t``, (n, ch)."""
         E = _exp(np.outer(t, self.poles))
         out = (E @ (self.poles[:, None] ** derivative * self.amplitudes)).real
         if derivative == 0:
@@ -128,15 +128,29 @@ def _block_average(t: FloatArray, x: FloatArray, block: int) -> tuple[FloatArray
     return tb, xb
 
 
+def _block_gain(poles: ComplexArray, block: int, dt: float) -> tuple[ComplexArray, ComplexArray]:
+    """Gain ``g(p)`` of averaging ``e^{p t}`` over ``block`` samples, and ``dg/dp``.
+
+    ``g = (1 - z^N) / (N (1 - z))`` with ``z = e^{p dt}``; at ``z = 1`` (p = 0) ``g = 1``.
+    """
+    if block == 1:
+        return np.ones_like(poles), np.zeros_like(poles)
+    N = block
+    z = np.exp(poles * dt)
+    near_one = np.abs(z - 1) < 1e-9
+    zs = np.where(near_one, 0.5, z)  # placeholder where the closed form is 0/0
+    g = (1 - zs**N) / (N * (1 - zs))
+    dg_dz = (-N * zs ** (N - 1) * (1 - zs) + (1 - zs**N)) / (N * (1 - zs) ** 2)
+    g = np.where(near_one, 1.0, g)
+    # Near z = 1: g ~ 1 + (N - 1) (z - 1) / 2, so dg/dz -> (N - 1) / 2.
+    dg_dz = np.where(near_one, (N - 1) / 2, dg_dz)
+    return np.asarray(g, dtype=complex), np.asarray(dg_dz * z * dt, dtype=complex)
+
+
 def _basis(tb: FloatArray, poles: ComplexArray, block: int, dt: float) -> ComplexArray:
     """Block averages of ``e^{p t}`` over ``block`` samples starting at ``tb`` (exact)."""
-    E = _exp(np.outer(tb, poles))
-    if block == 1:
-        return E
-    z = np.exp(poles * dt)
-    near_one = np.abs(z - 1) < 1e-12
-    gain = np.where(near_one, 1.0, (1 - z**block) / (block * (1 - np.where(near_one, 0.5, z))))
-    return E * gain
+    g, _ = _block_gain(poles, block, dt)
+    return _exp(np.outer(tb, poles)) * g
 
 
 def _poles_from_params(theta: FloatArray, n_complex: int) -> ComplexArray:
@@ -156,7 +170,7 @@ def _real_design(basis: ComplexArray, n_complex: int) -> FloatArray:
 
 def _solve_amplitudes(design: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
     coef, *_ = np.linalg.lstsq(design, y, rcond=None)
-    return coef, y - design @ coef
+    return np.asarray(coef, dtype=float), np.asarray(y - design @ coef, dtype=float)
 
 
 def _to_complex_amplitudes(
@@ -173,7 +187,7 @@ def _to_complex_amplitudes(
 def _pencil(xb: FloatArray, order: int, dtb: float) -> ComplexArray:
     """Matrix-pencil poles (1/s) of multichannel data at interval ``dtb``."""
     n = xb.shape[0]
-    L = max(order + 1, min(n // 3, 200))
+    L = max(order + 1, min(n // 3, 120))
     rows = n - L
     H = np.vstack([np.lib.stride_tricks.sliding_window_view(xb[:, c], L + 1)[:rows]
                    for c in range(xb.shape[1])])
@@ -257,7 +271,7 @@ def fit_modes(
     dtb = block * dt
     duration = float(t[-1] - t[0])
     bounds = _bounds(n_modes, dtb, duration)
-    pencil = _pencil(yb[: min(yb.shape[0], 600)], 2 * n_modes + max_real_poles + 3, dtb)
+    pencil = _pencil(yb[: min(yb.shape[0], 400)], 2 * n_modes + max_real_poles + 3, dtb)
     osc, reals = _strongest_poles(tb, yb, block, dt, pencil)
     if osc.size < n_modes:
         raise InsufficientDataError(
@@ -265,14 +279,18 @@ def fit_modes(
         )
     # Oscillatory modes first; then real poles one at a time while BIC improves, each new one
     # started from the pencil's real poles or from a grid of decay rates across the record.
-    theta, rss = _refine(tb, yb, block, dt, n_modes, 0, _complex_params(osc[:n_modes]), bounds)
+    # The order search uses loose tolerances (it only compares orders); the chosen order is then
+    # polished to full precision.
+    theta, rss = _refine(tb, yb, block, dt, n_modes, 0, _complex_params(osc[:n_modes]), bounds,
+                         loose=True)
     bic = _bic(rss, yb, n_modes, 0)
     grid = -np.geomspace(3.0 / duration, 0.3 / dtb, 3)
+    unused = [r for r in reals if bounds[0][-1] < r < bounds[1][-1]]
     for n_real in range(1, max_real_poles + 1):
-        found = [r for r in reals if bounds[0][-1] < r < bounds[1][-1]][:1]
-        starts = found + list(grid[:: 2 if found else 1])
+        starts = unused[:1] or list(grid)  # the pencil's next real pole when it found one
         trials = [
-            _refine(tb, yb, block, dt, n_modes, n_real, np.append(theta, start), bounds)
+            _refine(tb, yb, block, dt, n_modes, n_real, np.append(theta, start), bounds,
+                    loose=True)
             for start in starts
         ]
         theta_new, rss_new = min(trials, key=lambda trial: trial[1])
@@ -280,7 +298,9 @@ def fit_modes(
         if bic_new >= bic:
             break
         theta, rss, bic = theta_new, rss_new, bic_new
+        unused = unused[1:]
     n_real = theta.size - 2 * n_modes
+    theta, rss = _refine(tb, yb, block, dt, n_modes, n_real, theta, bounds, loose=False)
 
     # Amplitudes on the full-rate data (block = 1), with the refined poles.
     poles = _poles_from_params(theta, n_modes)
@@ -345,9 +365,11 @@ def _strongest_poles(
 
 def _refine(
     tb: FloatArray, yb: FloatArray, block: int, dt: float, n_modes: int, n_real: int,
-    theta0: FloatArray, bounds: tuple[FloatArray, FloatArray],
+    theta0: FloatArray, bounds: tuple[FloatArray, FloatArray], *, loose: bool,
 ) -> tuple[FloatArray, float]:
     """Variable-projection refinement of the poles; returns parameters and residual sum.
+
+    ``loose`` stops at a relative cost change of 1e-6 (enough to compare model orders).
 
     The Jacobian is Kaufman's approximation ``-P_perp (dD/dtheta) c`` with the derivative of each
     exponential column taken in closed form through its (holomorphic) pole derivative.
@@ -364,10 +386,11 @@ def _refine(
 
     sol = least_squares(
         lambda th: evaluate(th)[0], theta0, jac=lambda th: evaluate(th)[1],
-        bounds=(bounds[0][:k], bounds[1][:k]), x_scale="jac", xtol=1e-9, ftol=1e-10,
+        bounds=(bounds[0][:k], bounds[1][:k]), x_scale="jac",
+        xtol=1e-6 if loose else 1e-10, ftol=1e-6 if loose else 1e-12,
         # A well-posed fit converges in ~15 evaluations; a pole the data cannot support wanders,
         # and the BIC rejects it anyway, so its search is cut short.
-        max_nfev=40,
+        max_nfev=20 if loose else 60,
     )
     return sol.x, float(np.sum(sol.fun**2))
 
@@ -384,10 +407,10 @@ def _varpro_step(
     coef = np.linalg.solve(R, Q.T @ yb)
     resid = yb - design @ coef
     # Pole derivative of each distinct exponential column (upper complex poles, then reals).
-    distinct = np.concatenate([poles[:n_modes], poles[2 * n_modes : 2 * n_modes + n_real]])
+    # d/dp of g(p) e^{p t} = (t g + g') e^{p t}: reuses the exponentials of the basis.
     cols = np.concatenate([np.arange(n_modes), np.arange(2 * n_modes, 2 * n_modes + n_real)])
-    step = 1e-7 * np.maximum(np.abs(distinct), 1.0)
-    d_basis = (_basis(tb, distinct + step, block, dt) - basis[:, cols]) / step
+    g, dg = _block_gain(poles[cols], block, dt)
+    d_basis = basis[:, cols] * (tb[:, None] + dg / g)
     n_ch = yb.shape[1]
     jac = np.empty((yb.size, theta.size))
     for j in range(n_modes):
@@ -398,8 +421,8 @@ def _varpro_step(
             v = dre[:, None] * c_re + dim[:, None] * c_im
             jac[:, 2 * j + col] = -(v - Q @ (Q.T @ v)).ravel(order="F")
     for r in range(n_real):
-        dE = d_basis[:, n_modes + r].real
-        v = dE[:, None] * coef[2 * n_modes + r]
+        dE_real = d_basis[:, n_modes + r].real
+        v = dE_real[:, None] * coef[2 * n_modes + r]
         jac[:, 2 * n_modes + r] = -(v - Q @ (Q.T @ v)).ravel(order="F")
     assert jac.shape[0] == resid.size and n_ch == resid.shape[1]
     return resid.ravel(order="F"), jac
