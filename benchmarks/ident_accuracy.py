@@ -1,0 +1,144 @@
+"""Accuracy and speed of E2RFC against the indirect flutter-derivative route (not a test).
+
+For two sections (the flat-plate demo section, and a heavier deck with another mass and frequency
+ratio), both with flat-plate aerodynamics (Jones's exact Roger model, so the truth is known in
+closed form), releases are simulated by ``simulators.tunnel`` from (4 mm, 0.02 rad), 20 s at
+500 Hz, with Gaussian noise of 0, 2 and 5 % of each channel's RMS on all four channels:
+
+- E2RFC: 3 wind speeds (0.4, 0.6, 0.8 of the true flutter speed), structure chosen by evidence;
+- FD route (``ident.fd_method``): 10 wind speeds from 0.3 to 0.85 of the flutter speed.
+
+Printed per case: flutter-speed error (median and 90th percentile of |error| over the seeds),
+flutter-derivative error over the reduced frequencies the releases cover (mean over the eight
+derivatives of max |error| / max |true|), median identification time, and for E2RFC the median of
+|error| / predicted standard deviation (1 means honest error bars). A final table times E2RFC on
+5 releases of 30 s at 500 Hz.
+
+Run: ``.venv/bin/python benchmarks/ident_accuracy.py [--seeds 20] [--workers 2]``. BLAS is kept
+single-threaded in every process, so the times are one-core times.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: one-core timings
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import time  # noqa: E402
+from concurrent.futures import ProcessPoolExecutor  # noqa: E402
+
+import numpy as np  # noqa: E402
+from tqdm import tqdm  # noqa: E402
+
+from ident import Release, SectionModel, e2rfc, flat_plate  # noqa: E402
+from ident.conventions import FLUTTER_DERIVATIVE_NAMES  # noqa: E402
+from ident import flutter as fl  # noqa: E402
+from ident.modal import fit_modes  # noqa: E402
+from simulators import simulate_release  # noqa: E402
+
+SECTIONS = {
+    "flat plate (mu 35, fa/fh 2.0)": SectionModel(
+        B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005),
+    "deck (mu 41, fa/fh 3.0)": SectionModel(
+        B=0.45, m=8.0, I=0.16, fh=1.2, fa=3.6, zeta_h=0.003, zeta_a=0.003),
+}
+TRUTH = flat_plate.jones_model()
+NOISES = (0.0, 0.02, 0.05)
+E2RFC_SPEEDS = (0.4, 0.6, 0.8)
+FD_SPEEDS = tuple(np.linspace(0.3, 0.85, 10))
+
+
+def make_releases(section, U_F, fractions, noise, seed, duration=20.0):
+    return [
+        Release.from_simulation(simulate_release(
+            section, TRUTH, f * U_F, 0.004, 0.02, duration=duration, fs=500.0, noise=noise,
+            rng=(seed, i, int(1000 * noise))))
+        for i, f in enumerate(fractions)
+    ]
+
+
+def fd_error(section, model, releases):
+    """Mean over the eight derivatives of max |error| / max |true| on the covered K range."""
+    K = [2 * np.pi * fr * section.B / r.U for r in releases
+         for fr in fit_modes(r.t, np.column_stack([r.h / section.B, r.alpha])).frequencies]
+    grid = np.linspace(min(K), max(K), 50)
+    true, found = TRUTH.flutter_derivatives(grid), model.flutter_derivatives(grid)
+    return float(np.mean([np.abs(found[n] - true[n]).max() / np.abs(true[n]).max()
+                          for n in FLUTTER_DERIVATIVE_NAMES]))
+
+
+def one_run(args):
+    section_name, method, noise, seed = args
+    section = SECTIONS[section_name]
+    U_F = fl.analyze(section, TRUTH).speed
+    fractions = E2RFC_SPEEDS if method == "E2RFC" else FD_SPEEDS
+    releases = make_releases(section, U_F, fractions, noise, seed)
+    start = time.perf_counter()
+    if method == "E2RFC":
+        model = e2rfc.identify(releases, section)
+    else:
+        from ident import fd_method
+
+        model = fd_method.identify(releases, section)
+    elapsed = time.perf_counter() - start
+    if method == "E2RFC":
+        result, std = model.flutter(section)
+    else:
+        result, std = fl.analyze(section, model), None
+    error = np.inf if result.speed is None else result.speed / U_F - 1.0
+    z = abs(error) / std if std else np.nan
+    return section_name, method, noise, error, fd_error(section, model, releases), elapsed, z
+
+
+def timing(section, repeats=5):
+    U_F = fl.analyze(section, TRUTH).speed
+    releases = make_releases(section, U_F, (0.4, 0.5, 0.6, 0.7, 0.8), 0.02, 0, duration=30.0)
+    rows = []
+    for label, kwargs in (("structure chosen by evidence", {}),
+                          ("structure given (2 lags, A3)", {"n_lags": 2, "with_A3": True})):
+        times = []
+        for _ in range(repeats):
+            start = time.perf_counter()
+            e2rfc.identify(releases, section, **kwargs)
+            times.append(time.perf_counter() - start)
+        rows.append((label, float(np.median(times)), float(np.min(times))))
+    return rows
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=20)
+    parser.add_argument("--workers", type=int, default=2)
+    args = parser.parse_args()
+    jobs = [(s, m, n, seed) for s in SECTIONS for m in ("E2RFC", "FD route") for n in NOISES
+            for seed in range(args.seeds)]
+    with ProcessPoolExecutor(args.workers) as pool:
+        results = list(tqdm(pool.map(one_run, jobs), total=len(jobs), desc="identifications"))
+
+    print(f"\nE2RFC: 3 wind speeds (0.4/0.6/0.8 U_F); FD route: 10 wind speeds (0.30..0.85 U_F);"
+          f" 20 s at 500 Hz; {args.seeds} seeds per row; times on one core.\n")
+    header = (f"{'section':<30}{'method':<10}{'noise':>6}{'U_F err med':>13}{'U_F err p90':>13}"
+              f"{'FD err med':>12}{'time med':>10}{'|err|/std':>11}")
+    print(header)
+    print("-" * len(header))
+    for s in SECTIONS:
+        for m in ("E2RFC", "FD route"):
+            for n in NOISES:
+                rows = [r for r in results if r[:3] == (s, m, n)]
+                err = np.abs([r[3] for r in rows]) * 100
+                fde = np.array([r[4] for r in rows]) * 100
+                t = np.array([r[5] for r in rows])
+                z = np.array([r[6] for r in rows])
+                z_text = f"{np.nanmedian(z):>11.2f}" if np.any(np.isfinite(z)) else f"{'-':>11}"
+                print(f"{s:<30}{m:<10}{100 * n:>5.0f}%{np.median(err):>12.3f}%"
+                      f"{np.percentile(err, 90):>12.3f}%{np.median(fde):>11.2f}%"
+                      f"{np.median(t):>9.2f}s{z_text}")
+    print("\nE2RFC time, 5 releases of 30 s at 500 Hz (2 % noise), one core:")
+    for label, med, best in timing(SECTIONS["flat plate (mu 35, fa/fh 2.0)"]):
+        print(f"  {label:<32} median {med:.2f} s, best {best:.2f} s")
+
+
+if __name__ == "__main__":
+    main()
