@@ -22,6 +22,7 @@ the simplest model whose held-out error is within one standard error of the best
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -246,6 +247,8 @@ def identify(
         notes = "; ".join(f"n_lags={c.n_lags}, A3={c.with_A3}: {c.note}" for c in candidates)
         raise RankDeficiencyError(f"no model structure is determined by these releases ({notes})")
     chosen, reason = _select(usable, given=n_lags is not None and with_A3 is not None)
+    polished = problem.search(chosen.n_lags, chosen.with_A3, [np.array(chosen.d)], loose=False)
+    chosen = dataclasses.replace(chosen, d=tuple(float(x) for x in polished))
     return problem.final(chosen, tuple(candidates), reason)
 
 
@@ -379,7 +382,14 @@ class _Problem:
         new_roots = np.geomspace(K_lo / 3.0, 3.0 * K_hi, 3)
         return [np.sort(np.append(previous, r)) for r in new_roots] + [spread]
 
-    def _search(self, n_lags: int, with_A3: bool, starts: list[FloatArray]) -> FloatArray:
+    def search(
+        self, n_lags: int, with_A3: bool, starts: list[FloatArray], *, loose: bool
+    ) -> FloatArray:
+        """Lag roots minimising the weighted force residual, from the best of several starts.
+
+        ``loose`` stops at a relative cost change of 1e-6: enough to compare structures; the
+        chosen one is then polished to full precision.
+        """
         if n_lags == 0:
             return np.zeros(0)
         K_lo, K_hi = self.K_range
@@ -393,8 +403,10 @@ class _Problem:
         best = None
         for start in starts:
             theta0 = np.clip(np.log(start), lo + 1e-6, hi - 1e-6)
-            sol = least_squares(residual, theta0, bounds=(lo, hi), xtol=1e-10, ftol=1e-12,
-                                max_nfev=40 * (n_lags + 1))
+            sol = least_squares(
+                residual, theta0, bounds=(lo, hi), xtol=1e-6 if loose else 1e-10,
+                ftol=1e-6 if loose else 1e-12, max_nfev=(20 if loose else 60) * (n_lags + 1),
+            )
             if best is None or sol.cost < best.cost:
                 best = sol
         assert best is not None
@@ -406,7 +418,7 @@ class _Problem:
     ) -> tuple[Candidate, FloatArray | None]:
         """Search the lag roots of one structure and score it by held-out error."""
         k = 2 * ((6 if with_A3 else 4) + 2 * n_lags) + n_lags
-        d = self._search(n_lags, with_A3, starts)
+        d = self.search(n_lags, with_A3, starts, loose=True)
         if n_lags and np.min(np.diff(np.concatenate([[0.0], d]))) <= 1e-6 * d.max():
             return Candidate(n_lags, with_A3, tuple(d), math.inf, math.inf, k,
                              "lag roots merged: fewer lags describe the data"), None
