@@ -148,9 +148,16 @@ def _block_gain(poles: ComplexArray, block: int, dt: float) -> tuple[ComplexArra
 
 
 def _basis(tb: FloatArray, poles: ComplexArray, block: int, dt: float) -> ComplexArray:
-    """Block averages of ``e^{p t}`` over ``block`` samples starting at ``tb`` (exact)."""
+    """Block averages of ``e^{p t}`` over ``block`` samples starting at ``tb`` (exact).
+
+    ``tb`` is uniform from 0 here, so ``e^{p tb_k} = z^k`` with ``z = e^{p dtb}``: a running
+    product is several times faster than complex exponentials and accurate to ~k eps.
+    """
     g, _ = _block_gain(poles, block, dt)
-    return _exp(np.outer(tb, poles)) * g
+    z = _exp(poles * (tb[1] - tb[0]))
+    steps = np.broadcast_to(z, (tb.size, poles.size)).copy()
+    steps[0] = 1.0
+    return np.cumprod(steps, axis=0) * g
 
 
 def _poles_from_params(theta: FloatArray, n_complex: int) -> ComplexArray:
