@@ -24,7 +24,7 @@ from ident.section import SectionModel
 FloatArray = npt.NDArray[np.float64]
 
 #: Rows per release kept for the nonlinear search over lag roots (every k-th sample).
-SEARCH_ROWS = 2000
+SEARCH_ROWS = 1200
 
 
 @dataclass(frozen=True, eq=False)

@@ -26,6 +26,7 @@ import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -63,7 +64,8 @@ class Candidate:
     d : tuple of float
         Lag roots found for this structure.
     cv_error : float
-        Held-out weighted mean squared force error (1 = noise level).
+        Held-out weighted mean squared force error (1 = noise level); NaN for a structure
+        given by the caller (not scored).
     cv_se : float
         Its standard error over the folds.
     n_params : int
@@ -221,6 +223,7 @@ def identify(
     prepared = [prepare(r, section) for r in releases]
     problem = _Problem(prepared)
 
+    given = n_lags is not None and with_A3 is not None
     lags = range(4) if n_lags is None else [n_lags]
     a3_options = (True, False) if with_A3 is None else (with_A3,)
     candidates: list[Candidate] = []
@@ -230,7 +233,7 @@ def identify(
         starts = problem.starts(m, previous)
         tried = []
         for a3 in a3_options:
-            candidate, d_found = problem.candidate(m, a3, starts)
+            candidate, d_found = problem.candidate(m, a3, starts, score=not given)
             tried.append(candidate)
             if d_found is not None:
                 starts = [d_found]  # the other A3 option starts from these roots
@@ -246,9 +249,11 @@ def identify(
     if not usable:
         notes = "; ".join(f"n_lags={c.n_lags}, A3={c.with_A3}: {c.note}" for c in candidates)
         raise RankDeficiencyError(f"no model structure is determined by these releases ({notes})")
-    chosen, reason = _select(usable, given=n_lags is not None and with_A3 is not None)
-    polished = problem.search(chosen.n_lags, chosen.with_A3, [np.array(chosen.d)], loose=False)
-    chosen = dataclasses.replace(chosen, d=tuple(float(x) for x in polished))
+    chosen, reason = _select(usable, given=given)
+    if not given:
+        polished = problem.search(chosen.n_lags, chosen.with_A3, [np.array(chosen.d)],
+                                  loose=False)
+        chosen = dataclasses.replace(chosen, d=tuple(float(x) for x in polished))
     return problem.final(chosen, tuple(candidates), reason)
 
 
@@ -395,30 +400,37 @@ class _Problem:
         K_lo, K_hi = self.K_range
         lo, hi = math.log(K_lo / 20.0), math.log(20.0 * K_hi)
 
-        def residual(theta: FloatArray) -> FloatArray:
-            blocks = self._blocks(np.exp(theta), with_A3, "search")
+        def residual(theta: FloatArray, which: str) -> FloatArray:
+            blocks = self._blocks(np.exp(theta), with_A3, which)
             _, _, res = self._solve(blocks)
             return np.concatenate([r.ravel() for r in res])
 
-        best = None
-        for start in starts:
-            theta0 = np.clip(np.log(start), lo + 1e-6, hi - 1e-6)
-            sol = least_squares(
-                residual, theta0, bounds=(lo, hi), xtol=1e-6 if loose else 1e-10,
-                ftol=1e-6 if loose else 1e-12, max_nfev=(20 if loose else 60) * (n_lags + 1),
+        def solve(theta0: FloatArray, precise: bool) -> Any:
+            return least_squares(
+                residual, np.clip(theta0, lo + 1e-6, hi - 1e-6), bounds=(lo, hi),
+                args=("full" if precise else "search",),
+                xtol=1e-10 if precise else 1e-6, ftol=1e-12 if precise else 1e-6,
+                max_nfev=(60 if precise else 20) * (n_lags + 1),
             )
-            if best is None or sol.cost < best.cost:
-                best = sol
-        assert best is not None
+
+        # Every start is run loosely on the subsampled rows; only the best is polished (when asked
+        # to be precise), on every sample, so that the lag roots use all the data.
+        best = min((solve(np.log(start), False) for start in starts), key=lambda sol: sol.cost)
+        if not loose:
+            best = solve(best.x, True)
         return np.sort(np.exp(best.x))
 
     # -- structures ----------------------------------------------------------------------------
     def candidate(
-        self, n_lags: int, with_A3: bool, starts: list[FloatArray]
+        self, n_lags: int, with_A3: bool, starts: list[FloatArray], *, score: bool
     ) -> tuple[Candidate, FloatArray | None]:
-        """Search the lag roots of one structure and score it by held-out error."""
+        """Search the lag roots of one structure and (if ``score``) its held-out error.
+
+        Without ``score`` (a structure given by the caller) the search runs at full precision
+        at once and no held-out error is computed (it is reported as NaN).
+        """
         k = 2 * ((6 if with_A3 else 4) + 2 * n_lags) + n_lags
-        d = self.search(n_lags, with_A3, starts, loose=True)
+        d = self.search(n_lags, with_A3, starts, loose=score)
         if n_lags and np.min(np.diff(np.concatenate([[0.0], d]))) <= 1e-6 * d.max():
             return Candidate(n_lags, with_A3, tuple(d), math.inf, math.inf, k,
                              "lag roots merged: fewer lags describe the data"), None
@@ -426,6 +438,8 @@ class _Problem:
         if cond > MAX_CONDITION:
             return Candidate(n_lags, with_A3, tuple(d), math.inf, math.inf, k,
                              f"rank deficient (condition number {cond:.2g})"), None
+        if not score:
+            return Candidate(n_lags, with_A3, tuple(d), math.nan, math.nan, k), d
         errors = self._cross_validate(d, with_A3)
         return Candidate(n_lags, with_A3, tuple(d), float(errors.mean()),
                          float(errors.std(ddof=1) / math.sqrt(errors.size)), k), d

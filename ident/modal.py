@@ -31,7 +31,7 @@ FloatArray = npt.NDArray[np.float64]
 ComplexArray = npt.NDArray[np.complex128]
 
 #: Block-averaged samples per period of the fastest mode used for the fit.
-_SAMPLES_PER_PERIOD = 8
+_SAMPLES_PER_PERIOD = 6
 
 
 @dataclass(frozen=True, eq=False)
