@@ -100,21 +100,74 @@ def roger_fit(
     if w.shape != K_arr.shape or np.any(w < 0.0):
         raise ValueError("weights must be non-negative with the shape of K")
 
-    basis = roger_basis(K_arr, d_arr, with_A3)
-    keep = [0, 1] + ([2] if with_A3 else []) + list(range(3, 3 + d_arr.size))
-    sqrt_w = np.sqrt(w)[:, None]
-    design = np.vstack([(basis.real * sqrt_w)[:, keep], (basis.imag * sqrt_w)[:, keep]])
-    rank = np.linalg.matrix_rank(design)
-    if rank < len(keep):
-        raise RankDeficiencyError(
-            f"flutter-derivative table cannot determine {len(keep)} coefficients per entry "
-            f"(rank {rank}): use more distinct reduced frequencies or fewer/different lag roots"
-        )
-    A = np.zeros((3 + d_arr.size, 2, 2))
+    # Every entry is known at the same reduced frequencies here.
+    shape = Q.shape
+    return _fit_entries(
+        np.broadcast_to(K_arr[:, None, None], shape), Q, d_arr, with_A3,
+        np.broadcast_to(w[:, None, None], shape),
+    )
+
+
+def _fit_entries(
+    K: npt.NDArray[np.float64],
+    Q: npt.NDArray[np.complex128],
+    d: npt.NDArray[np.float64],
+    with_A3: bool,
+    weights: npt.NDArray[np.float64] | None = None,
+    *,
+    check_rank: bool = True,
+) -> RationalFunctionModel:
+    """Least-squares Roger fit of each entry of ``Q`` at that entry's own reduced frequencies.
+
+    For fixed lag roots every entry ``Q_ij(iK) = A1 + A2 iK + A3 (iK)^2 + sum_l A_l iK/(iK + d_l)``
+    is linear in its own coefficients, so the four entries are four independent real least-squares
+    problems (real and imaginary parts stacked). Entries may be known at different ``K``: the
+    classical flutter-derivative method measures the heave column at the heave-mode frequency and
+    the pitch column at the pitch-mode frequency (:mod:`ident.fd_method`).
+
+    Parameters
+    ----------
+    K : ndarray, shape (n, 2, 2)
+        Reduced frequency of each row of each entry, > 0 (not validated here).
+    Q : ndarray, shape (n, 2, 2), complex
+        ``Q(iK)`` values, entry ``[:, i, j]`` at ``K[:, i, j]``.
+    d : ndarray, shape (m,)
+        Lag roots, > 0 (not validated here).
+    with_A3 : bool
+        Fit ``A3``; when False it is exactly zero.
+    weights : ndarray, shape (n, 2, 2), optional
+        Non-negative weight of each squared residual (default all 1).
+    check_rank : bool, optional
+        Raise on a rank-deficient entry (default). The lag-root search turns it off: it may pass
+        through merged lag roots, where the minimum-norm solution is good enough to move on.
+
+    Returns
+    -------
+    RationalFunctionModel
+
+    Raises
+    ------
+    RankDeficiencyError
+        When ``check_rank`` and an entry's rows cannot determine its coefficients.
+    """
+    keep = [0, 1] + ([2] if with_A3 else []) + list(range(3, 3 + d.size))
+    A = np.zeros((3 + d.size, 2, 2))
     for i in range(2):
         for j in range(2):
+            w = np.ones(K.shape[0]) if weights is None else weights[:, i, j]
+            sqrt_w = np.sqrt(w)[:, None]
+            basis = roger_basis(K[:, i, j], d, with_A3)
+            design = np.vstack([(basis.real * sqrt_w)[:, keep], (basis.imag * sqrt_w)[:, keep]])
+            if check_rank:
+                rank = np.linalg.matrix_rank(design)
+                if rank < len(keep):
+                    raise RankDeficiencyError(
+                        f"flutter-derivative table cannot determine {len(keep)} coefficients per "
+                        f"entry (rank {rank}): use more distinct reduced frequencies or "
+                        "fewer/different lag roots"
+                    )
             entry = Q[:, i, j] * sqrt_w[:, 0]
             target = np.concatenate([entry.real, entry.imag])
             coef, *_ = np.linalg.lstsq(design, target, rcond=None)
             A[keep, i, j] = coef
-    return RationalFunctionModel(A, d_arr)
+    return RationalFunctionModel(A, d)
