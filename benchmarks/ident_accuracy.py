@@ -88,7 +88,7 @@ def one_run(args):
     else:
         result, std = fl.analyze(section, model), None
     error = np.inf if result.speed is None else result.speed / U_F - 1.0
-    z = abs(error) / std if std else np.nan
+    z = abs(error) * U_F / std if std else np.nan  # error is relative, std in m/s
     return section_name, method, noise, error, fd_error(section, model, releases), elapsed, z
 
 

@@ -34,6 +34,7 @@ from scipy.optimize import least_squares
 
 from ident import flutter as _flutter
 from ident._regressors import PreparedRelease, prepare
+from ident._selection import Candidate, select_one_se
 from ident._threads import single_threaded_blas
 from ident.errors import RankDeficiencyError
 from ident.modal import ModalFit
@@ -53,36 +54,6 @@ MAX_CONDITION = 1e8
 N_FOLDS = 5
 
 
-@dataclass(frozen=True)
-class Candidate:
-    """One model structure tried during selection.
-
-    Attributes
-    ----------
-    n_lags : int
-    with_A3 : bool
-    d : tuple of float
-        Lag roots found for this structure.
-    cv_error : float
-        Held-out weighted mean squared force error (1 = noise level); NaN for a structure
-        given by the caller (not scored).
-    cv_se : float
-        Its standard error over the folds.
-    n_params : int
-        Coefficients fitted (both force rows, lag roots included).
-    note : str
-        Why it was skipped, when it was.
-    """
-
-    n_lags: int
-    with_A3: bool
-    d: tuple[float, ...]
-    cv_error: float
-    cv_se: float
-    n_params: int
-    note: str = ""
-
-
 @dataclass(frozen=True, eq=False)
 class E2RFCDiagnostics:
     """What an E2RFC identification found besides the coefficients.
@@ -94,7 +65,8 @@ class E2RFCDiagnostics:
     reason : str
         Why it was chosen (or "given by the caller").
     candidates : tuple of Candidate
-        Every structure tried, with its held-out error.
+        Every structure tried, with its held-out error: the weighted mean squared force error
+        over five folds (1 = the noise level).
     release_residuals : ndarray, shape (n_releases, 2)
         RMS force residual of each release and force channel relative to that channel's RMS.
     wind_speeds : ndarray, shape (n_releases,)
@@ -249,7 +221,7 @@ def identify(
     if not usable:
         notes = "; ".join(f"n_lags={c.n_lags}, A3={c.with_A3}: {c.note}" for c in candidates)
         raise RankDeficiencyError(f"no model structure is determined by these releases ({notes})")
-    chosen, reason = _select(usable, given=given)
+    chosen, reason = select_one_se(usable, given=given)
     if not given:
         polished = problem.search(chosen.n_lags, chosen.with_A3, [np.array(chosen.d)],
                                   loose=False)
@@ -284,22 +256,6 @@ def _improves(new: list[Candidate], old: list[Candidate]) -> bool:
     best_new = min(new_ok, key=lambda c: c.cv_error)
     best_old = min(old_ok, key=lambda c: c.cv_error)
     return best_new.cv_error < best_old.cv_error - best_old.cv_se
-
-
-def _select(usable: list[Candidate], *, given: bool) -> tuple[Candidate, str]:
-    """Choose by the one-standard-error rule over held-out errors."""
-    if given:
-        return usable[0], "given by the caller"
-    best = min(usable, key=lambda c: c.cv_error)
-    threshold = best.cv_error + best.cv_se
-    simple = min((c for c in usable if c.cv_error <= threshold), key=lambda c: c.n_params)
-    reason = (
-        f"n_lags={simple.n_lags}, A3={'fitted' if simple.with_A3 else 'zero'}: the simplest "
-        f"structure whose held-out error ({simple.cv_error:.4g}) is within one standard error of "
-        f"the best ({best.cv_error:.4g} +/- {best.cv_se:.2g}, n_lags={best.n_lags}, "
-        f"A3={'fitted' if best.with_A3 else 'zero'})"
-    )
-    return simple, reason
 
 
 class _Problem:
@@ -405,20 +361,39 @@ class _Problem:
             _, _, res = self._solve(blocks)
             return np.concatenate([r.ravel() for r in res])
 
-        def solve(theta0: FloatArray, precise: bool) -> Any:
+        def solve(theta0: FloatArray, which: str, tol: float, nfev: int) -> Any:
             return least_squares(
-                residual, np.clip(theta0, lo + 1e-6, hi - 1e-6), bounds=(lo, hi),
-                args=("full" if precise else "search",),
-                xtol=1e-10 if precise else 1e-6, ftol=1e-12 if precise else 1e-6,
-                max_nfev=(60 if precise else 20) * (n_lags + 1),
+                residual, np.clip(theta0, lo + 1e-6, hi - 1e-6), bounds=(lo, hi), args=(which,),
+                xtol=tol, ftol=1e-2 * tol, max_nfev=nfev * (n_lags + 1),
             )
 
-        # Every start is run loosely on the subsampled rows; only the best is polished (when asked
-        # to be precise), on every sample, so that the lag roots use all the data.
-        best = min((solve(np.log(start), False) for start in starts), key=lambda sol: sol.cost)
+        # Every start is run loosely on the subsampled rows. When asked to be precise, the best
+        # is converged there, then moved by one Gauss-Newton step on every sample, so that the
+        # lag roots use all the data: the subsample's optimum lies within the estimation noise of
+        # the full-data one, and from there one step of this nearly quadratic problem leaves d
+        # within 0.15 of its own standard deviation of the converged value (measured at 5 %
+        # noise; three more steps cost 0.2 s for that).
+        best = min((solve(np.log(start), "search", 1e-3, 20) for start in starts),
+                   key=lambda sol: sol.cost)
+        theta = best.x
         if not loose:
-            best = solve(best.x, True)
-        return np.sort(np.exp(best.x))
+            theta = solve(theta, "search", 1e-8, 40).x
+            theta = self._gauss_newton_step(theta, lambda th: residual(th, "full"), lo, hi)
+        return np.sort(np.exp(theta))
+
+    @staticmethod
+    def _gauss_newton_step(
+        theta: FloatArray, residual: Any, lo: float, hi: float
+    ) -> FloatArray:
+        """One Gauss-Newton step (central-difference Jacobian), kept inside the bounds."""
+        r0 = residual(theta)
+        h = 1e-6
+        J = np.column_stack([
+            (residual(theta + h * e) - residual(theta - h * e)) / (2 * h)
+            for e in np.eye(theta.size)
+        ])
+        step, *_ = np.linalg.lstsq(J, -r0, rcond=None)
+        return np.asarray(np.clip(theta + step, lo + 1e-9, hi - 1e-9), dtype=float)
 
     # -- structures ----------------------------------------------------------------------------
     def candidate(

@@ -44,6 +44,7 @@ import numpy.typing as npt
 from scipy.optimize import least_squares, linear_sum_assignment
 
 from ident import _validate as v
+from ident._selection import Candidate, select_one_se
 from ident._threads import single_threaded_blas
 from ident.conventions import (
     FLUTTER_DERIVATIVE_NAMES,
@@ -58,7 +59,7 @@ from ident.roger import _fit_entries, roger_basis
 from ident.section import SectionModel
 
 __all__ = [
-    "FDCandidate",
+    "Candidate",
     "FDDiagnostics",
     "FDIdentifiedModel",
     "FlutterDerivativeTable",
@@ -403,36 +404,6 @@ def _check_decay(n: int, decay: Any) -> tuple[FloatArray, FloatArray, FloatArray
 # Roger fit of the table
 
 
-@dataclass(frozen=True)
-class FDCandidate:
-    """One Roger structure tried during selection.
-
-    Attributes
-    ----------
-    n_lags : int
-    with_A3 : bool
-    d : tuple of float
-        Lag roots found for this structure (non-dimensional).
-    cv_error : float
-        Leave-one-wind-speed-out mean squared error of the held-out ``Q`` entries, each entry
-        relative to its RMS over the table (so 0.01 is a 10 % RMS error).
-    cv_se : float
-        Its standard error over the held-out wind speeds.
-    n_params : int
-        Coefficients fitted (all four entries, lag roots included).
-    note : str
-        Why it was skipped, when it was.
-    """
-
-    n_lags: int
-    with_A3: bool
-    d: tuple[float, ...]
-    cv_error: float
-    cv_se: float
-    n_params: int
-    note: str = ""
-
-
 @dataclass(frozen=True, eq=False)
 class FDDiagnostics:
     """What the Roger fit of a flutter-derivative table found besides the coefficients.
@@ -443,8 +414,9 @@ class FDDiagnostics:
         The chosen structure.
     reason : str
         Why it was chosen (or "given by the caller").
-    candidates : tuple of FDCandidate
-        Every structure tried, with its held-out error.
+    candidates : tuple of Candidate
+        Every structure tried, with its held-out error: leave-one-wind-speed-out mean squared
+        error of the held-out ``Q`` entries, each relative to its RMS over the table.
     relative_residual : ndarray, shape (2, 2)
         RMS fit residual of each entry of ``Q`` relative to that entry's RMS over the table.
     """
@@ -452,7 +424,7 @@ class FDDiagnostics:
     n_lags: int
     with_A3: bool
     reason: str
-    candidates: tuple[FDCandidate, ...]
+    candidates: tuple[Candidate, ...]
     relative_residual: FloatArray
 
 
@@ -558,11 +530,11 @@ def identify(
 
     lags = range(4) if n_lags is None else [n_lags]
     a3_options = (True, False) if with_A3 is None else (with_A3,)
-    candidates: list[FDCandidate] = []
+    candidates: list[Candidate] = []
     previous: FloatArray | None = None  # lag roots of the best structure with one lag fewer
     for m in lags:
         starts = problem.starts(m, previous)
-        found: list[tuple[FDCandidate, FloatArray]] = []
+        found: list[tuple[Candidate, FloatArray]] = []
         for a3 in a3_options:
             candidate, d_found = problem.candidate(m, a3, starts)
             candidates.append(candidate)
@@ -576,7 +548,7 @@ def identify(
         raise RankDeficiencyError(
             f"no Roger structure is determined by this flutter-derivative table ({notes})"
         )
-    chosen, reason = _select(usable, given=n_lags is not None and with_A3 is not None)
+    chosen, reason = select_one_se(usable, given=n_lags is not None and with_A3 is not None)
     model = problem.fit(np.array(chosen.d), chosen.with_A3)
     diagnostics = FDDiagnostics(
         n_lags=chosen.n_lags,
@@ -602,22 +574,6 @@ def _check_wind_speeds(releases: list[Release]) -> None:
             "speeds (in practice many), one row per speed; this is the method's known weakness "
             "(E2RFC, ident.e2rfc.identify, works from two)"
         )
-
-
-def _select(usable: list[FDCandidate], *, given: bool) -> tuple[FDCandidate, str]:
-    """Choose by the one-standard-error rule over held-out errors (as :mod:`ident.e2rfc` does)."""
-    if given:
-        return usable[0], "given by the caller"
-    best = min(usable, key=lambda c: c.cv_error)
-    threshold = best.cv_error + best.cv_se
-    simple = min((c for c in usable if c.cv_error <= threshold), key=lambda c: c.n_params)
-    reason = (
-        f"n_lags={simple.n_lags}, A3={'fitted' if simple.with_A3 else 'zero'}: the simplest "
-        f"structure whose held-out error ({simple.cv_error:.4g}) is within one standard error of "
-        f"the best ({best.cv_error:.4g} +/- {best.cv_se:.2g}, n_lags={best.n_lags}, "
-        f"A3={'fitted' if best.with_A3 else 'zero'})"
-    )
-    return simple, reason
 
 
 class _RogerProblem:
@@ -708,13 +664,13 @@ class _RogerProblem:
 
     def candidate(
         self, n_lags: int, with_A3: bool, starts: list[FloatArray]
-    ) -> tuple[FDCandidate, FloatArray | None]:
+    ) -> tuple[Candidate, FloatArray | None]:
         """Search the lag roots of one structure and score it by leave-one-speed-out error."""
         per_entry = 2 + int(with_A3) + n_lags
         n_params = 4 * per_entry + n_lags
 
-        def skipped(note: str, d: tuple[float, ...] = ()) -> tuple[FDCandidate, None]:
-            return FDCandidate(n_lags, with_A3, d, math.inf, math.inf, n_params, note), None
+        def skipped(note: str, d: tuple[float, ...] = ()) -> tuple[Candidate, None]:
+            return Candidate(n_lags, with_A3, d, math.inf, math.inf, n_params, note), None
 
         # Each wind speed gives every entry one complex (two real) equations.
         if 2 * (self.n_speeds - 1) < per_entry or 8 * self.n_speeds < n_params:
@@ -733,7 +689,7 @@ class _RogerProblem:
             errors = self._cross_validate(d, with_A3)
         except RankDeficiencyError as err:
             return skipped(f"rank deficient: {err}", roots)
-        return FDCandidate(n_lags, with_A3, roots, float(errors.mean()),
+        return Candidate(n_lags, with_A3, roots, float(errors.mean()),
                            float(errors.std(ddof=1) / math.sqrt(errors.size)), n_params), d
 
     def _cross_validate(self, d: FloatArray, with_A3: bool) -> FloatArray:
