@@ -192,9 +192,18 @@ def identify(
     _check_wind_speeds(releases)
     if n_lags is not None and (not isinstance(n_lags, int) or not 0 <= n_lags <= 3):
         raise ValueError(f"n_lags must be an integer in 0..3 or None, got {n_lags!r}")
-    prepared = [prepare(r, section) for r in releases]
-    problem = _Problem(prepared)
+    return _identify_prepared([prepare(r, section) for r in releases], n_lags, with_A3)
 
+
+def _identify_prepared(
+    prepared: list[PreparedRelease], n_lags: int | None, with_A3: bool | None
+) -> IdentifiedModel:
+    """Choose the structure, search the lag roots and fit, on prepared releases.
+
+    Separate from :func:`identify` so that other regressor constructions (the benchmark's
+    ablation with differentiated raw displacements) run through the very same estimator.
+    """
+    problem = _Problem(prepared)
     given = n_lags is not None and with_A3 is not None
     lags = range(4) if n_lags is None else [n_lags]
     a3_options = (True, False) if with_A3 is None else (with_A3,)
