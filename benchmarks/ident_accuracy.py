@@ -38,8 +38,8 @@ from tqdm import tqdm  # noqa: E402
 
 from ident import Release, SectionModel, e2rfc, flat_plate  # noqa: E402
 from ident import flutter as fl  # noqa: E402
-from ident.conventions import FLUTTER_DERIVATIVE_NAMES  # noqa: E402
 from ident._regressors import PreparedRelease, RegressorView, prepare  # noqa: E402
+from ident.conventions import FLUTTER_DERIVATIVE_NAMES  # noqa: E402
 from ident.modal import fit_modes  # noqa: E402
 from simulators import simulate_release  # noqa: E402
 
