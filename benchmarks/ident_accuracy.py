@@ -190,7 +190,9 @@ def main():
                 fde = np.array([r[4] for r in rows]) * 100
                 t = np.array([r[5] for r in rows])
                 z = np.array([r[6] for r in rows])
-                z_text = f"{np.nanmedian(z):>11.2f}" if np.any(np.isfinite(z)) else f"{'-':>11}"
+                # Without noise both error and std are round-off: their ratio means nothing.
+                meaningful = n > 0 and np.any(np.isfinite(z))
+                z_text = f"{np.nanmedian(z):>11.2f}" if meaningful else f"{'-':>11}"
                 print(f"{s:<30}{m:<11}{100 * n:>5.0f}%{np.median(err):>12.3f}%"
                       f"{np.percentile(err, 90):>12.3f}%{np.median(fde):>11.2f}%"
                       f"{np.median(t):>9.2f}s{z_text}")
