@@ -135,23 +135,99 @@ class TapLayout:
     def from_table(cls, table: Mapping[str, Any]) -> TapLayout:
         """Build a layout from a config table (e.g. ``[taps]`` of a rig TOML).
 
-        Two forms: explicit arrays ``{x, z, nx, nz, length}``, or a generated rectangle
-        ``{shape = "rectangle", B, D, taps_per_face}``. Unknown or missing keys raise ``ValueError``
+        Explicit arrays ``{x, z, nx, nz, length}``, or a generated outline: ``{shape =
+        "rectangle", B, D, taps_per_face}``, ``{shape = "streamlined_deck", B, D, n_taps}`` or
+        ``{shape = "polygon", vertices, n_taps}``. Unknown or missing keys raise ``ValueError``
         naming them.
         """
+        shapes = {
+            "rectangle": {"shape", "B", "D", "taps_per_face"},
+            "streamlined_deck": {"shape", "B", "D", "n_taps"},
+            "polygon": {"shape", "vertices", "n_taps"},
+        }
         keys = set(table)
-        if table.get("shape") == "rectangle":
-            expected = {"shape", "B", "D", "taps_per_face"}
-        elif "shape" in table:
-            raise ValueError(f"taps.shape must be 'rectangle' (or absent), got {table['shape']!r}")
-        else:
-            expected = {"x", "z", "nx", "nz", "length"}
+        if "shape" in table and table["shape"] not in shapes:
+            raise ValueError(
+                f"taps.shape must be one of {sorted(shapes)} (or absent), got {table['shape']!r}"
+            )
+        expected = shapes[table["shape"]] if "shape" in table else {"x", "z", "nx", "nz", "length"}
         if keys != expected:
             missing, unknown = sorted(expected - keys), sorted(keys - expected)
             raise ValueError(f"taps table: missing keys {missing}, unknown keys {unknown}")
-        if "shape" in table:
+        shape = table.get("shape")
+        if shape == "rectangle":
             return cls.rectangle(table["B"], table["D"], table["taps_per_face"])
+        if shape == "streamlined_deck":
+            return cls.streamlined_deck(table["B"], table["D"], table["n_taps"])
+        if shape == "polygon":
+            return cls.polygon(table["vertices"], table["n_taps"])
         return cls(**{name: np.asarray(table[name], dtype=float) for name in expected})
+
+    @classmethod
+    def polygon(cls, vertices: Any, n_taps: int) -> TapLayout:
+        """Taps evenly spaced by arc length around a closed polygon outline.
+
+        Parameters
+        ----------
+        vertices : array_like, shape (n_vertices, 2)
+            Outline corners ``(x, z)`` in m, in order around the section (either direction;
+            normals are made to point outward).
+        n_taps : int
+            Number of taps (at least one per edge), spread over the edges in proportion to their
+            lengths; each tap sits mid-way along its tributary length on one edge.
+        """
+        xz = v.finite_array("vertices", vertices, ndim=2)
+        if xz.shape[1] != 2 or xz.shape[0] < 3:
+            raise ValueError(f"vertices must have shape (n >= 3, 2), got {xz.shape}")
+        if not isinstance(n_taps, int) or n_taps < 3:
+            raise ValueError(f"n_taps must be an integer >= 3, got {n_taps!r}")
+        closed = np.vstack([xz, xz[:1]])
+        edges = np.diff(closed, axis=0)
+        lengths = np.hypot(edges[:, 0], edges[:, 1])
+        if np.any(lengths == 0.0):
+            raise ValueError("vertices must not repeat consecutively")
+        # Signed area (shoelace): positive when the outline runs counter-clockwise in (x, z).
+        area = 0.5 * float(np.sum(closed[:-1, 0] * closed[1:, 1] - closed[1:, 0] * closed[:-1, 1]))
+        if n_taps < edges.shape[0]:
+            raise ValueError(f"n_taps must be at least the number of edges ({edges.shape[0]})")
+        # Taps per edge in proportion to its length (at least one), each edge split evenly: every
+        # tributary length then lies on one straight edge, so a uniform pressure integrates to
+        # exactly zero force and moment on the closed outline.
+        counts = np.maximum(1, np.round(n_taps * lengths / lengths.sum()).astype(int))
+        while counts.sum() != n_taps:
+            per_tap = lengths / counts
+            if counts.sum() < n_taps:
+                counts[np.argmax(per_tap)] += 1
+            else:
+                counts[np.argmin(np.where(counts > 1, per_tap, np.inf))] -= 1
+        sign = 1.0 if area > 0 else -1.0  # counter-clockwise: outward = tangent turned clockwise
+        x, z, nx, nz, ds = [], [], [], [], []
+        for start, edge, length, count in zip(closed[:-1], edges, lengths, counts, strict=True):
+            frac = (np.arange(count) + 0.5) / count
+            x.append(start[0] + frac * edge[0])
+            z.append(start[1] + frac * edge[1])
+            nx.append(np.full(count, sign * edge[1] / length))
+            nz.append(np.full(count, -sign * edge[0] / length))
+            ds.append(np.full(count, length / count))
+        return cls(x=np.concatenate(x), z=np.concatenate(z), nx=np.concatenate(nx),
+                   nz=np.concatenate(nz), length=np.concatenate(ds))
+
+    @classmethod
+    def streamlined_deck(cls, B: float, D: float, n_taps: int) -> TapLayout:
+        """Taps around a streamlined box-girder outline of width ``B`` and depth ``D``.
+
+        The outline is a flat top with sloping fairings to sharp edges at mid-depth, and a
+        bottom plate with inclined webs (a generic closed box girder, as on many long-span
+        bridges), centred on the elastic axis.
+        """
+        B = v.positive("B", B)
+        D = v.positive("D", D)
+        fairing, web = 0.18 * B, 0.25 * B
+        vertices = [
+            (-B / 2, 0.0), (-B / 2 + fairing, -D / 2), (B / 2 - fairing, -D / 2), (B / 2, 0.0),
+            (B / 2 - web, D / 2), (-B / 2 + web, D / 2),
+        ]
+        return cls.polygon(vertices, n_taps)
 
     @classmethod
     def rectangle(cls, B: float, D: float, taps_per_face: int) -> TapLayout:

@@ -63,8 +63,27 @@ def test_from_table_reads_both_forms_and_names_bad_keys():
     with pytest.raises(ValueError, match=r"missing keys \['length'\], unknown keys \['len'\]"):
         TapLayout.from_table({"x": [0.0, 0.1], "z": [0, 0], "nx": [0, 0], "nz": [-1, 1],
                               "len": [0.1, 0.1]})
-    with pytest.raises(ValueError, match="shape must be 'rectangle'"):
+    with pytest.raises(ValueError, match="shape must be one of"):
         TapLayout.from_table({"shape": "circle"})
+    deck = TapLayout.from_table({"shape": "streamlined_deck", "B": 0.45, "D": 0.05,
+                                 "n_taps": 64})
+    assert deck.n_taps == 64
+
+
+@pytest.mark.parametrize("layout", [
+    TapLayout.streamlined_deck(0.45, 0.05, 64),
+    TapLayout.polygon([(-0.1, 0.0), (0.0, -0.03), (0.1, 0.0), (0.0, 0.03)], 13),
+    TapLayout.polygon([(-0.1, 0.0), (0.0, 0.03), (0.1, 0.0), (0.0, -0.03)], 13),  # clockwise
+], ids=["deck", "diamond-ccw", "diamond-cw"])
+def test_generated_outlines_are_closed_with_outward_normals(layout):
+    """Uniform pressure gives no force or moment; normals point away from the centroid."""
+    lift, moment = layout.integrate(np.full((1, layout.n_taps), 500.0))
+    assert abs(lift[0]) < 1e-10 and abs(moment[0]) < 1e-10
+    centroid = np.array([np.average(layout.x, weights=layout.length),
+                         np.average(layout.z, weights=layout.length)])
+    outward = (layout.x - centroid[0]) * layout.nx + (layout.z - centroid[1]) * layout.nz
+    assert np.all(outward > 0)
+    assert layout.length.sum() > 0
 
 
 @pytest.mark.parametrize(

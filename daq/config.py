@@ -1,0 +1,266 @@
+"""Rig configurations: TOML files in rig_configs/, parsed and validated into frozen objects.
+
+A rig config describes one tunnel set-up: the section model (structure and pressure taps), the
+safety limits, the tunnel calibration, the instruments (each a ``driver`` name, a transport
+``url`` and driver-specific settings) and, for simulated rigs, the virtual tunnel's truth. Every
+table rejects unknown keys and names missing ones; every number is range-checked; each error is a
+:class:`~daq.errors.ConfigError` whose message names the key (``[section] m``) and the allowed
+range. Instrument settings are validated by the settings class each driver registers
+(:mod:`daq.registry`), so a driver owns its own keys.
+
+The TOML text is kept verbatim (it goes into every HDF5 file as ``/entry/config``).
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from daq.errors import ConfigError
+from ident.section import SectionModel
+from ident.taps import TapLayout
+
+__all__ = [
+    "InstrumentConfig",
+    "Limits",
+    "RigConfig",
+    "SimulationConfig",
+    "check_keys",
+    "load_rig_config",
+    "number",
+    "parse_rig_config",
+]
+
+#: Instrument roles a rig may have (DESIGN.md, "Instruments").
+ROLES = ("scanner", "lasers", "fan", "plc", "barometer")
+
+
+def check_keys(table: Mapping[str, Any], where: str, required: set[str],
+               optional: set[str] = frozenset()) -> None:  # type: ignore[assignment]
+    """Raise ConfigError naming unknown keys and missing required keys of a table."""
+    if not isinstance(table, Mapping):
+        raise ConfigError(f"{where} must be a table, got {type(table).__name__}")
+    unknown = sorted(set(table) - required - set(optional))
+    missing = sorted(required - set(table))
+    if unknown:
+        allowed = sorted(required | set(optional))
+        raise ConfigError(f"{where}: unknown key(s) {unknown}; allowed keys: {allowed}")
+    if missing:
+        raise ConfigError(f"{where}: missing required key(s) {missing}")
+
+
+def number(table: Mapping[str, Any], key: str, where: str, *, lo: float = -math.inf,
+           hi: float = math.inf, lo_open: bool = False, default: float | None = None) -> float:
+    """Read a finite number in ``[lo, hi]`` (``(lo, hi]`` if ``lo_open``) or raise ConfigError."""
+    if key not in table:
+        if default is None:
+            raise ConfigError(f"{where}: missing required key {key!r}")
+        return default
+    value = table[key]
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ConfigError(f"{where} {key} must be a number, got {value!r}")
+    x = float(value)
+    ok = math.isfinite(x) and (lo < x if lo_open else lo <= x) and x <= hi
+    if not ok:
+        left = "(" if lo_open else "["
+        raise ConfigError(f"{where} {key} = {x!r} is outside the allowed range {left}{lo}, {hi}]")
+    return x
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Safety limits of the rig.
+
+    Attributes
+    ----------
+    max_wind_speed : float
+        Highest wind speed the operator may request, m/s.
+    max_fan_rpm : float
+        Highest fan speed reference the drive may ever be sent, rpm.
+    """
+
+    max_wind_speed: float
+    max_fan_rpm: float
+
+
+@dataclass(frozen=True)
+class InstrumentConfig:
+    """One instrument: its driver name, transport URL and driver-specific settings."""
+
+    role: str
+    name: str
+    driver: str
+    url: str
+    settings: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class SimulationConfig:
+    """Truth of the virtual tunnel for a simulated rig.
+
+    Attributes
+    ----------
+    aerodynamics : str
+        ``"flat_plate_jones"`` (the closed-form flat plate) or ``"rfc"`` (coefficients given).
+    rfc : dict or None
+        ``{"A": ..., "d": ...}`` when ``aerodynamics = "rfc"``.
+    hold_h, hold_alpha : float
+        Hold position of the electromagnet, m and rad.
+    pressure_pa, temperature_c : float
+        Ambient air.
+    devices : dict
+        Per-instrument simulation settings (clock offset and drift, noise, faults), by name.
+    """
+
+    aerodynamics: str
+    rfc: Mapping[str, Any] | None
+    hold_h: float
+    hold_alpha: float
+    pressure_pa: float
+    temperature_c: float
+    devices: Mapping[str, Mapping[str, Any]]
+
+
+@dataclass(frozen=True)
+class RigConfig:
+    """A validated rig configuration (see the module docstring)."""
+
+    name: str
+    section: SectionModel
+    depth: float
+    taps: TapLayout
+    limits: Limits
+    wind_per_rpm: float
+    instruments: tuple[InstrumentConfig, ...]
+    simulation: SimulationConfig | None
+    text: str = field(repr=False)
+    source: str = ""
+
+    def instrument(self, name: str) -> InstrumentConfig:
+        """Return the instrument called ``name`` (``scanner``, ``fan``, a laser's name, ...)."""
+        for inst in self.instruments:
+            if inst.name == name:
+                return inst
+        raise ConfigError(f"{self.source}: no instrument named {name!r}; have "
+                          f"{[i.name for i in self.instruments]}")
+
+    def by_role(self, role: str) -> list[InstrumentConfig]:
+        """Return every instrument of a role (``lasers`` may have several)."""
+        return [inst for inst in self.instruments if inst.role == role]
+
+
+def load_rig_config(path: str | Path) -> RigConfig:
+    """Read and validate a rig config file."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(f"cannot read rig config {path}: {exc}") from exc
+    return parse_rig_config(text, source=str(path))
+
+
+def parse_rig_config(text: str, source: str = "<string>") -> RigConfig:
+    """Validate the TOML ``text`` of a rig config; ``source`` names it in error messages."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{source}: not valid TOML: {exc}") from exc
+    check_keys(data, source, {"rig", "section", "taps", "limits", "tunnel"},
+               set(ROLES) | {"simulation"})
+    check_keys(data["rig"], f"{source} [rig]", {"name"}, {"description"})
+    section, depth = _section(data["section"], f"{source} [section]")
+    try:
+        taps = TapLayout.from_table(data["taps"])
+    except (ValueError, TypeError) as exc:
+        raise ConfigError(f"{source} [taps]: {exc}") from exc
+    check_keys(data["limits"], f"{source} [limits]", {"max_wind_speed", "max_fan_rpm"})
+    limits = Limits(
+        max_wind_speed=number(data["limits"], "max_wind_speed", f"{source} [limits]",
+                              lo=0.0, hi=100.0, lo_open=True),
+        max_fan_rpm=number(data["limits"], "max_fan_rpm", f"{source} [limits]",
+                           lo=0.0, hi=100000.0, lo_open=True),
+    )
+    check_keys(data["tunnel"], f"{source} [tunnel]", {"wind_per_rpm"})
+    wind_per_rpm = number(data["tunnel"], "wind_per_rpm", f"{source} [tunnel]", lo=0.0,
+                          hi=10.0, lo_open=True)
+    if limits.max_fan_rpm * wind_per_rpm < limits.max_wind_speed:
+        raise ConfigError(
+            f"{source} [limits]: max_wind_speed {limits.max_wind_speed} m/s cannot be reached "
+            f"below max_fan_rpm {limits.max_fan_rpm} at {wind_per_rpm} (m/s)/rpm"
+        )
+    instruments = _instruments(data, source)
+    simulation = (_simulation(data["simulation"], f"{source} [simulation]", instruments)
+                  if "simulation" in data else None)
+    return RigConfig(name=str(data["rig"]["name"]), section=section, depth=depth, taps=taps,
+                     limits=limits, wind_per_rpm=wind_per_rpm, instruments=instruments,
+                     simulation=simulation, text=text, source=source)
+
+
+def _section(table: Mapping[str, Any], where: str) -> tuple[SectionModel, float]:
+    fields_ = {"B", "m", "I", "fh", "fa", "zeta_h", "zeta_a"}
+    check_keys(table, where, fields_ | {"depth"}, {"S"})
+    values = {key: number(table, key, where) for key in fields_ | ({"S"} & set(table))}
+    try:
+        section = SectionModel(**values)
+    except ValueError as exc:
+        raise ConfigError(f"{where}: {exc}") from exc
+    depth = number(table, "depth", where, lo=0.0, hi=section.B, lo_open=True)
+    return section, depth
+
+
+def _instruments(data: Mapping[str, Any], source: str) -> tuple[InstrumentConfig, ...]:
+    from daq import registry  # late: drivers register themselves on import
+
+    out: list[InstrumentConfig] = []
+    for role in ROLES:
+        if role not in data:
+            continue
+        tables = data[role] if role == "lasers" else [data[role]]
+        if role == "lasers" and not isinstance(tables, list):
+            raise ConfigError(f"{source}: lasers must be an array of tables ([[lasers]])")
+        for index, table in enumerate(tables):
+            where = f"{source} [{role}]" if role != "lasers" else f"{source} [[lasers]] #{index}"
+            if not isinstance(table, Mapping):
+                raise ConfigError(f"{where} must be a table")
+            for key in ("driver", "url"):
+                if key not in table:
+                    raise ConfigError(f"{where}: missing required key {key!r}")
+            name = str(table.get("name", role))
+            settings = {k: v for k, v in table.items() if k not in ("driver", "url", "name")}
+            registry.validate_settings(str(table["driver"]), role, settings, where)
+            out.append(InstrumentConfig(role=role, name=name, driver=str(table["driver"]),
+                                        url=str(table["url"]), settings=settings))
+    names = [inst.name for inst in out]
+    repeated = sorted({n for n in names if names.count(n) > 1})
+    if repeated:
+        raise ConfigError(f"{source}: instrument names must be unique; repeated: {repeated}")
+    return tuple(out)
+
+
+def _simulation(table: Mapping[str, Any], where: str,
+                instruments: tuple[InstrumentConfig, ...]) -> SimulationConfig:
+    check_keys(table, where, {"aerodynamics", "hold_h", "hold_alpha"},
+               {"rfc", "pressure_pa", "temperature_c", "devices"})
+    aerodynamics = table["aerodynamics"]
+    if aerodynamics not in ("flat_plate_jones", "rfc"):
+        raise ConfigError(f"{where} aerodynamics must be 'flat_plate_jones' or 'rfc', "
+                          f"got {aerodynamics!r}")
+    if (aerodynamics == "rfc") != ("rfc" in table):
+        raise ConfigError(f"{where}: an [simulation.rfc] table is required exactly when "
+                          "aerodynamics = 'rfc'")
+    devices = table.get("devices", {})
+    check_keys(devices, f"{where}.devices", set(), {inst.name for inst in instruments})
+    return SimulationConfig(
+        aerodynamics=aerodynamics,
+        rfc=table.get("rfc"),
+        hold_h=number(table, "hold_h", where, lo=-0.05, hi=0.05),
+        hold_alpha=number(table, "hold_alpha", where, lo=-0.2, hi=0.2),
+        pressure_pa=number(table, "pressure_pa", where, lo=50000.0, hi=120000.0,
+                           default=101325.0),
+        temperature_c=number(table, "temperature_c", where, lo=-30.0, hi=60.0, default=20.0),
+        devices=devices,
+    )

@@ -1,0 +1,247 @@
+"""The virtual tunnel: one physical truth that every simulated instrument samples.
+
+It owns the wind (from the fan speed the simulated drive reports), the air (pressure and
+temperature, hence density), the electromagnet that holds the section model and the release, and
+the motion and aerodynamic forces of the model, which come from
+:func:`simulators.tunnel.simulate_release` (the physics the identification is tested against).
+Instruments ask it for values at true times (:mod:`simulators.clock`); it never pushes data to
+them.
+
+Motion: while the magnet holds, the model sits at the hold position ``(h0, alpha0)``; a release
+at wind speed U computes the free decay once (on a fine grid, then interpolated with cubic splines)
+and the model follows it; re-arming pulls it back to the hold position. Forces are the
+self-excited forces plus any vortex forcing; tap pressures integrate exactly to them, plus a mean
+pressure distribution that integrates to zero. The Pitot channel reads the dynamic pressure.
+
+Thread safety: state changes (fan, magnet) come from Modbus server threads, reads from instrument
+threads; one lock guards the state, and the sampled release is an immutable object.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+from scipy.interpolate import CubicSpline
+
+from ident.rfc import RationalFunctionModel
+from ident.section import SectionModel
+from ident.taps import TapLayout
+from simulators.clock import Clock, MonotonicClock
+from simulators.effects import Effect
+from simulators.tunnel import simulate_release
+
+__all__ = ["AirState", "VirtualTunnel"]
+
+FloatArray = npt.NDArray[np.float64]
+
+#: Gas constant of dry air, J/(kg K).
+R_AIR = 287.058
+
+
+@dataclass(frozen=True)
+class AirState:
+    """Ambient air: static pressure (Pa) and temperature (K); density by the ideal-gas law."""
+
+    pressure_pa: float = 101325.0
+    temperature_k: float = 293.15
+
+    @property
+    def density(self) -> float:
+        """Air density, kg/m^3."""
+        return self.pressure_pa / (R_AIR * self.temperature_k)
+
+
+@dataclass(frozen=True, eq=False)
+class _Decay:
+    """A computed free decay after a release at true time ``t0``."""
+
+    t0: float
+    U: float
+    duration: float
+    splines: dict[str, CubicSpline] = field(repr=False)
+    final: dict[str, float] = field(repr=False)
+
+
+class VirtualTunnel:
+    """The physical truth shared by all simulated instruments.
+
+    Parameters
+    ----------
+    section : SectionModel
+        The spring-mounted section model (its ``rho`` is replaced by the air state's density).
+    model : RationalFunctionModel
+        Self-excited forces.
+    taps : TapLayout
+        Pressure taps of the section.
+    wind_per_rpm : float
+        Tunnel calibration: wind speed per fan speed, (m/s)/rpm.
+    hold : (float, float)
+        Hold position of the magnet, (h0 m, alpha0 rad).
+    effects : sequence of Effect, optional
+        Extra physics of the model in this tunnel.
+    air : AirState, optional
+    mean_cp_upper, mean_cp_lower : float
+        Mean pressure coefficients on upper and lower faces (shape of the steady distribution).
+    clock : Clock, optional
+        True time (default: real monotonic time).
+    decay_duration_s : float
+        Length of each computed decay; afterwards the model rests at its final state.
+    fs_internal : float
+        Sampling rate of the computed decay before spline interpolation, Hz.
+    """
+
+    def __init__(
+        self,
+        section: SectionModel,
+        model: RationalFunctionModel,
+        taps: TapLayout,
+        *,
+        wind_per_rpm: float,
+        hold: tuple[float, float] = (0.004, 0.02),
+        effects: Sequence[Effect] = (),
+        air: AirState | None = None,
+        mean_cp_upper: float = -0.6,
+        mean_cp_lower: float = -0.2,
+        clock: Clock | None = None,
+        decay_duration_s: float = 60.0,
+        fs_internal: float = 1000.0,
+    ) -> None:
+        if not wind_per_rpm > 0:
+            raise ValueError(f"wind_per_rpm must be > 0, got {wind_per_rpm!r}")
+        self.air = air or AirState()
+        self.section = section.replace(rho=self.air.density)
+        self.model = model
+        self.taps = taps
+        self.wind_per_rpm = float(wind_per_rpm)
+        self.hold = (float(hold[0]), float(hold[1]))
+        self.effects = tuple(effects)
+        self.clock: Clock = clock or MonotonicClock()
+        self.decay_duration_s = float(decay_duration_s)
+        self.fs_internal = float(fs_internal)
+        self._cp_mean = np.where(taps.nz < 0, mean_cp_upper, mean_cp_lower)
+        self._lock = threading.Lock()
+        self._fan_rpm = 0.0
+        self._armed = True  # the magnet holds at start
+        self._decay: _Decay | None = None
+        self._triggers: list[float] = []
+        self._releases: list[float] = []
+
+    # -- state changes (from the simulated drive and PLC) ----------------------------------------
+    def set_fan_speed(self, rpm: float) -> None:
+        """Set the actual fan speed (the simulated drive ramps it), rpm."""
+        with self._lock:
+            self._fan_rpm = float(rpm)
+
+    def arm(self) -> None:
+        """Energise the magnet: the model is pulled back to the hold position."""
+        with self._lock:
+            self._armed = True
+            self._decay = None
+
+    def release(self) -> float:
+        """De-energise the magnet: the model is released now; returns the true release time."""
+        with self._lock:
+            t0 = self.clock.now()
+            U = self._fan_rpm * self.wind_per_rpm
+            self._armed = False
+        decay = self._compute_decay(t0, U)
+        with self._lock:
+            self._decay = decay
+            self._releases.append(t0)
+        return t0
+
+    def trigger(self) -> float:
+        """Pulse the trigger line (from the PLC); return the pulse's true time."""
+        with self._lock:
+            t = self.clock.now()
+            self._triggers.append(t)
+        return t
+
+    # -- state queries ------------------------------------------------------------------------
+    @property
+    def armed(self) -> bool:
+        """Measure whether the magnet holds the model."""
+        with self._lock:
+            return self._armed
+
+    @property
+    def fan_rpm(self) -> float:
+        """Measure the actual fan speed, rpm."""
+        with self._lock:
+            return self._fan_rpm
+
+    def wind_speed(self) -> float:
+        """Mean wind speed now, m/s."""
+        with self._lock:
+            return self._fan_rpm * self.wind_per_rpm
+
+    def release_times(self) -> list[float]:
+        """Return the true times of every release so far, s."""
+        with self._lock:
+            return list(self._releases)
+
+    def trigger_times(self, since: float = -math.inf) -> list[float]:
+        """Return the true times of trigger pulses after ``since``, s."""
+        with self._lock:
+            return [t for t in self._triggers if t > since]
+
+    def sample(self, t: FloatArray) -> dict[str, FloatArray]:
+        """Physical channels at true times ``t`` (s, increasing, not in the future).
+
+        Returns
+        -------
+        dict
+            ``h`` (m), ``alpha`` (rad), ``lift`` (N/m), ``moment`` (N m/m), ``U`` (m/s) and
+            ``qd`` (dynamic pressure, Pa), each of shape ``t.shape``.
+        """
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        if t.ndim != 1:
+            raise ValueError(f"t must be 1-D, got shape {t.shape}")
+        with self._lock:
+            decay = self._decay
+            U_now = self._fan_rpm * self.wind_per_rpm
+        U = np.full(t.shape, U_now if decay is None else decay.U)
+        qd = 0.5 * self.air.density * U**2
+        h0, a0 = self.hold
+        B = self.section.B
+        # Held: motionless, with the static aerodynamic force of the held position.
+        static = np.outer(qd * B**2, self.model.A[0] @ np.array([h0 / B, a0]))
+        out = {"h": np.full(t.shape, h0), "alpha": np.full(t.shape, a0),
+               "lift": static[:, 0] / B, "moment": static[:, 1], "U": U, "qd": qd}
+        if decay is not None:
+            tau = t - decay.t0
+            after = tau >= 0
+            inside = after & (tau <= decay.duration)
+            for name in ("h", "alpha", "lift", "moment"):
+                values = out[name].copy()
+                values[inside] = decay.splines[name](tau[inside])
+                values[after & ~inside] = decay.final[name]
+                out[name] = values
+        return out
+
+    def pressures(self, t: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Tap pressures (n, n_taps) and Pitot dynamic pressure (n,) at true times ``t``, Pa."""
+        values = self.sample(t)
+        mean = np.outer(values["qd"], self._cp_mean)
+        G = self.taps.integration_matrix()
+        G_pinv = np.linalg.pinv(G)
+        forces = np.column_stack([values["lift"], values["moment"]])
+        # Remove the mean field's own lift and moment so that taps integrate to the forces.
+        p = forces @ G_pinv.T + mean - (mean @ G.T) @ G_pinv.T
+        return p, values["qd"]
+
+    # -- physics ------------------------------------------------------------------------------
+    def _compute_decay(self, t0: float, U: float) -> _Decay:
+        sim = simulate_release(
+            self.section, self.model, U, *self.hold, duration=self.decay_duration_s,
+            fs=self.fs_internal, effects=self.effects,
+        )
+        splines = {name: CubicSpline(sim.t, getattr(sim, name))
+                   for name in ("h", "alpha", "lift", "moment")}
+        final = {name: float(getattr(sim, name)[-1]) for name in splines}
+        return _Decay(t0=t0, U=U, duration=float(sim.t[-1]), splines=splines, final=final)

@@ -1,0 +1,85 @@
+"""Rig configs: structure, ranges and names are validated with errors naming the key."""
+
+from __future__ import annotations
+
+import pytest
+
+from daq.config import parse_rig_config
+from daq.errors import ConfigError
+
+BASE = """
+[rig]
+name = "test rig"
+
+[section]
+B = 0.3
+m = 3.0
+I = 0.03
+fh = 2.0
+fa = 4.0
+zeta_h = 0.005
+zeta_a = 0.005
+depth = 0.01
+
+[taps]
+shape = "rectangle"
+B = 0.3
+D = 0.01
+taps_per_face = 16
+
+[limits]
+max_wind_speed = 14.0
+max_fan_rpm = 1500.0
+
+[tunnel]
+wind_per_rpm = 0.01
+
+[simulation]
+aerodynamics = "flat_plate_jones"
+hold_h = 0.004
+hold_alpha = 0.02
+"""
+
+
+def test_a_valid_config_without_instruments_parses():
+    """Section, taps, limits, tunnel calibration and simulation truth are read and kept."""
+    rig = parse_rig_config(BASE, "base.toml")
+    assert rig.section.B == 0.3 and rig.depth == 0.01
+    assert rig.taps.n_taps == 2 * 16 + 2 * 2
+    assert rig.limits.max_fan_rpm == 1500.0 and rig.wind_per_rpm == 0.01
+    assert rig.simulation is not None and rig.simulation.pressure_pa == 101325.0
+    assert rig.text == BASE  # verbatim, for the HDF5 file
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "match"),
+    [
+        ("m = 3.0", "m = -3.0", r"\[section\]: m must be > 0"),
+        ("zeta_h = 0.005", "zeta_h = 0.005\nzeta_x = 1",
+         r"\[section\]: unknown key\(s\) \['zeta_x'\]"),
+        ("depth = 0.01\n", "", r"\[section\]: missing required key\(s\) \['depth'\]"),
+        ("depth = 0.01", "depth = 0.5", r"\[section\] depth = 0.5 is outside the allowed range"),
+        ("max_fan_rpm = 1500.0", "max_fan_rpm = 1000.0", "cannot be reached below max_fan_rpm"),
+        ("wind_per_rpm = 0.01", "wind_per_rpm = 0", r"\[tunnel\] wind_per_rpm = 0.0 is outside"),
+        ("taps_per_face = 16", "taps_per_face = 1", r"\[taps\]: taps_per_face must be"),
+        ('aerodynamics = "flat_plate_jones"', 'aerodynamics = "rfc"', r"\[simulation.rfc\]"),
+        ("hold_alpha = 0.02", "hold_alpha = 0.5", "hold_alpha = 0.5 is outside"),
+        ('name = "test rig"', 'name = "test rig"\n[fan]\nurl = "auto"',
+         r"\[fan\]: missing required key 'driver'"),
+        ('name = "test rig"', 'name = "test rig"\n[fan]\ndriver = "acme"\nurl = "auto"',
+         r"\[fan\]: unknown driver 'acme'"),
+        ("[tunnel]", "[tunnels]", r"unknown key\(s\) \['tunnels'\]"),
+        ("m = 3.0", 'm = "three"', "m must be a number"),
+    ],
+)
+def test_bad_configs_name_the_key_and_the_range(old, new, match):
+    """Each mistake is a ConfigError whose message names the table, the key and the range."""
+    assert old in BASE
+    with pytest.raises(ConfigError, match=match):
+        parse_rig_config(BASE.replace(old, new, 1), "bad.toml")
+
+
+def test_invalid_toml_is_reported_with_its_source():
+    """A TOML syntax error names the file."""
+    with pytest.raises(ConfigError, match="broken.toml: not valid TOML"):
+        parse_rig_config("[rig\nname=", "broken.toml")
