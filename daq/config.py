@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from daq.errors import ConfigError
+from ident.rfc import RationalFunctionModel
 from ident.section import SectionModel
 from ident.taps import TapLayout
 
@@ -148,6 +149,17 @@ class RigConfig:
         raise ConfigError(f"{self.source}: no instrument named {name!r}; have "
                           f"{[i.name for i in self.instruments]}")
 
+    def aerodynamic_model(self) -> RationalFunctionModel:
+        """Return the simulated truth's aerodynamic model (simulated rigs only)."""
+        if self.simulation is None:
+            raise ConfigError(f"{self.source}: not a simulated rig (no [simulation] table)")
+        if self.simulation.aerodynamics == "flat_plate_jones":
+            from ident.flat_plate import jones_model
+
+            return jones_model()
+        assert self.simulation.rfc is not None  # checked when parsed
+        return RationalFunctionModel.from_dict(dict(self.simulation.rfc))
+
     def by_role(self, role: str) -> list[InstrumentConfig]:
         """Return every instrument of a role (``lasers`` may have several)."""
         return [inst for inst in self.instruments if inst.role == role]
@@ -252,6 +264,12 @@ def _simulation(table: Mapping[str, Any], where: str,
     if (aerodynamics == "rfc") != ("rfc" in table):
         raise ConfigError(f"{where}: an [simulation.rfc] table is required exactly when "
                           "aerodynamics = 'rfc'")
+    if "rfc" in table:
+        check_keys(table["rfc"], f"{where}.rfc", {"A", "d"})
+        try:
+            RationalFunctionModel.from_dict(dict(table["rfc"]))
+        except (ValueError, TypeError) as exc:
+            raise ConfigError(f"{where}.rfc: {exc}") from exc
     devices = table.get("devices", {})
     check_keys(devices, f"{where}.devices", set(), {inst.name for inst in instruments})
     return SimulationConfig(

@@ -70,6 +70,9 @@ def test_a_valid_config_without_instruments_parses():
          r"\[fan\]: unknown driver 'acme'"),
         ("[tunnel]", "[tunnels]", r"unknown key\(s\) \['tunnels'\]"),
         ("m = 3.0", 'm = "three"', "m must be a number"),
+        ('hold_alpha = 0.02',
+         'hold_alpha = 0.02\n[simulation.rfc]\nA = [[[0, 0], [0, 0]]]\nd = []',
+         r"\[simulation\]: an \[simulation.rfc\] table is required exactly when"),
     ],
 )
 def test_bad_configs_name_the_key_and_the_range(old, new, match):
@@ -83,3 +86,11 @@ def test_invalid_toml_is_reported_with_its_source():
     """A TOML syntax error names the file."""
     with pytest.raises(ConfigError, match="broken.toml: not valid TOML"):
         parse_rig_config("[rig\nname=", "broken.toml")
+
+
+def test_a_bad_rfc_table_is_refused_with_the_reason():
+    """Simulated aerodynamics given as coefficients are validated like a RationalFunctionModel."""
+    text = BASE.replace('aerodynamics = "flat_plate_jones"', 'aerodynamics = "rfc"')
+    text += "\n[simulation.rfc]\nA = [[[0, 0], [0, 0]]]\nd = []\n"
+    with pytest.raises(ConfigError, match=r"\[simulation\].rfc: A must have shape"):
+        parse_rig_config(text, "bad.toml")
