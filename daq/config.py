@@ -205,11 +205,29 @@ def parse_rig_config(text: str, source: str = "<string>") -> RigConfig:
             f"below max_fan_rpm {limits.max_fan_rpm} at {wind_per_rpm} (m/s)/rpm"
         )
     instruments = _instruments(data, source)
+    _check_scanner_channels(instruments, taps, source)
     simulation = (_simulation(data["simulation"], f"{source} [simulation]", instruments)
                   if "simulation" in data else None)
     return RigConfig(name=str(data["rig"]["name"]), section=section, depth=depth, taps=taps,
                      limits=limits, wind_per_rpm=wind_per_rpm, instruments=instruments,
                      simulation=simulation, text=text, source=source)
+
+
+def _check_scanner_channels(instruments: tuple[InstrumentConfig, ...], taps: TapLayout,
+                            source: str) -> None:
+    """Taps occupy scanner channels 0..n_taps-1; the Pitot needs a channel of its own."""
+    for inst in instruments:
+        if inst.role != "scanner":
+            continue
+        channels = 64 * int(inst.settings["modules"])
+        pitot = int(inst.settings["pitot_channel"])
+        if taps.n_taps + 1 > channels:
+            raise ConfigError(f"{source} [scanner] modules: {taps.n_taps} taps plus the Pitot need "
+                              f"{taps.n_taps + 1} channels, {inst.settings['modules']} module(s) "
+                              f"have {channels}")
+        if pitot < taps.n_taps:
+            raise ConfigError(f"{source} [scanner] pitot_channel = {pitot} is a tap's channel; "
+                              f"taps use channels 0..{taps.n_taps - 1}")
 
 
 def _section(table: Mapping[str, Any], where: str) -> tuple[SectionModel, float]:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import importlib
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from daq.errors import ConfigError
@@ -18,7 +18,13 @@ from daq.errors import ConfigError
 __all__ = ["DRIVER_MODULES", "DriverEntry", "driver_entry", "register", "validate_settings"]
 
 #: The driver modules windrig ships; importing one registers its driver(s).
-DRIVER_MODULES: tuple[str, ...] = ()
+DRIVER_MODULES: tuple[str, ...] = (
+    "daq.vaisala_ptb330",
+    "daq.abb_acs580",
+    "daq.modbus_plc",
+    "daq.scanivalve_mps4264",
+    "daq.microepsilon_ild1420",
+)
 
 
 @dataclass(frozen=True)
@@ -35,12 +41,16 @@ class DriverEntry:
         Builds the driver from ``(transport_or_bus, settings)``.
     validate : callable
         ``validate(settings, where)`` returning the settings object or raising ConfigError.
+    transport_defaults : mapping
+        Line settings the device needs (e.g. 7E1 at 9600 baud), passed to
+        :func:`daq.transport.open_transport`; a ``serial://`` URL's query overrides them.
     """
 
     name: str
     role: str
     factory: Callable[..., Any]
     validate: Callable[[Mapping[str, Any], str], Any]
+    transport_defaults: Mapping[str, Any] = field(default_factory=dict)
 
 
 _REGISTRY: dict[str, DriverEntry] = {}

@@ -19,6 +19,7 @@ threads; one lock guards the state, and the sampled release is an immutable obje
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
 from collections.abc import Sequence
@@ -144,14 +145,18 @@ class VirtualTunnel:
             self._decay = None
 
     def release(self) -> float:
-        """De-energise the magnet: the model is released now; returns the true release time."""
+        """De-energise the magnet: the model is released now; returns the true release time.
+
+        The decay is computed first (~25 ms) and the release instant taken when it is installed,
+        so an instrument sampling meanwhile sees the held model, consistently with later queries.
+        """
+        with self._lock:
+            U = self._fan_rpm * self.wind_per_rpm
+        decay = self._compute_decay(U)
         with self._lock:
             t0 = self.clock.now()
-            U = self._fan_rpm * self.wind_per_rpm
+            self._decay = dataclasses.replace(decay, t0=t0)
             self._armed = False
-        decay = self._compute_decay(t0, U)
-        with self._lock:
-            self._decay = decay
             self._releases.append(t0)
         return t0
 
@@ -236,7 +241,7 @@ class VirtualTunnel:
         return p, values["qd"]
 
     # -- physics ------------------------------------------------------------------------------
-    def _compute_decay(self, t0: float, U: float) -> _Decay:
+    def _compute_decay(self, U: float) -> _Decay:
         sim = simulate_release(
             self.section, self.model, U, *self.hold, duration=self.decay_duration_s,
             fs=self.fs_internal, effects=self.effects,
@@ -244,4 +249,4 @@ class VirtualTunnel:
         splines = {name: CubicSpline(sim.t, getattr(sim, name))
                    for name in ("h", "alpha", "lift", "moment")}
         final = {name: float(getattr(sim, name)[-1]) for name in splines}
-        return _Decay(t0=t0, U=U, duration=float(sim.t[-1]), splines=splines, final=final)
+        return _Decay(t0=math.nan, U=U, duration=float(sim.t[-1]), splines=splines, final=final)

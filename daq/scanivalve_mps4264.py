@@ -1,0 +1,1301 @@
+"""Scanivalve MPS4264-class pressure scanner over TCP: settings, binary-frame decoder and driver.
+
+Responsibility: command the scanner over its ASCII command connection (status, frame rate, output
+format, zero calibration, scan start and stop), receive its binary frames on one TCP data
+connection per module, decode them (:class:`Mps4264Decoder`, pure, no I/O), unwrap the frame
+counters, merge the modules frame by frame, and return timestamped blocks (:class:`ScanBlock`) in
+which every missing frame is a marked gap and every missing module a NaN with its reason. Lost
+data connections are re-opened with a bounded, logged backoff. Not responsible for: deciding
+whether the wind is off before a zero calibration (the caller passes the wind speed it knows; the
+driver refuses a nonzero one), mapping the device clock onto the host clock (the synchronisation
+layer does that from the counters, frame times and host arrival times returned here), threads,
+or recording.
+
+Wire protocol (DEVICES.md A.1.1; [unverified] marks our choices where the facts stop):
+
+- Commands are ASCII lines terminated by CR LF [unverified terminator; the simulator accepts CR,
+  LF or both]. ``STATUS`` answers ``STATUS: <state>`` with a state of ``READY``, ``SCAN``,
+  ``CALZ``, ``SAVE``, ``CALVAL`` or ``PGM`` (mps-protocol.h); an unknown or refused command
+  answers ``INVALID COMMAND: <text>`` (the public MPS emulator). Other commands answer nothing
+  when they succeed [unverified], so the driver follows every command with ``STATUS`` as a fence:
+  an ``INVALID COMMAND`` line before the fence's ``STATUS:`` line is the command's refusal
+  (:class:`~daq.errors.DeviceError`), and the fence's state confirms the command's effect.
+- Commands used: ``SET FORMAT B B`` (binary frames to the TCP binary server, README "TCP BINARY
+  SERVER DATA FORMATTING MATRIX"), ``SET UNITS PA`` (EU in Pa, units index 23, Appendix A),
+  ``SET SIM 0x40`` (legacy 0x0A packet, which carries the external-trigger time) or ``SET SIM 0``
+  (the model's own packet, 0x6D for the MPS4264), ``SET RATE <Hz>`` (frame rate [unverified
+  syntax and range; the rate limit is configurable]), ``CALZ`` (quick zero, "under 10 seconds",
+  status ``CALZ`` meanwhile), ``SCAN`` and ``STOP``.
+- Binary frames come on a TCP connection to the scanner's binary server (port 503). Module ``k``
+  (0-based) of a multi-module scanner serves its frames on port ``data_port + k`` of the command
+  host [design: the 0x6D packet has no module field, so the connection identifies the module];
+  every module sends one packet per frame with the same frame number (the master starts them
+  together, ``MSCAN``).
+- Packets (mps-protocol.h; every field is a 4-byte word, big- or little-endian, detected per
+  packet from the non-zero byte of the type word as ``mps_peek()`` does):
+  0x6D MPS4264 EU, 304 bytes: ``int32 type, uint32 frame, uint32 frame_time_s,
+  uint32 frame_time_ns, float32 T[8], float32 P[64]``;
+  0x0A legacy, 348 bytes: ``int32 type, int32 size (=348), int32 frame, int32 serial_number,
+  float32 framerate_Hz, int32 valve_status (0 Px, 1 Cal), int32 unit_index, float32
+  unit_conversion, uint32 ptp_scan_start_s, uint32 ptp_scan_start_ns, uint32 ext_trigger_time_us,
+  float32 T[8], float32 P[64], uint32 frame_time_s, uint32 frame_time_ns, uint32 ext_trigger_s,
+  uint32 ext_trigger_ns``. The other packet types of the table (0x5D/0x5B 96 B, 0x65/0x63 160 B,
+  0x69 304 B) are recognised by size, skipped and counted.
+- Frame time is "a time relative to 0 (when PTP is disabled), or an absolute PTP time"; below
+  1e9 s (before 2001) the driver reports the block's time base as ``"relative"`` (the epoch-0
+  fault). The external trigger time ``ext_trigger_s/ns`` is relative to the scan start; the
+  driver adds ``ptp_scan_start`` so that it is on the frame-time base. Both zero means "no
+  trigger yet" [design] (NaN).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from types import TracebackType
+from typing import Any
+from urllib.parse import urlsplit
+
+import numpy as np
+import numpy.typing as npt
+
+from daq.config import check_keys, number
+from daq.errors import (
+    ConfigError,
+    DaqError,
+    DeviceError,
+    ProtocolError,
+    SafetyError,
+    TransportError,
+    TransportTimeout,
+)
+from daq.registry import DriverEntry, register
+from daq.transport import Transport, open_transport
+
+__all__ = [
+    "CHANNELS_PER_MODULE",
+    "MAX_RATE_HZ",
+    "STATUS_MISSING",
+    "STATUS_OK",
+    "STATUS_VALVE_CAL",
+    "TEMPERATURES_PER_MODULE",
+    "ClockStep",
+    "Gap",
+    "Mps4264Decoder",
+    "Mps4264Settings",
+    "PacketBatch",
+    "ScanBlock",
+    "ScanivalveMps4264",
+]
+
+log = logging.getLogger(__name__)
+
+#: Pressure channels per MPS4264 module (mps-protocol.h: at most 64 pressure channels).
+CHANNELS_PER_MODULE = 64
+#: Temperature channels per module (mps-protocol.h: 8 temperature channels).
+TEMPERATURES_PER_MODULE = 8
+#: Highest frame rate a rig config may ask for, Hz. [unverified]: the scanner's rate limit was
+#: not confirmed (DEVICES.md A.1.1, "Max scan rate"), so this is only the config's bound.
+MAX_RATE_HZ = 2000.0
+#: Highest number of modules in one scanner.
+MAX_MODULES = 8
+
+#: ``module_status`` codes of a :class:`ScanBlock` row.
+STATUS_OK = 0
+#: The module sent no packet for this frame number (pressures and temperatures NaN).
+STATUS_MISSING = 1
+#: The module's calibration valve was in the Cal position (``valve_status`` 1): pressures NaN.
+STATUS_VALVE_CAL = 2
+
+#: Pa per EU unit when ``unit_conversion`` is the PA factor (mps-protocol.h units table:
+#: EU = counts x calibration (PSI) x conversion, PA factor 6894.75977).
+_PA_FACTOR = float(np.float32(6894.75977))
+_UNIT_RAW = 27  # Appendix A: 27 RAW (counts, not pressures)
+
+#: Packet type -> size in bytes (DEVICES.md A.1.1 table, mps-protocol.h).
+_PACKET_SIZES: Mapping[int, int] = {
+    0x5D: 96, 0x5B: 96, 0x65: 160, 0x63: 160, 0x6D: 304, 0x69: 304, 0x0A: 348,
+}
+TYPE_EU64 = 0x6D
+TYPE_LEGACY = 0x0A
+_SUPPORTED = (TYPE_EU64, TYPE_LEGACY)
+_NS_LIMIT = 1_000_000_000
+_KEY_BITS = 40  # unwrapped counter bits within one counter epoch (2^40 frames ~ 17 years at 2 kHz)
+_KEY_MASK = (1 << _KEY_BITS) - 1
+_U32 = 1 << 32
+
+
+def _eu_dtype(order: str) -> np.dtype[Any]:
+    return np.dtype([
+        ("type", order + "i4"), ("frame", order + "u4"), ("time_s", order + "u4"),
+        ("time_ns", order + "u4"), ("T", order + "f4", (8,)), ("P", order + "f4", (64,)),
+    ])
+
+
+def _legacy_dtype(order: str) -> np.dtype[Any]:
+    return np.dtype([
+        ("type", order + "i4"), ("size", order + "i4"), ("frame", order + "u4"),
+        ("serial", order + "i4"), ("rate", order + "f4"), ("valve", order + "i4"),
+        ("unit", order + "i4"), ("conv", order + "f4"), ("start_s", order + "u4"),
+        ("start_ns", order + "u4"), ("ext_us", order + "u4"), ("T", order + "f4", (8,)),
+        ("P", order + "f4", (64,)), ("time_s", order + "u4"), ("time_ns", order + "u4"),
+        ("ext_s", order + "u4"), ("ext_ns", order + "u4"),
+    ])
+
+
+_DTYPES = {(kind, order): make(">" if order == "big" else "<")
+           for kind, make in ((TYPE_EU64, _eu_dtype), (TYPE_LEGACY, _legacy_dtype))
+           for order in ("big", "little")}
+assert all(dt.itemsize == _PACKET_SIZES[kind] for (kind, _), dt in _DTYPES.items())
+
+
+# ------------------------------------------------------------------------------------------------
+# Settings
+# ------------------------------------------------------------------------------------------------
+def _integer(table: Mapping[str, Any], key: str, where: str, lo: int, hi: int,
+             default: int | None = None) -> int:
+    if key not in table and default is not None:
+        return default
+    value = table.get(key)
+    if isinstance(value, bool) or not isinstance(value, int):
+        if key not in table:
+            raise ConfigError(f"{where}: missing required key {key!r}")
+        raise ConfigError(f"{where} {key} must be an integer in [{lo}, {hi}], got {value!r}")
+    if not lo <= value <= hi:
+        raise ConfigError(f"{where} {key} = {value!r} is outside the allowed range [{lo}, {hi}]")
+    return value
+
+
+@dataclass(frozen=True)
+class Mps4264Settings:
+    """Settings of the scanner (the ``[scanner]`` table of a rig config, without driver/url/name).
+
+    Attributes
+    ----------
+    modules : int
+        Number of 64-channel modules, 1..8.
+    rate_hz : float
+        Frame rate, Hz, in (0, 2000] ([unverified] rate limit, hence configurable).
+    byte_order : str
+        ``"big"`` or ``"little"``: the byte order the scanner is expected to send. The decoder
+        detects it from every packet's type word; a mismatch is logged and counted.
+    pitot_channel : int
+        Global 0-based channel (over all modules) of the Pitot dynamic pressure,
+        ``< 64 * modules``. Taps occupy channels ``0 .. n_taps - 1`` in the rig's tap order.
+    data_port : int
+        TCP port of module 0's binary data server (module ``k`` on ``data_port + k``), 1..65535,
+        default 503 (DEVICES.md A.1.1). A simulated scanner's ports are ephemeral: the launcher
+        fills this from the simulator's ``data_port``.
+    command_timeout_s : float
+        Timeout of a command's reply, and default timeout of :meth:`ScanivalveMps4264.read_block`,
+        s, in (0, 60], default 2.
+    """
+
+    modules: int
+    rate_hz: float
+    byte_order: str
+    pitot_channel: int
+    data_port: int = 503
+    command_timeout_s: float = 2.0
+
+    def __post_init__(self) -> None:
+        where = "scanivalve_mps4264 settings"
+        table = {name: getattr(self, name) for name in self.__dataclass_fields__}
+        _validated(table, where)  # raises ConfigError naming the key and its range
+
+    @property
+    def n_channels(self) -> int:
+        """Pressure channels over all modules."""
+        return CHANNELS_PER_MODULE * self.modules
+
+    @classmethod
+    def from_table(cls, table: Mapping[str, Any], where: str) -> Mps4264Settings:
+        """Validate a rig-config table (without ``driver``, ``url``, ``name``).
+
+        Raises
+        ------
+        ConfigError
+            Unknown or missing key, or a value outside its range (the message names both).
+        """
+        return cls(**_validated(table, where))
+
+
+def _validated(table: Mapping[str, Any], where: str) -> dict[str, Any]:
+    check_keys(table, where, {"modules", "rate_hz", "byte_order", "pitot_channel"},
+               {"data_port", "command_timeout_s"})
+    modules = _integer(table, "modules", where, 1, MAX_MODULES)
+    rate_hz = number(table, "rate_hz", where, lo=0.0, hi=MAX_RATE_HZ, lo_open=True)
+    byte_order = table["byte_order"]
+    if byte_order not in ("big", "little"):
+        raise ConfigError(f"{where} byte_order must be 'big' or 'little', got {byte_order!r}")
+    pitot = _integer(table, "pitot_channel", where, 0, CHANNELS_PER_MODULE * modules - 1)
+    data_port = _integer(table, "data_port", where, 1, 65535, default=503)
+    if data_port + modules - 1 > 65535:
+        raise ConfigError(f"{where} data_port = {data_port} leaves no room for {modules} "
+                          "consecutive module ports below 65536")
+    timeout = number(table, "command_timeout_s", where, lo=0.0, hi=60.0, lo_open=True,
+                     default=2.0)
+    return {"modules": modules, "rate_hz": rate_hz, "byte_order": byte_order,
+            "pitot_channel": pitot, "data_port": data_port, "command_timeout_s": timeout}
+
+
+# ------------------------------------------------------------------------------------------------
+# Decoder
+# ------------------------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class PacketBatch:
+    """Decoded packets of one stream, one row per packet (struct of arrays).
+
+    Attributes
+    ----------
+    kind : ndarray of int16, (n,)
+        Packet type (0x6D or 0x0A).
+    big_endian : ndarray of bool, (n,)
+        Byte order each packet was sent in.
+    frame : ndarray of int64, (n,)
+        Frame counter as sent (uint32, not unwrapped).
+    frame_time : ndarray of float64, (n,)
+        ``frame_time_s + 1e-9 frame_time_ns``, s (device clock).
+    trigger_time : ndarray of float64, (n,)
+        Last external trigger on the frame-time base (``ptp_scan_start + ext_trigger``), s; NaN
+        without a trigger or in a 0x6D packet.
+    rate_hz : ndarray of float64, (n,)
+        Frame rate the packet reports (legacy), Hz; NaN for 0x6D.
+    serial : ndarray of int64, (n,)
+        Module serial number (legacy); -1 for 0x6D.
+    valve_cal : ndarray of bool, (n,)
+        Calibration valve in the Cal position (legacy ``valve_status`` 1).
+    temperature : ndarray of float64, (n, 8)
+        Module temperatures, degC.
+    pressure : ndarray of float64, (n, 64)
+        Pressures, Pa (legacy: converted with the packet's own ``unit_conversion``; 0x6D: as
+        sent, in the units set with ``SET UNITS PA``).
+    """
+
+    kind: npt.NDArray[np.int16]
+    big_endian: npt.NDArray[np.bool_]
+    frame: npt.NDArray[np.int64]
+    frame_time: npt.NDArray[np.float64]
+    trigger_time: npt.NDArray[np.float64]
+    rate_hz: npt.NDArray[np.float64]
+    serial: npt.NDArray[np.int64]
+    valve_cal: npt.NDArray[np.bool_]
+    temperature: npt.NDArray[np.float64]
+    pressure: npt.NDArray[np.float64]
+
+    def __len__(self) -> int:
+        return int(self.frame.size)
+
+    @classmethod
+    def empty(cls) -> PacketBatch:
+        """Return a batch of no packets."""
+        return cls.concatenate([])
+
+    @classmethod
+    def concatenate(cls, batches: Sequence[PacketBatch]) -> PacketBatch:
+        """Stack batches in order."""
+        if len(batches) == 1:
+            return batches[0]
+        if not batches:
+            return cls(
+                kind=np.zeros(0, np.int16), big_endian=np.zeros(0, bool),
+                frame=np.zeros(0, np.int64), frame_time=np.zeros(0), trigger_time=np.zeros(0),
+                rate_hz=np.zeros(0), serial=np.zeros(0, np.int64), valve_cal=np.zeros(0, bool),
+                temperature=np.zeros((0, TEMPERATURES_PER_MODULE)),
+                pressure=np.zeros((0, CHANNELS_PER_MODULE)),
+            )
+        return cls(**{name: np.concatenate([getattr(b, name) for b in batches])
+                      for name in cls.__dataclass_fields__})
+
+    def take(self, index: Any) -> PacketBatch:
+        """Rows selected by ``index`` (a slice, boolean mask or integer array)."""
+        return PacketBatch(**{name: getattr(self, name)[index]
+                              for name in self.__dataclass_fields__})
+
+
+def _peek(buf: bytes, pos: int) -> tuple[int, str] | None:
+    """Type and byte order of the 4-byte word at ``pos``, or None.
+
+    As ``mps_peek()`` in mps-protocol.h: the type fits in one byte, so exactly one end of the
+    word is non-zero.
+    """
+    word = buf[pos:pos + 4]
+    if len(word) < 4:
+        return None
+    big = int.from_bytes(word, "big")
+    if big in _PACKET_SIZES:
+        return big, "big"
+    little = int.from_bytes(word, "little")
+    if little in _PACKET_SIZES:
+        return little, "little"
+    return None
+
+
+class Mps4264Decoder:
+    """Pure decoder of a scanner data stream: feed bytes, get :class:`PacketBatch` es.
+
+    Packets are found by their type word (either byte order) and accepted only when the next
+    packet's type word follows them, or when the bytes end exactly at their end; a packet whose
+    successor is not a valid type word is rejected (``bad_packets``) and the decoder searches for
+    the next valid packet from its second byte. When not in step (at garbage) a candidate packet
+    must be confirmed by a valid type word right after it. Field checks (legacy ``size`` = 348,
+    nanoseconds < 1e9, a positive unit conversion) reject corrupted headers. It never raises on
+    input bytes and always makes progress.
+
+    Attributes
+    ----------
+    bytes_skipped : int
+        Bytes discarded while searching for a packet (garbage, rejected packets).
+    packets : int
+        Packets decoded and returned.
+    bad_packets : int
+        Packets with a valid type word rejected by their field checks or their successor.
+    unsupported_packets : int
+        Well-formed packets of types this decoder does not return (RAW, 16/32-channel models,
+        legacy RAW units); skipped.
+    """
+
+    #: Bytes kept back when no candidate is found (a type word may straddle two feeds).
+    _KEEP = 3
+
+    def __init__(self) -> None:
+        self._rest = b""
+        self._synced = True  # a fresh stream starts at a packet boundary
+        self.bytes_skipped = 0
+        self.packets = 0
+        self.bad_packets = 0
+        self.unsupported_packets = 0
+
+    @property
+    def pending_bytes(self) -> int:
+        """Measure the bytes held back for the next feed (a partial packet)."""
+        return len(self._rest)
+
+    def reset(self) -> int:
+        """Forget buffered bytes (a new connection); return how many were discarded."""
+        discarded = len(self._rest)
+        self.bytes_skipped += discarded
+        self._rest = b""
+        self._synced = True
+        return discarded
+
+    def feed(self, data: bytes) -> PacketBatch:
+        """Decode as many packets as ``data`` completes; keep the remainder for the next call."""
+        buf = self._rest + bytes(data) if self._rest else bytes(data)
+        out: list[PacketBatch] = []
+        pos, end = 0, len(buf)
+        while True:
+            if not self._synced:
+                pos = self._search(buf, pos)
+                if not self._synced:
+                    break  # no candidate, or one awaiting its confirming word
+            if end - pos < 4:
+                break
+            head = _peek(buf, pos)
+            if head is None:
+                self._synced = False
+                continue
+            kind, order = head
+            size = _PACKET_SIZES[kind]
+            count = (end - pos) // size
+            if count == 0:
+                break
+            ok = self._run_ok(buf, pos, kind, order, size, count)
+            run = count if ok.all() else int(np.argmin(ok))
+            if run == 0:  # a type word, but corrupt fields
+                pos = self._reject(pos)
+                continue
+            after = pos + run * size
+            if after == end:
+                confirmed, accept = True, run
+            elif end - after < 4:  # 1..3 bytes of the next word: hold the last packet back
+                confirmed, accept = True, run - 1
+            else:
+                confirmed = _peek(buf, after) is not None
+                accept = run if confirmed else run - 1
+            if accept:
+                self._emit(buf, pos, kind, order, accept, out)
+                pos += accept * size
+            if not confirmed:  # the run's last packet is not followed by a packet: reject it
+                pos = self._reject(pos)
+                continue
+            if accept < run:
+                break
+        self._rest = buf[pos:]
+        return PacketBatch.concatenate(out)
+
+    # -- internals ---------------------------------------------------------------------------------
+    def _reject(self, pos: int) -> int:
+        """Count the packet at ``pos`` as bad and search again from its second byte."""
+        self.bad_packets += 1
+        self.bytes_skipped += 1
+        self._synced = False
+        return pos + 1
+
+    def _search(self, buf: bytes, pos: int) -> int:
+        """Find the next confirmed packet start at or after ``pos`` and set ``_synced``.
+
+        Returns the start; or, still unsynced, the candidate that awaits its confirming word or
+        the offset from which bytes are kept (no candidate: a type word may straddle two feeds).
+        """
+        start = pos
+        while True:
+            cand = _find_candidate(buf, pos)
+            if cand < 0:
+                keep = max(len(buf) - self._KEEP, start)
+                self.bytes_skipped += keep - start
+                return keep
+            head = _peek(buf, cand)
+            assert head is not None
+            kind, order = head
+            size = _PACKET_SIZES[kind]
+            if len(buf) - cand < size + 4:
+                self.bytes_skipped += cand - start
+                return cand
+            if self._run_ok(buf, cand, kind, order, size, 1)[0] and \
+                    _peek(buf, cand + size) is not None:
+                self.bytes_skipped += cand - start
+                self._synced = True
+                return cand
+            pos = cand + 1
+
+    @staticmethod
+    def _run_ok(buf: bytes, pos: int, kind: int, order: str, size: int,
+                count: int) -> npt.NDArray[np.bool_]:
+        """Per packet of a stride-``size`` run: same type word, and sane fields."""
+        o = ">" if order == "big" else "<"
+
+        def words(offset: int, code: str = "u4") -> npt.NDArray[Any]:
+            return np.ndarray((count,), dtype=o + code, buffer=buf, offset=pos + offset,
+                              strides=(size,))
+
+        ok: npt.NDArray[np.bool_] = words(0) == kind
+        if kind == TYPE_EU64:
+            ok &= words(12) < _NS_LIMIT
+        elif kind == TYPE_LEGACY:
+            ok &= words(4) == 348
+            for offset in (36, 4 * 84, 4 * 86):  # start_ns, time_ns, ext_ns
+                ok &= words(offset) < _NS_LIMIT
+            conv = words(28, "f4")
+            with np.errstate(invalid="ignore"):
+                ok &= np.isfinite(conv) & (conv > 0)
+        return ok
+
+    def _emit(self, buf: bytes, pos: int, kind: int, order: str, n: int,
+              out: list[PacketBatch]) -> None:
+        if kind not in _SUPPORTED:
+            self.unsupported_packets += n
+            log.debug("skipped %d unsupported packets of type 0x%02X", n, kind)
+            return
+        rec = np.frombuffer(buf, dtype=_DTYPES[(kind, order)], count=n, offset=pos)
+        frame_time = rec["time_s"].astype(np.float64) + 1e-9 * rec["time_ns"]
+        if kind == TYPE_EU64:
+            trigger = np.full(n, np.nan)
+            rate = np.full(n, np.nan)
+            serial = np.full(n, -1, np.int64)
+            valve = np.zeros(n, bool)
+            pressure = rec["P"].astype(np.float64)
+        else:
+            raw = rec["unit"] == _UNIT_RAW
+            if raw.any():  # counts, not pressures: not decodable to Pa here
+                self.unsupported_packets += int(raw.sum())
+                keep = ~raw
+                rec, frame_time = rec[keep], frame_time[keep]
+                n = int(keep.sum())
+                if n == 0:
+                    return
+            start = rec["start_s"].astype(np.float64) + 1e-9 * rec["start_ns"]
+            rel = rec["ext_s"].astype(np.float64) + 1e-9 * rec["ext_ns"]
+            none = (rec["ext_s"] == 0) & (rec["ext_ns"] == 0)
+            trigger = np.where(none, np.nan, start + rel)
+            rate = rec["rate"].astype(np.float64)
+            serial = rec["serial"].astype(np.int64)
+            valve = rec["valve"] == 1
+            factor = _PA_FACTOR / rec["conv"].astype(np.float64)  # EU = PSI x conversion
+            pressure = rec["P"].astype(np.float64) * factor[:, None]
+        out.append(PacketBatch(
+            kind=np.full(n, kind, np.int16), big_endian=np.full(n, order == "big"),
+            frame=rec["frame"].astype(np.int64), frame_time=frame_time, trigger_time=trigger,
+            rate_hz=rate, serial=serial, valve_cal=valve,
+            temperature=rec["T"].astype(np.float64), pressure=pressure,
+        ))
+        self.packets += n
+
+
+_PATTERNS = tuple(kind.to_bytes(4, order) for kind in _PACKET_SIZES for order in ("big", "little"))
+
+
+def _find_candidate(buf: bytes, pos: int) -> int:
+    """First offset >= ``pos`` holding any known type word (either order), or -1."""
+    best = -1
+    for pattern in _PATTERNS:
+        at = buf.find(pattern, pos, best + 4 if best >= 0 else len(buf))
+        if at >= 0 and (best < 0 or at < best):
+            best = at
+    return best
+
+
+# ------------------------------------------------------------------------------------------------
+# Blocks
+# ------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Gap:
+    """Frames that never arrived, in a block's counter sequence.
+
+    Attributes
+    ----------
+    after_counter : int
+        Unwrapped counter of the last frame before the gap (0 at the start of a scan).
+    length : int
+        Number of missing frames; -1 when unknown (a restart of the device's counter).
+    kind : str
+        ``"missing"`` (a counter jump: every module lost the frames) or ``"restart"`` (the
+        device counter restarted, e.g. after a TCP reset; the counter continues from
+        ``after_counter`` and the true gap is unknown).
+    """
+
+    after_counter: int
+    length: int
+    kind: str
+
+
+@dataclass(frozen=True)
+class ClockStep:
+    """A jump of the frame time against the counter (e.g. when PTP locks).
+
+    Attributes
+    ----------
+    counter : int
+        Unwrapped counter of the first frame after the step.
+    step_s : float
+        Frame time minus the time the counter and rate predict, s.
+    """
+
+    counter: int
+    step_s: float
+
+
+@dataclass(frozen=True, eq=False)
+class ScanBlock:
+    """Frames read in one call, merged over modules (one row per frame number).
+
+    Attributes
+    ----------
+    counter : ndarray of int64, (n,)
+        Unwrapped frame counter (continues across device-counter wraps and restarts).
+    frame_time : ndarray of float64, (n,)
+        Device frame time, s (PTP absolute, or relative to the scan start: see ``time_base``).
+    trigger_time : ndarray of float64, (n,)
+        Last external trigger on the frame-time base, s; NaN when none (or 0x6D packets).
+    host_time_ns : ndarray of int64, (n,)
+        Host ``time.monotonic_ns()`` when the frame's last module packet arrived, ns.
+    pressure : ndarray of float64, (n, 64 * modules)
+        Pa; NaN where ``module_status`` is not ``STATUS_OK``.
+    pitot : ndarray of float64, (n,)
+        Dynamic pressure of the Pitot channel, Pa (a copy of that pressure column).
+    temperature : ndarray of float64, (n, 8 * modules)
+        Module temperatures, degC; NaN for missing modules.
+    module_status : ndarray of int8, (n, modules)
+        ``STATUS_OK``, ``STATUS_MISSING`` or ``STATUS_VALVE_CAL`` per module: the reason of NaN.
+    gaps : tuple of Gap
+        Counter gaps and restarts before or inside this block.
+    clock_steps : tuple of ClockStep
+        Frame-time jumps detected before or inside this block.
+    time_base : str
+        ``"ptp"``, ``"relative"`` (frame times < 1e9 s: PTP absent, epoch 0) or ``"mixed"``.
+    """
+
+    counter: npt.NDArray[np.int64]
+    frame_time: npt.NDArray[np.float64]
+    trigger_time: npt.NDArray[np.float64]
+    host_time_ns: npt.NDArray[np.int64]
+    pressure: npt.NDArray[np.float64]
+    pitot: npt.NDArray[np.float64]
+    temperature: npt.NDArray[np.float64]
+    module_status: npt.NDArray[np.int8]
+    gaps: tuple[Gap, ...] = ()
+    clock_steps: tuple[ClockStep, ...] = ()
+    time_base: str = "ptp"
+
+    #: Names of the array fields, in :meth:`ScanivalveMps4264.describe` order.
+    CHANNELS = ("counter", "frame_time", "trigger_time", "host_time_ns", "pressure", "pitot",
+                "temperature", "module_status")
+
+    def __len__(self) -> int:
+        return int(self.counter.size)
+
+    def arrays(self) -> dict[str, npt.NDArray[Any]]:
+        """Return the block's arrays keyed exactly as :meth:`ScanivalveMps4264.describe`."""
+        return {name: getattr(self, name) for name in self.CHANNELS}
+
+
+# ------------------------------------------------------------------------------------------------
+# Per-module stream state
+# ------------------------------------------------------------------------------------------------
+class _ModuleStream:
+    """One module's data connection, decoder and counter unwrapping (keys for merging).
+
+    Key = ``epoch << 40 | u``: ``u`` is the unwrapped counter within a counter epoch; an epoch
+    ends when the device counter goes back (not a uint32 wrap), i.e. the scan restarted.
+    """
+
+    def __init__(self, index: int, transport: Transport) -> None:
+        self.index = index
+        self.transport = transport
+        self.decoder = Mps4264Decoder()
+        self.last_raw: int | None = None
+        self.epoch = 0
+        self.u_last = 0
+        self.watermark = -1
+        self.keys: list[npt.NDArray[np.int64]] = []
+        self.batches: list[PacketBatch] = []
+        self.hosts: list[npt.NDArray[np.int64]] = []
+        self.duplicates = 0
+        self.order_mismatches = 0
+        self.serial: int | None = None
+        self.last_arrival = time.monotonic()
+        self.silent = False
+
+    @property
+    def n_pending(self) -> int:
+        return sum(k.size for k in self.keys)
+
+    def ingest(self, batch: PacketBatch, host_ns: int) -> None:
+        raw = batch.frame
+        n = raw.size
+        d = np.empty(n, np.int64)
+        d[1:] = np.diff(raw) % _U32
+        d[0] = -1 if self.last_raw is None else (raw[0] - self.last_raw) % _U32
+        restart = (d < 0) | (d >= _U32 // 2)
+        keep = d != 0
+        self.duplicates += int(n - keep.sum())
+        u = np.empty(n, np.int64)
+        epoch = np.empty(n, np.int64)
+        bounds = [*np.flatnonzero(restart).tolist(), n]
+        if bounds[0] != 0:
+            bounds.insert(0, 0)
+        for s, e in zip(bounds[:-1], bounds[1:], strict=True):
+            if restart[s]:
+                if d[s] >= 0:  # a real restart, not the stream's first frame
+                    self.epoch += 1
+                    log.warning("module %d: frame counter restarted (%d after %d)",
+                                self.index, int(raw[s]), self.last_raw)
+                base = int(raw[s])
+                u[s:e] = base + np.concatenate([[0], np.cumsum(d[s + 1:e])])
+            else:
+                u[s:e] = self.u_last + np.cumsum(d[s:e])
+            epoch[s:e] = self.epoch
+            self.u_last = int(u[e - 1])
+            self.last_raw = int(raw[e - 1])
+        keys = (epoch << _KEY_BITS) | u
+        if not keep.all():
+            keys, batch = keys[keep], batch.take(keep)
+        if keys.size:
+            self.keys.append(keys)
+            self.batches.append(batch)
+            self.hosts.append(np.full(keys.size, host_ns, np.int64))
+            self.watermark = int(keys[-1])
+
+    def drop_upto(self, limit: int) -> int:
+        """Discard pending rows with key <= ``limit`` (late frames); return how many."""
+        if not self.keys or self.keys[0][0] > limit:
+            return 0
+        keys, _, _ = self.take_upto(limit)
+        return int(keys.size)
+
+    def take_upto(self, limit: int) -> tuple[npt.NDArray[np.int64], PacketBatch,
+                                             npt.NDArray[np.int64]]:
+        """Remove and return pending rows with key <= ``limit``."""
+        if not self.keys:
+            return np.zeros(0, np.int64), PacketBatch.empty(), np.zeros(0, np.int64)
+        keys = np.concatenate(self.keys)
+        batch = PacketBatch.concatenate(self.batches)
+        hosts = np.concatenate(self.hosts)
+        cut = int(np.searchsorted(keys, limit, side="right"))
+        if cut < keys.size:
+            self.keys, self.batches, self.hosts = [keys[cut:]], [batch.take(slice(cut, None))], \
+                [hosts[cut:]]
+        else:
+            self.keys, self.batches, self.hosts = [], [], []
+        return keys[:cut], batch.take(slice(0, cut)), hosts[:cut]
+
+
+# ------------------------------------------------------------------------------------------------
+# Driver
+# ------------------------------------------------------------------------------------------------
+class ScanivalveMps4264:
+    """Driver of a Scanivalve MPS4264-class scanner (see the module docstring for the protocol).
+
+    Parameters
+    ----------
+    transport : Transport
+        The command connection (``tcp://host:port``), created but not opened.
+    settings : Mps4264Settings
+        Validated settings.
+    data_transports : sequence of Transport, optional
+        One data connection per module (tests inject scripted ones). Default: ``tcp://host:
+        data_port + k`` on the command connection's host, created at :meth:`scan`.
+    reconnect_attempts : int
+        Attempts to re-open a lost data connection before :class:`TransportError`, >= 1.
+    reconnect_backoff_s : float
+        Delay before the first attempt, s; doubled at each further attempt.
+    max_pending_frames : int
+        Frames one module may hold while another lags; beyond, frames are emitted with the
+        lagging module marked ``STATUS_MISSING`` (its later packets count as late frames).
+    module_silence_s : float
+        A module that sends nothing for this long (s) is no longer waited for: frames are
+        emitted with it marked ``STATUS_MISSING``. A reconnect restarts its clock.
+
+    Notes
+    -----
+    Commands (one lock) and :meth:`read_block` use different connections, so one thread may read
+    while another commands (e.g. :meth:`stop`). The driver is not otherwise thread-safe.
+    """
+
+    def __init__(
+        self, transport: Transport, settings: Mps4264Settings, *,
+        data_transports: Sequence[Transport] | None = None, reconnect_attempts: int = 5,
+        reconnect_backoff_s: float = 0.1, max_pending_frames: int = 4096,
+        module_silence_s: float = 1.0,
+    ) -> None:
+        if not isinstance(settings, Mps4264Settings):
+            raise TypeError(f"settings must be Mps4264Settings, got {type(settings).__name__}")
+        if data_transports is not None and len(data_transports) != settings.modules:
+            raise ValueError(f"data_transports: need {settings.modules} (one per module), "
+                             f"got {len(data_transports)}")
+        if (reconnect_attempts < 1 or reconnect_backoff_s < 0 or max_pending_frames < 1
+                or not module_silence_s > 0):
+            raise ValueError("reconnect_attempts >= 1, reconnect_backoff_s >= 0, "
+                             "max_pending_frames >= 1 and module_silence_s > 0 are required")
+        self.transport = transport
+        self.settings = settings
+        self._data_given = list(data_transports) if data_transports is not None else None
+        self._attempts = int(reconnect_attempts)
+        self._backoff_s = float(reconnect_backoff_s)
+        self._max_pending = int(max_pending_frames)
+        self._silence_s = float(module_silence_s)
+        self._cmd_lock = threading.Lock()
+        self._cmd_buf = bytearray()
+        self._opened = False
+        self._streams: list[_ModuleStream] = []
+        self._rate_hz = settings.rate_hz
+        self._stats = dict.fromkeys(("reconnects", "late_frames", "forced_emissions"), 0)
+        self._reset_run_state()
+
+    # -- life cycle ----------------------------------------------------------------------------
+    def open(self) -> None:
+        """Connect the command connection and check that a scanner answers ``STATUS``."""
+        if self._opened:
+            return
+        if not self.transport.is_open:
+            self.transport.open()
+        self._cmd_buf.clear()
+        try:
+            state = self.status()
+        except DaqError:
+            self.transport.close()
+            raise
+        self._opened = True
+        log.info("%s: scanner %s", self.transport.url, state)
+
+    def close(self) -> None:
+        """Close every connection (sends nothing); idempotent."""
+        self._opened = False
+        for stream in self._streams:
+            stream.transport.close()
+        self.transport.close()
+
+    def __enter__(self) -> ScanivalveMps4264:
+        self.open()
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+    # -- description ---------------------------------------------------------------------------
+    def describe(self) -> dict[str, dict[str, Any]]:
+        """Channels of :meth:`read_block` blocks: ``{name: {units, dtype, shape}}`` (per row)."""
+        m = self.settings.modules
+        return {
+            "counter": {"units": "1", "dtype": "int64", "shape": ()},
+            "frame_time": {"units": "s", "dtype": "float64", "shape": ()},
+            "trigger_time": {"units": "s", "dtype": "float64", "shape": ()},
+            "host_time_ns": {"units": "ns", "dtype": "int64", "shape": ()},
+            "pressure": {"units": "Pa", "dtype": "float64", "shape": (CHANNELS_PER_MODULE * m,)},
+            "pitot": {"units": "Pa", "dtype": "float64", "shape": ()},
+            "temperature": {"units": "degC", "dtype": "float64",
+                            "shape": (TEMPERATURES_PER_MODULE * m,)},
+            "module_status": {"units": "1", "dtype": "int8", "shape": (m,)},
+        }
+
+    @property
+    def rate_hz(self) -> float:
+        """Measure the frame rate the scanner was last set to (the settings' until then), Hz."""
+        return self._rate_hz
+
+    @property
+    def n_channels(self) -> int:
+        """Measure the number of pressure channels (64 per module)."""
+        return self.settings.n_channels
+
+    @property
+    def stats(self) -> dict[str, int]:
+        """Measure the stream counters since :meth:`scan`.
+
+        Packets decoded, bytes skipped, bad and unsupported packets, duplicates, late frames,
+        byte-order mismatches, reconnects and forced emissions.
+        """
+        out = dict(self._stats)
+        decoders = [s.decoder for s in self._streams]
+        out["packets"] = sum(d.packets for d in decoders)
+        out["bytes_skipped"] = sum(d.bytes_skipped for d in decoders)
+        out["bad_packets"] = sum(d.bad_packets for d in decoders)
+        out["unsupported_packets"] = sum(d.unsupported_packets for d in decoders)
+        out["duplicates"] = sum(s.duplicates for s in self._streams)
+        out["byte_order_mismatches"] = sum(s.order_mismatches for s in self._streams)
+        return out
+
+    # -- commands ------------------------------------------------------------------------------
+    def status(self) -> str:
+        """Return the scanner state (``READY``, ``SCAN``, ``CALZ``, ...), from ``STATUS``."""
+        with self._cmd_lock:
+            return self._fence()
+
+    def set_rate(self, hz: float) -> None:
+        """Set the frame rate with ``SET RATE <hz>`` ([unverified] syntax), Hz in (0, 2000]."""
+        if isinstance(hz, bool) or not (isinstance(hz, (int, float)) and 0 < hz <= MAX_RATE_HZ):
+            raise ValueError(f"frame rate must be in (0, {MAX_RATE_HZ:g}] Hz, got {hz!r}")
+        self._command(f"SET RATE {float(hz):g}")
+        self._rate_hz = float(hz)
+
+    def set_format(self, packet: str = "legacy") -> None:
+        """Select binary frames on the TCP server, in Pa, as ``packet`` type.
+
+        Parameters
+        ----------
+        packet : {"legacy", "eu"}
+            ``"legacy"``: the 348-byte 0x0A packet (``SET SIM 0x40``), which carries the
+            external-trigger time the synchronisation needs; ``"eu"``: the MPS4264's own
+            304-byte 0x6D packet (``SET SIM 0``).
+        """
+        if packet not in ("legacy", "eu"):
+            raise ValueError(f"packet must be 'legacy' or 'eu', got {packet!r}")
+        self._command("SET FORMAT B B")
+        self._command("SET UNITS PA")
+        self._command("SET SIM 0x40" if packet == "legacy" else "SET SIM 0")
+
+    def configure(self, packet: str = "legacy") -> None:
+        """Apply the settings: :meth:`set_format` (``packet``) then :meth:`set_rate`."""
+        self.set_format(packet)
+        self.set_rate(self.settings.rate_hz)
+
+    def calz(self, *, wind_speed_now: float, timeout_s: float = 30.0,
+             poll_s: float = 0.1) -> None:
+        """Zero the sensors (``CALZ``) and wait until the scanner is ``READY`` again.
+
+        The MPS4232/4264 have no calibration valve: the zero is taken with the taps exposed, so
+        it must be taken wind-off (DEVICES.md A.1.1 "Zero calibration"). Deciding that the
+        wind is off is the caller's job; it passes the wind speed it knows.
+
+        Parameters
+        ----------
+        wind_speed_now : float
+            Current wind speed, m/s. Anything but exactly 0 is refused, NaN (unknown) too.
+        timeout_s : float
+            Longest wait for ``READY`` after ``CALZ``, s (the manual: "under 10 seconds").
+        poll_s : float
+            Interval between ``STATUS`` polls, s.
+
+        Raises
+        ------
+        SafetyError
+            ``wind_speed_now`` is not 0: nothing is sent.
+        DeviceError
+            ``CALZ`` refused, or the scanner still busy after ``timeout_s``.
+        """
+        if not wind_speed_now == 0.0:  # NaN compares unequal too: an unknown wind is refused
+            raise SafetyError(
+                f"{self.transport.url}: refusing CALZ with wind speed {wind_speed_now!r} m/s: "
+                "a zero taken wind-on bakes the wind's pressures into every channel's offset"
+            )
+        state = self._command("CALZ")
+        deadline = time.monotonic() + timeout_s
+        while state != "READY":
+            if state != "CALZ":
+                raise DeviceError(f"{self.transport.url}: unexpected state {state!r} during CALZ")
+            if time.monotonic() >= deadline:
+                raise DeviceError(f"{self.transport.url}: CALZ not finished after {timeout_s:g} s")
+            time.sleep(poll_s)
+            state = self.status()
+
+    def scan(self) -> None:
+        """Start scanning: fresh data connections, reset stream state, then ``SCAN``."""
+        with self._cmd_lock:
+            for stream in self._streams:
+                stream.transport.close()
+            self._streams = [_ModuleStream(k, t) for k, t in enumerate(self._data_transports())]
+            self._reset_run_state()
+            for stream in self._streams:
+                stream.transport.open()
+            state = self._command_locked("SCAN")
+        if state != "SCAN":
+            raise DeviceError(f"{self.transport.url}: state {state!r} after SCAN (expected SCAN)")
+
+    def stop(self) -> None:
+        """Stop scanning (``STOP``); frames already sent stay readable with :meth:`read_block`."""
+        state = self._command("STOP")
+        if state != "READY":
+            raise DeviceError(f"{self.transport.url}: state {state!r} after STOP")
+
+    def _data_transports(self) -> list[Transport]:
+        if self._data_given is not None:
+            return self._data_given
+        host = urlsplit(self.transport.url).hostname
+        if not host:
+            raise ConfigError(f"{self.transport.url}: no host to reach the data ports at; "
+                              "pass data_transports")
+        return [open_transport(f"tcp://{host}:{self.settings.data_port + k}")
+                for k in range(self.settings.modules)]
+
+    def _command(self, text: str) -> str:
+        with self._cmd_lock:
+            return self._command_locked(text)
+
+    def _command_locked(self, text: str) -> str:
+        self.transport.write(text.encode("ascii") + b"\r\n")
+        return self._fence(text)
+
+    def _fence(self, after: str | None = None) -> str:
+        """Send ``STATUS``; return its state; an ``INVALID COMMAND`` line before it is raised."""
+        self.transport.write(b"STATUS\r\n")
+        deadline = time.monotonic() + self.settings.command_timeout_s
+        refusal: str | None = None
+        while True:
+            line = self._read_line(deadline)
+            upper = line.upper()
+            if upper.startswith("INVALID COMMAND"):
+                refusal = line
+            elif upper.startswith("STATUS:"):
+                state = upper.split(":", 1)[1].strip()
+                if refusal is not None:
+                    what = after if after is not None else "STATUS"
+                    raise DeviceError(f"{self.transport.url}: {what!r} refused: {refusal!r}")
+                if not state:
+                    raise ProtocolError(f"{self.transport.url}: empty state in {line!r}")
+                return state
+            elif line:
+                log.debug("%s: ignored reply line %r", self.transport.url, line)
+
+    def _read_line(self, deadline: float) -> str:
+        """One reply line (terminated by CR, LF or CR LF), without its terminator."""
+        buf = self._cmd_buf
+        while True:
+            cut = min((i for i in (buf.find(b"\r"), buf.find(b"\n")) if i >= 0), default=-1)
+            if cut >= 0:
+                raw = bytes(buf[:cut])
+                del buf[:cut + 1]
+                return raw.decode("ascii", errors="replace").strip()
+            if len(buf) > 4096:
+                raise ProtocolError(f"{self.transport.url}: no line end within 4096 bytes: "
+                                    f"{bytes(buf[:64]).hex(' ')} ...")
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise TransportTimeout(f"{self.transport.url}: no reply line within "
+                                       f"{self.settings.command_timeout_s:g} s (received "
+                                       f"{bytes(buf)!r})")
+            buf += self.transport.read(4096, remaining)
+
+    # -- data ------------------------------------------------------------------------------------
+    def _reset_run_state(self) -> None:
+        self._last_key: int | None = None
+        self._last_counter = 0
+        self._last_time = math.nan
+        self._last_time_counter = 0
+        self._last_time_key = -1
+        self._steps_seen = 0
+        self._epoch_base: dict[int, int] = {}
+        self._pending_gaps: list[Gap] = []
+        self._pending_steps: list[ClockStep] = []
+        self._time_base: str | None = None
+        for key in self._stats:
+            self._stats[key] = 0
+
+    def read_block(self, timeout_s: float | None = None) -> ScanBlock:
+        """Return the frames that arrived, merged over modules (at least one frame).
+
+        Parameters
+        ----------
+        timeout_s : float, optional
+            Longest wait for a complete frame, s (default: ``command_timeout_s``).
+
+        Raises
+        ------
+        TransportTimeout
+            No frame completed within ``timeout_s``.
+        TransportError
+            A data connection was lost and stayed away after the bounded reconnects.
+        """
+        if not self._streams:
+            raise TransportError(f"{self.transport.url}: no data connections: call scan() first")
+        timeout = self.settings.command_timeout_s if timeout_s is None else float(timeout_s)
+        deadline = time.monotonic() + timeout
+        while True:
+            laggard = min(self._streams, key=lambda s: s.watermark)
+            for stream in self._streams:
+                if stream is not laggard:
+                    self._pump(stream, 0.0)
+            self._pump(laggard, min(max(deadline - time.monotonic(), 0.0), 0.05))
+            block = self._emit()
+            if block is not None:
+                return block
+            if time.monotonic() >= deadline:
+                # Frames held back for a module that stayed silent for the whole timeout (e.g.
+                # its last frames were dropped before STOP): emit them, marked missing there.
+                block = self._emit(flush=True)
+                if block is not None:
+                    return block
+                raise TransportTimeout(f"{self.transport.url}: no complete frame within "
+                                       f"{timeout:g} s")
+
+    def _pump(self, stream: _ModuleStream, wait_s: float) -> None:
+        """Read what one data connection has (waiting at most ``wait_s`` for the first bytes)."""
+        for _ in range(64):  # bounded: at most 4 MiB per call, then let the others speak
+            try:
+                data = stream.transport.read(1 << 16, wait_s)
+            except TransportTimeout:
+                return
+            except TransportError as exc:
+                self._reconnect(stream, exc)
+                return
+            host_ns = time.monotonic_ns()
+            stream.last_arrival = host_ns * 1e-9
+            batch = stream.decoder.feed(data)
+            if len(batch):
+                self._check_packets(stream, batch)
+                stream.ingest(batch, host_ns)
+            wait_s = 0.0
+
+    def _check_packets(self, stream: _ModuleStream, batch: PacketBatch) -> None:
+        expected = self.settings.byte_order == "big"
+        mismatched = int(np.count_nonzero(batch.big_endian != expected))
+        if mismatched:
+            if stream.order_mismatches == 0:
+                log.warning("module %d sends %s-endian packets but byte_order = %r: decoding "
+                            "with the detected order (fix the rig config)", stream.index,
+                            "little" if expected else "big", self.settings.byte_order)
+            stream.order_mismatches += mismatched
+        serials = batch.serial[batch.serial >= 0]
+        if serials.size:
+            if stream.serial is None:
+                stream.serial = int(serials[0])
+            if np.any(serials != stream.serial):
+                log.warning("module %d: serial number changed from %d to %s", stream.index,
+                            stream.serial, sorted(set(serials.tolist())))
+                stream.serial = int(serials[-1])
+        rates = batch.rate_hz[np.isfinite(batch.rate_hz) & (batch.rate_hz > 0)]
+        if rates.size:
+            self._rate_hz = float(rates[-1])
+
+    def _reconnect(self, stream: _ModuleStream, cause: TransportError) -> None:
+        log.warning("module %d: data connection lost (%s); reconnecting", stream.index, cause)
+        stream.transport.close()
+        discarded = stream.decoder.reset()
+        if discarded:
+            log.warning("module %d: %d bytes of a partial packet discarded", stream.index,
+                        discarded)
+        last: TransportError = cause
+        for attempt in range(1, self._attempts + 1):
+            time.sleep(self._backoff_s * 2 ** (attempt - 1))
+            try:
+                stream.transport.open()
+            except TransportError as exc:
+                last = exc
+                log.warning("module %d: reconnect attempt %d of %d failed: %s", stream.index,
+                            attempt, self._attempts, exc)
+                continue
+            self._stats["reconnects"] += 1
+            stream.last_arrival = time.monotonic()
+            log.info("module %d: data connection re-opened (attempt %d)", stream.index, attempt)
+            return
+        raise TransportError(f"{self.transport.url}: module {stream.index} data connection "
+                             f"stayed away after {self._attempts} attempts") from last
+
+    def _emit(self, flush: bool = False) -> ScanBlock | None:
+        """Merge and return the frames every module has answered for (or is silent about).
+
+        A frame number is complete when every module has sent it or a later one. A module that
+        sent nothing for ``module_silence_s`` (and holds nothing) is not waited for: its
+        columns are marked missing. ``flush`` emits everything held (the read timed out).
+        """
+        streams = self._streams
+        last = -1 if self._last_key is None else self._last_key
+        for s in streams:
+            late = s.drop_upto(last)
+            if late:
+                self._stats["late_frames"] += late
+                log.warning("module %d: %d late frames discarded (already emitted as missing)",
+                            s.index, late)
+        if flush:
+            limit = max((s.watermark for s in streams if s.keys), default=-1)
+        else:
+            now = time.monotonic()
+            waiting = []
+            for s in streams:
+                silent = not s.keys and now - s.last_arrival >= self._silence_s
+                if silent and not s.silent:
+                    log.warning("module %d silent for %.1f s: its frames are marked missing",
+                                s.index, now - s.last_arrival)
+                s.silent = silent
+                if not silent:
+                    waiting.append(s)
+            limit = min((s.watermark for s in waiting), default=-1)
+            for s in streams:  # bound what a lagging module can hold back
+                n = s.n_pending
+                if n > self._max_pending:
+                    forced = int(np.concatenate(s.keys)[n - self._max_pending - 1])
+                    if forced > limit:
+                        limit = forced
+                        log.warning("module %d holds %d frames: emitting without the "
+                                    "modules that lag", s.index, n)
+        if limit <= last:
+            return None
+        if flush or limit > min(s.watermark for s in streams):
+            self._stats["forced_emissions"] += 1
+        parts = [s.take_upto(limit) for s in streams]
+        all_keys = np.unique(np.concatenate([p[0] for p in parts]))
+        if all_keys.size == 0:
+            return None
+        return self._assemble(all_keys, parts)
+
+    def _assemble(self, keys: npt.NDArray[np.int64],
+                  parts: list[tuple[npt.NDArray[np.int64], PacketBatch, npt.NDArray[np.int64]]],
+                  ) -> ScanBlock:
+        n, m = keys.size, self.settings.modules
+        pressure = np.full((n, CHANNELS_PER_MODULE * m), np.nan)
+        temperature = np.full((n, TEMPERATURES_PER_MODULE * m), np.nan)
+        status = np.full((n, m), STATUS_MISSING, np.int8)
+        frame_time = np.full(n, np.nan)
+        trigger = np.full(n, np.nan)
+        host = np.zeros(n, np.int64)
+        have = np.zeros(n, bool)
+        for k, (mkeys, batch, hosts) in enumerate(parts):
+            if not mkeys.size:
+                continue
+            idx = np.searchsorted(keys, mkeys)
+            cols = slice(CHANNELS_PER_MODULE * k, CHANNELS_PER_MODULE * (k + 1))
+            p = batch.pressure
+            if batch.valve_cal.any():
+                p = p.copy()
+                p[batch.valve_cal] = np.nan
+            pressure[idx, cols] = p
+            temperature[idx, TEMPERATURES_PER_MODULE * k:TEMPERATURES_PER_MODULE * (k + 1)] = \
+                batch.temperature
+            status[idx, k] = np.where(batch.valve_cal, STATUS_VALVE_CAL, STATUS_OK)
+            first = ~have[idx]
+            frame_time[idx[first]] = batch.frame_time[first]
+            trigger[idx[first]] = batch.trigger_time[first]
+            have[idx] = True
+            host[idx] = np.maximum(host[idx], hosts)
+        counter = self._counters(keys)
+        self._find_clock_steps(counter, keys, frame_time)
+        base = self._block_time_base(frame_time)
+        gaps, steps = tuple(self._pending_gaps), tuple(self._pending_steps)
+        self._pending_gaps, self._pending_steps = [], []
+        self._last_key = int(keys[-1])
+        self._last_counter = int(counter[-1])
+        return ScanBlock(
+            counter=counter, frame_time=frame_time, trigger_time=trigger, host_time_ns=host,
+            pressure=pressure, pitot=pressure[:, self.settings.pitot_channel].copy(),
+            temperature=temperature, module_status=status, gaps=gaps, clock_steps=steps,
+            time_base=base,
+        )
+
+    def _counters(self, keys: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
+        """Unwrapped counters of merged keys; records the gaps and restarts before them.
+
+        Within a counter epoch the counter is ``base + u``; the first frame of a restarted epoch
+        continues at the previous counter + 1 (the true gap is unknown: a ``restart`` gap).
+        """
+        epochs = keys >> _KEY_BITS
+        u = keys & _KEY_MASK
+        counter = np.empty(keys.size, np.int64)
+        prev_counter = self._last_counter
+        for epoch in np.unique(epochs).tolist():
+            lo, hi = np.searchsorted(epochs, [epoch, epoch + 1])  # keys are sorted
+            if epoch not in self._epoch_base:
+                self._epoch_base[epoch] = (0 if self._last_key is None and lo == 0
+                                           else prev_counter + 1 - int(u[lo]))
+            counter[lo:hi] = self._epoch_base[epoch] + u[lo:hi]
+            prev_counter = int(counter[hi - 1])
+        prev_keys = np.concatenate([[-1 if self._last_key is None else self._last_key],
+                                    keys[:-1]])
+        prev_counts = np.concatenate([[self._last_counter], counter[:-1]])
+        new_epoch = (prev_keys >> _KEY_BITS) != epochs
+        restart = new_epoch & (prev_keys >= 0)
+        jump = ~new_epoch & (keys - prev_keys > 1)
+        gaps = []
+        if self._last_key is None and u[0] > 1:  # frames missing at the start of the scan
+            gaps.append(Gap(0, int(u[0]) - 1, "missing"))
+        for i in np.flatnonzero(restart | jump).tolist():
+            length = -1 if restart[i] else int(keys[i] - prev_keys[i] - 1)
+            gaps.append(Gap(int(prev_counts[i]), length, "restart" if restart[i] else "missing"))
+        for gap in gaps:
+            log.warning("scanner gap: %s", gap)
+        self._pending_gaps.extend(gaps)
+        return counter
+
+    def _find_clock_steps(self, counter: npt.NDArray[np.int64], keys: npt.NDArray[np.int64],
+                          frame_time: npt.NDArray[np.float64]) -> None:
+        """Record jumps of the frame time against ``counter / rate`` (same counter epoch)."""
+        ok = np.isfinite(frame_time)
+        c, t, e = counter[ok], frame_time[ok], (keys >> _KEY_BITS)[ok]
+        if self._last_time_key >= 0 and c.size:
+            c = np.concatenate([[self._last_time_counter], c])
+            t = np.concatenate([[self._last_time], t])
+            e = np.concatenate([[self._last_time_key >> _KEY_BITS], e])
+        if c.size:
+            self._last_time, self._last_time_counter = float(t[-1]), int(c[-1])
+            self._last_time_key = int(keys[ok][-1]) if ok.any() else self._last_time_key
+        if c.size < 2:
+            return
+        residual = np.diff(t) - np.diff(c) / self._rate_hz
+        # A quarter frame, at least 1 ms: ordinary frames sit within microseconds of the counter
+        # (the s/ns fields are exact); a PTP lock or a rate mismatch is far larger.
+        tol = max(0.25 / self._rate_hz, 1e-3)
+        for i in np.flatnonzero((np.abs(residual) > tol) & (np.diff(e) == 0)).tolist():
+            step = ClockStep(int(c[i + 1]), float(residual[i]))
+            self._steps_seen += 1
+            if self._steps_seen <= 5:
+                log.warning("scanner frame time stepped by %+.6f s at counter %d%s",
+                            step.step_s, step.counter,
+                            " (further steps not logged: is the rate right?)"
+                            if self._steps_seen == 5 else "")
+            self._pending_steps.append(step)
+
+    def _block_time_base(self, frame_time: npt.NDArray[np.float64]) -> str:
+        finite = frame_time[np.isfinite(frame_time)]
+        relative = finite < 1e9  # before 2001-09-09: a clock started at epoch 0 (no PTP time)
+        base = "mixed" if relative.any() and not relative.all() else \
+            ("relative" if relative.any() else "ptp")
+        last = None if not finite.size else ("relative" if relative[-1] else "ptp")
+        if last is not None and last != self._time_base:
+            if last == "relative":
+                log.warning("scanner frame times are relative to the scan start (PTP absent: "
+                            "epoch 0)")
+            elif self._time_base is not None:
+                log.info("scanner frame times are now absolute PTP times")
+            self._time_base = last
+        return base
+
+
+def _factory(transport: Transport, settings: Mps4264Settings) -> ScanivalveMps4264:
+    return ScanivalveMps4264(transport, settings)
+
+
+register(DriverEntry(name="scanivalve_mps4264", role="scanner", factory=_factory,
+                     validate=Mps4264Settings.from_table))

@@ -1,0 +1,189 @@
+"""Start every simulated instrument of a rig config from one call.
+
+Builds the virtual tunnel from the config's section, taps, tunnel calibration and ``[simulation]``
+truth, starts one simulator per configured instrument (loopback only), and returns the URLs to
+point drivers at, together with a copy of the rig config whose ``"auto"`` URLs are filled in.
+Responsible for translating config tables into simulator arguments; the simulators themselves
+live in :mod:`simulators.devices` and know nothing of rig configs.
+
+Per-instrument simulation settings come from ``[simulation.devices.<name>]``: ``clock_offset_s``,
+``clock_drift_ppm`` and ``seed`` for every device, and any further keyword the device's simulator
+accepts (noise levels, fault options); an unknown one is a ConfigError naming it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+import logging
+from collections.abc import Callable, Mapping
+from typing import Any
+
+from daq.config import InstrumentConfig, RigConfig
+from daq.errors import ConfigError
+from simulators.clock import Clock, DeviceClock
+from simulators.devices.abb_acs580 import SimAbbAcs580
+from simulators.devices.microepsilon_ild1420 import SimMicroEpsilonIld1420
+from simulators.devices.modbus_plc import SimModbusPlc
+from simulators.devices.scanivalve_mps4264 import SimScanivalveMps4264
+from simulators.devices.vaisala_ptb330 import SimVaisalaPtb330
+from simulators.virtual_tunnel import AirState, VirtualTunnel
+
+__all__ = ["SimulatedRig", "start_simulated_rig"]
+
+log = logging.getLogger(__name__)
+
+_COMMON_KEYS = {"clock_offset_s", "clock_drift_ppm", "seed"}
+
+
+def _scanner(tunnel: VirtualTunnel, s: Mapping[str, Any], **kw: Any) -> SimScanivalveMps4264:
+    return SimScanivalveMps4264(tunnel, modules=int(s["modules"]), rate_hz=float(s["rate_hz"]),
+                                byte_order=str(s.get("byte_order", "big")),
+                                pitot_channel=int(s["pitot_channel"]), **kw)
+
+
+def _laser(tunnel: VirtualTunnel, s: Mapping[str, Any], **kw: Any) -> SimMicroEpsilonIld1420:
+    keys = ("range_mm", "rate_hz", "x", "standoff_mm", "baudrate", "output")
+    return SimMicroEpsilonIld1420(tunnel, **{k: s[k] for k in keys if k in s}, **kw)
+
+
+def _fan(tunnel: VirtualTunnel, s: Mapping[str, Any], **kw: Any) -> SimAbbAcs580:
+    extra: dict[str, Any] = (
+        {"ramp_rpm_per_s": float(s["ramp_rpm_per_s"])} if "ramp_rpm_per_s" in s else {}
+    )
+    registers = s["registers"]
+    return SimAbbAcs580(tunnel, control_word=int(registers["control_word"]),
+                        reference_1=int(registers["reference_1"]),
+                        status_word=int(registers["status_word"]),
+                        actual_1=int(registers["actual_1"]), max_rpm=float(s["max_rpm"]),
+                        **extra, **kw)
+
+
+def _plc(tunnel: VirtualTunnel, s: Mapping[str, Any], **kw: Any) -> SimModbusPlc:
+    coils, inputs, registers = s["coils"], s["discrete_inputs"], s["holding_registers"]
+    return SimModbusPlc(tunnel, release=int(coils["release"]), arm=int(coils["arm"]),
+                        trigger=int(coils["trigger"]), released=int(inputs["released"]),
+                        trigger_count=int(registers["trigger_count"]), **kw)
+
+
+def _barometer(tunnel: VirtualTunnel, s: Mapping[str, Any], **kw: Any) -> SimVaisalaPtb330:
+    return SimVaisalaPtb330(tunnel, **kw)
+
+
+#: Simulator factory for each driver name: (tunnel, instrument settings, **sim options).
+SIMULATORS: dict[str, tuple[Callable[..., Any], Callable[..., Any]]] = {
+    "scanivalve_mps4264": (_scanner, SimScanivalveMps4264),
+    "microepsilon_ild1420": (_laser, SimMicroEpsilonIld1420),
+    "abb_acs580": (_fan, SimAbbAcs580),
+    "modbus_plc": (_plc, SimModbusPlc),
+    "vaisala_ptb330": (_barometer, SimVaisalaPtb330),
+}
+
+
+@dataclasses.dataclass
+class SimulatedRig:
+    """A running simulated rig.
+
+    Attributes
+    ----------
+    config : RigConfig
+        The rig config with every ``"auto"`` URL replaced by the simulator's URL.
+    tunnel : VirtualTunnel
+        The shared physical truth.
+    simulators : dict
+        Simulator object by instrument name.
+    urls : dict
+        URL by instrument name.
+    """
+
+    config: RigConfig
+    tunnel: VirtualTunnel
+    simulators: dict[str, Any]
+    urls: dict[str, str]
+
+    def close(self) -> None:
+        """Stop every simulator (idempotent); a failure is raised after all were stopped."""
+        failures: list[BaseException] = []
+        for name, sim in reversed(list(self.simulators.items())):
+            try:
+                sim.stop()
+            except Exception as exc:  # stop the others first; re-raised below, never swallowed
+                log.error("stopping simulator %s failed: %s", name, exc)
+                failures.append(exc)
+        if failures:
+            raise failures[0]
+
+    def __enter__(self) -> SimulatedRig:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def start_simulated_rig(
+    config: RigConfig, *, clock: Clock | None = None, serial: str = "socket"
+) -> SimulatedRig:
+    """Build the virtual tunnel of ``config`` and start all its simulated instruments.
+
+    Parameters
+    ----------
+    config : RigConfig
+        A rig config with a ``[simulation]`` table.
+    clock : Clock, optional
+        True time (default: real time).
+    serial : {"socket", "pty"}
+        How serial instruments are served: pyserial ``socket://`` or a pty pair.
+
+    Returns
+    -------
+    SimulatedRig
+        Use it as a context manager, or call ``close()``.
+    """
+    if config.simulation is None:
+        raise ConfigError(f"{config.source}: not a simulated rig (no [simulation] table)")
+    sim = config.simulation
+    tunnel = VirtualTunnel(
+        config.section, config.aerodynamic_model(), config.taps,
+        wind_per_rpm=config.wind_per_rpm, hold=(sim.hold_h, sim.hold_alpha),
+        air=AirState(pressure_pa=sim.pressure_pa, temperature_k=sim.temperature_c + 273.15),
+        clock=clock,
+    )
+    rig = SimulatedRig(config=config, tunnel=tunnel, simulators={}, urls={})
+    resolved: list[InstrumentConfig] = []
+    try:
+        for index, inst in enumerate(config.instruments):
+            simulator = _build(inst, tunnel, sim.devices.get(inst.name, {}), index, config.source)
+            rig.simulators[inst.name] = simulator
+            start = simulator.start
+            url = start(serial) if "transport" in inspect.signature(start).parameters else start()
+            rig.urls[inst.name] = url
+            settings = dict(inst.settings)
+            if inst.driver == "scanivalve_mps4264":
+                settings["data_port"] = simulator.data_port  # both ports are ephemeral here
+            resolved.append(dataclasses.replace(inst, url=url, settings=settings))
+    except BaseException:
+        rig.close()
+        raise
+    rig.config = dataclasses.replace(config, instruments=tuple(resolved))
+    return rig
+
+
+def _build(inst: InstrumentConfig, tunnel: VirtualTunnel, options: Mapping[str, Any],
+           index: int, source: str) -> Any:
+    if inst.driver not in SIMULATORS:
+        raise ConfigError(f"{source}: no simulator for driver {inst.driver!r}")
+    factory, cls = SIMULATORS[inst.driver]
+    where = f"{source} [simulation.devices.{inst.name}]"
+    accepted = set(inspect.signature(cls).parameters) - {"tunnel"}
+    unknown = sorted(set(options) - _COMMON_KEYS - accepted)
+    if unknown:
+        raise ConfigError(f"{where}: unknown key(s) {unknown}; allowed: "
+                          f"{sorted(_COMMON_KEYS | accepted)}")
+    kwargs = {k: v for k, v in options.items() if k not in _COMMON_KEYS}
+    kwargs["clock"] = DeviceClock(offset_s=float(options.get("clock_offset_s", 0.0)),
+                                  drift_ppm=float(options.get("clock_drift_ppm", 0.0)))
+    kwargs["rng"] = int(options.get("seed", index))
+    try:
+        return factory(tunnel, inst.settings, **kwargs)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"{where}: {exc}") from exc
