@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -42,7 +43,39 @@ def _build_parser() -> argparse.ArgumentParser:
                            help='JSON of a RationalFunctionModel ({"A": ..., "d": ...})')
     p_flutter.add_argument("--u-max", type=float, default=None,
                            help="upper wind speed of the search, m/s (default: K down to 0.2)")
+    p_sim = sub.add_parser(
+        "simulate",
+        help="start the simulated instruments of a rig config and print the URLs to connect to",
+    )
+    p_sim.add_argument("--config", type=Path, required=True, help="rig config TOML")
+    p_sim.add_argument("--serial", choices=("socket", "pty"), default="socket",
+                       help="serve serial instruments over socket:// (default) or a pty pair")
+    p_sim.add_argument("--duration", type=float, default=None,
+                       help="seconds to run, then stop (default: until Ctrl-C)")
     return parser
+
+
+def _simulate(args: argparse.Namespace) -> int:
+    from daq.config import load_rig_config
+    from daq.simulated_rig import start_simulated_rig
+
+    config = load_rig_config(args.config)
+    with start_simulated_rig(config, serial=args.serial) as rig:
+        print(f"{config.name}: simulated instruments on 127.0.0.1 (Ctrl-C stops them)")
+        for inst in rig.config.instruments:
+            extra = (f"  (binary data port {inst.settings['data_port']})"
+                     if "data_port" in inst.settings else "")
+            print(f"  {inst.name:<14} {inst.driver:<22} {inst.url}{extra}")
+        sys.stdout.flush()
+        try:
+            if args.duration is None:
+                while True:
+                    time.sleep(1.0)
+            else:
+                time.sleep(max(args.duration, 0.0))
+        except KeyboardInterrupt:
+            print("stopping the simulators")
+    return 0
 
 
 def _flutter(args: argparse.Namespace) -> int:
@@ -62,6 +95,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return demo.run(args.out)
     if args.command == "flutter":
         return _flutter(args)
+    if args.command == "simulate":
+        return _simulate(args)
     raise AssertionError(f"unhandled command {args.command!r}")  # argparse rejects unknown ones
 
 

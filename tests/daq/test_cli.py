@@ -54,3 +54,17 @@ def test_unknown_subcommand_exits_with_usage(capsys):
         main(["fly"])
     assert exc.value.code == 2
     assert "invalid choice" in capsys.readouterr().err
+
+
+def test_simulate_prints_a_loopback_url_for_every_instrument(capsys):
+    """`windrig simulate` starts the rig's simulators and lists where to connect."""
+    from pathlib import Path
+
+    config = Path(__file__).resolve().parents[2] / "rig_configs" / "sim_flat_plate.toml"
+    assert main(["simulate", "--config", str(config), "--duration", "0.2"]) == 0
+    out = capsys.readouterr().out
+    for name in ("scanner", "laser_front", "laser_rear", "laser_check", "fan", "plc",
+                 "barometer"):
+        line = next(line for line in out.splitlines() if line.strip().startswith(name))
+        assert "127.0.0.1:" in line
+    assert "binary data port" in out
