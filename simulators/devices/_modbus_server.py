@@ -16,7 +16,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import SimDevice
 
-__all__ = ["ModbusServerThread", "bits_into_registers"]
+__all__ = ["ModbusServerThread", "ModbusSimulator", "bits_into_registers"]
 
 log = logging.getLogger(__name__)
 
@@ -227,3 +227,34 @@ def bits_into_registers(registers: list[int], start: int, bits: Mapping[int, boo
         if 0 <= index < len(registers):
             mask = 1 << (address % 16)
             registers[index] = (registers[index] | mask) if value else (registers[index] & ~mask)
+
+
+class ModbusSimulator:
+    """Lifecycle shared by the Modbus simulators: a :class:`ModbusServerThread` and a unit id.
+
+    Subclasses set ``self._server`` and ``self.unit`` in their constructor.
+    """
+
+    _server: ModbusServerThread
+    unit: int
+
+    def start(self) -> str:
+        """Start the Modbus TCP server on 127.0.0.1; return the driver's URL."""
+        self._server.start()
+        return self.url
+
+    def stop(self) -> None:
+        """Stop the server and join its thread; idempotent."""
+        self._server.stop()
+
+    def __enter__(self) -> ModbusSimulator:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    @property
+    def url(self) -> str:
+        """Measure the URL of the running server."""
+        return f"modbus+tcp://127.0.0.1:{self._server.port}?unit={self.unit}"

@@ -44,7 +44,7 @@ from pymodbus.constants import ExcCodes
 from pymodbus.simulator import DataType, SimData, SimDevice
 
 from simulators.clock import DeviceClock
-from simulators.devices._modbus_server import ModbusServerThread
+from simulators.devices._modbus_server import ModbusServerThread, ModbusSimulator
 from simulators.virtual_tunnel import VirtualTunnel
 
 __all__ = ["SimAbbAcs580"]
@@ -74,7 +74,7 @@ FAULT = "FAULT"
 FAULTS = ("trip", "slow_ramp", "no_reply")
 
 
-class SimAbbAcs580:
+class SimAbbAcs580(ModbusSimulator):
     """A simulated ABB-drives-profile fan drive that turns the virtual tunnel's fan.
 
     Parameters
@@ -166,28 +166,6 @@ class SimAbbAcs580:
                                           ticks=[(tick_s, self._tick)])
         for name, params in (faults or {}).items():
             self.inject(name, **params)
-
-    # -- lifecycle -----------------------------------------------------------------------------
-    def start(self) -> str:
-        """Start the Modbus TCP server on 127.0.0.1; return the driver's URL."""
-        port = self._server.start()
-        return f"modbus+tcp://127.0.0.1:{port}?unit={self.unit}"
-
-    def stop(self) -> None:
-        """Stop the server and join its thread; idempotent."""
-        self._server.stop()
-
-    def __enter__(self) -> SimAbbAcs580:
-        self.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
-
-    @property
-    def url(self) -> str:
-        """Measure the URL of the running server."""
-        return f"modbus+tcp://127.0.0.1:{self._server.port}?unit={self.unit}"
 
     # -- truth for tests ---------------------------------------------------------------------------
     @property

@@ -31,7 +31,11 @@ from pymodbus.constants import ExcCodes
 from pymodbus.simulator import DataType, SimData, SimDevice
 
 from simulators.clock import DeviceClock
-from simulators.devices._modbus_server import ModbusServerThread, bits_into_registers
+from simulators.devices._modbus_server import (
+    ModbusServerThread,
+    ModbusSimulator,
+    bits_into_registers,
+)
 from simulators.virtual_tunnel import VirtualTunnel
 
 __all__ = ["SimModbusPlc"]
@@ -39,7 +43,7 @@ __all__ = ["SimModbusPlc"]
 FAULTS = ("release_stuck", "disconnect", "no_reply")
 
 
-class SimModbusPlc:
+class SimModbusPlc(ModbusSimulator):
     """A simulated Modbus TCP PLC that holds, releases and triggers in the virtual tunnel.
 
     Parameters
@@ -118,28 +122,6 @@ class SimModbusPlc:
         self._server = ModbusServerThread(f"SimModbusPlc-u{unit}", self._device)
         for name, params in (faults or {}).items():
             self.inject(name, **params)
-
-    # -- lifecycle -----------------------------------------------------------------------------
-    def start(self) -> str:
-        """Start the Modbus TCP server on 127.0.0.1; return the driver's URL."""
-        port = self._server.start()
-        return f"modbus+tcp://127.0.0.1:{port}?unit={self.unit}"
-
-    def stop(self) -> None:
-        """Stop the server and join its thread; idempotent."""
-        self._server.stop()
-
-    def __enter__(self) -> SimModbusPlc:
-        self.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
-
-    @property
-    def url(self) -> str:
-        """Measure the URL of the running server."""
-        return f"modbus+tcp://127.0.0.1:{self._server.port}?unit={self.unit}"
 
     # -- truth for tests ---------------------------------------------------------------------------
     @property
