@@ -1,0 +1,136 @@
+"""The one thin module through which :mod:`ident` reads recorded run files (HDF5, DESIGN.md).
+
+It reads the synchronised view ``/entry/sync``, the releases table ``/entry/releases`` and the
+section model from the rig config stored verbatim in ``/entry/config``, and returns
+:class:`~ident.release.Release` objects and a :class:`~ident.section.SectionModel`. Nothing else
+in :mod:`ident` touches files. Files are opened read-only with ``swmr=True``, so a run still
+being written, or one left by a crash, can be read as well as a finished one.
+
+Errors are specific: a missing file or dataset, a truncated file, or a release whose rows hold
+gaps (NaN) raises :class:`FileFormatError` (a ``ValueError``) naming the file and what is wrong.
+"""
+
+from __future__ import annotations
+
+import os
+import tomllib
+from dataclasses import dataclass
+from typing import Any
+
+import h5py
+import numpy as np
+
+from ident.errors import IdentError
+from ident.release import Release
+from ident.section import SectionModel
+
+__all__ = ["FileFormatError", "RunFile", "read_run"]
+
+_SECTION_FIELDS = ("B", "m", "I", "fh", "fa", "zeta_h", "zeta_a", "S")
+
+
+class FileFormatError(IdentError, ValueError):
+    """A run file is missing, truncated, or does not follow the windrig layout."""
+
+
+@dataclass(frozen=True)
+class RunFile:
+    """What identification needs from one run file.
+
+    Attributes
+    ----------
+    path : str
+    section : SectionModel
+        From the stored rig config (air density from the run's mean measured density).
+    releases : tuple of Release
+        One per row of ``/entry/releases``, time from the release instant.
+    rig_name : str
+    """
+
+    path: str
+    section: SectionModel
+    releases: tuple[Release, ...]
+    rig_name: str
+
+
+def read_run(path: str | os.PathLike[str]) -> RunFile:
+    """Read the section and the releases of a run file.
+
+    Parameters
+    ----------
+    path : path-like
+        A windrig HDF5 run file.
+
+    Returns
+    -------
+    RunFile
+
+    Raises
+    ------
+    FileFormatError
+        If the file cannot be opened as HDF5 or lacks a part of the layout, or if a release's rows
+        contain gaps (NaN): identification never silently fills a gap.
+    """
+    path = os.fspath(path)
+    try:
+        handle = h5py.File(path, "r", swmr=True)
+    except OSError as exc:
+        raise FileFormatError(f"{path}: cannot be opened as an HDF5 run file: {exc}") from exc
+    with handle as f:
+        try:
+            config_text = _text(f["entry/config"][()])
+            sync = {name: np.asarray(f[f"entry/sync/{name}"][()], dtype=float)
+                    for name in ("time", "h", "alpha", "lift", "moment", "U", "rho")}
+            table = f["entry/releases"][()]
+            rig_name = _text(f["entry"].attrs.get("rig_name", ""))
+        except KeyError as exc:
+            raise FileFormatError(f"{path}: missing {exc.args[0] if exc.args else exc}; "
+                                  "not a complete windrig run file") from exc
+        except OSError as exc:  # a truncated or corrupted file fails on read
+            raise FileFormatError(f"{path}: unreadable (truncated?): {exc}") from exc
+    section = _section(config_text, path, sync["rho"])
+    releases = tuple(_release(sync, row, path, i) for i, row in enumerate(table))
+    return RunFile(path=path, section=section, releases=releases, rig_name=rig_name)
+
+
+def _text(value: Any) -> str:
+    return value.decode("utf-8") if isinstance(value, bytes) else str(value)
+
+
+def _section(config_text: str, path: str, rho: np.ndarray) -> SectionModel:
+    try:
+        table = tomllib.loads(config_text)["section"]
+        fields = {name: float(table[name]) for name in _SECTION_FIELDS if name in table}
+    except (tomllib.TOMLDecodeError, KeyError, TypeError, ValueError) as exc:
+        raise FileFormatError(f"{path}: /entry/config has no usable [section]: {exc}") from exc
+    finite = rho[np.isfinite(rho)]
+    if finite.size:
+        fields["rho"] = float(np.median(finite))
+    try:
+        return SectionModel(**fields)
+    except (TypeError, ValueError) as exc:
+        raise FileFormatError(f"{path}: [section] of the stored config: {exc}") from exc
+
+
+def _release(sync: dict[str, np.ndarray], row: Any, path: str, index: int) -> Release:
+    start, stop = int(row["start_index"]), int(row["stop_index"])
+    n = sync["time"].size
+    if not 0 <= start < stop <= n:
+        raise FileFormatError(f"{path}: release {index} rows {start}..{stop} are outside the "
+                              f"{n} rows of /entry/sync (truncated run?)")
+    rows = slice(start, stop)
+    channels = {name: sync[name][rows] for name in ("h", "alpha", "lift", "moment")}
+    for name, values in channels.items():
+        bad = int(np.count_nonzero(~np.isfinite(values)))
+        if bad:
+            raise FileFormatError(f"{path}: release {index} has {bad} gap sample(s) in {name}; "
+                                  "cut the release before the gap")
+    t = sync["time"][rows] - float(row["release_time"])
+    U = float(row["U"])
+    rho = sync["rho"][rows]
+    rho_value = float(np.median(rho)) if np.any(np.isfinite(rho)) else None
+    try:
+        return Release(t=t, **channels, U=U, rho=rho_value,
+                       meta={"file": path, "release": index})
+    except ValueError as exc:
+        raise FileFormatError(f"{path}: release {index}: {exc}") from exc

@@ -1,0 +1,94 @@
+"""Reading run files: releases and section come back as written; bad files fail clearly."""
+
+from __future__ import annotations
+
+import h5py
+import numpy as np
+import pytest
+
+from daq.recorder import RunRecorder
+from ident import SectionModel, flat_plate
+from ident.io import FileFormatError, read_run
+from simulators import simulate_release
+
+CONFIG = """[rig]
+name = "test"
+[section]
+B = 0.3
+m = 3.0
+I = 0.03
+fh = 2.0
+fa = 4.0
+zeta_h = 0.005
+zeta_a = 0.005
+depth = 0.01
+"""
+SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+
+
+def write_run(path, *, gap=False):
+    """Write a run file with two releases through the real recorder."""
+    recorder = RunRecorder(path, config_text=CONFIG, rig_name="test", min_free_bytes=0)
+    recorder.open()
+    recorder.add_sync(["p0", "p1"])
+    recorder.start()
+    sims, t0, row = [], 0.0, 0
+    for U in (5.0, 8.0):
+        sim = simulate_release(SECTION, flat_plate.jones_model(), U, 0.004, 0.02, duration=4.0,
+                               fs=200.0, pre_s=0.5)
+        n = sim.t.size
+        columns = {"h": sim.h.copy(), "alpha": sim.alpha, "lift": sim.lift, "moment": sim.moment,
+                   "U": np.full(n, U), "rho": np.full(n, 1.2),
+                   "pressure": np.zeros((n, 2), dtype=np.float32)}
+        if gap and U == 8.0:
+            columns["h"][300] = np.nan
+        recorder.append_sync(t0 + 0.5 + sim.t, **columns)
+        after = int(np.flatnonzero(sim.t >= 0)[0])
+        recorder.add_release(release_time=t0 + 0.5, start_index=row + after, stop_index=row + n,
+                             U=U, h0=0.004, alpha0=0.02)
+        sims.append(sim)
+        t0 += 0.5 + 4.0
+        row += n
+    recorder.close()
+    return sims
+
+
+def test_releases_and_section_round_trip(tmp_path):
+    """Every release comes back with time from its release instant and the measured U and rho."""
+    path = tmp_path / "run.h5"
+    sims = write_run(path)
+    run = read_run(path)
+    assert run.rig_name == "test" and len(run.releases) == 2
+    assert run.section.B == 0.3 and run.section.rho == pytest.approx(1.2)
+    for release, sim in zip(run.releases, sims, strict=True):
+        after = sim.t >= 0
+        np.testing.assert_allclose(release.t, sim.t[after], atol=1e-9)
+        np.testing.assert_allclose(release.alpha, sim.alpha[after])
+        assert release.U == sim.U and release.meta["file"] == str(path)
+
+
+def test_a_gap_inside_a_release_is_refused_by_name(tmp_path):
+    """A NaN in a release's rows is an error naming release and channel, never interpolated."""
+    path = tmp_path / "gap.h5"
+    write_run(path, gap=True)
+    with pytest.raises(FileFormatError, match="release 1 has 1 gap sample"):
+        read_run(path)
+
+
+def test_not_hdf5_truncated_and_incomplete_files_fail_clearly(tmp_path):
+    """Garbage, a truncated copy and a file without the layout: FileFormatError (ValueError)."""
+    junk = tmp_path / "junk.h5"
+    junk.write_bytes(b"not an HDF5 file at all")
+    with pytest.raises(FileFormatError, match="cannot be opened as an HDF5 run file"):
+        read_run(junk)
+    good = tmp_path / "good.h5"
+    write_run(good)
+    truncated = tmp_path / "truncated.h5"
+    truncated.write_bytes(good.read_bytes()[: good.stat().st_size // 3])
+    with pytest.raises(FileFormatError):
+        read_run(truncated)
+    empty = tmp_path / "empty.h5"
+    with h5py.File(empty, "w") as f:
+        f.create_group("entry")
+    with pytest.raises(FileFormatError, match="missing"):
+        read_run(empty)
