@@ -13,6 +13,8 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+import numpy as np
+
 from daq import demo
 
 __all__ = ["main"]
@@ -43,6 +45,15 @@ def _build_parser() -> argparse.ArgumentParser:
                            help='JSON of a RationalFunctionModel ({"A": ..., "d": ...})')
     p_flutter.add_argument("--u-max", type=float, default=None,
                            help="upper wind speed of the search, m/s (default: K down to 0.2)")
+    p_id = sub.add_parser(
+        "identify", help="E2RFC on the releases of recorded run files; prints the flutter speed"
+    )
+    p_id.add_argument("files", type=Path, nargs="+", help="windrig HDF5 run files")
+    p_id.add_argument("--json", type=Path, default=None,
+                      help="write the model, diagnostics and flutter result to this JSON file")
+    p_id.add_argument("--n-lags", type=int, default=None, choices=(0, 1, 2, 3),
+                      help="number of lag terms (default: chosen by held-out error)")
+
     p_sim = sub.add_parser(
         "simulate",
         help="start the simulated instruments of a rig config and print the URLs to connect to",
@@ -78,6 +89,42 @@ def _simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _identify(args: argparse.Namespace) -> int:
+    from ident import e2rfc
+    from ident.io import read_run
+
+    runs = [read_run(path) for path in args.files]
+    section = runs[0].section
+    releases = [r for run in runs for r in run.releases]
+    print(f"{len(releases)} release(s) from {len(runs)} file(s); wind speeds "
+          f"{sorted({round(r.U, 2) for r in releases})} m/s")
+    model = e2rfc.identify(releases, section, n_lags=args.n_lags)
+    result, std = model.flutter(section)
+    diagnostics = model.diagnostics
+    print(f"structure: {diagnostics.reason}")
+    print(f"lag roots d = {np.round(model.d, 4).tolist()}")
+    for k, A_k in enumerate(model.A, start=1):
+        print(f"A{k} = {np.round(A_k, 4).tolist()}")
+    if result.speed is None:
+        print(result.summary())
+    else:
+        print(f"flutter speed {result.speed:.3f} +/- {std:.3f} m/s, frequency "
+              f"{result.frequency:.3f} Hz ({result.critical_mode} branch)")
+    if args.json is not None:
+        args.json.write_text(json.dumps({
+            "files": [str(p) for p in args.files],
+            "model": model.to_dict(),
+            "structure": diagnostics.reason,
+            "release_residuals": diagnostics.release_residuals.tolist(),
+            "flutter_speed": result.speed,
+            "flutter_speed_std": std,
+            "flutter_frequency": result.frequency,
+            "critical_mode": result.critical_mode,
+        }, indent=2))
+        print(f"wrote {args.json}")
+    return 0
+
+
 def _flutter(args: argparse.Namespace) -> int:
     from ident import RationalFunctionModel, SectionModel, flutter
 
@@ -97,6 +144,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _flutter(args)
     if args.command == "simulate":
         return _simulate(args)
+    if args.command == "identify":
+        return _identify(args)
     raise AssertionError(f"unhandled command {args.command!r}")  # argparse rejects unknown ones
 
 

@@ -68,3 +68,36 @@ def test_simulate_prints_a_loopback_url_for_every_instrument(capsys):
         line = next(line for line in out.splitlines() if line.strip().startswith(name))
         assert "127.0.0.1:" in line
     assert "binary data port" in out
+
+
+def test_identify_reads_run_files_and_prints_the_flutter_speed(tmp_path, capsys):
+    """`windrig identify` on recorded files gives the flutter speed of the simulated truth."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "ident"))
+    from test_io import write_run  # the recorder-written files of the reader's tests
+
+    files = []
+    for i in range(2):  # two files, two wind speeds each: the campaign spans files
+        files.append(tmp_path / f"run{i}.h5")
+        write_run(files[-1])
+    out_json = tmp_path / "model.json"
+    assert main(["identify", *map(str, files), "--json", str(out_json)]) == 0
+    out = capsys.readouterr().out
+    assert "4 release(s) from 2 file(s)" in out
+    result = json.loads(out_json.read_text())
+    truth = flutter.analyze(SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005,
+                                         zeta_a=0.005), flat_plate.jones_model())
+    # Noise-free records (4 s at 200 Hz): E2RFC is exact up to solver tolerances.
+    assert result["flutter_speed"] == pytest.approx(truth.speed, rel=1e-4)
+
+
+def test_identify_names_a_bad_file(tmp_path):
+    """A file that is not a run file is reported by name."""
+    from ident.io import FileFormatError
+
+    junk = tmp_path / "junk.h5"
+    junk.write_text("junk")
+    with pytest.raises(FileFormatError, match="junk.h5"):
+        main(["identify", str(junk)])

@@ -38,7 +38,7 @@ def write_run(path, *, gap=False):
                                fs=200.0, pre_s=0.5)
         n = sim.t.size
         columns = {"h": sim.h.copy(), "alpha": sim.alpha, "lift": sim.lift, "moment": sim.moment,
-                   "U": np.full(n, U), "rho": np.full(n, 1.2),
+                   "U": np.full(n, U), "rho": np.full(n, SECTION.rho),
                    "pressure": np.zeros((n, 2), dtype=np.float32)}
         if gap and U == 8.0:
             columns["h"][300] = np.nan
@@ -59,7 +59,7 @@ def test_releases_and_section_round_trip(tmp_path):
     sims = write_run(path)
     run = read_run(path)
     assert run.rig_name == "test" and len(run.releases) == 2
-    assert run.section.B == 0.3 and run.section.rho == pytest.approx(1.2)
+    assert run.section.B == 0.3 and run.section.rho == pytest.approx(SECTION.rho)
     for release, sim in zip(run.releases, sims, strict=True):
         after = sim.t >= 0
         np.testing.assert_allclose(release.t, sim.t[after], atol=1e-9)
