@@ -63,7 +63,47 @@ def _build_parser() -> argparse.ArgumentParser:
                        help="serve serial instruments over socket:// (default) or a pty pair")
     p_sim.add_argument("--duration", type=float, default=None,
                        help="seconds to run, then stop (default: until Ctrl-C)")
+
+    p_acq = sub.add_parser(
+        "acquire",
+        help="record a run (all instruments of a rig config) to an HDF5 file; prints a summary",
+    )
+    p_acq.add_argument("--config", type=Path, required=True, help="rig config TOML")
+    p_acq.add_argument("--simulate", action="store_true",
+                       help="start the rig's simulated instruments (else: the config's URLs)")
+    p_acq.add_argument("--duration", type=float, required=True, help="seconds to record")
+    p_acq.add_argument("--out", type=Path, required=True, help="run file to create (.h5)")
+    p_acq.add_argument("--notes", default="", help="operator notes stored with the run")
     return parser
+
+
+def _acquire(args: argparse.Namespace) -> int:
+    from daq.config import load_rig_config
+    from daq.pipeline import record_run
+
+    config = load_rig_config(args.config)
+    if not args.simulate:
+        auto = [inst.name for inst in config.instruments if inst.url == "auto"]
+        if auto:
+            print(f"error: {args.config}: instrument(s) {auto} have url = 'auto' (a simulated "
+                  "rig): pass --simulate, or give their real URLs", file=sys.stderr)
+            return 2
+    summary = record_run(config, args.out, duration_s=args.duration, simulate=args.simulate,
+                         operator_notes=args.notes, progress=sys.stderr.isatty())
+    print(f"wrote {summary['file']}: {summary['duration_s']:.1f} s ({summary['reason']}), "
+          f"{summary['sync_rows']} sync rows at {summary['sync_rate_hz']:g} Hz, "
+          f"{summary['releases']} release(s)")
+    print(f"{'device':<14} {'samples':>9} {'gaps':>5} {'overflow':>9}  clock fit")
+    for name, n in summary["samples"].items():
+        fit = summary["clock_fits"].get(name)
+        clock = ("" if fit is None else
+                 f"offset {fit['offset_s']:.6f} s, drift {fit['drift_ppm']:+.2f} ppm, "
+                 f"residual {fit['residual_s'] * 1e6:.1f} us, {int(fit['anchors'])} anchor(s)")
+        print(f"{name:<14} {n:>9} {summary['gaps'][name]:>5} "
+              f"{summary['overflow_samples'][name]:>9}  {clock}")
+    for error in summary["errors"]:
+        print(f"error: {error}")
+    return 0 if not summary["errors"] else 1
 
 
 def _simulate(args: argparse.Namespace) -> int:
@@ -146,6 +186,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _simulate(args)
     if args.command == "identify":
         return _identify(args)
+    if args.command == "acquire":
+        return _acquire(args)
     raise AssertionError(f"unhandled command {args.command!r}")  # argparse rejects unknown ones
 
 

@@ -1,0 +1,672 @@
+"""The recording pipeline: acquisition engine -> clock maps -> sync view -> HDF5 run file.
+
+Responsibility: :class:`RunWriter`, a ``(name, doc)`` subscriber of
+:class:`~daq.acquisition.Acquisition` that writes one run file laid out as DESIGN.md, "HDF5 file":
+the raw stream of every device, the synchronised view (every device clock mapped onto the host
+clock by a :class:`~daq.sync.ClockMap`, the streams resampled onto one time base by a
+:class:`~daq.sync.Resampler` and converted to h, alpha, lift, moment, U, rho), the events and one
+row per release; and :func:`record_run`, which runs a (simulated or real) rig through the engine
+into a file.
+
+Not responsible for: reading devices or threads (the engine), the numerics of clocks, resampling
+and conversions (:mod:`daq.sync`), the file layout itself (:mod:`daq.recorder`).
+
+Threads: the writer runs on the engine's dispatcher thread only (one thread touches h5py); the
+readers never wait for it (the engine's per-device queues are between them). A failure inside
+the writer is kept in :attr:`RunWriter.error` (the engine logs and counts it), the recorder is
+closed, and later docs are ignored; :func:`record_run` raises it at the end.
+"""
+
+from __future__ import annotations
+
+import errno
+import json
+import logging
+import math
+import time
+from collections import deque
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from daq.acquisition import Event, StreamBlock
+from daq.config import RigConfig
+from daq.recorder import RunRecorder, StorageError
+from daq.sync import (
+    ClockMap,
+    Resampler,
+    StreamSpec,
+    SyncBlock,
+    forces_from_pressures,
+    heave_pitch_from_lasers,
+    trigger_times_from_flags,
+    trigger_times_from_latch,
+    wind_speed,
+)
+
+__all__ = ["DEFAULT_RHO", "DEFAULT_SYNC_RATE_HZ", "RunWriter", "record_run"]
+
+log = logging.getLogger(__name__)
+
+#: Sync rate without a scanner, Hz (with one: the scanner's frame rate).
+DEFAULT_SYNC_RATE_HZ = 500.0
+#: Air density used before the barometer's first reading, kg/m^3 (recorded in the rho column).
+DEFAULT_RHO = 1.2
+#: Window of the held position before a release (h0, alpha0): [t - 0.3 s, t - 0.05 s].
+HOLD_WINDOW_S = (0.3, 0.05)
+#: Envelope window of the clock maps, s (see :class:`~daq.sync.ClockMap`).
+CLOCK_WINDOW_S = 0.5
+#: A device trigger time is paired with the PLC trigger event within this distance, s.
+TRIGGER_PAIRING_S = 0.05
+
+FloatArray = npt.NDArray[np.float64]
+
+# Raw channels of the polled kinds when the driver does not describe itself.
+_POLLED_DEFAULTS: Mapping[str, tuple[tuple[str, str], ...]] = {
+    "barometer": (("pressure", "Pa"), ("temperature", "K"), ("density", "kg/m^3")),
+    "fan": (("speed", "rpm"), ("status_word", "1")),
+    "plc": (("armed", "1"), ("released", "1"), ("trigger_count", "1")),
+}
+_POLLED_RATE_HZ = {"barometer": 1.0, "fan": 10.0, "plc": 10.0}
+
+
+@dataclass
+class _Device:
+    """What the writer knows of one device."""
+
+    name: str
+    kind: str
+    channels: list[str]
+    rate_hz: float
+    clock: ClockMap | None = None
+    samples: int = 0
+    gaps: int = 0
+    overflow_samples: int = 0
+    last_trigger: float = -math.inf  # scanner: last latched trigger time taken
+    pending_triggers: list[float] = field(default_factory=list)  # device times not yet paired
+
+
+@dataclass
+class _Release:
+    time: float
+    start_index: int | None = None
+    h0: float = math.nan
+    alpha0: float = math.nan
+    U: list[FloatArray] = field(default_factory=list)
+
+
+class RunWriter:
+    """Subscriber writing one run to HDF5 (see the module docstring).
+
+    Parameters
+    ----------
+    path : str or Path
+        Run file to create.
+    config : RigConfig
+        The rig config: laser positions and standoffs, tap layout, scanner Pitot channel and
+        rates; its text is stored verbatim.
+    operator_notes : str
+        Free text stored as an attribute of ``/entry``.
+    sync_rate_hz : float, optional
+        Rate of ``/entry/sync``; default: the scanner's rate, else 500 Hz.
+    use_trigger_anchors : bool
+        Pair the devices' trigger times (scanner latch, laser flags) with the PLC's trigger
+        events and give them to the clock maps as anchors.
+    max_hold_s : float
+        How long a stalled stream may hold the sync view back, s.
+    write_interval_s : float
+        Raw and sync rows are appended to the file in batches this often, s (0: every block).
+    recorder_options : mapping, optional
+        Further keyword arguments of :class:`~daq.recorder.RunRecorder` (``overwrite``,
+        ``min_free_bytes``, ``flush_interval_s``, ...).
+    """
+
+    def __init__(self, path: str | Path, config: RigConfig, *, operator_notes: str = "",
+                 sync_rate_hz: float | None = None, use_trigger_anchors: bool = True,
+                 max_hold_s: float = 2.0, write_interval_s: float = 0.2,
+                 recorder_options: Mapping[str, Any] | None = None) -> None:
+        self.path = Path(path)
+        self.config = config
+        self.operator_notes = operator_notes
+        self.use_trigger_anchors = use_trigger_anchors
+        self.max_hold_s = max_hold_s
+        self.write_interval_s = float(write_interval_s)
+        self._raw: dict[str, list[tuple[Any, Any, Any, Any, dict[str, Any]]]] = {}
+        self._last_write = -math.inf
+        self._recorder_options = dict(recorder_options or {})
+        scanners = config.by_role("scanner")
+        self._scanner_name = scanners[0].name if scanners else None
+        self._pitot_channel = int(scanners[0].settings["pitot_channel"]) if scanners else -1
+        if sync_rate_hz is None:
+            sync_rate_hz = (float(scanners[0].settings["rate_hz"]) if scanners
+                            else DEFAULT_SYNC_RATE_HZ)
+        self.sync_rate_hz = float(sync_rate_hz)
+        self._lasers = {inst.name: inst for inst in config.by_role("lasers")}
+        self.recorder: RunRecorder | None = None
+        self.error: BaseException | None = None
+        self.summary: dict[str, Any] | None = None
+        self._t0_ns = 0
+        self._devices: dict[str, _Device] = {}
+        self._resampler: Resampler | None = None
+        self._laser_order: list[str] = []
+        self._rho = DEFAULT_RHO
+        self._rho_measured = False
+        self._sync_rows = 0
+        self._recent: deque[tuple[FloatArray, FloatArray, FloatArray]] = deque()
+        self._releases: list[_Release] = []
+        self._written_releases = 0
+        self._trigger_events: deque[float] = deque(maxlen=64)
+
+    # -- dispatch ------------------------------------------------------------------------------
+    def __call__(self, name: str, doc: Any) -> None:
+        """Receive one engine doc (dispatcher thread)."""
+        if self.error is not None:
+            return
+        try:
+            if name == "start":
+                self._start(doc)
+            elif self.recorder is None:
+                return
+            elif name == "block":
+                self._block(doc)
+            elif name == "event":
+                self._event(doc)
+            elif name == "stop":
+                self._stop(doc)
+        except Exception as exc:  # kept, reported by record_run; the recorder is closed
+            self.error = exc
+            log.exception("run writer failed on a %r doc; the run file is closed", name)
+            if self.recorder is not None:
+                try:
+                    self.recorder.close()
+                except Exception:  # already failing: the first error is the one reported
+                    log.exception("closing the run file after the failure failed too")
+            raise
+
+    @staticmethod
+    def _clock_map() -> ClockMap:
+        # 0.5 s windows (20 laser blocks, 25 scanner blocks each): a usable slope after ~1.5 s
+        # (2 s windows leave a short run with a two-point slope); 600 windows span 5 min.
+        return ClockMap(window_s=CLOCK_WINDOW_S, n_windows=600)
+
+    def _time(self, host_ns: Any) -> Any:
+        return (np.asarray(host_ns, dtype=np.int64) - self._t0_ns) * 1e-9
+
+    # -- start ---------------------------------------------------------------------------------
+    def _start(self, doc: Mapping[str, Any]) -> None:
+        self._t0_ns = int(doc["host_time_ns"])
+        rec = RunRecorder(self.path, config_text=self.config.text, rig_name=self.config.name,
+                          operator_notes=self.operator_notes, **self._recorder_options)
+        rec.open()
+        self.recorder = rec
+        n_taps = self.config.taps.n_taps
+        tap_names = [f"tap{i:03d}" for i in range(n_taps)]
+        streams: list[StreamSpec] = []
+        for name, info in doc["devices"].items():
+            kind = str(info["kind"])
+            describe = info.get("describe", {}) or {}
+            if kind == "laser":
+                rate = float(self._lasers[name].settings["rate_hz"]) if name in self._lasers \
+                    else 4000.0
+                rec.add_stream(name, ["distance"], "m", rate, "float64",
+                               extra={"error_code": "int32", "triggered": "bool"})
+                dev = _Device(name, kind, ["distance"], rate, self._clock_map())
+                if name in self._lasers:
+                    self._laser_order.append(name)
+                    streams.append(StreamSpec(f"laser.{name}", 1.0 / rate, "boxcar"))
+            elif kind == "scanner":
+                inst = self.config.instrument(name)
+                rate = float(inst.settings["rate_hz"])
+                rec.add_stream(name, [*tap_names, "pitot"], "Pa", rate, "float32",
+                               extra={"trigger_time": "float64"})
+                dev = _Device(name, kind, [*tap_names, "pitot"], rate, self._clock_map())
+                if name == self._scanner_name:
+                    streams.append(StreamSpec("pressure", 1.0 / rate, "linear", n_taps))
+                    streams.append(StreamSpec("pitot", 1.0 / rate, "linear"))
+            else:
+                pairs = [(k, str(v.get("units", "") or "1")) for k, v in describe.items()
+                         if tuple(v.get("shape", ())) == () and k != "host_time_ns"]
+                if not pairs:
+                    pairs = list(_POLLED_DEFAULTS.get(kind, (("value", "1"),)))
+                channels = [k for k, _ in pairs]
+                rate = _POLLED_RATE_HZ.get(kind, 1.0)
+                rec.add_stream(name, channels, [u for _, u in pairs], rate, "float64")
+                dev = _Device(name, kind, channels, rate)
+            self._devices[name] = dev
+        if len(self._laser_order) < 2:
+            self._laser_order = []  # h and alpha need two lasers: no laser stream in the view
+            streams = [s for s in streams if not s.name.startswith("laser.")]
+        rec.add_sync(tap_names)
+        rec.start(self._t0_ns)
+        if streams:
+            self._resampler = Resampler(streams, rate_hz=self.sync_rate_hz, t_start=0.0,
+                                        max_hold_s=self.max_hold_s)
+
+    # -- blocks --------------------------------------------------------------------------------
+    def _block(self, block: StreamBlock) -> None:
+        dev = self._devices.get(block.device)
+        if dev is None:
+            return
+        rec = self.recorder
+        assert rec is not None
+        n = len(block)
+        dev.samples += n
+        dev.overflow_samples += int(block.overflow_samples)
+        for after, length in block.gaps:
+            rec.add_gap(dev.name, int(after), int(length) if int(length) >= 1 else -1)
+            dev.gaps += 1
+        if n == 0:
+            return
+        counter = (block.counter if block.counter is not None
+                   else np.arange(dev.samples - n, dev.samples, dtype=np.int64))
+        values = block.values
+        if dev.kind == "laser":
+            distance = np.asarray(values["distance"], dtype=np.float64)
+            self._buffer_raw(dev, block, counter, distance,
+                             {"error_code": values.get("error_code", np.zeros(n, np.int32)),
+                              "triggered": values.get("triggered", np.zeros(n, bool))})
+        elif dev.kind == "scanner":
+            n_taps = self.config.taps.n_taps
+            pressure = np.asarray(values["pressure"], dtype=np.float64)
+            pitot = np.asarray(values["pitot"], dtype=np.float64).reshape(n, 1)
+            self._buffer_raw(dev, block, counter, np.hstack([pressure[:, :n_taps], pitot]),
+                             {"trigger_time": values.get("trigger_time", np.full(n, np.nan))})
+        else:
+            table = np.column_stack([np.asarray(values.get(c, np.full(n, np.nan)),
+                                                dtype=np.float64).reshape(n)
+                                     for c in dev.channels])
+            self._buffer_raw(dev, block, counter, table, {})
+            if dev.kind == "barometer" and "density" in values:
+                rho = float(np.asarray(values["density"], dtype=np.float64)[-1])
+                if math.isfinite(rho) and rho > 0:
+                    self._rho, self._rho_measured = rho, True
+            self._write_if_due()
+            return
+        if block.device_time is None or dev.clock is None:
+            self._write_if_due()
+            return
+        t_dev = np.asarray(block.device_time, dtype=np.float64)
+        t_host = self._time(block.host_time_ns)
+        finite = np.isfinite(t_dev)
+        if not np.any(finite):
+            self._write_if_due()
+            return
+        last = int(np.flatnonzero(finite)[-1])
+        dev.clock.update(t_dev[last], float(t_host[last]))
+        if self.use_trigger_anchors:
+            self._anchor_triggers(dev, block, t_dev)
+        self._push(dev, block, t_dev, finite)
+        self._write_if_due()
+
+    def _buffer_raw(self, dev: _Device, block: StreamBlock, counter: Any, values: Any,
+                    extra: Mapping[str, Any]) -> None:
+        n = len(block)
+        t_dev = (np.full(n, np.nan) if block.device_time is None
+                 else np.asarray(block.device_time, dtype=np.float64))
+        self._raw.setdefault(dev.name, []).append(
+            (np.asarray(block.host_time_ns, dtype=np.int64), t_dev,
+             np.asarray(counter, dtype=np.int64), np.asarray(values),
+             {k: np.asarray(v) for k, v in extra.items()}))
+
+    def _write_if_due(self, *, force: bool = False) -> None:
+        """Append the buffered raw rows and the ready sync rows (every ``write_interval_s``).
+
+        Appending per block costs ~0.1 ms per dataset in h5py: a few hundred blocks per
+        second times ~8 datasets would take longer than the run. Batching bounds it.
+        """
+        now = time.monotonic()
+        if not force and now - self._last_write < self.write_interval_s:
+            return
+        self._last_write = now
+        rec = self.recorder
+        assert rec is not None
+        for name, parts in self._raw.items():
+            if not parts:
+                continue
+            host = np.concatenate([p[0] for p in parts])
+            t_dev = np.concatenate([p[1] for p in parts])
+            counter = np.concatenate([p[2] for p in parts])
+            values = np.concatenate([p[3] for p in parts])
+            extra = {k: np.concatenate([p[4][k] for p in parts]) for k in parts[0][4]}
+            rec.append_raw(name, host, t_dev, counter, values, extra=extra)
+            parts.clear()
+        if self._resampler is not None:
+            self._write_sync(self._resampler.pull())
+
+    def _anchor_triggers(self, dev: _Device, block: StreamBlock, t_dev: FloatArray) -> None:
+        if dev.kind == "scanner" and "trigger_time" in block.values:
+            found = trigger_times_from_latch(block.values["trigger_time"], dev.last_trigger)
+            if found.size:
+                dev.last_trigger = float(found[-1])
+        elif dev.kind == "laser" and "triggered" in block.values:
+            ok = np.isfinite(t_dev)
+            found = trigger_times_from_flags(t_dev[ok],
+                                             np.asarray(block.values["triggered"])[ok],
+                                             1.0 / dev.rate_hz)
+        else:
+            return
+        dev.pending_triggers.extend(float(t) for t in found)
+        del dev.pending_triggers[:-32]
+        self._pair_triggers(dev)
+
+    def _pair_triggers(self, dev: _Device) -> None:
+        if dev.clock is None or not dev.clock.ready or not self._trigger_events:
+            return
+        events = np.fromiter(self._trigger_events, dtype=np.float64)
+        left: list[float] = []
+        for td in dev.pending_triggers:
+            predicted = dev.clock.to_host(td)
+            k = int(np.argmin(np.abs(events - predicted)))
+            if abs(events[k] - predicted) <= TRIGGER_PAIRING_S:
+                dev.clock.add_anchor(td, float(events[k]))
+            elif predicted > events[-1]:
+                left.append(td)  # its PLC event may still come
+        dev.pending_triggers = left
+
+    def _push(self, dev: _Device, block: StreamBlock, t_dev: FloatArray,
+              finite: npt.NDArray[np.bool_]) -> None:
+        r = self._resampler
+        if r is None or dev.clock is None:
+            return
+        t = dev.clock.to_host(t_dev[finite])
+        keep = np.concatenate(([True], np.diff(t) > 0)) if t.size else np.zeros(0, bool)
+        t = t[keep]
+
+        def rows(a: Any) -> FloatArray:
+            return np.asarray(a, dtype=np.float64)[finite][keep]
+
+        if dev.kind == "laser" and dev.name in self._laser_order:
+            d = rows(block.values["distance"])
+            if "error_code" in block.values:
+                d = np.where(rows(block.values["error_code"]) != 0, np.nan, d)
+            r.push(f"laser.{dev.name}", t, d)
+        elif dev.kind == "scanner" and dev.name == self._scanner_name:
+            n_taps = self.config.taps.n_taps
+            r.push("pressure", t, rows(block.values["pressure"])[:, :n_taps])
+            r.push("pitot", t, rows(block.values["pitot"]))
+
+    # -- sync view -----------------------------------------------------------------------------
+    def _write_sync(self, sb: SyncBlock) -> None:
+        n = len(sb)
+        if n == 0:
+            return
+        rec = self.recorder
+        assert rec is not None
+        nan = np.full(n, np.nan)
+        h, alpha = nan, nan
+        if self._laser_order:
+            d = np.column_stack([sb.values[f"laser.{name}"] for name in self._laser_order])
+            x = [float(self._lasers[name].settings["x"]) for name in self._laser_order]
+            s = [float(self._lasers[name].settings["standoff_mm"]) * 1e-3
+                 for name in self._laser_order]
+            if d.shape[1] > 3:  # the conversion takes 2 or 3 lasers: the first three
+                d, x, s = d[:, :3], x[:3], s[:3]
+            hp = heave_pitch_from_lasers(d, x, s)
+            h, alpha = hp.h, hp.alpha
+        n_taps = self.config.taps.n_taps
+        if "pressure" in sb.values:
+            pressure = sb.values["pressure"]
+            lift, moment = forces_from_pressures(pressure, self.config.taps)
+            rho = np.full(n, self._rho)
+            U = wind_speed(sb.values["pitot"], rho).speed
+        else:
+            pressure = np.full((n, n_taps), np.nan)
+            lift, moment, U, rho = nan, nan, nan, np.full(n, self._rho)
+        rec.append_sync(sb.time, h=h, alpha=alpha, lift=lift, moment=moment, pressure=pressure,
+                        U=U, rho=rho)
+        base = self._sync_rows
+        self._sync_rows += n
+        self._track_releases(base, sb.time, h, alpha, U)
+
+    def _track_releases(self, base: int, t: FloatArray, h: FloatArray, alpha: FloatArray,
+                        U: FloatArray) -> None:
+        self._recent.append((t, h, alpha))
+        while len(self._recent) > 1 and self._recent[1][0][0] < t[-1] - 2 * HOLD_WINDOW_S[0]:
+            self._recent.popleft()
+        for rel in self._releases[self._written_releases:]:
+            if rel.start_index is None and t[-1] >= rel.time:
+                rel.start_index = base + int(np.searchsorted(t, rel.time, side="left"))
+                rel.h0, rel.alpha0 = self._held(rel.time)
+            if rel.start_index is not None:
+                lo = max(rel.start_index - base, 0)
+                if lo < t.size:
+                    rel.U.append(U[lo:])
+        self._write_finished_releases(final=False)
+
+    def _held(self, t_release: float) -> tuple[float, float]:
+        t = np.concatenate([b[0] for b in self._recent])
+        sel = (t >= t_release - HOLD_WINDOW_S[0]) & (t < t_release - HOLD_WINDOW_S[1])
+        out = []
+        for col in (1, 2):
+            v = np.concatenate([b[col] for b in self._recent])[sel]
+            v = v[np.isfinite(v)]
+            out.append(float(np.median(v)) if v.size else math.nan)
+        return out[0], out[1]
+
+    def _write_finished_releases(self, *, final: bool) -> None:
+        rec = self.recorder
+        assert rec is not None
+        pending = self._releases[self._written_releases:]
+        for i, rel in enumerate(pending):
+            following = pending[i + 1] if i + 1 < len(pending) else None
+            if following is not None and following.start_index is not None:
+                stop = following.start_index
+            elif final:
+                stop = self._sync_rows
+            else:
+                return
+            start = rel.start_index if rel.start_index is not None else stop
+            if rel.start_index is None:
+                rel.h0, rel.alpha0 = self._held(rel.time)
+            u = np.concatenate(rel.U) if rel.U else np.zeros(0)
+            u = u[: max(stop - start, 0)]
+            u = u[np.isfinite(u)]
+            rec.add_release(release_time=rel.time, start_index=start, stop_index=max(stop, start),
+                            U=float(np.median(u)) if u.size else math.nan, h0=rel.h0,
+                            alpha0=rel.alpha0)
+            self._written_releases += 1
+
+    # -- events --------------------------------------------------------------------------------
+    def _event(self, event: Event) -> None:
+        rec = self.recorder
+        assert rec is not None
+        t = float(self._time(event.host_time_ns))
+        text = event.text if event.device is None else f"{event.device}: {event.text}"
+        if event.data:
+            text = f"{text} {json.dumps(dict(event.data), default=str)}"
+        kind = event.kind.encode("utf-8")[:32].decode("utf-8", "ignore") or "event"
+        rec.add_event(t, kind, text.encode("utf-8")[:1024].decode("utf-8", "ignore"))
+        if event.kind == "release":
+            command = int(event.data.get("command_ns", event.host_time_ns))
+            self._releases.append(_Release(time=float(self._time(command))))
+        elif event.kind == "trigger":
+            self._trigger_events.append(t)
+            for dev in self._devices.values():
+                if dev.pending_triggers:
+                    self._pair_triggers(dev)
+
+    # -- stop ----------------------------------------------------------------------------------
+    def _stop(self, doc: Mapping[str, Any]) -> None:
+        rec = self.recorder
+        assert rec is not None
+        self._write_if_due(force=True)
+        if self._resampler is not None:
+            self._write_sync(self._resampler.flush())
+        self._write_finished_releases(final=True)
+        fits = self.clock_fits()
+        offsets = {n: f["offset_s"] for n, f in fits.items() if math.isfinite(f["offset_s"])}
+        drifts = {n: f["drift_ppm"] for n, f in fits.items() if math.isfinite(f["drift_ppm"])}
+        residuals = [f["residual_s"] for f in fits.values() if math.isfinite(f["residual_s"])]
+        rec.set_sync_attrs(clock_offset_s=offsets, clock_drift_ppm=drifts,
+                           residual_misalignment_s=max(residuals) if residuals else None)
+        summary = self._summary(doc)
+        rec.add_metadata("acquisition_summary", _storable(summary))
+        rec.close()
+        self.summary = summary
+
+    def clock_fits(self) -> dict[str, dict[str, float]]:
+        """Per clocked device: offset (s), drift (ppm), residual (s), anchors, pairs."""
+        out: dict[str, dict[str, float]] = {}
+        for name, dev in self._devices.items():
+            cm = dev.clock
+            if cm is None or not cm.ready:
+                continue
+            out[name] = {"offset_s": cm.offset_s, "drift_ppm": cm.drift_ppm,
+                         "residual_s": cm.residual_s, "latency_floor_s": cm.latency_floor_s,
+                         "anchors": float(cm.n_anchors), "pairs": float(cm.n_pairs)}
+        return out
+
+    def _summary(self, doc: Mapping[str, Any]) -> dict[str, Any]:
+        return {
+            "file": str(self.path),
+            "reason": str(doc.get("reason", "")),
+            "duration_s": float(doc.get("duration_s", 0.0)),
+            "samples": {n: d.samples for n, d in self._devices.items()},
+            "gaps": {n: d.gaps for n, d in self._devices.items()},
+            "overflow_samples": {n: d.overflow_samples for n, d in self._devices.items()},
+            "overflows": int(doc.get("overflows", 0)),
+            "faults": int(doc.get("faults", 0)),
+            "sync_rows": self._sync_rows,
+            "sync_rate_hz": self.sync_rate_hz,
+            "releases": self._written_releases,
+            "rho_measured": self._rho_measured,
+            "late_samples": dict(self._resampler.late_samples) if self._resampler else {},
+            "clock_fits": self.clock_fits(),
+        }
+
+
+def _storable(value: Any) -> Any:
+    """Make a summary storable as HDF5 metadata (names of letters, digits, _; no None)."""
+    if isinstance(value, Mapping):
+        return {"".join(c if c.isalnum() or c == "_" else "_" for c in str(k)): _storable(v)
+                for k, v in value.items()}
+    if value is None:
+        return ""
+    return value
+
+
+def record_run(config: RigConfig, out_path: str | Path, *, duration_s: float,
+               simulate: bool = True,
+               actions: Callable[[Any, Any], None] | None = None, progress: bool = True,
+               operator_notes: str = "", calz: bool | None = None,
+               writer_options: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """Acquire a rig for ``duration_s`` into one HDF5 run file and return the summary.
+
+    Parameters
+    ----------
+    config : RigConfig
+        The rig. With ``simulate`` its simulated instruments are started (loopback); without,
+        its URLs must be real (an ``"auto"`` URL is a :class:`~daq.errors.ConfigError`).
+    out_path : str or Path
+        The run file to create.
+    duration_s : float
+        Length of the run, s (> 0), from the engine's start.
+    simulate : bool
+        Start the simulated rig of the config.
+    actions : callable, optional
+        ``actions(acquisition, rig)`` called in its own thread once the engine runs (``rig`` is
+        the :class:`~daq.simulated_rig.SimulatedRig` or None): scripted fan and release
+        sequences. It should finish within ``duration_s``; it is joined before the engine
+        stops, and an exception in it is raised after the file is closed.
+    progress : bool
+        Show a tqdm progress bar over the duration.
+    operator_notes : str
+        Stored with the run.
+    calz : bool, optional
+        Zero the scanner (CALZ) before the engine starts; default: with ``simulate`` (whose
+        tunnel starts wind-off). With a real rig, ``calz=True`` asserts that the wind is off
+        (the driver refuses a CALZ with a nonzero wind speed; it is told 0 m/s).
+    writer_options : mapping, optional
+        Further keyword arguments of :class:`RunWriter`.
+
+    Returns
+    -------
+    dict
+        The writer's summary (``samples``, ``gaps``, ``overflow_samples`` per device,
+        ``clock_fits``, ``sync_rows``, ``releases``, ...) plus the engine's ``errors``.
+    """
+    import threading
+
+    from tqdm import tqdm
+
+    from daq.acquisition import Acquisition, drivers_from_config
+
+    if not (isinstance(duration_s, (int, float)) and math.isfinite(duration_s)
+            and duration_s > 0):
+        raise ValueError(f"duration_s must be a number > 0 s, got {duration_s!r}")
+    path = Path(out_path)
+    overwrite = bool(dict(dict(writer_options or {}).get("recorder_options", {}))
+                     .get("overwrite", False))
+    if path.exists() and not overwrite:
+        raise StorageError(errno.EEXIST, f"run file {path} already exists; refusing to "
+                           "overwrite a recorded run", str(path))
+    if calz is None:
+        calz = simulate
+    rig = None
+    if simulate:
+        from daq.simulated_rig import start_simulated_rig
+
+        rig = start_simulated_rig(config)
+        live = rig.config
+    else:
+        live = config
+    action_error: list[BaseException] = []
+    try:
+        writer = RunWriter(out_path, live, operator_notes=operator_notes,
+                           **dict(writer_options or {}))
+        drivers = drivers_from_config(live)
+        if calz:
+            for kind, driver in drivers.values():
+                if kind == "scanner":
+                    driver.open()  # idempotent: the engine's open() keeps this connection
+                    driver.calz(wind_speed_now=0.0)
+        acq = Acquisition(drivers, subscribers=[writer], metadata={"rig": live.name})
+        acq.start()
+        reason = "duration"
+        runner: threading.Thread | None = None
+        try:
+            if actions is not None:
+                def run_actions() -> None:
+                    try:
+                        actions(acq, rig)
+                    except BaseException as exc:  # re-raised in the caller's thread below
+                        log.exception("the actions callback failed")
+                        action_error.append(exc)
+
+                runner = threading.Thread(target=run_actions, name="windrig-actions",
+                                          daemon=True)
+                runner.start()
+            end = time.monotonic() + float(duration_s)
+            bar = (tqdm(total=round(float(duration_s), 1), unit="s", desc=f"recording {path.name}")
+                   if progress else None)
+            try:
+                while (left := end - time.monotonic()) > 0:
+                    time.sleep(min(0.1, left))
+                    if bar is not None:
+                        bar.n = round(float(duration_s) - max(end - time.monotonic(), 0.0), 1)
+                        bar.refresh()
+            except KeyboardInterrupt:  # Ctrl-C: stop cleanly, the file is closed and valid
+                log.warning("interrupted: stopping the run")
+                reason = "interrupted"
+            finally:
+                if bar is not None:
+                    bar.close()
+            if runner is not None:
+                runner.join(max(1.0, 0.25 * float(duration_s)))
+        finally:
+            engine = acq.stop(reason)
+    finally:
+        if rig is not None:
+            rig.close()
+    if writer.error is not None:
+        raise writer.error
+    if action_error:
+        raise action_error[0]
+    summary = dict(writer.summary or {})
+    summary["errors"] = list(engine.get("errors", []))
+    summary["subscriber_errors"] = dict(engine.get("subscriber_errors", {}))
+    return summary
