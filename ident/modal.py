@@ -382,6 +382,11 @@ def _refine(
     exponential column taken in closed form through its (holomorphic) pole derivative.
     """
     k = theta0.size
+    lo, hi = bounds[0][:k], bounds[1][:k]
+    # Start values come from the pencil and from grids, and may sit on or beyond a bound (a noise
+    # pole growing faster than allowed, say): the solver needs a strictly feasible start.
+    margin = 1e-6 * (hi - lo)
+    theta0 = np.clip(theta0, lo + margin, hi - margin)
     cache: dict[bytes, tuple[FloatArray, FloatArray]] = {}
 
     def evaluate(theta: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -393,7 +398,7 @@ def _refine(
 
     sol = least_squares(
         lambda th: evaluate(th)[0], theta0, jac=lambda th: evaluate(th)[1],
-        bounds=(bounds[0][:k], bounds[1][:k]), x_scale="jac",
+        bounds=(lo, hi), x_scale="jac",
         xtol=1e-6 if loose else 1e-10, ftol=1e-6 if loose else 1e-12,
         # A well-posed fit converges in ~15 evaluations; a pole the data cannot support wanders,
         # and the BIC rejects it anyway, so its search is cut short.

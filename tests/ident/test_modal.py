@@ -75,3 +75,28 @@ def test_noise_estimate_of_white_noise():
     rng = np.random.default_rng(0)
     x = rng.normal(scale=0.7, size=(20000, 2))
     np.testing.assert_allclose(noise_std(x), 0.7, rtol=0.03)
+
+
+def test_refinement_starts_inside_the_bounds_whatever_the_start_values():
+    """A start value beyond a bound (e.g. a growing noise pole from the pencil) is moved inside.
+
+    Regression: a default simulated campaign crashed with "Initial guess is outside of provided
+    bounds" on one noisy release at 0.8 U_F.
+    """
+    from ident import modal
+
+    rel = simulate_release(SECTION, MODEL, 0.6 * U_F, 0.004, 0.02, duration=10.0, fs=500.0,
+                           noise=0.02, rng=4)
+    t, q = rel.t, q_of(rel)
+    block = 6
+    tb, yb = modal._block_average(t - t[0], q / q.std(axis=0), block)
+    dtb = block * (t[1] - t[0])
+    bounds = modal._bounds(2, dtb, float(t[-1] - t[0]))
+    good = np.array([-0.7, 12.5, -0.5, 24.3])
+    outside = good.copy()
+    outside[0] = 10.0 * bounds[1][0]  # grows far faster than allowed
+    outside[3] = 2.0 * bounds[1][3]  # above the Nyquist bound
+    theta, _ = modal._refine(tb, yb, block, t[1] - t[0], 2, 0, outside, bounds, loose=False)
+    assert np.all(theta >= bounds[0][:4]) and np.all(theta <= bounds[1][:4])
+    reference, _ = modal._refine(tb, yb, block, t[1] - t[0], 2, 0, good, bounds, loose=False)
+    assert np.all(np.isfinite(theta)) and np.all(np.isfinite(reference))
