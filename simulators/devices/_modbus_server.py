@@ -258,3 +258,8 @@ class ModbusSimulator:
     def url(self) -> str:
         """Measure the URL of the running server."""
         return f"modbus+tcp://127.0.0.1:{self._server.port}?unit={self.unit}"
+
+    @property
+    def counters(self) -> dict[str, int]:
+        """Measure the server's truth counters (requests, replies, drops, disconnects)."""
+        return dict(self._server.counters)

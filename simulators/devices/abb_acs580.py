@@ -194,11 +194,6 @@ class SimAbbAcs580(ModbusSimulator):
         with self._lock:
             return [word for a, word in self.write_log if a == address]
 
-    @property
-    def counters(self) -> dict[str, int]:
-        """Measure the server's truth counters (requests, replies, replies dropped)."""
-        return dict(self._server.counters)
-
     # -- faults ----------------------------------------------------------------------------------
     def inject(self, fault: str, **params: Any) -> None:
         """Switch a fault on (DEVICES.md A.5, row "ABB VFD").

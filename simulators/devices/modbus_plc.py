@@ -142,11 +142,6 @@ class SimModbusPlc(ModbusSimulator):
         with self._lock:
             return self._count
 
-    @property
-    def counters(self) -> dict[str, int]:
-        """Measure the server's truth counters (requests, replies, drops, disconnects)."""
-        return dict(self._server.counters)
-
     # -- faults ----------------------------------------------------------------------------------
     def inject(self, fault: str, **params: Any) -> None:
         """Switch a fault on (DEVICES.md A.5, row "PLC").
