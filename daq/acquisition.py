@@ -33,9 +33,13 @@ Design choices:
   the driver to recover where the driver supports it (a laser that gave up is reopened, a
   scanner whose data connections stayed away is reopened and its scan restarted; the Modbus
   bus and the barometer reconnect on their own) and reads again. The first data after a fault
-  gives a ``"recovered"`` event. Any other exception is a bug, not a device fault: it is logged
-  with its traceback, reported as a fatal :class:`DeviceFault`, and that reader stops (the
-  others continue).
+  gives a ``"recovered"`` event. A line the driver lost and reopened by itself within a read
+  (the lasers, the scanner's data connections and the barometer do, counting it in
+  ``reconnects`` / ``stats["reconnects"]``) raises nothing, yet it is a fault too: the reader
+  reports it as a :class:`DeviceFault` when it sees the count grow, and the first data that
+  arrives after that gives the ``"recovered"`` event. Any other exception is a bug, not a device
+  fault: it is logged with its traceback, reported as a fatal :class:`DeviceFault`, and that
+  reader stops (the others continue).
 - **Stop is cooperative.** :meth:`Acquisition.stop` stops the scan, sets each reader's
   ``threading.Event`` (polled readers wait on it; streaming reads use a short timeout), joins the
   readers within ``join_timeout_s``, closes the drivers (which also unblocks a reader stuck in a
@@ -286,6 +290,18 @@ class _Adapter:
 
     def read(self, stop: threading.Event) -> _Rows | None:
         raise NotImplementedError
+
+    def reconnects(self) -> int | None:
+        """Count the reconnects the driver made on its own (None: it does not count them).
+
+        ``driver.reconnects`` (the lasers) or ``driver.stats["reconnects"]`` (the scanner, the
+        barometer).
+        """
+        count = getattr(self.driver, "reconnects", None)
+        if count is None:
+            stats = getattr(self.driver, "stats", None)
+            count = stats.get("reconnects") if isinstance(stats, Mapping) else None
+        return count if isinstance(count, int) and not isinstance(count, bool) else None
 
     def recover(self, error: BaseException) -> None:
         """Make the driver readable again after ``error`` (reopen it if it gave up)."""
@@ -632,6 +648,8 @@ class DeviceReader:
         consecutive = 0
         stalled = False
         last_data = time.monotonic()
+        reconnects = adapter.reconnects()
+        reconnected_ns: int | None = None  # when a reconnect made by the driver was seen
         try:
             while not stop.is_set():
                 if needs_recover:
@@ -657,6 +675,14 @@ class DeviceReader:
                     error, consecutive, needs_recover = exc, consecutive + 1, True
                     self._fault(exc, consecutive)
                     continue
+                count = adapter.reconnects()
+                if reconnects is not None and count is not None and count > reconnects:
+                    consecutive += 1
+                    reconnected_ns = time.monotonic_ns()
+                    self._fault(TransportError(
+                        f"line lost; the driver reconnected by itself "
+                        f"({count - reconnects} reconnect(s))"), consecutive)
+                reconnects = count  # also a new baseline when the driver reset its count
                 if rows is None:
                     idle = time.monotonic() - last_data
                     if adapter.streaming and not stalled and idle > self._stall_s:
@@ -666,9 +692,13 @@ class DeviceReader:
                                     consecutive)
                     continue
                 last_data = time.monotonic()
-                if consecutive:
+                # After a reconnect seen in this read, the rows may predate it (read before the
+                # line dropped): the recovery is the first data that arrived after it was seen.
+                if consecutive and (reconnected_ns is None
+                                    or (len(rows.host_time_ns) > 0
+                                        and int(rows.host_time_ns[-1]) > reconnected_ns)):
                     self._recovered(consecutive)
-                    consecutive, stalled, error = 0, False, None
+                    consecutive, stalled, error, reconnected_ns = 0, False, None, None
                     delay = self._backoff[0]
                 self._offer(rows)
         except Exception as exc:  # a bug, not a device fault: reported as fatal, never retried
@@ -1083,11 +1113,17 @@ class Acquisition:
         return event
 
     def arm(self, plc: str | None = None) -> Event:
-        """Arm the PLC (magnet on, one release permitted) and record an ``"arm"`` event."""
+        """Arm the PLC (magnet on, one release permitted) and record an ``"arm"`` event.
+
+        The event's ``host_time_ns`` is when the command was requested: arming catches a
+        decaying model, and the decay is certainly free before that instant (the magnet acts
+        somewhere between the request and the acknowledgement, ``data["acknowledged_ns"]``).
+        """
         name, driver = self._plc(plc, "arm")
+        requested = time.monotonic_ns()
         driver.arm()
-        event = Event(kind="arm", host_time_ns=time.monotonic_ns(), device=name,
-                      text="release armed")
+        event = Event(kind="arm", host_time_ns=requested, device=name, text="release armed",
+                      data={"acknowledged_ns": time.monotonic_ns()})
         self._post_event(event)
         return event
 
@@ -1095,7 +1131,9 @@ class Acquisition:
         """Pulse the trigger line and record a ``"trigger"`` event at the rising edge's time."""
         name, driver = self._plc(plc, "trigger_pulse")
         t_ns = int(driver.trigger_pulse())
-        event = Event(kind="trigger", host_time_ns=t_ns, device=name, text="trigger pulse")
+        round_trip = int(getattr(driver, "last_trigger_round_trip_ns", 0))
+        event = Event(kind="trigger", host_time_ns=t_ns, device=name, text="trigger pulse",
+                      data={"round_trip_s": round_trip * 1e-9})
         self._post_event(event)
         return event
 

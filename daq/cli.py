@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from collections.abc import Sequence
@@ -29,10 +30,12 @@ def _build_parser() -> argparse.ArgumentParser:
 
     p_demo = sub.add_parser(
         "demo",
-        help="run the numerical core on the embedded flat-plate section and write plots",
+        help="a whole simulated campaign on the default rig: record, identify, compare, plot",
     )
     p_demo.add_argument("--out", type=Path, default=Path("demo_output"),
                         help="output folder (created if missing; default: demo_output)")
+    p_demo.add_argument("--config", type=Path, default=None,
+                        help="a simulated rig config (default: rig_configs/sim_flat_plate.toml)")
 
     p_flutter = sub.add_parser(
         "flutter", help="flutter speed of a section with a rational-function model (JSON files)"
@@ -88,8 +91,18 @@ def _acquire(args: argparse.Namespace) -> int:
             print(f"error: {args.config}: instrument(s) {auto} have url = 'auto' (a simulated "
                   "rig): pass --simulate, or give their real URLs", file=sys.stderr)
             return 2
-    summary = record_run(config, args.out, duration_s=args.duration, simulate=args.simulate,
-                         operator_notes=args.notes, progress=sys.stderr.isatty())
+    from daq.recorder import StorageError, failed_writes
+
+    try:
+        summary = record_run(config, args.out, duration_s=args.duration, simulate=args.simulate,
+                             operator_notes=args.notes, progress=sys.stderr.isatty())
+    except StorageError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        if failed_writes():  # HDF5 would crash the process at exit (h5py#914)
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(1)
+        return 1
     print(f"wrote {summary['file']}: {summary['duration_s']:.1f} s ({summary['reason']}), "
           f"{summary['sync_rows']} sync rows at {summary['sync_rate_hz']:g} Hz, "
           f"{summary['releases']} release(s)")
@@ -101,6 +114,12 @@ def _acquire(args: argparse.Namespace) -> int:
                  f"residual {fit['residual_s'] * 1e6:.1f} us, {int(fit['anchors'])} anchor(s)")
         print(f"{name:<14} {n:>9} {summary['gaps'][name]:>5} "
               f"{summary['overflow_samples'][name]:>9}  {clock}")
+    clocks = summary.get("alignment", {}).get("clocks", {})
+    if clocks.get("clock_error_mean_s"):
+        errors = ", ".join(f"{name} {err * 1e3:+.3f} ms"
+                           for name, err in clocks["clock_error_mean_s"].items())
+        print(f"against the simulators' clocks (after {clocks['settle_s']:g} s): mean error "
+              f"{errors}; misalignment between devices {clocks['misalignment_s'] * 1e3:.3f} ms")
     for error in summary["errors"]:
         print(f"error: {error}")
     return 0 if not summary["errors"] else 1
@@ -131,10 +150,10 @@ def _simulate(args: argparse.Namespace) -> int:
 
 def _identify(args: argparse.Namespace) -> int:
     from ident import e2rfc
-    from ident.io import read_run
+    from ident.io import campaign_section, read_run
 
     runs = [read_run(path) for path in args.files]
-    section = runs[0].section
+    section = campaign_section(runs)
     releases = [r for run in runs for r in run.releases]
     print(f"{len(releases)} release(s) from {len(runs)} file(s); wind speeds "
           f"{sorted({round(r.U, 2) for r in releases})} m/s")
@@ -179,7 +198,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``windrig`` command line; returns the process exit code."""
     args = _build_parser().parse_args(argv)
     if args.command == "demo":
-        return demo.run(args.out)
+        return demo.run(args.out, args.config)
     if args.command == "flutter":
         return _flutter(args)
     if args.command == "simulate":

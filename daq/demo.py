@@ -1,112 +1,159 @@
-"""``windrig demo``: the numerical core on the embedded flat-plate section.
+"""``windrig demo``: a whole simulated campaign on the embedded default rig, end to end.
 
-Until the acquisition layers exist, the demo shows what the rest of windrig builds on: the
-state-space flutter analysis of a flat plate with the closed-form Jones RFC model, cross-checked by
-the classical frequency-domain solution with the exact Theodorsen flutter derivatives, and
-simulated releases below and just above the flutter speed. It writes a plot and a JSON summary.
+What it runs (README, "Two commands"): the simulated instruments of the default rig config
+(``rig_configs/sim_flat_plate.toml``: a flat-plate section model, one pressure scanner module,
+three lasers, the fan drive, the release PLC and a barometer) are started on loopback
+transports; the real drivers and the acquisition engine record, through
+:func:`daq.campaign.run_campaign`, two releases at each of three wind speeds (0.4, 0.6 and 0.8 of
+the simulated flutter speed) into one HDF5 run file per wind speed; the files are read back and
+identified by E2RFC; the identified flutter speed is compared with the simulator's truth.
+
+Printed: the truth (state-space flutter analysis of the simulated aerodynamics, cross-checked by
+the frequency-domain solution with Theodorsen's exact flutter derivatives), one line per
+release (measured frequencies and damping ratios against the truth at that wind speed), the
+identified flutter speed with its standard deviation and its error, and the wall times.
+Written into the output folder: the run files, ``campaign_decays.png``,
+``campaign_flutter_derivatives.png``, ``campaign_flutter.png`` and ``summary.json``.
+
+Not responsible for: the campaign itself (:mod:`daq.campaign`), the numerics (:mod:`ident`).
 """
 
 from __future__ import annotations
 
 import json
+import math
 import time
-from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")  # files only: the demo must run on a machine without a screen
-import matplotlib.pyplot as plt  # noqa: E402 - the backend must be chosen first
-import numpy as np  # noqa: E402
-
-from ident import SectionModel, flat_plate, flutter  # noqa: E402
-from simulators import SimulatedRelease, simulate_release  # noqa: E402
-
-#: The embedded default section: a 0.3 m flat-plate section model on a typical spring rig.
-DEMO_SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+#: The embedded default rig (the repository's own config; the package is installed editable).
+DEFAULT_CONFIG = Path(__file__).resolve().parents[1] / "rig_configs" / "sim_flat_plate.toml"
+#: The issue's end-to-end target: identified flutter speed within 3 % of the truth.
+TARGET_RELATIVE_ERROR = 0.03
 
 
-def run(out: Path) -> int:
-    """Run the demo, write ``flutter.png``, ``releases.png`` and ``summary.json`` into ``out``."""
+def run(out: Path, config_path: Path | None = None, *, progress: bool = True) -> int:
+    """Run the demo campaign into ``out`` (its old run files are replaced); return the exit code.
+
+    Parameters
+    ----------
+    out : Path
+        Output folder (created).
+    config_path : Path, optional
+        A simulated rig config; default :data:`DEFAULT_CONFIG`.
+    progress : bool
+        Progress bars while recording.
+
+    Returns
+    -------
+    int
+        0 when the campaign ran and flutter was identified, 1 otherwise (the reason is printed).
+    """
+    from daq.campaign import run_campaign
+    from daq.config import load_rig_config
+    from ident import flat_plate, flutter
+
+    path = DEFAULT_CONFIG if config_path is None else Path(config_path)
+    config = load_rig_config(path)
     out.mkdir(parents=True, exist_ok=True)
-    section = DEMO_SECTION
-    model = flat_plate.jones_model()
+    for old in out.glob("campaign_U*.h5"):  # a re-run replaces the previous demo's files
+        old.unlink()
 
-    t0 = time.perf_counter()
-    td = flutter.analyze(section, model)
-    t_td = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    fd = flutter.frequency_domain(section, flat_plate.flutter_derivatives)
-    t_fd = time.perf_counter() - t0
-    if td.speed is None or fd.speed is None:
-        print(f"demo: unexpected: {td.summary()} / {fd.summary()}")
-        return 1
+    section = config.section
+    print(f"windrig demo: simulated campaign on {config.name} ({path})")
+    print(f"section: B = {section.B:g} m, m = {section.m:g} kg/m, I = {section.I:g} kg m^2/m, "
+          f"fh = {section.fh:g} Hz, fa = {section.fa:g} Hz, zeta = {section.zeta_h:.2%} / "
+          f"{section.zeta_a:.2%}")
+    started = time.monotonic()
+    result = run_campaign(config, out, progress=progress)
+    truth_section = config.section.replace(rho=_simulated_density(config))
+    truth_model = config.aerodynamic_model()
+    truth = flutter.analyze(truth_section, truth_model)
 
-    print("windrig demo: flat plate, B = 0.3 m, m = 3 kg/m, I = 0.03 kg m^2/m, "
-          "fh = 2 Hz, fa = 4 Hz, zeta = 0.5 %")
-    print(f"{'method':<44}{'U_F (m/s)':>10}{'f_F (Hz)':>10}{'K_F':>8}{'time (s)':>10}")
-    for label, res, dt in (
-        ("state-space, Jones RFC model (windrig)", td, t_td),
-        ("frequency-domain, exact Theodorsen (Scanlan)", fd, t_fd),
-    ):
-        print(f"{label:<44}{res.speed:>10.3f}{res.frequency:>10.3f}"
-              f"{res.reduced_frequency:>8.3f}{dt:>10.3f}")
-    gap = td.speed / fd.speed - 1.0
-    print(f"difference {100 * gap:+.2f} % (the Jones approximation of Theodorsen's function)")
-    print(td.summary())
-
-    releases = {
-        label: simulate_release(section, model, factor * td.speed, 0.0, 0.02,
-                                duration=12.0, fs=200.0)
-        for label, factor in (("0.8 U_F", 0.8), ("1.02 U_F", 1.02))
-    }
-    _plot_modes(td, out / "flutter.png")
-    _plot_releases(releases, out / "releases.png")
-    summary = {
-        "section": section.to_dict(),
-        "model": model.to_dict(),
-        "flutter_speed_state_space": td.speed,
-        "flutter_frequency_state_space": td.frequency,
-        "flutter_speed_frequency_domain": fd.speed,
-        "critical_mode": td.critical_mode,
-        "divergence_speed": td.divergence_speed,
-    }
+    print()
+    print("truth (the simulator's aerodynamics)")
+    print(f"  state-space flutter analysis      U_F = {truth.speed:.3f} m/s, "
+          f"f_F = {truth.frequency:.3f} Hz ({truth.critical_mode} branch)")
+    if config.simulation is not None and config.simulation.aerodynamics == "flat_plate_jones":
+        exact = flutter.frequency_domain(truth_section, flat_plate.flutter_derivatives)
+        if exact.speed is not None and truth.speed is not None:
+            print(f"  frequency domain, exact Theodorsen U_F = {exact.speed:.3f} m/s "
+                  f"({100 * (truth.speed / exact.speed - 1):+.2f} %: the Jones approximation)")
+    rows = _release_rows(result, truth)
+    print()
+    print(f"{'release':<28}{'U (m/s)':>8}{'f_h (Hz)':>10}{'f_a (Hz)':>10}{'zeta_h':>9}"
+          f"{'zeta_a':>9}{'truth zeta_h':>14}{'truth zeta_a':>14}")
+    for row in rows:
+        print(f"{row['release']:<28}{row['U']:>8.2f}{row['f_h']:>10.3f}{row['f_a']:>10.3f}"
+              f"{row['zeta_h']:>9.2%}{row['zeta_a']:>9.2%}{row['truth_zeta_h']:>14.2%}"
+              f"{row['truth_zeta_a']:>14.2%}")
+    print()
+    print(result.summary())
+    ok = result.relative_error is not None
+    if ok:
+        assert result.relative_error is not None
+        verdict = ("within" if abs(result.relative_error) <= TARGET_RELATIVE_ERROR
+                   else "NOT within")
+        print(f"identified flutter speed {verdict} {TARGET_RELATIVE_ERROR:.0%} of the truth")
+    else:
+        print("no flutter speed identified: see the plots and the summary")
+    summary = _summary(result, truth, rows, time.monotonic() - started)
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
-    print(f"wrote {out / 'flutter.png'}, {out / 'releases.png'}, {out / 'summary.json'}")
-    return 0
+    print(f"wrote {out / 'summary.json'}")
+    return 0 if ok else 1
 
 
-def _plot_modes(result: flutter.FlutterResult, path: Path) -> None:
-    fig, (ax_f, ax_z) = plt.subplots(2, 1, sharex=True, figsize=(7, 6))
-    for j, name in enumerate(result.mode_names):
-        ax_f.plot(result.U, result.frequencies[:, j], label=name)
-        ax_z.plot(result.U, 100 * result.damping[:, j], label=name)
-    for ax in (ax_f, ax_z):
-        ax.axvline(result.speed, color="k", ls="--", lw=0.8)
-        ax.grid(True, alpha=0.3)
-    ax_z.axhline(0.0, color="k", lw=0.8)
-    ax_f.set_ylabel("frequency (Hz)")
-    ax_z.set_ylabel("damping ratio (%)")
-    ax_z.set_xlabel("wind speed U (m/s)")
-    ax_z.set_ylim(-5, max(10.0, float(np.nanmax(100 * result.damping[: len(result.U) // 2]))))
-    ax_f.legend()
-    ax_f.set_title(f"Flat plate: flutter at {result.speed:.2f} m/s, {result.frequency:.2f} Hz")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+def _simulated_density(config: Any) -> float:
+    from simulators.virtual_tunnel import AirState
+
+    sim = config.simulation
+    air = AirState(pressure_pa=sim.pressure_pa, temperature_k=sim.temperature_c + 273.15)
+    return float(air.density)
 
 
-def _plot_releases(releases: Mapping[str, SimulatedRelease], path: Path) -> None:
-    fig, axes = plt.subplots(2, 1, sharex=True, figsize=(7, 5))
-    for label, rel in releases.items():
-        axes[0].plot(rel.t, 1000 * rel.h, lw=0.8, label=label)
-        axes[1].plot(rel.t, np.degrees(rel.alpha), lw=0.8, label=label)
-    axes[0].set_ylabel("h (mm)")
-    axes[1].set_ylabel("alpha (deg)")
-    axes[1].set_xlabel("time after release (s)")
-    axes[0].legend()
-    for ax in axes:
-        ax.grid(True, alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+def _release_rows(result: Any, truth: Any) -> list[dict[str, Any]]:
+    """Per release: modal frequencies and damping ratios, and the truth's at the same U."""
+    model = result.model
+    rows: list[dict[str, Any]] = []
+    if model is None:
+        return rows
+    diagnostics = model.diagnostics
+    for i, fit in enumerate(diagnostics.modal_fits):
+        U = float(diagnostics.wind_speeds[i])
+        f, z = np.asarray(fit.frequencies), np.asarray(fit.damping)
+        f_h, f_a = (f[0], f[-1]) if f.size else (math.nan, math.nan)
+        z_h, z_a = (z[0], z[-1]) if z.size else (math.nan, math.nan)
+        truth_z = [float(np.interp(U, truth.U, truth.damping[:, j])) for j in range(2)]
+        names = list(truth.mode_names)
+        j_h = names.index("heave") if "heave" in names else 0
+        j_a = names.index("pitch") if "pitch" in names else 1
+        source = result.releases[i].meta
+        rows.append({"release": f"{Path(str(source['file'])).name} #{source['release']}",
+                     "U": U, "f_h": float(f_h), "f_a": float(f_a), "zeta_h": float(z_h),
+                     "zeta_a": float(z_a), "truth_zeta_h": truth_z[j_h],
+                     "truth_zeta_a": truth_z[j_a]})
+    return rows
+
+
+def _summary(result: Any, truth: Any, rows: list[dict[str, Any]],
+             wall_s: float) -> dict[str, Any]:
+    return {
+        "files": [str(p) for p in result.files],
+        "wind_speeds": result.wind_speeds,
+        "truth_flutter_speed": result.truth_speed,
+        "truth_flutter_frequency": truth.frequency,
+        "identified_flutter_speed": result.identified_speed,
+        "identified_flutter_speed_std": result.identified_std,
+        "relative_error": result.relative_error,
+        "target_relative_error": TARGET_RELATIVE_ERROR,
+        "model": None if result.model is None else result.model.to_dict(),
+        "structure": None if result.model is None else result.model.diagnostics.reason,
+        "releases": rows,
+        "timings_s": {**result.timings, "demo_total": wall_s},
+        "plots": {k: str(v) for k, v in result.plots.items()},
+    }
+
+
+__all__ = ["DEFAULT_CONFIG", "TARGET_RELATIVE_ERROR", "run"]

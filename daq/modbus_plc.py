@@ -142,6 +142,8 @@ class ModbusPlc:
         self._released_di = settings.discrete_inputs["released"]
         self._count_hr = settings.holding_registers["trigger_count"]
         self._trigger_low = False  # DAQ_TRIGGER known to be 0 (unknown until written)
+        #: Round trip of the last trigger pulse's rising-edge write, ns (0: no pulse yet).
+        self.last_trigger_round_trip_ns = 0
 
     # -- lifecycle -----------------------------------------------------------------------------
     def open(self) -> None:
@@ -255,7 +257,10 @@ class ModbusPlc:
         Returns
         -------
         int
-            The host time of the rising edge's acknowledgement, ``time.monotonic_ns()``.
+            Host time of the rising edge, ``time.monotonic_ns()`` clock: the midpoint between
+            sending the write and its acknowledgement (the PLC switches the line in between;
+            the midpoint is off by at most half the round trip, kept in
+            :attr:`last_trigger_round_trip_ns` so that a caller can refuse an uncertain one).
         """
         width_s = self.settings.trigger_pulse_s if width_s is None else width_s
         if not (math.isfinite(width_s) and 0 < width_s <= 1.0):
@@ -265,8 +270,11 @@ class ModbusPlc:
             self.bus.write_coil(self._coil["trigger"], False)
             self._trigger_low = True
         self._trigger_low = False
+        sent = time.monotonic_ns()
         self.bus.write_coil(self._coil["trigger"], True)
-        t_ns = time.monotonic_ns()
+        acknowledged = time.monotonic_ns()
+        self.last_trigger_round_trip_ns = acknowledged - sent
+        t_ns = (sent + acknowledged) // 2
         try:
             time.sleep(width_s)
         finally:

@@ -35,6 +35,7 @@ import numpy.typing as npt
 
 from daq.acquisition import Event, StreamBlock
 from daq.config import RigConfig
+from daq.continuous_time import ContinuousTimeline
 from daq.recorder import RunRecorder, StorageError
 from daq.sync import (
     ClockMap,
@@ -47,6 +48,7 @@ from daq.sync import (
     trigger_times_from_latch,
     wind_speed,
 )
+from daq.sync_check import ClockTruthTracker
 
 __all__ = ["DEFAULT_RHO", "DEFAULT_SYNC_RATE_HZ", "RunWriter", "record_run"]
 
@@ -60,6 +62,10 @@ DEFAULT_RHO = 1.2
 HOLD_WINDOW_S = (0.3, 0.05)
 #: Envelope window of the clock maps, s (see :class:`~daq.sync.ClockMap`).
 CLOCK_WINDOW_S = 0.5
+#: A trigger pulse whose command took longer than this (round trip, s) is no anchor: its host
+#: time, the midpoint, is off by at most half of it, and typically far less (the two legs are
+#: alike); the clock map takes the median over its anchors.
+MAX_ANCHOR_ROUND_TRIP_S = 1e-3
 #: A device trigger time is paired with the PLC trigger event within this distance, s.
 TRIGGER_PAIRING_S = 0.05
 
@@ -83,6 +89,7 @@ class _Device:
     channels: list[str]
     rate_hz: float
     clock: ClockMap | None = None
+    timeline: ContinuousTimeline | None = None  # continuous host times across clock refits
     samples: int = 0
     gaps: int = 0
     overflow_samples: int = 0
@@ -93,7 +100,9 @@ class _Device:
 @dataclass
 class _Release:
     time: float
+    end_time: float | None = None  # the next arm event: the model is caught, the decay ends
     start_index: int | None = None
+    stop_index: int | None = None
     h0: float = math.nan
     alpha0: float = math.nan
     U: list[FloatArray] = field(default_factory=list)
@@ -123,13 +132,18 @@ class RunWriter:
     recorder_options : mapping, optional
         Further keyword arguments of :class:`~daq.recorder.RunRecorder` (``overwrite``,
         ``min_free_bytes``, ``flush_interval_s``, ...).
+    clock_truth : ClockTruthTracker, optional
+        Simulated rigs: told the host times the sync view uses for every block, to measure them
+        against the simulators' truth (:mod:`daq.sync_check`).
     """
 
     def __init__(self, path: str | Path, config: RigConfig, *, operator_notes: str = "",
                  sync_rate_hz: float | None = None, use_trigger_anchors: bool = True,
                  max_hold_s: float = 2.0, write_interval_s: float = 0.2,
-                 recorder_options: Mapping[str, Any] | None = None) -> None:
+                 recorder_options: Mapping[str, Any] | None = None,
+                 clock_truth: ClockTruthTracker | None = None) -> None:
         self.path = Path(path)
+        self.clock_truth = clock_truth
         self.config = config
         self.operator_notes = operator_notes
         self.use_trigger_anchors = use_trigger_anchors
@@ -177,6 +191,12 @@ class RunWriter:
                 self._event(doc)
             elif name == "stop":
                 self._stop(doc)
+        except StorageError as exc:  # the file or its disk failed: one line, no traceback
+            self.error = exc
+            log.error("%s", exc)
+            if self.recorder is not None:
+                self.recorder.close()
+            return  # not re-raised: the engine would log it again, with a traceback
         except Exception as exc:  # kept, reported by record_run; the recorder is closed
             self.error = exc
             log.exception("run writer failed on a %r doc; the run file is closed", name)
@@ -199,9 +219,12 @@ class RunWriter:
     # -- start ---------------------------------------------------------------------------------
     def _start(self, doc: Mapping[str, Any]) -> None:
         self._t0_ns = int(doc["host_time_ns"])
-        rec = RunRecorder(self.path, config_text=self.config.text, rig_name=self.config.name,
-                          operator_notes=self.operator_notes, **self._recorder_options)
-        rec.open()
+        rec = self.recorder or RunRecorder(self.path, config_text=self.config.text,
+                                           rig_name=self.config.name,
+                                           operator_notes=self.operator_notes,
+                                           **self._recorder_options)
+        if rec.state == "new":
+            rec.open()
         self.recorder = rec
         n_taps = self.config.taps.n_taps
         tap_names = [f"tap{i:03d}" for i in range(n_taps)]
@@ -214,7 +237,8 @@ class RunWriter:
                     else 4000.0
                 rec.add_stream(name, ["distance"], "m", rate, "float64",
                                extra={"error_code": "int32", "triggered": "bool"})
-                dev = _Device(name, kind, ["distance"], rate, self._clock_map())
+                dev = _Device(name, kind, ["distance"], rate, self._clock_map(),
+                              ContinuousTimeline(1.0 / rate))
                 if name in self._lasers:
                     self._laser_order.append(name)
                     streams.append(StreamSpec(f"laser.{name}", 1.0 / rate, "boxcar"))
@@ -223,7 +247,8 @@ class RunWriter:
                 rate = float(inst.settings["rate_hz"])
                 rec.add_stream(name, [*tap_names, "pitot"], "Pa", rate, "float32",
                                extra={"trigger_time": "float64"})
-                dev = _Device(name, kind, [*tap_names, "pitot"], rate, self._clock_map())
+                dev = _Device(name, kind, [*tap_names, "pitot"], rate, self._clock_map(),
+                              ContinuousTimeline(1.0 / rate))
                 if name == self._scanner_name:
                     streams.append(StreamSpec("pressure", 1.0 / rate, "linear", n_taps))
                     streams.append(StreamSpec("pitot", 1.0 / rate, "linear"))
@@ -299,6 +324,8 @@ class RunWriter:
         dev.clock.update(t_dev[last], float(t_host[last]))
         if self.use_trigger_anchors:
             self._anchor_triggers(dev, block, t_dev)
+            if dev.pending_triggers:
+                self._pair_triggers(dev)  # pulses seen before the clock map was ready
         self._push(dev, block, t_dev, finite)
         self._write_if_due()
 
@@ -370,11 +397,13 @@ class RunWriter:
     def _push(self, dev: _Device, block: StreamBlock, t_dev: FloatArray,
               finite: npt.NDArray[np.bool_]) -> None:
         r = self._resampler
-        if r is None or dev.clock is None:
+        if r is None or dev.clock is None or dev.timeline is None:
             return
-        t = dev.clock.to_host(t_dev[finite])
+        t = dev.timeline.map(t_dev[finite], dev.clock.to_host)
         keep = np.concatenate(([True], np.diff(t) > 0)) if t.size else np.zeros(0, bool)
         t = t[keep]
+        if self.clock_truth is not None:
+            self.clock_truth.observe(dev.name, t, t_dev[finite][keep], self._t0_ns * 1e-9)
 
         def rows(a: Any) -> FloatArray:
             return np.asarray(a, dtype=np.float64)[finite][keep]
@@ -431,10 +460,14 @@ class RunWriter:
             if rel.start_index is None and t[-1] >= rel.time:
                 rel.start_index = base + int(np.searchsorted(t, rel.time, side="left"))
                 rel.h0, rel.alpha0 = self._held(rel.time)
+            if (rel.stop_index is None and rel.end_time is not None
+                    and t[-1] >= rel.end_time):
+                rel.stop_index = base + int(np.searchsorted(t, rel.end_time, side="left"))
             if rel.start_index is not None:
                 lo = max(rel.start_index - base, 0)
-                if lo < t.size:
-                    rel.U.append(U[lo:])
+                hi = t.size if rel.stop_index is None else max(rel.stop_index - base, lo)
+                if lo < min(hi, t.size):
+                    rel.U.append(U[lo:hi])
         self._write_finished_releases(final=False)
 
     def _held(self, t_release: float) -> tuple[float, float]:
@@ -453,7 +486,9 @@ class RunWriter:
         pending = self._releases[self._written_releases:]
         for i, rel in enumerate(pending):
             following = pending[i + 1] if i + 1 < len(pending) else None
-            if following is not None and following.start_index is not None:
+            if rel.stop_index is not None:
+                stop = rel.stop_index
+            elif following is not None and following.start_index is not None:
                 stop = following.start_index
             elif final:
                 stop = self._sync_rows
@@ -483,7 +518,17 @@ class RunWriter:
         if event.kind == "release":
             command = int(event.data.get("command_ns", event.host_time_ns))
             self._releases.append(_Release(time=float(self._time(command))))
+        elif event.kind == "arm" and self._releases and self._releases[-1].end_time is None:
+            # Arming again catches the model: the free decay of the last release ends before
+            # the arm command (less one sync period: a sync row averages the lasers over
+            # +- half a period, which must not reach into the caught model).
+            self._releases[-1].end_time = t - 1.0 / self.sync_rate_hz
         elif event.kind == "trigger":
+            # Its host time is known to half the command's round trip: an anchor only if that
+            # is well inside the alignment the sync view promises.
+            round_trip = float(event.data.get("round_trip_s", 0.0))
+            if round_trip > MAX_ANCHOR_ROUND_TRIP_S:
+                return
             self._trigger_events.append(t)
             for dev in self._devices.values():
                 if dev.pending_triggers:
@@ -494,8 +539,12 @@ class RunWriter:
         rec = self.recorder
         assert rec is not None
         self._write_if_due(force=True)
+        # Not flush(): at the end the streams stop at slightly different times (the last laser
+        # block in flight, the last scanner frame); the rows past the earliest end would be
+        # partial (NaN). The view ends where every stream has data (or stalled for longer than
+        # max_hold_s); the stragglers' samples stay in the raw streams.
         if self._resampler is not None:
-            self._write_sync(self._resampler.flush())
+            self._write_sync(self._resampler.pull())
         self._write_finished_releases(final=True)
         fits = self.clock_fits()
         offsets = {n: f["offset_s"] for n, f in fits.items() if math.isfinite(f["offset_s"])}
@@ -507,6 +556,11 @@ class RunWriter:
         rec.add_metadata("acquisition_summary", _storable(summary))
         rec.close()
         self.summary = summary
+
+    @property
+    def t0_ns(self) -> int:
+        """Host time of the run's time 0 (``time.monotonic_ns`` clock), ns."""
+        return self._t0_ns
 
     def clock_fits(self) -> dict[str, dict[str, float]]:
         """Per clocked device: offset (s), drift (ppm), residual (s), anchors, pairs."""
@@ -535,8 +589,43 @@ class RunWriter:
             "releases": self._written_releases,
             "rho_measured": self._rho_measured,
             "late_samples": dict(self._resampler.late_samples) if self._resampler else {},
+            "timelines": {n: {"largest_slewed_s": d.timeline.largest_slewed_s,
+                              "steps": d.timeline.steps}
+                          for n, d in self._devices.items() if d.timeline is not None},
             "clock_fits": self.clock_fits(),
         }
+
+
+def _clock_truth(rig: Any) -> ClockTruthTracker | None:
+    """Build the tracker of the simulators' clock truth on host time (None: no such truth)."""
+    origin = getattr(rig.tunnel.clock, "origin_s", None)
+    if origin is None:
+        return None
+
+    def on_host(sim: Any) -> Callable[[FloatArray], FloatArray]:
+        return lambda t_device: float(origin) + sim.true_time_of(t_device)
+
+    return ClockTruthTracker({name: on_host(sim) for name, sim in rig.simulators.items()
+                              if hasattr(sim, "true_time_of")})
+
+
+def _check_alignment(path: Path, rig: Any, writer: RunWriter) -> dict[str, Any]:
+    """Measure the sync view against the simulated rig's truth; store it in the file.
+
+    Two measures (:mod:`daq.sync_check`): the clock error of every block the sync view used
+    (per device, and the misalignment between devices), and the delay of the h, alpha, lift and
+    moment channels against the tunnel's decays (end to end; needs a release).
+    """
+    from daq.sync_check import measure_alignment, write_alignment
+
+    origin = getattr(rig.tunnel.clock, "origin_s", None)
+    if origin is None or writer.clock_truth is None:
+        return {}
+    clocks = writer.clock_truth.result()
+    signals = measure_alignment(path, rig.tunnel.decay_truth,
+                                writer.t0_ns * 1e-9 - float(origin))
+    write_alignment(path, clocks=clocks, signals=signals)
+    return {"clocks": clocks, "signals": signals}
 
 
 def _storable(value: Any) -> Any:
@@ -606,6 +695,10 @@ def record_run(config: RigConfig, out_path: str | Path, *, duration_s: float,
                            "overwrite a recorded run", str(path))
     if calz is None:
         calz = simulate
+    recorder_options = dict(dict(writer_options or {}).get("recorder_options", {}))
+    recorder = RunRecorder(path, config_text=config.text, rig_name=config.name,
+                           operator_notes=operator_notes, **recorder_options)
+    recorder.open()  # a missing or read-only directory, a full disk: fail before anything starts
     rig = None
     if simulate:
         from daq.simulated_rig import start_simulated_rig
@@ -616,8 +709,11 @@ def record_run(config: RigConfig, out_path: str | Path, *, duration_s: float,
         live = config
     action_error: list[BaseException] = []
     try:
-        writer = RunWriter(out_path, live, operator_notes=operator_notes,
-                           **dict(writer_options or {}))
+        options = dict(writer_options or {})
+        if rig is not None and "clock_truth" not in options:
+            options["clock_truth"] = _clock_truth(rig)
+        writer = RunWriter(out_path, live, operator_notes=operator_notes, **options)
+        writer.recorder = recorder  # opened above; declared and started at the "start" doc
         drivers = drivers_from_config(live)
         if calz:
             for kind, driver in drivers.values():
@@ -641,14 +737,16 @@ def record_run(config: RigConfig, out_path: str | Path, *, duration_s: float,
                                           daemon=True)
                 runner.start()
             end = time.monotonic() + float(duration_s)
-            bar = (tqdm(total=round(float(duration_s), 1), unit="s", desc=f"recording {path.name}")
-                   if progress else None)
+            # mininterval: redrawn at most twice a second (a log file gets a line per redraw).
+            bar = (tqdm(total=round(float(duration_s), 1), unit="s", mininterval=0.5,
+                        desc=f"recording {path.name}", bar_format="{l_bar}{bar}| "
+                        "{n:.1f}/{total:.1f} s [{elapsed}<{remaining}]") if progress else None)
             try:
-                while (left := end - time.monotonic()) > 0:
+                while (left := end - time.monotonic()) > 0 and writer.error is None:
                     time.sleep(min(0.1, left))
                     if bar is not None:
-                        bar.n = round(float(duration_s) - max(end - time.monotonic(), 0.0), 1)
-                        bar.refresh()
+                        done = round(float(duration_s) - max(end - time.monotonic(), 0.0), 1)
+                        bar.update(done - bar.n)
             except KeyboardInterrupt:  # Ctrl-C: stop cleanly, the file is closed and valid
                 log.warning("interrupted: stopping the run")
                 reason = "interrupted"
@@ -662,11 +760,16 @@ def record_run(config: RigConfig, out_path: str | Path, *, duration_s: float,
     finally:
         if rig is not None:
             rig.close()
+        if recorder.state == "declaring":  # the engine never started: no run, no file
+            recorder.close()
+            path.unlink(missing_ok=True)
     if writer.error is not None:
         raise writer.error
     if action_error:
         raise action_error[0]
     summary = dict(writer.summary or {})
+    if rig is not None and writer.summary is not None:
+        summary["alignment"] = _check_alignment(path, rig, writer)
     summary["errors"] = list(engine.get("errors", []))
     summary["subscriber_errors"] = dict(engine.get("subscriber_errors", {}))
     return summary

@@ -57,6 +57,12 @@ File layout (DESIGN.md, binding)
     /entry/events          (e,) compound: time f8 (s), kind S32, text S1024 (UTF-8 bytes)
     /entry/metadata        NXcollection: calibrations, CALZ results (:meth:`add_metadata`)
 
+Rows that never reached the file read as fill values no real row has: NaN in float columns and
+fields, -1 in signed integer ones (``host_time_ns``, ``counter``, indices, ``error_code``), and a
+gap row ``(-1, 0)`` (a real gap has a length >= 1 or -1). This matters after a failed write (a
+full disk): HDF5 may then have recorded a dataset's new size but not the chunk holding the new
+rows, which would otherwise read as plausible zeros (time 0 s, h 0 m).
+
 Releases and events are compound datasets, not groups of 1-D datasets: under SWMR a row is then
 appended as one unit (a live reader never sees a release whose ``U`` is missing), ``ds[:]`` gives
 a NumPy structured array (``pandas.DataFrame(ds[:])`` works), ``ds["U"]`` reads one column, and
@@ -103,6 +109,7 @@ __all__ = [
     "RecorderStateError",
     "RunRecorder",
     "StorageError",
+    "failed_writes",
     "read_sync",
 ]
 
@@ -128,6 +135,8 @@ class RecorderStateError(RecorderError, RuntimeError):
 
 #: Row of ``/entry/instrument/<device>/gaps``.
 GAP_DTYPE = np.dtype([("after_counter", "<i8"), ("length", "<i8")])
+#: What an unwritten row of a ``gaps`` dataset reads as: no real gap has length 0.
+_GAP_FILL = np.array((-1, 0), dtype=GAP_DTYPE)
 #: Row of ``/entry/releases`` (times in s from run start, indices into ``/entry/sync``).
 RELEASE_DTYPE = np.dtype([("release_time", "<f8"), ("start_index", "<i8"), ("stop_index", "<i8"),
                           ("U", "<f8"), ("h0", "<f8"), ("alpha0", "<f8")])
@@ -431,7 +440,9 @@ class RunRecorder:
     def close(self) -> None:
         """Flush and close the file, then write what was deferred; idempotent.
 
-        After this the file is a normal HDF5 file (the SWMR flag is cleared).
+        After this the file is a normal HDF5 file (the SWMR flag is cleared), unless a write had
+        failed: then the file is left as it is (readable with SWMR up to its last flush) and its
+        HDF5 objects are kept, never freed (see :func:`failed_writes`).
         """
         if self._state in ("new", "closed"):
             self._state = "closed"
@@ -440,13 +451,15 @@ class RunRecorder:
         file, self._file = self._file, None
         failed = self._state == "failed"
         self._state = "closed"
-        self._drop_handles()
-        if failed:  # a write failed: the StorageError raised then said why; closing may fail too
-            try:
-                file.close()
-            except (OSError, RuntimeError):
-                pass
+        if failed:
+            # A write failed (the StorageError raised then said why). Closing, or merely freeing,
+            # the HDF5 objects of such a file fails again in their finalisers, which print
+            # tracebacks ("Exception ignored in ... __dealloc__"), and HDF5 crashes the process
+            # at exit whatever is done here: keep them, for the life of the process.
+            _abandoned.append([file, *self._handles()])
+            self._drop_handles()
             return
+        self._drop_handles()
         with self._io("close"):
             try:
                 file.flush()
@@ -540,7 +553,7 @@ class RunRecorder:
                                     long_name="unwrapped sample counter"),
             "value": self._column(group, "value", dtype, width=len(channels),
                                   long_name=f"{device} samples"),
-            "gaps": self._column(group, "gaps", GAP_DTYPE, chunk=256),
+            "gaps": self._column(group, "gaps", GAP_DTYPE, chunk=256, fill=_GAP_FILL),
         }
         if len(set(unit_list)) == 1:
             ds["value"].attrs["units"] = unit_list[0]
@@ -878,8 +891,12 @@ class RunRecorder:
 
     def _column(self, group: h5py.Group, name: str, dtype: np.dtype[Any], *,
                 width: int | None = None, units: str | None = None,
-                long_name: str | None = None, chunk: int | None = None) -> h5py.Dataset:
-        """Create an empty resizable, chunked (and compressed) dataset of rows."""
+                long_name: str | None = None, chunk: int | None = None,
+                fill: Any = None) -> h5py.Dataset:
+        """Create an empty resizable, chunked (and compressed) dataset of rows.
+
+        Its fill value is ``fill``, else that of :func:`_fill_value` (see the module docstring).
+        """
         row_bytes = dtype.itemsize * (width or 1)
         rows = chunk or max(1, min(self.chunk_rows, _MAX_CHUNK_BYTES // max(row_bytes, 1)))
         shape = (0,) if width is None else (0, width)
@@ -892,7 +909,8 @@ class RunRecorder:
             if self.compression == "gzip":
                 filters["compression_opts"] = _GZIP_LEVEL
         ds = group.create_dataset(name, shape=shape, maxshape=maxshape, chunks=chunks,
-                                  dtype=dtype, **filters)
+                                  dtype=dtype, fillvalue=_fill_value(dtype) if fill is None
+                                  else fill, **filters)
         if units is not None:
             ds.attrs["units"] = units
         if long_name is not None:
@@ -911,6 +929,8 @@ class RunRecorder:
         except StorageError:
             raise
         except (OSError, RuntimeError) as exc:
+            global _failed_writes
+            _failed_writes += 1
             if self._state != "closed":
                 self._state = "failed"
             code = getattr(exc, "errno", None)
@@ -920,6 +940,11 @@ class RunRecorder:
             raise StorageError(code, f"run file {self.path}: cannot {what}: "
                                f"{os.strerror(code)}; the recording stopped, the file holds the "
                                "data up to the last flush", str(self.path)) from exc
+
+    def _handles(self) -> list[Any]:
+        """Return the open HDF5 objects of the file (datasets and groups)."""
+        return [*(ds for stream in self._streams.values() for ds in stream.datasets.values()),
+                *self._sync_ds.values(), self._sync, self._releases_ds, self._events_ds]
 
     def _drop_handles(self) -> None:
         for stream in self._streams.values():
@@ -945,6 +970,40 @@ class RunRecorder:
 # ------------------------------------------------------------------------------------------------
 def _now_iso() -> str:
     return datetime.now(UTC).isoformat(timespec="microseconds")
+
+
+_failed_writes = 0
+#: HDF5 objects of the files whose write failed, never freed (:meth:`RunRecorder.close`).
+_abandoned: list[list[Any]] = []
+
+
+def failed_writes() -> int:
+    """Count the run-file writes that failed in this process (each raised a StorageError).
+
+    After one, h5py 3.16 / HDF5 2.0 crash the process (SIGSEGV) when it exits, whatever is
+    closed first (h5py issue 914, a bug of the HDF5 library): a command line that has reported
+    the error should then leave with ``os._exit`` (after flushing its output). The failed file's
+    HDF5 objects are never freed for the same reason (:meth:`RunRecorder.close`).
+    """
+    return _failed_writes
+
+
+def _fill_value(dtype: np.dtype[Any]) -> Any:
+    """Return what an unwritten row of ``dtype`` reads as: NaN, -1, or (None) HDF5's zero."""
+    if dtype.names:
+        row = np.zeros((), dtype=dtype)
+        fields = dtype.fields
+        assert fields is not None  # a structured dtype (it has names)
+        for name in dtype.names:
+            value = _fill_value(fields[name][0])
+            if value is not None:
+                row[name] = value
+        return row
+    if dtype.kind == "f":
+        return np.nan
+    if dtype.kind == "i":
+        return -1
+    return None  # bool, unsigned, strings: HDF5's default (False, 0, empty)
 
 
 def _append(ds: h5py.Dataset, start: int, rows: npt.NDArray[Any]) -> None:

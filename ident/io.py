@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import os
 import tomllib
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -24,7 +25,7 @@ from ident.errors import IdentError
 from ident.release import Release
 from ident.section import SectionModel
 
-__all__ = ["FileFormatError", "RunFile", "read_run"]
+__all__ = ["FileFormatError", "RunFile", "campaign_section", "read_run"]
 
 _SECTION_FIELDS = ("B", "m", "I", "fh", "fa", "zeta_h", "zeta_a", "S")
 
@@ -91,6 +92,35 @@ def read_run(path: str | os.PathLike[str]) -> RunFile:
     section = _section(config_text, path, sync["rho"])
     releases = tuple(_release(sync, row, path, i) for i, row in enumerate(table))
     return RunFile(path=path, section=section, releases=releases, rig_name=rig_name)
+
+
+def campaign_section(runs: Sequence[RunFile]) -> SectionModel:
+    """Return the one section model of a campaign's run files, with the median air density.
+
+    Parameters
+    ----------
+    runs : sequence of RunFile
+        Files of one campaign (one section model, any wind speeds).
+
+    Returns
+    -------
+    SectionModel
+        The stored section with ``rho`` the median of the files' measured densities.
+
+    Raises
+    ------
+    FileFormatError
+        If there are no runs, or if the files' sections differ (other than in air density):
+        releases of different models cannot be identified together.
+    """
+    if not runs:
+        raise FileFormatError("no run files given")
+    first = runs[0].section
+    for run in runs[1:]:
+        if run.section.replace(rho=first.rho) != first:
+            raise FileFormatError(f"{run.path}: its section model differs from the one of "
+                                  f"{runs[0].path}; identify one section model at a time")
+    return first.replace(rho=float(np.median([run.section.rho for run in runs])))
 
 
 def _text(value: Any) -> str:

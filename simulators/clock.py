@@ -30,6 +30,11 @@ class MonotonicClock:
     def __init__(self) -> None:
         self._start = time.monotonic()
 
+    @property
+    def origin_s(self) -> float:
+        """``time.monotonic()`` at the clock's creation, s: true time 0 on the host's clock."""
+        return self._start
+
     def now(self) -> float:
         """Return seconds since creation."""
         return time.monotonic() - self._start

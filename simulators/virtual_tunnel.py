@@ -131,6 +131,9 @@ class VirtualTunnel:
         self._decay: _Decay | None = None
         self._triggers: list[float] = []
         self._releases: list[float] = []
+        # Every decay with the true time it ended (caught by an arm; inf while running): the
+        # truth that recorded runs are checked against (decay_truth).
+        self._history: list[tuple[_Decay, float]] = []
 
     # -- state changes (from the simulated drive and PLC) ----------------------------------------
     def set_fan_speed(self, rpm: float) -> None:
@@ -142,6 +145,8 @@ class VirtualTunnel:
         """Energise the magnet: the model is pulled back to the hold position."""
         with self._lock:
             self._armed = True
+            if self._decay is not None and self._history:
+                self._history[-1] = (self._history[-1][0], self.clock.now())
             self._decay = None
 
     def release(self) -> float:
@@ -158,6 +163,7 @@ class VirtualTunnel:
             self._decay = dataclasses.replace(decay, t0=t0)
             self._armed = False
             self._releases.append(t0)
+            self._history.append((self._decay, math.inf))
         return t0
 
     def trigger(self) -> float:
@@ -227,6 +233,28 @@ class VirtualTunnel:
                 values[inside] = decay.splines[name](tau[inside])
                 values[after & ~inside] = decay.final[name]
                 out[name] = values
+        return out
+
+    def decay_truth(self, t: FloatArray) -> dict[str, FloatArray]:
+        """Return the free-decay motion and forces at true times ``t`` (s), NaN outside decays.
+
+        Unlike :meth:`sample` (the present state), this covers every release so far, each from
+        its release to the arm that caught it: the truth a recorded run is checked against.
+
+        Returns
+        -------
+        dict
+            ``h`` (m), ``alpha`` (rad), ``lift`` (N/m), ``moment`` (N m/m), shape ``t.shape``.
+        """
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        out = {name: np.full(t.shape, np.nan) for name in ("h", "alpha", "lift", "moment")}
+        with self._lock:
+            history = list(self._history)
+        for decay, end in history:
+            tau = t - decay.t0
+            inside = (tau >= 0) & (tau <= decay.duration) & (t < end)
+            for name, values in out.items():
+                values[inside] = decay.splines[name](tau[inside])
         return out
 
     def pressures(self, t: FloatArray) -> tuple[FloatArray, FloatArray]:

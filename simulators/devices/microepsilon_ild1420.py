@@ -528,6 +528,16 @@ class SimMicroEpsilonIld1420:
             self._pending_master = None
             self._reply(self._pending_line, error="E104 Timeout")
 
+    def true_time_of(self, device_time: Any) -> Any:
+        """Return the true time (s, tunnel clock) of samples stamped ``device_time`` (unwrapped).
+
+        The timestamp counts from the sensor's power-on (the device time ``ts_origin``); the
+        truth against which a recording's clock mapping is checked, valid within the current
+        power-on epoch (to the timestamp's 10 us resolution).
+        """
+        t = np.asarray(device_time, dtype=np.float64)
+        return (t + self._ts_origin - self.clock.offset_s) / (1.0 + 1e-6 * self.clock.drift_ppm)
+
     # -- measurement --------------------------------------------------------------------------
     def _produce(self, now: float) -> None:
         """Sample every grid point due by ``now`` (true time) and queue its blocks."""

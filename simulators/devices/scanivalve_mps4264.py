@@ -414,6 +414,21 @@ class SimScanivalveMps4264:
             else:
                 self._invalid_pending += int(params.get("count", 1))
 
+    def true_time_of(self, device_time: Any) -> Any:
+        """Return the true time (s, tunnel clock) of frames stamped ``device_time`` (s, driver's).
+
+        The simulated frames are sampled at exactly ``t0_dev + (counter - 1) / rate`` on the
+        module clock; their frame time is that instant on the PTP base (``ptp_epoch_s`` +
+        device time + any ``ptp_lock`` step) or, without PTP, relative to the scan start. The
+        truth against which a recording's clock mapping is checked; valid for the current scan.
+        """
+        t = np.asarray(device_time, dtype=np.float64)
+        if self._ptp:
+            t_dev = t - self.ptp_epoch_s - self._step_ns * 1e-9
+        else:
+            t_dev = t + self._t0_dev
+        return (t_dev - self.clock.offset_s) / (1.0 + 1e-6 * self.clock.drift_ppm)
+
     def _ptp_start_ns(self) -> int:
         return self.ptp_epoch_s * _NS + round(self._t0_dev * 1e9)
 

@@ -53,15 +53,19 @@ def start_doc() -> dict:
     }}
 
 
-def synthetic_docs(config, tap_pressure: np.ndarray) -> list[tuple[str, object]]:
-    """Blocks of 3 lasers (4 kHz, 40 ms blocks), the scanner (500 Hz, 20 ms), a barometer."""
+def synthetic_docs(config, tap_pressure: np.ndarray,
+                   latency=lambda t: 0.0) -> list[tuple[str, object]]:
+    """Blocks of 3 lasers (4 kHz, 40 ms blocks), the scanner (500 Hz, 20 ms), a barometer.
+
+    ``latency(t)``: arrival delay of a block whose last sample was taken at ``t``, s.
+    """
     items: list[tuple[float, str, object]] = []
     seq: dict[str, int] = {}
 
     def block(device, kind, t, device_time, counter, values, gaps=()):
         seq[device] = seq.get(device, -1) + 1
         # Arrival exactly when the last sample was taken: the clock maps are then exact.
-        host = np.full(t.size, ns(t[-1:])[0], dtype=np.int64)
+        host = np.full(t.size, ns(t[-1:] + latency(float(t[-1])))[0], dtype=np.int64)
         items.append((float(t[-1]), "block", StreamBlock(
             device=device, kind=kind, seq=seq[device], host_time_ns=host,
             device_time=device_time, counter=counter, values=values, gaps=gaps)))
@@ -223,13 +227,61 @@ def test_two_releases_split_the_decays(config, tmp_path):
     assert writer.summary is not None and writer.summary["releases"] == 2
 
 
+def test_arm_event_ends_the_release_before_the_model_is_caught(config, tmp_path):
+    docs = synthetic_docs(config, np.zeros(config.taps.n_taps))
+    arm = Event(kind="arm", host_time_ns=int(ns(np.array([2.2]))[0]), device="plc")
+    stop = docs.pop()
+    index = next(i for i, (n, d) in enumerate(docs)
+                 if n == "block" and d.device == "scanner" and d.device_time[0] > 1002.25)
+    docs.insert(index, ("event", arm))
+    docs.append(stop)
+    writer = RunWriter(tmp_path / "arm.h5", config)
+    for name, doc in docs:
+        writer(name, doc)
+    assert writer.error is None
+    with h5py.File(tmp_path / "arm.h5", "r") as f:
+        (row,) = f["entry/releases"][:]
+        t = f["entry/sync/time"][:]
+    # The decay ends one sync period before the arm command (a sync row averages the lasers
+    # over +- half a period): its last row is the last one before 2.2 s - 2 ms.
+    end = 2.2 - 1 / 500.0
+    assert row["start_index"] == 500
+    assert row["stop_index"] == int(np.searchsorted(t, end))
+    assert t[row["stop_index"] - 1] < end <= t[row["stop_index"]] + 1e-9
+    assert 2.19 < t[row["stop_index"] - 1]
+
+
+def test_clock_map_refits_leave_no_gap_rows_in_the_sync_view(config, tmp_path):
+    """Arrivals 3 ms late for 1.2 s, then on time: the maps jump by ~3 ms when they see it.
+
+    Mapped block by block, the forward jump would open a 3 ms hole between two consecutive
+    laser samples (a NaN row although nothing was lost); the continuous timeline slews it.
+    """
+    docs = synthetic_docs(config, np.zeros(config.taps.n_taps),
+                          latency=lambda t: 3e-3 if t < 1.2 else 0.0)
+    writer = RunWriter(tmp_path / "refit.h5", config)
+    for name, doc in docs:
+        writer(name, doc)
+    assert writer.error is None
+    with h5py.File(tmp_path / "refit.h5", "r") as f:
+        t = f["entry/sync/time"][:]
+        h = f["entry/sync/h"][:]
+        lift = f["entry/sync/lift"][:]
+    timelines = writer.summary["timelines"]
+    assert timelines["laser_front"]["largest_slewed_s"] > 1e-3  # the refit did happen
+    # Every row is finite but the first few (the first blocks, 3 ms late, are mapped 3 ms
+    # late: the rows before them have no data, which is marked, not invented).
+    assert np.all(np.isfinite(h[t > 0.01]))
+    assert np.all(np.isfinite(lift[t > 0.01]))
+    assert t[-1] > DURATION_S - 0.05
+
+
 def test_existing_file_is_an_error_kept_by_the_writer(config, tmp_path):
     path = tmp_path / "exists.h5"
     path.write_bytes(b"")
     writer = RunWriter(path, config)
-    with pytest.raises(OSError, match="exists"):
-        writer("start", start_doc())
-    assert writer.error is not None
+    writer("start", start_doc())  # a StorageError is kept (and logged), not raised
+    assert isinstance(writer.error, OSError) and "exists" in str(writer.error)
     writer("stop", {})  # later docs are ignored
 
 
