@@ -119,7 +119,8 @@ def _acquire(args: argparse.Namespace) -> int:
         errors = ", ".join(f"{name} {err * 1e3:+.3f} ms"
                            for name, err in clocks["clock_error_mean_s"].items())
         print(f"against the simulators' clocks (after {clocks['settle_s']:g} s): mean error "
-              f"{errors}; misalignment between devices {clocks['misalignment_s'] * 1e3:.3f} ms")
+              f"{errors}; misalignment between devices {clocks['misalignment_s'] * 1e3:.3f} ms "
+              f"mean, {clocks['misalignment_max_s'] * 1e3:.3f} ms largest")
     for error in summary["errors"]:
         print(f"error: {error}")
     return 0 if not summary["errors"] else 1

@@ -65,7 +65,9 @@ CLOCK_WINDOW_S = 0.5
 #: A trigger pulse whose command took longer than this (round trip, s) is no anchor: its host
 #: time, the midpoint, is off by at most half of it, and typically far less (the two legs are
 #: alike); the clock map takes the median over its anchors.
-MAX_ANCHOR_ROUND_TRIP_S = 1e-3
+MAX_ANCHOR_ROUND_TRIP_S = 3e-3
+#: Default interval of the trigger pulses record_run sends as clock anchors, s.
+SYNC_PULSE_INTERVAL_S = 0.5
 #: A device trigger time is paired with the PLC trigger event within this distance, s.
 TRIGGER_PAIRING_S = 0.05
 
@@ -596,36 +598,59 @@ class RunWriter:
         }
 
 
-def _clock_truth(rig: Any) -> ClockTruthTracker | None:
-    """Build the tracker of the simulators' clock truth on host time (None: no such truth)."""
-    origin = getattr(rig.tunnel.clock, "origin_s", None)
-    if origin is None:
+class _SyncPulses:
+    """A thread pulsing the PLC's trigger line every ``interval_s`` (clock-map anchors)."""
+
+    def __init__(self, acq: Any, interval_s: float) -> None:
+        import threading
+
+        self._acq = acq
+        self._interval_s = interval_s
+        self._stop = threading.Event()
+        self.failures = 0
+        self._thread = threading.Thread(target=self._run, name="windrig-sync-pulses",
+                                        daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        from daq.errors import DaqError
+
+        while not self._stop.wait(self._interval_s):
+            try:
+                self._acq.trigger()
+            except DaqError as exc:  # the PLC's own fault reporting covers the link
+                self.failures += 1
+                log.warning("sync pulse failed (%d so far): %s", self.failures, exc)
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(2.0 + self._interval_s)
+
+
+def _start_sync_pulses(acq: Any, interval_s: float | None) -> _SyncPulses | None:
+    if interval_s is None:
         return None
-
-    def on_host(sim: Any) -> Callable[[FloatArray], FloatArray]:
-        return lambda t_device: float(origin) + sim.true_time_of(t_device)
-
-    return ClockTruthTracker({name: on_host(sim) for name, sim in rig.simulators.items()
-                              if hasattr(sim, "true_time_of")})
+    if not (math.isfinite(interval_s) and interval_s > 0):
+        raise ValueError(f"sync_pulse_interval_s must be > 0 s or None, got {interval_s!r}")
+    return _SyncPulses(acq, float(interval_s))
 
 
 def _check_alignment(path: Path, rig: Any, writer: RunWriter) -> dict[str, Any]:
-    """Measure the sync view against the simulated rig's truth; store it in the file.
+    """Check the sync view against the simulated rig's truth; store the result in the file.
 
     Two measures (:mod:`daq.sync_check`): the clock error of every block the sync view used
     (per device, and the misalignment between devices), and the delay of the h, alpha, lift and
-    moment channels against the tunnel's decays (end to end; needs a release).
+    moment channels against the tunnel's decays (needs a release). Only for a tunnel on the
+    host's real time (its clock has ``origin_s``).
     """
-    from daq.sync_check import measure_alignment, write_alignment
+    from daq.sync_check import check_run
 
     origin = getattr(rig.tunnel.clock, "origin_s", None)
     if origin is None or writer.clock_truth is None:
         return {}
-    clocks = writer.clock_truth.result()
-    signals = measure_alignment(path, rig.tunnel.decay_truth,
-                                writer.t0_ns * 1e-9 - float(origin))
-    write_alignment(path, clocks=clocks, signals=signals)
-    return {"clocks": clocks, "signals": signals}
+    return check_run(path, writer.clock_truth,
+                     true_time_of=lambda name, t: origin + rig.simulators[name].true_time_of(t),
+                     decay_truth=rig.tunnel.decay_truth, origin_s=origin)
 
 
 def _storable(value: Any) -> Any:
@@ -642,7 +667,8 @@ def record_run(config: RigConfig, out_path: str | Path, *, duration_s: float,
                simulate: bool = True,
                actions: Callable[[Any, Any], None] | None = None, progress: bool = True,
                operator_notes: str = "", calz: bool | None = None,
-               writer_options: Mapping[str, Any] | None = None) -> dict[str, Any]:
+               writer_options: Mapping[str, Any] | None = None,
+               sync_pulse_interval_s: float | None = SYNC_PULSE_INTERVAL_S) -> dict[str, Any]:
     """Acquire a rig for ``duration_s`` into one HDF5 run file and return the summary.
 
     Parameters
@@ -671,6 +697,10 @@ def record_run(config: RigConfig, out_path: str | Path, *, duration_s: float,
         (the driver refuses a CALZ with a nonzero wind speed; it is told 0 m/s).
     writer_options : mapping, optional
         Further keyword arguments of :class:`RunWriter`.
+    sync_pulse_interval_s : float or None
+        Pulse the PLC's trigger line this often during the run, s (None: never): the anchors
+        that tie every device clock to the host's (see :class:`~daq.sync.ClockMap`). Needs a
+        PLC; a failed pulse is logged and the run goes on.
 
     Returns
     -------
@@ -711,7 +741,7 @@ def record_run(config: RigConfig, out_path: str | Path, *, duration_s: float,
     try:
         options = dict(writer_options or {})
         if rig is not None and "clock_truth" not in options:
-            options["clock_truth"] = _clock_truth(rig)
+            options["clock_truth"] = ClockTruthTracker()
         writer = RunWriter(out_path, live, operator_notes=operator_notes, **options)
         writer.recorder = recorder  # opened above; declared and started at the "start" doc
         drivers = drivers_from_config(live)
@@ -724,6 +754,7 @@ def record_run(config: RigConfig, out_path: str | Path, *, duration_s: float,
         acq.start()
         reason = "duration"
         runner: threading.Thread | None = None
+        pulser: _SyncPulses | None = None
         try:
             if actions is not None:
                 def run_actions() -> None:
@@ -736,6 +767,8 @@ def record_run(config: RigConfig, out_path: str | Path, *, duration_s: float,
                 runner = threading.Thread(target=run_actions, name="windrig-actions",
                                           daemon=True)
                 runner.start()
+            has_plc = any(kind == "plc" for kind, _ in drivers.values())
+            pulser = _start_sync_pulses(acq, sync_pulse_interval_s if has_plc else None)
             end = time.monotonic() + float(duration_s)
             # mininterval: redrawn at most twice a second (a log file gets a line per redraw).
             bar = (tqdm(total=round(float(duration_s), 1), unit="s", mininterval=0.5,
@@ -756,6 +789,8 @@ def record_run(config: RigConfig, out_path: str | Path, *, duration_s: float,
             if runner is not None:
                 runner.join(max(1.0, 0.25 * float(duration_s)))
         finally:
+            if pulser is not None:
+                pulser.stop()
             engine = acq.stop(reason)
     finally:
         if rig is not None:

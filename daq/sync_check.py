@@ -22,6 +22,7 @@ have no truth: this runs only for simulated ones.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -30,7 +31,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["ClockTruthTracker", "measure_alignment", "write_alignment"]
+__all__ = ["ClockTruthTracker", "check_run", "measure_alignment", "write_alignment"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -40,6 +41,42 @@ CHANNEL_SOURCES = {"h": "lasers", "alpha": "lasers", "lift": "scanner", "moment"
 SKIP_AFTER_RELEASE_S = 0.05
 #: Step of the central difference that gives the truth's derivative, s.
 _DERIVATIVE_STEP_S = 1e-4
+
+
+def check_run(path: str | Path, tracker: ClockTruthTracker, *,
+              true_time_of: Callable[[str, FloatArray], FloatArray],
+              decay_truth: Callable[[FloatArray], Mapping[str, FloatArray]],
+              origin_s: float) -> dict[str, Any]:
+    """Check a closed run file against a simulated rig's truth and store the result in it.
+
+    Parameters
+    ----------
+    path : str or Path
+        The run file (closed).
+    tracker : ClockTruthTracker
+        The tracker the run's writer fed.
+    true_time_of : callable
+        ``(device name, device times) -> true host times`` (``time.monotonic`` s).
+    decay_truth : callable
+        True times (tunnel clock, s) -> the tunnel's decays.
+    origin_s : float
+        The tunnel's true time 0 on the ``time.monotonic`` clock, s.
+
+    Returns
+    -------
+    dict
+        ``clocks`` (:meth:`ClockTruthTracker.result`) and ``signals``
+        (:func:`measure_alignment`).
+    """
+    import h5py
+
+    clocks = tracker.result({name: functools.partial(true_time_of, name)
+                             for name in tracker.devices})
+    with h5py.File(path, "r") as f:
+        t0_s = int(f["entry/sync"].attrs["t0_host_ns"]) * 1e-9
+    signals = measure_alignment(path, decay_truth, t0_s - float(origin_s))
+    write_alignment(path, clocks=clocks, signals=signals)
+    return {"clocks": clocks, "signals": signals}
 
 
 def measure_alignment(path: str | Path, truth: Callable[[FloatArray], Mapping[str, FloatArray]],
@@ -112,8 +149,9 @@ def write_alignment(path: str | Path, *, clocks: Mapping[str, Any],
     """Store the truth checks as attributes of ``/entry/sync`` (of a closed file).
 
     Attributes: from :meth:`ClockTruthTracker.result`, ``truth_clock_error_mean_s.<device>``,
-    ``truth_clock_error_max_s.<device>`` and ``truth_misalignment_s`` (between devices, after
-    the settling time ``truth_settle_s``); from :func:`measure_alignment`,
+    ``truth_clock_error_max_s.<device>``, ``truth_misalignment_s`` and
+    ``truth_misalignment_max_s`` (between devices, mean and largest, after the settling time
+    ``truth_settle_s``); from :func:`measure_alignment`,
     ``truth_delay_s.<channel>`` and ``truth_delay_std_s.<channel>``.
     """
     import h5py
@@ -125,6 +163,7 @@ def write_alignment(path: str | Path, *, clocks: Mapping[str, Any],
             attrs[f"truth_clock_error_max_s.{name}"] = float(clocks["clock_error_max_s"][name])
         if "misalignment_s" in clocks:
             attrs["truth_misalignment_s"] = float(clocks["misalignment_s"])
+            attrs["truth_misalignment_max_s"] = float(clocks["misalignment_max_s"])
             attrs["truth_settle_s"] = float(clocks["settle_s"])
         for name, value in signals.get("delay_s", {}).items():
             attrs[f"truth_delay_s.{name}"] = float(value)
@@ -132,69 +171,99 @@ def write_alignment(path: str | Path, *, clocks: Mapping[str, Any],
 
 
 class ClockTruthTracker:
-    """Per-sample error of the host times the sync view used, against the simulator's truth.
+    """Error of the host times the sync view used, against the simulator's true clocks.
 
     The recorder calls :meth:`observe` with every block it puts into the sync view: the host
-    times it mapped the samples to (run seconds) and their device times. ``truth[name]`` gives
-    the true host time (``time.monotonic`` seconds) of a device time. The error of a sample is
-    ``mapped - true``; its spread between devices at the same instant is the misalignment the
-    sync view carries. One point per block is kept (the block's mean error and its time), so
-    memory grows by ~100 points per second of run (a few MB per hour): this runs on simulated
-    rigs only.
+    times it mapped the samples to (run seconds) and their device times. The first and last
+    sample of each block are kept (a clock error changes slowly within a 20-50 ms block), a few
+    hundred points per second of run: this runs on simulated rigs only. :meth:`result` compares
+    them with the truth, ``truth[name](device time) -> true host time`` (``time.monotonic``
+    seconds); the truth may be given at construction or only then (a rig in another process
+    answers after the run).
 
     Parameters
     ----------
-    truth : mapping of str to callable
+    truth : mapping of str to callable, optional
         Device name -> (device time, s -> true host time, s).
     settle_s : float
-        Run time before which errors are not counted in the headline figures, s: the clock maps
-        need a few envelope windows before their drift estimate means anything.
+        Run time before which errors are not counted, s: the clock maps need a few envelope
+        windows and their first anchors before they mean anything.
     """
 
-    def __init__(self, truth: Mapping[str, Callable[[FloatArray], FloatArray]], *,
-                 settle_s: float = 2.0) -> None:
-        self.truth = dict(truth)
+    def __init__(self, truth: Mapping[str, Callable[[FloatArray], FloatArray]] | None = None,
+                 *, settle_s: float = 2.0) -> None:
+        self.truth = dict(truth or {})
         self.settle_s = float(settle_s)
-        self._points: dict[str, list[tuple[float, float, float]]] = {n: [] for n in self.truth}
+        self._points: dict[str, list[tuple[float, float, float, float]]] = {}
+        self._t0_s = math.nan
 
     def observe(self, name: str, t_run: FloatArray, t_device: FloatArray, t0_s: float) -> None:
         """Record one block: mapped run times and device times of its samples, s."""
-        fn = self.truth.get(name)
-        if fn is None or t_run.size == 0:
+        if t_run.size == 0:
             return
-        err = t_run - (np.asarray(fn(t_device), dtype=np.float64) - t0_s)
-        self._points[name].append((float(t_run[0]), float(np.mean(err)),
-                                   float(np.max(np.abs(err)))))
+        self._t0_s = float(t0_s)
+        self._points.setdefault(name, []).append(
+            (float(t_run[0]), float(t_run[-1]), float(t_device[0]), float(t_device[-1])))
 
-    def result(self) -> dict[str, Any]:
+    @property
+    def devices(self) -> list[str]:
+        """Devices observed so far."""
+        return sorted(self._points)
+
+    def result(self, truth: Mapping[str, Callable[[FloatArray], FloatArray]] | None = None
+               ) -> dict[str, Any]:
         """Headline figures after ``settle_s``: per device mean and max error, misalignment.
+
+        Parameters
+        ----------
+        truth : mapping, optional
+            Overrides (adds to) the truth given at construction.
 
         Returns
         -------
         dict
-            ``clock_error_mean_s`` and ``clock_error_max_s`` per device, ``misalignment_s``
-            (largest difference, at one instant, between two devices' errors; NaN with fewer
-            than two devices), ``settle_s``.
+            ``clock_error_mean_s`` and ``clock_error_max_s`` per device (mapped minus true
+            time); ``misalignment_s``, the spread of the devices' errors at one instant (the
+            largest minus the smallest: how far apart two devices' samples of one instant
+            land in the sync view) averaged over the run, and ``misalignment_max_s``, its
+            largest value (NaN with fewer than two devices); ``settle_s``.
         """
+        truth = {**self.truth, **dict(truth or {})}
         mean: dict[str, float] = {}
         worst: dict[str, float] = {}
         series: dict[str, tuple[FloatArray, FloatArray]] = {}
         for name, points in self._points.items():
-            arr = np.array([p for p in points if p[0] >= self.settle_s]).reshape(-1, 3)
-            if arr.shape[0] < 2:
+            arr = np.array([p for p in points if p[0] >= self.settle_s]).reshape(-1, 4)
+            if name not in truth or arr.shape[0] < 2:
                 continue
-            mean[name] = float(np.mean(arr[:, 1]))
-            worst[name] = float(np.max(arr[:, 2]))
-            series[name] = (arr[:, 0], arr[:, 1])
-        misalignment = math.nan
+            t_run = arr[:, :2].ravel()
+            true = np.asarray(truth[name](arr[:, 2:].ravel()), dtype=np.float64) - self._t0_s
+            err = t_run - true
+            mean[name] = float(np.mean(err))
+            worst[name] = float(np.max(np.abs(err)))
+            series[name] = (t_run, err)
+        misalignment = worst_misalignment = math.nan
         names = sorted(series)
         if len(names) >= 2:
-            grid = np.unique(np.concatenate([series[n][0] for n in names]))
             lo = max(float(series[n][0][0]) for n in names)
             hi = min(float(series[n][0][-1]) for n in names)
+            grid = np.unique(np.concatenate([series[n][0] for n in names]))
             grid = grid[(grid >= lo) & (grid <= hi)]
             if grid.size:
                 errs = np.array([np.interp(grid, *series[n]) for n in names])
-                misalignment = float(np.max(errs.max(axis=0) - errs.min(axis=0)))
+                spread = errs.max(axis=0) - errs.min(axis=0)
+                # Time-weighted mean: the grid is the union of block edges, not uniform.
+                misalignment = float(np.average(spread, weights=_cell_widths(grid)))
+                worst_misalignment = float(np.max(spread))
         return {"clock_error_mean_s": mean, "clock_error_max_s": worst,
-                "misalignment_s": misalignment, "settle_s": self.settle_s}
+                "misalignment_s": misalignment, "misalignment_max_s": worst_misalignment,
+                "settle_s": self.settle_s}
+
+
+def _cell_widths(t: FloatArray) -> FloatArray:
+    """Width of the time cell around each point of an increasing grid (trapezoid weights)."""
+    if t.size < 2:
+        return np.ones_like(t)
+    edges = np.concatenate(([t[0]], 0.5 * (t[1:] + t[:-1]), [t[-1]]))
+    widths = np.diff(edges)
+    return widths if np.any(widths > 0) else np.ones_like(t)

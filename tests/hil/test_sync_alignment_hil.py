@@ -1,0 +1,112 @@
+"""Synchronisation against the simulator's truth: device clocks 20 ms off and 50 ppm apart.
+
+The issue's must-show: simulated devices with a 20 ms clock offset and 50 ppm drift, recorded
+through the real drivers, clock maps and resampler, the misalignment left in the sync view
+measured against the simulators' own clocks and reported in the file. The simulated rig runs in
+its own process (:class:`daq.rig_process.RigProcess`), as real instruments do: sharing the
+recorder's interpreter lock would add milliseconds of simulated-device latency that no real
+instrument has.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from daq.config import parse_rig_config
+from daq.pipeline import record_run
+from daq.rig_process import RigProcess
+from daq.sync_check import ClockTruthTracker, check_run
+
+CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
+TARGET_S = 0.2e-3
+
+# Scanner and lasers on clocks 20 ms off the host's and 50 ppm fast or slow: between the
+# scanner and laser_front 40 ms and 100 ppm to undo.
+CLOCKS = """
+[simulation.devices.fan]
+ramp_rpm_per_s = 4000.0
+[simulation.devices.scanner]
+clock_offset_s = 0.02
+clock_drift_ppm = 50.0
+[simulation.devices.laser_front]
+clock_offset_s = -0.02
+clock_drift_ppm = -50.0
+[simulation.devices.laser_rear]
+clock_offset_s = 0.02
+clock_drift_ppm = -50.0
+[simulation.devices.laser_check]
+clock_offset_s = -0.02
+clock_drift_ppm = 50.0
+"""
+
+
+def actions(acq, rig):
+    fan = acq.drivers["fan"]
+    fan.set_speed(700.0)
+    fan.start()
+    time.sleep(1.0)
+    for _ in range(2):
+        acq.arm()
+        time.sleep(0.5)
+        acq.release()
+        time.sleep(3.0)
+    acq.arm()
+
+
+def test_sync_view_is_aligned_to_the_truth(tmp_path):
+    config = parse_rig_config((CONFIGS / "sim_flat_plate.toml").read_text() + CLOCKS,
+                              "sim_flat_plate.toml")
+    path = tmp_path / "aligned.h5"
+    tracker = ClockTruthTracker()
+    with RigProcess(config) as rig:
+        # record_run pulses the PLC's trigger line every 0.5 s: the clock maps' anchors.
+        summary = record_run(rig.config, path, duration_s=9.0, simulate=False, calz=True,
+                             actions=actions, progress=False,
+                             writer_options={"clock_truth": tracker})
+        result = check_run(path, tracker, true_time_of=rig.true_time_of,
+                           decay_truth=rig.decay_truth, origin_s=rig.origin_s)
+    clocks, signals = result["clocks"], result["signals"]
+    report = f"clocks {clocks}\nsignals {signals}\nfits {summary['clock_fits']}"
+    with h5py.File(path, "r") as f:
+        attrs = dict(f["entry/sync"].attrs)
+    # Reported in the file.
+    assert attrs["truth_misalignment_s"] == clocks["misalignment_s"]
+    assert attrs["truth_misalignment_max_s"] == clocks["misalignment_max_s"]
+    for name in ("scanner", "laser_front", "laser_rear", "laser_check"):
+        assert attrs[f"truth_clock_error_mean_s.{name}"] == clocks["clock_error_mean_s"][name]
+        assert summary["clock_fits"][name]["anchors"] >= 2, report
+    # The 40 ms and 100 ppm between devices are undone: the samples of one instant land in the
+    # sync view < 0.2 ms apart on average over the run. (The largest spread, during the first
+    # seconds or right after a refit, is reported: 0.24-0.47 ms in development runs.)
+    assert clocks["misalignment_s"] < TARGET_S, report
+    assert clocks["misalignment_max_s"] < 1e-3, report
+    # Against the host's true time, each device is off by the anchors' error: the PLC pulse's
+    # host time is the midpoint of a Modbus round trip of up to 3 ms.
+    for err in clocks["clock_error_mean_s"].values():
+        assert abs(err) < 0.5e-3, report
+    # End to end on the signals: h and alpha (lasers) against the tunnel's decays, known to a
+    # few microseconds; lift and moment (62 taps, 1 Pa noise) only to ~0.25 ms: at 4 sigma.
+    for name in ("h", "alpha"):
+        assert abs(signals["delay_s"][name]) < 0.5e-3, report
+        assert signals["delay_std_s"][name] < 20e-6, report
+    for name in ("lift", "moment"):
+        assert abs(signals["delay_s"][name]) < 0.5e-3 + 4 * signals["delay_std_s"][name], report
+    assert np.isfinite(attrs["truth_delay_s.h"])
+
+
+def test_rig_process_reports_errors_of_its_child():
+    config = parse_rig_config((CONFIGS / "sim_flat_plate.toml").read_text() + CLOCKS,
+                              "sim_flat_plate.toml")
+    with RigProcess(config) as rig:
+        assert sorted(rig.clocked_devices()) == ["laser_check", "laser_front", "laser_rear",
+                                                 "scanner"]
+        with pytest.raises(RuntimeError, match="KeyError"):
+            rig.true_time_of("no_such_device", [0.0])
+        # The tunnel holds no decay yet: NaN everywhere, not zeros.
+        truth = rig.decay_truth(np.array([0.0, 1.0]))
+        assert np.all(np.isnan(truth["h"]))
