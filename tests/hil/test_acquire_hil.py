@@ -69,7 +69,10 @@ def test_record_run_writes_a_release_matching_the_tunnel_truth(tmp_path):
             summary["samples"]["laser_front"]
         assert f.attrs["default"] == "entry" and f["entry"].attrs["default"] == "sync"
     assert t.size > 1500 and np.isfinite(h).mean() > 0.98
-    assert kinds.count("release") == 1 and kinds.count("trigger") == 2
+    # Two pulses from the actions, and the sync pulses record_run sends every 0.5 s (the first
+    # after 0.5 s, the last possibly cut by the stop).
+    assert kinds.count("release") == 1
+    assert 2 + 6 <= kinds.count("trigger") <= 2 + 8
 
     (row,) = releases
     release_s = (seen["release"].data["command_ns"] * 1e-9) - t0_s
