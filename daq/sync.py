@@ -88,6 +88,10 @@ def _positive(name: str, value: Any) -> float:
     return x
 
 
+#: Points used by :func:`_theil_sen_slope` (more are thinned evenly): 7140 pairs.
+_MAX_SLOPE_POINTS = 120
+
+
 def _weighted_median(values: FloatArray, weights: FloatArray) -> float:
     """Lower weighted median: the smallest value whose cumulative weight reaches half the total."""
     order = np.argsort(values, kind="stable")
@@ -103,6 +107,11 @@ def _theil_sen_slope(x: FloatArray, y: FloatArray) -> float:
     per-point noise hardly moves, dominate the short ones; like the plain Theil-Sen estimator
     it ignores a minority of wild points (breakdown point about 29 %). Needs >= 2 distinct x.
     """
+    if x.size > _MAX_SLOPE_POINTS:
+        # All pairs of 600 points (a 5 min clock span) cost ~19 ms per refit; an even thinning
+        # keeps the span (what the drift needs) and the robustness, at ~0.5 ms.
+        keep = np.linspace(0, x.size - 1, _MAX_SLOPE_POINTS).round().astype(np.intp)
+        x, y = x[keep], y[keep]
     i, j = np.triu_indices(x.size, 1)
     dx = x[j] - x[i]
     keep = dx != 0.0
@@ -240,6 +249,9 @@ class ClockMap:
         if self._origin is None:
             self._origin = (float(d[0]), float(h[0]))
         d0, h0 = self._origin
+        if d.size == 1:  # the recorder's case (one pair per block): the same, without arrays
+            self._add_pair(float(d[0]) - d0, float(h[0]) - h0)
+            return
         dr, hr = d - d0, h - h0
         ids = np.floor(dr / self.window_s).astype(np.int64)
         if self._open is not None:
@@ -258,6 +270,20 @@ class ClockMap:
                 self._open = (wid, float(dr[lo + k]), float(hr[lo + k]), float(key[k]))
         self._n_pairs += int(d.size)
         if self._n_closed < 2:  # the open window is part of the fit until two windows closed
+            self._refit()
+
+    def _add_pair(self, dr: float, hr: float) -> None:
+        """Add one pair (relative times, s): :meth:`update`'s loop for a single pair."""
+        wid = math.floor(dr / self.window_s)
+        if self._open is not None:
+            wid = max(wid, self._open[0])
+            if wid != self._open[0]:
+                self._close_window()
+        key = hr - self._ref_slope * dr
+        if self._open is None or key < self._open[3]:
+            self._open = (wid, dr, hr, key)
+        self._n_pairs += 1
+        if self._n_closed < 2:
             self._refit()
 
     def add_anchor(self, t_device: float, t_host: float) -> None:
@@ -759,14 +785,47 @@ class SyncBlock:
 
 
 class _Buffer:
-    """Samples of one stream not yet consumed by the sync view (always 2-D values)."""
+    """Samples of one stream not yet consumed by the sync view (always 2-D values).
+
+    Pushed pieces are kept in a list and joined once, when the sync view reads them: joining
+    at every push would copy the whole buffer each time, quadratic in the pushes between two
+    pulls (18 % of the recorder's time in benchmarks/daq_throughput.py).
+    """
 
     def __init__(self, spec: StreamSpec) -> None:
         self.spec = spec
-        self.t = np.zeros(0)
-        self.v = np.zeros((0, spec.channels or 1))
+        self._t = np.zeros(0)
+        self._v = np.zeros((0, spec.channels or 1))
+        self._pieces: list[tuple[FloatArray, FloatArray]] = []
+        self.last = -math.inf  # time of the newest sample held
         self.late = 0
         self.overlapping = 0
+
+    def append(self, t: FloatArray, v: FloatArray) -> None:
+        if t.size:
+            self._pieces.append((t, v))
+            self.last = float(t[-1])
+
+    def _join(self) -> None:
+        if self._pieces:
+            self._t = np.concatenate([self._t, *(p[0] for p in self._pieces)])
+            self._v = np.concatenate([self._v, *(p[1] for p in self._pieces)])
+            self._pieces.clear()
+
+    @property
+    def t(self) -> FloatArray:
+        self._join()
+        return self._t
+
+    @property
+    def v(self) -> FloatArray:
+        self._join()
+        return self._v
+
+    def keep_from(self, i0: int) -> None:
+        """Drop the samples before index ``i0``."""
+        self._join()
+        self._t, self._v = self._t[i0:], self._v[i0:]
 
 
 class Resampler:
@@ -884,15 +943,14 @@ class Resampler:
         if tt.size > 1 and np.any(np.diff(tt) <= 0.0):
             raise ValueError(f"{name}: sample times must increase within a push")
         v = v.reshape(tt.size, -1)
-        if buf.t.size:
-            keep = tt > buf.t[-1]
+        if buf.last > -math.inf:
+            keep = tt > buf.last
             buf.overlapping += int(tt.size - np.count_nonzero(keep))
             tt, v = tt[keep], v[keep]
         if self._next > 0:
             buf.late += int(np.count_nonzero(tt < float(self._time(self._next - 1))
                                              - self._support(spec)))
-        buf.t = np.concatenate([buf.t, tt])
-        buf.v = np.concatenate([buf.v, v])
+        buf.append(tt, v)
 
     # -- output -----------------------------------------------------------------------------------
     def pull(self) -> SyncBlock:
@@ -900,7 +958,7 @@ class Resampler:
         ready = []
         newest = -math.inf
         for buf in self._buffers.values():
-            last = float(buf.t[-1]) if buf.t.size else -math.inf
+            last = buf.last
             newest = max(newest, last)
             ready.append(self._count_before(last - self._support(buf.spec)))
         stop = min(ready)
@@ -937,7 +995,7 @@ class Resampler:
             # Keep the sample just before the next output's support: it brackets it.
             i0 = int(np.searchsorted(buf.t, t_next - self._support(buf.spec), side="right")) - 1
             if i0 > 0:
-                buf.t, buf.v = buf.t[i0:], buf.v[i0:]
+                buf.keep_from(i0)
 
     # -- diagnostics ------------------------------------------------------------------------------
     @property
