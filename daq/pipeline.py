@@ -6,7 +6,8 @@ the raw stream of every device, the synchronised view (every device clock mapped
 clock by a :class:`~daq.sync.ClockMap`, the streams resampled onto one time base by a
 :class:`~daq.sync.Resampler` and converted to h, alpha, lift, moment, U, rho), the events and one
 row per release; and :func:`record_run`, which runs a (simulated or real) rig through the engine
-into a file.
+into a file, pulsing the PLC's trigger line every 0.5 s as clock anchors and, for a simulated rig,
+checking the result against the simulators' truth (:mod:`daq.sync_check`).
 
 Not responsible for: reading devices or threads (the engine), the numerics of clocks, resampling
 and conversions (:mod:`daq.sync`), the file layout itself (:mod:`daq.recorder`).
@@ -803,6 +804,7 @@ def record_run(config: RigConfig, out_path: str | Path, *, duration_s: float,
     if action_error:
         raise action_error[0]
     summary = dict(writer.summary or {})
+    summary["sync_pulses_failed"] = 0 if pulser is None else pulser.failures
     if rig is not None and writer.summary is not None:
         summary["alignment"] = _check_alignment(path, rig, writer)
     summary["errors"] = list(engine.get("errors", []))
