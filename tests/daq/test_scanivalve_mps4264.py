@@ -34,6 +34,7 @@ from daq.scanivalve_mps4264 import (
     Gap,
     Mps4264Decoder,
     Mps4264Settings,
+    ScanBlock,
     ScanivalveMps4264,
 )
 from daq.testing import ScriptedTransport, expected_exchange
@@ -76,6 +77,8 @@ def test_settings_from_table_with_defaults():
     s = Mps4264Settings.from_table(TABLE, "[scanner]")
     assert (s.modules, s.rate_hz, s.byte_order, s.pitot_channel) == (1, 500.0, "big", 63)
     assert s.data_port == 503 and s.command_timeout_s == 2.0 and s.n_channels == 64
+    assert s.min_block_s == 0.02  # 10 frames at 500 Hz per read_block
+    assert Mps4264Settings.from_table({**TABLE, "min_block_s": 0}, "t").min_block_s == 0.0
 
 
 @pytest.mark.parametrize(
@@ -91,6 +94,12 @@ def test_settings_from_table_with_defaults():
         ({"modules": 2, "data_port": 65535}, "no room for 2 consecutive module ports"),
         ({"command_timeout_s": -1}, r"command_timeout_s = -1.0 is outside"),
         ({"speed": 1}, r"unknown key\(s\) \['speed'\]"),
+        ({"min_block_s": -0.01},
+         r"\[scanner\] min_block_s = -0.01 is outside the allowed range \[0.0, 0.25\]"),
+        ({"min_block_s": 0.5}, r"min_block_s = 0.5 is outside the allowed range \[0.0, 0.25\]"),
+        ({"min_block_s": math.inf}, r"min_block_s = inf is outside"),
+        ({"min_block_s": "20 ms"}, r"\[scanner\] min_block_s must be a number, got '20 ms'"),
+        ({"min_block_s": True}, r"min_block_s must be a number, got True"),
     ],
 )
 def test_bad_settings_name_the_key_and_range(change, match):
@@ -541,3 +550,384 @@ def test_a_data_connection_that_stays_away_raises():
     driver = scanning([], transports=[data], reconnect_attempts=3, reconnect_backoff_s=0.0)
     with pytest.raises(TransportError, match="module 0 data connection stayed away after 3"):
         driver.read_block(0.5)
+
+
+# -- batching: read_block collects for min_block_s (on a simulated clock) ------------------------
+class FakeClock:
+    """Stands in for the driver module's ``time``: advances only when a read waits or sleeps."""
+
+    def __init__(self, t: float = 1000.0) -> None:
+        self.t = t
+
+    def monotonic(self) -> float:
+        return self.t
+
+    def monotonic_ns(self) -> int:
+        return round(self.t * 1e9)
+
+    def sleep(self, seconds: float) -> None:
+        self.t += max(seconds, 0.0)
+
+
+class TimedTransport(ScriptedTransport):
+    """A data connection whose bytes arrive at set times of a FakeClock.
+
+    ``read`` behaves as a socket's: it returns at once what has arrived, else waits (advances
+    the clock) up to ``timeout_s`` for the next arrival, else times out.
+    """
+
+    def __init__(self, clock: FakeClock, arrivals: list[tuple[float, bytes]]) -> None:
+        super().__init__([])
+        self.clock = clock
+        self.arrivals = sorted(arrivals, key=lambda a: a[0])
+
+    def read(self, max_bytes: int, timeout_s: float) -> bytes:
+        if not self.is_open:
+            raise TransportError(f"{self.url}: not open")
+        if not self.arrivals or self.arrivals[0][0] > self.clock.t:
+            nxt = self.arrivals[0][0] if self.arrivals else math.inf
+            if nxt > self.clock.t + timeout_s:
+                self.clock.t += max(timeout_s, 0.0)
+                raise TransportTimeout(f"{self.url}: nothing within {timeout_s:g} s")
+            self.clock.t = nxt
+        out = b""
+        while self.arrivals and self.arrivals[0][0] <= self.clock.t:
+            out += self.arrivals.pop(0)[1]
+        return out
+
+
+@pytest.fixture
+def clock(monkeypatch):
+    """Simulate the driver module's clock: the tests see exactly when a block comes out."""
+    import daq.scanivalve_mps4264 as module
+
+    fake = FakeClock()
+    monkeypatch.setattr(module, "time", fake)
+    return fake
+
+
+def timed_driver(clock: FakeClock, arrivals: list[list[tuple[float, bytes]]], *,
+                 min_block_s: float = 0.02, rate_hz: float = 500.0, **kwargs
+                 ) -> ScanivalveMps4264:
+    """Return a scanning driver whose module k receives ``arrivals[k]`` (times from now)."""
+    t0 = clock.t
+    data = [TimedTransport(clock, [(t0 + t, b) for t, b in module]) for module in arrivals]
+    table = {"modules": len(arrivals), "pitot_channel": 0, "min_block_s": min_block_s,
+             "rate_hz": rate_hz}
+    return scanning([], transports=data, table=table, **kwargs)
+
+
+def frames_at(times: dict[int, float], *, skip=()) -> list[tuple[float, bytes]]:
+    """Arrivals of EU packets: frame -> arrival time, s (frames in ``skip`` never arrive)."""
+    return [(t, eu_packet(f, 1_767_225_600 + f // 500, 2_000_000 * (f % 500)))
+            for f, t in times.items() if f not in skip]
+
+
+def read_all(driver: ScanivalveMps4264, clock: FakeClock,
+             timeout_s: float = 1.0) -> list[tuple[ScanBlock, float]]:
+    """Read blocks until a timeout; return (block, time it came out) pairs."""
+    out: list[tuple[ScanBlock, float]] = []
+    while True:
+        try:
+            block = driver.read_block(timeout_s)
+        except TransportTimeout:
+            return out
+        out.append((block, clock.t))
+
+
+def test_blocks_hold_min_block_s_of_frames_at_full_rate(clock):
+    """500 Hz, 3 modules (module k 0.1k ms behind module 0): every block holds 10 frames.
+
+    ``ceil(min_block_s * rate)`` = 10 complete frames end the collection early, so a block
+    comes out as its 10th frame completes: never later than min_block_s after its first.
+    """
+    n = 500
+    arrivals = [frames_at({f: 0.0005 + 0.002 * (f - 1) + 1e-4 * k for f in range(1, n + 1)})
+                for k in range(3)]
+    driver = timed_driver(clock, arrivals)
+    t0 = clock.t
+    blocks = read_all(driver, clock)
+    counter = np.concatenate([b.counter for b, _ in blocks])
+    np.testing.assert_array_equal(counter, np.arange(1, n + 1))
+    assert [len(b) for b, _ in blocks] == [10] * 50
+    for block, out in blocks:
+        assert not block.gaps and (block.module_status == STATUS_OK).all()
+        # A frame's host time is when its last module packet (module 2) was read: at once.
+        arrived = t0 + 0.0005 + 0.002 * (block.counter - 1) + 2e-4
+        np.testing.assert_allclose(block.host_time_ns * 1e-9, arrived, rtol=0, atol=1e-9)
+        first_complete = block.host_time_ns[0] * 1e-9
+        assert out - first_complete <= 0.02 + 1e-9
+        assert out == pytest.approx(block.host_time_ns[-1] * 1e-9, abs=1e-9)  # no idle wait
+
+
+def test_a_block_is_never_held_past_min_block_s(clock):
+    """Frames slower than the configured rate (100 Hz for 500 Hz): out after min_block_s."""
+    times = {f: 0.001 + 0.01 * (f - 1) for f in range(1, 31)}
+    driver = timed_driver(clock, [frames_at(times), frames_at(times)], min_block_s=0.025)
+    blocks = read_all(driver, clock, timeout_s=0.5)
+    assert np.concatenate([b.counter for b, _ in blocks]).tolist() == list(range(1, 31))
+    for block, out in blocks[:-1]:
+        first_complete = block.host_time_ns[0] * 1e-9
+        assert out == pytest.approx(first_complete + 0.025, abs=1e-9)  # the deadline itself
+        assert len(block) == 3  # frames at +0, +10, +20 ms of its first
+    assert len(blocks) == 10
+
+
+def test_a_lagging_module_does_not_hold_blocks_and_its_gaps_are_marked(clock):
+    """Module 1 lags 15 ms and loses frame 30; both lose frame 60 (a counter gap).
+
+    Blocks still come out by their deadline with what is complete; frames waiting for module 1
+    come in the next block; frame 30 is NaN with STATUS_MISSING there, as without batching.
+    """
+    n = 100
+    m0 = frames_at({f: 0.0005 + 0.002 * (f - 1) for f in range(1, n + 1)}, skip={60})
+    m1 = frames_at({f: 0.0155 + 0.002 * (f - 1) for f in range(1, n + 1)}, skip={30, 60})
+    driver = timed_driver(clock, [m0, m1])
+    blocks = read_all(driver, clock)
+    counter = np.concatenate([b.counter for b, _ in blocks])
+    np.testing.assert_array_equal(counter, np.setdiff1d(np.arange(1, n + 1), [60]))
+    assert [g for b, _ in blocks for g in b.gaps] == [Gap(59, 1, "missing")]
+    status = np.concatenate([b.module_status for b, _ in blocks])
+    assert status[counter == 30].tolist() == [[STATUS_OK, STATUS_MISSING]]
+    assert (status[counter != 30] == STATUS_OK).all()
+    pressure = np.concatenate([b.pressure for b, _ in blocks])
+    assert np.isnan(pressure[counter == 30, 64:]).all()
+    assert np.isfinite(pressure[counter != 30]).all()
+    for block, out in blocks:
+        assert out - block.host_time_ns[0] * 1e-9 <= 0.02 + 1e-9
+    assert driver.stats["late_frames"] == 0 and driver.stats["forced_emissions"] == 0
+
+
+def test_a_module_far_behind_still_gets_blocks_out_by_the_deadline(clock):
+    """Module 1 delivers in bursts of 40 ms (a stalling link): each block is out by its deadline.
+
+    Module 0 holds the frames module 1 has not sent yet; they come in later blocks, complete.
+    """
+    n = 200
+    m0 = frames_at({f: 0.0005 + 0.002 * (f - 1) for f in range(1, n + 1)})
+    m1 = frames_at({f: 0.04 * ((f - 1) // 20 + 1) for f in range(1, n + 1)})
+    driver = timed_driver(clock, [m0, m1])
+    blocks = read_all(driver, clock)
+    counter = np.concatenate([b.counter for b, _ in blocks])
+    np.testing.assert_array_equal(counter, np.arange(1, n + 1))
+    assert all((b.module_status == STATUS_OK).all() and not b.gaps for b, _ in blocks)
+    for block, out in blocks:
+        assert out - block.host_time_ns[0] * 1e-9 <= 0.02 + 1e-9
+
+
+def test_timeout_semantics_are_kept_with_batching(clock):
+    """No frame: TransportTimeout after exactly the timeout, as without batching.
+
+    A frame completing just before the timeout comes out at the timeout, not min_block_s
+    later; with timeout 0, what is there comes out without waiting.
+    """
+    driver = timed_driver(clock, [frames_at({1: 0.095, 2: 0.5})], min_block_s=0.02)
+    start = clock.t
+    block = driver.read_block(0.1)
+    assert block.counter.tolist() == [1]
+    assert clock.t - start == pytest.approx(0.1, abs=1e-9)  # capped by the read timeout
+    start = clock.t
+    with pytest.raises(TransportTimeout, match=r"no complete frame within 0.2 s"):
+        driver.read_block(0.2)  # frame 2 arrives 0.3 s later
+    assert clock.t - start == pytest.approx(0.2, abs=1e-9)
+    clock.t += 1.0
+    start = clock.t
+    assert driver.read_block(0.0).counter.tolist() == [2]  # already there: at once
+    assert clock.t == start
+    with pytest.raises(TransportTimeout):
+        driver.read_block(0.0)
+
+
+def test_a_backlog_comes_out_at_once_in_one_block(clock):
+    times = {f: 0.002 * f for f in range(1, 301)}
+    driver = timed_driver(clock, [frames_at(times), frames_at(times)])
+    clock.t += 1.0  # the reader was busy: 300 frames wait in the socket buffers
+    start = clock.t
+    block = driver.read_block(1.0)
+    assert block.counter.tolist() == list(range(1, 301)) and clock.t == start
+
+
+def test_min_block_s_zero_returns_each_frame_as_it_completes(clock):
+    times = {f: 0.0005 + 0.002 * (f - 1) for f in range(1, 21)}
+    driver = timed_driver(clock, [frames_at(times), frames_at(times)], min_block_s=0.0)
+    blocks = read_all(driver, clock)
+    assert [b.counter.tolist() for b, _ in blocks] == [[f] for f in range(1, 21)]
+    assert all(out == pytest.approx(b.host_time_ns[0] * 1e-9, abs=1e-9) for b, out in blocks)
+
+
+def test_a_silent_module_is_marked_missing_within_blocks_of_min_block_s(clock):
+    """Module 1 stops after frame 50; after module_silence_s, blocks go on without it."""
+    n = 300
+    m0 = frames_at({f: 0.0005 + 0.002 * (f - 1) for f in range(1, n + 1)})
+    m1 = frames_at({f: 0.0005 + 0.002 * (f - 1) for f in range(1, 51)})
+    driver = timed_driver(clock, [m0, m1], module_silence_s=0.2)
+    blocks = read_all(driver, clock)
+    counter = np.concatenate([b.counter for b, _ in blocks])
+    np.testing.assert_array_equal(counter, np.arange(1, n + 1))
+    status = np.concatenate([b.module_status for b, _ in blocks])
+    assert (status[:50] == STATUS_OK).all() and (status[50:, 1] == STATUS_MISSING).all()
+    late = [(b, out) for b, out in blocks if b.counter[0] > 150]  # well after the silence
+    assert late and all(len(b) == 10 for b, _ in late[:-1])
+
+
+def test_host_time_is_the_read_that_completed_each_packet(clock):
+    """Stamps follow the reads: a packet split over two reads takes the second read's time."""
+    one, two, three = eu_packet(1), eu_packet(2), eu_packet(3)
+    arrivals = [(0.001, one + two[:100]), (0.004, two[100:]), (0.0045, three[:3]),
+                (0.006, three[3:])]
+    driver = timed_driver(clock, [arrivals], min_block_s=0.02)
+    t0 = clock.t
+    block = driver.read_block(0.05)
+    assert block.counter.tolist() == [1, 2, 3]
+    np.testing.assert_allclose(block.host_time_ns * 1e-9 - t0, [0.001, 0.004, 0.006], atol=1e-9)
+
+
+def test_settings_constructed_directly_validate_min_block_s():
+    with pytest.raises(ConfigError, match=r"min_block_s = -1.0 is outside the allowed range"):
+        Mps4264Settings(modules=1, rate_hz=500.0, byte_order="big", pitot_channel=0,
+                        min_block_s=-1.0)
+
+
+# -- the one-pass decoding of several streams ----------------------------------------------------
+def test_feed_with_ends_gives_stream_offsets_across_splits_and_garbage():
+    stream = eu_packet(1) + eu_packet(2) + legacy_packet(3) + eu_packet(4)
+    ends = np.cumsum([304, 304, 348, 304])
+    decoder = Mps4264Decoder()
+    got, frames = [], []
+    for i in range(0, len(stream), 100):
+        batch, e = decoder.feed_with_ends(stream[i:i + 100])
+        got += e.tolist()
+        frames += batch.frame.tolist()
+    assert frames == [1, 2, 3, 4] and got == ends.tolist()
+    decoder.reset()
+    batch, e = decoder.feed_with_ends(b"\x01\x02garbage" + eu_packet(5) + eu_packet(6))
+    assert batch.frame.tolist() == [5, 6]
+    assert e.tolist() == [len(stream) + 9 + 304, len(stream) + 9 + 608]
+
+
+def _packets(kind: str, frames: list[int], order: str) -> bytes:
+    if kind == "eu":
+        return b"".join(eu_packet(f, order=order) for f in frames)
+    return b"".join(legacy_packet(f, order=order, ext=(f % 3, 1000 * f), valve=f % 2,
+                                  unit=27 if f % 7 == 0 else 23) for f in frames)
+
+
+@settings(max_examples=200, deadline=None, database=None,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(1, 4), st.data())
+def test_feed_many_equals_feeding_each_decoder(modules, data):
+    """The one-pass decoding gives what each decoder gives alone, in any chunking and mix."""
+    streams = []
+    for _ in range(modules):
+        parts = data.draw(st.lists(st.tuples(st.sampled_from(["eu", "legacy", "garbage"]),
+                                             st.integers(1, 4), st.sampled_from([">", "<"])),
+                                   min_size=1, max_size=4))
+        out, frame = b"", 1
+        for kind, count, order in parts:
+            if kind == "garbage":
+                out += bytes(data.draw(st.binary(min_size=1, max_size=20)))
+            else:
+                out += _packets(kind, list(range(frame, frame + count)), order)
+                frame += count
+        streams.append(out)
+    cuts = [sorted(data.draw(st.lists(st.integers(0, len(s)), max_size=5))) + [len(s)]
+            for s in streams]
+    steps = []
+    pos = [0] * modules
+    for step in range(max(len(c) for c in cuts)):
+        chunks = []
+        for k, s in enumerate(streams):
+            end = max(cuts[k][min(step, len(cuts[k]) - 1)], pos[k])
+            chunks.append(s[pos[k]:end])
+            pos[k] = end
+        steps.append(chunks)
+    assert_feed_many_equals_feeding_each(steps)
+
+
+def assert_feed_many_equals_feeding_each(steps: list[list[bytes]]) -> None:
+    """Feed each step's chunks (one per stream; b"" = nothing) both ways and compare."""
+    alone = [Mps4264Decoder() for _ in steps[0]]
+    together = [Mps4264Decoder() for _ in steps[0]]
+    for chunks in steps:
+        fed = [(d, c) for d, c in zip(together, chunks, strict=True) if c]
+        many = Mps4264Decoder.feed_many([d for d, _ in fed], [c for _, c in fed]) if fed else []
+        single = [d.feed_with_ends(c) for d, c in zip(alone, chunks, strict=True) if c]
+        assert len(many) == len(single)
+        for (b1, e1), (b2, e2) in zip(many, single, strict=True):
+            np.testing.assert_array_equal(e1, e2)
+            for name in b1.__dataclass_fields__:
+                np.testing.assert_array_equal(getattr(b1, name), getattr(b2, name), err_msg=name)
+        for d1, d2 in zip(together, alone, strict=True):
+            assert (d1.packets, d1.bytes_skipped, d1.bad_packets, d1.unsupported_packets,
+                    d1.pending_bytes, d1.offset) == (d2.packets, d2.bytes_skipped,
+                                                     d2.bad_packets, d2.unsupported_packets,
+                                                     d2.pending_bytes, d2.offset)
+
+
+@pytest.mark.parametrize("stream", [
+    eu_packet(1) + b"\x00" + eu_packet(2),  # packet 1 not followed by a type word: rejected
+    eu_packet(1) + b"[" + eu_packet(2),  # "[\0\0\0" reads as type 0x5B (little-endian)
+    eu_packet(1) + eu_packet(2)[:2],  # 2 bytes of the next type word: packet 1 waits
+    legacy_packet(1) + legacy_packet(2, size=340) + legacy_packet(3)[:3],  # corrupt, waiting
+    eu_packet(1) + legacy_packet(2)[:40],  # a type switch after the packets
+])
+def test_feed_many_equals_feeding_each_decoder_in_edge_cases(stream):
+    assert_feed_many_equals_feeding_each([[stream, eu_packet(1)], [eu_packet(3), eu_packet(2)]])
+
+
+def test_feed_many_takes_the_one_pass_for_modules_in_step(monkeypatch):
+    """Whole packets of one type on every stream: one decode for all (no per-stream feed)."""
+    decoders = [Mps4264Decoder() for _ in range(3)]
+    chunks = [_packets("legacy", [1, 2, 3], ">") + legacy_packet(4)[:10] for _ in range(3)]
+
+    def no_feed(self, data):  # pragma: no cover - must not be called
+        raise AssertionError("fell back to the per-stream decoder")
+
+    monkeypatch.setattr(Mps4264Decoder, "feed_with_ends", no_feed)
+    out = Mps4264Decoder.feed_many(decoders, chunks)
+    assert [b.frame.tolist() for b, _ in out] == [[1, 2, 3]] * 3
+    assert [e.tolist() for _, e in out] == [[348, 696, 1044]] * 3
+    assert [d.pending_bytes for d in decoders] == [10] * 3
+    assert [d.packets for d in decoders] == [3] * 3
+
+
+@settings(max_examples=60, deadline=None, database=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(st.integers(1, 3), st.integers(5, 80), st.data())
+def test_batching_changes_the_blocks_not_the_frames(clock, modules, n, data):
+    """Batching changes how frames are grouped into blocks, nothing else.
+
+    With lost and duplicated packets, modules lagging each other and a counter restart, the
+    same frames, statuses, gaps and counters come out with 20 ms blocks as with one block per
+    frame (``min_block_s`` 0).
+    """
+    restart = data.draw(st.one_of(st.none(), st.integers(2, n)))
+    arrivals = []
+    for _ in range(modules):
+        lost = data.draw(st.sets(st.integers(1, n), max_size=n // 4))
+        dup = data.draw(st.sets(st.integers(1, n), max_size=3))
+        lag = data.draw(st.floats(0.0, 0.03))
+        module = []
+        for i in range(1, n + 1):
+            frame = i if restart is None or i < restart else i - restart + 1  # counter restart
+            if i in lost:
+                continue
+            t = 0.0005 + 0.002 * i + lag
+            packet = eu_packet(frame, 1_767_225_600, 2_000_000 * i)
+            module += [(t, packet)] * (2 if i in dup else 1)
+        arrivals.append(module)
+
+    def run(min_block_s: float) -> tuple[list[ScanBlock], dict]:
+        clock.t = 1000.0
+        driver = timed_driver(clock, arrivals, min_block_s=min_block_s)
+        return [b for b, _ in read_all(driver, clock, timeout_s=0.3)], driver.stats
+
+    batched, stats_b = run(0.02)
+    single, stats_s = run(0.0)
+    assert sum(len(b) for b in batched) >= n // 2 and len(batched) <= len(single)
+    for name in ("counter", "frame_time", "pressure", "temperature", "module_status"):
+        np.testing.assert_array_equal(np.concatenate([getattr(b, name) for b in batched]),
+                                      np.concatenate([getattr(b, name) for b in single]),
+                                      err_msg=name)
+    assert [g for b in batched for g in b.gaps] == [g for b in single for g in b.gaps]
+    assert stats_b == stats_s
