@@ -44,8 +44,9 @@ the PLC are left out (a few rows per second).
 
 Options: ``--seconds`` (default 600), ``--profile`` (cProfile the last ``--profile-seconds``
 of the run, the steady state, instead of timing it; top functions of RunWriter and of decoding),
-``--scan-frames-per-read`` (scanner frames per ``read_block``: 10 or 25 emulate a driver that
-emits at most every 20 or 50 ms), ``--laser-block``, ``--out-dir``, ``--keep``.
+``--scan-frames-per-read`` (scanner frames per ``read_block``: 10, the default, is the driver's
+own 20 ms batching; 1 replays it unbatched, ``min_block_s = 0``), ``--laser-block``,
+``--out-dir``, ``--keep``.
 
 Run: ``.venv/bin/python benchmarks/daq_throughput.py [--seconds 600] [--profile] [--keep]``.
 """
@@ -162,8 +163,12 @@ def memory_mib() -> tuple[float, float]:
 # ------------------------------------------------------------------------------------------------
 # Rig config and the in-memory instruments
 # ------------------------------------------------------------------------------------------------
-def build_config() -> RigConfig:
+def build_config(frames_per_read: int = 10) -> RigConfig:
     """Return the streamlined-deck rig widened to 8 scanner modules and 511 taps.
+
+    With ``frames_per_read == 1`` the scanner's ``min_block_s`` is set to 0 (one frame per
+    ``read_block``, the driver's unbatched mode); otherwise the driver's default batching holds
+    (``ceil(min_block_s rate)`` = 10 frames at 500 Hz).
 
     The shipped config's text is edited in memory (taps, modules, Pitot channel) and parsed by
     the real :func:`~daq.config.parse_rig_config`, so the text stored in the run file is a valid
@@ -172,7 +177,8 @@ def build_config() -> RigConfig:
     text = BASE_CONFIG.read_text(encoding="utf-8")
     edits = ((r"(?m)^n_taps = \d+", f"n_taps = {N_TAPS}"),
              (r"(?m)^modules = \d+", f"modules = {MODULES}"),
-             (r"(?m)^pitot_channel = \d+", f"pitot_channel = {PITOT}"),
+             (r"(?m)^pitot_channel = \d+", f"pitot_channel = {PITOT}"
+              + ("\nmin_block_s = 0.0" if frames_per_read == 1 else "")),
              (r'(?m)^name = "Simulated streamlined-deck rig"',
               'name = "Simulated streamlined-deck rig, 8 modules (benchmark)"'))
     for pattern, replacement in edits:
@@ -799,7 +805,7 @@ def measure(args: argparse.Namespace, out_dir: Path) -> tuple[Result, dict[str, 
     Result, dict
         The measurements, and the profilers (empty without ``--profile``).
     """
-    config = build_config()
+    config = build_config(args.scan_frames_per_read)
     tpl = make_templates(config, np.random.default_rng(args.seed))
     ours = out_dir / "daq_throughput_run.h5"
     plain = out_dir / "daq_throughput_plain.h5"
@@ -940,8 +946,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         "decoding) instead of timing them")
     parser.add_argument("--profile-seconds", type=float, default=30.0,
                         help="length of the profiled tail, s (default 30)")
-    parser.add_argument("--scan-frames-per-read", type=int, default=1,
-                        help="scanner frames per read_block (default 1: a host that keeps up)")
+    parser.add_argument("--scan-frames-per-read", type=int, default=10,
+                        help="scanner frames per read_block (default 10: the driver's 20 ms "
+                        "blocks; 1: unbatched, min_block_s = 0)")
     parser.add_argument("--laser-block", type=int, default=100,
                         help="laser samples per read_block (default 100, 25 ms)")
     parser.add_argument("--seed", type=int, default=5)

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from daq.config import RigConfig
+from daq.rig_process import RigProcess
 from ident import e2rfc, flutter
 from ident.io import campaign_section, read_run
 from ident.release import Release
@@ -139,7 +140,7 @@ def _ramp_rate(config: RigConfig) -> float:
 
 
 def run_campaign(config: RigConfig, out_dir: str | Path, *,
-                 fractions: Sequence[float] = (0.4, 0.6, 0.8), releases_per_speed: int = 2,
+                 fractions: Sequence[float] = (0.5, 0.65, 0.8), releases_per_speed: int = 2,
                  decay_s: float | None = None, progress: bool = True,
                  n_lags: int | None = None, with_A3: bool | None = None) -> CampaignResult:
     """Run a simulated campaign and identify the flutter speed (see the module docstring).
@@ -217,8 +218,13 @@ def run_campaign(config: RigConfig, out_dir: str | Path, *,
                 time.sleep(decay_s)
             acq.arm()  # catch the model: the next decay is not recorded as part of this one
 
-        summary = record_run(config, path, duration_s=duration, actions=actions,
-                             progress=progress, operator_notes=f"campaign, {f:g} U_F")
+        # The simulated instruments run in their own process, as real ones run on their own
+        # hardware: sharing the recorder's interpreter lock would add milliseconds of
+        # simulated-device latency, which misaligns forces and motion (see daq.rig_process).
+        with RigProcess(config) as rig:
+            summary = record_run(rig.config, path, duration_s=duration, simulate=False,
+                                 calz=True, actions=actions, progress=progress,
+                                 operator_notes=f"campaign, {f:g} U_F")
         if summary.get("releases") != releases_per_speed:
             raise RuntimeError(f"{path}: recorded {summary.get('releases')} releases, expected "
                                f"{releases_per_speed} (fan ramp slower than assumed?)")

@@ -3,10 +3,11 @@
 What it runs (README, "Two commands"): the simulated instruments of the default rig config
 (``rig_configs/sim_flat_plate.toml``: a flat-plate section model, one pressure scanner module,
 three lasers, the fan drive, the release PLC and a barometer) are started on loopback
-transports; the real drivers and the acquisition engine record, through
-:func:`daq.campaign.run_campaign`, two releases at each of three wind speeds (0.4, 0.6 and 0.8 of
-the simulated flutter speed) into one HDF5 run file per wind speed; the files are read back and
-identified by E2RFC; the identified flutter speed is compared with the simulator's truth.
+transports, in a process of their own (:class:`daq.rig_process.RigProcess`); the real drivers
+and the acquisition engine record, through :func:`daq.campaign.run_campaign`, two releases at
+each of three wind speeds (0.5, 0.65 and 0.8 of the simulated flutter speed) into one HDF5 run
+file per wind speed; the files are read back and identified by E2RFC; the identified flutter
+speed is compared with the simulator's truth.
 
 Printed: the truth (state-space flutter analysis of the simulated aerodynamics, cross-checked by
 the frequency-domain solution with Theodorsen's exact flutter derivatives), one line per
