@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from daq.config import RigConfig
-from daq.rig_process import RigProcess
+from daq.rig_process import start_rig_process
 from ident import e2rfc, flutter
 from ident.io import campaign_section, read_run
 from ident.release import Release
@@ -221,7 +221,7 @@ def run_campaign(config: RigConfig, out_dir: str | Path, *,
         # The simulated instruments run in their own process, as real ones run on their own
         # hardware: sharing the recorder's interpreter lock would add milliseconds of
         # simulated-device latency, which misaligns forces and motion (see daq.rig_process).
-        with RigProcess(config) as rig:
+        with start_rig_process(config) as rig:
             summary = record_run(rig.config, path, duration_s=duration, simulate=False,
                                  calz=True, actions=actions, progress=progress,
                                  operator_notes=f"campaign, {f:g} U_F")

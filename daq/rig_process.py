@@ -1,10 +1,10 @@
 """A simulated rig served from its own process, as real instruments are.
 
-Responsibility: :class:`RigProcess` starts :func:`daq.simulated_rig.start_simulated_rig` in a
-child process (``spawn``) and hands the parent the rig config with the simulators' loopback URLs
-filled in; on request it answers questions about the truth (the true time of a device
-timestamp, the tunnel's decays), so that a recording made by the parent can be checked against
-it.
+Responsibility: :func:`start_rig_process` runs :func:`daq.simulated_rig.start_simulated_rig` in
+a child process (``spawn``) and returns a :class:`RigProcess` holding the rig config with the
+simulators' loopback URLs filled in; on request it answers questions about the truth (the true
+time of a device timestamp, the tunnel's decays), so that a recording made by the parent can be
+checked against it.
 
 Why a process: in one process the simulators, the drivers and the recorder share one
 interpreter lock. Every simulated device then waits for the others' Python code, which
@@ -25,20 +25,13 @@ import numpy.typing as npt
 
 from daq.config import RigConfig
 
-__all__ = ["RigProcess"]
+__all__ = ["RigProcess", "start_rig_process"]
 
 FloatArray = npt.NDArray[np.float64]
 
 
 class RigProcess:
-    """A simulated rig in a child process (see the module docstring).
-
-    Parameters
-    ----------
-    config : RigConfig
-        A simulated rig config (its ``[simulation]`` table).
-    start_timeout_s : float
-        How long the child may take to start every simulator, s.
+    """A simulated rig in a child process; start one with :func:`start_rig_process`.
 
     Attributes
     ----------
@@ -49,21 +42,11 @@ class RigProcess:
         processes on Linux).
     """
 
-    def __init__(self, config: RigConfig, *, start_timeout_s: float = 30.0) -> None:
-        ctx = multiprocessing.get_context("spawn")  # no fork of a threaded parent
-        self._conn, child = ctx.Pipe()
-        self._process = ctx.Process(target=_serve, args=(child, config.text, config.source),
-                                    name="windrig-simulated-rig", daemon=True)
-        self._process.start()
-        child.close()
-        try:
-            if not self._conn.poll(start_timeout_s):
-                raise TimeoutError(f"the simulated rig process did not start within "
-                                   f"{start_timeout_s:g} s")
-            self.config, self.origin_s = self._reply()
-        except BaseException:
-            self._kill()
-            raise
+    def __init__(self, process: Any, conn: Any, config: RigConfig, origin_s: float) -> None:
+        self._process = process
+        self._conn = conn
+        self.config = config
+        self.origin_s = float(origin_s)
 
     def true_time_of(self, name: str, t_device: Any) -> FloatArray:
         """Return the true host time (``time.monotonic`` s) of device ``name``'s timestamps."""
@@ -107,6 +90,51 @@ class RigProcess:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def start_rig_process(config: RigConfig, *, start_timeout_s: float = 30.0) -> RigProcess:
+    """Start the simulated rig of ``config`` in a child process (see the module docstring).
+
+    Parameters
+    ----------
+    config : RigConfig
+        A simulated rig config (its ``[simulation]`` table).
+    start_timeout_s : float
+        How long the child may take to start every simulator, s.
+
+    Returns
+    -------
+    RigProcess
+        Use it as a context manager, or call ``close()``.
+
+    Raises
+    ------
+    RuntimeError
+        The child failed to start the rig (its error is in the message).
+    TimeoutError
+        It did not answer within ``start_timeout_s``.
+    """
+    ctx = multiprocessing.get_context("spawn")  # no fork of a threaded parent
+    conn, child = ctx.Pipe()
+    process = ctx.Process(target=_serve, args=(child, config.text, config.source),
+                          name="windrig-simulated-rig", daemon=True)
+    process.start()
+    child.close()
+    try:
+        if not conn.poll(start_timeout_s):
+            raise TimeoutError(f"the simulated rig process did not start within "
+                               f"{start_timeout_s:g} s")
+        kind, payload = conn.recv()
+        if kind == "error":
+            raise RuntimeError(f"simulated rig process: {payload}")
+    except BaseException:
+        if process.is_alive():
+            process.kill()
+            process.join(5.0)
+        conn.close()
+        raise
+    live_config, origin = payload
+    return RigProcess(process, conn, live_config, origin)
 
 
 def _serve(conn: Any, config_text: str, source: str) -> None:

@@ -19,7 +19,7 @@ import pytest
 
 from daq.config import parse_rig_config
 from daq.pipeline import record_run
-from daq.rig_process import RigProcess
+from daq.rig_process import start_rig_process
 from daq.sync_check import ClockTruthTracker, check_run
 
 CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
@@ -63,7 +63,7 @@ def test_sync_view_is_aligned_to_the_truth(tmp_path):
                               "sim_flat_plate.toml")
     path = tmp_path / "aligned.h5"
     tracker = ClockTruthTracker()
-    with RigProcess(config) as rig:
+    with start_rig_process(config) as rig:
         # record_run pulses the PLC's trigger line every 0.5 s: the clock maps' anchors.
         summary = record_run(rig.config, path, duration_s=9.0, simulate=False, calz=True,
                              actions=actions, progress=False,
@@ -89,11 +89,13 @@ def test_sync_view_is_aligned_to_the_truth(tmp_path):
     # host time is the midpoint of a Modbus round trip of up to 3 ms.
     for err in clocks["clock_error_mean_s"].values():
         assert abs(err) < 0.5e-3, report
-    # End to end on the signals: h and alpha (lasers) against the tunnel's decays, known to a
-    # few microseconds; lift and moment (62 taps, 1 Pa noise) only to ~0.25 ms: at 4 sigma.
+    # End to end on the signals: h and alpha (lasers) against the tunnel's decays, known to
+    # 1-30 us (the fit's residual includes the clock error's slow wander, not only noise): at
+    # most a tenth of the bound checked; lift and moment (62 taps, 1 Pa noise) only to ~0.25
+    # ms: checked at 4 sigma.
     for name in ("h", "alpha"):
         assert abs(signals["delay_s"][name]) < 0.5e-3, report
-        assert signals["delay_std_s"][name] < 20e-6, report
+        assert signals["delay_std_s"][name] < 50e-6, report
     for name in ("lift", "moment"):
         assert abs(signals["delay_s"][name]) < 0.5e-3 + 4 * signals["delay_std_s"][name], report
     assert np.isfinite(attrs["truth_delay_s.h"])
@@ -102,7 +104,7 @@ def test_sync_view_is_aligned_to_the_truth(tmp_path):
 def test_rig_process_reports_errors_of_its_child():
     config = parse_rig_config((CONFIGS / "sim_flat_plate.toml").read_text() + CLOCKS,
                               "sim_flat_plate.toml")
-    with RigProcess(config) as rig:
+    with start_rig_process(config) as rig:
         assert sorted(rig.clocked_devices()) == ["laser_check", "laser_front", "laser_rear",
                                                  "scanner"]
         with pytest.raises(RuntimeError, match="KeyError"):
