@@ -77,7 +77,34 @@ def _build_parser() -> argparse.ArgumentParser:
     p_acq.add_argument("--duration", type=float, required=True, help="seconds to record")
     p_acq.add_argument("--out", type=Path, required=True, help="run file to create (.h5)")
     p_acq.add_argument("--notes", default="", help="operator notes stored with the run")
+
+    p_gui = sub.add_parser(
+        "gui", help="the operator console: replay a run file (live mode: not yet available)")
+    p_gui.add_argument("--replay", type=Path, default=None, metavar="FILE.h5",
+                       help="windrig run file to play back")
+    p_gui.add_argument("--config", type=Path, default=None, help="rig config TOML (live mode)")
+    p_gui.add_argument("--simulate", action="store_true",
+                       help="live mode on the simulated rig (not yet available)")
+    p_gui.add_argument("--speed", type=float, default=1.0,
+                       help="replay speed, x real time (default 1)")
+    p_gui.add_argument("--window", type=float, default=20.0,
+                       help="scrolling time window, s (default 20)")
+    p_gui.add_argument("--screenshot", type=Path, default=None, metavar="OUT.png",
+                       help="render headless, save the window as PNG and exit")
+    p_gui.add_argument("--after", type=float, default=3.0,
+                       help="seconds to run before the screenshot (default 3)")
+    p_gui.add_argument("--size", type=int, nargs=2, default=(1280, 800),
+                       metavar=("WIDTH", "HEIGHT"), help="window size, px (default 1280 800)")
     return parser
+
+
+def _gui(args: argparse.Namespace) -> int:
+    from daq.console import GuiOptions, run_gui
+
+    return run_gui(GuiOptions(replay=args.replay, config=args.config, simulate=args.simulate,
+                              speed=args.speed, window_s=args.window,
+                              screenshot=args.screenshot, after_s=args.after,
+                              size=(args.size[0], args.size[1])))
 
 
 def _acquire(args: argparse.Namespace) -> int:
@@ -208,6 +235,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _identify(args)
     if args.command == "acquire":
         return _acquire(args)
+    if args.command == "gui":
+        return _gui(args)
     raise AssertionError(f"unhandled command {args.command!r}")  # argparse rejects unknown ones
 
 

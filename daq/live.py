@@ -1,0 +1,226 @@
+"""The operator console's main window: traces, pressure distribution, spectra, wind, status.
+
+Responsibility: one :class:`ConsoleWindow` (no module-level state) that owns a ``QTimer`` and, at
+each tick, polls its :class:`~daq.source.DataSource` and redraws from a snapshot: scrolling h and
+alpha traces (peak downsampling, clipped to the view), lift and moment, the pressure coefficients
+of the latest row against the tap's perimeter position and on the section outline, the amplitude
+spectra of h and alpha over the visible window, wind speed and air density, and a status line.
+Data is never pushed into the window from other threads (STYLE.md, "Threads and GUI").
+
+Not responsible for: reading files or instruments (the sources), the numbers themselves
+(:mod:`daq.display`), or the command line (:mod:`daq.console`).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import pyqtgraph as pg
+from PySide6 import QtCore, QtWidgets
+
+from daq.display import amplitude_spectrum, perimeter_positions, pressure_coefficients
+from daq.qt_guard import guard_bool_refcounts
+from daq.replay import ReplayError
+from daq.source import DataSource
+
+__all__ = ["ConsoleWindow"]
+
+#: Redraw period, ms (20 frames/s).
+FRAME_MS = 50
+#: Trace colours (pen specs), by channel.
+_PENS = {"h": "c", "alpha": "y", "lift": "m", "moment": "g"}
+#: Displayed unit and scale factor from SI, by channel.
+_DISPLAY = {"h": ("mm", 1e3), "alpha": ("deg", 180.0 / math.pi), "lift": ("N/m", 1.0),
+            "moment": ("N m/m", 1.0)}
+
+
+def _plot_widget() -> pg.PlotWidget:
+    """Return a plot whose axes show the values as given (no automatic SI prefix)."""
+    plot = pg.PlotWidget()
+    for side in ("left", "bottom"):
+        plot.getAxis(side).enableAutoSIPrefix(False)
+    return plot
+
+
+class ConsoleWindow(QtWidgets.QMainWindow):
+    """The operator console window over one data source.
+
+    Parameters
+    ----------
+    source : DataSource
+        An opened source (replay or live); the window polls it and closes it when closed.
+    window_s : float
+        Length of the scrolling time window, s (> 0).
+    frame_ms : int
+        Redraw period, ms.
+    parent : QWidget, optional
+        Qt parent.
+
+    Attributes
+    ----------
+    curves : dict of str to pyqtgraph.PlotDataItem
+        The ``h`` (mm), ``alpha`` (deg), ``lift`` (N/m) and ``moment`` (N m/m) traces against
+        time (s from run start), as set by the last redraw.
+    cp_curve : pyqtgraph.PlotDataItem
+        Cp of the latest row against perimeter position (m).
+    spectrum_curves : dict of str to pyqtgraph.PlotDataItem
+        Amplitude spectra of ``h`` (mm) and ``alpha`` (deg) against frequency (Hz).
+    """
+
+    def __init__(self, source: DataSource, *, window_s: float = 20.0, frame_ms: int = FRAME_MS,
+                 parent: QtWidgets.QWidget | None = None) -> None:
+        guard_bool_refcounts()  # PySide6 6.12.0 + Python 3.11: see daq.qt_guard
+        super().__init__(parent)
+        if not (isinstance(window_s, (int, float)) and 0 < window_s < math.inf):
+            raise ValueError(f"window_s = {window_s!r} must be a number of seconds > 0")
+        self._source = source
+        self._window_s = float(window_s)
+        self._drawn_rows = -1
+        #: Time (s) of the row whose pressures the Cp view shows; NaN before the first one.
+        self.cp_time = math.nan
+        info = source.info
+        taps = info.config.taps
+        self._perimeter = perimeter_positions(taps)
+        self.setWindowTitle(f"windrig console: {info.label} ({info.config.name})")
+
+        central = QtWidgets.QWidget()
+        grid = QtWidgets.QGridLayout(central)
+        self.setCentralWidget(central)
+        self._wind_label = QtWidgets.QLabel("U = -- m/s")
+        self._rho_label = QtWidgets.QLabel("rho = -- kg/m^3")
+        for label in (self._wind_label, self._rho_label):
+            label.setStyleSheet("font-size: 16pt; font-weight: bold")
+        top = QtWidgets.QHBoxLayout()
+        top.addWidget(self._wind_label)
+        top.addWidget(self._rho_label)
+        top.addStretch(1)
+        grid.addLayout(top, 0, 0, 1, 2)
+
+        self.curves: dict[str, pg.PlotDataItem] = {}
+        first: pg.PlotWidget | None = None
+        for row, name in enumerate(("h", "alpha", "lift", "moment"), start=1):
+            unit, _ = _DISPLAY[name]
+            plot = _plot_widget()
+            plot.setLabel("left", f"{name} ({unit})")
+            plot.showGrid(x=True, y=True, alpha=0.3)
+            if first is None:
+                first = plot
+            else:
+                plot.setXLink(first)
+            if row == 4:
+                plot.setLabel("bottom", "time (s)")
+            curve = plot.plot(pen=_PENS[name])
+            curve.setDownsampling(auto=True, method="peak")
+            curve.setClipToView(True)
+            self.curves[name] = curve
+            grid.addWidget(plot, row, 0)
+        self._time_plot = first
+
+        cp_plot = _plot_widget()
+        cp_plot.setLabel("left", "Cp")
+        cp_plot.setLabel("bottom", "perimeter position (m)")
+        cp_plot.getViewBox().invertY(True)  # suction (Cp < 0) up, as aerodynamicists plot it
+        cp_plot.showGrid(x=True, y=True, alpha=0.3)
+        self.cp_curve = cp_plot.plot(pen="w", symbol="o", symbolSize=5, symbolBrush="w")
+        grid.addWidget(cp_plot, 1, 1)
+
+        outline = _plot_widget()
+        outline.setLabel("left", "-z (m)")
+        outline.setLabel("bottom", "x (m)")
+        outline.setAspectLocked(True)
+        outline.plot(np.append(taps.x, taps.x[0]), -np.append(taps.z, taps.z[0]), pen="w")
+        self._tap_scatter = pg.ScatterPlotItem(taps.x, -taps.z, size=8)
+        outline.addItem(self._tap_scatter)
+        self._colormap = pg.colormap.get("CET-D1")
+        grid.addWidget(outline, 2, 1)
+
+        spectrum = _plot_widget()
+        spectrum.setLabel("left", "amplitude (mm, deg)")
+        spectrum.setLabel("bottom", "frequency (Hz)")
+        spectrum.addLegend()
+        spectrum.showGrid(x=True, y=True, alpha=0.3)
+        self.spectrum_curves = {name: spectrum.plot(pen=_PENS[name], name=name)
+                                for name in ("h", "alpha")}
+        spectrum.setXRange(0.0, min(20.0, 0.5 * source.info.rate_hz))
+        grid.addWidget(spectrum, 3, 1, 2, 1)
+        grid.setColumnStretch(0, 3)
+        grid.setColumnStretch(1, 2)
+
+        self._status = QtWidgets.QLabel(source.status())
+        self.statusBar().addWidget(self._status, 1)
+
+        self._timer = QtCore.QTimer(self)
+        self._timer.setInterval(int(frame_ms))
+        self._timer.timeout.connect(self.tick)
+        self._timer.start()
+
+    # -- public ----------------------------------------------------------------------------------
+    @property
+    def source(self) -> DataSource:
+        """The data source the window polls."""
+        return self._source
+
+    @property
+    def window_s(self) -> float:
+        """Length of the scrolling time window, s."""
+        return self._window_s
+
+    @property
+    def status_text(self) -> str:
+        """The status line as shown."""
+        return str(self._status.text())
+
+    def tick(self) -> None:
+        """Poll the source and redraw when it has new rows (the timer's slot)."""
+        try:
+            self._source.poll()
+        except ReplayError:
+            self._timer.stop()
+        if self._source.total_rows != self._drawn_rows:
+            self._drawn_rows = self._source.total_rows
+            self.redraw(self._source.snapshot())
+        self._status.setText(self._source.status())
+
+    def redraw(self, snap: dict[str, npt.NDArray[Any]]) -> None:
+        """Draw one snapshot (columns of :func:`daq.source.sync_columns`)."""
+        t = snap["time"]
+        if t.size == 0:
+            return
+        t_end = float(t[-1])
+        visible = t >= t_end - self._window_s
+        tv = t[visible]
+        for name, curve in self.curves.items():
+            _, scale = _DISPLAY[name]
+            curve.setData(tv, snap[name][visible] * scale)
+        if self._time_plot is not None:
+            self._time_plot.setXRange(t_end - self._window_s, t_end, padding=0.0)
+        for name, curve in self.spectrum_curves.items():
+            _, scale = _DISPLAY[name]
+            freq, amp = amplitude_spectrum(tv, snap[name][visible] * scale)
+            curve.setData(freq, amp)
+        U, rho = float(snap["U"][-1]), float(snap["rho"][-1])
+        self._wind_label.setText(f"U = {U:.2f} m/s")
+        self._rho_label.setText(f"rho = {rho:.3f} kg/m^3")
+        cp = pressure_coefficients(snap["pressure"][-1], U, rho)
+        self.cp_time = t_end
+        self.cp_curve.setData(self._perimeter, cp, connect="finite")
+        self._tap_scatter.setBrush(self._tap_brushes(cp))
+
+    # -- Qt --------------------------------------------------------------------------------------
+    def closeEvent(self, event: Any) -> None:  # noqa: N802 - Qt's name
+        """Stop the timer and close the source."""
+        self._timer.stop()
+        self._source.close()
+        super().closeEvent(event)
+
+    # -- internals -------------------------------------------------------------------------------
+    def _tap_brushes(self, cp: npt.NDArray[np.float64]) -> list[Any]:
+        """Colour each tap by Cp on [-2, 2] (grey where Cp is not defined)."""
+        grey = pg.mkBrush(120, 120, 120)
+        scaled = np.clip((cp + 2.0) / 4.0, 0.0, 1.0)
+        colours = self._colormap.map(np.nan_to_num(scaled, nan=0.5), mode="qcolor")
+        return [grey if not math.isfinite(c) else pg.mkBrush(q) for c, q in zip(cp, colours,
+                                                                                  strict=True)]

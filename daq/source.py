@@ -1,0 +1,114 @@
+"""What the operator console reads: the data-source contract shared by replay and live.
+
+Responsibility: name the columns of the synchronised view as the console sees them (the same
+names, units and row shapes as ``/entry/sync`` of a run file, DESIGN.md "HDF5 file"), and state
+the :class:`DataSource` protocol that the console's GUI timer polls. A source is *polled* from
+the GUI thread: :meth:`DataSource.poll` moves it forward, :meth:`DataSource.snapshot` hands out
+copies shaped like :meth:`daq.ring_buffer.RingBuffer.snapshot`. Nothing is ever pushed to the
+GUI from another thread (STYLE.md, "Threads and GUI").
+
+Implementations: :class:`daq.replay.ReplaySource` (a recorded run played back in time); a later
+``LiveSource`` wraps the acquisition's :class:`~daq.ring_buffer.RingBuffer` (its ``poll`` only
+reports whether ``total_rows`` changed).
+
+Not responsible for: reading files (``daq.replay``), acquisition, or drawing (``daq.live``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+import numpy.typing as npt
+
+from daq.config import RigConfig
+from daq.ring_buffer import Column
+
+__all__ = ["SYNC_SCALARS", "DataSource", "SourceInfo", "sync_columns"]
+
+#: Scalar columns of the synchronised view and their units (``pressure`` is the one 2-D column).
+SYNC_SCALARS: dict[str, str] = {
+    "time": "s", "h": "m", "alpha": "rad", "lift": "N/m", "moment": "N m/m", "U": "m/s",
+    "rho": "kg/m^3",
+}
+
+
+def sync_columns(n_taps: int) -> tuple[Column, ...]:
+    """Return the ring-buffer columns of the synchronised view.
+
+    Parameters
+    ----------
+    n_taps : int
+        Number of pressure taps (the width of the ``pressure`` column), >= 0.
+
+    Returns
+    -------
+    tuple of Column
+        ``time`` (s), ``h`` (m), ``alpha`` (rad), ``lift`` (N/m), ``moment`` (N m/m), ``U``
+        (m/s), ``rho`` (kg/m^3) as float64 scalars, and ``pressure`` (Pa) as float32 rows of
+        ``n_taps`` values (the storage type of the run file: 7 digits, far below scanner noise).
+
+    Examples
+    --------
+    >>> [c.name for c in sync_columns(4)][-1], sync_columns(4)[-1].shape
+    ('pressure', (4,))
+    """
+    return (*(Column(name) for name in SYNC_SCALARS), Column("pressure", np.float32, (n_taps,)))
+
+
+@dataclass(frozen=True)
+class SourceInfo:
+    """Static description of a source, known once it is open.
+
+    Attributes
+    ----------
+    label : str
+        Shown in the status line (a file name, or "live").
+    config : RigConfig
+        The rig config (tap geometry for the pressure view, limits for later controls).
+    rate_hz : float
+        Row rate of the synchronised view, Hz.
+    duration_s : float or None
+        Length of a recorded run, s; ``None`` for a live source.
+    """
+
+    label: str
+    config: RigConfig
+    rate_hz: float
+    duration_s: float | None
+
+
+class DataSource(Protocol):
+    """What the console polls (GUI thread only)."""
+
+    @property
+    def info(self) -> SourceInfo:
+        """Describe the source (valid after it is opened)."""
+        ...
+
+    @property
+    def total_rows(self) -> int:
+        """Count rows made available so far (a poller redraws when it changes)."""
+        ...
+
+    @property
+    def error(self) -> str | None:
+        """Describe the error that stopped the source, or ``None``."""
+        ...
+
+    def poll(self) -> int:
+        """Bring in what is due now and return the number of new rows."""
+        ...
+
+    def snapshot(self, last: int | None = None) -> dict[str, npt.NDArray[Any]]:
+        """Return copies of the most recent rows, oldest first (see ``RingBuffer.snapshot``)."""
+        ...
+
+    def status(self) -> str:
+        """Return one line for the status bar (position, speed, end of file, errors)."""
+        ...
+
+    def close(self) -> None:
+        """Release the source's resources (idempotent)."""
+        ...
