@@ -79,12 +79,15 @@ def _build_parser() -> argparse.ArgumentParser:
     p_acq.add_argument("--notes", default="", help="operator notes stored with the run")
 
     p_gui = sub.add_parser(
-        "gui", help="the operator console: replay a run file (live mode: not yet available)")
+        "gui", help="the operator console: a live (simulated) rig, or replay of a run file")
     p_gui.add_argument("--replay", type=Path, default=None, metavar="FILE.h5",
                        help="windrig run file to play back")
     p_gui.add_argument("--config", type=Path, default=None, help="rig config TOML (live mode)")
     p_gui.add_argument("--simulate", action="store_true",
-                       help="live mode on the simulated rig (not yet available)")
+                       help="live mode on the config's simulated rig (in a child process)")
+    p_gui.add_argument("--fan-rpm", type=float, default=None, metavar="RPM",
+                       help="live mode: start the fan at this speed (within the config's "
+                            "limits; default: leave it off)")
     p_gui.add_argument("--speed", type=float, default=1.0,
                        help="replay speed, x real time (default 1)")
     p_gui.add_argument("--window", type=float, default=20.0,
@@ -102,7 +105,7 @@ def _gui(args: argparse.Namespace) -> int:
     from daq.console import GuiOptions, run_gui
 
     return run_gui(GuiOptions(replay=args.replay, config=args.config, simulate=args.simulate,
-                              speed=args.speed, window_s=args.window,
+                              fan_rpm=args.fan_rpm, speed=args.speed, window_s=args.window,
                               screenshot=args.screenshot, after_s=args.after,
                               size=(args.size[0], args.size[1])))
 

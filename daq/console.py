@@ -1,11 +1,14 @@
-"""``windrig gui``: start the operator console on a replayed run (live mode comes later).
+"""``windrig gui``: start the operator console on a replayed run or a live (simulated) rig.
 
-Responsibility: turn the command-line options into a data source and a
+Responsibility: turn the command-line options into a data source (a
+:class:`~daq.replay.ReplaySource`, or a :class:`~daq.live_source.LiveSource` whose simulated rig
+runs in a child process) and a
 :class:`~daq.live.ConsoleWindow`, run Qt's event loop (or, with ``screenshot``, render headless
 for ``after`` seconds, save the window as PNG and return), and turn bad input into one clear
 message and exit code 2. Qt is imported only once the input has been checked.
 
-Not responsible for: the window's content (:mod:`daq.live`) or reading files (:mod:`daq.replay`).
+Not responsible for: the window's content (:mod:`daq.live`), reading files (:mod:`daq.replay`) or
+acquiring (:mod:`daq.live_source`).
 """
 
 from __future__ import annotations
@@ -16,7 +19,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from daq.errors import ConfigError, DaqError
 from daq.replay import ReplayError, ReplaySource
+from daq.source import DataSource
 
 __all__ = ["GuiOptions", "run_gui"]
 
@@ -33,9 +38,11 @@ class GuiOptions:
     replay : Path or None
         Run file to replay.
     config : Path or None
-        Rig config of a live console (not yet available).
+        Rig config of a live console.
     simulate : bool
-        Live console on the simulated rig (not yet available).
+        Live console on the config's simulated rig (started in a child process).
+    fan_rpm : float or None
+        Live: start the fan at this speed (within the config's limits); None leaves it alone.
     speed : float
         Replay speed, > 0 (1: real time).
     window_s : float
@@ -51,6 +58,7 @@ class GuiOptions:
     replay: Path | None = None
     config: Path | None = None
     simulate: bool = False
+    fan_rpm: float | None = None
     speed: float = 1.0
     window_s: float = 20.0
     screenshot: Path | None = None
@@ -74,13 +82,16 @@ def run_gui(options: GuiOptions) -> int:
     Returns
     -------
     int
-        0 on success, 2 for bad input (missing or unreadable file, bad option values, live
-        mode), with a one-line message on stderr.
+        0 on success, 2 for bad input (missing or unreadable file or config, bad option values),
+        1 when the live rig fails to start or stops with an error, with a one-line message on
+        stderr.
     """
-    if options.replay is None:
-        if options.config is not None or options.simulate:
-            return _error("live mode: not yet available (use --replay FILE.h5)")
-        return _error("give --replay FILE.h5 (live mode: not yet available)")
+    if options.replay is None and options.config is None:
+        return _error("give --replay FILE.h5, or --config CONFIG.toml [--simulate] (live)")
+    if options.replay is not None and (options.config is not None or options.simulate):
+        return _error("--replay FILE.h5 and --config/--simulate (live) exclude each other")
+    if options.fan_rpm is not None and not options.fan_rpm >= 0:
+        return _error(f"--fan-rpm {options.fan_rpm:g}: must be >= 0 rpm")
     if not options.speed > 0:
         return _error(f"--speed {options.speed:g}: must be > 0")
     if not options.window_s > 0:
@@ -92,6 +103,8 @@ def run_gui(options: GuiOptions) -> int:
     if options.screenshot is not None and not options.screenshot.parent.is_dir():
         return _error(f"--screenshot {options.screenshot}: no such directory "
                       f"{options.screenshot.parent}")
+    if options.replay is None:
+        return _run_live(options)
     source = ReplaySource(options.replay, speed=options.speed, window_s=options.window_s)
     try:
         source.open()
@@ -103,7 +116,38 @@ def run_gui(options: GuiOptions) -> int:
         source.close()
 
 
-def _run_window(source: ReplaySource, options: GuiOptions) -> int:
+def _run_live(options: GuiOptions) -> int:
+    from daq.config import load_rig_config
+    from daq.live_source import LiveSource
+
+    assert options.config is not None
+    try:
+        config = load_rig_config(options.config)
+    except ConfigError as exc:
+        return _error(str(exc))
+    if config.limits is not None and options.fan_rpm is not None \
+            and options.fan_rpm > config.limits.max_fan_rpm:
+        return _error(f"--fan-rpm {options.fan_rpm:g}: above the rig's max_fan_rpm "
+                      f"{config.limits.max_fan_rpm:g}")
+    if not options.simulate:
+        auto = [inst.name for inst in config.instruments if inst.url == "auto"]
+        if auto:
+            return _error(f"{options.config}: instrument(s) {auto} have url = 'auto' (a "
+                          "simulated rig): pass --simulate, or give their real URLs")
+    source = LiveSource(config, simulate=options.simulate, window_s=options.window_s,
+                        fan_rpm=options.fan_rpm)
+    try:
+        source.open()
+    except (DaqError, RuntimeError, TimeoutError, OSError) as exc:
+        print(f"error: the live rig did not start: {exc}", file=sys.stderr)
+        return 1
+    try:
+        return _run_window(source, options)
+    finally:
+        source.close()
+
+
+def _run_window(source: DataSource, options: GuiOptions) -> int:
     headless = options.screenshot is not None
     if headless and not os.environ.get("QT_QPA_PLATFORM") \
             and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
@@ -124,13 +168,14 @@ def _run_window(source: ReplaySource, options: GuiOptions) -> int:
         loop.exec()
         window.tick()  # draw what is due at exactly S s
         image = window.grab()
+        status = source.status()
     finally:
         window.close()
         window.deleteLater()
     if source.error is not None:
-        return _error(source.error)
+        print(f"error: {source.error}", file=sys.stderr)
+        return 1 if options.replay is None else EXIT_USAGE
     if not image.save(str(options.screenshot), "PNG"):
         return _error(f"--screenshot {options.screenshot}: could not write the PNG")
-    print(f"wrote {options.screenshot} ({image.width()} x {image.height()} px, "
-          f"{source.status()})")
+    print(f"wrote {options.screenshot} ({image.width()} x {image.height()} px, {status})")
     return 0

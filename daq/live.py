@@ -5,6 +5,9 @@ each tick, polls its :class:`~daq.source.DataSource` and redraws from a snapshot
 alpha traces (peak downsampling, clipped to the view), lift and moment, the pressure coefficients
 of the latest row against the tap's perimeter position and on the section outline, the amplitude
 spectra of h and alpha over the visible window, wind speed and air density, and a status line.
+Over a live source (a :class:`~daq.source.HealthSource`) it adds the fan state and a device
+health panel (samples/s, gaps, overflows, errors, clock fit and last fault per device) with a red
+alarm line when a device has faulted or stalled; both are polled by the same timer.
 Data is never pushed into the window from other threads (STYLE.md, "Threads and GUI").
 
 Not responsible for: reading files or instruments (the sources), the numbers themselves
@@ -24,7 +27,7 @@ from PySide6 import QtCore, QtWidgets
 from daq.display import amplitude_spectrum, perimeter_positions, pressure_coefficients
 from daq.qt_guard import guard_bool_refcounts
 from daq.replay import ReplayError
-from daq.source import DataSource
+from daq.source import DataSource, DeviceHealth, HealthSource
 
 __all__ = ["ConsoleWindow"]
 
@@ -35,6 +38,10 @@ _PENS = {"h": "c", "alpha": "y", "lift": "m", "moment": "g"}
 #: Displayed unit and scale factor from SI, by channel.
 _DISPLAY = {"h": ("mm", 1e3), "alpha": ("deg", 180.0 / math.pi), "lift": ("N/m", 1.0),
             "moment": ("N m/m", 1.0)}
+#: Columns of the health panel.
+HEALTH_COLUMNS = ("device", "samples/s", "gaps", "overflow", "errors", "clock fit", "last fault")
+#: The health panel is refreshed every this many frames.
+_HEALTH_EVERY = 5
 
 
 def _plot_widget() -> pg.PlotWidget:
@@ -68,6 +75,10 @@ class ConsoleWindow(QtWidgets.QMainWindow):
         Cp of the latest row against perimeter position (m).
     spectrum_curves : dict of str to pyqtgraph.PlotDataItem
         Amplitude spectra of ``h`` (mm) and ``alpha`` (deg) against frequency (Hz).
+    health_table : QTableWidget or None
+        The device health panel (columns :data:`HEALTH_COLUMNS`), for a live source only.
+    alarm_label : QLabel or None
+        The alarm line above it: empty when all is well, red text naming the devices in alarm.
     """
 
     def __init__(self, source: DataSource, *, window_s: float = 20.0, frame_ms: int = FRAME_MS,
@@ -96,6 +107,12 @@ class ConsoleWindow(QtWidgets.QMainWindow):
         top = QtWidgets.QHBoxLayout()
         top.addWidget(self._wind_label)
         top.addWidget(self._rho_label)
+        self._health_source = source if isinstance(source, HealthSource) else None
+        self._fan_label: QtWidgets.QLabel | None = None
+        if self._health_source is not None:
+            self._fan_label = QtWidgets.QLabel("fan: -- rpm")
+            self._fan_label.setStyleSheet("font-size: 16pt; font-weight: bold")
+            top.addWidget(self._fan_label)
         top.addStretch(1)
         grid.addLayout(top, 0, 0, 1, 2)
 
@@ -145,7 +162,14 @@ class ConsoleWindow(QtWidgets.QMainWindow):
         self.spectrum_curves = {name: spectrum.plot(pen=_PENS[name], name=name)
                                 for name in ("h", "alpha")}
         spectrum.setXRange(0.0, min(20.0, 0.5 * source.info.rate_hz))
-        grid.addWidget(spectrum, 3, 1, 2, 1)
+        self.health_table: QtWidgets.QTableWidget | None = None
+        self.alarm_label: QtWidgets.QLabel | None = None
+        self._frames = 0
+        if self._health_source is None:
+            grid.addWidget(spectrum, 3, 1, 2, 1)
+        else:
+            grid.addWidget(spectrum, 3, 1)
+            grid.addWidget(self._health_panel(), 4, 1)
         grid.setColumnStretch(0, 3)
         grid.setColumnStretch(1, 2)
 
@@ -183,6 +207,40 @@ class ConsoleWindow(QtWidgets.QMainWindow):
             self._drawn_rows = self._source.total_rows
             self.redraw(self._source.snapshot())
         self._status.setText(self._source.status())
+        if self._health_source is not None and self._frames % _HEALTH_EVERY == 0:
+            self.show_health(self._health_source.health(), self._health_source.fan_speed_rpm)
+        self._frames += 1
+
+    def show_health(self, health: list[DeviceHealth], fan_rpm: float) -> None:
+        """Fill the health panel, the alarm line and the fan state (live sources only)."""
+        table, alarm = self.health_table, self.alarm_label
+        if table is None or alarm is None:
+            return
+        if self._fan_label is not None:
+            self._fan_label.setText("fan: -- rpm" if math.isnan(fan_rpm)
+                                    else f"fan: {fan_rpm:.0f} rpm")
+        table.setRowCount(len(health))
+        red = pg.mkColor(255, 90, 90)
+        for row, dev in enumerate(health):
+            fit = dev.clock_fit
+            clock = ("" if fit is None else f"{fit.get('drift_ppm', math.nan):+.1f} ppm "
+                     f"{fit.get('residual_s', math.nan) * 1e6:.0f} us")
+            cells = (dev.device, f"{dev.rate_hz:.1f}", str(dev.gaps), str(dev.overflow_samples),
+                     str(dev.faults), clock, dev.alarm or dev.last_fault or "")
+            for col, text in enumerate(cells):
+                item = table.item(row, col)
+                if item is None:
+                    item = QtWidgets.QTableWidgetItem()
+                    table.setItem(row, col, item)
+                item.setText(text)
+                if dev.alarm is not None:
+                    item.setForeground(red)
+                else:
+                    item.setData(QtCore.Qt.ItemDataRole.ForegroundRole, None)
+        alarms = [f"{d.device}: {d.alarm}" for d in health if d.alarm is not None]
+        alarm.setText("ALARM  " + "; ".join(alarms) if alarms else "all devices OK")
+        alarm.setStyleSheet("color: white; background: #c00000; font-weight: bold; padding: 2px"
+                            if alarms else "color: #60d060; padding: 2px")
 
     def redraw(self, snap: dict[str, npt.NDArray[Any]]) -> None:
         """Draw one snapshot (columns of :func:`daq.source.sync_columns`)."""
@@ -206,7 +264,10 @@ class ConsoleWindow(QtWidgets.QMainWindow):
         self._rho_label.setText(f"rho = {rho:.3f} kg/m^3")
         cp = pressure_coefficients(snap["pressure"][-1], U, rho)
         self.cp_time = t_end
-        self.cp_curve.setData(self._perimeter, cp, connect="finite")
+        if np.isfinite(cp).any():
+            self.cp_curve.setData(self._perimeter, cp, connect="finite")
+        else:  # wind off: no Cp (an all-NaN curve makes pyqtgraph warn at every frame)
+            self.cp_curve.setData([], [])
         self._tap_scatter.setBrush(self._tap_brushes(cp))
 
     # -- Qt --------------------------------------------------------------------------------------
@@ -217,6 +278,29 @@ class ConsoleWindow(QtWidgets.QMainWindow):
         super().closeEvent(event)
 
     # -- internals -------------------------------------------------------------------------------
+    def _health_panel(self) -> QtWidgets.QWidget:
+        """Build the (empty) device health panel: the alarm line over the table."""
+        panel = QtWidgets.QWidget()
+        layout = QtWidgets.QVBoxLayout(panel)
+        layout.setContentsMargins(0, 0, 0, 0)
+        self.alarm_label = QtWidgets.QLabel("devices: starting")
+        layout.addWidget(self.alarm_label)
+        table = QtWidgets.QTableWidget(0, len(HEALTH_COLUMNS))
+        table.setHorizontalHeaderLabels(list(HEALTH_COLUMNS))
+        table.verticalHeader().setVisible(False)
+        table.setEditTriggers(QtWidgets.QAbstractItemView.EditTrigger.NoEditTriggers)
+        table.verticalHeader().setDefaultSectionSize(17)
+        font = table.font()
+        font.setPointSizeF(max(font.pointSizeF() - 1.0, 7.0))
+        table.setFont(font)
+        table.setHorizontalScrollBarPolicy(QtCore.Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+        header = table.horizontalHeader()
+        header.setSectionResizeMode(QtWidgets.QHeaderView.ResizeMode.ResizeToContents)
+        header.setStretchLastSection(True)
+        layout.addWidget(table)
+        self.health_table = table
+        return panel
+
     def _tap_brushes(self, cp: npt.NDArray[np.float64]) -> list[Any]:
         """Colour each tap by Cp on [-2, 2] (grey where Cp is not defined)."""
         grey = pg.mkBrush(120, 120, 120)

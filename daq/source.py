@@ -7,9 +7,10 @@ the GUI thread: :meth:`DataSource.poll` moves it forward, :meth:`DataSource.snap
 copies shaped like :meth:`daq.ring_buffer.RingBuffer.snapshot`. Nothing is ever pushed to the
 GUI from another thread (STYLE.md, "Threads and GUI").
 
-Implementations: :class:`daq.replay.ReplaySource` (a recorded run played back in time); a later
-``LiveSource`` wraps the acquisition's :class:`~daq.ring_buffer.RingBuffer` (its ``poll`` only
-reports whether ``total_rows`` changed).
+Implementations: :class:`daq.replay.ReplaySource` (a recorded run played back in time) and
+:class:`daq.live_source.LiveSource` (a rig acquired now; its ``poll`` only reports how far
+``total_rows`` moved). A live source is also a :class:`HealthSource`: it reports
+:class:`DeviceHealth` per device, which the window shows in its health panel.
 
 Not responsible for: reading files (``daq.replay``), acquisition, or drawing (``daq.live``).
 """
@@ -17,7 +18,7 @@ Not responsible for: reading files (``daq.replay``), acquisition, or drawing (``
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 import numpy.typing as npt
@@ -25,7 +26,8 @@ import numpy.typing as npt
 from daq.config import RigConfig
 from daq.ring_buffer import Column
 
-__all__ = ["SYNC_SCALARS", "DataSource", "SourceInfo", "sync_columns"]
+__all__ = ["SYNC_SCALARS", "DataSource", "DeviceHealth", "HealthSource", "SourceInfo",
+           "sync_columns"]
 
 #: Scalar columns of the synchronised view and their units (``pressure`` is the one 2-D column).
 SYNC_SCALARS: dict[str, str] = {
@@ -111,4 +113,56 @@ class DataSource(Protocol):
 
     def close(self) -> None:
         """Release the source's resources (idempotent)."""
+        ...
+
+
+@dataclass(frozen=True)
+class DeviceHealth:
+    """The health of one device of a live rig, as the console's health panel shows it.
+
+    Attributes
+    ----------
+    device, kind : str
+        Instrument name and engine kind.
+    rate_hz : float
+        Samples read per second, recently.
+    gaps : int
+        Gaps the device's stream reported.
+    overflow_samples : int
+        Samples dropped because the engine's queue was full.
+    faults : int
+        Driver faults so far (stalls and reconnects included).
+    last_fault : str or None
+        The last fault's text.
+    clock_fit : dict or None
+        The device clock's fit onto the host clock (``offset_s``, ``drift_ppm``,
+        ``residual_s``, ...; see ``RunWriter.clock_fits``), None for an unclocked device or
+        before the fit is ready.
+    alarm : str or None
+        Why the device needs the operator's attention now (faulted, stalled, reader stopped),
+        or None.
+    """
+
+    device: str
+    kind: str
+    rate_hz: float
+    gaps: int
+    overflow_samples: int
+    faults: int
+    last_fault: str | None
+    clock_fit: dict[str, float] | None
+    alarm: str | None
+
+
+@runtime_checkable
+class HealthSource(Protocol):
+    """A source that reports device health (a live rig); polled from the GUI thread."""
+
+    def health(self) -> list[DeviceHealth]:
+        """Return every device's health now."""
+        ...
+
+    @property
+    def fan_speed_rpm(self) -> float:
+        """Measure the fan speed last read, rpm (NaN when unknown)."""
         ...

@@ -240,9 +240,9 @@ def test_bad_replay_files_give_one_line_and_exit_code_2(make, message, run_file,
         ReplaySource(path).open()
 
 
-def test_live_mode_is_refused_clearly(capsys):
-    assert main(["gui", "--config", str(CONFIGS / "sim_flat_plate.toml"), "--simulate"]) == 2
-    assert "live mode: not yet available" in capsys.readouterr().err
+def test_gui_without_a_source_is_refused_clearly(capsys):
+    assert main(["gui"]) == 2
+    assert "give --replay FILE.h5, or --config CONFIG.toml" in capsys.readouterr().err
 
 
 def test_the_refcount_guard_keeps_true_alive_through_many_signal_emissions(qapp):
