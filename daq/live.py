@@ -7,7 +7,9 @@ of the latest row against the tap's perimeter position and on the section outlin
 spectra of h and alpha over the visible window, wind speed and air density, and a status line.
 Over a live source (a :class:`~daq.source.HealthSource`) it adds the fan state and a device
 health panel (samples/s, gaps, overflows, errors, clock fit and last fault per device) with a red
-alarm line when a device has faulted or stalled; both are polled by the same timer.
+alarm line when a device has faulted or stalled, and the operator controls
+(:class:`~daq.controls.ControlPanel`: fan, arm/release, CALZ, markers); all are polled by the
+same timer.
 Data is never pushed into the window from other threads (STYLE.md, "Threads and GUI").
 
 Not responsible for: reading files or instruments (the sources), the numbers themselves
@@ -17,6 +19,7 @@ Not responsible for: reading files or instruments (the sources), the numbers the
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -24,6 +27,7 @@ import numpy.typing as npt
 import pyqtgraph as pg
 from PySide6 import QtCore, QtWidgets
 
+from daq.controls import ControlPanel
 from daq.display import amplitude_spectrum, perimeter_positions, pressure_coefficients
 from daq.qt_guard import guard_bool_refcounts
 from daq.replay import ReplayError
@@ -63,6 +67,9 @@ class ConsoleWindow(QtWidgets.QMainWindow):
         Length of the scrolling time window, s (> 0).
     frame_ms : int
         Redraw period, ms.
+    confirm : callable, optional
+        ``confirm(title, question) -> bool`` for the control panel's dangerous actions
+        (default: a message box); a seam for tests.
     parent : QWidget, optional
         Qt parent.
 
@@ -79,9 +86,13 @@ class ConsoleWindow(QtWidgets.QMainWindow):
         The device health panel (columns :data:`HEALTH_COLUMNS`), for a live source only.
     alarm_label : QLabel or None
         The alarm line above it: empty when all is well, red text naming the devices in alarm.
+    controls : ControlPanel or None
+        The operator controls (:mod:`daq.controls`), over a live source (one with an ``acq``
+        engine) only; re-evaluated at every tick.
     """
 
     def __init__(self, source: DataSource, *, window_s: float = 20.0, frame_ms: int = FRAME_MS,
+                 confirm: Callable[[str, str], bool] | None = None,
                  parent: QtWidgets.QWidget | None = None) -> None:
         guard_bool_refcounts()  # PySide6 6.12.0 + Python 3.11: see daq.qt_guard
         super().__init__(parent)
@@ -170,6 +181,10 @@ class ConsoleWindow(QtWidgets.QMainWindow):
         else:
             grid.addWidget(spectrum, 3, 1)
             grid.addWidget(self._health_panel(), 4, 1)
+        self.controls: ControlPanel | None = None
+        if self._health_source is not None and hasattr(source, "acq"):
+            self.controls = ControlPanel(source, confirm=confirm)
+            grid.addWidget(self.controls, 5, 0, 1, 2)
         grid.setColumnStretch(0, 3)
         grid.setColumnStretch(1, 2)
 
@@ -209,6 +224,8 @@ class ConsoleWindow(QtWidgets.QMainWindow):
         self._status.setText(self._source.status())
         if self._health_source is not None and self._frames % _HEALTH_EVERY == 0:
             self.show_health(self._health_source.health(), self._health_source.fan_speed_rpm)
+        if self.controls is not None:
+            self.controls.refresh()
         self._frames += 1
 
     def show_health(self, health: list[DeviceHealth], fan_rpm: float) -> None:
@@ -272,8 +289,10 @@ class ConsoleWindow(QtWidgets.QMainWindow):
 
     # -- Qt --------------------------------------------------------------------------------------
     def closeEvent(self, event: Any) -> None:  # noqa: N802 - Qt's name
-        """Stop the timer and close the source."""
+        """Stop the timer, wait for a running control action, and close the source."""
         self._timer.stop()
+        if self.controls is not None:
+            self.controls.shutdown()
         self._source.close()
         super().closeEvent(event)
 

@@ -12,7 +12,8 @@ The GUI thread polls :meth:`LiveSource.snapshot` (the ring's copy) and :meth:`Li
 pushed to the GUI from the acquisition threads (STYLE.md, "Threads and GUI").
 
 Not responsible for: drawing (:mod:`daq.live`), the sync numerics (:mod:`daq.sync` through
-:class:`~daq.pipeline.RunWriter`), recording to a file or operator controls (later parts).
+:class:`~daq.pipeline.RunWriter`), recording to a file (a later part), or the operator controls
+(:mod:`daq.controls`, which use :attr:`LiveSource.acq`).
 """
 
 from __future__ import annotations
@@ -46,6 +47,8 @@ FAULT_ALARM_S = 10.0
 RATE_WINDOW_S = 2.0
 #: How often the subscriber copies the writer's clock fits for the GUI, s.
 CLOCK_FIT_INTERVAL_S = 0.5
+#: The live source keeps this many of the engine's latest events (:meth:`LiveSource.events`).
+EVENTS_KEPT = 1000
 #: Sync rows are handed to the ring this often, s (the writer's batching interval).
 WRITE_INTERVAL_S = 0.05
 
@@ -64,15 +67,21 @@ class RingRecorder:
         The console's buffer.
     fan_devices : sequence of str
         Names of the fan drives whose ``speed`` channel is the fan state.
+    plc_devices : sequence of str
+        Names of the PLCs whose ``armed`` channel is the release state.
     """
 
-    def __init__(self, ring: RingBuffer, fan_devices: Sequence[str] = ()) -> None:
+    def __init__(self, ring: RingBuffer, fan_devices: Sequence[str] = (),
+                 plc_devices: Sequence[str] = ()) -> None:
         self.ring = ring
         self._fans = set(fan_devices)
+        self._plcs = set(plc_devices)
         self._channels: dict[str, list[str]] = {}
         self._state = "new"
         #: Last fan speed read, rpm (NaN before the first reading).
         self.fan_rpm = math.nan
+        #: Last PLC ARM coil read: (host ``monotonic_ns`` of the reading, armed); None before.
+        self.plc_armed: tuple[int, bool] | None = None
 
     @property
     def state(self) -> str:
@@ -101,12 +110,18 @@ class RingRecorder:
 
     def append_raw(self, device: str, host_time_ns: Any, device_time: Any, counter: Any,
                    values: Any, *, extra: Mapping[str, Any] | None = None) -> None:
-        """Keep the last fan speed; drop the other raw samples."""
-        if device not in self._fans or "speed" not in self._channels.get(device, ()):
-            return
-        table = np.asarray(values, dtype=np.float64)
-        if table.ndim == 2 and table.shape[0]:
-            self.fan_rpm = float(table[-1, self._channels[device].index("speed")])
+        """Keep the last fan speed and PLC ARM state; drop the other raw samples."""
+        channels = self._channels.get(device, ())
+        if device in self._fans and "speed" in channels:
+            table = np.asarray(values, dtype=np.float64)
+            if table.ndim == 2 and table.shape[0]:
+                self.fan_rpm = float(table[-1, channels.index("speed")])
+        elif device in self._plcs and "armed" in channels:
+            table = np.asarray(values, dtype=np.float64)
+            hosts = np.asarray(host_time_ns, dtype=np.int64)
+            if table.ndim == 2 and table.shape[0] and hosts.size:
+                # one tuple, swapped whole (atomic for the GUI thread that reads it)
+                self.plc_armed = (int(hosts[-1]), bool(table[-1, channels.index("armed")]))
 
     def append_sync(self, time: Any, *, h: Any, alpha: Any, lift: Any, moment: Any,
                     pressure: Any, U: Any, rho: Any) -> None:
@@ -139,8 +154,12 @@ class _HealthTap:
         self._last_fault: dict[str, tuple[float, str]] = {}
         self._fits: dict[str, dict[str, float]] = {}
         self._next_fit = 0.0
+        self._events: deque[Any] = deque(maxlen=EVENTS_KEPT)
 
     def __call__(self, name: str, doc: Any) -> None:
+        if name == "event":
+            with self._lock:
+                self._events.append(doc)
         if name == "event" and getattr(doc, "kind", "") == "fault":
             device = str(getattr(doc, "device", None) or "?")
             text = f"{getattr(doc, 'error', 'fault')}: {getattr(doc, 'text', '')}"
@@ -153,6 +172,10 @@ class _HealthTap:
             fits = self.writer.clock_fits()
             with self._lock:
                 self._fits = fits
+
+    def events(self) -> list[Any]:
+        with self._lock:
+            return list(self._events)
 
     def read(self) -> tuple[dict[str, tuple[float, str]], dict[str, dict[str, float]]]:
         with self._lock:
@@ -237,7 +260,8 @@ class LiveSource:
             rate = float(scanners[0].settings["rate_hz"]) if scanners else 500.0
             self._ring = RingBuffer(int(math.ceil(self.window_s * rate)) + 2,
                                     *sync_columns(live.taps.n_taps))
-            self._recorder = RingRecorder(self._ring, [i.name for i in live.by_role("fan")])
+            self._recorder = RingRecorder(self._ring, [i.name for i in live.by_role("fan")],
+                                          [i.name for i in live.by_role("plc")])
             writer = RunWriter(Path("live"), live, write_interval_s=WRITE_INTERVAL_S)
             writer.recorder = cast(RunRecorder, self._recorder)  # duck-typed: no file
             self._writer = writer
@@ -320,6 +344,36 @@ class LiveSource:
     def running(self) -> bool:
         """Tell whether the engine runs."""
         return self._acq is not None and bool(self._acq.running)
+
+    @property
+    def acq(self) -> Any:
+        """The acquisition engine (:class:`~daq.acquisition.Acquisition`); None when stopped.
+
+        For operator commands (:mod:`daq.controls`): its ``drivers``, ``arm``, ``release``,
+        ``mark``.
+        """
+        return self._acq
+
+    def events(self, kind: str | None = None) -> list[Any]:
+        """Return the engine's latest events (:class:`~daq.acquisition.Event`), oldest first.
+
+        Parameters
+        ----------
+        kind : str, optional
+            Only those of this kind (``"release"``, ``"arm"``, ``"note"``, ...).
+
+        Returns
+        -------
+        list of Event
+            At most :data:`EVENTS_KEPT`; empty before :meth:`open`.
+        """
+        events = [] if self._tap is None else self._tap.events()
+        return [e for e in events if kind is None or getattr(e, "kind", None) == kind]
+
+    @property
+    def plc_armed(self) -> tuple[int, bool] | None:
+        """The PLC's ARM coil as last read: (host ``monotonic_ns``, armed); None before."""
+        return None if self._recorder is None else self._recorder.plc_armed
 
     @property
     def fan_speed_rpm(self) -> float:

@@ -1,0 +1,376 @@
+"""The operator control panel of the live console: fan, arm/release, CALZ, event markers.
+
+Responsibility: one :class:`ControlPanel` widget over a live source (``source.acq`` is the
+:class:`~daq.acquisition.Acquisition` engine, ``source.fan_speed_rpm`` and ``source.plc_armed``
+the last readings). Its :meth:`ControlPanel.refresh` (called from the window's timer) decides
+which actions the current state allows and disables the others, with the reason as the tooltip
+and in the status line (e.g. ``"release: arm first"``). Actions that can block (fan start,
+arm, release, CALZ) run one at a time on a plain worker thread; the result comes back to the
+GUI thread through a Qt signal and any error (``SafetyError``, ``DeviceError``, ...) is shown in
+the status line. Stopping the fan is one register write and runs at once on the GUI thread (a
+stop must never queue behind a running action). The release asks for confirmation through an
+injectable ``confirm(title, question) -> bool`` (a ``QMessageBox`` by default).
+
+Not responsible for: the drivers' own safety checks (the fan limit, ARM before RELEASE, CALZ
+wind-off are enforced there as well), drawing, or recording.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+from PySide6 import QtCore, QtWidgets
+
+__all__ = ["CALZ_MAX_WIND", "FAN_STOPPED_RPM", "ControlPanel", "ask_user"]
+
+#: CALZ only below this measured wind speed, m/s.
+CALZ_MAX_WIND = 0.5
+#: The fan counts as stopped at or below this measured speed, rpm.
+FAN_STOPPED_RPM = 1.0
+#: How long closing the panel waits for a running action, s.
+_JOIN_S = 35.0
+
+
+def ask_user(title: str, question: str) -> bool:
+    """Ask a yes/no question in a modal message box (the default ``confirm``)."""
+    answer = QtWidgets.QMessageBox.question(
+        None, title, question,
+        QtWidgets.QMessageBox.StandardButton.Yes | QtWidgets.QMessageBox.StandardButton.No,
+        QtWidgets.QMessageBox.StandardButton.No)
+    return bool(answer == QtWidgets.QMessageBox.StandardButton.Yes)
+
+
+class ControlPanel(QtWidgets.QGroupBox):
+    """Operator controls over a live source (see the module docstring).
+
+    Parameters
+    ----------
+    source : LiveSource
+        An opened live source: ``acq``, ``info.config``, ``fan_speed_rpm``, ``plc_armed`` and
+        ``snapshot(last)``.
+    confirm : callable, optional
+        ``confirm(title, question) -> bool`` for dangerous actions; default :func:`ask_user`.
+    parent : QWidget, optional
+        Qt parent.
+
+    Attributes
+    ----------
+    fan_spin : QDoubleSpinBox
+        The fan setpoint, rpm, within [0, ``[limits] max_fan_rpm``].
+    buttons : dict of str to QPushButton
+        ``fan_apply``, ``fan_stop``, ``arm``, ``release``, ``calz``, ``mark``.
+    note_edit : QLineEdit
+        The text of the next event marker.
+    reasons : dict of str to str
+        Why each disabled button is disabled (``"release: arm first"``); absent when enabled.
+    """
+
+    #: (action, error text or None, result): posted from the worker thread.
+    finished = QtCore.Signal(str, object, object)
+
+    def __init__(self, source: Any, *, confirm: Callable[[str, str], bool] | None = None,
+                 parent: QtWidgets.QWidget | None = None) -> None:
+        super().__init__("controls", parent)
+        self._source = source
+        self._confirm = ask_user if confirm is None else confirm
+        config = source.info.config
+        self._max_rpm = float(config.limits.max_fan_rpm)
+        fans = config.by_role("fan")
+        plcs = config.by_role("plc")
+        scanners = config.by_role("scanner")
+        self._fan_name: str | None = fans[0].name if fans else None
+        self._plc_name: str | None = plcs[0].name if len(plcs) == 1 else None
+        self._scanner_name: str | None = scanners[0].name if scanners else None
+        self._worker: threading.Thread | None = None
+        self._busy: str | None = None
+        #: The ARM state the panel's own commands left, with their host time (ns).
+        self._own_armed: tuple[int, bool] | None = None
+        self._fan_commanded = False
+        self.reasons: dict[str, str] = {}
+        self._message = ""
+
+        outer = QtWidgets.QVBoxLayout(self)
+        layout = QtWidgets.QHBoxLayout()
+        outer.addLayout(layout)
+        layout.addWidget(QtWidgets.QLabel("fan (rpm)"))
+        self.fan_spin = QtWidgets.QDoubleSpinBox()
+        self.fan_spin.setDecimals(0)
+        self.fan_spin.setRange(0.0, self._max_rpm)
+        self.fan_spin.setSingleStep(50.0)
+        self.fan_spin.setToolTip(f"fan speed setpoint, 0..{self._max_rpm:g} rpm "
+                                 "([limits] max_fan_rpm)")
+        layout.addWidget(self.fan_spin)
+        self.buttons: dict[str, QtWidgets.QPushButton] = {}
+        for key, text, slot in (("fan_apply", "apply", self._on_apply),
+                                ("fan_stop", "stop fan", self.stop_fan),
+                                ("arm", "arm", self.arm),
+                                ("release", "release", self.release),
+                                ("calz", "CALZ", self.calz)):
+            button = QtWidgets.QPushButton(text)
+            button.clicked.connect(slot)
+            self.buttons[key] = button
+            layout.addWidget(button)
+        self.note_edit = QtWidgets.QLineEdit()
+        self.note_edit.setPlaceholderText("event note")
+        self.note_edit.returnPressed.connect(self._on_mark)
+        layout.addWidget(self.note_edit, 1)
+        mark = QtWidgets.QPushButton("mark")
+        mark.clicked.connect(self._on_mark)
+        self.buttons["mark"] = mark
+        layout.addWidget(mark)
+        self.status_label = QtWidgets.QLabel("")
+        self.status_label.setWordWrap(True)
+        outer.addWidget(self.status_label)
+        self.finished.connect(self._on_finished)
+        self.refresh()
+
+    # -- state -----------------------------------------------------------------------------------
+    @property
+    def status_text(self) -> str:
+        """The status line as shown."""
+        return str(self.status_label.text())
+
+    @property
+    def busy(self) -> str | None:
+        """The action running on the worker thread, if any."""
+        return self._busy
+
+    def armed(self) -> bool | None:
+        """Tell whether the PLC is armed: the newer of its last reading and the panel's command."""
+        reading = self._source.plc_armed
+        own = self._own_armed
+        if reading is None:
+            return None if own is None else own[1]
+        if own is None or reading[0] > own[0]:
+            return reading[1]
+        return own[1]
+
+    def refresh(self) -> None:
+        """Re-evaluate which actions are allowed now; disable the others with the reason."""
+        acq = self._source.acq
+        running = acq is not None and bool(acq.running)
+        drivers = acq.drivers if running else {}
+        reasons: dict[str, str] = {}
+
+        def refuse(keys: tuple[str, ...], why: str) -> None:
+            for key in keys:
+                reasons.setdefault(key, f"{_LABELS[key]}: {why}")
+
+        if not running:
+            refuse(tuple(self.buttons), "acquisition not running")
+        if self._busy is not None:
+            refuse(("fan_apply", "arm", "release", "calz"), f"busy ({self._busy})")
+        fan_rpm = float(self._source.fan_speed_rpm)
+        if self._fan_name is None or self._fan_name not in drivers:
+            refuse(("fan_apply", "fan_stop"), "no fan in this rig")
+        if self._plc_name is None or self._plc_name not in drivers:
+            refuse(("arm", "release"), "no PLC in this rig")
+        else:
+            armed = self.armed()
+            if armed is None:
+                refuse(("release",), "PLC state not read yet")
+            elif not armed:
+                refuse(("release",), "arm first")
+            else:
+                refuse(("arm",), "already armed")
+        if self._scanner_name is None or self._scanner_name not in drivers:
+            refuse(("calz",), "no scanner in this rig")
+        elif self._fan_name is not None:
+            if math.isnan(fan_rpm):
+                refuse(("calz",), "fan speed not read yet")
+            elif fan_rpm > FAN_STOPPED_RPM or self._fan_commanded:
+                refuse(("calz",), "stop the fan first")
+        if "calz" not in reasons:
+            wind = self._wind()
+            if not math.isfinite(wind):
+                refuse(("calz",), "wind speed not measured yet")
+            elif wind >= CALZ_MAX_WIND:
+                refuse(("calz",), f"wind {wind:.2f} m/s, must be below {CALZ_MAX_WIND:g} m/s")
+        if "calz" not in reasons:
+            # The scanner refuses every command but STOP while it scans, and the engine keeps it
+            # scanning: the console zeroes it when it starts; a pause of the scan is not built.
+            refuse(("calz",), "the scanner is scanning (CALZ runs when the console starts)")
+        self.reasons = reasons
+        for key, button in self.buttons.items():
+            why = reasons.get(key)
+            button.setEnabled(why is None)
+            button.setToolTip(why or "")
+        self.fan_spin.setEnabled("fan_apply" not in reasons)
+        self.note_edit.setEnabled("mark" not in reasons)
+        self._show()
+
+    # -- actions ---------------------------------------------------------------------------------
+    def apply_fan(self, rpm: float) -> None:
+        """Set the fan speed to ``rpm`` and run the fan (on the worker thread).
+
+        The driver refuses a speed outside [0, max_fan_rpm] (``SafetyError``, shown).
+        """
+        fan = self._driver(self._fan_name, "fan", "fan")
+        if fan is None:
+            return
+
+        def run() -> str:
+            fan.set_speed(float(rpm))
+            fan.start()
+            return f"fan set to {float(rpm):.0f} rpm"
+
+        self._fan_commanded = True
+        self._submit("fan", run)
+
+    def stop_fan(self) -> None:
+        """Stop the fan now (one register write, on the GUI thread)."""
+        fan = self._driver(self._fan_name, "fan", "fan")
+        if fan is None:
+            return
+        try:
+            fan.stop()
+        except Exception as exc:  # shown, never swallowed
+            self._set_message(f"fan stop failed: {type(exc).__name__}: {exc}")
+        else:
+            self._fan_commanded = False
+            self._set_message("fan stopped")
+        self.refresh()
+
+    def arm(self) -> None:
+        """Arm the PLC (magnet on, one release permitted), on the worker thread."""
+        acq = self._acq("arm")
+        if acq is not None:
+            self._submit("arm", lambda: acq.arm(self._plc_name))
+
+    def release(self) -> None:
+        """Release the model after confirmation (on the worker thread)."""
+        acq = self._acq("release")
+        if acq is None:
+            return
+        if not self._confirm("release", "Release the model now?"):
+            self._set_message("release: cancelled")
+            return
+        self._submit("release", lambda: acq.release(self._plc_name))
+
+    def calz(self) -> None:
+        """Zero the scanner (CALZ) with the fan stopped and the wind below 0.5 m/s."""
+        self.refresh()
+        why = self.reasons.get("calz")
+        if why is not None:
+            self._set_message(why)
+            return
+        scanner = self._driver(self._scanner_name, "CALZ", "scanner")
+        if scanner is not None:
+            # wind off checked above (measured < CALZ_MAX_WIND, fan stopped): zero it
+            self._submit("calz", lambda: scanner.calz(wind_speed_now=0.0))
+
+    def mark(self, text: str) -> None:
+        """Record an operator ``"note"`` event with ``text`` (immediate: no I/O)."""
+        acq = self._acq("mark")
+        if acq is None:
+            return
+        try:
+            acq.mark("note", text)
+        except Exception as exc:
+            self._set_message(f"mark failed: {type(exc).__name__}: {exc}")
+        else:
+            self._set_message(f"marked: {text!r}")
+
+    def shutdown(self, timeout_s: float = _JOIN_S) -> None:
+        """Wait for a running action to finish (before the source closes)."""
+        worker, self._worker = self._worker, None
+        if worker is not None:
+            worker.join(timeout_s)
+
+    # -- internals -------------------------------------------------------------------------------
+    def _on_apply(self) -> None:
+        self.apply_fan(self.fan_spin.value())
+
+    def _on_mark(self) -> None:
+        text = self.note_edit.text().strip()
+        if not text:
+            self._set_message("mark: type a note first")
+            return
+        self.mark(text)
+        self.note_edit.clear()
+
+    def _acq(self, what: str) -> Any:
+        acq = self._source.acq
+        if acq is None or not acq.running:
+            self._set_message(f"{what}: acquisition not running")
+            return None
+        return acq
+
+    def _driver(self, name: str | None, what: str, noun: str) -> Any:
+        acq = self._acq(what)
+        if acq is None:
+            return None
+        driver = acq.drivers.get(name) if name is not None else None
+        if driver is None:
+            self._set_message(f"{what}: no {noun} in this rig")
+        return driver
+
+    def _submit(self, action: str, job: Callable[[], Any]) -> None:
+        if self._busy is not None:
+            self._set_message(f"{action}: busy ({self._busy})")
+            return
+        self._busy = action
+        self._set_message(f"{action}: running ...")
+
+        def run() -> None:
+            try:
+                result = job()
+            except Exception as exc:  # posted to the GUI thread, shown there
+                error: str | None = f"{type(exc).__name__}: {exc}"
+                result = None
+            else:
+                error = None
+            try:
+                self.finished.emit(action, error, result)
+            except RuntimeError:  # the panel is gone (closed while the action ran)
+                pass
+
+        self._worker = threading.Thread(target=run, name=f"console-{action}", daemon=True)
+        self._worker.start()
+        self.refresh()
+
+    def _on_finished(self, action: str, error: object, result: object) -> None:
+        self._busy = None
+        worker, self._worker = self._worker, None
+        if worker is not None:
+            worker.join(1.0)  # it has emitted: it ends now
+        now = time.monotonic_ns()
+        if error is not None:
+            if action == "fan":
+                self._fan_commanded = False
+            self._set_message(f"{action} failed: {error}")
+        else:
+            if action == "arm":
+                self._own_armed = (now, True)
+            elif action == "release":
+                self._own_armed = (now, False)
+            text = result if isinstance(result, str) else getattr(result, "text", "")
+            self._set_message(f"{action}: done" + (f" ({text})" if text else ""))
+        if action == "release" and error is not None:
+            self._own_armed = None  # unknown: trust the next PLC reading
+        self.refresh()
+
+    def _set_message(self, text: str) -> None:
+        self._message = text
+        self._show()
+
+    def _show(self) -> None:
+        parts = [self._message] if self._message else []
+        parts += list(self.reasons.values())
+        self.status_label.setText("  |  ".join(dict.fromkeys(parts)))
+
+    def _wind(self) -> float:
+        try:
+            snap = self._source.snapshot(1)
+        except RuntimeError:
+            return math.nan
+        wind = snap.get("U")
+        return float(wind[-1]) if wind is not None and len(wind) else math.nan
+
+
+_LABELS = {"fan_apply": "fan", "fan_stop": "fan", "arm": "arm", "release": "release",
+           "calz": "CALZ", "mark": "mark"}
