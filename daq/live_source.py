@@ -247,7 +247,7 @@ class LiveSource:
         if self._acq is not None or self._closed:
             return
         from daq.acquisition import Acquisition, drivers_from_config
-        from daq.pipeline import RunWriter, _start_sync_pulses
+        from daq.pipeline import RunWriter, start_sync_pulses
 
         try:
             live = self.config
@@ -276,8 +276,7 @@ class LiveSource:
                                     metadata={"rig": live.name, "mode": "live console"})
             self._acq.start()
             self._started_ns = time.monotonic_ns()
-            has_plc = any(kind == "plc" for kind, _ in drivers.values())
-            self._pulser = _start_sync_pulses(self._acq, self._pulse_s if has_plc else None)
+            self._pulser = start_sync_pulses(self._acq, drivers, self._pulse_s)
             if self.fan_rpm is not None and "fan" in self._acq.drivers:
                 fan = self._acq.drivers["fan"]
                 fan.set_speed(self.fan_rpm)

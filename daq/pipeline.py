@@ -51,7 +51,8 @@ from daq.sync import (
 )
 from daq.sync_check import ClockTruthTracker
 
-__all__ = ["DEFAULT_RHO", "DEFAULT_SYNC_RATE_HZ", "RunWriter", "record_run"]
+__all__ = ["DEFAULT_RHO", "DEFAULT_SYNC_RATE_HZ", "RunWriter", "SyncPulses", "record_run",
+           "start_sync_pulses"]
 
 log = logging.getLogger(__name__)
 
@@ -599,8 +600,12 @@ class RunWriter:
         }
 
 
-class _SyncPulses:
-    """A thread pulsing the PLC's trigger line every ``interval_s`` (clock-map anchors)."""
+class SyncPulses:
+    """A thread pulsing the PLC's trigger line every ``interval_s`` (clock-map anchors).
+
+    Start it with :func:`start_sync_pulses`; :meth:`stop` ends it. ``failures`` counts the
+    pulses that failed (each logged; the PLC's own fault reporting covers the link).
+    """
 
     def __init__(self, acq: Any, interval_s: float) -> None:
         import threading
@@ -611,6 +616,9 @@ class _SyncPulses:
         self.failures = 0
         self._thread = threading.Thread(target=self._run, name="windrig-sync-pulses",
                                         daemon=True)
+
+    def start(self) -> None:
+        """Start pulsing."""
         self._thread.start()
 
     def _run(self) -> None:
@@ -624,16 +632,37 @@ class _SyncPulses:
                 log.warning("sync pulse failed (%d so far): %s", self.failures, exc)
 
     def stop(self) -> None:
+        """Stop pulsing and join the thread."""
         self._stop.set()
-        self._thread.join(2.0 + self._interval_s)
+        if self._thread.is_alive():
+            self._thread.join(2.0 + self._interval_s)
 
 
-def _start_sync_pulses(acq: Any, interval_s: float | None) -> _SyncPulses | None:
-    if interval_s is None:
+def start_sync_pulses(acq: Any, drivers: Mapping[str, tuple[str, Any]],
+                      interval_s: float | None) -> SyncPulses | None:
+    """Pulse the PLC's trigger line every ``interval_s`` while ``acq`` runs.
+
+    Parameters
+    ----------
+    acq : Acquisition
+        The running engine (its :meth:`~daq.acquisition.Acquisition.trigger` is called).
+    drivers : mapping
+        The engine's ``name -> (kind, driver)``: without a ``"plc"`` there is nothing to pulse.
+    interval_s : float or None
+        Interval, s (> 0); None: no pulses.
+
+    Returns
+    -------
+    SyncPulses or None
+        The running pulser (call ``stop()``), or None when there is none.
+    """
+    if interval_s is None or not any(kind == "plc" for kind, _ in drivers.values()):
         return None
     if not (math.isfinite(interval_s) and interval_s > 0):
         raise ValueError(f"sync_pulse_interval_s must be > 0 s or None, got {interval_s!r}")
-    return _SyncPulses(acq, float(interval_s))
+    pulser = SyncPulses(acq, float(interval_s))
+    pulser.start()
+    return pulser
 
 
 def _check_alignment(path: Path, rig: Any, writer: RunWriter) -> dict[str, Any]:
@@ -755,7 +784,7 @@ def record_run(config: RigConfig, out_path: str | Path, *, duration_s: float,
         acq.start()
         reason = "duration"
         runner: threading.Thread | None = None
-        pulser: _SyncPulses | None = None
+        pulser: SyncPulses | None = None
         try:
             if actions is not None:
                 def run_actions() -> None:
@@ -768,8 +797,7 @@ def record_run(config: RigConfig, out_path: str | Path, *, duration_s: float,
                 runner = threading.Thread(target=run_actions, name="windrig-actions",
                                           daemon=True)
                 runner.start()
-            has_plc = any(kind == "plc" for kind, _ in drivers.values())
-            pulser = _start_sync_pulses(acq, sync_pulse_interval_s if has_plc else None)
+            pulser = start_sync_pulses(acq, drivers, sync_pulse_interval_s)
             end = time.monotonic() + float(duration_s)
             # mininterval: redrawn at most twice a second (a log file gets a line per redraw).
             bar = (tqdm(total=round(float(duration_s), 1), unit="s", mininterval=0.5,

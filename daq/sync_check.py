@@ -182,21 +182,16 @@ class ClockTruthTracker:
     sample of each block are kept (a clock error changes slowly within a 20-50 ms block), a few
     hundred points per second of run: this runs on simulated rigs only. :meth:`result` compares
     them with the truth, ``truth[name](device time) -> true host time`` (``time.monotonic``
-    seconds); the truth may be given at construction or only then (a rig in another process
-    answers after the run).
+    seconds), asked only then (a rig in another process answers after the run).
 
     Parameters
     ----------
-    truth : mapping of str to callable, optional
-        Device name -> (device time, s -> true host time, s).
     settle_s : float
         Run time before which errors are not counted, s: the clock maps need a few envelope
         windows and their first anchors before they mean anything.
     """
 
-    def __init__(self, truth: Mapping[str, Callable[[FloatArray], FloatArray]] | None = None,
-                 *, settle_s: float = 2.0) -> None:
-        self.truth = dict(truth or {})
+    def __init__(self, *, settle_s: float = 2.0) -> None:
         self.settle_s = float(settle_s)
         self._points: dict[str, list[tuple[float, float, float, float]]] = {}
         self._t0_s = math.nan
@@ -214,14 +209,14 @@ class ClockTruthTracker:
         """Devices observed so far."""
         return sorted(self._points)
 
-    def result(self, truth: Mapping[str, Callable[[FloatArray], FloatArray]] | None = None
-               ) -> dict[str, Any]:
+    def result(self, truth: Mapping[str, Callable[[FloatArray], FloatArray]]) -> dict[str, Any]:
         """Headline figures after ``settle_s``: per device mean and max error, misalignment.
 
         Parameters
         ----------
-        truth : mapping, optional
-            Overrides (adds to) the truth given at construction.
+        truth : mapping of str to callable
+            Device name -> (device time, s -> true host time, s); devices without one are
+            left out.
 
         Returns
         -------
@@ -232,7 +227,6 @@ class ClockTruthTracker:
             land in the sync view) averaged over the run, and ``misalignment_max_s``, its
             largest value (NaN with fewer than two devices); ``settle_s``.
         """
-        truth = {**self.truth, **dict(truth or {})}
         mean: dict[str, float] = {}
         worst: dict[str, float] = {}
         series: dict[str, tuple[FloatArray, FloatArray]] = {}
