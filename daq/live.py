@@ -42,6 +42,8 @@ _PENS = {"h": "c", "alpha": "y", "lift": "m", "moment": "g"}
 #: Displayed unit and scale factor from SI, by channel.
 _DISPLAY = {"h": ("mm", 1e3), "alpha": ("deg", 180.0 / math.pi), "lift": ("N/m", 1.0),
             "moment": ("N m/m", 1.0)}
+#: The columns drawn over the whole window (the pressures are drawn for the latest row only).
+_TRACE_COLUMNS = ("time", "h", "alpha", "lift", "moment", "U", "rho")
 #: Columns of the health panel.
 HEALTH_COLUMNS = ("device", "samples/s", "gaps", "overflow", "errors", "clock fit", "last fault")
 #: The health panel is refreshed every this many frames.
@@ -220,7 +222,10 @@ class ConsoleWindow(QtWidgets.QMainWindow):
             self._timer.stop()
         if self._source.total_rows != self._drawn_rows:
             self._drawn_rows = self._source.total_rows
-            self.redraw(self._source.snapshot())
+            # The scalars of the whole window, the (wide) pressures of the latest row only.
+            snap = self._source.snapshot(columns=_TRACE_COLUMNS)
+            latest = self._source.snapshot(1, columns=("time", "pressure"))
+            self.redraw(snap, latest)
         self._status.setText(self._source.status())
         if self._health_source is not None and self._frames % _HEALTH_EVERY == 0:
             self.show_health(self._health_source.health(), self._health_source.fan_speed_rpm)
@@ -259,8 +264,19 @@ class ConsoleWindow(QtWidgets.QMainWindow):
         alarm.setStyleSheet("color: white; background: #c00000; font-weight: bold; padding: 2px"
                             if alarms else "color: #60d060; padding: 2px")
 
-    def redraw(self, snap: dict[str, npt.NDArray[Any]]) -> None:
-        """Draw one snapshot (columns of :func:`daq.source.sync_columns`)."""
+    def redraw(self, snap: dict[str, npt.NDArray[Any]],
+               latest: dict[str, npt.NDArray[Any]] | None = None) -> None:
+        """Draw one snapshot.
+
+        Parameters
+        ----------
+        snap : dict of str to ndarray
+            The window's rows of the scalar columns of :func:`daq.source.sync_columns`
+            (``pressure`` may be absent).
+        latest : dict of str to ndarray, optional
+            ``time`` and ``pressure`` of the row the pressure views show (the latest); default
+            the last row of ``snap``.
+        """
         t = snap["time"]
         if t.size == 0:
             return
@@ -279,8 +295,10 @@ class ConsoleWindow(QtWidgets.QMainWindow):
         U, rho = float(snap["U"][-1]), float(snap["rho"][-1])
         self._wind_label.setText(f"U = {U:.2f} m/s")
         self._rho_label.setText(f"rho = {rho:.3f} kg/m^3")
-        cp = pressure_coefficients(snap["pressure"][-1], U, rho)
-        self.cp_time = t_end
+        if latest is None:
+            latest = {"time": t[-1:], "pressure": snap["pressure"][-1:]}
+        cp = pressure_coefficients(latest["pressure"][-1], U, rho)
+        self.cp_time = float(latest["time"][-1])
         if np.isfinite(cp).any():
             self.cp_curve.setData(self._perimeter, cp, connect="finite")
         else:  # wind off: no Cp (an all-NaN curve makes pyqtgraph warn at every frame)

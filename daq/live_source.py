@@ -51,6 +51,9 @@ CLOCK_FIT_INTERVAL_S = 0.5
 EVENTS_KEPT = 1000
 #: Sync rows are handed to the ring this often, s (the writer's batching interval).
 WRITE_INTERVAL_S = 0.05
+#: The ring holds at least this much history, s: a whole free decay must still be there when
+#: the releases table cuts it (:mod:`daq.live_ident`).
+MIN_HISTORY_S = 30.0
 
 
 class RingRecorder:
@@ -136,7 +139,7 @@ class RingRecorder:
         """Ignore (faults reach the health panel through :class:`_HealthTap`)."""
 
     def add_release(self, **kwargs: Any) -> None:
-        """Ignore (the releases table is a later part)."""
+        """Ignore (the live releases come from the writer's ``release_hook``)."""
 
     def set_sync_attrs(self, **kwargs: Any) -> None:
         """Ignore."""
@@ -233,6 +236,8 @@ class LiveSource:
         self._error: str | None = None
         self._seen_rows = 0
         self._counts: deque[tuple[float, dict[str, int]]] = deque()  # (host s, samples)
+        self._decay_lock = threading.Lock()
+        self._decays: list[tuple[float, float | None]] = []  # (release s, caught s or None)
 
     # -- life cycle ------------------------------------------------------------------------------
     def open(self) -> None:
@@ -258,11 +263,13 @@ class LiveSource:
                 live = self._rig.config
             scanners = live.by_role("scanner")
             rate = float(scanners[0].settings["rate_hz"]) if scanners else 500.0
-            self._ring = RingBuffer(int(math.ceil(self.window_s * rate)) + 2,
+            history_s = max(self.window_s, MIN_HISTORY_S)
+            self._ring = RingBuffer(int(math.ceil(history_s * rate)) + 2,
                                     *sync_columns(live.taps.n_taps))
             self._recorder = RingRecorder(self._ring, [i.name for i in live.by_role("fan")],
                                           [i.name for i in live.by_role("plc")])
-            writer = RunWriter(Path("live"), live, write_interval_s=WRITE_INTERVAL_S)
+            writer = RunWriter(Path("live"), live, write_interval_s=WRITE_INTERVAL_S,
+                               release_hook=self._on_decay)
             writer.recorder = cast(RunRecorder, self._recorder)  # duck-typed: no file
             self._writer = writer
             self._tap = _HealthTap(writer)
@@ -369,6 +376,28 @@ class LiveSource:
         events = [] if self._tap is None else self._tap.events()
         return [e for e in events if kind is None or getattr(e, "kind", None) == kind]
 
+    def decays(self) -> list[tuple[float, float | None]]:
+        """Return the free decays seen so far, oldest first.
+
+        Returns
+        -------
+        list of (float, float or None)
+            ``(release, caught)``: the release instant and, once the model was armed again, the
+            time of the decay's last row, s from the run start (the sync view's ``time``);
+            ``caught`` is None while the decay goes on. The same instants as the releases
+            table of a recorded run (:class:`~daq.pipeline.RunWriter`).
+        """
+        with self._decay_lock:
+            return list(self._decays)
+
+    def _on_decay(self, what: str, t: float) -> None:
+        """Note a decay's start or end (the run writer's release hook, dispatcher thread)."""
+        with self._decay_lock:
+            if what == "release":
+                self._decays.append((t, None))
+            elif what == "caught" and self._decays and self._decays[-1][1] is None:
+                self._decays[-1] = (self._decays[-1][0], t)
+
     @property
     def plc_armed(self) -> tuple[int, bool] | None:
         """The PLC's ARM coil as last read: (host ``monotonic_ns``, armed); None before."""
@@ -385,11 +414,12 @@ class LiveSource:
         new, self._seen_rows = total - self._seen_rows, total
         return new
 
-    def snapshot(self, last: int | None = None) -> dict[str, npt.NDArray[Any]]:
+    def snapshot(self, last: int | None = None,
+                 columns: Sequence[str] | None = None) -> dict[str, npt.NDArray[Any]]:
         """Return copies of the most recent sync rows, oldest first (``RingBuffer.snapshot``)."""
         if self._ring is None:
             raise RuntimeError("LiveSource.snapshot: call open() first")
-        return self._ring.snapshot(last)
+        return self._ring.snapshot(last, columns)
 
     def status(self) -> str:
         """Return the status line: rig, rows, seconds shown, fan speed, errors."""

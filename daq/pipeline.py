@@ -139,14 +139,22 @@ class RunWriter:
     clock_truth : ClockTruthTracker, optional
         Simulated rigs: told the host times the sync view uses for every block, to measure them
         against the simulators' truth (:mod:`daq.sync_check`).
+    release_hook : callable, optional
+        Told of free decays as soon as they begin and end, before their row of the releases
+        table is final: ``release_hook("release", t)`` with the release instant and
+        ``release_hook("caught", t)`` when arming again ends the last decay (``t`` its last
+        row's time), s from the run start. Called on the engine's dispatcher thread; it must
+        be quick. The live console cuts its decays with it.
     """
 
     def __init__(self, path: str | Path, config: RigConfig, *, operator_notes: str = "",
                  sync_rate_hz: float | None = None, use_trigger_anchors: bool = True,
                  max_hold_s: float = 2.0, write_interval_s: float = 0.2,
                  recorder_options: Mapping[str, Any] | None = None,
-                 clock_truth: ClockTruthTracker | None = None) -> None:
+                 clock_truth: ClockTruthTracker | None = None,
+                 release_hook: Callable[[str, float], None] | None = None) -> None:
         self.path = Path(path)
+        self.release_hook = release_hook
         self.clock_truth = clock_truth
         self.config = config
         self.operator_notes = operator_notes
@@ -522,11 +530,15 @@ class RunWriter:
         if event.kind == "release":
             command = int(event.data.get("command_ns", event.host_time_ns))
             self._releases.append(_Release(time=float(self._time(command))))
+            if self.release_hook is not None:
+                self.release_hook("release", self._releases[-1].time)
         elif event.kind == "arm" and self._releases and self._releases[-1].end_time is None:
             # Arming again catches the model: the free decay of the last release ends before
             # the arm command (less one sync period: a sync row averages the lasers over
             # +- half a period, which must not reach into the caught model).
             self._releases[-1].end_time = t - 1.0 / self.sync_rate_hz
+            if self.release_hook is not None:
+                self.release_hook("caught", self._releases[-1].end_time)
         elif event.kind == "trigger":
             # Its host time is known to half the command's round trip: an anchor only if that
             # is well inside the alignment the sync view promises.

@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -215,13 +215,16 @@ class ReplaySource:
         self._next = stop
         return stop - start
 
-    def snapshot(self, last: int | None = None) -> dict[str, npt.NDArray[Any]]:
+    def snapshot(self, last: int | None = None,
+                 columns: Sequence[str] | None = None) -> dict[str, npt.NDArray[Any]]:
         """Return copies of the played rows in the window, oldest first.
 
         Parameters
         ----------
         last : int, optional
             Only the most recent ``last`` rows.
+        columns : sequence of str, optional
+            Only these columns (default all).
 
         Returns
         -------
@@ -230,7 +233,7 @@ class ReplaySource:
         """
         if self._ring is None:
             raise RuntimeError("ReplaySource.snapshot: call open() first")
-        return self._ring.snapshot(last)
+        return self._ring.snapshot(last, columns)
 
     @property
     def error(self) -> str | None:

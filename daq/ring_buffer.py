@@ -14,7 +14,7 @@ plotting (the GUI), or persistence (the recorder).
 from __future__ import annotations
 
 import threading
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -180,29 +180,46 @@ class RingBuffer:
             self._total = 0
 
     # -- reading ---------------------------------------------------------------------------------
-    def snapshot(self, last: int | None = None) -> dict[str, npt.NDArray[Any]]:
+    def snapshot(self, last: int | None = None,
+                 columns: Sequence[str] | None = None) -> dict[str, npt.NDArray[Any]]:
         """Return copies of the rows held, oldest first (all columns the same rows).
 
         Parameters
         ----------
         last : int, optional
             Return only the most recent ``last`` rows (>= 0); default all rows held.
+        columns : sequence of str, optional
+            Copy only these columns (a viewer that draws the scalars of a whole window needs
+            only the latest row of a wide column); default all.
 
         Returns
         -------
         dict of str to ndarray
-            One array per column, shape ``(rows, *column.shape)``; the caller owns them.
+            One array per requested column, shape ``(rows, *column.shape)``; the caller owns
+            them.
+
+        Raises
+        ------
+        ValueError
+            ``last`` is not an integer >= 0.
+        KeyError
+            A requested column does not exist.
         """
         if last is not None and (isinstance(last, bool) or not isinstance(last, int)
                                  or last < 0):
             raise ValueError(f"last must be an integer >= 0 or None, got {last!r}")
+        names = list(self._data) if columns is None else list(columns)
+        unknown = [name for name in names if name not in self._data]
+        if unknown:
+            raise KeyError(f"no column(s) {unknown} in the buffer; it has {list(self._data)}")
         with self._lock:
             held = min(self._total, self._capacity)
             n = held if last is None else min(last, held)
             start = (self._head - n) % self._capacity
             idx_end = start + n
             out: dict[str, npt.NDArray[Any]] = {}
-            for name, arr in self._data.items():
+            for name in names:
+                arr = self._data[name]
                 if idx_end <= self._capacity:
                     out[name] = arr[start:idx_end].copy()
                 else:

@@ -17,6 +17,7 @@ Not responsible for: reading files (``daq.replay``), acquisition, or drawing (``
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
@@ -103,7 +104,8 @@ class DataSource(Protocol):
         """Bring in what is due now and return the number of new rows."""
         ...
 
-    def snapshot(self, last: int | None = None) -> dict[str, npt.NDArray[Any]]:
+    def snapshot(self, last: int | None = None,
+                 columns: Sequence[str] | None = None) -> dict[str, npt.NDArray[Any]]:
         """Return copies of the most recent rows, oldest first (see ``RingBuffer.snapshot``)."""
         ...
 

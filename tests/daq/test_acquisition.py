@@ -641,6 +641,18 @@ def test_ring_buffer_snapshots_are_copies_and_appends_are_copied():
     assert ring.snapshot()["t"].tolist() == [1.0, 2.0]
 
 
+def test_ring_buffer_snapshot_of_some_columns_holds_the_same_rows():
+    ring = RingBuffer(5, "t", Column("p", shape=(3,)))
+    t = np.arange(8.0)  # wraps around the capacity
+    ring.append({"t": t, "p": np.repeat(t[:, None], 3, axis=1)})
+    only_t = ring.snapshot(columns=["t"])
+    assert list(only_t) == ["t"] and only_t["t"].tolist() == [3.0, 4.0, 5.0, 6.0, 7.0]
+    last_p = ring.snapshot(2, columns=("p",))
+    assert list(last_p) == ["p"] and last_p["p"].tolist() == [[6.0] * 3, [7.0] * 3]
+    with pytest.raises(KeyError, match=r"no column\(s\) \['x'\]"):
+        ring.snapshot(columns=("t", "x"))
+
+
 def test_ring_buffer_refuses_bad_blocks_and_writes_nothing_then():
     ring = RingBuffer(4, "t", Column("n", np.int64))
     ring.append({"t": [0.0], "n": [0]})
