@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -29,7 +29,9 @@ from PySide6 import QtCore, QtWidgets
 
 from daq.controls import ControlPanel
 from daq.display import amplitude_spectrum, perimeter_positions, pressure_coefficients
+from daq.live_ident import DecaySource, LiveIdentifier
 from daq.qt_guard import guard_bool_refcounts
+from daq.releases_panel import DerivativesPanel, ReleasesPanel
 from daq.replay import ReplayError
 from daq.source import DataSource, DeviceHealth, HealthSource
 
@@ -72,6 +74,9 @@ class ConsoleWindow(QtWidgets.QMainWindow):
     confirm : callable, optional
         ``confirm(title, question) -> bool`` for the control panel's dangerous actions
         (default: a message box); a seam for tests.
+    identify : bool
+        Fit each release of the source (one with ``decays()``) and, from two wind speeds on,
+        the E2RFC model (:mod:`daq.live_ident`, in a worker process).
     parent : QWidget, optional
         Qt parent.
 
@@ -91,10 +96,20 @@ class ConsoleWindow(QtWidgets.QMainWindow):
     controls : ControlPanel or None
         The operator controls (:mod:`daq.controls`), over a live source (one with an ``acq``
         engine) only; re-evaluated at every tick.
+    identifier : LiveIdentifier or None
+        Fits the releases (None when the source has no ``decays()`` or ``identify`` is off).
+    tabs : QTabWidget
+        The ``spectra``, ``releases`` and ``flutter derivatives`` views.
+    releases_panel : ReleasesPanel
+        The releases table and the E2RFC status line.
+    derivatives_panel : DerivativesPanel
+        The model's flutter derivatives against the table values.
+    flutter_label : QLabel
+        The predicted flutter speed in the top bar ("U_F = --" until there is a model).
     """
 
     def __init__(self, source: DataSource, *, window_s: float = 20.0, frame_ms: int = FRAME_MS,
-                 confirm: Callable[[str, str], bool] | None = None,
+                 confirm: Callable[[str, str], bool] | None = None, identify: bool = True,
                  parent: QtWidgets.QWidget | None = None) -> None:
         guard_bool_refcounts()  # PySide6 6.12.0 + Python 3.11: see daq.qt_guard
         super().__init__(parent)
@@ -126,6 +141,11 @@ class ConsoleWindow(QtWidgets.QMainWindow):
             self._fan_label = QtWidgets.QLabel("fan: -- rpm")
             self._fan_label.setStyleSheet("font-size: 16pt; font-weight: bold")
             top.addWidget(self._fan_label)
+        self.flutter_label = QtWidgets.QLabel("U_F = --")
+        self.flutter_label.setStyleSheet("font-size: 16pt; font-weight: bold")
+        self.flutter_label.setToolTip("flutter speed predicted by the E2RFC model of this "
+                                      "session's releases")
+        top.addWidget(self.flutter_label)
         top.addStretch(1)
         grid.addLayout(top, 0, 0, 1, 2)
 
@@ -175,13 +195,24 @@ class ConsoleWindow(QtWidgets.QMainWindow):
         self.spectrum_curves = {name: spectrum.plot(pen=_PENS[name], name=name)
                                 for name in ("h", "alpha")}
         spectrum.setXRange(0.0, min(20.0, 0.5 * source.info.rate_hz))
+        self.releases_panel = ReleasesPanel()
+        self.derivatives_panel = DerivativesPanel()
+        self.tabs = QtWidgets.QTabWidget()
+        self.tabs.addTab(spectrum, "spectra")
+        self.tabs.addTab(self.releases_panel, "releases")
+        self.tabs.addTab(self.derivatives_panel, "flutter derivatives")
+        self.identifier: LiveIdentifier | None = None
+        self._decay_source: DecaySource | None = None
+        if identify and callable(getattr(source, "decays", None)):
+            self._decay_source = cast(DecaySource, source)
+            self.identifier = LiveIdentifier(info.config.section, info.rate_hz)
         self.health_table: QtWidgets.QTableWidget | None = None
         self.alarm_label: QtWidgets.QLabel | None = None
         self._frames = 0
         if self._health_source is None:
-            grid.addWidget(spectrum, 3, 1, 2, 1)
+            grid.addWidget(self.tabs, 3, 1, 2, 1)
         else:
-            grid.addWidget(spectrum, 3, 1)
+            grid.addWidget(self.tabs, 3, 1)
             grid.addWidget(self._health_panel(), 4, 1)
         self.controls: ControlPanel | None = None
         if self._health_source is not None and hasattr(source, "acq"):
@@ -231,7 +262,25 @@ class ConsoleWindow(QtWidgets.QMainWindow):
             self.show_health(self._health_source.health(), self._health_source.fan_speed_rpm)
         if self.controls is not None:
             self.controls.refresh()
+        if (self.identifier is not None and self._decay_source is not None
+                and self.identifier.update(self._decay_source)):
+            self.show_releases()
         self._frames += 1
+
+    def show_releases(self) -> None:
+        """Redraw the releases table, the derivatives and the flutter speed from the fits."""
+        ident = self.identifier
+        if ident is None:
+            return
+        self.releases_panel.show_rows(ident)
+        self.derivatives_panel.show_fit(ident)
+        self.tabs.setTabText(1, f"releases ({len(ident.rows)})")
+        fit = ident.campaign
+        if fit is None or fit.flutter_speed is None:
+            self.flutter_label.setText("U_F = --" if fit is None else "U_F: none found")
+        else:
+            std = "" if fit.flutter_std is None else f" +- {fit.flutter_std:.2f}"
+            self.flutter_label.setText(f"U_F = {fit.flutter_speed:.2f}{std} m/s")
 
     def show_health(self, health: list[DeviceHealth], fan_rpm: float) -> None:
         """Fill the health panel, the alarm line and the fan state (live sources only)."""
@@ -311,6 +360,8 @@ class ConsoleWindow(QtWidgets.QMainWindow):
         self._timer.stop()
         if self.controls is not None:
             self.controls.shutdown()
+        if self.identifier is not None:
+            self.identifier.close()
         self._source.close()
         super().closeEvent(event)
 

@@ -29,7 +29,10 @@ from daq.errors import ConfigError, DaqError
 from daq.ring_buffer import RingBuffer
 from daq.source import SYNC_SCALARS, SourceInfo, sync_columns
 
-__all__ = ["ReplayError", "ReplaySource"]
+__all__ = ["MIN_HISTORY_S", "ReplayError", "ReplaySource"]
+
+#: The ring holds at least this much of the run, s (a whole decay for the releases table).
+MIN_HISTORY_S = 30.0
 
 
 class ReplayError(DaqError, ValueError):
@@ -74,6 +77,7 @@ class ReplaySource:
         self._info: SourceInfo | None = None
         self._started_at: float | None = None
         self._error: str | None = None
+        self._decays: list[tuple[float, float | None]] = []  # the file's releases table
 
     # -- life cycle ------------------------------------------------------------------------------
     def open(self) -> None:
@@ -137,7 +141,8 @@ class ReplaySource:
         if steps.size == 0:
             raise ReplayError(f"{where}: /entry/sync/time does not increase")
         rate = 1.0 / float(np.median(steps))
-        self._ring = RingBuffer(int(math.ceil(self.window_s * rate)) + 2,
+        history_s = max(self.window_s, MIN_HISTORY_S)  # a whole decay, for the releases table
+        self._ring = RingBuffer(int(math.ceil(history_s * rate)) + 2,
                                 *sync_columns(config.taps.n_taps))
         self._info = SourceInfo(label=self.path.name, config=config, rate_hz=rate,
                                 duration_s=float(t[-1] - t[0]))
@@ -235,6 +240,20 @@ class ReplaySource:
             raise RuntimeError("ReplaySource.snapshot: call open() first")
         return self._ring.snapshot(last, columns)
 
+    def decays(self) -> list[tuple[float, float | None]]:
+        """Return the file's free decays that the playback has reached, oldest first.
+
+        Returns
+        -------
+        list of (float, float or None)
+            ``(release, end)`` from ``/entry/releases``: the release instant and the time of
+            the decay's last row, s (the sync view's ``time``), as
+            :meth:`daq.live_source.LiveSource.decays` reports them live; ``end`` is None for a
+            row whose end is past the rows read so far.
+        """
+        position = self.position_s
+        return [d for d in self._decays if d[0] <= position]
+
     @property
     def error(self) -> str | None:
         """Describe the read error that stopped the replay, if any."""
@@ -260,3 +279,18 @@ class ReplaySource:
         n = min(ds.shape[0] for ds in self._ds.values())  # rows complete in every column
         if n > self._time.size:
             self._time = np.concatenate([self._time, self._ds["time"][self._time.size:n]])
+        self._read_releases()
+
+    def _read_releases(self) -> None:
+        """Read the releases table (absent in a run that has none yet: no releases)."""
+        if self._file is None or "entry/releases" not in self._file:
+            return
+        ds = self._file["entry/releases"]
+        ds.refresh()
+        rows = ds[()]
+        decays = []
+        for row in rows:
+            stop = int(row["stop_index"])
+            end = float(self._time[stop - 1]) if 0 < stop <= self._time.size else None
+            decays.append((float(row["release_time"]), end))
+        self._decays = decays

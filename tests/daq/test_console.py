@@ -17,6 +17,7 @@ import h5py
 import numpy as np
 import pytest
 
+from daq import replay
 from daq.cli import main
 from daq.config import parse_rig_config
 from daq.display import amplitude_spectrum, pressure_coefficients
@@ -109,7 +110,9 @@ def played(qtbot, run_file, make_window):
 
 # -- the data source ---------------------------------------------------------------------------
 
-def test_replay_plays_at_its_speed_with_ring_buffer_snapshots(run_file):
+def test_replay_plays_at_its_speed_with_ring_buffer_snapshots(run_file, monkeypatch):
+    # The ring keeps the window, or MIN_HISTORY_S (a whole decay) if that is longer.
+    monkeypatch.setattr(replay, "MIN_HISTORY_S", 2.0)
     clock = FakeClock()
     with ReplaySource(run_file, speed=4.0, window_s=5.0, clock=clock) as source:
         assert source.info.rate_hz == pytest.approx(RATE_HZ)
