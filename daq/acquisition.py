@@ -56,6 +56,7 @@ import queue
 import threading
 import time
 import uuid
+from collections import deque
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from types import TracebackType
@@ -74,6 +75,8 @@ __all__ = [
     "ROLE_KINDS",
     "SYSTEM_EVENT_KINDS",
     "Acquisition",
+    "CalzError",
+    "CalzResult",
     "DeviceFault",
     "DeviceReader",
     "DeviceStats",
@@ -92,7 +95,7 @@ ROLE_KINDS: Mapping[str, str] = {"scanner": "scanner", "lasers": "laser",
                                  "barometer": "barometer", "fan": "fan", "plc": "plc"}
 #: Event kinds the engine itself emits; :meth:`Acquisition.mark` refuses them.
 SYSTEM_EVENT_KINDS = frozenset({"fault", "recovered", "overflow", "release", "release_failed",
-                                "arm", "trigger"})
+                                "arm", "trigger", "calz", "calz_failed"})
 
 #: Methods each kind of driver must have (checked at construction, no I/O).
 _NEEDS: Mapping[str, tuple[str, ...]] = {
@@ -106,6 +109,9 @@ _NEEDS: Mapping[str, tuple[str, ...]] = {
 _POLL_S: Mapping[str, float] = {"barometer": 1.0, "fan": 0.1, "plc": 0.1}
 #: Device gaps kept per run of dropped blocks (more are counted in the overflow event).
 _MAX_DROPPED_GAPS = 256
+#: After a CALZ that timed out the scanner may still be zeroing: how long a restart of the scan
+#: keeps trying, s (the manual: a CALZ takes "under 10 seconds").
+_RESTART_WAIT_S = 10.0
 
 IntArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
@@ -255,6 +261,75 @@ class DeviceStats:
     failed: str | None
 
 
+class CalzError(DaqError, RuntimeError):
+    """A zero calibration during a run failed after the scan was interrupted.
+
+    The message says at which step (``pause``, ``stop``, ``calz``, ``restart``) and whether the
+    scan runs again; the device's own error is the ``__cause__``.
+    """
+
+
+@dataclass(frozen=True, eq=False)
+class CalzResult:
+    """What :meth:`Acquisition.calz` did: the pause of the scan and the zero it removed.
+
+    Attributes
+    ----------
+    device : str
+        The scanner.
+    wind_speed_now : float
+        The wind speed the caller vouched for, m/s (0: the driver refuses anything else).
+    stop_ns, stopped_ns : int
+        Host ``time.monotonic_ns()`` just before STOP was sent and once it was acknowledged:
+        the scanner stopped in between.
+    restart_ns, restarted_ns : int
+        The same for the new scan: before the (successful) restart began and once SCAN was
+        acknowledged.
+    pause_s : float
+        How long the scanner did not scan, s: from the middle of the STOP command to the
+        middle of the restart, each known to within half its duration (a few ms; the bounds
+        are ``(restart_ns - stopped_ns)`` and ``(restarted_ns - stop_ns)``).
+    calz_s : float
+        Time from CALZ to READY, s.
+    offsets_before_pa : ndarray of float64, (channels,)
+        Mean pressure per channel over the last frames before STOP (``frames_averaged`` of
+        them), Pa. Wind-off (as a CALZ must be) this is the zero error the CALZ removed; NaN
+        for a channel without a frame.
+    frames_averaged : int
+        Frames in that mean.
+    event : Event
+        The ``"calz"`` event posted.
+    """
+
+    device: str
+    wind_speed_now: float
+    stop_ns: int
+    stopped_ns: int
+    restart_ns: int
+    restarted_ns: int
+    pause_s: float
+    calz_s: float
+    offsets_before_pa: FloatArray
+    frames_averaged: int
+    event: Event
+
+    def summary(self) -> dict[str, float | int]:
+        """Zero-offset figures for an event or a status line (Pa): RMS, max and where."""
+        return _offsets_summary(self.offsets_before_pa, self.frames_averaged)
+
+
+def _offsets_summary(offsets: FloatArray, frames: int) -> dict[str, float | int]:
+    finite = np.isfinite(offsets)
+    if not finite.any():
+        return {"frames_averaged": frames, "channels": 0}
+    abs_off = np.where(finite, np.abs(offsets), -1.0)
+    worst = int(np.argmax(abs_off))
+    return {"frames_averaged": frames, "channels": int(finite.sum()),
+            "offset_mean_pa": float(np.mean(offsets[finite])),
+            "offset_rms_pa": float(np.sqrt(np.mean(offsets[finite] ** 2))),
+            "offset_max_abs_pa": float(abs_off[worst]), "offset_max_channel": worst}
+
+
 class Subscriber(Protocol):
     """A ``(name, doc)`` callback, as in bluesky: called on the dispatcher thread only."""
 
@@ -324,9 +399,21 @@ class _ScannerAdapter(_Adapter):
     after a restart made here the counters are shifted to continue after the last one
     delivered, with a ``(last, -1)`` restart gap: the stream's counter stays increasing, as the
     driver keeps it across restarts within one scan.
+
+    A restart after a pause of the engine's own (:meth:`restart_after_pause`, a CALZ) is
+    measured instead where the device clock allows it: with absolute (PTP) frame times on both
+    sides the gap is the number of frame periods the scan stood still, ``(last, n)``, and the
+    counter continues after it. With frame times relative to the scan start (PTP absent) the
+    new scan's clock starts again at 0 and the length is unknown (-1); its frame times are then
+    continued on the previous scan's base with the host-measured time from STOP to SCAN (the
+    only measure of it there is; off by less than a frame period plus half the two commands'
+    durations), so that the clock map of the stream stays valid.
     """
 
     streaming = True
+    #: Frames kept for :meth:`recent_pressure_mean`: the last this many seconds of them.
+    RECENT_S = 0.5
+    _MAX_RECENT_ROWS = 4096
 
     def __init__(self, driver: Any, read_timeout_s: float) -> None:
         super().__init__(driver)
@@ -334,14 +421,26 @@ class _ScannerAdapter(_Adapter):
         self._offset = 0
         self._last: int | None = None
         self._restarted = False
+        self._measure_gap = False  # the next restart follows a pause of ours: measure its gap
+        self._time_shift = 0.0  # s added to frame times (a relative base continued)
+        self._last_time = math.nan  # last finite frame time delivered (shifted), s
+        self._last_host_ns = 0  # its host arrival time, ns
+        self._last_base: str | None = None  # time base of the block that held it
+        self._pause_s: float | None = None  # STOP to SCAN of the last pause, host-measured, s
+        self._recent: deque[FloatArray] = deque()  # pressure rows of the last RECENT_S
+        self._recent_rows = 0
 
     def begin(self) -> None:
         self.driver.configure()
         self.driver.scan()
 
     def read(self, stop: threading.Event) -> _Rows | None:
+        return self.read_within(self.read_timeout_s)
+
+    def read_within(self, timeout_s: float) -> _Rows | None:
+        """Read one block, waiting at most ``timeout_s`` (s); None when nothing came."""
         try:
-            block = self.driver.read_block(timeout_s=self.read_timeout_s)
+            block = self.driver.read_block(timeout_s=timeout_s)
         except TransportTimeout:
             return None
         values = {"pressure": block.pressure, "pitot": block.pitot,
@@ -352,15 +451,109 @@ class _ScannerAdapter(_Adapter):
         if self._restarted and len(block):
             self._restarted = False
             if self._last is not None:
-                self._offset = self._last + 1 - int(counter[0])
+                length = self._restart_gap(block)
+                self._offset = self._last + 1 + max(length, 0) - int(counter[0])
                 gaps = [(a, n) for a, n in gaps if a >= int(counter[0]) - 1 or n < 0]
-                gaps.insert(0, (self._last - self._offset, -1))
+                gaps.insert(0, (self._last - self._offset, length))
         if self._offset:
             counter = counter + self._offset
             gaps = [(a + self._offset, n) for a, n in gaps]
+        frame_time = block.frame_time
+        if self._time_shift:
+            frame_time = frame_time + self._time_shift
         if len(block):
             self._last = int(counter[-1])
-        return _Rows(block.host_time_ns, block.frame_time, counter, values, tuple(gaps), block)
+            self._remember(block, frame_time)
+        return _Rows(block.host_time_ns, frame_time, counter, values, tuple(gaps), block)
+
+    def _restart_gap(self, block: Any) -> int:
+        """Length of the gap before the first block of a restarted scan (-1: unknown).
+
+        Also sets the frame-time shift of the new scan (see the class docstring).
+        """
+        measure, self._measure_gap = self._measure_gap, False
+        if not measure:  # a restart of the recovery: as it always was
+            self._time_shift = 0.0
+            return -1
+        base = getattr(block, "time_base", "ptp")
+        finite = np.flatnonzero(np.isfinite(block.frame_time))
+        if finite.size == 0 or not math.isfinite(self._last_time):
+            return -1
+        first = int(finite[0])
+        t_first = float(block.frame_time[first])
+        if base == "ptp":
+            self._time_shift = 0.0  # absolute times continue by themselves
+            if self._last_base != "ptp":
+                return -1
+            rate = float(getattr(self.driver, "rate_hz", math.nan))
+            # Frames the scanner would have sent at its rate while it stood still; the new
+            # scan's frames are not on the old frame grid, hence the rounding.
+            n = round((t_first - self._last_time) * rate) - 1 if rate > 0 else -1
+            return n if n >= 1 else -1
+        pause_s = self._pause_s
+        if pause_s is not None:
+            # Relative frame time 0 is the SCAN; the last frame preceded STOP by less than a
+            # period: on the old base, the new scan starts the pause after that frame.
+            self._time_shift = self._last_time + pause_s
+        else:  # the reader's recovery restarted it: the arrival times are all there is
+            pause_s = (int(block.host_time_ns[first]) - self._last_host_ns) * 1e-9
+            self._time_shift = self._last_time + pause_s - t_first
+        log.warning("scanner: frame times restarted at 0 with the scan (PTP absent): continued "
+                    "on the previous base with the host-measured pause, %.3f s", pause_s)
+        return -1
+
+    def _remember(self, block: Any, frame_time: FloatArray) -> None:
+        """Keep the last frame time and the last ``RECENT_S`` of pressure rows."""
+        finite = np.flatnonzero(np.isfinite(frame_time))
+        if finite.size:
+            self._last_time = float(frame_time[finite[-1]])
+            self._last_host_ns = int(block.host_time_ns[finite[-1]])
+            self._last_base = getattr(block, "time_base", "ptp")
+        rate = float(getattr(self.driver, "rate_hz", 0.0) or 0.0)
+        keep = min(max(math.ceil(self.RECENT_S * rate), 1), self._MAX_RECENT_ROWS)
+        self._recent.append(np.asarray(block.pressure, dtype=np.float64))
+        self._recent_rows += len(block)
+        while self._recent_rows - len(self._recent[0]) >= keep:
+            self._recent_rows -= len(self._recent.popleft())
+
+    def recent_pressure_mean(self) -> tuple[FloatArray, int]:
+        """Mean pressure per channel over the last ``RECENT_S`` of frames read, Pa, and rows.
+
+        NaN rows (a missing module) are left out per channel; an empty history gives an empty
+        array and 0.
+        """
+        if not self._recent:
+            return np.zeros(0), 0
+        rows = np.concatenate(list(self._recent))
+        rate = float(getattr(self.driver, "rate_hz", 0.0) or 0.0)
+        rows = rows[-min(max(math.ceil(self.RECENT_S * rate), 1), self._MAX_RECENT_ROWS):]
+        with np.errstate(invalid="ignore"):
+            counted = np.isfinite(rows).sum(axis=0)
+            mean = np.where(counted > 0, np.nansum(rows, axis=0) / np.maximum(counted, 1),
+                            np.nan)
+        return mean, int(rows.shape[0])
+
+    def drain(self, timeout_s: float) -> list[_Rows]:
+        """Read the frames still in flight after STOP, until ``timeout_s`` (s) of silence."""
+        out = []
+        while (rows := self.read_within(timeout_s)) is not None:
+            out.append(rows)
+        return out
+
+    def restart_after_pause(self) -> None:
+        """Start a new scan after a pause of the engine; its gap is measured (class docstring).
+
+        The restart is marked before the scan is sent, so that a scan the reader's own recovery
+        starts instead (this one failed) is marked and measured the same way.
+        """
+        self._restarted = True
+        self._measure_gap = True
+        self._pause_s = None
+        self.driver.scan()
+
+    def note_pause(self, pause_s: float) -> None:
+        """Tell the host-measured time from STOP to SCAN, s (used without PTP: class doc)."""
+        self._pause_s = float(pause_s)
 
     def recover(self, error: BaseException) -> None:
         # The driver already retried its data connections (bounded, logged); a TransportError
@@ -566,6 +759,11 @@ class DeviceReader:
         self._stall_s = stall_s
         self._backoff = (backoff_min_s, backoff_max_s)
         self._stop = threading.Event()
+        # Pausing (see pause()): the thread parks between reads while _pause_requested is set.
+        self._park = threading.Condition()
+        self._pause_requested = False
+        self._parked = False
+        self._ended = False
         self._thread: threading.Thread | None = None
         self._lock = threading.Lock()  # guards the counters and the drop ledger
         self._seq = 0
@@ -600,8 +798,103 @@ class DeviceReader:
         self._thread.start()
 
     def request_stop(self) -> None:
-        """Ask the thread to finish after its current read."""
-        self._stop.set()
+        """Ask the thread to finish after its current read (a parked thread finishes too)."""
+        with self._park:
+            self._stop.set()
+            self._park.notify_all()
+
+    def pause(self, timeout_s: float) -> bool:
+        """Park the thread between two reads; return True once it is parked.
+
+        While parked the thread touches neither the driver nor its queue, so the caller may
+        command the device and read from it (:meth:`drain`). Call :meth:`resume` afterwards in
+        every case (also when this returned False: the request stays pending until then).
+
+        Parameters
+        ----------
+        timeout_s : float
+            Longest wait for the current read (or retry wait) to end, s.
+
+        Returns
+        -------
+        bool
+            True when the thread is parked; False when it did not park within ``timeout_s``
+            or is not running.
+        """
+        with self._park:
+            self._pause_requested = True
+            self._park.notify_all()  # ends a retry wait early
+            return self._park.wait_for(
+                lambda: self._parked or self._ended or not self.alive or self._stop.is_set(),
+                timeout=max(timeout_s, 0.0)) and self._parked
+
+    def resume(self) -> None:
+        """Let a paused thread read again (see :meth:`pause`)."""
+        with self._park:
+            self._pause_requested = False
+            self._park.notify_all()
+
+    @property
+    def paused(self) -> bool:
+        """Measure whether the thread is parked by :meth:`pause`."""
+        return self._parked
+
+    def drain(self, timeout_s: float) -> int:
+        """Deliver the scanner frames still in flight after STOP; return the blocks delivered.
+
+        Only while the thread is parked (:meth:`pause`): the caller's thread then reads in its
+        place, and the blocks go to the queue as the thread's own would.
+
+        Parameters
+        ----------
+        timeout_s : float
+            The reading ends after this long without a frame, s.
+        """
+        if not self._parked or not isinstance(self._adapter, _ScannerAdapter):
+            raise RuntimeError(f"{self.name}: drain() needs a scanner reader paused first")
+        rows = self._adapter.drain(timeout_s)
+        for r in rows:
+            self._offer(r)
+        return len(rows)
+
+    def restart_after_pause(self) -> None:
+        """Start a new scan after a pause (scanner only; see ``_ScannerAdapter``)."""
+        if not self._parked or not isinstance(self._adapter, _ScannerAdapter):
+            raise RuntimeError(f"{self.name}: restart_after_pause() needs a paused scanner")
+        self._adapter.restart_after_pause()
+
+    def note_pause(self, pause_s: float) -> None:
+        """Tell the scanner adapter how long the scan stood still, s (before :meth:`resume`)."""
+        if isinstance(self._adapter, _ScannerAdapter):
+            self._adapter.note_pause(pause_s)
+
+    def recent_pressure_mean(self) -> tuple[FloatArray, int]:
+        """Mean pressure per channel over the last frames read, Pa, and their number."""
+        if not isinstance(self._adapter, _ScannerAdapter):
+            raise RuntimeError(f"{self.name}: not a scanner")
+        return self._adapter.recent_pressure_mean()
+
+    def report_fault(self, exc: BaseException) -> None:
+        """Report a failure found outside the thread (e.g. a scan not restarted) as a fault."""
+        self._fault(exc, 1)
+
+    def _wait(self, seconds: float) -> bool:
+        """Wait ``seconds`` between retries; end early on stop or pause; True on stop."""
+        with self._park:
+            self._park.wait_for(lambda: self._stop.is_set() or self._pause_requested,
+                                timeout=seconds)
+        return self._stop.is_set()
+
+    def _park_if_asked(self) -> bool:
+        """Park while a pause is requested; return True when the thread was parked."""
+        with self._park:
+            if not self._pause_requested or self._stop.is_set():
+                return False
+            self._parked = True
+            self._park.notify_all()
+            self._park.wait_for(lambda: not self._pause_requested or self._stop.is_set())
+            self._parked = False
+            return True
 
     def join(self, timeout_s: float) -> bool:
         """Wait up to ``timeout_s`` for the thread; return True when it has finished."""
@@ -652,9 +945,15 @@ class DeviceReader:
         reconnected_ns: int | None = None  # when a reconnect made by the driver was seen
         try:
             while not stop.is_set():
+                if self._park_if_asked():
+                    # A pause is not a stall; the driver may have reset its reconnect count.
+                    last_data, reconnects = time.monotonic(), adapter.reconnects()
+                    continue
                 if needs_recover:
-                    if stop.wait(delay):
+                    if self._wait(delay):
                         break
+                    if self._pause_requested:
+                        continue
                     delay = min(2.0 * delay, self._backoff[1])
                     try:
                         assert error is not None
@@ -705,6 +1004,10 @@ class DeviceReader:
             log.exception("%s: reader failed; it reads no more", self.name)
             self.failed = exc
             self._fault(exc, consecutive + 1, fatal=True)
+        finally:
+            with self._park:  # a pause() waiting for this thread learns that it ended
+                self._ended = True
+                self._park.notify_all()
 
     def _fault(self, exc: BaseException, consecutive: int, *, fatal: bool = False) -> None:
         with self._lock:
@@ -858,6 +1161,7 @@ class Acquisition:
         self._events_dropped = 0
         self._counts_lock = threading.Lock()
         self._releases: list[Event] = []
+        self._calz_lock = threading.Lock()  # one CALZ at a time; stop() waits for it
         self._errors: list[str] = []
         self._stop_done: set[str] = set()
         self._reason = ""
@@ -956,6 +1260,11 @@ class Acquisition:
             if self._state == "running":
                 self._reason = reason
             self._state = "stopping"
+        # A CALZ in progress first restarts the scan and resumes its reader (bounded by its own
+        # timeouts): stopping under it would interleave STOP with its commands. calz() refuses
+        # to begin once the state is "stopping".
+        with self._calz_lock:
+            pass
         readers = list(self._readers.values())
         if "halt" not in self._stop_done:
             for reader in readers:
@@ -1136,6 +1445,206 @@ class Acquisition:
                       data={"round_trip_s": round_trip * 1e-9})
         self._post_event(event)
         return event
+
+    def calz(self, device: str | None = None, *, wind_speed_now: float,
+             timeout_s: float = 30.0) -> CalzResult:
+        """Zero the pressure scanner (CALZ) during the run, wind-off; return what it did.
+
+        The scanner refuses every command but STOP while it scans, so the scan is interrupted:
+        the scanner's reader is parked between two reads, STOP is sent, the frames still in
+        flight are read and delivered, the driver's CALZ runs (its wind-off rule stays in
+        force: ``wind_speed_now`` is passed through), a new scan is started and the reader
+        resumed. The interruption is marked, never silent: the scanner stream gets a gap over
+        the pause (its length in frames where the frame times are absolute, else -1; see
+        ``_ScannerAdapter``), so the sync view has NaN pressures and forces there, and a
+        ``"calz"`` event (at ``stop_ns``) carries the pause and the zero-offset summary.
+
+        Parameters
+        ----------
+        device : str, optional
+            The scanner's name; default: the only device of kind ``"scanner"``.
+        wind_speed_now : float
+            The wind speed now, m/s, as measured by the caller with the fan stopped. The
+            driver refuses anything but 0 (:meth:`~daq.scanivalve_mps4264.ScanivalveMps4264.
+            check_calz_allowed`), before anything is interrupted.
+        timeout_s : float
+            Longest wait for the scanner to finish zeroing, s (> 0; the manual: "under 10
+            seconds"). Parking the reader is bounded separately by ``join_timeout_s``.
+
+        Returns
+        -------
+        CalzResult
+            Pause, CALZ duration, the zero it removed, the event posted.
+
+        Raises
+        ------
+        RuntimeError
+            The engine is not running, or a CALZ is already in progress (nothing is done).
+        ValueError
+            ``device`` is not a scanner of this engine, or ``timeout_s`` is not > 0.
+        TypeError
+            The scanner's driver has no ``calz()``.
+        SafetyError
+            The driver refuses: the wind is not off. Nothing was interrupted; a
+            ``"calz_failed"`` event is posted.
+        CalzError
+            A step after the refusal check failed (the reader did not pause, STOP, CALZ or the
+            restart of the scan failed); a ``"calz_failed"`` event is posted, the restart of
+            the scan was tried in any case and the reader resumed. When the scan could not be
+            restarted, a fault of the scanner is posted too and the reader's recovery (reopen,
+            new scan) takes over.
+        """
+        if not (isinstance(timeout_s, (int, float)) and math.isfinite(timeout_s)
+                and timeout_s > 0):
+            raise ValueError(f"timeout_s must be a finite number > 0, got {timeout_s!r}")
+        name, reader = self._scanner(device)
+        if not self._calz_lock.acquire(blocking=False):
+            raise RuntimeError(f"calz({name!r}): a CALZ is already in progress; wait for it")
+        try:
+            # Checked again under the lock: stop() waits for this lock once it is "stopping".
+            self._require_running(f"calz({name!r})")
+            if not reader.alive:
+                raise RuntimeError(f"calz({name!r}): the scanner's reader has stopped "
+                                   f"({reader.failed!r}); restart the acquisition")
+            self._refuse_unsafe_calz(name, reader.driver, wind_speed_now)
+            return self._calz_paused(name, reader, float(wind_speed_now), float(timeout_s))
+        finally:
+            self._calz_lock.release()
+
+    def _scanner(self, name: str | None) -> tuple[str, DeviceReader]:
+        self._require_running("calz()")
+        scanners = [n for n, r in self._readers.items() if r.kind == "scanner"]
+        if name is None:
+            if len(scanners) != 1:
+                raise ValueError(f"name the scanner: devices of kind 'scanner' are {scanners}")
+            name = scanners[0]
+        elif name not in scanners:
+            raise ValueError(f"{name!r} is not a device of kind 'scanner'; those are "
+                             f"{scanners}")
+        driver = self._readers[name].driver
+        if not callable(getattr(driver, "calz", None)):
+            raise TypeError(f"scanner {name!r} driver {type(driver).__name__} has no calz()")
+        return name, self._readers[name]
+
+    def _refuse_unsafe_calz(self, name: str, driver: Any, wind_speed_now: float) -> None:
+        """Apply the driver's wind-off rule before the scan is touched (a refusal costs no data)."""
+        check = getattr(driver, "check_calz_allowed", None)
+        if not callable(check):
+            return  # the driver's calz() still applies its rule, after STOP
+        try:
+            check(wind_speed_now=wind_speed_now)
+        except DaqError as exc:
+            self._post_event(Event(
+                kind="calz_failed", host_time_ns=time.monotonic_ns(), device=name,
+                text=f"CALZ refused, the scan goes on: {exc}",
+                data={"stage": "refused", "error": type(exc).__name__,
+                      "wind_speed_now": wind_speed_now, "scan_interrupted": False}))
+            raise
+
+    def _calz_paused(self, name: str, reader: DeviceReader, wind_speed_now: float,
+                     timeout_s: float) -> CalzResult:
+        """Park the reader, STOP, drain, CALZ, restart the scan, resume: the steps of calz()."""
+        driver = reader.driver
+        if not reader.pause(self._join_timeout_s):
+            reader.resume()
+            why = (f"the reader of {name!r} did not pause within {self._join_timeout_s:g} s "
+                   "(stuck in a read or a reconnect?)")
+            self._calz_failed(name, "pause", why, time.monotonic_ns(), restarted=None)
+            raise CalzError(f"CALZ of {name!r} not started: {why}; nothing was interrupted, "
+                            "the scan goes on")
+        stage = "stop"
+        failure: DaqError | None = None
+        calz_s = math.nan
+        offsets, frames = np.zeros(0), 0
+        stop_ns = stopped_ns = time.monotonic_ns()
+        try:
+            try:
+                driver.stop()
+                stopped_ns = time.monotonic_ns()
+                # Frames sent before STOP are data like any other: deliver them, so that the
+                # gap is only the time the scanner stood still.
+                rate = float(getattr(driver, "rate_hz", 0.0) or 0.0)
+                reader.drain(max(0.05, 5.0 / rate) if rate > 0 else 0.2)
+                offsets, frames = reader.recent_pressure_mean()
+                stage = "calz"
+                took = driver.calz(wind_speed_now=wind_speed_now, timeout_s=timeout_s)
+                calz_s = float(took) if isinstance(took, (int, float)) else math.nan
+                stage = "restart"
+            except DaqError as exc:
+                failure = exc
+            finally:  # also on a bug or Ctrl-C: the scan must run again if at all possible
+                restart_error, restart_ns = self._restart_scan(name, reader)
+                restarted_ns = time.monotonic_ns()
+                # Each end of the standstill is known to within half its command's duration.
+                pause_s = ((restart_ns + restarted_ns) - (stop_ns + stopped_ns)) * 0.5e-9
+                reader.note_pause(pause_s)
+        finally:
+            reader.resume()
+        if restart_error is not None:
+            reader.report_fault(restart_error)
+            if failure is None:
+                stage, failure = "restart", restart_error
+        if failure is not None:
+            self._calz_failed(name, stage, failure, stop_ns, restarted=restart_error is None,
+                              pause_s=pause_s)
+            state = (f"the scan was restarted after {pause_s:.2f} s" if restart_error is None
+                     else f"the scan could NOT be restarted ({restart_error}); the reader's "
+                     "recovery retries")
+            raise CalzError(f"CALZ of {name!r} failed at {stage}: {failure}; {state}") \
+                from failure
+        summary = _offsets_summary(offsets, frames)
+        event = Event(kind="calz", host_time_ns=stop_ns, device=name,
+                      text=f"scanner zeroed (CALZ, wind {wind_speed_now:g} m/s); scan paused "
+                           f"{pause_s:.3f} s",
+                      data={"pause_s": pause_s, "calz_s": calz_s, "stop_ns": stop_ns,
+                            "stopped_ns": stopped_ns, "restart_ns": restart_ns,
+                            "restarted_ns": restarted_ns, "wind_speed_now": wind_speed_now,
+                            **summary})
+        self._post_event(event)
+        log.info("%s: CALZ done; scan paused %.3f s; zero removed: %s", name, pause_s, summary)
+        return CalzResult(device=name, wind_speed_now=wind_speed_now, stop_ns=stop_ns,
+                          stopped_ns=stopped_ns, restart_ns=restart_ns,
+                          restarted_ns=restarted_ns, pause_s=pause_s, calz_s=calz_s,
+                          offsets_before_pa=offsets, frames_averaged=frames, event=event)
+
+    def _restart_scan(self, name: str, reader: DeviceReader) -> tuple[DaqError | None, int]:
+        """Start the scan again after a pause; return the error when it could not be.
+
+        A refused SCAN is retried while the scanner still zeroes (a CALZ that timed out),
+        for at most ``_RESTART_WAIT_S``; a scanner found scanning already (STOP had failed)
+        counts as restarted: it streams to the fresh data connections. Also returns the host
+        time (ns) at which the last attempt began.
+        """
+        end = time.monotonic() + _RESTART_WAIT_S
+        while True:
+            began = time.monotonic_ns()
+            try:
+                reader.restart_after_pause()
+                return None, began
+            except DaqError as exc:
+                error = exc
+            try:
+                state = reader.driver.status()
+            except DaqError as exc:
+                log.error("%s: scan not restarted (%s); status failed too: %s", name, error, exc)
+                return error, began
+            if state == "SCAN":
+                return None, began
+            if state != "CALZ" or time.monotonic() >= end:
+                log.error("%s: scan not restarted (state %s): %s", name, state, error)
+                return error, began
+            time.sleep(0.1)
+
+    def _calz_failed(self, name: str, stage: str, error: BaseException | str, at_ns: int, *,
+                     restarted: bool | None, pause_s: float = 0.0) -> None:
+        log.error("%s: CALZ failed at %s: %s", name, stage, error)
+        self._post_event(Event(
+            kind="calz_failed", host_time_ns=at_ns, device=name,
+            text=f"CALZ failed at {stage}: {error}",
+            data={"stage": stage,
+                  "error": "timeout" if isinstance(error, str) else type(error).__name__,
+                  "scan_interrupted": restarted is not None, "scan_restarted": restarted,
+                  "pause_s": pause_s}))
 
     def _plc(self, name: str | None, method: str) -> tuple[str, Any]:
         self._require_running(f"{method}()")

@@ -1114,13 +1114,38 @@ class ScanivalveMps4264:
         self.set_format(packet)
         self.set_rate(self.settings.rate_hz)
 
+    def check_calz_allowed(self, *, wind_speed_now: float) -> None:
+        """Refuse a zero calibration unless the wind is known to be off (no I/O).
+
+        The one wind-off rule of :meth:`calz`, callable on its own so that a caller can refuse
+        before it interrupts anything (the acquisition engine stops the scan for a CALZ only
+        once this has passed; :meth:`calz` checks again).
+
+        Parameters
+        ----------
+        wind_speed_now : float
+            Current wind speed, m/s. Anything but exactly 0 is refused, NaN (unknown) too.
+
+        Raises
+        ------
+        SafetyError
+            ``wind_speed_now`` is not 0.
+        """
+        if not wind_speed_now == 0.0:  # NaN compares unequal too: an unknown wind is refused
+            raise SafetyError(
+                f"{self.transport.url}: refusing CALZ with wind speed {wind_speed_now!r} m/s: "
+                "a zero taken wind-on bakes the wind's pressures into every channel's offset"
+            )
+
     def calz(self, *, wind_speed_now: float, timeout_s: float = 30.0,
-             poll_s: float = 0.1) -> None:
+             poll_s: float = 0.1) -> float:
         """Zero the sensors (``CALZ``) and wait until the scanner is ``READY`` again.
 
         The MPS4232/4264 have no calibration valve: the zero is taken with the taps exposed, so
         it must be taken wind-off (DEVICES.md A.1.1 "Zero calibration"). Deciding that the
-        wind is off is the caller's job; it passes the wind speed it knows.
+        wind is off is the caller's job; it passes the wind speed it knows
+        (:meth:`check_calz_allowed`). The scanner refuses CALZ while it scans: :meth:`stop`
+        first (:meth:`daq.acquisition.Acquisition.calz` does that during a run).
 
         Parameters
         ----------
@@ -1131,6 +1156,11 @@ class ScanivalveMps4264:
         poll_s : float
             Interval between ``STATUS`` polls, s.
 
+        Returns
+        -------
+        float
+            Time from sending ``CALZ`` to seeing ``READY``, s.
+
         Raises
         ------
         SafetyError
@@ -1138,13 +1168,10 @@ class ScanivalveMps4264:
         DeviceError
             ``CALZ`` refused, or the scanner still busy after ``timeout_s``.
         """
-        if not wind_speed_now == 0.0:  # NaN compares unequal too: an unknown wind is refused
-            raise SafetyError(
-                f"{self.transport.url}: refusing CALZ with wind speed {wind_speed_now!r} m/s: "
-                "a zero taken wind-on bakes the wind's pressures into every channel's offset"
-            )
+        self.check_calz_allowed(wind_speed_now=wind_speed_now)
+        start = time.monotonic()
         state = self._command("CALZ")
-        deadline = time.monotonic() + timeout_s
+        deadline = time.monotonic() + timeout_s  # the wait for READY, after the command
         while state != "READY":
             if state != "CALZ":
                 raise DeviceError(f"{self.transport.url}: unexpected state {state!r} during CALZ")
@@ -1152,6 +1179,7 @@ class ScanivalveMps4264:
                 raise DeviceError(f"{self.transport.url}: CALZ not finished after {timeout_s:g} s")
             time.sleep(poll_s)
             state = self.status()
+        return time.monotonic() - start
 
     def scan(self) -> None:
         """Start scanning: fresh data connections, reset stream state, then ``SCAN``."""

@@ -309,6 +309,16 @@ class SimScanivalveMps4264:
             self._update_state()
             return self._state
 
+    @property
+    def zero_error_pa(self) -> npt.NDArray[np.float64]:
+        """Truth: what each channel reads with no pressure applied, before noise, Pa (a copy).
+
+        The sensors' zero offsets less the zero the last CALZ recorded (every channel's reading
+        then, wind included: DEVICES.md A.1.1). Shape ``(64 * modules,)``.
+        """
+        with self._lock:
+            return self._sensor_offset - self._calz_offset
+
     def start(self) -> str:
         """Start the servers on 127.0.0.1 (ephemeral ports); return the command URL.
 
@@ -494,6 +504,11 @@ class SimScanivalveMps4264:
             if self._state == "CALZ":
                 return invalid
             if command == "STOP":
+                if self._state == "SCAN":
+                    # A real scanner samples until STOP; the generator thread may lag (it runs
+                    # every few ms, later under load): produce what is due by now first, so that
+                    # the frames the scan stops after are the ones the clock says.
+                    self._produce_due()
                 self._state = "READY"
                 return b""
             if self._state == "SCAN":
