@@ -99,9 +99,10 @@ class ConsoleWindow(QtWidgets.QMainWindow):
     identifier : LiveIdentifier or None
         Fits the releases (None when the source has no ``decays()`` or ``identify`` is off).
     tabs : QTabWidget
-        The ``spectra``, ``releases`` and ``flutter derivatives`` views.
+        The ``spectra`` and ``flutter derivatives`` views.
     releases_panel : ReleasesPanel
-        The releases table and the E2RFC status line.
+        The releases table and the E2RFC status line (under the traces; hidden without an
+        identifier).
     derivatives_panel : DerivativesPanel
         The model's flutter derivatives against the table values.
     flutter_label : QLabel
@@ -133,6 +134,7 @@ class ConsoleWindow(QtWidgets.QMainWindow):
         for label in (self._wind_label, self._rho_label):
             label.setStyleSheet("font-size: 16pt; font-weight: bold")
         top = QtWidgets.QHBoxLayout()
+        top.setSpacing(40)
         top.addWidget(self._wind_label)
         top.addWidget(self._rho_label)
         self._health_source = source if isinstance(source, HealthSource) else None
@@ -199,7 +201,6 @@ class ConsoleWindow(QtWidgets.QMainWindow):
         self.derivatives_panel = DerivativesPanel()
         self.tabs = QtWidgets.QTabWidget()
         self.tabs.addTab(spectrum, "spectra")
-        self.tabs.addTab(self.releases_panel, "releases")
         self.tabs.addTab(self.derivatives_panel, "flutter derivatives")
         self.identifier: LiveIdentifier | None = None
         self._decay_source: DecaySource | None = None
@@ -209,15 +210,17 @@ class ConsoleWindow(QtWidgets.QMainWindow):
         self.health_table: QtWidgets.QTableWidget | None = None
         self.alarm_label: QtWidgets.QLabel | None = None
         self._frames = 0
+        grid.addWidget(self.releases_panel, 5, 0)
+        self.releases_panel.setVisible(self.identifier is not None)
         if self._health_source is None:
-            grid.addWidget(self.tabs, 3, 1, 2, 1)
+            grid.addWidget(self.tabs, 3, 1, 3, 1)
         else:
             grid.addWidget(self.tabs, 3, 1)
-            grid.addWidget(self._health_panel(), 4, 1)
+            grid.addWidget(self._health_panel(), 4, 1, 2, 1)
         self.controls: ControlPanel | None = None
         if self._health_source is not None and hasattr(source, "acq"):
             self.controls = ControlPanel(source, confirm=confirm)
-            grid.addWidget(self.controls, 5, 0, 1, 2)
+            grid.addWidget(self.controls, 6, 0, 1, 2)
         grid.setColumnStretch(0, 3)
         grid.setColumnStretch(1, 2)
 
@@ -274,7 +277,6 @@ class ConsoleWindow(QtWidgets.QMainWindow):
             return
         self.releases_panel.show_rows(ident)
         self.derivatives_panel.show_fit(ident)
-        self.tabs.setTabText(1, f"releases ({len(ident.rows)})")
         fit = ident.campaign
         if fit is None or fit.flutter_speed is None:
             self.flutter_label.setText("U_F = --" if fit is None else "U_F: none found")

@@ -44,8 +44,8 @@ def _cells(row: ReleaseRow) -> tuple[str, ...]:
             *modes, row.status)
 
 
-class ReleasesPanel(QtWidgets.QWidget):
-    """The releases table and the E2RFC status line.
+class ReleasesPanel(QtWidgets.QGroupBox):
+    """The releases table and the E2RFC status line, titled ``releases (n)``.
 
     Attributes
     ----------
@@ -57,9 +57,9 @@ class ReleasesPanel(QtWidgets.QWidget):
     """
 
     def __init__(self, parent: QtWidgets.QWidget | None = None) -> None:
-        super().__init__(parent)
+        super().__init__("releases", parent)
         layout = QtWidgets.QVBoxLayout(self)
-        layout.setContentsMargins(0, 0, 0, 0)
+        layout.setContentsMargins(2, 2, 2, 2)
         self.table = QtWidgets.QTableWidget(0, len(RELEASE_COLUMNS))
         self.table.setHorizontalHeaderLabels(list(RELEASE_COLUMNS))
         self.table.verticalHeader().setVisible(False)
@@ -68,6 +68,8 @@ class ReleasesPanel(QtWidgets.QWidget):
         header = self.table.horizontalHeader()
         header.setSectionResizeMode(QtWidgets.QHeaderView.ResizeMode.ResizeToContents)
         header.setStretchLastSection(True)
+        # about six rows: the traces above keep the height (the table scrolls to the newest)
+        self.table.setMaximumHeight(150)
         layout.addWidget(self.table, 1)
         self.model_label = QtWidgets.QLabel("")
         self.model_label.setWordWrap(True)
@@ -91,6 +93,7 @@ class ReleasesPanel(QtWidgets.QWidget):
                     item.setForeground(grey)
         if ident.rows:
             table.scrollToBottom()
+        self.setTitle(f"releases ({len(ident.rows)})")
         self.model_label.setText(ident.campaign_status)
 
     def cell(self, row: int, column: str) -> str:
