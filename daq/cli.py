@@ -98,6 +98,9 @@ def _build_parser() -> argparse.ArgumentParser:
                        help="seconds to run before the screenshot (default 3)")
     p_gui.add_argument("--size", type=int, nargs=2, default=(1280, 800),
                        metavar=("WIDTH", "HEIGHT"), help="window size, px (default 1280 800)")
+    p_gui.add_argument("--record-dir", type=Path, default=None, metavar="DIR",
+                       help="live mode: directory of the run files recorded from the console "
+                            "(default: the current directory)")
     return parser
 
 
@@ -107,7 +110,7 @@ def _gui(args: argparse.Namespace) -> int:
     return run_gui(GuiOptions(replay=args.replay, config=args.config, simulate=args.simulate,
                               fan_rpm=args.fan_rpm, speed=args.speed, window_s=args.window,
                               screenshot=args.screenshot, after_s=args.after,
-                              size=(args.size[0], args.size[1])))
+                              size=(args.size[0], args.size[1]), record_dir=args.record_dir))
 
 
 def _acquire(args: argparse.Namespace) -> int:

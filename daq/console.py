@@ -53,6 +53,9 @@ class GuiOptions:
         Seconds of wall time to run before the screenshot, >= 0.
     size : tuple of int
         Window size, pixels (width, height): the size of the screenshot.
+    record_dir : Path or None
+        Live: directory of the run files recorded from the console (it must exist); None: the
+        current directory.
     """
 
     replay: Path | None = None
@@ -64,6 +67,7 @@ class GuiOptions:
     screenshot: Path | None = None
     after_s: float = 3.0
     size: tuple[int, int] = (1280, 800)
+    record_dir: Path | None = None
 
 
 def _error(message: str) -> int:
@@ -100,6 +104,11 @@ def run_gui(options: GuiOptions) -> int:
         return _error(f"--after {options.after_s:g}: must be >= 0 s")
     if min(options.size) < 1:
         return _error(f"--size {options.size[0]} {options.size[1]}: must be >= 1 px")
+    if options.record_dir is not None:
+        if options.replay is not None:
+            return _error("--record-dir is for the live console (--config), not --replay")
+        if not options.record_dir.is_dir():
+            return _error(f"--record-dir {options.record_dir}: no such directory")
     if options.screenshot is not None and not options.screenshot.parent.is_dir():
         return _error(f"--screenshot {options.screenshot}: no such directory "
                       f"{options.screenshot.parent}")
@@ -134,8 +143,10 @@ def _run_live(options: GuiOptions) -> int:
         if auto:
             return _error(f"{options.config}: instrument(s) {auto} have url = 'auto' (a "
                           "simulated rig): pass --simulate, or give their real URLs")
+    # The console's recording row suggests files in record_dir (ControlPanel reads it from the
+    # source: the window needs no option of its own).
     source = LiveSource(config, simulate=options.simulate, window_s=options.window_s,
-                        fan_rpm=options.fan_rpm)
+                        fan_rpm=options.fan_rpm, record_dir=options.record_dir)
     try:
         source.open()
     except (DaqError, RuntimeError, TimeoutError, OSError) as exc:

@@ -1,4 +1,4 @@
-"""The operator control panel of the live console: fan, arm/release, CALZ, event markers.
+"""The operator control panel of the live console: fan, arm/release, CALZ, markers, recording.
 
 Responsibility: one :class:`ControlPanel` widget over a live source (``source.acq`` is the
 :class:`~daq.acquisition.Acquisition` engine, ``source.fan_speed_rpm`` and ``source.plc_armed``
@@ -11,21 +11,30 @@ the status line. Stopping the fan is one register write and runs at once on the 
 stop must never queue behind a running action). The release asks for confirmation through an
 injectable ``confirm(title, question) -> bool`` (a ``QMessageBox`` by default).
 
+The recording row starts and stops a run file through the source's
+:meth:`~daq.live_source.LiveSource.start_recording` / ``stop_recording`` (which hand the work to
+the engine's dispatcher thread and wait for it, well under a second, so they run on the GUI
+thread); its label shows the file and the elapsed time, or why the last recording stopped.
+
 Not responsible for: the drivers' own safety checks (the fan limit, ARM before RELEASE, CALZ
-wind-off are enforced there as well), drawing, or recording.
+wind-off are enforced there as well), drawing, or writing files (:mod:`daq.live_source`).
 """
 
 from __future__ import annotations
 
+import logging
 import math
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 from PySide6 import QtCore, QtWidgets
 
-__all__ = ["CALZ_MAX_WIND", "FAN_STOPPED_RPM", "ControlPanel", "ask_user"]
+__all__ = ["CALZ_MAX_WIND", "FAN_STOPPED_RPM", "ControlPanel", "ask_user", "suggest_run_name"]
+
+log = logging.getLogger(__name__)
 
 #: CALZ only below this measured wind speed, m/s.
 CALZ_MAX_WIND = 0.5
@@ -33,6 +42,17 @@ CALZ_MAX_WIND = 0.5
 FAN_STOPPED_RPM = 1.0
 #: How long closing the panel waits for a running action, s.
 _JOIN_S = 35.0
+
+
+def suggest_run_name(now: float | None = None) -> str:
+    """Suggest a run file name from the local time: ``run_YYYYmmdd_HHMMSS.h5``.
+
+    Parameters
+    ----------
+    now : float, optional
+        Wall-clock time, s since the epoch (``time.time()``); default now.
+    """
+    return time.strftime("run_%Y%m%d_%H%M%S.h5", time.localtime(now))
 
 
 def ask_user(title: str, question: str) -> bool:
@@ -54,6 +74,9 @@ class ControlPanel(QtWidgets.QGroupBox):
         ``snapshot(last)``.
     confirm : callable, optional
         ``confirm(title, question) -> bool`` for dangerous actions; default :func:`ask_user`.
+    record_dir : str or Path, optional
+        Directory of the suggested run files, and of a relative file name typed; default the
+        source's ``record_dir`` if it has one, else the current directory.
     parent : QWidget, optional
         Qt parent.
 
@@ -62,9 +85,18 @@ class ControlPanel(QtWidgets.QGroupBox):
     fan_spin : QDoubleSpinBox
         The fan setpoint, rpm, within [0, ``[limits] max_fan_rpm``].
     buttons : dict of str to QPushButton
-        ``fan_apply``, ``fan_stop``, ``arm``, ``release``, ``calz``, ``mark``.
+        ``fan_apply``, ``fan_stop``, ``arm``, ``release``, ``calz``, ``mark``, ``record``,
+        ``stop_record``.
     note_edit : QLineEdit
         The text of the next event marker.
+    file_edit : QLineEdit
+        The run file to record: a name in ``record_dir``, or a path.
+    run_notes_edit : QLineEdit
+        The operator notes stored with the next recording.
+    record_label : QLabel
+        The file being recorded and the elapsed time (or the last recording's failure).
+    record_dir : Path
+        Where run files are suggested.
     reasons : dict of str to str
         Why each disabled button is disabled (``"release: arm first"``); absent when enabled.
     """
@@ -73,6 +105,7 @@ class ControlPanel(QtWidgets.QGroupBox):
     finished = QtCore.Signal(str, object, object)
 
     def __init__(self, source: Any, *, confirm: Callable[[str, str], bool] | None = None,
+                 record_dir: str | Path | None = None,
                  parent: QtWidgets.QWidget | None = None) -> None:
         super().__init__("controls", parent)
         self._source = source
@@ -122,6 +155,12 @@ class ControlPanel(QtWidgets.QGroupBox):
         mark.clicked.connect(self._on_mark)
         self.buttons["mark"] = mark
         layout.addWidget(mark)
+        outer.addLayout(self._recording_row(record_dir))
+        # Tight rows: the recording row must not make the console taller than it was (its
+        # window still fits 800 x 600).
+        outer.setSpacing(0)
+        margins = outer.contentsMargins()
+        outer.setContentsMargins(margins.left(), 2, margins.right(), 0)
         self.status_label = QtWidgets.QLabel("")
         self.status_label.setWordWrap(True)
         outer.addWidget(self.status_label)
@@ -194,6 +233,7 @@ class ControlPanel(QtWidgets.QGroupBox):
             # The scanner refuses every command but STOP while it scans, and the engine keeps it
             # scanning: the console zeroes it when it starts; a pause of the scan is not built.
             refuse(("calz",), "the scanner is scanning (CALZ runs when the console starts)")
+        self._check_recording(refuse)
         self.reasons = reasons
         for key, button in self.buttons.items():
             why = reasons.get(key)
@@ -201,6 +241,8 @@ class ControlPanel(QtWidgets.QGroupBox):
             button.setToolTip(why or "")
         self.fan_spin.setEnabled("fan_apply" not in reasons)
         self.note_edit.setEnabled("mark" not in reasons)
+        self.file_edit.setEnabled("record" not in reasons)
+        self.run_notes_edit.setEnabled("record" not in reasons)
         self._show()
 
     # -- actions ---------------------------------------------------------------------------------
@@ -275,6 +317,58 @@ class ControlPanel(QtWidgets.QGroupBox):
         else:
             self._set_message(f"marked: {text!r}")
 
+    def record(self) -> None:
+        """Start recording to the file typed (in ``record_dir`` unless a path), with the notes.
+
+        Refused (reason in the status line) when the current state does not allow it; the
+        source's refusals (an existing file, a missing or read-only directory, ...) are shown.
+        """
+        self.refresh()
+        why = self.reasons.get("record")
+        if why is not None:
+            self._set_message(why)
+            return
+        path = self.record_path()
+        if path is None:
+            self._set_message("record: type a file name first")
+            return
+        try:
+            started = self._source.start_recording(path, self.run_notes_edit.text())
+        except Exception as exc:  # StorageError, RecordingError, ...: shown, never swallowed
+            log.warning("record to %s refused: %s", path, exc)
+            self._set_message(f"record failed: {type(exc).__name__}: {exc}")
+        else:
+            self._set_message(f"recording to {started}")
+        self.refresh()
+
+    def stop_record(self) -> None:
+        """Stop the recording: the file is finished and closed; its summary is shown."""
+        self.refresh()
+        why = self.reasons.get("stop_record")
+        if why is not None:
+            self._set_message(why)
+            return
+        try:
+            summary = self._source.stop_recording()
+        except Exception as exc:  # RecordingError, StorageError: shown, never swallowed
+            log.error("stop recording failed: %s", exc)
+            self._set_message(f"stop recording failed: {type(exc).__name__}: {exc}")
+        else:
+            self._set_message(
+                f"recorded {summary.get('file', '?')}: {float(summary.get('duration_s', 0.0)):.1f}"
+                f" s, {summary.get('sync_rows', 0)} sync rows, "
+                f"{summary.get('releases', 0)} release(s)")
+            self.file_edit.setText(suggest_run_name())  # the next run gets a new name
+        self.refresh()
+
+    def record_path(self) -> Path | None:
+        """Return the run file typed, resolved against ``record_dir``; None when empty."""
+        text = self.file_edit.text().strip()
+        if not text:
+            return None
+        path = Path(text).expanduser()
+        return path if path.is_absolute() else self.record_dir / path
+
     def shutdown(self, timeout_s: float = _JOIN_S) -> None:
         """Wait for a running action to finish (before the source closes)."""
         worker, self._worker = self._worker, None
@@ -282,6 +376,57 @@ class ControlPanel(QtWidgets.QGroupBox):
             worker.join(timeout_s)
 
     # -- internals -------------------------------------------------------------------------------
+    def _recording_row(self, record_dir: str | Path | None) -> QtWidgets.QHBoxLayout:
+        """Build the recording row: file name, notes, record / stop, file and elapsed time."""
+        if record_dir is None:
+            record_dir = getattr(self._source, "record_dir", None)
+        self.record_dir = Path.cwd() if record_dir is None else Path(record_dir)
+        self._reported_failure: Any = None
+        row = QtWidgets.QHBoxLayout()
+        row.addWidget(QtWidgets.QLabel("run file"))
+        self.file_edit = QtWidgets.QLineEdit(suggest_run_name())
+        self.file_edit.setToolTip(f"the HDF5 run file to record: a name in {self.record_dir}, "
+                                  "or a path")
+        row.addWidget(self.file_edit, 2)
+        self.run_notes_edit = QtWidgets.QLineEdit()
+        self.run_notes_edit.setPlaceholderText("run notes")
+        self.run_notes_edit.setToolTip("operator notes stored with the run file")
+        row.addWidget(self.run_notes_edit, 3)
+        for key, text, slot in (("record", "record", self.record),
+                                ("stop_record", "stop recording", self.stop_record)):
+            button = QtWidgets.QPushButton(text)
+            button.clicked.connect(slot)
+            self.buttons[key] = button
+            row.addWidget(button)
+        self.record_label = QtWidgets.QLabel("not recording")
+        row.addWidget(self.record_label, 2)
+        return row
+
+    def _check_recording(self, refuse: Callable[[tuple[str, ...], str], None]) -> None:
+        """Refuse the recording buttons the state does not allow; update the recording label."""
+        if not callable(getattr(self._source, "start_recording", None)):
+            refuse(("record", "stop_record"), "this source cannot record")
+            self.record_label.setText("")
+            return
+        rec = self._source.recording
+        if rec is not None and rec.error is None:
+            refuse(("record",), "already recording")
+            self.record_label.setText(f"recording {rec.path.name} ({_clock(rec.elapsed_s())})")
+            self.record_label.setToolTip(str(rec.path))
+            return
+        refuse(("stop_record",), "not recording")
+        if rec is None:
+            self.record_label.setText("not recording")
+            self.record_label.setToolTip("")
+            return
+        # The recording stopped by itself (e.g. the disk filled up): say so once in the status
+        # line; the label keeps it until the next recording.
+        self.record_label.setText(f"recording {rec.path.name} FAILED")
+        self.record_label.setToolTip(f"{rec.path}: {rec.error}")
+        if self._reported_failure is not rec:
+            self._reported_failure = rec
+            self._message = f"recording to {rec.path} failed: {rec.error}"
+
     def _on_apply(self) -> None:
         self.apply_fan(self.fan_spin.value())
 
@@ -360,7 +505,9 @@ class ControlPanel(QtWidgets.QGroupBox):
 
     def _show(self) -> None:
         parts = [self._message] if self._message else []
-        parts += list(self.reasons.values())
+        # "stop recording: not recording" is the idle state, which the recording label shows
+        # already: the status line keeps to the other reasons (and stays one line shorter).
+        parts += [why for key, why in self.reasons.items() if key != "stop_record"]
         self.status_label.setText("  |  ".join(dict.fromkeys(parts)))
 
     def _wind(self) -> float:
@@ -372,5 +519,12 @@ class ControlPanel(QtWidgets.QGroupBox):
         return float(wind[-1]) if wind is not None and len(wind) else math.nan
 
 
+def _clock(seconds: float) -> str:
+    """Format a duration as ``h:mm:ss`` (the recording's elapsed time)."""
+    minutes, secs = divmod(max(int(seconds), 0), 60)
+    hours, minutes = divmod(minutes, 60)
+    return f"{hours}:{minutes:02d}:{secs:02d}"
+
+
 _LABELS = {"fan_apply": "fan", "fan_stop": "fan", "arm": "arm", "release": "release",
-           "calz": "CALZ", "mark": "mark"}
+           "calz": "CALZ", "mark": "mark", "record": "record", "stop_record": "stop recording"}
