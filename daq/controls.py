@@ -30,14 +30,24 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from PySide6 import QtCore, QtWidgets
 
-__all__ = ["CALZ_MAX_WIND", "FAN_STOPPED_RPM", "ControlPanel", "ask_user", "suggest_run_name"]
+__all__ = ["CALZ_MAX_WIND", "CALZ_SETTLE_S", "CALZ_WIND_WINDOW_S", "FAN_STOPPED_RPM",
+           "ControlPanel",
+           "ask_user", "suggest_run_name"]
 
 log = logging.getLogger(__name__)
 
-#: CALZ only below this measured wind speed, m/s.
-CALZ_MAX_WIND = 0.5
+#: CALZ only below this wind speed, m/s: the median over the last CALZ_WIND_WINDOW_S, a dynamic
+#: pressure of ~1.4 Pa. Above the wind-off reading (Pitot noise of ~1 Pa per sample gives single
+#: samples of 1-1.5 m/s, but a median of ~0) and a small zero drift, far below any test wind.
+CALZ_MAX_WIND = 1.5
+#: The wind's median is taken over this long, s.
+CALZ_WIND_WINDOW_S = 1.0
+#: CALZ only once the fan has been seen stopped for this long, s (the air in the circuit slows
+#: down after the fan).
+CALZ_SETTLE_S = 3.0
 #: The fan counts as stopped at or below this measured speed, rpm.
 FAN_STOPPED_RPM = 1.0
 #: How long closing the panel waits for a running action, s.
@@ -123,6 +133,7 @@ class ControlPanel(QtWidgets.QGroupBox):
         #: The ARM state the panel's own commands left, with their host time (ns).
         self._own_armed: tuple[int, bool] | None = None
         self._fan_commanded = False
+        self._fan_stopped_at: float | None = None  # monotonic s when the fan was seen stopped
         self.reasons: dict[str, str] = {}
         self._message = ""
 
@@ -222,17 +233,22 @@ class ControlPanel(QtWidgets.QGroupBox):
             if math.isnan(fan_rpm):
                 refuse(("calz",), "fan speed not read yet")
             elif fan_rpm > FAN_STOPPED_RPM or self._fan_commanded:
+                self._fan_stopped_at = None
                 refuse(("calz",), "stop the fan first")
+            else:
+                now = time.monotonic()
+                if self._fan_stopped_at is None:
+                    self._fan_stopped_at = now
+                settled = now - self._fan_stopped_at
+                if settled < CALZ_SETTLE_S:
+                    refuse(("calz",), f"fan stopped {settled:.0f} s ago, wait "
+                                      f"{CALZ_SETTLE_S:g} s for the air to settle")
         if "calz" not in reasons:
             wind = self._wind()
             if not math.isfinite(wind):
                 refuse(("calz",), "wind speed not measured yet")
             elif wind >= CALZ_MAX_WIND:
                 refuse(("calz",), f"wind {wind:.2f} m/s, must be below {CALZ_MAX_WIND:g} m/s")
-        if "calz" not in reasons:
-            # The scanner refuses every command but STOP while it scans, and the engine keeps it
-            # scanning: the console zeroes it when it starts; a pause of the scan is not built.
-            refuse(("calz",), "the scanner is scanning (CALZ runs when the console starts)")
         self._check_recording(refuse)
         self.reasons = reasons
         for key, button in self.buttons.items():
@@ -294,16 +310,27 @@ class ControlPanel(QtWidgets.QGroupBox):
         self._submit("release", lambda: acq.release(self._plc_name))
 
     def calz(self) -> None:
-        """Zero the scanner (CALZ) with the fan stopped and the wind below 0.5 m/s."""
+        """Zero the scanner (CALZ) with the fan stopped and settled and the wind off."""
         self.refresh()
         why = self.reasons.get("calz")
         if why is not None:
             self._set_message(why)
             return
-        scanner = self._driver(self._scanner_name, "CALZ", "scanner")
-        if scanner is not None:
-            # wind off checked above (measured < CALZ_MAX_WIND, fan stopped): zero it
-            self._submit("calz", lambda: scanner.calz(wind_speed_now=0.0))
+        acq = self._acq("CALZ")
+        if acq is None:
+            return
+        name = self._scanner_name
+
+        def run() -> str:
+            # Wind off checked above (measured < CALZ_MAX_WIND, fan stopped). The engine pauses
+            # the scan (the scanner takes no command while scanning); the pause is a marked gap.
+            result = acq.calz(name, wind_speed_now=0.0)
+            offsets = np.abs(result.offsets_before_pa)
+            largest = float(np.nanmax(offsets)) if np.isfinite(offsets).any() else math.nan
+            return (f"scanner zeroed; scan paused {result.pause_s:.2f} s, largest zero offset "
+                    f"removed {largest:.2f} Pa")
+
+        self._submit("calz", run)
 
     def mark(self, text: str) -> None:
         """Record an operator ``"note"`` event with ``text`` (immediate: no I/O)."""
@@ -511,12 +538,14 @@ class ControlPanel(QtWidgets.QGroupBox):
         self.status_label.setText("  |  ".join(dict.fromkeys(parts)))
 
     def _wind(self) -> float:
+        """Return the median measured wind speed over the last ``CALZ_WIND_WINDOW_S``, m/s."""
+        rows = max(1, int(CALZ_WIND_WINDOW_S * float(self._source.info.rate_hz)))
         try:
-            snap = self._source.snapshot(1)
+            wind = self._source.snapshot(rows, columns=("U",))["U"]
         except RuntimeError:
             return math.nan
-        wind = snap.get("U")
-        return float(wind[-1]) if wind is not None and len(wind) else math.nan
+        wind = wind[np.isfinite(wind)]
+        return float(np.median(wind)) if wind.size else math.nan
 
 
 def _clock(seconds: float) -> str:

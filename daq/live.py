@@ -50,6 +50,14 @@ _TRACE_COLUMNS = ("time", "h", "alpha", "lift", "moment", "U", "rho")
 HEALTH_COLUMNS = ("device", "samples/s", "gaps", "overflow", "errors", "clock fit", "last fault")
 #: The health panel is refreshed every this many frames.
 _HEALTH_EVERY = 5
+#: The timer redraws the spectra and the pressure views when the data moved on by this much,
+#: s of run time (~7 per second at real time): they change slowly and cost as much as the four
+#: traces.
+_SLOW_PERIOD_S = 0.15
+#: Tap colours on the outline: Cp on [-2, 2] in this many steps. The brushes are made once:
+#: pyqtgraph caches a rendered symbol per brush *object*, so new brushes at every frame would
+#: re-render every tap's symbol (~60 ms per frame with 511 taps).
+_CP_LEVELS = 64
 
 
 def _plot_widget() -> pg.PlotWidget:
@@ -164,6 +172,9 @@ class ConsoleWindow(QtWidgets.QMainWindow):
                 plot.setXLink(first)
             if row == 4:
                 plot.setLabel("bottom", "time (s)")
+            else:  # one time axis with numbers is enough (the grid lines stay)
+                plot.getAxis("bottom").setStyle(showValues=False)
+            plot.enableAutoRange(x=False)  # the window sets it
             curve = plot.plot(pen=_PENS[name])
             curve.setDownsampling(auto=True, method="peak")
             curve.setClipToView(True)
@@ -187,6 +198,10 @@ class ConsoleWindow(QtWidgets.QMainWindow):
         self._tap_scatter = pg.ScatterPlotItem(taps.x, -taps.z, size=8)
         outline.addItem(self._tap_scatter)
         self._colormap = pg.colormap.get("CET-D1")
+        self._palette = [pg.mkBrush(q) for q in self._colormap.map(
+            np.linspace(0.0, 1.0, _CP_LEVELS), mode="qcolor")] + [pg.mkBrush(120, 120, 120)]
+        self._tap_levels_shown: npt.NDArray[np.intp] | None = None
+        self._slow_drawn_at = -math.inf  # run time of the last redraw of the slow views, s
         grid.addWidget(outline, 2, 1)
 
         spectrum = _plot_widget()
@@ -258,8 +273,10 @@ class ConsoleWindow(QtWidgets.QMainWindow):
             self._drawn_rows = self._source.total_rows
             # The scalars of the whole window, the (wide) pressures of the latest row only.
             snap = self._source.snapshot(columns=_TRACE_COLUMNS)
-            latest = self._source.snapshot(1, columns=("time", "pressure"))
-            self.redraw(snap, latest)
+            t_end = float(snap["time"][-1]) if snap["time"].size else math.nan
+            slow = not t_end < self._slow_drawn_at + _SLOW_PERIOD_S  # NaN: draw
+            latest = self._source.snapshot(1, columns=("time", "pressure")) if slow else None
+            self.redraw(snap, latest, slow_views=slow)
         self._status.setText(self._source.status())
         if self._health_source is not None and self._frames % _HEALTH_EVERY == 0:
             self.show_health(self._health_source.health(), self._health_source.fan_speed_rpm)
@@ -316,7 +333,8 @@ class ConsoleWindow(QtWidgets.QMainWindow):
                             if alarms else "color: #60d060; padding: 2px")
 
     def redraw(self, snap: dict[str, npt.NDArray[Any]],
-               latest: dict[str, npt.NDArray[Any]] | None = None) -> None:
+               latest: dict[str, npt.NDArray[Any]] | None = None, *,
+               slow_views: bool = True) -> None:
         """Draw one snapshot.
 
         Parameters
@@ -327,6 +345,9 @@ class ConsoleWindow(QtWidgets.QMainWindow):
         latest : dict of str to ndarray, optional
             ``time`` and ``pressure`` of the row the pressure views show (the latest); default
             the last row of ``snap``.
+        slow_views : bool
+            Redraw the spectra and the pressure views too (the timer does when the data
+            moved on by ``_SLOW_PERIOD_S``); the traces and labels are always redrawn.
         """
         t = snap["time"]
         if t.size == 0:
@@ -334,18 +355,21 @@ class ConsoleWindow(QtWidgets.QMainWindow):
         t_end = float(t[-1])
         visible = t >= t_end - self._window_s
         tv = t[visible]
+        if self._time_plot is not None:  # before the data: one repaint, not two
+            self._time_plot.setXRange(t_end - self._window_s, t_end, padding=0.0)
         for name, curve in self.curves.items():
             _, scale = _DISPLAY[name]
             curve.setData(tv, snap[name][visible] * scale)
-        if self._time_plot is not None:
-            self._time_plot.setXRange(t_end - self._window_s, t_end, padding=0.0)
+        U, rho = float(snap["U"][-1]), float(snap["rho"][-1])
+        self._wind_label.setText(f"U = {U:.2f} m/s")
+        self._rho_label.setText(f"rho = {rho:.3f} kg/m^3")
+        if not slow_views:
+            return
+        self._slow_drawn_at = t_end
         for name, curve in self.spectrum_curves.items():
             _, scale = _DISPLAY[name]
             freq, amp = amplitude_spectrum(tv, snap[name][visible] * scale)
             curve.setData(freq, amp)
-        U, rho = float(snap["U"][-1]), float(snap["rho"][-1])
-        self._wind_label.setText(f"U = {U:.2f} m/s")
-        self._rho_label.setText(f"rho = {rho:.3f} kg/m^3")
         if latest is None:
             latest = {"time": t[-1:], "pressure": snap["pressure"][-1:]}
         cp = pressure_coefficients(latest["pressure"][-1], U, rho)
@@ -354,7 +378,10 @@ class ConsoleWindow(QtWidgets.QMainWindow):
             self.cp_curve.setData(self._perimeter, cp, connect="finite")
         else:  # wind off: no Cp (an all-NaN curve makes pyqtgraph warn at every frame)
             self.cp_curve.setData([], [])
-        self._tap_scatter.setBrush(self._tap_brushes(cp))
+        levels = self._tap_levels(cp)
+        if self._tap_levels_shown is None or not np.array_equal(levels, self._tap_levels_shown):
+            self._tap_scatter.setBrush(self._tap_brushes(cp))
+            self._tap_levels_shown = levels
 
     # -- Qt --------------------------------------------------------------------------------------
     def closeEvent(self, event: Any) -> None:  # noqa: N802 - Qt's name
@@ -391,10 +418,14 @@ class ConsoleWindow(QtWidgets.QMainWindow):
         self.health_table = table
         return panel
 
+    @staticmethod
+    def _tap_levels(cp: npt.NDArray[np.float64]) -> npt.NDArray[np.intp]:
+        """Return each tap's colour: Cp on [-2, 2] in ``_CP_LEVELS`` steps (that index: NaN)."""
+        scaled = np.clip((np.asarray(cp, dtype=float) + 2.0) / 4.0, 0.0, 1.0)
+        levels = np.rint(np.nan_to_num(scaled) * (_CP_LEVELS - 1)).astype(np.intp)
+        levels[~np.isfinite(scaled)] = _CP_LEVELS
+        return levels
+
     def _tap_brushes(self, cp: npt.NDArray[np.float64]) -> list[Any]:
-        """Colour each tap by Cp on [-2, 2] (grey where Cp is not defined)."""
-        grey = pg.mkBrush(120, 120, 120)
-        scaled = np.clip((cp + 2.0) / 4.0, 0.0, 1.0)
-        colours = self._colormap.map(np.nan_to_num(scaled, nan=0.5), mode="qcolor")
-        return [grey if not math.isfinite(c) else pg.mkBrush(q) for c, q in zip(cp, colours,
-                                                                                  strict=True)]
+        """Return each tap's brush, by Cp on [-2, 2] (grey where Cp is not defined)."""
+        return [self._palette[i] for i in self._tap_levels(cp).tolist()]

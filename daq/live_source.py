@@ -62,8 +62,9 @@ RATE_WINDOW_S = 2.0
 CLOCK_FIT_INTERVAL_S = 0.5
 #: The live source keeps this many of the engine's latest events (:meth:`LiveSource.events`).
 EVENTS_KEPT = 1000
-#: Sync rows are handed to the ring this often, s (the writer's batching interval).
-WRITE_INTERVAL_S = 0.05
+#: Sync rows are handed to the ring this often, s (the writer's batching interval): an append to
+#: the ring is cheap, and the window redraws only when rows are new (20 frames/s need 20 appends/s).
+WRITE_INTERVAL_S = 0.02
 #: The ring holds at least this much history, s: a whole free decay must still be there when
 #: the releases table cuts it (:mod:`daq.live_ident`).
 MIN_HISTORY_S = 30.0

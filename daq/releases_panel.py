@@ -70,6 +70,7 @@ class ReleasesPanel(QtWidgets.QGroupBox):
         header.setStretchLastSection(True)
         # about six rows: the traces above keep the height (the table scrolls to the newest)
         self.table.setMaximumHeight(150)
+        self.table.setMinimumHeight(40)  # a small window (800 x 600) keeps its size
         layout.addWidget(self.table, 1)
         self.model_label = QtWidgets.QLabel("")
         self.model_label.setWordWrap(True)

@@ -216,7 +216,10 @@ class VirtualTunnel:
         with self._lock:
             decay = self._decay
             U_now = self._fan_rpm * self.wind_per_rpm
-        U = np.full(t.shape, U_now if decay is None else decay.U)
+        # The wind follows the fan at all times (the Pitot and the mean pressures see it). A
+        # decay's motion and self-excited forces are those computed at the wind of its release:
+        # a change of wind during a free decay is not modelled (a campaign keeps it constant).
+        U = np.full(t.shape, U_now)
         qd = 0.5 * self.air.density * U**2
         h0, a0 = self.hold
         B = self.section.B

@@ -2,8 +2,9 @@
 
 One live simulated rig (as ``test_console_live.py``) runs the state checks and actions end to end:
 forbidden actions disabled with a reason, arm then release (confirmation injected) recorded by the
-engine with the model moving afterwards, a refused confirmation, the fan limit, CALZ while the fan
-runs. A fake source checks the panel of a rig without a fan or PLC, without any device.
+engine with the model moving afterwards, a refused confirmation, the fan limit, CALZ refused while
+the fan runs and done (the scan paused by the engine) once it is stopped. A fake source checks the
+panel of a rig without a fan or PLC, without any device.
 """
 
 from __future__ import annotations
@@ -89,7 +90,9 @@ def test_controls_on_a_live_simulated_rig(qtbot):
         assert b["arm"].isEnabled()
         b["arm"].click()
         qtbot.waitUntil(lambda: panel.busy is None and b["release"].isEnabled(), timeout=5_000)
-        assert len(_events(source, "arm")) == 1 and not b["arm"].isEnabled()
+        # the engine's event reaches the source through the dispatcher thread: soon, not now
+        qtbot.waitUntil(lambda: len(_events(source, "arm")) == 1, timeout=2_000)
+        assert not b["arm"].isEnabled()
         answers.append(False)
         b["release"].click()
         assert questions and panel.busy is None
@@ -113,6 +116,23 @@ def test_controls_on_a_live_simulated_rig(qtbot):
         assert h_after > 3.0 * h_before and h_after > 1e-3, (h_before, h_after)
         qtbot.waitUntil(lambda: panel.armed() is False and not b["release"].isEnabled(),
                         timeout=5_000)
+
+        # CALZ during the run: allowed once the fan is stopped and the wind is off; the engine
+        # pauses the scan for it and marks the pause.
+        b["fan_stop"].click()
+        deadline = time.monotonic() + 15.0
+        while not b["calz"].isEnabled():
+            assert time.monotonic() < deadline, panel.reasons
+            qtbot.wait(100)
+            window.tick()
+        b["calz"].click()
+        qtbot.waitUntil(lambda: panel.busy is None, timeout=15_000)
+        assert "calz: done (scanner zeroed; scan paused" in panel.status_text, panel.status_text
+        assert len(_events(source, "calz")) == 1
+        rows = source.snapshot(1)["time"]
+        qtbot.waitUntil(lambda: float(source.snapshot(1)["time"][-1]) > float(rows[-1]) + 0.5,
+                        timeout=5_000)  # the sync view goes on after the pause
+        assert np.isfinite(source.snapshot(50)["h"]).all()
 
         window.close()  # waits for the worker, stops engine and rig: the leak fixture checks
         assert not source.running

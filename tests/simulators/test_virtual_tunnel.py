@@ -41,6 +41,23 @@ def test_held_model_is_static_and_release_follows_the_simulated_decay():
     assert vt.armed and np.all(vt.sample(t)["alpha"] == 0.02)
 
 
+def test_the_wind_follows_the_fan_after_a_release_too():
+    """A fan stopped while the model is free stops the wind (it stayed at the release's)."""
+    clock = ManualClock()
+    vt = tunnel(clock)
+    vt.set_fan_speed(500.0)
+    clock.advance(1.0)
+    t0 = vt.release()
+    clock.advance(2.0)
+    vt.set_fan_speed(0.0)
+    later = vt.sample(np.array([t0 + 2.5]))
+    assert later["U"][0] == 0.0 and later["qd"][0] == 0.0
+    _, qd = vt.pressures(np.array([t0 + 2.5]))
+    assert qd[0] == 0.0
+    # The decay itself goes on as computed (a wind change during a decay is not modelled).
+    assert later["alpha"][0] != 0.02
+
+
 def test_tap_pressures_integrate_to_the_forces_and_pitot_reads_qd():
     """Scanner-side truth: taps integrate to lift and moment, the Pitot to rho U^2 / 2."""
     clock = ManualClock()
