@@ -27,16 +27,22 @@ MYPY_VERSION := 2.4.1
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 
 # Tests and the demo never open a window, and never need a display.
-test demo: export QT_QPA_PLATFORM := offscreen
-test demo: export MPLBACKEND := Agg
+test demo screenshot: export QT_QPA_PLATFORM := offscreen
+test demo screenshot: export MPLBACKEND := Agg
 
-.PHONY: test demo lint typecheck setup qt-libs clean
+.PHONY: test demo screenshot lint typecheck setup qt-libs clean
 
 test: setup
 	$(PY) -m pytest -q -p no:cacheprovider $(PYTEST_ARGS)
 
 demo: setup
 	$(VENV)/bin/windrig demo --out demo_output
+
+# The README's picture of the live console (a simulated session, three automatic releases).
+screenshot: setup
+	$(VENV)/bin/windrig gui --config rig_configs/sim_flat_plate.toml --simulate \
+	    --auto-release 550,700,850 --screenshot daq/console_screenshot.png --after 31 \
+	    --size 1600 1000
 
 setup: $(STAMP) qt-libs
 

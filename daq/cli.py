@@ -101,7 +101,19 @@ def _build_parser() -> argparse.ArgumentParser:
     p_gui.add_argument("--record-dir", type=Path, default=None, metavar="DIR",
                        help="live mode: directory of the run files recorded from the console "
                             "(default: the current directory)")
+    p_gui.add_argument("--auto-release", type=_rpm_list, default=(), metavar="RPM[,RPM...]",
+                       help="simulated rig only: a hands-free session, one release (arm, "
+                            "hold, release, decay, arm) at each fan speed in turn")
     return parser
+
+
+def _rpm_list(text: str) -> tuple[float, ...]:
+    """Parse ``"600,850"`` into fan speeds, rpm."""
+    try:
+        return tuple(float(part) for part in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected fan speeds in rpm separated by "
+                                         "commas, e.g. 600,850") from None
 
 
 def _gui(args: argparse.Namespace) -> int:
@@ -110,7 +122,8 @@ def _gui(args: argparse.Namespace) -> int:
     return run_gui(GuiOptions(replay=args.replay, config=args.config, simulate=args.simulate,
                               fan_rpm=args.fan_rpm, speed=args.speed, window_s=args.window,
                               screenshot=args.screenshot, after_s=args.after,
-                              size=(args.size[0], args.size[1]), record_dir=args.record_dir))
+                              size=(args.size[0], args.size[1]), record_dir=args.record_dir,
+                              auto_release=args.auto_release))
 
 
 def _acquire(args: argparse.Namespace) -> int:

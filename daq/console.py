@@ -56,6 +56,9 @@ class GuiOptions:
     record_dir : Path or None
         Live: directory of the run files recorded from the console (it must exist); None: the
         current directory.
+    auto_release : tuple of float
+        Simulated live rig only: fan speeds (rpm) of a hands-free programme, one release each
+        (:mod:`daq.auto_release`); empty: none.
     """
 
     replay: Path | None = None
@@ -68,6 +71,7 @@ class GuiOptions:
     after_s: float = 3.0
     size: tuple[int, int] = (1280, 800)
     record_dir: Path | None = None
+    auto_release: tuple[float, ...] = ()
 
 
 def _error(message: str) -> int:
@@ -109,6 +113,9 @@ def run_gui(options: GuiOptions) -> int:
             return _error("--record-dir is for the live console (--config), not --replay")
         if not options.record_dir.is_dir():
             return _error(f"--record-dir {options.record_dir}: no such directory")
+    if options.auto_release and not options.simulate:
+        return _error("--auto-release drives the rig by itself: only for a simulated live rig "
+                      "(--config C --simulate)")
     if options.screenshot is not None and not options.screenshot.parent.is_dir():
         return _error(f"--screenshot {options.screenshot}: no such directory "
                       f"{options.screenshot.parent}")
@@ -138,6 +145,10 @@ def _run_live(options: GuiOptions) -> int:
             and options.fan_rpm > config.limits.max_fan_rpm:
         return _error(f"--fan-rpm {options.fan_rpm:g}: above the rig's max_fan_rpm "
                       f"{config.limits.max_fan_rpm:g}")
+    for rpm in options.auto_release:
+        if config.limits is not None and not 0 < rpm <= config.limits.max_fan_rpm:
+            return _error(f"--auto-release {rpm:g}: fan speeds must be in (0, max_fan_rpm = "
+                          f"{config.limits.max_fan_rpm:g}] rpm")
     if not options.simulate:
         auto = [inst.name for inst in config.instruments if inst.url == "auto"]
         if auto:
@@ -169,6 +180,14 @@ def _run_window(source: DataSource, options: GuiOptions) -> int:
 
     app: Any = QtWidgets.QApplication.instance() or QtWidgets.QApplication(sys.argv[:1])
     window = ConsoleWindow(source, window_s=options.window_s)
+    auto = None
+    if options.auto_release and window.controls is not None:
+        from daq.auto_release import AutoReleaser
+        from daq.campaign import default_decay_s
+
+        auto = AutoReleaser(window.controls, source, options.auto_release,
+                            default_decay_s(source.info.config.section), parent=window)
+        auto.start()
     try:
         window.resize(*options.size)
         window.show()
@@ -181,6 +200,8 @@ def _run_window(source: DataSource, options: GuiOptions) -> int:
         image = window.grab()
         status = source.status()
     finally:
+        if auto is not None:
+            auto.stop()
         window.close()
         window.deleteLater()
     if source.error is not None:

@@ -276,6 +276,8 @@ class ControlPanel(QtWidgets.QGroupBox):
             fan.start()
             return f"fan set to {float(rpm):.0f} rpm"
 
+        if 0.0 <= rpm <= self._max_rpm:  # the setpoint shown is the one commanded
+            self.fan_spin.setValue(float(rpm))
         self._fan_commanded = True
         self._submit("fan", run)
 
@@ -299,12 +301,19 @@ class ControlPanel(QtWidgets.QGroupBox):
         if acq is not None:
             self._submit("arm", lambda: acq.arm(self._plc_name))
 
-    def release(self) -> None:
-        """Release the model after confirmation (on the worker thread)."""
+    def release(self, *, confirmed: bool = False) -> None:
+        """Release the model after confirmation (on the worker thread).
+
+        Parameters
+        ----------
+        confirmed : bool
+            The operator has agreed already (the automatic releases of a simulated session,
+            :mod:`daq.auto_release`): do not ask.
+        """
         acq = self._acq("release")
         if acq is None:
             return
-        if not self._confirm("release", "Release the model now?"):
+        if not confirmed and not self._confirm("release", "Release the model now?"):
             self._set_message("release: cancelled")
             return
         self._submit("release", lambda: acq.release(self._plc_name))
@@ -525,6 +534,15 @@ class ControlPanel(QtWidgets.QGroupBox):
         if action == "release" and error is not None:
             self._own_armed = None  # unknown: trust the next PLC reading
         self.refresh()
+
+    @property
+    def message(self) -> str:
+        """The last action's message (the status line without the reasons)."""
+        return self._message
+
+    def show_message(self, text: str) -> None:
+        """Show ``text`` in the panel's status line (before the reasons)."""
+        self._set_message(text)
 
     def _set_message(self, text: str) -> None:
         self._message = text

@@ -17,6 +17,8 @@ from typing import Any
 import numpy as np
 import pytest
 
+from daq.auto_release import AutoReleaser
+from daq.cli import main
 from daq.config import parse_rig_config
 from daq.live import ConsoleWindow
 from daq.live_ident import fit_release_modes, identify_releases
@@ -107,6 +109,43 @@ def test_a_release_from_the_console_appears_in_the_releases_table(qtbot):
         assert not source.running
     finally:
         source.close()
+
+
+def test_auto_release_runs_a_session_through_the_panel(qtbot):
+    config = flat_plate_config()
+    source = LiveSource(config, simulate=True, window_s=10.0)
+    source.open()
+    try:
+        window = ConsoleWindow(source, window_s=10.0, frame_ms=50, confirm=lambda *_: False)
+        qtbot.addWidget(window)
+        panel = window.controls
+        assert panel is not None
+        auto = AutoReleaser(panel, source, [700.0], decay_s=3.0, parent=window)
+        auto.start()
+        qtbot.waitUntil(lambda: auto.step == "done", timeout=30_000)
+        assert auto.releases == 1 and len(source.events("release")) == 1
+        assert panel.message == "auto: 1 release(s) done; the fan stays at 700 rpm"
+        assert panel.fan_spin.value() == 700.0  # the setpoint shown is the one commanded
+        # the release was not asked about (confirm answers no): the programme's own consent
+        qtbot.waitUntil(lambda: window.releases_panel.cell(0, "status") == "ok", timeout=20_000)
+        assert float(window.releases_panel.cell(0, "U (m/s)")) == pytest.approx(7.0, rel=0.05)
+        window.close()
+    finally:
+        source.close()
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--auto-release", "600"], "only for a simulated live rig"),
+    (["--simulate", "--auto-release", "600,5000"], "--auto-release 5000: fan speeds must be in"),
+    (["--simulate", "--auto-release", "600,fast"], "expected fan speeds in rpm"),
+])
+def test_auto_release_is_refused_unless_simulated_and_within_limits(capsys, args, message):
+    try:
+        code = main(["gui", "--config", str(CONFIGS / "sim_flat_plate.toml"), *args])
+    except SystemExit as exc:  # argparse's own refusal of a malformed value
+        code = exc.code
+    assert code == 2
+    assert message in capsys.readouterr().err
 
 
 # -- replay ------------------------------------------------------------------------------------
