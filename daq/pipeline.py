@@ -9,6 +9,14 @@ row per release; and :func:`record_run`, which runs a (simulated or real) rig th
 into a file, pulsing the PLC's trigger line every 0.5 s as clock anchors and, for a simulated rig,
 checking the result against the simulators' truth (:mod:`daq.sync_check`).
 
+Device clock restarts: a restart gap (length -1, e.g. the scanner's scan restarted after a TCP
+reset) after which the device time goes back (relative frame times without PTP restart at 0)
+starts a fresh clock map and timeline for that device, from the first sample after the gap (a
+block is split there); the rows already written keep their times, a NaN sample marks the break
+in the sync view, and a ``clock_restart`` event records it. Device times that move forward across
+the gap (PTP, or relative ones the engine continued, as after ``Acquisition.calz``) keep their
+map. The final clock fit in ``/entry/sync`` attrs then describes the last clock epoch only.
+
 Not responsible for: reading devices or threads (the engine), the numerics of clocks, resampling
 and conversions (:mod:`daq.sync`), the file layout itself (:mod:`daq.recorder`).
 
@@ -99,6 +107,11 @@ class _Device:
     overflow_samples: int = 0
     last_trigger: float = -math.inf  # scanner: last latched trigger time taken
     pending_triggers: list[float] = field(default_factory=list)  # device times not yet paired
+    last_device_time: float = math.nan  # newest finite device time mapped, s
+    last_host: float = -math.inf  # host time (run s) of the newest sample pushed to the view
+    restart_pending: bool = False  # a restart gap was seen; its first timed sample decides
+    break_pending: bool = False  # the clock restarted: mark the break in the view (_push)
+    clock_restarts: int = 0  # clock maps started afresh after a device clock restart
 
 
 @dataclass
@@ -220,10 +233,10 @@ class RunWriter:
             raise
 
     @staticmethod
-    def _clock_map() -> ClockMap:
+    def _clock_map(assumed_floor_s: float = 0.0) -> ClockMap:
         # 0.5 s windows (20 laser blocks, 25 scanner blocks each): a usable slope after ~1.5 s
         # (2 s windows leave a short run with a two-point slope); 600 windows span 5 min.
-        return ClockMap(window_s=CLOCK_WINDOW_S, n_windows=600)
+        return ClockMap(window_s=CLOCK_WINDOW_S, n_windows=600, assumed_floor_s=assumed_floor_s)
 
     def _time(self, host_ns: Any) -> Any:
         return (np.asarray(host_ns, dtype=np.int64) - self._t0_ns) * 1e-9
@@ -293,10 +306,14 @@ class RunWriter:
         n = len(block)
         dev.samples += n
         dev.overflow_samples += int(block.overflow_samples)
+        restarts: list[int] = []  # counters after which the device restarted (length -1)
         for after, length in block.gaps:
             rec.add_gap(dev.name, int(after), int(length) if int(length) >= 1 else -1)
             dev.gaps += 1
+            if int(length) < 0:
+                restarts.append(int(after))
         if n == 0:
+            dev.restart_pending = dev.restart_pending or bool(restarts)
             return
         counter = (block.counter if block.counter is not None
                    else np.arange(dev.samples - n, dev.samples, dtype=np.int64))
@@ -326,20 +343,93 @@ class RunWriter:
         if block.device_time is None or dev.clock is None:
             self._write_if_due()
             return
+        if not restarts:  # the usual case: one clock epoch, the whole block
+            self._map_rows(dev, block)
+            self._write_if_due()
+            return
+        # A restart gap splits the block: the rows before it belong to the old device clock
+        # (and its map), the rows after it perhaps to a restarted one (see _map_rows).
+        cuts = sorted({int(np.searchsorted(counter, after, side="right")) for after in restarts})
+        bounds = [0, *(k for k in cuts if 0 < k < n), n]
+        for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
+            if lo in cuts:
+                dev.restart_pending = True
+            self._map_rows(dev, block if hi - lo == n else _take_rows(block, lo, hi))
+        if n in cuts:  # the restart follows this block's rows: the next block decides
+            dev.restart_pending = True
+        self._write_if_due()
+
+    def _map_rows(self, dev: _Device, block: StreamBlock) -> None:
+        """Feed one clock epoch's rows of a block to the clock map and the sync view.
+
+        Called with a whole block, or with the rows on one side of a restart gap. After a
+        restart gap (``dev.restart_pending``) the first finite device time decides whether the
+        device clock restarted (see :meth:`_restart_clock`).
+        """
+        assert dev.clock is not None
         t_dev = np.asarray(block.device_time, dtype=np.float64)
         t_host = self._time(block.host_time_ns)
         finite = np.isfinite(t_dev)
         if not np.any(finite):
-            self._write_if_due()
             return
-        last = int(np.flatnonzero(finite)[-1])
+        rows = np.flatnonzero(finite)
+        first, last = int(rows[0]), int(rows[-1])
+        if dev.restart_pending:
+            dev.restart_pending = False
+            # Device time not after the last one mapped: the device clock restarted with the
+            # scan (relative frame times start again at 0 without PTP, DEVICES.md A.1.1), and
+            # the map from the previous scan no longer applies. Absolute (PTP) frame times,
+            # and relative ones the engine continued across its own pause (Acquisition.calz),
+            # move forward: their map stays valid and is kept. (NaN: nothing mapped yet.)
+            if float(t_dev[first]) <= dev.last_device_time:
+                self._restart_clock(dev, float(t_dev[first]), float(t_host[first]))
         dev.clock.update(t_dev[last], float(t_host[last]))
         if self.use_trigger_anchors:
             self._anchor_triggers(dev, block, t_dev)
             if dev.pending_triggers:
                 self._pair_triggers(dev)  # pulses seen before the clock map was ready
         self._push(dev, block, t_dev, finite)
-        self._write_if_due()
+        dev.last_device_time = float(t_dev[last])
+
+    def _restart_clock(self, dev: _Device, t_device: float, t_host: float) -> None:
+        """Start a fresh clock map and timeline after the device clock went back to ``t_device``.
+
+        Nothing already mapped changes: the raw rows and the sync rows written keep the old
+        map's times, and the old map's samples stay in the resampler. What is discarded is what
+        only the old clock could use: its fit, the timeline's continuity, the latched trigger
+        time and the trigger times still waiting for their PLC event (device times on the old
+        clock: paired with the new map they would be anchors of the wrong epoch).
+
+        Parameters
+        ----------
+        dev : _Device
+            The device (clocked: it has a map and a timeline).
+        t_device : float
+            Device time of the first sample of the new clock epoch, s.
+        t_host : float
+            Its host arrival time, s from the run start.
+        """
+        assert dev.clock is not None and dev.timeline is not None
+        rec = self.recorder
+        assert rec is not None
+        # The latency floor is a property of the transport (same link, same driver), not of
+        # the device clock: the old anchors' value keeps the new map from being late by it
+        # until the new epoch's first trigger pulse is paired (0.5 s pulses). Clamped at 0:
+        # a floor cannot be negative (a negative median is the anchors' noise).
+        floor = dev.clock.latency_floor_s
+        floor = floor if math.isfinite(floor) and floor > 0.0 else 0.0
+        previous = dev.last_device_time
+        dev.clock = self._clock_map(assumed_floor_s=floor)
+        dev.timeline.restart()
+        dev.last_trigger = -math.inf
+        dev.pending_triggers.clear()
+        dev.clock_restarts += 1
+        dev.break_pending = True
+        text = (f"{dev.name}: device clock restarted (device time {t_device:.6f} s after "
+                f"{previous:.6f} s); clock map started afresh, latency floor "
+                f"{floor * 1e3:.3f} ms kept")
+        log.warning("%s", text)
+        rec.add_event(t_host, "clock_restart", text)
 
     def _buffer_raw(self, dev: _Device, block: StreamBlock, counter: Any, values: Any,
                     extra: Mapping[str, Any]) -> None:
@@ -412,8 +502,17 @@ class RunWriter:
         if r is None or dev.clock is None or dev.timeline is None:
             return
         t = dev.timeline.map(t_dev[finite], dev.clock.to_host)
-        keep = np.concatenate(([True], np.diff(t) > 0)) if t.size else np.zeros(0, bool)
+        # Only samples after every earlier one of the block: the resampler needs increasing
+        # times, and a sample compared with its neighbour alone would let one that went back
+        # (device time going back inside a block) through after the first.
+        keep = (np.concatenate(([True], t[1:] > np.maximum.accumulate(t)[:-1])) if t.size
+                else np.zeros(0, bool))
         t = t[keep]
+        if dev.break_pending and t.size:
+            dev.break_pending = False
+            self._mark_break(dev, t[0])
+        if t.size:
+            dev.last_host = max(dev.last_host, float(t[-1]))
         if self.clock_truth is not None:
             self.clock_truth.observe(dev.name, t, t_dev[finite][keep], self._t0_ns * 1e-9)
 
@@ -429,6 +528,29 @@ class RunWriter:
             n_taps = self.config.taps.n_taps
             r.push("pressure", t, rows(block.values["pressure"])[:, :n_taps])
             r.push("pitot", t, rows(block.values["pitot"]))
+
+    def _mark_break(self, dev: _Device, t_next: float) -> None:
+        """Put a NaN sample between a device's last sample and ``t_next`` (run s) in the view.
+
+        After a clock restart the spacing between the two epochs' samples is the difference of
+        two maps, the new one fitted from a single block: a sync row interpolated across it
+        would blend samples whose relative timing is unknown to milliseconds. The NaN sample
+        (sync view only, not the raw record) makes every row between them NaN, whatever the
+        spacing, and no row outside them: the restart stays visible where it is.
+        """
+        r = self._resampler
+        if r is None or dev.last_host == -math.inf:
+            return
+        # Midway; or just after the last sample if the new map put the first one on or before it
+        # (those samples are dropped as overlapping by the resampler, the break still marked).
+        t_nan = (0.5 * (dev.last_host + t_next) if t_next > dev.last_host
+                 else float(np.nextafter(dev.last_host, math.inf)))
+        at = np.array([t_nan])
+        if dev.kind == "laser" and dev.name in self._laser_order:
+            r.push(f"laser.{dev.name}", at, np.full(1, np.nan))
+        elif dev.kind == "scanner" and dev.name == self._scanner_name:
+            r.push("pressure", at, np.full((1, self.config.taps.n_taps), np.nan))
+            r.push("pitot", at, np.full(1, np.nan))
 
     # -- sync view -----------------------------------------------------------------------------
     def _write_sync(self, sb: SyncBlock) -> None:
@@ -605,6 +727,10 @@ class RunWriter:
             "releases": self._written_releases,
             "rho_measured": self._rho_measured,
             "late_samples": dict(self._resampler.late_samples) if self._resampler else {},
+            "overlapping_samples": (dict(self._resampler.overlapping_samples)
+                                    if self._resampler else {}),
+            "clock_restarts": {n: d.clock_restarts for n, d in self._devices.items()
+                               if d.clock is not None},
             "timelines": {n: {"largest_slewed_s": d.timeline.largest_slewed_s,
                               "steps": d.timeline.steps}
                           for n, d in self._devices.items() if d.timeline is not None},
@@ -675,6 +801,17 @@ def start_sync_pulses(acq: Any, drivers: Mapping[str, tuple[str, Any]],
     pulser = SyncPulses(acq, float(interval_s))
     pulser.start()
     return pulser
+
+
+def _take_rows(block: StreamBlock, lo: int, hi: int) -> StreamBlock:
+    """Rows ``lo:hi`` of a block (every value holds one row per sample), without its gaps."""
+    return StreamBlock(
+        device=block.device, kind=block.kind, seq=block.seq,
+        host_time_ns=block.host_time_ns[lo:hi],
+        device_time=None if block.device_time is None else block.device_time[lo:hi],
+        counter=None if block.counter is None else block.counter[lo:hi],
+        values={k: np.asarray(v)[lo:hi] for k, v in block.values.items()},
+        gaps=(), raw=block.raw, overflow_samples=0)
 
 
 def _check_alignment(path: Path, rig: Any, writer: RunWriter) -> dict[str, Any]:
