@@ -280,9 +280,10 @@ class MeteredWindow(ConsoleWindow):
         METER.tick_wall.append(time.perf_counter() - t0)
         METER.tick_cpu.append(time.thread_time() - c0)
 
-    def redraw(self, snap: dict[str, Any], latest: dict[str, Any] | None = None) -> None:
+    def redraw(self, snap: dict[str, Any], latest: dict[str, Any] | None = None,
+               **kwargs: Any) -> None:
         t0 = time.perf_counter()
-        super().redraw(snap, latest)
+        super().redraw(snap, latest, **kwargs)
         if METER.on:
             METER.redraws += 1
             METER.redraw_wall += time.perf_counter() - t0

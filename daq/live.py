@@ -35,7 +35,7 @@ from daq.releases_panel import DerivativesPanel, ReleasesPanel
 from daq.replay import ReplayError
 from daq.source import DataSource, DeviceHealth, HealthSource
 
-__all__ = ["ConsoleWindow"]
+__all__ = ["TRACE_BINS", "ConsoleWindow", "peak_decimate"]
 
 #: Redraw period, ms (20 frames/s).
 FRAME_MS = 50
@@ -46,6 +46,9 @@ _DISPLAY = {"h": ("mm", 1e3), "alpha": ("deg", 180.0 / math.pi), "lift": ("N/m",
             "moment": ("N m/m", 1.0)}
 #: The columns drawn over the whole window (the pressures are drawn for the latest row only).
 _TRACE_COLUMNS = ("time", "h", "alpha", "lift", "moment", "U", "rho")
+#: The traces are drawn as the minimum and maximum of this many bins (about the plot's width in
+#: pixels: no peak is lost, and 10 000 rows of a 20 s window cost 2000 points).
+TRACE_BINS = 1000
 #: Columns of the health panel.
 HEALTH_COLUMNS = ("device", "samples/s", "gaps", "overflow", "errors", "clock fit", "last fault")
 #: The health panel is refreshed every this many frames.
@@ -60,9 +63,77 @@ _SLOW_PERIOD_S = 0.15
 _CP_LEVELS = 64
 
 
-def _plot_widget() -> pg.PlotWidget:
-    """Return a plot whose axes show the values as given (no automatic SI prefix)."""
+def peak_decimate(t: npt.NDArray[Any], y: npt.NDArray[Any],
+                  bins: int) -> tuple[npt.NDArray[Any], npt.NDArray[Any]]:
+    """Reduce a trace to the minimum and maximum of each of ``bins`` equal runs of samples.
+
+    Parameters
+    ----------
+    t, y : ndarray, shape (n,)
+        Time (s) and values; NaN (a gap) in ``y`` stays a gap: a bin with a NaN gives NaN.
+    bins : int
+        Number of bins (>= 1); traces of at most ``2 bins`` samples are returned as they are.
+
+    Returns
+    -------
+    t, y : ndarray, shape (2 bins,) or (n,)
+        Each bin's minimum then maximum, in time order within the bin, at the bin's first and
+        last sample times.
+    """
+    n = t.size
+    if n <= 2 * bins:
+        return t, y
+    per = n // bins
+    used = per * bins
+    start = n - used  # the newest samples are kept whole; the oldest few are dropped
+    yb = y[start:].reshape(bins, per)
+    tb = t[start:].reshape(bins, per)
+    with np.errstate(invalid="ignore"):
+        lo, hi = yb.min(axis=1), yb.max(axis=1)  # NaN propagates: a gap stays visible
+    arg_lo, arg_hi = np.argmin(np.nan_to_num(yb, nan=np.inf), axis=1), \
+        np.argmax(np.nan_to_num(yb, nan=-np.inf), axis=1)
+    first = arg_lo <= arg_hi  # the minimum comes first in time
+    out_y = np.empty(2 * bins)
+    out_y[0::2] = np.where(first, lo, hi)
+    out_y[1::2] = np.where(first, hi, lo)
+    out_t = np.empty(2 * bins)
+    out_t[0::2] = tb[:, 0]
+    out_t[1::2] = tb[:, -1]
+    return out_t, out_y
+
+
+class _RangeKeeper:
+    """Sets a plot's y range from the data drawn, at redraw time, with hysteresis.
+
+    pyqtgraph's auto-range runs at paint time and its range change asks for a second paint of
+    every plot at every frame; here the range follows the data (grows at once, shrinks when
+    the data fill less than a third of it) and is set before the paint.
+    """
+
+    def __init__(self, plot: pg.PlotWidget) -> None:
+        plot.enableAutoRange(y=False)
+        self._plot = plot
+        self._range: tuple[float, float] | None = None
+
+    def fit(self, *arrays: npt.NDArray[Any]) -> None:
+        """Make the y range hold the finite values of ``arrays`` (nothing when there are none)."""
+        lows = [float(np.nanmin(a)) for a in arrays if a.size and np.isfinite(a).any()]
+        highs = [float(np.nanmax(a)) for a in arrays if a.size and np.isfinite(a).any()]
+        if not lows:
+            return
+        lo, hi = min(lows), max(highs)
+        span = hi - lo if hi > lo else max(abs(hi) * 0.1, 1e-9)
+        lo, hi = lo - 0.05 * span, hi + 0.05 * span
+        now = self._range
+        if now is None or lo < now[0] or hi > now[1] or now[1] - now[0] > 3.0 * (hi - lo):
+            self._plot.setYRange(lo, hi, padding=0.0)
+            self._range = (lo, hi)
+
+
+def _plot_widget(plots: list[pg.PlotWidget]) -> pg.PlotWidget:
+    """Return a plot whose axes show the values as given (no automatic SI prefix), in ``plots``."""
     plot = pg.PlotWidget()
+    plots.append(plot)
     for side in ("left", "bottom"):
         plot.getAxis(side).enableAutoSIPrefix(False)
     return plot
@@ -160,10 +231,12 @@ class ConsoleWindow(QtWidgets.QMainWindow):
         grid.addLayout(top, 0, 0, 1, 2)
 
         self.curves: dict[str, pg.PlotDataItem] = {}
+        self._y_ranges: dict[str, _RangeKeeper] = {}
+        self._plots: list[pg.PlotWidget] = []
         first: pg.PlotWidget | None = None
         for row, name in enumerate(("h", "alpha", "lift", "moment"), start=1):
             unit, _ = _DISPLAY[name]
-            plot = _plot_widget()
+            plot = _plot_widget(self._plots)
             plot.setLabel("left", f"{name} ({unit})")
             plot.showGrid(x=True, y=True, alpha=0.3)
             if first is None:
@@ -175,22 +248,27 @@ class ConsoleWindow(QtWidgets.QMainWindow):
             else:  # one time axis with numbers is enough (the grid lines stay)
                 plot.getAxis("bottom").setStyle(showValues=False)
             plot.enableAutoRange(x=False)  # the window sets it
+            self._y_ranges[name] = _RangeKeeper(plot)
+            # Decimated here (peak_decimate), not by pyqtgraph: its automatic downsampling
+            # depends on the view's transform, which is only known at paint time, and its
+            # recomputation then asks for a second paint of every trace at every frame.
             curve = plot.plot(pen=_PENS[name])
-            curve.setDownsampling(auto=True, method="peak")
-            curve.setClipToView(True)
             self.curves[name] = curve
             grid.addWidget(plot, row, 0)
         self._time_plot = first
 
-        cp_plot = _plot_widget()
+        cp_plot = _plot_widget(self._plots)
         cp_plot.setLabel("left", "Cp")
         cp_plot.setLabel("bottom", "perimeter position (m)")
         cp_plot.getViewBox().invertY(True)  # suction (Cp < 0) up, as aerodynamicists plot it
         cp_plot.showGrid(x=True, y=True, alpha=0.3)
         self.cp_curve = cp_plot.plot(pen="w", symbol="o", symbolSize=5, symbolBrush="w")
+        cp_plot.enableAutoRange(x=False)
+        cp_plot.setXRange(float(np.min(self._perimeter)), float(np.max(self._perimeter)))
+        self._y_ranges["Cp"] = _RangeKeeper(cp_plot)
         grid.addWidget(cp_plot, 1, 1)
 
-        outline = _plot_widget()
+        outline = _plot_widget(self._plots)
         outline.setLabel("left", "-z (m)")
         outline.setLabel("bottom", "x (m)")
         outline.setAspectLocked(True)
@@ -204,14 +282,16 @@ class ConsoleWindow(QtWidgets.QMainWindow):
         self._slow_drawn_at = -math.inf  # run time of the last redraw of the slow views, s
         grid.addWidget(outline, 2, 1)
 
-        spectrum = _plot_widget()
+        spectrum = _plot_widget(self._plots)
         spectrum.setLabel("left", "amplitude (mm, deg)")
         spectrum.setLabel("bottom", "frequency (Hz)")
         spectrum.addLegend()
         spectrum.showGrid(x=True, y=True, alpha=0.3)
         self.spectrum_curves = {name: spectrum.plot(pen=_PENS[name], name=name)
                                 for name in ("h", "alpha")}
+        spectrum.enableAutoRange(x=False)
         spectrum.setXRange(0.0, min(20.0, 0.5 * source.info.rate_hz))
+        self._y_ranges["spectrum"] = _RangeKeeper(spectrum)
         self.releases_panel = ReleasesPanel()
         self.derivatives_panel = DerivativesPanel()
         self.tabs = QtWidgets.QTabWidget()
@@ -359,22 +439,29 @@ class ConsoleWindow(QtWidgets.QMainWindow):
             self._time_plot.setXRange(t_end - self._window_s, t_end, padding=0.0)
         for name, curve in self.curves.items():
             _, scale = _DISPLAY[name]
-            curve.setData(tv, snap[name][visible] * scale)
+            values = snap[name][visible] * scale
+            self._y_ranges[name].fit(values)
+            curve.setData(*peak_decimate(tv, values, TRACE_BINS), connect="finite")
         U, rho = float(snap["U"][-1]), float(snap["rho"][-1])
         self._wind_label.setText(f"U = {U:.2f} m/s")
         self._rho_label.setText(f"rho = {rho:.3f} kg/m^3")
         if not slow_views:
+            self._prepare_paint()
             return
         self._slow_drawn_at = t_end
+        amplitudes = []
         for name, curve in self.spectrum_curves.items():
             _, scale = _DISPLAY[name]
             freq, amp = amplitude_spectrum(tv, snap[name][visible] * scale)
+            amplitudes.append(amp)
             curve.setData(freq, amp)
+        self._y_ranges["spectrum"].fit(*amplitudes)
         if latest is None:
             latest = {"time": t[-1:], "pressure": snap["pressure"][-1:]}
         cp = pressure_coefficients(latest["pressure"][-1], U, rho)
         self.cp_time = float(latest["time"][-1])
         if np.isfinite(cp).any():
+            self._y_ranges["Cp"].fit(cp)
             self.cp_curve.setData(self._perimeter, cp, connect="finite")
         else:  # wind off: no Cp (an all-NaN curve makes pyqtgraph warn at every frame)
             self.cp_curve.setData([], [])
@@ -382,6 +469,16 @@ class ConsoleWindow(QtWidgets.QMainWindow):
         if self._tap_levels_shown is None or not np.array_equal(levels, self._tap_levels_shown):
             self._tap_scatter.setBrush(self._tap_brushes(cp))
             self._tap_levels_shown = levels
+        self._prepare_paint()
+
+    def _prepare_paint(self) -> None:
+        """Bring the plots' view transforms up to date now, before Qt paints them.
+
+        pyqtgraph updates a view's transform lazily in the paint itself, and the axes it moves
+        then ask for a second paint: every plot would be painted twice per frame.
+        """
+        for plot in self._plots:
+            plot.scene().prepareForPaint()
 
     # -- Qt --------------------------------------------------------------------------------------
     def closeEvent(self, event: Any) -> None:  # noqa: N802 - Qt's name

@@ -21,7 +21,7 @@ from daq import replay
 from daq.cli import main
 from daq.config import parse_rig_config
 from daq.display import amplitude_spectrum, pressure_coefficients
-from daq.live import ConsoleWindow
+from daq.live import ConsoleWindow, peak_decimate
 from daq.recorder import RunRecorder
 from daq.replay import ReplayError, ReplaySource
 from daq.ring_buffer import RingBuffer
@@ -263,3 +263,18 @@ def test_the_refcount_guard_keeps_true_alive_through_many_signal_emissions(qapp)
         emitter.changed.emit(1)
     if active:
         assert min(sys.getrefcount(True), sys.getrefcount(None)) > (1 << 39)
+
+
+def test_peak_decimation_keeps_peaks_gaps_and_the_newest_samples():
+    t = np.arange(10_000) / 500.0
+    y = np.sin(2 * np.pi * 2.0 * t)
+    y[4321] = 5.0  # one spike of one sample
+    y[7000:7010] = np.nan  # a gap
+    td, yd = peak_decimate(t, y, 1000)
+    assert td.size == yd.size == 2000
+    assert np.nanmax(yd) == 5.0 and np.nanmin(yd) == pytest.approx(-1.0, abs=1e-3)
+    gap = (td >= t[7000] - 0.02) & (td <= t[7009] + 0.02)
+    assert np.isnan(yd[gap]).any() and np.isfinite(yd[~gap]).all()
+    assert td[-1] == t[-1] and np.all(np.diff(td) >= 0)  # newest kept, time order
+    short_t, short_y = peak_decimate(t[:2000], y[:2000], 1000)
+    assert np.array_equal(short_t, t[:2000]) and np.array_equal(short_y, y[:2000])  # as given
