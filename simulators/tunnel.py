@@ -1,17 +1,14 @@
-"""The virtual tunnel's physics: free-vibration releases of a section model in the wind.
+"""The virtual tunnel's releases: free-vibration decays of a section model in the wind, as recorded.
 
-A release starts from rest at ``(h0, alpha0)`` with all aerodynamic lag states at zero (DESIGN.md)
-and runs freely. The linear physics (structure plus Roger self-excited forces, plus static
-unbalance and harmonic vortex forcing, which stay linear) is advanced by its exact discretisation
-``z[k+1] = expm(A dt) z[k]``. Structural nonlinearities (friction, quadratic damping, cubic springs)
-are added by a second-order exponential integrator (ETD2RK of Cox and Matthews) on a fixed step
-that is a multiple of the output rate: exact for the linear part, second order for the nonlinear
-part. Measurement effects (channel delay, crosstalk) and noise are applied to the recorded channels
-last. The forces returned are the self-excited forces (plus vortex forcing): what the surface
-pressures integrate to, not the spring or friction forces.
+The physics (exact matrix-exponential stepping of the linear aeroelastic system, ETD2RK for the
+structural nonlinearities, the measurement effects) lives in :mod:`ident.simulate`, shared with
+the discrepancy workflow; the effects in :mod:`ident.effects` (re-exported by
+:mod:`simulators.effects`).
+This module adds what the instruments add: the held, static stretch before the release and
+Gaussian measurement noise, and returns the record as a :class:`SimulatedRelease`.
 
-This module knows physics only; the simulated instruments (later) sample it through their own
-wire protocols.
+This module knows physics only; the simulated instruments sample it through their own wire
+protocols.
 """
 
 from __future__ import annotations
@@ -23,26 +20,15 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy.interpolate import CubicSpline
-from scipy.linalg import expm
 
 from ident import _validate as v
+from ident.effects import Effect
 from ident.rfc import RationalFunctionModel
 from ident.section import SectionModel
-from ident.statespace import AeroelasticSystem
+from ident.simulate import CHANNELS, simulate_decay
 from ident.taps import TapLayout
-from simulators.effects import (
-    ChannelDelay,
-    Effect,
-    SensorCrosstalk,
-    StaticUnbalance,
-    VortexShedding,
-)
 
 __all__ = ["CHANNELS", "SimulatedRelease", "simulate_release"]
-
-#: Recorded channels of a release, in order.
-CHANNELS: tuple[str, ...] = ("h", "alpha", "lift", "moment")
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -135,7 +121,7 @@ def simulate_release(
         Random source (or seed) of the noise; required when ``noise`` is not zero, so that every
         noisy simulation is reproducible.
     effects : iterable of Effect, optional
-        Extra physics (:mod:`simulators.effects`); at most one of each kind.
+        Extra physics (:mod:`ident.effects`); at most one of each kind.
     oversample : int, optional
         Integrator steps per output sample for nonlinear effects (>= 1); raised automatically when
         a stiff effect (smoothed friction) needs a smaller step.
@@ -154,58 +140,30 @@ def simulate_release(
     >>> r.t.shape, float(r.alpha[0])
     ((2000,), 0.02)
     """
-    U = v.finite("U", U)
-    if U < 0.0:
-        raise ValueError(f"U must be >= 0, got {U!r}")
     duration = v.positive("duration", duration)
     fs = v.positive("fs", fs)
     pre_s = v.finite("pre_s", pre_s)
     if pre_s < 0.0:
         raise ValueError(f"pre_s must be >= 0, got {pre_s!r}")
-    if not isinstance(oversample, int) or oversample < 1:
-        raise ValueError(f"oversample must be an integer >= 1, got {oversample!r}")
-    effects = _check_effects(effects)
     noise_frac = _noise_fractions(noise)
     if any(noise_frac.values()) and rng is None:
         raise ValueError("noise needs rng (a numpy Generator or a seed) so that it is reproducible")
     generator = np.random.default_rng(rng) if rng is not None else None
-
-    for effect in effects:
-        if isinstance(effect, StaticUnbalance):
-            section = section.replace(S=section.S + effect.S)
-    system = AeroelasticSystem(section, model, U)
-    z0 = system.initial_state(h0, alpha0)  # validates h0, alpha0
     n = int(round(duration * fs))
     if n < 2:
         raise ValueError(f"duration * fs must give at least 2 samples, got {n}")
-    dt = 1.0 / fs
 
-    plant = _Plant(system, effects)
-    if plant.nonlinear:
-        z, qdd = plant.integrate_nonlinear(z0, n, dt, oversample)
-    else:
-        z, qdd = plant.integrate_linear(z0, n, dt)
-    t = np.asarray(np.arange(n) * dt, dtype=np.float64)
-    forces = plant.forces(z, qdd, t)
-    clean = {
-        "h": z[:, 0] * section.B,
-        "alpha": z[:, 1].copy(),
-        "lift": forces[:, 0] / section.B,
-        "moment": forces[:, 1],
-    }
-    static_force = plant.static_force(z0)
+    decay = simulate_decay(section, model, U, h0, alpha0, n=n, fs=fs, effects=effects,
+                           oversample=oversample)
+    t, clean, measured = decay.t, decay.clean, decay.measured
     if pre_s > 0.0:
         n_pre = int(round(pre_s * fs))
-        t_pre = np.asarray(-np.arange(n_pre, 0, -1) * dt, dtype=np.float64)
-        held = plant.vortex_force(t_pre) + static_force
+        t_pre = np.asarray(-np.arange(n_pre, 0, -1) * (1.0 / fs), dtype=np.float64)
+        held_clean, held_measured = decay.held(t_pre)
         t = np.concatenate([t_pre, t])
-        clean = {
-            "h": np.concatenate([np.full(n_pre, h0), clean["h"]]),
-            "alpha": np.concatenate([np.full(n_pre, alpha0), clean["alpha"]]),
-            "lift": np.concatenate([held[:, 0] / section.B, clean["lift"]]),
-            "moment": np.concatenate([held[:, 1], clean["moment"]]),
-        }
-    measured = _measure(clean, t, effects, plant, static_force, section.B)
+        clean = {name: np.concatenate([held_clean[name], clean[name]]) for name in CHANNELS}
+        measured = {name: np.concatenate([held_measured[name], measured[name]])
+                    for name in CHANNELS}
     if generator is not None:
         for name, frac in noise_frac.items():
             if frac:
@@ -214,28 +172,16 @@ def simulate_release(
     return SimulatedRelease(
         t=t,
         **measured,
-        U=U,
-        rho=section.rho,
+        U=decay.U,
+        rho=decay.rho,
         fs=fs,
-        h0=float(h0),
-        alpha0=float(alpha0),
+        h0=decay.h0,
+        alpha0=decay.alpha0,
         clean=clean,
-        section=section,
+        section=decay.section,
         model=model,
-        effects=effects,
+        effects=decay.effects,
     )
-
-
-def _check_effects(effects: Iterable[Effect]) -> tuple[Effect, ...]:
-    out = tuple(effects)
-    for effect in out:
-        if not isinstance(effect, Effect):
-            raise TypeError(f"effects must be simulators.effects.Effect instances, got {effect!r}")
-    names = [effect.name for effect in out]
-    repeated = sorted({name for name in names if names.count(name) > 1})
-    if repeated:
-        raise ValueError(f"each effect may appear once; repeated: {repeated}")
-    return out
 
 
 def _noise_fractions(noise: float | Mapping[str, float]) -> dict[str, float]:
@@ -250,142 +196,3 @@ def _noise_fractions(noise: float | Mapping[str, float]) -> dict[str, float]:
         if not (math.isfinite(frac) and frac >= 0.0):
             raise ValueError(f"noise for {name} must be a finite fraction >= 0, got {frac!r}")
     return fractions
-
-
-class _Plant:
-    """The linear system, optionally augmented with a vortex oscillator, plus nonlinear terms.
-
-    The vortex forcing ``sin(w t)``, ``cos(w t)`` is generated by two extra states of a harmonic
-    oscillator, so that a vortex-forced linear system is still advanced by an exact matrix
-    exponential.
-    """
-
-    def __init__(self, system: AeroelasticSystem, effects: tuple[Effect, ...]) -> None:
-        self.system = system
-        self.B = system.section.B
-        self.nonlinear_effects = [e for e in effects if e.nonlinear]
-        self.nonlinear = bool(self.nonlinear_effects)
-        self.M_inv = np.linalg.inv(system.effective_mass())
-        vortex = [e for e in effects if isinstance(e, VortexShedding)]
-        self.vortex = vortex[0] if vortex and system.U > 0.0 else None
-        n = system.n_states
-        A = system.matrix()
-        if self.vortex is not None:
-            w = 2.0 * math.pi * self.vortex.frequency(system.U)
-            A_aug = np.zeros((n + 2, n + 2))
-            A_aug[:n, :n] = A
-            A_aug[n, n + 1] = w  # s' = w c
-            A_aug[n + 1, n] = -w  # c' = -w s
-            A_aug[2:4, n : n + 2] = self.M_inv @ self._vortex_gain()
-            A = A_aug
-        self.A = A
-        self.n_struct = n
-
-    def _vortex_gain(self) -> FloatArray:
-        """Generalised vortex force per oscillator state ``[s, c]``: ``[L B, M] = G [s, c]``."""
-        assert self.vortex is not None
-        s = self.system.section
-        qd_B2 = 0.5 * s.rho * self.system.U**2 * s.B**2
-        vx = self.vortex
-        return qd_B2 * np.array(
-            [[vx.cl, 0.0], [vx.cm * math.cos(vx.phase), vx.cm * math.sin(vx.phase)]]
-        )
-
-    def initial(self, z0: FloatArray) -> FloatArray:
-        if self.vortex is None:
-            return z0
-        return np.concatenate([z0, [0.0, 1.0]])  # sin(0) = 0, cos(0) = 1
-
-    def vortex_force(self, t: FloatArray) -> FloatArray:
-        """Generalised vortex force at times ``t`` (any sign), shape (len(t), 2)."""
-        if self.vortex is None:
-            return np.zeros((t.size, 2))
-        w = 2.0 * math.pi * self.vortex.frequency(self.system.U)
-        sc = np.column_stack([np.sin(w * t), np.cos(w * t)])
-        return np.asarray(sc @ self._vortex_gain().T, dtype=float)
-
-    def static_force(self, z0: FloatArray) -> FloatArray:
-        """Self-excited generalised force on the held model (no motion, lag states at zero)."""
-        return np.asarray(self.system.forces(z0, np.zeros(2)), dtype=float)
-
-    def nonlinear_acceleration(self, z: FloatArray) -> FloatArray:
-        """``q''`` contribution of the structural nonlinearities at state ``z``."""
-        force = np.zeros(2)
-        for effect in self.nonlinear_effects:
-            force = force + effect.structural_force(z[0:2], z[2:4], self.B)
-        return np.asarray(self.M_inv @ force, dtype=float)
-
-    def integrate_linear(self, z0: FloatArray, n: int, dt: float) -> tuple[FloatArray, FloatArray]:
-        phi = expm(self.A * dt)
-        z = np.empty((n, self.A.shape[0]))
-        z[0] = self.initial(z0)
-        for k in range(1, n):
-            z[k] = phi @ z[k - 1]
-        qdd = z @ self.A[2:4, :].T
-        return z, qdd
-
-    def integrate_nonlinear(
-        self, z0: FloatArray, n: int, dt: float, oversample: int
-    ) -> tuple[FloatArray, FloatArray]:
-        rate = max(e.stiffness_rate(self.system.effective_mass(), self.B)
-                   for e in self.nonlinear_effects)
-        # Keep the explicit treatment of the nonlinear term well inside its stability limit.
-        substeps = max(oversample, math.ceil(2.0 * rate * dt))
-        h = dt / substeps
-        n_aug = self.A.shape[0]
-        # Van Loan: expm([[A, I, 0], [0, 0, I], [0, 0, 0]] h) holds e^{Ah}, int e^{As} ds and
-        # int e^{A(h-s)} s ds, the three matrices of the ETD2RK step (Cox and Matthews 2002).
-        big = np.zeros((3 * n_aug, 3 * n_aug))
-        big[:n_aug, :n_aug] = self.A
-        big[:n_aug, n_aug : 2 * n_aug] = np.eye(n_aug)
-        big[n_aug : 2 * n_aug, 2 * n_aug :] = np.eye(n_aug)
-        blocks = expm(big * h)
-        phi = blocks[:n_aug, :n_aug]
-        gamma1 = blocks[:n_aug, n_aug : 2 * n_aug][:, 2:4]  # only q'' rows receive the force
-        gamma2 = blocks[:n_aug, 2 * n_aug :][:, 2:4] / h
-        z = np.empty((n, n_aug))
-        u = self.initial(z0)
-        z[0] = u
-        for k in range(1, n):
-            for _ in range(substeps):
-                n_u = self.nonlinear_acceleration(u)
-                a = phi @ u + gamma1 @ n_u
-                u = a + gamma2 @ (self.nonlinear_acceleration(a) - n_u)
-            z[k] = u
-        qdd = z @ self.A[2:4, :].T + np.array([self.nonlinear_acceleration(zk) for zk in z])
-        return z, qdd
-
-    def forces(self, z: FloatArray, qdd: FloatArray, t: FloatArray) -> FloatArray:
-        """Generalised aerodynamic forces ``[L B, M]`` recorded at the output samples."""
-        aero = self.system.forces(z[:, : self.n_struct], qdd)
-        return np.asarray(aero + self.vortex_force(t), dtype=float)
-
-
-def _measure(
-    clean: dict[str, FloatArray],
-    t: FloatArray,
-    effects: tuple[Effect, ...],
-    plant: _Plant,
-    static_force: FloatArray,
-    B: float,
-) -> dict[str, FloatArray]:
-    """Apply the measurement effects (delay, crosstalk) to the clean channels."""
-    out = {name: clean[name].copy() for name in CHANNELS}
-    for effect in effects:
-        if isinstance(effect, ChannelDelay) and effect.delay_s > 0.0:
-            after = t >= 0.0
-            t_src = t - effect.delay_s
-            generalised = np.column_stack([clean["lift"] * B, clean["moment"]])
-            # Smooth after the release; the release itself is a kink (the added-mass force jumps),
-            # so the spline only spans t >= 0 and earlier times take the held (static) value.
-            spline = CubicSpline(t[after], generalised[after], axis=0)
-            delayed = np.where(
-                (t_src >= 0.0)[:, None],
-                spline(np.clip(t_src, 0.0, None)),
-                static_force + plant.vortex_force(t_src),
-            )
-            out["lift"], out["moment"] = delayed[:, 0] / B, delayed[:, 1]
-        elif isinstance(effect, SensorCrosstalk):
-            out["h"] = clean["h"] + effect.h_from_alpha * clean["alpha"]
-            out["alpha"] = clean["alpha"] + effect.alpha_from_h * clean["h"]
-    return out

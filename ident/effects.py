@@ -1,0 +1,280 @@
+"""Named physical effects that the linear aeroelastic model leaves out.
+
+These are the named physical terms used both by the virtual tunnel (:mod:`simulators.tunnel`,
+through :func:`ident.simulate.simulate_decay`), which adds them to the simulated physics, and by the
+discrepancy workflow (:mod:`ident.discrepancy`), which tries them as candidate explanations of a
+gap between an identified model and the measured releases. Each effect is a small validated
+dataclass with its own parameters, in SI units per unit span. The seven names are fixed by
+DESIGN.md.
+
+Three kinds: structural nonlinearities (``coulomb_friction``, ``quadratic_damping``,
+``cubic_stiffness``), changes to the linear physics (``static_unbalance``, ``vortex_shedding``), and
+measurement effects applied to the recorded channels (``channel_delay``, ``sensor_crosstalk``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+import numpy.typing as npt
+
+from ident import _validate as v
+
+__all__ = [
+    "EFFECT_NAMES",
+    "ChannelDelay",
+    "CoulombFriction",
+    "CubicStiffness",
+    "Effect",
+    "QuadraticDamping",
+    "SensorCrosstalk",
+    "StaticUnbalance",
+    "VortexShedding",
+]
+
+
+class Effect:
+    """Base class of the named effects: ``name`` is the DESIGN.md name of the effect."""
+
+    name: ClassVar[str]
+    #: True for effects that need a nonlinear (fixed-step) integration.
+    nonlinear: ClassVar[bool] = False
+
+    def structural_force(
+        self, q: npt.NDArray[np.float64], qd: npt.NDArray[np.float64], B: float
+    ) -> npt.NDArray[np.float64]:
+        """Return the extra generalised force ``[F_h B, M]``, N m/m, at ``q``, ``q'`` (here 0)."""
+        return np.zeros(2)
+
+    def stiffness_rate(self, effective_mass: npt.NDArray[np.float64], B: float) -> float:
+        """Return the largest rate (1/s) at which the force changes with velocity (step sizing)."""
+        return 0.0
+
+
+@dataclass(frozen=True)
+class CoulombFriction(Effect):
+    """Dry friction in the suspension: a force of constant size opposing the velocity.
+
+    Signature: the free-decay envelope falls linearly in time instead of exponentially.
+
+    Parameters
+    ----------
+    force_h : float
+        Friction force on heave, N/m (per unit span), >= 0.
+    moment_a : float
+        Friction moment on pitch, N m/m, >= 0.
+    v_smooth_h, v_smooth_a : float
+        Velocity band over which the sign function is smoothed (``tanh(v / v_smooth)``), m/s and
+        rad/s: an integrable stand-in for stick-slip, much smaller than the release velocities.
+    """
+
+    name: ClassVar[str] = "coulomb_friction"
+    nonlinear: ClassVar[bool] = True
+    force_h: float = 0.0
+    moment_a: float = 0.0
+    v_smooth_h: float = 1e-4
+    v_smooth_a: float = 1e-3
+
+    def __post_init__(self) -> None:
+        for name in ("force_h", "moment_a"):
+            if v.finite(name, getattr(self, name)) < 0.0:
+                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
+        v.positive("v_smooth_h", self.v_smooth_h)
+        v.positive("v_smooth_a", self.v_smooth_a)
+
+    def stiffness_rate(self, effective_mass: npt.NDArray[np.float64], B: float) -> float:
+        """Slope of the smoothed friction force over mass: the explicit step must resolve it."""
+        m_h = effective_mass[0, 0] / B**2
+        return max(self.force_h / (self.v_smooth_h * m_h),
+                   self.moment_a / (self.v_smooth_a * effective_mass[1, 1]))
+
+    def structural_force(
+        self, q: npt.NDArray[np.float64], qd: npt.NDArray[np.float64], B: float
+    ) -> npt.NDArray[np.float64]:
+        """Return the extra generalised force ``[F_h B, M]``, N m/m (see :class:`Effect`)."""
+        h_dot, a_dot = qd[0] * B, qd[1]
+        return np.array([
+            -self.force_h * np.tanh(h_dot / self.v_smooth_h) * B,
+            -self.moment_a * np.tanh(a_dot / self.v_smooth_a),
+        ])
+
+
+@dataclass(frozen=True)
+class QuadraticDamping(Effect):
+    """Velocity-squared damping (e.g. air drag on the springs and arms): ``-c2 |v| v``.
+
+    Signature: damping that grows with amplitude; the decay is fast at first, then exponential.
+
+    Parameters
+    ----------
+    c2_h : float
+        Heave coefficient, N s^2/m^3 (force per unit span per (m/s)^2), >= 0.
+    c2_a : float
+        Pitch coefficient, N m s^2/m (moment per unit span per (rad/s)^2), >= 0.
+    """
+
+    name: ClassVar[str] = "quadratic_damping"
+    nonlinear: ClassVar[bool] = True
+    c2_h: float = 0.0
+    c2_a: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("c2_h", "c2_a"):
+            if v.finite(name, getattr(self, name)) < 0.0:
+                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
+
+    def structural_force(
+        self, q: npt.NDArray[np.float64], qd: npt.NDArray[np.float64], B: float
+    ) -> npt.NDArray[np.float64]:
+        """Return the extra generalised force ``[F_h B, M]``, N m/m (see :class:`Effect`)."""
+        h_dot, a_dot = qd[0] * B, qd[1]
+        return np.array([-self.c2_h * abs(h_dot) * h_dot * B, -self.c2_a * abs(a_dot) * a_dot])
+
+
+@dataclass(frozen=True)
+class CubicStiffness(Effect):
+    """Cubic spring term (hardening if > 0): restoring force ``k3 x^3`` added to the linear one.
+
+    Signature: the oscillation frequency depends on amplitude (backbone curve).
+
+    Parameters
+    ----------
+    k3_h : float
+        Heave coefficient, N/m^4 (force per unit span per m^3).
+    k3_a : float
+        Pitch coefficient, N m/m per rad^3.
+    """
+
+    name: ClassVar[str] = "cubic_stiffness"
+    nonlinear: ClassVar[bool] = True
+    k3_h: float = 0.0
+    k3_a: float = 0.0
+
+    def __post_init__(self) -> None:
+        v.finite("k3_h", self.k3_h)
+        v.finite("k3_a", self.k3_a)
+
+    def structural_force(
+        self, q: npt.NDArray[np.float64], qd: npt.NDArray[np.float64], B: float
+    ) -> npt.NDArray[np.float64]:
+        """Return the extra generalised force ``[F_h B, M]``, N m/m (see :class:`Effect`)."""
+        h, a = q[0] * B, q[1]
+        return np.array([-self.k3_h * h**3 * B, -self.k3_a * a**3])
+
+
+@dataclass(frozen=True)
+class StaticUnbalance(Effect):
+    """The centre of mass is off the elastic axis: static unbalance ``S = m x_cg``.
+
+    Signature: inertial coupling of heave and pitch, visible even at zero wind.
+
+    Parameters
+    ----------
+    S : float
+        kg m/m (per unit span); positive when the centre of mass is downstream of the axis.
+    """
+
+    name: ClassVar[str] = "static_unbalance"
+    S: float = 0.0
+
+    def __post_init__(self) -> None:
+        v.finite("S", self.S)
+
+
+@dataclass(frozen=True)
+class VortexShedding(Effect):
+    """Harmonic lift and moment from vortex shedding at the Strouhal frequency ``St U / D``.
+
+    Signature: a spectral line in the forces (and responses) that is not at a modal frequency and
+    moves with U.
+
+    Parameters
+    ----------
+    strouhal : float
+        Strouhal number based on the depth, > 0 (about 0.1 to 0.2 for bridge decks).
+    depth : float
+        Section depth D, m, > 0.
+    cl, cm : float
+        Amplitudes of the lift and moment coefficients (``L = qd B cl sin(...)``,
+        ``M = qd B^2 cm sin(... + phase)``), >= 0.
+    phase : float
+        Phase of the moment relative to the lift, rad.
+    """
+
+    name: ClassVar[str] = "vortex_shedding"
+    strouhal: float = 0.12
+    depth: float = 0.03
+    cl: float = 0.0
+    cm: float = 0.0
+    phase: float = 0.0
+
+    def __post_init__(self) -> None:
+        v.positive("strouhal", self.strouhal)
+        v.positive("depth", self.depth)
+        for name in ("cl", "cm"):
+            if v.finite(name, getattr(self, name)) < 0.0:
+                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
+        v.finite("phase", self.phase)
+
+    def frequency(self, U: float) -> float:
+        """Shedding frequency at wind speed ``U``, Hz."""
+        return self.strouhal * U / self.depth
+
+
+@dataclass(frozen=True)
+class ChannelDelay(Effect):
+    """The force channels lag the displacement channels (pressure tubing, scanner buffering).
+
+    Parameters
+    ----------
+    delay_s : float
+        Delay of lift and moment relative to h and alpha, s, >= 0.
+    """
+
+    name: ClassVar[str] = "channel_delay"
+    delay_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        if v.finite("delay_s", self.delay_s) < 0.0:
+            raise ValueError(f"delay_s must be >= 0, got {self.delay_s!r}")
+
+
+@dataclass(frozen=True)
+class SensorCrosstalk(Effect):
+    """Each displacement reading picks up a fraction of the other degree of freedom.
+
+    ``h_measured = h + h_from_alpha * alpha`` and ``alpha_measured = alpha + alpha_from_h * h``
+    (laser misalignment, a wrong lever arm in the conversion).
+
+    Parameters
+    ----------
+    h_from_alpha : float
+        m/rad.
+    alpha_from_h : float
+        rad/m.
+    """
+
+    name: ClassVar[str] = "sensor_crosstalk"
+    h_from_alpha: float = 0.0
+    alpha_from_h: float = 0.0
+
+    def __post_init__(self) -> None:
+        v.finite("h_from_alpha", self.h_from_alpha)
+        v.finite("alpha_from_h", self.alpha_from_h)
+
+
+#: The seven effect names of DESIGN.md, mapped to their classes.
+EFFECT_NAMES: dict[str, type[Effect]] = {
+    cls.name: cls
+    for cls in (
+        CoulombFriction,
+        QuadraticDamping,
+        CubicStiffness,
+        ChannelDelay,
+        VortexShedding,
+        StaticUnbalance,
+        SensorCrosstalk,
+    )
+}
