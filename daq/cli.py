@@ -57,6 +57,19 @@ def _build_parser() -> argparse.ArgumentParser:
     p_id.add_argument("--n-lags", type=int, default=None, choices=(0, 1, 2, 3),
                       help="number of lag terms (default: chosen by held-out error)")
 
+    p_diag = sub.add_parser(
+        "diagnose",
+        help="find the physical effect the identified model misses in recorded run files, add "
+             "it, show the gap shrink (report and plots)")
+    p_diag.add_argument("files", type=Path, nargs="+", help="windrig HDF5 run files")
+    p_diag.add_argument("--out", type=Path, default=Path("diagnose_output"),
+                        help="directory of the plots (default diagnose_output)")
+    p_diag.add_argument("--depth", type=float, default=None,
+                        help="section depth D, m, for a shedding line's Strouhal number "
+                             "(default: the stored rig config's)")
+    p_diag.add_argument("--json", type=Path, default=None,
+                        help="write the report's numbers to this JSON file")
+
     p_sim = sub.add_parser(
         "simulate",
         help="start the simulated instruments of a rig config and print the URLs to connect to",
@@ -252,6 +265,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _simulate(args)
     if args.command == "identify":
         return _identify(args)
+    if args.command == "diagnose":
+        from daq.diagnosis import run_diagnose
+
+        return run_diagnose(args.files, args.out, depth=args.depth, json_path=args.json)
     if args.command == "acquire":
         return _acquire(args)
     if args.command == "gui":

@@ -35,6 +35,7 @@ from scipy.optimize import least_squares
 from ident import flutter as _flutter
 from ident._regressors import PreparedRelease, prepare
 from ident._selection import Candidate, select_one_se
+from ident._stats import autocorrelation_inflation
 from ident._threads import single_threaded_blas
 from ident.errors import RankDeficiencyError
 from ident.modal import ModalFit
@@ -524,7 +525,7 @@ class _Problem:
         J = np.hstack(columns)
         r = np.concatenate([np.concatenate([res[:, i] for res in residuals]) for i in range(2)])
         dof = max(r.size - J.shape[1], 1)
-        sigma2 = float(r @ r) / dof * _autocorrelation_inflation(residuals)
+        sigma2 = float(r @ r) / dof * autocorrelation_inflation(residuals)
         return np.asarray(sigma2 * np.linalg.pinv(J.T @ J) * n_search / n_full, dtype=float)
 
     def _residual_vector(self, d: FloatArray, with_A3: bool, coef: FloatArray) -> FloatArray:
@@ -536,22 +537,3 @@ class _Problem:
                 e = y[:, i] - X @ coef[:, i]
                 out.append(w[i] * (e - e.mean()))
         return np.concatenate(out)
-
-
-def _autocorrelation_inflation(residuals: list[FloatArray]) -> float:
-    """Variance inflation ``1 + 2 sum (1 - k/(L+1)) rho_k`` (Bartlett window, L = 50 lags).
-
-    Least-squares covariances assume white residuals; model error makes them coloured, and
-    ignoring that would understate the uncertainty of the flutter speed.
-    """
-    factors = []
-    L = 50
-    for res in residuals:
-        for e in res.T:
-            e = e - e.mean()
-            var = float(e @ e)
-            if var == 0.0 or e.size <= 2 * L:
-                continue
-            rho = np.array([float(e[:-k] @ e[k:]) / var for k in range(1, L + 1)])
-            factors.append(1.0 + 2.0 * float(np.sum((1 - np.arange(1, L + 1) / (L + 1)) * rho)))
-    return max(1.0, float(np.median(factors))) if factors else 1.0

@@ -9,7 +9,7 @@ rest has ``x_l = 0`` at the release. The self-excited generalised force is::
     f = [L B, M] = rho/2 [U^2 B^2 A1 q + U B^3 A2 q' + B^4 A3 q'' + U^2 B^2 sum_l A_{l+3} x_l]
 
 written with U factored out so that U = 0 (still air, added mass only) is not a special case.
-This module builds the matrices; :mod:`ident.flutter` analyses them and :mod:`simulators.tunnel`
+This module builds the matrices; :mod:`ident.flutter` analyses them and :mod:`ident.simulate`
 integrates them.
 """
 

@@ -32,6 +32,15 @@ FAST_FAN = "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n"
 GRID_TOL_S = 1e-9
 
 
+
+def _sync_rows(path: Path) -> int:
+    """Rows of /entry/sync a SWMR reader sees now (0 while the file is not readable yet)."""
+    try:
+        with h5py.File(path, "r", swmr=True) as f:
+            return int(f["entry/sync/time"].shape[0])
+    except (OSError, KeyError):  # not yet in SWMR mode, or the datasets not created yet
+        return 0
+
 def live_config_text() -> str:
     return (CONFIGS / "sim_flat_plate.toml").read_text() + FAST_FAN
 
@@ -224,7 +233,9 @@ def test_recording_refusals_a_full_disk_and_closing_while_recording(qtbot, tmp_p
                    "flush_interval_s": 0.1, "reserve_bytes": 1 << 20}
         full_path = source.start_recording(tmp_path / "full.h5", "disk fills up",
                                            recorder_options=options)
-        qtbot.wait(300)  # some rows reach the file first
+        # Some rows reach the file first (read as a live SWMR reader would; a loaded host may
+        # take longer than a fixed wait).
+        qtbot.waitUntil(lambda: _sync_rows(full_path) > 0, timeout=8_000)
         full.set()
         qtbot.waitUntil(lambda: source.recording is not None
                         and source.recording.error is not None, timeout=8_000)  # loaded host

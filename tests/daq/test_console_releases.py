@@ -87,7 +87,8 @@ def test_a_release_from_the_console_appears_in_the_releases_table(qtbot):
         # 4 s of decay, scanner noise: the modal frequencies to 1 %.
         assert float(table.cell(0, "f_h (Hz)")) == pytest.approx(truth["f_h"], rel=0.01)
         assert float(table.cell(0, "f_a (Hz)")) == pytest.approx(truth["f_a"], rel=0.01)
-        assert float(table.cell(0, "length (s)")) == pytest.approx(LIVE_DECAY_S, abs=0.6)
+        # The arm click comes LIVE_DECAY_S after the release, later on a loaded host.
+        assert LIVE_DECAY_S - 0.3 <= float(table.cell(0, "length (s)")) <= LIVE_DECAY_S + 3.0
         assert table.title() == "releases (1)"
         assert "two or more wind speeds (have: " in table.model_label.text()
         assert window.flutter_label.text() == "U_F = --"
