@@ -101,6 +101,8 @@ def _as_json(report: Any, files: Sequence[Path]) -> dict[str, Any]:
         "gap_after": report.gap_after,
         "gap_per_release": report.gap_per_release.tolist(),
         "runner_up": report.runner_up,
+        "whiteness_before": report.whiteness_before,
+        "whiteness_after": report.whiteness_after,
         "evidence": [{"effect": ev.effect, "parameters": ev.parameters, "std": ev.std,
                       "cv_ratio": ev.cv_ratio, "cv_ratio_se": ev.cv_ratio_se,
                       "verdict": ev.verdict} for ev in report.evidence],

@@ -62,7 +62,7 @@ from ident.section import SectionModel
 from ident.simulate import simulate_decay
 
 __all__ = ["CHANNELS", "MIN_SIGMAS", "NONE_RATIO", "Backbone", "CandidateEvidence",
-           "DiscrepancyReport", "backbone", "diagnose", "gap"]
+           "DiscrepancyReport", "backbone", "diagnose", "gap", "whiteness"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -137,6 +137,10 @@ class DiscrepancyReport:
     simulated_before, simulated_after : tuple of dict
         Per release, the four simulated channels (as measured) of the baseline and of the
         refitted model (the same objects for None).
+    whiteness_before, whiteness_after : dict of str to float
+        Per channel, the lag-1 autocorrelation of measured minus simulated (:func:`whiteness`):
+        near 1 when the model misses something smooth, near 0 when only the measurement
+        noise is left.
     """
 
     effect: str | None
@@ -153,6 +157,8 @@ class DiscrepancyReport:
     effects: tuple[Effect, ...] = ()
     simulated_before: tuple[dict[str, FloatArray], ...] = field(default=(), repr=False)
     simulated_after: tuple[dict[str, FloatArray], ...] = field(default=(), repr=False)
+    whiteness_before: dict[str, float] = field(default_factory=dict)
+    whiteness_after: dict[str, float] = field(default_factory=dict)
 
     def summary(self) -> str:
         """Return the report as text: the verdict, the gap, every candidate's evidence."""
@@ -168,11 +174,35 @@ class DiscrepancyReport:
                      f"({shrink:+.0%} shrink)" if self.effect is not None
                      else f"gap: {self.gap_before:.4f}")
         lines.append(f"runner-up: {self.runner_up}")
+        lines.append("residual lag-1 autocorrelation (near 0: only white noise left): " + ", ".join(
+            f"{c} {self.whiteness_before.get(c, math.nan):.2f}"
+            + (f" -> {self.whiteness_after.get(c, math.nan):.2f}" if self.effect else "")
+            for c in CHANNELS))
         lines.append(f"{'candidate':<20}{'held-out':>10}{'+-':>8}  verdict")
         for ev in self.evidence:
             lines.append(f"{ev.effect:<20}{ev.cv_ratio:>10.4f}{ev.cv_ratio_se:>8.4f}  "
                          f"{ev.verdict}")
         return "\n".join(lines)
+
+
+def whiteness(measured: Sequence[dict[str, FloatArray]],
+              simulated: Sequence[dict[str, FloatArray]]) -> dict[str, float]:
+    """Return, per channel, the lag-1 autocorrelation of measured minus simulated.
+
+    The mean over the releases of ``sum e[k] e[k+1] / sum e[k]^2`` (``e`` the residual less
+    its mean): about 0 for white measurement noise, near 1 for a smooth model error.
+    """
+    out = {}
+    for name in CHANNELS:
+        values = []
+        for m, s in zip(measured, simulated, strict=True):
+            e = np.asarray(m[name] - s[name], dtype=float)
+            e = e - e.mean()
+            den = float(e @ e)
+            if den > 0 and e.size > 2:
+                values.append(float(e[:-1] @ e[1:]) / den)
+        out[name] = float(np.mean(values)) if values else math.nan
+    return out
 
 
 def gap(measured: Sequence[dict[str, FloatArray]],
@@ -254,7 +284,9 @@ def diagnose(releases: Sequence[Release], section: SectionModel,
             effect=None, parameters={}, uncertainty={}, gap_before=gap_before,
             gap_after=gap_before, gap_per_release=per_release, evidence=tuple(ranked),
             runner_up=runner_up, baseline=baseline, refitted=baseline, section=section,
-            simulated_before=tuple(before), simulated_after=tuple(before))
+            simulated_before=tuple(before), simulated_after=tuple(before),
+            whiteness_before=whiteness(measured, before),
+            whiteness_after=whiteness(measured, before))
 
     effect = _effect(best.effect, best.parameters, fits, depth)
     refitted, new_section, effects = _refit(best.effect, effect, releases, section, baseline,
@@ -276,7 +308,8 @@ def diagnose(releases: Sequence[Release], section: SectionModel,
         gap_before=gap_before, gap_after=gap(measured, after), gap_per_release=per_release,
         evidence=tuple(ranked), runner_up=runner_up, baseline=baseline, refitted=refitted,
         section=new_section, effects=effects, simulated_before=tuple(before),
-        simulated_after=tuple(after))
+        simulated_after=tuple(after), whiteness_before=whiteness(measured, before),
+        whiteness_after=whiteness(measured, after))
 
 
 @dataclass(frozen=True)

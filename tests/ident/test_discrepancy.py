@@ -40,6 +40,8 @@ def test_a_hidden_effect_is_named_recovered_and_the_gap_shrinks(name, factor, se
     assert report.effects and report.effects[0].name == name
     assert [ev.effect for ev in report.evidence][0] == name
     assert report.evidence[0].verdict.startswith("chosen")
+    # The baseline misses something smooth: its residual is far from white noise.
+    assert max(report.whiteness_before.values()) > 0.5, report.whiteness_before
 
 
 @pytest.mark.parametrize("seed", [1, 2])
@@ -53,6 +55,9 @@ def test_clean_campaigns_raise_no_false_alarm(seed):
     assert all(ev.cv_ratio > NONE_RATIO for ev in report.evidence)
     assert report.evidence[0].verdict.startswith("best, but not clear")
     assert report.parameters == {} and report.effects == ()
+    # Only the (white) measurement noise is left: lag-1 autocorrelations near 0 (0.01-0.02
+    # seen; 0.1 leaves room for the seeds).
+    assert all(abs(w) < 0.1 for w in report.whiteness_before.values()), report.whiteness_before
 
 
 def test_gap_is_the_mean_of_the_channels_normalised_rms_differences():
