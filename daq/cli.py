@@ -70,6 +70,23 @@ def _build_parser() -> argparse.ArgumentParser:
     p_diag.add_argument("--json", type=Path, default=None,
                         help="write the report's numbers to this JSON file")
 
+    p_re = sub.add_parser(
+        "reprocess",
+        help="reprocess many run files on Dask: per-file modal fits, per-campaign E2RFC, "
+             "flutter speed and discrepancy check; tables, plots and an HTML report")
+    p_re.add_argument("paths", nargs="+", help="run files, directories or globs")
+    p_re.add_argument("--out", type=Path, required=True, help="output directory")
+    where = p_re.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, default=None,
+                       help="local worker processes (default: the number of cores)")
+    where.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                       help="an existing Dask scheduler, e.g. tcp://10.0.0.5:8786")
+    p_re.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                      dest="overrides",
+                      help="identification setting (n_lags, with_A3, diagnose, depth); "
+                           "repeatable")
+    p_re.add_argument("--no-progress", action="store_true", help="no progress bar")
+
     p_sim = sub.add_parser(
         "simulate",
         help="start the simulated instruments of a rig config and print the URLs to connect to",
@@ -244,6 +261,37 @@ def _identify(args: argparse.Namespace) -> int:
     return 0
 
 
+def _reprocess(args: argparse.Namespace) -> int:
+    from daq.reprocess import ReprocessSettings, reprocess
+
+    try:
+        settings = ReprocessSettings.parse(args.overrides)
+        if args.workers is not None and args.workers < 1:
+            raise ValueError(f"--workers {args.workers}: must be >= 1")
+        summary = reprocess(args.paths, args.out, workers=args.workers,
+                            scheduler=args.scheduler, settings=settings,
+                            progress=not args.no_progress)
+    except (ValueError, FileNotFoundError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(f"{len(summary.files)} file(s): {len(summary.files) - len(summary.failed)} used, "
+          f"{len(summary.failed)} not used, {len(summary.reused)} from the cache")
+    for path, reason in summary.failed.items():
+        print(f"  not used: {reason if reason.startswith(path) else f'{path}: {reason}'}")
+    for i, c in enumerate(summary.campaigns, start=1):
+        if "error" in c:
+            print(f"campaign_{i}: {len(c.get('files', []))} file(s): {c['error']}")
+            continue
+        speed = c.get("flutter_speed")
+        flutter_text = ("no flutter found" if speed is None
+                        else f"U_F = {speed:.3f} +- {c.get('flutter_std') or 0.0:.3f} m/s")
+        print(f"campaign_{i}: {len(c['files'])} file(s), {c['n_releases']} releases at "
+              f"{c['wind_speeds']} m/s: {flutter_text}; effect: {c.get('effect')}")
+    print("wall time " + ", ".join(f"{k} {v:.1f} s" for k, v in summary.timings.items()))
+    print(f"report: {summary.outputs['report']}")
+    return 0
+
+
 def _flutter(args: argparse.Namespace) -> int:
     from ident import RationalFunctionModel, SectionModel, flutter
 
@@ -265,6 +313,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _simulate(args)
     if args.command == "identify":
         return _identify(args)
+    if args.command == "reprocess":
+        return _reprocess(args)
     if args.command == "diagnose":
         from daq.diagnosis import run_diagnose
 

@@ -73,9 +73,11 @@ def no_leaked_threads() -> Iterator[None]:
     leaked = []
     for thread in threading.enumerate():
         # tqdm's monitor: one daemon per process, started by the first progress bar and kept
-        # (it holds no port or file); not a thread of ours.
+        # (it holds no port or file); not a thread of ours. Likewise dask.distributed's
+        # process-wide "offload" executor (one daemon thread, kept for the process's life).
         if (thread in before or isinstance(thread, threading._DummyThread)
-                or type(thread).__name__ == "TMonitor"):
+                or type(thread).__name__ == "TMonitor"
+                or thread.name.startswith("Dask-Offload")):
             continue
         thread.join(timeout=max(0.0, deadline - time.monotonic()))
         if thread.is_alive():

@@ -1,0 +1,515 @@
+"""``windrig reprocess``: whole campaigns of run files, again, on Dask (a laptop or a cluster).
+
+Responsibility: :func:`reprocess` expands paths and globs into run files and hands each to a
+``dask.distributed`` worker (:func:`process_file`: opens it read-only, reads its releases, fits
+each release's modes; returns plain numbers and arrays, never h5py objects). Files are grouped
+into campaigns by the rig and section model stored in them; each campaign is a second task
+(:func:`process_campaign`: E2RFC on all its releases, the flutter speed, the discrepancy check).
+Only the client writes: the summary tables (CSV and JSON, per release and per campaign), plots
+per campaign and a static HTML report linking them, into the output directory. A file that
+cannot be read (truncated, not HDF5, no releases) is reported with its reason and the others go
+on. Finished files are cached in ``OUT/cache`` under a key of their path, size and
+modification time (the per-file work does not depend on the settings), so a second run reads
+again only files that changed; the campaigns, which the settings do change, are always redone.
+
+The cluster: a ``LocalCluster`` of ``workers`` single-threaded processes by default; with
+``scheduler`` an existing one (``tcp://host:8786``) is used instead, and nothing else changes.
+
+Not responsible for: the numerics (:mod:`ident`), reading files (:mod:`ident.io`).
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import glob
+import hashlib
+import html
+import json
+import math
+import os
+import pickle
+import time
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["ReprocessSettings", "ReprocessSummary", "expand_paths", "process_campaign",
+           "process_file", "reprocess"]
+
+#: Bumped when the per-file results change meaning: old cache entries are then not reused.
+CACHE_VERSION = 1
+
+
+@dataclass(frozen=True)
+class ReprocessSettings:
+    """What a reprocessing run may change (``--set name=value``).
+
+    Attributes
+    ----------
+    n_lags : int or None
+        E2RFC's number of lags (None: chosen by held-out error, as ``windrig identify``).
+    with_A3 : bool or None
+        Fit the added-mass matrix (None: chosen).
+    diagnose : bool
+        Run the discrepancy check on each campaign.
+    depth : float or None
+        Section depth for a shedding line's Strouhal number, m (None: per metre).
+    """
+
+    n_lags: int | None = None
+    with_A3: bool | None = None
+    diagnose: bool = True
+    depth: float | None = None
+
+    @classmethod
+    def parse(cls, assignments: Iterable[str]) -> ReprocessSettings:
+        """Build settings from ``name=value`` strings (``none``, ``true``/``false``, numbers).
+
+        Raises
+        ------
+        ValueError
+            An unknown name or a value of the wrong kind, with the name.
+        """
+        names = {f.name for f in dataclasses.fields(cls)}
+        values: dict[str, Any] = {}
+        for item in assignments:
+            name, sep, text = item.partition("=")
+            name = name.strip().replace("-", "_")
+            if not sep or name not in names:
+                raise ValueError(f"--set {item!r}: expected name=value with name one of "
+                                 f"{sorted(names)}")
+            values[name] = _parse_value(name, text.strip())
+        return cls(**values)
+
+    def key(self) -> str:
+        """Return a short hash of the settings (part of the cache key)."""
+        text = json.dumps(dataclasses.asdict(self), sort_keys=True)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _parse_value(name: str, text: str) -> Any:
+    lowered = text.lower()
+    if lowered == "none":
+        return None
+    if name in ("with_A3", "diagnose"):
+        if lowered in ("true", "1", "yes"):
+            return True
+        if lowered in ("false", "0", "no"):
+            return False
+        raise ValueError(f"--set {name}={text}: expected true or false")
+    try:
+        return int(text) if name == "n_lags" else float(text)
+    except ValueError:
+        raise ValueError(f"--set {name}={text}: expected a number") from None
+
+
+# -- tasks (run on the workers) -----------------------------------------------------------------
+
+def process_file(path: str) -> dict[str, Any]:
+    """Read one run file and fit its releases' modes (a worker task).
+
+    Parameters
+    ----------
+    path : str
+        The run file (opened read-only).
+
+    Returns
+    -------
+    dict
+        ``path``, and either ``error`` (the reason the file cannot be used) or ``rig``,
+        ``section`` (dict), ``campaign`` (the grouping key) and ``releases``: per release its
+        arrays (``t``, ``h``, ``alpha``, ``lift``, ``moment``), ``U``, ``rho``, ``index`` and
+        its modes (``f_h``, ``zeta_h``, ``f_a``, ``zeta_a``; NaN with ``modal_error`` when the
+        fit fails).
+    """
+    from daq.live_ident import fit_release_modes
+    from ident.errors import IdentError
+    from ident.io import read_run
+
+    try:
+        run = read_run(path)
+    except IdentError as exc:
+        return {"path": path, "error": str(exc)}
+    if not run.releases:
+        return {"path": path, "error": f"{path}: no releases in /entry/releases"}
+    section = run.section
+    releases = []
+    for i, r in enumerate(run.releases):
+        item: dict[str, Any] = {"index": i, "U": float(r.U), "rho": r.rho,
+                                **{name: np.asarray(getattr(r, name)) for name in
+                                   ("t", "h", "alpha", "lift", "moment")}}
+        try:
+            modal = fit_release_modes(r.t, r.h, r.alpha, section)
+            item.update(dataclasses.asdict(modal))
+        except IdentError as exc:
+            item.update(f_h=math.nan, zeta_h=math.nan, f_a=math.nan, zeta_a=math.nan,
+                        modal_error=str(exc))
+        releases.append(item)
+    shape = section.replace(rho=1.0).to_dict()  # the model; air density differs by run
+    return {"path": path, "rig": run.rig_name, "section": section.to_dict(),
+            "campaign": f"{run.rig_name} {json.dumps(shape, sort_keys=True)}",
+            "releases": releases}
+
+
+def process_campaign(files: list[dict[str, Any]], settings: ReprocessSettings) -> dict[str, Any]:
+    """Identify one campaign from its files' results (a worker task).
+
+    The section is the files' stored one with the median of their air densities, and the
+    releases are taken file by file in path order: exactly what ``windrig identify`` does with
+    the same files, so the numbers agree.
+
+    Returns
+    -------
+    dict
+        ``files``, ``n_releases``, ``wind_speeds``, and ``model`` (dict), ``structure``,
+        ``flutter_speed``, ``flutter_std``, ``flutter_frequency``, ``effect`` and the gaps, or
+        ``error`` when E2RFC cannot identify a model (one wind speed).
+    """
+    from ident import e2rfc
+    from ident.discrepancy import diagnose
+    from ident.errors import IdentError
+    from ident.release import Release
+    from ident.section import SectionModel
+
+    files = sorted(files, key=lambda f: f["path"])
+    sections = [SectionModel.from_dict(f["section"]) for f in files]
+    section = sections[0].replace(rho=float(np.median([s.rho for s in sections])))
+    releases = [Release(t=r["t"], h=r["h"], alpha=r["alpha"], lift=r["lift"],
+                        moment=r["moment"], U=r["U"], rho=r["rho"],
+                        meta={"file": f["path"], "release": r["index"]})
+                for f in files for r in f["releases"]]
+    out: dict[str, Any] = {"files": [f["path"] for f in files], "n_releases": len(releases),
+                           "wind_speeds": sorted({round(r.U, 2) for r in releases}),
+                           "section": section.to_dict()}
+    try:
+        model = e2rfc.identify(releases, section, n_lags=settings.n_lags,
+                               with_A3=settings.with_A3)
+    except IdentError as exc:
+        out["error"] = f"{type(exc).__name__}: {exc}"
+        return out
+    result, std = model.flutter(section)
+    K_values = [section.B * 2 * math.pi * fs / r.U for r in releases
+                for fs in (section.fh, section.fa)]
+    K = np.linspace(0.8 * min(K_values), 1.2 * max(K_values), 100)
+    out.update(model=model.to_dict(), structure=model.diagnostics.reason,
+               flutter_speed=result.speed, flutter_std=std, flutter_frequency=result.frequency,
+               K=K, derivatives={k: np.asarray(v) for k, v in
+                                 model.flutter_derivatives(K).items()})
+    if settings.diagnose:
+        report = diagnose(releases, section, baseline=model, depth=settings.depth)
+        out.update(effect=report.effect, effect_parameters=report.parameters,
+                   gap_before=report.gap_before, gap_after=report.gap_after,
+                   runner_up=report.runner_up)
+    return out
+
+
+# -- the client -----------------------------------------------------------------------------------
+
+@dataclass
+class ReprocessSummary:
+    """What :func:`reprocess` did.
+
+    Attributes
+    ----------
+    files : list of str
+        Every run file found.
+    failed : dict of str to str
+        Files that could not be used, with the reason.
+    reused : list of str
+        Files taken from the cache (not redone).
+    campaigns : list of dict
+        One per campaign (see :func:`process_campaign`).
+    outputs : dict of str to Path
+        The tables, plots and report written.
+    timings : dict of str to float
+        Wall time of the phases, s.
+    """
+
+    files: list[str]
+    failed: dict[str, str] = field(default_factory=dict)
+    reused: list[str] = field(default_factory=list)
+    campaigns: list[dict[str, Any]] = field(default_factory=list)
+    outputs: dict[str, Path] = field(default_factory=dict)
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+def expand_paths(items: Sequence[str | os.PathLike[str]]) -> list[str]:
+    """Return the run files named by paths, directories (their ``*.h5``) and globs, sorted.
+
+    Raises
+    ------
+    FileNotFoundError
+        An item matches nothing.
+    """
+    found: set[str] = set()
+    for item in items:
+        text = os.fspath(item)
+        if os.path.isdir(text):
+            matches = glob.glob(os.path.join(text, "*.h5"))
+        elif glob.has_magic(text):
+            matches = glob.glob(text)
+        else:
+            matches = [text] if os.path.exists(text) else []
+        if not matches:
+            raise FileNotFoundError(f"{text}: no such run file (or nothing matches)")
+        found.update(os.path.abspath(m) for m in matches)
+    return sorted(found)
+
+
+def reprocess(paths: Sequence[str | os.PathLike[str]], out: str | os.PathLike[str], *,
+              workers: int | None = None, scheduler: str | None = None,
+              settings: ReprocessSettings | None = None,
+              progress: bool = True) -> ReprocessSummary:
+    """Reprocess run files on Dask; write the tables, plots and report (module docstring).
+
+    Parameters
+    ----------
+    paths : sequence of path-like
+        Run files, directories and globs.
+    out : path-like
+        Output directory (created).
+    workers : int, optional
+        Local worker processes (default: the machine's cores); ignored with ``scheduler``.
+    scheduler : str, optional
+        Address of an existing Dask scheduler.
+    settings : ReprocessSettings, optional
+        Identification settings (default: those of ``windrig identify``).
+    progress : bool
+        Show a progress bar.
+
+    Returns
+    -------
+    ReprocessSummary
+    """
+    from dask.distributed import Client, LocalCluster, as_completed
+    from tqdm import tqdm
+
+    settings = settings or ReprocessSettings()
+    out_dir = Path(out)
+    cache_dir = out_dir / "cache"
+    cache_dir.mkdir(parents=True, exist_ok=True)
+    files = expand_paths(paths)
+    summary = ReprocessSummary(files=files)
+    started = time.monotonic()
+    results: dict[str, dict[str, Any]] = {}
+    todo = []
+    for path in files:
+        cached = _cache_load(cache_dir, path)
+        if cached is not None:
+            results[path] = cached
+            summary.reused.append(path)
+        else:
+            todo.append(path)
+
+    cluster = None
+    if scheduler is None:
+        n = workers if workers is not None else (os.cpu_count() or 1)
+        # Loopback only, no dashboard: a laptop run opens no port to the network.
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                               host="127.0.0.1", dashboard_address=None,
+                               scheduler_kwargs={"dashboard": False})
+    client = Client(scheduler if scheduler is not None else cluster)
+    try:
+        futures = client.map(process_file, todo, pure=False)
+        bar = tqdm(total=len(files), initial=len(files) - len(todo), unit="file",
+                   disable=not progress, desc="files")
+        for future in as_completed(futures):
+            path = todo[futures.index(future)]
+            try:
+                result = future.result()
+            except Exception as exc:  # a worker's unexpected failure: reported, not fatal
+                result = {"path": path, "error": f"{type(exc).__name__}: {exc}"}
+            results[path] = result
+            _cache_store(cache_dir, path, result)
+            bar.update(1)
+        bar.close()
+        summary.timings["files"] = time.monotonic() - started
+
+        t1 = time.monotonic()
+        groups: dict[str, list[dict[str, Any]]] = {}
+        for path in files:
+            result = results[path]
+            if "error" in result:
+                summary.failed[path] = result["error"]
+            else:
+                groups.setdefault(result["campaign"], []).append(result)
+        campaign_futures = [client.submit(process_campaign, group, settings, pure=False)
+                            for group in groups.values()]
+        for future in campaign_futures:
+            try:
+                summary.campaigns.append(future.result())
+            except Exception as exc:  # reported with the campaign's files
+                summary.campaigns.append({"files": [], "error": f"{type(exc).__name__}: {exc}"})
+        summary.timings["campaigns"] = time.monotonic() - t1
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+    t2 = time.monotonic()
+    summary.outputs = _write_outputs(out_dir, results, summary)
+    summary.timings["outputs"] = time.monotonic() - t2
+    summary.timings["total"] = time.monotonic() - started
+    return summary
+
+
+# -- cache ------------------------------------------------------------------------------------
+
+def _cache_key(path: str) -> str | None:
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    text = f"{CACHE_VERSION} {path} {st.st_size} {st.st_mtime_ns}"
+    return hashlib.sha256(text.encode()).hexdigest()[:24]
+
+
+def _cache_file(cache_dir: Path, path: str) -> Path:
+    return cache_dir / (hashlib.sha256(path.encode()).hexdigest()[:24] + ".pkl")
+
+
+def _cache_load(cache_dir: Path, path: str) -> dict[str, Any] | None:
+    key = _cache_key(path)
+    entry = _cache_file(cache_dir, path)
+    if key is None or not entry.exists():
+        return None
+    try:
+        with entry.open("rb") as f:
+            stored = pickle.load(f)  # noqa: S301 - our own cache, written by this function
+    except (OSError, pickle.UnpicklingError, EOFError):
+        return None  # a damaged cache entry is redone
+    if not isinstance(stored, dict) or stored.get("key") != key:
+        return None
+    result = stored.get("result")
+    return result if isinstance(result, dict) else None
+
+
+def _cache_store(cache_dir: Path, path: str, result: dict[str, Any]) -> None:
+    key = _cache_key(path)
+    if key is None:
+        return
+    entry = _cache_file(cache_dir, path)
+    tmp = entry.with_suffix(".tmp")
+    with tmp.open("wb") as f:
+        pickle.dump({"key": key, "result": result}, f)
+    tmp.replace(entry)  # atomic: an interrupted run leaves no half entry
+
+
+# -- outputs ----------------------------------------------------------------------------------
+
+_RELEASE_FIELDS = ("file", "release", "U", "f_h", "zeta_h", "f_a", "zeta_a", "campaign")
+_CAMPAIGN_FIELDS = ("campaign", "n_files", "n_releases", "wind_speeds", "flutter_speed",
+                    "flutter_std", "flutter_frequency", "structure", "effect", "gap_before",
+                    "gap_after", "error")
+
+
+def _write_outputs(out: Path, results: dict[str, dict[str, Any]],
+                   summary: ReprocessSummary) -> dict[str, Path]:
+    outputs: dict[str, Path] = {}
+    names = {id(c): f"campaign_{i + 1}" for i, c in enumerate(summary.campaigns)}
+    campaign_of = {p: names[id(c)] for c in summary.campaigns for p in c.get("files", [])}
+    release_rows = []
+    for path in summary.files:
+        result = results[path]
+        for r in result.get("releases", []):
+            release_rows.append({"file": path, "release": r["index"], "U": r["U"],
+                                 "f_h": r["f_h"], "zeta_h": r["zeta_h"], "f_a": r["f_a"],
+                                 "zeta_a": r["zeta_a"], "campaign": campaign_of.get(path, "")})
+    campaign_rows = []
+    for c in summary.campaigns:
+        campaign_rows.append({
+            "campaign": names[id(c)], "n_files": len(c.get("files", [])),
+            "n_releases": c.get("n_releases"), "wind_speeds": c.get("wind_speeds"),
+            "flutter_speed": c.get("flutter_speed"), "flutter_std": c.get("flutter_std"),
+            "flutter_frequency": c.get("flutter_frequency"), "structure": c.get("structure"),
+            "effect": c.get("effect"), "gap_before": c.get("gap_before"),
+            "gap_after": c.get("gap_after"), "error": c.get("error")})
+    for name, rows, fields in (("releases", release_rows, _RELEASE_FIELDS),
+                               ("campaigns", campaign_rows, _CAMPAIGN_FIELDS)):
+        csv_path = out / f"{name}.csv"
+        with csv_path.open("w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=fields)
+            writer.writeheader()
+            writer.writerows(rows)
+        outputs[f"{name}_csv"] = csv_path
+    summary_json = out / "summary.json"
+    summary_json.write_text(json.dumps({
+        "files": summary.files, "failed": summary.failed, "reused": summary.reused,
+        "releases": release_rows, "campaigns": campaign_rows,
+        "models": {names[id(c)]: c.get("model") for c in summary.campaigns},
+    }, indent=2, default=_json_default))
+    outputs["summary_json"] = summary_json
+    plots = {names[id(c)]: _campaign_plot(out, names[id(c)], c, results)
+             for c in summary.campaigns if "model" in c}
+    outputs.update({f"plot_{k}": v for k, v in plots.items()})
+    outputs["report"] = _html_report(out, summary, campaign_rows, plots)
+    return outputs
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+
+
+def _campaign_plot(out: Path, name: str, campaign: dict[str, Any],
+                   results: dict[str, dict[str, Any]]) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, 4, figsize=(14, 6))
+    K = np.asarray(campaign["K"])
+    for ax, (deriv, values) in zip(axes.ravel(), campaign["derivatives"].items(), strict=False):
+        ax.plot(1.0 / K, values, "r-")
+        ax.set_title(f"{deriv}*")
+        ax.set_xlabel("1/K")
+    speed = campaign.get("flutter_speed")
+    fig.suptitle(f"{name}: {campaign['n_releases']} releases at {campaign['wind_speeds']} m/s; "
+                 + (f"U_F = {speed:.2f} m/s" if speed is not None else "no flutter found"))
+    fig.tight_layout()
+    path = out / f"{name}_flutter_derivatives.png"
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+def _html_report(out: Path, summary: ReprocessSummary, campaigns: list[dict[str, Any]],
+                 plots: dict[str, Path]) -> Path:
+    def cell(value: Any) -> str:
+        if isinstance(value, float):
+            return f"{value:.4g}"
+        return html.escape("" if value is None else str(value))
+
+    parts = ["<!doctype html><html><head><meta charset='utf-8'><title>windrig reprocess</title>",
+             "<style>body{font-family:sans-serif} td,th{padding:2px 8px;border-bottom:1px solid"
+             " #ccc}</style></head><body>",
+             f"<h1>windrig reprocess</h1><p>{len(summary.files)} files, "
+             f"{len(summary.failed)} failed, {len(summary.reused)} from the cache; "
+             "<a href='releases.csv'>releases.csv</a>, <a href='campaigns.csv'>campaigns.csv"
+             "</a>, <a href='summary.json'>summary.json</a></p>",
+             "<h2>Campaigns</h2><table><tr>"
+             + "".join(f"<th>{f}</th>" for f in _CAMPAIGN_FIELDS) + "</tr>"]
+    for row in campaigns:
+        parts.append("<tr>" + "".join(f"<td>{cell(row[f])}</td>" for f in _CAMPAIGN_FIELDS)
+                     + "</tr>")
+    parts.append("</table>")
+    for name, path in plots.items():
+        parts.append(f"<h3>{html.escape(name)}</h3><img src='{html.escape(path.name)}' "
+                     "width='900'>")
+    if summary.failed:
+        parts.append("<h2>Files not used</h2><ul>")
+        parts.extend(f"<li>{html.escape(p)}: {html.escape(reason)}</li>"
+                     for p, reason in summary.failed.items())
+        parts.append("</ul>")
+    parts.append("</body></html>")
+    path = out / "index.html"
+    path.write_text("\n".join(parts))
+    return path

@@ -1,0 +1,116 @@
+"""``windrig reprocess`` on a folder of run files with 2 local Dask workers.
+
+The folder: three run files of a simulated campaign (the flat-plate rig, one wind speed each, two
+5 s releases, 2 % noise; written by the acquisition's recorder), a truncated copy of one of them
+and a file that is not HDF5. The numbers must equal ``windrig identify`` on the three good
+files, the two bad files must be reported with their reasons, and a second run must take the
+files from the cache.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from daq.cli import main
+from daq.config import parse_rig_config
+from daq.recorder import RunRecorder
+from daq.reprocess import ReprocessSettings, expand_paths, reprocess
+from simulators.campaigns import FRACTIONS, simulated_campaign
+
+CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
+
+
+def write_run(path: Path, releases: list) -> None:
+    """Write releases into a run file the way the acquisition's recorder does."""
+    config = parse_rig_config((CONFIGS / "sim_flat_plate.toml").read_text(),
+                              "sim_flat_plate.toml")
+    rec = RunRecorder(path, config_text=config.text, rig_name=config.name, min_free_bytes=0,
+                      reserve_bytes=0)
+    rec.open()
+    n_taps = config.taps.n_taps
+    rec.add_sync([f"tap{i:03d}" for i in range(n_taps)])
+    rec.start()
+    rows, t0 = 0, 0.0
+    for r in releases:
+        t = t0 + r.t
+        n = t.size
+        rec.append_sync(t, h=r.h, alpha=r.alpha, lift=r.lift, moment=r.moment,
+                        pressure=np.zeros((n, n_taps)), U=np.full(n, r.U),
+                        rho=np.full(n, float(r.rho)))
+        rec.add_release(release_time=t0, start_index=rows, stop_index=rows + n, U=r.U,
+                        h0=float(r.h[0]), alpha0=float(r.alpha[0]))
+        rows += n
+        t0 = float(t[-1]) + float(r.t[1] - r.t[0])
+    rec.close()
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("campaign")
+    releases = simulated_campaign(None, seed=11, duration=5.0)
+    per_speed = len(releases) // len(FRACTIONS)
+    for i in range(len(FRACTIONS)):
+        write_run(root / f"run_{i}.h5", releases[i * per_speed:(i + 1) * per_speed])
+    good = root / "run_0.h5"
+    truncated = root / "run_9_truncated.h5"
+    shutil.copy(good, truncated)
+    with truncated.open("r+b") as f:
+        f.truncate(good.stat().st_size // 2)
+    (root / "notes.h5").write_text("operator's notes, not a run file\n")
+    return root
+
+
+def test_reprocess_matches_identify_and_reports_the_bad_files(folder, tmp_path, capsys):
+    good = sorted(str(p) for p in folder.glob("run_[0-2].h5"))
+    assert main(["identify", *good, "--json", str(tmp_path / "identify.json")]) == 0
+    expected = json.loads((tmp_path / "identify.json").read_text())
+
+    out = tmp_path / "out"
+    summary = reprocess([str(folder)], out, workers=2, progress=False)
+    assert len(summary.files) == 5
+    assert set(summary.failed) == {str(folder / "run_9_truncated.h5"), str(folder / "notes.h5")}
+    assert "truncated" in summary.failed[str(folder / "run_9_truncated.h5")]
+    assert "cannot be opened as an HDF5" in summary.failed[str(folder / "notes.h5")]
+    assert len(summary.campaigns) == 1
+    campaign = summary.campaigns[0]
+    assert campaign["files"] == good and campaign["n_releases"] == 6
+    # Same files, same order, same section: the same numbers as `windrig identify` (the
+    # workers run the same code; 1e-9 leaves room only for float summation order).
+    assert campaign["flutter_speed"] == pytest.approx(expected["flutter_speed"], rel=1e-9)
+    assert campaign["flutter_std"] == pytest.approx(expected["flutter_speed_std"], rel=1e-6)
+    assert np.allclose(campaign["model"]["d"], expected["model"]["d"], rtol=1e-9)
+    assert campaign["effect"] is None  # a clean campaign: no discrepancy
+
+    with (out / "releases.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 6 and {r["campaign"] for r in rows} == {"campaign_1"}
+    assert all(1.8 < float(r["f_h"]) < 2.2 and 3.0 < float(r["f_a"]) < 4.1 for r in rows)
+    data = json.loads((out / "summary.json").read_text())
+    assert data["campaigns"][0]["flutter_speed"] == pytest.approx(campaign["flutter_speed"])
+    report = (out / "index.html").read_text()
+    assert "campaign_1_flutter_derivatives.png" in report and "notes.h5" in report
+    assert (out / "campaign_1_flutter_derivatives.png").read_bytes()[:4] == b"\x89PNG"
+
+    # Resumable: nothing changed, so every file comes from the cache.
+    again = reprocess([str(folder / "*.h5")], out, workers=1, progress=False)
+    assert sorted(again.reused) == sorted(summary.files)
+    assert again.campaigns[0]["flutter_speed"] == campaign["flutter_speed"]
+
+
+def test_settings_and_paths_are_checked(folder, tmp_path, capsys):
+    assert ReprocessSettings.parse(["n_lags=2", "diagnose=false"]) == \
+        ReprocessSettings(n_lags=2, diagnose=False)
+    with pytest.raises(ValueError, match="n_lags, with_A3, diagnose, depth|name one of"):
+        ReprocessSettings.parse(["lags=2"])
+    with pytest.raises(ValueError, match="expected true or false"):
+        ReprocessSettings.parse(["diagnose=maybe"])
+    with pytest.raises(FileNotFoundError, match="nothing matches"):
+        expand_paths([str(folder / "missing_*.h5")])
+    assert main(["reprocess", str(folder / "none.h5"), "--out", str(tmp_path)]) == 2
+    assert "no such run file" in capsys.readouterr().err
