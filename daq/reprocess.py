@@ -305,6 +305,7 @@ def reprocess(paths: Sequence[str | os.PathLike[str]], out: str | os.PathLike[st
         else:
             todo.append(path)
 
+    t_cluster = time.monotonic()
     cluster = None
     if scheduler is None:
         n = workers if workers is not None else (os.cpu_count() or 1)
@@ -313,6 +314,7 @@ def reprocess(paths: Sequence[str | os.PathLike[str]], out: str | os.PathLike[st
                                host="127.0.0.1", dashboard_address=None,
                                scheduler_kwargs={"dashboard": False})
     client = Client(scheduler if scheduler is not None else cluster)
+    summary.timings["cluster start"] = time.monotonic() - t_cluster
     try:
         futures = client.map(process_file, todo, pure=False)
         bar = tqdm(total=len(files), initial=len(files) - len(todo), unit="file",
@@ -327,7 +329,7 @@ def reprocess(paths: Sequence[str | os.PathLike[str]], out: str | os.PathLike[st
             _cache_store(cache_dir, path, result)
             bar.update(1)
         bar.close()
-        summary.timings["files"] = time.monotonic() - started
+        summary.timings["files"] = time.monotonic() - t_cluster - summary.timings["cluster start"]
 
         t1 = time.monotonic()
         groups: dict[str, list[dict[str, Any]]] = {}
