@@ -74,7 +74,11 @@ def _build_parser() -> argparse.ArgumentParser:
         "reprocess",
         help="reprocess many run files on Dask: per-file modal fits, per-campaign E2RFC, "
              "flutter speed and discrepancy check; tables, plots and an HTML report")
-    p_re.add_argument("paths", nargs="+", help="run files, directories or globs")
+    p_re.add_argument("paths", nargs="*", help="run files, directories or globs")
+    p_re.add_argument("--config", type=Path, default=None, metavar="FILE.toml",
+                      help="reprocessing config: [reprocess] settings and [campaigns] "
+                           "name = [paths or globs] (named campaigns replace the grouping by "
+                           "stored section model)")
     p_re.add_argument("--out", type=Path, required=True, help="output directory")
     where = p_re.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, default=None,
@@ -262,14 +266,21 @@ def _identify(args: argparse.Namespace) -> int:
 
 
 def _reprocess(args: argparse.Namespace) -> int:
-    from daq.reprocess import ReprocessSettings, reprocess
+    from daq.reprocess import ReprocessSettings, load_reprocess_config, reprocess
 
     try:
-        settings = ReprocessSettings.parse(args.overrides)
+        settings = ReprocessSettings()
+        campaigns: dict[str, list[str]] = {}
+        if args.config is not None:
+            settings, campaigns = load_reprocess_config(args.config)
+        settings = ReprocessSettings.parse(args.overrides, base=settings)
         if args.workers is not None and args.workers < 1:
             raise ValueError(f"--workers {args.workers}: must be >= 1")
+        if not args.paths and not campaigns:
+            raise ValueError("give run files, directories or globs, or --config with "
+                             "[campaigns]")
         summary = reprocess(args.paths, args.out, workers=args.workers,
-                            scheduler=args.scheduler, settings=settings,
+                            scheduler=args.scheduler, settings=settings, campaigns=campaigns,
                             progress=not args.no_progress)
     except (ValueError, FileNotFoundError) as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -278,14 +289,14 @@ def _reprocess(args: argparse.Namespace) -> int:
           f"{len(summary.failed)} not used, {len(summary.reused)} from the cache")
     for path, reason in summary.failed.items():
         print(f"  not used: {reason if reason.startswith(path) else f'{path}: {reason}'}")
-    for i, c in enumerate(summary.campaigns, start=1):
+    for c in summary.campaigns:
         if "error" in c:
-            print(f"campaign_{i}: {len(c.get('files', []))} file(s): {c['error']}")
+            print(f"{c.get('name')}: {len(c.get('files', []))} file(s): {c['error']}")
             continue
         speed = c.get("flutter_speed")
         flutter_text = ("no flutter found" if speed is None
                         else f"U_F = {speed:.3f} +- {c.get('flutter_std') or 0.0:.3f} m/s")
-        print(f"campaign_{i}: {len(c['files'])} file(s), {c['n_releases']} releases at "
+        print(f"{c.get('name')}: {len(c['files'])} file(s), {c['n_releases']} releases at "
               f"{c['wind_speeds']} m/s: {flutter_text}; effect: {c.get('effect')}")
     print("wall time " + ", ".join(f"{k} {v:.1f} s" for k, v in summary.timings.items()))
     print(f"report: {summary.outputs['report']}")

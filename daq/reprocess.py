@@ -30,15 +30,15 @@ import math
 import os
 import pickle
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["ReprocessSettings", "ReprocessSummary", "expand_paths", "process_campaign",
-           "process_file", "reprocess"]
+__all__ = ["ReprocessSettings", "ReprocessSummary", "expand_paths", "load_reprocess_config",
+           "process_campaign", "process_file", "reprocess"]
 
 #: Bumped when the per-file results change meaning: old cache entries are then not reused.
 CACHE_VERSION = 1
@@ -66,7 +66,36 @@ class ReprocessSettings:
     depth: float | None = None
 
     @classmethod
-    def parse(cls, assignments: Iterable[str]) -> ReprocessSettings:
+    def from_mapping(cls, values: Mapping[str, Any], where: str,
+                     base: ReprocessSettings | None = None) -> ReprocessSettings:
+        """Return ``base`` (default: the defaults) with the settings of a TOML table.
+
+        Raises
+        ------
+        ValueError
+            An unknown name or a value of the wrong type, naming ``where``.
+        """
+        names = {f.name: f for f in dataclasses.fields(cls)}
+        unknown = sorted(set(values) - set(names))
+        if unknown:
+            raise ValueError(f"{where}: unknown setting(s) {unknown}; known: {sorted(names)}")
+        checked: dict[str, Any] = {}
+        for name, value in values.items():
+            if value is None or (name in ("with_A3", "diagnose") and isinstance(value, bool)):
+                checked[name] = value
+            elif name == "n_lags" and isinstance(value, int) and not isinstance(value, bool):
+                checked[name] = value
+            elif (name == "depth" and isinstance(value, (int, float))
+                  and not isinstance(value, bool)):
+                checked[name] = float(value)
+            else:
+                raise ValueError(f"{where}: {name} = {value!r} has the wrong type "
+                                 f"({names[name].type})")
+        return dataclasses.replace(base or cls(), **checked)
+
+    @classmethod
+    def parse(cls, assignments: Iterable[str],
+              base: ReprocessSettings | None = None) -> ReprocessSettings:
         """Build settings from ``name=value`` strings (``none``, ``true``/``false``, numbers).
 
         Raises
@@ -83,7 +112,7 @@ class ReprocessSettings:
                 raise ValueError(f"--set {item!r}: expected name=value with name one of "
                                  f"{sorted(names)}")
             values[name] = _parse_value(name, text.strip())
-        return cls(**values)
+        return dataclasses.replace(base or cls(), **values)
 
     def key(self) -> str:
         """Return a short hash of the settings (part of the cache key)."""
@@ -105,6 +134,39 @@ def _parse_value(name: str, text: str) -> Any:
         return int(text) if name == "n_lags" else float(text)
     except ValueError:
         raise ValueError(f"--set {name}={text}: expected a number") from None
+
+
+def load_reprocess_config(path: str | os.PathLike[str]) -> tuple[ReprocessSettings,
+                                                                dict[str, list[str]]]:
+    """Read a reprocessing config: settings and, optionally, the campaigns by name.
+
+    The TOML file may hold ``[reprocess]`` (the :class:`ReprocessSettings` names) and
+    ``[campaigns]`` (``name = ["run files, directories or globs", ...]``, relative to the
+    file's directory). Named campaigns replace the grouping by stored section model.
+
+    Raises
+    ------
+    ValueError
+        The file is not TOML, or a table or value is malformed (the message names it).
+    """
+    import tomllib
+
+    where = os.fspath(path)
+    try:
+        data = tomllib.loads(Path(path).read_text())
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise ValueError(f"{where}: cannot read the reprocessing config: {exc}") from exc
+    unknown = sorted(set(data) - {"reprocess", "campaigns"})
+    if unknown:
+        raise ValueError(f"{where}: unknown table(s) {unknown}; known: reprocess, campaigns")
+    settings = ReprocessSettings.from_mapping(data.get("reprocess", {}), f"{where} [reprocess]")
+    base = Path(path).resolve().parent
+    campaigns: dict[str, list[str]] = {}
+    for name, items in data.get("campaigns", {}).items():
+        if not (isinstance(items, list) and items and all(isinstance(i, str) for i in items)):
+            raise ValueError(f"{where} [campaigns] {name}: expected a list of paths or globs")
+        campaigns[name] = [i if os.path.isabs(i) else str(base / i) for i in items]
+    return settings, campaigns
 
 
 # -- tasks (run on the workers) -----------------------------------------------------------------
@@ -155,7 +217,8 @@ def process_file(path: str) -> dict[str, Any]:
             "releases": releases}
 
 
-def process_campaign(files: list[dict[str, Any]], settings: ReprocessSettings) -> dict[str, Any]:
+def process_campaign(name: str, files: list[dict[str, Any]],
+                     settings: ReprocessSettings) -> dict[str, Any]:
     """Identify one campaign from its files' results (a worker task).
 
     The section is the files' stored one with the median of their air densities, and the
@@ -177,14 +240,19 @@ def process_campaign(files: list[dict[str, Any]], settings: ReprocessSettings) -
 
     files = sorted(files, key=lambda f: f["path"])
     sections = [SectionModel.from_dict(f["section"]) for f in files]
+    out: dict[str, Any] = {"name": name, "files": [f["path"] for f in files]}
+    for f, s in zip(files[1:], sections[1:], strict=True):
+        if s.replace(rho=sections[0].rho) != sections[0]:
+            out["error"] = (f"{f['path']}: its section model differs from that of "
+                            f"{files[0]['path']}; one campaign is one section model")
+            return out
     section = sections[0].replace(rho=float(np.median([s.rho for s in sections])))
     releases = [Release(t=r["t"], h=r["h"], alpha=r["alpha"], lift=r["lift"],
                         moment=r["moment"], U=r["U"], rho=r["rho"],
                         meta={"file": f["path"], "release": r["index"]})
                 for f in files for r in f["releases"]]
-    out: dict[str, Any] = {"files": [f["path"] for f in files], "n_releases": len(releases),
-                           "wind_speeds": sorted({round(r.U, 2) for r in releases}),
-                           "section": section.to_dict()}
+    out.update(n_releases=len(releases), wind_speeds=sorted({round(r.U, 2) for r in releases}),
+               section=section.to_dict())
     try:
         model = e2rfc.identify(releases, section, n_lags=settings.n_lags,
                                with_A3=settings.with_A3)
@@ -263,6 +331,7 @@ def expand_paths(items: Sequence[str | os.PathLike[str]]) -> list[str]:
 def reprocess(paths: Sequence[str | os.PathLike[str]], out: str | os.PathLike[str], *,
               workers: int | None = None, scheduler: str | None = None,
               settings: ReprocessSettings | None = None,
+              campaigns: Mapping[str, Sequence[str]] | None = None,
               progress: bool = True) -> ReprocessSummary:
     """Reprocess run files on Dask; write the tables, plots and report (module docstring).
 
@@ -278,6 +347,9 @@ def reprocess(paths: Sequence[str | os.PathLike[str]], out: str | os.PathLike[st
         Address of an existing Dask scheduler.
     settings : ReprocessSettings, optional
         Identification settings (default: those of ``windrig identify``).
+    campaigns : mapping of str to sequence of str, optional
+        Named campaigns (paths, directories, globs each): they replace the grouping by stored
+        section model, and their files are added to ``paths``.
     progress : bool
         Show a progress bar.
 
@@ -292,7 +364,14 @@ def reprocess(paths: Sequence[str | os.PathLike[str]], out: str | os.PathLike[st
     out_dir = Path(out)
     cache_dir = out_dir / "cache"
     cache_dir.mkdir(parents=True, exist_ok=True)
-    files = expand_paths(paths)
+    named: dict[str, str] = {}  # file -> campaign name
+    for name, items in (campaigns or {}).items():
+        for path in expand_paths(items):
+            if named.setdefault(path, name) != name:
+                raise ValueError(f"{path} is in two campaigns: {named[path]} and {name}")
+    files = sorted(set(expand_paths(paths) if paths else []) | set(named))
+    if not files:
+        raise FileNotFoundError("no run files given")
     summary = ReprocessSummary(files=files)
     started = time.monotonic()
     results: dict[str, dict[str, Any]] = {}
@@ -337,15 +416,21 @@ def reprocess(paths: Sequence[str | os.PathLike[str]], out: str | os.PathLike[st
             result = results[path]
             if "error" in result:
                 summary.failed[path] = result["error"]
+            elif named:
+                if path in named:  # files outside the named campaigns are read, not grouped
+                    groups.setdefault(named[path], []).append(result)
             else:
                 groups.setdefault(result["campaign"], []).append(result)
-        campaign_futures = [client.submit(process_campaign, group, settings, pure=False)
-                            for group in groups.values()]
-        for future in campaign_futures:
+        labels = {key: key if named else f"campaign_{i + 1}" for i, key in enumerate(groups)}
+        campaign_futures = [client.submit(process_campaign, labels[key], group, settings,
+                                          pure=False) for key, group in groups.items()]
+        for key, future in zip(groups, campaign_futures, strict=True):
             try:
                 summary.campaigns.append(future.result())
             except Exception as exc:  # reported with the campaign's files
-                summary.campaigns.append({"files": [], "error": f"{type(exc).__name__}: {exc}"})
+                summary.campaigns.append({"name": labels[key],
+                                          "files": [f["path"] for f in groups[key]],
+                                          "error": f"{type(exc).__name__}: {exc}"})
         summary.timings["campaigns"] = time.monotonic() - t1
     finally:
         client.close()
@@ -412,7 +497,8 @@ _CAMPAIGN_FIELDS = ("campaign", "n_files", "n_releases", "wind_speeds", "flutter
 def _write_outputs(out: Path, results: dict[str, dict[str, Any]],
                    summary: ReprocessSummary) -> dict[str, Path]:
     outputs: dict[str, Path] = {}
-    names = {id(c): f"campaign_{i + 1}" for i, c in enumerate(summary.campaigns)}
+    names = {id(c): str(c.get("name", f"campaign_{i + 1}"))
+             for i, c in enumerate(summary.campaigns)}
     campaign_of = {p: names[id(c)] for c in summary.campaigns for p in c.get("files", [])}
     release_rows = []
     for path in summary.files:

@@ -114,3 +114,37 @@ def test_settings_and_paths_are_checked(folder, tmp_path, capsys):
         expand_paths([str(folder / "missing_*.h5")])
     assert main(["reprocess", str(folder / "none.h5"), "--out", str(tmp_path)]) == 2
     assert "no such run file" in capsys.readouterr().err
+
+
+def test_a_config_names_the_campaigns_and_sets_the_settings(folder, tmp_path, capsys):
+    config = tmp_path / "reprocess.toml"
+    config.write_text(f"""
+[reprocess]
+n_lags = 2
+diagnose = false
+
+[campaigns]
+low = ["{folder}/run_0.h5", "{folder}/run_1.h5"]
+all_three = ["{folder}/run_[0-2].h5"]
+""")
+    with pytest.raises(ValueError, match="in two campaigns"):
+        from daq.reprocess import load_reprocess_config
+
+        settings, campaigns = load_reprocess_config(config)
+        reprocess([], tmp_path / "o", workers=1, settings=settings, campaigns=campaigns,
+                  progress=False)
+    config.write_text(config.read_text().replace(
+        'all_three = ["' + f"{folder}/run_[0-2].h5" + '"]', ""))
+    code = main(["reprocess", "--config", str(config), "--out", str(tmp_path / "out"),
+                 "--workers", "1", "--no-progress", "--set", "with_A3=true"])
+    printed = capsys.readouterr().out
+    assert code == 0, printed
+    assert "low: 2 file(s), 4 releases" in printed and "effect: None" in printed
+    data = json.loads((tmp_path / "out" / "summary.json").read_text())
+    (campaign,) = data["campaigns"]
+    assert campaign["campaign"] == "low" and campaign["effect"] is None  # diagnose = false
+    assert campaign["structure"] == "given by the caller"  # n_lags and with_A3 were set
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[reprocess]\nn_lags = 'two'\n")
+    assert main(["reprocess", "--config", str(bad), "--out", str(tmp_path / "o2")]) == 2
+    assert "n_lags = 'two' has the wrong type" in capsys.readouterr().err
