@@ -21,9 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from daq.config import RigConfig, parse_rig_config
-from daq.recorder import RunRecorder
+from daq.config import parse_rig_config
 from daq.reprocess import reprocess
+from daq.testing import write_release_run
 from ident import flat_plate, flutter
 from ident.release import Release
 from simulators.campaigns import HOLDS, SECTION
@@ -54,30 +54,9 @@ def write_files(root: Path) -> list[Path]:
                 section, truth, fraction * U_F, h0, a0, duration=7.5, fs=500.0, noise=0.02,
                 rng=rng)) for h0, a0 in HOLDS]
             path = root / f"c{c}_run{i:02d}.h5"
-            _write(path, config, releases)
+            write_release_run(path, config, releases)
             paths.append(path)
     return paths
-
-
-def _write(path: Path, config: RigConfig, releases: list[Release]) -> None:
-    rec = RunRecorder(path, config_text=config.text, rig_name=config.name, min_free_bytes=0,
-                      reserve_bytes=0)
-    rec.open()
-    n_taps = config.taps.n_taps
-    rec.add_sync([f"tap{i:03d}" for i in range(n_taps)])
-    rec.start()
-    rows, t0 = 0, 0.0
-    for r in releases:
-        t = t0 + r.t
-        n = t.size
-        rec.append_sync(t, h=r.h, alpha=r.alpha, lift=r.lift, moment=r.moment,
-                        pressure=np.zeros((n, n_taps), dtype=np.float32), U=np.full(n, r.U),
-                        rho=np.full(n, float(r.rho if r.rho is not None else 1.2)))
-        rec.add_release(release_time=t0, start_index=rows, stop_index=rows + n, U=r.U,
-                        h0=float(r.h[0]), alpha0=float(r.alpha[0]))
-        rows += n
-        t0 = float(t[-1]) + 1.0 / 500.0
-    rec.close()
 
 
 def main() -> None:

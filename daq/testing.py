@@ -1,4 +1,4 @@
-"""Scripted byte exchanges for driver tests (no hardware, no simulator).
+"""Test helpers: scripted byte exchanges for driver tests, and run files written from releases.
 
 ``expected_exchange([(sent, reply), ...])`` yields an open :class:`ScriptedTransport`; the driver
 under test writes to it and reads from it. Every write must match the next expected ``sent``
@@ -6,17 +6,25 @@ bytes exactly (a mismatch fails at once, showing both in hex), after which ``rep
 readable; on exit every pair must have been consumed. A pair with ``sent = b""`` is unsolicited
 data (a stream) that is readable as soon as the previous pair is done. Modelled on pymeasure's
 ``expected_protocol`` (STYLE.md, "Tests").
+
+``write_release_run(path, config, releases)`` writes :class:`~ident.release.Release` objects
+(e.g. simulated ones) back to back into a run file with the acquisition's own recorder, for the
+tests and benchmarks of the file readers (identify, diagnose, reprocess).
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import numpy as np
 
 from daq.errors import TransportError, TransportTimeout
 from daq.transport import _TransportBase
 
-__all__ = ["ScriptedTransport", "expected_exchange"]
+__all__ = ["ScriptedTransport", "expected_exchange", "write_release_run"]
 
 
 class ScriptedTransport(_TransportBase):
@@ -103,3 +111,40 @@ def expected_exchange(exchanges: Sequence[tuple[bytes, bytes]]) -> Iterator[Scri
     transport.open()
     yield transport
     transport.assert_complete()
+
+
+def write_release_run(path: str | Path, config: Any, releases: Sequence[Any]) -> None:
+    """Write releases back to back into a run file (the DESIGN.md layout, via RunRecorder).
+
+    Parameters
+    ----------
+    path : str or Path
+        The run file to create.
+    config : RigConfig
+        Stored verbatim (its section and rig name are the file's).
+    releases : sequence of Release
+        One row of ``/entry/releases`` each; the sync view holds their samples one after the
+        other on one time base (the tap pressures are zero: not simulated here), U constant
+        and the release's air density (1.2 kg/m^3 when it has none).
+    """
+    from daq.recorder import RunRecorder
+
+    rec = RunRecorder(path, config_text=config.text, rig_name=config.name, min_free_bytes=0,
+                      reserve_bytes=0)
+    rec.open()
+    n_taps = config.taps.n_taps
+    rec.add_sync([f"tap{i:03d}" for i in range(n_taps)])
+    rec.start()
+    rows, t0 = 0, 0.0
+    for r in releases:
+        t = t0 + r.t
+        n = t.size
+        rho = 1.2 if r.rho is None else float(r.rho)
+        rec.append_sync(t, h=r.h, alpha=r.alpha, lift=r.lift, moment=r.moment,
+                        pressure=np.zeros((n, n_taps), dtype=np.float32), U=np.full(n, r.U),
+                        rho=np.full(n, rho))
+        rec.add_release(release_time=t0, start_index=rows, stop_index=rows + n, U=r.U,
+                        h0=float(r.h[0]), alpha0=float(r.alpha[0]))
+        rows += n
+        t0 = float(t[-1]) + float(r.t[1] - r.t[0])
+    rec.close()

@@ -10,12 +10,11 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from daq.cli import main
 from daq.config import parse_rig_config
-from daq.recorder import RunRecorder
+from daq.testing import write_release_run
 from simulators.campaigns import REALISTIC, simulated_campaign
 
 CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
@@ -27,24 +26,7 @@ def delayed_run(tmp_path_factory) -> Path:
                               "sim_flat_plate.toml")
     releases = simulated_campaign(REALISTIC["channel_delay"], seed=7)
     path = tmp_path_factory.mktemp("diagnose") / "run.h5"
-    rec = RunRecorder(path, config_text=config.text, rig_name=config.name, min_free_bytes=0,
-                      reserve_bytes=0)
-    rec.open()
-    n_taps = config.taps.n_taps
-    rec.add_sync([f"tap{i:03d}" for i in range(n_taps)])
-    rec.start()
-    rows, t0 = 0, 0.0
-    for r in releases:
-        t = t0 + r.t
-        n = t.size
-        rec.append_sync(t, h=r.h, alpha=r.alpha, lift=r.lift, moment=r.moment,
-                        pressure=np.zeros((n, n_taps)), U=np.full(n, r.U),
-                        rho=np.full(n, float(r.rho if r.rho is not None else 1.2)))
-        rec.add_release(release_time=t0, start_index=rows, stop_index=rows + n, U=r.U,
-                        h0=float(r.h[0]), alpha0=float(r.alpha[0]))
-        rows += n
-        t0 = float(t[-1]) + float(r.t[1] - r.t[0])
-    rec.close()
+    write_release_run(path, config, releases)
     return path
 
 
