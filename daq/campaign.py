@@ -281,9 +281,7 @@ def _plots(out: Path, releases: list[Release], section: SectionModel,
     plt.close(fig)
 
     # Flutter derivatives over the K range the releases cover (both modes, all wind speeds).
-    B = section.B
-    K_values = [B * 2 * math.pi * fs / r.U for r in releases for fs in (section.fh, section.fa)]
-    K = np.linspace(0.8 * min(K_values), 1.2 * max(K_values), 200)
+    K = e2rfc.reduced_frequency_span(releases, section, 200)
     ident_fd = model.flutter_derivatives(K)
     truth_fd = truth_model.flutter_derivatives(K)
     fig, grid = plt.subplots(2, 4, figsize=(14, 6))

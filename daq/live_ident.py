@@ -227,9 +227,7 @@ def identify_releases(releases: Sequence[Release], section: SectionModel) -> Cam
     releases = list(releases)
     model = e2rfc.identify(releases, section)
     result, std = model.flutter(section)
-    K_values = [section.B * 2 * math.pi * fs / r.U for r in releases
-                for fs in (section.fh, section.fa)]
-    K = np.linspace(0.8 * min(K_values), 1.2 * max(K_values), 120)
+    K = e2rfc.reduced_frequency_span(releases, section, 120)
     fds = model.flutter_derivatives(K)
     table: fd_method.FlutterDerivativeTable | None = None
     table_error = None
@@ -239,7 +237,8 @@ def identify_releases(releases: Sequence[Release], section: SectionModel) -> Cam
         table_error = f"{type(exc).__name__}: {exc}"
     diagnostics = model.diagnostics
     return CampaignFit(
-        n_releases=len(releases), wind_speeds=tuple(distinct_speeds([r.U for r in releases])),
+        n_releases=len(releases),
+        wind_speeds=tuple(e2rfc.distinct_wind_speeds([r.U for r in releases])),
         n_lags=int(diagnostics.n_lags), with_A3=bool(diagnostics.with_A3),
         flutter_speed=None if result.speed is None else float(result.speed),
         flutter_std=None if std is None else float(std),
@@ -247,15 +246,6 @@ def identify_releases(releases: Sequence[Release], section: SectionModel) -> Cam
         K=K, derivatives={name: np.asarray(fds[name], dtype=float)
                           for name in FLUTTER_DERIVATIVE_NAMES},
         table=table, table_error=table_error)
-
-
-def distinct_speeds(speeds: Sequence[float]) -> list[float]:
-    """Return the wind speeds that count as distinct for E2RFC (2 % apart), increasing, m/s."""
-    out: list[float] = []
-    for u in sorted(speeds):
-        if not out or u > out[-1] * (1 + e2rfc.DISTINCT_U_RTOL):
-            out.append(float(u))
-    return out
 
 
 def _spawn_executor() -> Executor:
@@ -439,7 +429,7 @@ class LiveIdentifier:
         if self._campaign_job is not None or self._modal_jobs:
             return  # one at a time, and only with every decay fitted
         usable = [row for row in self.rows if row.usable]
-        speeds = distinct_speeds([row.U for row in usable])
+        speeds = e2rfc.distinct_wind_speeds([row.U for row in usable])
         if len(speeds) < 2:
             have = ", ".join(f"{u:.2f}" for u in speeds) or "none"
             self.campaign_status = (f"E2RFC needs releases at two or more wind speeds "

@@ -260,9 +260,7 @@ def process_campaign(name: str, files: list[dict[str, Any]],
         out["error"] = f"{type(exc).__name__}: {exc}"
         return out
     result, std = model.flutter(section)
-    K_values = [section.B * 2 * math.pi * fs / r.U for r in releases
-                for fs in (section.fh, section.fa)]
-    K = np.linspace(0.8 * min(K_values), 1.2 * max(K_values), 100)
+    K = e2rfc.reduced_frequency_span(releases, section, 100)
     out.update(model=model.to_dict(), structure=model.diagnostics.reason,
                flutter_speed=result.speed, flutter_std=std, flutter_frequency=result.frequency,
                K=K, derivatives={k: np.asarray(v) for k, v in

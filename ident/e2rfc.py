@@ -43,7 +43,8 @@ from ident.release import Release
 from ident.rfc import RationalFunctionModel
 from ident.section import SectionModel
 
-__all__ = ["Candidate", "E2RFCDiagnostics", "IdentifiedModel", "identify"]
+__all__ = ["Candidate", "E2RFCDiagnostics", "IdentifiedModel", "distinct_wind_speeds", "identify",
+           "reduced_frequency_span"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -239,17 +240,36 @@ def _identify_prepared(
     return problem.final(chosen, tuple(candidates), reason)
 
 
+def distinct_wind_speeds(speeds: Sequence[float]) -> list[float]:
+    """Return the wind speeds that count as distinct for E2RFC, increasing, m/s.
+
+    A speed within ``DISTINCT_U_RTOL`` above the last distinct one is the same wind speed.
+    """
+    out: list[float] = []
+    for u in sorted(speeds):
+        if not out or u > out[-1] * (1 + DISTINCT_U_RTOL):
+            out.append(float(u))
+    return out
+
+
+def reduced_frequency_span(releases: Sequence[Release], section: SectionModel,
+                           n: int) -> FloatArray:
+    """Return ``n`` reduced frequencies spanning what the releases measured, widened 20 %.
+
+    ``K = B omega / U`` of both structural modes at every release's wind speed: where an
+    identified model's flutter derivatives rest on data (for plots and tables).
+    """
+    K = [section.B * 2 * math.pi * f / r.U for r in releases for f in (section.fh, section.fa)]
+    return np.linspace(0.8 * min(K), 1.2 * max(K), n)
+
+
 def _check_wind_speeds(releases: list[Release]) -> None:
     if not releases:
         raise RankDeficiencyError(
             "no releases given: E2RFC needs releases at two or more wind speeds"
         )
     speeds = sorted(r.U for r in releases)
-    distinct = [speeds[0]]
-    for u in speeds[1:]:
-        if u > distinct[-1] * (1 + DISTINCT_U_RTOL):
-            distinct.append(u)
-    if len(distinct) < 2:
+    if len(distinct_wind_speeds(speeds)) < 2:
         raise RankDeficiencyError(
             f"releases at one wind speed ({speeds[0]:.3g} m/s) cannot determine the rational "
             "function model: one decay holds only two complex frequencies. Record releases at "
