@@ -40,13 +40,12 @@ from pathlib import Path
 from typing import Any, cast
 
 import numpy as np
-import numpy.typing as npt
 
 from daq.config import RigConfig
 from daq.errors import DaqError
 from daq.recorder import RunRecorder
 from daq.ring_buffer import RingBuffer
-from daq.source import DeviceHealth, SourceInfo, sync_columns
+from daq.source import DeviceHealth, RingSource, SourceInfo, sync_columns
 
 __all__ = ["STALL_S", "LiveSource", "Recording", "RecordingError", "RingRecorder"]
 
@@ -546,7 +545,7 @@ class _HealthTap:
             return dict(self._last_fault), dict(self._fits)
 
 
-class LiveSource:
+class LiveSource(RingSource):
     """A rig acquired live, as a console data source (see the module docstring).
 
     Parameters
@@ -695,28 +694,7 @@ class LiveSource:
         if rig is not None:
             rig.close()
 
-    def __enter__(self) -> LiveSource:
-        """Start the rig and the engine."""
-        self.open()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        """Stop everything."""
-        self.close()
-
     # -- the DataSource protocol -----------------------------------------------------------------
-    @property
-    def info(self) -> SourceInfo:
-        """Describe the live rig (after :meth:`open`)."""
-        if self._info is None:
-            raise RuntimeError("LiveSource.info: call open() first")
-        return self._info
-
-    @property
-    def total_rows(self) -> int:
-        """Count sync rows synchronised so far."""
-        return 0 if self._ring is None else self._ring.total_rows
-
     @property
     def error(self) -> str | None:
         """Describe the failure that stopped the sync view, if any."""
@@ -883,13 +861,6 @@ class LiveSource:
         total = self.total_rows
         new, self._seen_rows = total - self._seen_rows, total
         return new
-
-    def snapshot(self, last: int | None = None,
-                 columns: Sequence[str] | None = None) -> dict[str, npt.NDArray[Any]]:
-        """Return copies of the most recent sync rows, oldest first (``RingBuffer.snapshot``)."""
-        if self._ring is None:
-            raise RuntimeError("LiveSource.snapshot: call open() first")
-        return self._ring.snapshot(last, columns)
 
     def status(self) -> str:
         """Return the status line: rig, rows, seconds shown, fan speed, errors."""

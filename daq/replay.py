@@ -16,18 +16,16 @@ from __future__ import annotations
 import math
 import os
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import h5py
 import numpy as np
-import numpy.typing as npt
 
 from daq.config import parse_rig_config
 from daq.errors import ConfigError, DaqError
 from daq.ring_buffer import RingBuffer
-from daq.source import SYNC_SCALARS, SourceInfo, sync_columns
+from daq.source import SYNC_SCALARS, RingSource, SourceInfo, sync_columns
 
 __all__ = ["MIN_HISTORY_S", "ReplayError", "ReplaySource"]
 
@@ -39,7 +37,7 @@ class ReplayError(DaqError, ValueError):
     """A run file cannot be replayed: missing, not HDF5, truncated, or not a windrig run."""
 
 
-class ReplaySource:
+class ReplaySource(RingSource):
     """A recorded run played back at ``speed`` times real time (a :class:`DataSource`).
 
     Parameters
@@ -154,28 +152,7 @@ class ReplaySource:
         if f is not None:
             f.close()
 
-    def __enter__(self) -> ReplaySource:
-        """Open the file."""
-        self.open()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        """Close the file."""
-        self.close()
-
     # -- the DataSource protocol -----------------------------------------------------------------
-    @property
-    def info(self) -> SourceInfo:
-        """Describe the run (after :meth:`open`)."""
-        if self._info is None:
-            raise RuntimeError("ReplaySource.info: call open() first")
-        return self._info
-
-    @property
-    def total_rows(self) -> int:
-        """Count rows played so far."""
-        return 0 if self._ring is None else self._ring.total_rows
-
     @property
     def position_s(self) -> float:
         """Measure the playback position, s of run time (time of the first row until started)."""
@@ -219,26 +196,6 @@ class ReplaySource:
         self._ring.append(block)
         self._next = stop
         return stop - start
-
-    def snapshot(self, last: int | None = None,
-                 columns: Sequence[str] | None = None) -> dict[str, npt.NDArray[Any]]:
-        """Return copies of the played rows in the window, oldest first.
-
-        Parameters
-        ----------
-        last : int, optional
-            Only the most recent ``last`` rows.
-        columns : sequence of str, optional
-            Only these columns (default all).
-
-        Returns
-        -------
-        dict of str to ndarray
-            The columns of :func:`daq.source.sync_columns`, as ``RingBuffer.snapshot``.
-        """
-        if self._ring is None:
-            raise RuntimeError("ReplaySource.snapshot: call open() first")
-        return self._ring.snapshot(last, columns)
 
     def decays(self) -> list[tuple[float, float | None]]:
         """Return the file's free decays that the playback has reached, oldest first.

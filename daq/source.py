@@ -19,16 +19,16 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, Protocol, Self, runtime_checkable
 
 import numpy as np
 import numpy.typing as npt
 
 from daq.config import RigConfig
-from daq.ring_buffer import Column
+from daq.ring_buffer import Column, RingBuffer
 
-__all__ = ["SYNC_SCALARS", "DataSource", "DeviceHealth", "HealthSource", "SourceInfo",
-           "sync_columns"]
+__all__ = ["SYNC_SCALARS", "DataSource", "DeviceHealth", "HealthSource", "RingSource",
+           "SourceInfo", "sync_columns"]
 
 #: Scalar columns of the synchronised view and their units (``pressure`` is the one 2-D column).
 SYNC_SCALARS: dict[str, str] = {
@@ -116,6 +116,55 @@ class DataSource(Protocol):
     def close(self) -> None:
         """Release the source's resources (idempotent)."""
         ...
+
+
+class RingSource:
+    """What the replay and live sources share: the rows shown are a ring buffer's.
+
+    A subclass sets ``_ring`` (the :class:`~daq.ring_buffer.RingBuffer` of
+    :func:`sync_columns`) and ``_info`` in its ``open()`` (None before) and defines
+    ``open()`` and ``close()``; this class gives the context manager, :attr:`info`,
+    :attr:`total_rows` and :meth:`snapshot`.
+    """
+
+    _ring: RingBuffer | None
+    _info: SourceInfo | None
+
+    def open(self) -> None:
+        """Open the source (subclasses)."""
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Release the source's resources (subclasses)."""
+        raise NotImplementedError
+
+    def __enter__(self) -> Self:
+        """Open the source."""
+        self.open()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        """Close the source."""
+        self.close()
+
+    @property
+    def info(self) -> SourceInfo:
+        """Describe the source (after :meth:`open`)."""
+        if self._info is None:
+            raise RuntimeError(f"{type(self).__name__}.info: call open() first")
+        return self._info
+
+    @property
+    def total_rows(self) -> int:
+        """Count rows made available so far."""
+        return 0 if self._ring is None else self._ring.total_rows
+
+    def snapshot(self, last: int | None = None,
+                 columns: Sequence[str] | None = None) -> dict[str, npt.NDArray[Any]]:
+        """Return copies of the most recent rows, oldest first (``RingBuffer.snapshot``)."""
+        if self._ring is None:
+            raise RuntimeError(f"{type(self).__name__}.snapshot: call open() first")
+        return self._ring.snapshot(last, columns)
 
 
 @dataclass(frozen=True)
