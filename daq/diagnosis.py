@@ -58,7 +58,7 @@ def run_diagnose(files: Sequence[Path], out: Path, *, depth: float | None = None
         section = campaign_section(runs)
         releases = [r for run in runs for r in run.releases]
         if depth is None:
-            depth = _stored_depth(files[0])
+            depth = runs[0].depth
         print(f"{len(releases)} release(s) from {len(runs)} file(s); wind speeds "
               f"{sorted({round(r.U, 2) for r in releases})} m/s")
         report = diagnose(releases, section, depth=depth)
@@ -73,22 +73,6 @@ def run_diagnose(files: Sequence[Path], out: Path, *, depth: float | None = None
         json_path.write_text(json.dumps(_as_json(report, files), indent=2))
         print(f"wrote {json_path}")
     return 0
-
-
-def _stored_depth(path: Path) -> float | None:
-    """Return the section depth of a run file's stored config (None when it has none)."""
-    import h5py
-
-    from daq.config import parse_rig_config
-    from daq.errors import ConfigError
-
-    with h5py.File(path, "r", swmr=True) as f:
-        raw = f["entry/config"][()]
-    text = raw.decode("utf-8") if isinstance(raw, bytes) else str(raw)
-    try:
-        return float(parse_rig_config(text, f"{path}:/entry/config").depth)
-    except ConfigError:
-        return None
 
 
 def _as_json(report: Any, files: Sequence[Path]) -> dict[str, Any]:

@@ -46,12 +46,15 @@ class RunFile:
     releases : tuple of Release
         One per row of ``/entry/releases``, time from the release instant.
     rig_name : str
+    depth : float or None
+        Section depth D from the stored ``[section]``, m (None when the config has none).
     """
 
     path: str
     section: SectionModel
     releases: tuple[Release, ...]
     rig_name: str
+    depth: float | None = None
 
 
 def read_run(path: str | os.PathLike[str]) -> RunFile:
@@ -89,9 +92,10 @@ def read_run(path: str | os.PathLike[str]) -> RunFile:
                                   "not a complete windrig run file") from exc
         except OSError as exc:  # a truncated or corrupted file fails on read
             raise FileFormatError(f"{path}: unreadable (truncated?): {exc}") from exc
-    section = _section(config_text, path, sync["rho"])
+    section, depth = _section(config_text, path, sync["rho"])
     releases = tuple(_release(sync, row, path, i) for i, row in enumerate(table))
-    return RunFile(path=path, section=section, releases=releases, rig_name=rig_name)
+    return RunFile(path=path, section=section, releases=releases, rig_name=rig_name,
+                   depth=depth)
 
 
 def campaign_section(runs: Sequence[RunFile]) -> SectionModel:
@@ -127,17 +131,22 @@ def _text(value: Any) -> str:
     return value.decode("utf-8") if isinstance(value, bytes) else str(value)
 
 
-def _section(config_text: str, path: str, rho: np.ndarray) -> SectionModel:
+def _section(config_text: str, path: str,
+             rho: np.ndarray) -> tuple[SectionModel, float | None]:
+    """Return the stored section model (with the run's air density) and its depth, m."""
     try:
         table = tomllib.loads(config_text)["section"]
         fields = {name: float(table[name]) for name in _SECTION_FIELDS if name in table}
+        depth = float(table["depth"]) if "depth" in table else None
     except (tomllib.TOMLDecodeError, KeyError, TypeError, ValueError) as exc:
         raise FileFormatError(f"{path}: /entry/config has no usable [section]: {exc}") from exc
+    if depth is not None and not (np.isfinite(depth) and depth > 0):
+        raise FileFormatError(f"{path}: /entry/config [section] depth = {depth!r} must be > 0")
     finite = rho[np.isfinite(rho)]
     if finite.size:
         fields["rho"] = float(np.median(finite))
     try:
-        return SectionModel(**fields)
+        return SectionModel(**fields), depth
     except (TypeError, ValueError) as exc:
         raise FileFormatError(f"{path}: [section] of the stored config: {exc}") from exc
 

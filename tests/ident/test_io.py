@@ -59,6 +59,7 @@ def test_releases_and_section_round_trip(tmp_path):
     sims = write_run(path)
     run = read_run(path)
     assert run.rig_name == "test" and len(run.releases) == 2
+    assert run.depth == 0.01  # [section] depth of the stored config, m
     assert run.section.B == 0.3 and run.section.rho == pytest.approx(SECTION.rho)
     for release, sim in zip(run.releases, sims, strict=True):
         after = sim.t >= 0
