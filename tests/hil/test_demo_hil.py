@@ -47,6 +47,15 @@ def test_demo_campaign_identifies_the_flutter_speed_within_3_percent(tmp_path, c
     for row in summary["releases"]:
         assert row["zeta_a"] == pytest.approx(row["truth_zeta_a"], rel=0.05)
         assert row["zeta_h"] == pytest.approx(row["truth_zeta_h"], rel=0.05)
-    assert re.search(r"campaign_U05\.92\.h5 #1\s+5\.92", printed)
+    # The printed table has a row per release with its measured mean wind speed, which is
+    # within 0.05 m/s of the setpoint's (the wind's noise and the fan's settling move the
+    # second decimal from run to run).
+    for row in summary["releases"]:
+        match = re.search(re.escape(row["release"]) + r"\s+(\d+\.\d\d)\s", printed)
+        assert match, printed
+        assert float(match.group(1)) == pytest.approx(row["U"], abs=0.005)
+    first = summary["releases"][0]
+    assert first["release"] == "campaign_U05.92.h5 #0"
+    assert first["U"] == pytest.approx(0.5 * 11.849, abs=0.05)
     for name in ("decays", "flutter_derivatives", "flutter"):
         assert Path(summary["plots"][name]).stat().st_size > 10_000
