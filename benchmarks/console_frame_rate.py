@@ -2,10 +2,14 @@
 
 What is measured
 ----------------
-The real console: :class:`daq.live.ConsoleWindow` (1280 x 800, 20 s window, its own 50 ms
-``QTimer``) under Qt's ``offscreen`` platform, polling a :class:`daq.live_source.LiveSource`
-whose simulated instruments run in a child process (:mod:`daq.rig_process`) and are acquired by
-the real drivers, engine and :class:`~daq.pipeline.RunWriter` in this process. The fan runs
+The real console: :class:`daq.live.ConsoleWindow` (1280 x 800, 20 s window, its own
+``QTimer`` of ``daq.live.FRAME_MS``) under Qt's ``offscreen`` platform, polling the source
+``windrig gui`` uses, a :class:`daq.acquisition_process.ProcessLiveSource`: the real drivers,
+engine and :class:`~daq.pipeline.RunWriter` run in a child process (the *acquisition process*)
+and hand the synchronised rows over shared memory; the simulated instruments run in that
+child's own child (:mod:`daq.rig_process`), on the same two cores. The ``threads`` run puts the
+acquisition back into this process as threads (:class:`daq.live_source.LiveSource`), for
+comparison. The fan runs
 (``--fan-rpm``, 800 rpm = 8 m/s by default, ramped fast) so that pressures, Cp, lift and moment
 move, and a helper thread arms and releases the model through ``source.acq`` every
 ``RELEASE_EVERY_S`` so that the traces show free decays. Rigs:
@@ -37,22 +41,21 @@ run a few ``window.grab()`` calls render the whole window into a pixmap (timed, 
 of distinct colours in the image is shown, to prove that real content was drawn).
 
 Numbers per run (``--seconds`` after ``--warmup``): ticks/s, frames/s (redraws), h-plot
-repaints/s, ring appends/s (how often the live pipeline hands rows to the ring: a tick that
-finds no new rows draws nothing), tick wall durations (median, p95, max, ms), CPU of this
-process in % of one core (split into the GUI thread, from ``/proc/self/task``, and the rest:
-the acquisition, dispatcher and Qt threads), CPU of the simulated rig's child process
-(``/proc/<pid>/stat``), resident memory of both (``VmRSS``), the GUI thread's CPU per frame
-and the time of the tap colouring (``_tap_brushes``: one ``pg.mkBrush`` per tap per frame, and
-``ScatterPlotItem.setBrush``). The 511-tap live run is then profiled on the GUI thread
-(cProfile, ``--profile-seconds``, CPU time then wall time), ticks and painting together.
+repaints/s, ring appends/s (how often the live pipeline hands rows to the ring, where it does
+so in this process: a tick that finds no new rows draws nothing), tick wall durations (median,
+p95, max, ms), CPU of this process in % of one core (split into the GUI thread, from
+``/proc/self/task``, and the rest: Qt's threads, and the acquisition's in the ``threads`` run),
+CPU of the acquisition process and of the simulated rig's process (``/proc/<pid>/stat``),
+resident memory (``VmRSS``), the GUI thread's CPU per frame and the time of the tap colouring
+(``_tap_brushes`` and ``ScatterPlotItem.setBrush``). The 511-tap live run is then profiled on
+the GUI thread (cProfile, ``--profile-seconds``, CPU time then wall time), ticks and painting
+together.
 
-Experiments (measured, not daq's code): the 511-tap live run again with the GIL's switch
-interval at 0.5 ms (``sys.setswitchinterval``; Python's default is 5 ms), and with the taps
-coloured from 64 brushes made once (:class:`PaletteWindow`) instead of 511 new brushes per
-frame.
+An experiment (not in the default runs): the ``threads`` run again with the GIL's switch
+interval at 0.5 ms (``switch``: ``sys.setswitchinterval``; Python's default is 5 ms).
 
 Run: ``.venv/bin/python benchmarks/console_frame_rate.py [--seconds 30] [--warmup 5]
-[--runs flat,wide,switch,replay]``. Takes about 5 minutes; the machine's load average is
+[--runs flat,wide,threads,replay]``. Takes about 5 minutes; the machine's load average is
 printed (other work on the two cores lowers every number here).
 """
 
@@ -85,6 +88,7 @@ import numpy as np  # noqa: E402
 import pyqtgraph as pg  # noqa: E402
 from PySide6 import QtCore, QtGui, QtWidgets  # noqa: E402
 
+from daq.acquisition_process import ProcessLiveSource  # noqa: E402
 from daq.config import RigConfig, parse_rig_config  # noqa: E402
 from daq.live import FRAME_MS, ConsoleWindow  # noqa: E402
 from daq.live_source import LiveSource  # noqa: E402
@@ -109,7 +113,9 @@ ARM_TO_RELEASE_S = 1.5
 GRABS = 5
 CLK_TCK = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 #: Runs, in order (see --runs).
-RUNS = ("flat", "wide", "switch", "palette", "replay")
+RUNS = ("flat", "wide", "threads", "switch", "replay")
+#: Runs when --runs is not given.
+DEFAULT_RUNS = ("flat", "wide", "threads", "replay")
 #: The GIL switch interval of the "switch" run, s (Python's default is 5 ms).
 SWITCH_INTERVAL_S = 0.0005
 
@@ -168,6 +174,15 @@ def _stat_cpu_s(path: Path) -> float:
 def process_cpu_s(pid: int) -> float:
     """CPU time (user + system) of process ``pid`` so far, s."""
     return _stat_cpu_s(Path(f"/proc/{pid}/stat"))
+
+
+def child_pid(pid: int) -> int | None:
+    """Return the pid of process ``pid``'s only child (the simulated rig), None without one."""
+    try:
+        children = Path(f"/proc/{pid}/task/{pid}/children").read_text().split()
+    except OSError:
+        return None
+    return int(children[0]) if len(children) == 1 else None
 
 
 def rss_mib(pid: int) -> float:
@@ -312,7 +327,7 @@ class MeteredWindow(ConsoleWindow):
 
     def h_view_id(self) -> int:
         """Return id() of the h-trace plot's view (its paints are the rendered frames)."""
-        return id(self._time_plot)
+        return id(self._plots[0])  # the h plot, made first
 
     def view_names(self) -> dict[int, str]:
         """Return id() of each plot's view -> a short name."""
@@ -324,34 +339,6 @@ class MeteredWindow(ConsoleWindow):
             view = item.getViewWidget()
             if view is not None:
                 out[id(view)] = name
-        return out
-
-
-class PaletteWindow(MeteredWindow):
-    """Experiment, not daq's code: the taps coloured from a fixed palette of reused brushes.
-
-    pyqtgraph's symbol atlas keys a spot's style by the *identity* of its QBrush, so 511 new
-    ``pg.mkBrush`` per frame render 511 new symbols per frame (and grow the atlas to 4 x 511
-    before it is rebuilt). Here Cp on [-2, 2] is quantised to ``PALETTE`` colours whose brushes
-    are made once: after the first frames every style is in the atlas and ``setBrush`` renders
-    nothing.
-    """
-
-    PALETTE = 64
-
-    def _tap_brushes(self, cp: Any) -> list[Any]:
-        t0 = time.perf_counter()
-        palette = getattr(self, "_palette", None)
-        if palette is None:
-            colours = self._colormap.map(np.linspace(0.0, 1.0, self.PALETTE), mode="qcolor")
-            palette = [pg.mkBrush(c) for c in colours] + [pg.mkBrush(120, 120, 120)]
-            self._palette = palette
-        scaled = np.clip((np.asarray(cp) + 2.0) / 4.0, 0.0, 1.0)
-        index = np.where(np.isfinite(scaled),
-                         np.rint(np.nan_to_num(scaled) * (self.PALETTE - 1)), self.PALETTE)
-        out = [palette[i] for i in index.astype(np.intp).tolist()]
-        if METER.on:
-            METER.brushes_wall += time.perf_counter() - t0
         return out
 
 
@@ -387,6 +374,7 @@ class Result:
     gui_cpu: float  # % of one core, whole process
     gui_thread_cpu: float
     rig_cpu: float  # NaN without a child process
+    acq_cpu: float  # the acquisition process (ProcessLiveSource); NaN without one
     rss: float
     rig_rss: float
     gui_split: tuple[float, float, float, float]  # GUI thread, % of wall: busy (in tick or
@@ -464,7 +452,8 @@ def console(source: DataSource, frame_ms: int,
         QtCore.QCoreApplication.sendPostedEvents(None, QtCore.QEvent.Type.DeferredDelete)
 
 
-def measure(label: str, source: DataSource, *, rig_pid: int | None, warmup_s: float,
+def measure(label: str, source: DataSource, *, rig_pid: int | None, acq_pid: int | None,
+            warmup_s: float,
             seconds: float, frame_ms: int = FRAME_MS,
             profile: Callable[[MeteredWindow], None] | None = None,
             window_class: type[MeteredWindow] = MeteredWindow) -> Result:
@@ -474,6 +463,7 @@ def measure(label: str, source: DataSource, *, rig_pid: int | None, warmup_s: fl
         spin(warmup_s)
         METER.reset()
         rig0 = process_cpu_s(rig_pid) if rig_pid is not None else math.nan
+        acq0 = process_cpu_s(acq_pid) if acq_pid is not None else math.nan
         gui_tid = threading.main_thread().native_id or -1
         sched0 = schedstat_s(gui_tid)
         threads0 = thread_cpu_s()
@@ -487,6 +477,7 @@ def measure(label: str, source: DataSource, *, rig_pid: int | None, warmup_s: fl
         threads1 = thread_cpu_s()
         sched1 = schedstat_s(gui_tid)
         rig1 = process_cpu_s(rig_pid) if rig_pid is not None else math.nan
+        acq1 = process_cpu_s(acq_pid) if acq_pid is not None else math.nan
         load = load_average()
         rss = rss_mib(os.getpid())
         rig_rss = rss_mib(rig_pid) if rig_pid is not None else math.nan
@@ -525,7 +516,8 @@ def measure(label: str, source: DataSource, *, rig_pid: int | None, warmup_s: fl
         tick_ms=((float(np.median(ticks)), float(np.percentile(ticks, 95)), float(ticks.max()))
                  if ticks.size else (math.nan,) * 3),
         gui_cpu=100 * proc_s / wall, gui_thread_cpu=100 * gui_thread_s / wall,
-        rig_cpu=100 * (rig1 - rig0) / wall, rss=rss, rig_rss=rig_rss,
+        rig_cpu=100 * (rig1 - rig0) / wall, acq_cpu=100 * (acq1 - acq0) / wall, rss=rss,
+        rig_rss=rig_rss,
         gui_split=split, gui_ms_per_frame=1e3 * gui_thread_s / frames,
         tick_cpu_share=tick_cpu_s / gui_thread_s if gui_thread_s > 0 else math.nan,
         redraw_ms=1e3 * m.redraw_wall / frames, brushes_ms=1e3 * m.brushes_wall / frames,
@@ -538,22 +530,32 @@ def measure(label: str, source: DataSource, *, rig_pid: int | None, warmup_s: fl
 
 def run_live(label: str, config: RigConfig, args: argparse.Namespace,
              profile: Callable[[MeteredWindow], None] | None = None,
-             window_class: type[MeteredWindow] = MeteredWindow) -> Result:
-    """Measure the console over a live simulated rig (child process), fan on, releases cycling."""
+             window_class: type[MeteredWindow] = MeteredWindow,
+             threads: bool = False) -> Result:
+    """Measure the console over a live simulated rig, fan on, releases cycling.
+
+    The source is the console's: a :class:`ProcessLiveSource` (the acquisition in a child
+    process, the simulated rig in the child's child), or with ``threads`` the acquisition's
+    threads in this process (:class:`LiveSource`, as before the acquisition process).
+    """
     print(f"- {label}: starting the simulated rig ({config.taps.n_taps} taps) ...", flush=True)
-    source = LiveSource(config, simulate=True, window_s=WINDOW_S, fan_rpm=args.fan_rpm)
+    source: Any = (LiveSource if threads else ProcessLiveSource)(
+        config, simulate=True, window_s=WINDOW_S, fan_rpm=args.fan_rpm)
     t0 = time.perf_counter()
     source.open()
     print(f"  rig up in {time.perf_counter() - t0:.1f} s; measuring", flush=True)
-    rig = getattr(source, "_rig", None)
-    process = getattr(rig, "_process", None)
-    rig_pid = getattr(process, "pid", None)
+    if threads:
+        acq_pid = None
+        rig_pid = getattr(getattr(getattr(source, "_rig", None), "_process", None), "pid", None)
+    else:
+        acq_pid = source._process.pid
+        rig_pid = child_pid(acq_pid)
     stop = threading.Event()
     actions = threading.Thread(target=cycle_releases, args=(source.acq, stop),
                                name="benchmark-releases", daemon=True)
     actions.start()
     try:
-        return measure(label, source, rig_pid=rig_pid, warmup_s=args.warmup,
+        return measure(label, source, rig_pid=rig_pid, acq_pid=acq_pid, warmup_s=args.warmup,
                        seconds=args.seconds, profile=profile, window_class=window_class)
     finally:
         stop.set()
@@ -588,7 +590,8 @@ def run_replay(label: str, path: Path, args: argparse.Namespace, frame_ms: int,
     source = ReplaySource(path, speed=1.0, window_s=WINDOW_S)
     source.open()
     try:
-        return measure(label, source, rig_pid=None, warmup_s=args.warmup, seconds=seconds,
+        return measure(label, source, rig_pid=None, acq_pid=None, warmup_s=args.warmup,
+                       seconds=seconds,
                        frame_ms=frame_ms)
     finally:
         source.close()
@@ -637,23 +640,27 @@ def print_report(results: list[Result], profiles: list[str], args: argparse.Name
           f"{os.cpu_count()} CPUs, fan {args.fan_rpm:g} rpm")
     print("frames/s = redraws (a tick that found new rows and called redraw); paints/s = "
           "repaints of the h plot by Qt;")
-    print("ring/s = the source's appends to the ring buffer (new rows available); CPU in % of "
-          "one core; RSS MiB = this")
-    print("process after the run (the runs share it: it accumulates), rig RSS = the rig's "
-          "child process.")
+    print("ring/s = the source's appends to the ring buffer (new rows available; counted only "
+          "where they are made in this")
+    print("process); CPU in % of one core: GUI proc = the console's process, acq proc = the "
+          "acquisition process, rig")
+    print("proc = the simulated rig's process; RSS MiB = this process after the run (the runs "
+          "share it: it accumulates).")
     print()
     head = (f"{'config':<34} {'taps':>4} {'ticks/s':>7} {'frames/s':>8} {'paints/s':>8} "
             f"{'ring/s':>6} {'tick ms med/p95/max':>20} {'GUI proc %':>10} {'GUI thr %':>9} "
-            f"{'rig proc %':>10} {'RSS MiB':>8} {'rig RSS':>7}")
+            f"{'acq proc %':>10} {'rig proc %':>10} {'RSS MiB':>8} {'rig RSS':>7}")
     print(head)
     print("-" * len(head))
     for r in results:
         ticks = "{:.1f}/{:.1f}/{:.1f}".format(*r.tick_ms)
         rig = "-" if math.isnan(r.rig_cpu) else f"{r.rig_cpu:.0f}"
+        acq = "-" if math.isnan(r.acq_cpu) else f"{r.acq_cpu:.0f}"
+        ring = "-" if not math.isnan(r.acq_cpu) else f"{r.appends_ps:.1f}"
         rig_rss = "-" if math.isnan(r.rig_rss) else f"{r.rig_rss:.0f}"
         print(f"{r.label:<34} {r.taps:>4} {r.ticks_ps:>7.1f} {r.frames_ps:>8.1f} "
-              f"{r.paints_ps:>8.1f} {r.appends_ps:>6.1f} {ticks:>20} {r.gui_cpu:>10.0f} "
-              f"{r.gui_thread_cpu:>9.0f} {rig:>10} {r.rss:>8.0f} {rig_rss:>7}")
+              f"{r.paints_ps:>8.1f} {ring:>6} {ticks:>20} {r.gui_cpu:>10.0f} "
+              f"{r.gui_thread_cpu:>9.0f} {acq:>10} {rig:>10} {r.rss:>8.0f} {rig_rss:>7}")
     print()
     print("Per frame (GUI thread): CPU, inside tick(), redraw, tap colours (_tap_brushes + "
           "setBrush), paints of all plots; full-window grab()")
@@ -701,11 +708,8 @@ def print_report(results: list[Result], profiles: list[str], args: argparse.Name
         print(f"target >= {TARGET_FPS:g} frames/s, {r.label} ({r.taps} taps): {verdict} "
               f"({r.frames_ps:.1f} frames/s drawn, {r.paints_ps:.1f} repaints/s; tick p95 "
               f"{r.tick_ms[1]:.1f} ms of the {FRAME_MS} ms budget)")
-    print(f"(the timer runs at {1000 / FRAME_MS:g}/s, so {TARGET_FPS:g} is also the ceiling; "
-          f"within 0.5 frames/s counts as met)")
-    if any(r.label.endswith("*") for r in results):
-        print("* an experiment: ConsoleWindow._tap_brushes replaced in this benchmark by "
-              f"{PaletteWindow.PALETTE} reused brushes (daq/live.py is unchanged)")
+    print(f"(the timer runs at {1000 / FRAME_MS:g}/s; within 0.5 frames/s of the target counts "
+          "as met)")
     for text in profiles:
         print()
         print(text)
@@ -722,17 +726,16 @@ def run(args: argparse.Namespace) -> None:
     if "wide" in args.runs:
         results.append(run_live("live, 8 modules", wide, args,
                                 profile=profiler(args.profile_seconds, profiles)))
+    if "threads" in args.runs:
+        results.append(run_live("live, 8 modules, acq. threads", wide, args, threads=True))
     if "switch" in args.runs:
         default = sys.getswitchinterval()
         sys.setswitchinterval(SWITCH_INTERVAL_S)
         try:
             results.append(run_live(f"live, 8 modules, switch {SWITCH_INTERVAL_S * 1e3:g} ms",
-                                    wide, args))
+                                    wide, args, threads=True))
         finally:
             sys.setswitchinterval(default)
-    if "palette" in args.runs:
-        results.append(run_live("live, 8 modules, palette brushes*", wide, args,
-                                window_class=PaletteWindow))
     if "replay" in args.runs:
         tmp = Path(tempfile.mkdtemp(prefix="console_frame_rate_"))
         try:
@@ -759,12 +762,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="fan speed, rpm (default 800: 8 m/s on the flat-plate rig)")
     parser.add_argument("--profile-seconds", type=float, default=5.0,
                         help="cProfile the GUI thread of the 511-tap live run this long (s)")
-    parser.add_argument("--runs", default=",".join(RUNS),
-                        help=f"comma-separated runs among {', '.join(RUNS)} (default all): "
-                        "flat = live 62 taps, wide = live 511 taps (profiled), switch = wide "
-                        f"with sys.setswitchinterval({SWITCH_INTERVAL_S:g}), palette = wide with "
-                        "the taps coloured from 64 reused brushes (an experiment), replay = a "
-                        "recorded 511-tap run replayed (timer 50 ms, then 0 ms)")
+    parser.add_argument("--runs", default=",".join(DEFAULT_RUNS),
+                        help=f"comma-separated runs among {', '.join(RUNS)} (default "
+                        f"{','.join(DEFAULT_RUNS)}): flat = live 62 taps, wide = live 511 taps "
+                        "(profiled), threads = wide with the acquisition's threads in the GUI's "
+                        "process (LiveSource), switch = threads with sys.setswitchinterval("
+                        f"{SWITCH_INTERVAL_S:g}), replay = a recorded 511-tap run replayed "
+                        f"(timer {FRAME_MS} ms, then 0 ms)")
     args = parser.parse_args(argv)
     args.runs = [r.strip() for r in args.runs.split(",") if r.strip()]
     if not args.runs or set(args.runs) - set(RUNS):

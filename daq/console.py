@@ -1,8 +1,8 @@
 """``windrig gui``: start the operator console on a replayed run or a live (simulated) rig.
 
 Responsibility: turn the command-line options into a data source (a
-:class:`~daq.replay.ReplaySource`, or a :class:`~daq.live_source.LiveSource` whose simulated rig
-runs in a child process) and a
+:class:`~daq.replay.ReplaySource`, or a :class:`~daq.acquisition_process.ProcessLiveSource`: the
+acquisition in a child process, the simulated rig in another) and a
 :class:`~daq.live.ConsoleWindow`, run Qt's event loop (or, with ``screenshot``, render headless
 for ``after`` seconds, save the window as PNG and return), and turn bad input into one clear
 message and exit code 2. Qt is imported only once the input has been checked.
@@ -133,8 +133,8 @@ def run_gui(options: GuiOptions) -> int:
 
 
 def _run_live(options: GuiOptions) -> int:
+    from daq.acquisition_process import ProcessLiveSource
     from daq.config import load_rig_config
-    from daq.live_source import LiveSource
 
     assert options.config is not None
     try:
@@ -156,8 +156,8 @@ def _run_live(options: GuiOptions) -> int:
                           "simulated rig): pass --simulate, or give their real URLs")
     # The console's recording row suggests files in record_dir (ControlPanel reads it from the
     # source: the window needs no option of its own).
-    source = LiveSource(config, simulate=options.simulate, window_s=options.window_s,
-                        fan_rpm=options.fan_rpm, record_dir=options.record_dir)
+    source = ProcessLiveSource(config, simulate=options.simulate, window_s=options.window_s,
+                               fan_rpm=options.fan_rpm, record_dir=options.record_dir)
     try:
         source.open()
     except (DaqError, RuntimeError, TimeoutError, OSError) as exc:

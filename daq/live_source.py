@@ -43,11 +43,12 @@ import numpy as np
 
 from daq.config import RigConfig
 from daq.errors import DaqError
+from daq.pipeline import default_sync_rate_hz
 from daq.recorder import RunRecorder
 from daq.ring_buffer import RingBuffer
 from daq.source import DeviceHealth, RingSource, SourceInfo, sync_columns
 
-__all__ = ["STALL_S", "LiveSource", "Recording", "RecordingError", "RingRecorder"]
+__all__ = ["STALL_S", "LiveSource", "Recording", "RecordingError", "RingRecorder", "ring_rows"]
 
 log = logging.getLogger(__name__)
 
@@ -85,6 +86,20 @@ STOP_CATCH_UP_S = 3.0
 #: Devices whose blocks come further apart than this (polled ones: the 1 Hz barometer) are not
 #: waited for by a stop, s.
 SLOW_BLOCKS_S = 0.25
+
+
+def ring_rows(config: RigConfig, window_s: float) -> int:
+    """Return the rows a live ring keeps: ``window_s`` or :data:`MIN_HISTORY_S`, the longer.
+
+    Parameters
+    ----------
+    config : RigConfig
+        The rig (its sync rate).
+    window_s : float
+        The console's time window, s.
+    """
+    history_s = max(float(window_s), MIN_HISTORY_S)
+    return int(math.ceil(history_s * default_sync_rate_hz(config))) + 2
 
 
 class RingRecorder:
@@ -565,6 +580,11 @@ class LiveSource(RingSource):
     record_dir : str or Path, optional
         Where the console suggests run files (:mod:`daq.controls`); default: the current
         directory. Only stored: :meth:`start_recording` takes any path.
+    ring : RingBuffer, optional
+        The buffer the synchronised rows go to, with the columns of :func:`sync_columns` and
+        at least :func:`ring_rows` rows (a :class:`~daq.shared_ring.SharedRingBuffer` when
+        another process draws them: :mod:`daq.acquisition_process`); default: one made by
+        :meth:`open`.
 
     Notes
     -----
@@ -576,7 +596,7 @@ class LiveSource(RingSource):
     def __init__(self, config: RigConfig, *, simulate: bool = True, window_s: float = 20.0,
                  fan_rpm: float | None = None,
                  sync_pulse_interval_s: float | None = 0.5,
-                 record_dir: str | Path | None = None) -> None:
+                 record_dir: str | Path | None = None, ring: RingBuffer | None = None) -> None:
         if not (isinstance(window_s, (int, float)) and 0 < window_s < math.inf):
             raise ValueError(f"window_s = {window_s!r} must be a number of seconds > 0")
         if fan_rpm is not None and not (math.isfinite(fan_rpm) and fan_rpm >= 0):
@@ -595,6 +615,7 @@ class LiveSource(RingSource):
         self._tap: _HealthTap | None = None
         self._writer: Any = None
         self._recorder: RingRecorder | None = None
+        self._given_ring = ring
         self._ring: RingBuffer | None = None
         self._info: SourceInfo | None = None
         self._fan_started = False
@@ -628,11 +649,8 @@ class LiveSource(RingSource):
 
                 self._rig = start_rig_process(self.config)
                 live = self._rig.config
-            scanners = live.by_role("scanner")
-            rate = float(scanners[0].settings["rate_hz"]) if scanners else 500.0
-            history_s = max(self.window_s, MIN_HISTORY_S)
-            self._ring = RingBuffer(int(math.ceil(history_s * rate)) + 2,
-                                    *sync_columns(live.taps.n_taps))
+            rate = default_sync_rate_hz(live)
+            self._ring = self._make_ring(live)
             self._recorder = RingRecorder(self._ring, [i.name for i in live.by_role("fan")],
                                           [i.name for i in live.by_role("plc")])
             writer = RunWriter(Path("live"), live, write_interval_s=WRITE_INTERVAL_S,
@@ -660,6 +678,19 @@ class LiveSource(RingSource):
         except BaseException:
             self.close()
             raise
+
+    def _make_ring(self, config: RigConfig) -> RingBuffer:
+        """Return the given ring (checked against the config) or a new one."""
+        columns = sync_columns(config.taps.n_taps)
+        rows = ring_rows(config, self.window_s)
+        ring = self._given_ring
+        if ring is None:
+            return RingBuffer(rows, *columns)
+        if ring.columns != columns or ring.capacity_rows < rows:
+            raise ValueError(f"the ring given to LiveSource has columns {ring.columns} and "
+                             f"{ring.capacity_rows} rows; this rig needs {columns} and at "
+                             f"least {rows} rows")
+        return ring
 
     def close(self) -> None:
         """Finish a recording, stop the fan (if this source started it), the engine, the rig.

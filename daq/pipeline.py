@@ -59,8 +59,8 @@ from daq.sync import (
 )
 from daq.sync_check import ClockTruthTracker
 
-__all__ = ["DEFAULT_RHO", "DEFAULT_SYNC_RATE_HZ", "RunWriter", "SyncPulses", "record_run",
-           "start_sync_pulses"]
+__all__ = ["DEFAULT_RHO", "DEFAULT_SYNC_RATE_HZ", "RunWriter", "SyncPulses",
+           "default_sync_rate_hz", "record_run", "start_sync_pulses"]
 
 log = logging.getLogger(__name__)
 
@@ -180,10 +180,8 @@ class RunWriter:
         scanners = config.by_role("scanner")
         self._scanner_name = scanners[0].name if scanners else None
         self._pitot_channel = int(scanners[0].settings["pitot_channel"]) if scanners else -1
-        if sync_rate_hz is None:
-            sync_rate_hz = (float(scanners[0].settings["rate_hz"]) if scanners
-                            else DEFAULT_SYNC_RATE_HZ)
-        self.sync_rate_hz = float(sync_rate_hz)
+        self.sync_rate_hz = float(default_sync_rate_hz(config) if sync_rate_hz is None
+                                  else sync_rate_hz)
         self._lasers = {inst.name: inst for inst in config.by_role("lasers")}
         self.recorder: RunRecorder | None = None
         self.error: BaseException | None = None
@@ -774,6 +772,12 @@ class SyncPulses:
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join(2.0 + self._interval_s)
+
+
+def default_sync_rate_hz(config: RigConfig) -> float:
+    """Return a rig's synchronised row rate, Hz: its scanner's frame rate, else the default."""
+    scanners = config.by_role("scanner")
+    return float(scanners[0].settings["rate_hz"]) if scanners else DEFAULT_SYNC_RATE_HZ
 
 
 def start_sync_pulses(acq: Any, drivers: Mapping[str, tuple[str, Any]],

@@ -85,11 +85,15 @@ class RingBuffer:
             raise ValueError(f"column names must be distinct; repeated: {repeated}")
         self._capacity = capacity_rows
         self._columns: dict[str, Column] = {c.name: c for c in specs}
-        self._data: dict[str, npt.NDArray[Any]] = {
-            c.name: np.zeros((capacity_rows, *c.shape), dtype=c.dtype) for c in specs}
+        self._data: dict[str, npt.NDArray[Any]] = self._allocate(capacity_rows, specs)
         self._head = 0  # index the next row is written to
         self._total = 0  # rows appended since construction (or the last clear)
-        self._lock = threading.Lock()
+        self._lock: Any = threading.Lock()
+
+    def _allocate(self, capacity_rows: int,
+                  specs: tuple[Column, ...]) -> dict[str, npt.NDArray[Any]]:
+        """Return the zeroed column arrays (a subclass may place them in shared memory)."""
+        return {c.name: np.zeros((capacity_rows, *c.shape), dtype=c.dtype) for c in specs}
 
     # -- description -----------------------------------------------------------------------------
     @property

@@ -1,6 +1,8 @@
 """The operator control panel of the live console (pytest-qt, offscreen).
 
-One live simulated rig (as ``test_console_live.py``) runs the state checks and actions end to end:
+One live simulated rig, acquired in its own process as ``windrig gui`` runs it
+(:class:`~daq.acquisition_process.ProcessLiveSource`: every action crosses to the acquisition
+process and back), runs the state checks and actions end to end:
 forbidden actions disabled with a reason, arm then release (confirmation injected) recorded by the
 engine with the model moving afterwards, a refused confirmation, the fan limit, CALZ refused while
 the fan runs and done (the scan paused by the engine) once it is stopped. A fake source checks the
@@ -17,10 +19,10 @@ from typing import Any
 
 import numpy as np
 
+from daq.acquisition_process import ProcessLiveSource
 from daq.config import parse_rig_config
 from daq.controls import ControlPanel
 from daq.live import ConsoleWindow
-from daq.live_source import LiveSource
 
 CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
 FAST_FAN = "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n"
@@ -30,14 +32,14 @@ def live_config_text() -> str:
     return (CONFIGS / "sim_flat_plate.toml").read_text() + FAST_FAN
 
 
-def _events(source: LiveSource, kind: str) -> list[Any]:
+def _events(source: ProcessLiveSource, kind: str) -> list[Any]:
     """Return the engine's events of a kind, as the source's subscriber saw them."""
     return source.events(kind)
 
 
 def test_controls_on_a_live_simulated_rig(qtbot):
     config = parse_rig_config(live_config_text(), "sim_flat_plate.toml + fast fan")
-    source = LiveSource(config, simulate=True, window_s=10.0, fan_rpm=500.0)
+    source = ProcessLiveSource(config, simulate=True, window_s=10.0, fan_rpm=500.0)
     source.open()
     answers: list[bool] = []
     questions: list[str] = []

@@ -1,6 +1,7 @@
 """The console's releases table and flutter prediction, live and in replay (pytest-qt, offscreen).
 
-Live: a simulated rig (its instruments in a child process, as the console runs them), releases
+Live: a simulated rig (acquired in a child process, its instruments in another, as ``windrig gui``
+runs them: :class:`~daq.acquisition_process.ProcessLiveSource`), releases
 triggered from the window's control panel at two wind speeds; each appears in the releases table
 with its modes, then the E2RFC model and the flutter speed. Replay: a run file with releases at
 two wind speeds; the table and the model equal what the same numerics give on the file as
@@ -17,12 +18,12 @@ from typing import Any
 import numpy as np
 import pytest
 
+from daq.acquisition_process import ProcessLiveSource
 from daq.auto_release import AutoReleaser
 from daq.cli import main
 from daq.config import parse_rig_config
 from daq.live import ConsoleWindow
 from daq.live_ident import fit_release_modes, identify_releases
-from daq.live_source import LiveSource
 from daq.recorder import RunRecorder
 from daq.replay import ReplaySource
 from ident import flat_plate, flutter
@@ -50,7 +51,7 @@ def truth_at(config: Any, U: float) -> dict[str, float]:
 
 def test_a_release_from_the_console_appears_in_the_releases_table(qtbot):
     config = flat_plate_config()
-    source = LiveSource(config, simulate=True, window_s=10.0, fan_rpm=600.0)
+    source = ProcessLiveSource(config, simulate=True, window_s=10.0, fan_rpm=600.0)
     source.open()
     try:
         window = ConsoleWindow(source, window_s=10.0, frame_ms=50, confirm=lambda *_: True)
@@ -114,7 +115,7 @@ def test_a_release_from_the_console_appears_in_the_releases_table(qtbot):
 
 def test_auto_release_runs_a_session_through_the_panel(qtbot):
     config = flat_plate_config()
-    source = LiveSource(config, simulate=True, window_s=10.0)
+    source = ProcessLiveSource(config, simulate=True, window_s=10.0)
     source.open()
     try:
         window = ConsoleWindow(source, window_s=10.0, frame_ms=50, confirm=lambda *_: False)
