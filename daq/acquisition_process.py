@@ -40,6 +40,7 @@ import logging
 import multiprocessing
 import multiprocessing.util
 import pickle
+import signal
 import threading
 from collections.abc import Mapping
 from pathlib import Path
@@ -201,6 +202,10 @@ def _serve(conn: Any, handle: SharedRingHandle, config_text: str, source: str,
     """Child process: open the live source over the shared ring and serve the parent."""
     from daq.config import parse_rig_config
 
+    # Ctrl-C in the operator's terminal reaches the whole process group: the console handles
+    # it and closes this process in order (the recording finished, the fan stopped), which an
+    # interrupt here would pre-empt. The simulated rig's process inherits the setting.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     ring = SharedRingBuffer.attach(handle)
     try:
         live = LiveSource(parse_rig_config(config_text, source), ring=ring, **options)

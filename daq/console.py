@@ -14,6 +14,7 @@ acquiring (:mod:`daq.live_source`).
 from __future__ import annotations
 
 import os
+import signal
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -192,6 +193,9 @@ def _run_window(source: DataSource, options: GuiOptions) -> int:
         window.resize(*options.size)
         window.show()
         if options.screenshot is None:  # pragma: no cover - interactive
+            # Ctrl-C closes the window as its close button does (the timer's ticks let Python
+            # run the handler): the source then closes in order.
+            signal.signal(signal.SIGINT, lambda *_: window.close())
             return int(app.exec())
         loop = QtCore.QEventLoop()
         QtCore.QTimer.singleShot(int(round(options.after_s * 1000)), loop.quit)
