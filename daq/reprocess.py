@@ -41,7 +41,7 @@ __all__ = ["ReprocessSettings", "ReprocessSummary", "expand_paths", "load_reproc
            "process_campaign", "process_file", "reprocess"]
 
 #: Bumped when the per-file results change meaning: old cache entries are then not reused.
-CACHE_VERSION = 1
+CACHE_VERSION = 2  # 2: a file result has the section depth
 
 
 @dataclass(frozen=True)
@@ -57,7 +57,8 @@ class ReprocessSettings:
     diagnose : bool
         Run the discrepancy check on each campaign.
     depth : float or None
-        Section depth for a shedding line's Strouhal number, m (None: per metre).
+        Section depth for a shedding line's Strouhal number, m (None: the ``depth`` stored in
+        the campaign's first run file, as ``windrig diagnose``; per metre without one).
     """
 
     n_lags: int | None = None
@@ -183,7 +184,8 @@ def process_file(path: str) -> dict[str, Any]:
     -------
     dict
         ``path``, and either ``error`` (the reason the file cannot be used) or ``rig``,
-        ``section`` (dict), ``campaign`` (the grouping key) and ``releases``: per release its
+        ``section`` (dict), ``depth`` (m, or None), ``campaign`` (the grouping key) and
+        ``releases``: per release its
         arrays (``t``, ``h``, ``alpha``, ``lift``, ``moment``), ``U``, ``rho``, ``index`` and
         its modes (``f_h``, ``zeta_h``, ``f_a``, ``zeta_a``; NaN with ``modal_error`` when the
         fit fails).
@@ -212,7 +214,7 @@ def process_file(path: str) -> dict[str, Any]:
                         modal_error=str(exc))
         releases.append(item)
     shape = section.replace(rho=1.0).to_dict()  # the model; air density differs by run
-    return {"path": path, "rig": run.rig_name, "section": section.to_dict(),
+    return {"path": path, "rig": run.rig_name, "section": section.to_dict(), "depth": run.depth,
             "campaign": f"{run.rig_name} {json.dumps(shape, sort_keys=True)}",
             "releases": releases}
 
@@ -266,7 +268,8 @@ def process_campaign(name: str, files: list[dict[str, Any]],
                K=K, derivatives={k: np.asarray(v) for k, v in
                                  model.flutter_derivatives(K).items()})
     if settings.diagnose:
-        report = diagnose(releases, section, baseline=model, depth=settings.depth)
+        depth = settings.depth if settings.depth is not None else files[0].get("depth")
+        report = diagnose(releases, section, baseline=model, depth=depth)
         out.update(effect=report.effect, effect_parameters=report.parameters,
                    gap_before=report.gap_before, gap_after=report.gap_after,
                    runner_up=report.runner_up)

@@ -19,7 +19,7 @@ import pytest
 
 from daq.cli import main
 from daq.config import parse_rig_config
-from daq.reprocess import ReprocessSettings, expand_paths, reprocess
+from daq.reprocess import ReprocessSettings, expand_paths, process_file, reprocess
 from daq.testing import write_release_run
 from simulators.campaigns import FRACTIONS, simulated_campaign
 
@@ -131,3 +131,15 @@ all_three = ["{folder}/run_[0-2].h5"]
     bad.write_text("[reprocess]\nn_lags = 'two'\n")
     assert main(["reprocess", "--config", str(bad), "--out", str(tmp_path / "o2")]) == 2
     assert "n_lags = 'two' has the wrong type" in capsys.readouterr().err
+
+
+def test_a_file_task_returns_plain_numbers_and_the_stored_section_depth(folder):
+    result = process_file(str(folder / "run_1.h5"))
+    # The depth the discrepancy check turns a shedding line into a Strouhal number with, as
+    # `windrig diagnose` takes it: the run's stored [section] depth (0.01 m in the rig config).
+    assert result["depth"] == 0.01
+    assert result["rig"] == "Simulated flat-plate rig" and len(result["releases"]) == 2
+    for release in result["releases"]:
+        assert isinstance(release["U"], float) and isinstance(release["h"], np.ndarray)
+    bad = process_file(str(folder / "notes.h5"))
+    assert set(bad) == {"path", "error"}
