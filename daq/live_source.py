@@ -5,8 +5,9 @@ simulated one in a child process, :func:`daq.rig_process.start_rig_process`, or 
 instruments of a config), runs the acquisition engine over its drivers and feeds the console's
 :class:`~daq.ring_buffer.RingBuffer` with the rows of the synchronised view. The sync view is the
 recording pipeline's own: a :class:`~daq.pipeline.RunWriter` runs as the engine's subscriber,
-writing into a :class:`RingRecorder` instead of an HDF5 file (the writer only needs the
-recorder's methods), so the live view and a recorded file hold the same rows by construction.
+writing into a :class:`RingRecorder` instead of an HDF5 file (both are a
+:class:`~daq.recorder.Recorder`), so the live view and a recorded file hold the same rows by
+construction.
 The GUI thread polls :meth:`LiveSource.snapshot` (the ring's copy) and :meth:`LiveSource.health`
 (built from :meth:`Acquisition.stats` and what the subscriber kept under a lock); nothing is
 pushed to the GUI from the acquisition threads (STYLE.md, "Threads and GUI").
@@ -105,7 +106,7 @@ def ring_rows(config: RigConfig, window_s: float) -> int:
 class RingRecorder:
     """What :class:`~daq.pipeline.RunWriter` writes into, for a live view: no file.
 
-    It offers the :class:`~daq.recorder.RunRecorder` methods the writer calls. The sync rows go
+    A :class:`~daq.recorder.Recorder`, as :class:`~daq.recorder.RunRecorder` is. The sync rows go
     to ``ring`` (columns of :func:`daq.source.sync_columns`); of the raw streams only the last
     fan speed is kept (``fan_rpm``); everything else is dropped. Called on the engine's
     dispatcher thread; the ring is thread-safe, and ``fan_rpm`` is one float (atomic).
@@ -150,11 +151,12 @@ class RingRecorder:
         self._state = "closed"
 
     def add_stream(self, device: str, channels: Sequence[str], units: Any, rate_hz: float,
-                   dtype: Any, *, extra: Mapping[str, Any] | None = None) -> None:
+                   value_dtype: Any = "float32", *,
+                   extra: Mapping[str, Any] | None = None) -> None:
         """Remember a stream's channel names."""
         self._channels[device] = list(channels)
 
-    def add_sync(self, tap_names: Sequence[str], **_: Any) -> None:
+    def add_sync(self, tap_names: Sequence[str]) -> None:
         """Declare the sync view (the ring already has its columns)."""
 
     def append_raw(self, device: str, host_time_ns: Any, device_time: Any, counter: Any,
@@ -178,16 +180,19 @@ class RingRecorder:
         self.ring.append({"time": time, "h": h, "alpha": alpha, "lift": lift, "moment": moment,
                           "U": U, "rho": rho, "pressure": pressure})
 
-    def add_gap(self, *args: Any, **kwargs: Any) -> None:
+    def add_gap(self, device: str, after_counter: int, length: int) -> None:
         """Ignore (gaps are counted by the engine's stats)."""
 
-    def add_event(self, *args: Any, **kwargs: Any) -> None:
+    def add_event(self, time: float, kind: str, text: str = "") -> None:
         """Ignore (faults reach the health panel through :class:`_HealthTap`)."""
 
-    def add_release(self, **kwargs: Any) -> None:
+    def add_release(self, *, release_time: float, start_index: int, stop_index: int, U: float,
+                    h0: float, alpha0: float) -> None:
         """Ignore (the live releases come from the writer's ``release_hook``)."""
 
-    def set_sync_attrs(self, **kwargs: Any) -> None:
+    def set_sync_attrs(self, *, clock_offset_s: Mapping[str, float] | None = None,
+                       clock_drift_ppm: Mapping[str, float] | None = None,
+                       residual_misalignment_s: float | None = None) -> None:
         """Ignore."""
 
     def add_metadata(self, name: str, value: Any) -> None:
@@ -655,7 +660,7 @@ class LiveSource(RingSource):
                                           [i.name for i in live.by_role("plc")])
             writer = RunWriter(Path("live"), live, write_interval_s=WRITE_INTERVAL_S,
                                release_hook=self._on_decay)
-            writer.recorder = cast(RunRecorder, self._recorder)  # duck-typed: no file
+            writer.recorder = self._recorder  # a Recorder into the ring: no file
             self._writer = writer
             self._tap = _HealthTap(writer, self._files)
             drivers = drivers_from_config(live)

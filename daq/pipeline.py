@@ -45,7 +45,7 @@ import numpy.typing as npt
 from daq.acquisition import Event, StreamBlock
 from daq.config import RigConfig
 from daq.continuous_time import ContinuousTimeline
-from daq.recorder import RunRecorder, StorageError
+from daq.recorder import Recorder, RunRecorder, StorageError
 from daq.sync import (
     ClockMap,
     Resampler,
@@ -183,7 +183,7 @@ class RunWriter:
         self.sync_rate_hz = float(default_sync_rate_hz(config) if sync_rate_hz is None
                                   else sync_rate_hz)
         self._lasers = {inst.name: inst for inst in config.by_role("lasers")}
-        self.recorder: RunRecorder | None = None
+        self.recorder: Recorder | None = None
         self.error: BaseException | None = None
         self.summary: dict[str, Any] | None = None
         self._t0_ns = 0

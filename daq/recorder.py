@@ -90,7 +90,7 @@ from contextlib import contextmanager
 from datetime import UTC, datetime
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import h5py
 import numpy as np
@@ -105,6 +105,7 @@ __all__ = [
     "RELEASE_DTYPE",
     "SYNC_COLUMNS",
     "InsufficientSpaceError",
+    "Recorder",
     "RecorderError",
     "RecorderStateError",
     "RunRecorder",
@@ -214,6 +215,75 @@ class _Stream:
         self.extra = extra
         self.rows = 0
         self.gaps = 0
+
+
+class Recorder(Protocol):
+    """What :class:`~daq.pipeline.RunWriter` writes a run into.
+
+    :class:`RunRecorder` (a run file) and :class:`daq.live_source.RingRecorder` (the live
+    console's ring buffer, no file) implement it; the methods and their meaning are
+    :class:`RunRecorder`'s.
+    """
+
+    @property
+    def state(self) -> str:
+        """Measure the phase: ``"new"``, ``"declaring"``, ``"recording"`` or ``"closed"``."""
+        ...
+
+    def open(self) -> None:
+        """Start declaring streams."""
+        ...
+
+    def start(self, t0_host_ns: int | None = None) -> None:
+        """Start taking rows (time 0 at ``t0_host_ns``)."""
+        ...
+
+    def close(self) -> None:
+        """Finish."""
+        ...
+
+    def add_stream(self, device: str, channels: Sequence[str], units: Any, rate_hz: float,
+                   value_dtype: Any = "float32", *,
+                   extra: Mapping[str, Any] | None = None) -> None:
+        """Declare a device's raw stream."""
+        ...
+
+    def add_sync(self, tap_names: Sequence[str]) -> None:
+        """Declare the synchronised view."""
+        ...
+
+    def append_raw(self, device: str, host_time_ns: Any, device_time: Any, counter: Any,
+                   values: Any, *, extra: Mapping[str, Any] | None = None) -> None:
+        """Append a device's raw samples."""
+        ...
+
+    def append_sync(self, time: Any, *, h: Any, alpha: Any, lift: Any, moment: Any,
+                    pressure: Any, U: Any, rho: Any) -> None:
+        """Append rows of the synchronised view."""
+        ...
+
+    def add_gap(self, device: str, after_counter: int, length: int) -> None:
+        """Mark a gap in a device's stream."""
+        ...
+
+    def add_event(self, time: float, kind: str, text: str = "") -> None:
+        """Add an operator or system event."""
+        ...
+
+    def add_release(self, *, release_time: float, start_index: int, stop_index: int, U: float,
+                    h0: float, alpha0: float) -> Any:
+        """Add a free decay to the releases table."""
+        ...
+
+    def set_sync_attrs(self, *, clock_offset_s: Mapping[str, float] | None = None,
+                       clock_drift_ppm: Mapping[str, float] | None = None,
+                       residual_misalignment_s: float | None = None) -> None:
+        """Store the clock fits with the synchronised view."""
+        ...
+
+    def add_metadata(self, name: str, value: Any) -> None:
+        """Store a metadata entry."""
+        ...
 
 
 class RunRecorder:
