@@ -9,7 +9,7 @@ it:
 
 1. **Decode** (the reader threads' work): the real drivers (:class:`ScanivalveMps4264`,
    :class:`MicroEpsilonIld1420`) read in-memory transports through the engine's own adapters
-   (``daq.acquisition._make_adapter``), one driver read per :class:`StreamBlock`: the scanner
+   (``daq.device_reader._make_adapter``), one driver read per :class:`StreamBlock`: the scanner
    gets one legacy 0x0A packet per frame per module and is read after every frame (on a rig
    that keeps up, ``read_block`` returns as soon as every module has sent the frame), the
    lasers are read every ``--laser-block`` samples (100 by default: the driver drains
@@ -78,7 +78,7 @@ import numpy as np  # noqa: E402
 import numpy.typing as npt  # noqa: E402
 from threadpoolctl import threadpool_limits  # noqa: E402
 
-from daq import acquisition  # noqa: E402
+from daq import device_reader  # noqa: E402
 from daq.acquisition import Event, StreamBlock  # noqa: E402
 from daq.config import RigConfig, parse_rig_config  # noqa: E402
 from daq.errors import TransportError, TransportTimeout  # noqa: E402
@@ -442,7 +442,7 @@ class Device:
 def build_devices(config: RigConfig) -> dict[str, Device]:
     """Build the real drivers on replay transports, opened and scanning as the engine leaves them.
 
-    The engine's own adapter (``daq.acquisition._make_adapter``) opens them, starts the scan
+    The engine's own adapter (``daq.device_reader._make_adapter``) opens them, starts the scan
     (configure + SCAN) and turns each driver read into the rows of a :class:`StreamBlock`.
     """
     devices: dict[str, Device] = {}
@@ -452,15 +452,16 @@ def build_devices(config: RigConfig) -> dict[str, Device]:
     scanner = ScanivalveMps4264(CommandTransport("replay://scanner", ScannerCommands()), settings,
                                 data_transports=data)
     devices[inst.name] = Device(inst.name, "scanner", scanner, data,
-                                acquisition._make_adapter("scanner", scanner, poll_interval_s=None,
-                                                          read_timeout_s=1.0))
+                                device_reader._make_adapter("scanner", scanner,
+                                                            poll_interval_s=None,
+                                                            read_timeout_s=1.0))
     for inst in config.by_role("lasers"):
         line = CommandTransport(f"replay://{inst.name}", laser_commands)
         laser = MicroEpsilonIld1420(line, Ild1420Settings.from_table(inst.settings, inst.name))
         devices[inst.name] = Device(inst.name, "laser", laser, [line],
-                                    acquisition._make_adapter("laser", laser,
-                                                              poll_interval_s=None,
-                                                              read_timeout_s=1.0))
+                                    device_reader._make_adapter("laser", laser,
+                                                                poll_interval_s=None,
+                                                                read_timeout_s=1.0))
     for dev in devices.values():
         dev.adapter.open()
     for dev in devices.values():
