@@ -558,8 +558,9 @@ class Acquisition:
         force: ``wind_speed_now`` is passed through), a new scan is started and the reader
         resumed. The interruption is marked, never silent: the scanner stream gets a gap over
         the pause (its length in frames where the frame times are absolute, else -1; see
-        ``_ScannerAdapter``), so the sync view has NaN pressures and forces there, and a
-        ``"calz"`` event (at ``stop_ns``) carries the pause and the zero-offset summary.
+        ``daq.device_reader._ScannerAdapter``), so the sync view has NaN pressures and forces
+        there, and a ``"calz"`` event (at ``stop_ns``) carries the pause and the zero-offset
+        summary.
 
         Parameters
         ----------

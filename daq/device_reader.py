@@ -482,7 +482,8 @@ class DeviceReader:
 
     Notes
     -----
-    The :class:`Acquisition` creates, starts and stops readers; use it rather than this class.
+    The :class:`~daq.acquisition.Acquisition` creates, starts and stops readers; use it rather
+    than this class.
     """
 
     def __init__(self, name: str, kind: str, driver: Any, *, queue_size: int,

@@ -35,7 +35,7 @@ __all__ = [
 
 #: Kinds of device the engine knows how to read.
 KINDS = ("scanner", "laser", "barometer", "fan", "plc")
-#: Event kinds the engine itself emits; :meth:`Acquisition.mark` refuses them.
+#: Event kinds the engine itself emits; :meth:`~daq.acquisition.Acquisition.mark` refuses them.
 SYSTEM_EVENT_KINDS = frozenset({"fault", "recovered", "overflow", "release", "release_failed",
                                 "arm", "trigger", "calz", "calz_failed"})
 
@@ -105,7 +105,7 @@ class Event:
     kind : str
         ``"release"``, ``"arm"``, ``"trigger"``, ``"release_failed"``, ``"fault"``,
         ``"recovered"``, ``"overflow"``, or an operator's own kind given to
-        :meth:`Acquisition.mark`.
+        :meth:`~daq.acquisition.Acquisition.mark`.
     host_time_ns : int
         Host ``time.monotonic_ns()`` of the event (for a release: when the PLC acknowledged the
         RELEASE coil).
@@ -146,7 +146,7 @@ class DeviceFault(Event):
 
 @dataclass(frozen=True)
 class DeviceStats:
-    """Counters of one device's reader (:meth:`Acquisition.stats`).
+    """Counters of one device's reader (:meth:`~daq.acquisition.Acquisition.stats`).
 
     Attributes
     ----------
