@@ -46,6 +46,7 @@ from ident._equation_error import (
     fit_structural,
     fit_vortex,
 )
+from ident.coupling import ZeroWindCoupling, coupling_verdict, zero_wind_coupling
 from ident.effects import (
     EFFECT_NAMES,
     ChannelDelay,
@@ -142,6 +143,9 @@ class DiscrepancyReport:
         Per channel, the lag-1 autocorrelation of measured minus simulated (:func:`whiteness`):
         near 1 when the model misses something smooth, near 0 when only the measurement
         noise is left.
+    zero_wind_coupling : tuple of ZeroWindCoupling
+        The heave and pitch modes' coupling that the baseline lacks, extrapolated to zero wind
+        (:func:`ident.coupling.zero_wind_coupling`; empty when it cannot be estimated).
     """
 
     effect: str | None
@@ -160,6 +164,7 @@ class DiscrepancyReport:
     simulated_after: tuple[dict[str, FloatArray], ...] = field(default=(), repr=False)
     whiteness_before: dict[str, float] = field(default_factory=dict)
     whiteness_after: dict[str, float] = field(default_factory=dict)
+    zero_wind_coupling: tuple[ZeroWindCoupling, ...] = ()
 
     def summary(self) -> str:
         """Return the report as text: the verdict, the gap, every candidate's evidence."""
@@ -179,6 +184,9 @@ class DiscrepancyReport:
             f"{c} {self.whiteness_before.get(c, math.nan):.2f}"
             + (f" -> {self.whiteness_after.get(c, math.nan):.2f}" if self.effect else "")
             for c in CHANNELS))
+        lines.append("coupling at zero wind (measured minus baseline, extrapolated): "
+                     + coupling_verdict(self.zero_wind_coupling))
+        lines.extend(f"  {c.text()}" for c in self.zero_wind_coupling)
         lines.append(f"{'candidate':<20}{'held-out':>10}{'+-':>8}  verdict")
         for ev in self.evidence:
             lines.append(f"{ev.effect:<20}{ev.cv_ratio:>10.4f}{ev.cv_ratio_se:>8.4f}  "
@@ -261,6 +269,7 @@ def diagnose(releases: Sequence[Release], section: SectionModel,
     before = [_simulate(r, section, baseline, ()) for r in releases]
     gap_before = gap(measured, before)
 
+    coupling = zero_wind_coupling(releases, section, baseline)
     signals = [decay_signals(r, section) for r in releases]
     evidence, fits = _candidates(signals, section, depth)
     ranked = sorted(evidence, key=lambda ev: ev.cv_ratio)
@@ -287,7 +296,7 @@ def diagnose(releases: Sequence[Release], section: SectionModel,
             runner_up=runner_up, baseline=baseline, refitted=baseline, section=section,
             simulated_before=tuple(before), simulated_after=tuple(before),
             whiteness_before=whiteness(measured, before),
-            whiteness_after=whiteness(measured, before))
+            whiteness_after=whiteness(measured, before), zero_wind_coupling=coupling)
 
     effect = _effect(best.effect, best.parameters, fits, depth)
     refitted, new_section, effects = _refit(best.effect, effect, releases, section, baseline,
@@ -310,7 +319,7 @@ def diagnose(releases: Sequence[Release], section: SectionModel,
         evidence=tuple(ranked), runner_up=runner_up, baseline=baseline, refitted=refitted,
         section=new_section, effects=effects, simulated_before=tuple(before),
         simulated_after=tuple(after), whiteness_before=whiteness(measured, before),
-        whiteness_after=whiteness(measured, after))
+        whiteness_after=whiteness(measured, after), zero_wind_coupling=coupling)
 
 
 @dataclass(frozen=True)
