@@ -125,6 +125,10 @@ class VirtualTunnel:
         self.decay_duration_s = float(decay_duration_s)
         self.fs_internal = float(fs_internal)
         self._cp_mean = np.where(taps.nz < 0, mean_cp_upper, mean_cp_lower)
+        # The taps are fixed: their force matrix and its pseudo-inverse are computed once (an
+        # SVD per production step cost ~10 % of a core with 511 taps).
+        self._G = taps.integration_matrix()
+        self._G_pinv = np.linalg.pinv(self._G)
         self._lock = threading.Lock()
         self._fan_rpm = 0.0
         self._armed = True  # the magnet holds at start
@@ -264,8 +268,7 @@ class VirtualTunnel:
         """Tap pressures (n, n_taps) and Pitot dynamic pressure (n,) at true times ``t``, Pa."""
         values = self.sample(t)
         mean = np.outer(values["qd"], self._cp_mean)
-        G = self.taps.integration_matrix()
-        G_pinv = np.linalg.pinv(G)
+        G, G_pinv = self._G, self._G_pinv
         forces = np.column_stack([values["lift"], values["moment"]])
         # Remove the mean field's own lift and moment so that taps integrate to the forces.
         p = forces @ G_pinv.T + mean - (mean @ G.T) @ G_pinv.T
