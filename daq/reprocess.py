@@ -266,7 +266,9 @@ def process_campaign(name: str, files: list[dict[str, Any]],
     out.update(model=model.to_dict(), structure=model.diagnostics.reason,
                flutter_speed=result.speed, flutter_std=std, flutter_frequency=result.frequency,
                K=K, derivatives={k: np.asarray(v) for k, v in
-                                 model.flutter_derivatives(K).items()})
+                                 model.flutter_derivatives(K).items()},
+               curves={"U": result.U, "frequencies": result.frequencies,
+                       "damping": result.damping, "mode_names": list(result.mode_names)})
     if settings.diagnose:
         depth = settings.depth if settings.depth is not None else files[0].get("depth")
         report = diagnose(releases, section, baseline=model, depth=depth)
@@ -532,9 +534,10 @@ def _write_outputs(out: Path, results: dict[str, dict[str, Any]],
         "models": {names[id(c)]: c.get("model") for c in summary.campaigns},
     }, indent=2, default=_json_default))
     outputs["summary_json"] = summary_json
-    plots = {names[id(c)]: _campaign_plot(out, names[id(c)], c, results)
+    plots = {names[id(c)]: _campaign_plots(out, names[id(c)], c, results)
              for c in summary.campaigns if "model" in c}
-    outputs.update({f"plot_{k}": v for k, v in plots.items()})
+    outputs.update({f"plot_{name}_{kind}": path for name, paths in plots.items()
+                    for kind, path in paths.items()})
     outputs["report"] = _html_report(out, summary, campaign_rows, plots)
     return outputs
 
@@ -547,12 +550,26 @@ def _json_default(value: Any) -> Any:
     raise TypeError(f"not JSON serialisable: {type(value).__name__}")
 
 
-def _campaign_plot(out: Path, name: str, campaign: dict[str, Any],
-                   results: dict[str, dict[str, Any]]) -> Path:
+def _campaign_plots(out: Path, name: str, campaign: dict[str, Any],
+                    results: dict[str, dict[str, Any]]) -> dict[str, Path]:
+    """Write a campaign's plots; return their paths by kind.
+
+    ``flutter_derivatives``: the model's eight derivatives over the releases' K span.
+    ``modes``: frequency and damping ratio of the heave and pitch modes against U, the model's
+    (its state-space flutter analysis) as lines, each release's modal fit as points, the
+    flutter speed marked: where the model and the decays agree, and how far the prediction
+    reaches beyond the measured wind speeds.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
+    speed = campaign.get("flutter_speed")
+    title = (f"{name}: {campaign['n_releases']} releases at {campaign['wind_speeds']} m/s; "
+             + (f"U_F = {speed:.2f} m/s" if speed is not None else "no flutter found"))
+    paths = {"flutter_derivatives": out / f"{name}_flutter_derivatives.png",
+             "modes": out / f"{name}_modes.png"}
 
     fig, axes = plt.subplots(2, 4, figsize=(14, 6))
     K = np.asarray(campaign["K"])
@@ -560,18 +577,43 @@ def _campaign_plot(out: Path, name: str, campaign: dict[str, Any],
         ax.plot(1.0 / K, values, "r-")
         ax.set_title(f"{deriv}*")
         ax.set_xlabel("1/K")
-    speed = campaign.get("flutter_speed")
-    fig.suptitle(f"{name}: {campaign['n_releases']} releases at {campaign['wind_speeds']} m/s; "
-                 + (f"U_F = {speed:.2f} m/s" if speed is not None else "no flutter found"))
+    fig.suptitle(title)
     fig.tight_layout()
-    path = out / f"{name}_flutter_derivatives.png"
-    fig.savefig(path, dpi=90)
+    fig.savefig(paths["flutter_derivatives"], dpi=90)
     plt.close(fig)
-    return path
+
+    curves = campaign["curves"]
+    releases = [r for path in campaign["files"] for r in results[path].get("releases", [])]
+    fig, (ax_f, ax_z) = plt.subplots(2, 1, figsize=(9, 7), sharex=True)
+    measured = {"heave": ("f_h", "zeta_h"), "pitch": ("f_a", "zeta_a")}
+    for j, mode in enumerate(curves["mode_names"]):
+        line, = ax_f.plot(curves["U"], curves["frequencies"][:, j], "-", label=f"{mode}, model")
+        ax_z.plot(curves["U"], curves["damping"][:, j], "-", color=line.get_color())
+        if mode in measured:
+            f_key, z_key = measured[mode]
+            U = [r["U"] for r in releases]
+            ax_f.plot(U, [r[f_key] for r in releases], "o", color=line.get_color(),
+                      label=f"{mode}, releases")
+            ax_z.plot(U, [r[z_key] for r in releases], "o", color=line.get_color())
+    if speed is not None:
+        for ax in (ax_f, ax_z):
+            ax.axvline(speed, color="grey", ls="--", lw=0.8)
+    ax_z.axhline(0.0, color="k", lw=0.6)
+    ax_f.set_ylabel("frequency (Hz)")
+    ax_z.set_ylabel("damping ratio")
+    ax_z.set_xlabel("U (m/s)")
+    finite = np.asarray(curves["damping"])[np.isfinite(curves["damping"])]
+    ax_z.set_ylim(-0.05, max(0.1, 0.5 * float(finite.max())) if finite.size else 0.2)
+    ax_f.legend(fontsize=8)
+    ax_f.set_title(title)
+    fig.tight_layout()
+    fig.savefig(paths["modes"], dpi=90)
+    plt.close(fig)
+    return paths
 
 
 def _html_report(out: Path, summary: ReprocessSummary, campaigns: list[dict[str, Any]],
-                 plots: dict[str, Path]) -> Path:
+                 plots: dict[str, dict[str, Path]]) -> Path:
     def cell(value: Any) -> str:
         if isinstance(value, float):
             return f"{value:.4g}"
@@ -590,9 +632,10 @@ def _html_report(out: Path, summary: ReprocessSummary, campaigns: list[dict[str,
         parts.append("<tr>" + "".join(f"<td>{cell(row[f])}</td>" for f in _CAMPAIGN_FIELDS)
                      + "</tr>")
     parts.append("</table>")
-    for name, path in plots.items():
-        parts.append(f"<h3>{html.escape(name)}</h3><img src='{html.escape(path.name)}' "
-                     "width='900'>")
+    for name, paths in plots.items():
+        parts.append(f"<h3>{html.escape(name)}</h3>")
+        parts.extend(f"<img src='{html.escape(path.name)}' width='900'>"
+                     for path in paths.values())
     if summary.failed:
         parts.append("<h2>Files not used</h2><ul>")
         parts.extend(f"<li>{html.escape(p)}: {html.escape(reason)}</li>"

@@ -78,7 +78,19 @@ def test_reprocess_matches_identify_and_reports_the_bad_files(folder, tmp_path, 
     assert data["campaigns"][0]["flutter_speed"] == pytest.approx(campaign["flutter_speed"])
     report = (out / "index.html").read_text()
     assert "campaign_1_flutter_derivatives.png" in report and "notes.h5" in report
-    assert (out / "campaign_1_flutter_derivatives.png").read_bytes()[:4] == b"\x89PNG"
+    assert "campaign_1_modes.png" in report
+    for plot in ("campaign_1_flutter_derivatives.png", "campaign_1_modes.png"):
+        assert (out / plot).read_bytes()[:4] == b"\x89PNG"
+        assert summary.outputs[f"plot_{plot[:-4]}"] == out / plot
+    # The modes plot's model curves: the campaign's flutter analysis, damping crossing zero
+    # at its flutter speed.
+    curves = campaign["curves"]
+    assert curves["mode_names"] == ["heave", "pitch"]
+    U, damping = curves["U"], curves["damping"]
+    j = int(np.argmin(damping[-1]))  # the mode that goes unstable
+    i = int(np.flatnonzero(damping[:, j] < 0)[0])
+    crossing = np.interp(0.0, [damping[i, j], damping[i - 1, j]], [U[i], U[i - 1]])
+    assert crossing == pytest.approx(campaign["flutter_speed"], rel=0.01)
 
     # Resumable: nothing changed, so every file comes from the cache.
     again = reprocess([str(folder / "*.h5")], out, workers=1, progress=False)
