@@ -599,6 +599,9 @@ def _campaign_plots(out: Path, name: str, campaign: dict[str, Any],
         for ax in (ax_f, ax_z):
             ax.axvline(speed, color="grey", ls="--", lw=0.8)
     ax_z.axhline(0.0, color="k", lw=0.6)
+    # Up to half again the flutter speed (or the highest release): the range that matters.
+    reach = max([speed or 0.0] + [r["U"] for r in releases])
+    ax_z.set_xlim(0.0, min(1.5 * reach, float(np.max(curves["U"]))))
     ax_f.set_ylabel("frequency (Hz)")
     ax_z.set_ylabel("damping ratio")
     ax_z.set_xlabel("U (m/s)")
