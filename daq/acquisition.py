@@ -702,7 +702,7 @@ class Acquisition:
                       data={"pause_s": pause_s, "calz_s": calz_s, "stop_ns": stop_ns,
                             "stopped_ns": stopped_ns, "restart_ns": restart_ns,
                             "restarted_ns": restarted_ns, "wind_speed_now": wind_speed_now,
-                            **summary})
+                            **summary, "offsets_before_pa": offsets.copy()})
         self._post_event(event)
         log.info("%s: CALZ done; scan paused %.3f s; zero removed: %s", name, pause_s, summary)
         return CalzResult(device=name, wind_speed_now=wind_speed_now, stop_ns=stop_ns,

@@ -32,6 +32,7 @@ import errno
 import json
 import logging
 import math
+import re
 import time
 from collections import deque
 from collections.abc import Callable, Mapping
@@ -66,6 +67,8 @@ log = logging.getLogger(__name__)
 
 #: Sync rate without a scanner, Hz (with one: the scanner's frame rate).
 DEFAULT_SYNC_RATE_HZ = 500.0
+#: What a CALZ made during the run keeps in its metadata entry (:meth:`RunWriter._calz_record`).
+_CALZ_FIELDS = ("pause_s", "calz_s", "wind_speed_now", "frames_averaged", "offsets_before_pa")
 #: Air density used before the barometer's first reading, kg/m^3 (recorded in the rho column).
 DEFAULT_RHO = 1.2
 #: Window of the held position before a release (h0, alpha0): [t - 0.3 s, t - 0.05 s].
@@ -196,6 +199,7 @@ class RunWriter:
         self._recent: deque[tuple[FloatArray, FloatArray, FloatArray]] = deque()
         self._releases: list[_Release] = []
         self._written_releases = 0
+        self._calz_count: dict[str, int] = {}
         self._trigger_events: deque[float] = deque(maxlen=64)
 
     # -- dispatch ------------------------------------------------------------------------------
@@ -638,15 +642,35 @@ class RunWriter:
             self._written_releases += 1
 
     # -- events --------------------------------------------------------------------------------
+    def _calz_record(self, event: Event, t: float) -> None:
+        """Keep a CALZ made during the run: ``/entry/metadata/calz_<device>_<n>``.
+
+        Its run time (s), pause, duration, the wind speed vouched for and the zero removed per
+        scanner channel (``offsets_before_pa``: the mean over the last frames before the
+        scan stopped, Pa; what the scanner's pressures shifted by at the CALZ).
+        """
+        rec = self.recorder
+        assert rec is not None
+        device = _name_part(event.device or "scanner")
+        self._calz_count[device] = n = self._calz_count.get(device, 0) + 1
+        record = {"time_s": t, **{k: v for k, v in event.data.items()
+                                  if k in _CALZ_FIELDS and v is not None}}
+        rec.add_metadata(f"calz_{device}_{n}", record)
+
     def _event(self, event: Event) -> None:
         rec = self.recorder
         assert rec is not None
         t = float(self._time(event.host_time_ns))
         text = event.text if event.device is None else f"{event.device}: {event.text}"
-        if event.data:
-            text = f"{text} {json.dumps(dict(event.data), default=str)}"
+        # The event's numbers go into its text; arrays (a CALZ's offsets per channel) do not
+        # fit there and go to /entry/metadata instead (below).
+        scalars = {k: v for k, v in event.data.items() if not isinstance(v, np.ndarray)}
+        if scalars:
+            text = f"{text} {json.dumps(scalars, default=str)}"
         kind = event.kind.encode("utf-8")[:32].decode("utf-8", "ignore") or "event"
         rec.add_event(t, kind, text.encode("utf-8")[:1024].decode("utf-8", "ignore"))
+        if event.kind == "calz":
+            self._calz_record(event, t)
         if event.kind == "release":
             command = int(event.data.get("command_ns", event.host_time_ns))
             self._releases.append(_Release(time=float(self._time(command))))
@@ -772,6 +796,11 @@ class SyncPulses:
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join(2.0 + self._interval_s)
+
+
+def _name_part(device: str) -> str:
+    """Return a device name as part of a metadata name (letters, digits and ``_`` only)."""
+    return re.sub(r"\W", "_", device)
 
 
 def default_sync_rate_hz(config: RigConfig) -> float:
@@ -929,10 +958,14 @@ def record_run(config: RigConfig, out_path: str | Path, *, duration_s: float,
         writer.recorder = recorder  # opened above; declared and started at the "start" doc
         drivers = drivers_from_config(live)
         if calz:
-            for kind, driver in drivers.values():
+            for name, (kind, driver) in drivers.items():
                 if kind == "scanner":
                     driver.open()  # idempotent: the engine's open() keeps this connection
-                    driver.calz(wind_speed_now=0.0)
+                    calz_s = driver.calz(wind_speed_now=0.0)
+                    # The file says that its pressures start zeroed (the offsets themselves
+                    # are the scanner's: it reports none).
+                    recorder.add_metadata(f"calz_{_name_part(name)}_start",
+                                          {"calz_s": float(calz_s), "wind_speed_now": 0.0})
         acq = Acquisition(drivers, subscribers=[writer], metadata={"rig": live.name})
         acq.start()
         reason = "duration"

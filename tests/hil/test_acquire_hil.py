@@ -68,6 +68,10 @@ def test_record_run_writes_a_release_matching_the_tunnel_truth(tmp_path):
         assert f["entry/instrument/laser_front/value"].shape[0] == \
             summary["samples"]["laser_front"]
         assert f.attrs["default"] == "entry" and f["entry"].attrs["default"] == "sync"
+        # The scanner was zeroed (wind off) before the run, and the file says so; the
+        # simulator's CALZ takes 0.2 s, polled every 0.1 s by the driver.
+        calz = f["entry/metadata/calz_scanner_start"]
+        assert 0.2 <= float(calz["calz_s"][()]) < 0.6 and float(calz["wind_speed_now"][()]) == 0
     assert t.size > 1500 and np.isfinite(h).mean() > 0.98
     # Two pulses from the actions, and the sync pulses record_run sends every 0.5 s (the first
     # after 0.5 s, the last possibly cut by the stop).

@@ -88,6 +88,15 @@ def test_calz_during_a_recorded_run_rezeroes_and_leaves_a_measured_gap(tmp_path:
         sync_p = f["entry/sync/pressure"][:]
         sync_lift = f["entry/sync/lift"][:]
         events = f["entry/events"][:]
+        calz = {k: v[()] for k, v in f["entry/metadata/calz_scanner_1"].items()}
+        assert "calz_scanner_start" not in f["entry/metadata"]  # record_run(calz=False)
+
+    # -- the CALZ's record: when, how long, and the zero it removed per channel ---------------
+    assert set(calz) == {"time_s", "pause_s", "calz_s", "wind_speed_now", "frames_averaged",
+                         "offsets_before_pa"}
+    np.testing.assert_array_equal(calz["offsets_before_pa"], result.offsets_before_pa)
+    assert calz["pause_s"] == result.pause_s and calz["frames_averaged"] == 250
+    assert calz["time_s"] == pytest.approx((result.stop_ns * 1e-9 - t0_s), abs=1e-3)
 
     # -- the raw stream: one gap, marked, as long as the pause --------------------------------
     assert gaps.shape == (1,)
