@@ -37,7 +37,7 @@ import numpy.typing as npt
 from ident import e2rfc, fd_method
 from ident.conventions import FLUTTER_DERIVATIVE_NAMES
 from ident.errors import IdentError, InsufficientDataError
-from ident.modal import fit_modes
+from ident.modal import fit_modes, name_modes
 from ident.release import Release
 from ident.section import SectionModel
 
@@ -195,11 +195,7 @@ def fit_release_modes(t: FloatArray, h: FloatArray, alpha: FloatArray,
     if fit.frequencies.size < 2:
         raise InsufficientDataError(f"found {fit.frequencies.size} oscillatory mode(s) in the "
                                     "decay, need 2 (heave and pitch)")
-    ms = np.diag(section.mass_matrix())
-    shapes = np.abs(fit.mode_shapes()) ** 2 * ms
-    heave_share = shapes[:, 0] / shapes.sum(axis=1)
-    j_h = int(np.argmax(heave_share))
-    j_a = 1 - j_h
+    j_h, j_a = name_modes(fit.mode_shapes(), section.mass_matrix())
     f, z = fit.frequencies, fit.damping
     return ModalResult(f_h=float(f[j_h]), zeta_h=float(z[j_h]), f_a=float(f[j_a]),
                        zeta_a=float(z[j_a]))

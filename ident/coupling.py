@@ -28,7 +28,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ident.errors import IdentError
-from ident.modal import fit_modes
+from ident.modal import fit_modes, name_modes
 from ident.release import Release
 from ident.rfc import RationalFunctionModel
 from ident.section import SectionModel
@@ -96,9 +96,8 @@ def _mode_shapes(release: Release, section: SectionModel) -> tuple[ComplexArray,
     fit = fit_modes(release.t, x, n_modes=2)
     if fit.modes.size < 2:
         raise IdentError(f"found {fit.modes.size} oscillatory mode(s), need 2")
+    order = list(name_modes(fit.mode_shapes(), section.mass_matrix()))
     shapes = fit.mode_shapes() * np.sqrt(np.diag(section.mass_matrix()))
-    heave_share = np.abs(shapes[:, 0]) ** 2 / np.sum(np.abs(shapes) ** 2, axis=1)
-    order = [int(np.argmax(heave_share)), int(np.argmin(heave_share))]
     return fit.modes[order], shapes[order]
 
 

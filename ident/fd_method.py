@@ -41,7 +41,7 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy.optimize import least_squares, linear_sum_assignment
+from scipy.optimize import least_squares
 
 from ident import _validate as v
 from ident._selection import Candidate, select_one_se
@@ -52,7 +52,7 @@ from ident.conventions import (
     flutter_derivatives_from_Q,
 )
 from ident.errors import InsufficientDataError, NonUniformSamplingError, RankDeficiencyError
-from ident.modal import ModalFit, fit_modes
+from ident.modal import ModalFit, fit_modes, name_modes
 from ident.release import SAMPLING_RTOL, Release
 from ident.rfc import RationalFunctionModel
 from ident.roger import _fit_entries, roger_basis
@@ -311,7 +311,7 @@ def _modal_system(t: Any, h: Any, alpha: Any, section: SectionModel) -> _ModalSy
     phi = fit.mode_shapes()  # (2 modes, 2 coordinates); any complex scale per mode is fine
     S = _system_matrix(lam, phi)
     Ms = section.mass_matrix()
-    heave, pitch = _name_modes(Ms, phi)
+    heave, pitch = name_modes(phi, Ms)
     return _ModalSystem(
         K_eff=-Ms @ S[2:4, 0:2],
         C_eff=-Ms @ S[2:4, 2:4],
@@ -343,19 +343,6 @@ def _system_matrix(lam: ComplexArray, phi: ComplexArray) -> FloatArray:
             "the decay does not determine the stiffness and damping matrices"
         )
     return np.asarray(S.real, dtype=float)
-
-
-def _name_modes(Ms: FloatArray, phi: ComplexArray) -> tuple[int, int]:
-    """Return the indices of the heave- and pitch-dominated modes (by kinetic-energy share).
-
-    ``|phi|^2`` weighted by the diagonal of the mass matrix is each coordinate's share of a mode's
-    kinetic energy; comparing shares (not raw amplitudes) makes ``h/B`` and ``alpha`` comparable.
-    """
-    share = np.abs(phi.T) ** 2 * np.diag(Ms)[:, None]  # (coordinate, mode)
-    share = share / share.sum(axis=0, keepdims=True)
-    rows, cols = linear_sum_assignment(-share)  # row 0 = heave, row 1 = pitch
-    by_row = dict(zip(rows.tolist(), cols.tolist(), strict=True))
-    return int(by_row[0]), int(by_row[1])
 
 
 def _still_air_reference(

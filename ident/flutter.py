@@ -23,6 +23,7 @@ from scipy.optimize import brentq, linear_sum_assignment
 
 from ident import _validate as v
 from ident.conventions import Q_from_flutter_derivatives
+from ident.modal import name_modes
 from ident.rfc import RationalFunctionModel
 from ident.section import SectionModel
 from ident.statespace import AeroelasticSystem
@@ -111,19 +112,6 @@ def default_U_max(section: SectionModel) -> float:
     return 2.0 * math.pi * max(section.fh, section.fa) * section.B / _K_MIN_DEFAULT
 
 
-def _name_modes(section: SectionModel, vectors: npt.NDArray[np.complex128]) -> list[int]:
-    """Return, for (heave, pitch), the index of the column of ``vectors`` that each one is.
-
-    Columns are the q-parts (2 entries) of the two oscillatory eigenvectors in still air. A mode is
-    named by its kinetic-energy share in each degree of freedom.
-    """
-    Ms = section.mass_matrix()
-    share = np.abs(vectors) ** 2 * np.diag(Ms)[:, None]
-    share = share / share.sum(axis=0, keepdims=True)
-    rows, cols = linear_sum_assignment(-share)  # row 0 = heave, row 1 = pitch
-    return [int(c) for _, c in sorted(zip(rows, cols, strict=True))]
-
-
 def _oscillatory_candidates(lam: npt.NDArray[np.complex128]) -> npt.NDArray[np.complex128]:
     """Eigenvalues in the upper half plane, plus real ones (a mode may become overdamped)."""
     return lam[lam.imag >= -1e-9 * np.maximum(1.0, np.abs(lam))]
@@ -154,7 +142,7 @@ def _initial_branches(
             f"expected 2 oscillatory still-air modes, found {oscillatory.size}: the section is "
             "overdamped or the aerodynamic model dominates the structure at low wind speed"
         )
-    order = _name_modes(section, vec[0:2, oscillatory])
+    order = list(name_modes(vec[0:2, oscillatory].T, section.mass_matrix()))
     return np.asarray(lam[oscillatory[order]], dtype=complex)
 
 

@@ -20,12 +20,12 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from scipy.optimize import least_squares
+from scipy.optimize import least_squares, linear_sum_assignment
 
 from ident._threads import single_threaded_blas
 from ident.errors import InsufficientDataError
 
-__all__ = ["ModalFit", "fit_modes", "noise_std"]
+__all__ = ["ModalFit", "fit_modes", "name_modes", "noise_std"]
 
 FloatArray = npt.NDArray[np.float64]
 ComplexArray = npt.NDArray[np.complex128]
@@ -103,6 +103,33 @@ class ModalFit:
         E = _exp(np.outer(t, p)) - np.exp(np.maximum(-mu * t, -600.0))[:, None]
         gain = p / (p + mu)
         return np.asarray((E @ (gain[:, None] * self.amplitudes)).real, dtype=float)
+
+
+def name_modes(shapes: ComplexArray, mass_matrix: FloatArray) -> tuple[int, int]:
+    """Return the indices of the heave- and pitch-dominated modes, by kinetic-energy share.
+
+    ``|phi|^2`` weighted by the diagonal of the mass matrix is each coordinate's share of a
+    mode's kinetic energy; comparing shares (not raw amplitudes) makes ``h/B`` and ``alpha``
+    comparable. With more than two modes, the two that are most heave and most pitch (jointly,
+    an assignment) are named.
+
+    Parameters
+    ----------
+    shapes : ndarray, complex, shape (n_modes, 2)
+        Each mode's amplitudes of ``[h/B, alpha]`` (any complex scale per mode), n_modes >= 2.
+    mass_matrix : ndarray, shape (2, 2)
+        The section's mass matrix for ``q = [h/B, alpha]`` (:meth:`SectionModel.mass_matrix`).
+
+    Returns
+    -------
+    (int, int)
+        Row of ``shapes`` of the heave mode, then of the pitch mode.
+    """
+    share = np.abs(np.asarray(shapes).T) ** 2 * np.diag(mass_matrix)[:, None]  # (coord, mode)
+    share = share / share.sum(axis=0, keepdims=True)
+    rows, cols = linear_sum_assignment(-share)  # row 0 = heave, row 1 = pitch
+    by_row = dict(zip(rows.tolist(), cols.tolist(), strict=True))
+    return int(by_row[0]), int(by_row[1])
 
 
 def noise_std(x: FloatArray) -> FloatArray:

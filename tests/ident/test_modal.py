@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from ident import AeroelasticSystem, SectionModel, flat_plate, flutter
-from ident.modal import fit_modes, noise_std
+from ident.modal import fit_modes, name_modes, noise_std
 from simulators import simulate_release
 
 SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
@@ -100,3 +100,15 @@ def test_refinement_starts_inside_the_bounds_whatever_the_start_values():
     assert np.all(theta >= bounds[0][:4]) and np.all(theta <= bounds[1][:4])
     reference, _ = modal._refine(tb, yb, block, t[1] - t[0], 2, 0, good, bounds, loose=False)
     assert np.all(np.isfinite(theta)) and np.all(np.isfinite(reference))
+
+
+def test_modes_are_named_by_their_kinetic_energy_share_not_their_amplitude():
+    # h/B amplitude 1 against alpha 1.5: by amplitude the first mode would be pitch, but with
+    # m B^2 = 0.27 and I = 0.03 its kinetic energy is 0.27 / (0.27 + 0.0675) = 80 % heave.
+    mass = np.diag([0.27, 0.03])
+    shapes = np.array([[0.2j, 1.0], [1.0, 1.5j]])
+    assert name_modes(shapes, mass) == (1, 0)
+    # A third (spurious) mode, 69 % heave: the pair most heave and most pitch jointly is named.
+    three = np.vstack([shapes, [[0.5, 1.0]]])
+    assert name_modes(three, mass) == (1, 0)
+    assert name_modes(np.vstack([shapes, [[1.0, 0.1]]]), mass) == (2, 0)  # 99 % heave
