@@ -122,10 +122,13 @@ def write_release_run(path: str | Path, config: Any, releases: Sequence[Any]) ->
         The run file to create.
     config : RigConfig
         Stored verbatim (its section and rig name are the file's).
-    releases : sequence of Release
+    releases : sequence of Release or SimulatedRelease
         One row of ``/entry/releases`` each; the sync view holds their samples one after the
         other on one time base (the tap pressures are zero: not simulated here), U constant
-        and the release's air density (1.2 kg/m^3 when it has none).
+        and the release's air density (1.2 kg/m^3 when it has none). Samples before a
+        release's ``t = 0`` (a simulated hold, ``pre_s``) are written before its release row's
+        start; its ``h0``/``alpha0`` are the release's own when it has them, else the samples
+        at ``t = 0``.
     """
     from daq.recorder import RunRecorder
 
@@ -137,14 +140,17 @@ def write_release_run(path: str | Path, config: Any, releases: Sequence[Any]) ->
     rec.start()
     rows, t0 = 0, 0.0
     for r in releases:
-        t = t0 + r.t
+        t = t0 - float(r.t[0]) + r.t  # the release's first sample (held or free) at t0
         n = t.size
+        first = int(np.searchsorted(r.t, 0.0))  # the release instant, t = 0
         rho = 1.2 if r.rho is None else float(r.rho)
         rec.append_sync(t, h=r.h, alpha=r.alpha, lift=r.lift, moment=r.moment,
                         pressure=np.zeros((n, n_taps), dtype=np.float32), U=np.full(n, r.U),
                         rho=np.full(n, rho))
-        rec.add_release(release_time=t0, start_index=rows, stop_index=rows + n, U=r.U,
-                        h0=float(r.h[0]), alpha0=float(r.alpha[0]))
+        rec.add_release(release_time=float(t[first]), start_index=rows + first,
+                        stop_index=rows + n, U=r.U,
+                        h0=float(getattr(r, "h0", r.h[first])),
+                        alpha0=float(getattr(r, "alpha0", r.alpha[first])))
         rows += n
         t0 = float(t[-1]) + float(r.t[1] - r.t[0])
     rec.close()

@@ -24,8 +24,8 @@ from daq.cli import main
 from daq.config import parse_rig_config
 from daq.live import ConsoleWindow
 from daq.live_ident import fit_release_modes, identify_releases
-from daq.recorder import RunRecorder
 from daq.replay import ReplaySource
+from daq.testing import write_release_run
 from ident import flat_plate, flutter
 from ident.io import campaign_section, read_run
 from simulators import simulate_release
@@ -163,26 +163,10 @@ def releases_file(tmp_path_factory) -> Path:
     config = flat_plate_config()
     section, truth = config.section.replace(rho=1.2), flat_plate.jones_model()
     path = tmp_path_factory.mktemp("releases") / "run.h5"
-    rec = RunRecorder(path, config_text=config.text, rig_name=config.name, min_free_bytes=0,
-                      reserve_bytes=0)
-    rec.open()
-    n_taps = config.taps.n_taps
-    rec.add_sync([f"tap{i:03d}" for i in range(n_taps)])
-    rec.start()
-    t0, rows = 0.0, 0
-    for seed, U in enumerate(REPLAY_SPEEDS):
-        sim = simulate_release(section, truth, U, 0.004, 0.02, duration=REPLAY_DECAY_S,
-                               fs=REPLAY_RATE, noise=0.01, rng=seed, pre_s=1.0)
-        t = t0 + 1.0 + sim.t
-        n = t.size
-        rec.append_sync(t, h=sim.h, alpha=sim.alpha, lift=sim.lift, moment=sim.moment,
-                        pressure=np.zeros((n, n_taps)), U=np.full(n, U), rho=np.full(n, 1.2))
-        start = rows + int(np.searchsorted(sim.t, 0.0))
-        rec.add_release(release_time=t0 + 1.0, start_index=start, stop_index=rows + n, U=U,
-                        h0=0.004, alpha0=0.02)
-        rows += n
-        t0 = float(t[-1]) + 1.0 / REPLAY_RATE  # the next hold follows
-    rec.close()
+    write_release_run(path, config, [
+        simulate_release(section, truth, U, 0.004, 0.02, duration=REPLAY_DECAY_S,
+                         fs=REPLAY_RATE, noise=0.01, rng=seed, pre_s=1.0)  # 1 s held first
+        for seed, U in enumerate(REPLAY_SPEEDS)])
     return path
 
 
