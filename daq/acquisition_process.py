@@ -48,7 +48,7 @@ from typing import Any
 
 from daq.config import RigConfig
 from daq.errors import DaqError
-from daq.live_source import LiveSource, Recording, ring_rows
+from daq.live_source import LiveSource, Recording, check_live_options, ring_rows
 from daq.ring_buffer import RingBuffer
 from daq.shared_ring import SharedRingBuffer, SharedRingHandle
 from daq.source import DeviceHealth, RingSource, SourceInfo, sync_columns
@@ -310,8 +310,7 @@ class ProcessLiveSource(RingSource):
                  fan_rpm: float | None = None, sync_pulse_interval_s: float | None = 0.5,
                  record_dir: str | Path | None = None,
                  start_timeout_s: float = START_TIMEOUT_S) -> None:
-        # The same checks as the child's, before a process is started for nothing.
-        LiveSource(config, simulate=simulate, window_s=window_s, fan_rpm=fan_rpm)
+        check_live_options(window_s, fan_rpm)  # the child's checks, before it is started
         self.config = config
         self.window_s = float(window_s)
         self.record_dir = Path.cwd() if record_dir is None else Path(record_dir)

@@ -49,7 +49,8 @@ from daq.recorder import RunRecorder
 from daq.ring_buffer import RingBuffer
 from daq.source import DeviceHealth, RingSource, SourceInfo, sync_columns
 
-__all__ = ["STALL_S", "LiveSource", "Recording", "RecordingError", "RingRecorder", "ring_rows"]
+__all__ = ["STALL_S", "LiveSource", "Recording", "RecordingError", "RingRecorder",
+           "check_live_options", "ring_rows"]
 
 log = logging.getLogger(__name__)
 
@@ -87,6 +88,20 @@ STOP_CATCH_UP_S = 3.0
 #: Devices whose blocks come further apart than this (polled ones: the 1 Hz barometer) are not
 #: waited for by a stop, s.
 SLOW_BLOCKS_S = 0.25
+
+
+def check_live_options(window_s: float, fan_rpm: float | None) -> None:
+    """Refuse a history length or a starting fan speed a live source cannot take.
+
+    Raises
+    ------
+    ValueError
+        ``window_s`` is not a number of seconds > 0, or ``fan_rpm`` not None or >= 0.
+    """
+    if not (isinstance(window_s, (int, float)) and 0 < window_s < math.inf):
+        raise ValueError(f"window_s = {window_s!r} must be a number of seconds > 0")
+    if fan_rpm is not None and not (math.isfinite(fan_rpm) and fan_rpm >= 0):
+        raise ValueError(f"fan_rpm = {fan_rpm!r} must be a number of rpm >= 0")
 
 
 def ring_rows(config: RigConfig, window_s: float) -> int:
@@ -602,10 +617,7 @@ class LiveSource(RingSource):
                  fan_rpm: float | None = None,
                  sync_pulse_interval_s: float | None = 0.5,
                  record_dir: str | Path | None = None, ring: RingBuffer | None = None) -> None:
-        if not (isinstance(window_s, (int, float)) and 0 < window_s < math.inf):
-            raise ValueError(f"window_s = {window_s!r} must be a number of seconds > 0")
-        if fan_rpm is not None and not (math.isfinite(fan_rpm) and fan_rpm >= 0):
-            raise ValueError(f"fan_rpm = {fan_rpm!r} must be a number of rpm >= 0")
+        check_live_options(window_s, fan_rpm)
         self.config = config
         self.simulate = bool(simulate)
         self.window_s = float(window_s)
