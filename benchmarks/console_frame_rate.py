@@ -433,12 +433,11 @@ def cycle_releases(acq: Any, stop: threading.Event, first_s: float = 1.0) -> Non
 
 
 @contextmanager
-def console(source: DataSource, frame_ms: int,
-            window_class: type[MeteredWindow] = MeteredWindow) -> Iterator[MeteredWindow]:
+def console(source: DataSource, frame_ms: int) -> Iterator[MeteredWindow]:
     """Show a metered console window over ``source``; close it (and the source) at the end."""
     app: Any = QtWidgets.QApplication.instance() or QtWidgets.QApplication(sys.argv[:1])
     assert app is not None
-    window = window_class(source, window_s=WINDOW_S, frame_ms=frame_ms)
+    window = MeteredWindow(source, window_s=WINDOW_S, frame_ms=frame_ms)
     window.hook_scatter()
     hook_ring(source)
     window.resize(*WINDOW_SIZE)
@@ -453,13 +452,11 @@ def console(source: DataSource, frame_ms: int,
 
 
 def measure(label: str, source: DataSource, *, rig_pid: int | None, acq_pid: int | None,
-            warmup_s: float,
-            seconds: float, frame_ms: int = FRAME_MS,
-            profile: Callable[[MeteredWindow], None] | None = None,
-            window_class: type[MeteredWindow] = MeteredWindow) -> Result:
+            warmup_s: float, seconds: float, frame_ms: int = FRAME_MS,
+            profile: Callable[[MeteredWindow], None] | None = None) -> Result:
     """Warm up, then measure ``seconds`` of the console over an opened ``source``."""
     taps = source.info.config.taps.n_taps
-    with console(source, frame_ms, window_class) as window:
+    with console(source, frame_ms) as window:
         spin(warmup_s)
         METER.reset()
         rig0 = process_cpu_s(rig_pid) if rig_pid is not None else math.nan
@@ -530,7 +527,6 @@ def measure(label: str, source: DataSource, *, rig_pid: int | None, acq_pid: int
 
 def run_live(label: str, config: RigConfig, args: argparse.Namespace,
              profile: Callable[[MeteredWindow], None] | None = None,
-             window_class: type[MeteredWindow] = MeteredWindow,
              threads: bool = False) -> Result:
     """Measure the console over a live simulated rig, fan on, releases cycling.
 
@@ -556,7 +552,7 @@ def run_live(label: str, config: RigConfig, args: argparse.Namespace,
     actions.start()
     try:
         return measure(label, source, rig_pid=rig_pid, acq_pid=acq_pid, warmup_s=args.warmup,
-                       seconds=args.seconds, profile=profile, window_class=window_class)
+                       seconds=args.seconds, profile=profile)
     finally:
         stop.set()
         actions.join(10.0)
