@@ -60,6 +60,9 @@ class CampaignResult:
         Flutter speed of the identified model, m/s (None: no flutter found).
     identified_std : float or None
         Its standard deviation, m/s.
+    structures : StructureSpread or None
+        The flutter speeds of the structures within one standard error of the best, the
+        chosen one first.
     relative_error : float or None
         ``identified / truth - 1``.
     n_releases : int
@@ -86,6 +89,7 @@ class CampaignResult:
     plots: dict[str, Path] = field(default_factory=dict)
     model: RationalFunctionModel | None = field(default=None, repr=False)
     releases: list[Release] = field(default_factory=list, repr=False)
+    structures: e2rfc.StructureSpread | None = None
 
     def summary(self) -> str:
         """Plain-text summary for operators and logs."""
@@ -100,6 +104,8 @@ class CampaignResult:
         else:
             std = "" if self.identified_std is None else f" +- {self.identified_std:.3f}"
             lines.append(f"identified flutter speed  {self.identified_speed:.3f}{std} m/s")
+            if self.structures is not None:
+                lines.append(f"structure                 {self.structures.summary()}")
             if self.relative_error is not None:
                 lines.append(f"relative error            {100 * self.relative_error:+.2f} %")
         lines.append("wall time " + ", ".join(f"{k} {v:.1f} s" for k, v in self.timings.items()))
@@ -250,7 +256,8 @@ def run_campaign(config: RigConfig, out_dir: str | Path, *,
         identified_std=std, relative_error=error, n_releases=len(releases), decay_s=decay_s,
         timings={"acquisition": t_acq, "identification": t_ident, "plots": t_plots,
                  "total": time.monotonic() - started},
-        plots=plots, model=model, releases=releases)
+        plots=plots, model=model, releases=releases,
+        structures=model.structure_spread(file_section))
 
 
 def _plots(out: Path, releases: list[Release], section: SectionModel,

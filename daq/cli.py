@@ -240,6 +240,7 @@ def _identify(args: argparse.Namespace) -> int:
           f"{sorted({round(r.U, 2) for r in releases})} m/s")
     model = e2rfc.identify(releases, section, n_lags=args.n_lags)
     result, std = model.flutter(section)
+    spread = model.structure_spread(section)
     diagnostics = model.diagnostics
     print(f"structure: {diagnostics.reason}")
     print(f"lag roots d = {np.round(model.d, 4).tolist()}")
@@ -249,7 +250,13 @@ def _identify(args: argparse.Namespace) -> int:
         print(result.summary())
     else:
         print(f"flutter speed {result.speed:.3f} +/- {std:.3f} m/s, frequency "
-              f"{result.frequency:.3f} Hz ({result.critical_mode} branch)")
+              f"{result.frequency:.3f} Hz ({result.critical_mode} branch); "
+              f"{spread.summary()}")
+    for label, speed, speed_std in zip(spread.labels[1:], spread.speeds[1:], spread.stds[1:],
+                                       strict=True):
+        print(f"  also within one SE: {label}: " + (
+            f"no flutter below {spread.U_max:.3g} m/s" if speed is None or speed_std is None
+            else f"flutter speed {speed:.3f} +/- {speed_std:.3f} m/s"))
     if args.json is not None:
         args.json.write_text(json.dumps({
             "files": [str(p) for p in args.files],
@@ -258,6 +265,7 @@ def _identify(args: argparse.Namespace) -> int:
             "release_residuals": diagnostics.release_residuals.tolist(),
             "flutter_speed": result.speed,
             "flutter_speed_std": std,
+            "flutter_speed_structures": dict(zip(spread.labels, spread.speeds, strict=True)),
             "flutter_frequency": result.frequency,
             "critical_mode": result.critical_mode,
         }, indent=2))
@@ -296,6 +304,9 @@ def _reprocess(args: argparse.Namespace) -> int:
         speed = c.get("flutter_speed")
         flutter_text = ("no flutter found" if speed is None
                         else f"U_F = {speed:.3f} +- {c.get('flutter_std') or 0.0:.3f} m/s")
+        low, high = c.get("flutter_speed_low"), c.get("flutter_speed_high")
+        if speed is not None and low is not None and high is not None and low < high:
+            flutter_text += f" ({low:.3f}-{high:.3f} over the structures within one SE)"
         print(f"{c.get('name')}: {len(c['files'])} file(s), {c['n_releases']} releases at "
               f"{c['wind_speeds']} m/s: {flutter_text}; effect: {c.get('effect')}")
     print("wall time " + ", ".join(f"{k} {v:.1f} s" for k, v in summary.timings.items()))

@@ -147,6 +147,9 @@ def _summary(result: Any, truth: Any, rows: list[dict[str, Any]],
         "truth_flutter_frequency": truth.frequency,
         "identified_flutter_speed": result.identified_speed,
         "identified_flutter_speed_std": result.identified_std,
+        "identified_flutter_speed_structures": (
+            None if result.structures is None
+            else dict(zip(result.structures.labels, result.structures.speeds, strict=True))),
         "relative_error": result.relative_error,
         "target_relative_error": TARGET_RELATIVE_ERROR,
         "model": None if result.model is None else result.model.to_dict(),

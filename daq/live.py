@@ -383,7 +383,12 @@ class ConsoleWindow(QtWidgets.QMainWindow):
             self.flutter_label.setText("U_F = --" if fit is None else "U_F: none found")
         else:
             std = "" if fit.flutter_std is None else f" +- {fit.flutter_std:.2f}"
-            self.flutter_label.setText(f"U_F = {fit.flutter_speed:.2f}{std} m/s")
+            spread = fit.structures
+            # The range only when the data leave the structure open: the std alone would
+            # claim more than they hold.
+            also = ("" if spread is None or len(spread.labels) == 1
+                    else f" ({spread.summary().replace(' within one SE', '')})")
+            self.flutter_label.setText(f"U_F = {fit.flutter_speed:.2f}{std} m/s{also}")
 
     def show_health(self, health: list[DeviceHealth], fan_rpm: float) -> None:
         """Fill the health panel, the alarm line and the fan state (live sources only)."""

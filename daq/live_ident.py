@@ -141,6 +141,9 @@ class CampaignFit:
         heave column at ``K_h``, the pitch column at ``K_a``); None when it failed.
     table_error : str or None
         Why the table is missing.
+    structures : StructureSpread or None
+        Flutter speeds of every structure within one standard error of the best, the chosen
+        one first (see :meth:`ident.e2rfc.IdentifiedModel.structure_spread`).
     """
 
     n_releases: int
@@ -154,6 +157,7 @@ class CampaignFit:
     derivatives: dict[str, FloatArray] = field(repr=False)
     table: fd_method.FlutterDerivativeTable | None = field(repr=False)
     table_error: str | None = None
+    structures: e2rfc.StructureSpread | None = None
 
     def summary(self) -> str:
         """Return one line: the flutter speed, the model and the data it rests on."""
@@ -164,7 +168,8 @@ class CampaignFit:
             return f"no flutter predicted ({model}; {data})"
         std = "" if self.flutter_std is None else f" +- {self.flutter_std:.2f}"
         freq = "" if self.flutter_frequency is None else f" at {self.flutter_frequency:.2f} Hz"
-        return f"flutter speed {self.flutter_speed:.2f}{std} m/s{freq} ({model}; {data})"
+        spread = "" if self.structures is None else f"; {self.structures.summary()}"
+        return f"flutter speed {self.flutter_speed:.2f}{std} m/s{freq} ({model}; {data}{spread})"
 
 
 def fit_release_modes(t: FloatArray, h: FloatArray, alpha: FloatArray,
@@ -241,7 +246,7 @@ def identify_releases(releases: Sequence[Release], section: SectionModel) -> Cam
         flutter_frequency=None if result.frequency is None else float(result.frequency),
         K=K, derivatives={name: np.asarray(fds[name], dtype=float)
                           for name in FLUTTER_DERIVATIVE_NAMES},
-        table=table, table_error=table_error)
+        table=table, table_error=table_error, structures=model.structure_spread(section))
 
 
 def _spawn_executor() -> Executor:

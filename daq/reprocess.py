@@ -231,7 +231,9 @@ def process_campaign(name: str, files: list[dict[str, Any]],
     -------
     dict
         ``files``, ``n_releases``, ``wind_speeds``, and ``model`` (dict), ``structure``,
-        ``flutter_speed``, ``flutter_std``, ``flutter_frequency``, ``effect`` and the gaps, or
+        ``flutter_speed``, ``flutter_std``, ``flutter_frequency``, ``flutter_structures`` (the
+        flutter speed of every structure within one standard error of the best, by label, None
+        for no flutter), ``effect`` and the gaps, or
         ``error`` when E2RFC cannot identify a model (one wind speed).
     """
     from ident import e2rfc
@@ -262,9 +264,12 @@ def process_campaign(name: str, files: list[dict[str, Any]],
         out["error"] = f"{type(exc).__name__}: {exc}"
         return out
     result, std = model.flutter(section)
+    spread = model.structure_spread(section)
     K = e2rfc.reduced_frequency_span(releases, section, 100)
     out.update(model=model.to_dict(), structure=model.diagnostics.reason,
                flutter_speed=result.speed, flutter_std=std, flutter_frequency=result.frequency,
+               flutter_structures=dict(zip(spread.labels, spread.speeds, strict=True)),
+               flutter_speed_low=spread.low, flutter_speed_high=spread.high,
                K=K, derivatives={k: np.asarray(v) for k, v in
                                  model.flutter_derivatives(K).items()},
                curves={"U": result.U, "frequencies": result.frequencies,
@@ -493,8 +498,9 @@ def _cache_store(cache_dir: Path, path: str, result: dict[str, Any]) -> None:
 
 _RELEASE_FIELDS = ("file", "release", "U", "f_h", "zeta_h", "f_a", "zeta_a", "campaign")
 _CAMPAIGN_FIELDS = ("campaign", "n_files", "n_releases", "wind_speeds", "flutter_speed",
-                    "flutter_std", "flutter_frequency", "structure", "effect", "gap_before",
-                    "gap_after", "error")
+                    "flutter_std", "flutter_speed_low", "flutter_speed_high",
+                    "flutter_frequency", "structure", "effect", "gap_before", "gap_after",
+                    "error")
 
 
 def _write_outputs(out: Path, results: dict[str, dict[str, Any]],
@@ -516,6 +522,10 @@ def _write_outputs(out: Path, results: dict[str, dict[str, Any]],
             "campaign": names[id(c)], "n_files": len(c.get("files", [])),
             "n_releases": c.get("n_releases"), "wind_speeds": c.get("wind_speeds"),
             "flutter_speed": c.get("flutter_speed"), "flutter_std": c.get("flutter_std"),
+            # Over the structures within one standard error of the best (high: inf when one
+            # of them has no flutter below the analysis' upper speed).
+            "flutter_speed_low": c.get("flutter_speed_low"),
+            "flutter_speed_high": c.get("flutter_speed_high"),
             "flutter_frequency": c.get("flutter_frequency"), "structure": c.get("structure"),
             "effect": c.get("effect"), "gap_before": c.get("gap_before"),
             "gap_after": c.get("gap_after"), "error": c.get("error")})

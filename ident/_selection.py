@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["Candidate", "select_one_se"]
+__all__ = ["Candidate", "select_one_se", "within_one_se"]
 
 
 @dataclass(frozen=True)
@@ -61,11 +61,32 @@ def select_one_se(usable: list[Candidate], *, given: bool) -> tuple[Candidate, s
     if given:
         return usable[0], "given by the caller"
     best = min(usable, key=lambda c: c.cv_error)
-    threshold = best.cv_error + best.cv_se
-    simple = min((c for c in usable if c.cv_error <= threshold), key=lambda c: c.n_params)
+    simple = min(within_one_se(usable), key=lambda c: c.n_params)
     reason = (
         f"{simple.label}: the simplest structure whose held-out error ({simple.cv_error:.4g}) is "
         f"within one standard error of the best ({best.cv_error:.4g} +/- {best.cv_se:.2g}, "
         f"{best.label})"
     )
     return simple, reason
+
+
+def within_one_se(usable: list[Candidate]) -> list[Candidate]:
+    """Return the scored candidates whose held-out error is within one standard error of the best.
+
+    The data do not tell these structures apart: the one-standard-error rule picks the simplest
+    of them, and the spread of what they predict is an uncertainty of the model's structure
+    that the chosen structure's parameter covariance does not hold.
+
+    Parameters
+    ----------
+    usable : list of Candidate
+        Scored candidates (none skipped); not empty.
+
+    Returns
+    -------
+    list of Candidate
+        In the order given.
+    """
+    best = min(usable, key=lambda c: c.cv_error)
+    threshold = best.cv_error + best.cv_se
+    return [c for c in usable if c.cv_error <= threshold]

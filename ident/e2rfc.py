@@ -17,7 +17,10 @@ linear least-squares solve, so the nonlinear search runs over log(d) alone (scip
 least squares, several starts spread over the reduced frequencies the data cover). The number of
 lags (0 to 3) and whether the added-mass matrix A3 is fitted are chosen by five-fold held-out
 error (folds of interleaved one-period blocks of every release), with the one-standard-error rule:
-the simplest model whose held-out error is within one standard error of the best.
+the simplest model whose held-out error is within one standard error of the best. The other
+structures within one standard error are fitted too (``diagnostics.alternatives``): the data do not
+tell them apart, and the spread of their flutter speeds (:meth:`IdentifiedModel.structure_spread`)
+is an uncertainty that the chosen structure's parameter covariance cannot show.
 """
 
 from __future__ import annotations
@@ -34,7 +37,7 @@ from scipy.optimize import least_squares
 
 from ident import flutter as _flutter
 from ident._regressors import PreparedRelease, prepare
-from ident._selection import Candidate, select_one_se
+from ident._selection import Candidate, select_one_se, within_one_se
 from ident._stats import autocorrelation_inflation
 from ident._threads import single_threaded_blas
 from ident.errors import RankDeficiencyError
@@ -43,8 +46,8 @@ from ident.release import Release
 from ident.rfc import RationalFunctionModel
 from ident.section import SectionModel
 
-__all__ = ["Candidate", "E2RFCDiagnostics", "IdentifiedModel", "distinct_wind_speeds", "identify",
-           "reduced_frequency_span"]
+__all__ = ["Candidate", "E2RFCDiagnostics", "IdentifiedModel", "StructureSpread",
+           "distinct_wind_speeds", "identify", "reduced_frequency_span"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -81,6 +84,10 @@ class E2RFCDiagnostics:
         ``(k, i, j)`` of ``A[k, i, j]`` for each of the first covariance rows.
     modal_fits : tuple of ModalFit
         Modal fit of each release's displacements ``[h/B, alpha]`` (frequencies, damping).
+    alternatives : tuple of IdentifiedModel
+        The other structures whose held-out error is within one standard error of the best,
+        each fitted on every sample as the chosen one is (empty when the caller gave the
+        structure).
     """
 
     n_lags: int
@@ -93,6 +100,55 @@ class E2RFCDiagnostics:
     covariance: FloatArray = field(repr=False)
     parameter_index: tuple[tuple[int, int, int], ...] = field(repr=False)
     modal_fits: tuple[ModalFit, ...] = field(repr=False)
+    alternatives: tuple[IdentifiedModel, ...] = field(default=(), repr=False)
+
+
+@dataclass(frozen=True)
+class StructureSpread:
+    """Flutter speeds of the structures the held-out error does not tell apart.
+
+    Attributes
+    ----------
+    labels : tuple of str
+        The structures, the chosen one first (e.g. ``n_lags=2, A3=zero``).
+    speeds : tuple of float or None
+        Flutter speed of each, m/s; None when it has no flutter below ``U_max``.
+    stds : tuple of float or None
+        Standard deviation of each from its own parameter covariance, m/s.
+    U_max : float
+        Upper end of the searched wind speeds, m/s.
+    """
+
+    labels: tuple[str, ...]
+    speeds: tuple[float | None, ...]
+    stds: tuple[float | None, ...]
+    U_max: float
+
+    @property
+    def low(self) -> float | None:
+        """Lowest flutter speed over the structures, m/s (None: none flutters)."""
+        found = [u for u in self.speeds if u is not None]
+        return min(found) if found else None
+
+    @property
+    def high(self) -> float | None:
+        """Highest flutter speed, m/s; ``inf`` when a structure has none below ``U_max``."""
+        if self.low is None:
+            return None
+        return math.inf if None in self.speeds else max(u for u in self.speeds if u is not None)
+
+    def summary(self) -> str:
+        """One phrase, e.g. ``11.91-12.11 m/s over 3 structures within one SE``."""
+        n = len(self.labels)
+        if n == 1:
+            return "one structure within one SE"
+        low, high = self.low, self.high
+        if low is None or high is None:
+            return f"no flutter below {self.U_max:.3g} m/s over {n} structures within one SE"
+        if math.isinf(high):
+            return (f"{low:.2f} m/s to no flutter below {self.U_max:.3g} m/s over {n} "
+                    "structures within one SE")
+        return f"{low:.2f}-{high:.2f} m/s over {n} structures within one SE"
 
 
 class IdentifiedModel(RationalFunctionModel):
@@ -129,6 +185,36 @@ class IdentifiedModel(RationalFunctionModel):
         )
         variance = float(gradient @ self.diagnostics.covariance @ gradient)
         return result, math.sqrt(max(variance, 0.0))
+
+    def structure_spread(self, section: SectionModel, U_max: float | None = None
+                         ) -> StructureSpread:
+        """Flutter speed of this model and of every alternative structure within one SE.
+
+        With one short release per wind speed the held-out error often cannot tell one lag from
+        two; the structures it cannot tell apart may predict flutter speeds further apart than
+        the chosen one's standard deviation. Report this spread next to that deviation.
+
+        Parameters
+        ----------
+        section : SectionModel
+        U_max : float, optional
+            Upper end of the searched wind speeds, m/s (default: :func:`ident.flutter.analyze`'s).
+
+        Returns
+        -------
+        StructureSpread
+        """
+        models = (self, *self.diagnostics.alternatives)
+        labels, speeds, stds = [], [], []
+        searched = math.nan
+        for model in models:
+            result, std = model.flutter(section, U_max)
+            searched = result.U_max
+            labels.append(f"n_lags={model.diagnostics.n_lags}, "
+                          f"A3={'fitted' if model.diagnostics.with_A3 else 'zero'}")
+            speeds.append(result.speed)
+            stds.append(std)
+        return StructureSpread(tuple(labels), tuple(speeds), tuple(stds), float(searched))
 
 
 @single_threaded_blas
@@ -233,11 +319,13 @@ def _identify_prepared(
         notes = "; ".join(f"n_lags={c.n_lags}, A3={c.with_A3}: {c.note}" for c in candidates)
         raise RankDeficiencyError(f"no model structure is determined by these releases ({notes})")
     chosen, reason = select_one_se(usable, given=given)
-    if not given:
-        polished = problem.search(chosen.n_lags, chosen.with_A3, [np.array(chosen.d)],
-                                  loose=False)
-        chosen = dataclasses.replace(chosen, d=tuple(float(x) for x in polished))
-    return problem.final(chosen, tuple(candidates), reason)
+    if given:
+        return problem.final(chosen, tuple(candidates), reason)
+    alternatives = tuple(
+        problem.final(problem.polished(c), tuple(candidates),
+                      f"{c.label}: within one standard error of the best, not chosen")
+        for c in within_one_se(usable) if c is not chosen)
+    return problem.final(problem.polished(chosen), tuple(candidates), reason, alternatives)
 
 
 def distinct_wind_speeds(speeds: Sequence[float]) -> list[float]:
@@ -479,8 +567,14 @@ class _Problem:
         labels = (np.floor((t - t[0]) / period).astype(int)) % N_FOLDS
         return [np.flatnonzero(labels == k) for k in range(N_FOLDS)]
 
+    def polished(self, candidate: Candidate) -> Candidate:
+        """Return the candidate with its lag roots searched again at full precision."""
+        d = self.search(candidate.n_lags, candidate.with_A3, [np.array(candidate.d)], loose=False)
+        return dataclasses.replace(candidate, d=tuple(float(x) for x in d))
+
     def final(
-        self, chosen: Candidate, candidates: tuple[Candidate, ...], reason: str
+        self, chosen: Candidate, candidates: tuple[Candidate, ...], reason: str,
+        alternatives: tuple[IdentifiedModel, ...] = (),
     ) -> IdentifiedModel:
         """Fit the chosen structure on every sample and assemble the model and diagnostics."""
         d = np.array(chosen.d)
@@ -510,6 +604,7 @@ class _Problem:
             covariance=covariance,
             parameter_index=tuple(index),
             modal_fits=tuple(p.fit for p in self.prepared),
+            alternatives=alternatives,
         )
         return IdentifiedModel(A, d, diagnostics)
 

@@ -215,6 +215,11 @@ def test_replay_shows_the_releases_and_model_that_the_file_gives(qtbot, releases
     fit = ident.campaign
     assert fit.flutter_speed == pytest.approx(expected_fit.flutter_speed, rel=1e-6)
     assert window.flutter_label.text().startswith(f"U_F = {fit.flutter_speed:.2f}")
+    # The range over the structures within one SE is shown when there are several, not else.
+    spread = fit.structures
+    assert spread is not None
+    range_text = spread.summary().replace(" within one SE", "")
+    assert (range_text in window.flutter_label.text()) == (len(spread.labels) > 1)
     # The table values drawn are the indirect method's, one point per wind speed.
     assert fit.table is not None
     xs, ys = window.derivatives_panel.points["A3"].getData()

@@ -129,6 +129,11 @@ def test_each_release_gets_its_modes_and_two_wind_speeds_give_the_flutter_speed(
     assert fit.flutter_speed == pytest.approx(U_F, rel=0.03)
     assert fit.flutter_std is not None and 0 < fit.flutter_std < 0.03 * U_F
     assert "flutter speed" in ident.campaign_status
+    # The chosen structure first among those the data cannot tell apart, its speed the one shown.
+    spread = fit.structures
+    assert spread is not None and spread.speeds[0] == fit.flutter_speed
+    assert spread.labels[0] == f"n_lags={fit.n_lags}, A3={'fitted' if fit.with_A3 else 'zero'}"
+    assert spread.summary() in fit.summary()
     # The model's derivatives against the truth where the releases are (the big ones, 5 %).
     exact = TRUTH.flutter_derivatives(fit.K)
     for name in ("H1", "A2", "A3"):

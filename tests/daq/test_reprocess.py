@@ -68,6 +68,15 @@ def test_reprocess_matches_identify_and_reports_the_bad_files(folder, tmp_path, 
     assert campaign["flutter_speed"] == pytest.approx(expected["flutter_speed"], rel=1e-9)
     assert campaign["flutter_std"] == pytest.approx(expected["flutter_speed_std"], rel=1e-6)
     assert np.allclose(campaign["model"]["d"], expected["model"]["d"], rtol=1e-9)
+    # The structures within one SE of the best, as identify reports them, and their range.
+    structures = expected["flutter_speed_structures"]
+    assert list(campaign["flutter_structures"]) == list(structures)
+    assert np.allclose(list(campaign["flutter_structures"].values()), list(structures.values()),
+                       rtol=1e-9)
+    assert campaign["flutter_speed_low"] == pytest.approx(min(structures.values()), rel=1e-9)
+    assert campaign["flutter_speed_high"] == pytest.approx(max(structures.values()), rel=1e-9)
+    assert (campaign["flutter_speed_low"] <= campaign["flutter_speed"]
+            <= campaign["flutter_speed_high"])
     assert campaign["effect"] is None  # a clean campaign: no discrepancy
 
     with (out / "releases.csv").open() as f:
@@ -76,6 +85,10 @@ def test_reprocess_matches_identify_and_reports_the_bad_files(folder, tmp_path, 
     assert all(1.8 < float(r["f_h"]) < 2.2 and 3.0 < float(r["f_a"]) < 4.1 for r in rows)
     data = json.loads((out / "summary.json").read_text())
     assert data["campaigns"][0]["flutter_speed"] == pytest.approx(campaign["flutter_speed"])
+    with (out / "campaigns.csv").open() as f:
+        (row,) = list(csv.DictReader(f))
+    assert float(row["flutter_speed_low"]) == pytest.approx(campaign["flutter_speed_low"])
+    assert float(row["flutter_speed_high"]) == pytest.approx(campaign["flutter_speed_high"])
     report = (out / "index.html").read_text()
     assert "campaign_1_flutter_derivatives.png" in report and "notes.h5" in report
     assert "campaign_1_modes.png" in report

@@ -15,6 +15,7 @@ from ident import (
     flutter,
     roger_fit,
 )
+from ident._selection import within_one_se
 from simulators import simulate_release
 
 SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
@@ -123,3 +124,57 @@ def test_diagnostics_are_complete_and_consistent():
     assert 1.0 <= diagnostics.condition_number < e2rfc.MAX_CONDITION
     for k, i, j in diagnostics.parameter_index:
         assert model.A[k, i, j] != 0.0
+
+
+def test_the_structures_the_data_cannot_tell_apart_are_fitted_and_their_spread_reported():
+    """Every structure within one SE of the best is fitted; its flutter speed is reported.
+
+    Short releases (4 s, one per speed, 2 % noise): seed 5 leaves 2 and 3 lags within one
+    standard error of each other (found by trying seeds 0-5; the others give one structure).
+    """
+    data = releases(JONES, (0.46, 0.59, 0.72), noise=0.02, seed=5, duration=4.0)
+    model = e2rfc.identify(data, SECTION)
+    diagnostics = model.diagnostics
+    usable = [c for c in diagnostics.candidates if not c.note]
+    plausible = {c.label for c in within_one_se(usable)}
+    assert len(plausible) >= 2  # the case this test is about
+    spread = model.structure_spread(SECTION)
+    chosen = f"n_lags={diagnostics.n_lags}, A3={'fitted' if diagnostics.with_A3 else 'zero'}"
+    assert spread.labels[0] == chosen and set(spread.labels) == plausible
+    assert len(spread.labels) == len(diagnostics.alternatives) + 1
+    result, std = model.flutter(SECTION)
+    assert (spread.speeds[0], spread.stds[0]) == (result.speed, std)
+    for alternative, label in zip(diagnostics.alternatives, spread.labels[1:], strict=True):
+        alt = alternative.diagnostics
+        assert label == f"n_lags={alt.n_lags}, A3={'fitted' if alt.with_A3 else 'zero'}"
+        assert alt.alternatives == () and "not chosen" in alt.reason
+        # Fitted on every sample as the chosen one is: force residuals at the 2 % noise level
+        # (10 %: the spread of a noise RMS estimate over these ~2000 samples is ~2 %, plus the
+        # structure's own misfit, which within one SE of the best is small).
+        np.testing.assert_allclose(alt.release_residuals, 0.02, rtol=0.1)
+    assert spread.low == min(spread.speeds) and spread.high == max(spread.speeds)
+    assert spread.low < spread.high
+    assert spread.summary() == (f"{spread.low:.2f}-{spread.high:.2f} m/s over "
+                                f"{len(plausible)} structures within one SE")
+
+
+def test_a_structure_given_by_the_caller_has_no_alternatives():
+    data = releases(JONES, (0.5, 0.8), duration=6.0, fs=250.0)
+    model = e2rfc.identify(data, SECTION, n_lags=2, with_A3=True)
+    assert model.diagnostics.alternatives == ()
+    spread = model.structure_spread(SECTION)
+    assert spread.labels == ("n_lags=2, A3=fitted",)
+    assert spread.low == spread.high == pytest.approx(U_F, rel=1e-6)
+    assert spread.summary() == "one structure within one SE"
+
+
+def test_a_structure_without_flutter_leaves_the_spread_open_above():
+    """No flutter below U_max for one structure: the high end is infinite, and said so."""
+    spread = e2rfc.StructureSpread(("n_lags=1, A3=zero", "n_lags=2, A3=zero"), (12.0, None),
+                                   (0.1, None), 40.0)
+    assert (spread.low, spread.high) == (12.0, np.inf)
+    assert spread.summary() == ("12.00 m/s to no flutter below 40 m/s over 2 structures within "
+                                "one SE")
+    none = e2rfc.StructureSpread(("a", "b"), (None, None), (None, None), 40.0)
+    assert (none.low, none.high) == (None, None)
+    assert none.summary() == "no flutter below 40 m/s over 2 structures within one SE"
