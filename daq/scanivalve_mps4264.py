@@ -1,15 +1,21 @@
-"""Scanivalve MPS4264-class pressure scanner over TCP: settings, binary-frame decoder and driver.
+"""Scanivalve MPS4264-class pressure scanner over TCP: the driver.
 
 Responsibility: command the scanner over its ASCII command connection (status, frame rate, output
 format, zero calibration, scan start and stop), receive its binary frames on one TCP data
-connection per module, decode them (:class:`Mps4264Decoder`, pure, no I/O), unwrap the frame
-counters, merge the modules frame by frame, and return timestamped blocks (:class:`ScanBlock`) in
-which every missing frame is a marked gap and every missing module a NaN with its reason. Lost
-data connections are re-opened with a bounded, logged backoff. Not responsible for: deciding
-whether the wind is off before a zero calibration (the caller passes the wind speed it knows; the
-driver refuses a nonzero one), mapping the device clock onto the host clock (the synchronisation
-layer does that from the counters, frame times and host arrival times returned here), threads,
-or recording.
+connection per module, decode them (:class:`~daq.mps4264_frames.Mps4264Decoder`, pure, no I/O),
+unwrap the frame counters, merge the modules frame by frame, and return timestamped blocks
+(:class:`~daq.mps4264_blocks.ScanBlock`) in which every missing frame is a marked gap and every
+missing module a NaN with its reason. Lost data connections are re-opened with a bounded, logged
+backoff. Not responsible for: deciding whether the wind is off before a zero calibration (the
+caller passes the wind speed it knows; the driver refuses a nonzero one), mapping the device
+clock onto the host clock (the synchronisation layer does that from the counters, frame times
+and host arrival times returned here), threads, or recording.
+
+This module holds the driver (:class:`ScanivalveMps4264`) and its per-module data streams,
+which share the driver's clock. The rest has a module of its own, every public name of which is
+re-exported here: the settings (:mod:`daq.mps4264_settings`), the packet layouts and the
+decoder (:mod:`daq.mps4264_frames`, which describes the packets) and the blocks returned
+(:mod:`daq.mps4264_blocks`).
 
 Wire protocol (DEVICES.md A.1.1; [unverified] marks our choices where the facts stop):
 
@@ -31,28 +37,17 @@ Wire protocol (DEVICES.md A.1.1; [unverified] marks our choices where the facts 
   host [design: the 0x6D packet has no module field, so the connection identifies the module];
   every module sends one packet per frame with the same frame number (the master starts them
   together, ``MSCAN``).
-- Packets (mps-protocol.h; every field is a 4-byte word, big- or little-endian, detected per
-  packet from the non-zero byte of the type word as ``mps_peek()`` does):
-  0x6D MPS4264 EU, 304 bytes: ``int32 type, uint32 frame, uint32 frame_time_s,
-  uint32 frame_time_ns, float32 T[8], float32 P[64]``;
-  0x0A legacy, 348 bytes: ``int32 type, int32 size (=348), int32 frame, int32 serial_number,
-  float32 framerate_Hz, int32 valve_status (0 Px, 1 Cal), int32 unit_index, float32
-  unit_conversion, uint32 ptp_scan_start_s, uint32 ptp_scan_start_ns, uint32 ext_trigger_time_us,
-  float32 T[8], float32 P[64], uint32 frame_time_s, uint32 frame_time_ns, uint32 ext_trigger_s,
-  uint32 ext_trigger_ns``. The other packet types of the table (0x5D/0x5B 96 B, 0x65/0x63 160 B,
-  0x69 304 B) are recognised by size, skipped and counted.
+  Packet layouts and their decoding: :mod:`daq.mps4264_frames`.
 - Frame time is "a time relative to 0 (when PTP is disabled), or an absolute PTP time"; below
   1e9 s (before 2001) the driver reports the block's time base as ``"relative"`` (the epoch-0
-  fault). The external trigger time ``ext_trigger_s/ns`` is relative to the scan start; the
-  driver adds ``ptp_scan_start`` so that it is on the frame-time base. Both zero means "no
-  trigger yet" [design] (NaN).
+  fault).
 
 Batching [design]: :meth:`ScanivalveMps4264.read_block` does not return after every frame. Once
 a frame is complete it keeps reading for at most ``min_block_s`` (default 20 ms, 10 frames at
 500 Hz; fewer if that many frames are complete sooner), then decodes the bytes of every module
-in one numpy pass (:meth:`Mps4264Decoder.feed_many`) and returns every complete frame in one
-block. A block costs a fixed ~0.2 ms of Python whatever its size; one block per frame made the
-decoding most of a core at 8 modules x 500 Hz.
+in one numpy pass (:meth:`~daq.mps4264_frames.Mps4264Decoder.feed_many`) and returns every
+complete frame in one block. A block costs a fixed ~0.2 ms of Python whatever its size; one
+block per frame made the decoding most of a core at 8 modules x 500 Hz.
 """
 
 from __future__ import annotations
@@ -61,8 +56,7 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Sequence
 from types import TracebackType
 from typing import Any
 from urllib.parse import urlsplit
@@ -70,7 +64,6 @@ from urllib.parse import urlsplit
 import numpy as np
 import numpy.typing as npt
 
-from daq.config import check_keys, number
 from daq.errors import (
     ConfigError,
     DaqError,
@@ -80,6 +73,28 @@ from daq.errors import (
     TransportError,
     TransportTimeout,
 )
+from daq.mps4264_blocks import (
+    STATUS_MISSING,
+    STATUS_OK,
+    STATUS_VALVE_CAL,
+    ClockStep,
+    Gap,
+    ScanBlock,
+)
+from daq.mps4264_frames import (
+    _PACKET_SIZES,
+    _U32,
+    CHANNELS_PER_MODULE,
+    TEMPERATURES_PER_MODULE,
+    TYPE_EU64,
+    Mps4264Decoder,
+    PacketBatch,
+)
+from daq.mps4264_frames import TYPE_LEGACY as TYPE_LEGACY
+from daq.mps4264_settings import DEFAULT_MIN_BLOCK_S as DEFAULT_MIN_BLOCK_S
+from daq.mps4264_settings import MAX_MIN_BLOCK_S as MAX_MIN_BLOCK_S
+from daq.mps4264_settings import MAX_MODULES as MAX_MODULES
+from daq.mps4264_settings import MAX_RATE_HZ, Mps4264Settings
 from daq.registry import DriverEntry, register
 from daq.transport import Transport, open_transport
 
@@ -101,687 +116,11 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-#: Pressure channels per MPS4264 module (mps-protocol.h: at most 64 pressure channels).
-CHANNELS_PER_MODULE = 64
-#: Temperature channels per module (mps-protocol.h: 8 temperature channels).
-TEMPERATURES_PER_MODULE = 8
-#: Highest frame rate a rig config may ask for, Hz. [unverified]: the scanner's rate limit was
-#: not confirmed (DEVICES.md A.1.1, "Max scan rate"), so this is only the config's bound.
-MAX_RATE_HZ = 2000.0
-#: Highest number of modules in one scanner.
-MAX_MODULES = 8
-#: Default and upper bound of :attr:`Mps4264Settings.min_block_s`, s (see there why).
-DEFAULT_MIN_BLOCK_S = 0.02
-MAX_MIN_BLOCK_S = 0.25
-
-#: ``module_status`` codes of a :class:`ScanBlock` row.
-STATUS_OK = 0
-#: The module sent no packet for this frame number (pressures and temperatures NaN).
-STATUS_MISSING = 1
-#: The module's calibration valve was in the Cal position (``valve_status`` 1): pressures NaN.
-STATUS_VALVE_CAL = 2
-
-#: Pa per EU unit when ``unit_conversion`` is the PA factor (mps-protocol.h units table:
-#: EU = counts x calibration (PSI) x conversion, PA factor 6894.75977).
-_PA_FACTOR = float(np.float32(6894.75977))
-_UNIT_RAW = 27  # Appendix A: 27 RAW (counts, not pressures)
-
-#: Packet type -> size in bytes (DEVICES.md A.1.1 table, mps-protocol.h).
-_PACKET_SIZES: Mapping[int, int] = {
-    0x5D: 96, 0x5B: 96, 0x65: 160, 0x63: 160, 0x6D: 304, 0x69: 304, 0x0A: 348,
-}
-TYPE_EU64 = 0x6D
-TYPE_LEGACY = 0x0A
-_SUPPORTED = (TYPE_EU64, TYPE_LEGACY)
-_NS_LIMIT = 1_000_000_000
 _KEY_BITS = 40  # unwrapped counter bits within one counter epoch (2^40 frames ~ 17 years at 2 kHz)
 _KEY_MASK = (1 << _KEY_BITS) - 1
-_U32 = 1 << 32
 #: Longest single wait on one data connection inside :meth:`ScanivalveMps4264.read_block`, s:
 #: the other modules are polled at least this often.
 _MAX_WAIT_S = 0.05
-
-
-def _eu_dtype(order: str) -> np.dtype[Any]:
-    return np.dtype([
-        ("type", order + "i4"), ("frame", order + "u4"), ("time_s", order + "u4"),
-        ("time_ns", order + "u4"), ("T", order + "f4", (8,)), ("P", order + "f4", (64,)),
-    ])
-
-
-def _legacy_dtype(order: str) -> np.dtype[Any]:
-    return np.dtype([
-        ("type", order + "i4"), ("size", order + "i4"), ("frame", order + "u4"),
-        ("serial", order + "i4"), ("rate", order + "f4"), ("valve", order + "i4"),
-        ("unit", order + "i4"), ("conv", order + "f4"), ("start_s", order + "u4"),
-        ("start_ns", order + "u4"), ("ext_us", order + "u4"), ("T", order + "f4", (8,)),
-        ("P", order + "f4", (64,)), ("time_s", order + "u4"), ("time_ns", order + "u4"),
-        ("ext_s", order + "u4"), ("ext_ns", order + "u4"),
-    ])
-
-
-_DTYPES = {(kind, order): make(">" if order == "big" else "<")
-           for kind, make in ((TYPE_EU64, _eu_dtype), (TYPE_LEGACY, _legacy_dtype))
-           for order in ("big", "little")}
-assert all(dt.itemsize == _PACKET_SIZES[kind] for (kind, _), dt in _DTYPES.items())
-#: Word (4-byte) index of each field of the supported packets, from the layouts above.
-_WORD = {kind: {name: _DTYPES[(kind, "big")].fields[name][1] // 4  # type: ignore[index]
-                for name in _DTYPES[(kind, "big")].names or ()}
-         for kind in _SUPPORTED}
-_EU_W, _LEG_W = _WORD[TYPE_EU64], _WORD[TYPE_LEGACY]
-_LEG_NS_WORDS = [_LEG_W["start_ns"], _LEG_W["time_ns"], _LEG_W["ext_ns"]]
-
-
-# ------------------------------------------------------------------------------------------------
-# Settings
-# ------------------------------------------------------------------------------------------------
-def _integer(table: Mapping[str, Any], key: str, where: str, lo: int, hi: int,
-             default: int | None = None) -> int:
-    if key not in table and default is not None:
-        return default
-    value = table.get(key)
-    if isinstance(value, bool) or not isinstance(value, int):
-        if key not in table:
-            raise ConfigError(f"{where}: missing required key {key!r}")
-        raise ConfigError(f"{where} {key} must be an integer in [{lo}, {hi}], got {value!r}")
-    if not lo <= value <= hi:
-        raise ConfigError(f"{where} {key} = {value!r} is outside the allowed range [{lo}, {hi}]")
-    return value
-
-
-@dataclass(frozen=True)
-class Mps4264Settings:
-    """Settings of the scanner (the ``[scanner]`` table of a rig config, without driver/url/name).
-
-    Attributes
-    ----------
-    modules : int
-        Number of 64-channel modules, 1..8.
-    rate_hz : float
-        Frame rate, Hz, in (0, 2000] ([unverified] rate limit, hence configurable).
-    byte_order : str
-        ``"big"`` or ``"little"``: the byte order the scanner is expected to send. The decoder
-        detects it from every packet's type word; a mismatch is logged and counted.
-    pitot_channel : int
-        Global 0-based channel (over all modules) of the Pitot dynamic pressure,
-        ``< 64 * modules``. Taps occupy channels ``0 .. n_taps - 1`` in the rig's tap order.
-    data_port : int
-        TCP port of module 0's binary data server (module ``k`` on ``data_port + k``), 1..65535,
-        default 503 (DEVICES.md A.1.1). A simulated scanner's ports are ephemeral: the launcher
-        fills this from the simulator's ``data_port``.
-    command_timeout_s : float
-        Timeout of a command's reply, and default timeout of :meth:`ScanivalveMps4264.read_block`,
-        s, in (0, 60], default 2.
-    min_block_s : float
-        Batching of :meth:`ScanivalveMps4264.read_block`, s, in [0, 0.25], default 0.02: once a
-        frame is complete, the read keeps collecting for at most this long (or until this many
-        seconds of frames, ``ceil(min_block_s * rate_hz)``, are complete) and returns them in one
-        block. Why: every block costs a fixed overhead whatever its size (decoding and merging
-        here, then the per-block work of the pipeline and the recorder): one block per frame
-        (500 per second at 8 modules) took most of a core, 20 ms blocks (10 frames at 500 Hz)
-        a fraction of it; 20 ms is also the block size the pipeline's clock windows are sized
-        for (25 scanner blocks per 0.5 s window) and adds at most 20 ms of latency. 0 returns
-        each frame as soon as it is complete. At most 0.25 s, so that every 0.5 s clock window
-        still sees several blocks (the clock fit keeps the least-latency block of each) and the
-        live view stays fluid. The read timeout still bounds the whole read.
-    """
-
-    modules: int
-    rate_hz: float
-    byte_order: str
-    pitot_channel: int
-    data_port: int = 503
-    command_timeout_s: float = 2.0
-    min_block_s: float = 0.02
-
-    def __post_init__(self) -> None:
-        where = "scanivalve_mps4264 settings"
-        table = {name: getattr(self, name) for name in self.__dataclass_fields__}
-        _validated(table, where)  # raises ConfigError naming the key and its range
-
-    @property
-    def n_channels(self) -> int:
-        """Pressure channels over all modules."""
-        return CHANNELS_PER_MODULE * self.modules
-
-    @classmethod
-    def from_table(cls, table: Mapping[str, Any], where: str) -> Mps4264Settings:
-        """Validate a rig-config table (without ``driver``, ``url``, ``name``).
-
-        Raises
-        ------
-        ConfigError
-            Unknown or missing key, or a value outside its range (the message names both).
-        """
-        return cls(**_validated(table, where))
-
-
-def _validated(table: Mapping[str, Any], where: str) -> dict[str, Any]:
-    check_keys(table, where, {"modules", "rate_hz", "byte_order", "pitot_channel"},
-               {"data_port", "command_timeout_s", "min_block_s"})
-    modules = _integer(table, "modules", where, 1, MAX_MODULES)
-    rate_hz = number(table, "rate_hz", where, lo=0.0, hi=MAX_RATE_HZ, lo_open=True)
-    byte_order = table["byte_order"]
-    if byte_order not in ("big", "little"):
-        raise ConfigError(f"{where} byte_order must be 'big' or 'little', got {byte_order!r}")
-    pitot = _integer(table, "pitot_channel", where, 0, CHANNELS_PER_MODULE * modules - 1)
-    data_port = _integer(table, "data_port", where, 1, 65535, default=503)
-    if data_port + modules - 1 > 65535:
-        raise ConfigError(f"{where} data_port = {data_port} leaves no room for {modules} "
-                          "consecutive module ports below 65536")
-    timeout = number(table, "command_timeout_s", where, lo=0.0, hi=60.0, lo_open=True,
-                     default=2.0)
-    min_block = number(table, "min_block_s", where, lo=0.0, hi=MAX_MIN_BLOCK_S,
-                       default=DEFAULT_MIN_BLOCK_S)
-    return {"modules": modules, "rate_hz": rate_hz, "byte_order": byte_order,
-            "pitot_channel": pitot, "data_port": data_port, "command_timeout_s": timeout,
-            "min_block_s": min_block}
-
-
-# ------------------------------------------------------------------------------------------------
-# Decoder
-# ------------------------------------------------------------------------------------------------
-@dataclass(frozen=True, eq=False)
-class PacketBatch:
-    """Decoded packets of one stream, one row per packet (struct of arrays).
-
-    Attributes
-    ----------
-    kind : ndarray of int16, (n,)
-        Packet type (0x6D or 0x0A).
-    big_endian : ndarray of bool, (n,)
-        Byte order each packet was sent in.
-    frame : ndarray of int64, (n,)
-        Frame counter as sent (uint32, not unwrapped).
-    frame_time : ndarray of float64, (n,)
-        ``frame_time_s + 1e-9 frame_time_ns``, s (device clock).
-    trigger_time : ndarray of float64, (n,)
-        Last external trigger on the frame-time base (``ptp_scan_start + ext_trigger``), s; NaN
-        without a trigger or in a 0x6D packet.
-    rate_hz : ndarray of float64, (n,)
-        Frame rate the packet reports (legacy), Hz; NaN for 0x6D.
-    serial : ndarray of int64, (n,)
-        Module serial number (legacy); -1 for 0x6D.
-    valve_cal : ndarray of bool, (n,)
-        Calibration valve in the Cal position (legacy ``valve_status`` 1).
-    temperature : ndarray of float64, (n, 8)
-        Module temperatures, degC.
-    pressure : ndarray of float64, (n, 64)
-        Pressures, Pa (legacy: converted with the packet's own ``unit_conversion``; 0x6D: as
-        sent, in the units set with ``SET UNITS PA``).
-    """
-
-    kind: npt.NDArray[np.int16]
-    big_endian: npt.NDArray[np.bool_]
-    frame: npt.NDArray[np.int64]
-    frame_time: npt.NDArray[np.float64]
-    trigger_time: npt.NDArray[np.float64]
-    rate_hz: npt.NDArray[np.float64]
-    serial: npt.NDArray[np.int64]
-    valve_cal: npt.NDArray[np.bool_]
-    temperature: npt.NDArray[np.float64]
-    pressure: npt.NDArray[np.float64]
-
-    def __len__(self) -> int:
-        return int(self.frame.size)
-
-    @classmethod
-    def empty(cls) -> PacketBatch:
-        """Return a batch of no packets."""
-        return cls.concatenate([])
-
-    @classmethod
-    def concatenate(cls, batches: Sequence[PacketBatch]) -> PacketBatch:
-        """Stack batches in order."""
-        if len(batches) == 1:
-            return batches[0]
-        if not batches:
-            return cls(
-                kind=np.zeros(0, np.int16), big_endian=np.zeros(0, bool),
-                frame=np.zeros(0, np.int64), frame_time=np.zeros(0), trigger_time=np.zeros(0),
-                rate_hz=np.zeros(0), serial=np.zeros(0, np.int64), valve_cal=np.zeros(0, bool),
-                temperature=np.zeros((0, TEMPERATURES_PER_MODULE)),
-                pressure=np.zeros((0, CHANNELS_PER_MODULE)),
-            )
-        return cls(**{name: np.concatenate([getattr(b, name) for b in batches])
-                      for name in cls.__dataclass_fields__})
-
-    def take(self, index: Any) -> PacketBatch:
-        """Rows selected by ``index`` (a slice, boolean mask or integer array)."""
-        return PacketBatch(**{name: getattr(self, name)[index]
-                              for name in self.__dataclass_fields__})
-
-
-def _peek(buf: bytes, pos: int) -> tuple[int, str] | None:
-    """Type and byte order of the 4-byte word at ``pos``, or None.
-
-    As ``mps_peek()`` in mps-protocol.h: the type fits in one byte, so exactly one end of the
-    word is non-zero.
-    """
-    word = buf[pos:pos + 4]
-    if len(word) < 4:
-        return None
-    big = int.from_bytes(word, "big")
-    if big in _PACKET_SIZES:
-        return big, "big"
-    little = int.from_bytes(word, "little")
-    if little in _PACKET_SIZES:
-        return little, "little"
-    return None
-
-
-class Mps4264Decoder:
-    """Pure decoder of a scanner data stream: feed bytes, get :class:`PacketBatch` es.
-
-    Packets are found by their type word (either byte order) and accepted only when the next
-    packet's type word follows them, or when the bytes end exactly at their end; a packet whose
-    successor is not a valid type word is rejected (``bad_packets``) and the decoder searches for
-    the next valid packet from its second byte. When not in step (at garbage) a candidate packet
-    must be confirmed by a valid type word right after it. Field checks (legacy ``size`` = 348,
-    nanoseconds < 1e9, a positive unit conversion) reject corrupted headers. It never raises on
-    input bytes and always makes progress.
-
-    Attributes
-    ----------
-    bytes_skipped : int
-        Bytes discarded while searching for a packet (garbage, rejected packets).
-    packets : int
-        Packets decoded and returned.
-    bad_packets : int
-        Packets with a valid type word rejected by their field checks or their successor.
-    unsupported_packets : int
-        Well-formed packets of types this decoder does not return (RAW, 16/32-channel models,
-        legacy RAW units); skipped.
-    """
-
-    #: Bytes kept back when no candidate is found (a type word may straddle two feeds).
-    _KEEP = 3
-
-    def __init__(self) -> None:
-        self._rest = b""
-        self._base = 0  # stream offset of the first byte of _rest (bytes fed before it)
-        self._synced = True  # a fresh stream starts at a packet boundary
-        self.bytes_skipped = 0
-        self.packets = 0
-        self.bad_packets = 0
-        self.unsupported_packets = 0
-
-    @property
-    def pending_bytes(self) -> int:
-        """Measure the bytes held back for the next feed (a partial packet)."""
-        return len(self._rest)
-
-    def reset(self) -> int:
-        """Forget buffered bytes (a new connection); return how many were discarded."""
-        discarded = len(self._rest)
-        self.bytes_skipped += discarded
-        self._base += discarded
-        self._rest = b""
-        self._synced = True
-        return discarded
-
-    @property
-    def offset(self) -> int:
-        """Measure the stream offset of the bytes held back: bytes fed minus ``pending_bytes``."""
-        return self._base
-
-    def feed(self, data: bytes) -> PacketBatch:
-        """Decode as many packets as ``data`` completes; keep the remainder for the next call."""
-        return self.feed_with_ends(data)[0]
-
-    def feed_with_ends(self, data: bytes) -> tuple[PacketBatch, npt.NDArray[np.int64]]:
-        """As :meth:`feed`, and also return each packet's end as a stream offset.
-
-        The stream offset counts every byte fed since the decoder was made (across
-        :meth:`reset`): a packet ending at offset ``e`` was completed by the byte ``e - 1``,
-        which tells the caller which read delivered it.
-        """
-        buf = self._rest + bytes(data) if self._rest else bytes(data)
-        out: list[PacketBatch] = []
-        ends: list[npt.NDArray[np.int64]] = []
-        base = self._base
-        pos, end = 0, len(buf)
-        while True:
-            if not self._synced:
-                pos = self._search(buf, pos)
-                if not self._synced:
-                    break  # no candidate, or one awaiting its confirming word
-            if end - pos < 4:
-                break
-            head = _peek(buf, pos)
-            if head is None:
-                self._synced = False
-                continue
-            kind, order = head
-            size = _PACKET_SIZES[kind]
-            count = (end - pos) // size
-            if count == 0:
-                break
-            ok = self._run_ok(buf, pos, kind, order, size, count)
-            run = count if ok.all() else int(np.argmin(ok))
-            if run == 0:  # a type word, but corrupt fields
-                pos = self._reject(pos)
-                continue
-            after = pos + run * size
-            if after == end:
-                confirmed, accept = True, run
-            elif end - after < 4:  # 1..3 bytes of the next word: hold the last packet back
-                confirmed, accept = True, run - 1
-            else:
-                confirmed = _peek(buf, after) is not None
-                accept = run if confirmed else run - 1
-            if accept:
-                self._emit(buf, pos, kind, order, accept, out, ends, base)
-                pos += accept * size
-            if not confirmed:  # the run's last packet is not followed by a packet: reject it
-                pos = self._reject(pos)
-                continue
-            if accept < run:
-                break
-        self._rest = buf[pos:]
-        self._base = base + pos
-        if len(out) == 1:
-            return out[0], ends[0]
-        return PacketBatch.concatenate(out), (np.concatenate(ends) if ends
-                                              else np.zeros(0, np.int64))
-
-    @staticmethod
-    def feed_many(decoders: Sequence[Mps4264Decoder], chunks: Sequence[bytes],
-                  ) -> list[tuple[PacketBatch, npt.NDArray[np.int64]]]:
-        """:meth:`feed_with_ends` of each decoder with its chunk, in one numpy pass if possible.
-
-        The one pass (one check and one conversion of all the streams' packets together) is
-        taken when every decoder is in step and its bytes are whole packets of one supported
-        type and byte order, the same for all (the usual case: the modules of one scanner);
-        otherwise each decoder decodes its own chunk. The results are the same either way.
-        """
-        plan = _in_step(decoders, chunks)
-        if plan is None:
-            return [d.feed_with_ends(c) for d, c in zip(decoders, chunks, strict=True)]
-        (kind, order), bufs, checked, accepted = plan
-        size = _PACKET_SIZES[kind]
-        total = sum(checked)
-        batch = PacketBatch.empty()
-        if total:
-            joined = b"".join(buf[:n * size] for buf, n in zip(bufs, checked, strict=True))
-            if not Mps4264Decoder._run_ok(joined, 0, kind, order, size, total).all():
-                return [d.feed_with_ends(c) for d, c in zip(decoders, chunks, strict=True)]
-            batch, keep = _decode_packets(joined, 0, kind, order, total)
-            if keep is not None:  # RAW units: let each decoder count what it skips
-                return [d.feed_with_ends(c) for d, c in zip(decoders, chunks, strict=True)]
-        out = []
-        first = 0
-        for d, buf, n, count in zip(decoders, bufs, checked, accepted, strict=True):
-            part = batch if count == total else batch.take(slice(first, first + count))
-            first += n
-            out.append((part, np.arange(d._base + size, d._base + (count + 1) * size, size,
-                                        dtype=np.int64)))
-            d._rest = buf[count * size:]
-            d._base += count * size
-            d.packets += count
-        return out
-
-    # -- internals ---------------------------------------------------------------------------------
-    def _reject(self, pos: int) -> int:
-        """Count the packet at ``pos`` as bad and search again from its second byte."""
-        self.bad_packets += 1
-        self.bytes_skipped += 1
-        self._synced = False
-        return pos + 1
-
-    def _search(self, buf: bytes, pos: int) -> int:
-        """Find the next confirmed packet start at or after ``pos`` and set ``_synced``.
-
-        Returns the start; or, still unsynced, the candidate that awaits its confirming word or
-        the offset from which bytes are kept (no candidate: a type word may straddle two feeds).
-        """
-        start = pos
-        while True:
-            cand = _find_candidate(buf, pos)
-            if cand < 0:
-                keep = max(len(buf) - self._KEEP, start)
-                self.bytes_skipped += keep - start
-                return keep
-            head = _peek(buf, cand)
-            assert head is not None
-            kind, order = head
-            size = _PACKET_SIZES[kind]
-            if len(buf) - cand < size + 4:
-                self.bytes_skipped += cand - start
-                return cand
-            if self._run_ok(buf, cand, kind, order, size, 1)[0] and \
-                    _peek(buf, cand + size) is not None:
-                self.bytes_skipped += cand - start
-                self._synced = True
-                return cand
-            pos = cand + 1
-
-    @staticmethod
-    def _run_ok(buf: bytes, pos: int, kind: int, order: str, size: int,
-                count: int) -> npt.NDArray[np.bool_]:
-        """Per packet of a stride-``size`` run: same type word, and sane fields."""
-        o = ">" if order == "big" else "<"
-        # One row of 4-byte words per packet (a view of the buffer, no copy).
-        w = np.ndarray((count, size // 4), dtype=o + "u4", buffer=buf, offset=pos,
-                       strides=(size, 4))
-        ok: npt.NDArray[np.bool_] = w[:, 0] == kind
-        if kind == TYPE_EU64:
-            ok &= w[:, _EU_W["time_ns"]] < _NS_LIMIT
-        elif kind == TYPE_LEGACY:
-            ok &= w[:, _LEG_W["size"]] == 348
-            ok &= w[:, _LEG_NS_WORDS].max(axis=1) < _NS_LIMIT  # start_ns, time_ns, ext_ns
-            conv = w[:, _LEG_W["conv"]].view(o + "f4")
-            ok &= (conv > 0) & (conv < np.inf)  # finite and positive (NaN compares false)
-        return ok
-
-    def _emit(self, buf: bytes, pos: int, kind: int, order: str, n: int,
-              out: list[PacketBatch], ends: list[npt.NDArray[np.int64]], base: int) -> None:
-        if kind not in _SUPPORTED:
-            self.unsupported_packets += n
-            log.debug("skipped %d unsupported packets of type 0x%02X", n, kind)
-            return
-        size = _PACKET_SIZES[kind]
-        end = np.arange(base + pos + size, base + pos + (n + 1) * size, size, dtype=np.int64)
-        batch, keep = _decode_packets(buf, pos, kind, order, n)
-        if keep is not None:
-            self.unsupported_packets += n - len(batch)
-            end = end[keep]
-        if len(batch):
-            out.append(batch)
-            ends.append(end)
-            self.packets += len(batch)
-
-
-def _decode_packets(buf: bytes, pos: int, kind: int, order: str, n: int,
-                    ) -> tuple[PacketBatch, npt.NDArray[np.bool_] | None]:
-    """Decode ``n`` checked packets of a supported ``kind`` stored back to back from ``pos``.
-
-    Returns the batch and, when legacy packets in RAW units (counts, not pressures: not
-    decodable to Pa here) were left out, the mask of the packets kept (else None).
-    """
-    size = _PACKET_SIZES[kind]
-    o = ">" if order == "big" else "<"
-    # The packets' 4-byte words, one row per packet: as integers (uint32 -> int64, exact) and
-    # as float32 (the float fields); _WORD gives each field's word.
-    words = np.ndarray((n, size // 4), dtype=o + "u4", buffer=buf, offset=pos)
-    w = words.astype(np.int64)
-    f = words.view(o + "f4")
-    i = _WORD[kind]
-    t, p = i["T"], i["P"]
-    keep: npt.NDArray[np.bool_] | None = None
-    if kind == TYPE_EU64:
-        trigger = np.full(n, np.nan)
-        rate = np.full(n, np.nan)
-        serial = np.full(n, -1, np.int64)
-        valve = np.zeros(n, bool)
-        pressure = f[:, p:p + CHANNELS_PER_MODULE].astype(np.float64)
-    else:
-        raw = w[:, i["unit"]] == _UNIT_RAW
-        if raw.any():
-            keep = ~raw
-            w, f = w[keep], f[keep]
-            n = int(keep.sum())
-        ext_s, ext_ns = w[:, i["ext_s"]], w[:, i["ext_ns"]]
-        start = w[:, i["start_s"]] + 1e-9 * w[:, i["start_ns"]]
-        trigger = start + (ext_s + 1e-9 * ext_ns)
-        trigger[(ext_s | ext_ns) == 0] = np.nan  # no trigger yet
-        rate = f[:, i["rate"]].astype(np.float64)
-        sn = w[:, i["serial"]]
-        serial = np.where(sn >= 1 << 31, sn - _U32, sn)  # an int32 field
-        valve = w[:, i["valve"]] == 1
-        factor = _PA_FACTOR / f[:, i["conv"]].astype(np.float64)  # EU = PSI x conversion
-        pressure = f[:, p:p + CHANNELS_PER_MODULE] * factor[:, None]
-    frame_time = w[:, i["time_s"]] + 1e-9 * w[:, i["time_ns"]]
-    temperature = f[:, t:t + TEMPERATURES_PER_MODULE].astype(np.float64)
-    return PacketBatch(
-        kind=np.full(n, kind, np.int16), big_endian=np.full(n, order == "big"),
-        frame=w[:, i["frame"]].copy(), frame_time=frame_time, trigger_time=trigger,
-        rate_hz=rate, serial=serial, valve_cal=valve, temperature=temperature,
-        pressure=pressure,
-    ), keep
-
-
-def _in_step(decoders: Sequence[Mps4264Decoder], chunks: Sequence[bytes],
-             ) -> tuple[tuple[int, str], list[bytes], list[int], list[int]] | None:
-    """Plan the one pass of :meth:`Mps4264Decoder.feed_many`, or None.
-
-    Returns the common (type, order), every decoder's bytes, how many whole packets
-    :meth:`~Mps4264Decoder.feed_with_ends` would check in them and how many of those it would
-    accept if all pass their checks (one fewer when 1..3 bytes of a next type word follow);
-    None when a decoder would have more to do (resynchronise, switch type or byte order,
-    reject a packet that no type word follows).
-    """
-    head: tuple[int, str] | None = None
-    bufs, checked, accepted = [], [], []
-    for d, data in zip(decoders, chunks, strict=True):
-        buf = d._rest + bytes(data) if d._rest else bytes(data)
-        h = _peek(buf, 0) if d._synced else None
-        if h is None or h[0] not in _SUPPORTED or (head is not None and h != head):
-            return None
-        head = h
-        size = _PACKET_SIZES[h[0]]
-        count, rest = divmod(len(buf), size)
-        accept = count
-        if count and 0 < rest < 4:
-            accept -= 1  # 1..3 bytes of the next type word: the last packet waits (as in feed)
-        elif rest >= 4:
-            after = _peek(buf, count * size)  # the next packet's type word, incomplete packet
-            if after is None or _PACKET_SIZES[after[0]] <= rest:
-                return None
-        bufs.append(buf)
-        checked.append(count)
-        accepted.append(accept)
-    if head is None:
-        return None
-    return head, bufs, checked, accepted
-
-
-_PATTERNS = tuple(kind.to_bytes(4, order) for kind in _PACKET_SIZES for order in ("big", "little"))
-
-
-def _find_candidate(buf: bytes, pos: int) -> int:
-    """First offset >= ``pos`` holding any known type word (either order), or -1."""
-    best = -1
-    for pattern in _PATTERNS:
-        at = buf.find(pattern, pos, best + 4 if best >= 0 else len(buf))
-        if at >= 0 and (best < 0 or at < best):
-            best = at
-    return best
-
-
-# ------------------------------------------------------------------------------------------------
-# Blocks
-# ------------------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class Gap:
-    """Frames that never arrived, in a block's counter sequence.
-
-    Attributes
-    ----------
-    after_counter : int
-        Unwrapped counter of the last frame before the gap (0 at the start of a scan).
-    length : int
-        Number of missing frames; -1 when unknown (a restart of the device's counter).
-    kind : str
-        ``"missing"`` (a counter jump: every module lost the frames) or ``"restart"`` (the
-        device counter restarted, e.g. after a TCP reset; the counter continues from
-        ``after_counter`` and the true gap is unknown).
-    """
-
-    after_counter: int
-    length: int
-    kind: str
-
-
-@dataclass(frozen=True)
-class ClockStep:
-    """A jump of the frame time against the counter (e.g. when PTP locks).
-
-    Attributes
-    ----------
-    counter : int
-        Unwrapped counter of the first frame after the step.
-    step_s : float
-        Frame time minus the time the counter and rate predict, s.
-    """
-
-    counter: int
-    step_s: float
-
-
-@dataclass(frozen=True, eq=False)
-class ScanBlock:
-    """Frames read in one call, merged over modules (one row per frame number).
-
-    Attributes
-    ----------
-    counter : ndarray of int64, (n,)
-        Unwrapped frame counter (continues across device-counter wraps and restarts).
-    frame_time : ndarray of float64, (n,)
-        Device frame time, s (PTP absolute, or relative to the scan start: see ``time_base``).
-    trigger_time : ndarray of float64, (n,)
-        Last external trigger on the frame-time base, s; NaN when none (or 0x6D packets).
-    host_time_ns : ndarray of int64, (n,)
-        Host ``time.monotonic_ns()`` when the frame's last module packet arrived (the return of
-        the read that delivered its last byte), ns.
-    pressure : ndarray of float64, (n, 64 * modules)
-        Pa; NaN where ``module_status`` is not ``STATUS_OK``.
-    pitot : ndarray of float64, (n,)
-        Dynamic pressure of the Pitot channel, Pa (a copy of that pressure column).
-    temperature : ndarray of float64, (n, 8 * modules)
-        Module temperatures, degC; NaN for missing modules.
-    module_status : ndarray of int8, (n, modules)
-        ``STATUS_OK``, ``STATUS_MISSING`` or ``STATUS_VALVE_CAL`` per module: the reason of NaN.
-    gaps : tuple of Gap
-        Counter gaps and restarts before or inside this block.
-    clock_steps : tuple of ClockStep
-        Frame-time jumps detected before or inside this block.
-    time_base : str
-        ``"ptp"``, ``"relative"`` (frame times < 1e9 s: PTP absent, epoch 0) or ``"mixed"``.
-    """
-
-    counter: npt.NDArray[np.int64]
-    frame_time: npt.NDArray[np.float64]
-    trigger_time: npt.NDArray[np.float64]
-    host_time_ns: npt.NDArray[np.int64]
-    pressure: npt.NDArray[np.float64]
-    pitot: npt.NDArray[np.float64]
-    temperature: npt.NDArray[np.float64]
-    module_status: npt.NDArray[np.int8]
-    gaps: tuple[Gap, ...] = ()
-    clock_steps: tuple[ClockStep, ...] = ()
-    time_base: str = "ptp"
-
-    #: Names of the array fields, in :meth:`ScanivalveMps4264.describe` order.
-    CHANNELS = ("counter", "frame_time", "trigger_time", "host_time_ns", "pressure", "pitot",
-                "temperature", "module_status")
-
-    def __len__(self) -> int:
-        return int(self.counter.size)
-
-    def arrays(self) -> dict[str, npt.NDArray[Any]]:
-        """Return the block's arrays keyed exactly as :meth:`ScanivalveMps4264.describe`."""
-        return {name: getattr(self, name) for name in self.CHANNELS}
 
 
 # ------------------------------------------------------------------------------------------------
