@@ -13,9 +13,12 @@ Device clock restarts: a restart gap (length -1, e.g. the scanner's scan restart
 reset) after which the device time goes back (relative frame times without PTP restart at 0)
 starts a fresh clock map and timeline for that device, from the first sample after the gap (a
 block is split there); the rows already written keep their times, a NaN sample marks the break
-in the sync view, and a ``clock_restart`` event records it. Device times that move forward across
-the gap (PTP, or relative ones the engine continued, as after ``Acquisition.calz``) keep their
-map. The final clock fit in ``/entry/sync`` attrs then describes the last clock epoch only.
+in the sync view, and a ``clock_restart`` event records it. The new epoch's samples reach the
+sync view only once ``RESTART_SETTLE_S`` of them have arrived: a fresh map rests on the least
+arrival latency seen, and a first block delayed by the host (a busy machine, the reconnect
+itself) would otherwise place the new epoch late by that delay. Device times that move forward
+across the gap (PTP, or relative ones the engine continued, as after ``Acquisition.calz``) keep
+their map. The final clock fit in ``/entry/sync`` attrs then describes the last clock epoch only.
 
 Not responsible for: reading devices or threads (the engine), the numerics of clocks, resampling
 and conversions (:mod:`daq.sync`), the file layout itself (:mod:`daq.recorder`).
@@ -83,6 +86,11 @@ MAX_ANCHOR_ROUND_TRIP_S = 3e-3
 SYNC_PULSE_INTERVAL_S = 0.5
 #: A device trigger time is paired with the PLC trigger event within this distance, s.
 TRIGGER_PAIRING_S = 0.05
+#: After a device clock restart, the new epoch's samples are held back from the sync view until
+#: this much device time has arrived, s: the fresh clock map then rests on the least-latency
+#: block among them (12 blocks of 20 ms), not on the first one alone. Measured with two CPU
+#: hogs on the two cores: a first block 124 ms late, the blocks after it back to ~1 ms.
+RESTART_SETTLE_S = 0.25
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -115,6 +123,9 @@ class _Device:
     restart_pending: bool = False  # a restart gap was seen; its first timed sample decides
     break_pending: bool = False  # the clock restarted: mark the break in the view (_push)
     clock_restarts: int = 0  # clock maps started afresh after a device clock restart
+    settle_until: float = math.nan  # device time up to which a new epoch's rows are held back
+    held: list[tuple[StreamBlock, FloatArray, npt.NDArray[np.bool_]]] = field(
+        default_factory=list)  # rows of the new epoch waiting for its map to settle
 
 
 @dataclass
@@ -366,7 +377,9 @@ class RunWriter:
 
         Called with a whole block, or with the rows on one side of a restart gap. After a
         restart gap (``dev.restart_pending``) the first finite device time decides whether the
-        device clock restarted (see :meth:`_restart_clock`).
+        device clock restarted (see :meth:`_restart_clock`). After a restart the rows are held
+        back from the sync view until ``RESTART_SETTLE_S`` of device time has arrived; the
+        clock map takes every block's pair at once.
         """
         assert dev.clock is not None
         t_dev = np.asarray(block.device_time, dtype=np.float64)
@@ -390,8 +403,19 @@ class RunWriter:
             self._anchor_triggers(dev, block, t_dev)
             if dev.pending_triggers:
                 self._pair_triggers(dev)  # pulses seen before the clock map was ready
-        self._push(dev, block, t_dev, finite)
         dev.last_device_time = float(t_dev[last])
+        if math.isnan(dev.settle_until):
+            self._push(dev, block, t_dev, finite)
+            return
+        dev.held.append((block, t_dev, finite))
+        if dev.last_device_time >= dev.settle_until:
+            self._release_held(dev)
+
+    def _release_held(self, dev: _Device) -> None:
+        """Push the rows held since a clock restart, on the map fitted from all of them."""
+        held, dev.held, dev.settle_until = dev.held, [], math.nan
+        for block, t_dev, finite in held:
+            self._push(dev, block, t_dev, finite)
 
     def _restart_clock(self, dev: _Device, t_device: float, t_host: float) -> None:
         """Start a fresh clock map and timeline after the device clock went back to ``t_device``.
@@ -414,6 +438,7 @@ class RunWriter:
         assert dev.clock is not None and dev.timeline is not None
         rec = self.recorder
         assert rec is not None
+        self._release_held(dev)  # an epoch still settling goes out on its own map
         # The latency floor is a property of the transport (same link, same driver), not of
         # the device clock: the old anchors' value keeps the new map from being late by it
         # until the new epoch's first trigger pulse is paired (0.5 s pulses). Clamped at 0:
@@ -427,6 +452,7 @@ class RunWriter:
         dev.pending_triggers.clear()
         dev.clock_restarts += 1
         dev.break_pending = True
+        dev.settle_until = t_device + RESTART_SETTLE_S
         text = (f"{dev.name}: device clock restarted (device time {t_device:.6f} s after "
                 f"{previous:.6f} s); clock map started afresh, latency floor "
                 f"{floor * 1e3:.3f} ms kept")
@@ -698,6 +724,8 @@ class RunWriter:
     def _stop(self, doc: Mapping[str, Any]) -> None:
         rec = self.recorder
         assert rec is not None
+        for dev in self._devices.values():
+            self._release_held(dev)  # a restart shortly before the stop: its rows still count
         self._write_if_due(force=True)
         # Not flush(): at the end the streams stop at slightly different times (the last laser
         # block in flight, the last scanner frame); the rows past the earliest end would be
