@@ -387,7 +387,7 @@ class ConsoleWindow(QtWidgets.QMainWindow):
             # The range only when the data leave the structure open: the std alone would
             # claim more than they hold.
             also = ("" if spread is None or len(spread.labels) == 1
-                    else f" ({spread.summary().replace(' within one SE', '')})")
+                    else f" ({spread.range_text()})")
             self.flutter_label.setText(f"U_F = {fit.flutter_speed:.2f}{std} m/s{also}")
 
     def show_health(self, health: list[DeviceHealth], fan_rpm: float) -> None:

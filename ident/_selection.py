@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["Candidate", "select_one_se", "within_one_se"]
+__all__ = ["Candidate", "select_one_se", "structure_label", "within_one_se"]
 
 
 @dataclass(frozen=True)
@@ -45,7 +45,12 @@ class Candidate:
     @property
     def label(self) -> str:
         """Short description, e.g. ``n_lags=2, A3=fitted``."""
-        return f"n_lags={self.n_lags}, A3={'fitted' if self.with_A3 else 'zero'}"
+        return structure_label(self.n_lags, self.with_A3)
+
+
+def structure_label(n_lags: int, with_A3: bool) -> str:
+    """Short description of a structure, e.g. ``n_lags=2, A3=fitted``."""
+    return f"n_lags={n_lags}, A3={'fitted' if with_A3 else 'zero'}"
 
 
 def select_one_se(usable: list[Candidate], *, given: bool) -> tuple[Candidate, str]:

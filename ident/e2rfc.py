@@ -37,7 +37,7 @@ from scipy.optimize import least_squares
 
 from ident import flutter as _flutter
 from ident._regressors import PreparedRelease, prepare
-from ident._selection import Candidate, select_one_se, within_one_se
+from ident._selection import Candidate, select_one_se, structure_label, within_one_se
 from ident._stats import autocorrelation_inflation
 from ident._threads import single_threaded_blas
 from ident.errors import RankDeficiencyError
@@ -137,18 +137,21 @@ class StructureSpread:
             return None
         return math.inf if None in self.speeds else max(u for u in self.speeds if u is not None)
 
-    def summary(self) -> str:
-        """One phrase, e.g. ``11.91-12.11 m/s over 3 structures within one SE``."""
+    def range_text(self) -> str:
+        """Say the flutter speeds' range, e.g. ``11.91-12.11 m/s over 3 structures``."""
         n = len(self.labels)
         if n == 1:
-            return "one structure within one SE"
+            return "one structure"
         low, high = self.low, self.high
         if low is None or high is None:
-            return f"no flutter below {self.U_max:.3g} m/s over {n} structures within one SE"
+            return f"no flutter below {self.U_max:.3g} m/s over {n} structures"
         if math.isinf(high):
-            return (f"{low:.2f} m/s to no flutter below {self.U_max:.3g} m/s over {n} "
-                    "structures within one SE")
-        return f"{low:.2f}-{high:.2f} m/s over {n} structures within one SE"
+            return f"{low:.2f} m/s to no flutter below {self.U_max:.3g} m/s over {n} structures"
+        return f"{low:.2f}-{high:.2f} m/s over {n} structures"
+
+    def summary(self) -> str:
+        """One phrase, e.g. ``11.91-12.11 m/s over 3 structures within one SE``."""
+        return f"{self.range_text()} within one SE"
 
 
 class IdentifiedModel(RationalFunctionModel):
@@ -210,8 +213,7 @@ class IdentifiedModel(RationalFunctionModel):
         for model in models:
             result, std = model.flutter(section, U_max)
             searched = result.U_max
-            labels.append(f"n_lags={model.diagnostics.n_lags}, "
-                          f"A3={'fitted' if model.diagnostics.with_A3 else 'zero'}")
+            labels.append(structure_label(model.diagnostics.n_lags, model.diagnostics.with_A3))
             speeds.append(result.speed)
             stds.append(std)
         return StructureSpread(tuple(labels), tuple(speeds), tuple(stds), float(searched))

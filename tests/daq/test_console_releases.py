@@ -218,8 +218,7 @@ def test_replay_shows_the_releases_and_model_that_the_file_gives(qtbot, releases
     # The range over the structures within one SE is shown when there are several, not else.
     spread = fit.structures
     assert spread is not None
-    range_text = spread.summary().replace(" within one SE", "")
-    assert (range_text in window.flutter_label.text()) == (len(spread.labels) > 1)
+    assert (spread.range_text() in window.flutter_label.text()) == (len(spread.labels) > 1)
     # The table values drawn are the indirect method's, one point per wind speed.
     assert fit.table is not None
     xs, ys = window.derivatives_panel.points["A3"].getData()

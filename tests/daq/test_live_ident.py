@@ -19,6 +19,7 @@ import pytest
 from daq.live_ident import DECAY_COLUMNS, MIN_DECAY_S, LiveIdentifier, fit_release_modes
 from daq.ring_buffer import RingBuffer
 from ident import flat_plate, flutter
+from ident._selection import structure_label
 from ident.section import SectionModel
 from simulators import simulate_release
 
@@ -132,7 +133,7 @@ def test_each_release_gets_its_modes_and_two_wind_speeds_give_the_flutter_speed(
     # The chosen structure first among those the data cannot tell apart, its speed the one shown.
     spread = fit.structures
     assert spread is not None and spread.speeds[0] == fit.flutter_speed
-    assert spread.labels[0] == f"n_lags={fit.n_lags}, A3={'fitted' if fit.with_A3 else 'zero'}"
+    assert spread.labels[0] == structure_label(fit.n_lags, fit.with_A3)
     assert spread.summary() in fit.summary()
     # The model's derivatives against the truth where the releases are (the big ones, 5 %).
     exact = TRUTH.flutter_derivatives(fit.K)

@@ -15,7 +15,7 @@ from ident import (
     flutter,
     roger_fit,
 )
-from ident._selection import within_one_se
+from ident._selection import structure_label, within_one_se
 from simulators import simulate_release
 
 SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
@@ -139,14 +139,14 @@ def test_the_structures_the_data_cannot_tell_apart_are_fitted_and_their_spread_r
     plausible = {c.label for c in within_one_se(usable)}
     assert len(plausible) >= 2  # the case this test is about
     spread = model.structure_spread(SECTION)
-    chosen = f"n_lags={diagnostics.n_lags}, A3={'fitted' if diagnostics.with_A3 else 'zero'}"
+    chosen = structure_label(diagnostics.n_lags, diagnostics.with_A3)
     assert spread.labels[0] == chosen and set(spread.labels) == plausible
     assert len(spread.labels) == len(diagnostics.alternatives) + 1
     result, std = model.flutter(SECTION)
     assert (spread.speeds[0], spread.stds[0]) == (result.speed, std)
     for alternative, label in zip(diagnostics.alternatives, spread.labels[1:], strict=True):
         alt = alternative.diagnostics
-        assert label == f"n_lags={alt.n_lags}, A3={'fitted' if alt.with_A3 else 'zero'}"
+        assert label == structure_label(alt.n_lags, alt.with_A3)
         assert alt.alternatives == () and "not chosen" in alt.reason
         # Fitted on every sample as the chosen one is: force residuals at the 2 % noise level
         # (10 %: the spread of a noise RMS estimate over these ~2000 samples is ~2 %, plus the
