@@ -412,31 +412,37 @@ class _Problem:
         Per-release intercepts are profiled out by demeaning each release (Frisch-Waugh). The
         many solves of the lag-root search and of cross-validation use column-scaled normal
         equations (fast; candidates are accepted only when well conditioned); the final fit uses
-        an SVD-based solve of the stacked system (``exact=True``).
+        an SVD-based solve of the stacked system (``exact=True``). The releases are stacked into
+        one array so that each solve is a few matrix products, not a loop over releases.
         """
-        centred = [(X - X.mean(axis=0), y - y.mean(axis=0)) for X, y in blocks]
-        k = blocks[0][0].shape[1]
+        sizes = np.array([X.shape[0] for X, _ in blocks])
+        X = np.vstack([b[0] for b in blocks])
+        y = np.vstack([b[1] for b in blocks])
+        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+        X_mean = np.add.reduceat(X, starts, axis=0) / sizes[:, None]
+        y_mean = np.add.reduceat(y, starts, axis=0) / sizes[:, None]
+        release = np.repeat(np.arange(sizes.size), sizes)
+        Xc = X - X_mean[release]
+        yc = y - y_mean[release]
+        w = self.weights[release]  # (n_rows, 2)
+        k = X.shape[1]
         coef = np.empty((k, 2))
         for i in range(2):
+            Xw = Xc * w[:, i : i + 1]
+            yw = yc[:, i] * w[:, i]
             if exact:
-                M = np.vstack([w[i] * Xc for (Xc, _), w in zip(centred, self.weights, strict=True)])
-                b = np.concatenate(
-                    [w[i] * yc[:, i] for (_, yc), w in zip(centred, self.weights, strict=True)]
-                )
-                coef[:, i], *_ = np.linalg.lstsq(M, b, rcond=None)
+                coef[:, i], *_ = np.linalg.lstsq(Xw, yw, rcond=None)
                 continue
-            G = np.zeros((k, k))
-            b = np.zeros(k)
-            for (Xc, yc), w in zip(centred, self.weights, strict=True):
-                G += w[i] ** 2 * (Xc.T @ Xc)
-                b += w[i] ** 2 * (Xc.T @ yc[:, i])
+            G = Xw.T @ Xw
+            b = Xw.T @ yw
             scale = np.sqrt(np.diag(G))
             scale[scale == 0.0] = 1.0
             scaled, *_ = np.linalg.lstsq(G / np.outer(scale, scale), b / scale, rcond=None)
             coef[:, i] = scaled / scale
-        intercepts = [y.mean(axis=0) - X.mean(axis=0) @ coef for X, y in blocks]
-        residuals = [w * (y - X @ coef - c)
-                     for (X, y), c, w in zip(blocks, intercepts, self.weights, strict=True)]
+        intercept_rows = y_mean - X_mean @ coef
+        intercepts = list(intercept_rows)
+        residual_rows = w * (yc - Xc @ coef)
+        residuals = np.split(residual_rows, np.cumsum(sizes)[:-1])
         return coef, intercepts, residuals
 
     def condition(self, d: FloatArray, with_A3: bool) -> float:
