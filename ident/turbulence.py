@@ -65,6 +65,7 @@ __all__ = [
     "GustField",
     "StaticCoefficients",
     "TurbulenceSpec",
+    "WindLoad",
     "buffeting_force_spectrum",
     "buffeting_forces",
     "buffeting_gain",
@@ -500,6 +501,41 @@ def buffeting_forces(
     fs = v.positive("fs", fs)
     gusts = GustField.generate(spec, B=B, span=span, n=n, dx=U / fs, rng=rng)
     return np.asarray(U * gusts.values @ buffeting_gain(static, U, B, rho).T, dtype=float)
+
+
+@dataclass(frozen=True, eq=False)
+class WindLoad:
+    """Mean plus buffeting generalised wind load on a section at one mean speed.
+
+    Parameters
+    ----------
+    static : StaticCoefficients
+        The section's static coefficients (mean load and quasi-steady gains).
+    U : float
+        Mean wind speed, m/s, >= 0 (0: no load).
+    B, rho : float
+        Deck width (m) and air density (kg/m^3).
+    gusts : GustField, optional
+        The effective gusts; without them only the mean load acts (smooth flow).
+    """
+
+    static: StaticCoefficients
+    U: float
+    B: float
+    rho: float
+    gusts: GustField | None = None
+
+    def force(self, t: Any) -> FloatArray:
+        """Generalised wind load ``[L B, M, D B]`` (N m/m) at times ``t`` (s), shape (k, 3)."""
+        t_arr = np.atleast_1d(np.asarray(t, dtype=float))
+        out = np.zeros((t_arr.size, 3))
+        if self.U <= 0.0:
+            return out
+        out += mean_wind_load(self.static, self.U, self.B, self.rho)
+        if self.gusts is not None:
+            gain = buffeting_gain(self.static, self.U, self.B, self.rho)
+            out += self.gusts.gusts(self.U, t_arr) @ gain.T
+        return out
 
 
 def _generator(rng: Any) -> np.random.Generator:
