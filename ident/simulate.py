@@ -60,6 +60,9 @@ __all__ = ["CHANNELS", "SimulatedDecay", "simulate_decay"]
 #: Recorded channels of a release, in order.
 CHANNELS: tuple[str, ...] = ("h", "alpha", "lift", "moment")
 
+#: Samples of a record that the force spline of its continuation runs through.
+_SPLINE_LEAD = 16
+
 FloatArray = npt.NDArray[np.float64]
 
 
@@ -200,7 +203,19 @@ class SimulatedDecay:
         z, qdd, wind = _integrate(self._plant, self._wind, self._z_end, t_start, int(n) + 1,
                                   1.0 / self.fs, self._substeps)
         t = t_start + np.arange(int(n) + 1) / self.fs
-        clean, spline = _clean_channels(self._plant, z, qdd, t, wind, self.effects, self.section.B)
+        clean, _ = _clean_channels(self._plant, z, qdd, t, wind, (), self.section.B)
+        B = self.section.B
+        spline = None
+        if self._delay_spline is not None:
+            # The spline runs on through the last _SPLINE_LEAD samples of this record, so that
+            # the seam is inside it (a cubic spline's end condition fades by 0.27 per knot).
+            lead = slice(max(0, self.t.size - 1 - _SPLINE_LEAD), self.t.size - 1)
+            t_spline = np.concatenate([self.t[lead], t])
+            forces = np.column_stack([clean["lift"] * B, clean["moment"]])
+            lead_forces = np.column_stack([self.clean["lift"][lead] * B,
+                                           self.clean["moment"][lead]])
+            spline = CubicSpline(t_spline, np.vstack([lead_forces, forces]), axis=0)
+            t_start = float(t_spline[0])
         previous = self._delay_spline
         start = float(self.t[0])
 
@@ -209,8 +224,7 @@ class SimulatedDecay:
 
         keep = slice(1, None)
         clean = {name: values[keep] for name, values in clean.items()}
-        measured = _measure(clean, t[keep], self.effects, before, spline, t_start,
-                            self.section.B)
+        measured = _measure(clean, t[keep], self.effects, before, spline, t_start, B)
         return dataclasses.replace(
             self, t=t[keep], **measured, clean=clean,
             wind_load=None if wind is None else wind[keep], _z_end=z[-1].copy(),

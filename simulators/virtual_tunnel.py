@@ -97,6 +97,9 @@ class _Decay:
 
 _NAMES = ("h", "alpha", "lift", "moment")
 
+#: Samples of the previous chunk that a continuation chunk's splines run through.
+_SPLINE_LEAD = 16
+
 
 class _Continuation:
     """The random response after a computed decay in turbulence, extended on demand in chunks."""
@@ -124,11 +127,15 @@ class _Continuation:
     def _extend(self) -> None:
         last = self._last
         nxt = last.continued(self._n_chunk)
-        t = np.concatenate([last.t[-1:], nxt.t])
-        splines = {name: CubicSpline(t, np.concatenate([getattr(last, name)[-1:],
+        # The spline runs through the last samples of the previous chunk too, so that its end
+        # condition (fading by 0.27 per knot) does not show at the seam.
+        lead = slice(-_SPLINE_LEAD, None)
+        t = np.concatenate([last.t[lead], nxt.t])
+        splines = {name: CubicSpline(t, np.concatenate([getattr(last, name)[lead],
                                                         getattr(nxt, name)]))
                    for name in _NAMES}
-        self._chunks = [*self._chunks, (float(t[0]), splines)][-CONTINUATION_CHUNKS_KEPT:]
+        seam = float(last.t[-1])
+        self._chunks = [*self._chunks, (seam, splines)][-CONTINUATION_CHUNKS_KEPT:]
         self._last = nxt
         self._end = float(nxt.t[-1])
 
