@@ -161,7 +161,7 @@ class SimulatedDecay:
         if t_arr.ndim != 1 or not np.all(t_arr < 0.0):
             raise ValueError("held times must be a 1-D array of times before the release (t < 0)")
         if self._before is None:
-            raise ValueError("held() is for a record that starts at the release, not a continuation")
+            raise ValueError("held() is for a record from the release, not a continuation")
         if t_arr.size and float(t_arr.min()) < self._held_from - 1e-9 / self.fs:
             raise ValueError(f"the turbulence was generated from t = {self._held_from} s; "
                              f"pass pre_s to simulate_decay to cover t = {float(t_arr.min())} s")
@@ -226,7 +226,8 @@ class SimulatedDecay:
         clean = {name: values[keep] for name, values in clean.items()}
         measured = _measure(clean, t[keep], self.effects, before, spline, t_start, B)
         return dataclasses.replace(
-            self, t=t[keep], **measured, clean=clean,
+            self, t=t[keep], h=measured["h"], alpha=measured["alpha"], lift=measured["lift"],
+            moment=measured["moment"], clean=clean,
             wind_load=None if wind is None else wind[keep], _z_end=z[-1].copy(),
             _delay_spline=spline, _before=None,
         )
@@ -616,7 +617,7 @@ def _clean_channels(
     plant: _Plant, z: FloatArray, qdd: FloatArray, t: FloatArray, wind: FloatArray | None,
     effects: tuple[Effect, ...], B: float,
 ) -> tuple[dict[str, FloatArray], Any]:
-    """The four physical channels, and the spline of the forces a channel delay needs."""
+    """Return the four physical channels, and the spline of the forces a channel delay needs."""
     forces = plant.forces(z, qdd, t)
     if wind is not None:
         forces = forces + wind

@@ -442,7 +442,7 @@ class GustField:
         return float(self.values.shape[0] * self.dx)
 
     def shifted(self, distance: float) -> GustField:
-        """The same field with ``t = 0`` moved ``distance`` m further along it."""
+        """Return the same field with ``t = 0`` moved ``distance`` m further along it."""
         return replace(self, x0=self.x0 + v.finite("distance", distance))
 
     def gusts(self, U: float, t: Any) -> FloatArray:

@@ -53,7 +53,7 @@ from ident.taps import TapLayout
 from ident.turbulence import GustField, StaticCoefficients, TurbulenceSpec, WindLoad
 from simulators.clock import Clock, MonotonicClock
 from simulators.effects import Effect
-from simulators.tunnel import simulate_release
+from simulators.tunnel import SimulatedRelease, simulate_release
 
 __all__ = ["AirState", "VirtualTunnel"]
 
@@ -111,7 +111,9 @@ class _Continuation:
         self._end = float(sim.t[-1])
         self._chunks: list[tuple[float, dict[str, CubicSpline]]] = []
 
-    def fill(self, tau: FloatArray, out: dict[str, FloatArray], mask: FloatArray) -> None:
+    def fill(
+        self, tau: FloatArray, out: dict[str, FloatArray], mask: npt.NDArray[np.bool_]
+    ) -> None:
         """Write the channels at times ``tau[mask]`` (after the computed decay) into ``out``."""
         if not np.any(mask):
             return
@@ -388,24 +390,24 @@ class VirtualTunnel:
 
     # -- physics ------------------------------------------------------------------------------
     def _compute_decay(self, U: float, x0: float) -> _Decay:
-        """The decay at wind ``U`` from position ``x0`` (m) of the gust field."""
+        """Compute the decay at wind ``U`` from position ``x0`` (m) of the gust field."""
+        sim: SimulatedRelease | SimulatedDecay
+        continuation = None
         if self.static is None:
             sim = simulate_release(
                 self.section, self.model, U, *self.hold, duration=self.decay_duration_s,
                 fs=self.fs_internal, effects=self.effects,
             )
-            continuation = None
         else:
             # Noise-free and without a held stretch, simulate_release is simulate_decay; the
             # latter's record can be continued.
             n = int(round(self.decay_duration_s * self.fs_internal))
             gusts = None if self._gusts is None else self._gusts.shifted(x0)
-            decay_sim = simulate_decay(self.section, self.model, U, *self.hold, n=n,
-                                       fs=self.fs_internal, effects=self.effects,
-                                       static=self.static, turbulence=gusts)
-            continuation = (_Continuation(decay_sim, n)
-                            if gusts is not None and U > 0.0 else None)
-            sim = decay_sim
+            sim = simulate_decay(self.section, self.model, U, *self.hold, n=n,
+                                 fs=self.fs_internal, effects=self.effects, static=self.static,
+                                 turbulence=gusts)
+            if gusts is not None and U > 0.0:
+                continuation = _Continuation(sim, n)
         splines = {name: CubicSpline(sim.t, getattr(sim, name)) for name in _NAMES}
         final = {name: float(getattr(sim, name)[-1]) for name in splines}
         return _Decay(t0=math.nan, U=U, duration=float(sim.t[-1]), splines=splines, final=final,
