@@ -5,7 +5,10 @@ structural nonlinearities, the measurement effects) lives in :mod:`ident.simulat
 the discrepancy workflow; the effects in :mod:`ident.effects` (re-exported by
 :mod:`simulators.effects`).
 This module adds what the instruments add: the held, static stretch before the release and
-Gaussian measurement noise, and returns the record as a :class:`SimulatedRelease`.
+Gaussian measurement noise, and returns the record as a :class:`SimulatedRelease`. In turbulent
+flow (``static`` and ``turbulence``, :mod:`ident.turbulence`) the buffeting forces act on the held
+model (which does not move; the forces fluctuate) and drive it after the release, which then
+decays into a random response.
 
 This module knows physics only; the simulated instruments sample it through their own wire
 protocols.
@@ -27,6 +30,7 @@ from ident.rfc import RationalFunctionModel
 from ident.section import SectionModel
 from ident.simulate import CHANNELS, simulate_decay
 from ident.taps import TapLayout
+from ident.turbulence import GustField, StaticCoefficients, TurbulenceSpec
 
 __all__ = ["CHANNELS", "SimulatedRelease", "simulate_release"]
 
@@ -45,7 +49,8 @@ class SimulatedRelease:
         Heave (m, positive down) and pitch (rad, positive nose-up), with measurement effects and
         noise.
     lift, moment : ndarray, shape (n,)
-        Self-excited (plus vortex) lift, N/m, and moment, N m/m, with measurement effects and noise.
+        Self-excited (plus vortex, plus mean and buffeting wind load) lift, N/m, and moment,
+        N m/m, with measurement effects and noise.
     U, rho, fs : float
         Wind speed (m/s), air density (kg/m^3), sampling rate (Hz).
     h0, alpha0 : float
@@ -97,6 +102,9 @@ def simulate_release(
     effects: Iterable[Effect] = (),
     oversample: int = 8,
     pre_s: float = 0.0,
+    static: StaticCoefficients | None = None,
+    turbulence: TurbulenceSpec | GustField | None = None,
+    span: float | None = None,
 ) -> SimulatedRelease:
     """Simulate a free-vibration release of a section model at wind speed ``U``.
 
@@ -118,8 +126,9 @@ def simulate_release(
         Gaussian measurement noise as a fraction of each channel's RMS (one number for all four
         channels, or a dict by channel name ``h, alpha, lift, moment``).
     rng : numpy.random.Generator or int, optional
-        Random source (or seed) of the noise; required when ``noise`` is not zero, so that every
-        noisy simulation is reproducible.
+        Random source (or seed) of the noise and of the turbulence (drawn first); required when
+        ``noise`` is not zero or ``turbulence`` is a spec, so that every simulation is
+        reproducible.
     effects : iterable of Effect, optional
         Extra physics (:mod:`ident.effects`); at most one of each kind.
     oversample : int, optional
@@ -127,6 +136,9 @@ def simulate_release(
         a stiff effect (smoothed friction) needs a smaller step.
     pre_s : float, optional
         Seconds of the held, static model recorded before the release (t < 0), >= 0.
+    static, turbulence, span : optional
+        Wind load: static coefficients (mean load), turbulence (spec or gust field) and the
+        section model's span, m; see :func:`ident.simulate.simulate_decay`.
 
     Returns
     -------
@@ -148,13 +160,18 @@ def simulate_release(
     noise_frac = _noise_fractions(noise)
     if any(noise_frac.values()) and rng is None:
         raise ValueError("noise needs rng (a numpy Generator or a seed) so that it is reproducible")
+    if isinstance(turbulence, TurbulenceSpec) and rng is None:
+        raise ValueError("turbulence needs rng (a numpy Generator or a seed) so that it is "
+                         "reproducible")
     generator = np.random.default_rng(rng) if rng is not None else None
     n = int(round(duration * fs))
     if n < 2:
         raise ValueError(f"duration * fs must give at least 2 samples, got {n}")
 
+    spec_rng = generator if isinstance(turbulence, TurbulenceSpec) else None
     decay = simulate_decay(section, model, U, h0, alpha0, n=n, fs=fs, effects=effects,
-                           oversample=oversample)
+                           oversample=oversample, static=static, turbulence=turbulence,
+                           span=span, rng=spec_rng, pre_s=pre_s)
     t, clean, measured = decay.t, decay.clean, decay.measured
     if pre_s > 0.0:
         n_pre = int(round(pre_s * fs))

@@ -10,8 +10,25 @@ them.
 Motion: while the magnet holds, the model sits at the hold position ``(h0, alpha0)``; a release
 at wind speed U computes the free decay once (on a fine grid, then interpolated with cubic splines)
 and the model follows it; re-arming pulls it back to the hold position. Forces are the
-self-excited forces plus any vortex forcing; tap pressures integrate exactly to them, plus a mean
-pressure distribution that integrates to zero. The Pitot channel reads the dynamic pressure.
+self-excited forces plus any vortex forcing and wind load; tap pressures integrate exactly to
+them, plus a mean pressure distribution that integrates to zero. The Pitot channel reads the
+mean dynamic pressure.
+
+Turbulent flow (optional: static coefficients, a :class:`~ident.turbulence.TurbulenceSpec`, the
+model's span and a seed): one periodic field of effective gusts along the distance the air
+travels, ``x`` (:class:`~ident.turbulence.GustField`, ``2**20`` points every 1 cm, so ~10.5 km,
+17 min at 10 m/s before it repeats), is generated from the seed at construction. The tunnel
+tracks ``x(t)``, advancing at the wind speed of the moment (continuous when the fan changes), and
+the buffeting forces follow it whenever the wind blows: on the held model (which does not move;
+the taps see the fluctuating pressures) and during a decay, which is driven by the same field
+from the release on. After the computed decay (``decay_duration_s``) the model does not freeze:
+the response is continued on demand from the full final state under the same field, in chunks
+of the same length (:meth:`ident.simulate.SimulatedDecay.continued`), the latest
+``CONTINUATION_CHUNKS_KEPT`` of which are kept (instruments sample the recent past; an older
+time takes the value at the start of the oldest chunk kept). :meth:`VirtualTunnel.decay_truth`
+covers the computed decay only. Smooth flow keeps the previous behaviour (the model rests at its
+final state after the computed decay). Everything is deterministic for a seed: the field
+depends on the seed only, and the motion on the field, the wind and the release times.
 
 Thread safety: state changes (fan, magnet) come from Modbus server threads, reads from instrument
 threads; one lock guards the state, and the sampled release is an immutable object.
@@ -31,10 +48,12 @@ from scipy.interpolate import CubicSpline
 
 from ident.rfc import RationalFunctionModel
 from ident.section import SectionModel
+from ident.simulate import SimulatedDecay, simulate_decay
 from ident.taps import TapLayout
+from ident.turbulence import GustField, StaticCoefficients, TurbulenceSpec, WindLoad
 from simulators.clock import Clock, MonotonicClock
 from simulators.effects import Effect
-from simulators.tunnel import simulate_release
+from simulators.tunnel import SimulatedRelease, simulate_release
 
 __all__ = ["AirState", "VirtualTunnel"]
 
@@ -42,6 +61,13 @@ FloatArray = npt.NDArray[np.float64]
 
 #: Gas constant of dry air, J/(kg K).
 R_AIR = 287.058
+
+#: Points and spacing (m) of the tunnel's gust field (see the module docstring).
+GUST_FIELD_POINTS = 2**20
+GUST_FIELD_DX_M = 0.01
+
+#: Continuation chunks of the random response after a decay kept for sampling.
+CONTINUATION_CHUNKS_KEPT = 2
 
 
 @dataclass(frozen=True)
@@ -66,6 +92,54 @@ class _Decay:
     duration: float
     splines: dict[str, CubicSpline] = field(repr=False)
     final: dict[str, float] = field(repr=False)
+    continuation: _Continuation | None = field(default=None, repr=False)
+
+
+_NAMES = ("h", "alpha", "lift", "moment")
+
+#: Samples of the previous chunk that a continuation chunk's splines run through.
+_SPLINE_LEAD = 16
+
+
+class _Continuation:
+    """The random response after a computed decay in turbulence, extended on demand in chunks."""
+
+    def __init__(self, sim: SimulatedDecay, n_chunk: int) -> None:
+        self._lock = threading.Lock()
+        self._last = sim
+        self._n_chunk = n_chunk
+        self._end = float(sim.t[-1])
+        self._chunks: list[tuple[float, dict[str, CubicSpline]]] = []
+
+    def fill(
+        self, tau: FloatArray, out: dict[str, FloatArray], mask: npt.NDArray[np.bool_]
+    ) -> None:
+        """Write the channels at times ``tau[mask]`` (after the computed decay) into ``out``."""
+        if not np.any(mask):
+            return
+        with self._lock:  # one sampler extends; the others wait for it
+            while self._end < float(tau[mask].max()):
+                self._extend()
+            chunks = list(self._chunks)
+        for i, (start, splines) in enumerate(chunks):
+            inside = mask & (tau > start) if i else mask  # older times: the oldest chunk kept
+            for name in _NAMES:
+                out[name][inside] = splines[name](np.maximum(tau[inside], start))
+
+    def _extend(self) -> None:
+        last = self._last
+        nxt = last.continued(self._n_chunk)
+        # The spline runs through the last samples of the previous chunk too, so that its end
+        # condition (fading by 0.27 per knot) does not show at the seam.
+        lead = slice(-_SPLINE_LEAD, None)
+        t = np.concatenate([last.t[lead], nxt.t])
+        splines = {name: CubicSpline(t, np.concatenate([getattr(last, name)[lead],
+                                                        getattr(nxt, name)]))
+                   for name in _NAMES}
+        seam = float(last.t[-1])
+        self._chunks = [*self._chunks, (seam, splines)][-CONTINUATION_CHUNKS_KEPT:]
+        self._last = nxt
+        self._end = float(nxt.t[-1])
 
 
 class VirtualTunnel:
@@ -94,6 +168,15 @@ class VirtualTunnel:
         Length of each computed decay; afterwards the model rests at its final state.
     fs_internal : float
         Sampling rate of the computed decay before spline interpolation, Hz.
+    static : StaticCoefficients, optional
+        Static coefficients of the section: the mean wind load, and the buffeting forces with
+        ``turbulence``. Default None: no wind load (smooth flow as before).
+    turbulence : TurbulenceSpec, optional
+        Oncoming turbulence (needs ``static``, ``span`` and ``seed``). Default None.
+    span : float, optional
+        Span of the section model, m (span-wise coherence of the gusts).
+    seed : int, optional
+        Seed of the gust field.
     """
 
     def __init__(
@@ -111,6 +194,10 @@ class VirtualTunnel:
         clock: Clock | None = None,
         decay_duration_s: float = 60.0,
         fs_internal: float = 1000.0,
+        static: StaticCoefficients | None = None,
+        turbulence: TurbulenceSpec | None = None,
+        span: float | None = None,
+        seed: int | None = None,
     ) -> None:
         if not wind_per_rpm > 0:
             raise ValueError(f"wind_per_rpm must be > 0, got {wind_per_rpm!r}")
@@ -124,6 +211,18 @@ class VirtualTunnel:
         self.clock: Clock = clock or MonotonicClock()
         self.decay_duration_s = float(decay_duration_s)
         self.fs_internal = float(fs_internal)
+        self.static = static
+        self._gusts: GustField | None = None
+        if turbulence is not None:
+            if static is None or span is None or seed is None:
+                raise ValueError("turbulence needs static coefficients, the span and a seed")
+            self._gusts = GustField.generate(turbulence, B=self.section.B, span=span,
+                                             n=GUST_FIELD_POINTS, dx=GUST_FIELD_DX_M, rng=seed)
+        elif span is not None or seed is not None:
+            raise ValueError("span and seed are for turbulence; pass turbulence too")
+        # Distance travelled by the air past the model: x(t) = x_ref + U (t - t_ref).
+        self._t_ref = 0.0
+        self._x_ref = 0.0
         self._cp_mean = np.where(taps.nz < 0, mean_cp_upper, mean_cp_lower)
         # The taps are fixed: their force matrix and its pseudo-inverse are computed once (an
         # SVD per production step cost ~10 % of a core with 511 taps).
@@ -143,6 +242,9 @@ class VirtualTunnel:
     def set_fan_speed(self, rpm: float) -> None:
         """Set the actual fan speed (the simulated drive ramps it), rpm."""
         with self._lock:
+            now = self.clock.now()
+            self._x_ref += self._fan_rpm * self.wind_per_rpm * (now - self._t_ref)
+            self._t_ref = now
             self._fan_rpm = float(rpm)
 
     def arm(self) -> None:
@@ -161,9 +263,14 @@ class VirtualTunnel:
         """
         with self._lock:
             U = self._fan_rpm * self.wind_per_rpm
-        decay = self._compute_decay(U)
+            x0 = self._x_ref + U * (self.clock.now() - self._t_ref)
+        decay = self._compute_decay(U, x0)
         with self._lock:
             t0 = self.clock.now()
+            # The decay starts at x0 in the gust field: re-anchor x(t) there, so the forces run
+            # on continuously through the release (the held past moves by the ~25 ms the
+            # computation took, invisible in the statistics).
+            self._t_ref, self._x_ref = t0, x0
             self._decay = dataclasses.replace(decay, t0=t0)
             self._armed = False
             self._releases.append(t0)
@@ -220,6 +327,7 @@ class VirtualTunnel:
         with self._lock:
             decay = self._decay
             U_now = self._fan_rpm * self.wind_per_rpm
+            x_origin = self._x_ref - U_now * self._t_ref
         # The wind follows the fan at all times (the Pitot and the mean pressures see it). A
         # decay's motion and self-excited forces are those computed at the wind of its release:
         # a change of wind during a free decay is not modelled (a campaign keeps it constant).
@@ -229,17 +337,23 @@ class VirtualTunnel:
         B = self.section.B
         # Held: motionless, with the static aerodynamic force of the held position.
         static = np.outer(qd * B**2, self.model.A[0] @ np.array([h0 / B, a0]))
+        if self.static is not None:
+            gusts = None if self._gusts is None else self._gusts.shifted(x_origin)
+            wind = WindLoad(self.static, U_now, B, self.air.density, gusts)
+            static = static + wind.force(t)[:, :2]
         out = {"h": np.full(t.shape, h0), "alpha": np.full(t.shape, a0),
                "lift": static[:, 0] / B, "moment": static[:, 1], "U": U, "qd": qd}
         if decay is not None:
             tau = t - decay.t0
             after = tau >= 0
             inside = after & (tau <= decay.duration)
-            for name in ("h", "alpha", "lift", "moment"):
+            for name in _NAMES:
                 values = out[name].copy()
                 values[inside] = decay.splines[name](tau[inside])
                 values[after & ~inside] = decay.final[name]
                 out[name] = values
+            if decay.continuation is not None:
+                decay.continuation.fill(tau, out, after & ~inside)
         return out
 
     def decay_truth(self, t: FloatArray) -> dict[str, FloatArray]:
@@ -275,12 +389,26 @@ class VirtualTunnel:
         return p, values["qd"]
 
     # -- physics ------------------------------------------------------------------------------
-    def _compute_decay(self, U: float) -> _Decay:
-        sim = simulate_release(
-            self.section, self.model, U, *self.hold, duration=self.decay_duration_s,
-            fs=self.fs_internal, effects=self.effects,
-        )
-        splines = {name: CubicSpline(sim.t, getattr(sim, name))
-                   for name in ("h", "alpha", "lift", "moment")}
+    def _compute_decay(self, U: float, x0: float) -> _Decay:
+        """Compute the decay at wind ``U`` from position ``x0`` (m) of the gust field."""
+        sim: SimulatedRelease | SimulatedDecay
+        continuation = None
+        if self.static is None:
+            sim = simulate_release(
+                self.section, self.model, U, *self.hold, duration=self.decay_duration_s,
+                fs=self.fs_internal, effects=self.effects,
+            )
+        else:
+            # Noise-free and without a held stretch, simulate_release is simulate_decay; the
+            # latter's record can be continued.
+            n = int(round(self.decay_duration_s * self.fs_internal))
+            gusts = None if self._gusts is None else self._gusts.shifted(x0)
+            sim = simulate_decay(self.section, self.model, U, *self.hold, n=n,
+                                 fs=self.fs_internal, effects=self.effects, static=self.static,
+                                 turbulence=gusts)
+            if gusts is not None and U > 0.0:
+                continuation = _Continuation(sim, n)
+        splines = {name: CubicSpline(sim.t, getattr(sim, name)) for name in _NAMES}
         final = {name: float(getattr(sim, name)[-1]) for name in splines}
-        return _Decay(t0=math.nan, U=U, duration=float(sim.t[-1]), splines=splines, final=final)
+        return _Decay(t0=math.nan, U=U, duration=float(sim.t[-1]), splines=splines, final=final,
+                      continuation=continuation)

@@ -94,3 +94,69 @@ def test_device_clock_maps_both_ways():
     assert c.true_time(c.device_time(123.4)) == pytest.approx(123.4, abs=1e-12)
     with pytest.raises(ValueError, match="cannot go back"):
         ManualClock().advance(-1.0)
+
+
+def turbulent_tunnel(clock, seed=3, **kwargs):
+    from ident.turbulence import StaticCoefficients, TurbulenceSpec
+
+    spec = TurbulenceSpec(Iu=0.1, Iw=0.08, Lux=0.6, Lwx=0.25, Cuy=10.0, Cwy=8.0)
+    return VirtualTunnel(SECTION, flat_plate.jones_model(), TAPS, wind_per_rpm=0.01,
+                         hold=(0.004, 0.02), clock=clock, decay_duration_s=4.0,
+                         static=StaticCoefficients.flat_plate(), turbulence=spec, span=1.0,
+                         seed=seed, **kwargs)
+
+
+def test_turbulence_buffets_the_held_model_and_the_taps_integrate_to_the_forces():
+    """Held: motionless, fluctuating forces (same seed, same forces); taps integrate to them."""
+    clock = ManualClock()
+    vts = [turbulent_tunnel(clock), turbulent_tunnel(clock), turbulent_tunnel(clock, seed=4)]
+    for vt in vts:
+        vt.set_fan_speed(600.0)
+    clock.advance(5.0)
+    t = np.linspace(1.0, 5.0, 2001)
+    samples = [vt.sample(t) for vt in vts]
+    held = samples[0]
+    assert np.all(held["alpha"] == 0.02) and np.all(held["h"] == 0.004)
+    assert held["moment"].std() > 0.05 * abs(held["moment"].mean())
+    np.testing.assert_array_equal(held["moment"], samples[1]["moment"])
+    assert not np.allclose(held["moment"], samples[2]["moment"])
+    p, _ = vts[0].pressures(t)
+    lift, moment = TAPS.integrate(p)
+    np.testing.assert_allclose(lift, held["lift"], atol=1e-9 * np.abs(held["lift"]).max())
+    np.testing.assert_allclose(moment, held["moment"], atol=1e-9 * np.abs(held["moment"]).max())
+
+
+def test_turbulence_keeps_the_model_moving_after_the_computed_decay():
+    """After decay_duration_s the response goes on (continued, not frozen) and is continuous.
+
+    Samples 1 ms apart across the seam have second differences no larger than those over a
+    second of the later response: no jump where the computed decay ends and the continuation
+    begins.
+    """
+    clock = ManualClock()
+    vt = turbulent_tunnel(clock)
+    vt.set_fan_speed(600.0)
+    clock.advance(2.0)
+    t0 = vt.release()
+    clock.advance(5.0)  # instruments sample the recent past, in time order
+    seam_t = t0 + vt._decay.duration + np.arange(-5, 6) * 1e-3
+    seam = vt.sample(seam_t)
+    clock.advance(15.0)
+    late = vt.sample(t0 + np.linspace(8.0, 18.0, 5001))
+    assert late["alpha"].std() > 0.1 * 0.02  # a random response, not a frozen model
+    # Across the seam alpha moves as it does elsewhere: its second differences stay within
+    # those of a later stretch sampled alike (a jump at the seam would show as one large one).
+    elsewhere = vt.sample(t0 + 15.0 + np.arange(-500, 501) * 1e-3)["alpha"]
+    assert np.abs(np.diff(seam["alpha"], 2)).max() < 1.5 * np.abs(np.diff(elsewhere, 2)).max()
+    # A second tunnel with the same seed and history gives the same motion.
+    clock2 = ManualClock()
+    vt2 = turbulent_tunnel(clock2)
+    vt2.set_fan_speed(600.0)
+    clock2.advance(2.0)
+    t0_2 = vt2.release()
+    clock2.advance(20.0)
+    np.testing.assert_array_equal(vt2.sample(t0_2 + np.linspace(8.0, 18.0, 5001))["alpha"],
+                                  late["alpha"])
+    with pytest.raises(ValueError, match="needs static"):
+        VirtualTunnel(SECTION, flat_plate.jones_model(), TAPS, wind_per_rpm=0.01,
+                      turbulence=vt._gusts.spec, span=1.0, seed=1)
