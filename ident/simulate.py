@@ -62,6 +62,8 @@ CHANNELS: tuple[str, ...] = ("h", "alpha", "lift", "moment")
 
 #: Samples of a record that the force spline of its continuation runs through.
 _SPLINE_LEAD = 16
+#: Samples stepped at once by the free linear integrator (powers of the step matrix).
+LINEAR_BLOCK = 256
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -510,11 +512,26 @@ class _Plant:
         return np.asarray(self.M_inv @ force, dtype=float)
 
     def integrate_linear(self, z0: FloatArray, n: int, dt: float) -> tuple[FloatArray, FloatArray]:
+        """Step the free linear system exactly: ``z[k] = expm(A dt)^k z[0]``.
+
+        The powers are applied a block of ``LINEAR_BLOCK`` samples at a time (``z[s + j] =
+        phi^j z[s]``), so a minute at 1 kHz costs a few hundred small matrix products instead of
+        60 000 Python-level steps (0.3 s, which delayed the virtual tunnel's release).
+        """
         phi = expm(self.A * dt)
-        z = np.empty((n, self.A.shape[0]))
-        z[0] = self.initial(z0)
-        for k in range(1, n):
-            z[k] = phi @ z[k - 1]
+        size = self.A.shape[0]
+        block = min(LINEAR_BLOCK, n)
+        powers = np.empty((block, size, size))
+        powers[0] = np.eye(size)
+        for j in range(1, block):
+            powers[j] = phi @ powers[j - 1]
+        step = phi @ powers[-1]  # phi^block: from one block's start to the next
+        z = np.empty((n, size))
+        start = self.initial(z0)
+        for s in range(0, n, block):
+            m = min(block, n - s)
+            z[s : s + m] = powers[:m] @ start
+            start = step @ start
         qdd = z @ self.A[2:4, :].T
         return z, qdd
 
