@@ -112,7 +112,7 @@ def identify_raw(releases, section):
         fixed = np.hstack([q - q.mean(axis=0), c * qd, c**2 * np.gradient(qd, r.dt, axis=0)])
         prepared.append(_RawPrepared(release=r, fit=p.fit, B=p.B, qd=p.qd, fixed=fixed,
                                      force=p.force, force_noise=p.force_noise, q=q))
-    return e2rfc._identify_prepared(prepared, None, None)
+    return e2rfc._identify_prepared(prepared, section, None, None)
 
 
 def fd_error(section, model, releases):

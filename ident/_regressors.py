@@ -108,6 +108,26 @@ class RegressorView:
             columns.append(x)
         return np.hstack(columns)
 
+    def lag_derivatives(self, d: FloatArray) -> FloatArray:
+        """Return the derivatives of :meth:`lag_columns` in ``log d``, shape (n_rows, 2 m).
+
+        With ``g = p / (p + mu)`` (``mu = rate d``), ``x = Re[e^{pt} g C] - e^{-mu t} Re[sum g C]``
+        and ``dg/dmu = -p / (p + mu)^2``; times ``dmu/dlog d = mu``.
+        """
+        if len(d) == 0:
+            return np.zeros((self.t.size, 0))
+        columns = []
+        poles, amplitudes = self.fit.poles, self.fit.amplitudes
+        for d_l in d:
+            mu = self.rate * d_l
+            gained = (poles / (poles + mu))[:, None] * amplitudes
+            dgained = (-poles / (poles + mu) ** 2)[:, None] * amplitudes
+            decay = np.exp(np.maximum(-mu * self.t, -600.0))[:, None]
+            dx = ((self.exponentials @ dgained).real - decay * dgained.sum(axis=0).real
+                  + self.t[:, None] * decay * gained.sum(axis=0).real)
+            columns.append(mu * dx)
+        return np.hstack(columns)
+
 
 def prepare(release: Release, section: SectionModel) -> PreparedRelease:
     """Fit the modes of one release and build its fixed regressors and normalised forces."""

@@ -17,46 +17,67 @@ linear least-squares solve, so the nonlinear search runs over log(d) alone (scip
 least squares, several starts spread over the reduced frequencies the data cover). The number of
 lags (0 to 3) and whether the added-mass matrix A3 is fitted are chosen by five-fold held-out
 error (folds of interleaved one-period blocks of every release), with the one-standard-error rule:
-the simplest model whose held-out error is within one standard error of the best. The other
-structures within one standard error are fitted too (``diagnostics.alternatives``): the data do not
-tell them apart, and the spread of their flutter speeds (:meth:`IdentifiedModel.structure_spread`)
-is an uncertainty that the chosen structure's parameter covariance cannot show.
+the simplest model whose held-out error is within one standard error of the best. The machinery
+of that problem is :mod:`ident._e2rfc_problem`.
+
+How uncertain the flutter speed is (:meth:`IdentifiedModel.uncertainty`), from four sources:
+
+- *parametric*: measurement noise through the chosen model's parameter covariance;
+- *structure*: the other structures within one standard error are fitted too
+  (``diagnostics.alternatives``): the data do not tell them apart, and the spread of their
+  flutter speeds is an uncertainty that one structure's covariance cannot show;
+- *extrapolation*: the flutter speed lies beyond the wind speeds released at, at a lower reduced
+  frequency than the releases cover, where a rational function fitted over the covered range
+  can drift (real decks are not exactly of Roger's form). With releases at three or more wind
+  speeds the model is fitted again without the highest one; how far its flutter speed moves,
+  scaled by how much farther it extrapolates, measures that drift;
+- *turbulence*: in turbulent flow the decays turn into a random response (buffeting), which the
+  modal fit cannot follow and which is correlated over whole periods, so the least-squares
+  covariance says nothing. The releases' buffeting is independent from one release to the next,
+  so the release-to-release scatter measures it honestly: each release is left out in turn and
+  the model fitted again (jackknife). A release holds a random response when its modal fit's
+  residual exceeds ``RANDOM_RESPONSE_LIMIT`` times its white measurement noise (smooth-flow
+  decays, even with friction or other nonlinear physics, stay below 5; 0.3 % turbulence gives
+  about 40). Its variance falls as one over the number of releases, which is how
+  :meth:`FlutterUncertainty.releases_needed` tells how many would be needed.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy.optimize import least_squares
 
 from ident import flutter as _flutter
+from ident._e2rfc_problem import FinalFit, Problem, improves
 from ident._regressors import PreparedRelease, prepare
 from ident._selection import Candidate, select_one_se, structure_label, within_one_se
-from ident._stats import autocorrelation_inflation
 from ident._threads import single_threaded_blas
 from ident.errors import RankDeficiencyError
-from ident.modal import ModalFit
+from ident.modal import ModalFit, name_modes
 from ident.release import Release
 from ident.rfc import RationalFunctionModel
 from ident.section import SectionModel
 
-__all__ = ["Candidate", "E2RFCDiagnostics", "IdentifiedModel", "StructureSpread",
-           "distinct_wind_speeds", "identify", "reduced_frequency_span"]
+__all__ = ["Candidate", "E2RFCDiagnostics", "FlutterUncertainty", "IdentifiedModel",
+           "StructureSpread", "distinct_wind_speeds", "identify", "reduced_frequency_span"]
 
 FloatArray = npt.NDArray[np.float64]
 
 #: Wind speeds closer than this (relative) count as one wind speed.
 DISTINCT_U_RTOL = 0.02
-#: Largest condition number of the column-scaled design accepted as determined.
-MAX_CONDITION = 1e8
-#: Folds of the held-out error.
-N_FOLDS = 5
+#: A release holds a random response (turbulence) when its modal fit's residual is more than
+#: this many times its white measurement noise (module docstring).
+RANDOM_RESPONSE_LIMIT = 10.0
+#: Grid of the flutter analyses of the refitted models (jackknife, extrapolation): they are
+#: close to the chosen model, so a coarser grid than a first analysis needs is enough.
+REFIT_GRID = 150
+#: Largest extrapolation, as the ratio of the lowest covered reduced frequency to the flutter
+#: one, accepted without a warning.
+EXTRAPOLATION_WARN = 1.1
 
 
 @dataclass(frozen=True, eq=False)
@@ -88,6 +109,27 @@ class E2RFCDiagnostics:
         The other structures whose held-out error is within one standard error of the best,
         each fitted on every sample as the chosen one is (empty when the caller gave the
         structure).
+    random_response : ndarray, shape (n_releases,)
+        Each release's modal-fit residual over its white measurement noise (module docstring).
+    jackknife : tuple of RationalFunctionModel
+        With a random response: the chosen structure fitted with each release left out in turn
+        (those whose removal leaves two or more wind speeds).
+    reduced : RationalFunctionModel or None
+        The chosen structure fitted without the releases at the highest wind speed (releases at
+        three or more wind speeds), for the extrapolation uncertainty.
+    finer : RationalFunctionModel or None
+        The chosen structure with one lag more, fitted on every release (None when the data do
+        not determine it): how far its flutter speed moves measures the chosen one's
+        approximation error.
+    reduced_K : dict
+        Reduced frequencies those releases cover, ``{"heave": (lo, hi), "pitch": (lo, hi)}``.
+    K_range : dict
+        Reduced frequencies ``B omega / U`` each mode covers over the releases (modal fits,
+        modes named by their kinetic energy), ``{"heave": (lo, hi), "pitch": (lo, hi)}``.
+    warnings : tuple of str
+        What the checks of the data and the model found (random response, a release far worse
+        than the others, residuals not white); :meth:`IdentifiedModel.uncertainty` adds the
+        flutter speed's own (extrapolation).
     """
 
     n_lags: int
@@ -101,6 +143,98 @@ class E2RFCDiagnostics:
     parameter_index: tuple[tuple[int, int, int], ...] = field(repr=False)
     modal_fits: tuple[ModalFit, ...] = field(repr=False)
     alternatives: tuple[IdentifiedModel, ...] = field(default=(), repr=False)
+    random_response: FloatArray = field(default_factory=lambda: np.zeros(0), repr=False)
+    jackknife: tuple[RationalFunctionModel, ...] = field(default=(), repr=False)
+    reduced: RationalFunctionModel | None = field(default=None, repr=False)
+    finer: RationalFunctionModel | None = field(default=None, repr=False)
+    reduced_K: dict[str, tuple[float, float]] = field(default_factory=dict)
+    K_range: dict[str, tuple[float, float]] = field(default_factory=dict)
+    warnings: tuple[str, ...] = ()
+
+    @property
+    def turbulent(self) -> bool:
+        """Whether the releases hold a random response (median over releases above the limit)."""
+        return bool(self.random_response.size
+                    and float(np.median(self.random_response)) > RANDOM_RESPONSE_LIMIT)
+
+
+@dataclass(frozen=True)
+class FlutterUncertainty:
+    """The flutter speed, its standard deviation and where that comes from (m/s).
+
+    Attributes
+    ----------
+    speed : float or None
+        Flutter speed of the chosen model, m/s (None: none below ``U_max``).
+    parametric : float
+        Measurement noise through the chosen model's parameter covariance.
+    structure : float
+        Standard deviation of the flutter speeds of the structures within one standard error
+        (0 with one structure; one without flutter below ``U_max`` counts as ``U_max``).
+    extrapolation : float
+        Drift of the flutter speed with the covered reduced frequencies (module docstring).
+    refinement : float
+        How far the flutter speed moves with one lag more (module docstring).
+    turbulence : float
+        Release-to-release (jackknife) standard deviation; 0 without a random response.
+    n_releases : int
+    warnings : tuple of str
+        The identification's warnings and the flutter speed's own.
+    """
+
+    speed: float | None
+    parametric: float
+    structure: float
+    extrapolation: float
+    refinement: float
+    turbulence: float
+    n_releases: int
+    warnings: tuple[str, ...] = ()
+
+    @property
+    def statistical(self) -> float:
+        """The part that averages down with more releases, m/s.
+
+        With a random response the jackknife measures all of the noise, the parametric part
+        included, so the larger of the two is taken, not their sum.
+        """
+        return max(self.parametric, self.turbulence)
+
+    @property
+    def total(self) -> float:
+        """Standard deviation of the flutter speed, m/s: the four parts combined."""
+        return math.sqrt(self.statistical**2 + self.systematic**2)
+
+    @property
+    def systematic(self) -> float:
+        """The part more releases at these wind speeds do not reduce, m/s."""
+        return math.sqrt(self.structure**2 + self.extrapolation**2 + self.refinement**2)
+
+    def releases_needed(self, target: float) -> int | None:
+        """Releases (in the same proportion over the wind speeds) for a total std of ``target``.
+
+        Only the statistical part averages down (as one over the number of releases); None when
+        the structure and extrapolation parts alone exceed the target (more releases at these
+        wind speeds cannot reach it: releases closer to flutter can).
+        """
+        fixed = self.systematic**2
+        if not math.isfinite(self.total) or target**2 <= fixed:
+            return None
+        if self.statistical == 0.0:
+            return self.n_releases
+        return max(self.n_releases,
+                   math.ceil(self.n_releases * self.statistical**2 / (target**2 - fixed)))
+
+    def summary(self) -> str:
+        """One line, e.g. ``12.10 +- 0.35 m/s (noise 0.05, structure 0.10, ...)``."""
+        if self.speed is None:
+            return "no flutter below the searched wind speeds"
+        parts = [f"noise {self.parametric:.3g}"]
+        if self.turbulence:
+            parts.append(f"release scatter {self.turbulence:.3g}")
+        parts += [f"structure {self.structure:.3g}", f"extrapolation {self.extrapolation:.3g}",
+                  f"one lag more {self.refinement:.3g}"]
+        return f"{self.speed:.3f} +- {self.total:.3f} m/s ({', '.join(parts)})"
 
 
 @dataclass(frozen=True)
@@ -166,11 +300,11 @@ class IdentifiedModel(RationalFunctionModel):
     def flutter(
         self, section: SectionModel, U_max: float | None = None
     ) -> tuple[_flutter.FlutterResult, float | None]:
-        """Flutter analysis with this model, and the standard deviation of the flutter speed.
+        """Flutter analysis with this model, and the flutter speed's standard deviation.
 
-        The standard deviation propagates the parameter covariance (coefficients and lag roots)
-        through the first-order sensitivity of the flutter speed
-        (:func:`ident.flutter.speed_sensitivity`).
+        The standard deviation is :attr:`FlutterUncertainty.total` (noise, structure,
+        extrapolation and, in turbulence, release-to-release scatter); see
+        :meth:`uncertainty` for its parts.
 
         Returns
         -------
@@ -178,6 +312,24 @@ class IdentifiedModel(RationalFunctionModel):
         speed_std : float or None
             m/s; None without flutter below ``U_max``.
         """
+        result, parametric = self._parametric(section, U_max)
+        if result.speed is None or parametric is None:
+            return result, None
+        return result, self._uncertainty(section, result, parametric).total
+
+    def uncertainty(self, section: SectionModel, U_max: float | None = None
+                    ) -> FlutterUncertainty:
+        """Return the flutter speed and each part of its standard deviation (module docstring)."""
+        result, parametric = self._parametric(section, U_max)
+        if result.speed is None or parametric is None:
+            return FlutterUncertainty(None, math.nan, math.nan, math.nan, math.nan, math.nan,
+                                      self.diagnostics.wind_speeds.size,
+                                      self.diagnostics.warnings)
+        return self._uncertainty(section, result, parametric)
+
+    def _parametric(self, section: SectionModel, U_max: float | None
+                    ) -> tuple[_flutter.FlutterResult, float | None]:
+        """Flutter analysis, and the std from the parameter covariance (first-order)."""
         result = _flutter.analyze(section, self, U_max)
         if result.speed is None or result.frequency is None:
             return result, None
@@ -188,6 +340,60 @@ class IdentifiedModel(RationalFunctionModel):
         )
         variance = float(gradient @ self.diagnostics.covariance @ gradient)
         return result, math.sqrt(max(variance, 0.0))
+
+    def _uncertainty(self, section: SectionModel, result: _flutter.FlutterResult,
+                     parametric: float) -> FlutterUncertainty:
+        diag = self.diagnostics
+        speed = float(result.speed)  # type: ignore[arg-type]  # checked by the callers
+        U_max = result.U_max
+        warnings = list(diag.warnings)
+
+        def refit_speed(model: RationalFunctionModel) -> float:
+            """Flutter speed of a refitted model, m/s.
+
+            A refit without flutter below ``U_max`` (or without two still-air modes, a wild
+            refit) counts as ``U_max``: as far as the search can tell, so that the spread stays
+            finite and large rather than infinite.
+            """
+            try:
+                found = _flutter.analyze(section, model, U_max, n_points=REFIT_GRID).speed
+            except ValueError:
+                return U_max
+            return U_max if found is None else float(found)
+
+        structure = 0.0
+        if diag.alternatives:
+            speeds = [speed] + [refit_speed(m) for m in diag.alternatives]
+            structure = float(np.std(speeds, ddof=1))
+        turbulence = 0.0
+        if diag.jackknife:
+            pseudo = np.array([refit_speed(m) for m in diag.jackknife])
+            n = pseudo.size
+            turbulence = math.sqrt((n - 1) / n * float(np.sum((pseudo - pseudo.mean())**2)))
+        extrapolation = 0.0
+        K_F = result.reduced_frequency
+        mode = result.critical_mode or ""
+        K_min = diag.K_range.get(mode, (math.nan, math.nan))[0]
+        reduced_K_min = diag.reduced_K.get(mode, (math.nan, math.nan))[0]
+        if K_F is not None and math.isfinite(K_min):
+            if K_min > EXTRAPOLATION_WARN * K_F:
+                warnings.append(
+                    f"the flutter speed is extrapolated: the {mode} branch flutters at K = "
+                    f"{K_F:.3g}, below the lowest reduced frequency the releases cover on it "
+                    f"({K_min:.3g}); releases closer to flutter would cover it")
+            if diag.reduced is not None and reduced_K_min > K_F:
+                # How far the flutter speed moves when the coverage shrinks, scaled by the
+                # ratio of the extrapolation distances (in log K).
+                moved = refit_speed(diag.reduced)
+                reach = max(math.log(K_min / K_F), 0.0) / math.log(reduced_K_min / K_F)
+                extrapolation = abs(moved - speed) * min(reach, 1.0)
+        refinement = 0.0
+        if diag.finer is not None:
+            refinement = abs(refit_speed(diag.finer) - speed)
+        return FlutterUncertainty(speed=speed, parametric=parametric, structure=structure,
+                                  extrapolation=extrapolation, refinement=refinement,
+                                  turbulence=turbulence,
+                                  n_releases=diag.wind_speeds.size, warnings=tuple(warnings))
 
     def structure_spread(self, section: SectionModel, U_max: float | None = None
                          ) -> StructureSpread:
@@ -211,7 +417,7 @@ class IdentifiedModel(RationalFunctionModel):
         labels, speeds, stds = [], [], []
         searched = math.nan
         for model in models:
-            result, std = model.flutter(section, U_max)
+            result, std = model._parametric(section, U_max)
             searched = result.U_max
             labels.append(structure_label(model.diagnostics.n_lags, model.diagnostics.with_A3))
             speeds.append(result.speed)
@@ -282,18 +488,21 @@ def identify(
     _check_wind_speeds(releases)
     if n_lags is not None and (not isinstance(n_lags, int) or not 0 <= n_lags <= 3):
         raise ValueError(f"n_lags must be an integer in 0..3 or None, got {n_lags!r}")
-    return _identify_prepared([prepare(r, section) for r in releases], n_lags, with_A3)
+    return _identify_prepared([prepare(r, section) for r in releases], section, n_lags,
+                              with_A3)
 
 
 def _identify_prepared(
-    prepared: list[PreparedRelease], n_lags: int | None, with_A3: bool | None
+    prepared: list[PreparedRelease], section: SectionModel, n_lags: int | None,
+    with_A3: bool | None, *, refits: bool = True,
 ) -> IdentifiedModel:
     """Choose the structure, search the lag roots and fit, on prepared releases.
 
     Separate from :func:`identify` so that other regressor constructions (the benchmark's
     ablation with differentiated raw displacements) run through the very same estimator.
+    ``refits`` adds the jackknife and extrapolation refits (module docstring).
     """
-    problem = _Problem(prepared)
+    problem = Problem(prepared)
     given = n_lags is not None and with_A3 is not None
     lags = range(4) if n_lags is None else [n_lags]
     a3_options = (True, False) if with_A3 is None else (with_A3,)
@@ -313,7 +522,7 @@ def _identify_prepared(
         history.append(tried)
         # Two lag counts in a row that beat nothing simpler: more lags will not either.
         if n_lags is None and m >= 2 and not any(
-            _improves(history[j], [c for h in history[:j] for c in h]) for j in (m - 1, m)
+            improves(history[j], [c for h in history[:j] for c in h]) for j in (m - 1, m)
         ):
             break
     usable = [c for c in candidates if not c.note]
@@ -321,13 +530,109 @@ def _identify_prepared(
         notes = "; ".join(f"n_lags={c.n_lags}, A3={c.with_A3}: {c.note}" for c in candidates)
         raise RankDeficiencyError(f"no model structure is determined by these releases ({notes})")
     chosen, reason = select_one_se(usable, given=given)
+    context = _Context(prepared, section, tuple(candidates))
     if given:
-        return problem.final(chosen, tuple(candidates), reason)
+        return context.model(problem.final(chosen), reason, refits=refits)
     alternatives = tuple(
-        problem.final(problem.polished(c), tuple(candidates),
-                      f"{c.label}: within one standard error of the best, not chosen")
+        context.model(problem.final(problem.polished(c)),
+                      f"{c.label}: within one standard error of the best, not chosen",
+                      refits=False)
         for c in within_one_se(usable) if c is not chosen)
-    return problem.final(problem.polished(chosen), tuple(candidates), reason, alternatives)
+    return context.model(problem.final(problem.polished(chosen)), reason, alternatives,
+                         refits=refits)
+
+
+@dataclass(frozen=True)
+class _Context:
+    """What every model of one identification shares: the releases and the candidates tried."""
+
+    prepared: list[PreparedRelease]
+    section: SectionModel
+    candidates: tuple[Candidate, ...]
+
+    def model(self, fit: FinalFit, reason: str, alternatives: tuple[IdentifiedModel, ...] = (),
+              *, refits: bool) -> IdentifiedModel:
+        """Assemble an :class:`IdentifiedModel`, with the refits and checks when asked."""
+        prepared = self.prepared
+        random_response = np.array([_random_response(p.fit) for p in prepared])
+        K_range = _K_ranges(prepared, self.section)
+        jackknife: tuple[RationalFunctionModel, ...] = ()
+        reduced: RationalFunctionModel | None = None
+        finer: RationalFunctionModel | None = None
+        reduced_K_min: dict[str, tuple[float, float]] = {}
+        warnings: list[str] = []
+        if refits:
+            finer = _refit_finer(prepared, fit)
+            speeds = distinct_wind_speeds([p.U for p in prepared])
+            if len(speeds) >= 3:
+                top = speeds[-1] / (1 + DISTINCT_U_RTOL)
+                kept = [p for p in prepared if p.U < top]
+                reduced = _refit(kept, fit)
+                reduced_K_min = _K_ranges(kept, self.section)
+            turbulent = float(np.median(random_response)) > RANDOM_RESPONSE_LIMIT
+            if turbulent:
+                subsets = [prepared[:i] + prepared[i + 1:] for i in range(len(prepared))]
+                refitted = [_refit(others, fit) for others in subsets
+                            if len(distinct_wind_speeds([p.U for p in others])) >= 2]
+                jackknife = tuple(m for m in refitted if m is not None)
+                warnings.append(
+                    f"the decays turn into a random response (turbulence: residual "
+                    f"{float(np.median(random_response)):.3g} times the noise): the modal fits "
+                    "and the least-squares covariance do not hold; the flutter speed's "
+                    "deviation is the release-to-release scatter")
+            worst = fit.release_residuals.max(axis=1)
+            median = float(np.median(worst))
+            for p, r in zip(prepared, worst, strict=True):
+                if r > 3.0 * median and r > 0.05:
+                    name = p.release.meta.get("name", f"release at {p.U:.3g} m/s")
+                    warnings.append(f"{name}: force residual {100 * r:.1f} % of the signal, "
+                                    f"over 3 times the median ({100 * median:.1f} %)")
+        diagnostics = E2RFCDiagnostics(
+            n_lags=fit.d.size, with_A3=fit.with_A3, reason=reason,
+            candidates=self.candidates, release_residuals=fit.release_residuals,
+            wind_speeds=np.array([p.U for p in prepared]),
+            condition_number=fit.condition_number, covariance=fit.covariance,
+            parameter_index=fit.parameter_index, modal_fits=tuple(p.fit for p in prepared),
+            alternatives=alternatives, random_response=random_response, jackknife=jackknife,
+            reduced=reduced, reduced_K=reduced_K_min, finer=finer, K_range=K_range,
+            warnings=tuple(warnings))
+        return IdentifiedModel(fit.A, fit.d, diagnostics)
+
+
+def _K_ranges(prepared: list[PreparedRelease], section: SectionModel
+              ) -> dict[str, tuple[float, float]]:
+    """Reduced frequencies ``B omega / U`` each mode covers over the releases, by mode name."""
+    K: dict[str, list[float]] = {"heave": [], "pitch": []}
+    for p in prepared:
+        fit = p.fit
+        if fit.modes.size < 2:
+            continue
+        heave, pitch = name_modes(fit.mode_shapes(), section.mass_matrix())
+        for name, i in (("heave", heave), ("pitch", pitch)):
+            K[name].append(2 * math.pi * float(fit.frequencies[i]) * p.B / p.U)
+    return {name: (min(v), max(v)) for name, v in K.items() if v}
+
+
+def _refit(prepared: list[PreparedRelease], fit: FinalFit) -> RationalFunctionModel | None:
+    """Fit the structure of ``fit`` again on some of the releases, from its lag roots."""
+    refit = Problem(prepared).refit(fit.d.size, fit.with_A3, [fit.d])
+    return None if refit is None else RationalFunctionModel(refit.A, refit.d)
+
+
+def _refit_finer(prepared: list[PreparedRelease], fit: FinalFit
+                 ) -> RationalFunctionModel | None:
+    """Fit the chosen structure with one lag more (None when the data cannot determine it)."""
+    problem = Problem(prepared)
+    K_lo, K_hi = problem.K_range
+    starts = [np.sort(np.append(fit.d, root)) for root in (K_lo / 2.0, 2.0 * K_hi)]
+    refit = problem.refit(fit.d.size + 1, fit.with_A3, starts)
+    return None if refit is None else RationalFunctionModel(refit.A, refit.d)
+
+
+def _random_response(fit: ModalFit) -> float:
+    """Return a release's modal-fit residual over its white measurement noise (larger channel)."""
+    scale = np.maximum(fit.noise, 1e-9 * np.maximum(fit.residual_rms, 1e-300))
+    return float(np.max(fit.residual_rms / scale)) if np.any(fit.residual_rms > 0) else 0.0
 
 
 def distinct_wind_speeds(speeds: Sequence[float]) -> list[float]:
@@ -367,296 +672,3 @@ def _check_wind_speeds(releases: list[Release]) -> None:
         )
 
 
-def _improves(new: list[Candidate], old: list[Candidate]) -> bool:
-    """Tell whether the best new candidate beats the best old one by more than its std error."""
-    new_ok = [c for c in new if not c.note]
-    old_ok = [c for c in old if not c.note]
-    if not new_ok or not old_ok:
-        return bool(new_ok)
-    best_new = min(new_ok, key=lambda c: c.cv_error)
-    best_old = min(old_ok, key=lambda c: c.cv_error)
-    return best_new.cv_error < best_old.cv_error - best_old.cv_se
-
-
-class _Problem:
-    """The stacked weighted least-squares problem over all releases, for any structure."""
-
-    def __init__(self, prepared: list[PreparedRelease]) -> None:
-        self.prepared = prepared
-        self.weights = np.array([1.0 / p.force_noise for p in prepared])  # (n_releases, 2)
-        # Reduced frequencies the data cover, from the modal frequencies: where lags can live.
-        K = np.concatenate([2 * math.pi * p.fit.frequencies * p.B / p.U for p in prepared])
-        self.K_range = (float(K.min()), float(K.max()))
-
-    # -- linear part -------------------------------------------------------------------------
-    def _blocks(
-        self, d: FloatArray, with_A3: bool, which: str, rows: list[FloatArray] | None = None
-    ) -> list[tuple[FloatArray, FloatArray]]:
-        """Per release: design (n, k) and normalised forces (n, 2) on a view, or rows of it."""
-        out = []
-        for n, p in enumerate(self.prepared):
-            view = p.view(which)
-            fixed = view.fixed if with_A3 else view.fixed[:, :4]
-            design = np.hstack([fixed, view.lag_columns(d)])
-            force = view.force
-            if rows is not None:
-                design, force = design[rows[n]], force[rows[n]]
-            out.append((design, force))
-        return out
-
-    def _solve(
-        self, blocks: list[tuple[FloatArray, FloatArray]], *, exact: bool = False
-    ) -> tuple[FloatArray, list[FloatArray], list[FloatArray]]:
-        """Coefficients (k, 2), per-release intercepts and weighted residuals.
-
-        Per-release intercepts are profiled out by demeaning each release (Frisch-Waugh). The
-        many solves of the lag-root search and of cross-validation use column-scaled normal
-        equations (fast; candidates are accepted only when well conditioned); the final fit uses
-        an SVD-based solve of the stacked system (``exact=True``). The releases are stacked into
-        one array so that each solve is a few matrix products, not a loop over releases.
-        """
-        sizes = np.array([X.shape[0] for X, _ in blocks])
-        X = np.vstack([b[0] for b in blocks])
-        y = np.vstack([b[1] for b in blocks])
-        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-        X_mean = np.add.reduceat(X, starts, axis=0) / sizes[:, None]
-        y_mean = np.add.reduceat(y, starts, axis=0) / sizes[:, None]
-        release = np.repeat(np.arange(sizes.size), sizes)
-        Xc = X - X_mean[release]
-        yc = y - y_mean[release]
-        w = self.weights[release]  # (n_rows, 2)
-        k = X.shape[1]
-        coef = np.empty((k, 2))
-        for i in range(2):
-            Xw = Xc * w[:, i : i + 1]
-            yw = yc[:, i] * w[:, i]
-            if exact:
-                coef[:, i], *_ = np.linalg.lstsq(Xw, yw, rcond=None)
-                continue
-            G = Xw.T @ Xw
-            b = Xw.T @ yw
-            scale = np.sqrt(np.diag(G))
-            scale[scale == 0.0] = 1.0
-            scaled, *_ = np.linalg.lstsq(G / np.outer(scale, scale), b / scale, rcond=None)
-            coef[:, i] = scaled / scale
-        intercept_rows = y_mean - X_mean @ coef
-        intercepts = list(intercept_rows)
-        residual_rows = w * (yc - Xc @ coef)
-        residuals = np.split(residual_rows, np.cumsum(sizes)[:-1])
-        return coef, intercepts, residuals
-
-    def condition(self, d: FloatArray, with_A3: bool) -> float:
-        """Condition number of the column-scaled, demeaned, stacked design."""
-        blocks = self._blocks(d, with_A3, "search")
-        M = np.vstack([X - X.mean(axis=0) for X, _ in blocks])
-        norms = np.linalg.norm(M, axis=0)
-        if np.any(norms == 0.0):
-            return math.inf
-        return float(np.linalg.cond(M / norms))
-
-    # -- lag-root search ---------------------------------------------------------------------
-    def starts(self, n_lags: int, previous: FloatArray | None) -> list[FloatArray]:
-        """Start values of the lag-root search for ``n_lags`` lags.
-
-        Lags found with one lag fewer are kept and one new root is tried at three places across
-        the covered reduced frequencies (nested starts converge fast); one evenly spread start
-        guards against a poor previous solution.
-        """
-        K_lo, K_hi = self.K_range
-        spread = np.geomspace(K_lo / 3.0, 3.0 * K_hi, n_lags + 2)[1:-1]
-        if previous is None or previous.size != n_lags - 1:
-            return [spread, spread * 0.3, spread * 3.0]
-        new_roots = np.geomspace(K_lo / 3.0, 3.0 * K_hi, 3)
-        return [np.sort(np.append(previous, r)) for r in new_roots] + [spread]
-
-    def search(
-        self, n_lags: int, with_A3: bool, starts: list[FloatArray], *, loose: bool
-    ) -> FloatArray:
-        """Lag roots minimising the weighted force residual, from the best of several starts.
-
-        ``loose`` stops at a relative cost change of 1e-6: enough to compare structures; the
-        chosen one is then polished to full precision.
-        """
-        if n_lags == 0:
-            return np.zeros(0)
-        K_lo, K_hi = self.K_range
-        lo, hi = math.log(K_lo / 20.0), math.log(20.0 * K_hi)
-
-        def residual(theta: FloatArray, which: str) -> FloatArray:
-            blocks = self._blocks(np.exp(theta), with_A3, which)
-            _, _, res = self._solve(blocks)
-            return np.concatenate([r.ravel() for r in res])
-
-        def solve(theta0: FloatArray, which: str, tol: float, nfev: int) -> Any:
-            return least_squares(
-                residual, np.clip(theta0, lo + 1e-6, hi - 1e-6), bounds=(lo, hi), args=(which,),
-                xtol=tol, ftol=1e-2 * tol, max_nfev=nfev * (n_lags + 1),
-            )
-
-        # Every start is run loosely on the subsampled rows. When asked to be precise, the best
-        # is converged there, then moved by one Gauss-Newton step on every sample, so that the
-        # lag roots use all the data: the subsample's optimum lies within the estimation noise of
-        # the full-data one, and from there one step of this nearly quadratic problem leaves d
-        # within 0.15 of its own standard deviation of the converged value (measured at 5 %
-        # noise; three more steps cost 0.2 s for that).
-        best = min((solve(np.log(start), "search", 1e-3, 20) for start in starts),
-                   key=lambda sol: sol.cost)
-        theta = best.x
-        if not loose:
-            theta = solve(theta, "search", 1e-8, 40).x
-            theta = self._gauss_newton_step(theta, lambda th: residual(th, "full"), lo, hi)
-        return np.sort(np.exp(theta))
-
-    @staticmethod
-    def _gauss_newton_step(
-        theta: FloatArray, residual: Any, lo: float, hi: float
-    ) -> FloatArray:
-        """One Gauss-Newton step (central-difference Jacobian), kept inside the bounds."""
-        r0 = residual(theta)
-        h = 1e-6
-        J = np.column_stack([
-            (residual(theta + h * e) - residual(theta - h * e)) / (2 * h)
-            for e in np.eye(theta.size)
-        ])
-        step, *_ = np.linalg.lstsq(J, -r0, rcond=None)
-        return np.asarray(np.clip(theta + step, lo + 1e-9, hi - 1e-9), dtype=float)
-
-    # -- structures ----------------------------------------------------------------------------
-    def candidate(
-        self, n_lags: int, with_A3: bool, starts: list[FloatArray], *, score: bool
-    ) -> tuple[Candidate, FloatArray | None]:
-        """Search the lag roots of one structure and (if ``score``) its held-out error.
-
-        Without ``score`` (a structure given by the caller) the search runs at full precision
-        at once and no held-out error is computed (it is reported as NaN).
-        """
-        k = 2 * ((6 if with_A3 else 4) + 2 * n_lags) + n_lags
-        d = self.search(n_lags, with_A3, starts, loose=score)
-        if n_lags and np.min(np.diff(np.concatenate([[0.0], d]))) <= 1e-6 * d.max():
-            return Candidate(n_lags, with_A3, tuple(d), math.inf, math.inf, k,
-                             "lag roots merged: fewer lags describe the data"), None
-        cond = self.condition(d, with_A3)
-        if cond > MAX_CONDITION:
-            return Candidate(n_lags, with_A3, tuple(d), math.inf, math.inf, k,
-                             f"rank deficient (condition number {cond:.2g})"), None
-        if not score:
-            return Candidate(n_lags, with_A3, tuple(d), math.nan, math.nan, k), d
-        errors = self._cross_validate(d, with_A3)
-        return Candidate(n_lags, with_A3, tuple(d), float(errors.mean()),
-                         float(errors.std(ddof=1) / math.sqrt(errors.size)), k), d
-
-    def _cross_validate(self, d: FloatArray, with_A3: bool) -> FloatArray:
-        """Held-out weighted mean squared force error per fold."""
-        folds = [self._folds(p) for p in self.prepared]
-        errors = np.empty(N_FOLDS)
-        blocks = self._blocks(d, with_A3, "search")
-        for k in range(N_FOLDS):
-            train = [np.concatenate([f[j] for j in range(N_FOLDS) if j != k]) for f in folds]
-            training = [(X[r], y[r]) for (X, y), r in zip(blocks, train, strict=True)]
-            coef, intercepts, _ = self._solve(training)
-            sq, n = 0.0, 0
-            for (X, y), f, c, w in zip(blocks, folds, intercepts, self.weights, strict=True):
-                e = w * (y[f[k]] - X[f[k]] @ coef - c)
-                sq += float(np.sum(e**2))
-                n += e.size
-            errors[k] = sq / n
-        return errors
-
-    @staticmethod
-    def _folds(p: PreparedRelease) -> list[npt.NDArray[np.intp]]:
-        """Split a release's search rows into folds of interleaved blocks, each one period long.
-
-        Contiguous folds would hold out the large-amplitude start of a decay in one fold and
-        judge it by coefficients fitted to the small tail; interleaving gives every fold the
-        whole decay, and one-period blocks keep neighbouring (correlated) samples together.
-        """
-        t = p.view("search").t
-        period = 1.0 / float(p.fit.frequencies.min())
-        labels = (np.floor((t - t[0]) / period).astype(int)) % N_FOLDS
-        return [np.flatnonzero(labels == k) for k in range(N_FOLDS)]
-
-    def polished(self, candidate: Candidate) -> Candidate:
-        """Return the candidate with its lag roots searched again at full precision."""
-        d = self.search(candidate.n_lags, candidate.with_A3, [np.array(candidate.d)], loose=False)
-        return dataclasses.replace(candidate, d=tuple(float(x) for x in d))
-
-    def final(
-        self, chosen: Candidate, candidates: tuple[Candidate, ...], reason: str,
-        alternatives: tuple[IdentifiedModel, ...] = (),
-    ) -> IdentifiedModel:
-        """Fit the chosen structure on every sample and assemble the model and diagnostics."""
-        d = np.array(chosen.d)
-        blocks = self._blocks(d, chosen.with_A3, "full")
-        coef, _, residuals = self._solve(blocks, exact=True)
-        terms = [0, 1, 2] if chosen.with_A3 else [0, 1]
-        terms += [3 + l for l in range(d.size)]
-        A = np.zeros((3 + d.size, 2, 2))
-        index: list[tuple[int, int, int]] = []
-        for i in range(2):
-            for col, (term, j) in enumerate((t, j) for t in terms for j in range(2)):
-                A[term, i, j] = coef[col, i]
-                index.append((term, i, j))
-        release_residuals = np.array([
-            np.sqrt(np.mean((r / w) ** 2, axis=0)) / np.sqrt(np.mean(y**2, axis=0))
-            for r, w, (_, y) in zip(residuals, self.weights, blocks, strict=True)
-        ])
-        covariance = self._covariance(d, chosen.with_A3, coef, residuals)
-        diagnostics = E2RFCDiagnostics(
-            n_lags=d.size,
-            with_A3=chosen.with_A3,
-            reason=reason,
-            candidates=candidates,
-            release_residuals=release_residuals,
-            wind_speeds=np.array([p.U for p in self.prepared]),
-            condition_number=self.condition(d, chosen.with_A3),
-            covariance=covariance,
-            parameter_index=tuple(index),
-            modal_fits=tuple(p.fit for p in self.prepared),
-            alternatives=alternatives,
-        )
-        return IdentifiedModel(A, d, diagnostics)
-
-    def _covariance(
-        self, d: FloatArray, with_A3: bool, coef: FloatArray, residuals: list[FloatArray]
-    ) -> FloatArray:
-        """Gauss-Newton covariance of [A entries (force row 0, row 1), log d].
-
-        The residual variance and its autocorrelation inflation come from the full-rate
-        residuals; the curvature ``J^T J`` from the search subsample, scaled by the ratio of
-        sample counts (the rows are an even subsample of the same decays).
-        """
-        blocks = self._blocks(d, with_A3, "search")
-        k = coef.shape[0]
-        n_search = sum(X.shape[0] for X, _ in blocks)
-        n_full = sum(r.shape[0] for r in residuals)
-        # Linear part: block diagonal over the two force rows.
-        J_lin = np.zeros((2 * n_search, 2 * k))
-        for i in range(2):
-            J_lin[i * n_search : (i + 1) * n_search, i * k : (i + 1) * k] = np.vstack(
-                [-w[i] * (X - X.mean(axis=0))
-                 for (X, _), w in zip(blocks, self.weights, strict=True)]
-            )
-        columns = [J_lin]
-        for l in range(d.size):
-            h = 1e-6
-            d_plus, d_minus = d.copy(), d.copy()
-            d_plus[l] *= math.exp(h)
-            d_minus[l] *= math.exp(-h)
-            r_plus = self._residual_vector(d_plus, with_A3, coef)
-            r_minus = self._residual_vector(d_minus, with_A3, coef)
-            columns.append(((r_plus - r_minus) / (2 * h))[:, None])
-        J = np.hstack(columns)
-        r = np.concatenate([np.concatenate([res[:, i] for res in residuals]) for i in range(2)])
-        dof = max(r.size - J.shape[1], 1)
-        sigma2 = float(r @ r) / dof * autocorrelation_inflation(residuals)
-        return np.asarray(sigma2 * np.linalg.pinv(J.T @ J) * n_search / n_full, dtype=float)
-
-    def _residual_vector(self, d: FloatArray, with_A3: bool, coef: FloatArray) -> FloatArray:
-        """Weighted search-row residuals at fixed coefficients (intercepts re-profiled)."""
-        blocks = self._blocks(d, with_A3, "search")
-        out = []
-        for i in range(2):
-            for (X, y), w in zip(blocks, self.weights, strict=True):
-                e = y[:, i] - X @ coef[:, i]
-                out.append(w[i] * (e - e.mean()))
-        return np.concatenate(out)

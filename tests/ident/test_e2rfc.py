@@ -15,6 +15,7 @@ from ident import (
     flutter,
     roger_fit,
 )
+from ident._e2rfc_problem import MAX_CONDITION
 from ident._selection import structure_label, within_one_se
 from simulators import simulate_release
 
@@ -121,7 +122,7 @@ def test_diagnostics_are_complete_and_consistent():
     np.testing.assert_allclose(diagnostics.wind_speeds, [r.U for r in data])
     assert len(diagnostics.modal_fits) == len(data)
     assert diagnostics.reason == "given by the caller"
-    assert 1.0 <= diagnostics.condition_number < e2rfc.MAX_CONDITION
+    assert 1.0 <= diagnostics.condition_number < MAX_CONDITION
     for k, i, j in diagnostics.parameter_index:
         assert model.A[k, i, j] != 0.0
 
@@ -143,7 +144,13 @@ def test_the_structures_the_data_cannot_tell_apart_are_fitted_and_their_spread_r
     assert spread.labels[0] == chosen and set(spread.labels) == plausible
     assert len(spread.labels) == len(diagnostics.alternatives) + 1
     result, std = model.flutter(SECTION)
-    assert (spread.speeds[0], spread.stds[0]) == (result.speed, std)
+    uncertainty = model.uncertainty(SECTION)
+    # The spread reports each structure's own (parametric) deviation; the model's flutter()
+    # deviation is the total, which holds the structures' spread too.
+    assert (spread.speeds[0], spread.stds[0]) == (result.speed, uncertainty.parametric)
+    assert std == uncertainty.total and uncertainty.structure > 0.0
+    assert uncertainty.structure == pytest.approx(
+        float(np.std([s for s in spread.speeds if s is not None], ddof=1)), rel=1e-3)
     for alternative, label in zip(diagnostics.alternatives, spread.labels[1:], strict=True):
         alt = alternative.diagnostics
         assert label == structure_label(alt.n_lags, alt.with_A3)

@@ -1,0 +1,416 @@
+"""The stacked least-squares problem of E2RFC for any model structure (private to ident.e2rfc).
+
+For fixed lag roots the normalised forces of every release are linear in Roger's coefficients;
+this module holds that problem (:class:`Problem`): the weighted, intercept-profiled solve, the
+lag-root search by variable projection, the held-out error of a structure, the final fit on
+every sample and its covariance. Choosing among structures and reporting are
+:mod:`ident.e2rfc`'s.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from scipy.optimize import least_squares
+
+from ident._regressors import PreparedRelease
+from ident._selection import Candidate
+from ident._stats import autocorrelation_inflation
+
+__all__ = ["FinalFit", "MAX_CONDITION", "N_FOLDS", "Problem", "improves"]
+
+FloatArray = npt.NDArray[np.float64]
+
+#: Largest condition number of the column-scaled design accepted as determined.
+MAX_CONDITION = 1e8
+#: Folds of the held-out error.
+N_FOLDS = 5
+
+
+@dataclass(frozen=True, eq=False)
+class FinalFit:
+    """One structure fitted on every sample.
+
+    Attributes
+    ----------
+    A : ndarray, shape (3 + n_lags, 2, 2)
+    d : ndarray, shape (n_lags,)
+    with_A3 : bool
+    covariance : ndarray
+        Of the fitted ``A`` entries (``parameter_index``) then ``log d``.
+    parameter_index : tuple of (int, int, int)
+    release_residuals : ndarray, shape (n_releases, 2)
+        RMS force residual per release and channel relative to that channel's RMS.
+    condition_number : float
+    """
+
+    A: FloatArray
+    d: FloatArray
+    with_A3: bool
+    covariance: FloatArray
+    parameter_index: tuple[tuple[int, int, int], ...]
+    release_residuals: FloatArray
+    condition_number: float
+
+
+def improves(new: list[Candidate], old: list[Candidate]) -> bool:
+    """Tell whether the best new candidate beats the best old one by more than its std error."""
+    new_ok = [c for c in new if not c.note]
+    old_ok = [c for c in old if not c.note]
+    if not new_ok or not old_ok:
+        return bool(new_ok)
+    best_new = min(new_ok, key=lambda c: c.cv_error)
+    best_old = min(old_ok, key=lambda c: c.cv_error)
+    return best_new.cv_error < best_old.cv_error - best_old.cv_se
+
+
+class Problem:
+    """The stacked weighted least-squares problem over all releases, for any structure."""
+
+    def __init__(self, prepared: list[PreparedRelease]) -> None:
+        self.prepared = prepared
+        self.weights = np.array([1.0 / p.force_noise for p in prepared])  # (n_releases, 2)
+        # Reduced frequencies the data cover, from the modal frequencies: where lags can live.
+        K = np.concatenate([2 * math.pi * p.fit.frequencies * p.B / p.U for p in prepared])
+        self.K_range = (float(K.min()), float(K.max()))
+
+    # -- linear part -------------------------------------------------------------------------
+    def _blocks(
+        self, d: FloatArray, with_A3: bool, which: str, rows: list[FloatArray] | None = None
+    ) -> list[tuple[FloatArray, FloatArray]]:
+        """Per release: design (n, k) and normalised forces (n, 2) on a view, or rows of it."""
+        out = []
+        for n, p in enumerate(self.prepared):
+            view = p.view(which)
+            fixed = view.fixed if with_A3 else view.fixed[:, :4]
+            design = np.hstack([fixed, view.lag_columns(d)])
+            force = view.force
+            if rows is not None:
+                design, force = design[rows[n]], force[rows[n]]
+            out.append((design, force))
+        return out
+
+    def _solve(
+        self, blocks: list[tuple[FloatArray, FloatArray]], *, exact: bool = False
+    ) -> tuple[FloatArray, list[FloatArray], list[FloatArray]]:
+        """Coefficients (k, 2), per-release intercepts and weighted residuals.
+
+        Per-release intercepts are profiled out by demeaning each release (Frisch-Waugh). The
+        many solves of the lag-root search and of cross-validation use column-scaled normal
+        equations (fast; candidates are accepted only when well conditioned); the final fit uses
+        an SVD-based solve of the stacked system (``exact=True``). The releases are stacked into
+        one array so that each solve is a few matrix products, not a loop over releases.
+        """
+        sizes = np.array([X.shape[0] for X, _ in blocks])
+        X = np.vstack([b[0] for b in blocks])
+        y = np.vstack([b[1] for b in blocks])
+        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+        X_mean = np.add.reduceat(X, starts, axis=0) / sizes[:, None]
+        y_mean = np.add.reduceat(y, starts, axis=0) / sizes[:, None]
+        release = np.repeat(np.arange(sizes.size), sizes)
+        Xc = X - X_mean[release]
+        yc = y - y_mean[release]
+        w = self.weights[release]  # (n_rows, 2)
+        k = X.shape[1]
+        coef = np.empty((k, 2))
+        for i in range(2):
+            Xw = Xc * w[:, i : i + 1]
+            yw = yc[:, i] * w[:, i]
+            if exact:
+                coef[:, i], *_ = np.linalg.lstsq(Xw, yw, rcond=None)
+                continue
+            G = Xw.T @ Xw
+            b = Xw.T @ yw
+            scale = np.sqrt(np.diag(G))
+            scale[scale == 0.0] = 1.0
+            scaled, *_ = np.linalg.lstsq(G / np.outer(scale, scale), b / scale, rcond=None)
+            coef[:, i] = scaled / scale
+        intercept_rows = y_mean - X_mean @ coef
+        intercepts = list(intercept_rows)
+        residual_rows = w * (yc - Xc @ coef)
+        residuals = np.split(residual_rows, np.cumsum(sizes)[:-1])
+        return coef, intercepts, residuals
+
+    def condition(self, d: FloatArray, with_A3: bool) -> float:
+        """Condition number of the column-scaled, demeaned, stacked design."""
+        blocks = self._blocks(d, with_A3, "search")
+        M = np.vstack([X - X.mean(axis=0) for X, _ in blocks])
+        norms = np.linalg.norm(M, axis=0)
+        if np.any(norms == 0.0):
+            return math.inf
+        return float(np.linalg.cond(M / norms))
+
+    # -- lag-root search ---------------------------------------------------------------------
+    def starts(self, n_lags: int, previous: FloatArray | None) -> list[FloatArray]:
+        """Start values of the lag-root search for ``n_lags`` lags.
+
+        Lags found with one lag fewer are kept and one new root is tried at three places across
+        the covered reduced frequencies (nested starts converge fast); one evenly spread start
+        guards against a poor previous solution.
+        """
+        K_lo, K_hi = self.K_range
+        spread = np.geomspace(K_lo / 3.0, 3.0 * K_hi, n_lags + 2)[1:-1]
+        if previous is None or previous.size != n_lags - 1:
+            return [spread, spread * 0.3, spread * 3.0]
+        new_roots = np.geomspace(K_lo / 3.0, 3.0 * K_hi, 3)
+        return [np.sort(np.append(previous, r)) for r in new_roots] + [spread]
+
+    def search(
+        self, n_lags: int, with_A3: bool, starts: list[FloatArray], *, loose: bool
+    ) -> FloatArray:
+        """Lag roots minimising the weighted force residual, from the best of several starts.
+
+        ``loose`` stops at a relative change of 1e-3: enough to compare structures; the chosen
+        one is then polished to full precision.
+        """
+        if n_lags == 0:
+            return np.zeros(0)
+        K_lo, K_hi = self.K_range
+        lo, hi = math.log(K_lo / 20.0), math.log(20.0 * K_hi)
+        stacked = {which: _Stacked(self, with_A3, which) for which in ("search", "full")}
+
+        def solve(theta0: FloatArray, which: str, tol: float, nfev: int) -> Any:
+            problem = stacked[which]
+            return least_squares(
+                problem.residual, np.clip(theta0, lo + 1e-6, hi - 1e-6), jac=problem.jacobian,
+                bounds=(lo, hi), xtol=tol, ftol=1e-2 * tol, max_nfev=nfev)
+
+        # Every start is run loosely on the subsampled rows. When asked to be precise, the best
+        # is converged there, then moved by one Gauss-Newton step on every sample, so that the
+        # lag roots use all the data: the subsample's optimum lies within the estimation noise of
+        # the full-data one, and from there one step of this nearly quadratic problem leaves d
+        # within 0.15 of its own standard deviation of the converged value (measured at 5 %
+        # noise).
+        best = min((solve(np.log(start), "search", 1e-3, 20) for start in starts),
+                   key=lambda sol: sol.cost)
+        theta = best.x
+        if not loose:
+            theta = solve(theta, "search", 1e-8, 40).x
+            full = stacked["full"]
+            step, *_ = np.linalg.lstsq(full.jacobian(theta), -full.residual(theta), rcond=None)
+            theta = np.clip(theta + step, lo + 1e-9, hi - 1e-9)
+        return np.sort(np.exp(theta))
+
+    # -- structures ----------------------------------------------------------------------------
+    def candidate(
+        self, n_lags: int, with_A3: bool, starts: list[FloatArray], *, score: bool
+    ) -> tuple[Candidate, FloatArray | None]:
+        """Search the lag roots of one structure and (if ``score``) its held-out error.
+
+        Without ``score`` (a structure given by the caller) the search runs at full precision
+        at once and no held-out error is computed (it is reported as NaN).
+        """
+        k = 2 * ((6 if with_A3 else 4) + 2 * n_lags) + n_lags
+        d = self.search(n_lags, with_A3, starts, loose=score)
+        if n_lags and np.min(np.diff(np.concatenate([[0.0], d]))) <= 1e-6 * d.max():
+            return Candidate(n_lags, with_A3, tuple(d), math.inf, math.inf, k,
+                             "lag roots merged: fewer lags describe the data"), None
+        cond = self.condition(d, with_A3)
+        if cond > MAX_CONDITION:
+            return Candidate(n_lags, with_A3, tuple(d), math.inf, math.inf, k,
+                             f"rank deficient (condition number {cond:.2g})"), None
+        if not score:
+            return Candidate(n_lags, with_A3, tuple(d), math.nan, math.nan, k), d
+        errors = self._cross_validate(d, with_A3)
+        return Candidate(n_lags, with_A3, tuple(d), float(errors.mean()),
+                         float(errors.std(ddof=1) / math.sqrt(errors.size)), k), d
+
+    def refit(self, n_lags: int, with_A3: bool, starts: list[FloatArray]) -> FinalFit | None:
+        """Fit a structure from near-converged starts, loosely: for the uncertainty's refits.
+
+        The lag roots are searched to a relative 1e-3 (their effect on a flutter speed that is
+        compared with the chosen model's is far below the differences measured); None when the
+        roots merge or the design is rank deficient.
+        """
+        d = self.search(n_lags, with_A3, starts, loose=True)
+        if n_lags and np.min(np.diff(np.concatenate([[0.0], d]))) <= 1e-6 * d.max():
+            return None
+        if self.condition(d, with_A3) > MAX_CONDITION:
+            return None
+        return self.final(Candidate(n_lags, with_A3, tuple(d), math.nan, math.nan, 0))
+
+    def _cross_validate(self, d: FloatArray, with_A3: bool) -> FloatArray:
+        """Held-out weighted mean squared force error per fold."""
+        folds = [self._folds(p) for p in self.prepared]
+        errors = np.empty(N_FOLDS)
+        blocks = self._blocks(d, with_A3, "search")
+        for k in range(N_FOLDS):
+            train = [np.concatenate([f[j] for j in range(N_FOLDS) if j != k]) for f in folds]
+            training = [(X[r], y[r]) for (X, y), r in zip(blocks, train, strict=True)]
+            coef, intercepts, _ = self._solve(training)
+            sq, n = 0.0, 0
+            for (X, y), f, c, w in zip(blocks, folds, intercepts, self.weights, strict=True):
+                e = w * (y[f[k]] - X[f[k]] @ coef - c)
+                sq += float(np.sum(e**2))
+                n += e.size
+            errors[k] = sq / n
+        return errors
+
+    @staticmethod
+    def _folds(p: PreparedRelease) -> list[npt.NDArray[np.intp]]:
+        """Split a release's search rows into folds of interleaved blocks, each one period long.
+
+        Contiguous folds would hold out the large-amplitude start of a decay in one fold and
+        judge it by coefficients fitted to the small tail; interleaving gives every fold the
+        whole decay, and one-period blocks keep neighbouring (correlated) samples together.
+        """
+        t = p.view("search").t
+        period = 1.0 / float(p.fit.frequencies.min())
+        labels = (np.floor((t - t[0]) / period).astype(int)) % N_FOLDS
+        return [np.flatnonzero(labels == k) for k in range(N_FOLDS)]
+
+    def polished(self, candidate: Candidate) -> Candidate:
+        """Return the candidate with its lag roots searched again at full precision."""
+        d = self.search(candidate.n_lags, candidate.with_A3, [np.array(candidate.d)], loose=False)
+        return dataclasses.replace(candidate, d=tuple(float(x) for x in d))
+
+    def final(self, chosen: Candidate) -> FinalFit:
+        """Fit the chosen structure on every sample; return the model's arrays and statistics."""
+        d = np.array(chosen.d)
+        blocks = self._blocks(d, chosen.with_A3, "full")
+        coef, _, residuals = self._solve(blocks, exact=True)
+        terms = [0, 1, 2] if chosen.with_A3 else [0, 1]
+        terms += [3 + l for l in range(d.size)]
+        A = np.zeros((3 + d.size, 2, 2))
+        index: list[tuple[int, int, int]] = []
+        for i in range(2):
+            for col, (term, j) in enumerate((t, j) for t in terms for j in range(2)):
+                A[term, i, j] = coef[col, i]
+                index.append((term, i, j))
+        release_residuals = np.array([
+            np.sqrt(np.mean((r / w) ** 2, axis=0)) / np.sqrt(np.mean(y**2, axis=0))
+            for r, w, (_, y) in zip(residuals, self.weights, blocks, strict=True)
+        ])
+        return FinalFit(
+            A=A, d=d, with_A3=chosen.with_A3,
+            covariance=self._covariance(d, chosen.with_A3, coef, residuals),
+            parameter_index=tuple(index), release_residuals=release_residuals,
+            condition_number=self.condition(d, chosen.with_A3))
+
+    def _covariance(
+        self, d: FloatArray, with_A3: bool, coef: FloatArray, residuals: list[FloatArray]
+    ) -> FloatArray:
+        """Gauss-Newton covariance of [A entries (force row 0, row 1), log d].
+
+        The residual variance and its autocorrelation inflation come from the full-rate
+        residuals; the curvature ``J^T J`` from the search subsample, scaled by the ratio of
+        sample counts (the rows are an even subsample of the same decays).
+        """
+        blocks = self._blocks(d, with_A3, "search")
+        k = coef.shape[0]
+        n_search = sum(X.shape[0] for X, _ in blocks)
+        n_full = sum(r.shape[0] for r in residuals)
+        # Linear part: block diagonal over the two force rows.
+        J_lin = np.zeros((2 * n_search, 2 * k))
+        for i in range(2):
+            J_lin[i * n_search : (i + 1) * n_search, i * k : (i + 1) * k] = np.vstack(
+                [-w[i] * (X - X.mean(axis=0))
+                 for (X, _), w in zip(blocks, self.weights, strict=True)]
+            )
+        columns = [J_lin]
+        for l in range(d.size):
+            h = 1e-6
+            d_plus, d_minus = d.copy(), d.copy()
+            d_plus[l] *= math.exp(h)
+            d_minus[l] *= math.exp(-h)
+            r_plus = self._residual_vector(d_plus, with_A3, coef)
+            r_minus = self._residual_vector(d_minus, with_A3, coef)
+            columns.append(((r_plus - r_minus) / (2 * h))[:, None])
+        J = np.hstack(columns)
+        r = np.concatenate([np.concatenate([res[:, i] for res in residuals]) for i in range(2)])
+        dof = max(r.size - J.shape[1], 1)
+        sigma2 = float(r @ r) / dof * autocorrelation_inflation(residuals)
+        return np.asarray(sigma2 * np.linalg.pinv(J.T @ J) * n_search / n_full, dtype=float)
+
+    def _residual_vector(self, d: FloatArray, with_A3: bool, coef: FloatArray) -> FloatArray:
+        """Weighted search-row residuals at fixed coefficients (intercepts re-profiled)."""
+        blocks = self._blocks(d, with_A3, "search")
+        out = []
+        for i in range(2):
+            for (X, y), w in zip(blocks, self.weights, strict=True):
+                e = y[:, i] - X @ coef[:, i]
+                out.append(w[i] * (e - e.mean()))
+        return np.concatenate(out)
+
+
+class _Stacked:
+    """The weighted, release-demeaned residual over log(d) and its Jacobian, for one structure.
+
+    The fixed columns (``q``, ``q'``, ``q''``) do not depend on the lag roots: their stacked,
+    demeaned and weighted form and their normal-equation blocks are computed once; each
+    evaluation adds only the lag columns. The Jacobian is Golub and Pereyra's exact
+    variable-projection form ``-(I - P) (dX/dlog d_l) c - X G^-1 (dX/dlog d_l)^T r`` (``P``
+    the projection on the columns, ``G`` the normal matrix): a few matrix products per lag
+    instead of a residual evaluation per lag.
+    """
+
+    def __init__(self, problem: Problem, with_A3: bool, which: str) -> None:
+        self.views = [p.view(which) for p in problem.prepared]
+        sizes = np.array([v.t.size for v in self.views])
+        self.starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+        self.sizes = sizes
+        self.release = np.repeat(np.arange(sizes.size), sizes)
+        self.w = problem.weights[self.release]  # (N, 2)
+        fixed = np.vstack([v.fixed if with_A3 else v.fixed[:, :4] for v in self.views])
+        y = np.vstack([v.force for v in self.views])
+        fixed_c = self._demeaned(fixed)
+        y_c = self._demeaned(y)
+        self.Fw = [fixed_c * self.w[:, i:i + 1] for i in range(2)]
+        self.yw = [y_c[:, i] * self.w[:, i] for i in range(2)]
+        self.Gff = [F.T @ F for F in self.Fw]
+        self.Fy = [F.T @ yw for F, yw in zip(self.Fw, self.yw, strict=True)]
+        self._cache: tuple[bytes, Any] | None = None
+
+    def _demeaned(self, X: FloatArray) -> FloatArray:
+        means = np.add.reduceat(X, self.starts, axis=0) / self.sizes[:, None]
+        return np.asarray(X - means[self.release], dtype=float)
+
+    def _evaluate(self, theta: FloatArray) -> Any:
+        key = theta.tobytes()
+        if self._cache is not None and self._cache[0] == key:
+            return self._cache[1]
+        d = np.exp(theta)
+        L = self._demeaned(np.vstack([v.lag_columns(d) for v in self.views]))
+        out = []
+        for i in range(2):
+            Lw = L * self.w[:, i:i + 1]
+            G = np.block([[self.Gff[i], self.Fw[i].T @ Lw], [Lw.T @ self.Fw[i], Lw.T @ Lw]])
+            b = np.concatenate([self.Fy[i], Lw.T @ self.yw[i]])
+            scale = np.sqrt(np.diag(G))
+            scale[scale == 0.0] = 1.0
+            G_scaled = G / np.outer(scale, scale)
+            coef = np.linalg.lstsq(G_scaled, b / scale, rcond=None)[0] / scale
+            X = np.hstack([self.Fw[i], Lw])
+            residual = self.yw[i] - X @ coef
+            out.append((X, G_scaled, scale, coef, residual))
+        self._cache = (key, (d, out))
+        return d, out
+
+    def residual(self, theta: FloatArray) -> FloatArray:
+        """Weighted residuals of both force channels, stacked."""
+        _, out = self._evaluate(theta)
+        return np.concatenate([o[4] for o in out])
+
+    def jacobian(self, theta: FloatArray) -> FloatArray:
+        """Kaufman's variable-projection Jacobian over log(d), shape (2 N, m)."""
+        d, out = self._evaluate(theta)
+        dL = self._demeaned(np.vstack([v.lag_derivatives(d) for v in self.views]))
+        m = d.size
+        J = np.empty((2 * dL.shape[0], m))
+        for i, (X, G_scaled, scale, coef, residual) in enumerate(out):
+            k = X.shape[1]
+            lag_coef = coef[k - 2 * m:].reshape(m, 2)
+            for l in range(m):
+                dX = dL[:, 2 * l:2 * l + 2] * self.w[:, i:i + 1]
+                v = dX @ lag_coef[l]
+                # Golub and Pereyra's full Jacobian: -(I - P) dX c - X G^-1 dX^T r.
+                rhs = X.T @ v
+                rhs[k - 2 * m + 2 * l:k - 2 * m + 2 * l + 2] -= dX.T @ residual
+                correction = X @ (np.linalg.lstsq(G_scaled, rhs / scale, rcond=None)[0] / scale)
+                J[i * dL.shape[0]:(i + 1) * dL.shape[0], l] = -(v - correction)
+        return J
