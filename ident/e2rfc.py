@@ -195,10 +195,11 @@ class FlutterUncertainty:
     def statistical(self) -> float:
         """The part that averages down with more releases, m/s.
 
-        With a random response the jackknife measures all of the noise, the parametric part
-        included, so the larger of the two is taken, not their sum.
+        With a random response the release scatter (jackknife) measures all of the noise, and
+        the least-squares covariance, which takes the buffeting for white noise, measures
+        nothing: the scatter alone is taken then; otherwise the parametric part.
         """
-        return max(self.parametric, self.turbulence)
+        return self.turbulence if self.turbulence > 0.0 else self.parametric
 
     @property
     def total(self) -> float:

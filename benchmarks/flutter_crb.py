@@ -1,0 +1,168 @@
+"""Cramer-Rao bound of the flutter speed identified from releases in turbulence (not a test).
+
+What can the data tell at best? For releases simulated as ``ident_accuracy.py``'s turbulence rows
+(a section model, a rational aerodynamic model, 2 % white noise on every channel, buffeting by
+quasi-steady vertical gusts), the Fisher information of the model's coefficients is computed in
+the frequency domain (Whittle), per release, from the recorded channels ``[h, alpha, lift,
+moment]``:
+
+- the deterministic decay ``mu(t)`` (its DFT, in the noise of the random response);
+- the random response, Gaussian with the cross-spectral matrix ``S = T S_b T^H + N``, where ``T``
+  maps the buffeting force to the four channels through the aeroelastic system and ``N`` is the
+  white noise;
+
+    F_ij = sum_k [2 Re(dM_k^H S_k^-1 dM_k) + tr(S_k^-1 dS_i S_k^-1 dS_j)]
+
+with derivatives by central differences. The buffeting spectrum's level (a 2 x 2 matrix) and
+shape (a polynomial in log frequency, ``--shape`` terms) are nuisance parameters per release:
+an estimator does not know them. The bound on the flutter speed's standard deviation is
+``g^T F^-1 g`` with ``g`` its gradient (``ident.flutter.speed_sensitivity``); "deterministic
+only" keeps the first term alone (what an estimator that treats the random response as noise can
+reach). The random response starts at rest at the release and the DFT treats it as stationary:
+the bound is slightly optimistic.
+
+Run: ``.venv/bin/python benchmarks/flutter_crb.py [--iw 0.01,0.03]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+import numpy as np
+
+from ident import SectionModel, flat_plate
+from ident import flutter as fl
+from ident.rfc import RationalFunctionModel
+from ident.turbulence import StaticCoefficients, TurbulenceSpec, buffeting_force_spectrum
+from simulators import simulate_release
+
+PLATE = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+HOLDS = ((0.004, 0.02), (-0.003, 0.012))
+FRACTIONS = (0.4, 0.6, 0.8)
+
+
+def vertical_gusts(Iw: float) -> TurbulenceSpec:
+    """Return the benchmark's vertical turbulence: intensity ``Iw``, 0.3 m scale, quasi-steady."""
+    return TurbulenceSpec(Iu=0.0, Iw=Iw, Lux=1.0, Lwx=0.3, Cuy=10.0, Cwy=8.0)
+
+
+def _transfer(section: SectionModel, model: RationalFunctionModel, U: float, f: np.ndarray
+              ) -> np.ndarray:
+    """``T(f)``, shape (K, 4, 2): generalised buffeting force -> ``[h, alpha, lift, moment]``."""
+    B = section.B
+    w = 2 * np.pi * f
+    qd = 0.5 * section.rho * U**2
+    Q = model.Q(1j * B * w / U)
+    D = (-(w**2)[:, None, None] * section.mass_matrix()
+         + 1j * w[:, None, None] * section.damping_matrix() + section.stiffness_matrix()
+         - qd * B**2 * Q)
+    H = np.linalg.inv(D)
+    forces = qd * B**2 * Q @ H + np.eye(2)
+    return np.stack([B * H[:, 0], H[:, 1], forces[:, 0] / B, forces[:, 1]], axis=1)
+
+
+def _decay(section: SectionModel, model: RationalFunctionModel, U: float, hold: tuple[float, float],
+           n: int, fs: float) -> tuple[np.ndarray, np.ndarray]:
+    """DFT of the noise-free decay (bins 1..n/2-1) and each channel's RMS."""
+    r = simulate_release(section, model, U, *hold, duration=n / fs, fs=fs)
+    channels = np.column_stack([r.h, r.alpha, r.lift, r.moment])
+    return np.fft.rfft(channels, axis=0)[1:-1], channels.std(axis=0)
+
+
+def flutter_speed_bound(section: SectionModel, model: RationalFunctionModel, Iw: float, *,
+                        static: StaticCoefficients, fractions=FRACTIONS, holds=HOLDS,
+                        duration: float = 20.0, fs: float = 500.0, noise: float = 0.02,
+                        span: float = 1.0, n_shape: int = 3) -> tuple[float, float, float]:
+    """Return the flutter speed and the bounds on its std, full and deterministic-only (m/s)."""
+    result = fl.analyze(section, model)
+    U_F = result.speed
+    index = [(k, i, j) for k in range(model.A.shape[0]) for i in range(2) for j in range(2)]
+    theta0 = np.concatenate([[model.A[a] for a in index], np.log(model.d)])
+    n_theta = theta0.size
+
+    def with_theta(theta: np.ndarray) -> RationalFunctionModel:
+        A = model.A.copy()
+        for a, value in zip(index, theta[:len(index)], strict=True):
+            A[a] = value
+        return RationalFunctionModel(A, np.exp(theta[len(index):]))
+
+    n = int(round(duration * fs))
+    f = np.fft.rfftfreq(n, 1 / fs)[1:-1]
+    x = np.log(f / f.mean())
+    x = (x - x.mean()) / x.std()
+    spec = vertical_gusts(Iw)
+    n_nuisance = 3 + n_shape
+    n_releases = len(fractions) * len(holds)
+    size = n_theta + n_nuisance * n_releases
+    F_full = np.zeros((size, size))
+    F_mean = np.zeros((n_theta, n_theta))
+    r = 0
+    for fraction in fractions:
+        U = fraction * U_F
+        Sb = buffeting_force_spectrum(spec, static, f, U=U, B=section.B, span=span,
+                                      rho=section.rho)[:, :2, :2] * n * fs / 2
+        Sb = Sb + 1e-6 * np.trace(Sb, axis1=1, axis2=2)[:, None, None] * np.eye(2)
+        for hold in holds:
+            M0, rms = _decay(section, model, U, hold, n, fs)
+            T0 = _transfer(section, model, U, f)
+            S = T0 @ Sb @ np.conj(np.swapaxes(T0, 1, 2)) + np.diag(n * (noise * rms) ** 2)
+            S_inv = np.linalg.inv(S)
+            dM, dS = [], []
+            for p in range(n_theta):
+                h = 1e-6 * max(1.0, abs(theta0[p]))
+                plus, minus = theta0.copy(), theta0.copy()
+                plus[p] += h
+                minus[p] -= h
+                m_plus, m_minus = with_theta(plus), with_theta(minus)
+                dM.append((_decay(section, m_plus, U, hold, n, fs)[0]
+                           - _decay(section, m_minus, U, hold, n, fs)[0]) / (2 * h))
+                T_plus, T_minus = (_transfer(section, m, U, f) for m in (m_plus, m_minus))
+                dS.append((T_plus @ Sb @ np.conj(np.swapaxes(T_plus, 1, 2))
+                           - T_minus @ Sb @ np.conj(np.swapaxes(T_minus, 1, 2))) / (2 * h))
+            # Nuisance: the spectrum's level (symmetric 2 x 2) and shape exp(sum c_j x^j).
+            for E in (np.array([[1, 0], [0, 0]]), np.array([[0, 1], [1, 0]]),
+                      np.array([[0, 0], [0, 1]])):
+                dM.append(np.zeros_like(M0))
+                dS.append(T0 @ (0.5 * (E @ Sb + Sb @ E)) @ np.conj(np.swapaxes(T0, 1, 2)))
+            for j in range(1, n_shape + 1):
+                dM.append(np.zeros_like(M0))
+                dS.append(T0 @ (Sb * (x**j)[:, None, None]) @ np.conj(np.swapaxes(T0, 1, 2)))
+            dM_arr, dS_arr = np.array(dM), np.array(dS)
+            weighted = np.einsum("kab,pkb->pka", S_inv, dM_arr)
+            F_m = 2 * np.real(np.einsum("pka,qka->pq", np.conj(dM_arr), weighted))
+            R = np.einsum("kab,pkbc->pkac", S_inv, dS_arr)
+            F_c = np.real(np.einsum("pkab,qkba->pq", R, R))
+            columns = list(range(n_theta)) + list(range(n_theta + n_nuisance * r,
+                                                        n_theta + n_nuisance * (r + 1)))
+            F_full[np.ix_(columns, columns)] += F_m + F_c
+            F_mean += F_m[:n_theta, :n_theta]
+            r += 1
+    dU_dA, dU_dd = fl.speed_sensitivity(section, model, U_F, result.frequency)
+    g = np.concatenate([[dU_dA[a] for a in index], dU_dd * model.d])
+    g_full = np.concatenate([g, np.zeros(size - n_theta)])
+    full = math.sqrt(g_full @ np.linalg.pinv(F_full) @ g_full)
+    mean_only = math.sqrt(g @ np.linalg.pinv(F_mean) @ g)
+    return float(U_F), full, mean_only
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--iw", default="0.01,0.03", help="vertical turbulence intensities")
+    args = parser.parse_args()
+    n = len(FRACTIONS) * len(HOLDS)
+    print("Flat plate (mu 35, fa/fh 2), Jones aerodynamics (2 lags, A3: 28 coefficients and 2 "
+          f"lag roots), {n} releases of 20 s at 500 Hz (0.4/0.6/0.8 U_F, 2 holds), 2 % noise.\n")
+    print(f"{'Iw':>5}{'CRB std':>10}{'median |err| >=':>17}{'det. only':>11}"
+          f"{'releases for median 1 %':>26}")
+    for Iw in (float(v) for v in args.iw.split(",")):
+        U_F, full, mean_only = flutter_speed_bound(PLATE, flat_plate.jones_model(), Iw,
+                                                   static=StaticCoefficients.flat_plate())
+        # |error| of an efficient estimator is half-normal: its median is 0.674 std.
+        needed = math.ceil(n * (0.674 * full / (0.01 * U_F)) ** 2)
+        print(f"{100 * Iw:>4.0f}%{100 * full / U_F:>9.2f}%{100 * 0.674 * full / U_F:>16.2f}%"
+              f"{100 * mean_only / U_F:>10.2f}%{needed:>26d}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,127 @@
+"""E2RFC's flutter-speed uncertainty where its model is not exact and the flow not smooth.
+
+Seeded cases of each kind the identification meets in a real tunnel: releases in turbulence
+(vertical gusts, quasi-steady buffeting), the exact-Theodorsen flat plate (not of Roger's form),
+and a bluff deck whose entries have lags of their own. Each asserts the error and that the
+2-std interval covers the truth; the turbulence cases over several seeds, with the count that a
+95 % interval must reach (at least 4 of 5 covered has probability 0.98 when the coverage is
+95 %, and 0.92 at 90 %; the seeds are fixed, so the count is deterministic).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from ident import Release, SectionModel, e2rfc, flat_plate
+from ident import flutter as fl
+from ident.e2rfc import RANDOM_RESPONSE_LIMIT, FlutterUncertainty
+from ident.turbulence import StaticCoefficients, TurbulenceSpec
+from simulators import simulate_release
+from simulators.decks import BLUFF_DECK, bluff_deck_model
+
+PLATE = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+HOLDS = ((0.004, 0.02), (-0.003, 0.012))
+
+
+def campaign(section, model, *, seed, Iw=0.0, static=None, holds=HOLDS, duration=12.0):
+    """Releases at 0.4, 0.6 and 0.8 of the flutter speed, one per hold, 2 % noise."""
+    U_F = fl.analyze(section, model).speed
+    wind = {}
+    if Iw:
+        wind = {"static": static, "span": 1.0,
+                "turbulence": TurbulenceSpec(Iu=0.0, Iw=Iw, Lux=1.0, Lwx=0.3, Cuy=10.0, Cwy=8.0)}
+    return [Release.from_simulation(simulate_release(
+        section, model, f * U_F, h0, a0, duration=duration, fs=500.0, noise=0.02,
+        rng=(seed, i, j), **wind))
+        for i, f in enumerate((0.4, 0.6, 0.8)) for j, (h0, a0) in enumerate(holds)]
+
+
+def test_releases_in_turbulence_are_flagged_and_their_interval_holds_the_truth():
+    """1 % vertical turbulence: the random response is found, the interval covers the truth.
+
+    The least-squares covariance of such releases is no measure (the buffeting is correlated
+    over whole periods); the release-to-release scatter is. Error: the median over the seeds
+    within 10 % (benchmarks/ident_accuracy.py: median 3 %, 90th percentile 14 % over 10 seeds;
+    the Cramer-Rao bound of the case is 2.9 % std and 10 % for an estimator that treats the
+    random response as noise, benchmarks/flutter_crb.py).
+    """
+    model = flat_plate.jones_model()
+    U_F = fl.analyze(PLATE, model).speed
+    covered, errors = 0, []
+    for seed in range(5):
+        identified = e2rfc.identify(
+            campaign(PLATE, model, seed=seed, Iw=0.01, static=StaticCoefficients.flat_plate(),
+                     duration=20.0), PLATE)
+        diagnostics = identified.diagnostics
+        assert diagnostics.turbulent
+        assert np.median(diagnostics.random_response) > RANDOM_RESPONSE_LIMIT
+        assert len(diagnostics.jackknife) == 6
+        assert any("random response" in w for w in diagnostics.warnings)
+        u = identified.uncertainty(PLATE)
+        if u.speed is None:  # no flutter below the searched speeds: a miss, not a crash
+            errors.append(math.inf)
+            continue
+        assert u.turbulence > 0 and u.statistical == u.turbulence
+        errors.append(abs(u.speed / U_F - 1))
+        covered += abs(u.speed - U_F) <= 2 * u.total
+    assert covered >= 4
+    assert float(np.median(errors)) < 0.10
+
+
+def test_smooth_flow_releases_are_not_taken_for_turbulence():
+    """2 % white noise only: no random response, no jackknife, a tight interval on the truth."""
+    model = flat_plate.jones_model()
+    U_F = fl.analyze(PLATE, model).speed
+    identified = e2rfc.identify(campaign(PLATE, model, seed=1), PLATE)
+    diagnostics = identified.diagnostics
+    assert not diagnostics.turbulent and diagnostics.jackknife == ()
+    assert np.all(diagnostics.random_response < 2.0)  # ~1: the residual is the white noise
+    u = identified.uncertainty(PLATE)
+    assert u.turbulence == 0.0
+    assert abs(u.speed - U_F) <= 2 * u.total
+    assert u.total < 0.002 * U_F  # 2 % noise, 72 s of data: a few hundredths of a per cent
+
+
+def test_the_exact_theodorsen_plate_is_identified_within_half_a_percent_and_covered():
+    """Theodorsen's function is not rational: E2RFC approximates it, and the interval says so.
+
+    Truth: the frequency-domain analysis with the exact flutter derivatives.
+    """
+    truth = fl.frequency_domain(PLATE, flat_plate.flutter_derivatives).speed
+    identified = e2rfc.identify(campaign(PLATE, flat_plate.theodorsen_model(), seed=2), PLATE)
+    u = identified.uncertainty(PLATE)
+    assert abs(u.speed / truth - 1) < 0.005
+    assert abs(u.speed - truth) <= 2 * u.total
+
+
+def test_a_bluff_deck_outside_rogers_form_is_covered_and_its_extrapolation_reported():
+    """Ten lags of its own per entry, flutter below the covered reduced frequencies.
+
+    Three shared lags approximate it to about 0.2 %; one lag more moves the flutter speed by
+    as much, and that is in the interval. The flutter reduced frequency (0.59) is below what
+    releases at 0.8 U_F cover on the pitch branch (0.8): a warning says so.
+    """
+    model = bluff_deck_model()
+    U_F = fl.analyze(BLUFF_DECK, model).speed
+    identified = e2rfc.identify(campaign(BLUFF_DECK, model, seed=3, holds=HOLDS[:1],
+                                         duration=20.0), BLUFF_DECK)
+    u = identified.uncertainty(BLUFF_DECK)
+    assert abs(u.speed / U_F - 1) < 0.01
+    assert abs(u.speed - U_F) <= 2 * u.total
+    assert u.refinement > 0 and u.systematic > u.parametric
+    assert any("extrapolated" in w and "pitch branch" in w for w in u.warnings)
+
+
+def test_releases_needed_scale_the_statistical_part_only():
+    """Releases needed: n s_stat^2 / (target^2 - s_sys^2); None when s_sys alone is too large."""
+    u = FlutterUncertainty(speed=12.0, parametric=0.1, structure=0.03, extrapolation=0.04,
+                           refinement=0.0, turbulence=0.6, n_releases=6)
+    assert u.statistical == 0.6  # the release scatter replaces the least-squares part
+    assert u.systematic == pytest.approx(0.05)
+    assert u.total == pytest.approx(math.sqrt(0.36 + 0.0025))
+    assert u.releases_needed(0.3) == math.ceil(6 * 0.36 / (0.09 - 0.0025))
+    assert u.releases_needed(0.04) is None  # below the systematic part
+    assert u.releases_needed(1.0) == 6  # met already
