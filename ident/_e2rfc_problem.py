@@ -78,6 +78,7 @@ class Problem:
         # Reduced frequencies the data cover, from the modal frequencies: where lags can live.
         K = np.concatenate([2 * math.pi * p.fit.frequencies * p.B / p.U for p in prepared])
         self.K_range = (float(K.min()), float(K.max()))
+        self._stacked_cache: dict[tuple[bool, str], _Stacked] = {}
 
     # -- linear part -------------------------------------------------------------------------
     def _blocks(
@@ -172,10 +173,8 @@ class Problem:
             return np.zeros(0)
         K_lo, K_hi = self.K_range
         lo, hi = math.log(K_lo / 20.0), math.log(20.0 * K_hi)
-        stacked = {which: _Stacked(self, with_A3, which) for which in ("search", "full")}
-
         def solve(theta0: FloatArray, which: str, tol: float, nfev: int) -> Any:
-            problem = stacked[which]
+            problem = self._stacked(with_A3, which)
             return least_squares(
                 problem.residual, np.clip(theta0, lo + 1e-6, hi - 1e-6), jac=problem.jacobian,
                 bounds=(lo, hi), xtol=tol, ftol=1e-2 * tol, max_nfev=nfev)
@@ -191,10 +190,17 @@ class Problem:
         theta = best.x
         if not loose:
             theta = solve(theta, "search", 1e-8, 40).x
-            full = stacked["full"]
+            full = self._stacked(with_A3, "full")
             step, *_ = np.linalg.lstsq(full.jacobian(theta), -full.residual(theta), rcond=None)
             theta = np.clip(theta + step, lo + 1e-9, hi - 1e-9)
         return np.sort(np.exp(theta))
+
+    def _stacked(self, with_A3: bool, which: str) -> _Stacked:
+        """Return the stacked problem of a structure family on a view (built once, reused)."""
+        key = (with_A3, which)
+        if key not in self._stacked_cache:
+            self._stacked_cache[key] = _Stacked(self, with_A3, which)
+        return self._stacked_cache[key]
 
     # -- structures ----------------------------------------------------------------------------
     def candidate(

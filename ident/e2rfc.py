@@ -45,7 +45,7 @@ How uncertain the flutter speed is (:meth:`IdentifiedModel.uncertainty`), from f
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -111,25 +111,20 @@ class E2RFCDiagnostics:
         structure).
     random_response : ndarray, shape (n_releases,)
         Each release's modal-fit residual over its white measurement noise (module docstring).
-    jackknife : tuple of RationalFunctionModel
-        With a random response: the chosen structure fitted with each release left out in turn
-        (those whose removal leaves two or more wind speeds).
-    reduced : RationalFunctionModel or None
-        The chosen structure fitted without the releases at the highest wind speed (releases at
-        three or more wind speeds), for the extrapolation uncertainty.
-    finer : RationalFunctionModel or None
-        The chosen structure with one lag more, fitted on every release (None when the data do
-        not determine it): how far its flutter speed moves measures the chosen one's
-        approximation error.
-    reduced_K : dict
-        Reduced frequencies those releases cover, ``{"heave": (lo, hi), "pitch": (lo, hi)}``.
     K_range : dict
         Reduced frequencies ``B omega / U`` each mode covers over the releases (modal fits,
         modes named by their kinetic energy), ``{"heave": (lo, hi), "pitch": (lo, hi)}``.
     warnings : tuple of str
         What the checks of the data and the model found (random response, a release far worse
-        than the others, residuals not white); :meth:`IdentifiedModel.uncertainty` adds the
-        flutter speed's own (extrapolation).
+        than the others); :meth:`IdentifiedModel.uncertainty` adds the flutter speed's own
+        (extrapolation).
+
+    The refitted models of the uncertainty are computed on first use: :attr:`jackknife` (with
+    a random response, the chosen structure fitted with each release left out in turn, those
+    whose removal leaves two wind speeds), :attr:`reduced` (fitted without the releases at the
+    highest wind speed, with three or more speeds) and :attr:`reduced_K` (what those releases
+    cover), :attr:`finer` (one lag more, on every release; None when the data do not
+    determine it).
     """
 
     n_lags: int
@@ -144,18 +139,66 @@ class E2RFCDiagnostics:
     modal_fits: tuple[ModalFit, ...] = field(repr=False)
     alternatives: tuple[IdentifiedModel, ...] = field(default=(), repr=False)
     random_response: FloatArray = field(default_factory=lambda: np.zeros(0), repr=False)
-    jackknife: tuple[RationalFunctionModel, ...] = field(default=(), repr=False)
-    reduced: RationalFunctionModel | None = field(default=None, repr=False)
-    finer: RationalFunctionModel | None = field(default=None, repr=False)
-    reduced_K: dict[str, tuple[float, float]] = field(default_factory=dict)
     K_range: dict[str, tuple[float, float]] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
+    # What the refits need, and their results once computed (on first use: they cost about
+    # as much as the identification, and not every caller asks for the uncertainty).
+    _prepared: tuple[PreparedRelease, ...] = field(default=(), repr=False)
+    _section: SectionModel | None = field(default=None, repr=False)
+    _lag_roots: FloatArray = field(default_factory=lambda: np.zeros(0), repr=False)
+    _refits: dict[str, object] = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def turbulent(self) -> bool:
         """Whether the releases hold a random response (median over releases above the limit)."""
         return bool(self.random_response.size
                     and float(np.median(self.random_response)) > RANDOM_RESPONSE_LIMIT)
+
+    @property
+    def jackknife(self) -> tuple[RationalFunctionModel, ...]:
+        """With a random response: the chosen structure refitted with each release left out."""
+        return self._computed("jackknife", self._jackknife)  # type: ignore[return-value]
+
+    @property
+    def reduced(self) -> RationalFunctionModel | None:
+        """The chosen structure refitted without the highest wind speed (3 or more speeds)."""
+        return self._computed("reduced", self._reduced)  # type: ignore[return-value]
+
+    @property
+    def reduced_K(self) -> dict[str, tuple[float, float]]:
+        """Reduced frequencies the releases of :attr:`reduced` cover, by mode."""
+        return self._computed("reduced_K", lambda: _K_ranges(  # type: ignore[return-value]
+            self._below_top(), self._section) if self._section is not None else {})
+
+    @property
+    def finer(self) -> RationalFunctionModel | None:
+        """The chosen structure with one lag more, fitted on every release."""
+        return self._computed("finer", lambda: _refit_finer(  # type: ignore[return-value]
+            list(self._prepared), self._lag_roots, self.with_A3) if self._prepared else None)
+
+    def _computed(self, name: str, compute: Callable[[], object]) -> object:
+        if name not in self._refits:
+            self._refits[name] = compute()
+        return self._refits[name]
+
+    def _below_top(self) -> list[PreparedRelease]:
+        speeds = distinct_wind_speeds([p.U for p in self._prepared])
+        if len(speeds) < 3:
+            return []
+        return [p for p in self._prepared if p.U < speeds[-1] / (1 + DISTINCT_U_RTOL)]
+
+    def _reduced(self) -> RationalFunctionModel | None:
+        kept = self._below_top()
+        return _refit(kept, self._lag_roots, self.with_A3) if kept else None
+
+    def _jackknife(self) -> tuple[RationalFunctionModel, ...]:
+        if not self.turbulent:
+            return ()
+        prepared = list(self._prepared)
+        subsets = [prepared[:i] + prepared[i + 1:] for i in range(len(prepared))]
+        refitted = [_refit(others, self._lag_roots, self.with_A3) for others in subsets
+                    if len(distinct_wind_speeds([p.U for p in others])) >= 2]
+        return tuple(m for m in refitted if m is not None)
 
 
 @dataclass(frozen=True)
@@ -495,13 +538,13 @@ def identify(
 
 def _identify_prepared(
     prepared: list[PreparedRelease], section: SectionModel, n_lags: int | None,
-    with_A3: bool | None, *, refits: bool = True,
+    with_A3: bool | None, *, checks: bool = True,
 ) -> IdentifiedModel:
     """Choose the structure, search the lag roots and fit, on prepared releases.
 
     Separate from :func:`identify` so that other regressor constructions (the benchmark's
     ablation with differentiated raw displacements) run through the very same estimator.
-    ``refits`` adds the jackknife and extrapolation refits (module docstring).
+    ``checks`` adds the data checks' warnings (module docstring).
     """
     problem = Problem(prepared)
     given = n_lags is not None and with_A3 is not None
@@ -533,14 +576,14 @@ def _identify_prepared(
     chosen, reason = select_one_se(usable, given=given)
     context = _Context(prepared, section, tuple(candidates))
     if given:
-        return context.model(problem.final(chosen), reason, refits=refits)
+        return context.model(problem.final(chosen), reason, checks=checks)
     alternatives = tuple(
         context.model(problem.final(problem.polished(c)),
                       f"{c.label}: within one standard error of the best, not chosen",
-                      refits=False)
+                      checks=False)
         for c in within_one_se(usable) if c is not chosen)
     return context.model(problem.final(problem.polished(chosen)), reason, alternatives,
-                         refits=refits)
+                         checks=checks)
 
 
 @dataclass(frozen=True)
@@ -552,30 +595,13 @@ class _Context:
     candidates: tuple[Candidate, ...]
 
     def model(self, fit: FinalFit, reason: str, alternatives: tuple[IdentifiedModel, ...] = (),
-              *, refits: bool) -> IdentifiedModel:
-        """Assemble an :class:`IdentifiedModel`, with the refits and checks when asked."""
+              *, checks: bool) -> IdentifiedModel:
+        """Assemble an :class:`IdentifiedModel`, with the data checks when asked."""
         prepared = self.prepared
         random_response = np.array([_random_response(p.fit) for p in prepared])
-        K_range = _K_ranges(prepared, self.section)
-        jackknife: tuple[RationalFunctionModel, ...] = ()
-        reduced: RationalFunctionModel | None = None
-        finer: RationalFunctionModel | None = None
-        reduced_K_min: dict[str, tuple[float, float]] = {}
         warnings: list[str] = []
-        if refits:
-            finer = _refit_finer(prepared, fit)
-            speeds = distinct_wind_speeds([p.U for p in prepared])
-            if len(speeds) >= 3:
-                top = speeds[-1] / (1 + DISTINCT_U_RTOL)
-                kept = [p for p in prepared if p.U < top]
-                reduced = _refit(kept, fit)
-                reduced_K_min = _K_ranges(kept, self.section)
-            turbulent = float(np.median(random_response)) > RANDOM_RESPONSE_LIMIT
-            if turbulent:
-                subsets = [prepared[:i] + prepared[i + 1:] for i in range(len(prepared))]
-                refitted = [_refit(others, fit) for others in subsets
-                            if len(distinct_wind_speeds([p.U for p in others])) >= 2]
-                jackknife = tuple(m for m in refitted if m is not None)
+        if checks:
+            if float(np.median(random_response)) > RANDOM_RESPONSE_LIMIT:
                 warnings.append(
                     f"the decays turn into a random response (turbulence: residual "
                     f"{float(np.median(random_response)):.3g} times the noise): the modal fits "
@@ -594,9 +620,9 @@ class _Context:
             wind_speeds=np.array([p.U for p in prepared]),
             condition_number=fit.condition_number, covariance=fit.covariance,
             parameter_index=fit.parameter_index, modal_fits=tuple(p.fit for p in prepared),
-            alternatives=alternatives, random_response=random_response, jackknife=jackknife,
-            reduced=reduced, reduced_K=reduced_K_min, finer=finer, K_range=K_range,
-            warnings=tuple(warnings))
+            alternatives=alternatives, random_response=random_response,
+            K_range=_K_ranges(prepared, self.section), warnings=tuple(warnings),
+            _prepared=tuple(prepared), _section=self.section, _lag_roots=fit.d)
         return IdentifiedModel(fit.A, fit.d, diagnostics)
 
 
@@ -614,19 +640,20 @@ def _K_ranges(prepared: list[PreparedRelease], section: SectionModel
     return {name: (min(v), max(v)) for name, v in K.items() if v}
 
 
-def _refit(prepared: list[PreparedRelease], fit: FinalFit) -> RationalFunctionModel | None:
-    """Fit the structure of ``fit`` again on some of the releases, from its lag roots."""
-    refit = Problem(prepared).refit(fit.d.size, fit.with_A3, [fit.d])
+def _refit(prepared: list[PreparedRelease], d: FloatArray, with_A3: bool
+           ) -> RationalFunctionModel | None:
+    """Fit a structure (lag roots ``d`` as the start) again on some of the releases."""
+    refit = Problem(prepared).refit(d.size, with_A3, [d])
     return None if refit is None else RationalFunctionModel(refit.A, refit.d)
 
 
-def _refit_finer(prepared: list[PreparedRelease], fit: FinalFit
+def _refit_finer(prepared: list[PreparedRelease], d: FloatArray, with_A3: bool
                  ) -> RationalFunctionModel | None:
-    """Fit the chosen structure with one lag more (None when the data cannot determine it)."""
+    """Fit a structure with one lag more (None when the data cannot determine it)."""
     problem = Problem(prepared)
     K_lo, K_hi = problem.K_range
-    starts = [np.sort(np.append(fit.d, root)) for root in (K_lo / 2.0, 2.0 * K_hi)]
-    refit = problem.refit(fit.d.size + 1, fit.with_A3, starts)
+    starts = [np.sort(np.append(d, root)) for root in (K_lo / 2.0, 2.0 * K_hi)]
+    refit = problem.refit(d.size + 1, with_A3, starts)
     return None if refit is None else RationalFunctionModel(refit.A, refit.d)
 
 
