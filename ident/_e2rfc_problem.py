@@ -47,6 +47,8 @@ class FinalFit:
     release_residuals : ndarray, shape (n_releases, 2)
         RMS force residual per release and channel relative to that channel's RMS.
     condition_number : float
+    residual_inflation : float
+        Variance inflation of the force residuals' autocorrelation (1: white).
     """
 
     A: FloatArray
@@ -56,6 +58,7 @@ class FinalFit:
     parameter_index: tuple[tuple[int, int, int], ...]
     release_residuals: FloatArray
     condition_number: float
+    residual_inflation: float
 
 
 def improves(new: list[Candidate], old: list[Candidate]) -> bool:
@@ -296,7 +299,8 @@ class Problem:
             A=A, d=d, with_A3=chosen.with_A3,
             covariance=self._covariance(d, chosen.with_A3, coef, residuals),
             parameter_index=tuple(index), release_residuals=release_residuals,
-            condition_number=self.condition(d, chosen.with_A3))
+            condition_number=self.condition(d, chosen.with_A3),
+            residual_inflation=autocorrelation_inflation(residuals))
 
     def _covariance(
         self, d: FloatArray, with_A3: bool, coef: FloatArray, residuals: list[FloatArray]

@@ -72,6 +72,10 @@ DISTINCT_U_RTOL = 0.02
 #: A release holds a random response (turbulence) when its modal fit's residual is more than
 #: this many times its white measurement noise (module docstring).
 RANDOM_RESPONSE_LIMIT = 10.0
+#: Variance inflation of the force residuals' autocorrelation above which they are reported as
+#: not white (measured: 1.0 for exact Roger aerodynamics, 3 for the exact-Theodorsen plate, 5 to
+#: 30 for friction, quadratic damping, a cubic spring or a 10 ms channel delay).
+WHITENESS_WARN = 5.0
 #: Grid of the flutter analyses of the refitted models (jackknife, extrapolation): they are
 #: close to the chosen model, so a coarser grid than a first analysis needs is enough.
 REFIT_GRID = 150
@@ -115,9 +119,9 @@ class E2RFCDiagnostics:
         Reduced frequencies ``B omega / U`` each mode covers over the releases (modal fits,
         modes named by their kinetic energy), ``{"heave": (lo, hi), "pitch": (lo, hi)}``.
     warnings : tuple of str
-        What the checks of the data and the model found (random response, a release far worse
-        than the others); :meth:`IdentifiedModel.uncertainty` adds the flutter speed's own
-        (extrapolation).
+        What the checks of the data and the model found (random response, force residuals not
+        white, a release far worse than the others); :meth:`IdentifiedModel.uncertainty` adds
+        the flutter speed's own (extrapolation).
 
     The refitted models of the uncertainty are computed on first use: :attr:`jackknife` (with
     a random response, the chosen structure fitted with each release left out in turn, those
@@ -607,6 +611,12 @@ class _Context:
                     f"{float(np.median(random_response)):.3g} times the noise): the modal fits "
                     "and the least-squares covariance do not hold; the flutter speed's "
                     "deviation is the release-to-release scatter")
+            elif fit.residual_inflation > WHITENESS_WARN:
+                warnings.append(
+                    f"the force residuals are not white (their autocorrelation inflates the "
+                    f"variance {fit.residual_inflation:.3g}-fold): the model misses a systematic "
+                    "part of the forces, such as friction, a nonlinear spring or a delayed "
+                    "channel (windrig diagnose names it)")
             worst = fit.release_residuals.max(axis=1)
             median = float(np.median(worst))
             for p, r in zip(prepared, worst, strict=True):

@@ -125,3 +125,13 @@ def test_releases_needed_scale_the_statistical_part_only():
     assert u.releases_needed(0.3) == math.ceil(6 * 0.36 / (0.09 - 0.0025))
     assert u.releases_needed(0.04) is None  # below the systematic part
     assert u.releases_needed(1.0) == 6  # met already
+
+
+def test_a_systematic_misfit_is_reported_as_residuals_that_are_not_white():
+    """Coulomb friction the model lacks: the force residuals are correlated, and said so."""
+    from simulators.campaigns import REALISTIC, SECTION, simulated_campaign
+
+    identified = e2rfc.identify(simulated_campaign(REALISTIC["coulomb_friction"], 1), SECTION)
+    assert any("not white" in w for w in identified.diagnostics.warnings)
+    clean = e2rfc.identify(simulated_campaign(None, 1), SECTION)
+    assert not any("not white" in w for w in clean.diagnostics.warnings)
