@@ -360,20 +360,23 @@ class IdentifiedModel(RationalFunctionModel):
         speed_std : float or None
             m/s; None without flutter below ``U_max``.
         """
-        result, parametric = self._parametric(section, U_max)
-        if result.speed is None or parametric is None:
-            return result, None
-        return result, self._uncertainty(section, result, parametric).total
+        result, uncertainty = self.analysis(section, U_max)
+        return result, None if uncertainty.speed is None else uncertainty.total
 
     def uncertainty(self, section: SectionModel, U_max: float | None = None
                     ) -> FlutterUncertainty:
         """Return the flutter speed and each part of its standard deviation (module docstring)."""
+        return self.analysis(section, U_max)[1]
+
+    def analysis(self, section: SectionModel, U_max: float | None = None
+                 ) -> tuple[_flutter.FlutterResult, FlutterUncertainty]:
+        """Return the flutter analysis and the flutter speed's uncertainty, from one analysis."""
         result, parametric = self._parametric(section, U_max)
         if result.speed is None or parametric is None:
-            return FlutterUncertainty(None, math.nan, math.nan, math.nan, math.nan, math.nan,
-                                      self.diagnostics.wind_speeds.size,
-                                      self.diagnostics.warnings)
-        return self._uncertainty(section, result, parametric)
+            return result, FlutterUncertainty(None, math.nan, math.nan, math.nan, math.nan,
+                                              math.nan, self.diagnostics.wind_speeds.size,
+                                              self.diagnostics.warnings)
+        return result, self._uncertainty(section, result, parametric)
 
     def _parametric(self, section: SectionModel, U_max: float | None
                     ) -> tuple[_flutter.FlutterResult, float | None]:
