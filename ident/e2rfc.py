@@ -377,8 +377,32 @@ class IdentifiedModel(RationalFunctionModel):
         if result.speed is None or parametric is None:
             return result, FlutterUncertainty(None, math.nan, math.nan, math.nan, math.nan,
                                               math.nan, self.diagnostics.wind_speeds.size,
-                                              self.diagnostics.warnings)
+                                              self._no_flutter_warnings(section, result.U_max))
         return result, self._uncertainty(section, result, parametric)
+
+    def _no_flutter_warnings(self, section: SectionModel, U_max: float) -> tuple[str, ...]:
+        """Return a model's warnings without flutter; with a random response, the refits' too.
+
+        From releases in turbulence "no flutter below U_max" may be the noise speaking: when
+        some of the jackknife refits do flutter below U_max, say so (how many, and where).
+        """
+        diag = self.diagnostics
+        if not diag.turbulent:
+            return diag.warnings
+        speeds = []
+        for model in diag.jackknife:
+            try:
+                found = _flutter.analyze(section, model, U_max, n_points=REFIT_GRID).speed
+            except ValueError:
+                continue
+            if found is not None:
+                speeds.append(float(found))
+        if not speeds:
+            return diag.warnings
+        return (*diag.warnings,
+                f"no flutter below {U_max:.3g} m/s, but {len(speeds)} of {len(diag.jackknife)} "
+                f"refits with one release left out flutter at {min(speeds):.3g}-"
+                f"{max(speeds):.3g} m/s: these releases do not determine the flutter speed")
 
     def _parametric(self, section: SectionModel, U_max: float | None
                     ) -> tuple[_flutter.FlutterResult, float | None]:
