@@ -106,6 +106,18 @@ class _RawView(RegressorView):
             columns.append(lfilter([g, -g], [1.0, -a], self.q - self.q[0], axis=0)[self.rows])
         return np.hstack(columns) if columns else np.zeros((self.t.size, 0))
 
+    def lag_derivatives(self, d):
+        """Return the lag columns' derivatives in log d (central differences, step 1e-6)."""
+        d = np.asarray(d, dtype=float)
+        columns = []
+        for l in range(d.size):
+            up, down = d.copy(), d.copy()
+            up[l] *= np.exp(1e-6)
+            down[l] *= np.exp(-1e-6)
+            columns.append((self.lag_columns(up)[:, 2 * l:2 * l + 2]
+                            - self.lag_columns(down)[:, 2 * l:2 * l + 2]) / 2e-6)
+        return np.hstack(columns) if columns else np.zeros((self.t.size, 0))
+
 
 @dataclass(frozen=True, eq=False)
 class _RawPrepared(PreparedRelease):
