@@ -20,11 +20,9 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 
 from daq.errors import TransportTimeout  # noqa: E402
-from daq.microepsilon_ild1420 import (  # noqa: E402
-    Ild1420Decoder,
-    Ild1420Settings,
-    MicroEpsilonIld1420,
-)
+from daq.instruments.microepsilon_ild1420.decoder import Ild1420Decoder
+from daq.instruments.microepsilon_ild1420.driver import MicroEpsilonIld1420
+from daq.instruments.microepsilon_ild1420.settings import Ild1420Settings
 
 RATE_HZ = 4000.0
 SECONDS = 10.0

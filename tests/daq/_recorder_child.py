@@ -1,7 +1,7 @@
 """Helper process for tests/daq/test_recorder.py (not a test module: no ``test_`` prefix).
 
 ``python _recorder_child.py write PATH``
-    Record a run with :class:`daq.recorder.RunRecorder` (flush interval 0.1 s), appending a block
+    Record a run with :class:`daq.recording.recorder.RunRecorder` (flush interval 0.1 s), appending a block
     of ``BLOCK`` rows every 0.02 s to a raw stream and to the sync view, and print
     ``flushed <raw rows> <sync rows>`` (rows written when it flushed) after each flush, until
     killed (or ``MAX_S`` passed). Row ``k`` holds the values of :func:`expected`, so the parent
@@ -30,7 +30,8 @@ import time
 import h5py
 import numpy as np
 
-from daq.recorder import RunRecorder, StorageError
+from daq.errors import StorageError
+from daq.recording.recorder import RunRecorder
 
 BLOCK = 20
 MAX_S = 20.0

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from daq.shared_ring import SharedRingBuffer, SharedRingHandle
+from daq.console.shared_ring import SharedRingBuffer, SharedRingHandle
 
 #: Rows appended, in blocks of BLOCK.
 ROWS, BLOCK = 20_000, 50

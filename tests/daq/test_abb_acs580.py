@@ -14,11 +14,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from daq.abb_acs580 import AbbAcs580, AbbAcs580Settings, DriveStatus
 from daq.config import parse_rig_config
 from daq.errors import ConfigError, DeviceError, SafetyError
-from daq.modbus import ScriptedBus, expected_bus_calls
-from daq.registry import driver_entry
+from daq.instruments.abb_acs580.driver import AbbAcs580
+from daq.instruments.abb_acs580.profile import DriveStatus
+from daq.instruments.abb_acs580.settings import AbbAcs580Settings
+from daq.instruments.registry import driver_entry
+from daq.transports.scripted import ScriptedBus, expected_bus_calls
 
 TABLE = {
     "max_rpm": 1500.0,

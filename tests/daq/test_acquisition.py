@@ -20,20 +20,16 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from daq.acquisition import (
-    Acquisition,
-    DeviceFault,
-    Event,
-    StreamBlock,
-)
+from daq.acquisition.engine import Acquisition
+from daq.acquisition.records import DeviceFault, Event, StreamBlock
+from daq.console.ring_buffer import Column, RingBuffer
 from daq.errors import DeviceError, ProtocolError, SafetyError, TransportError, TransportTimeout
-from daq.microepsilon_ild1420 import Gap as LaserGap
-from daq.microepsilon_ild1420 import LaserBlock
-from daq.modbus_plc import ReleaseTiming
-from daq.ring_buffer import Column, RingBuffer
-from daq.scanivalve_mps4264 import STATUS_OK, ScanBlock
-from daq.scanivalve_mps4264 import Gap as ScanGap
-from daq.vaisala_ptb330 import BarometerReading
+from daq.instruments.microepsilon_ild1420.blocks import Gap as LaserGap
+from daq.instruments.microepsilon_ild1420.blocks import LaserBlock
+from daq.instruments.modbus_plc.driver import ReleaseTiming
+from daq.instruments.scanivalve_mps4264.blocks import STATUS_OK, ScanBlock
+from daq.instruments.scanivalve_mps4264.blocks import Gap as ScanGap
+from daq.instruments.vaisala_ptb330.decoder import BarometerReading
 
 
 # ------------------------------------------------------------------------------------------------

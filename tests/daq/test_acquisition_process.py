@@ -1,7 +1,7 @@
-"""The live console's acquisition in its own process (``daq.acquisition_process``).
+"""The live console's acquisition in its own process (``daq.console.process_source``).
 
-Real processes throughout: a :class:`~daq.shared_ring.SharedRingBuffer` appended by a spawned
-child and read here; a :class:`~daq.acquisition_process.ProcessLiveSource` over the simulated
+Real processes throughout: a :class:`~daq.console.shared_ring.SharedRingBuffer` appended by a spawned
+child and read here; a :class:`~daq.console.process_source.ProcessLiveSource` over the simulated
 rig (the acquisition in a child process, the simulators in its child) drawn by the console
 window, its commands crossing the pipe (allowed, refused, failing with the driver's own error),
 a recording made through it, the child killed under it, and a rig that does not start.
@@ -22,17 +22,12 @@ import h5py
 import numpy as np
 import pytest
 
-from daq.acquisition_process import (
-    AcquisitionProcessError,
-    ProcessLiveSource,
-    RemoteError,
-    _portable,
-)
 from daq.config import parse_rig_config
-from daq.errors import ConfigError, SafetyError
-from daq.live import ConsoleWindow
-from daq.ring_buffer import Column
-from daq.shared_ring import SharedRingBuffer
+from daq.console.process_source import ProcessLiveSource, _portable
+from daq.console.ring_buffer import Column
+from daq.console.shared_ring import SharedRingBuffer
+from daq.console.window import ConsoleWindow
+from daq.errors import AcquisitionProcessError, ConfigError, RemoteError, SafetyError
 
 # The shared-ring test's child imports its target by module name: a top-level one.
 sys.path.insert(0, str(Path(__file__).resolve().parent))

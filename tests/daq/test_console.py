@@ -1,6 +1,6 @@
 """The operator console on a replayed run file (pytest-qt, offscreen).
 
-The run file is written by the real recorder (:class:`daq.recorder.RunRecorder`, the layout of
+The run file is written by the real recorder (:class:`daq.recording.recorder.RunRecorder`, the layout of
 DESIGN.md) with synthetic rows whose values are known: h a 2 Hz sinusoid, alpha 3.3 Hz, a slowly
 rising wind, tap pressures of a fixed Cp distribution scaled by qd.
 """
@@ -17,15 +17,16 @@ import h5py
 import numpy as np
 import pytest
 
-from daq import replay
 from daq.cli import main
 from daq.config import parse_rig_config
-from daq.display import amplitude_spectrum, pressure_coefficients
-from daq.live import ConsoleWindow, peak_decimate
-from daq.recorder import RunRecorder
-from daq.replay import ReplayError, ReplaySource
-from daq.ring_buffer import RingBuffer
-from daq.source import sync_columns
+from daq.console import replay
+from daq.console.display import amplitude_spectrum, pressure_coefficients
+from daq.console.replay import ReplaySource
+from daq.console.ring_buffer import RingBuffer
+from daq.console.source import sync_columns
+from daq.console.window import ConsoleWindow, peak_decimate
+from daq.errors import ReplayError
+from daq.recording.recorder import RunRecorder
 
 CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
 RATE_HZ = 100.0
@@ -251,7 +252,7 @@ def test_gui_without_a_source_is_refused_clearly(capsys):
 def test_the_refcount_guard_keeps_true_alive_through_many_signal_emissions(qapp):
     from PySide6 import QtCore
 
-    from daq.qt_guard import guard_bool_refcounts
+    from daq.console.qt_guard import guard_bool_refcounts
 
     class Emitter(QtCore.QObject):
         changed = QtCore.Signal(object)

@@ -1,7 +1,7 @@
 """The operator control panel of the live console (pytest-qt, offscreen).
 
 One live simulated rig, acquired in its own process as ``windrig gui`` runs it
-(:class:`~daq.acquisition_process.ProcessLiveSource`: every action crosses to the acquisition
+(:class:`~daq.console.process_source.ProcessLiveSource`: every action crosses to the acquisition
 process and back), runs the state checks and actions end to end:
 forbidden actions disabled with a reason, arm then release (confirmation injected) recorded by the
 engine with the model moving afterwards, a refused confirmation, the fan limit, CALZ refused while
@@ -19,10 +19,10 @@ from typing import Any
 
 import numpy as np
 
-from daq.acquisition_process import ProcessLiveSource
 from daq.config import parse_rig_config
-from daq.controls import ControlPanel
-from daq.live import ConsoleWindow
+from daq.console.controls import ControlPanel
+from daq.console.process_source import ProcessLiveSource
+from daq.console.window import ConsoleWindow
 
 CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
 FAST_FAN = "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n"

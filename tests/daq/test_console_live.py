@@ -1,9 +1,9 @@
 """The operator console on a live simulated rig (pytest-qt, offscreen).
 
 The rig is ``sim_flat_plate.toml`` with a fast fan ramp, its simulators in a child process
-(:func:`daq.rig_process.start_rig_process`), acquired by the real drivers and engine and
-synchronised by the recording pipeline's own :class:`~daq.pipeline.RunWriter` into the window's
-ring buffer (:class:`daq.live_source.LiveSource`).
+(:func:`daq.sim.rig_process.start_rig_process`), acquired by the real drivers and engine and
+synchronised by the recording pipeline's own :class:`~daq.recording.writer.RunWriter` into the window's
+ring buffer (:class:`daq.console.live_source.LiveSource`).
 """
 
 from __future__ import annotations
@@ -19,9 +19,9 @@ from pathlib import Path
 import pytest
 
 from daq.config import parse_rig_config
-from daq.live import HEALTH_COLUMNS, ConsoleWindow
-from daq.live_source import LiveSource
-from daq.source import DeviceHealth, HealthSource
+from daq.console.live_source import LiveSource
+from daq.console.source import DeviceHealth, HealthSource
+from daq.console.window import HEALTH_COLUMNS, ConsoleWindow
 
 CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
 FAST_FAN = "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n"

@@ -20,9 +20,10 @@ import numpy as np
 import pytest
 
 from daq.config import RigConfig, parse_rig_config
-from daq.controls import ControlPanel
-from daq.live import ConsoleWindow
-from daq.live_source import LiveSource, RecordingError
+from daq.console.controls import ControlPanel
+from daq.console.live_source import LiveSource
+from daq.console.window import ConsoleWindow
+from daq.errors import RecordingError
 from ident.io import read_run
 
 CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"

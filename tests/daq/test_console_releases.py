@@ -1,7 +1,7 @@
 """The console's releases table and flutter prediction, live and in replay (pytest-qt, offscreen).
 
 Live: a simulated rig (acquired in a child process, its instruments in another, as ``windrig gui``
-runs them: :class:`~daq.acquisition_process.ProcessLiveSource`), releases
+runs them: :class:`~daq.console.process_source.ProcessLiveSource`), releases
 triggered from the window's control panel at two wind speeds; each appears in the releases table
 with its modes, then the E2RFC model and the flutter speed. Replay: a run file with releases at
 two wind speeds; the table and the model equal what the same numerics give on the file as
@@ -18,16 +18,17 @@ from typing import Any
 import numpy as np
 import pytest
 
-from daq.acquisition_process import ProcessLiveSource
-from daq.auto_release import AutoReleaser
 from daq.cli import main
 from daq.config import parse_rig_config
-from daq.live import ConsoleWindow
-from daq.live_ident import fit_release_modes, identify_releases
-from daq.replay import ReplaySource
-from daq.testing import write_release_run
+from daq.console.auto_release import AutoReleaser
+from daq.console.live_ident import identify_releases
+from daq.console.process_source import ProcessLiveSource
+from daq.console.replay import ReplaySource
+from daq.console.window import ConsoleWindow
+from daq.recording.synthetic import write_release_run
 from ident import flat_plate, flutter
 from ident.io import campaign_section, read_run
+from ident.modal import fit_release_modes
 from simulators import simulate_release
 
 CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from daq.continuous_time import ContinuousTimeline
+from daq.sync.continuous_time import ContinuousTimeline
 
 PERIOD = 1 / 4000.0  # a 4 kHz laser
 BLOCK = 200

@@ -14,7 +14,7 @@ import pytest
 
 from daq.cli import main
 from daq.config import parse_rig_config
-from daq.testing import write_release_run
+from daq.recording.synthetic import write_release_run
 from simulators.campaigns import REALISTIC, simulated_campaign
 
 CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"

@@ -12,8 +12,8 @@ from unittest.mock import MagicMock
 
 import pytest
 
-from daq import registry
 from daq.config import load_rig_config
+from daq.instruments import registry
 
 CONFIG = load_rig_config(Path(__file__).resolve().parents[2] / "rig_configs" /
                          "sim_flat_plate.toml")

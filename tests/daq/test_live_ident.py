@@ -1,6 +1,6 @@
 """The console's releases table: decays cut from a sync-view buffer, fitted, then E2RFC.
 
-The source here is a real :class:`~daq.ring_buffer.RingBuffer` holding the sync rows of a
+The source here is a real :class:`~daq.console.ring_buffer.RingBuffer` holding the sync rows of a
 simulated session (flat plate, Jones aerodynamics, 1 % noise, seeded) and the decay instants
 the console's source would report; the fits run on a thread pool (the console's default worker
 process is exercised by tests/daq/test_console_releases.py).
@@ -16,10 +16,11 @@ from typing import Any
 import numpy as np
 import pytest
 
-from daq.live_ident import DECAY_COLUMNS, MIN_DECAY_S, LiveIdentifier, fit_release_modes
-from daq.ring_buffer import RingBuffer
+from daq.console.live_ident import DECAY_COLUMNS, MIN_DECAY_S, LiveIdentifier
+from daq.console.ring_buffer import RingBuffer
 from ident import flat_plate, flutter
 from ident._selection import structure_label
+from ident.modal import fit_release_modes
 from ident.section import SectionModel
 from simulators import simulate_release
 

@@ -15,18 +15,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from daq import registry
 from daq.errors import ConfigError, DeviceError, TransportTimeout
-from daq.microepsilon_ild1420 import (
-    ERROR_CODES,
-    Gap,
-    Ild1420Decoder,
-    Ild1420Sequencer,
-    Ild1420Settings,
-    MicroEpsilonIld1420,
-    error_reason,
-)
-from daq.testing import expected_exchange
+from daq.instruments import registry
+from daq.instruments.microepsilon_ild1420.blocks import Gap, Ild1420Sequencer
+from daq.instruments.microepsilon_ild1420.decoder import ERROR_CODES, Ild1420Decoder, error_reason
+from daq.instruments.microepsilon_ild1420.driver import MicroEpsilonIld1420
+from daq.instruments.microepsilon_ild1420.settings import Ild1420Settings
+from daq.transports.scripted import expected_exchange
 
 TABLE = {"range_mm": 10, "rate_hz": 4000.0, "x": 0.1, "standoff_mm": 5.0}
 

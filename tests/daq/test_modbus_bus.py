@@ -15,19 +15,13 @@ from pymodbus.pdu import ExceptionResponse, ModbusPDU
 from daq.errors import (
     ConfigError,
     DeviceError,
+    ModbusDeviceError,
     ProtocolError,
     TransportError,
     TransportTimeout,
 )
-from daq.modbus import (
-    ModbusBus,
-    ModbusDeviceError,
-    RegisterBus,
-    ScriptedBus,
-    from_int16,
-    parse_modbus_url,
-    to_int16,
-)
+from daq.transports.modbus import ModbusBus, RegisterBus, from_int16, parse_modbus_url, to_int16
+from daq.transports.scripted import ScriptedBus
 
 
 # -- URLs ----------------------------------------------------------------------------------------
@@ -230,10 +224,10 @@ def test_exception_response_is_a_device_error_and_never_retried():
 
 def test_lost_connection_is_retried_with_logged_exponential_backoff(monkeypatch, caplog):
     sleeps: list[float] = []
-    monkeypatch.setattr("daq.modbus.time.sleep", sleeps.append)
+    monkeypatch.setattr("daq.transports.modbus.time.sleep", sleeps.append)
     bus, client = fake_bus([ConnectionException("reset"), ConnectionException("reset"),
                             registers(42)], retries=2, backoff_s=0.1)
-    with caplog.at_level(logging.WARNING, logger="daq.modbus"):
+    with caplog.at_level(logging.WARNING, logger="daq.transports.modbus"):
         assert bus.read_uint16(0) == 42
     assert sleeps == [0.1, 0.2]
     assert [r.getMessage().split("; ")[-1] for r in caplog.records] == [
@@ -250,7 +244,7 @@ def test_lost_connection_is_retried_with_logged_exponential_backoff(monkeypatch,
     (ModbusIOException("Unable to decode request"), ProtocolError, "bad reply"),
 ])
 def test_persistent_failures_surface_as_one_specific_error(monkeypatch, failure, error, message):
-    monkeypatch.setattr("daq.modbus.time.sleep", lambda s: None)
+    monkeypatch.setattr("daq.transports.modbus.time.sleep", lambda s: None)
     bus, client = fake_bus([failure] * 3, retries=2, timeout_s=0.5)
     with pytest.raises(error, match=message) as info:
         bus.write_coil(1, True)
@@ -261,14 +255,14 @@ def test_persistent_failures_surface_as_one_specific_error(monkeypatch, failure,
 
 
 def test_short_or_bad_replies_are_protocol_errors(monkeypatch):
-    monkeypatch.setattr("daq.modbus.time.sleep", lambda s: None)
+    monkeypatch.setattr("daq.transports.modbus.time.sleep", lambda s: None)
     bus, _ = fake_bus([registers(1)], retries=0)
     with pytest.raises(ProtocolError, match=r"reply holds \[1\]"):
         bus.read_holding_registers(0, 2)
 
 
 def test_connect_failure_is_retried_then_a_transport_error(monkeypatch):
-    monkeypatch.setattr("daq.modbus.time.sleep", lambda s: None)
+    monkeypatch.setattr("daq.transports.modbus.time.sleep", lambda s: None)
     client = FakeClient([], connects=[False, False])
     bus = ModbusBus("modbus+tcp://fake:502", client=client, retries=1)
     with pytest.raises(TransportError, match="cannot connect"):

@@ -12,9 +12,10 @@ from unittest.mock import MagicMock
 import pytest
 
 from daq.errors import ConfigError, DeviceError, SafetyError, TransportError
-from daq.modbus import ScriptedBus, expected_bus_calls
-from daq.modbus_plc import ModbusPlc, ModbusPlcSettings
-from daq.registry import driver_entry
+from daq.instruments.modbus_plc.driver import ModbusPlc
+from daq.instruments.modbus_plc.settings import ModbusPlcSettings
+from daq.instruments.registry import driver_entry
+from daq.transports.scripted import ScriptedBus, expected_bus_calls
 
 TABLE = {
     "coils": {"release": 16, "arm": 17, "trigger": 18},

@@ -9,9 +9,9 @@ import h5py
 import numpy as np
 import pytest
 
-from daq.acquisition import Event, StreamBlock
+from daq.acquisition.records import Event, StreamBlock
 from daq.config import parse_rig_config
-from daq.pipeline import DEFAULT_RHO, RunWriter
+from daq.recording.writer import DEFAULT_RHO, RunWriter
 
 CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
 T0_NS = 10_000_000_000
@@ -296,9 +296,9 @@ def test_cli_acquire_refuses_auto_urls_without_simulate(tmp_path, capsys):
 
 
 def test_record_run_refuses_an_existing_file_before_starting_anything(config, tmp_path):
-    from daq.pipeline import record_run
+    from daq.sim.recording import record_simulated_run
 
     path = tmp_path / "exists.h5"
     path.write_bytes(b"")
     with pytest.raises(OSError, match="already exists"):
-        record_run(config, path, duration_s=1.0, simulate=True, progress=False)
+        record_simulated_run(config, path, duration_s=1.0, progress=False)

@@ -1,4 +1,4 @@
-"""Tests of daq.recorder: the HDF5 file of one run, as DESIGN.md, "HDF5 file" specifies it.
+"""Tests of daq.recording.recorder: the HDF5 file of one run, as DESIGN.md, "HDF5 file" specifies it.
 
 Measurements (2026-11, h5py 3.16.0 / HDF5 2.0.0, shared 2-core VM, local disk, page cache warm;
 a throwaway script, to be kept in benchmarks/ later): a 512-channel float32 stream at 500 Hz in
@@ -42,18 +42,9 @@ import h5py
 import numpy as np
 import pytest
 
-from daq.errors import DaqError
-from daq.recorder import (
-    CLOCK_MODEL,
-    EVENT_DTYPE,
-    GAP_DTYPE,
-    RELEASE_DTYPE,
-    InsufficientSpaceError,
-    RecorderStateError,
-    RunRecorder,
-    StorageError,
-    read_sync,
-)
+from daq.errors import DaqError, InsufficientSpaceError, RecorderStateError, StorageError
+from daq.recording.layout import CLOCK_MODEL, EVENT_DTYPE, GAP_DTYPE, RELEASE_DTYPE, read_sync
+from daq.recording.recorder import RunRecorder
 
 REPO = Path(__file__).resolve().parents[2]
 CHILD = Path(__file__).with_name("_recorder_child.py")

@@ -19,8 +19,8 @@ import pytest
 
 from daq.cli import main
 from daq.config import parse_rig_config
-from daq.reprocess import ReprocessSettings, expand_paths, process_file, reprocess
-from daq.testing import write_release_run
+from daq.offline.reprocess import ReprocessSettings, expand_paths, process_file, reprocess
+from daq.recording.synthetic import write_release_run
 from simulators.campaigns import FRACTIONS, simulated_campaign
 
 CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
@@ -136,7 +136,7 @@ low = ["{folder}/run_0.h5", "{folder}/run_1.h5"]
 all_three = ["{folder}/run_[0-2].h5"]
 """)
     with pytest.raises(ValueError, match="in two campaigns"):
-        from daq.reprocess import load_reprocess_config
+        from daq.offline.reprocess import load_reprocess_config
 
         settings, campaigns = load_reprocess_config(config)
         reprocess([], tmp_path / "o", workers=1, settings=settings, campaigns=campaigns,

@@ -17,7 +17,6 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from daq import registry
 from daq.config import parse_rig_config
 from daq.errors import (
     ConfigError,
@@ -27,17 +26,18 @@ from daq.errors import (
     TransportError,
     TransportTimeout,
 )
-from daq.scanivalve_mps4264 import (
+from daq.instruments import registry
+from daq.instruments.scanivalve_mps4264.blocks import (
     STATUS_MISSING,
     STATUS_OK,
     STATUS_VALVE_CAL,
     Gap,
-    Mps4264Decoder,
-    Mps4264Settings,
     ScanBlock,
-    ScanivalveMps4264,
 )
-from daq.testing import ScriptedTransport, expected_exchange
+from daq.instruments.scanivalve_mps4264.driver import ScanivalveMps4264
+from daq.instruments.scanivalve_mps4264.frames import Mps4264Decoder
+from daq.instruments.scanivalve_mps4264.settings import Mps4264Settings
+from daq.transports.scripted import ScriptedTransport, expected_exchange
 
 PA_PER_PSI = 6894.75977  # mps-protocol.h units table, PA factor
 TABLE = {"modules": 1, "rate_hz": 500.0, "byte_order": "big", "pitot_channel": 63}
@@ -450,7 +450,7 @@ def test_counter_wrap_and_restart_are_unwrapped():
 
 def test_byte_order_mismatch_is_decoded_and_reported(caplog):
     driver = scanning([[eu_packet(1, order="<") + eu_packet(2, order="<")]])
-    with caplog.at_level(logging.WARNING, logger="daq.scanivalve_mps4264"):
+    with caplog.at_level(logging.WARNING, logger="daq.instruments.scanivalve_mps4264.driver"):
         block = driver.read_block(0.05)
     assert block.counter.tolist() == [1, 2]
     assert driver.stats["byte_order_mismatches"] == 2
@@ -537,7 +537,7 @@ class DroppingTransport(ScriptedTransport):
 
 def test_lost_data_connection_is_reopened_with_backoff(caplog):
     data = DroppingTransport([(b"", eu_packet(1) + eu_packet(2))], fail_opens=1)
-    with caplog.at_level(logging.WARNING, logger="daq.scanivalve_mps4264"):
+    with caplog.at_level(logging.WARNING, logger="daq.instruments.scanivalve_mps4264.driver"):
         driver = scanning([], transports=[data], reconnect_backoff_s=0.001)
         block = driver.read_block(0.5)
     assert block.counter.tolist() == [1, 2]
@@ -599,7 +599,7 @@ class TimedTransport(ScriptedTransport):
 @pytest.fixture
 def clock(monkeypatch):
     """Simulate the driver module's clock: the tests see exactly when a block comes out."""
-    import daq.scanivalve_mps4264 as module
+    import daq.instruments.scanivalve_mps4264.driver as module
 
     fake = FakeClock()
     monkeypatch.setattr(module, "time", fake)

@@ -1,4 +1,4 @@
-"""Synchronisation (daq.sync): clock maps, counters, the sync view and its physical conversions.
+"""Synchronisation (daq.sync.resample): clock maps, counters, the sync view and its physical conversions.
 
 Simulated device streams use :class:`simulators.clock.DeviceClock`; the host clock is the true time.
 A block arrives ``floor + Exp(1 ms)`` after its last sample, 1 % of blocks 50 ms more (the reader
@@ -26,25 +26,16 @@ import numpy.typing as npt
 import pytest
 from scipy import stats
 
-from daq.sync import (
-    ClockMap,
-    CounterStep,
-    CounterUnwrapper,
-    Gap,
-    Resampler,
-    StreamSpec,
-    SyncBlock,
-    SyncError,
+from daq.errors import SyncError
+from daq.sync.clock_map import ClockMap, trigger_times_from_flags, trigger_times_from_latch
+from daq.sync.conversions import (
     air_density,
-    find_gaps,
     forces_from_pressures,
     heave_pitch_from_lasers,
-    resample,
-    trigger_times_from_flags,
-    trigger_times_from_latch,
-    unwrap_counter,
     wind_speed,
 )
+from daq.sync.counters import CounterStep, CounterUnwrapper, Gap, find_gaps, unwrap_counter
+from daq.sync.resample import Resampler, StreamSpec, SyncBlock, resample
 from ident.taps import TapLayout
 from simulators.clock import DeviceClock
 

@@ -1,4 +1,4 @@
-"""The test helpers themselves (:mod:`daq.testing`).
+"""The test helpers themselves (:mod:`daq.transports.scripted`).
 
 The scripted-exchange harness must catch wrong, missing and extra bytes; the run-file writer
 must put each release where its row says.
@@ -14,7 +14,8 @@ import pytest
 
 from daq.config import load_rig_config
 from daq.errors import TransportTimeout
-from daq.testing import ScriptedTransport, expected_exchange, write_release_run
+from daq.recording.synthetic import write_release_run
+from daq.transports.scripted import ScriptedTransport, expected_exchange
 from ident import flat_plate
 from simulators import simulate_release
 

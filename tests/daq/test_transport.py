@@ -8,7 +8,7 @@ import threading
 import pytest
 
 from daq.errors import ConfigError, TransportError, TransportTimeout
-from daq.transport import SerialTransport, TcpTransport, open_transport
+from daq.transports.byte_transport import SerialTransport, TcpTransport, open_transport
 
 
 def test_loop_url_round_trip_and_timeout():

@@ -17,23 +17,21 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from daq import registry
 from daq.errors import ConfigError, ProtocolError, TransportError, TransportTimeout
-from daq.testing import ScriptedTransport, expected_exchange
-from daq.transport import SerialTransport, open_transport
-from daq.vaisala_ptb330 import (
-    FORM_STRING,
+from daq.instruments import registry
+from daq.instruments.vaisala_ptb330.decoder import (
     R_DRY_AIR,
-    SERIAL_DEFAULTS,
     BarometerReading,
     Ptb330BadLine,
     Ptb330Line,
     Ptb330LineDecoder,
-    Ptb330Settings,
-    VaisalaPtb330,
     parse_line,
     reading_from_line,
 )
+from daq.instruments.vaisala_ptb330.driver import FORM_STRING, SERIAL_DEFAULTS, VaisalaPtb330
+from daq.instruments.vaisala_ptb330.settings import Ptb330Settings
+from daq.transports.byte_transport import SerialTransport, open_transport
+from daq.transports.scripted import ScriptedTransport, expected_exchange
 
 FORM_CMD = b"FORM " + FORM_STRING.encode() + b"\r"
 LINE = b"P=  1013.250 hPa    T= 21.34 'C \r\n"  # what FORM_STRING gives (widths [unverified])
@@ -49,7 +47,7 @@ def test_settings_defaults_and_registry_entry():
     """An empty table gives the documented defaults; the registry knows the driver and role."""
     s = Ptb330Settings.from_table({}, "[barometer]")
     assert (s.poll_interval_s, s.timeout_s, s.address) == (1.0, 2.0, None)
-    assert "daq.vaisala_ptb330" in registry.DRIVER_MODULES
+    assert "daq.instruments.vaisala_ptb330.driver" in registry.DRIVER_MODULES
     entry = registry.driver_entry("vaisala_ptb330")
     assert entry.role == "barometer" and entry.factory is VaisalaPtb330
     got = registry.validate_settings("vaisala_ptb330", "barometer",

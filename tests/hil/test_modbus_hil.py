@@ -14,10 +14,12 @@ from collections.abc import Iterator
 
 import pytest
 
-from daq.abb_acs580 import AbbAcs580, AbbAcs580Settings
-from daq.errors import DeviceError, SafetyError, TransportError, TransportTimeout
-from daq.modbus import ModbusBus, ModbusDeviceError
-from daq.modbus_plc import ModbusPlc, ModbusPlcSettings
+from daq.errors import DeviceError, ModbusDeviceError, SafetyError, TransportError, TransportTimeout
+from daq.instruments.abb_acs580.driver import AbbAcs580
+from daq.instruments.abb_acs580.settings import AbbAcs580Settings
+from daq.instruments.modbus_plc.driver import ModbusPlc
+from daq.instruments.modbus_plc.settings import ModbusPlcSettings
+from daq.transports.modbus import ModbusBus
 from ident import SectionModel, TapLayout, flat_plate
 from simulators.devices.abb_acs580 import SimAbbAcs580
 from simulators.devices.modbus_plc import SimModbusPlc
@@ -165,7 +167,7 @@ def test_invalid_register_is_a_device_error_with_the_modbus_code(fan):
 def test_fan_no_reply_times_out_then_recovers(fan, caplog):
     sim, drive = fan
     sim.inject("no_reply", count=1)  # one lost reply: the bus's retry absorbs it, logged
-    with caplog.at_level(logging.WARNING, logger="daq.modbus"):
+    with caplog.at_level(logging.WARNING, logger="daq.transports.modbus"):
         assert drive.status().swc_on_inhib
     assert any("retry 1 of 1" in r.getMessage() for r in caplog.records)
     sim.inject("no_reply")  # the drive goes silent
@@ -253,7 +255,7 @@ def test_plc_disconnect_is_a_transport_error_then_the_bus_reconnects(plc, caplog
     sim, drive = plc
     assert drive.armed()
     sim.inject("disconnect")  # dropped connection, server back at once: retry absorbs it
-    with caplog.at_level(logging.WARNING, logger="daq.modbus"):
+    with caplog.at_level(logging.WARNING, logger="daq.transports.modbus"):
         assert drive.trigger_count() == 0
     assert any("connection failed" in r.getMessage() for r in caplog.records)
     sim.inject("disconnect", outage_s=0.3)  # longer than the bus's retries (0.02 + 0.04 s)

@@ -18,15 +18,10 @@ import numpy as np
 import pytest
 
 from daq.errors import DeviceError, SafetyError
-from daq.scanivalve_mps4264 import (
-    STATUS_MISSING,
-    STATUS_OK,
-    Gap,
-    Mps4264Settings,
-    ScanBlock,
-    ScanivalveMps4264,
-)
-from daq.transport import open_transport
+from daq.instruments.scanivalve_mps4264.blocks import STATUS_MISSING, STATUS_OK, Gap, ScanBlock
+from daq.instruments.scanivalve_mps4264.driver import ScanivalveMps4264
+from daq.instruments.scanivalve_mps4264.settings import Mps4264Settings
+from daq.transports.byte_transport import open_transport
 from ident import SectionModel, TapLayout, flat_plate
 from simulators.clock import DeviceClock
 from simulators.devices.scanivalve_mps4264 import SimScanivalveMps4264

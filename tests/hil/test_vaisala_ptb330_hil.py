@@ -13,14 +13,10 @@ import numpy as np
 import pytest
 
 from daq.errors import ProtocolError, TransportTimeout
-from daq.transport import open_transport
-from daq.vaisala_ptb330 import (
-    SERIAL_DEFAULTS,
-    Ptb330Line,
-    Ptb330LineDecoder,
-    Ptb330Settings,
-    VaisalaPtb330,
-)
+from daq.instruments.vaisala_ptb330.decoder import Ptb330Line, Ptb330LineDecoder
+from daq.instruments.vaisala_ptb330.driver import SERIAL_DEFAULTS, VaisalaPtb330
+from daq.instruments.vaisala_ptb330.settings import Ptb330Settings
+from daq.transports.byte_transport import open_transport
 from ident import SectionModel, TapLayout, flat_plate
 from simulators.devices.vaisala_ptb330 import SimVaisalaPtb330
 from simulators.virtual_tunnel import AirState, VirtualTunnel
