@@ -5,14 +5,13 @@ What is measured
 The real console: :class:`daq.console.window.ConsoleWindow` (1280 x 800, 20 s window, its own
 ``QTimer`` of ``daq.console.window.FRAME_MS``) under Qt's ``offscreen`` platform, polling the source
 ``windrig gui`` uses, a :class:`daq.console.process_source.ProcessLiveSource`: the real drivers,
-engine and :class:`~daq.recording.writer.RunWriter` run in a child process (the *acquisition process*)
-and hand the synchronised rows over shared memory; the simulated instruments run in that
+engine and :class:`~daq.recording.writer.RunWriter` run in a child process (the *acquisition
+process*) and hand the synchronised rows over shared memory; the simulated instruments run in that
 child's own child (:mod:`daq.sim.rig_process`), on the same two cores. The ``threads`` run puts the
 acquisition back into this process as threads (:class:`daq.console.live_source.LiveSource`), for
-comparison. The fan runs
-(``--fan-rpm``, 800 rpm = 8 m/s by default, ramped fast) so that pressures, Cp, lift and moment
-move, and a helper thread arms and releases the model through ``source.acq`` every
-``RELEASE_EVERY_S`` so that the traces show free decays. Rigs:
+comparison. The fan runs (``--fan-rpm``, 800 rpm = 8 m/s by default, ramped fast) so that pressures,
+Cp, lift and moment move, and a helper thread arms and releases the model through ``source.acq``
+every ``RELEASE_EVERY_S`` so that the traces show free decays. Rigs:
 
 - ``sim_flat_plate.toml`` as shipped: 1 scanner module, 62 taps + the Pitot.
 - The same rig widened to 8 scanner modules x 64 channels: **511 taps + the Pitot** (512
@@ -23,9 +22,9 @@ move, and a helper thread arms and releases the model through ``source.acq`` eve
   most). The TOML text is built here and parsed by :func:`daq.config.parse_rig_config`.
 - Optionally (``--runs ...,replay``, on by default) a run of the 511-tap rig recorded first with
   :func:`daq.recording.run.record_run` and played back in real time by
-  :class:`daq.console.replay.ReplaySource`: the console's own cost without acquisition in the process.
-  The same file is also played with ``frame_ms = 0`` (the timer fires whenever Qt is idle, and
-  a replay has new rows at every poll): the most frames/s the GUI thread can draw, i.e. the
+  :class:`daq.console.replay.ReplaySource`: the console's own cost without acquisition in the
+  process. The same file is also played with ``frame_ms = 0`` (the timer fires whenever Qt is idle,
+  and a replay has new rows at every poll): the most frames/s the GUI thread can draw, i.e. the
   headroom above the 20 frames/s target.
 
 What a "frame" is

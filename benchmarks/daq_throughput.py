@@ -9,20 +9,20 @@ it:
 
 1. **Decode** (the reader threads' work): the real drivers (:class:`ScanivalveMps4264`,
    :class:`MicroEpsilonIld1420`) read in-memory transports through the engine's own adapters
-   (``daq.acquisition.adapters.make_adapter``), one driver read per :class:`StreamBlock`: the scanner
-   gets one legacy 0x0A packet per frame per module and is read after every frame (on a rig
-   that keeps up, ``read_block`` returns as soon as every module has sent the frame), the
-   lasers are read every ``--laser-block`` samples (100 by default: the driver drains
-   ``DRAIN_S`` = 20 ms after the first byte, i.e. 80 samples plus what arrived meanwhile; the
-   pipeline sizes its clock windows for 20 laser blocks per 0.5 s, the same 100).
+   (``daq.acquisition.adapters.make_adapter``), one driver read per :class:`StreamBlock`: the
+   scanner gets one legacy 0x0A packet per frame per module and is read after every frame (on a rig
+   that keeps up, ``read_block`` returns as soon as every module has sent the frame), the lasers are
+   read every ``--laser-block`` samples (100 by default: the driver drains ``DRAIN_S`` = 20 ms after
+   the first byte, i.e. 80 samples plus what arrived meanwhile; the pipeline sizes its clock windows
+   for 20 laser blocks per 0.5 s, the same 100).
 2. **RunWriter** (the dispatcher thread's work): every block, as a ``"block"`` doc, into
-   :class:`daq.recording.writer.RunWriter`: clock maps, the :class:`~daq.sync.resample.Resampler`, h and alpha
-   from the lasers, lift and moment from the 511 taps, U from the Pitot, raw and synchronised
-   rows into the HDF5 file through :class:`~daq.recording.recorder.RunRecorder` (gzip 1 + shuffle,
-   chunked, SWMR), plus the PLC's ``"arm"`` and ``"release"`` events of every template loop.
-   RunWriter appends every 0.2 s and the recorder flushes every 1 s of *wall* time, so in a
-   replay faster than real time each append holds more data (as when a real run catches up
-   after a stall).
+   :class:`daq.recording.writer.RunWriter`: clock maps, the :class:`~daq.sync.resample.Resampler`, h
+   and alpha from the lasers, lift and moment from the 511 taps, U from the Pitot, raw and
+   synchronised rows into the HDF5 file through :class:`~daq.recording.recorder.RunRecorder` (gzip 1
+   + shuffle, chunked, SWMR), plus the PLC's ``"arm"`` and ``"release"`` events of every template
+   loop. RunWriter appends every 0.2 s and the recorder flushes every 1 s of *wall* time, so in a
+   replay faster than real time each append holds more data (as when a real run catches up after a
+   stall).
 3. **Plain h5py append** (the limit): the same datasets (final sizes, dtypes, chunks,
    compression, SWMR) appended with ``resize`` + slice assignment, in as many equal batches as
    RunWriter wrote, with no decoding and no synchronisation, from rows read back from our own

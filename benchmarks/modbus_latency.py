@@ -1,7 +1,7 @@
 """Modbus round-trip latency and poll rates of the fan drive and PLC drivers (not a test).
 
-The drivers talk to their simulators (pymodbus TCP servers on 127.0.0.1, each in its own thread
-and asyncio loop) through :class:`daq.transports.modbus.ModbusBus`, so the figures are pymodbus client +
+The drivers talk to their simulators (pymodbus TCP servers on 127.0.0.1, each in its own thread and
+asyncio loop) through :class:`daq.transports.modbus.ModbusBus`, so the figures are pymodbus client +
 loopback TCP + pymodbus server + simulator logic, on this machine. A real drive adds its own
 response time (typically a few ms on Modbus TCP), which these figures do not include.
 

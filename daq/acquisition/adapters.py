@@ -49,6 +49,8 @@ POLL_S: Mapping[str, float] = {"barometer": 1.0, "fan": 0.1, "plc": 0.1}
 
 
 class Rows(NamedTuple):
+    """What one read of a driver gave, in the form of a :class:`StreamBlock`'s fields."""
+
     host_time_ns: IntArray
     device_time: FloatArray | None
     counter: IntArray | None
@@ -66,12 +68,14 @@ class Adapter:
         self.driver = driver
 
     def open(self) -> None:
+        """Open the driver (no data yet)."""
         self.driver.open()
 
     def begin(self) -> None:
         """Start producing data (after every device is open)."""
 
     def read(self, stop: threading.Event) -> Rows | None:
+        """Read once; return the rows, or None when nothing came (``stop`` ends a wait)."""
         raise NotImplementedError
 
     def reconnects(self) -> int | None:
@@ -97,6 +101,7 @@ class Adapter:
         """Stop producing data (before the readers stop)."""
 
     def close(self) -> None:
+        """Close the driver."""
         self.driver.close()
 
 
@@ -139,10 +144,12 @@ class ScannerAdapter(Adapter):
         self._recent_rows = 0
 
     def begin(self) -> None:
+        """Configure the scanner and start the scan."""
         self.driver.configure()
         self.driver.scan()
 
     def read(self, stop: threading.Event) -> Rows | None:
+        """Read one block within the read timeout (None: nothing came)."""
         return self.read_within(self.read_timeout_s)
 
     def read_within(self, timeout_s: float) -> Rows | None:
@@ -264,6 +271,7 @@ class ScannerAdapter(Adapter):
         self._pause_s = float(pause_s)
 
     def recover(self, error: BaseException) -> None:
+        """Start a new scan on fresh connections after a lasting TransportError."""
         # The driver already retried its data connections (bounded, logged); a TransportError
         # here means they stayed away: start over with fresh connections and a new scan.
         if isinstance(error, TransportError) and not isinstance(error, TransportTimeout):
@@ -275,10 +283,13 @@ class ScannerAdapter(Adapter):
             self.driver.scan()
 
     def halt(self) -> None:
+        """Stop the scan (STOP)."""
         self.driver.stop()
 
 
 class LaserAdapter(Adapter):
+    """Laser: ``read_block`` with the read timeout; its channels become the rows."""
+
     streaming = True
     _TIME_KEYS = ("host_time_ns", "device_time", "counter")
 
@@ -287,6 +298,7 @@ class LaserAdapter(Adapter):
         self.read_timeout_s = read_timeout_s
 
     def read(self, stop: threading.Event) -> Rows | None:
+        """Read one block within the read timeout (None: nothing came)."""
         try:
             block = self.driver.read_block(timeout_s=self.read_timeout_s)
         except TransportTimeout:
@@ -309,6 +321,7 @@ class PolledAdapter(Adapter):
         self._last_counter: int | None = None
 
     def read(self, stop: threading.Event) -> Rows | None:
+        """Wait for the next poll slot (None if ``stop`` is set meanwhile), then ``read()``."""
         now = time.monotonic()
         if self._next is None:
             self._next = now
@@ -355,7 +368,12 @@ class PolledAdapter(Adapter):
 
 
 def make_adapter(kind: str, driver: Any, *, poll_interval_s: float | None,
-                  read_timeout_s: float) -> Adapter:
+                 read_timeout_s: float) -> Adapter:
+    """Return the adapter of a driver of ``kind`` (a polled one every ``poll_interval_s``).
+
+    ``poll_interval_s`` None: the barometer's own ``poll_interval_s`` setting, else
+    :data:`POLL_S`. ``read_timeout_s``: the timeout of one streaming read, s.
+    """
     if kind == "scanner":
         return ScannerAdapter(driver, read_timeout_s)
     if kind == "laser":

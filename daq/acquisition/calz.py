@@ -213,9 +213,11 @@ def restart_scan(name: str, reader: DeviceReader) -> tuple[DaqError | None, int]
             return error, began
         time.sleep(0.1)
 
+
 def post_calz_failed(post_event: Callable[[Event], None], name: str, stage: str,
                      error: BaseException | str, at_ns: int, *, restarted: bool | None,
                      pause_s: float = 0.0) -> None:
+    """Log a failed CALZ and post its ``"calz_failed"`` event (the stage, the error, the scan)."""
     log.error("%s: CALZ failed at %s: %s", name, stage, error)
     post_event(Event(
         kind="calz_failed", host_time_ns=at_ns, device=name,

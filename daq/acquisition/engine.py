@@ -15,11 +15,11 @@ through the engine, so that each is recorded as an event with its host time
 (:mod:`daq.acquisition.commands`, :mod:`daq.acquisition.calz`). Every subscriber call happens
 on the dispatcher thread, so a subscriber needs no locking of its own.
 
-Not responsible for: the device protocols (the drivers), the reading of one device itself
-(reads, faults and recovery, the bounded queue: :mod:`daq.acquisition.reader`), the records'
-types (:mod:`daq.acquisition.records`), mapping device clocks onto the host clock
-(:mod:`daq.sync.resample`), writing files (:mod:`daq.recording`), or plotting (the console, which polls a
-ring buffer fed by a subscriber). The acquisition threads never touch h5py or Qt.
+Not responsible for: the device protocols (the drivers), the reading of one device itself (reads,
+faults and recovery, the bounded queue: :mod:`daq.acquisition.reader`), the records' types
+(:mod:`daq.acquisition.records`), mapping device clocks onto the host clock
+(:mod:`daq.sync.resample`), writing files (:mod:`daq.recording`), or plotting (the console, which
+polls a ring buffer fed by a subscriber). The acquisition threads never touch h5py or Qt.
 
 Design choices:
 
@@ -459,8 +459,9 @@ class Acquisition:
         device : str, optional
             The scanner's name; default: the only device of kind ``"scanner"``.
         wind_speed_now : float
-            The wind speed now, m/s, as measured by the caller with the fan stopped. The
-            driver refuses anything but 0 (:meth:`~daq.instruments.scanivalve_mps4264.driver.ScanivalveMps4264.
+            The wind speed now, m/s, as measured by the caller with the fan stopped. The driver
+            refuses anything but 0
+            (:meth:`~daq.instruments.scanivalve_mps4264.driver.ScanivalveMps4264.
             check_calz_allowed`), before anything is interrupted.
         timeout_s : float
             Longest wait for the scanner to finish zeroing, s (> 0; the manual: "under 10

@@ -1,13 +1,14 @@
 """One instrument's reader: a blocking thread that reads its driver into a bounded queue.
 
-Responsibility: read one instrument in its own blocking reader thread (:class:`DeviceReader`:
-the scanner and the lasers with ``read_block``, the barometer, the fan drive and the PLC by
-polling ``read()``, each through a small adapter for its kind of driver), turn what the driver
-returns into :class:`~daq.acquisition.records.StreamBlock` records and put them on the reader's bounded
-queue, which never blocks the reader: when it is full the oldest block is dropped and the loss
-accounted for (counters, and drop runs the dispatcher takes). Driver faults are reported as
-:class:`~daq.acquisition.records.DeviceFault` events, retried with backoff and recovered from. A scanner's
-reader can also be parked, drained and its scan restarted, for a pause of the engine (a CALZ).
+Responsibility: read one instrument in its own blocking reader thread (:class:`DeviceReader`: the
+scanner and the lasers with ``read_block``, the barometer, the fan drive and the PLC by polling
+``read()``, each through a small adapter for its kind of driver), turn what the driver returns into
+:class:`~daq.acquisition.records.StreamBlock` records and put them on the reader's bounded queue,
+which never blocks the reader: when it is full the oldest block is dropped and the loss accounted
+for (counters, and drop runs the dispatcher takes). Driver faults are reported as
+:class:`~daq.acquisition.records.DeviceFault` events, retried with backoff and recovered from. A
+scanner's reader can also be parked, drained and its scan restarted, for a pause of the engine (a
+CALZ).
 
 Not responsible for: the device protocols (the drivers); creating, starting and stopping the
 readers, dispatching their blocks to subscribers, marking the overflow gaps on the blocks
@@ -150,8 +151,8 @@ class DeviceReader:
 
     Notes
     -----
-    The :class:`~daq.acquisition.engine.Acquisition` creates, starts and stops readers; use it rather
-    than this class.
+    The :class:`~daq.acquisition.engine.Acquisition` creates, starts and stops readers; use it
+    rather than this class.
     """
 
     def __init__(self, name: str, kind: str, driver: Any, *, queue_size: int,

@@ -8,8 +8,9 @@ the vocabulary of their ``kind`` fields (:data:`KINDS`, :data:`SYSTEM_EVENT_KIND
 array aliases they are typed with. :mod:`daq.acquisition.engine` re-exports every public name here.
 
 Not responsible for: producing the records (the readers, :mod:`daq.acquisition.reader`; the engine,
-:mod:`daq.acquisition.engine`) or consuming them (the subscribers: :class:`~daq.recording.writer.RunWriter`,
-the live ring buffers). No I/O and no threads: frozen dataclasses only.
+:mod:`daq.acquisition.engine`) or consuming them (the subscribers:
+:class:`~daq.recording.writer.RunWriter`, the live ring buffers). No I/O and no threads: frozen
+dataclasses only.
 """
 
 from __future__ import annotations
@@ -35,7 +36,8 @@ __all__ = [
 
 #: Kinds of device the engine knows how to read.
 KINDS = ("scanner", "laser", "barometer", "fan", "plc")
-#: Event kinds the engine itself emits; :meth:`~daq.acquisition.engine.Acquisition.mark` refuses them.
+#: Event kinds the engine itself emits; :meth:`~daq.acquisition.engine.Acquisition.mark` refuses
+#: them.
 SYSTEM_EVENT_KINDS = frozenset({"fault", "recovered", "overflow", "release", "release_failed",
                                 "arm", "arm_failed", "disarm", "disarm_failed", "trigger",
                                 "calz", "calz_failed", "fan_speed", "fan_start", "fan_stop",

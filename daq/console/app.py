@@ -1,14 +1,15 @@
 """``windrig gui``: start the operator console on a replayed run or a live (simulated) rig.
 
 Responsibility: turn the command-line options into a data source (a
-:class:`~daq.console.replay.ReplaySource`, or a :class:`~daq.console.process_source.ProcessLiveSource`: the
-acquisition in a child process, the simulated rig in another) and a
-:class:`~daq.console.window.ConsoleWindow`, run Qt's event loop (or, with ``screenshot``, render headless
-for ``after`` seconds, save the window as PNG and return), and turn bad input into one clear
-message and exit code 2. Qt is imported only once the input has been checked.
+:class:`~daq.console.replay.ReplaySource`, or a
+:class:`~daq.console.process_source.ProcessLiveSource`: the acquisition in a child process, the
+simulated rig in another) and a :class:`~daq.console.window.ConsoleWindow`, run Qt's event loop (or,
+with ``screenshot``, render headless for ``after`` seconds, save the window as PNG and return), and
+turn bad input into one clear message and exit code 2. Qt is imported only once the input has been
+checked.
 
-Not responsible for: the window's content (:mod:`daq.console.window`), reading files (:mod:`daq.console.replay`) or
-acquiring (:mod:`daq.console.live_source`).
+Not responsible for: the window's content (:mod:`daq.console.window`), reading files
+(:mod:`daq.console.replay`) or acquiring (:mod:`daq.console.live_source`).
 """
 
 from __future__ import annotations

@@ -1,13 +1,13 @@
 """Hands-free releases for a simulated session in the console: fan, arm, release, decay, repeat.
 
-Responsibility: :class:`AutoReleaser` drives the console's own :class:`~daq.console.controls.ControlPanel`
-through a short test programme, one release per fan speed given: set the fan and wait until it
-reads the speed, let the wind settle, arm (the model is pulled back and held), hold, release,
-let the model decay for ``decay_s``, arm again (which ends the decay), and go on with the next
-speed; at the end the fan is left running at the last speed. Every step goes through the
-panel's actions, so the panel's and the drivers' safety rules apply exactly as to an operator's
-clicks. It is polled by a ``QTimer`` on the GUI thread and never blocks. ``windrig gui
---simulate --auto-release RPM,RPM,...`` uses it to demonstrate a session (the README's
+Responsibility: :class:`AutoReleaser` drives the console's own
+:class:`~daq.console.controls.ControlPanel` through a short test programme, one release per fan
+speed given: set the fan and wait until it reads the speed, let the wind settle, arm (the model is
+pulled back and held), hold, release, let the model decay for ``decay_s``, arm again (which ends the
+decay), and go on with the next speed; at the end the fan is left running at the last speed. Every
+step goes through the panel's actions, so the panel's and the drivers' safety rules apply exactly as
+to an operator's clicks. It is polled by a ``QTimer`` on the GUI thread and never blocks. ``windrig
+gui --simulate --auto-release RPM,RPM,...`` uses it to demonstrate a session (the README's
 screenshot); a real rig is never driven by it (the command line refuses).
 
 Not responsible for: the actions themselves (:mod:`daq.console.controls`) or fitting the releases

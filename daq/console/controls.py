@@ -16,8 +16,8 @@ action). The release asks for confirmation through an injectable
 ``confirm(title, question) -> bool`` (a ``QMessageBox`` by default).
 
 The recording row starts and stops a run file through the source's
-:meth:`~daq.console.live_source.LiveSource.start_recording` / ``stop_recording`` (which hand the work to
-the engine's dispatcher thread and wait for it, well under a second, so they run on the GUI
+:meth:`~daq.console.live_source.LiveSource.start_recording` / ``stop_recording`` (which hand the
+work to the engine's dispatcher thread and wait for it, well under a second, so they run on the GUI
 thread); its label shows the file and the elapsed time, or why the last recording stopped.
 
 Not responsible for: the rules themselves (:mod:`daq.console.interlocks`), the drivers' own

@@ -169,7 +169,7 @@ class Interlocks:
 
     def _check_fan_for_calz(self, state: ConsoleState, now_s: float,
                             refuse: Callable[[tuple[str, ...], str], None]) -> None:
-        """The CALZ rules before the wind: a scanner, and the fan stopped and settled."""
+        """Apply the CALZ rules before the wind: a scanner, and the fan stopped and settled."""
         if not state.has_scanner:
             refuse(("calz",), "no scanner in this rig")
             return

@@ -16,8 +16,8 @@ process would hold the interpreter lock against the acquisition threads and the 
 GUI thread only submits jobs and collects finished ones; nothing here blocks it.
 
 Not responsible for: drawing (:mod:`daq.console.releases_panel`), where the decays come from
-(:meth:`daq.console.live_source.LiveSource.decays`, :meth:`daq.console.replay.ReplaySource.decays`), or the
-numerics (:mod:`ident`).
+(:meth:`daq.console.live_source.LiveSource.decays`, :meth:`daq.console.replay.ReplaySource.decays`),
+or the numerics (:mod:`ident`).
 """
 
 from __future__ import annotations

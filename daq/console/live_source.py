@@ -3,27 +3,27 @@
 Responsibility: :class:`LiveSource` (a :class:`~daq.console.source.DataSource`) starts a rig (the
 simulated one in a child process, :func:`daq.sim.rig_process.start_rig_process`, or the real
 instruments of a config), runs the acquisition engine over its drivers and feeds the console's
-:class:`~daq.console.ring_buffer.RingBuffer` with the rows of the synchronised view. The sync view is the
-recording pipeline's own: a :class:`~daq.recording.writer.RunWriter` runs as the engine's subscriber,
-writing into a :class:`RingRecorder` instead of an HDF5 file (both are a
-:class:`~daq.recording.recorder.Recorder`), so the live view and a recorded file hold the same rows by
-construction.
-The GUI thread polls :meth:`LiveSource.snapshot` (the ring's copy) and :meth:`LiveSource.health`
-(built from :meth:`Acquisition.stats` and what the subscriber kept under a lock); nothing is
-pushed to the GUI from the acquisition threads (STYLE.md, "Threads and GUI").
+:class:`~daq.console.ring_buffer.RingBuffer` with the rows of the synchronised view. The sync view
+is the recording pipeline's own: a :class:`~daq.recording.writer.RunWriter` runs as the engine's
+subscriber, writing into a :class:`RingRecorder` instead of an HDF5 file (both are a
+:class:`~daq.recording.recorder.Recorder`), so the live view and a recorded file hold the same rows
+by construction. The GUI thread polls :meth:`LiveSource.snapshot` (the ring's copy) and
+:meth:`LiveSource.health` (built from :meth:`Acquisition.stats` and what the subscriber kept under a
+lock); nothing is pushed to the GUI from the acquisition threads (STYLE.md, "Threads and GUI").
 
 Recording (:meth:`LiveSource.start_recording`, :meth:`LiveSource.stop_recording`): while the
-operator records, the same subscriber also feeds a second, ordinary :class:`~daq.recording.writer.RunWriter`
-with its :class:`~daq.recording.recorder.RunRecorder`, the pair ``windrig acquire`` uses, so the file has the
-DESIGN.md layout by construction. That writer lives on the engine's dispatcher thread (the one
-thread that touches its h5py file): the GUI thread creates the file (every check of
-:meth:`RunRecorder.open <daq.recording.recorder.RunRecorder.open>` runs before anything starts), then posts a
-request and waits, with a timeout, for the dispatcher to start or finish the recording at its next
-doc (:class:`FileRecording`).
+operator records, the same subscriber also feeds a second, ordinary
+:class:`~daq.recording.writer.RunWriter` with its :class:`~daq.recording.recorder.RunRecorder`, the
+pair ``windrig acquire`` uses, so the file has the DESIGN.md layout by construction. That writer
+lives on the engine's dispatcher thread (the one thread that touches its h5py file): the GUI thread
+creates the file (every check of :meth:`RunRecorder.open <daq.recording.recorder.RunRecorder.open>`
+runs before anything starts), then posts a request and waits, with a timeout, for the dispatcher to
+start or finish the recording at its next doc (:class:`FileRecording`).
 
-Not responsible for: drawing (:mod:`daq.console.window`), the sync numerics (:mod:`daq.sync.resample` through
-:class:`~daq.recording.writer.RunWriter`), the file layout (:mod:`daq.recording.recorder`), or the operator controls
-(:mod:`daq.console.controls`, which use :attr:`LiveSource.acq` and the recording methods).
+Not responsible for: drawing (:mod:`daq.console.window`), the sync numerics
+(:mod:`daq.sync.resample` through :class:`~daq.recording.writer.RunWriter`), the file layout
+(:mod:`daq.recording.recorder`), or the operator controls (:mod:`daq.console.controls`, which use
+:attr:`LiveSource.acq` and the recording methods).
 """
 
 from __future__ import annotations
@@ -423,7 +423,7 @@ class LiveSource(RingSource):
         return self._files.stop(reason, timeout_s)
 
     def events(self, kind: str | None = None) -> list[Any]:
-        """Return the engine's latest events (:class:`~daq.acquisition.records.Event`), oldest first.
+        """Return the engine's latest events, oldest first.
 
         Parameters
         ----------

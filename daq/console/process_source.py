@@ -1,10 +1,10 @@
 """The live console's acquisition in a process of its own.
 
-Responsibility: :class:`ProcessLiveSource` is the console's live data source (the same
-interface as :class:`~daq.console.live_source.LiveSource`: rows, status, health, decays, events,
-operator commands through ``acq``, recordings) whose :class:`~daq.console.live_source.LiveSource` (the
-rig, the drivers, the acquisition engine, the sync view, the recordings) runs in a child
-process started with ``spawn``. The child appends the synchronised rows to a
+Responsibility: :class:`ProcessLiveSource` is the console's live data source (the same interface as
+:class:`~daq.console.live_source.LiveSource`: rows, status, health, decays, events, operator
+commands through ``acq``, recordings) whose :class:`~daq.console.live_source.LiveSource` (the rig,
+the drivers, the acquisition engine, the sync view, the recordings) runs in a child process started
+with ``spawn``. The child appends the synchronised rows to a
 :class:`~daq.console.shared_ring.SharedRingBuffer` that this process created, and this process reads
 them as any :class:`~daq.console.source.RingSource`: no row is pickled. Everything else crosses one
 :func:`multiprocessing.Pipe` as small numbered requests:
@@ -29,8 +29,8 @@ Why a process: on two cores the acquisition threads (readers, dispatcher, sync v
 interpreter lock against the GUI thread in one process: measured, the GUI thread waited for the
 lock 22 % of the time and drew 6.7 frames/s with 511 taps (``benchmarks/console_frame_rate.py``).
 
-Not responsible for: acquisition, recording and health themselves (:mod:`daq.console.live_source`, run
-unchanged in the child), or drawing (:mod:`daq.console.window`).
+Not responsible for: acquisition, recording and health themselves (:mod:`daq.console.live_source`,
+run unchanged in the child), or drawing (:mod:`daq.console.window`).
 """
 
 from __future__ import annotations
@@ -264,7 +264,7 @@ class _RemoteAcquisition:
         return self._source.call("engine", "arm", plc)
 
     def release(self, plc: str | None = None) -> Any:
-        """Release the model (:meth:`daq.acquisition.engine.Acquisition.release`); return its event."""
+        """Release the model (the engine's ``release``); return its event."""
         return self._source.call("engine", "release", plc)
 
     def calz(self, device: str | None = None, *, wind_speed_now: float,
@@ -283,7 +283,7 @@ class _RemoteAcquisition:
         return self._source.call("engine", "disarm", plc)
 
     def set_fan_speed(self, rpm: float, fan: str | None = None) -> Any:
-        """Set the fan's speed reference (:meth:`daq.acquisition.engine.Acquisition.set_fan_speed`)."""
+        """Set the fan's speed reference (the engine's ``set_fan_speed``); return its event."""
         return self._source.call("engine", "set_fan_speed", rpm, fan)
 
     def start_fan(self, fan: str | None = None) -> Any:
@@ -553,7 +553,7 @@ class ProcessLiveSource(RingSource):
         return self._state.get("plc_armed")
 
     def decays(self) -> list[tuple[float, float | None]]:
-        """Return the free decays seen so far (:meth:`daq.console.live_source.LiveSource.decays`)."""
+        """Return the free decays seen so far (as ``LiveSource.decays``)."""
         return list(self._state.get("decays", []))
 
     def events(self, kind: str | None = None) -> list[Any]:

@@ -8,7 +8,8 @@ E2RFC part is doing (waiting for a second wind speed, identifying, the predicted
 against ``1/K`` with the indirect method's table values from the same decays as points. Both
 are redrawn by the window when the identifier reports a change; they hold no state of their own.
 
-Not responsible for: the fits (:mod:`daq.console.live_ident`) or the window (:mod:`daq.console.window`).
+Not responsible for: the fits (:mod:`daq.console.live_ident`) or the window
+(:mod:`daq.console.window`).
 """
 
 from __future__ import annotations

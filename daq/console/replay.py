@@ -8,7 +8,8 @@ RingBuffer` that holds the visible window. :meth:`ReplaySource.snapshot` is that
 snapshot, so a live source wrapping the acquisition's ring buffer is a drop-in replacement.
 Only the new rows are read from the file at each poll; h5py objects never leave this module.
 
-Not responsible for: drawing (:mod:`daq.console.window`), or the file's layout (:mod:`daq.recording.recorder`).
+Not responsible for: drawing (:mod:`daq.console.window`), or the file's layout
+(:mod:`daq.recording.recorder`).
 """
 
 from __future__ import annotations
@@ -199,10 +200,10 @@ class ReplaySource(RingSource):
         Returns
         -------
         list of (float, float or None)
-            ``(release, end)`` from ``/entry/releases``: the release instant and the time of
-            the decay's last row, s (the sync view's ``time``), as
-            :meth:`daq.console.live_source.LiveSource.decays` reports them live; ``end`` is None for a
-            row whose end is past the rows read so far.
+            ``(release, end)`` from ``/entry/releases``: the release instant and the time of the
+            decay's last row, s (the sync view's ``time``), as
+            :meth:`daq.console.live_source.LiveSource.decays` reports them live; ``end`` is None for
+            a row whose end is past the rows read so far.
         """
         position = self.position_s
         return [d for d in self._decays if d[0] <= position]

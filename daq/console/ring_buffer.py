@@ -2,10 +2,10 @@
 
 Responsibility: keep the last ``capacity_rows`` rows appended, per column, in preallocated numpy
 arrays (memory is fixed at construction: O(capacity), whatever is appended), and hand out
-time-ordered copies. The live view (:mod:`daq.console.window`) polls :meth:`RingBuffer.snapshot` from its
-GUI timer; an acquisition subscriber calls :meth:`RingBuffer.append` from the dispatcher thread.
-One lock makes every append and snapshot atomic: a snapshot never mixes rows of two appends, and
-all its columns have the same rows.
+time-ordered copies. The live view (:mod:`daq.console.window`) polls :meth:`RingBuffer.snapshot`
+from its GUI timer; an acquisition subscriber calls :meth:`RingBuffer.append` from the dispatcher
+thread. One lock makes every append and snapshot atomic: a snapshot never mixes rows of two appends,
+and all its columns have the same rows.
 
 Not responsible for: choosing what to buffer (the subscriber that feeds it), downsampling or
 plotting (the GUI), or persistence (the recorder).

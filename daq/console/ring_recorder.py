@@ -6,7 +6,8 @@ so that the live view and a recorded file hold the same sync rows by constructio
 rows go to the ring; of the raw streams only the last fan speed and the PLC's last ARM state
 are kept (the console shows them); everything else is dropped.
 
-Not responsible for: the sync rows' numbers (the writer), or the ring (:mod:`daq.console.ring_buffer`).
+Not responsible for: the sync rows' numbers (the writer), or the ring
+(:mod:`daq.console.ring_buffer`).
 """
 
 from __future__ import annotations
@@ -23,10 +24,10 @@ from daq.console.ring_buffer import RingBuffer
 class RingRecorder:
     """What :class:`~daq.recording.writer.RunWriter` writes into, for a live view: no file.
 
-    A :class:`~daq.recording.recorder.Recorder`, as :class:`~daq.recording.recorder.RunRecorder` is. The sync rows go
-    to ``ring`` (columns of :func:`daq.console.source.sync_columns`); of the raw streams only the last
-    fan speed is kept (``fan_rpm``); everything else is dropped. Called on the engine's
-    dispatcher thread; the ring is thread-safe, and ``fan_rpm`` is one float (atomic).
+    A :class:`~daq.recording.recorder.Recorder`, as :class:`~daq.recording.recorder.RunRecorder` is.
+    The sync rows go to ``ring`` (columns of :func:`daq.console.source.sync_columns`); of the raw
+    streams only the last fan speed is kept (``fan_rpm``); everything else is dropped. Called on the
+    engine's dispatcher thread; the ring is thread-safe, and ``fan_rpm`` is one float (atomic).
 
     Parameters
     ----------

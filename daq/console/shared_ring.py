@@ -13,7 +13,8 @@ Why: the live console's acquisition runs in its own process (:mod:`daq.console.p
 that its threads do not hold the interpreter lock against the GUI thread; the rows it
 synchronises reach the GUI through this ring without being pickled.
 
-Not responsible for: the ring's semantics (:class:`~daq.console.ring_buffer.RingBuffer`), or who appends.
+Not responsible for: the ring's semantics (:class:`~daq.console.ring_buffer.RingBuffer`), or who
+appends.
 """
 
 from __future__ import annotations

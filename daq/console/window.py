@@ -1,16 +1,16 @@
 """The operator console's main window: traces, pressure distribution, spectra, wind, status.
 
 Responsibility: one :class:`ConsoleWindow` (no module-level state) that owns a ``QTimer`` and, at
-each tick, polls its :class:`~daq.console.source.DataSource` and redraws from a snapshot: scrolling h and
-alpha traces (peak downsampling, clipped to the view), lift and moment, the pressure coefficients
-of the latest row against the tap's perimeter position and on the section outline, the amplitude
-spectra of h and alpha over the visible window, wind speed and air density, and a status line.
-Over a live source (a :class:`~daq.console.source.HealthSource`) it adds the fan state and a device
-health panel (samples/s, gaps, overflows, errors, clock fit and last fault per device) with a red
-alarm line when a device has faulted or stalled, and the operator controls
-(:class:`~daq.console.controls.ControlPanel`: fan, arm/release, CALZ, markers); all are polled by the
-same timer.
-Data is never pushed into the window from other threads (STYLE.md, "Threads and GUI").
+each tick, polls its :class:`~daq.console.source.DataSource` and redraws from a snapshot: scrolling
+h and alpha traces (peak downsampling, clipped to the view), lift and moment, the pressure
+coefficients of the latest row against the tap's perimeter position and on the section outline, the
+amplitude spectra of h and alpha over the visible window, wind speed and air density, and a status
+line. Over a live source (a :class:`~daq.console.source.HealthSource`) it adds the fan state and a
+device health panel (samples/s, gaps, overflows, errors, clock fit and last fault per device) with a
+red alarm line when a device has faulted or stalled, and the operator controls
+(:class:`~daq.console.controls.ControlPanel`: fan, arm/release, CALZ, markers); all are polled by
+the same timer. Data is never pushed into the window from other threads (STYLE.md, "Threads and
+GUI").
 
 Not responsible for: reading files or instruments (the sources), the numbers themselves
 (:mod:`daq.console.display`), or the command line (:mod:`daq.console.app`).

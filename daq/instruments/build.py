@@ -1,9 +1,10 @@
 """Build the driver of a configured instrument: transport from its URL, settings, safety limits.
 
 The one place that turns an :class:`~daq.config.InstrumentConfig` into a driver object (not yet
-opened: drivers do no I/O until ``open()``). Modbus URLs get a :class:`~daq.transports.modbus.ModbusBus`;
-everything else a byte transport with the driver's line defaults (a ``serial://`` query overrides
-them). The fan drive always receives the rig's fan-speed limit.
+opened: drivers do no I/O until ``open()``). Modbus URLs get a
+:class:`~daq.transports.modbus.ModbusBus`; everything else a byte transport with the driver's line
+defaults (a ``serial://`` query overrides them). The fan drive always receives the rig's fan-speed
+limit.
 """
 
 from __future__ import annotations

@@ -61,7 +61,8 @@ _CAMPAIGN_FIELDS = ("campaign", "n_files", "n_releases", "wind_speeds", "flutter
 
 
 def write_outputs(out: Path, results: dict[str, dict[str, Any]],
-                   summary: ReprocessSummary) -> dict[str, Path]:
+                  summary: ReprocessSummary) -> dict[str, Path]:
+    """Write the tables, plots and report into ``out``; return their paths by name."""
     outputs: dict[str, Path] = {}
     names = {id(c): str(c.get("name", f"campaign_{i + 1}"))
              for i, c in enumerate(summary.campaigns)}

@@ -95,7 +95,8 @@ EVENT_DTYPE = np.dtype([("time", "<f8"),
                         ("text", h5py.string_dtype("utf-8", EVENT_TEXT_BYTES))])
 
 
-#: Clock mapping stored in ``/entry/sync``'s attributes (that of :class:`daq.sync.clock_map.ClockMap`).
+#: Clock mapping stored in ``/entry/sync``'s attributes (that of
+#: :class:`daq.sync.clock_map.ClockMap`).
 CLOCK_MODEL = ("device_time = clock_offset_s.<device> + (1 + 1e-6 clock_drift_ppm.<device>) t, "
                "t in s from run start")
 
@@ -135,6 +136,7 @@ EXTRA_DTYPES = tuple(np.dtype(t) for t in ("bool", "int8", "int16", "int32", "in
 
 
 def windrig_version() -> str:
+    """Return the installed windrig's version (``"unknown"`` from a bare source tree)."""
     try:
         return version("windrig")
     except PackageNotFoundError:  # running from a source tree that was never installed
@@ -142,10 +144,12 @@ def windrig_version() -> str:
 
 
 def str_array(values: Sequence[str]) -> npt.NDArray[Any]:
+    """Return strings as an array HDF5 stores as variable-length UTF-8."""
     return np.array(list(values), dtype=h5py.string_dtype())
 
 
 def check_name(name: str, what: str) -> str:
+    """Return ``name`` if it can be an HDF5 path component here (letters, digits, ``_``)."""
     if not isinstance(name, str) or not NAME_PATTERN.match(name):
         raise ValueError(f"{what} {name!r} must be a name of letters, digits and '_' "
                          "(not starting with a digit): it becomes an HDF5 path component")
@@ -153,6 +157,7 @@ def check_name(name: str, what: str) -> str:
 
 
 def now_iso() -> str:
+    """Return the UTC time now, ISO 8601 with microseconds."""
     return datetime.now(UTC).isoformat(timespec="microseconds")
 
 
@@ -175,11 +180,13 @@ def fill_value(dtype: np.dtype[Any]) -> Any:
 
 
 def append_rows(ds: h5py.Dataset, start: int, rows: npt.NDArray[Any]) -> None:
+    """Grow ``ds`` along its first axis and write ``rows`` from row ``start``."""
     ds.resize(start + rows.shape[0], axis=0)
     ds[start:start + rows.shape[0]] = rows
 
 
 def validate_metadata(name: str, value: Any) -> None:
+    """Raise unless ``value`` can be stored as metadata ``name`` (names, numbers, strings)."""
     if isinstance(value, Mapping):
         for key, item in value.items():
             check_name(key, f"metadata {name}: key")
@@ -194,6 +201,7 @@ def validate_metadata(name: str, value: Any) -> None:
 
 
 def write_metadata(group: h5py.Group, name: str, value: Any) -> None:
+    """Store ``value`` under ``group/name``: a dataset, or a group for a mapping."""
     if isinstance(value, Mapping):
         sub = group.create_group(name)
         sub.attrs["NX_class"] = "NXcollection"

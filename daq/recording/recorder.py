@@ -1,11 +1,11 @@
 """HDF5 writer of one run: raw device streams, the synchronised view, releases and events.
 
-Responsible for: writing one run file in the layout of :mod:`daq.recording.layout` (a contract
-that tests, ``ident`` and outside readers such as silx rely on); appending blocks in place to chunked,
-resizable datasets; switching the file to SWMR mode so that a live reader (the GUI, h5py in
-another process, silx) can follow the run; flushing every ``flush_interval_s`` so that a crash
-of the process loses at most that much (a power cut too, with ``fsync=True``); and failing
-*at once*, with a specific error, when the file cannot be created or the disk is (nearly) full.
+Responsible for: writing one run file in the layout of :mod:`daq.recording.layout` (a contract that
+tests, ``ident`` and outside readers such as silx rely on); appending blocks in place to chunked,
+resizable datasets; switching the file to SWMR mode so that a live reader (the GUI, h5py in another
+process, silx) can follow the run; flushing every ``flush_interval_s`` so that a crash of the
+process loses at most that much (a power cut too, with ``fsync=True``); and failing *at once*, with
+a specific error, when the file cannot be created or the disk is (nearly) full.
 
 Not responsible for: acquisition, clock fitting, resampling or integrating pressures (the
 acquisition engine computes every number written here), nor for threads: a :class:`RunRecorder`
@@ -38,9 +38,9 @@ The file's layout (groups, datasets, their types and fill values) is
 A live reader opens with ``h5py.File(path, "r", libver="latest", swmr=True)`` and calls
 ``dataset.refresh()`` before reading a shape. The datasets of one group are resized one after the
 other, so a live reader should read the shortest length over the datasets it combines
-(:func:`daq.recording.layout.read_sync` does). A file left behind by a crash keeps HDF5's "open for SWMR write" flag:
-it opens read-only with ``swmr=True`` (as :func:`daq.recording.layout.read_sync` does); a plain ``h5py.File(path)``
-refuses it until ``h5clear -s`` clears the flag.
+(:func:`daq.recording.layout.read_sync` does). A file left behind by a crash keeps HDF5's "open for
+SWMR write" flag: it opens read-only with ``swmr=True`` (as :func:`daq.recording.layout.read_sync`
+does); a plain ``h5py.File(path)`` refuses it until ``h5clear -s`` clears the flag.
 """
 
 from __future__ import annotations
@@ -533,12 +533,12 @@ class RunRecorder:
                        residual_misalignment_s: float | None = None) -> None:
         """Record how each device's clock maps onto the run's time base.
 
-        The convention of :class:`daq.sync.clock_map.ClockMap` and :class:`simulators.clock.DeviceClock`:
-        ``device_time = clock_offset_s + (1 + 1e-6 clock_drift_ppm) t``, ``t`` in s from run
-        start (host clock). Stored as attributes of ``/entry/sync``: ``clock_offset_s.<device>``,
-        ``clock_drift_ppm.<device>`` and ``residual_misalignment_s``. After :meth:`start` they
-        are written at :meth:`close` (SWMR forbids new attributes); a later call replaces
-        earlier values.
+        The convention of :class:`daq.sync.clock_map.ClockMap` and
+        :class:`simulators.clock.DeviceClock`: ``device_time = clock_offset_s + (1 + 1e-6
+        clock_drift_ppm) t``, ``t`` in s from run start (host clock). Stored as attributes of
+        ``/entry/sync``: ``clock_offset_s.<device>``, ``clock_drift_ppm.<device>`` and
+        ``residual_misalignment_s``. After :meth:`start` they are written at :meth:`close` (SWMR
+        forbids new attributes); a later call replaces earlier values.
 
         Parameters
         ----------

@@ -20,8 +20,8 @@ itself) would otherwise place the new epoch late by that delay. Device times tha
 across the gap (PTP, or relative ones the engine continued, as after ``Acquisition.calz``) keep
 their map. The final clock fit in ``/entry/sync`` attrs then describes the last clock epoch only.
 
-Not responsible for: reading devices or threads (the engine), the numerics of clocks, resampling
-and conversions (:mod:`daq.sync.resample`), the file itself (:mod:`daq.recording.recorder`), running a
+Not responsible for: reading devices or threads (the engine), the numerics of clocks, resampling and
+conversions (:mod:`daq.sync.resample`), the file itself (:mod:`daq.recording.recorder`), running a
 rig into a file (:mod:`daq.recording.run`), or any simulator.
 
 Threads: the writer runs on the engine's dispatcher thread only (one thread touches h5py); the

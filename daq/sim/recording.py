@@ -60,7 +60,8 @@ def record_simulated_run(config: RigConfig, out_path: str | Path, *, duration_s:
     Returns
     -------
     dict
-        :func:`~daq.recording.run.record_run`'s summary plus ``alignment`` (:func:`check_alignment`).
+        :func:`~daq.recording.run.record_run`'s summary plus ``alignment``
+        (:func:`check_alignment`).
     """
     options = dict(writer_options or {})
     options.setdefault("clock_truth", ClockTruthTracker())

@@ -20,8 +20,8 @@ The first order is ample: at 4 Hz, 1 ms of delay is a 2.5 % phase, its second-or
 and alpha (lasers) a few microseconds over seconds of decay; for lift and moment, integrated
 from 62 taps with 1 Pa noise each, ~0.25 ms at half the flutter speed.
 
-Not responsible for: recording (:mod:`daq.recording.writer`), the truth (:mod:`simulators`). Real rigs
-have no truth: this runs only for simulated ones.
+Not responsible for: recording (:mod:`daq.recording.writer`), the truth (:mod:`simulators`). Real
+rigs have no truth: this runs only for simulated ones.
 """
 
 from __future__ import annotations

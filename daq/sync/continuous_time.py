@@ -1,8 +1,8 @@
 """Continuous host times for one device stream while its clock map keeps improving.
 
 Responsibility: :class:`ContinuousTimeline` turns the device times of successive blocks into host
-times through a :class:`~daq.sync.clock_map.ClockMap` that is refitted as evidence arrives, without the
-refits showing up as steps in the stream.
+times through a :class:`~daq.sync.clock_map.ClockMap` that is refitted as evidence arrives, without
+the refits showing up as steps in the stream.
 
 Why: a clock map is re-solved every time an envelope window closes or an anchor arrives (every
 0.5 s in the recorder). Each re-solve moves the map by the change of its estimate: early in a run

@@ -8,8 +8,8 @@ Responsibility (DESIGN.md, "Synchronisation"): pure numerical code used by the a
 - :func:`wind_speed` (:class:`WindSpeed`): wind speed from the Pitot dynamic pressure;
 - :func:`air_density`: dry-air density from the barometer's pressure and temperature.
 
-Not responsible for: reading devices, threads, queues or files (the acquisition engine feeds
-arrays in and takes arrays out), nor putting the streams on one time base (:mod:`daq.sync.resample`).
+Not responsible for: reading devices, threads, queues or files (the acquisition engine feeds arrays
+in and takes arrays out), nor putting the streams on one time base (:mod:`daq.sync.resample`).
 
 Conventions: SI units.
 """

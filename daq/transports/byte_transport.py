@@ -1,8 +1,8 @@
 """Byte transports opened from URLs: serial ports (pyserial) and TCP sockets.
 
 Responsibility: move bytes with timeouts, and turn every low-level failure into a
-:class:`~daq.errors.TransportError` (or :class:`~daq.errors.TransportTimeout`). Not responsible
-for framing or protocols (the drivers), nor for Modbus (``daq.transports.modbus``, through pymodbus).
+:class:`~daq.errors.TransportError` (or :class:`~daq.errors.TransportTimeout`). Not responsible for
+framing or protocols (the drivers), nor for Modbus (``daq.transports.modbus``, through pymodbus).
 
 URL schemes (DESIGN.md, "Instruments"):
 

@@ -116,10 +116,10 @@ class ScriptedBus:
     """A :class:`RegisterBus` that plays a script of expected calls (driver tests, no I/O).
 
     Each script entry is ``(method, address, value_or_count, result)``: a write is
-    ``("write_register", 0, 0x047F, None)``; a read is ``("read_holding_registers", 3, 2,
-    [0x0237, 1000])``; ``result`` may also be an exception instance, which the call raises.
-    Any other call fails at once with both calls shown; :meth:`assert_complete` checks that the
-    whole script was played (the register-level analogue of :func:`daq.transports.scripted.expected_exchange`).
+    ``("write_register", 0, 0x047F, None)``; a read is ``("read_holding_registers", 3, 2, [0x0237,
+    1000])``; ``result`` may also be an exception instance, which the call raises. Any other call
+    fails at once with both calls shown; :meth:`assert_complete` checks that the whole script was
+    played (the register-level analogue of :func:`daq.transports.scripted.expected_exchange`).
     """
 
     def __init__(self, script: Sequence[tuple[str, int, Any, Any]],

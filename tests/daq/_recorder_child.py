@@ -1,11 +1,11 @@
 """Helper process for tests/daq/test_recorder.py (not a test module: no ``test_`` prefix).
 
 ``python _recorder_child.py write PATH``
-    Record a run with :class:`daq.recording.recorder.RunRecorder` (flush interval 0.1 s), appending a block
-    of ``BLOCK`` rows every 0.02 s to a raw stream and to the sync view, and print
-    ``flushed <raw rows> <sync rows>`` (rows written when it flushed) after each flush, until
-    killed (or ``MAX_S`` passed). Row ``k`` holds the values of :func:`expected`, so the parent
-    can check what survives a SIGKILL.
+    Record a run with :class:`daq.recording.recorder.RunRecorder` (flush interval 0.1 s), appending
+    a block of ``BLOCK`` rows every 0.02 s to a raw stream and to the sync view, and print ``flushed
+    <raw rows> <sync rows>`` (rows written when it flushed) after each flush, until killed (or
+    ``MAX_S`` passed). Row ``k`` holds the values of :func:`expected`, so the parent can check what
+    survives a SIGKILL.
 
 ``python _recorder_child.py fill PATH``
     Record with a 1 MB limit on file size (``RLIMIT_FSIZE``: writes past it fail with EFBIG, as

@@ -1,10 +1,10 @@
 """The live console's acquisition in its own process (``daq.console.process_source``).
 
-Real processes throughout: a :class:`~daq.console.shared_ring.SharedRingBuffer` appended by a spawned
-child and read here; a :class:`~daq.console.process_source.ProcessLiveSource` over the simulated
-rig (the acquisition in a child process, the simulators in its child) drawn by the console
-window, its commands crossing the pipe (allowed, refused, failing with the driver's own error),
-a recording made through it, the child killed under it, and a rig that does not start.
+Real processes throughout: a :class:`~daq.console.shared_ring.SharedRingBuffer` appended by a
+spawned child and read here; a :class:`~daq.console.process_source.ProcessLiveSource` over the
+simulated rig (the acquisition in a child process, the simulators in its child) drawn by the console
+window, its commands crossing the pipe (allowed, refused, failing with the driver's own error), a
+recording made through it, the child killed under it, and a rig that does not start.
 """
 
 from __future__ import annotations

@@ -68,7 +68,7 @@ def _imports(name: str, path: Path) -> Iterator[tuple[str, str, int]]:
 
 
 def _graph() -> dict[str, set[str]]:
-    """Module -> the first-party modules it imports (a submodule named in ``from`` counts)."""
+    """Return module -> the first-party modules it imports (``from`` a package: its module)."""
     edges: dict[str, set[str]] = {name: set() for name in MODULES}
     for name, path in MODULES.items():
         for module, imported, _ in _imports(name, path):

@@ -2,8 +2,8 @@
 
 The rig is ``sim_flat_plate.toml`` with a fast fan ramp, its simulators in a child process
 (:func:`daq.sim.rig_process.start_rig_process`), acquired by the real drivers and engine and
-synchronised by the recording pipeline's own :class:`~daq.recording.writer.RunWriter` into the window's
-ring buffer (:class:`daq.console.live_source.LiveSource`).
+synchronised by the recording pipeline's own :class:`~daq.recording.writer.RunWriter` into the
+window's ring buffer (:class:`daq.console.live_source.LiveSource`).
 """
 
 from __future__ import annotations

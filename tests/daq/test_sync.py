@@ -1,4 +1,4 @@
-"""Synchronisation (daq.sync.resample): clock maps, counters, the sync view and its physical conversions.
+"""Synchronisation (daq.sync): clock maps, counters, the sync view and its physical conversions.
 
 Simulated device streams use :class:`simulators.clock.DeviceClock`; the host clock is the true time.
 A block arrives ``floor + Exp(1 ms)`` after its last sample, 1 % of blocks 50 ms more (the reader

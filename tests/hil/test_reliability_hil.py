@@ -56,8 +56,8 @@ import pytest
 from daq.config import parse_rig_config
 from daq.recording.layout import SYNC_COLUMNS
 from daq.recording.recorder import RunRecorder
-from daq.sim.recording import record_simulated_run
 from daq.recording.writer import RunWriter
+from daq.sim.recording import record_simulated_run
 from ident.io import read_run
 
 REPO = Path(__file__).resolve().parents[2]

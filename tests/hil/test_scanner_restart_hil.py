@@ -41,8 +41,8 @@ import pytest
 from daq.acquisition.records import Event, StreamBlock
 from daq.config import RigConfig, parse_rig_config
 from daq.recording import writer as pipeline
-from daq.sim.recording import record_simulated_run
 from daq.recording.writer import RunWriter
+from daq.sim.recording import record_simulated_run
 from daq.sim.sync_check import ClockTruthTracker
 
 CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
@@ -303,9 +303,10 @@ def test_a_restart_gap_restarts_the_map_only_when_the_device_clock_went_back(
     expected = (sync_t < t_run[0]) | ((sync_t >= last_old) & (sync_t < first_new))
     assert np.array_equal(~np.all(np.isfinite(sync_p), axis=1), expected)
     assert sync_t[-1] > t_run[-1] - PERIOD_S
-    # Values on the right time (from 1 s, where the map is exact): the linear interpolation of
-    # a 3 Hz sine sampled at 500 Hz is within A (w T)^2 / 8 = 1.78e-4 of it (daq.sync.resample.Resampler;
-    # float32 storage adds 1e-8); a frame period off would be up to w T = 0.038 off.
+    # Values on the right time (from 1 s, where the map is exact): the linear interpolation of a 3
+    # Hz sine sampled at 500 Hz is within A (w T)^2 / 8 = 1.78e-4 of it
+    # (daq.sync.resample.Resampler; float32 storage adds 1e-8); a frame period off would be up to w
+    # T = 0.038 off.
     ok = ~expected & (sync_t > 1.0)
     assert np.count_nonzero(ok & (sync_t > first_new)) > 900  # the new scan's rows
     truth = np.sin(2 * np.pi * 3.0 * sync_t[ok])

@@ -2,12 +2,12 @@
 
 Responsibility: start, stop and coast the fan, send its speed reference, read its ramped actual
 speed and decoded status, reset a trip, and wait for a speed, through a :class:`RegisterBus`
-(:mod:`daq.transports.modbus`). Safety: the driver refuses (:class:`~daq.errors.SafetyError`) any speed
-reference below 0 or above the rig's fan limit (``[limits] max_fan_rpm``, given to the
-constructor as ``limit_rpm``) and never clips it; :meth:`AbbAcs580.start` refuses to run a
-drive whose stored reference is above the limit. It writes only the Control Word and Reference
-1 and reads only the four registers of its ``registers`` table. Not responsible for Modbus
-transport, retries or error normalisation (the bus), nor for turning wind speed into fan speed.
+(:mod:`daq.transports.modbus`). Safety: the driver refuses (:class:`~daq.errors.SafetyError`) any
+speed reference below 0 or above the rig's fan limit (``[limits] max_fan_rpm``, given to the
+constructor as ``limit_rpm``) and never clips it; :meth:`AbbAcs580.start` refuses to run a drive
+whose stored reference is above the limit. It writes only the Control Word and Reference 1 and reads
+only the four registers of its ``registers`` table. Not responsible for Modbus transport, retries or
+error normalisation (the bus), nor for turning wind speed into fan speed.
 
 Facts implemented (DEVICES.md A.3 "Fan VFD", and the ABB Drives profile tables of the ACS580
 firmware manual "Contents of the fieldbus Control word / Status word", FDNA-01 manual p.91,

@@ -7,11 +7,11 @@ words into blocks (:class:`Ild1420Decoder`, pure, no I/O), unwraps the 18-bit co
 ASCII command set (``GETOUTINFO_RS422``, ``MASTERMV``, ``OUTPUT``, ``GETINFO``) and reconnects
 with a bounded backoff when the line drops (:class:`MicroEpsilonIld1420`).
 
-Not responsible for: opening ports (the transport is injected, see :mod:`daq.transports.byte_transport`;
-:meth:`Ild1420Settings.line` gives its serial settings), converting distances into heave and
-pitch (the acquisition does that with the ``x`` and ``standoff_mm`` settings), mapping the device
-clock onto the host clock (the synchronisation), or threads and queues (the acquisition runs one
-reader thread per sensor).
+Not responsible for: opening ports (the transport is injected, see
+:mod:`daq.transports.byte_transport`; :meth:`Ild1420Settings.line` gives its serial settings),
+converting distances into heave and pitch (the acquisition does that with the ``x`` and
+``standoff_mm`` settings), mapping the device clock onto the host clock (the synchronisation), or
+threads and queues (the acquisition runs one reader thread per sensor).
 
 Manual facts (DEVICES.md A.2.1) and the choices made beyond them:
 

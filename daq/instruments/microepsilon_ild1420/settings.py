@@ -121,7 +121,7 @@ class Ild1420Settings:
         return BITS_PER_VALUE * self.values_per_block * self.rate_hz
 
     def line(self) -> dict[str, Any]:
-        """Return the serial settings for :func:`daq.transports.byte_transport.open_transport` (8N1)."""
+        """Return the serial settings (8N1) for ``open_transport``."""
         return {"baudrate": self.baudrate, "bytesize": 8, "parity": "N", "stopbits": 1}
 
 

@@ -1,21 +1,21 @@
 """Scanivalve MPS4264-class pressure scanner over TCP: the driver.
 
 Responsibility: command the scanner over its ASCII command connection (status, frame rate, output
-format, zero calibration, scan start and stop), receive its binary frames on one TCP data
-connection per module, decode them (:class:`~daq.instruments.scanivalve_mps4264.frames.Mps4264Decoder`, pure, no I/O),
-unwrap the frame counters, merge the modules frame by frame, and return timestamped blocks
-(:class:`~daq.instruments.scanivalve_mps4264.blocks.ScanBlock`) in which every missing frame is a marked gap and every
-missing module a NaN with its reason. Lost data connections are re-opened with a bounded, logged
-backoff. Not responsible for: deciding whether the wind is off before a zero calibration (the
-caller passes the wind speed it knows; the driver refuses a nonzero one), mapping the device
-clock onto the host clock (the synchronisation layer does that from the counters, frame times
-and host arrival times returned here), threads, or recording.
+format, zero calibration, scan start and stop), receive its binary frames on one TCP data connection
+per module, decode them (:class:`~daq.instruments.scanivalve_mps4264.frames.Mps4264Decoder`, pure,
+no I/O), unwrap the frame counters, merge the modules frame by frame, and return timestamped blocks
+(:class:`~daq.instruments.scanivalve_mps4264.blocks.ScanBlock`) in which every missing frame is a
+marked gap and every missing module a NaN with its reason. Lost data connections are re-opened with
+a bounded, logged backoff. Not responsible for: deciding whether the wind is off before a zero
+calibration (the caller passes the wind speed it knows; the driver refuses a nonzero one), mapping
+the device clock onto the host clock (the synchronisation layer does that from the counters, frame
+times and host arrival times returned here), threads, or recording.
 
-This module holds the driver (:class:`ScanivalveMps4264`) and its per-module data streams,
-which share the driver's clock. The rest has a module of its own, every public name of which is
-re-exported here: the settings (:mod:`daq.instruments.scanivalve_mps4264.settings`), the packet layouts and the
-decoder (:mod:`daq.instruments.scanivalve_mps4264.frames`, which describes the packets) and the blocks returned
-(:mod:`daq.instruments.scanivalve_mps4264.blocks`).
+This module holds the driver (:class:`ScanivalveMps4264`) and its per-module data streams, which
+share the driver's clock. The rest has a module of its own, every public name of which is
+re-exported here: the settings (:mod:`daq.instruments.scanivalve_mps4264.settings`), the packet
+layouts and the decoder (:mod:`daq.instruments.scanivalve_mps4264.frames`, which describes the
+packets) and the blocks returned (:mod:`daq.instruments.scanivalve_mps4264.blocks`).
 
 Wire protocol (DEVICES.md A.1.1; [unverified] marks our choices where the facts stop):
 
@@ -42,12 +42,12 @@ Wire protocol (DEVICES.md A.1.1; [unverified] marks our choices where the facts 
   1e9 s (before 2001) the driver reports the block's time base as ``"relative"`` (the epoch-0
   fault).
 
-Batching [design]: :meth:`ScanivalveMps4264.read_block` does not return after every frame. Once
-a frame is complete it keeps reading for at most ``min_block_s`` (default 20 ms, 10 frames at
-500 Hz; fewer if that many frames are complete sooner), then decodes the bytes of every module
-in one numpy pass (:meth:`~daq.instruments.scanivalve_mps4264.frames.Mps4264Decoder.feed_many`) and returns every
-complete frame in one block. A block costs a fixed ~0.2 ms of Python whatever its size; one
-block per frame made the decoding most of a core at 8 modules x 500 Hz.
+Batching [design]: :meth:`ScanivalveMps4264.read_block` does not return after every frame. Once a
+frame is complete it keeps reading for at most ``min_block_s`` (default 20 ms, 10 frames at 500 Hz;
+fewer if that many frames are complete sooner), then decodes the bytes of every module in one numpy
+pass (:meth:`~daq.instruments.scanivalve_mps4264.frames.Mps4264Decoder.feed_many`) and returns every
+complete frame in one block. A block costs a fixed ~0.2 ms of Python whatever its size; one block
+per frame made the decoding most of a core at 8 modules x 500 Hz.
 """
 
 from __future__ import annotations
@@ -369,7 +369,9 @@ class ScanivalveMps4264:
         with self._cmd_lock:
             for stream in self._streams:
                 stream.transport.close()
-            self._streams = [ModuleStream(k, t, time.monotonic()) for k, t in enumerate(self._data_transports())]
+            now = time.monotonic()
+            self._streams = [ModuleStream(k, t, now)
+                             for k, t in enumerate(self._data_transports())]
             self._reset_run_state()
             for stream in self._streams:
                 stream.transport.open()

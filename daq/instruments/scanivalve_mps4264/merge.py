@@ -82,6 +82,7 @@ class FrameMerger:
         return self.assemble(all_keys, parts)
 
     def assemble(self, keys: npt.NDArray[np.int64], parts: list[Part]) -> ScanBlock:
+        """Merge the modules' frames of merge keys ``keys`` (sorted) into one block."""
         n, m = keys.size, self.modules
         pressure = np.full((n, CHANNELS_PER_MODULE * m), np.nan)
         temperature = np.full((n, TEMPERATURES_PER_MODULE * m), np.nan)

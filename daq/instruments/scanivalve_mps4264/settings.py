@@ -1,12 +1,11 @@
 """Settings of the Scanivalve MPS4264-class scanner driver, and their validation.
 
-Responsibility: :class:`Mps4264Settings`, the validated ``[scanner]`` table of a rig config
-(without ``driver``, ``url`` and ``name``), and the bounds it is checked against
-(:data:`MAX_RATE_HZ`, :data:`MAX_MODULES`, :data:`MAX_MIN_BLOCK_S`): every key is checked with
-its range, and a bad value is a :class:`~daq.errors.ConfigError` naming the key and the range.
-Not responsible for: applying the settings to a scanner (the driver,
-:mod:`daq.instruments.scanivalve_mps4264.driver`, which re-exports every public name here) or reading the rig
-config file (:mod:`daq.config`). No I/O.
+Responsibility: :class:`Mps4264Settings`, the validated ``[scanner]`` table of a rig config (without
+``driver``, ``url`` and ``name``), and the bounds it is checked against (:data:`MAX_RATE_HZ`,
+:data:`MAX_MODULES`, :data:`MAX_MIN_BLOCK_S`): every key is checked with its range, and a bad value
+is a :class:`~daq.errors.ConfigError` naming the key and the range. Not responsible for: applying
+the settings to a scanner (the driver, :mod:`daq.instruments.scanivalve_mps4264.driver`, which
+re-exports every public name here) or reading the rig config file (:mod:`daq.config`). No I/O.
 """
 
 from __future__ import annotations
@@ -73,20 +72,20 @@ class Mps4264Settings:
         fills this from the simulator's ``data_port``.
     command_timeout_s : float
         Timeout of a command's reply, and default timeout of
-        :meth:`~daq.instruments.scanivalve_mps4264.driver.ScanivalveMps4264.read_block`, s, in (0, 60], default 2.
+        :meth:`~daq.instruments.scanivalve_mps4264.driver.ScanivalveMps4264.read_block`, s, in (0,
+        60], default 2.
     min_block_s : float
-        Batching of :meth:`~daq.instruments.scanivalve_mps4264.driver.ScanivalveMps4264.read_block`, s, in
-        [0, 0.25], default 0.02: once a frame is complete, the read keeps collecting for at most
-        this long (or until this many seconds of frames, ``ceil(min_block_s * rate_hz)``, are
-        complete) and returns them in one block. Why: every block costs a fixed overhead
-        whatever its size (decoding and merging in the driver, then the per-block work of the
-        pipeline and the recorder): one block per frame (500 per second at 8 modules) took most
-        of a core, 20 ms blocks (10 frames at 500 Hz) a fraction of it; 20 ms is also the block
-        size the pipeline's clock windows are sized for (25 scanner blocks per 0.5 s window) and
-        adds at most 20 ms of latency. 0 returns each frame as soon as it is complete. At most
-        0.25 s, so that every 0.5 s clock window still sees several blocks (the clock fit keeps
-        the least-latency block of each) and the live view stays fluid. The read timeout still
-        bounds the whole read.
+        Batching of :meth:`~daq.instruments.scanivalve_mps4264.driver.ScanivalveMps4264.read_block`,
+        s, in [0, 0.25], default 0.02: once a frame is complete, the read keeps collecting for at
+        most this long (or until this many seconds of frames, ``ceil(min_block_s * rate_hz)``, are
+        complete) and returns them in one block. Why: every block costs a fixed overhead whatever
+        its size (decoding and merging in the driver, then the per-block work of the pipeline and
+        the recorder): one block per frame (500 per second at 8 modules) took most of a core, 20 ms
+        blocks (10 frames at 500 Hz) a fraction of it; 20 ms is also the block size the pipeline's
+        clock windows are sized for (25 scanner blocks per 0.5 s window) and adds at most 20 ms of
+        latency. 0 returns each frame as soon as it is complete. At most 0.25 s, so that every 0.5 s
+        clock window still sees several blocks (the clock fit keeps the least-latency block of each)
+        and the live view stays fluid. The read timeout still bounds the whole read.
     """
 
     modules: int
