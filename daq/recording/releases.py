@@ -87,6 +87,8 @@ class ReleaseRows:
         self._write_finished(rec, final=False)
 
     def _held(self, t_release: float) -> tuple[float, float]:
+        if not self._recent:  # a rig without lasers or scanner has no sync rows
+            return math.nan, math.nan
         t = np.concatenate([b[0] for b in self._recent])
         sel = (t >= t_release - HOLD_WINDOW_S[0]) & (t < t_release - HOLD_WINDOW_S[1])
         out = []

@@ -33,7 +33,7 @@ from daq.errors import AcquisitionProcessError, ConfigError, RemoteError, Safety
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _ring_child import BLOCK, ROWS, append_rows  # noqa: E402
 
-CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
+CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
 FAST_FAN = "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n"
 def live_config():
     return parse_rig_config((CONFIGS / "sim_flat_plate.toml").read_text() + FAST_FAN,

@@ -23,7 +23,7 @@ from daq.offline.reprocess import ReprocessSettings, expand_paths, process_file,
 from daq.recording.synthetic import write_release_run
 from simulators.campaigns import FRACTIONS, simulated_campaign
 
-CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
+CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
 
 
 def write_run(path: Path, releases: list) -> None:

@@ -24,7 +24,7 @@ from daq.console.controls import ControlPanel
 from daq.console.process_source import ProcessLiveSource
 from daq.console.window import ConsoleWindow
 
-CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
+CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
 FAST_FAN = "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n"
 
 

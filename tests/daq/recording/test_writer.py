@@ -13,7 +13,7 @@ from daq.acquisition.records import Event, StreamBlock
 from daq.config import parse_rig_config
 from daq.recording.writer import DEFAULT_RHO, RunWriter
 
-CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
+CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
 T0_NS = 10_000_000_000
 LASERS = {"laser_front": -0.1, "laser_rear": 0.1, "laser_check": 0.0}  # x, m (config)
 STANDOFF = 0.025

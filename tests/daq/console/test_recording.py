@@ -26,7 +26,7 @@ from daq.console.window import ConsoleWindow
 from daq.errors import RecordingError
 from ident.io import read_run
 
-CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
+CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
 FAST_FAN = "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n"
 #: Sync rows are placed at exactly t_k = k / rate (computed from k, never accumulated): the
 #: grid holds to float64 rounding of values of a few seconds.

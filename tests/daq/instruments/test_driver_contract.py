@@ -15,7 +15,7 @@ import pytest
 from daq.config import load_rig_config
 from daq.instruments import registry
 
-CONFIG = load_rig_config(Path(__file__).resolve().parents[2] / "rig_configs" /
+CONFIG = load_rig_config(Path(__file__).resolve().parents[3] / "rig_configs" /
                          "sim_flat_plate.toml")
 INSTRUMENTS = {inst.driver: inst for inst in CONFIG.instruments}
 

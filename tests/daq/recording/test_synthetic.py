@@ -1,7 +1,6 @@
-"""The test helpers themselves (:mod:`daq.transports.scripted`).
+"""Run files written from releases (:mod:`daq.recording.synthetic`), the readers' test data.
 
-The scripted-exchange harness must catch wrong, missing and extra bytes; the run-file writer
-must put each release where its row says.
+The run-file writer must put each release where its row says.
 """
 
 from __future__ import annotations
@@ -13,42 +12,11 @@ import numpy as np
 import pytest
 
 from daq.config import load_rig_config
-from daq.errors import TransportTimeout
 from daq.recording.synthetic import write_release_run
-from daq.transports.scripted import ScriptedTransport, expected_exchange
 from ident import flat_plate
 from simulators import simulate_release
 
-CONFIG = Path(__file__).resolve().parents[2] / "rig_configs" / "sim_flat_plate.toml"
-
-
-def test_a_complete_exchange_passes():
-    """Writes matching the script release the replies, in order."""
-    with expected_exchange([(b"", b"HELLO\r\n"), (b"SEND\r\n", b"1013.2\r\n")]) as t:
-        assert t.read_until(b"\r\n", 1.0) == b"HELLO\r\n"
-        t.write(b"SE")
-        with pytest.raises(TransportTimeout):
-            t.read(1, 0.1)  # no reply before the command is complete
-        t.write(b"ND\r\n")
-        assert t.read_until(b"\r\n", 1.0) == b"1013.2\r\n"
-
-
-def test_wrong_bytes_fail_immediately_with_hex():
-    """A byte that differs from the script fails at once and shows both sides."""
-    t = ScriptedTransport([(b"SCAN\r\n", b"")])
-    t.open()
-    with pytest.raises(AssertionError, match=r"expected b'SCAN\\r\\n' \(53 43 41 4e 0d 0a\)"):
-        t.write(b"STOP\r\n")
-
-
-def test_unplayed_script_or_unread_reply_fails_on_exit():
-    """Leaving an exchange undone, or a reply unread, is a failure."""
-    with pytest.raises(AssertionError, match="1 of 2 exchanges done"):
-        with expected_exchange([(b"A", b""), (b"B", b"")]) as t:
-            t.write(b"A")
-    with pytest.raises(AssertionError, match="reply bytes never read"):
-        with expected_exchange([(b"A", b"ok")]) as t:
-            t.write(b"A")
+CONFIG = Path(__file__).resolve().parents[3] / "rig_configs" / "sim_flat_plate.toml"
 
 
 def test_releases_with_and_without_a_held_start_land_where_their_rows_say(tmp_path):

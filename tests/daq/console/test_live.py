@@ -23,7 +23,7 @@ from daq.console.live_source import LiveSource
 from daq.console.source import DeviceHealth, HealthSource
 from daq.console.window import HEALTH_COLUMNS, ConsoleWindow
 
-CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
+CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
 FAST_FAN = "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n"
 
 

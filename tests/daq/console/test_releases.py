@@ -31,7 +31,7 @@ from ident.io import campaign_section, read_run
 from ident.modal import fit_release_modes
 from simulators import simulate_release
 
-CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
+CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
 FAST_FAN = "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n"
 #: Decays of the live test, s: long enough for a modal fit (>= 2 s), short for the test's sake.
 LIVE_DECAY_S = 4.0

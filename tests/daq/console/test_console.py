@@ -28,7 +28,7 @@ from daq.console.window import ConsoleWindow, peak_decimate
 from daq.errors import ReplayError
 from daq.recording.recorder import RunRecorder
 
-CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
+CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
 RATE_HZ = 100.0
 DURATION_S = 30.0
 F_H = 2.0      # heave frequency, Hz

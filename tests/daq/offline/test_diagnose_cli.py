@@ -17,7 +17,7 @@ from daq.config import parse_rig_config
 from daq.recording.synthetic import write_release_run
 from simulators.campaigns import REALISTIC, simulated_campaign
 
-CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
+CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
 
 
 @pytest.fixture(scope="module")
