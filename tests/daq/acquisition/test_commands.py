@@ -59,7 +59,7 @@ class FakeFan:
 
 
 class FakePlc:
-    """ModbusPlc-like: ``arm``, ``disarm``, ``release`` (armed only), ``trigger_pulse``, ``read``."""
+    """ModbusPlc-like: arm, disarm, release (armed only), trigger_pulse, read."""
 
     def __init__(self) -> None:
         self.armed = False
