@@ -29,7 +29,7 @@ SECONDS = 10.0
 
 
 def stream(n: int, seed: int = 0) -> bytes:
-    """Encode n blocks (DEVICES.md A.2.1): L = 00 D5..D0, M = 01 D11..D6, H = 1 f D17..D12."""
+    """Encode n blocks (docs/wire_formats.md, "Lasers"): L, M and H bytes of 18-bit words."""
     rng = np.random.default_rng(seed)
     k = np.arange(n)
     ticks = 25 * k + 123456

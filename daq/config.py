@@ -36,7 +36,7 @@ __all__ = [
     "parse_rig_config",
 ]
 
-#: Instrument roles a rig may have (DESIGN.md, "Instruments").
+#: Instrument roles a rig may have (docs/wire_formats.md, "Transports and URLs").
 ROLES = ("scanner", "lasers", "fan", "plc", "barometer")
 
 

@@ -9,16 +9,18 @@ subscriber, writing into a :class:`RingRecorder` instead of an HDF5 file (both a
 :class:`~daq.recording.recorder.Recorder`), so the live view and a recorded file hold the same rows
 by construction. The GUI thread polls :meth:`LiveSource.snapshot` (the ring's copy) and
 :meth:`LiveSource.health` (built from :meth:`Acquisition.stats` and what the subscriber kept under a
-lock); nothing is pushed to the GUI from the acquisition threads (STYLE.md, "Threads and GUI").
+lock); nothing is pushed to the GUI from the acquisition threads (docs/architecture.md, "Design
+rules").
 
 Recording (:meth:`LiveSource.start_recording`, :meth:`LiveSource.stop_recording`): while the
 operator records, the same subscriber also feeds a second, ordinary
 :class:`~daq.recording.writer.RunWriter` with its :class:`~daq.recording.recorder.RunRecorder`, the
-pair ``windrig acquire`` uses, so the file has the DESIGN.md layout by construction. That writer
-lives on the engine's dispatcher thread (the one thread that touches its h5py file): the GUI thread
-creates the file (every check of :meth:`RunRecorder.open <daq.recording.recorder.RunRecorder.open>`
-runs before anything starts), then posts a request and waits, with a timeout, for the dispatcher to
-start or finish the recording at its next doc (:class:`FileRecording`).
+pair ``windrig acquire`` uses, so the file has the docs/file_format.md layout by construction. That
+writer lives on the engine's dispatcher thread (the one thread that touches its h5py file): the GUI
+thread creates the file (every check of :meth:`RunRecorder.open
+<daq.recording.recorder.RunRecorder.open>` runs before anything starts), then posts a request and
+waits, with a timeout, for the dispatcher to start or finish the recording at its next doc
+(:class:`FileRecording`).
 
 Not responsible for: drawing (:mod:`daq.console.window`), the sync numerics
 (:mod:`daq.sync.resample` through :class:`~daq.recording.writer.RunWriter`), the file layout
@@ -341,7 +343,7 @@ class LiveSource(RingSource):
     def start_recording(self, path: str | Path, notes: str = "", *,
                         recorder_options: Mapping[str, Any] | None = None,
                         timeout_s: float = RECORDING_TIMEOUT_S) -> Path:
-        """Start recording the live rig to a new run file (DESIGN.md layout); return its path.
+        """Start recording the live rig to a new run file; return its path.
 
         The file's time 0 is the moment the engine's dispatcher starts the recording; the
         file's writer is first given the last :data:`PREROLL_S` of blocks (their raw samples

@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -28,7 +29,7 @@ from daq.sync.clock_map import ClockMap, trigger_times_from_flags, trigger_times
 from daq.sync.continuous_time import ContinuousTimeline
 
 __all__ = ["CLOCK_WINDOW_S", "POLLED_DEFAULTS", "POLLED_RATE_HZ", "TRIGGER_PAIRING_S",
-           "DeviceState", "new_clock_map", "take_rows"]
+           "ClockObserver", "DeviceState", "new_clock_map", "take_rows"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -44,6 +45,13 @@ POLLED_DEFAULTS: Mapping[str, tuple[tuple[str, str], ...]] = {
     "plc": (("armed", "1"), ("released", "1"), ("trigger_count", "1")),
 }
 POLLED_RATE_HZ = {"barometer": 1.0, "fan": 10.0, "plc": 10.0}
+
+
+class ClockObserver(Protocol):
+    """Told the host times the sync view gives every clocked block (a clock-truth check)."""
+
+    def observe(self, name: str, t_run: FloatArray, t_device: FloatArray, t0_s: float) -> None:
+        """Take device ``name``'s samples: run times ``t_run`` (s), device times, run start."""
 
 
 def new_clock_map(assumed_floor_s: float = 0.0) -> ClockMap:
@@ -123,3 +131,12 @@ class DeviceState:
             elif predicted > events[-1]:
                 left.append(td)  # its PLC event may still come
         self.pending_triggers = left
+
+    def clock_fit(self) -> dict[str, float] | None:
+        """Return the clock fit: offset (s), drift (ppm), residual (s), anchors, pairs; or None."""
+        cm = self.clock
+        if cm is None or not cm.ready:
+            return None
+        return {"offset_s": cm.offset_s, "drift_ppm": cm.drift_ppm, "residual_s": cm.residual_s,
+                "latency_floor_s": cm.latency_floor_s, "anchors": float(cm.n_anchors),
+                "pairs": float(cm.n_pairs)}

@@ -41,6 +41,13 @@ other, so a live reader should read the shortest length over the datasets it com
 (:func:`daq.recording.layout.read_sync` does). A file left behind by a crash keeps HDF5's "open for
 SWMR write" flag: it opens read-only with ``swmr=True`` (as :func:`daq.recording.layout.read_sync`
 does); a plain ``h5py.File(path)`` refuses it until ``h5clear -s`` clears the flag.
+
+Longer than 600 lines: :class:`RunRecorder` is one object, the life cycle of one HDF5 file
+under SWMR (open, declare, start, append, flush, close) together with its failure paths (a full
+disk, a failed write, an abandoned file), which all hold the same open file and dataset handles;
+most of its length is the numpydoc of its public methods, which state the SWMR rules where they
+apply. What does not need that state is elsewhere: the layout in :mod:`daq.recording.layout`,
+the errors in :mod:`daq.errors`, the writer that feeds it in :mod:`daq.recording.writer`.
 """
 
 from __future__ import annotations
@@ -177,7 +184,7 @@ class Recorder(Protocol):
 
 
 class RunRecorder:
-    """Write one run to an HDF5 file laid out as DESIGN.md, "HDF5 file" (see module docstring).
+    """Write one run to an HDF5 file laid out as docs/file_format.md (see module docstring).
 
     Parameters
     ----------

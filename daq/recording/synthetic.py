@@ -20,7 +20,7 @@ from daq.recording.recorder import RunRecorder
 
 
 def write_release_run(path: str | Path, config: Any, releases: Sequence[Any]) -> None:
-    """Write releases back to back into a run file (the DESIGN.md layout, via RunRecorder).
+    """Write releases back to back into a run file, with the acquisition's own recorder.
 
     Parameters
     ----------

@@ -38,7 +38,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -49,6 +49,7 @@ from daq.errors import StorageError
 from daq.recording.devices import (
     POLLED_DEFAULTS,
     POLLED_RATE_HZ,
+    ClockObserver,
     DeviceState,
     new_clock_map,
     take_rows,
@@ -61,8 +62,7 @@ from daq.recording.sync_view import physical_columns
 from daq.sync.continuous_time import ContinuousTimeline
 from daq.sync.resample import Resampler, StreamSpec, SyncBlock
 
-__all__ = ["DEFAULT_RHO", "DEFAULT_SYNC_RATE_HZ", "ClockObserver", "RunWriter",
-           "default_sync_rate_hz"]
+__all__ = ["DEFAULT_RHO", "DEFAULT_SYNC_RATE_HZ", "RunWriter", "default_sync_rate_hz"]
 
 log = logging.getLogger(__name__)
 
@@ -85,13 +85,6 @@ MAX_ANCHOR_ROUND_TRIP_S = 3e-3
 RESTART_SETTLE_S = 0.25
 
 FloatArray = npt.NDArray[np.float64]
-
-class ClockObserver(Protocol):
-    """Told the host times the sync view gives every clocked block (a clock-truth check)."""
-
-    def observe(self, name: str, t_run: FloatArray, t_device: FloatArray, t0_s: float) -> None:
-        """Take device ``name``'s samples: run times ``t_run`` (s), device times, run start."""
-
 
 class RunWriter:
     """Subscriber writing one run to HDF5 (see the module docstring).
@@ -337,10 +330,10 @@ class RunWriter:
         first, last = int(rows[0]), int(rows[-1])
         if dev.restart_pending:
             dev.restart_pending = False
-            # Device time not after the last one mapped: the device clock restarted with the
-            # scan (relative frame times start again at 0 without PTP, DEVICES.md A.1.1), and
-            # the map from the previous scan no longer applies. Absolute (PTP) frame times,
-            # and relative ones the engine continued across its own pause (Acquisition.calz),
+            # Device time not after the last one mapped: the device clock restarted with the scan
+            # (relative frame times start again at 0 without PTP, docs/wire_formats.md, "Pressure
+            # scanner"), and the map from the previous scan no longer applies. Absolute (PTP) frame
+            # times, and relative ones the engine continued across its own pause (Acquisition.calz),
             # move forward: their map stays valid and is kept. (NaN: nothing mapped yet.)
             if float(t_dev[first]) <= dev.last_device_time:
                 self._restart_clock(dev, float(t_dev[first]), float(t_host[first]))
@@ -569,15 +562,8 @@ class RunWriter:
 
     def clock_fits(self) -> dict[str, dict[str, float]]:
         """Per clocked device: offset (s), drift (ppm), residual (s), anchors, pairs."""
-        out: dict[str, dict[str, float]] = {}
-        for name, dev in self._devices.items():
-            cm = dev.clock
-            if cm is None or not cm.ready:
-                continue
-            out[name] = {"offset_s": cm.offset_s, "drift_ppm": cm.drift_ppm,
-                         "residual_s": cm.residual_s, "latency_floor_s": cm.latency_floor_s,
-                         "anchors": float(cm.n_anchors), "pairs": float(cm.n_pairs)}
-        return out
+        fits = {name: dev.clock_fit() for name, dev in self._devices.items()}
+        return {name: fit for name, fit in fits.items() if fit is not None}
 
     def _summary(self, doc: Mapping[str, Any]) -> dict[str, Any]:
         return {

@@ -1,6 +1,7 @@
 """Unwrapping of wrapping sample counters, and the gaps and backward steps they reveal.
 
-Responsibility (DESIGN.md, "Synchronisation"): pure numerical code used by the acquisition engine
+Responsibility (the synchronised view of docs/file_format.md): pure numerical code used by the
+run writer
 
 - :class:`CounterUnwrapper` / :func:`unwrap_counter` unwrap wrapping sample counters of any
   modulus and list the gaps (:class:`Gap`) and the steps that are not forward

@@ -5,7 +5,7 @@ under test writes to it and reads from it. Every write must match the next expec
 bytes exactly (a mismatch fails at once, showing both in hex), after which ``reply`` becomes
 readable; on exit every pair must have been consumed. A pair with ``sent = b""`` is unsolicited
 data (a stream) that is readable as soon as the previous pair is done. Modelled on pymeasure's
-``expected_protocol`` (STYLE.md, "Tests").
+``expected_protocol``.
 
 ``expected_bus_calls([(method, address, value, result), ...])`` does the same one level up, for
 the Modbus drivers: it yields a :class:`ScriptedBus` (a

@@ -14,7 +14,8 @@ of a first-party module, at module level, inside functions and under ``TYPE_CHEC
 - no module of daq imports a private name (``_x``) from another module;
 - no module of daq is longer than 600 lines unless its docstring has a paragraph starting
   ``Longer than 600 lines:`` that says why;
-- every exception class of daq is defined in :mod:`daq.errors`.
+- every exception class of daq is defined in :mod:`daq.errors`;
+- daq's packages form layers (:data:`LAYERS`): a module imports from its own layer or below.
 """
 
 from __future__ import annotations
@@ -31,6 +32,20 @@ REPO = Path(__file__).resolve().parents[2]
 PACKAGES = ("daq", "ident", "simulators")
 MAX_LINES = 600
 LONG_MARKER = "Longer than 600 lines:"
+#: daq's layers, bottom first (``docs/architecture.md``): a module may import from its own layer
+#: and from the layers below. ``daq.instruments.build`` (a configured instrument's driver) sits
+#: above the rig config, which validates instrument tables through the driver registry.
+LAYERS: tuple[tuple[str, ...], ...] = (
+    ("daq.errors", "daq.validation", "ident"),
+    ("daq.transports",),
+    ("daq.instruments",),
+    ("daq.config", "daq.procedure", "daq.instruments.build"),
+    ("daq.sync",),
+    ("daq.acquisition",),
+    ("daq.recording",),
+    ("daq.sim", "daq.offline", "simulators"),
+    ("daq.console", "daq.cli"),
+)
 
 
 def _module_name(path: Path) -> str:
@@ -140,6 +155,27 @@ def test_layer_rules(importer, forbidden):
     broken = sorted(f"{m} imports {t}" for m, targets in GRAPH.items() if _in(m, importer)
                     for t in targets if _in(t, *forbidden))
     assert broken == []
+
+
+def _layer(module: str) -> int | None:
+    """Return the layer of ``module`` (its longest matching prefix), or None (``daq`` itself)."""
+    found = [(len(p), i) for i, names in enumerate(LAYERS) for p in names if _in(module, p)]
+    return max(found)[1] if found else None
+
+
+def test_layers_only_import_downwards():
+    upward = []
+    for module, targets in GRAPH.items():
+        if not _in(module, "daq"):
+            continue
+        own = _layer(module)
+        for target in targets:
+            theirs = _layer(target)
+            if own is not None and theirs is not None and theirs > own:
+                upward.append(f"{module} ({own}) imports {target} ({theirs})")
+    assert upward == []
+    unplaced = sorted(m for m in MODULES if _in(m, "daq") and m != "daq" and _layer(m) is None)
+    assert unplaced == []
 
 
 def test_packages_have_a_map_and_import_nothing():

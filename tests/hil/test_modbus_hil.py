@@ -1,8 +1,9 @@
 """HIL: the fan-drive and PLC drivers against their simulators over Modbus TCP on 127.0.0.1.
 
-Each driver runs its own decoding against the simulator's own encoding (DEVICES.md A.3), through
+Each driver runs its own decoding against the simulator's own encoding (docs/wire_formats.md),
+through
 a real pymodbus server and client, so the two implementations cross-check each other; every
-fault of DEVICES.md A.5 (rows "ABB VFD" and "PLC") is injected and the driver's reaction checked.
+fault of docs/wire_formats.md, "Faults") is injected and the driver's reaction checked.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_
 # The rig-config tables the drivers validate; the simulators get the same numbers as plain ints.
 FAN_TABLE = {
     "max_rpm": 1500.0,
-    # The ACH550/RETA-01 wind-tunnel map of DEVICES.md A.3: 0 CW, 1 REF1, 3 SW, 4 ACT1.
+    # An ACH550/RETA-01 wind tunnel's register map: 0 CW, 1 REF1, 3 SW, 4 ACT1.
     "registers": {"control_word": 0, "reference_1": 1, "status_word": 3, "actual_1": 4},
     "poll_timeout_s": 0.1,
     "ramp_rpm_per_s": 3000.0,  # a fast ramp keeps the tests short
@@ -97,7 +98,7 @@ def test_fan_spins_up_along_the_ramp_and_turns_the_tunnel_fan(fan, tunnel):
     assert tunnel.fan_rpm == pytest.approx(600.0, abs=1e-9)  # the tunnel gets the true speed
     assert tunnel.wind_speed() == pytest.approx(6.0)
     assert drive.status().at_setpoint
-    assert sim.writes_to("reference_1") == [8000]  # 600 / 1500 * 20000 (DEVICES.md A.3)
+    assert sim.writes_to("reference_1") == [8000]  # 600 / 1500 * 20000 (docs/wire_formats.md)
     assert sim.writes_to("control_word") == [0x0476, 0x047F]
     reading = drive.read()
     assert set(reading) == set(drive.describe())

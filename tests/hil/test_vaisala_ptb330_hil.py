@@ -1,8 +1,9 @@
 """PTB330 driver against its simulator over real transports (pyserial socket:// and a pty).
 
 The driver (daq/) and the simulator (simulators/) encode and decode the wire format with separate
-code; agreement here cross-checks both against the manual facts of DEVICES.md A.3. Faults are the
-PTB330 row of DEVICES.md A.5: garbled/partial line, no reply, unit change.
+code; agreement here cross-checks both against the manual facts of docs/wire_formats.md,
+"Barometer". Faults are the barometer's of docs/wire_formats.md, "Faults": garbled/partial line,
+no reply, unit change.
 """
 
 from __future__ import annotations

@@ -9,20 +9,22 @@ whose stored reference is above the limit. It writes only the Control Word and R
 only the four registers of its ``registers`` table. Not responsible for Modbus transport, retries or
 error normalisation (the bus), nor for turning wind speed into fan speed.
 
-Facts implemented (DEVICES.md A.3 "Fan VFD", and the ABB Drives profile tables of the ACS580
-firmware manual "Contents of the fieldbus Control word / Status word", FDNA-01 manual p.91,
+Facts implemented (docs/wire_formats.md, "Fan drive", and the ABB Drives profile tables of the
+ACS580 firmware manual "Contents of the fieldbus Control word / Status word", FDNA-01 manual p.91,
 FPBA-01 manual p.113, ACS880 manual p.635):
 
-- CW 0x0476 = prepare / ramp stop, 0x047F = run, 0x0000 = coast (DEVICES.md A.3);
+- CW 0x0476 = prepare / ramp stop, 0x047F = run, 0x0000 = coast (docs/wire_formats.md, "Fan drive");
 - CW bit 7 RESET: a 0->1 edge resets an active fault and the drive proceeds to SWITCH-ON
   INHIBITED (ACS580 firmware manual);
-- SW bits 0 RDY_ON, 1 RDY_RUN, 2 RDY_REF, 3 TRIPPED (DEVICES.md A.3 names them; the positions
+- SW bits 0 RDY_ON, 1 RDY_RUN, 2 RDY_REF, 3 TRIPPED (the fan drive section of
+  ``docs/wire_formats.md`` names them; the positions
   come from the ABB Drives profile Status word tables cited above), 4 OFF_2_STA, 5 OFF_3_STA,
   6 SWC_ON_INHIB, 7 ALARM, 8 AT_SETPOINT, 9 REMOTE, 10 ABOVE_LIMIT;
-- Reference 1 is a signed word, 0..+/-20000 scaled to the maximum speed (DEVICES.md A.3);
-- Actual 1 is the speed with the same 20000 = maximum-speed scaling. [unverified] DEVICES.md
-  says ACT1 is "selectable, e.g. speed": its source and scaling are drive parameters, so the rig
-  must map ACT1 to motor speed with the Reference 1 scaling for this driver to be right.
+- Reference 1 is a signed word, 0..+/-20000 scaled to the maximum speed (docs/wire_formats.md, "Fan
+  drive");
+- Actual 1 is the speed with the same 20000 = maximum-speed scaling. [unverified] The drive manuals
+  call ACT1 "selectable, e.g. speed": its source and scaling are drive parameters, so the rig must
+  map ACT1 to motor speed with the Reference 1 scaling for this driver to be right.
 - [unverified] The reset sequence (CW 0x0476, then 0x04F6 = 0x0476 with bit 7, then 0x0476) is
   ours: the sources give bit 7's edge, not a sequence.
 """

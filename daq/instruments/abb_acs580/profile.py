@@ -13,7 +13,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-#: Control Word values (DEVICES.md A.3) and the RESET bit (ABB Drives profile CW bit 7).
+#: Control Word values (docs/wire_formats.md, "Fan drive") and the RESET bit (ABB Drives profile CW
+#: bit 7).
 CW_PREPARE = 0x0476
 
 
@@ -26,7 +27,7 @@ CW_COAST = 0x0000
 CW_RESET_BIT = 0x0080
 
 
-#: Reference 1 / Actual 1 counts at the maximum speed (DEVICES.md A.3).
+#: Reference 1 / Actual 1 counts at the maximum speed (docs/wire_formats.md, "Fan drive").
 FULL_SCALE = 20000
 
 

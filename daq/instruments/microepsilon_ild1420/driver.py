@@ -1,11 +1,11 @@
 r"""Driver for the Micro-Epsilon optoNCDT ILD1420-class laser displacement sensor (RS-422).
 
-Responsibility: the sensor's byte protocol (DEVICES.md A.2.1) and its rig-config settings. It
-validates the ``[[lasers]]`` table (:class:`Ild1420Settings`), decodes the binary stream of 3-byte
-words into blocks (:class:`Ild1420Decoder`, pure, no I/O), unwraps the 18-bit counter and the
-32-bit timestamp, marks gaps and device restarts (:class:`Ild1420Sequencer`, pure), talks the
-ASCII command set (``GETOUTINFO_RS422``, ``MASTERMV``, ``OUTPUT``, ``GETINFO``) and reconnects
-with a bounded backoff when the line drops (:class:`MicroEpsilonIld1420`).
+Responsibility: the sensor's byte protocol (docs/wire_formats.md, "Lasers") and its rig-config
+settings. It validates the ``[[lasers]]`` table (:class:`Ild1420Settings`), decodes the binary
+stream of 3-byte words into blocks (:class:`Ild1420Decoder`, pure, no I/O), unwraps the 18-bit
+counter and the 32-bit timestamp, marks gaps and device restarts (:class:`Ild1420Sequencer`, pure),
+talks the ASCII command set (``GETOUTINFO_RS422``, ``MASTERMV``, ``OUTPUT``, ``GETINFO``) and
+reconnects with a bounded backoff when the line drops (:class:`MicroEpsilonIld1420`).
 
 Not responsible for: opening ports (the transport is injected, see
 :mod:`daq.transports.byte_transport`; :meth:`Ild1420Settings.line` gives its serial settings),
@@ -13,7 +13,7 @@ converting distances into heave and pitch (the acquisition does that with the ``
 ``standoff_mm`` settings), mapping the device clock onto the host clock (the synchronisation), or
 threads and queues (the acquisition runs one reader thread per sensor).
 
-Manual facts (DEVICES.md A.2.1) and the choices made beyond them:
+Manual facts (docs/wire_formats.md, "Lasers") and the choices made beyond them:
 
 - 921.6 kBd 8N1 by default; one value is three bytes ``L = 00 D5..D0``, ``M = 01 D11..D6``,
   ``H = 1 f D17..D12``; ``f = 0`` for the first value of a block (the distance), 1 for the

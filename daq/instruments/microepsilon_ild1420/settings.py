@@ -18,7 +18,7 @@ from typing import Any, Final
 from daq.errors import ConfigError
 from daq.validation import check_keys, number
 
-#: Measuring ranges of the ILD1420 family, mm (DEVICES.md A.2.1).
+#: Measuring ranges of the ILD1420 family, mm (docs/wire_formats.md, "Lasers").
 RANGES_MM: Final = (10, 25, 50, 100, 200, 500)
 
 

@@ -11,13 +11,19 @@ calibration (the caller passes the wind speed it knows; the driver refuses a non
 the device clock onto the host clock (the synchronisation layer does that from the counters, frame
 times and host arrival times returned here), threads, or recording.
 
-This module holds the driver (:class:`ScanivalveMps4264`) and its per-module data streams, which
-share the driver's clock. The rest has a module of its own, every public name of which is
-re-exported here: the settings (:mod:`daq.instruments.scanivalve_mps4264.settings`), the packet
-layouts and the decoder (:mod:`daq.instruments.scanivalve_mps4264.frames`, which describes the
-packets) and the blocks returned (:mod:`daq.instruments.scanivalve_mps4264.blocks`).
+This module holds the driver (:class:`ScanivalveMps4264`). What needs none of its state has a
+module of its own in this package: the settings (:mod:`.settings`), the packet layouts and the
+decoder (:mod:`.frames`), one module's data stream (:mod:`.streams`), the merging of the
+modules' frames into blocks (:mod:`.merge`) and the blocks returned (:mod:`.blocks`).
 
-Wire protocol (DEVICES.md A.1.1; [unverified] marks our choices where the facts stop):
+Longer than 600 lines: the driver is one state machine. Its command connection, its scan and
+its per-module data connections share one lock, the scan state and the reconnect path (a
+reconnect restarts the data connection under a running scan, ``scan()`` replaces the streams,
+a CALZ needs the scan stopped), so they stay in one class, with the description of the
+protocol below, which its methods cite.
+
+Wire protocol (docs/wire_formats.md, "Pressure scanner"; [unverified] marks our choices where the
+facts stop):
 
 - Commands are ASCII lines terminated by CR LF [unverified terminator; the simulator accepts CR,
   LF or both]. ``STATUS`` answers ``STATUS: <state>`` with a state of ``READY``, ``SCAN``,
@@ -325,7 +331,7 @@ class ScanivalveMps4264:
         """Zero the sensors (``CALZ``) and wait until the scanner is ``READY`` again.
 
         The MPS4232/4264 have no calibration valve: the zero is taken with the taps exposed, so
-        it must be taken wind-off (DEVICES.md A.1.1 "Zero calibration"). Deciding that the
+        it must be taken wind-off (docs/wire_formats.md, "Pressure scanner"). Deciding that the
         wind is off is the caller's job; it passes the wind speed it knows
         (:meth:`check_calz_allowed`). The scanner refuses CALZ while it scans: :meth:`stop`
         first (:meth:`daq.acquisition.engine.Acquisition.calz` does that during a run).

@@ -9,7 +9,8 @@ merging the modules frame by frame, or host arrival times (the driver,
 :mod:`daq.instruments.scanivalve_mps4264.driver`, which re-exports every public name here). Pure: no
 I/O, no threads, no clock.
 
-Packets (DEVICES.md A.1.1, mps-protocol.h; [unverified] marks our choices where the facts stop):
+Packets (docs/wire_formats.md, "Pressure scanner"; Scanivalve's mps-protocol.h; [unverified]
+marks our choices where the facts stop):
 
 - Every field is a 4-byte word, big- or little-endian, detected per packet from the non-zero
   byte of the type word as ``mps_peek()`` does:
@@ -61,7 +62,7 @@ TEMPERATURES_PER_MODULE = 8
 _PA_FACTOR = float(np.float32(6894.75977))
 _UNIT_RAW = 27  # Appendix A: 27 RAW (counts, not pressures)
 
-#: Packet type -> size in bytes (DEVICES.md A.1.1 table, mps-protocol.h).
+#: Packet type -> size in bytes (docs/wire_formats.md, "Pressure scanner", mps-protocol.h).
 PACKET_SIZES: Mapping[int, int] = {
     0x5D: 96, 0x5B: 96, 0x65: 160, 0x63: 160, 0x6D: 304, 0x69: 304, 0x0A: 348,
 }

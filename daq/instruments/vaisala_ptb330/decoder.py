@@ -26,9 +26,9 @@ R_DRY_AIR = 287.058
 
 
 #: Pascals per unit of every pressure unit the decoder accepts (PTB330 Table 13 lists hPa, psi,
-#: inHg, torr, bar, mbar, mmHg, kPa, Pa, mmH2O, inH2O; the water columns are refused, see the
-#: module docstring). mmHg and inHg are the conventional units (13.5951 g/cm^3, g_n), psi the
-#: pound-force per square inch; 'psia' is how the PTB200 names it (DEVICES.md A.3).
+#: inHg, torr, bar, mbar, mmHg, kPa, Pa, mmH2O, inH2O; the water columns are refused, see the module
+#: docstring). mmHg and inHg are the conventional units (13.5951 g/cm^3, g_n), psi the pound-force
+#: per square inch; 'psia' is how the PTB200 names it (docs/wire_formats.md, "Barometer").
 PRESSURE_UNITS_PA: Mapping[str, float] = {
     "Pa": 1.0,
     "hPa": 100.0,

@@ -7,12 +7,13 @@ bounded, logged retry. Not responsible for: opening the serial port's URL (the c
 transport, with :data:`SERIAL_DEFAULTS` as line defaults), scheduling acquisition threads, or
 recording (the driver only returns readings).
 
-Wire format (DEVICES.md A.3 "Barometer / T / RH", manual facts cited inline):
+Wire format (docs/wire_formats.md, "Barometer", manual facts cited inline):
 
-- line settings 9600 baud, 7 data bits, even parity, 1 stop bit, XON/XOFF (the PTB330 integration
-  in DEVICES.md A.3); commands are ASCII terminated by a carriage return (``<cr>`` in the manuals);
+- line settings 9600 baud, 7 data bits, even parity, 1 stop bit, XON/XOFF (the PTB330 integration in
+  docs/wire_formats.md, "Barometer"); commands are ASCII terminated by a carriage return (``<cr>``
+  in the manuals);
 - the driver sets the output format (``FORM``) to :data:`FORM_STRING`, which makes each reply a
-  PTU300-style line (DEVICES.md A.3, PTU300 p.103)::
+  PTU300-style line (docs/wire_formats.md, "Barometer", PTU300 p.103)::
 
       P=  1013.250 hPa    T= 21.34 'C <CR><LF>
 
@@ -21,11 +22,11 @@ Wire format (DEVICES.md A.3 "Barometer / T / RH", manual facts cited inline):
   unit-field widths are not fixed by the facts we have), so the decoder accepts any spacing.
   The temperature quantity of the PTB330 is ``TP1`` (barometer module 1; PTB330 Table 13);
   a PTU300 calls it ``T``: subclass and override :attr:`VaisalaPtb330.FORM_STRING`;
-- the pressure unit is read from every line (the instrument's ``UNIT`` can be changed on its
-  display or serial port at any time: the DEVICES.md A.5 fault "unit change"), and the value is
+- the pressure unit is read from every line (the instrument's ``UNIT`` can be changed on its display
+  or serial port at any time: the "unit change" fault of docs/wire_formats.md), and the value is
   converted with :data:`PRESSURE_UNITS_PA`; an unknown unit is a :class:`ProtocolError`, never a
-  silently wrong number. ``mmH2O``/``inH2O`` are refused on purpose (their reference temperature
-  is not stated in the line).
+  silently wrong number. ``mmH2O``/``inH2O`` are refused on purpose (their reference temperature is
+  not stated in the line).
 
 Temperature: ``TP1`` is the temperature of the pressure module, i.e. of the instrument, which
 equals the air temperature only once the barometer is in thermal equilibrium with the tunnel air;
@@ -62,8 +63,9 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-#: Serial line defaults (DEVICES.md A.3: "9600 baud, 7 data bits, even parity, 1 stop bit,
-#: XON/XOFF"); the query of a ``serial://`` URL overrides them (``open_transport(url, **these)``).
+#: Serial line defaults (docs/wire_formats.md, "Barometer": "9600 baud, 7 data bits, even parity, 1
+#: stop bit, XON/XOFF"); the query of a ``serial://`` URL overrides them (``open_transport(url,
+#: **these)``).
 SERIAL_DEFAULTS: Mapping[str, Any] = {
     "baudrate": 9600, "bytesize": 7, "parity": "E", "stopbits": 1, "xonxoff": True,
 }

@@ -1,7 +1,7 @@
 """Contract tests over every registered driver (pymeasure's test_all_instruments pattern).
 
 Construction does no I/O, unknown keywords are refused, every described channel has units, and
-property docstrings follow the Measure/Control rule (STYLE.md, "Tests").
+property docstrings follow the Measure/Control rule.
 """
 
 from __future__ import annotations
@@ -73,6 +73,6 @@ def test_property_docstrings_follow_the_measure_control_rule(driver):
 
 
 def test_every_role_of_the_design_has_a_registered_driver():
-    """Scanner, lasers, fan, PLC and barometer: all five instruments of DESIGN.md."""
+    """Scanner, lasers, fan, PLC and barometer: all five instruments of docs/wire_formats.md."""
     roles = {registry.driver_entry(d).role for d in INSTRUMENTS}
     assert roles == {"scanner", "lasers", "fan", "plc", "barometer"}
