@@ -18,7 +18,7 @@ on the dispatcher thread, so a subscriber needs no locking of its own.
 Not responsible for: the device protocols (the drivers), the reading of one device itself (reads,
 faults and recovery, the bounded queue: :mod:`daq.acquisition.reader`), the records' types
 (:mod:`daq.acquisition.records`), mapping device clocks onto the host clock
-(:mod:`daq.sync.resample`), writing files (:mod:`daq.recording`), or plotting (the console, which
+(:mod:`daq.sync`), writing files (:mod:`daq.recording`), or plotting (the console, which
 polls a ring buffer fed by a subscriber). The acquisition threads never touch h5py or Qt.
 
 Design choices:
@@ -450,7 +450,7 @@ class Acquisition:
         force: ``wind_speed_now`` is passed through), a new scan is started and the reader
         resumed. The interruption is marked, never silent: the scanner stream gets a gap over
         the pause (its length in frames where the frame times are absolute, else -1; see
-        ``daq.device_reader.ScannerAdapter``), so the sync view has NaN pressures and forces
+        ``daq.acquisition.adapters.ScannerAdapter``), so the sync view has NaN pressures and forces
         there, and a ``"calz"`` event (at ``stop_ns``) carries the pause and the zero-offset
         summary.
 

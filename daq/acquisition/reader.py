@@ -2,7 +2,8 @@
 
 Responsibility: read one instrument in its own blocking reader thread (:class:`DeviceReader`: the
 scanner and the lasers with ``read_block``, the barometer, the fan drive and the PLC by polling
-``read()``, each through a small adapter for its kind of driver), turn what the driver returns into
+``read()``, each through the adapter of its kind of driver, :mod:`daq.acquisition.adapters`),
+turn what the driver returns into
 :class:`~daq.acquisition.records.StreamBlock` records and put them on the reader's bounded queue,
 which never blocks the reader: when it is full the oldest block is dropped and the loss accounted
 for (counters, and drop runs the dispatcher takes). Driver faults are reported as
@@ -11,9 +12,10 @@ scanner's reader can also be parked, drained and its scan restarted, for a pause
 CALZ).
 
 Not responsible for: the device protocols (the drivers); creating, starting and stopping the
-readers, dispatching their blocks to subscribers, marking the overflow gaps on the blocks
-delivered, or the CALZ itself (:class:`~daq.acquisition.engine.Acquisition`); the records' types
-(:mod:`daq.acquisition.records`).
+readers (:class:`~daq.acquisition.engine.Acquisition`); dispatching their blocks to
+subscribers and marking the overflow gaps on the blocks delivered
+(:mod:`daq.acquisition.dispatch`); the CALZ itself (:mod:`daq.acquisition.calz`); the records'
+types (:mod:`daq.acquisition.records`).
 
 Design choices:
 

@@ -5,7 +5,7 @@ Responsibility: define the immutable records of the engine's ``(name, doc)`` str
 device in one call), :class:`Event` (the ``"event"`` doc) and its :class:`DeviceFault`, and
 :class:`DeviceStats` (a reader's counters, :meth:`~daq.acquisition.engine.Acquisition.stats`); with
 the vocabulary of their ``kind`` fields (:data:`KINDS`, :data:`SYSTEM_EVENT_KINDS`) and the
-array aliases they are typed with. :mod:`daq.acquisition.engine` re-exports every public name here.
+array aliases they are typed with.
 
 Not responsible for: producing the records (the readers, :mod:`daq.acquisition.reader`; the engine,
 :mod:`daq.acquisition.engine`) or consuming them (the subscribers:

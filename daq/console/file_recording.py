@@ -33,7 +33,7 @@ log = logging.getLogger(__name__)
 #: A recording's file writer is first fed this much of the blocks already delivered, s: every
 #: stream then covers time 0 (no NaN rows at the start of the file's sync view) and the clock
 #: maps have closed their first two 0.5 s windows (a fitted slope, not a cold start; see
-#: :meth:`daq.recording.writer.RunWriter._clock_map`). Those raw samples precede time 0 in the file.
+#: :func:`daq.recording.devices.new_clock_map`). Those raw samples precede time 0 in the file.
 #: Cost: ~0.4 s of the dispatcher's time at the start (the maps refit at every block until
 #: then); the engine's queues hold several seconds.
 PREROLL_S = 1.0

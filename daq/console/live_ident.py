@@ -1,12 +1,12 @@
 """The console's releases table: each free decay's frequency and damping, then E2RFC, as they come.
 
 Responsibility: :class:`LiveIdentifier`, polled from the GUI timer, watches the free decays of a
-source (``source.decays()``: release instants and, once the model is armed again, the end of
-each decay) and, as soon as a decay is complete, cuts its rows out of the source's buffer, checks
-them (gaps, length, wind) and has a worker process fit its two modes
-(:func:`fit_release_modes`: frequency and damping ratio of the heave- and pitch-dominated
-modes). Once usable releases exist at two or more wind speeds, the worker identifies the
-rational-function model from all of them together (:func:`identify_releases`:
+source (``source.decays()``: release instants and, once the model is armed again, the end of each
+decay) and, as soon as a decay is complete, cuts its rows out of the source's buffer, checks them
+(gaps, length, wind) and has a worker process fit its two modes
+(:func:`ident.modal.fit_release_modes`: frequency and damping ratio of the heave- and
+pitch-dominated modes). Once usable releases exist at two or more wind speeds, the worker identifies
+the rational-function model from all of them together (:func:`identify_releases`:
 :func:`ident.e2rfc.identify`, the flutter speed with its standard deviation, the model's flutter
 derivatives, and the indirect method's table of flutter derivatives from the same decays,
 :func:`ident.fd_method.flutter_derivatives`, to plot against), again whenever a release is added.

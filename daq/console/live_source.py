@@ -4,8 +4,9 @@ Responsibility: :class:`LiveSource` (a :class:`~daq.console.source.DataSource`) 
 simulated one in a child process, :func:`daq.sim.rig_process.start_rig_process`, or the real
 instruments of a config), runs the acquisition engine over its drivers and feeds the console's
 :class:`~daq.console.ring_buffer.RingBuffer` with the rows of the synchronised view. The sync view
-is the recording pipeline's own: a :class:`~daq.recording.writer.RunWriter` runs as the engine's
-subscriber, writing into a :class:`RingRecorder` instead of an HDF5 file (both are a
+is the recording's own: a :class:`~daq.recording.writer.RunWriter` runs as the engine's
+subscriber, writing into a :class:`~daq.console.ring_recorder.RingRecorder` instead of an HDF5
+file (both are a
 :class:`~daq.recording.recorder.Recorder`), so the live view and a recorded file hold the same rows
 by construction. The GUI thread polls :meth:`LiveSource.snapshot` (the ring's copy) and
 :meth:`LiveSource.health` (built from :meth:`Acquisition.stats` and what the subscriber kept under a
@@ -20,12 +21,12 @@ writer lives on the engine's dispatcher thread (the one thread that touches its 
 thread creates the file (every check of :meth:`RunRecorder.open
 <daq.recording.recorder.RunRecorder.open>` runs before anything starts), then posts a request and
 waits, with a timeout, for the dispatcher to start or finish the recording at its next doc
-(:class:`FileRecording`).
+(:class:`~daq.console.file_recording.FileRecording`).
 
-Not responsible for: drawing (:mod:`daq.console.window`), the sync numerics
-(:mod:`daq.sync.resample` through :class:`~daq.recording.writer.RunWriter`), the file layout
-(:mod:`daq.recording.recorder`), or the operator controls (:mod:`daq.console.controls`, which use
-:attr:`LiveSource.acq` and the recording methods).
+Not responsible for: drawing (:mod:`daq.console.window`), the sync numerics (:mod:`daq.sync` through
+:class:`~daq.recording.writer.RunWriter`), the file layout (:mod:`daq.recording.layout`), the
+recordings' hand-over (:mod:`daq.console.file_recording`), or the operator controls
+(:mod:`daq.console.controls`, which use :attr:`LiveSource.acq` and the recording methods).
 """
 
 from __future__ import annotations

@@ -9,7 +9,7 @@ snapshot, so a live source wrapping the acquisition's ring buffer is a drop-in r
 Only the new rows are read from the file at each poll; h5py objects never leave this module.
 
 Not responsible for: drawing (:mod:`daq.console.window`), or the file's layout
-(:mod:`daq.recording.recorder`).
+(:mod:`daq.recording.layout`, ``docs/file_format.md``).
 """
 
 from __future__ import annotations

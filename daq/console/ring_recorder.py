@@ -102,7 +102,7 @@ class RingRecorder:
         """Ignore (gaps are counted by the engine's stats)."""
 
     def add_event(self, time: float, kind: str, text: str = "") -> None:
-        """Ignore (faults reach the health panel through :class:`_HealthTap`)."""
+        """Ignore (faults reach the health panel through the live source's own subscriber)."""
 
     def add_release(self, *, release_time: float, start_index: int, stop_index: int, U: float,
                     h0: float, alpha0: float) -> None:

@@ -7,9 +7,10 @@ thread: :meth:`DataSource.poll` moves it forward, :meth:`DataSource.snapshot` ha
 shaped like :meth:`daq.console.ring_buffer.RingBuffer.snapshot`. Nothing is ever pushed to the GUI
 from another thread (docs/architecture.md, "Design rules").
 
-Implementations: :class:`daq.console.replay.ReplaySource` (a recorded run played back in time) and
+Implementations: :class:`daq.console.replay.ReplaySource` (a recorded run played back in time),
 :class:`daq.console.live_source.LiveSource` (a rig acquired now; its ``poll`` only reports how far
-``total_rows`` moved). A live source is also a :class:`HealthSource`: it reports
+``total_rows`` moved) and :class:`daq.console.process_source.ProcessLiveSource` (the same in a
+process of its own). A live source is also a :class:`HealthSource`: it reports
 :class:`DeviceHealth` per device, which the window shows in its health panel.
 
 Not responsible for: reading files (``daq.console.replay``), acquisition, or drawing

@@ -7,7 +7,8 @@ and their pairing with the PLC's trigger pulses as clock anchors
 (:meth:`DeviceState.anchor_triggers`, :meth:`DeviceState.pair_triggers`), and the state of a
 device clock restart (rows held back until a fresh map settles). :func:`take_rows` cuts a block
 at a restart gap; :data:`POLLED_DEFAULTS` names the raw channels of polled devices that do not
-describe themselves.
+describe themselves; :class:`ClockObserver` is what the writer tells the sync view's times to
+(a check against a simulated rig's truth).
 
 Not responsible for: deciding when a device clock restarted, or the sync view and the file
 (:class:`daq.recording.writer.RunWriter`, which owns the states); the clock-map numerics

@@ -8,7 +8,8 @@ before it (``h0``, ``alpha0``: the median over :data:`HOLD_WINDOW_S` before the 
 is written once its decay has ended, so a live reader never sees one change.
 
 Not responsible for: the sync rows themselves (:class:`daq.recording.writer.RunWriter`) or the
-file (:mod:`daq.recording.recorder`).
+file (:mod:`daq.recording.recorder`). A run without sync rows (no lasers, no scanner) still gets
+its rows, with NaN where the view would be needed.
 """
 
 from __future__ import annotations

@@ -21,7 +21,7 @@ across the gap (PTP, or relative ones the engine continued, as after ``Acquisiti
 their map. The final clock fit in ``/entry/sync`` attrs then describes the last clock epoch only.
 
 Not responsible for: reading devices or threads (the engine), the numerics of clocks, resampling and
-conversions (:mod:`daq.sync.resample`), the file itself (:mod:`daq.recording.recorder`), running a
+conversions (:mod:`daq.sync`), the file itself (:mod:`daq.recording.recorder`), running a
 rig into a file (:mod:`daq.recording.run`), or any simulator.
 
 Threads: the writer runs on the engine's dispatcher thread only (one thread touches h5py); the

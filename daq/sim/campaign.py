@@ -1,7 +1,9 @@
 """A whole simulated test campaign: releases at several wind speeds -> E2RFC -> flutter speed.
 
-Responsibility: :func:`run_campaign` drives a *simulated* rig through the real drivers and the
-acquisition engine (:func:`daq.recording.run.record_run`): for each fraction ``f`` of the true
+Responsibility: :func:`run_campaign` drives a *simulated* rig, started in a process of its own
+(:mod:`daq.sim.rig_process`), through the real drivers, the acquisition engine and the production
+recorder (:func:`daq.recording.run.record_run`, every fan and release step one of the engine's
+commands, so an event of the run): for each fraction ``f`` of the true
 flutter speed it sets the fan so that the wind is ``f U_F``, waits for the ramp, then arms, holds
 and releases the model ``releases_per_speed`` times, recording each free decay for ``decay_s``
 seconds, one HDF5 run file per wind speed (``campaign_U<speed>.h5``). It then reads the files back
@@ -10,9 +12,9 @@ rational-function model from all releases (:func:`ident.e2rfc.identify`), comput
 flutter speed with its standard deviation and compares it with the truth. Plots (matplotlib, Agg)
 are written next to the files.
 
-Not responsible for: the drivers, the engine or the file layout (:mod:`daq.recording.writer`), the
-numerics (:mod:`ident`). Real rigs are not driven here: the truth (``U_F``) that sets the wind
-speeds exists only for a simulated rig.
+Not responsible for: the drivers, the engine or the file (:mod:`daq.recording`), the numerics
+(:mod:`ident`), or the decay length (:mod:`daq.procedure`). Real rigs are not driven here: the truth
+(``U_F``) that sets the wind speeds exists only for a simulated rig.
 """
 
 from __future__ import annotations

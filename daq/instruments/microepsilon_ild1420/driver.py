@@ -1,11 +1,14 @@
 r"""Driver for the Micro-Epsilon optoNCDT ILD1420-class laser displacement sensor (RS-422).
 
-Responsibility: the sensor's byte protocol (docs/wire_formats.md, "Lasers") and its rig-config
-settings. It validates the ``[[lasers]]`` table (:class:`Ild1420Settings`), decodes the binary
-stream of 3-byte words into blocks (:class:`Ild1420Decoder`, pure, no I/O), unwraps the 18-bit
-counter and the 32-bit timestamp, marks gaps and device restarts (:class:`Ild1420Sequencer`, pure),
-talks the ASCII command set (``GETOUTINFO_RS422``, ``MASTERMV``, ``OUTPUT``, ``GETINFO``) and
-reconnects with a bounded backoff when the line drops (:class:`MicroEpsilonIld1420`).
+Responsibility: :class:`MicroEpsilonIld1420` talks the sensor's ASCII command set
+(``GETOUTINFO_RS422``, ``MASTERMV``, ``OUTPUT``, ``GETINFO``), reads its binary stream (commands
+and stream share the line: the stream bytes around a reply are kept), and reconnects with a
+bounded backoff when the line drops. The pieces without I/O are the package's other modules: the
+``[[lasers]]`` table (:class:`~daq.instruments.microepsilon_ild1420.settings.Ild1420Settings`),
+the 3-byte words into samples
+(:class:`~daq.instruments.microepsilon_ild1420.decoder.Ild1420Decoder`), and the unwrapping of
+the 18-bit counter and the 32-bit timestamp with its gaps and restarts
+(:class:`~daq.instruments.microepsilon_ild1420.blocks.Ild1420Sequencer`).
 
 Not responsible for: opening ports (the transport is injected, see
 :mod:`daq.transports.byte_transport`; :meth:`Ild1420Settings.line` gives its serial settings),

@@ -5,9 +5,9 @@ Responsibility: the immutable results of
 (the frames of one read merged over modules, one row per frame number), the :class:`Gap` and
 :class:`ClockStep` records it carries, and the ``module_status`` codes of its rows
 (:data:`STATUS_OK`, :data:`STATUS_MISSING`, :data:`STATUS_VALVE_CAL`). Not responsible for:
-producing them (the driver, :mod:`daq.instruments.scanivalve_mps4264.driver`, which re-exports every
-public name here) or mapping their device times onto the host clock (:mod:`daq.sync.resample`). No
-I/O: frozen dataclasses only.
+producing them (:mod:`daq.instruments.scanivalve_mps4264.merge` and the driver) or mapping their
+device times onto the host clock (:mod:`daq.sync`, through the run writer). No I/O: frozen
+dataclasses only.
 """
 
 from __future__ import annotations

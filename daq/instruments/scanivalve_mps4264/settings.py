@@ -5,7 +5,7 @@ Responsibility: :class:`Mps4264Settings`, the validated ``[scanner]`` table of a
 :data:`MAX_MODULES`, :data:`MAX_MIN_BLOCK_S`): every key is checked with its range, and a bad value
 is a :class:`~daq.errors.ConfigError` naming the key and the range. Not responsible for: applying
 the settings to a scanner (the driver, :mod:`daq.instruments.scanivalve_mps4264.driver`, which
-re-exports every public name here) or reading the rig config file (:mod:`daq.config`). No I/O.
+uses them) or reading the rig config file (:mod:`daq.config`). No I/O.
 """
 
 from __future__ import annotations

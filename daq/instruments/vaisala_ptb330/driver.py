@@ -1,17 +1,17 @@
-"""Vaisala PTB330-class barometer over RS-232 ASCII: settings, line decoder and polled driver.
+"""Vaisala PTB330-class barometer over RS-232 ASCII: the polled driver.
 
-Responsibility: configure the barometer's output format, poll it (``SEND``), decode its ASCII
-lines into static pressure (Pa) and temperature (K) whatever unit the instrument is set to, derive
-the air density, and turn every failure into a specific :mod:`daq.errors` exception after a
-bounded, logged retry. Not responsible for: opening the serial port's URL (the caller builds the
-transport, with :data:`SERIAL_DEFAULTS` as line defaults), scheduling acquisition threads, or
-recording (the driver only returns readings).
+Responsibility: configure the barometer's output format, poll it (``SEND``), have its ASCII lines
+decoded into static pressure (Pa), temperature (K) and air density whatever unit the instrument is
+set to (:mod:`daq.instruments.vaisala_ptb330.decoder`), and turn every failure into a specific
+:mod:`daq.errors` exception after a bounded, logged retry. Its settings are
+:mod:`daq.instruments.vaisala_ptb330.settings`'. Not responsible for: opening the serial port's URL
+(the caller builds the transport, with :data:`SERIAL_DEFAULTS` as line defaults), scheduling
+acquisition threads, or recording (the driver only returns readings).
 
 Wire format (docs/wire_formats.md, "Barometer", manual facts cited inline):
 
-- line settings 9600 baud, 7 data bits, even parity, 1 stop bit, XON/XOFF (the PTB330 integration in
-  docs/wire_formats.md, "Barometer"); commands are ASCII terminated by a carriage return (``<cr>``
-  in the manuals);
+- line settings 9600 baud, 7 data bits, even parity, 1 stop bit, XON/XOFF (a published PTB330
+  integration); commands are ASCII terminated by a carriage return (``<cr>`` in the manuals);
 - the driver sets the output format (``FORM``) to :data:`FORM_STRING`, which makes each reply a
   PTU300-style line (docs/wire_formats.md, "Barometer", PTU300 p.103)::
 
