@@ -39,6 +39,30 @@ def _failed(post_event: PostEvent, kind: str, name: str, requested_ns: int, exc:
                      data={"error": type(exc).__name__, **data}))
 
 
+def _command(name: str, post_event: PostEvent | None, action: Callable[[], object], *, kind: str,
+             text: str, data: dict[str, Any] | None = None, failed: str | None = None,
+             failed_data: dict[str, Any] | None = None) -> Event:
+    """Run ``action`` (a driver call); post its event at the request, or the failure's.
+
+    The event's ``data`` gets ``acknowledged_ns`` (when the call returned). A
+    :class:`~daq.errors.DaqError` posts ``failed`` (default ``"<kind>_failed"``) and is raised
+    again. Nothing is posted when ``post_event`` is None.
+    """
+    requested = time.monotonic_ns()
+    try:
+        action()
+    except DaqError as exc:
+        if post_event is not None:
+            _failed(post_event, failed or f"{kind}_failed", name, requested, exc,
+                    **(failed_data or {}))
+        raise
+    event = Event(kind=kind, host_time_ns=requested, device=name, text=text,
+                  data={**(data or {}), "acknowledged_ns": time.monotonic_ns()})
+    if post_event is not None:
+        post_event(event)
+    return event
+
+
 def marker(kind: str, text: str) -> Event:
     """Return an operator marker event (time: now); refuse an empty or reserved ``kind``."""
     if not isinstance(kind, str) or not kind.strip():
@@ -68,30 +92,12 @@ def release(name: str, driver: Any, post_event: PostEvent) -> Event:
 
 def arm(name: str, driver: Any, post_event: PostEvent) -> Event:
     """Arm the PLC; post ``"arm"`` at the request (the decay is surely free before it)."""
-    requested = time.monotonic_ns()
-    try:
-        driver.arm()
-    except DaqError as exc:
-        _failed(post_event, "arm_failed", name, requested, exc)
-        raise
-    event = Event(kind="arm", host_time_ns=requested, device=name, text="release armed",
-                  data={"acknowledged_ns": time.monotonic_ns()})
-    post_event(event)
-    return event
+    return _command(name, post_event, driver.arm, kind="arm", text="release armed")
 
 
 def disarm(name: str, driver: Any, post_event: PostEvent) -> Event:
     """Disarm the PLC (magnet off, no release permitted); post ``"disarm"`` at the request."""
-    requested = time.monotonic_ns()
-    try:
-        driver.disarm()
-    except DaqError as exc:
-        _failed(post_event, "disarm_failed", name, requested, exc)
-        raise
-    event = Event(kind="disarm", host_time_ns=requested, device=name, text="release disarmed",
-                  data={"acknowledged_ns": time.monotonic_ns()})
-    post_event(event)
-    return event
+    return _command(name, post_event, driver.disarm, kind="disarm", text="release disarmed")
 
 
 def trigger(name: str, driver: Any, post_event: PostEvent) -> Event:
@@ -106,31 +112,15 @@ def trigger(name: str, driver: Any, post_event: PostEvent) -> Event:
 
 def set_fan_speed(name: str, driver: Any, rpm: float, post_event: PostEvent) -> Event:
     """Send the fan's speed reference; post ``"fan_speed"`` at the request, with ``rpm``."""
-    requested = time.monotonic_ns()
-    try:
-        driver.set_speed(rpm)
-    except DaqError as exc:
-        _failed(post_event, "fan_failed", name, requested, exc, command="set_speed", rpm=rpm)
-        raise
-    event = Event(kind="fan_speed", host_time_ns=requested, device=name,
-                  text=f"fan speed reference {rpm:g} rpm",
-                  data={"rpm": rpm, "acknowledged_ns": time.monotonic_ns()})
-    post_event(event)
-    return event
+    return _command(name, post_event, lambda: driver.set_speed(rpm), kind="fan_speed",
+                    text=f"fan speed reference {rpm:g} rpm", data={"rpm": rpm},
+                    failed="fan_failed", failed_data={"command": "set_speed", "rpm": rpm})
 
 
 def start_fan(name: str, driver: Any, post_event: PostEvent) -> Event:
     """Run the fan at its reference; post ``"fan_start"`` at the request."""
-    requested = time.monotonic_ns()
-    try:
-        driver.start()
-    except DaqError as exc:
-        _failed(post_event, "fan_failed", name, requested, exc, command="start")
-        raise
-    event = Event(kind="fan_start", host_time_ns=requested, device=name, text="fan started",
-                  data={"acknowledged_ns": time.monotonic_ns()})
-    post_event(event)
-    return event
+    return _command(name, post_event, driver.start, kind="fan_start", text="fan started",
+                    failed="fan_failed", failed_data={"command": "start"})
 
 
 def stop_fan(name: str, driver: Any, post_event: PostEvent | None) -> Event:
@@ -139,15 +129,5 @@ def stop_fan(name: str, driver: Any, post_event: PostEvent | None) -> Event:
     The engine stops the fan even when it records nothing (not running): a stop must never be
     refused for want of a place to record it.
     """
-    requested = time.monotonic_ns()
-    try:
-        driver.stop()
-    except DaqError as exc:
-        if post_event is not None:
-            _failed(post_event, "fan_failed", name, requested, exc, command="stop")
-        raise
-    event = Event(kind="fan_stop", host_time_ns=requested, device=name, text="fan stopped",
-                  data={"acknowledged_ns": time.monotonic_ns()})
-    if post_event is not None:
-        post_event(event)
-    return event
+    return _command(name, post_event, driver.stop, kind="fan_stop", text="fan stopped",
+                    failed="fan_failed", failed_data={"command": "stop"})
