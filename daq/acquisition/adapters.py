@@ -32,6 +32,9 @@ from daq.acquisition.records import (
 )
 from daq.errors import TransportError, TransportTimeout
 
+__all__ = ["POLL_S", "REQUIRED_METHODS", "Adapter", "LaserAdapter", "PolledAdapter", "Rows",
+           "ScannerAdapter", "make_adapter"]
+
 log = logging.getLogger(__name__)
 
 #: Methods each kind of driver must have (checked at construction, no I/O).

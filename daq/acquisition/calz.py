@@ -35,6 +35,9 @@ from daq.errors import CalzError, DaqError
 if TYPE_CHECKING:
     pass
 
+__all__ = ["RESTART_WAIT_S", "CalzResult", "offsets_summary", "post_calz_failed",
+           "refuse_unsafe_calz", "restart_scan", "run_calz"]
+
 log = logging.getLogger(__name__)
 #: After a CALZ that timed out the scanner may still be zeroing: how long a restart of the scan
 #: keeps trying, s (the manual: a CALZ takes "under 10 seconds").

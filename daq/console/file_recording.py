@@ -28,6 +28,9 @@ from typing import Any, cast
 
 from daq.errors import RecordingError
 
+__all__ = ["PREROLL_S", "RECORDING_TIMEOUT_S", "SLOW_BLOCKS_S", "STOP_CATCH_UP_S", "FileRecording",
+           "Recording"]
+
 log = logging.getLogger(__name__)
 
 #: A recording's file writer is first fed this much of the blocks already delivered, s: every

@@ -20,6 +20,8 @@ import numpy as np
 
 from daq.console.ring_buffer import RingBuffer
 
+__all__ = ["RingRecorder"]
+
 
 class RingRecorder:
     """What :class:`~daq.recording.writer.RunWriter` writes into, for a live view: no file.

@@ -22,6 +22,8 @@ from typing import Any
 
 import numpy as np
 
+__all__ = ["ReprocessSummary", "write_outputs"]
+
 
 @dataclass
 class ReprocessSummary:

@@ -65,6 +65,13 @@ import h5py
 import numpy as np
 import numpy.typing as npt
 
+__all__ = ["CLOCK_MODEL", "EVENT_DTYPE", "EVENT_KIND_BYTES", "EVENT_TEXT_BYTES", "EXTRA_DTYPES",
+           "GAP_DTYPE", "GAP_FILL", "GZIP_LEVEL", "MAX_CHUNK_BYTES", "NAME_PATTERN",
+           "RELEASE_DTYPE", "RELEASE_UNITS", "SYNC_COLUMNS", "VALUE_DTYPES", "append_rows",
+           "check_name", "create_column", "create_stream", "create_sync", "event_row", "fill_value",
+           "metadata_name_part", "now_iso", "read_sync", "storable_metadata", "str_array",
+           "validate_metadata", "windrig_version", "write_metadata", "write_skeleton"]
+
 #: Row of ``/entry/instrument/<device>/gaps``.
 GAP_DTYPE = np.dtype([("after_counter", "<i8"), ("length", "<i8")])
 

@@ -23,6 +23,8 @@ import numpy.typing as npt
 
 from daq.recording.recorder import Recorder
 
+__all__ = ["HOLD_WINDOW_S", "ReleaseRows"]
+
 FloatArray = npt.NDArray[np.float64]
 
 #: Window of the held position before a release (h0, alpha0): [t - 0.3 s, t - 0.05 s].

@@ -18,6 +18,8 @@ import numpy as np
 
 from daq.recording.recorder import RunRecorder
 
+__all__ = ["write_release_run"]
+
 
 def write_release_run(path: str | Path, config: Any, releases: Sequence[Any]) -> None:
     """Write releases back to back into a run file, with the acquisition's own recorder.

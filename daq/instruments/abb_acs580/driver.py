@@ -48,7 +48,7 @@ from daq.instruments.abb_acs580.settings import AbbAcs580Settings
 from daq.instruments.entry import DriverEntry
 from daq.transports.modbus import RegisterBus, to_int16
 
-__all__ = ["AbbAcs580",]
+__all__ = ["DRIVER", "AbbAcs580"]
 
 
 class AbbAcs580:

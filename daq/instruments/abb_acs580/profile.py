@@ -13,6 +13,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+__all__ = ["CW_COAST", "CW_PREPARE", "CW_RESET_BIT", "CW_RUN", "FULL_SCALE", "DriveStatus"]
+
 #: Control Word values (docs/wire_formats.md, "Fan drive") and the RESET bit (ABB Drives profile CW
 #: bit 7).
 CW_PREPARE = 0x0476

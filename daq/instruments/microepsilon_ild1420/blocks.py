@@ -26,6 +26,8 @@ from daq.instruments.microepsilon_ild1420.decoder import (
     error_reason,
 )
 
+__all__ = ["Gap", "Ild1420Sequencer", "LaserBlock"]
+
 BoolArray = npt.NDArray[np.bool_]
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]

@@ -22,6 +22,10 @@ import numpy.typing as npt
 
 from daq.instruments.microepsilon_ild1420.settings import DEFAULT_OUTPUT, RANGES_MM, WORDS_PER_VALUE
 
+__all__ = ["COUNTER_MODULUS", "ERROR_CODES", "FIRST_ERROR_VALUE", "MAX_DISTANCE_16",
+           "STATUS_TRIGGERED", "TIMESTAMP_MODULUS", "TIMESTAMP_TICK_S", "Ild1420Decoder",
+           "Ild1420Samples", "error_reason"]
+
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 

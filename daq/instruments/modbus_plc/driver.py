@@ -35,7 +35,7 @@ from daq.instruments.entry import DriverEntry
 from daq.instruments.modbus_plc.settings import ModbusPlcSettings
 from daq.transports.modbus import RegisterBus
 
-__all__ = ["ModbusPlc", "ReleaseTiming"]
+__all__ = ["DRIVER", "POLL_S", "ModbusPlc", "ReleaseTiming"]
 
 #: Interval between polls of RELEASED while a release is confirmed, s.
 POLL_S = 0.002

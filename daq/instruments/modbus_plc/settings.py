@@ -16,6 +16,8 @@ from typing import Any
 from daq.errors import ConfigError
 from daq.validation import check_keys, number
 
+__all__ = ["ModbusPlcSettings"]
+
 
 def _addresses(table: Any, where: str, names: tuple[str, ...]) -> dict[str, int]:
     check_keys(table, where, set(names))

@@ -80,11 +80,6 @@ from daq.errors import (
 )
 from daq.instruments.entry import DriverEntry
 from daq.instruments.scanivalve_mps4264.blocks import (
-    STATUS_MISSING,
-    STATUS_OK,
-    STATUS_VALVE_CAL,
-    ClockStep,
-    Gap,
     ScanBlock,
 )
 from daq.instruments.scanivalve_mps4264.frames import (
@@ -104,21 +99,7 @@ from daq.instruments.scanivalve_mps4264.streams import (
 )
 from daq.transports.byte_transport import Transport, open_transport
 
-__all__ = [
-    "CHANNELS_PER_MODULE",
-    "MAX_RATE_HZ",
-    "STATUS_MISSING",
-    "STATUS_OK",
-    "STATUS_VALVE_CAL",
-    "TEMPERATURES_PER_MODULE",
-    "ClockStep",
-    "Gap",
-    "Mps4264Decoder",
-    "Mps4264Settings",
-    "PacketBatch",
-    "ScanBlock",
-    "ScanivalveMps4264",
-]
+__all__ = ["DRIVER", "ScanivalveMps4264"]
 
 log = logging.getLogger(__name__)
 
@@ -126,11 +107,6 @@ log = logging.getLogger(__name__)
 #: Longest single wait on one data connection inside :meth:`ScanivalveMps4264.read_block`, s:
 #: the other modules are polled at least this often.
 _MAX_WAIT_S = 0.05
-
-
-# ------------------------------------------------------------------------------------------------
-# Per-module stream state
-# ------------------------------------------------------------------------------------------------
 
 
 # ------------------------------------------------------------------------------------------------

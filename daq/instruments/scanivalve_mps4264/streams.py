@@ -28,6 +28,8 @@ from daq.instruments.scanivalve_mps4264.frames import (
 )
 from daq.transports.byte_transport import Transport
 
+__all__ = ["KEY_BITS", "KEY_MASK", "ModuleStream", "aligned"]
+
 log = logging.getLogger(__name__)
 
 KEY_BITS = 40  # unwrapped counter bits within one counter epoch (2^40 frames ~ 17 years at 2 kHz)

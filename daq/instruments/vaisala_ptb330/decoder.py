@@ -21,6 +21,10 @@ from dataclasses import dataclass
 
 from daq.errors import ProtocolError
 
+__all__ = ["MAX_LINE_BYTES", "PRESSURE_RANGE_PA", "PRESSURE_UNITS_PA", "R_DRY_AIR",
+           "TEMPERATURE_RANGE_K", "BarometerReading", "Ptb330BadLine", "Ptb330Line",
+           "Ptb330LineDecoder", "parse_line", "reading_from_line"]
+
 #: Gas constant of dry air, J/(kg K).
 R_DRY_AIR = 287.058
 

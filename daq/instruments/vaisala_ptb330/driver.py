@@ -55,11 +55,7 @@ from daq.instruments.vaisala_ptb330.decoder import (
 from daq.instruments.vaisala_ptb330.settings import Ptb330Settings
 from daq.transports.byte_transport import Transport
 
-__all__ = [
-    "FORM_STRING",
-    "SERIAL_DEFAULTS",
-    "VaisalaPtb330",
-]
+__all__ = ["DRIVER", "FORM_STRING", "SERIAL_DEFAULTS", "VaisalaPtb330"]
 
 logger = logging.getLogger(__name__)
 
@@ -74,21 +70,6 @@ SERIAL_DEFAULTS: Mapping[str, Any] = {
 #: ``FORM`` examples: ``"..."`` string constant, ``x.y`` length modifier, ``U6`` unit field of
 #: 6 characters, ``#r #n`` CR LF). [unverified] exact field widths; the decoder ignores spacing.
 FORM_STRING = '"P=" 6.3 P " " U6 "T=" 3.2 TP1 " " U3 #r #n'
-
-
-# ------------------------------------------------------------------------------------------
-# Pure decoding
-# ------------------------------------------------------------------------------------------
-
-
-# ------------------------------------------------------------------------------------------
-# Readings
-# ------------------------------------------------------------------------------------------
-
-
-# ------------------------------------------------------------------------------------------
-# Settings
-# ------------------------------------------------------------------------------------------
 
 
 # ------------------------------------------------------------------------------------------

@@ -17,6 +17,8 @@ from typing import Any
 from daq.errors import ConfigError
 from daq.validation import check_keys, number
 
+__all__ = ["Ptb330Settings"]
+
 
 @dataclass(frozen=True)
 class Ptb330Settings:
