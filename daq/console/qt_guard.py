@@ -29,7 +29,7 @@ def _affected() -> bool:
     if sys.implementation.name != "cpython" or sys.version_info >= (3, 12):
         return False
     try:
-        import shiboken6
+        import shiboken6  # Qt's binding: loaded only where the guard is asked for
     except ImportError:
         return False
     return str(getattr(shiboken6, "__version__", "")).startswith("6.12.0")

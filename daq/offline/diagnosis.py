@@ -94,7 +94,7 @@ def _as_json(report: Any, files: Sequence[Path]) -> dict[str, Any]:
 
 
 def _plots(out: Path, releases: list[Any], report: Any, section: Any) -> dict[str, Path]:
-    import matplotlib
+    import matplotlib  # here: the backend is chosen before pyplot loads, only when plotting
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

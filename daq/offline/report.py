@@ -130,7 +130,7 @@ def _campaign_plots(out: Path, name: str, campaign: dict[str, Any],
     flutter speed marked: where the model and the decays agree, and how far the prediction
     reaches beyond the measured wind speeds.
     """
-    import matplotlib
+    import matplotlib  # here: the backend is chosen before pyplot loads, only when plotting
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

@@ -247,7 +247,7 @@ def _plots(out: Path, releases: list[Release], section: SectionModel,
            model: RationalFunctionModel, truth_section: SectionModel,
            truth_model: RationalFunctionModel, identified: flutter.FlutterResult,
            truth: flutter.FlutterResult) -> dict[str, Path]:
-    import matplotlib
+    import matplotlib  # here: the backend is chosen before pyplot loads, only when plotting
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
