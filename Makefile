@@ -42,7 +42,7 @@ demo: setup
 # The README's picture of the live console (a simulated session, three automatic releases).
 screenshot: setup
 	$(VENV)/bin/windrig gui --config rig_configs/sim_flat_plate.toml --simulate \
-	    --auto-release 550,700,850 --screenshot daq/console_screenshot.png --after 31 \
+	    --auto-release 550,700,850 --screenshot docs/console_screenshot.png --after 31 \
 	    --size 1600 1000
 
 setup: $(STAMP) qt-libs

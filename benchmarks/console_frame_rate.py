@@ -2,17 +2,16 @@
 
 What is measured
 ----------------
-The real console: :class:`daq.live.ConsoleWindow` (1280 x 800, 20 s window, its own
-``QTimer`` of ``daq.live.FRAME_MS``) under Qt's ``offscreen`` platform, polling the source
-``windrig gui`` uses, a :class:`daq.acquisition_process.ProcessLiveSource`: the real drivers,
-engine and :class:`~daq.pipeline.RunWriter` run in a child process (the *acquisition process*)
-and hand the synchronised rows over shared memory; the simulated instruments run in that
-child's own child (:mod:`daq.rig_process`), on the same two cores. The ``threads`` run puts the
-acquisition back into this process as threads (:class:`daq.live_source.LiveSource`), for
-comparison. The fan runs
-(``--fan-rpm``, 800 rpm = 8 m/s by default, ramped fast) so that pressures, Cp, lift and moment
-move, and a helper thread arms and releases the model through ``source.acq`` every
-``RELEASE_EVERY_S`` so that the traces show free decays. Rigs:
+The real console: :class:`daq.console.window.ConsoleWindow` (1280 x 800, 20 s window, its own
+``QTimer`` of ``daq.console.window.FRAME_MS``) under Qt's ``offscreen`` platform, polling the source
+``windrig gui`` uses, a :class:`daq.console.process_source.ProcessLiveSource`: the real drivers,
+engine and :class:`~daq.recording.writer.RunWriter` run in a child process (the *acquisition
+process*) and hand the synchronised rows over shared memory; the simulated instruments run in that
+child's own child (:mod:`daq.sim.rig_process`), on the same two cores. The ``threads`` run puts the
+acquisition back into this process as threads (:class:`daq.console.live_source.LiveSource`), for
+comparison. The fan runs (``--fan-rpm``, 800 rpm = 8 m/s by default, ramped fast) so that pressures,
+Cp, lift and moment move, and a helper thread arms and releases the model through ``source.acq``
+every ``RELEASE_EVERY_S`` so that the traces show free decays. Rigs:
 
 - ``sim_flat_plate.toml`` as shipped: 1 scanner module, 62 taps + the Pitot.
 - The same rig widened to 8 scanner modules x 64 channels: **511 taps + the Pitot** (512
@@ -22,10 +21,10 @@ move, and a helper thread arms and releases the model through ``source.acq`` eve
   with the plate's B x D corners: the ``rectangle`` shape makes 2 n + 2 (n // 8) taps, 510 at
   most). The TOML text is built here and parsed by :func:`daq.config.parse_rig_config`.
 - Optionally (``--runs ...,replay``, on by default) a run of the 511-tap rig recorded first with
-  :func:`daq.pipeline.record_run` and played back in real time by
-  :class:`daq.replay.ReplaySource`: the console's own cost without acquisition in the process.
-  The same file is also played with ``frame_ms = 0`` (the timer fires whenever Qt is idle, and
-  a replay has new rows at every poll): the most frames/s the GUI thread can draw, i.e. the
+  :func:`daq.recording.run.record_run` and played back in real time by
+  :class:`daq.console.replay.ReplaySource`: the console's own cost without acquisition in the
+  process. The same file is also played with ``frame_ms = 0`` (the timer fires whenever Qt is idle,
+  and a replay has new rows at every poll): the most frames/s the GUI thread can draw, i.e. the
   headroom above the 20 frames/s target.
 
 What a "frame" is
@@ -88,12 +87,12 @@ import numpy as np  # noqa: E402
 import pyqtgraph as pg  # noqa: E402
 from PySide6 import QtCore, QtGui, QtWidgets  # noqa: E402
 
-from daq.acquisition_process import ProcessLiveSource  # noqa: E402
 from daq.config import RigConfig, parse_rig_config  # noqa: E402
-from daq.live import FRAME_MS, ConsoleWindow  # noqa: E402
-from daq.live_source import LiveSource  # noqa: E402
-from daq.replay import ReplaySource  # noqa: E402
-from daq.source import DataSource  # noqa: E402
+from daq.console.live_source import LiveSource  # noqa: E402
+from daq.console.process_source import ProcessLiveSource  # noqa: E402
+from daq.console.replay import ReplaySource  # noqa: E402
+from daq.console.source import DataSource  # noqa: E402
+from daq.console.window import FRAME_MS, ConsoleWindow  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 BASE_CONFIG = ROOT / "rig_configs" / "sim_flat_plate.toml"
@@ -561,7 +560,7 @@ def run_live(label: str, config: RigConfig, args: argparse.Namespace,
 
 def record_file(config: RigConfig, path: Path, duration_s: float, fan_rpm: float) -> None:
     """Record a simulated run of ``config`` (fan on, releases cycling) for the replay runs."""
-    from daq.pipeline import record_run
+    from daq.sim.recording import record_simulated_run
 
     def actions(acq: Any, rig: Any) -> None:
         fan = acq.drivers["fan"]
@@ -575,8 +574,7 @@ def record_file(config: RigConfig, path: Path, duration_s: float, fan_rpm: float
         finally:
             timer.cancel()
 
-    record_run(config, path, duration_s=duration_s, simulate=True, actions=actions,
-               progress=False)
+    record_simulated_run(config, path, duration_s=duration_s, actions=actions, progress=False)
 
 
 def run_replay(label: str, path: Path, args: argparse.Namespace, frame_ms: int,

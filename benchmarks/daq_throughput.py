@@ -9,20 +9,20 @@ it:
 
 1. **Decode** (the reader threads' work): the real drivers (:class:`ScanivalveMps4264`,
    :class:`MicroEpsilonIld1420`) read in-memory transports through the engine's own adapters
-   (``daq.device_reader._make_adapter``), one driver read per :class:`StreamBlock`: the scanner
-   gets one legacy 0x0A packet per frame per module and is read after every frame (on a rig
-   that keeps up, ``read_block`` returns as soon as every module has sent the frame), the
-   lasers are read every ``--laser-block`` samples (100 by default: the driver drains
-   ``DRAIN_S`` = 20 ms after the first byte, i.e. 80 samples plus what arrived meanwhile; the
-   pipeline sizes its clock windows for 20 laser blocks per 0.5 s, the same 100).
+   (``daq.acquisition.adapters.make_adapter``), one driver read per :class:`StreamBlock`: the
+   scanner gets one legacy 0x0A packet per frame per module and is read after every frame (on a rig
+   that keeps up, ``read_block`` returns as soon as every module has sent the frame), the lasers are
+   read every ``--laser-block`` samples (100 by default: the driver drains ``DRAIN_S`` = 20 ms after
+   the first byte, i.e. 80 samples plus what arrived meanwhile; the pipeline sizes its clock windows
+   for 20 laser blocks per 0.5 s, the same 100).
 2. **RunWriter** (the dispatcher thread's work): every block, as a ``"block"`` doc, into
-   :class:`daq.pipeline.RunWriter`: clock maps, the :class:`~daq.sync.Resampler`, h and alpha
-   from the lasers, lift and moment from the 511 taps, U from the Pitot, raw and synchronised
-   rows into the HDF5 file through :class:`~daq.recorder.RunRecorder` (gzip 1 + shuffle,
-   chunked, SWMR), plus the PLC's ``"arm"`` and ``"release"`` events of every template loop.
-   RunWriter appends every 0.2 s and the recorder flushes every 1 s of *wall* time, so in a
-   replay faster than real time each append holds more data (as when a real run catches up
-   after a stall).
+   :class:`daq.recording.writer.RunWriter`: clock maps, the :class:`~daq.sync.resample.Resampler`, h
+   and alpha from the lasers, lift and moment from the 511 taps, U from the Pitot, raw and
+   synchronised rows into the HDF5 file through :class:`~daq.recording.recorder.RunRecorder` (gzip 1
+   + shuffle, chunked, SWMR), plus the PLC's ``"arm"`` and ``"release"`` events of every template
+   loop. RunWriter appends every 0.2 s and the recorder flushes every 1 s of *wall* time, so in a
+   replay faster than real time each append holds more data (as when a real run catches up after a
+   stall).
 3. **Plain h5py append** (the limit): the same datasets (final sizes, dtypes, chunks,
    compression, SWMR) appended with ``resize`` + slice assignment, in as many equal batches as
    RunWriter wrote, with no decoding and no synchronisation, from rows read back from our own
@@ -78,13 +78,15 @@ import numpy as np  # noqa: E402
 import numpy.typing as npt  # noqa: E402
 from threadpoolctl import threadpool_limits  # noqa: E402
 
-from daq import device_reader  # noqa: E402
-from daq.acquisition import Event, StreamBlock  # noqa: E402
+from daq.acquisition import adapters  # noqa: E402
+from daq.acquisition.records import Event, StreamBlock  # noqa: E402
 from daq.config import RigConfig, parse_rig_config  # noqa: E402
 from daq.errors import TransportError, TransportTimeout  # noqa: E402
-from daq.microepsilon_ild1420 import Ild1420Settings, MicroEpsilonIld1420  # noqa: E402
-from daq.pipeline import RunWriter  # noqa: E402
-from daq.scanivalve_mps4264 import Mps4264Settings, ScanivalveMps4264  # noqa: E402
+from daq.instruments.microepsilon_ild1420.driver import MicroEpsilonIld1420  # noqa: E402
+from daq.instruments.microepsilon_ild1420.settings import Ild1420Settings  # noqa: E402
+from daq.instruments.scanivalve_mps4264.driver import ScanivalveMps4264  # noqa: E402
+from daq.instruments.scanivalve_mps4264.settings import Mps4264Settings  # noqa: E402
+from daq.recording.writer import RunWriter  # noqa: E402
 from simulators.clock import DeviceClock, ManualClock  # noqa: E402
 from simulators.devices.microepsilon_ild1420 import SimMicroEpsilonIld1420  # noqa: E402
 from simulators.devices.scanivalve_mps4264 import _words_legacy  # noqa: E402
@@ -442,7 +444,7 @@ class Device:
 def build_devices(config: RigConfig) -> dict[str, Device]:
     """Build the real drivers on replay transports, opened and scanning as the engine leaves them.
 
-    The engine's own adapter (``daq.device_reader._make_adapter``) opens them, starts the scan
+    The engine's own adapter (``daq.acquisition.adapters.make_adapter``) opens them, starts the scan
     (configure + SCAN) and turns each driver read into the rows of a :class:`StreamBlock`.
     """
     devices: dict[str, Device] = {}
@@ -452,14 +454,14 @@ def build_devices(config: RigConfig) -> dict[str, Device]:
     scanner = ScanivalveMps4264(CommandTransport("replay://scanner", ScannerCommands()), settings,
                                 data_transports=data)
     devices[inst.name] = Device(inst.name, "scanner", scanner, data,
-                                device_reader._make_adapter("scanner", scanner,
+                                adapters.make_adapter("scanner", scanner,
                                                             poll_interval_s=None,
                                                             read_timeout_s=1.0))
     for inst in config.by_role("lasers"):
         line = CommandTransport(f"replay://{inst.name}", laser_commands)
         laser = MicroEpsilonIld1420(line, Ild1420Settings.from_table(inst.settings, inst.name))
         devices[inst.name] = Device(inst.name, "laser", laser, [line],
-                                    device_reader._make_adapter("laser", laser,
+                                    adapters.make_adapter("laser", laser,
                                                                 poll_interval_s=None,
                                                                 read_timeout_s=1.0))
     for dev in devices.values():

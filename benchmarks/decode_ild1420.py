@@ -20,18 +20,16 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 
 from daq.errors import TransportTimeout  # noqa: E402
-from daq.microepsilon_ild1420 import (  # noqa: E402
-    Ild1420Decoder,
-    Ild1420Settings,
-    MicroEpsilonIld1420,
-)
+from daq.instruments.microepsilon_ild1420.decoder import Ild1420Decoder
+from daq.instruments.microepsilon_ild1420.driver import MicroEpsilonIld1420
+from daq.instruments.microepsilon_ild1420.settings import Ild1420Settings
 
 RATE_HZ = 4000.0
 SECONDS = 10.0
 
 
 def stream(n: int, seed: int = 0) -> bytes:
-    """Encode n blocks (DEVICES.md A.2.1): L = 00 D5..D0, M = 01 D11..D6, H = 1 f D17..D12."""
+    """Encode n blocks (docs/wire_formats.md, "Lasers"): L, M and H bytes of 18-bit words."""
     rng = np.random.default_rng(seed)
     k = np.arange(n)
     ticks = 25 * k + 123456

@@ -21,7 +21,7 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from daq.vaisala_ptb330 import (  # noqa: E402
+from daq.instruments.vaisala_ptb330.decoder import (
     Ptb330Line,
     Ptb330LineDecoder,
     parse_line,

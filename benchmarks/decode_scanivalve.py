@@ -21,8 +21,10 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 
 from daq.errors import TransportTimeout  # noqa: E402
-from daq.scanivalve_mps4264 import Mps4264Decoder, Mps4264Settings, ScanivalveMps4264  # noqa: E402
-from daq.testing import ScriptedTransport  # noqa: E402
+from daq.instruments.scanivalve_mps4264.driver import ScanivalveMps4264
+from daq.instruments.scanivalve_mps4264.frames import Mps4264Decoder
+from daq.instruments.scanivalve_mps4264.settings import Mps4264Settings
+from daq.transports.scripted import ScriptedTransport  # noqa: E402
 
 RATE_HZ = 500.0
 SECONDS = 10.0

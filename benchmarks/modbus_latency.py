@@ -1,7 +1,7 @@
 """Modbus round-trip latency and poll rates of the fan drive and PLC drivers (not a test).
 
-The drivers talk to their simulators (pymodbus TCP servers on 127.0.0.1, each in its own thread
-and asyncio loop) through :class:`daq.modbus.ModbusBus`, so the figures are pymodbus client +
+The drivers talk to their simulators (pymodbus TCP servers on 127.0.0.1, each in its own thread and
+asyncio loop) through :class:`daq.transports.modbus.ModbusBus`, so the figures are pymodbus client +
 loopback TCP + pymodbus server + simulator logic, on this machine. A real drive adds its own
 response time (typically a few ms on Modbus TCP), which these figures do not include.
 
@@ -27,9 +27,11 @@ from collections.abc import Callable  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from daq.abb_acs580 import AbbAcs580, AbbAcs580Settings  # noqa: E402
-from daq.modbus import ModbusBus  # noqa: E402
-from daq.modbus_plc import ModbusPlc, ModbusPlcSettings  # noqa: E402
+from daq.instruments.abb_acs580.driver import AbbAcs580
+from daq.instruments.abb_acs580.settings import AbbAcs580Settings
+from daq.instruments.modbus_plc.driver import ModbusPlc
+from daq.instruments.modbus_plc.settings import ModbusPlcSettings
+from daq.transports.modbus import ModbusBus  # noqa: E402
 from ident import SectionModel, TapLayout, flat_plate  # noqa: E402
 from simulators.devices.abb_acs580 import SimAbbAcs580  # noqa: E402
 from simulators.devices.modbus_plc import SimModbusPlc  # noqa: E402

@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from daq.config import parse_rig_config
-from daq.reprocess import reprocess
-from daq.testing import write_release_run
+from daq.offline.reprocess import reprocess
+from daq.recording.synthetic import write_release_run
 from ident import flat_plate, flutter
 from ident.release import Release
 from simulators.campaigns import HOLDS, SECTION

@@ -1,4 +1,17 @@
-"""windrig data acquisition: drivers, transports, synchronisation, HDF5 recording, operator GUI.
+"""windrig's rig side: transports, drivers, acquisition, synchronisation, recording, console.
 
-For now it holds the command line (:mod:`daq.cli`); the acquisition layers arrive with their issues.
+One subpackage per concern (``docs/architecture.md`` has the tree and the import rules):
+
+- :mod:`daq.transports`: bytes and registers from URLs (serial, TCP, Modbus), scripted fakes;
+- :mod:`daq.instruments`: the driver registry, ``build_driver`` and one subpackage per device;
+- :mod:`daq.acquisition`: the engine (reader threads, dispatcher, operator commands, CALZ);
+- :mod:`daq.sync`: clock maps, counters, resampling, physical conversions (numerics only);
+- :mod:`daq.recording`: the HDF5 run file, the run writer, ``record_run``;
+- :mod:`daq.console`: the operator console (``windrig gui``);
+- :mod:`daq.sim`: the simulated rig, its truth checks, the campaign and ``windrig demo``;
+- :mod:`daq.offline`: recorded files again (``windrig reprocess``, ``windrig diagnose``).
+
+Modules of their own: :mod:`daq.errors` (every exception of daq), :mod:`daq.validation` (checks
+of TOML tables), :mod:`daq.config` (rig configs), :mod:`daq.procedure` (hold and decay times)
+and :mod:`daq.cli` (the ``windrig`` command line).
 """

@@ -1,7 +1,13 @@
 """The ``windrig`` command line: the operator's and the reprocessing engineer's entry point.
 
 Each subcommand is a thin shell over library calls: argument parsing, printing and file output
-live here, numerics live in :mod:`ident` and physics in :mod:`simulators`.
+live here, numerics live in :mod:`ident` and physics in :mod:`simulators`. Each subcommand
+imports what it needs when it runs, so that ``windrig --help`` or ``windrig flutter`` start
+without Qt, h5py, Dask or the simulators.
+
+``windrig acquire --simulate`` is the one place that decides to start simulators for a
+recording: it hands the rig to :func:`daq.sim.recording.record_simulated_run`; without
+``--simulate`` the rig's real URLs go to :func:`daq.recording.run.record_run`.
 """
 
 from __future__ import annotations
@@ -15,8 +21,6 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-
-from daq import demo
 
 __all__ = ["main"]
 
@@ -151,7 +155,7 @@ def _rpm_list(text: str) -> tuple[float, ...]:
 
 
 def _gui(args: argparse.Namespace) -> int:
-    from daq.console import GuiOptions, run_gui
+    from daq.console.app import GuiOptions, run_gui
 
     return run_gui(GuiOptions(replay=args.replay, config=args.config, simulate=args.simulate,
                               fan_rpm=args.fan_rpm, speed=args.speed, window_s=args.window,
@@ -162,7 +166,8 @@ def _gui(args: argparse.Namespace) -> int:
 
 def _acquire(args: argparse.Namespace) -> int:
     from daq.config import load_rig_config
-    from daq.pipeline import record_run
+    from daq.recording.run import record_run
+    from daq.sim.recording import record_simulated_run
 
     config = load_rig_config(args.config)
     if not args.simulate:
@@ -171,11 +176,13 @@ def _acquire(args: argparse.Namespace) -> int:
             print(f"error: {args.config}: instrument(s) {auto} have url = 'auto' (a simulated "
                   "rig): pass --simulate, or give their real URLs", file=sys.stderr)
             return 2
-    from daq.recorder import StorageError, failed_writes
+    from daq.errors import StorageError
+    from daq.recording.recorder import failed_writes
 
     try:
-        summary = record_run(config, args.out, duration_s=args.duration, simulate=args.simulate,
-                             operator_notes=args.notes, progress=sys.stderr.isatty())
+        record = record_simulated_run if args.simulate else record_run
+        summary = record(config, args.out, duration_s=args.duration, operator_notes=args.notes,
+                         progress=sys.stderr.isatty())
     except StorageError as exc:
         print(f"error: {exc}", file=sys.stderr)
         if failed_writes():  # HDF5 would crash the process at exit (h5py#914)
@@ -208,7 +215,7 @@ def _acquire(args: argparse.Namespace) -> int:
 
 def _simulate(args: argparse.Namespace) -> int:
     from daq.config import load_rig_config
-    from daq.simulated_rig import start_simulated_rig
+    from daq.sim.rig import start_simulated_rig
 
     config = load_rig_config(args.config)
     with start_simulated_rig(config, serial=args.serial) as rig:
@@ -274,7 +281,7 @@ def _identify(args: argparse.Namespace) -> int:
 
 
 def _reprocess(args: argparse.Namespace) -> int:
-    from daq.reprocess import ReprocessSettings, load_reprocess_config, reprocess
+    from daq.offline.reprocess import ReprocessSettings, load_reprocess_config, reprocess
 
     try:
         settings = ReprocessSettings()
@@ -328,6 +335,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``windrig`` command line; returns the process exit code."""
     args = _build_parser().parse_args(argv)
     if args.command == "demo":
+        from daq.sim import demo
+
         return demo.run(args.out, args.config)
     if args.command == "flutter":
         return _flutter(args)
@@ -338,7 +347,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command == "reprocess":
         return _reprocess(args)
     if args.command == "diagnose":
-        from daq.diagnosis import run_diagnose
+        from daq.offline.diagnosis import run_diagnose
 
         return run_diagnose(args.files, args.out, depth=args.depth, json_path=args.json)
     if args.command == "acquire":

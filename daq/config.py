@@ -6,14 +6,13 @@ safety limits, the tunnel calibration, the instruments (each a ``driver`` name, 
 table rejects unknown keys and names missing ones; every number is range-checked; each error is a
 :class:`~daq.errors.ConfigError` whose message names the key (``[section] m``) and the allowed
 range. Instrument settings are validated by the settings class each driver registers
-(:mod:`daq.registry`), so a driver owns its own keys.
+(:mod:`daq.instruments.registry`), so a driver owns its own keys.
 
 The TOML text is kept verbatim (it goes into every HDF5 file as ``/entry/config``).
 """
 
 from __future__ import annotations
 
-import math
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -21,6 +20,9 @@ from pathlib import Path
 from typing import Any
 
 from daq.errors import ConfigError
+from daq.instruments import registry
+from daq.validation import check_keys, number
+from ident.flat_plate import jones_model
 from ident.rfc import RationalFunctionModel
 from ident.section import SectionModel
 from ident.taps import TapLayout
@@ -30,46 +32,12 @@ __all__ = [
     "Limits",
     "RigConfig",
     "SimulationConfig",
-    "check_keys",
     "load_rig_config",
-    "number",
     "parse_rig_config",
 ]
 
-#: Instrument roles a rig may have (DESIGN.md, "Instruments").
+#: Instrument roles a rig may have (docs/wire_formats.md, "Transports and URLs").
 ROLES = ("scanner", "lasers", "fan", "plc", "barometer")
-
-
-def check_keys(table: Mapping[str, Any], where: str, required: set[str],
-               optional: set[str] = frozenset()) -> None:  # type: ignore[assignment]
-    """Raise ConfigError naming unknown keys and missing required keys of a table."""
-    if not isinstance(table, Mapping):
-        raise ConfigError(f"{where} must be a table, got {type(table).__name__}")
-    unknown = sorted(set(table) - required - set(optional))
-    missing = sorted(required - set(table))
-    if unknown:
-        allowed = sorted(required | set(optional))
-        raise ConfigError(f"{where}: unknown key(s) {unknown}; allowed keys: {allowed}")
-    if missing:
-        raise ConfigError(f"{where}: missing required key(s) {missing}")
-
-
-def number(table: Mapping[str, Any], key: str, where: str, *, lo: float = -math.inf,
-           hi: float = math.inf, lo_open: bool = False, default: float | None = None) -> float:
-    """Read a finite number in ``[lo, hi]`` (``(lo, hi]`` if ``lo_open``) or raise ConfigError."""
-    if key not in table:
-        if default is None:
-            raise ConfigError(f"{where}: missing required key {key!r}")
-        return default
-    value = table[key]
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ConfigError(f"{where} {key} must be a number, got {value!r}")
-    x = float(value)
-    ok = math.isfinite(x) and (lo < x if lo_open else lo <= x) and x <= hi
-    if not ok:
-        left = "(" if lo_open else "["
-        raise ConfigError(f"{where} {key} = {x!r} is outside the allowed range {left}{lo}, {hi}]")
-    return x
 
 
 @dataclass(frozen=True)
@@ -154,8 +122,6 @@ class RigConfig:
         if self.simulation is None:
             raise ConfigError(f"{self.source}: not a simulated rig (no [simulation] table)")
         if self.simulation.aerodynamics == "flat_plate_jones":
-            from ident.flat_plate import jones_model
-
             return jones_model()
         assert self.simulation.rfc is not None  # checked when parsed
         return RationalFunctionModel.from_dict(dict(self.simulation.rfc))
@@ -243,8 +209,6 @@ def _section(table: Mapping[str, Any], where: str) -> tuple[SectionModel, float]
 
 
 def _instruments(data: Mapping[str, Any], source: str) -> tuple[InstrumentConfig, ...]:
-    from daq import registry  # late: drivers register themselves on import
-
     out: list[InstrumentConfig] = []
     for role in ROLES:
         if role not in data:

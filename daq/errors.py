@@ -1,18 +1,52 @@
-"""Exceptions raised by the acquisition side (drivers, transports, configuration).
+"""Every exception daq raises, in one place: the error boundary of the acquisition side.
 
-One error channel: every failure of a device, a transport or a configuration surfaces as one of
-these, each also a builtin (``ValueError``, ``ConnectionError``, ``TimeoutError``) so that generic
-callers can catch it too (STYLE.md, "Errors"). Messages name the device, the key or the bytes.
+One error channel: every failure of a device, a transport, a configuration, a recording or the
+console's acquisition surfaces as one of these, each also a builtin (``ValueError``,
+``ConnectionError``, ``TimeoutError``, ``OSError``, ``RuntimeError``) so that generic callers can
+catch it too. Messages name the device, the key or the bytes. No other module of daq defines an
+exception class (``tests/daq/test_architecture.py`` checks it).
+
+The tree::
+
+    DaqError(Exception)
+    ├── ConfigError(ValueError)          bad or unknown key, value out of its range
+    ├── TransportError(ConnectionError)  a link cannot be opened, or failed in use
+    │   └── TransportTimeout(TimeoutError)
+    ├── ProtocolError                    bytes that do not follow the device's protocol
+    ├── DeviceError                      the device reported an error
+    │   └── ModbusDeviceError            ... as a Modbus exception response (code, function)
+    ├── SafetyError(ValueError)          a command refused by a safety limit or interlock
+    ├── SyncError(ValueError)            a synchronisation step with no answer yet
+    ├── CalzError(RuntimeError)          a CALZ during a run failed after the scan stopped
+    ├── RecorderError                    the run file writer
+    │   ├── StorageError(OSError)        the file cannot be created or written (errno set)
+    │   │   └── InsufficientSpaceError   too little free space
+    │   └── RecorderStateError(RuntimeError)  a call out of the writer's order
+    ├── RecordingError(RuntimeError)     a console recording request that cannot be served now
+    ├── ReplayError(ValueError)          a run file that cannot be replayed
+    ├── AcquisitionProcessError(RuntimeError)  the console's acquisition process is gone
+    └── RemoteError(RuntimeError)        an error of that process that could not be sent as is
 """
 
 from __future__ import annotations
 
 __all__ = [
+    "AcquisitionProcessError",
+    "CalzError",
     "ConfigError",
     "DaqError",
     "DeviceError",
+    "InsufficientSpaceError",
+    "ModbusDeviceError",
     "ProtocolError",
+    "RecorderError",
+    "RecorderStateError",
+    "RecordingError",
+    "RemoteError",
+    "ReplayError",
     "SafetyError",
+    "StorageError",
+    "SyncError",
     "TransportError",
     "TransportTimeout",
 ]
@@ -22,6 +56,7 @@ class DaqError(Exception):
     """Base class of every acquisition error."""
 
 
+# -- configuration, transports, devices -----------------------------------------------------------
 class ConfigError(DaqError, ValueError):
     """A rig configuration is invalid: unknown or missing key, or a value out of its range."""
 
@@ -42,5 +77,81 @@ class DeviceError(DaqError):
     """The device reported an error (a code and its decoded text are in the message)."""
 
 
+class ModbusDeviceError(DeviceError):
+    """The device answered with a Modbus exception response.
+
+    Attributes
+    ----------
+    code : int
+        The Modbus exception code (2 = illegal data address, ...; see
+        :data:`daq.transports.modbus.EXCEPTION_CODES`).
+    function_code : int
+        The function code of the request that was refused (1, 2, 3, 5, 6).
+    """
+
+    def __init__(self, message: str, *, code: int, function_code: int) -> None:
+        super().__init__(message)
+        self.code = code
+        self.function_code = function_code
+
+
 class SafetyError(DaqError, ValueError):
     """A command was refused because it would break a safety limit of the rig config."""
+
+
+# -- synchronisation and the engine ---------------------------------------------------------------
+class SyncError(DaqError, ValueError):
+    """A synchronisation step cannot give an answer (e.g. a clock map with no data yet)."""
+
+
+class CalzError(DaqError, RuntimeError):
+    """A zero calibration during a run failed after the scan was interrupted.
+
+    The message says at which step (``pause``, ``stop``, ``calz``, ``restart``) and whether the
+    scan runs again; the device's own error is the ``__cause__``.
+    """
+
+
+# -- recording ------------------------------------------------------------------------------------
+class RecorderError(DaqError):
+    """Base class of the errors of the run recorder."""
+
+
+class StorageError(RecorderError, OSError):
+    """The run file cannot be created or written (permissions, no such directory, disk full).
+
+    ``errno`` is set (``EACCES``, ``ENOENT``, ``ENOSPC``, ...) and ``filename`` is the file.
+    """
+
+
+class InsufficientSpaceError(StorageError):
+    """The file system of the run file has less free space than the configured minimum."""
+
+
+class RecorderStateError(RecorderError, RuntimeError):
+    """A method was called out of the order open -> declare -> start -> append -> close."""
+
+
+# -- the console ----------------------------------------------------------------------------------
+class RecordingError(DaqError, RuntimeError):
+    """A recording request that cannot be carried out now.
+
+    Already recording, not recording, the acquisition not running, or the dispatcher not
+    answering in time. File problems (an existing file, a missing or read-only directory, a
+    full disk) are :class:`StorageError` instead.
+    """
+
+
+class ReplayError(DaqError, ValueError):
+    """A run file cannot be replayed: missing, not HDF5, truncated, or not a windrig run."""
+
+
+class AcquisitionProcessError(DaqError, RuntimeError):
+    """The acquisition process did not start, did not answer, or is gone."""
+
+
+class RemoteError(DaqError, RuntimeError):
+    """An exception raised in the acquisition process that could not be sent as it was.
+
+    Its message is the original's type name and message.
+    """

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -25,7 +26,11 @@ from scipy.optimize import least_squares, linear_sum_assignment
 from ident._threads import single_threaded_blas
 from ident.errors import InsufficientDataError
 
-__all__ = ["ModalFit", "fit_modes", "name_modes", "noise_std"]
+if TYPE_CHECKING:  # only the type: a section's B and mass matrix are read
+    from ident.section import SectionModel
+
+__all__ = ["ModalFit", "ReleaseModes", "fit_modes", "fit_release_modes", "name_modes",
+           "noise_std"]
 
 FloatArray = npt.NDArray[np.float64]
 ComplexArray = npt.NDArray[np.complex128]
@@ -465,3 +470,56 @@ def _varpro_step(
         jac[:, 2 * n_modes + r] = -(v - Q @ (Q.T @ v)).ravel(order="F")
     assert jac.shape[0] == resid.size and n_ch == resid.shape[1]
     return resid.ravel(order="F"), jac
+
+
+# -- one release's heave and pitch modes (the console's releases table, reprocessing) ----------
+@dataclass(frozen=True)
+class ReleaseModes:
+    """Frequency and damping of the heave and pitch modes of one decay.
+
+    Attributes
+    ----------
+    f_h, f_a : float
+        Frequencies of the heave- and pitch-dominated modes, Hz.
+    zeta_h, zeta_a : float
+        Their damping ratios (1 = critical).
+    """
+
+    f_h: float
+    zeta_h: float
+    f_a: float
+    zeta_a: float
+
+
+def fit_release_modes(t: FloatArray, h: FloatArray, alpha: FloatArray,
+                      section: SectionModel) -> ReleaseModes:
+    """Fit the two modes of one free decay and name them heave and pitch.
+
+    Parameters
+    ----------
+    t : ndarray, shape (n,)
+        Uniform sample times, s.
+    h, alpha : ndarray, shape (n,)
+        Heave (m) and pitch (rad).
+    section : SectionModel
+        Its mass matrix names the modes: the heave-dominated mode is the one whose kinetic
+        energy is most in heave (``m B^2 |phi_h/B|^2`` against ``I |phi_alpha|^2``).
+
+    Returns
+    -------
+    ReleaseModes
+
+    Raises
+    ------
+    InsufficientDataError
+        The decay is too short, or two oscillatory modes are not found in it.
+    """
+    x = np.column_stack([np.asarray(h, dtype=float) / section.B, np.asarray(alpha, dtype=float)])
+    fit = fit_modes(np.asarray(t, dtype=float), x, n_modes=2)
+    if fit.frequencies.size < 2:
+        raise InsufficientDataError(f"found {fit.frequencies.size} oscillatory mode(s) in the "
+                                    "decay, need 2 (heave and pitch)")
+    j_h, j_a = name_modes(fit.mode_shapes(), section.mass_matrix())
+    f, z = fit.frequencies, fit.damping
+    return ReleaseModes(f_h=float(f[j_h]), zeta_h=float(z[j_h]), f_a=float(f[j_a]),
+                       zeta_a=float(z[j_a]))

@@ -1,4 +1,4 @@
-"""The Python examples in README.md run as written (STYLE.md: examples are executed in CI)."""
+"""The Python examples in README.md run as written (examples are executed in CI)."""
 
 from __future__ import annotations
 

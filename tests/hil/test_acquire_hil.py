@@ -19,7 +19,7 @@ import h5py
 import numpy as np
 
 from daq.config import parse_rig_config
-from daq.pipeline import record_run
+from daq.sim.recording import record_simulated_run
 
 CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
 FAN_RPM = 600.0  # 6 m/s on this rig
@@ -50,8 +50,8 @@ def test_record_run_writes_a_release_matching_the_tunnel_truth(tmp_path):
 
     path = tmp_path / "run.h5"
     started = time.monotonic()
-    summary = record_run(config, path, duration_s=4.0, actions=actions, progress=False,
-                         operator_notes="HIL")
+    summary = record_simulated_run(config, path, duration_s=4.0, actions=actions,
+                                   progress=False, operator_notes="HIL")
     assert time.monotonic() - started < 10.0
     assert summary["errors"] == [] and summary["subscriber_errors"] == {}
     assert summary["overflows"] == 0 and summary["releases"] == 1

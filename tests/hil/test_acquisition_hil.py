@@ -15,9 +15,11 @@ from typing import Any
 
 import numpy as np
 
-from daq.acquisition import Acquisition, Event, StreamBlock, drivers_from_config
+from daq.acquisition.drivers import drivers_from_config
+from daq.acquisition.engine import Acquisition
+from daq.acquisition.records import Event, StreamBlock
 from daq.config import parse_rig_config
-from daq.simulated_rig import start_simulated_rig
+from daq.sim.rig import start_simulated_rig
 
 CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
 LASERS = ("laser_front", "laser_rear", "laser_check")

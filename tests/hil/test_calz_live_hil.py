@@ -23,12 +23,15 @@ import h5py
 import numpy as np
 import pytest
 
-from daq.acquisition import Acquisition, CalzError, CalzResult, Event, drivers_from_config
+from daq.acquisition.calz import CalzResult
+from daq.acquisition.drivers import drivers_from_config
+from daq.acquisition.engine import Acquisition
+from daq.acquisition.records import Event
 from daq.config import RigConfig, parse_rig_config
-from daq.errors import SafetyError
-from daq.pipeline import record_run
-from daq.simulated_rig import SimulatedRig, start_simulated_rig
-from daq.sync import wind_speed
+from daq.errors import CalzError, SafetyError
+from daq.sim.recording import record_simulated_run
+from daq.sim.rig import SimulatedRig, start_simulated_rig
+from daq.sync.conversions import wind_speed
 
 CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
 RATE_HZ = 500.0  # the scanner's frame rate in sim_flat_plate.toml
@@ -58,8 +61,8 @@ def test_calz_during_a_recorded_run_rezeroes_and_leaves_a_measured_gap(tmp_path:
 
     # calz=False: the scanner starts with its raw sensor offsets (10 Pa RMS), which the CALZ
     # during the run must remove.
-    summary = record_run(config(), path, duration_s=4.0, actions=actions, progress=False,
-                         calz=False)
+    summary = record_simulated_run(config(), path, duration_s=4.0, actions=actions,
+                                   progress=False, calz=False)
 
     result: CalzResult = seen["result"]
     n_taps = 32  # sim_flat_plate.toml: 16 taps per face
@@ -160,7 +163,7 @@ def test_calz_during_a_recorded_run_rezeroes_and_leaves_a_measured_gap(tmp_path:
 
 def test_without_ptp_the_restarted_clock_is_continued_and_the_sync_view_recovers(
         tmp_path: Path) -> None:
-    # PTP absent: frame times restart at 0 with every scan (DEVICES.md A.1.1 "Scan start").
+    # PTP absent: frame times restart at 0 with every scan (docs/wire_formats.md, scanner).
     path = tmp_path / "run.h5"
     seen: dict[str, CalzResult] = {}
 
@@ -168,8 +171,8 @@ def test_without_ptp_the_restarted_clock_is_continued_and_the_sync_view_recovers
         time.sleep(1.8)
         seen["result"] = acq.calz(wind_speed_now=0.0)
 
-    record_run(config("\n[simulation.devices.scanner]\nptp = false\n"), path, duration_s=3.5,
-               actions=actions, progress=False)
+    record_simulated_run(config("\n[simulation.devices.scanner]\nptp = false\n"), path,
+                         duration_s=3.5, actions=actions, progress=False)
     result = seen["result"]
     with h5py.File(path, "r") as f:
         raw = f["entry/instrument/scanner"]

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from daq.cli import main
-from daq.demo import DEFAULT_CONFIG
+from daq.sim.demo import DEFAULT_CONFIG
 from ident.io import read_run
 
 

@@ -3,7 +3,7 @@
 The simulator encodes from the manual facts with its own code; the driver decodes with its own;
 these tests cross-check the two and prove, with the simulator's truth record, that every sample
 the simulator put on the wire intact arrives, with its value, counter, device time and trigger
-flag, and that each fault of DEVICES.md A.5 (row ILD1420) is recovered from or raised.
+flag, and that each fault of docs/wire_formats.md, "Faults") is recovered from or raised.
 Only ``test_full_rate_for_10_s_loses_no_frame`` is long (10 s, required by the issue).
 """
 
@@ -17,8 +17,10 @@ import numpy as np
 import pytest
 
 from daq.errors import DeviceError, TransportError, TransportTimeout
-from daq.microepsilon_ild1420 import Gap, Ild1420Settings, LaserBlock, MicroEpsilonIld1420
-from daq.transport import open_transport
+from daq.instruments.microepsilon_ild1420.blocks import Gap, LaserBlock
+from daq.instruments.microepsilon_ild1420.driver import MicroEpsilonIld1420
+from daq.instruments.microepsilon_ild1420.settings import Ild1420Settings
+from daq.transports.byte_transport import open_transport
 from ident import SectionModel, TapLayout, flat_plate
 from simulators.clock import DeviceClock, MonotonicClock
 from simulators.devices.microepsilon_ild1420 import FATES, SimIld1420Truth, SimMicroEpsilonIld1420
@@ -257,7 +259,7 @@ def test_clock_drift_is_carried_into_device_time(make_sim):
 def test_disconnect_reconnects_with_backoff_and_marks_the_restart(make_sim, caplog):
     sim = make_sim()
     driver = connect(sim.start("socket"), sim, reconnect_backoff_s=0.05)
-    caplog.set_level(logging.WARNING, logger="daq.microepsilon_ild1420")
+    caplog.set_level(logging.WARNING, logger="daq.instruments.microepsilon_ild1420.driver")
     with driver:
         blocks = read_for(driver, 0.1)
         sim.inject("disconnect", downtime_s=0.3, restart=True)
@@ -279,7 +281,7 @@ def test_disconnect_reconnects_with_backoff_and_marks_the_restart(make_sim, capl
 def test_a_sensor_that_stays_away_raises_after_bounded_attempts(make_sim, caplog):
     sim = make_sim()
     driver = connect(sim.start("socket"), sim, reconnect_attempts=3, reconnect_backoff_s=0.01)
-    caplog.set_level(logging.WARNING, logger="daq.microepsilon_ild1420")
+    caplog.set_level(logging.WARNING, logger="daq.instruments.microepsilon_ild1420.driver")
     driver.read_block(1.0)
     sim.stop()
     with pytest.raises(TransportError, match="did not come back after 3 reopen attempts"):

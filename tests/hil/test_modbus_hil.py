@@ -1,8 +1,9 @@
 """HIL: the fan-drive and PLC drivers against their simulators over Modbus TCP on 127.0.0.1.
 
-Each driver runs its own decoding against the simulator's own encoding (DEVICES.md A.3), through
+Each driver runs its own decoding against the simulator's own encoding (docs/wire_formats.md),
+through
 a real pymodbus server and client, so the two implementations cross-check each other; every
-fault of DEVICES.md A.5 (rows "ABB VFD" and "PLC") is injected and the driver's reaction checked.
+fault of docs/wire_formats.md, "Faults") is injected and the driver's reaction checked.
 """
 
 from __future__ import annotations
@@ -14,10 +15,12 @@ from collections.abc import Iterator
 
 import pytest
 
-from daq.abb_acs580 import AbbAcs580, AbbAcs580Settings
-from daq.errors import DeviceError, SafetyError, TransportError, TransportTimeout
-from daq.modbus import ModbusBus, ModbusDeviceError
-from daq.modbus_plc import ModbusPlc, ModbusPlcSettings
+from daq.errors import DeviceError, ModbusDeviceError, SafetyError, TransportError, TransportTimeout
+from daq.instruments.abb_acs580.driver import AbbAcs580
+from daq.instruments.abb_acs580.settings import AbbAcs580Settings
+from daq.instruments.modbus_plc.driver import ModbusPlc
+from daq.instruments.modbus_plc.settings import ModbusPlcSettings
+from daq.transports.modbus import ModbusBus
 from ident import SectionModel, TapLayout, flat_plate
 from simulators.devices.abb_acs580 import SimAbbAcs580
 from simulators.devices.modbus_plc import SimModbusPlc
@@ -28,7 +31,7 @@ SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_
 # The rig-config tables the drivers validate; the simulators get the same numbers as plain ints.
 FAN_TABLE = {
     "max_rpm": 1500.0,
-    # The ACH550/RETA-01 wind-tunnel map of DEVICES.md A.3: 0 CW, 1 REF1, 3 SW, 4 ACT1.
+    # An ACH550/RETA-01 wind tunnel's register map: 0 CW, 1 REF1, 3 SW, 4 ACT1.
     "registers": {"control_word": 0, "reference_1": 1, "status_word": 3, "actual_1": 4},
     "poll_timeout_s": 0.1,
     "ramp_rpm_per_s": 3000.0,  # a fast ramp keeps the tests short
@@ -95,7 +98,7 @@ def test_fan_spins_up_along_the_ramp_and_turns_the_tunnel_fan(fan, tunnel):
     assert tunnel.fan_rpm == pytest.approx(600.0, abs=1e-9)  # the tunnel gets the true speed
     assert tunnel.wind_speed() == pytest.approx(6.0)
     assert drive.status().at_setpoint
-    assert sim.writes_to("reference_1") == [8000]  # 600 / 1500 * 20000 (DEVICES.md A.3)
+    assert sim.writes_to("reference_1") == [8000]  # 600 / 1500 * 20000 (docs/wire_formats.md)
     assert sim.writes_to("control_word") == [0x0476, 0x047F]
     reading = drive.read()
     assert set(reading) == set(drive.describe())
@@ -165,7 +168,7 @@ def test_invalid_register_is_a_device_error_with_the_modbus_code(fan):
 def test_fan_no_reply_times_out_then_recovers(fan, caplog):
     sim, drive = fan
     sim.inject("no_reply", count=1)  # one lost reply: the bus's retry absorbs it, logged
-    with caplog.at_level(logging.WARNING, logger="daq.modbus"):
+    with caplog.at_level(logging.WARNING, logger="daq.transports.modbus"):
         assert drive.status().swc_on_inhib
     assert any("retry 1 of 1" in r.getMessage() for r in caplog.records)
     sim.inject("no_reply")  # the drive goes silent
@@ -253,7 +256,7 @@ def test_plc_disconnect_is_a_transport_error_then_the_bus_reconnects(plc, caplog
     sim, drive = plc
     assert drive.armed()
     sim.inject("disconnect")  # dropped connection, server back at once: retry absorbs it
-    with caplog.at_level(logging.WARNING, logger="daq.modbus"):
+    with caplog.at_level(logging.WARNING, logger="daq.transports.modbus"):
         assert drive.trigger_count() == 0
     assert any("connection failed" in r.getMessage() for r in caplog.records)
     sim.inject("disconnect", outage_s=0.3)  # longer than the bus's retries (0.02 + 0.04 s)

@@ -1,7 +1,7 @@
 """Reliability of a recording (issue 5): crash, device disconnect, unwritable path, full disk.
 
 Everything real: ``windrig acquire`` (``python -m daq.cli acquire``) in a subprocess, or
-:func:`daq.pipeline.record_run` in this process, with the simulated instruments of
+:func:`daq.sim.recording.record_simulated_run` in this process, with the simulated instruments of
 ``rig_configs/sim_flat_plate.toml`` over their loopback transports, and run files read back with
 h5py. Nothing of our own code is mocked.
 
@@ -54,8 +54,10 @@ import numpy as np
 import pytest
 
 from daq.config import parse_rig_config
-from daq.pipeline import RunWriter, record_run
-from daq.recorder import SYNC_COLUMNS, RunRecorder
+from daq.recording.layout import SYNC_COLUMNS
+from daq.recording.recorder import RunRecorder
+from daq.recording.writer import RunWriter
+from daq.sim.recording import record_simulated_run
 from ident.io import read_run
 
 REPO = Path(__file__).resolve().parents[2]
@@ -326,7 +328,8 @@ def test_device_disconnects_mid_run_are_marked_gaps_with_fault_and_recovery_even
         scanner.inject("tcp_reset")  # RST on the data connection; the scan restarts at frame 1
 
     path = tmp_path / "disconnect.h5"
-    summary = record_run(config, path, duration_s=4.5, actions=actions, progress=False)
+    summary = record_simulated_run(config, path, duration_s=4.5, actions=actions,
+                                   progress=False)
     rig = seen["rig"]
     truth = {name: rig.simulators[name].truth() for name in LASERS_CUT}
     scan_truth = rig.simulators["scanner"].truth

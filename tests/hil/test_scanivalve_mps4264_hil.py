@@ -1,7 +1,7 @@
 """Scanivalve MPS4264 driver against its simulator over real TCP connections on 127.0.0.1.
 
 One full-rate test (64 taps at 500 Hz for 10 s, the issue's requirement); every fault of the
-DEVICES.md A.5 row MPS4264 (TCP parts) in a short test of its own. The simulator's truth
+docs/wire_formats.md, "Faults") in a short test of its own. The simulator's truth
 counters (frames sent and dropped, with the reason) are the reference for "no frame lost that
 the simulator did not drop".
 """
@@ -18,15 +18,10 @@ import numpy as np
 import pytest
 
 from daq.errors import DeviceError, SafetyError
-from daq.scanivalve_mps4264 import (
-    STATUS_MISSING,
-    STATUS_OK,
-    Gap,
-    Mps4264Settings,
-    ScanBlock,
-    ScanivalveMps4264,
-)
-from daq.transport import open_transport
+from daq.instruments.scanivalve_mps4264.blocks import STATUS_MISSING, STATUS_OK, Gap, ScanBlock
+from daq.instruments.scanivalve_mps4264.driver import ScanivalveMps4264
+from daq.instruments.scanivalve_mps4264.settings import Mps4264Settings
+from daq.transports.byte_transport import open_transport
 from ident import SectionModel, TapLayout, flat_plate
 from simulators.clock import DeviceClock
 from simulators.devices.scanivalve_mps4264 import SimScanivalveMps4264

@@ -1,13 +1,14 @@
 """The sync view after a scanner restart without absolute (PTP) frame times.
 
-Without PTP the MPS4264's frame times are relative to the scan start (DEVICES.md A.1.1, "Frame
-time"), so when the scan restarts (the driver's reconnect after a TCP reset of the data
+Without PTP the MPS4264's frame times are relative to the scan start (docs/wire_formats.md,
+"Pressure scanner"), so when the scan restarts (the driver's reconnect after a TCP reset of the data
 connection, the engine's recovery) the device time goes back to 0. The run writer must then
 start a fresh clock map for the scanner: the old one maps the new scan's frames as far back as
 the old scan lasted.
 
 1. The real driver against the simulated scanner (``rig_configs/sim_flat_plate.toml`` with
-   ``ptp = false``), recorded by the real :func:`~daq.pipeline.record_run`; the scanner resets
+   ``ptp = false``), recorded by the real recorder
+   (:func:`~daq.sim.recording.record_simulated_run`); the scanner resets
    its data connection 2 s into the run (``tcp_reset``: an RST, then a new scan with the
    counter from 1 and the frame time from 0). The reference is the simulator's truth: the new
    scan's :meth:`true_time_of` (valid for the scan in progress, i.e. the one after the reset).
@@ -37,11 +38,12 @@ import h5py
 import numpy as np
 import pytest
 
-from daq import pipeline
-from daq.acquisition import Event, StreamBlock
+from daq.acquisition.records import Event, StreamBlock
 from daq.config import RigConfig, parse_rig_config
-from daq.pipeline import RunWriter, record_run
-from daq.sync_check import ClockTruthTracker
+from daq.recording import writer as pipeline
+from daq.recording.writer import RunWriter
+from daq.sim.recording import record_simulated_run
+from daq.sim.sync_check import ClockTruthTracker
 
 CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
 RATE_HZ = 500.0  # the scanner's frame rate in sim_flat_plate.toml (and of the sync view)
@@ -88,8 +90,8 @@ def test_after_a_reset_without_ptp_the_sync_view_is_finite_and_aligned_again(
         rig.simulators["scanner"].inject("tcp_reset")  # RST; the scan restarts at frame 1, t=0
 
     tracker = RecordingTracker()
-    summary = record_run(config(NO_PTP), path, duration_s=5.0, actions=actions, progress=False,
-                         writer_options={"clock_truth": tracker})
+    summary = record_simulated_run(config(NO_PTP), path, duration_s=5.0, actions=actions,
+                                   progress=False, writer_options={"clock_truth": tracker})
     assert summary["errors"] == [] and summary["subscriber_errors"] == {}
     sim = seen["rig"].simulators["scanner"]
     origin_s = seen["rig"].tunnel.clock.origin_s
@@ -301,9 +303,10 @@ def test_a_restart_gap_restarts_the_map_only_when_the_device_clock_went_back(
     expected = (sync_t < t_run[0]) | ((sync_t >= last_old) & (sync_t < first_new))
     assert np.array_equal(~np.all(np.isfinite(sync_p), axis=1), expected)
     assert sync_t[-1] > t_run[-1] - PERIOD_S
-    # Values on the right time (from 1 s, where the map is exact): the linear interpolation of
-    # a 3 Hz sine sampled at 500 Hz is within A (w T)^2 / 8 = 1.78e-4 of it (daq.sync.Resampler;
-    # float32 storage adds 1e-8); a frame period off would be up to w T = 0.038 off.
+    # Values on the right time (from 1 s, where the map is exact): the linear interpolation of a 3
+    # Hz sine sampled at 500 Hz is within A (w T)^2 / 8 = 1.78e-4 of it
+    # (daq.sync.resample.Resampler; float32 storage adds 1e-8); a frame period off would be up to w
+    # T = 0.038 off.
     ok = ~expected & (sync_t > 1.0)
     assert np.count_nonzero(ok & (sync_t > first_new)) > 900  # the new scan's rows
     truth = np.sin(2 * np.pi * 3.0 * sync_t[ok])

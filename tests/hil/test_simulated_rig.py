@@ -13,8 +13,8 @@ import pytest
 
 from daq.config import load_rig_config, parse_rig_config
 from daq.errors import ConfigError, SafetyError
-from daq.instruments import build_driver
-from daq.simulated_rig import start_simulated_rig
+from daq.instruments.build import build_driver
+from daq.sim.rig import start_simulated_rig
 
 CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
 

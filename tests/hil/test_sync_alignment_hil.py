@@ -3,7 +3,7 @@
 The issue's must-show: simulated devices with a 20 ms clock offset and 50 ppm drift, recorded
 through the real drivers, clock maps and resampler, the misalignment left in the sync view
 measured against the simulators' own clocks and reported in the file. The simulated rig runs in
-its own process (:class:`daq.rig_process.RigProcess`), as real instruments do: sharing the
+its own process (:class:`daq.sim.rig_process.RigProcess`), as real instruments do: sharing the
 recorder's interpreter lock would add milliseconds of simulated-device latency that no real
 instrument has.
 """
@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 
 from daq.config import parse_rig_config
-from daq.pipeline import record_run
-from daq.rig_process import start_rig_process
-from daq.sync_check import ClockTruthTracker, check_run
+from daq.recording.run import record_run
+from daq.sim.rig_process import start_rig_process
+from daq.sim.sync_check import ClockTruthTracker, check_run
 
 CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
 TARGET_S = 0.2e-3
@@ -45,7 +45,7 @@ clock_drift_ppm = 50.0
 """
 
 
-def actions(acq, rig):
+def actions(acq, rig=None):
     fan = acq.drivers["fan"]
     fan.set_speed(700.0)
     fan.start()
@@ -65,7 +65,7 @@ def test_sync_view_is_aligned_to_the_truth(tmp_path):
     tracker = ClockTruthTracker()
     with start_rig_process(config) as rig:
         # record_run pulses the PLC's trigger line every 0.5 s: the clock maps' anchors.
-        summary = record_run(rig.config, path, duration_s=9.0, simulate=False, calz=True,
+        summary = record_run(rig.config, path, duration_s=9.0, calz=True,
                              actions=actions, progress=False,
                              writer_options={"clock_truth": tracker})
         result = check_run(path, tracker, true_time_of=rig.true_time_of,

@@ -1,8 +1,9 @@
 """PTB330 driver against its simulator over real transports (pyserial socket:// and a pty).
 
 The driver (daq/) and the simulator (simulators/) encode and decode the wire format with separate
-code; agreement here cross-checks both against the manual facts of DEVICES.md A.3. Faults are the
-PTB330 row of DEVICES.md A.5: garbled/partial line, no reply, unit change.
+code; agreement here cross-checks both against the manual facts of docs/wire_formats.md,
+"Barometer". Faults are the barometer's of docs/wire_formats.md, "Faults": garbled/partial line,
+no reply, unit change.
 """
 
 from __future__ import annotations
@@ -13,14 +14,10 @@ import numpy as np
 import pytest
 
 from daq.errors import ProtocolError, TransportTimeout
-from daq.transport import open_transport
-from daq.vaisala_ptb330 import (
-    SERIAL_DEFAULTS,
-    Ptb330Line,
-    Ptb330LineDecoder,
-    Ptb330Settings,
-    VaisalaPtb330,
-)
+from daq.instruments.vaisala_ptb330.decoder import Ptb330Line, Ptb330LineDecoder
+from daq.instruments.vaisala_ptb330.driver import SERIAL_DEFAULTS, VaisalaPtb330
+from daq.instruments.vaisala_ptb330.settings import Ptb330Settings
+from daq.transports.byte_transport import open_transport
 from ident import SectionModel, TapLayout, flat_plate
 from simulators.devices.vaisala_ptb330 import SimVaisalaPtb330
 from simulators.virtual_tunnel import AirState, VirtualTunnel

@@ -6,7 +6,7 @@ import h5py
 import numpy as np
 import pytest
 
-from daq.recorder import RunRecorder
+from daq.recording.recorder import RunRecorder
 from ident import SectionModel, flat_plate
 from ident.io import FileFormatError, read_run
 from simulators import simulate_release

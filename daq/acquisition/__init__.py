@@ -1,0 +1,14 @@
+"""The acquisition engine: every instrument read in its own thread, one dispatcher, subscribers.
+
+- :mod:`~daq.acquisition.engine`: :class:`Acquisition`: start, stop, the operator's commands;
+- :mod:`~daq.acquisition.reader`: one device's reader thread, bounded queue, faults, recovery;
+- :mod:`~daq.acquisition.adapters`: how a reader talks to each kind of driver;
+- :mod:`~daq.acquisition.dispatch`: the dispatcher thread and the ``(name, doc)`` subscribers;
+- :mod:`~daq.acquisition.records`: the records handed to subscribers (blocks, events, stats);
+- :mod:`~daq.acquisition.commands`: what each operator command does and the event it records;
+- :mod:`~daq.acquisition.calz`: a CALZ during a run (the scan paused, zeroed, restarted);
+- :mod:`~daq.acquisition.sync_pulses`: trigger pulses every 0.5 s, the clocks' anchors;
+- :mod:`~daq.acquisition.drivers`: every configured instrument's driver, for the engine.
+
+Nothing here touches h5py or Qt, and nothing knows a simulator.
+"""

@@ -1,0 +1,42 @@
+"""What a driver tells the registry about itself: :class:`DriverEntry`.
+
+Responsibility: the record each driver module exports as its ``DRIVER`` constant (its name in
+rig configs, the role it fills, how to build it and how to validate its settings, the line
+settings its transport needs). Kept apart from :mod:`daq.instruments.registry`, which imports
+every driver, so that a driver module never imports the registry.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+__all__ = ["DriverEntry"]
+
+
+@dataclass(frozen=True)
+class DriverEntry:
+    """A registered driver.
+
+    Attributes
+    ----------
+    name : str
+        The ``driver`` value in rig configs.
+    role : str
+        The instrument role it fills (``scanner``, ``lasers``, ``fan``, ``plc``, ``barometer``).
+    factory : callable
+        Builds the driver from ``(transport_or_bus, settings)``.
+    validate : callable
+        ``validate(settings, where)`` returning the settings object or raising ConfigError.
+    transport_defaults : mapping
+        Line settings the device needs (e.g. 7E1 at 9600 baud), passed to
+        :func:`daq.transports.byte_transport.open_transport`; a ``serial://`` URL's query
+        overrides them.
+    """
+
+    name: str
+    role: str
+    factory: Callable[..., Any]
+    validate: Callable[[Mapping[str, Any], str], Any]
+    transport_defaults: Mapping[str, Any] = field(default_factory=dict)

@@ -1,0 +1,219 @@
+"""What the ILD1420-class laser driver returns: counters unwrapped, gaps marked, blocks.
+
+Responsibility: :class:`Ild1420Sequencer` (pure) unwraps the 18-bit counter and the 32-bit
+timestamp of decoded samples, and marks the samples that are missing (:class:`Gap`, counted)
+and the sensor's restarts (a gap of unknown length); :class:`LaserBlock` is one read of the
+driver: the samples with their host arrival times, device times, error codes and trigger flags.
+
+Not responsible for: decoding bytes (:mod:`daq.instruments.microepsilon_ild1420.decoder`) or
+reading the line (:mod:`daq.instruments.microepsilon_ild1420.driver`).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from daq.instruments.microepsilon_ild1420.decoder import (
+    COUNTER_MODULUS,
+    TIMESTAMP_MODULUS,
+    TIMESTAMP_TICK_S,
+    error_reason,
+)
+
+__all__ = ["Gap", "Ild1420Sequencer", "LaserBlock"]
+
+BoolArray = npt.NDArray[np.bool_]
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Gap:
+    """Samples missing from the stream.
+
+    Attributes
+    ----------
+    after_counter : int
+        Unwrapped counter of the last sample before the gap.
+    length : int
+        Number of samples missing.
+    exact : bool
+        True when counted from the device counter; False when the sensor restarted (counter and
+        timestamp began again) and the length is estimated from the host time and ``rate_hz``.
+    """
+
+    after_counter: int
+    length: int
+    exact: bool = True
+
+
+class Ild1420Sequencer:
+    """Unwrap the 18-bit counter and the 32-bit timestamp across chunks; find gaps and restarts.
+
+    Within one epoch (one run of the sensor since power-on) counter steps are taken modulo 2**18
+    and timestamp steps modulo 2**32; a counter step that disagrees with the timestamp step by a
+    whole number of counter periods (a gap longer than 2**18 samples) is corrected with the
+    timestamp. A timestamp that goes backwards is a restart: a new epoch begins, the unwrapped
+    counter continues after an estimated gap (host time x ``rate_hz``), and the device time
+    restarts with the device. After a reconnect the first step is also checked against the host
+    time elapsed, so a restart that happened while the line was down is found.
+
+    Parameters
+    ----------
+    rate_hz : float
+        Nominal measuring rate, Hz (to resolve counter wraps and estimate restart gaps).
+    """
+
+    #: Slack when checking a step against the host time elapsed, s.
+    RESTART_SLACK_S = 1.0
+
+    def __init__(self, rate_hz: float) -> None:
+        self.rate_hz = float(rate_hz)
+        self.epoch = 0
+        self._last: tuple[int, int, int, int, int] | None = None  # raw c, raw ts, c, ticks, ns
+        self._check_next = False
+
+    def expect_discontinuity(self) -> None:
+        """Check the next step against the host time (call after a reconnect)."""
+        self._check_next = True
+
+    def process(self, counter: IntArray, timestamp: IntArray, host_ns: IntArray,
+                ) -> tuple[IntArray, FloatArray, npt.NDArray[np.int32], list[Gap]]:
+        """Unwrap one batch; return (counter, device time s, epoch per sample, gaps).
+
+        ``counter`` and ``timestamp`` are the raw values, ``host_ns`` the arrival times (ns).
+        """
+        n = int(counter.size)
+        out_c = np.empty(n, dtype=np.int64)
+        out_t = np.empty(n, dtype=np.int64)
+        epochs = np.empty(n, dtype=np.int32)
+        gaps: list[Gap] = []
+        if n == 0:
+            return out_c, out_t.astype(np.float64), epochs, gaps
+        first_ever = self._last is None
+        if self._last is None:
+            prev = (int(counter[0]), int(timestamp[0]), 0, 0, int(host_ns[0]))
+        else:
+            prev = self._last
+        raw_c = np.concatenate(([prev[0]], counter))
+        ns = np.concatenate(([prev[4]], host_ns))
+        dc = np.diff(raw_c) % COUNTER_MODULUS
+        dt = np.diff(np.concatenate(([prev[1]], timestamp))) % TIMESTAMP_MODULUS
+        # A gap longer than a counter period: the timestamp tells how many periods passed.
+        expected = dt * (TIMESTAMP_TICK_S * self.rate_hz)
+        dc = dc + COUNTER_MODULUS * np.maximum(
+            np.round((expected - dc) / COUNTER_MODULUS), 0).astype(np.int64)
+        restart = dt >= TIMESTAMP_MODULUS // 2  # the timestamp went backwards: a restart
+        if first_ever:
+            restart[0] = True
+        elif self._check_next:
+            restart[0] |= not self._continues(int(dc[0]), int(dt[0]), int(ns[1] - ns[0]))
+        self._check_next = False
+        c, t = prev[2], prev[3]
+        bounds = sorted({0, n, *np.flatnonzero(restart).tolist()})
+        for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+            if restart[a]:  # sample a starts an epoch
+                if first_ever and a == 0:
+                    c, t = int(counter[0]), int(timestamp[0])
+                else:
+                    self.epoch += 1
+                    elapsed_s = max(0.0, (int(ns[a + 1]) - int(ns[a])) * 1e-9)
+                    missing = max(0, round(elapsed_s * self.rate_hz) - 1)
+                    log.warning("ILD1420 restarted (counter %d, timestamp %d): epoch %d, about "
+                                "%d samples missing", int(counter[a]), int(timestamp[a]),
+                                self.epoch, missing)
+                    gaps.append(Gap(after_counter=c, length=missing, exact=False))
+                    c, t = c + 1 + missing, int(timestamp[a])
+                out_c[a], out_t[a], epochs[a] = c, t, self.epoch
+                a += 1
+            if b > a:  # samples a..b-1 continue from (c, t)
+                run = c + np.cumsum(dc[a:b])
+                out_c[a:b] = run
+                out_t[a:b] = t + np.cumsum(dt[a:b])
+                epochs[a:b] = self.epoch
+                for j in np.flatnonzero(dc[a:b] != 1).tolist():
+                    step = int(dc[a + j])
+                    if step > 1:
+                        gaps.append(Gap(after_counter=int(run[j]) - step, length=step - 1))
+                    else:
+                        log.warning("ILD1420 counter %d repeated", int(run[j]))
+                c, t = int(run[-1]), int(out_t[b - 1])
+        self._last = (int(counter[-1]), int(timestamp[-1]), c, t, int(host_ns[-1]))
+        return out_c, out_t.astype(np.float64) * TIMESTAMP_TICK_S, epochs, gaps  # ticks -> s
+
+    def _continues(self, dc: int, dt: int, elapsed_ns: int) -> bool:
+        """Whether a step across a reconnect is consistent with the host time elapsed."""
+        dt_s = dt * TIMESTAMP_TICK_S
+        if dt_s > elapsed_ns * 1e-9 + self.RESTART_SLACK_S:
+            return False
+        expected = dt_s * self.rate_hz
+        return abs(dc - expected) <= 0.05 * expected + 2
+
+
+@dataclass(frozen=True)
+class LaserBlock:
+    """Samples read in one call, self-describing (keys of ``channels`` = ``describe()`` keys).
+
+    Attributes
+    ----------
+    channels : dict of str to ndarray, each shape (n,)
+        ``distance`` (m, NaN on error), ``error_code`` (0 = valid, else the sensor's error value,
+        see :data:`ERROR_CODES`), ``counter`` (unwrapped int64), ``device_time`` (s, unwrapped
+        within an epoch), ``epoch`` (restarts of the sensor seen so far), ``triggered`` (status
+        bit 15), ``status`` (raw status bits), ``host_time_ns`` (``time.monotonic_ns()`` when the
+        chunk that completed the sample arrived); plus ``exposure`` (s) and ``intensity`` (%)
+        when selected.
+    gaps : tuple of Gap
+        Samples missing before or inside this block (counter jumps, restarts).
+    bytes_skipped : int
+        Bytes the decoder discarded while producing this block (resynchronisations).
+    """
+
+    channels: Mapping[str, npt.NDArray[Any]]
+    gaps: tuple[Gap, ...] = ()
+    bytes_skipped: int = 0
+
+    def __len__(self) -> int:
+        return int(self.channels["counter"].shape[0])
+
+    @property
+    def distance(self) -> FloatArray:
+        """Measure the distances, m (NaN where the sensor reported an error)."""
+        return self.channels["distance"]
+
+    @property
+    def error_code(self) -> npt.NDArray[np.int32]:
+        """Measure the error value per sample (0 = valid)."""
+        return self.channels["error_code"]
+
+    @property
+    def counter(self) -> IntArray:
+        """Measure the unwrapped sample counter."""
+        return self.channels["counter"]
+
+    @property
+    def device_time(self) -> FloatArray:
+        """Measure the device time, s (unwrapped; restarts with the sensor)."""
+        return self.channels["device_time"]
+
+    @property
+    def triggered(self) -> BoolArray:
+        """Measure the "value triggered" flag (status bit 15) per sample."""
+        return self.channels["triggered"]
+
+    @property
+    def host_time_ns(self) -> IntArray:
+        """Measure the host arrival time of each sample, ns (``time.monotonic_ns``)."""
+        return self.channels["host_time_ns"]
+
+    def reasons(self) -> list[str]:
+        """Return the error text per sample (``""`` where valid)."""
+        return [error_reason(int(code)) for code in self.error_code]

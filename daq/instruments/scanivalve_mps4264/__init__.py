@@ -1,0 +1,10 @@
+"""The Scanivalve MPS4264-class pressure scanner.
+
+- :mod:`.settings`: the ``[scanner]`` table (modules, rate, ports, Pitot channel, batching);
+- :mod:`.frames`: the binary packets (0x6D, legacy 0x0A) and their pure, vectorised decoder;
+- :mod:`.streams`: one module's data connection state: bytes, decoder, merge keys;
+- :mod:`.merge`: the modules' frames merged into blocks, counters, gaps and clock steps;
+- :mod:`.blocks`: what the driver returns (:class:`ScanBlock`, :class:`Gap`,
+  :class:`ClockStep`);
+- :mod:`.driver`: :class:`ScanivalveMps4264`, the commands, the scan, reconnects, batching.
+"""

@@ -1,0 +1,7 @@
+"""Recorded run files, again: reprocessing on Dask and the discrepancy diagnosis.
+
+- :mod:`~daq.offline.reprocess`: ``windrig reprocess``: per-file modal fits and per-campaign
+  E2RFC on a Dask cluster, with a cache;
+- :mod:`~daq.offline.report`: its tables, plots and HTML report;
+- :mod:`~daq.offline.diagnosis`: ``windrig diagnose``: the discrepancy workflow with its plots.
+"""

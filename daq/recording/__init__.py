@@ -1,0 +1,17 @@
+"""The run file: one HDF5 file per run, its writer, and the production recorder.
+
+- :mod:`~daq.recording.layout`: the file's layout (groups, row types, units, fill values,
+  chunking) and :func:`read_sync`;
+- :mod:`~daq.recording.recorder`: :class:`RunRecorder`, one file's life cycle under SWMR;
+- :mod:`~daq.recording.writer`: :class:`RunWriter`, the engine subscriber that maps clocks,
+  resamples and writes the raw streams, the sync view, releases and events;
+- :mod:`~daq.recording.devices`: what the writer keeps per device (clock map, triggers, restarts);
+- :mod:`~daq.recording.releases`: the releases table, filled as the decays end;
+- :mod:`~daq.recording.sync_view`: the sync view's physical columns from the resampled streams;
+- :mod:`~daq.recording.raw_batches`: raw rows buffered between appends;
+- :mod:`~daq.recording.run`: :func:`record_run`, a rig with real URLs recorded into one file;
+- :mod:`~daq.recording.synthetic`: run files written from releases (test data for readers).
+
+It knows no simulator: starting simulators is :mod:`daq.sim`'s decision. ``docs/file_format.md``
+is the file's contract for readers.
+"""

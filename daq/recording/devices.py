@@ -1,0 +1,143 @@
+"""What the run writer keeps per device: its clock map, timeline, triggers and counts.
+
+Responsibility: :class:`DeviceState`, one per device of a run: its sample, gap and overflow
+counts, and for a clocked device (the scanner, the lasers) its clock map onto the host clock
+(:func:`new_clock_map`), its continuous host timeline, the trigger times it latched or flagged
+and their pairing with the PLC's trigger pulses as clock anchors
+(:meth:`DeviceState.anchor_triggers`, :meth:`DeviceState.pair_triggers`), and the state of a
+device clock restart (rows held back until a fresh map settles). :func:`take_rows` cuts a block
+at a restart gap; :data:`POLLED_DEFAULTS` names the raw channels of polled devices that do not
+describe themselves; :class:`ClockObserver` is what the writer tells the sync view's times to
+(a check against a simulated rig's truth).
+
+Not responsible for: deciding when a device clock restarted, or the sync view and the file
+(:class:`daq.recording.writer.RunWriter`, which owns the states); the clock-map numerics
+(:mod:`daq.sync.clock_map`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Collection, Mapping
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+import numpy.typing as npt
+
+from daq.acquisition.records import StreamBlock
+from daq.sync.clock_map import ClockMap, trigger_times_from_flags, trigger_times_from_latch
+from daq.sync.continuous_time import ContinuousTimeline
+
+__all__ = ["CLOCK_WINDOW_S", "POLLED_DEFAULTS", "POLLED_RATE_HZ", "TRIGGER_PAIRING_S",
+           "ClockObserver", "DeviceState", "new_clock_map", "take_rows"]
+
+FloatArray = npt.NDArray[np.float64]
+
+#: Envelope window of the clock maps, s (see :class:`~daq.sync.clock_map.ClockMap`).
+CLOCK_WINDOW_S = 0.5
+#: A device trigger time is paired with the PLC trigger event within this distance, s.
+TRIGGER_PAIRING_S = 0.05
+
+#: Raw channels of the polled kinds when the driver does not describe itself.
+POLLED_DEFAULTS: Mapping[str, tuple[tuple[str, str], ...]] = {
+    "barometer": (("pressure", "Pa"), ("temperature", "K"), ("density", "kg/m^3")),
+    "fan": (("speed", "rpm"), ("status_word", "1")),
+    "plc": (("armed", "1"), ("released", "1"), ("trigger_count", "1")),
+}
+POLLED_RATE_HZ = {"barometer": 1.0, "fan": 10.0, "plc": 10.0}
+
+
+class ClockObserver(Protocol):
+    """Told the host times the sync view gives every clocked block (a clock-truth check)."""
+
+    def observe(self, name: str, t_run: FloatArray, t_device: FloatArray, t0_s: float) -> None:
+        """Take device ``name``'s samples: run times ``t_run`` (s), device times, run start."""
+
+
+def new_clock_map(assumed_floor_s: float = 0.0) -> ClockMap:
+    """Return a fresh clock map of the writer's windows (``assumed_floor_s``: a known floor)."""
+    # 0.5 s windows (20 laser blocks, 25 scanner blocks each): a usable slope after ~1.5 s
+    # (2 s windows leave a short run with a two-point slope); 600 windows span 5 min.
+    return ClockMap(window_s=CLOCK_WINDOW_S, n_windows=600, assumed_floor_s=assumed_floor_s)
+
+
+def take_rows(block: StreamBlock, lo: int, hi: int) -> StreamBlock:
+    """Rows ``lo:hi`` of a block (every value holds one row per sample), without its gaps."""
+    return StreamBlock(
+        device=block.device, kind=block.kind, seq=block.seq,
+        host_time_ns=block.host_time_ns[lo:hi],
+        device_time=None if block.device_time is None else block.device_time[lo:hi],
+        counter=None if block.counter is None else block.counter[lo:hi],
+        values={k: np.asarray(v)[lo:hi] for k, v in block.values.items()},
+        gaps=(), raw=block.raw, overflow_samples=0)
+
+
+@dataclass
+class DeviceState:
+    """What the writer knows of one device: counts, clock map, timeline, triggers, restarts."""
+
+    name: str
+    kind: str
+    channels: list[str]
+    rate_hz: float
+    clock: ClockMap | None = None
+    timeline: ContinuousTimeline | None = None  # continuous host times across clock refits
+    samples: int = 0
+    gaps: int = 0
+    overflow_samples: int = 0
+    last_trigger: float = -math.inf  # scanner: last latched trigger time taken
+    pending_triggers: list[float] = field(default_factory=list)  # device times not yet paired
+    last_device_time: float = math.nan  # newest finite device time mapped, s
+    last_host: float = -math.inf  # host time (run s) of the newest sample pushed to the view
+    restart_pending: bool = False  # a restart gap was seen; its first timed sample decides
+    break_pending: bool = False  # the clock restarted: mark the break in the view (_push)
+    clock_restarts: int = 0  # clock maps started afresh after a device clock restart
+    settle_until: float = math.nan  # device time up to which a new epoch's rows are held back
+    held: list[tuple[StreamBlock, FloatArray, npt.NDArray[np.bool_]]] = field(
+        default_factory=list)  # rows of the new epoch waiting for its map to settle
+
+    def anchor_triggers(self, block: StreamBlock, t_dev: FloatArray,
+                        trigger_events: Collection[float]) -> None:
+        """Take the trigger times a block reveals (latched or flagged); pair those it can."""
+        if self.kind == "scanner" and "trigger_time" in block.values:
+            found = trigger_times_from_latch(block.values["trigger_time"], self.last_trigger)
+            if found.size:
+                self.last_trigger = float(found[-1])
+        elif self.kind == "laser" and "triggered" in block.values:
+            ok = np.isfinite(t_dev)
+            found = trigger_times_from_flags(t_dev[ok],
+                                             np.asarray(block.values["triggered"])[ok],
+                                             1.0 / self.rate_hz)
+        else:
+            return
+        self.pending_triggers.extend(float(t) for t in found)
+        del self.pending_triggers[:-32]
+        self.pair_triggers(trigger_events)
+
+    def pair_triggers(self, trigger_events: Collection[float]) -> None:
+        """Give the clock map an anchor per trigger time that matches a PLC trigger event.
+
+        ``trigger_events``: the host times of the PLC's trigger pulses, s from the run start.
+        """
+        if self.clock is None or not self.clock.ready or not trigger_events:
+            return
+        events = np.fromiter(trigger_events, dtype=np.float64)
+        left: list[float] = []
+        for td in self.pending_triggers:
+            predicted = self.clock.to_host(td)
+            k = int(np.argmin(np.abs(events - predicted)))
+            if abs(events[k] - predicted) <= TRIGGER_PAIRING_S:
+                self.clock.add_anchor(td, float(events[k]))
+            elif predicted > events[-1]:
+                left.append(td)  # its PLC event may still come
+        self.pending_triggers = left
+
+    def clock_fit(self) -> dict[str, float] | None:
+        """Return the clock fit: offset (s), drift (ppm), residual (s), anchors, pairs; or None."""
+        cm = self.clock
+        if cm is None or not cm.ready:
+            return None
+        return {"offset_s": cm.offset_s, "drift_ppm": cm.drift_ppm, "residual_s": cm.residual_s,
+                "latency_floor_s": cm.latency_floor_s, "anchors": float(cm.n_anchors),
+                "pairs": float(cm.n_pairs)}

@@ -1,0 +1,130 @@
+"""The releases table of a run, filled as the synchronised view is written: one row per decay.
+
+Responsibility: :class:`ReleaseRows` turns the engine's ``"release"`` and ``"arm"`` events into
+rows of ``/entry/releases``: the release instant, the sync rows of the free decay (from the
+first row after the release to the row before the model is armed again, or to the next
+release, or to the end of the run), the median wind speed over it, and the position held
+before it (``h0``, ``alpha0``: the median over :data:`HOLD_WINDOW_S` before the release). A row
+is written once its decay has ended, so a live reader never sees one change.
+
+Not responsible for: the sync rows themselves (:class:`daq.recording.writer.RunWriter`) or the
+file (:mod:`daq.recording.recorder`). A run without sync rows (no lasers, no scanner) still gets
+its rows, with NaN where the view would be needed.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+from daq.recording.recorder import Recorder
+
+__all__ = ["HOLD_WINDOW_S", "ReleaseRows"]
+
+FloatArray = npt.NDArray[np.float64]
+
+#: Window of the held position before a release (h0, alpha0): [t - 0.3 s, t - 0.05 s].
+HOLD_WINDOW_S = (0.3, 0.05)
+
+
+@dataclass
+class _Release:
+    time: float
+    end_time: float | None = None  # the next arm event: the model is caught, the decay ends
+    start_index: int | None = None
+    stop_index: int | None = None
+    h0: float = math.nan
+    alpha0: float = math.nan
+    U: list[FloatArray] = field(default_factory=list)
+
+
+class ReleaseRows:
+    """The releases of one run, written to ``/entry/releases`` as their decays end.
+
+    Attributes
+    ----------
+    written : int
+        Rows written so far.
+    """
+
+    def __init__(self) -> None:
+        self._recent: deque[tuple[FloatArray, FloatArray, FloatArray]] = deque()
+        self._releases: list[_Release] = []
+        self._sync_rows = 0
+        self.written = 0
+
+    def released(self, t: float) -> float:
+        """Start a release at ``t`` (s from the run start); return ``t``."""
+        self._releases.append(_Release(time=t))
+        return t
+
+    def caught(self, t_end: float) -> float | None:
+        """End the last decay at ``t_end`` (its last row's time, s); None if none is running."""
+        if not self._releases or self._releases[-1].end_time is not None:
+            return None
+        self._releases[-1].end_time = t_end
+        return t_end
+
+    def track(self, rec: Recorder, base: int, t: FloatArray, h: FloatArray, alpha: FloatArray,
+              U: FloatArray) -> None:
+        """Take sync rows ``base, base + 1, ...`` (times ``t``, s); write the decays ended."""
+        self._recent.append((t, h, alpha))
+        while len(self._recent) > 1 and self._recent[1][0][0] < t[-1] - 2 * HOLD_WINDOW_S[0]:
+            self._recent.popleft()
+        for rel in self._releases[self.written:]:
+            if rel.start_index is None and t[-1] >= rel.time:
+                rel.start_index = base + int(np.searchsorted(t, rel.time, side="left"))
+                rel.h0, rel.alpha0 = self._held(rel.time)
+            if (rel.stop_index is None and rel.end_time is not None
+                    and t[-1] >= rel.end_time):
+                rel.stop_index = base + int(np.searchsorted(t, rel.end_time, side="left"))
+            if rel.start_index is not None:
+                lo = max(rel.start_index - base, 0)
+                hi = t.size if rel.stop_index is None else max(rel.stop_index - base, lo)
+                if lo < min(hi, t.size):
+                    rel.U.append(U[lo:hi])
+        self._write_finished(rec, final=False)
+
+    def _held(self, t_release: float) -> tuple[float, float]:
+        if not self._recent:  # a rig without lasers or scanner has no sync rows
+            return math.nan, math.nan
+        t = np.concatenate([b[0] for b in self._recent])
+        sel = (t >= t_release - HOLD_WINDOW_S[0]) & (t < t_release - HOLD_WINDOW_S[1])
+        out = []
+        for col in (1, 2):
+            v = np.concatenate([b[col] for b in self._recent])[sel]
+            v = v[np.isfinite(v)]
+            out.append(float(np.median(v)) if v.size else math.nan)
+        return out[0], out[1]
+
+    def finish(self, rec: Recorder, sync_rows: int) -> None:
+        """Write every release not written yet (the run ends after ``sync_rows`` rows)."""
+        self._sync_rows = sync_rows
+        self._write_finished(rec, final=True)
+
+    def _write_finished(self, rec: Recorder, *, final: bool) -> None:
+        pending = self._releases[self.written:]
+        for i, rel in enumerate(pending):
+            following = pending[i + 1] if i + 1 < len(pending) else None
+            if rel.stop_index is not None:
+                stop = rel.stop_index
+            elif following is not None and following.start_index is not None:
+                stop = following.start_index
+            elif final:
+                stop = self._sync_rows
+            else:
+                return
+            start = rel.start_index if rel.start_index is not None else stop
+            if rel.start_index is None:
+                rel.h0, rel.alpha0 = self._held(rel.time)
+            u = np.concatenate(rel.U) if rel.U else np.zeros(0)
+            u = u[: max(stop - start, 0)]
+            u = u[np.isfinite(u)]
+            rec.add_release(release_time=rel.time, start_index=start, stop_index=max(stop, start),
+                            U=float(np.median(u)) if u.size else math.nan, h0=rel.h0,
+                            alpha0=rel.alpha0)
+            self.written += 1

@@ -1,0 +1,62 @@
+"""Run files written from releases: the file readers' test and benchmark data.
+
+Responsibility: :func:`write_release_run` writes :class:`~ident.release.Release` objects (e.g.
+simulated ones) back to back into a run file with the acquisition's own recorder
+(:class:`~daq.recording.recorder.RunRecorder`), for the tests and benchmarks of the file
+readers (``windrig identify``, ``diagnose``, ``reprocess``, the console's replay).
+
+Not responsible for: recording a rig (:mod:`daq.recording.run`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from daq.recording.recorder import RunRecorder
+
+__all__ = ["write_release_run"]
+
+
+def write_release_run(path: str | Path, config: Any, releases: Sequence[Any]) -> None:
+    """Write releases back to back into a run file, with the acquisition's own recorder.
+
+    Parameters
+    ----------
+    path : str or Path
+        The run file to create.
+    config : RigConfig
+        Stored verbatim (its section and rig name are the file's).
+    releases : sequence of Release or SimulatedRelease
+        One row of ``/entry/releases`` each; the sync view holds their samples one after the
+        other on one time base (the tap pressures are zero: not simulated here), U constant
+        and the release's air density (1.2 kg/m^3 when it has none). Samples before a
+        release's ``t = 0`` (a simulated hold, ``pre_s``) are written before its release row's
+        start; its ``h0``/``alpha0`` are the release's own when it has them, else the samples
+        at ``t = 0``.
+    """
+    rec = RunRecorder(path, config_text=config.text, rig_name=config.name, min_free_bytes=0,
+                      reserve_bytes=0)
+    rec.open()
+    n_taps = config.taps.n_taps
+    rec.add_sync([f"tap{i:03d}" for i in range(n_taps)])
+    rec.start()
+    rows, t0 = 0, 0.0
+    for r in releases:
+        t = t0 - float(r.t[0]) + r.t  # the release's first sample (held or free) at t0
+        n = t.size
+        first = int(np.searchsorted(r.t, 0.0))  # the release instant, t = 0
+        rho = 1.2 if r.rho is None else float(r.rho)
+        rec.append_sync(t, h=r.h, alpha=r.alpha, lift=r.lift, moment=r.moment,
+                        pressure=np.zeros((n, n_taps), dtype=np.float32), U=np.full(n, r.U),
+                        rho=np.full(n, rho))
+        rec.add_release(release_time=float(t[first]), start_index=rows + first,
+                        stop_index=rows + n, U=r.U,
+                        h0=float(getattr(r, "h0", r.h[first])),
+                        alpha0=float(getattr(r, "alpha0", r.alpha[first])))
+        rows += n
+        t0 = float(t[-1]) + float(r.t[1] - r.t[0])
+    rec.close()

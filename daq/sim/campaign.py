@@ -1,0 +1,314 @@
+"""A whole simulated test campaign: releases at several wind speeds -> E2RFC -> flutter speed.
+
+Responsibility: :func:`run_campaign` drives a *simulated* rig, started in a process of its own
+(:mod:`daq.sim.rig_process`), through the real drivers, the acquisition engine and the production
+recorder (:func:`daq.recording.run.record_run`, every fan and release step one of the engine's
+commands, so an event of the run): for each fraction ``f`` of the true
+flutter speed it sets the fan so that the wind is ``f U_F``, waits for the ramp, then arms, holds
+and releases the model ``releases_per_speed`` times, recording each free decay for ``decay_s``
+seconds, one HDF5 run file per wind speed (``campaign_U<speed>.h5``). It then reads the files back
+(:func:`ident.io.read_run`: each release ends where the model is armed again), identifies the
+rational-function model from all releases (:func:`ident.e2rfc.identify`), computes the identified
+flutter speed with its standard deviation and compares it with the truth. Plots (matplotlib, Agg)
+are written next to the files.
+
+Not responsible for: the drivers, the engine or the file (:mod:`daq.recording`), the numerics
+(:mod:`ident`), or the decay length (:mod:`daq.procedure`). Real rigs are not driven here: the truth
+(``U_F``) that sets the wind speeds exists only for a simulated rig.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from daq.acquisition.engine import Acquisition
+from daq.config import RigConfig
+from daq.procedure import HOLD_S, default_decay_s
+from daq.recording.run import record_run
+from daq.sim.rig_process import start_rig_process
+from ident import e2rfc, flutter
+from ident.io import campaign_section, read_run
+from ident.release import Release
+from ident.rfc import RationalFunctionModel
+from ident.section import SectionModel
+from simulators.virtual_tunnel import AirState
+
+__all__ = ["CampaignResult", "run_campaign"]
+
+#: Fan ramp rate assumed when the simulated drive's is not configured, rpm/s (the simulator's).
+DEFAULT_RAMP_RPM_PER_S = 100.0
+
+
+@dataclass
+class CampaignResult:
+    """Outcome of :func:`run_campaign`.
+
+    Attributes
+    ----------
+    files : list of Path
+        One run file per wind speed.
+    wind_speeds : list of float
+        Requested wind speeds, m/s.
+    truth_speed : float
+        Flutter speed of the simulated truth, m/s.
+    identified_speed : float or None
+        Flutter speed of the identified model, m/s (None: no flutter found).
+    identified_std : float or None
+        Its standard deviation, m/s.
+    structures : StructureSpread or None
+        The flutter speeds of the structures within one standard error of the best, the
+        chosen one first.
+    relative_error : float or None
+        ``identified / truth - 1``.
+    n_releases : int
+    decay_s : float
+    timings : dict
+        Wall times, s: ``acquisition``, ``identification``, ``plots``, ``total``.
+    plots : dict
+        Plot name -> path.
+    model : RationalFunctionModel or None
+        The identified model.
+    releases : list of Release
+        The releases identified, in the order of the model's diagnostics.
+    """
+
+    files: list[Path]
+    wind_speeds: list[float]
+    truth_speed: float
+    identified_speed: float | None
+    identified_std: float | None
+    relative_error: float | None
+    n_releases: int
+    decay_s: float
+    timings: dict[str, float] = field(default_factory=dict)
+    plots: dict[str, Path] = field(default_factory=dict)
+    model: RationalFunctionModel | None = field(default=None, repr=False)
+    releases: list[Release] = field(default_factory=list, repr=False)
+    structures: e2rfc.StructureSpread | None = None
+
+    def summary(self) -> str:
+        """Plain-text summary for operators and logs."""
+        lines = [
+            f"campaign: {self.n_releases} releases at "
+            + ", ".join(f"{u:.2f}" for u in self.wind_speeds) + " m/s "
+            f"({self.decay_s:.1f} s decays), {len(self.files)} run files",
+            f"truth flutter speed       {self.truth_speed:.3f} m/s",
+        ]
+        if self.identified_speed is None:
+            lines.append("identified flutter speed  none found")
+        else:
+            std = "" if self.identified_std is None else f" +- {self.identified_std:.3f}"
+            lines.append(f"identified flutter speed  {self.identified_speed:.3f}{std} m/s")
+            if self.structures is not None:
+                lines.append(f"structure                 {self.structures.summary()}")
+            if self.relative_error is not None:
+                lines.append(f"relative error            {100 * self.relative_error:+.2f} %")
+        lines.append("wall time " + ", ".join(f"{k} {v:.1f} s" for k, v in self.timings.items()))
+        lines.extend(f"plot {name}: {path}" for name, path in self.plots.items())
+        return "\n".join(lines)
+
+
+def _truth(config: RigConfig) -> tuple[SectionModel, RationalFunctionModel]:
+    """Section with the simulated air density, and the simulated aerodynamic model."""
+    sim = config.simulation
+    if sim is None:
+        raise ValueError(f"{config.source}: run_campaign needs a simulated rig ([simulation])")
+    air = AirState(pressure_pa=sim.pressure_pa, temperature_k=sim.temperature_c + 273.15)
+    return config.section.replace(rho=air.density), config.aerodynamic_model()
+
+
+def _ramp_rate(config: RigConfig) -> float:
+    assert config.simulation is not None
+    fan = config.by_role("fan")
+    name = fan[0].name if fan else "fan"
+    options = config.simulation.devices.get(name, {})
+    return float(options.get("ramp_rpm_per_s", DEFAULT_RAMP_RPM_PER_S))
+
+
+def run_campaign(config: RigConfig, out_dir: str | Path, *,
+                 fractions: Sequence[float] = (0.5, 0.65, 0.8), releases_per_speed: int = 2,
+                 decay_s: float | None = None, progress: bool = True,
+                 n_lags: int | None = None, with_A3: bool | None = None) -> CampaignResult:
+    """Run a simulated campaign and identify the flutter speed (see the module docstring).
+
+    Parameters
+    ----------
+    config : RigConfig
+        A simulated rig (its ``[simulation]`` table is the truth).
+    out_dir : str or Path
+        Directory for the run files and the plots (created; existing run files are refused).
+    fractions : sequence of float
+        Wind speeds as fractions of the true flutter speed (each in (0, 1), two or more distinct).
+    releases_per_speed : int
+        Releases recorded at each wind speed (>= 1).
+    decay_s : float, optional
+        Recorded length of each decay, s; default :func:`default_decay_s`.
+    progress : bool
+        Show progress bars while recording.
+    n_lags, with_A3 : optional
+        Model structure passed to :func:`ident.e2rfc.identify` (None: chosen by held-out error;
+        with two short releases the choice can fall on too few lags, see the HIL test).
+
+    Returns
+    -------
+    CampaignResult
+    """
+    started = time.monotonic()
+    fractions = [float(f) for f in fractions]
+    if len(set(fractions)) < 2 or not all(0.0 < f < 1.0 for f in fractions):
+        raise ValueError(f"fractions must hold two or more distinct values in (0, 1), "
+                         f"got {fractions!r}")
+    if not (isinstance(releases_per_speed, int) and releases_per_speed >= 1):
+        raise ValueError(f"releases_per_speed must be an integer >= 1, got {releases_per_speed!r}")
+    section, truth_model = _truth(config)
+    if decay_s is None:
+        decay_s = default_decay_s(section)
+    decay_s = float(decay_s)
+    if not (math.isfinite(decay_s) and decay_s > 1.0):
+        raise ValueError(f"decay_s must be a number > 1 s, got {decay_s!r}")
+    truth = flutter.analyze(section, truth_model)
+    if truth.speed is None:
+        raise ValueError(f"the simulated truth has no flutter below {truth.U_max:.3g} m/s")
+    U_F = float(truth.speed)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    ramp_rate = _ramp_rate(config)
+
+    files: list[Path] = []
+    speeds: list[float] = []
+    for f in fractions:
+        U = f * U_F
+        rpm = U / config.wind_per_rpm
+        if U > config.limits.max_wind_speed or rpm > config.limits.max_fan_rpm:
+            raise ValueError(f"{f:g} U_F = {U:.3g} m/s ({rpm:.0f} rpm) exceeds the rig's limits "
+                             f"({config.limits.max_wind_speed:g} m/s, "
+                             f"{config.limits.max_fan_rpm:g} rpm)")
+        path = out / f"campaign_U{U:05.2f}.h5"
+        # Each file starts its own simulated rig: the fan ramps from rest.
+        ramp_s = rpm / ramp_rate + 1.0
+        duration = ramp_s + releases_per_speed * (HOLD_S + decay_s) + 1.0
+
+        def actions(acq: Acquisition, rpm: float = rpm, ramp_s: float = ramp_s) -> None:
+            acq.set_fan_speed(rpm)  # operator commands through the engine: events of the run
+            acq.start_fan()
+            acq.drivers["fan"].wait_for_speed(rpm, tolerance_rpm=max(2.0, 0.002 * rpm),
+                                              timeout_s=ramp_s + 5.0)
+            time.sleep(0.3)  # let the wind settle at the set point
+            for _ in range(releases_per_speed):
+                acq.arm()
+                time.sleep(HOLD_S)
+                acq.release()
+                time.sleep(decay_s)
+            acq.arm()  # catch the model: the next decay is not recorded as part of this one
+
+        # The simulated instruments run in their own process, as real ones run on their own
+        # hardware: sharing the recorder's interpreter lock would add milliseconds of
+        # simulated-device latency, which misaligns forces and motion (see daq.sim.rig_process).
+        with start_rig_process(config) as rig:
+            summary = record_run(rig.config, path, duration_s=duration, calz=True,
+                                 actions=actions, progress=progress,
+                                 operator_notes=f"campaign, {f:g} U_F")
+        if summary.get("releases") != releases_per_speed:
+            raise RuntimeError(f"{path}: recorded {summary.get('releases')} releases, expected "
+                               f"{releases_per_speed} (fan ramp slower than assumed?)")
+        files.append(path)
+        speeds.append(U)
+    t_acq = time.monotonic() - started
+
+    t1 = time.monotonic()
+    runs = [read_run(path) for path in files]
+    releases = [r for run in runs for r in run.releases]
+    file_section = campaign_section(runs)  # as `windrig identify` does
+    model = e2rfc.identify(releases, file_section, n_lags=n_lags, with_A3=with_A3)
+    result, std = model.flutter(file_section)
+    speed = None if result.speed is None else float(result.speed)
+    error = None if speed is None else speed / U_F - 1.0
+    t_ident = time.monotonic() - t1
+
+    t2 = time.monotonic()
+    plots = _plots(out, releases, file_section, model, section, truth_model, result, truth)
+    t_plots = time.monotonic() - t2
+    return CampaignResult(
+        files=files, wind_speeds=speeds, truth_speed=U_F, identified_speed=speed,
+        identified_std=std, relative_error=error, n_releases=len(releases), decay_s=decay_s,
+        timings={"acquisition": t_acq, "identification": t_ident, "plots": t_plots,
+                 "total": time.monotonic() - started},
+        plots=plots, model=model, releases=releases,
+        structures=model.structure_spread(file_section))
+
+
+def _plots(out: Path, releases: list[Release], section: SectionModel,
+           model: RationalFunctionModel, truth_section: SectionModel,
+           truth_model: RationalFunctionModel, identified: flutter.FlutterResult,
+           truth: flutter.FlutterResult) -> dict[str, Path]:
+    import matplotlib  # here: the backend is chosen before pyplot loads, only when plotting
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    plots: dict[str, Path] = {}
+
+    # Decays: h and alpha of each release.
+    fig, axes = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
+    for i, r in enumerate(releases):
+        label = f"#{i} U = {r.U:.2f} m/s"
+        axes[0].plot(r.t, 1e3 * r.h, lw=0.7, label=label)
+        axes[1].plot(r.t, 1e3 * r.alpha, lw=0.7, label=label)
+    axes[0].set_ylabel("h (mm)")
+    axes[1].set_ylabel("alpha (mrad)")
+    axes[1].set_xlabel("time from release (s)")
+    axes[0].legend(fontsize=7, ncol=2)
+    axes[0].set_title("recorded free decays")
+    fig.tight_layout()
+    plots["decays"] = out / "campaign_decays.png"
+    fig.savefig(plots["decays"], dpi=110)
+    plt.close(fig)
+
+    # Flutter derivatives over the K range the releases cover (both modes, all wind speeds).
+    K = e2rfc.reduced_frequency_span(releases, section, 200)
+    ident_fd = model.flutter_derivatives(K)
+    truth_fd = truth_model.flutter_derivatives(K)
+    fig, grid = plt.subplots(2, 4, figsize=(14, 6))
+    names = [f"H{i}" for i in range(1, 5)] + [f"A{i}" for i in range(1, 5)]
+    for ax, name in zip(grid.ravel(), names, strict=True):
+        ax.plot(1.0 / K, truth_fd[name], "k-", lw=1.2, label="truth")
+        ax.plot(1.0 / K, ident_fd[name], "r--", lw=1.2, label="identified")
+        ax.set_title(f"{name}*")
+        ax.set_xlabel("1/K = U/(B omega)")
+    grid[0, 0].legend(fontsize=8)
+    fig.tight_layout()
+    plots["flutter_derivatives"] = out / "campaign_flutter_derivatives.png"
+    fig.savefig(plots["flutter_derivatives"], dpi=110)
+    plt.close(fig)
+
+    # Damping and frequency against U, identified vs truth.
+    U_max = max(truth.U_max, identified.U_max)
+    ident_curves = flutter.analyze(section, model, U_max)
+    truth_curves = flutter.analyze(truth_section, truth_model, U_max)
+    fig, (ax_f, ax_z) = plt.subplots(2, 1, figsize=(9, 7), sharex=True)
+    for res, style, who in ((truth_curves, "-", "truth"), (ident_curves, "--", "identified")):
+        for j, mode in enumerate(res.mode_names):
+            ax_f.plot(res.U, res.frequencies[:, j], style, label=f"{mode}, {who}")
+            ax_z.plot(res.U, res.damping[:, j], style, label=f"{mode}, {who}")
+        if res.speed is not None:
+            ax_z.axvline(res.speed, ls=style, color="grey", lw=0.8)
+    for r in releases:
+        ax_z.axvline(r.U, color="tab:green", lw=0.5, alpha=0.5)
+    ax_z.axhline(0.0, color="k", lw=0.6)
+    ax_f.set_ylabel("frequency (Hz)")
+    ax_z.set_ylabel("damping ratio")
+    ax_z.set_xlabel("U (m/s)")
+    ax_z.set_ylim(-0.05, max(0.2, float(np.nanmax(truth_curves.damping)) * 0.5))
+    ax_f.legend(fontsize=8)
+    ax_f.set_title("state-space flutter analysis: identified (--) vs truth (-)")
+    fig.tight_layout()
+    plots["flutter"] = out / "campaign_flutter.png"
+    fig.savefig(plots["flutter"], dpi=110)
+    plt.close(fig)
+    return plots
