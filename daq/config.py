@@ -26,6 +26,7 @@ from ident.flat_plate import jones_model
 from ident.rfc import RationalFunctionModel
 from ident.section import SectionModel
 from ident.taps import TapLayout
+from ident.turbulence import StaticCoefficients, TurbulenceSpec
 
 __all__ = [
     "InstrumentConfig",
@@ -83,6 +84,19 @@ class SimulationConfig:
         Ambient air.
     devices : dict
         Per-instrument simulation settings (clock offset and drift, noise, faults), by name.
+    static : StaticCoefficients or None
+        ``[simulation.static]``: the section's static coefficients (``C_D, C_L, C_M`` and their
+        slopes per radian, lift positive downward): the mean wind load, and the buffeting
+        forces with turbulence.
+    turbulence : TurbulenceSpec or None
+        ``[simulation.turbulence]``: oncoming turbulence (``Iu, Iw`` intensities as fractions,
+        ``Lux, Lwx`` length scales in m, ``Cuy, Cwy`` span-wise coherence decays, ``admittance``
+        ``"none"`` or ``"davenport"`` with ``decay``); needs ``static``.
+    span : float or None
+        The section model's span, m (``[simulation.turbulence] span``: the span-wise coherence
+        of the gusts averages the buffeting over it).
+    turbulence_seed : int
+        Seed of the gust field (``[simulation.turbulence] seed``, default 0).
     """
 
     aerodynamics: str
@@ -92,6 +106,10 @@ class SimulationConfig:
     pressure_pa: float
     temperature_c: float
     devices: Mapping[str, Mapping[str, Any]]
+    static: StaticCoefficients | None = None
+    turbulence: TurbulenceSpec | None = None
+    span: float | None = None
+    turbulence_seed: int = 0
 
 
 @dataclass(frozen=True)
@@ -238,7 +256,7 @@ def _instruments(data: Mapping[str, Any], source: str) -> tuple[InstrumentConfig
 def _simulation(table: Mapping[str, Any], where: str,
                 instruments: tuple[InstrumentConfig, ...]) -> SimulationConfig:
     check_keys(table, where, {"aerodynamics", "hold_h", "hold_alpha"},
-               {"rfc", "pressure_pa", "temperature_c", "devices"})
+               {"rfc", "pressure_pa", "temperature_c", "devices", "static", "turbulence"})
     aerodynamics = table["aerodynamics"]
     if aerodynamics not in ("flat_plate_jones", "rfc"):
         raise ConfigError(f"{where} aerodynamics must be 'flat_plate_jones' or 'rfc', "
@@ -247,13 +265,20 @@ def _simulation(table: Mapping[str, Any], where: str,
         raise ConfigError(f"{where}: an [simulation.rfc] table is required exactly when "
                           "aerodynamics = 'rfc'")
     if "rfc" in table:
-        check_keys(table["rfc"], f"{where}.rfc", {"A", "d"})
+        check_keys(table["rfc"], _subtable(where, "rfc"), {"A", "d"})
         try:
             RationalFunctionModel.from_dict(dict(table["rfc"]))
         except (ValueError, TypeError) as exc:
-            raise ConfigError(f"{where}.rfc: {exc}") from exc
+            raise ConfigError(f"{_subtable(where, 'rfc')}: {exc}") from exc
     devices = table.get("devices", {})
-    check_keys(devices, f"{where}.devices", set(), {inst.name for inst in instruments})
+    check_keys(devices, _subtable(where, "devices"), set(), {inst.name for inst in instruments})
+    static = _static(table["static"], _subtable(where, "static")) if "static" in table else None
+    turbulence, span, seed = None, None, 0
+    if "turbulence" in table:
+        if static is None:
+            raise ConfigError(f"{_subtable(where, 'turbulence')} needs a [simulation.static] "
+                              "table: the buffeting forces come from the static coefficients")
+        turbulence, span, seed = _turbulence(table["turbulence"], _subtable(where, "turbulence"))
     return SimulationConfig(
         aerodynamics=aerodynamics,
         rfc=table.get("rfc"),
@@ -263,4 +288,44 @@ def _simulation(table: Mapping[str, Any], where: str,
                            default=101325.0),
         temperature_c=number(table, "temperature_c", where, lo=-30.0, hi=60.0, default=20.0),
         devices=devices,
+        static=static,
+        turbulence=turbulence,
+        span=span,
+        turbulence_seed=seed,
     )
+
+
+def _subtable(where: str, name: str) -> str:
+    """Name a sub-table in messages: ``file [simulation]`` -> ``file [simulation.name]``."""
+    return f"{where[:-1]}.{name}]" if where.endswith("]") else f"{where}.{name}"
+
+
+def _static(table: Mapping[str, Any], where: str) -> StaticCoefficients:
+    """Read the static coefficients: six numbers, the slopes per radian (|value| <= 20)."""
+    names = ("C_D", "C_L", "C_M", "dC_D", "dC_L", "dC_M")
+    check_keys(table, where, set(names))
+    return StaticCoefficients(**{name: number(table, name, where, lo=-20.0, hi=20.0)
+                                 for name in names})
+
+
+def _turbulence(table: Mapping[str, Any], where: str) -> tuple[TurbulenceSpec, float, int]:
+    """Read the turbulence spec, the model's span (m) and the gust field's seed."""
+    check_keys(table, where, {"Iu", "Iw", "Lux", "Lwx", "span"},
+               {"Cuy", "Cwy", "admittance", "decay", "seed"})
+    admittance = table.get("admittance", "none")
+    if admittance not in ("none", "davenport"):
+        raise ConfigError(f"{where} admittance must be 'none' or 'davenport', got {admittance!r}")
+    seed = table.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ConfigError(f"{where} seed must be an integer >= 0, got {seed!r}")
+    spec = TurbulenceSpec(
+        Iu=number(table, "Iu", where, lo=0.0, hi=0.5),
+        Iw=number(table, "Iw", where, lo=0.0, hi=0.5),
+        Lux=number(table, "Lux", where, lo=0.0, hi=100.0, lo_open=True),
+        Lwx=number(table, "Lwx", where, lo=0.0, hi=100.0, lo_open=True),
+        Cuy=number(table, "Cuy", where, lo=0.0, hi=100.0, default=10.0),
+        Cwy=number(table, "Cwy", where, lo=0.0, hi=100.0, default=8.0),
+        admittance=admittance,
+        decay=number(table, "decay", where, lo=0.0, hi=100.0, lo_open=True, default=7.0),
+    )
+    return spec, number(table, "span", where, lo=0.0, hi=20.0, lo_open=True), int(seed)

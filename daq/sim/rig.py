@@ -146,7 +146,8 @@ def start_simulated_rig(
         config.section, config.aerodynamic_model(), config.taps,
         wind_per_rpm=config.wind_per_rpm, hold=(sim.hold_h, sim.hold_alpha),
         air=AirState(pressure_pa=sim.pressure_pa, temperature_k=sim.temperature_c + 273.15),
-        clock=clock,
+        clock=clock, static=sim.static, turbulence=sim.turbulence, span=sim.span,
+        seed=None if sim.turbulence is None else sim.turbulence_seed,
     )
     rig = SimulatedRig(config=config, tunnel=tunnel, simulators={}, urls={})
     resolved: list[InstrumentConfig] = []

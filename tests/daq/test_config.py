@@ -92,5 +92,55 @@ def test_a_bad_rfc_table_is_refused_with_the_reason():
     """Simulated aerodynamics given as coefficients are validated like a RationalFunctionModel."""
     text = BASE.replace('aerodynamics = "flat_plate_jones"', 'aerodynamics = "rfc"')
     text += "\n[simulation.rfc]\nA = [[[0, 0], [0, 0]]]\nd = []\n"
-    with pytest.raises(ConfigError, match=r"\[simulation\].rfc: A must have shape"):
+    with pytest.raises(ConfigError, match=r"\[simulation.rfc\]: A must have shape"):
         parse_rig_config(text, "bad.toml")
+
+
+TURBULENT = BASE + """
+[simulation.static]
+C_D = 0.02
+C_L = 0.0
+C_M = 0.0
+dC_D = 0.0
+dC_L = -6.283
+dC_M = 1.571
+
+[simulation.turbulence]
+Iu = 0.0
+Iw = 0.01
+Lux = 1.0
+Lwx = 0.3
+span = 1.0
+seed = 3
+"""
+
+
+def test_turbulence_and_static_coefficients_of_the_virtual_tunnel_are_read():
+    """[simulation.static] and [simulation.turbulence]: defaults for coherence and admittance."""
+    sim = parse_rig_config(TURBULENT, "turbulent.toml").simulation
+    assert sim is not None and sim.static is not None and sim.turbulence is not None
+    assert sim.static.dC_L == -6.283 and sim.turbulence.Iw == 0.01
+    assert (sim.turbulence.Cuy, sim.turbulence.Cwy, sim.turbulence.admittance) == (10.0, 8.0,
+                                                                                     "none")
+    assert sim.span == 1.0 and sim.turbulence_seed == 3
+    smooth = parse_rig_config(BASE, "base.toml").simulation
+    assert smooth is not None and smooth.turbulence is None and smooth.static is None
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "match"),
+    [
+        ("Iw = 0.01", "Iw = 0.9", r"\[simulation.turbulence\] Iw = 0.9 is outside"),
+        ("Lwx = 0.3", "Lwx = 0.0", r"\[simulation.turbulence\] Lwx = 0.0 is outside"),
+        ("span = 1.0\n", "", r"\[simulation.turbulence\]: missing required key\(s\) \['span'\]"),
+        ("seed = 3", "seed = -1", r"\[simulation.turbulence\] seed must be an integer >= 0"),
+        ("seed = 3", 'admittance = "sears"', "admittance must be 'none' or 'davenport'"),
+        ("dC_M = 1.571", "dC_M = 1.571\nC_X = 1", r"\[simulation.static\]: unknown key"),
+        ("[simulation.static]\nC_D = 0.02\nC_L = 0.0\nC_M = 0.0\ndC_D = 0.0\ndC_L = -6.283\n"
+         "dC_M = 1.571\n", "", r"turbulence\] needs a \[simulation.static\] table"),
+    ],
+)
+def test_bad_turbulence_tables_name_the_key(old, new, match):
+    assert old in TURBULENT
+    with pytest.raises(ConfigError, match=match):
+        parse_rig_config(TURBULENT.replace(old, new, 1), "bad.toml")
