@@ -27,27 +27,16 @@ from ident import e2rfc, fd_method
 from ident import flutter as _flutter
 from ident.conventions import FLUTTER_DERIVATIVE_NAMES
 from ident.errors import IdentError
-from ident.modal import name_modes
+from ident.modal import ReleaseModes, release_modes
 from ident.release import Release
 from ident.section import SectionModel
 
-__all__ = ["CampaignAnalysis", "ReleaseModes", "analyze_campaign"]
+__all__ = ["CampaignAnalysis", "analyze_campaign"]
 
 FloatArray = npt.NDArray[np.float64]
 
 #: Reduced frequencies at which the derivatives are tabulated over the covered span.
 K_POINTS = 120
-
-
-@dataclass(frozen=True)
-class ReleaseModes:
-    """Frequency (Hz) and damping ratio of a release's heave- and pitch-dominated modes."""
-
-    U: float
-    f_h: float
-    f_a: float
-    zeta_h: float
-    zeta_a: float
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,8 +49,10 @@ class CampaignAnalysis:
     n_releases : int
     wind_speeds : tuple of float
         The distinct wind speeds, m/s.
+    release_speeds : tuple of float
+        Each release's wind speed, m/s, in the order given.
     modes : tuple of ReleaseModes
-        One per release, in the order given.
+        Each release's heave and pitch modes (frequency, damping), in the order given.
     model : IdentifiedModel
     flutter : FlutterResult
         The model's flutter analysis (state space).
@@ -82,6 +73,7 @@ class CampaignAnalysis:
     section: SectionModel
     n_releases: int
     wind_speeds: tuple[float, ...]
+    release_speeds: tuple[float, ...]
     modes: tuple[ReleaseModes, ...]
     model: e2rfc.IdentifiedModel = field(repr=False)
     flutter: _flutter.FlutterResult = field(repr=False)
@@ -154,7 +146,8 @@ class CampaignAnalysis:
             "flutter_speed_low": self.structures.low,
             "flutter_speed_high": self.structures.high,
             "warnings": list(self.warnings),
-            "modes": [vars(m) for m in self.modes],
+            "modes": [{"U": u, **vars(m)} for u, m in zip(self.release_speeds, self.modes,
+                                                           strict=True)],
         }
 
 
@@ -202,17 +195,10 @@ def analyze_campaign(
     return CampaignAnalysis(
         section=section, n_releases=len(releases),
         wind_speeds=tuple(e2rfc.distinct_wind_speeds([r.U for r in releases])),
-        modes=tuple(_modes(r.U, fit, section) for r, fit in
-                    zip(releases, model.diagnostics.modal_fits, strict=True)),
+        release_speeds=tuple(float(r.U) for r in releases),
+        modes=tuple(release_modes(fit, section) for fit in model.diagnostics.modal_fits),
         model=model, flutter=flutter, uncertainty=uncertainty,
         structures=model.structure_spread(section, U_max), K=K,
         derivatives={name: np.asarray(derivatives[name], dtype=float)
                      for name in FLUTTER_DERIVATIVE_NAMES},
         table=fd_table, table_error=table_error)
-
-
-def _modes(U: float, fit: Any, section: SectionModel) -> ReleaseModes:
-    heave, pitch = name_modes(fit.mode_shapes(), section.mass_matrix())
-    return ReleaseModes(U=float(U), f_h=float(fit.frequencies[heave]),
-                        f_a=float(fit.frequencies[pitch]), zeta_h=float(fit.damping[heave]),
-                        zeta_a=float(fit.damping[pitch]))

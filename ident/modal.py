@@ -30,7 +30,7 @@ if TYPE_CHECKING:  # only the type: a section's B and mass matrix are read
     from ident.section import SectionModel
 
 __all__ = ["ModalFit", "ReleaseModes", "fit_modes", "fit_release_modes", "name_modes",
-           "noise_std"]
+           "noise_std", "release_modes"]
 
 FloatArray = npt.NDArray[np.float64]
 ComplexArray = npt.NDArray[np.complex128]
@@ -515,11 +515,21 @@ def fit_release_modes(t: FloatArray, h: FloatArray, alpha: FloatArray,
         The decay is too short, or two oscillatory modes are not found in it.
     """
     x = np.column_stack([np.asarray(h, dtype=float) / section.B, np.asarray(alpha, dtype=float)])
-    fit = fit_modes(np.asarray(t, dtype=float), x, n_modes=2)
+    return release_modes(fit_modes(np.asarray(t, dtype=float), x, n_modes=2), section)
+
+
+def release_modes(fit: ModalFit, section: SectionModel) -> ReleaseModes:
+    """Name the two modes of a decay's modal fit (of ``[h/B, alpha]``) heave and pitch.
+
+    Raises
+    ------
+    InsufficientDataError
+        The fit holds fewer than two oscillatory modes.
+    """
     if fit.frequencies.size < 2:
         raise InsufficientDataError(f"found {fit.frequencies.size} oscillatory mode(s) in the "
                                     "decay, need 2 (heave and pitch)")
     j_h, j_a = name_modes(fit.mode_shapes(), section.mass_matrix())
     f, z = fit.frequencies, fit.damping
     return ReleaseModes(f_h=float(f[j_h]), zeta_h=float(z[j_h]), f_a=float(f[j_a]),
-                       zeta_a=float(z[j_a]))
+                        zeta_a=float(z[j_a]))

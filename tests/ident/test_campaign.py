@@ -36,7 +36,7 @@ def test_the_analysis_holds_what_identify_and_the_flutter_analysis_give():
     assert analysis.wind_speeds == tuple(r.U for r in data)
     assert analysis.structures.labels[0] == analysis.structure
     # Modes named by energy: heave near 2 Hz, pitch below 4 Hz and falling with the wind.
-    assert [m.U for m in analysis.modes] == [r.U for r in data]
+    assert analysis.release_speeds == tuple(r.U for r in data)
     assert all(1.9 < m.f_h < 2.2 and 3.0 < m.f_a < 4.0 for m in analysis.modes)
     assert analysis.modes[0].f_a > analysis.modes[-1].f_a
     truth = MODEL.flutter_derivatives(analysis.K)
