@@ -237,7 +237,7 @@ def _simulate(args: argparse.Namespace) -> int:
 
 
 def _identify(args: argparse.Namespace) -> int:
-    from ident import e2rfc
+    from ident.campaign import analyze_campaign
     from ident.io import campaign_section, read_run
 
     runs = [read_run(path) for path in args.files]
@@ -245,9 +245,9 @@ def _identify(args: argparse.Namespace) -> int:
     releases = [r for run in runs for r in run.releases]
     print(f"{len(releases)} release(s) from {len(runs)} file(s); wind speeds "
           f"{sorted({round(r.U, 2) for r in releases})} m/s")
-    model = e2rfc.identify(releases, section, n_lags=args.n_lags)
-    result, std = model.flutter(section)
-    spread = model.structure_spread(section)
+    analysis = analyze_campaign(releases, section, n_lags=args.n_lags, table=False)
+    model, result, spread = analysis.model, analysis.flutter, analysis.structures
+    u = analysis.uncertainty
     diagnostics = model.diagnostics
     print(f"structure: {diagnostics.reason}")
     print(f"lag roots d = {np.round(model.d, 4).tolist()}")
@@ -256,25 +256,35 @@ def _identify(args: argparse.Namespace) -> int:
     if result.speed is None:
         print(result.summary())
     else:
-        print(f"flutter speed {result.speed:.3f} +/- {std:.3f} m/s, frequency "
+        print(f"flutter speed {result.speed:.3f} +/- {u.total:.3f} m/s, frequency "
               f"{result.frequency:.3f} Hz ({result.critical_mode} branch); "
               f"{spread.summary()}")
+        parts = [f"noise {u.parametric:.3f}", f"structure {u.structure:.3f}",
+                 f"extrapolation {u.extrapolation:.3f}", f"one lag more {u.refinement:.3f}"]
+        if u.turbulence:
+            parts.insert(1, f"release scatter {u.turbulence:.3f}")
+        print("  its std (m/s): " + ", ".join(parts))
     for label, speed, speed_std in zip(spread.labels[1:], spread.speeds[1:], spread.stds[1:],
                                        strict=True):
         print(f"  also within one SE: {label}: " + (
             f"no flutter below {spread.U_max:.3g} m/s" if speed is None or speed_std is None
             else f"flutter speed {speed:.3f} +/- {speed_std:.3f} m/s"))
+    for warning in analysis.warnings:
+        print(f"warning: {warning}")
     if args.json is not None:
+        summary = analysis.to_dict()
         args.json.write_text(json.dumps({
             "files": [str(p) for p in args.files],
-            "model": model.to_dict(),
-            "structure": diagnostics.reason,
+            "model": summary["model"],
+            "structure": summary["reason"],
             "release_residuals": diagnostics.release_residuals.tolist(),
             "flutter_speed": result.speed,
-            "flutter_speed_std": std,
-            "flutter_speed_structures": dict(zip(spread.labels, spread.speeds, strict=True)),
+            "flutter_speed_std": analysis.flutter_std,
+            "flutter_speed_std_parts": summary["flutter_std_parts"],
+            "flutter_speed_structures": summary["flutter_structures"],
             "flutter_frequency": result.frequency,
             "critical_mode": result.critical_mode,
+            "warnings": summary["warnings"],
         }, indent=2))
         print(f"wrote {args.json}")
     return 0

@@ -6,10 +6,10 @@ decay) and, as soon as a decay is complete, cuts its rows out of the source's bu
 (gaps, length, wind) and has a worker process fit its two modes
 (:func:`ident.modal.fit_release_modes`: frequency and damping ratio of the heave- and
 pitch-dominated modes). Once usable releases exist at two or more wind speeds, the worker identifies
-the rational-function model from all of them together (:func:`identify_releases`:
-:func:`ident.e2rfc.identify`, the flutter speed with its standard deviation, the model's flutter
-derivatives, and the indirect method's table of flutter derivatives from the same decays,
-:func:`ident.fd_method.flutter_derivatives`, to plot against), again whenever a release is added.
+the rational-function model from all of them together (:func:`identify_releases`, which is
+:func:`ident.campaign.analyze_campaign`: E2RFC, the flutter speed with its standard deviation and
+warnings, the model's flutter derivatives, and the indirect method's table of flutter derivatives
+from the same decays to plot against), again whenever a release is added.
 
 The fits run in one worker *process*: a campaign fit takes ~1 s of CPU, which in the console's
 process would hold the interpreter lock against the acquisition threads and the redraws. The
@@ -35,14 +35,14 @@ import numpy as np
 import numpy.typing as npt
 
 from daq.procedure import default_decay_s
-from ident import e2rfc, fd_method
-from ident.conventions import FLUTTER_DERIVATIVE_NAMES
+from ident import e2rfc
+from ident.campaign import CampaignAnalysis, analyze_campaign
 from ident.errors import IdentError
 from ident.modal import ReleaseModes, fit_release_modes
 from ident.release import Release
 from ident.section import SectionModel
 
-__all__ = ["DECAY_COLUMNS", "MIN_DECAY_S", "STILL_AIR_U", "CampaignFit", "DecaySource",
+__all__ = ["DECAY_COLUMNS", "MIN_DECAY_S", "STILL_AIR_U", "DecaySource",
            "LiveIdentifier", "ReleaseRow", "identify_releases"]
 
 log = logging.getLogger(__name__)
@@ -107,102 +107,15 @@ class ReleaseRow:
         return self.status == "ok" and self.release is not None
 
 
-@dataclass(frozen=True)
-class CampaignFit:
-    """The model identified from all usable releases of the session.
-
-    Attributes
-    ----------
-    n_releases : int
-        Releases used.
-    wind_speeds : tuple of float
-        Their distinct wind speeds (2 % apart or more, as E2RFC counts them), m/s.
-    n_lags, with_A3 :
-        The model structure E2RFC chose.
-    flutter_speed, flutter_std, flutter_frequency : float or None
-        Predicted flutter speed and its standard deviation (m/s) and frequency (Hz); None when
-        the model has no flutter below the analysis' upper speed.
-    K : ndarray
-        Reduced frequencies ``B omega / U`` spanning the releases, for the derivative curves.
-    derivatives : dict of str to ndarray
-        The model's ``H1..H4, A1..A4`` at ``K``.
-    table : FlutterDerivativeTable or None
-        The indirect method's derivatives from the same decays (one row per wind speed: the
-        heave column at ``K_h``, the pitch column at ``K_a``); None when it failed.
-    table_error : str or None
-        Why the table is missing.
-    structures : StructureSpread or None
-        Flutter speeds of every structure within one standard error of the best, the chosen
-        one first (see :meth:`ident.e2rfc.IdentifiedModel.structure_spread`).
-    """
-
-    n_releases: int
-    wind_speeds: tuple[float, ...]
-    n_lags: int
-    with_A3: bool
-    flutter_speed: float | None
-    flutter_std: float | None
-    flutter_frequency: float | None
-    K: FloatArray = field(repr=False)
-    derivatives: dict[str, FloatArray] = field(repr=False)
-    table: fd_method.FlutterDerivativeTable | None = field(repr=False)
-    table_error: str | None = None
-    structures: e2rfc.StructureSpread | None = None
-
-    def summary(self) -> str:
-        """Return one line: the flutter speed, the model and the data it rests on."""
-        speeds = ", ".join(f"{u:.2f}" for u in self.wind_speeds)
-        model = f"E2RFC {self.n_lags} lag(s){' + A3' if self.with_A3 else ''}"
-        data = f"{self.n_releases} releases at {speeds} m/s"
-        if self.flutter_speed is None:
-            return f"no flutter predicted ({model}; {data})"
-        std = "" if self.flutter_std is None else f" +- {self.flutter_std:.2f}"
-        freq = "" if self.flutter_frequency is None else f" at {self.flutter_frequency:.2f} Hz"
-        spread = "" if self.structures is None else f"; {self.structures.summary()}"
-        return f"flutter speed {self.flutter_speed:.2f}{std} m/s{freq} ({model}; {data}{spread})"
-
-
-def identify_releases(releases: Sequence[Release], section: SectionModel) -> CampaignFit:
-    """Identify the rational-function model from releases at two or more wind speeds.
-
-    Parameters
-    ----------
-    releases : sequence of Release
-        Wind-on free decays with forces.
-    section : SectionModel
-        The structure, with the session's air density.
-
-    Returns
-    -------
-    CampaignFit
+def identify_releases(releases: Sequence[Release], section: SectionModel) -> CampaignAnalysis:
+    """Analyse the session's usable releases: :func:`ident.campaign.analyze_campaign`.
 
     Raises
     ------
     IdentError
         E2RFC cannot identify a model from these releases (one wind speed, rank deficiency).
     """
-    releases = list(releases)
-    model = e2rfc.identify(releases, section)
-    result, std = model.flutter(section)
-    K = e2rfc.reduced_frequency_span(releases, section, 120)
-    fds = model.flutter_derivatives(K)
-    table: fd_method.FlutterDerivativeTable | None = None
-    table_error = None
-    try:
-        table = fd_method.flutter_derivatives(releases, section)
-    except IdentError as exc:  # shown next to the curves; the model itself stands
-        table_error = f"{type(exc).__name__}: {exc}"
-    diagnostics = model.diagnostics
-    return CampaignFit(
-        n_releases=len(releases),
-        wind_speeds=tuple(e2rfc.distinct_wind_speeds([r.U for r in releases])),
-        n_lags=int(diagnostics.n_lags), with_A3=bool(diagnostics.with_A3),
-        flutter_speed=None if result.speed is None else float(result.speed),
-        flutter_std=None if std is None else float(std),
-        flutter_frequency=None if result.frequency is None else float(result.frequency),
-        K=K, derivatives={name: np.asarray(fds[name], dtype=float)
-                          for name in FLUTTER_DERIVATIVE_NAMES},
-        table=table, table_error=table_error, structures=model.structure_spread(section))
+    return analyze_campaign(releases, section)
 
 
 def _spawn_executor() -> Executor:
@@ -229,7 +142,7 @@ class LiveIdentifier:
     ----------
     rows : list of ReleaseRow
         The releases table, oldest first.
-    campaign : CampaignFit or None
+    campaign : CampaignAnalysis or None
         The latest model identified from all usable releases.
     campaign_status : str
         What the model part is doing or why there is none (shown under the table).
@@ -248,10 +161,10 @@ class LiveIdentifier:
         self._executor = executor
         self._own_executor = executor is None
         self.rows: list[ReleaseRow] = []
-        self.campaign: CampaignFit | None = None
+        self.campaign: CampaignAnalysis | None = None
         self.campaign_status = "releases at two or more wind speeds give the E2RFC model"
         self._modal_jobs: dict[int, Future[ReleaseModes]] = {}
-        self._campaign_job: Future[CampaignFit] | None = None
+        self._campaign_job: Future[CampaignAnalysis] | None = None
         self._campaign_inputs: tuple[int, ...] = ()  # the row numbers of the running/last fit
         self._closed = False
 

@@ -38,7 +38,7 @@ import numpy as np
 from tqdm import tqdm
 
 from daq.offline.report import ReprocessSummary, write_outputs
-from ident import e2rfc
+from ident.campaign import analyze_campaign
 from ident.discrepancy import diagnose
 from ident.errors import IdentError
 from ident.io import read_run
@@ -234,7 +234,8 @@ def process_campaign(name: str, files: list[dict[str, Any]],
     -------
     dict
         ``files``, ``n_releases``, ``wind_speeds``, and ``model`` (dict), ``structure``,
-        ``flutter_speed``, ``flutter_std``, ``flutter_frequency``, ``flutter_structures`` (the
+        ``flutter_speed``, ``flutter_std`` (all parts: :class:`ident.e2rfc.FlutterUncertainty`),
+        ``flutter_std_parts``, ``warnings``, ``flutter_frequency``, ``flutter_structures`` (the
         flutter speed of every structure within one standard error of the best, by label, None
         for no flutter), ``effect`` and the gaps, or
         ``error`` when E2RFC cannot identify a model (one wind speed).
@@ -255,20 +256,21 @@ def process_campaign(name: str, files: list[dict[str, Any]],
     out.update(n_releases=len(releases), wind_speeds=sorted({round(r.U, 2) for r in releases}),
                section=section.to_dict())
     try:
-        model = e2rfc.identify(releases, section, n_lags=settings.n_lags,
-                               with_A3=settings.with_A3)
+        analysis = analyze_campaign(releases, section, n_lags=settings.n_lags,
+                                    with_A3=settings.with_A3, table=False)
     except IdentError as exc:
         out["error"] = f"{type(exc).__name__}: {exc}"
         return out
-    result, std = model.flutter(section)
-    spread = model.structure_spread(section)
-    K = e2rfc.reduced_frequency_span(releases, section, 100)
-    out.update(model=model.to_dict(), structure=model.diagnostics.reason,
-               flutter_speed=result.speed, flutter_std=std, flutter_frequency=result.frequency,
-               flutter_structures=dict(zip(spread.labels, spread.speeds, strict=True)),
-               flutter_speed_low=spread.low, flutter_speed_high=spread.high,
-               K=K, derivatives={k: np.asarray(v) for k, v in
-                                 model.flutter_derivatives(K).items()},
+    model, result = analysis.model, analysis.flutter
+    summary = analysis.to_dict()
+    out.update(model=summary["model"], structure=summary["reason"],
+               flutter_speed=analysis.flutter_speed, flutter_std=analysis.flutter_std,
+               flutter_frequency=analysis.flutter_frequency,
+               flutter_structures=summary["flutter_structures"],
+               flutter_speed_low=summary["flutter_speed_low"],
+               flutter_speed_high=summary["flutter_speed_high"],
+               flutter_std_parts=summary["flutter_std_parts"], warnings=summary["warnings"],
+               K=analysis.K, derivatives=analysis.derivatives,
                curves={"U": result.U, "frequencies": result.frequencies,
                        "damping": result.damping, "mode_names": list(result.mode_names)})
     if settings.diagnose:

@@ -33,6 +33,7 @@ from daq.procedure import HOLD_S, default_decay_s
 from daq.recording.run import record_run
 from daq.sim.rig_process import start_rig_process
 from ident import e2rfc, flutter
+from ident.campaign import CampaignAnalysis, analyze_campaign
 from ident.io import campaign_section, read_run
 from ident.release import Release
 from ident.rfc import RationalFunctionModel
@@ -76,6 +77,8 @@ class CampaignResult:
         The identified model.
     releases : list of Release
         The releases identified, in the order of the model's diagnostics.
+    analysis : CampaignAnalysis or None
+        The whole campaign analysis (:func:`ident.campaign.analyze_campaign`).
     """
 
     files: list[Path]
@@ -91,6 +94,7 @@ class CampaignResult:
     model: RationalFunctionModel | None = field(default=None, repr=False)
     releases: list[Release] = field(default_factory=list, repr=False)
     structures: e2rfc.StructureSpread | None = None
+    analysis: CampaignAnalysis | None = field(default=None, repr=False)
 
     def summary(self) -> str:
         """Plain-text summary for operators and logs."""
@@ -107,6 +111,8 @@ class CampaignResult:
             lines.append(f"identified flutter speed  {self.identified_speed:.3f}{std} m/s")
             if self.structures is not None:
                 lines.append(f"structure                 {self.structures.summary()}")
+            if self.analysis is not None:
+                lines.extend(f"warning: {w}" for w in self.analysis.warnings)
             if self.relative_error is not None:
                 lines.append(f"relative error            {100 * self.relative_error:+.2f} %")
         lines.append("wall time " + ", ".join(f"{k} {v:.1f} s" for k, v in self.timings.items()))
@@ -225,22 +231,24 @@ def run_campaign(config: RigConfig, out_dir: str | Path, *,
     runs = [read_run(path) for path in files]
     releases = [r for run in runs for r in run.releases]
     file_section = campaign_section(runs)  # as `windrig identify` does
-    model = e2rfc.identify(releases, file_section, n_lags=n_lags, with_A3=with_A3)
-    result, std = model.flutter(file_section)
-    speed = None if result.speed is None else float(result.speed)
+    analysis = analyze_campaign(releases, file_section, n_lags=n_lags, with_A3=with_A3,
+                                table=False)
+    speed = analysis.flutter_speed
     error = None if speed is None else speed / U_F - 1.0
     t_ident = time.monotonic() - t1
 
     t2 = time.monotonic()
-    plots = _plots(out, releases, file_section, model, section, truth_model, result, truth)
+    plots = _plots(out, releases, file_section, analysis.model, section, truth_model,
+                   analysis.flutter, truth)
     t_plots = time.monotonic() - t2
     return CampaignResult(
         files=files, wind_speeds=speeds, truth_speed=U_F, identified_speed=speed,
-        identified_std=std, relative_error=error, n_releases=len(releases), decay_s=decay_s,
+        identified_std=analysis.flutter_std, relative_error=error, n_releases=len(releases),
+        decay_s=decay_s,
         timings={"acquisition": t_acq, "identification": t_ident, "plots": t_plots,
                  "total": time.monotonic() - started},
-        plots=plots, model=model, releases=releases,
-        structures=model.structure_spread(file_section))
+        plots=plots, model=analysis.model, releases=releases, structures=analysis.structures,
+        analysis=analysis)
 
 
 def _plots(out: Path, releases: list[Release], section: SectionModel,

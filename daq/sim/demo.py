@@ -22,7 +22,6 @@ Not responsible for: the campaign itself (:mod:`daq.sim.campaign`), the numerics
 from __future__ import annotations
 
 import json
-import math
 import time
 from pathlib import Path
 from typing import Any
@@ -115,24 +114,19 @@ def _simulated_density(config: Any) -> float:
 
 def _release_rows(result: Any, truth: Any) -> list[dict[str, Any]]:
     """Per release: modal frequencies and damping ratios, and the truth's at the same U."""
-    model = result.model
+    analysis = result.analysis
     rows: list[dict[str, Any]] = []
-    if model is None:
+    if analysis is None:
         return rows
-    diagnostics = model.diagnostics
-    for i, fit in enumerate(diagnostics.modal_fits):
-        U = float(diagnostics.wind_speeds[i])
-        f, z = np.asarray(fit.frequencies), np.asarray(fit.damping)
-        f_h, f_a = (f[0], f[-1]) if f.size else (math.nan, math.nan)
-        z_h, z_a = (z[0], z[-1]) if z.size else (math.nan, math.nan)
+    names = list(truth.mode_names)
+    j_h = names.index("heave") if "heave" in names else 0
+    j_a = names.index("pitch") if "pitch" in names else 1
+    for i, (U, modes) in enumerate(zip(analysis.release_speeds, analysis.modes, strict=True)):
         truth_z = [float(np.interp(U, truth.U, truth.damping[:, j])) for j in range(2)]
-        names = list(truth.mode_names)
-        j_h = names.index("heave") if "heave" in names else 0
-        j_a = names.index("pitch") if "pitch" in names else 1
         source = result.releases[i].meta
         rows.append({"release": f"{Path(str(source['file'])).name} #{source['release']}",
-                     "U": U, "f_h": float(f_h), "f_a": float(f_a), "zeta_h": float(z_h),
-                     "zeta_a": float(z_a), "truth_zeta_h": truth_z[j_h],
+                     "U": U, "f_h": modes.f_h, "f_a": modes.f_a, "zeta_h": modes.zeta_h,
+                     "zeta_a": modes.zeta_a, "truth_zeta_h": truth_z[j_h],
                      "truth_zeta_a": truth_z[j_a]})
     return rows
 
@@ -153,6 +147,10 @@ def _summary(result: Any, truth: Any, rows: list[dict[str, Any]],
         "target_relative_error": TARGET_RELATIVE_ERROR,
         "model": None if result.model is None else result.model.to_dict(),
         "structure": None if result.model is None else result.model.diagnostics.reason,
+        "identified_flutter_speed_std_parts": (
+            None if result.analysis is None
+            else result.analysis.to_dict()["flutter_std_parts"]),
+        "warnings": [] if result.analysis is None else list(result.analysis.warnings),
         "releases": rows,
         "timings_s": {**result.timings, "demo_total": wall_s},
         "plots": {k: str(v) for k, v in result.plots.items()},
