@@ -3,8 +3,8 @@
 The barometer sends about one line per second, so any decoder is fast enough; this measures the
 headroom and guards against a pathological regression (e.g. quadratic buffering). The stream is
 lines as the driver's FORM produces them (``P=  1013.250 hPa    T= 21.34 'C`` CR LF), with the
-pressure unit changing every 1000 lines (the A.5 fault "unit change"), fed in 64-byte chunks as
-a serial port returns them. A second stream has 10 % garbled and 5 % truncated lines.
+pressure unit changing every 1000 lines (the simulator's fault "unit_change"), fed in 64-byte chunks
+as a serial port returns them. A second stream has 10 % garbled and 5 % truncated lines.
 
 Run: ``.venv/bin/python benchmarks/decode_ptb330.py [--lines 200000]``.
 """

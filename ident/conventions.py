@@ -3,7 +3,7 @@
 Scanlan's flutter derivatives and windrig's aerodynamic transfer matrix ``Q`` are two views of the
 same self-excited forces. With generalised coordinates ``q = [h/B, alpha]``, generalised forces
 ``f = [L B, M]`` and ``f = qd B^2 Q(p) q`` (``qd = rho U^2 / 2``, ``p = s B / U``), harmonic motion
-(``p = iK``) gives (DESIGN.md, "Conventions")::
+(``p = iK``) gives (``docs/conventions.md``, "Reduced frequency and the self-excited forces")::
 
     Q(iK) = K^2 [[H4* + i H1*, H3* + i H2*],
                  [A4* + i A1*, A3* + i A2*]]

@@ -7,10 +7,10 @@ aerodynamics, identified by E2RFC unless given) with the releases it came from:
    (:func:`ident.simulate.simulate_decay`) and compared with what was measured:
    :func:`gap` is the RMS difference of h, alpha, lift and moment over all releases, each
    channel divided by its own RMS, averaged over the four channels.
-2. **Candidates**: the seven named effects of DESIGN.md are each fitted to the data as a
-   physical term with its own parameters (:mod:`ident._equation_error`: the residual of the
-   structural equation for six of them, the forces' line above the motion's band for vortex
-   shedding) and scored by the held-out fraction of that residual they explain.
+2. **Candidates**: the seven named effects (``docs/conventions.md``, "Named effects") are each
+   fitted to the data as a physical term with its own parameters (:mod:`ident._equation_error`: the
+   residual of the structural equation for six of them, the forces' line above the motion's band for
+   vortex shedding) and scored by the held-out fraction of that residual they explain.
 3. **Naming**: the candidate with the smallest held-out residual wins if it explains at least
    ``1 - NONE_RATIO`` of it and its improvement is ``MIN_SIGMAS`` standard errors clear of
    nothing; otherwise the answer is None (the baseline explains the data: no false alarms).

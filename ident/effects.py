@@ -4,8 +4,8 @@ These are the named physical terms used both by the virtual tunnel (:mod:`simula
 through :func:`ident.simulate.simulate_decay`), which adds them to the simulated physics, and by the
 discrepancy workflow (:mod:`ident.discrepancy`), which tries them as candidate explanations of a
 gap between an identified model and the measured releases. Each effect is a small validated
-dataclass with its own parameters, in SI units per unit span. The seven names are fixed by
-DESIGN.md.
+dataclass with its own parameters, in SI units per unit span. The seven names are fixed
+(``docs/conventions.md``, "Named effects").
 
 Three kinds: structural nonlinearities (``coulomb_friction``, ``quadratic_damping``,
 ``cubic_stiffness``), changes to the linear physics (``static_unbalance``, ``vortex_shedding``), and
@@ -36,7 +36,7 @@ __all__ = [
 
 
 class Effect:
-    """Base class of the named effects: ``name`` is the DESIGN.md name of the effect."""
+    """Base class of the named effects: ``name`` is the effect's fixed name."""
 
     name: ClassVar[str]
     #: True for effects that need a nonlinear (fixed-step) integration.
@@ -265,7 +265,7 @@ class SensorCrosstalk(Effect):
         v.finite("alpha_from_h", self.alpha_from_h)
 
 
-#: The seven effect names of DESIGN.md, mapped to their classes.
+#: The seven effect names (docs/conventions.md, "Named effects"), mapped to their classes.
 EFFECT_NAMES: dict[str, type[Effect]] = {
     cls.name: cls
     for cls in (

@@ -1,8 +1,8 @@
 """The indirect peer route: flutter derivatives from displacement-only decays, then Roger's fit.
 
-This module is responsible for the classical method windrig compares E2RFC with (DESIGN.md,
-"Identification pipeline", step 4). It takes the same inputs as :func:`ident.e2rfc.identify` (so
-that both run on one data set) but uses only the displacements of each release:
+This module is responsible for the classical method windrig compares E2RFC with. It takes the same
+inputs as :func:`ident.e2rfc.identify` (so that both run on one data set) but uses only the
+displacements of each release:
 
 1. Each free decay ``q = [h/B, alpha]`` is fitted with two damped modes
    (:func:`ident.modal.fit_modes`). Their poles ``lambda_k`` and complex mode shapes ``phi_k``

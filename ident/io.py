@@ -1,4 +1,4 @@
-"""The one thin module through which :mod:`ident` reads recorded run files (HDF5, DESIGN.md).
+"""The one thin module through which :mod:`ident` reads run files (``docs/file_format.md``).
 
 It reads the synchronised view ``/entry/sync``, the releases table ``/entry/releases`` and the
 section model from the rig config stored verbatim in ``/entry/config``, and returns

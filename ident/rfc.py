@@ -1,7 +1,8 @@
 """Roger's rational-function model of the self-excited forces (the object E2RFC identifies).
 
 ``Q(p) = A1 + A2 p + A3 p^2 + sum_l A_{l+3} p / (p + d_l)`` with real 2x2 matrices ``A_k`` and lag
-roots ``d_l > 0`` shared by all four entries (DESIGN.md, "Conventions"). The model is a value: it is
+roots ``d_l > 0`` shared by all four entries (``docs/conventions.md``,
+"Reduced frequency and the self-excited forces"). The model is a value: it is
 immutable, validated on construction, and serialisable to JSON through :meth:`to_dict`.
 """
 

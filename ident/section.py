@@ -1,8 +1,8 @@
 """The structural model of a spring-mounted section model (two degrees of freedom: heave and pitch).
 
 This module owns the structural matrices in windrig's generalised coordinates ``q = [h/B, alpha]``
-(DESIGN.md, "Conventions"). It knows nothing of aerodynamics; :mod:`ident.statespace` couples it
-with a :class:`~ident.rfc.RationalFunctionModel`.
+(``docs/conventions.md``, "Signs and coordinates"). It knows nothing of aerodynamics;
+:mod:`ident.statespace` couples it with a :class:`~ident.rfc.RationalFunctionModel`.
 """
 
 from __future__ import annotations

@@ -2,9 +2,9 @@
 
 With the Roger model of the self-excited forces, the aeroelastic equations of motion become a
 linear, frequency-independent state-space model whose matrix depends explicitly on the wind speed U
-(DESIGN.md, "Conventions"). The state is ``z = [q, q', x_1, ..., x_m]`` with ``q = [h/B, alpha]``
-and one 2-vector of lag states per lag root, ``x_l' = q' - (U/B) d_l x_l``; a model released from
-rest has ``x_l = 0`` at the release. The self-excited generalised force is::
+(``docs/conventions.md``, "In the time domain"). The state is ``z = [q, q', x_1, ..., x_m]`` with
+``q = [h/B, alpha]`` and one 2-vector of lag states per lag root, ``x_l' = q' - (U/B) d_l x_l``; a
+model released from rest has ``x_l = 0`` at the release. The self-excited generalised force is::
 
     f = [L B, M] = rho/2 [U^2 B^2 A1 q + U B^3 A2 q' + B^4 A3 q'' + U^2 B^2 sum_l A_{l+3} x_l]
 

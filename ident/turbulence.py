@@ -1,6 +1,6 @@
 """Turbulent flow and the buffeting forces it exerts on a bridge-deck section (pure numerics).
 
-Model (DESIGN.md, "Full-bridge flutter and buffeting"; SI units):
+Model (``docs/conventions.md``, "Static coefficients and buffeting"; SI units):
 
 - Gusts ``u`` (along-wind, positive downwind) and ``w`` (vertical, **positive upward**), zero-mean,
   independent of each other, with von Karman one-sided spectra (m^2/s^2 per Hz) at mean speed
@@ -11,7 +11,7 @@ Model (DESIGN.md, "Full-bridge flutter and buffeting"; SI units):
 
   with ``sigma_u = Iu U``, ``sigma_w = Iw U`` and the integral scales ``Lux``, ``Lwx``.
 - Quasi-steady buffeting forces per unit span from the static coefficients
-  (:class:`StaticCoefficients`, DESIGN.md's signs: lift positive downward, drag downwind, moment
+  (:class:`StaticCoefficients`, windrig's signs: lift positive downward, drag downwind, moment
   nose-up), ``qd = rho U^2 / 2``::
 
       L_b = qd B   [2 C_L u/U + (dC_L - C_D) w/U]
@@ -251,7 +251,7 @@ class TurbulenceSpec:
 
 @dataclass(frozen=True)
 class StaticCoefficients:
-    """Static force coefficients of a section and their slopes (DESIGN.md's signs).
+    """Static force coefficients of a section and their slopes (windrig's signs).
 
     ``L = qd B C_L`` (positive downward, along h), ``D = qd B C_D`` (downwind),
     ``M = qd B^2 C_M`` (nose-up); slopes ``dC_*`` per radian of nose-up alpha.
@@ -323,7 +323,7 @@ def mean_wind_load(static: StaticCoefficients, U: float, B: float, rho: float) -
 def buffeting_gain(static: StaticCoefficients, U: float, B: float, rho: float) -> FloatArray:
     """Matrix ``G`` with ``[L_b B, M_b, D_b B] = G [u, w]`` (N m/m per m/s), shape (3, 2).
 
-    Quasi-steady, DESIGN.md's signs, ``w`` positive upward (see the module docstring)::
+    Quasi-steady, windrig's signs, ``w`` positive upward (see the module docstring)::
 
         G = qd B^2 / U [[2 C_L, dC_L - C_D], [2 C_M, dC_M], [2 C_D, dC_D + C_L]]
 

@@ -3,7 +3,7 @@
 The tunnel runs on one true time base; each simulated instrument reads it through its own
 :class:`DeviceClock`, with a configurable offset and drift, so that the acquisition's clock mapping
 can be tested against a known truth. :class:`ManualClock` lets tests advance time explicitly
-instead of sleeping (STYLE.md, "Simulators").
+instead of sleeping.
 """
 
 from __future__ import annotations

@@ -5,7 +5,8 @@ bridge deck, for benchmarks and tests that need aerodynamics E2RFC's model canno
 exactly; :data:`BLUFF_DECK_STATIC` its static coefficients (buffeting); :data:`BLUFF_DECK`
 a section model to test it on.
 
-The model (in Roger's notation, ``Q(p)``, DESIGN's signs):
+The model (in Roger's notation, ``Q(p)``, Scanlan's signs of
+``docs/conventions.md``):
 
 - lift row: 0.7 times the exact-Theodorsen flat plate's (eight lags,
   :func:`ident.flat_plate.theodorsen_model`): a lift slope of 0.7 x 2 pi, as decks with edge

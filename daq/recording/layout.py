@@ -128,7 +128,7 @@ MAX_CHUNK_BYTES = 512 * 1024
 
 
 #: gzip level: 1 compresses these streams within 2 % of level 4 and is 10 % faster (measured: see
-#: tests/daq/test_recorder.py, "Measurements").
+#: tests/daq/recording/test_recorder.py, "Measurements").
 GZIP_LEVEL = 1
 
 

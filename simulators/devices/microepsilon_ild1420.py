@@ -4,20 +4,20 @@ Responsibility: behave on the wire like an ILD1420 looking down at the section m
 :class:`~simulators.virtual_tunnel.VirtualTunnel`: sample the model's heave and pitch at the
 measuring rate on the sensor's own :class:`~simulators.clock.DeviceClock`, add seeded noise, encode
 blocks of 3-byte values (distance, then counter, timestamp, status ... as configured) and stream
-them in real time through pyserial's ``socket://`` (a TCP server on 127.0.0.1) or a pty pair;
-answer the ASCII commands the driver uses; inject the faults of DEVICES.md A.5 (row ILD1420); and
-keep a truth record of every sample (what was measured and whether it reached the wire intact) so
-tests can prove that nothing was lost that the simulator did not drop.
+them in real time through pyserial's ``socket://`` (a TCP server on 127.0.0.1) or a pty pair; answer
+the ASCII commands the driver uses; inject the lasers' faults (``docs/wire_formats.md``, "Faults the
+simulators inject"); and keep a truth record of every sample (what was measured and whether it
+reached the wire intact) so tests can prove that nothing was lost that the simulator did not drop.
 
 Not responsible for: line timing (neither transport limits the byte rate; blocks are sent every
 ``period_s`` as they fall due), the analog output, the web interface, or decoding anything (it
 never imports :mod:`daq`: its encoder is written here from the manual facts, independently of the
 driver's decoder).
 
-Wire facts (DEVICES.md A.2.1): values are 18-bit words sent as ``L = 00 D5..D0``,
-``M = 01 D11..D6``, ``H = 1 f D17..D12`` with ``f = 0`` for the first value of a block (the
-distance) and 1 for the others; distance ``x = (100 d / MR + 1) 65520 / 102`` (16 bits), with
-mastering ``x = (100 d / MR + 51) 65520 / 102`` (18 bits); error values 262075..262082 in the
+Wire facts (``docs/wire_formats.md``, "Laser displacement sensors"): values are 18-bit words sent as
+``L = 00 D5..D0``, ``M = 01 D11..D6``, ``H = 1 f D17..D12`` with ``f = 0`` for the first value of a
+block (the distance) and 1 for the others; distance ``x = (100 d / MR + 1) 65520 / 102`` (16 bits),
+with mastering ``x = (100 d / MR + 51) 65520 / 102`` (18 bits); error values 262075..262082 in the
 distance word; 18-bit counter; timestamp two 16-bit words in 10 us ticks (low word first
 [unverified]); status bits: 2 no peak, 5 before SMR, 6 after EMR, 15 value triggered, 16/17 LED
 ([unverified] green = bit 16, red = bit 17). ASCII framing [unverified]: commands end with CR LF
@@ -202,7 +202,7 @@ class SimMicroEpsilonIld1420:
         self.truth_limit = int(truth_limit)
         self.values_per_block = 1 + sum(WORDS[o] for o in self.output)
         self.block_bytes = 3 * self.values_per_block
-        #: Whether the line cannot carry the block rate: the sensor then sends 262075 (A.2.1).
+        #: Whether the line cannot carry the block rate: the sensor then sends 262075.
         self.baud_overflow = 33 * self.values_per_block * self.rate_hz > self.baudrate
 
         self._lock = threading.Lock()
@@ -304,7 +304,7 @@ class SimMicroEpsilonIld1420:
 
     # -- faults -------------------------------------------------------------------------------
     def inject(self, fault: str, **params: Any) -> None:
-        r"""Schedule a fault (DEVICES.md A.5, row ILD1420).
+        r"""Schedule a fault (``docs/wire_formats.md``, "Faults the simulators inject").
 
         Faults and their parameters:
 
@@ -653,7 +653,7 @@ class SimMicroEpsilonIld1420:
 
     @staticmethod
     def _encode(words: npt.NDArray[np.int64]) -> npt.NDArray[np.uint8]:
-        """Three bytes per value, L M H, with the block flag f in the H byte (A.2.1)."""
+        """Three bytes per value, L M H, with the block flag f in the H byte."""
         n, m = words.shape
         out = np.empty((n, m, 3), dtype=np.uint8)
         out[:, :, 0] = words & 0x3F  # 00 D5..D0

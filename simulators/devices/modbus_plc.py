@@ -1,13 +1,14 @@
 """Simulated release/trigger PLC (Modbus TCP coils, discrete input, register) at 127.0.0.1.
 
-Responsibility: the PLC of DEVICES.md A.3 "Electromagnet release and triggers" on a pymodbus TCP
-server: coils ARM, RELEASE and DAQ_TRIGGER, the discrete input RELEASED (the armature's limit
-switch) and the holding register TRIGGER_COUNT, wired to the virtual tunnel's magnet and trigger
-line; and the faults of DEVICES.md A.5 row "PLC": a release that never happens (RELEASED never
-set: the driver must time out) and a disconnect. Not responsible for the driver side
-(``daq.modbus_plc``); imports nothing from ``daq``.
+Responsibility: the PLC of ``docs/wire_formats.md``, "Release and trigger PLC over Modbus", on a
+pymodbus TCP server: coils ARM, RELEASE and DAQ_TRIGGER, the discrete input RELEASED (the armature's
+limit switch) and the holding register TRIGGER_COUNT, wired to the virtual tunnel's magnet and
+trigger line; and the PLC's faults (``docs/wire_formats.md``, "Faults the simulators inject"): a
+release that never happens (RELEASED never set: the driver must time out) and a disconnect. Not
+responsible for the driver side (``daq.instruments.modbus_plc.driver``); imports nothing from
+``daq``.
 
-PLC logic ([design]; DEVICES.md A.3 names the signals, not the ladder):
+PLC logic ([design]: the sources name the signals, not the ladder):
 
 - ARM coil 0->1: energise the magnet, which pulls the model back to its hold position
   (:meth:`VirtualTunnel.arm`); RELEASED clears; the release is armed (permitted).
@@ -57,7 +58,7 @@ class SimModbusPlc(ModbusSimulator):
     trigger_count : int
         Zero-based holding-register address of TRIGGER_COUNT.
     release_delay_s : (float, float)
-        Range of the delay from the release to RELEASED, s (DEVICES.md A.5: 10-50 ms).
+        Range of the delay from the release to RELEASED, s (10-50 ms by default).
     unit : int
         Modbus unit id the PLC answers to.
     clock : DeviceClock, optional
@@ -144,7 +145,7 @@ class SimModbusPlc(ModbusSimulator):
 
     # -- faults ----------------------------------------------------------------------------------
     def inject(self, fault: str, **params: Any) -> None:
-        """Switch a fault on (DEVICES.md A.5, row "PLC").
+        """Switch a fault on (``docs/wire_formats.md``, "Faults the simulators inject").
 
         Parameters
         ----------

@@ -1,16 +1,16 @@
 """Simulated Scanivalve MPS4264-class pressure scanner: ASCII command and binary TCP servers.
 
-Responsibility: speak the scanner's wire protocol on 127.0.0.1 (DEVICES.md A.1.1, A.5 row
-MPS4264) from the virtual tunnel's pressures: a TCP command server answering ASCII commands, and
+Responsibility: speak the scanner's wire protocol on 127.0.0.1 (``docs/wire_formats.md``, "Pressure
+scanner") from the virtual tunnel's pressures: a TCP command server answering ASCII commands, and
 one TCP binary data server per 64-channel module (module ``k`` on port ``data_port + k``, our
 [design] for several modules, since the 0x6D packet carries no module field); frames at the
-commanded rate on the device's own clock (offset, drift), with seeded noise, sensor zero
-offsets and their CALZ, the external-trigger time of the tunnel's trigger line, both byte orders,
-a bounded frame buffer that drops frames when the client stalls, and fault injection. It keeps
-truth counters (frames produced, sent, dropped with the reason) so tests can prove that no frame
-was lost that the simulator did not drop. Not responsible for: UDP/FTP outputs, ASCII/CSV/LabVIEW
-scan formats, RAW packets, or anything of the driver (this module imports nothing from ``daq``:
-the packets are encoded here from the manual facts, independently of the driver's decoder).
+commanded rate on the device's own clock (offset, drift), with seeded noise, sensor zero offsets and
+their CALZ, the external-trigger time of the tunnel's trigger line, both byte orders, a bounded
+frame buffer that drops frames when the client stalls, and fault injection. It keeps truth counters
+(frames produced, sent, dropped with the reason) so tests can prove that no frame was lost that the
+simulator did not drop. Not responsible for: UDP/FTP outputs, ASCII/CSV/LabVIEW scan formats, RAW
+packets, or anything of the driver (this module imports nothing from ``daq``: the packets are
+encoded here from the manual facts, independently of the driver's decoder).
 
 Commands (CR, LF or CR LF terminated, case-insensitive; replies end with CR LF [unverified]):
 ``STATUS`` -> ``STATUS: READY|SCAN|CALZ``; ``SCAN``; ``STOP``; ``CALZ`` (status ``CALZ`` for
@@ -203,7 +203,8 @@ class SimScanivalveMps4264:
         ``SO_SNDBUF`` of data connections (small values make a stall overrun sooner).
     ptp : bool
         PTP locked: frame times are absolute (``ptp_epoch_s`` + device clock); False: relative
-        to the scan start, from epoch 0 (DEVICES.md A.1.1 "Scan start").
+        to the scan start, from epoch 0 (``docs/wire_formats.md``, "Pressure scanner", on the
+        scan start and the frame time's epoch).
     ptp_epoch_s : int
         PTP (TAI/UTC) seconds at true time 0 of the tunnel clock.
     serial_number : int
@@ -314,7 +315,7 @@ class SimScanivalveMps4264:
         """Truth: what each channel reads with no pressure applied, before noise, Pa (a copy).
 
         The sensors' zero offsets less the zero the last CALZ recorded (every channel's reading
-        then, wind included: DEVICES.md A.1.1). Shape ``(64 * modules,)``.
+        then, wind included: the taps stay exposed). Shape ``(64 * modules,)``.
         """
         with self._lock:
             return self._sensor_offset - self._calz_offset
@@ -559,7 +560,7 @@ class SimScanivalveMps4264:
             self._state = "READY"
 
     def _start_calz(self) -> None:
-        """Record each channel's reading as its zero (DEVICES.md A.1.1: the taps stay exposed)."""
+        """Record each channel's reading as its zero (no calibration valve: taps stay exposed)."""
         t = self.tunnel.clock.now()
         self._calz_offset = self._sensor_offset + self._truth_pressures(np.array([t]))[0]
         self.truth.calz_wind_speeds.append(self.tunnel.wind_speed())

@@ -1,23 +1,24 @@
 """Simulated Vaisala PTB330-class barometer: the RS-232 ASCII protocol over socket:// or a pty.
 
-Responsibility: answer the barometer's serial commands from the manual facts (DEVICES.md A.3
-"Barometer / T / RH"), produce its measurement lines from the virtual tunnel's air (pressure and
-temperature, plus the instrument's own slow drift and seeded noise), and inject the faults of the
-PTB330 row of DEVICES.md A.5 (garbled or partial line, no reply, unit change), keeping truth
-counters so tests can tell what the simulator dropped from what a driver lost. Not responsible
-for: anything the driver does (this module shares no code with ``daq``: it encodes the wire
-format with its own implementation, which the HIL tests cross-check against the driver's), nor
-the electrical line (a pty is always 8N1; ``socket://`` carries bytes only).
+Responsibility: answer the barometer's serial commands from the manual facts
+(``docs/wire_formats.md``, "Barometer"), produce its measurement lines from the virtual tunnel's air
+(pressure and temperature, plus the instrument's own slow drift and seeded noise), and inject the
+barometer's faults (garbled or partial line, no reply, unit change: ``docs/wire_formats.md``,
+"Faults the simulators inject"), keeping truth counters so tests can tell what the simulator dropped
+from what a driver lost. Not responsible for: anything the driver does (this module shares no code
+with ``daq``: it encodes the wire format with its own implementation, which the HIL tests
+cross-check against the driver's), nor the electrical line (a pty is always 8N1; ``socket://``
+carries bytes only).
 
 Behaviour (manual facts, with the simulator's own choices marked [sim]):
 
 - commands end with CR (or LF) and are not case sensitive (PTB220 manual: "The commands are not
   case sensitive"); XON/XOFF bytes on input are flow control, not data, and are dropped;
-- modes (``SMODE STOP|RUN|POLL|SEND``; ``POLLED`` is accepted as in the Hydromet integration,
-  DEVICES.md A.3) take effect at ``RESET`` (PTU200: "give the RESET command to initialize the new
-  sending mode"); STOP: every command works; RUN: lines are output every ``INTV`` and only ``S``
-  (or ESC) is obeyed (DMT152/PTU300 ``R``/``S``); POLL: only ``SEND [aa]`` and ``OPEN aa``
-  are obeyed, and ``OPEN aa`` ... ``CLOSE`` gives temporary command access (PTB330 p.101);
+- modes (``SMODE STOP|RUN|POLL|SEND``; ``POLLED`` is accepted too, as a published Hydromet
+  integration spells it) take effect at ``RESET`` (PTU200: "give the RESET command to initialize the
+  new sending mode"); STOP: every command works; RUN: lines are output every ``INTV`` and only ``S``
+  (or ESC) is obeyed (DMT152/PTU300 ``R``/``S``); POLL: only ``SEND [aa]`` and ``OPEN aa`` are
+  obeyed, and ``OPEN aa`` ... ``CLOSE`` gives temporary command access (PTB330 p.101);
 - ``SEND [aa]`` outputs one line in the ``FORM`` format (PTB330 p.101: ``pressure = 1013.02
   hPa`` with the factory format); a bare ``SEND`` is answered in POLL mode too [sim];
 - ``FORM`` accepts the modifiers of PTB330 Table 12 (``x.y``, quantities, ``U``/``U1..U9``,
@@ -51,7 +52,7 @@ from simulators.virtual_tunnel import VirtualTunnel
 
 __all__ = ["FAULTS", "SimVaisalaPtb330", "TruthLine"]
 
-#: Faults of the PTB330 row of DEVICES.md A.5.
+#: The barometer's faults (docs/wire_formats.md, "Faults the simulators inject").
 FAULTS = ("garbled", "partial", "no_reply", "unit_change")
 _LINE_FAULTS = ("garbled", "partial", "no_reply")
 
@@ -74,7 +75,7 @@ _PRESSURE_QUANTITIES = {"P", "P1", "P2", "P3"}
 _TEMPERATURE_QUANTITIES = {"T", "TP1", "TP2", "TP3"}
 _OTHER_QUANTITIES = {"MCTR", "ADDR", "SN"}
 
-#: Factory output format: SEND gives ``pressure = 1013.02 hPa`` (PTB330 p.101, DEVICES.md A.3).
+#: Factory output format: SEND gives ``pressure = 1013.02 hPa`` (PTB330 p.101).
 DEFAULT_FORM = '"pressure = " P " " U #r #n'
 _FORM_TOKEN = re.compile(r'\s*("[^"]*"|[#\\](?:rn|r|n|t|\d{1,3})|\d+\.\d+|[A-Za-z][A-Za-z0-9]*|/)',
                          re.IGNORECASE)
@@ -262,7 +263,7 @@ class SimVaisalaPtb330:
 
     # -- test interface -------------------------------------------------------------------------
     def inject(self, fault: str, count: int = 1, **params: Any) -> None:
-        """Inject a fault of DEVICES.md A.5.
+        """Inject a fault (``docs/wire_formats.md``, "Faults the simulators inject").
 
         Parameters
         ----------

@@ -66,7 +66,7 @@ def test_polled_readings_are_the_simulated_air(transport):
 
 
 def test_garbled_partial_and_missing_replies_are_retried_and_silence_raises():
-    """Each A.5 line fault costs one retry; a unit that stays silent raises TransportTimeout.
+    """Each simulated line fault costs one retry; a unit that stays silent raises TransportTimeout.
 
     Every reading is the simulator's next intact line, and the driver's error counts equal the
     faults the simulator injected; after the bounded attempts fail, the driver recovers.
@@ -98,7 +98,7 @@ def test_garbled_partial_and_missing_replies_are_retried_and_silence_raises():
 
 
 def test_unit_changes_are_followed_and_an_unknown_unit_never_gives_a_number():
-    """The A.5 'unit change' (from the display) and UNIT over the line (PTB330 Table 13)."""
+    """The fault 'unit_change' (from the display) and UNIT over the line (PTB330 Table 13)."""
     with SimVaisalaPtb330(tunnel(), rng=4) as sim:
         url = sim.start("pty")
         raw = open_transport(url, **SERIAL_DEFAULTS)

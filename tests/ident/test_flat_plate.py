@@ -1,7 +1,7 @@
 """Flat-plate truth case: Theodorsen's function, closed-form flutter derivatives, Jones's RFCs.
 
-The closed-form flutter derivatives are DESIGN.md's; R. T. Jones's rational approximation makes the
-plate an exact Roger model.
+The closed-form flutter derivatives are those of ``docs/conventions.md``, "The analytic truth";
+R. T. Jones's rational approximation makes the plate an exact Roger model.
 
 Every expectation here is computed in the test itself, from Bessel functions (scipy.special.jv, yv,
 not the Hankel routine ident uses), from the eight formulas written out again below, or from
@@ -26,13 +26,13 @@ def theodorsen_from_bessel(k):
 
 
 def jones_from_formula(p):
-    """R. T. Jones: C(p) = 1 - 0.165 p/(p + 0.091) - 0.335 p/(p + 0.6) (DESIGN.md)."""
+    """R. T. Jones: C(p) = 1 - 0.165 p/(p + 0.091) - 0.335 p/(p + 0.6) (docs/conventions.md)."""
     p = np.asarray(p, dtype=complex)
     return 1.0 - 0.165 * p / (p + 0.091) - 0.335 * p / (p + 0.6)
 
 
 def design_flutter_derivatives(K, C):
-    """Evaluate the eight flat-plate formulas of DESIGN.md ("Conventions"), C = F + iG."""
+    """Evaluate the eight flat-plate formulas of docs/conventions.md, C = F + iG."""
     K = np.asarray(K, dtype=float)
     F, G = C.real, C.imag
     return {
@@ -48,7 +48,7 @@ def design_flutter_derivatives(K, C):
 
 
 def Q_by_hand(K, fd):
-    """Q(iK) = K^2 [[H4 + i H1, H3 + i H2], [A4 + i A1, A3 + i A2]], written out (DESIGN.md)."""
+    """Q(iK) = K^2 [[H4 + i H1, H3 + i H2], [A4 + i A1, A3 + i A2]] (docs/conventions.md)."""
     K = np.asarray(K, dtype=float)
     Q = np.empty(K.shape + (2, 2), dtype=complex)
     Q[:, 0, 0] = fd["H4"] + 1j * fd["H1"]
@@ -105,7 +105,7 @@ def test_theodorsen_limits():
 
 @pytest.mark.parametrize("K", [0.3, 0.6283, 1.0, 3.1416])
 def test_flutter_derivatives_equal_closed_forms(K):
-    """flat_plate.flutter_derivatives(K) equals DESIGN's 8 formulas with Bessel-form C(K/2)."""
+    """flat_plate.flutter_derivatives(K) equals the 8 documented formulas, Bessel-form C(K/2)."""
     want = design_flutter_derivatives(np.array([K]), theodorsen_from_bessel(K / 2.0))
     got = flat_plate.flutter_derivatives(K)
     assert set(got) == set(conventions.FLUTTER_DERIVATIVE_NAMES)
@@ -172,7 +172,7 @@ def test_jones_model_reproduces_exact_plate_within_2_5_percent():
 
 
 def test_jones_model_is_exactly_the_design_formulas_with_jones_C():
-    """The closed-form RFCs are exact: Q of jones_model() = DESIGN formulas with Jones's C(p)."""
+    """The closed-form RFCs are exact: Q of jones_model() = the formulas with Jones's C(p)."""
     K = np.geomspace(0.05, 20.0, 400)
     model = flat_plate.jones_model()
     want_fd = design_flutter_derivatives(K, jones_from_formula(1j * K))

@@ -29,7 +29,7 @@ __all__ = ["COUNTER_MODULUS", "ERROR_CODES", "FIRST_ERROR_VALUE", "MAX_DISTANCE_
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 
-#: Error values inside the distance word (A.2.1, manual p. 66).
+#: Error values inside the distance word (manual p. 66).
 ERROR_CODES: Final = {
     262075: "data amount too big for the selected baud rate",
     262076: "no peak available",
@@ -113,10 +113,10 @@ class Ild1420Decoder:
     Feed it bytes in chunks of any size; it returns the samples of every complete block and keeps
     the bytes of an unfinished one. A block is ``3 x values`` bytes whose top two bits follow the
     pattern ``00 01 10`` (first value: distance, ``f = 0``) then ``00 01 11`` for each additional
-    value (docs/wire_formats.md, "Lasers"). A byte that breaks the pattern (lost or inserted byte, a
-    start mid-block) makes it skip forward to the next position where a whole block pattern starts;
-    the skipped bytes are counted. It never raises on any input and always consumes what it is
-    given.
+    value (docs/wire_formats.md, "Laser displacement sensors"). A byte that breaks the pattern
+    (lost or inserted byte, a start mid-block) makes it skip forward to the next position where a
+    whole block pattern starts; the skipped bytes are counted. It never raises on any input and
+    always consumes what it is given.
 
     The protocol has no checksum: an inserted byte of the right class exactly in front of a
     genuine one of the same class is indistinguishable from it, and the value it lands in is wrong
@@ -238,7 +238,7 @@ class Ild1420Decoder:
         return n
 
     def _convert(self, rows: npt.NDArray[np.uint8]) -> Ild1420Samples:
-        """Assemble 18-bit words (L | M << 6 | H << 12) and convert them (A.2.1)."""
+        """Assemble 18-bit words (L | M << 6 | H << 12) and convert them."""
         count = rows.shape[0]
         self.blocks_decoded += count
         low = (rows[:, 0::3] & 0x3F).astype(np.int64)

@@ -16,7 +16,7 @@ converting distances into heave and pitch (the acquisition does that with the ``
 ``standoff_mm`` settings), mapping the device clock onto the host clock (the synchronisation), or
 threads and queues (the acquisition runs one reader thread per sensor).
 
-Manual facts (docs/wire_formats.md, "Lasers") and the choices made beyond them:
+Manual facts (docs/wire_formats.md, "Laser displacement sensors") and the choices made beyond them:
 
 - 921.6 kBd 8N1 by default; one value is three bytes ``L = 00 D5..D0``, ``M = 01 D11..D6``,
   ``H = 1 f D17..D12``; ``f = 0`` for the first value of a block (the distance), 1 for the
@@ -297,7 +297,7 @@ class MicroEpsilonIld1420:
     def master(self, master_value_mm: float) -> None:
         """Master the next value to ``master_value_mm`` (``MASTERMV MASTER``), mm in [0, 2 MR].
 
-        Afterwards distances are 18-bit values relative to the master (A.2.1). Raises
+        Afterwards distances are 18-bit values relative to the master. Raises
         DeviceError (``E104 Timeout``) when no value comes within 2 s.
         """
         mv = float(master_value_mm)

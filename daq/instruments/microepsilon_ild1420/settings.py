@@ -21,15 +21,15 @@ from daq.validation import check_keys, number
 __all__ = ["BAUDRATE_RANGE", "BITS_PER_VALUE", "DEFAULT_BAUDRATE", "DEFAULT_OUTPUT", "MAX_RATE_HZ",
            "RANGES_MM", "REQUIRED_OUTPUT", "WORDS_PER_VALUE", "Ild1420Settings"]
 
-#: Measuring ranges of the ILD1420 family, mm (docs/wire_formats.md, "Lasers").
+#: Measuring ranges of the ILD1420 family, mm (docs/wire_formats.md, "Laser displacement").
 RANGES_MM: Final = (10, 25, 50, 100, 200, 500)
 
 
-#: Highest measuring rate, Hz ("The maximum measuring rate is 4 kHz", A.2.1).
+#: Highest measuring rate, Hz ("The maximum measuring rate is 4 kHz").
 MAX_RATE_HZ: Final = 4000.0
 
 
-#: Factory baud rate (A.2.1).
+#: Factory baud rate.
 DEFAULT_BAUDRATE: Final = 921600
 
 
@@ -37,7 +37,7 @@ DEFAULT_BAUDRATE: Final = 921600
 BAUDRATE_RANGE: Final = (9600, 1000000)
 
 
-#: Line bits per value: 3 bytes x (start + 8 data + stop) (8N1; the ILD2300 sizing rule, A.2.2).
+#: Line bits per value: 3 bytes x (start + 8 data + stop) (8N1; the ILD2300 sizing rule).
 BITS_PER_VALUE: Final = 33
 
 
@@ -49,7 +49,7 @@ DEFAULT_OUTPUT: Final = ("counter", "timestamp", "status")
 REQUIRED_OUTPUT: Final = frozenset(DEFAULT_OUTPUT)
 
 
-#: Words per additional value (the timestamp is two 16-bit words, A.2.1).
+#: Words per additional value (the timestamp is two 16-bit words).
 WORDS_PER_VALUE: Final = {"counter": 1, "timestamp": 2, "status": 1, "exposure": 1, "intensity": 1}
 
 

@@ -3,7 +3,7 @@
 The source here is a real :class:`~daq.console.ring_buffer.RingBuffer` holding the sync rows of a
 simulated session (flat plate, Jones aerodynamics, 1 % noise, seeded) and the decay instants
 the console's source would report; the fits run on a thread pool (the console's default worker
-process is exercised by tests/daq/test_console_releases.py).
+process is exercised by tests/daq/console/test_releases.py).
 """
 
 from __future__ import annotations

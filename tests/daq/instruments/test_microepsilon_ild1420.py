@@ -1,7 +1,7 @@
 """ILD1420 driver: settings, the word/block decoder, unwrapping, and scripted byte exchanges.
 
-Byte sequences are written out by hand from docs/wire_formats.md, "Lasers" (the manual's pp.
-65-66, 84, 108): a value
+Byte sequences are written out by hand from docs/wire_formats.md, "Laser displacement sensors"
+(the manual's pp. 65-66, 84, 108): a value
 is three bytes L = 00 D5..D0, M = 01 D11..D6, H = 1 f D17..D12 with f = 0 for the distance (the
 first value of a block) and 1 for the additional values.
 """
@@ -26,7 +26,7 @@ from daq.transports.scripted import expected_exchange
 
 TABLE = {"range_mm": 10, "rate_hz": 4000.0, "x": 0.1, "standoff_mm": 5.0}
 
-# Block 1 (bytes from docs/wire_formats.md, "Lasers"): distance 32760 = 0x7FF8 (0.5 MR),
+# Block 1 (bytes from docs/wire_formats.md, "Laser displacement"): distance 32760 = 0x7FF8 (0.5 MR),
 # counter 262143,
 # timestamp 0x0001_0002 ticks (low word first), status bits 15 (triggered) and 16.
 BLOCK_1 = bytes.fromhex("38 7F 87  3F 7F FF  02 40 C0  01 40 C0  00 40 D8")
@@ -43,7 +43,7 @@ OPEN_SCRIPT = [
 
 
 def encode(words: list[list[int]]) -> bytes:
-    """Test-side encoder (a third, deliberately naive implementation of A.2.1)."""
+    """Test-side encoder (a third, deliberately naive implementation of the wire format)."""
     out = bytearray()
     for block in words:
         for i, value in enumerate(block):
@@ -286,7 +286,7 @@ def test_gaps_are_reported_with_their_length():
 
 
 def test_command_replies_inside_the_stream_lose_no_samples():
-    """Blocks before the echo and after the prompt are all decoded (bytes from A.2.1)."""
+    """Blocks before the echo and after the prompt are all decoded (bytes from the wire format)."""
     before = encode([block_words(c, 25 * c) for c in (1, 2)])
     after = encode([block_words(c, 25 * c) for c in (3, 4)])
     reply = before + b"GETINFO\r\nName: ILD1420-10\r\nMeasuring range: 10.00mm\r\n->" + after

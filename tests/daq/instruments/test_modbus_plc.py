@@ -2,7 +2,7 @@
 
 Signals from docs/wire_formats.md, "PLC": coil RELEASE (FC05), discrete
 input RELEASED (FC02), coil DAQ_TRIGGER (FC05), holding register TRIGGER_COUNT (FC03); the ARM
-coil and the edge semantics are windrig's [design] (daq/modbus_plc.py docstring).
+coil and the edge semantics are windrig's [design] (daq/instruments/modbus_plc/driver.py docstring).
 """
 
 from __future__ import annotations

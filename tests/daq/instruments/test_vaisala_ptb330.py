@@ -110,7 +110,7 @@ def test_serial_line_defaults_are_7e1_xonxoff_and_the_url_query_overrides_them()
     ],
 )
 def test_every_pressure_unit_is_converted_to_pascal(text, pa):
-    """The unit is read from each line (the A.5 fault 'unit change').
+    """The unit is read from each line (the simulator's fault 'unit_change').
 
     Tolerance 1e-5 relative: the rounding of the printed values (14.6959 psi is 101324.5 Pa).
     """

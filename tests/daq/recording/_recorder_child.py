@@ -1,4 +1,4 @@
-"""Helper process for tests/daq/test_recorder.py (not a test module: no ``test_`` prefix).
+"""Helper process for tests/daq/recording/test_recorder.py (not a test module: no ``test_`` prefix).
 
 ``python _recorder_child.py write PATH``
     Record a run with :class:`daq.recording.recorder.RunRecorder` (flush interval 0.1 s), appending
