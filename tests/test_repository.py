@@ -22,8 +22,6 @@ import subprocess
 from functools import cache
 from pathlib import Path
 
-import pytest
-
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 
@@ -51,11 +49,17 @@ def _is_text_file(path: str) -> bool:
 def tracked_text_files() -> tuple[str, ...]:
     """Return the tracked text files, relative to the repository root."""
     git = shutil.which("git")
-    if git is None or not (ROOT / ".git").exists():
-        pytest.skip("not a git checkout: the tracked files are unknown")
-    out = subprocess.run([git, "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True)
-    files = [name for name in out.stdout.decode().split("\0") if name]
-    return tuple(name for name in files if _is_text_file(name) and (ROOT / name).is_file())
+    if git is not None and (ROOT / ".git").exists():
+        out = subprocess.run([git, "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True)
+        files = [name for name in out.stdout.decode().split("\0") if name]
+    else:  # an unpacked source tree: every file outside the build and cache folders
+        skip = {".git", ".venv", "build", "demo_output", "__pycache__", ".mypy_cache",
+                ".ruff_cache", ".pytest_cache", ".hypothesis"}
+        files = [str(path.relative_to(ROOT)) for path in ROOT.rglob("*")
+                 if not skip & set(path.relative_to(ROOT).parts)
+                 and not path.name.endswith(".egg-info")]
+    return tuple(sorted(name for name in files
+                        if _is_text_file(name) and (ROOT / name).is_file()))
 
 
 def _line_of(text: str, offset: int) -> int:
