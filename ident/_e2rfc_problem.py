@@ -182,13 +182,13 @@ class Problem:
                 problem.residual, np.clip(theta0, lo + 1e-6, hi - 1e-6), jac=problem.jacobian,
                 bounds=(lo, hi), xtol=tol, ftol=1e-2 * tol, max_nfev=nfev)
 
-        # Every start is run loosely on the subsampled rows. When asked to be precise, the best
-        # is converged there, then moved by one Gauss-Newton step on every sample, so that the
+        # Every start is run loosely on the coarse rows. When asked to be precise, the best is
+        # converged on the search rows, then moved by one Gauss-Newton step on every sample, so the
         # lag roots use all the data: the subsample's optimum lies within the estimation noise of
         # the full-data one, and from there one step of this nearly quadratic problem leaves d
         # within 0.15 of its own standard deviation of the converged value (measured at 5 %
         # noise).
-        best = min((solve(np.log(start), "search", 1e-3, 20) for start in starts),
+        best = min((solve(np.log(start), "coarse", 1e-3, 20) for start in starts),
                    key=lambda sol: sol.cost)
         theta = best.x
         if not loose:

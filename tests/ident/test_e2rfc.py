@@ -130,10 +130,11 @@ def test_diagnostics_are_complete_and_consistent():
 def test_the_structures_the_data_cannot_tell_apart_are_fitted_and_their_spread_reported():
     """Every structure within one SE of the best is fitted; its flutter speed is reported.
 
-    Short releases (4 s, one per speed, 2 % noise): seed 5 leaves 2 and 3 lags within one
-    standard error of each other (found by trying seeds 0-5; the others give one structure).
+    Short releases (4 s, one per speed, 2 % noise): seed 1 leaves 2 and 3 lags within one
+    standard error of each other (found by trying seeds 0-11: 1 and 11 do, the others give one
+    structure).
     """
-    data = releases(JONES, (0.46, 0.59, 0.72), noise=0.02, seed=5, duration=4.0)
+    data = releases(JONES, (0.46, 0.59, 0.72), noise=0.02, seed=1, duration=4.0)
     model = e2rfc.identify(data, SECTION)
     diagnostics = model.diagnostics
     usable = [c for c in diagnostics.candidates if not c.note]
