@@ -301,7 +301,12 @@ def fit_modes(
     # Block size: about _SAMPLES_PER_PERIOD averaged samples per period of the fastest mode.
     spectrum = np.abs(np.fft.rfft(y - y.mean(axis=0), axis=0)).sum(axis=1)
     freqs = np.fft.rfftfreq(t.size, dt)
-    f_peak = float(freqs[1:][np.argmax(spectrum[1:])])
+    # The peak of an oscillation the record holds at least four periods of: a slow drift (or
+    # the low-frequency part of a random response) must not set a block longer than the modes.
+    usable = freqs >= 4.0 / max(float(t[-1] - t[0]), dt)
+    usable[0] = False
+    f_peak = float(freqs[usable][np.argmax(spectrum[usable])]) if usable.any() else float(
+        freqs[1:][np.argmax(spectrum[1:])])
     block = max(1, int(1.0 / (2.0 * f_peak * _SAMPLES_PER_PERIOD * dt)))
     tb, yb = _block_average(t - t[0], y, block)
     if tb.size < 8 * (2 * n_modes + max_real_poles + 1):
