@@ -30,6 +30,9 @@ def _build_parser() -> argparse.ArgumentParser:
         prog="windrig",
         description="Wind-tunnel section-model acquisition and flutter identification.",
     )
+    parser.add_argument("--version", action="version", version=f"windrig {_version()}")
+    parser.add_argument("--debug", action="store_true",
+                        help="show the traceback of an error (default: one 'error:' line)")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     p_demo = sub.add_parser(
@@ -49,9 +52,13 @@ def _build_parser() -> argparse.ArgumentParser:
         help="JSON of SectionModel fields (B, m, I, fh, fa, zeta_h, zeta_a, ...)",
     )
     p_flutter.add_argument("--model", type=Path, required=True,
-                           help='JSON of a RationalFunctionModel ({"A": ..., "d": ...})')
+                           help='JSON of a RationalFunctionModel ({"A": ..., "d": ...}), or '
+                                "what `windrig identify --json` writes")
     p_flutter.add_argument("--u-max", type=float, default=None,
                            help="upper wind speed of the search, m/s (default: K down to 0.2)")
+    p_flutter.add_argument("--json", type=Path, default=None,
+                           help="write the flutter speed and frequency (state space and "
+                                "frequency domain), the section and the model to this file")
     p_id = sub.add_parser(
         "identify", help="E2RFC on the releases of recorded run files; prints the flutter speed"
     )
@@ -169,6 +176,8 @@ def _acquire(args: argparse.Namespace) -> int:
     from daq.recording.run import record_run
     from daq.sim.recording import record_simulated_run
 
+    if not args.duration > 0:
+        raise _UsageError(f"--duration {args.duration:g}: must be > 0 s")
     config = load_rig_config(args.config)
     if not args.simulate:
         auto = [inst.name for inst in config.instruments if inst.url == "auto"]
@@ -217,6 +226,8 @@ def _simulate(args: argparse.Namespace) -> int:
     from daq.config import load_rig_config
     from daq.sim.rig import start_simulated_rig
 
+    if args.duration is not None and not args.duration > 0:
+        raise _UsageError(f"--duration {args.duration:g}: must be > 0 s")
     config = load_rig_config(args.config)
     with start_simulated_rig(config, serial=args.serial) as rig:
         print(f"{config.name}: simulated instruments on 127.0.0.1 (Ctrl-C stops them)")
@@ -230,7 +241,7 @@ def _simulate(args: argparse.Namespace) -> int:
                 while True:
                     time.sleep(1.0)
             else:
-                time.sleep(max(args.duration, 0.0))
+                time.sleep(args.duration)
         except KeyboardInterrupt:
             print("stopping the simulators")
     return 0
@@ -334,16 +345,138 @@ def _reprocess(args: argparse.Namespace) -> int:
 def _flutter(args: argparse.Namespace) -> int:
     from ident import RationalFunctionModel, SectionModel, flutter
 
-    section = SectionModel.from_dict(json.loads(args.section.read_text()))
-    model = RationalFunctionModel.from_dict(json.loads(args.model.read_text()))
+    if args.u_max is not None and not args.u_max > 0:
+        raise _UsageError(f"--u-max {args.u_max:g}: must be > 0 m/s")
+
+    section_data = _read_json(args.section, "section")
+    if not isinstance(section_data, dict):
+        raise _UsageError(f"{args.section}: expected a JSON object of SectionModel fields")
+    try:
+        section = SectionModel.from_dict(section_data)
+    except (TypeError, ValueError) as exc:
+        raise _UsageError(f"{args.section}: {exc}") from exc
+    if "rho" not in section_data:
+        print(f"note: {args.section} gives no air density rho: using {section.rho} kg/m^3")
+    model_data = _read_json(args.model, "model")
+    if isinstance(model_data, dict) and "model" in model_data:  # `windrig identify --json`
+        model_data = model_data["model"]
+    if not isinstance(model_data, dict):
+        raise _UsageError(f"{args.model}: expected a JSON object, the model or `windrig "
+                          "identify --json` output")
+    try:
+        model = RationalFunctionModel.from_dict(model_data)
+    except (TypeError, ValueError, KeyError) as exc:
+        raise _UsageError(f"{args.model}: not a rational-function model ({exc}); expected "
+                         '{"A": [[[...]]], "d": [...]} or `windrig identify --json` output'
+                         ) from exc
     result = flutter.analyze(section, model, U_max=args.u_max)
     print(result.summary())
+    frequency_domain = flutter.frequency_domain(section, model.flutter_derivatives)
+    if frequency_domain.speed is not None:
+        print(f"frequency domain (flutter derivatives of the model): U_F = "
+              f"{frequency_domain.speed:.3f} m/s")
+    if args.json is not None:
+        args.json.write_text(json.dumps({
+            "flutter_speed": result.speed, "flutter_frequency": result.frequency,
+            "critical_mode": result.critical_mode,
+            "flutter_speed_frequency_domain": frequency_domain.speed,
+            "flutter_frequency_frequency_domain": frequency_domain.frequency,
+            "U_max": result.U_max, "section": section.to_dict(), "model": model.to_dict(),
+        }, indent=2))
+        print(f"wrote {args.json}")
     return 0
 
 
+def _read_json(path: Path, what: str) -> object:
+    """Read a JSON file named on the command line (a bad one: a usage error naming it)."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise _UsageError(f"{path}: cannot read the {what} file: {exc.strerror or exc}"
+                          ) from exc
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise _UsageError(f"{path}: not valid JSON ({exc.msg}, line {exc.lineno} column "
+                          f"{exc.colno})") from exc
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("windrig")
+    except PackageNotFoundError:  # run from a source tree that was never installed
+        return "unknown (not installed)"
+
+
+class _UsageError(ValueError):
+    """A command-line value, or a file it names, that the command cannot take (exit 2)."""
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the ``windrig`` command line; returns the process exit code."""
+    """Run the ``windrig`` command line; returns the process exit code.
+
+    The error boundary of every command: a user's mistake (a missing or malformed file, a bad
+    config key or value, data that cannot be identified, an unreachable device, a missing
+    optional dependency) is one ``error:`` line on stderr and exit status 1 (2 for a bad
+    command-line value; argparse's own usage errors are 2 too); ``--debug`` shows the traceback
+    instead. Anything else is a bug and keeps its traceback.
+    """
     args = _build_parser().parse_args(argv)
+    try:
+        return _dispatch(args)
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    except (ValueError, OSError, ModuleNotFoundError) as exc:
+        if args.debug:
+            raise
+        print(f"error: {_describe(exc)}", file=sys.stderr)
+        return 2 if _is_usage(exc) else 1
+    except Exception as exc:
+        from daq.errors import DaqError
+        from ident.errors import IdentError
+
+        if args.debug or not isinstance(exc, (DaqError, IdentError)):
+            raise
+        print(f"error: {_describe(exc)}", file=sys.stderr)
+        return 1
+
+
+#: Optional dependencies and the extra that installs each.
+_EXTRAS = {"dask": "dask", "distributed": "dask", "PySide6": "gui", "pyqtgraph": "gui",
+           "shiboken6": "gui"}
+
+
+def _is_usage(exc: BaseException) -> bool:
+    """Tell whether an error is in what the user gave: a value, a file or a config (exit 2).
+
+    Everything else failed while running (an unreachable device, data that cannot be
+    identified, a full disk: exit 1).
+    """
+    from daq.errors import ConfigError
+    from ident.io import FileFormatError
+
+    return isinstance(exc, (_UsageError, ConfigError, FileFormatError, FileNotFoundError,
+                            IsADirectoryError, NotADirectoryError))
+
+
+def _describe(exc: BaseException) -> str:
+    """One line for a user's error: the file, key or value and what is wrong."""
+    if isinstance(exc, ModuleNotFoundError) and exc.name is not None:
+        top = exc.name.split(".")[0]
+        if top in _EXTRAS:
+            return (f"this command needs {top}, which is not installed: pip install "
+                    f"'windrig[{_EXTRAS[top]}]'")
+        return f"missing Python module {exc.name!r}: {exc}"
+    if isinstance(exc, OSError) and exc.filename is not None and exc.strerror:
+        return f"{exc.filename}: {exc.strerror}"
+    text = " ".join(str(exc).split())  # one line
+    return text or type(exc).__name__
+
+
+def _dispatch(args: argparse.Namespace) -> int:
     if args.command == "demo":
         from daq.sim import demo
 

@@ -76,20 +76,30 @@ def read_run(path: str | os.PathLike[str]) -> RunFile:
         contain gaps (NaN): identification never silently fills a gap.
     """
     path = os.fspath(path)
+    if not os.path.exists(path):
+        raise FileFormatError(f"{path}: no such file")
+    if os.path.isdir(path):
+        raise FileFormatError(f"{path}: a directory, not a run file")
     try:
         handle = h5py.File(path, "r", swmr=True)
     except OSError as exc:
-        raise FileFormatError(f"{path}: cannot be opened as an HDF5 run file: {exc}") from exc
+        reason = ("not an HDF5 file (or its first bytes are lost)"
+                  if "signature" in str(exc) else f"cannot be opened as HDF5: {exc}")
+        raise FileFormatError(f"{path}: {reason}") from exc
     with handle as f:
+        part = "/entry/config"
         try:
             config_text = _text(f["entry/config"][()])
-            sync = {name: np.asarray(f[f"entry/sync/{name}"][()], dtype=float)
-                    for name in ("time", "h", "alpha", "lift", "moment", "U", "rho")}
+            sync = {}
+            for name in ("time", "h", "alpha", "lift", "moment", "U", "rho"):
+                part = f"/entry/sync/{name}"
+                sync[name] = np.asarray(f[part][()], dtype=float)
+            part = "/entry/releases"
             table = f["entry/releases"][()]
             rig_name = _text(f["entry"].attrs.get("rig_name", ""))
         except KeyError as exc:
-            raise FileFormatError(f"{path}: missing {exc.args[0] if exc.args else exc}; "
-                                  "not a complete windrig run file") from exc
+            raise FileFormatError(f"{path}: has no {part}: not a windrig run file (or an "
+                                  "incomplete one)") from exc
         except OSError as exc:  # a truncated or corrupted file fails on read
             raise FileFormatError(f"{path}: unreadable (truncated?): {exc}") from exc
     section, depth = _section(config_text, path, sync["rho"])

@@ -24,15 +24,15 @@ def test_flutter_command_reads_json_section_and_model(tmp_path, capsys):
     assert f"flutter at U = {expected:.4g} m/s" in capsys.readouterr().out
 
 
-def test_flutter_command_refuses_an_unknown_section_key(tmp_path):
+def test_flutter_command_refuses_an_unknown_section_key(tmp_path, capsys):
     """A misspelt key in the section file is an error naming it, not a silent default."""
     data = SectionModel(B=0.4, m=8.0, I=0.12, fh=1.5, fa=3.5, zeta_h=0.0, zeta_a=0.0).to_dict()
     data["zeta_alpha"] = 0.01
     (tmp_path / "s.json").write_text(json.dumps(data))
     (tmp_path / "m.json").write_text(json.dumps(flat_plate.jones_model().to_dict()))
-    with pytest.raises(TypeError, match="zeta_alpha"):
-        main(["flutter", "--section", str(tmp_path / "s.json"),
-              "--model", str(tmp_path / "m.json")])
+    assert main(["flutter", "--section", str(tmp_path / "s.json"),
+                 "--model", str(tmp_path / "m.json")]) == 2
+    assert "zeta_alpha" in capsys.readouterr().err
 
 
 def test_unknown_subcommand_exits_with_usage(capsys):
@@ -80,11 +80,13 @@ def test_identify_reads_run_files_and_prints_the_flutter_speed(tmp_path, capsys)
     assert result["flutter_speed"] == pytest.approx(truth.speed, rel=1e-4)
 
 
-def test_identify_names_a_bad_file(tmp_path):
-    """A file that is not a run file is reported by name."""
+def test_identify_names_a_bad_file(tmp_path, capsys):
+    """A file that is not a run file is reported by name (its exception with --debug)."""
     from ident.io import FileFormatError
 
     junk = tmp_path / "junk.h5"
     junk.write_text("junk")
+    assert main(["identify", str(junk)]) == 2
+    assert "junk.h5" in capsys.readouterr().err
     with pytest.raises(FileFormatError, match="junk.h5"):
-        main(["identify", str(junk)])
+        main(["--debug", "identify", str(junk)])

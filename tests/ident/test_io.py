@@ -80,8 +80,10 @@ def test_not_hdf5_truncated_and_incomplete_files_fail_clearly(tmp_path):
     """Garbage, a truncated copy and a file without the layout: FileFormatError (ValueError)."""
     junk = tmp_path / "junk.h5"
     junk.write_bytes(b"not an HDF5 file at all")
-    with pytest.raises(FileFormatError, match="cannot be opened as an HDF5 run file"):
+    with pytest.raises(FileFormatError, match="junk.h5: not an HDF5 file"):
         read_run(junk)
+    with pytest.raises(FileFormatError, match="nothing.h5: no such file"):
+        read_run(tmp_path / "nothing.h5")
     good = tmp_path / "good.h5"
     write_run(good)
     truncated = tmp_path / "truncated.h5"
@@ -91,5 +93,5 @@ def test_not_hdf5_truncated_and_incomplete_files_fail_clearly(tmp_path):
     empty = tmp_path / "empty.h5"
     with h5py.File(empty, "w") as f:
         f.create_group("entry")
-    with pytest.raises(FileFormatError, match="missing"):
+    with pytest.raises(FileFormatError, match=r"has no /entry/config: not a windrig run file"):
         read_run(empty)
