@@ -49,6 +49,7 @@ __all__ = [
     "SyncError",
     "TransportError",
     "TransportTimeout",
+    "UsageError",
 ]
 
 
@@ -140,6 +141,10 @@ class RecordingError(DaqError, RuntimeError):
     answering in time. File problems (an existing file, a missing or read-only directory, a
     full disk) are :class:`StorageError` instead.
     """
+
+
+class UsageError(DaqError, ValueError):
+    """A command-line value, or a file it names, that a command cannot take (exit code 2)."""
 
 
 class ReplayError(DaqError, ValueError):
