@@ -103,7 +103,10 @@ class MicroEpsilonIld1420:
     decoded, nothing is lost. Not thread-safe: send commands from the thread that reads.
     """
 
-    #: Longest time a read keeps collecting data that has already arrived, s.
+    #: Time a read keeps collecting data after its first sample, s: a block spans about this
+    #: long (80 samples at 4 kHz) instead of the few samples one serial read gives, so that
+    #: everything downstream (engine queue, synchronisation, recording, live view) runs per
+    #: block at ~50 blocks/s rather than per read at ~350 reads/s, which saturated one core.
     DRAIN_S = 0.02
 
     def __init__(self, transport: Transport, settings: Ild1420Settings, *,
@@ -327,8 +330,8 @@ class MicroEpsilonIld1420:
     def read_block(self, timeout_s: float = 1.0, *, max_samples: int = 100_000) -> LaserBlock:
         """Return the samples received so far (at least one), waiting up to ``timeout_s``.
 
-        After the first sample it keeps reading what has already arrived, without waiting, for
-        at most :attr:`DRAIN_S` and up to ``max_samples``. A failed line is reopened (bounded
+        After the first sample it keeps reading, waiting for more, for :attr:`DRAIN_S` and up
+        to ``max_samples`` (one read's worth more at most). A failed line is reopened (bounded
         attempts with backoff, logged); after a reopen the first step is checked for a sensor
         restart.
 
@@ -355,26 +358,22 @@ class MicroEpsilonIld1420:
                 self._reconnect(exc)
                 continue
             self._ingest(data, time.monotonic_ns())
-        # Drain what has already arrived, for at most DRAIN_S (data keeps coming), and decode it
-        # in one go (the transport may return a few bytes per call), stamped with the time of
-        # its last read.
-        pending = bytearray()
-        stamp = time.monotonic_ns()
-        limit = (max_samples - self._backlog_size) * self._decoder.block_bytes
-        drain_end = stamp + int(self.DRAIN_S * 1e9)
-        while len(pending) < limit and stamp < drain_end:
+        # Keep collecting for DRAIN_S after the first sample (waiting for what is still coming)
+        # and up to max_samples; each read is decoded and stamped with its own arrival time, so
+        # the clock fit keeps a tight host time for the last sample of every read.
+        drain_end = time.monotonic() + self.DRAIN_S
+        while self._backlog_size < max_samples:
+            remaining = drain_end - time.monotonic()
+            if remaining <= 0:
+                break
             try:
-                pending += self._transport.read(65536, 0.0)
+                data = self._transport.read(65536, remaining)
             except TransportTimeout:
                 break
             except TransportError as exc:
-                self._ingest(bytes(pending), time.monotonic_ns())
-                pending.clear()
                 self._reconnect(exc)
                 break
-            stamp = time.monotonic_ns()
-        if pending:
-            self._ingest(bytes(pending), stamp)
+            self._ingest(data, time.monotonic_ns())
         return self._build_block()
 
     def _reconnect(self, cause: TransportError) -> None:
