@@ -337,15 +337,10 @@ class RunWriter:
             # move forward: their map stays valid and is kept. (NaN: nothing mapped yet.)
             if float(t_dev[first]) <= dev.last_device_time:
                 self._restart_clock(dev, float(t_dev[first]), float(t_host[first]))
-        # A block may hold several reads (the laser driver collects 20 ms of them), each row
-        # stamped with its read's arrival: the last row of every read is a pair as tight as a
-        # one-read block's, so each one is given to the clock map's lower envelope.
-        ends = rows[np.flatnonzero(np.diff(t_host[rows]) != 0.0)]
-        if ends.size:
-            dev.clock.update(np.append(t_dev[ends], t_dev[last]),
-                             np.append(t_host[ends], t_host[last]))
-        else:
-            dev.clock.update(t_dev[last], float(t_host[last]))
+        # Each read in a block (lasers: 20 ms of reads) has its own arrival stamp: the last row
+        # of every read is a tight pair for the clock map's lower envelope.
+        ends = np.append(rows[np.flatnonzero(np.diff(t_host[rows]) != 0.0)], last)
+        dev.clock.update(t_dev[ends], t_host[ends])
         if self.use_trigger_anchors:
             dev.anchor_triggers(block, t_dev, self._trigger_events)
             if dev.pending_triggers:
