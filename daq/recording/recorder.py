@@ -82,6 +82,7 @@ from daq.recording.layout import (
     create_stream,
     create_sync,
     now_iso,
+    per_device_attr,
     validate_metadata,
     write_metadata,
     write_skeleton,
@@ -543,7 +544,8 @@ class RunRecorder:
         The convention of :class:`daq.sync.clock_map.ClockMap` and
         :class:`simulators.clock.DeviceClock`: ``device_time = clock_offset_s + (1 + 1e-6
         clock_drift_ppm) t``, ``t`` in s from run start (host clock). Stored as attributes of
-        ``/entry/sync``: ``clock_offset_s.<device>``, ``clock_drift_ppm.<device>`` and
+        ``/entry/sync``: ``clock_offset_s__<device>``, ``clock_drift_ppm__<device>`` (named by
+        :func:`daq.recording.layout.per_device_attr`) and
         ``residual_misalignment_s``. After :meth:`start` they are written at :meth:`close` (SWMR
         forbids new attributes); a later call replaces earlier values.
 
@@ -567,7 +569,7 @@ class RunRecorder:
                 if device not in self._streams:
                     raise ValueError(f"{label}: no stream {device!r} declared; have "
                                      f"{sorted(self._streams)}")
-                attrs[f"{label}.{device}"] = _finite(value, f"{label} of {device}")
+                attrs[per_device_attr(label, device)] = _finite(value, f"{label} of {device}")
         if residual_misalignment_s is not None:
             attrs["residual_misalignment_s"] = _finite(residual_misalignment_s,
                                                      "residual_misalignment_s")
