@@ -123,6 +123,19 @@ def _build_parser() -> argparse.ArgumentParser:
     p_acq.add_argument("--out", type=Path, required=True, help="run file to create (.h5)")
     p_acq.add_argument("--notes", default="", help="operator notes stored with the run")
 
+    p_rec = sub.add_parser(
+        "recover",
+        help="make a run file left by a crash (SIGKILL, power cut) readable by any HDF5 tool: "
+             "keep every flushed row, trim a partly written last append, mark it recovered")
+    p_rec.add_argument("files", type=Path, nargs="+", help="windrig HDF5 run files")
+
+    p_info = sub.add_parser(
+        "info",
+        help="what a run file holds: rig, section, devices (rates, samples, gaps, clock fits), "
+             "releases, events, CALZ, and whether it was closed, crashed or recovered")
+    p_info.add_argument("file", type=Path, help="a windrig HDF5 run file")
+    p_info.add_argument("--json", action="store_true", help="print JSON instead of text")
+
     p_gui = sub.add_parser(
         "gui", help="the operator console: a live (simulated) rig, or replay of a run file")
     p_gui.add_argument("--replay", type=Path, default=None, metavar="FILE.h5",
@@ -342,6 +355,33 @@ def _reprocess(args: argparse.Namespace) -> int:
     return 0
 
 
+def _recover(args: argparse.Namespace) -> int:
+    from daq.recording.recover import recover_run
+
+    for path in args.files:
+        report = recover_run(path)
+        if not report.recovered:
+            print(f"{path}: " + ("closed cleanly by its writer" if report.recovered_before is None
+                                 else f"already recovered ({report.recovered_before})")
+                  + ", nothing to recover")
+            continue
+        trimmed = sum(report.trimmed.values())
+        print(f"recovered {path}: status flags 0x{report.flags_before:02x} cleared; "
+              f"{report.sync_rows} sync rows kept (to {report.end_s:.3f} s); {trimmed} row(s) of "
+              f"a partly written last append trimmed; marked recovered")
+        for name, n in report.trimmed.items():
+            print(f"  trimmed {n:>6} row(s) of {name}")
+    return 0
+
+
+def _info(args: argparse.Namespace) -> int:
+    from daq.recording.info import format_info, run_info
+
+    info = run_info(args.file)
+    print(json.dumps(info, indent=2, allow_nan=False) if args.json else format_info(info))
+    return 0
+
+
 def _flutter(args: argparse.Namespace) -> int:
     from ident import RationalFunctionModel, SectionModel, flutter
 
@@ -456,9 +496,11 @@ def _is_usage(exc: BaseException) -> bool:
     identified, a full disk: exit 1).
     """
     from daq.errors import ConfigError
+    from daq.recording.recover import NotARunFileError
     from ident.io import FileFormatError
 
-    return isinstance(exc, (_UsageError, ConfigError, FileFormatError, FileNotFoundError,
+    return isinstance(exc, (_UsageError, ConfigError, FileFormatError, NotARunFileError,
+                            FileNotFoundError,
                             IsADirectoryError, NotADirectoryError))
 
 
@@ -497,6 +539,10 @@ def _dispatch(args: argparse.Namespace) -> int:
         return _acquire(args)
     if args.command == "gui":
         return _gui(args)
+    if args.command == "recover":
+        return _recover(args)
+    if args.command == "info":
+        return _info(args)
     raise AssertionError(f"unhandled command {args.command!r}")  # argparse rejects unknown ones
 
 
