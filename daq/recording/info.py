@@ -76,7 +76,7 @@ def _device(name: str, group: h5py.Group, t0_ns: int | None,
     lengths = lengths[lengths != 0]  # (-1, 0): a fill row, not a gap
     span = None
     if host.size and t0_ns is not None:
-        span = [float((host[0] - t0_ns) * 1e-9), float((host[-1] - t0_ns) * 1e-9)]
+        span = [round(float((t - t0_ns) * 1e-9), 9) for t in (host[0], host[-1])]
     info: dict[str, Any] = {
         "driver": config.get(name, {}).get("driver"),
         "rate_hz": float(group.attrs.get("rate", np.nan)),
@@ -124,20 +124,21 @@ def run_info(path: str | os.PathLike[str]) -> dict[str, Any]:
     dict
         ``file``, ``size_bytes``, ``state`` (``"closed"``, ``"crashed"`` or ``"recovered"``),
         ``windrig_version``, ``created``, ``start_time``, ``rig``, ``operator_notes``,
-        ``section`` (the stored ``[section]``: m, kg/m, kg m^2/m, Hz), ``sync`` (rows, rate in
-        Hz, duration in s, the fraction of rows with h finite), ``devices`` (per device: driver,
+        ``section`` (the stored ``[section]``: m, kg/m, kg m^2/m, Hz), ``sync`` (rows written
+        whole, rows sized but never written (a crash), rate in Hz, duration in s, the fraction
+        of rows with h finite), ``devices`` (per device: driver,
         rate in Hz, channels, samples, time span in s from the run start, gaps, missing samples,
         restarts, clock fit: offset s, drift ppm), ``residual_misalignment_s``, ``releases``
         (time s, U m/s, h0 m, alpha0 rad, decay length s), ``events`` (counts per kind and
         every event but the trigger pulses: time s, kind, text), ``calz`` (each CALZ record's
-        scalars) and ``recovery`` (what ``windrig recover`` did, or None).
+        scalars) and ``recovery`` (what ``windrig recover`` did, or None). NaN is None.
 
     Raises
     ------
     FileNotFoundError
         If there is no such file.
     NotARunFileError
-        If it is a directory, not HDF5, or not a windrig run file.
+        If it is a directory, not HDF5, not a windrig run file, or unreadable (truncated).
     """
     path = Path(path)
     if not path.exists():
@@ -148,12 +149,15 @@ def run_info(path: str | os.PathLike[str]) -> dict[str, Any]:
     try:
         handle = h5py.File(path, "r", swmr=True)
     except OSError as exc:
-        raise NotARunFileError(f"{path}: HDF5 cannot open it ({exc}); truncated?") from exc
+        raise NotARunFileError(f"{path}: HDF5 cannot open it (truncated?): {exc}") from exc
     with handle as f:
         for part in ("entry/sync", "entry/instrument", "entry/config"):
             if part not in f:
                 raise NotARunFileError(f"{path}: has no /{part}: not a windrig run file")
-        return _describe(path, f)
+        try:
+            return _describe(path, f)
+        except OSError as exc:  # a truncated or corrupted file fails on read
+            raise NotARunFileError(f"{path}: unreadable HDF5 data (truncated?): {exc}") from exc
 
 
 def _describe(path: Path, f: h5py.File) -> dict[str, Any]:
@@ -162,8 +166,12 @@ def _describe(path: Path, f: h5py.File) -> dict[str, Any]:
     columns = [sync[name] for name in SYNC_COLUMNS if name in sync]
     for ds in columns:
         ds.refresh()
-    n = min((ds.shape[0] for ds in columns), default=0)
-    time = sync["time"][:n] if "time" in sync else np.zeros(0)
+    shortest = min((ds.shape[0] for ds in columns), default=0)
+    time = sync["time"][:shortest] if "time" in sync else np.zeros(0)
+    # Rows whose size reached the file but whose data did not (a crash) read as NaN times.
+    finite = np.flatnonzero(np.isfinite(time))
+    n = int(finite[-1]) + 1 if finite.size else 0
+    time = time[:n]
     rate = round(1.0 / float(np.median(np.diff(time))), 6) if time.size > 1 else None
     h = sync["h"][:n] if "h" in sync else np.zeros(0)
     t0 = sync.attrs.get("t0_host_ns")
@@ -187,7 +195,7 @@ def _describe(path: Path, f: h5py.File) -> dict[str, Any]:
         for row in entry["events"][:]:
             kind = _text(row["kind"])
             counts[kind] += 1
-            if kind not in _COUNTED_ONLY:
+            if kind not in _COUNTED_ONLY and np.isfinite(row["time"]):  # NaN: never written
                 events.append({"time_s": float(row["time"]), "kind": kind,
                                "text": _text(row["text"])})
     metadata = entry["metadata"] if "metadata" in entry else {}
@@ -195,7 +203,7 @@ def _describe(path: Path, f: h5py.File) -> dict[str, Any]:
     recovery = next((_plain(metadata[name]) for name in sorted(metadata, reverse=True)
                      if name.startswith("recovery")), None)
     residual = sync.attrs.get("residual_misalignment_s")
-    return {
+    return _finite_or_none({
         "file": str(path),
         "size_bytes": path.stat().st_size,
         **_state(path, entry),
@@ -205,7 +213,7 @@ def _describe(path: Path, f: h5py.File) -> dict[str, Any]:
         "rig": _text(entry.attrs.get("rig_name", "")),
         "operator_notes": _text(entry.attrs.get("operator_notes", "")),
         "section": section,
-        "sync": {"rows": int(n), "rate_hz": rate,
+        "sync": {"rows": int(n), "unwritten_rows": int(shortest - n), "rate_hz": rate,
                  "duration_s": float(time[-1] - time[0]) if time.size else 0.0,
                  "h_finite": float(np.isfinite(h).mean()) if h.size else None},
         "devices": devices,
@@ -214,7 +222,23 @@ def _describe(path: Path, f: h5py.File) -> dict[str, Any]:
         "events": {"counts": dict(sorted(counts.items())), "list": events},
         "calz": calz,
         "recovery": recovery,
-    }
+    })
+
+
+def _finite_or_none(value: Any) -> Any:
+    """Return ``value`` with every NaN or infinite float, at any depth, as None (JSON null)."""
+    if isinstance(value, dict):
+        return {k: _finite_or_none(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_finite_or_none(v) for v in value]
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
+
+
+def _fmt(value: float | None, spec: str, scale: float = 1.0) -> str:
+    """Format a number of :func:`run_info` (None, a NaN in the file, as ``?``)."""
+    return "?" if value is None else format(value * scale, spec)
 
 
 def format_info(info: dict[str, Any]) -> str:
@@ -234,17 +258,20 @@ def format_info(info: dict[str, Any]) -> str:
         "section    " + (", ".join(f"{k} = {v}" for k, v in info["section"].items()) or "none"),
         f"sync view  {sync['rows']} rows"
         + (f" at {sync['rate_hz']:.6g} Hz, {sync['duration_s']:.3f} s" if sync["rate_hz"] else "")
-        + (f", h finite in {sync['h_finite']:.1%}" if sync["h_finite"] is not None else ""),
+        + (f", h finite in {sync['h_finite']:.1%}" if sync["h_finite"] is not None else "")
+        + (f"; {sync['unwritten_rows']} more rows sized but never written (trimmed by windrig "
+           "recover)" if sync["unwritten_rows"] else ""),
         "",
         f"{'device':<14} {'driver':<22} {'rate Hz':>8} {'samples':>9} {'gaps':>5} "
         f"{'missing':>8} {'restarts':>8}  clock fit",
     ]
     for name, d in info["devices"].items():
         fit = d["clock_fit"]
-        clock = ("-" if fit is None else
-                 f"offset {fit['offset_s']:+.6f} s, drift {fit.get('drift_ppm', np.nan):+.2f} ppm")
-        lines.append(f"{name:<14} {d['driver'] or '?':<22} {d['rate_hz']:>8g} {d['samples']:>9} "
-                     f"{d['gaps']:>5} {d['missing_samples']:>8} {d['restarts']:>8}  {clock}")
+        clock = ("-" if fit is None else f"offset {_fmt(fit['offset_s'], '+.6f')} s, drift "
+                 f"{_fmt(fit.get('drift_ppm'), '+.2f')} ppm")
+        lines.append(f"{name:<14} {d['driver'] or '?':<22} {_fmt(d['rate_hz'], '>8g')} "
+                     f"{d['samples']:>9} {d['gaps']:>5} {d['missing_samples']:>8} "
+                     f"{d['restarts']:>8}  {clock}")
     if info["residual_misalignment_s"] is not None:
         lines.append(f"residual misalignment of the clock fits "
                      f"{info['residual_misalignment_s'] * 1e3:.3f} ms")
@@ -254,13 +281,13 @@ def format_info(info: dict[str, Any]) -> str:
     lines += ["", f"releases   {len(info['releases'])}"]
     for i, r in enumerate(info["releases"]):
         decay = f", decay {r['decay_s']:.2f} s" if r["decay_s"] is not None else ""
-        lines.append(f"  #{i}  t = {r['time_s']:8.3f} s  U = {r['U']:6.3f} m/s  "
-                     f"h0 = {r['h0'] * 1e3:+7.3f} mm  alpha0 = {np.degrees(r['alpha0']):+7.3f} deg"
-                     f"{decay}")
+        lines.append(f"  #{i}  t = {_fmt(r['time_s'], '8.3f')} s  U = {_fmt(r['U'], '6.3f')} m/s"
+                     f"  h0 = {_fmt(r['h0'], '+7.3f', 1e3)} mm  alpha0 = "
+                     f"{_fmt(r['alpha0'], '+7.3f', 180 / np.pi)} deg{decay}")
     counts = info["events"]["counts"]
     lines += ["", "events     " + (", ".join(f"{k} {v}" for k, v in counts.items()) or "none")]
     for e in info["events"]["list"]:
-        lines.append(f"  {e['time_s']:8.3f} s  {e['kind']:<16} {e['text']}")
+        lines.append(f"  {_fmt(e['time_s'], '8.3f')} s  {e['kind']:<16} {e['text']}")
     lines += ["", "CALZ       " + (", ".join(info["calz"]) or "none")]
     for name, record in info["calz"].items():
         scalars = {k: v for k, v in record.items() if not isinstance(v, (list, dict))} \

@@ -388,14 +388,19 @@ def recover_run(path: str | os.PathLike[str]) -> RecoveryReport:
                             "(a recording in progress?); recover a file only once its writer "
                             "has ended")
     clear_status_flags(path)
-    with h5py.File(path, "r+") as f:
-        entry = f["entry"]
-        report.sync_rows = _trim_sync(entry, report)
-        for group in entry["instrument"].values():
-            if isinstance(group, h5py.Group):
-                _trim_stream(group, report)
-        _trim_tables(entry, report.sync_rows, report)
-        _mark(entry, report)
+    try:
+        with h5py.File(path, "r+") as f:
+            entry = f["entry"]
+            report.sync_rows = _trim_sync(entry, report)
+            for group in entry["instrument"].values():
+                if isinstance(group, h5py.Group):
+                    _trim_stream(group, report)
+            _trim_tables(entry, report.sync_rows, report)
+            _mark(entry, report)
+    except OSError as exc:
+        raise RecoveryError(f"{path}: the status flags are cleared, but HDF5 failed while "
+                            f"trimming ({exc}): the file is damaged beyond what a crash leaves; "
+                            "it still opens read-only") from exc
     report.recovered = True
     return report
 
