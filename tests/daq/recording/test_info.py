@@ -1,4 +1,4 @@
-"""``windrig info`` on a closed run file with releases (crashed and recovered files: test_recover)."""
+"""``windrig info`` on a closed run file with releases (crashed, recovered: test_recover.py)."""
 
 from __future__ import annotations
 
