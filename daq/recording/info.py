@@ -24,7 +24,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from daq.recording.layout import SYNC_COLUMNS, per_device_attrs
+from daq.recording.layout import STREAM_TABLES, SYNC_COLUMNS, per_device_attrs
 from daq.recording.recover import NotARunFileError, read_superblock
 
 __all__ = ["format_info", "run_info"]
@@ -66,7 +66,8 @@ def _state(path: Path, entry: h5py.Group) -> dict[str, Any]:
 
 def _device(name: str, group: h5py.Group, t0_ns: int | None,
             clock: dict[str, dict[str, float]], config: dict[str, Any]) -> dict[str, Any]:
-    rows = [ds for key, ds in group.items() if isinstance(ds, h5py.Dataset) and key != "gaps"]
+    rows = [ds for key, ds in group.items()
+            if isinstance(ds, h5py.Dataset) and key not in STREAM_TABLES]
     for ds in rows:
         ds.refresh()
     n = min((ds.shape[0] for ds in rows), default=0)

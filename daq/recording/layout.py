@@ -21,13 +21,15 @@ File layout
     /entry                 NXentry; default="sync", rig_name, operator_notes, start_time
     /entry/config          scalar UTF-8 string: the rig config TOML, verbatim
     /entry/instrument      NXinstrument
-    /entry/instrument/<d>  NXcollection; attrs channel_names, units (one per channel), rate (Hz)
+    /entry/instrument/<d>  NXdata (signal value, axes host_time_ns, channel); attrs channel_names,
+                           units (one per channel), rate (Hz)
         host_time_ns  (n,)          int64    host time.monotonic_ns() at arrival, ns
         device_time   (n,)          float64  device clock, s (NaN: the device has none)
         counter       (n,)          int64    unwrapped sample counter
         value         (n, ch)       float32 or float64, units as the group's attrs
         gaps          (g,) compound (after_counter int64, length int64); length -1 = unknown
         <extra>       (n,)          optional per-sample columns declared with the stream
+        channel       (ch,)         the channel names (value's second axis)
     /entry/sync            NXdata; signal="h", axes="time", time_indices=0, tap_names, t0_host_ns,
                            clock_model, clock_offset_s__<d>, clock_drift_ppm__<d>,
                            residual_misalignment_s
@@ -68,7 +70,7 @@ import numpy.typing as npt
 __all__ = ["CLOCK_MODEL", "EVENT_DTYPE", "EVENT_KIND_BYTES", "EVENT_TEXT_BYTES", "EXTRA_DTYPES",
            "EXTRA_UNITS", "GAP_DTYPE", "GAP_FILL", "GZIP_LEVEL", "MAX_CHUNK_BYTES",
            "NAME_PATTERN", "PER_DEVICE_SEPARATOR", "RELEASE_DTYPE", "RELEASE_UNITS",
-           "SYNC_COLUMNS", "VALUE_DTYPES", "append_rows", "attach_dimension_scales", "check_name",
+           "STREAM_TABLES", "SYNC_COLUMNS", "VALUE_DTYPES", "append_rows", "attach_dimension_scales", "check_name",
            "create_column", "create_stream", "create_sync", "event_row", "fill_value",
            "metadata_name_part", "now_iso", "per_device_attr", "per_device_attrs", "read_sync",
            "storable_metadata", "str_array", "validate_metadata", "windrig_version",
@@ -170,6 +172,10 @@ NAME_PATTERN = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 
 VALUE_DTYPES = (np.dtype("float32"), np.dtype("float64"))
+
+
+#: Datasets of a raw stream that are not one row per sample (the gaps table, the channel names).
+STREAM_TABLES = ("gaps", "channel")
 
 
 #: Units of the extra per-sample columns a stream may declare (any other is a count or a flag,
@@ -365,9 +371,14 @@ def create_stream(instrument: h5py.Group, device: str, channels: list[str], unit
     ``make_column(group, name, dtype, **options)`` creates a dataset as :func:`create_column`.
     """
     group = instrument.create_group(device)
-    # NXlog: "information recorded as a function of time", the NeXus class of a raw stream
-    # (NXcollection, the class of anything, makes validators warn about every member).
-    group.attrs["NX_class"] = "NXlog"
+    # NXdata, plotted as value(host_time_ns, channel): NeXus validators accept a NXdata's own
+    # fields and attributes (punx warns about every member of an NXcollection, nxcheck about
+    # every field an NXlog does not define).
+    group.attrs["NX_class"] = "NXdata"
+    group.attrs["signal"] = "value"
+    group.attrs["axes"] = str_array(["host_time_ns", "channel"])
+    group.attrs["host_time_ns_indices"] = np.int32(0)
+    group.attrs["channel_indices"] = np.int32(1)
     group.attrs["channel_names"] = str_array(channels)
     group.attrs["units"] = str_array(units)
     group.attrs["rate"] = float(rate_hz)
@@ -392,6 +403,10 @@ def create_stream(instrument: h5py.Group, device: str, channels: list[str], unit
     ds["gaps"].attrs["units"] = "1"  # both fields count samples
     for name, kind in extra.items():
         ds[name] = make_column(group, name, kind, units=EXTRA_UNITS.get(name, "1"))
+    # The channel names as a dataset too: the axis of value's second dimension (not a row
+    # column: it is not returned, and never appended to).
+    channel = group.create_dataset("channel", data=str_array(channels))
+    channel.attrs["long_name"] = "channel name"
     return ds
 
 

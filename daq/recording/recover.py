@@ -43,7 +43,13 @@ import h5py
 import numpy as np
 
 from daq.errors import RecorderError
-from daq.recording.layout import SYNC_COLUMNS, append_rows, now_iso, write_metadata
+from daq.recording.layout import (
+    STREAM_TABLES,
+    SYNC_COLUMNS,
+    append_rows,
+    now_iso,
+    write_metadata,
+)
 
 __all__ = ["RECOVERED_EVENT", "NotARunFileError", "RecoveryError", "RecoveryReport", "Superblock",
            "clear_status_flags", "lookup3", "needs_recovery", "read_superblock", "recover_run"]
@@ -308,7 +314,8 @@ def _trim_sync(entry: h5py.Group, report: RecoveryReport) -> int:
 
 
 def _trim_stream(group: h5py.Group, report: RecoveryReport) -> None:
-    rows = [ds for name, ds in group.items() if isinstance(ds, h5py.Dataset) and name != "gaps"]
+    rows = [ds for name, ds in group.items()
+            if isinstance(ds, h5py.Dataset) and name not in STREAM_TABLES]
     n = min((ds.shape[0] for ds in rows), default=0)
     if "host_time_ns" in group:  # a fill row reads -1; host times are monotonic_ns >= 0
         n = _keep_prefix(group["host_time_ns"][:n] >= 0)

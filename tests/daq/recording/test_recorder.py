@@ -163,7 +163,9 @@ def test_layout_is_the_contract(tmp_path: Path) -> None:
                 ("scanner", ["p0", "p1", "p2"], ["Pa"] * 3, 500.0, "float32", 57),
                 ("lasers", ["h", "alpha"], ["m", "rad"], 2000.0, "float64", 11)]:
             group = instrument[device]
-            assert group.attrs["NX_class"] == "NXlog"
+            assert group.attrs["NX_class"] == "NXdata" and group.attrs["signal"] == "value"
+            assert list(group.attrs["axes"]) == ["host_time_ns", "channel"]
+            assert [c.decode() for c in group["channel"][:]] == channels
             assert list(group.attrs["channel_names"]) == channels
             assert list(group.attrs["units"]) == units
             assert group.attrs["rate"] == rate and group.attrs["rate_units"] == "Hz"
@@ -173,7 +175,7 @@ def test_layout_is_the_contract(tmp_path: Path) -> None:
                 "gaps": (GAP_DTYPE, (1,))}
             if device == "scanner":
                 expected["trigger_time"] = (np.float64, (rows,))
-            assert sorted(group) == sorted(expected)
+            assert sorted(group) == sorted([*expected, "channel"])
             for name, (kind, shape) in expected.items():
                 ds = group[name]
                 assert ds.dtype == np.dtype(kind), (device, name)
