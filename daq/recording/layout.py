@@ -70,11 +70,11 @@ import numpy.typing as npt
 __all__ = ["CLOCK_MODEL", "EVENT_DTYPE", "EVENT_KIND_BYTES", "EVENT_TEXT_BYTES", "EXTRA_DTYPES",
            "EXTRA_UNITS", "GAP_DTYPE", "GAP_FILL", "GZIP_LEVEL", "MAX_CHUNK_BYTES",
            "NAME_PATTERN", "PER_DEVICE_SEPARATOR", "RELEASE_DTYPE", "RELEASE_UNITS",
-           "STREAM_TABLES", "SYNC_COLUMNS", "VALUE_DTYPES", "append_rows", "attach_dimension_scales", "check_name",
-           "create_column", "create_stream", "create_sync", "event_row", "fill_value",
-           "metadata_name_part", "now_iso", "per_device_attr", "per_device_attrs", "read_sync",
-           "storable_metadata", "str_array", "validate_metadata", "windrig_version",
-           "write_metadata", "write_skeleton"]
+           "STREAM_TABLES", "SYNC_COLUMNS", "VALUE_DTYPES", "append_rows",
+           "attach_dimension_scales", "check_name", "create_column", "create_stream",
+           "create_sync", "event_row", "fill_value", "metadata_name_part", "now_iso",
+           "per_device_attr", "per_device_attrs", "read_sync", "storable_metadata", "str_array",
+           "validate_metadata", "windrig_version", "write_metadata", "write_skeleton"]
 
 #: Row of ``/entry/instrument/<device>/gaps``.
 GAP_DTYPE = np.dtype([("after_counter", "<i8"), ("length", "<i8")])
