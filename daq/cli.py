@@ -17,7 +17,7 @@ import json
 import os
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -122,6 +122,12 @@ def _build_parser() -> argparse.ArgumentParser:
     p_acq.add_argument("--duration", type=float, required=True, help="seconds to record")
     p_acq.add_argument("--out", type=Path, required=True, help="run file to create (.h5)")
     p_acq.add_argument("--notes", default="", help="operator notes stored with the run")
+    p_acq.add_argument("--log-file", type=Path, default=None, metavar="FILE.log",
+                       help="also write the run's log (device faults, reconnects, dropped "
+                            "blocks, clock restarts) to this file, appended to")
+    p_acq.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING",
+                                                               "ERROR"),
+                       help="lowest level written to --log-file (default INFO)")
 
     p_rec = sub.add_parser(
         "recover",
@@ -207,6 +213,11 @@ def _acquire(args: argparse.Namespace) -> int:
                          progress=sys.stderr.isatty())
     except StorageError as exc:
         print(f"error: {exc}", file=sys.stderr)
+        if args.log_file is not None:  # else logging's last resort would print it again
+            import logging
+
+            logging.getLogger("daq.cli").error("acquire ended with an error: %s", exc,
+                                               exc_info=True)
         if failed_writes():  # HDF5 would crash the process at exit (h5py#914)
             sys.stdout.flush()
             sys.stderr.flush()
@@ -233,6 +244,29 @@ def _acquire(args: argparse.Namespace) -> int:
     for error in summary["errors"]:
         print(f"error: {error}")
     return 0 if not summary["errors"] else 1
+
+
+def _logged(args: argparse.Namespace, command: Callable[[argparse.Namespace], int]) -> int:
+    """Run ``command``, logging to ``args.log_file`` if given (its own errors logged too)."""
+    if args.log_file is None:
+        return command(args)
+    import logging
+
+    from daq.log_file import close_log_file, open_log_file
+
+    handler = open_log_file(args.log_file, args.log_level)
+    log = logging.getLogger("daq.cli")
+    log.info("windrig %s: %s", _version(), " ".join(args.argv))
+    try:
+        code = command(args)
+    except BaseException:
+        log.exception("%s ended with an error", args.command)  # the traceback, in the file
+        raise
+    else:
+        log.info("%s ended, exit status %d", args.command, code)
+        return code
+    finally:
+        close_log_file(handler)
 
 
 def _simulate(args: argparse.Namespace) -> int:
@@ -464,6 +498,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     instead. Anything else is a bug and keeps its traceback.
     """
     args = _build_parser().parse_args(argv)
+    args.argv = list(sys.argv[1:] if argv is None else argv)  # for a log file's first line
     try:
         return _dispatch(args)
     except KeyboardInterrupt:
@@ -539,7 +574,7 @@ def _dispatch(args: argparse.Namespace) -> int:
 
         return run_diagnose(args.files, args.out, depth=args.depth, json_path=args.json)
     if args.command == "acquire":
-        return _acquire(args)
+        return _logged(args, _acquire)
     if args.command == "gui":
         return _gui(args)
     if args.command == "recover":
