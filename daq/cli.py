@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from daq.errors import UsageError
+
 __all__ = ["main"]
 
 
@@ -196,7 +198,7 @@ def _acquire(args: argparse.Namespace) -> int:
     from daq.sim.recording import record_simulated_run
 
     if not args.duration > 0:
-        raise _UsageError(f"--duration {args.duration:g}: must be > 0 s")
+        raise UsageError(f"--duration {args.duration:g}: must be > 0 s")
     config = load_rig_config(args.config)
     if not args.simulate:
         auto = [inst.name for inst in config.instruments if inst.url == "auto"]
@@ -274,7 +276,7 @@ def _simulate(args: argparse.Namespace) -> int:
     from daq.sim.rig import start_simulated_rig
 
     if args.duration is not None and not args.duration > 0:
-        raise _UsageError(f"--duration {args.duration:g}: must be > 0 s")
+        raise UsageError(f"--duration {args.duration:g}: must be > 0 s")
     config = load_rig_config(args.config)
     with start_simulated_rig(config, serial=args.serial) as rig:
         print(f"{config.name}: simulated instruments on 127.0.0.1 (Ctrl-C stops them)")
@@ -420,27 +422,27 @@ def _flutter(args: argparse.Namespace) -> int:
     from ident import RationalFunctionModel, SectionModel, flutter
 
     if args.u_max is not None and not args.u_max > 0:
-        raise _UsageError(f"--u-max {args.u_max:g}: must be > 0 m/s")
+        raise UsageError(f"--u-max {args.u_max:g}: must be > 0 m/s")
 
     section_data = _read_json(args.section, "section")
     if not isinstance(section_data, dict):
-        raise _UsageError(f"{args.section}: expected a JSON object of SectionModel fields")
+        raise UsageError(f"{args.section}: expected a JSON object of SectionModel fields")
     try:
         section = SectionModel.from_dict(section_data)
     except (TypeError, ValueError) as exc:
-        raise _UsageError(f"{args.section}: {exc}") from exc
+        raise UsageError(f"{args.section}: {exc}") from exc
     if "rho" not in section_data:
         print(f"note: {args.section} gives no air density rho: using {section.rho} kg/m^3")
     model_data = _read_json(args.model, "model")
     if isinstance(model_data, dict) and "model" in model_data:  # `windrig identify --json`
         model_data = model_data["model"]
     if not isinstance(model_data, dict):
-        raise _UsageError(f"{args.model}: expected a JSON object, the model or `windrig "
+        raise UsageError(f"{args.model}: expected a JSON object, the model or `windrig "
                           "identify --json` output")
     try:
         model = RationalFunctionModel.from_dict(model_data)
     except (TypeError, ValueError, KeyError) as exc:
-        raise _UsageError(f"{args.model}: not a rational-function model ({exc}); expected "
+        raise UsageError(f"{args.model}: not a rational-function model ({exc}); expected "
                          '{"A": [[[...]]], "d": [...]} or `windrig identify --json` output'
                          ) from exc
     result = flutter.analyze(section, model, U_max=args.u_max)
@@ -466,12 +468,12 @@ def _read_json(path: Path, what: str) -> object:
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
-        raise _UsageError(f"{path}: cannot read the {what} file: {exc.strerror or exc}"
+        raise UsageError(f"{path}: cannot read the {what} file: {exc.strerror or exc}"
                           ) from exc
     try:
         return json.loads(text)
     except json.JSONDecodeError as exc:
-        raise _UsageError(f"{path}: not valid JSON ({exc.msg}, line {exc.lineno} column "
+        raise UsageError(f"{path}: not valid JSON ({exc.msg}, line {exc.lineno} column "
                           f"{exc.colno})") from exc
 
 
@@ -482,10 +484,6 @@ def _version() -> str:
         return version("windrig")
     except PackageNotFoundError:  # run from a source tree that was never installed
         return "unknown (not installed)"
-
-
-class _UsageError(ValueError):
-    """A command-line value, or a file it names, that the command cannot take (exit 2)."""
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -533,11 +531,10 @@ def _is_usage(exc: BaseException) -> bool:
     Everything else failed while running (an unreachable device, data that cannot be
     identified, a full disk: exit 1).
     """
-    from daq.errors import ConfigError
-    from daq.recording.recover import NotARunFileError
+    from daq.errors import ConfigError, NotARunFileError
     from ident.io import FileFormatError
 
-    return isinstance(exc, (_UsageError, ConfigError, FileFormatError, NotARunFileError,
+    return isinstance(exc, (UsageError, ConfigError, FileFormatError, NotARunFileError,
                             FileNotFoundError,
                             IsADirectoryError, NotADirectoryError))
 

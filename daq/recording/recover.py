@@ -42,7 +42,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from daq.errors import RecorderError
+from daq.errors import NotARunFileError, RecoveryError
 from daq.recording.layout import (
     STREAM_TABLES,
     SYNC_COLUMNS,
@@ -62,14 +62,6 @@ _V2_LENGTH = 48
 
 #: The ``/entry/events`` kind that marks a recovered run (``recovered`` alone is a device's).
 RECOVERED_EVENT = "file_recovered"
-
-
-class RecoveryError(RecorderError, ValueError):
-    """A file that :func:`recover_run` cannot or must not recover (named in the message)."""
-
-
-class NotARunFileError(RecoveryError):
-    """The path is not a windrig run file: a directory, not HDF5, or another HDF5 layout."""
 
 
 @dataclass(frozen=True)
