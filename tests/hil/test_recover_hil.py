@@ -10,11 +10,13 @@ replay read it as it is. Then ``windrig recover`` runs as a subprocess, and a pl
 ``h5py.File(path)`` reads the file back.
 
 Measured on the development machine (2 cores, both loaded by the burners, 2026-11; the test
-prints each run's figures with ``-s``): data lost (kill time minus the last kept sync row) with
-the recorder's 0.5 s flush interval 0.27-0.36 s killed just after a flush,
-0.51-0.58 s half-way to the next, 0.74-0.77 s just before it (2 runs each; the 1 Hz barometer's
-newest sample up to 1.44 s old). With the former 1 s
-interval, a kill just before a flush lost 1.22 s: hence 0.5 s.
+prints each run's figures with ``-s``), data lost (kill time minus the last kept sync row) with the
+recorder's 0.5 s flush interval, 7 runs of each phase: 0.27-0.64 s killed just after a flush,
+0.51-0.58 s half-way to the next, 0.73-0.81 s just before it (the 1 Hz barometer's newest sample
+up to 1.59 s old, its period). Two half-way kills of 21 lost more (2.94 s, and one not printed)
+while the machine was loaded beyond the burners (load average ~8: other test runs on the same 2
+cores): the writer had fallen behind its sources. With the former 1 s flush interval a kill just
+before a flush lost 1.22 s: hence 0.5 s.
 """
 
 from __future__ import annotations
