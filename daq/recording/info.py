@@ -8,8 +8,9 @@ records, whether the file was closed, left by a crash or recovered) into JSON-re
 Not responsible for: the numbers' analysis (:mod:`ident`), repairing a crashed file
 (:mod:`daq.recording.recover`).
 
-The file is opened read-only as a SWMR reader, so a file still being written or left by a crash
-is described as it is; the datasets of one group are read to their shortest length, as
+The file is opened read-only (:func:`daq.recording.layout.open_run_file`: as a SWMR reader if a
+writer still has it or left it open), so a file being written or left by a crash is described as
+it is; the datasets of one group are read to their shortest length, as
 :func:`daq.recording.layout.read_sync` does.
 """
 
@@ -24,7 +25,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from daq.recording.layout import STREAM_TABLES, SYNC_COLUMNS, per_device_attrs
+from daq.recording.layout import STREAM_TABLES, SYNC_COLUMNS, open_run_file, per_device_attrs
 from daq.recording.recover import NotARunFileError, read_superblock
 
 __all__ = ["format_info", "run_info"]
@@ -148,17 +149,20 @@ def run_info(path: str | os.PathLike[str]) -> dict[str, Any]:
         raise NotARunFileError(f"{path}: a directory, not a run file")
     read_superblock(path)  # not HDF5: a specific error before h5py's
     try:
-        handle = h5py.File(path, "r", swmr=True)
+        handle = open_run_file(path)
     except OSError as exc:
         raise NotARunFileError(f"{path}: HDF5 cannot open it (truncated?): {exc}") from exc
     with handle as f:
-        for part in ("entry/sync", "entry/instrument", "entry/config"):
-            if part not in f:
-                raise NotARunFileError(f"{path}: has no /{part}: not a windrig run file")
         try:
+            for part in ("entry/sync", "entry/instrument", "entry/config"):
+                if part not in f:
+                    raise NotARunFileError(f"{path}: has no /{part}: not a windrig run file")
             return _describe(path, f)
-        except OSError as exc:  # a truncated or corrupted file fails on read
-            raise NotARunFileError(f"{path}: unreadable HDF5 data (truncated?): {exc}") from exc
+        except (OSError, RuntimeError, KeyError, ValueError) as exc:
+            # h5py's errors on a truncated or damaged file: OSError on reading data, KeyError on
+            # opening an object, RuntimeError on following a link, ValueError on a bad type.
+            raise NotARunFileError(f"{path}: unreadable HDF5 data (truncated or damaged?): "
+                                   f"{exc}") from exc
 
 
 def _describe(path: Path, f: h5py.File) -> dict[str, Any]:

@@ -73,8 +73,9 @@ __all__ = ["CLOCK_MODEL", "EVENT_DTYPE", "EVENT_KIND_BYTES", "EVENT_TEXT_BYTES",
            "STREAM_TABLES", "SYNC_COLUMNS", "VALUE_DTYPES", "append_rows",
            "attach_dimension_scales", "check_name", "create_column", "create_stream",
            "create_sync", "event_row", "fill_value", "metadata_name_part", "now_iso",
-           "per_device_attr", "per_device_attrs", "read_sync", "storable_metadata", "str_array",
-           "validate_metadata", "windrig_version", "write_metadata", "write_skeleton"]
+           "open_run_file", "per_device_attr", "per_device_attrs", "read_sync",
+           "storable_metadata", "str_array", "validate_metadata", "windrig_version",
+           "write_metadata", "write_skeleton"]
 
 #: Row of ``/entry/instrument/<device>/gaps``.
 GAP_DTYPE = np.dtype([("after_counter", "<i8"), ("length", "<i8")])
@@ -267,6 +268,27 @@ def write_metadata(group: h5py.Group, name: str, value: Any) -> None:
             group.create_dataset(name, data=array.astype(object), dtype=h5py.string_dtype())
         else:
             group.create_dataset(name, data=array)
+
+
+def open_run_file(path: str | os.PathLike[str]) -> h5py.File:
+    """Open a run file read-only: as a plain reader, or as a SWMR reader if a writer has it.
+
+    A file that a writer still has open, or left open by a crash, carries HDF5's "open for
+    write" status flags and opens only as a SWMR reader. Any other file is opened plainly: a
+    SWMR reader retries every metadata block whose checksum fails (it may be mid-write), with
+    pauses, so a damaged closed file would take minutes to fail instead of failing at once.
+
+    Raises
+    ------
+    OSError
+        As ``h5py.File`` does (not HDF5, truncated, ...).
+    """
+    try:
+        return h5py.File(path, "r")
+    except OSError as exc:
+        if "already open for write" not in str(exc):
+            raise
+    return h5py.File(path, "r", libver="latest", swmr=True)
 
 
 def read_sync(path: str | os.PathLike[str]) -> dict[str, npt.NDArray[Any]]:

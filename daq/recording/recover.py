@@ -48,6 +48,7 @@ from daq.recording.layout import (
     SYNC_COLUMNS,
     append_rows,
     now_iso,
+    open_run_file,
     write_metadata,
 )
 
@@ -369,11 +370,11 @@ def recover_run(path: str | os.PathLike[str]) -> RecoveryReport:
     flags = read_superblock(path).flags
     report = RecoveryReport(path=str(path), flags_before=flags, recovered=False)
     try:  # check the layout before any write
-        with h5py.File(path, "r", swmr=True) as f:
+        with open_run_file(path) as f:
             missing = [p for p in ("entry/sync", "entry/instrument") if p not in f]
             before = f["entry"].attrs.get("recovered") if "entry" in f else None
-    except OSError as exc:
-        raise RecoveryError(f"{path}: HDF5 cannot open it even read-only ({exc}): more is "
+    except (OSError, RuntimeError, KeyError, ValueError) as exc:  # h5py's, on a damaged file
+        raise RecoveryError(f"{path}: HDF5 cannot read it even read-only ({exc}): more is "
                             "damaged than a crash leaves") from exc
     if missing:
         raise NotARunFileError(f"{path}: has no /{missing[0]}: not a windrig run file")
@@ -396,7 +397,7 @@ def recover_run(path: str | os.PathLike[str]) -> RecoveryReport:
                     _trim_stream(group, report)
             _trim_tables(entry, report.sync_rows, report)
             _mark(entry, report)
-    except OSError as exc:
+    except (OSError, RuntimeError, KeyError, ValueError) as exc:
         raise RecoveryError(f"{path}: the status flags are cleared, but HDF5 failed while "
                             f"trimming ({exc}): the file is damaged beyond what a crash leaves; "
                             "it still opens read-only") from exc

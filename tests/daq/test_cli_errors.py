@@ -100,7 +100,9 @@ CASES = [
     (["info", "{d}/text.txt"], 2, "text.txt: not an HDF5 file"),
     (["info", "{d}/empty.h5"], 2, "empty.h5: has no /entry/sync: not a windrig run file"),
     (["info", "{d}", "--json"], 2, "a directory, not a run file"),
-    (["info", "{d}/truncated.h5"], 2, "truncated.h5: unreadable HDF5 data (truncated?)"),
+    (["info", "{d}/truncated.h5"], 2, "truncated.h5: HDF5 cannot open it (truncated?)"),
+    (["identify", "{d}/truncated.h5"], 2, "truncated.h5: cannot be opened as HDF5"),
+    (["recover", "{d}/truncated.h5"], 1, "truncated.h5: HDF5 cannot read it even read-only"),
 ]
 
 
