@@ -59,7 +59,7 @@ def test_reprocess_matches_identify_and_reports_the_bad_files(folder, tmp_path, 
     assert len(summary.files) == 5
     assert set(summary.failed) == {str(folder / "run_9_truncated.h5"), str(folder / "notes.h5")}
     assert "truncated" in summary.failed[str(folder / "run_9_truncated.h5")]
-    assert "cannot be opened as an HDF5" in summary.failed[str(folder / "notes.h5")]
+    assert "not an HDF5 file" in summary.failed[str(folder / "notes.h5")]
     assert len(summary.campaigns) == 1
     campaign = summary.campaigns[0]
     assert campaign["files"] == good and campaign["n_releases"] == 6
