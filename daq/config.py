@@ -187,7 +187,11 @@ def load_rig_config(path: str | Path) -> RigConfig:
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
-        raise ConfigError(f"cannot read rig config {path}: {exc}") from exc
+        hint = ""
+        if path.parent == Path(".") and not path.exists():
+            names = sorted(p.stem for p in SHIPPED_CONFIGS.glob("*.toml"))
+            hint = f" (shipped configs, by name: {', '.join(names)})"
+        raise ConfigError(f"cannot read rig config {path}: {exc.strerror or exc}{hint}") from exc
     return parse_rig_config(text, source=str(path))
 
 

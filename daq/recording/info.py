@@ -158,6 +158,8 @@ def run_info(path: str | os.PathLike[str]) -> dict[str, Any]:
                 if part not in f:
                     raise NotARunFileError(f"{path}: has no /{part}: not a windrig run file")
             return _describe(path, f)
+        except NotARunFileError:
+            raise
         except (OSError, RuntimeError, KeyError, ValueError) as exc:
             # h5py's errors on a truncated or damaged file: OSError on reading data, KeyError on
             # opening an object, RuntimeError on following a link, ValueError on a bad type.
