@@ -25,8 +25,9 @@ from typing import Any
 import h5py
 import numpy as np
 
+from daq.errors import NotARunFileError
 from daq.recording.layout import STREAM_TABLES, SYNC_COLUMNS, open_run_file, per_device_attrs
-from daq.recording.recover import NotARunFileError, read_superblock
+from daq.recording.recover import holders, read_superblock
 
 __all__ = ["format_info", "run_info"]
 
@@ -59,6 +60,9 @@ def _state(path: Path, entry: h5py.Group) -> dict[str, Any]:
     flags = read_superblock(path).flags
     recovered = entry.attrs.get("recovered")
     if flags:
+        writers = holders(path)
+        if writers:  # a recording in progress, not a crash
+            return {"state": "writing", "status_flags": flags, "open_in_processes": writers}
         return {"state": "crashed", "status_flags": flags}
     if recovered is not None:
         return {"state": "recovered", "recovered": _text(recovered)}
@@ -124,7 +128,8 @@ def run_info(path: str | os.PathLike[str]) -> dict[str, Any]:
     Returns
     -------
     dict
-        ``file``, ``size_bytes``, ``state`` (``"closed"``, ``"crashed"`` or ``"recovered"``),
+        ``file``, ``size_bytes``, ``state`` (``"closed"``, ``"writing"`` (another process has it open),
+        ``"crashed"`` (left open by a writer that is gone) or ``"recovered"``),
         ``windrig_version``, ``created``, ``start_time``, ``rig``, ``operator_notes``,
         ``section`` (the stored ``[section]``: m, kg/m, kg m^2/m, Hz), ``sync`` (rows written
         whole, rows sized but never written (a crash), rate in Hz, duration in s, the fraction
@@ -254,6 +259,8 @@ def format_info(info: dict[str, Any]) -> str:
              "crashed": (f"left open by its writer (crash?, status flags "
                          f"0x{info.get('status_flags', 0):02x}): run `windrig recover "
                          f"{info['file']}` before opening it with other HDF5 tools"),
+             "writing": (f"being written (open in process "
+                         f"{', '.join(map(str, info.get('open_in_processes', [])))})"),
              "recovered": f"recovered by windrig recover ({info.get('recovered')})"}[info["state"]]
     sync = info["sync"]
     lines = [

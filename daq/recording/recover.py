@@ -52,8 +52,8 @@ from daq.recording.layout import (
     write_metadata,
 )
 
-__all__ = ["RECOVERED_EVENT", "NotARunFileError", "RecoveryError", "RecoveryReport", "Superblock",
-           "clear_status_flags", "lookup3", "needs_recovery", "read_superblock", "recover_run"]
+__all__ = ["RECOVERED_EVENT", "RecoveryReport", "Superblock", "clear_status_flags", "holders",
+           "lookup3", "needs_recovery", "read_superblock", "recover_run"]
 
 _SIGNATURE = b"\x89HDF\r\n\x1a\n"
 
@@ -256,8 +256,9 @@ def clear_status_flags(path: str | os.PathLike[str]) -> int:
     return sb.flags
 
 
-def _holders(path: Path) -> list[int]:
+def holders(path: str | os.PathLike[str]) -> list[int]:
     """Return the ids of other processes that have ``path`` open (Linux ``/proc``; else [])."""
+    path = Path(path)
     proc = Path("/proc")
     if not (proc / "self" / "fd").is_dir():
         return []
@@ -382,9 +383,9 @@ def recover_run(path: str | os.PathLike[str]) -> RecoveryReport:
         report.recovered_before = before.decode() if isinstance(before, bytes) else str(before)
     if flags == 0:
         return report
-    holders = _holders(path)
-    if holders:
-        raise RecoveryError(f"{path}: still open in process {', '.join(map(str, holders))} "
+    writers = holders(path)
+    if writers:
+        raise RecoveryError(f"{path}: still open in process {', '.join(map(str, writers))} "
                             "(a recording in progress?); recover a file only once its writer "
                             "has ended")
     clear_status_flags(path)

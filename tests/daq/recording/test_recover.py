@@ -19,10 +19,10 @@ import numpy as np
 import pytest
 
 from daq.cli import main
+from daq.errors import RecoveryError
 from daq.recording.layout import STREAM_TABLES, read_sync
 from daq.recording.recover import (
     RECOVERED_EVENT,
-    RecoveryError,
     clear_status_flags,
     lookup3,
     needs_recovery,
@@ -135,6 +135,9 @@ def test_a_file_still_being_written_is_refused(tmp_path, capsys):
                             stdout=subprocess.PIPE, text=True)
     try:
         assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
+        assert main(["info", str(path), "--json"]) == 0
+        info = json.loads(capsys.readouterr().out)
+        assert info["state"] == "writing" and info["open_in_processes"] == [proc.pid]
         before = digest(path)
         assert main(["recover", str(path)]) == 1
         err = capsys.readouterr().err.strip()
