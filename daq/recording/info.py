@@ -128,8 +128,8 @@ def run_info(path: str | os.PathLike[str]) -> dict[str, Any]:
     Returns
     -------
     dict
-        ``file``, ``size_bytes``, ``state`` (``"closed"``, ``"writing"`` (another process has it open),
-        ``"crashed"`` (left open by a writer that is gone) or ``"recovered"``),
+        ``file``, ``size_bytes``, ``state`` (``"closed"``, ``"writing"`` (another process has
+        it open), ``"crashed"`` (left open by a writer that is gone) or ``"recovered"``),
         ``windrig_version``, ``created``, ``start_time``, ``rig``, ``operator_notes``,
         ``section`` (the stored ``[section]``: m, kg/m, kg m^2/m, Hz), ``sync`` (rows written
         whole, rows sized but never written (a crash), rate in Hz, duration in s, the fraction
