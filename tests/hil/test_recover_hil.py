@@ -11,12 +11,13 @@ replay read it as it is. Then ``windrig recover`` runs as a subprocess, and a pl
 
 Measured on the development machine (2 cores, both loaded by the burners, 2026-11; the test
 prints each run's figures with ``-s``), data lost (kill time minus the last kept sync row) with the
-recorder's 0.5 s flush interval, 7 runs of each phase: 0.27-0.64 s killed just after a flush,
-0.51-0.58 s half-way to the next, 0.73-0.81 s just before it (the 1 Hz barometer's newest sample
-up to 1.59 s old, its period). Two half-way kills of 21 lost more (2.94 s, and one not printed)
-while the machine was loaded beyond the burners (load average ~8: other test runs on the same 2
-cores): the writer had fallen behind its sources. With the former 1 s flush interval a kill just
-before a flush lost 1.22 s: hence 0.5 s.
+recorder's 0.5 s flush interval, 7 runs of each phase on an otherwise quiet machine: 0.27-0.64 s
+killed just after a flush, 0.51-0.58 s half-way to the next, 0.73-0.81 s just before it (the
+1 Hz barometer's newest sample up to 1.59 s old, its period). While other work loaded the same
+2 cores as well (load average 6-8), 12 more kills lost 0.50-0.86 s, and 3 lost more: 1.03 s
+(just before a flush), 2.94 s (half-way), and once the PLC's newest sample was 1.17 s old: the
+writer had fallen behind its sources, and those runs fail. With the former 1 s flush interval a
+kill just before a flush lost 1.22 s on the quiet machine: hence 0.5 s.
 """
 
 from __future__ import annotations
