@@ -35,6 +35,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import signal
 import threading
 import time
 from collections.abc import Callable
@@ -161,6 +162,8 @@ class _Session:
         self.fan_on_at: float | None = None
         self.fan_rpm = 0.0
         self.runs: list[RunFile] = []
+        #: Set by Ctrl-C (the runner's SIGINT handler): the actions stop at their next step.
+        self.abort = threading.Event()
 
     # -- the fan, outside a run: the final stop ---------------------------------------------
     def fan_down(self) -> None:
@@ -279,6 +282,7 @@ def run_plan(plan: CampaignPlan, config: RigConfig, out_dir: str | Path, *,
     with rig_cm as rig:
         live = config if rig is None else rig.config
         session = _Session(plan, live, out, say)
+        restore = _on_sigint(session.abort)
         try:
             _loop(session, outcome)
         except KeyboardInterrupt:
@@ -288,6 +292,7 @@ def run_plan(plan: CampaignPlan, config: RigConfig, out_dir: str | Path, *,
             outcome.stopped_because = f"error: {type(exc).__name__}: {exc}"
             raise
         finally:
+            restore()
             fan_was_on = session.fan_on_at
             try:
                 session.fan_down()
@@ -300,6 +305,29 @@ def run_plan(plan: CampaignPlan, config: RigConfig, out_dir: str | Path, *,
                 session.calz_wind_off()
     outcome.wall_s = time.monotonic() - started
     return outcome
+
+
+def _on_sigint(abort: threading.Event) -> Callable[[], None]:
+    """Make Ctrl-C set ``abort`` as well as raise KeyboardInterrupt; return the undo.
+
+    The interrupt reaches the main thread, which waits in :func:`record_run` and finishes the
+    file; the actions thread learns of it from ``abort`` and commands nothing more than
+    catching the model and stopping the fan. Outside the main thread (no signals there) the
+    handler is left alone.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+
+    def handler(signum: int, frame: Any) -> None:
+        abort.set()
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGINT, handler)
+
+    def undo() -> None:
+        signal.signal(signal.SIGINT, previous)
+
+    return undo
 
 
 def _loop(session: _Session, outcome: CampaignOutcome) -> None:
@@ -388,7 +416,15 @@ def _record_speed(session: _Session, outcome: CampaignOutcome, index: int, U: fl
     duration = (1.5 * ramp + 2.0 + STEADY_TIMEOUT_S + plan.settle_s
                 + n * (HOLD_S + decay_s + plan.pause_s + 1.0) + 5.0)
 
-    def actions(acq: Acquisition) -> None:
+    def wait(seconds: float) -> bool:
+        """Wait ``seconds`` or until the decay grows or Ctrl-C; return True if it should stop."""
+        end = time.monotonic() + seconds
+        while (left := end - time.monotonic()) > 0:
+            if monitor.growing.wait(min(left, 0.05)) or session.abort.is_set():
+                return True
+        return False
+
+    def body(acq: Acquisition) -> None:
         fan = acq.drivers[session.fan_name]
         acq.set_fan_speed(rpm)  # operator commands through the engine: events of the run
         outcome.max_fan_rpm_commanded = max(outcome.max_fan_rpm_commanded, rpm)
@@ -396,15 +432,20 @@ def _record_speed(session: _Session, outcome: CampaignOutcome, index: int, U: fl
         if session.fan_on_at is None:
             session.fan_on_at = time.monotonic()
         session.fan_rpm = rpm
-        _wait_steady(fan, rpm, plan.steady_tolerance, plan.settle_s)
+        _wait_steady(fan, rpm, plan.steady_tolerance, plan.settle_s, session.abort)
+        if session.abort.is_set():
+            return
         say(f"  wind steady at {fan.speed() * config.wind_per_rpm:.2f} m/s")
         for i in range(n):
             acq.arm()
-            time.sleep(HOLD_S)
+            if wait(HOLD_S):
+                return
             acq.release()
-            if monitor.growing.wait(decay_s):
+            if wait(decay_s):
                 acq.arm()  # catch the model first, then take the wind away
                 acq.stop_fan()
+                if not monitor.growing.is_set():
+                    return  # Ctrl-C: caught and stopped, the runner waits the fan down
                 grown.set()
                 amp = monitor.amplitude()
                 say(f"  release {i + 1}/{n}: the decay GROWS"
@@ -415,10 +456,18 @@ def _record_speed(session: _Session, outcome: CampaignOutcome, index: int, U: fl
             say(f"  release {i + 1}/{n}: decay amplitude "
                 + ("?" if amp is None else f"{1e3 * amp.first:.2f} -> {1e3 * amp.last:.2f} mm "
                    f"over {amp.windows} periods"))
-            if plan.pause_s:
-                time.sleep(plan.pause_s)
+            if plan.pause_s and wait(plan.pause_s) and session.abort.is_set():
+                return
         acq.arm()  # hold the model: the next decay is not recorded as part of this one
         done.set()
+
+    def actions(acq: Acquisition) -> None:
+        try:
+            body(acq)
+        finally:
+            if session.abort.is_set() and acq.running:
+                acq.arm()  # Ctrl-C: the model is held before the run ends
+                acq.stop_fan()
 
     calz = plan.calz_start and session.fan_on_at is None  # wind-off only before the first start
     summary = record_run(config, path, duration_s=duration, calz=calz, actions=actions,
@@ -479,13 +528,14 @@ def _modes(run: RunFile) -> list[str]:
     return out
 
 
-def _wait_steady(fan: Any, rpm: float, tolerance: float, settle_s: float) -> None:
+def _wait_steady(fan: Any, rpm: float, tolerance: float, settle_s: float,
+                 abort: threading.Event) -> None:
     """Wait for the set-point, then until the speed stays within tolerance for ``settle_s``."""
     tol = max(2.0, tolerance * rpm)
     fan.wait_for_speed(rpm, tolerance_rpm=tol)
     deadline = time.monotonic() + STEADY_TIMEOUT_S + settle_s
     steady_since = time.monotonic()
-    while time.monotonic() - steady_since < settle_s:
+    while time.monotonic() - steady_since < settle_s and not abort.is_set():
         if time.monotonic() > deadline:
             raise DeviceError(f"the wind did not stay within {100 * tolerance:g} % of "
                               f"{rpm:.0f} rpm for {settle_s:g} s within {STEADY_TIMEOUT_S:g} s")

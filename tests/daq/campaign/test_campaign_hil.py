@@ -10,6 +10,7 @@ the decay monitor's event, never on fixed guesses of how long the rig takes.
 
 from __future__ import annotations
 
+import _thread
 import json
 from pathlib import Path
 
@@ -161,3 +162,29 @@ def test_a_campaign_resumes_from_the_files_in_its_directory(tmp_path):
     assert second.stopped_because == "plan done: 3 speeds"
     assert second.wind_on_s > first.wind_on_s  # carried on, plus this session's
     assert second.analysis is not None and second.analysis.n_releases == 3
+
+
+def test_ctrl_c_catches_the_model_stops_the_fan_and_finishes_the_file(tmp_path):
+    config = parse_rig_config(RIG_TEXT + FAST_FAN, "rig.toml")
+    plan = parse_plan(_fixed([5.0, 7.0], releases=2), "plan.toml")
+    lines: list[str] = []
+
+    def say(line: str) -> None:
+        lines.append(line)
+        if line.startswith("  release 1/2"):  # the operator presses Ctrl-C after a release
+            _thread.interrupt_main()
+
+    outcome = run_plan(plan, config, tmp_path, simulate=True, say=say)
+
+    assert outcome.stopped_because == "interrupted by the operator (Ctrl-C)", lines
+    assert outcome.steps == []  # the interrupted speed does not count: a resume repeats it
+    assert not list(tmp_path.glob("speed01_U05.00.h5"))
+    path = tmp_path / "speed01_U05.00.interrupted.h5"
+    with h5py.File(path, "r") as f:  # finished and readable
+        kinds = [row["kind"].decode() for row in f["/entry/events"][:]]
+        assert f["/entry/releases"].shape[0] == 1
+    assert kinds.count("release") == 1
+    last = len(kinds) - 1 - kinds[::-1].index("release")
+    assert "arm" in kinds[last:] and "fan_stop" in kinds[last:]
+    assert any(line.startswith("fan stopped") for line in lines)
+    assert not any(line.startswith("[speed 2]") for line in lines)
