@@ -62,7 +62,8 @@ def report_dict(outcome: CampaignOutcome) -> dict[str, Any]:
         "resumed_speeds": outcome.resumed,
         "history": [{"index": s.index, "U": s.U, "file": s.path.name, "releases": s.releases,
                      "why": s.why, "flutter_speed": _number(s.flutter_speed),
-                     "flutter_speed_std": _number(s.flutter_std)} for s in outcome.steps],
+                     "flutter_speed_std": _number(s.flutter_std),
+                     "wind_on_s": s.wind_on_s} for s in outcome.steps],
         "choices": [{"speed": c.speed, "reason": c.reason, "current_std": _number(c.current_std),
                      "bound": _number(c.bound),
                      "predicted_std": [[u, s] for u, s in c.predicted]}
@@ -125,12 +126,13 @@ def _markdown(data: dict[str, Any], paths: dict[str, Path]) -> str:
                      + ("" if err is None else f" (error {100 * err:+.2f} %)"))
     lines += ["", f"Stopped because: {data['stopped_because']}", "",
               f"Wind on {data['wind_on_s']:.1f} s, wall time {data['wall_s']:.1f} s.", "",
-              "| # | U (m/s) | releases | U_F after (m/s) | std (m/s) | why |",
-              "|---|---|---|---|---|---|"]
+              "| # | U (m/s) | releases | U_F after (m/s) | std (m/s) | wind on (s) | why |",
+              "|---|---|---|---|---|---|---|"]
     for h in data["history"]:
         uf = "" if h["flutter_speed"] is None else f"{h['flutter_speed']:.3f}"
         sd = "" if h["flutter_speed_std"] is None else f"{h['flutter_speed_std']:.3f}"
-        lines.append(f"| {h['index']} | {h['U']:.2f} | {h['releases']} | {uf} | {sd} | "
+        on = "" if h["wind_on_s"] is None else f"{h['wind_on_s']:.1f}"
+        lines.append(f"| {h['index']} | {h['U']:.2f} | {h['releases']} | {uf} | {sd} | {on} | "
                      f"{h['why']} |")
     lines.append("")
     for name, path in paths.items():

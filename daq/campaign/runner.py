@@ -87,6 +87,9 @@ class SpeedStep:
         Why this speed (listed in the plan, or the adaptive choice).
     flutter_speed, flutter_std : float or None
         The estimate after this speed, m/s.
+    wind_on_s : float or None
+        Wind-on time of the campaign when this speed's estimate was known, s (None: read
+        back from an earlier session).
     """
 
     index: int
@@ -96,6 +99,7 @@ class SpeedStep:
     why: str
     flutter_speed: float | None = None
     flutter_std: float | None = None
+    wind_on_s: float | None = None
 
 
 @dataclass
@@ -504,7 +508,11 @@ def _record_speed(session: _Session, outcome: CampaignOutcome, index: int, U: fl
 
 def _update(session: _Session, outcome: CampaignOutcome, step: SpeedStep) -> None:
     try:
-        outcome.analysis = _analysis(session.runs)
+        try:
+            outcome.analysis = _analysis(session.runs)
+        finally:  # the wind blows while the analysis runs: its time counts
+            if session.fan_on_at is not None:
+                step.wind_on_s = outcome.wind_on_s + time.monotonic() - session.fan_on_at
     except IdentError as exc:
         session.say(f"E2RFC: {exc}")
         return
