@@ -9,8 +9,9 @@ every simulated instrument's noise, ``[simulation.devices.<name>] seed``):
   choice among candidates from 0.45 of the limit to the limit (:mod:`daq.campaign.adaptive`),
   target std <= 1 % of U_F, at most 6 speeds;
 - **fixed 3-speed**: 0.5, 0.65 and 0.8 of the *true* flutter speed (the demo's plan, which an
-  operator could only guess), 1 release per speed; if the std is still above 1 % after the
-  third speed, again with 2 releases per speed;
+  operator could only guess), 1 release per speed; while the std is still above 1 % after
+  the third speed (or the safety bound stopped the plan), again with 2, then 4 releases per
+  speed;
 - **FD route**: 10 speeds from 0.3 to 0.85 of the true flutter speed, 1 release each, the
   flutter derivatives (:func:`ident.fd_method.identify`, no forces used) and their flutter
   speed (the indirect route has no std of its own).
@@ -66,15 +67,22 @@ def plan_text(mode: str, speeds: list[float], decay_s: float, releases: int = 1,
     """Return a plan's TOML."""
     return (f'[campaign]\nmode = "{mode}"\nreleases_per_speed = {releases}\n'
             f"decay_s = {decay_s:.1f}\nsettle_s = 0.5\ncalz_end = false\n\n"
-            f"[speeds]\nwind_speeds = {[round(u, 2) for u in speeds]!r}\n{adaptive}")
+            f"[speeds]\nwind_speeds = {[float(round(u, 2)) for u in speeds]!r}\n{adaptive}")
+
+
+LOG: list[str] = []
 
 
 def run(config: RigConfig, text: str, fd: bool = False) -> tuple[CampaignOutcome, float | None]:
-    """Run one campaign in a temporary directory, quietly; with ``fd`` the FD route's U_F."""
+    """Run one campaign in a temporary directory; with ``fd`` the FD route's U_F.
+
+    The campaign's progress lines go to :data:`LOG` (``--log FILE`` writes them).
+    """
     fd_speed = None
+    LOG.append(f"--- {config.source}\n{text}")
     with tempfile.TemporaryDirectory() as out:
         outcome = run_plan(parse_plan(text, "benchmark"), config, out, simulate=True,
-                           say=lambda line: None)
+                           say=LOG.append)
         if fd:  # the FD route needs the files: read them while they exist
             runs = [read_run(s.path) for s in outcome.steps]
             releases = [r for run in runs for r in run.releases]
@@ -98,6 +106,8 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--rigs", nargs="+", default=list(RIGS), choices=list(RIGS))
     parser.add_argument("--no-fd", action="store_true", help="skip the FD route (10 speeds)")
+    parser.add_argument("--log", type=Path, default=None,
+                        help="write every campaign's progress lines to this file")
     args = parser.parse_args()
     rows = []
     for name in args.rigs:
@@ -120,9 +130,13 @@ def main() -> None:
             for label, text in cases:
                 rows.append((name, seed, label, *run(config, text), truth))
                 print(_row(*rows[-1]), flush=True)
-            if first_reaching(rows[-1][3]) is None:
-                rows.append((name, seed, "fixed 3-speed x2",
-                             *run(config, plan_text("fixed", fixed, decay, 2)), truth))
+                if args.log is not None:
+                    args.log.write_text("\n".join(LOG) + "\n")
+            for releases in (2, 4):  # more releases per speed until the target is reached
+                if first_reaching(rows[-1][3]) is not None:
+                    break
+                rows.append((name, seed, f"fixed 3-speed x{releases}",
+                             *run(config, plan_text("fixed", fixed, decay, releases)), truth))
                 print(_row(*rows[-1]), flush=True)
             if not args.no_fd:
                 speeds = list(np.linspace(0.3, 0.85, 10) * truth)
@@ -130,6 +144,8 @@ def main() -> None:
                              *run(config, plan_text("fixed", speeds, decay, 1), fd=True),
                              truth))
                 print(_row(*rows[-1]), flush=True)
+    if args.log is not None:
+        args.log.write_text("\n".join(LOG) + "\n")
     print()
     print(f"{'rig':<11} {'seed':>4}  {'campaign':<20} {'speeds':>6} {'wind on (s)':>11} "
           f"{'std (%)':>8} {'error (%)':>9}  stopped because")
