@@ -12,7 +12,7 @@ every simulated instrument's noise, ``[simulation.devices.<name>] seed``):
   operator could only guess), 1 release per speed; while the std is still above 1 % after
   the third speed (or the safety bound stopped the plan), again with 2, then 4 releases per
   speed;
-- **FD route**: 10 speeds from 0.3 to 0.85 of the true flutter speed, 1 release each, the
+- **FD route**: 10 speeds from 0.3 to 0.8 of the true flutter speed, 1 release each, the
   flutter derivatives (:func:`ident.fd_method.identify`, no forces used) and their flutter
   speed (the indirect route has no std of its own).
 
@@ -139,7 +139,7 @@ def main() -> None:
                              *run(config, plan_text("fixed", fixed, decay, releases)), truth))
                 print(_row(*rows[-1]), flush=True)
             if not args.no_fd:
-                speeds = list(np.linspace(0.3, 0.85, 10) * truth)
+                speeds = list(np.linspace(0.3, 0.8, 10) * truth)
                 rows.append((name, seed, "FD route, 10 speeds",
                              *run(config, plan_text("fixed", speeds, decay, 1), fd=True),
                              truth))

@@ -20,10 +20,13 @@ scaled to the identified one (``kappa``), so only ratios of information matter::
 
     var_new(U_c) = kappa g^T (I_0 + n J_c^T J_c)^+ g,  kappa = sigma_param^2 / (g^T I_0^+ g)
 
-The other parts of the standard deviation: the extrapolation part shrinks as the releases
-cover reduced frequencies closer to the flutter one (scaled by
-``log(K_min,new / K_F) / log(K_min / K_F)``, clipped to [0, 1], ``K_c = B omega(U_c) / U_c`` of
-the critical branch from the identified model); the structure and one-lag-more parts, which
+The other parts of the standard deviation: the extrapolation part (how far the flutter speed
+moves when the top speed's releases are left out, :mod:`ident.e2rfc`) is, with few releases,
+mostly the noise of that reduced fit, so it is scaled by the predicted std ratio of the reduced
+fit (a candidate below the top speed joins it; above, the old top speed does), and by
+``log(K_min,new / K_F) / log(K_min / K_F)`` (clipped to [0, 1]; ``K_c = B omega(U_c) / U_c`` of
+the critical branch from the identified model) as the releases cover reduced frequencies closer
+to the flutter one; the structure and one-lag-more parts, which
 come from the data not telling structures apart, are taken to shrink in the same ratio as the
 noise part (an assumption: more informative data tell them apart better). The choice is the
 candidate with the smallest predicted total; none is chosen when no candidate below the bound
@@ -48,7 +51,7 @@ from scipy.signal import lfilter
 
 from ident import flutter
 from ident.campaign import CampaignAnalysis
-from ident.e2rfc import IdentifiedModel
+from ident.e2rfc import DISTINCT_U_RTOL, IdentifiedModel, distinct_wind_speeds
 from ident.modal import noise_std
 from ident.release import Release
 from ident.section import SectionModel
@@ -170,6 +173,18 @@ def _hold(releases: Sequence[Release]) -> tuple[float, float]:
             float(np.median([r.alpha[0] for r in releases])))
 
 
+def _variance(g: FloatArray, information: FloatArray) -> float:
+    """``g^T I^+ g``: the variance of ``U_F`` up to the common scale ``kappa``."""
+    return float(g @ np.linalg.pinv(information) @ g)
+
+
+def _ratio(new: float, old: float) -> float:
+    """Standard-deviation ratio ``sqrt(new / old)``, 1 when it cannot be told."""
+    if not (math.isfinite(new) and math.isfinite(old)) or old <= 0 or new < 0:
+        return 1.0
+    return min(math.sqrt(new / old), 1.0)
+
+
 def _branch_K(result: flutter.FlutterResult, U: float, B: float) -> float:
     """Reduced frequency of the critical branch at ``U`` (identified model's curves)."""
     column = result.mode_names.index(result.critical_mode or result.mode_names[-1])
@@ -207,18 +222,28 @@ def predicted_std(analysis: CampaignAnalysis, releases: Sequence[Release],
     g = _gradient(model, section, result)
     sigma = _noise(releases, section)
     h0, alpha0 = _hold(releases)
-    I0 = sum(_information(model, section, r.U, h0, alpha0, float(r.t[-1] - r.t[0]), sigma)
-             for r in releases)
-    now = float(g @ np.linalg.pinv(I0) @ g)
+    infos = [_information(model, section, r.U, h0, alpha0, float(r.t[-1] - r.t[0]), sigma)
+             for r in releases]
+    I0 = np.sum(infos, axis=0)
+    now = _variance(g, I0)
+    # The extrapolation part is the gap between the fit and the fit without the top speed:
+    # with few releases mostly the noise of that reduced fit (module docstring).
+    top = max(distinct_wind_speeds([r.U for r in releases]))
+    below = [i for r, i in zip(releases, infos, strict=True) if r.U < top / (1 + DISTINCT_U_RTOL)]
+    I_red = np.sum(below, axis=0) if below else None
+    red_now = math.nan if I_red is None else _variance(g, I_red)
     statistical = u.statistical
     K_F = result.reduced_frequency
     K_min = min(_branch_K(result, r.U, section.B) for r in releases)
     out = []
     for U in candidates:
-        Ic = _information(model, section, U, h0, alpha0, decay_s, sigma)
-        new = float(g @ np.linalg.pinv(I0 + releases_per_speed * Ic) @ g)
-        ratio = math.sqrt(max(new, 0.0) / now) if now > 0 else 1.0
+        Ic = releases_per_speed * _information(model, section, U, h0, alpha0, decay_s, sigma)
+        ratio = _ratio(_variance(g, I0 + Ic), now)
         extrapolation = u.extrapolation
+        if I_red is not None and extrapolation > 0:
+            # Below the top speed a candidate joins the reduced fit; above it, the old top does.
+            red_new = _variance(g, I_red + Ic if U < top / (1 + DISTINCT_U_RTOL) else I0)
+            extrapolation *= _ratio(red_new, red_now)
         if K_F is not None and math.isfinite(K_min) and K_min > K_F:
             K_new = min(K_min, _branch_K(result, U, section.B))
             reach = max(math.log(K_new / K_F), 0.0) / math.log(K_min / K_F)

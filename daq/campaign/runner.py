@@ -8,8 +8,9 @@ release n of N, decay amplitude), each release's modal fit and, from two speeds 
 flutter speed +- std after each speed. It stops for the first of these reasons, each written to
 ``campaign.json`` as ``stopped_because``:
 
-- the plan is done (fixed mode), the target std is met or no candidate speed gains
-  (adaptive mode, :mod:`daq.campaign.adaptive`), or ``max_speeds`` is reached;
+- the plan is done (fixed mode), the target std is met (from three speeds on: with two the
+  std lacks its extrapolation part) or no candidate speed gains (adaptive mode,
+  :mod:`daq.campaign.adaptive`), or ``max_speeds`` is reached;
 - the next speed is above the safety bound ``fraction * (U_F - 3 std)`` of the current
   estimate (both modes; fixed plans use 0.9) or the rig's limits: it is never set;
 - a decay grows (:class:`~daq.campaign.monitor.DecayMonitor`): the model is caught (re-armed)
@@ -66,6 +67,8 @@ log = logging.getLogger(__name__)
 FIXED_SAFETY_FRACTION = 0.9
 #: Longest wait for the wind to become steady at a set-point, s (beyond the ramp).
 STEADY_TIMEOUT_S = 30.0
+#: Distinct wind speeds before an adaptive campaign may call its target met (see _loop).
+MIN_SPEEDS_FOR_TARGET = 3
 #: Fan speed counted as stopped, rpm.
 STOPPED_RPM = 5.0
 
@@ -361,8 +364,10 @@ def _loop(session: _Session, outcome: CampaignOutcome) -> None:
             outcome.stopped_because = (f"plan done: {k} speeds" if plan.mode == "fixed"
                                        else f"max_speeds ({max_speeds}) reached")
             return
+        # Three speeds at least: from two, E2RFC cannot measure the extrapolation part of the
+        # std (it refits without the top speed), so a two-speed std is only a lower bound.
         if plan.adaptive and analysis is not None and analysis.flutter_speed is not None \
-                and k >= len(listed):
+                and k >= len(listed) and len(analysis.wind_speeds) >= MIN_SPEEDS_FOR_TARGET:
             rel = analysis.flutter_std / analysis.flutter_speed  # type: ignore[operator]
             if rel <= plan.adaptive.target_std:
                 outcome.stopped_because = (f"target met: std {100 * rel:.2f} % <= "
