@@ -187,6 +187,8 @@ def _plots(outcome: CampaignOutcome, out: Path,
         ax_z.axvline(s.U, color="tab:green", lw=0.6, alpha=0.6)
     ax_z.axhline(0.0, color="k", lw=0.6)
     ax_z.set_ylim(-0.05, 0.3)
+    if analysis.flutter_speed is not None:  # the curves far beyond flutter say nothing here
+        ax_z.set_xlim(0.0, min(U_max, 1.6 * analysis.flutter_speed))
     ax_f.set_ylabel("frequency (Hz)")
     ax_z.set_ylabel("damping ratio")
     ax_z.set_xlabel("U (m/s)")
