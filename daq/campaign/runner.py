@@ -167,6 +167,9 @@ class _Session:
             raise DeviceError(f"{config.source}: a campaign needs a fan drive ([fan])")
         self.fan_name = fans[0].name
         self.fan_on_at: float | None = None
+        #: Set before the first fan command: from then on the campaign ends with a fan stop,
+        #: even when the start itself failed halfway.
+        self.fan_commanded = False
         self.fan_rpm = 0.0
         self.runs: list[RunFile] = []
         #: Set by Ctrl-C (the runner's SIGINT handler): the actions stop at their next step.
@@ -175,7 +178,7 @@ class _Session:
     # -- the fan, outside a run: the final stop ---------------------------------------------
     def fan_down(self) -> None:
         """Stop the fan and wait until it has stopped (always; a stop is never refused)."""
-        if self.fan_on_at is None:
+        if not self.fan_commanded:
             return
         driver = build_driver(self.config.instrument(self.fan_name), self.config.limits)
         # Sent directly to the drive: the campaign's end is decided after the last run file
@@ -435,6 +438,7 @@ def _record_speed(session: _Session, outcome: CampaignOutcome, index: int, U: fl
 
     def body(acq: Acquisition) -> None:
         fan = acq.drivers[session.fan_name]
+        session.fan_commanded = True
         acq.set_fan_speed(rpm)  # operator commands through the engine: events of the run
         outcome.max_fan_rpm_commanded = max(outcome.max_fan_rpm_commanded, rpm)
         acq.start_fan()
