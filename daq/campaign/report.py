@@ -115,15 +115,13 @@ def _json_default(value: Any) -> Any:
 def _markdown(data: dict[str, Any], paths: dict[str, Path]) -> str:
     U_F, std = data["flutter_speed"], data["flutter_speed_std"]
     lines = ["# Campaign report", ""]
-    if U_F is None:
-        lines.append("No flutter speed identified.")
-    else:
-        lines.append(f"**Flutter speed {U_F:.3f} +- {std:.3f} m/s** "
-                     f"({100 * std / U_F:.2f} %)")
+    headline = ("No flutter speed identified" if U_F is None or std is None
+                else f"**Flutter speed {U_F:.3f} +- {std:.3f} m/s** ({100 * std / U_F:.2f} %)")
     if "truth_flutter_speed" in data:
         err = data.get("relative_error")
-        lines.append(f"; simulated truth {data['truth_flutter_speed']:.3f} m/s"
+        headline += (f"; simulated truth {data['truth_flutter_speed']:.3f} m/s"
                      + ("" if err is None else f" (error {100 * err:+.2f} %)"))
+    lines.append(headline + ".")
     lines += ["", f"Stopped because: {data['stopped_because']}", "",
               f"Wind on {data['wind_on_s']:.1f} s, wall time {data['wall_s']:.1f} s.", "",
               "| # | U (m/s) | releases | U_F after (m/s) | std (m/s) | wind on (s) | why |",
@@ -135,6 +133,13 @@ def _markdown(data: dict[str, Any], paths: dict[str, Path]) -> str:
         lines.append(f"| {h['index']} | {h['U']:.2f} | {h['releases']} | {uf} | {sd} | {on} | "
                      f"{h['why']} |")
     lines.append("")
+    if data["choices"]:
+        lines += ["Adaptive decisions (predicted std of the flutter speed after releases at each "
+                  "candidate below the safety bound, m/s):", ""]
+        for c in data["choices"]:
+            table = ", ".join(f"{u:.2f}: {p:.3f}" for u, p in c["predicted_std"])
+            lines.append(f"- {c['reason']} (bound {c['bound']:.2f} m/s; {table})")
+        lines.append("")
     for name, path in paths.items():
         if path.suffix == ".png":
             lines += [f"![{name}]({path.name})", ""]
