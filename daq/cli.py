@@ -144,6 +144,16 @@ def _build_parser() -> argparse.ArgumentParser:
     p_info.add_argument("file", type=Path, help="a windrig HDF5 run file")
     p_info.add_argument("--json", action="store_true", help="print JSON instead of text")
 
+    p_camp = sub.add_parser(
+        "campaign", help="a headless test campaign from a plan: fixed or adaptive wind speeds, "
+                         "safe stop short of flutter, resumable; report in --out")
+    p_camp.add_argument("plan", type=Path, help="campaign plan TOML (rig_configs/plans/)")
+    p_camp.add_argument("--config", type=Path, required=True, help="rig config TOML")
+    p_camp.add_argument("--simulate", action="store_true",
+                        help="start the rig's simulated instruments (else: the config's URLs)")
+    p_camp.add_argument("--out", type=Path, required=True,
+                        help="directory for the run files and the report (resumed if present)")
+
     p_gui = sub.add_parser(
         "gui", help="the operator console: a live (simulated) rig, or replay of a run file")
     p_gui.add_argument("--replay", type=Path, default=None, metavar="FILE.h5",
@@ -560,6 +570,10 @@ def _dispatch(args: argparse.Namespace) -> int:
         return demo.run(args.out, args.config)
     if args.command == "flutter":
         return _flutter(args)
+    if args.command == "campaign":
+        from daq.campaign.command import run_command  # per-subcommand import: fast --help
+
+        return run_command(args.plan, args.config, args.out, simulate=args.simulate)
     if args.command == "simulate":
         return _simulate(args)
     if args.command == "identify":

@@ -22,12 +22,13 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from tqdm import tqdm
 
+from daq.acquisition.dispatch import Subscriber
 from daq.acquisition.drivers import drivers_from_config
 from daq.acquisition.engine import Acquisition
 from daq.acquisition.sync_pulses import SYNC_PULSE_INTERVAL_S, SyncPulses, start_sync_pulses
@@ -77,7 +78,9 @@ def record_run(config: RigConfig, out_path: str | Path, *, duration_s: float,
                operator_notes: str = "", calz: bool = False,
                writer_options: Mapping[str, Any] | None = None,
                sync_pulse_interval_s: float | None = SYNC_PULSE_INTERVAL_S,
-               recorder: RunRecorder | None = None) -> dict[str, Any]:
+               recorder: RunRecorder | None = None,
+               subscribers: Sequence[Subscriber] = (),
+               until: threading.Event | None = None) -> dict[str, Any]:
     """Acquire a rig for ``duration_s`` into one HDF5 run file and return the summary.
 
     Parameters
@@ -112,6 +115,12 @@ def record_run(config: RigConfig, out_path: str | Path, *, duration_s: float,
     recorder : RunRecorder, optional
         The run file, already opened by :func:`open_run_file` (a caller that must start
         something between the checks and the run); default: opened here.
+    subscribers : sequence of callable, optional
+        Further ``(name, doc)`` subscribers of the engine, after the writer (a campaign's live
+        decay monitor, :mod:`daq.campaign.monitor`).
+    until : threading.Event, optional
+        End the run early when it is set (a campaign sets it once its actions are done, so
+        that a run lasts as long as its releases and not as long as a worst-case estimate).
 
     Returns
     -------
@@ -141,7 +150,8 @@ def record_run(config: RigConfig, out_path: str | Path, *, duration_s: float,
                     # are the scanner's: it reports none).
                     recorder.add_metadata(f"calz_{metadata_name_part(name)}_start",
                                           {"calz_s": float(calz_s), "wind_speed_now": 0.0})
-        acq = Acquisition(drivers, subscribers=[writer], metadata={"rig": config.name})
+        acq = Acquisition(drivers, subscribers=[writer, *subscribers],
+                          metadata={"rig": config.name})
         acq.start()
         reason = "duration"
         runner: threading.Thread | None = None
@@ -165,7 +175,8 @@ def record_run(config: RigConfig, out_path: str | Path, *, duration_s: float,
                         desc=f"recording {path.name}", bar_format="{l_bar}{bar}| "
                         "{n:.1f}/{total:.1f} s [{elapsed}<{remaining}]") if progress else None)
             try:
-                while (left := end - time.monotonic()) > 0 and writer.error is None:
+                while ((left := end - time.monotonic()) > 0 and writer.error is None
+                       and not (until is not None and until.is_set())):
                     time.sleep(min(0.1, left))
                     if bar is not None:
                         done = round(float(duration_s) - max(end - time.monotonic(), 0.0), 1)

@@ -40,7 +40,7 @@ from ident.rfc import RationalFunctionModel
 from ident.section import SectionModel
 from simulators.virtual_tunnel import AirState
 
-__all__ = ["CampaignResult", "run_campaign"]
+__all__ = ["CampaignResult", "run_campaign", "simulated_truth"]
 
 #: Fan ramp rate assumed when the simulated drive's is not configured, rpm/s (the simulator's).
 DEFAULT_RAMP_RPM_PER_S = 100.0
@@ -120,7 +120,7 @@ class CampaignResult:
         return "\n".join(lines)
 
 
-def _truth(config: RigConfig) -> tuple[SectionModel, RationalFunctionModel]:
+def simulated_truth(config: RigConfig) -> tuple[SectionModel, RationalFunctionModel]:
     """Section with the simulated air density, and the simulated aerodynamic model."""
     sim = config.simulation
     if sim is None:
@@ -172,7 +172,7 @@ def run_campaign(config: RigConfig, out_dir: str | Path, *,
                          f"got {fractions!r}")
     if not (isinstance(releases_per_speed, int) and releases_per_speed >= 1):
         raise ValueError(f"releases_per_speed must be an integer >= 1, got {releases_per_speed!r}")
-    section, truth_model = _truth(config)
+    section, truth_model = simulated_truth(config)
     if decay_s is None:
         decay_s = default_decay_s(section)
     decay_s = float(decay_s)

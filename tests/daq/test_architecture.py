@@ -43,7 +43,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("daq.sync",),
     ("daq.acquisition",),
     ("daq.recording",),
-    ("daq.sim", "daq.offline", "simulators"),
+    ("daq.sim", "daq.offline", "daq.campaign", "simulators"),
     ("daq.console", "daq.cli"),
 )
 

@@ -1,0 +1,179 @@
+"""Tunnel time of headless campaigns: adaptive vs a fixed 3-speed plan vs the FD route (not a test).
+
+Every campaign is a real one (:func:`daq.campaign.runner.run_plan` with ``simulate=True``): the
+simulated instruments in a process of their own on loopback, the real drivers, engine and
+recorder, one HDF5 file per wind speed, E2RFC after each speed. Per rig and seed (the seed of
+every simulated instrument's noise, ``[simulation.devices.<name>] seed``):
+
+- **adaptive**: first speeds 0.45 and 0.63 of the rig's wind-speed limit, then the c-optimal
+  choice among candidates from 0.45 of the limit to the limit (:mod:`daq.campaign.adaptive`),
+  target std <= 1 % of U_F, at most 6 speeds;
+- **fixed 3-speed**: 0.5, 0.65 and 0.8 of the *true* flutter speed (the demo's plan, which an
+  operator could only guess), 1 release per speed; while the std is still above 1 % after
+  the third speed (or the safety bound stopped the plan), again with 2, then 4 releases per
+  speed;
+- **FD route**: 10 speeds from 0.8 down to 0.3 of the true flutter speed, 1 release each, the
+  flutter derivatives (:func:`ident.fd_method.identify`, no forces used) and their flutter
+  speed (the indirect route has no std of its own).
+
+All with decays of 15 periods of the slower mode (7.5 s on the plate, 12.5 s on the deck; 1 release
+per speed unless said) and a fast simulated fan ramp (1000 rpm/s; the wind-on time then counts
+mostly the settling, the releases and the analysis between speeds). Printed per row: the speeds
+needed to reach std <= 1 % (E2RFC rows) or all speeds (FD route), the wind-on time at that point
+(s; the fan runs from the first speed's start while the campaign records and analyses), the std
+there and the actual error against the simulator's truth.
+
+Run: ``.venv/bin/python benchmarks/campaign_efficiency.py [--seeds 1 2] [--rigs flat_plate deck]``
+(about 6 minutes per seed on the plate, 10 on the deck, on two cores).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from daq.campaign.plan import parse_plan
+from daq.campaign.runner import CampaignOutcome, run_plan
+from daq.config import RigConfig, parse_rig_config
+from ident import flutter
+from ident.fd_method import identify as fd_identify
+from ident.io import campaign_section, read_run
+
+REPO = Path(__file__).resolve().parents[1]
+RIGS = {"flat_plate": REPO / "rig_configs" / "sim_flat_plate.toml",
+        "deck": REPO / "rig_configs" / "sim_streamlined_deck.toml"}
+TARGET = 0.01
+#: Decay length, periods of the slower structural mode (daq.procedure's default: 7.5 s on the
+#: flat plate, 12.5 s on the deck).
+DECAY_PERIODS = 15.0
+
+
+def rig(name: str, seed: int) -> RigConfig:
+    """Return the rig with a fast fan and every simulated instrument's noise seeded."""
+    text = RIGS[name].read_text()
+    base = parse_rig_config(text, str(RIGS[name]))
+    for inst in base.instruments:
+        extra = "ramp_rpm_per_s = 1000.0\n" if inst.role == "fan" else ""
+        text += f"\n[simulation.devices.{inst.name}]\nseed = {seed}\n{extra}"
+    return parse_rig_config(text, f"{RIGS[name].name} seed {seed}")
+
+
+def plan_text(mode: str, speeds: list[float], decay_s: float, releases: int = 1,
+              adaptive: str = "") -> str:
+    """Return a plan's TOML."""
+    return (f'[campaign]\nmode = "{mode}"\nreleases_per_speed = {releases}\n'
+            f"decay_s = {decay_s:.1f}\nsettle_s = 0.5\ncalz_end = false\n\n"
+            f"[speeds]\nwind_speeds = {[float(round(u, 2)) for u in speeds]!r}\n{adaptive}")
+
+
+LOG: list[str] = []
+
+
+def run(config: RigConfig, text: str, fd: bool = False) -> tuple[CampaignOutcome, float | None]:
+    """Run one campaign in a temporary directory; with ``fd`` the FD route's U_F.
+
+    The campaign's progress lines go to :data:`LOG` (``--log FILE`` writes them).
+    """
+    fd_speed = None
+    LOG.append(f"--- {config.source}\n{text}")
+    with tempfile.TemporaryDirectory() as out:
+        outcome = run_plan(parse_plan(text, "benchmark"), config, out, simulate=True,
+                           say=LOG.append)
+        if fd and len(outcome.steps) >= 3:  # the FD route needs the files: read them now
+            runs = [read_run(s.path) for s in outcome.steps]
+            releases = [r for run in runs for r in run.releases]
+            section = campaign_section(runs)
+            found = flutter.analyze(section, fd_identify(releases, section)).speed
+            fd_speed = None if found is None else float(found)
+    return outcome, fd_speed
+
+
+def first_reaching(outcome: CampaignOutcome) -> tuple[int, float, float, float] | None:
+    """Return (speeds, wind-on s, std, U_F) when the std first was <= TARGET, or None."""
+    for k, step in enumerate(outcome.steps, start=1):
+        if step.flutter_speed and step.flutter_std is not None \
+                and step.flutter_std <= TARGET * step.flutter_speed:
+            return k, float(step.wind_on_s or math.nan), step.flutter_std, step.flutter_speed
+    return None
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--rigs", nargs="+", default=list(RIGS), choices=list(RIGS))
+    parser.add_argument("--no-fd", action="store_true", help="skip the FD route (10 speeds)")
+    parser.add_argument("--log", type=Path, default=None,
+                        help="write every campaign's progress lines to this file")
+    args = parser.parse_args()
+    rows = []
+    for name in args.rigs:
+        for seed in args.seeds:
+            config = rig(name, seed)
+            limit = min(config.limits.max_wind_speed,
+                        config.limits.max_fan_rpm * config.wind_per_rpm)
+            from daq.sim.campaign import simulated_truth
+
+            truth = flutter.analyze(*simulated_truth(config)).speed
+            assert truth is not None
+            adaptive = (f"\n[adaptive]\ntarget_std = {TARGET}\nsafety_fraction = 0.9\n"
+                        f"candidate_min = {0.45 * limit:.2f}\ncandidate_max = {limit:.2f}\n"
+                        f"candidate_step = {limit / 22:.2f}\nmax_speeds = 6\n")
+            decay = DECAY_PERIODS / min(config.section.fh, config.section.fa)
+            fixed = [f * truth for f in (0.5, 0.65, 0.8)]
+            cases = [("adaptive", plan_text("adaptive", [0.45 * limit, 0.63 * limit], decay,
+                                            adaptive=adaptive)),
+                     ("fixed 3-speed x1", plan_text("fixed", fixed, decay, 1))]
+            for label, text in cases:
+                rows.append((name, seed, label, *run(config, text), truth))
+                print(_row(*rows[-1]), flush=True)
+                if args.log is not None:
+                    args.log.write_text("\n".join(LOG) + "\n")
+            for releases in (2, 4):  # more releases per speed until the target is reached
+                if first_reaching(rows[-1][3]) is not None:
+                    break
+                rows.append((name, seed, f"fixed 3-speed x{releases}",
+                             *run(config, plan_text("fixed", fixed, decay, releases)), truth))
+                print(_row(*rows[-1]), flush=True)
+            if not args.no_fd:
+                # Highest first: from two low speeds the estimate is too uncertain for the
+                # safety bound to let a fixed plan climb (the bound is on the speed, not the
+                # order, so the same ten speeds are recorded either way).
+                speeds = list(np.linspace(0.8, 0.3, 10) * truth)
+                rows.append((name, seed, "FD route, 10 speeds",
+                             *run(config, plan_text("fixed", speeds, decay, 1), fd=True),
+                             truth))
+                print(_row(*rows[-1]), flush=True)
+    if args.log is not None:
+        args.log.write_text("\n".join(LOG) + "\n")
+    print()
+    print(f"{'rig':<11} {'seed':>4}  {'campaign':<20} {'speeds':>6} {'wind on (s)':>11} "
+          f"{'std (%)':>8} {'error (%)':>9}  stopped because")
+    for row in rows:
+        print(_row(*row))
+
+
+def _row(name: str, seed: int, label: str, outcome: CampaignOutcome, fd_speed: float | None,
+         truth: float) -> str:
+    if label.startswith("FD"):
+        n, on = len(outcome.steps), outcome.steps[-1].wind_on_s or math.nan
+        err = math.nan if fd_speed is None else 100 * (fd_speed / truth - 1)
+        return (f"{name:<11} {seed:>4}  {label:<20} {n:>6} {on:>11.1f} {'-':>8} {err:>+9.2f}"
+                f"  {outcome.stopped_because}")
+    reached = first_reaching(outcome)
+    if reached is None:
+        n, on = len(outcome.steps), outcome.steps[-1].wind_on_s or math.nan
+        std = 100 * (outcome.flutter_std or math.nan) / (outcome.flutter_speed or math.nan)
+        err = 100 * ((outcome.flutter_speed or math.nan) / truth - 1)
+        return (f"{name:<11} {seed:>4}  {label:<20} {n:>5}* {on:>11.1f} {std:>8.2f} "
+                f"{err:>+9.2f}  target not reached: {outcome.stopped_because}")
+    n, on, std, speed = reached
+    return (f"{name:<11} {seed:>4}  {label:<20} {n:>6} {on:>11.1f} {100 * std / speed:>8.2f} "
+            f"{100 * (speed / truth - 1):>+9.2f}  {outcome.stopped_because}")
+
+
+if __name__ == "__main__":
+    main()

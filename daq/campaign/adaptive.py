@@ -1,0 +1,295 @@
+"""The adaptive choice of the next wind speed (c-optimal), and the safety bound.
+
+Responsibility: :func:`choose_next` picks, among candidate wind speeds, the one whose releases
+are predicted to reduce the flutter speed's standard deviation most; :func:`safety_bound` is
+the highest speed a campaign may set given what it has learnt so far.
+
+The prediction (c-optimal design: the criterion is the variance of one function of the
+parameters, the flutter speed ``U_F(theta)``): E2RFC's parameters ``theta`` (the ``A`` entries and
+``log d``) have the covariance ``C`` of :class:`ident.e2rfc.E2RFCDiagnostics`, and ``U_F`` the
+gradient ``g = dU_F/dtheta`` (:func:`ident.flutter.speed_sensitivity`), so that
+``var(U_F) = g^T C g`` (how :mod:`ident.e2rfc` computes its noise part). ``n`` more releases at
+a candidate speed ``U_c`` add the information ``n J_c^T J_c``, where ``J_c`` is the weighted
+Jacobian of E2RFC's force residuals for the release the identified model predicts there: its
+decay simulated from the campaign's hold position (:func:`ident.simulate.simulate_decay`), the
+regressors ``q, (B/U) q', (B/U)^2 q'', x_l`` of ``docs/conventions.md`` computed from it, each
+force row weighted by ``qd B^2 / sigma`` (the force noise ``sigma``, N/m and N m/m, measured on
+the recorded releases and taken as independent of U: the scanner's). The same construction for
+the recorded releases gives ``I_0 = sum_r J_r^T J_r``; its prediction of today's variance is
+scaled to the identified one (``kappa``), so only ratios of information matter::
+
+    var_new(U_c) = kappa g^T (I_0 + n J_c^T J_c)^+ g,  kappa = sigma_param^2 / (g^T I_0^+ g)
+
+The other parts of the standard deviation: the extrapolation part (how far the flutter speed
+moves when the top speed's releases are left out, :mod:`ident.e2rfc`) is, with few releases,
+mostly the noise of that reduced fit, so it is scaled by the predicted std ratio of the reduced
+fit (a candidate below the top speed joins it; above, the old top speed does), and by
+``log(K_min,new / K_F) / log(K_min / K_F)`` (clipped to [0, 1]; ``K_c = B omega(U_c) / U_c`` of
+the critical branch from the identified model) as the releases cover reduced frequencies closer
+to the flutter one; the structure and one-lag-more parts, which
+come from the data not telling structures apart, are taken to shrink in the same ratio as the
+noise part (an assumption: more informative data tell them apart better). The choice is the
+candidate with the smallest predicted total; none is chosen when no candidate below the bound
+gains :data:`MIN_GAIN` of the current standard deviation.
+
+Safety: :func:`safety_bound` is ``fraction * (U_F - 3 std)`` of the current estimate (infinite
+without one: the first speeds are the plan's); the runner also applies the rig's limits.
+
+Not responsible for: recording (:mod:`daq.campaign.runner`) or the identification itself
+(:mod:`ident.e2rfc`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+from scipy.signal import lfilter
+
+from ident import flutter
+from ident.campaign import CampaignAnalysis
+from ident.e2rfc import DISTINCT_U_RTOL, IdentifiedModel, distinct_wind_speeds
+from ident.modal import noise_std
+from ident.release import Release
+from ident.section import SectionModel
+from ident.simulate import simulate_decay
+
+__all__ = ["MIN_GAIN", "Choice", "choose_next", "predicted_std", "safety_bound"]
+
+FloatArray = npt.NDArray[np.float64]
+
+#: A candidate must be predicted to reduce the standard deviation by this fraction to be chosen.
+MIN_GAIN = 0.05
+#: Sampling rate of the predicted releases, Hz: ~50 samples per period of a 4 Hz mode; only
+#: ratios of information matter, so the rate need not be the recorder's.
+PREDICT_FS = 200.0
+
+
+@dataclass(frozen=True)
+class Choice:
+    """One adaptive decision.
+
+    Attributes
+    ----------
+    speed : float or None
+        The next wind speed, m/s (None: stop).
+    reason : str
+        Why (also the stop reason).
+    current_std : float
+        The flutter speed's standard deviation now, m/s.
+    predicted : tuple of (float, float)
+        ``(U_c, predicted std)`` of each candidate below the bound, m/s.
+    bound : float
+        The safety bound applied, m/s.
+    """
+
+    speed: float | None
+    reason: str
+    current_std: float
+    predicted: tuple[tuple[float, float], ...]
+    bound: float
+
+    def summary(self) -> str:
+        """One line per decision, with the candidates' predictions."""
+        table = ", ".join(f"{u:.2f}: {s:.3f}" for u, s in self.predicted)
+        return (f"adaptive: {self.reason} [now {self.current_std:.3f} m/s; predicted std at "
+                f"candidates <= {self.bound:.2f} m/s: {table or 'none'}]")
+
+
+def safety_bound(analysis: CampaignAnalysis | None, fraction: float) -> float:
+    """Highest wind speed allowed now, m/s: ``fraction * (U_F - 3 std)``; inf without one."""
+    if analysis is None or analysis.flutter_speed is None or analysis.flutter_std is None:
+        return math.inf
+    std = analysis.flutter_std if math.isfinite(analysis.flutter_std) else analysis.flutter_speed
+    return max(fraction * (analysis.flutter_speed - 3.0 * std), 0.0)
+
+
+def _gradient(model: IdentifiedModel, section: SectionModel, result: flutter.FlutterResult
+              ) -> FloatArray:
+    """``dU_F/dtheta`` in the covariance's parameter order (as :mod:`ident.e2rfc` builds it)."""
+    assert result.speed is not None and result.frequency is not None
+    dU_dA, dU_dd = flutter.speed_sensitivity(section, model, result.speed, result.frequency)
+    index = model.diagnostics.parameter_index
+    return np.array([dU_dA[k, i, j] for k, i, j in index] + list(dU_dd * model.d))
+
+
+def _lag_states(qdot: FloatArray, rate: float, d: float, dt: float) -> FloatArray:
+    """``x' = q' - rate d x`` from ``x(0) = 0``, exact for ``q'`` held over each step."""
+    a = rate * d
+    decay = math.exp(-a * dt)
+    gain = (1.0 - decay) / a
+    # x[k] = decay x[k-1] + gain q'[k-1]: a first-order recursion, as a filter.
+    return np.asarray(lfilter([0.0, gain], [1.0, -decay], qdot, axis=0), dtype=float)
+
+
+def _information(model: IdentifiedModel, section: SectionModel, U: float, h0: float,
+                 alpha0: float, duration_s: float, sigma: FloatArray) -> FloatArray:
+    """``J^T J`` of one predicted release at ``U`` (module docstring), parameter order of C."""
+    n = max(int(duration_s * PREDICT_FS), 64)
+    decay = simulate_decay(section, model, U, h0, alpha0, n=n, fs=PREDICT_FS)
+    B, dt = section.B, 1.0 / PREDICT_FS
+    q = np.column_stack([decay.h / B, decay.alpha])
+    qdot = np.gradient(q, dt, axis=0)
+    qddot = np.gradient(qdot, dt, axis=0)
+    c = B / U
+    regressors = {0: q, 1: c * qdot, 2: c**2 * qddot}
+    rate = U / B
+    lags = [_lag_states(qdot, rate, float(d), dt) for d in model.d]
+    for l, x in enumerate(lags):
+        regressors[3 + l] = x
+    qd = 0.5 * section.rho * U**2
+    weights = qd * B**2 / sigma  # normalised force noise sigma / (qd B^2), inverted
+    index = model.diagnostics.parameter_index
+    columns = []
+    for k, i, j in index:
+        col = np.zeros(2 * n)
+        col[i * n:(i + 1) * n] = weights[i] * (regressors[k][:, j] - regressors[k][:, j].mean())
+        columns.append(col)
+    h = 1e-4
+    for l, d in enumerate(model.d):
+        dx = (_lag_states(qdot, rate, float(d) * math.exp(h), dt)
+              - _lag_states(qdot, rate, float(d) * math.exp(-h), dt)) / (2 * h)
+        col = np.zeros(2 * n)
+        for i in range(2):
+            v = dx @ model.A[3 + l, i, :]
+            col[i * n:(i + 1) * n] = weights[i] * (v - v.mean())
+        columns.append(col)
+    J = np.column_stack(columns)
+    return np.asarray(J.T @ J, dtype=float)
+
+
+def _noise(releases: Sequence[Release], section: SectionModel) -> FloatArray:
+    """Force noise of the recorded releases, ``[L B, M]``, N m/m (median over releases)."""
+    levels = [noise_std(np.column_stack([r.lift * section.B, r.moment])) for r in releases]
+    return np.maximum(np.median(np.array(levels), axis=0), 1e-12)
+
+
+def _hold(releases: Sequence[Release]) -> tuple[float, float]:
+    """Return the campaign's hold position (median release start), m and rad."""
+    return (float(np.median([r.h[0] for r in releases])),
+            float(np.median([r.alpha[0] for r in releases])))
+
+
+def _variance(g: FloatArray, information: FloatArray) -> float:
+    """``g^T I^+ g``: the variance of ``U_F`` up to the common scale ``kappa``."""
+    return float(g @ np.linalg.pinv(information) @ g)
+
+
+def _ratio(new: float, old: float) -> float:
+    """Standard-deviation ratio ``sqrt(new / old)``, 1 when it cannot be told."""
+    if not (math.isfinite(new) and math.isfinite(old)) or old <= 0 or new < 0:
+        return 1.0
+    return min(math.sqrt(new / old), 1.0)
+
+
+def _branch_K(result: flutter.FlutterResult, U: float, B: float) -> float:
+    """Reduced frequency of the critical branch at ``U`` (identified model's curves)."""
+    column = result.mode_names.index(result.critical_mode or result.mode_names[-1])
+    f = float(np.interp(U, result.U, result.frequencies[:, column]))
+    return B * 2.0 * math.pi * f / U if f > 0 else math.nan
+
+
+def predicted_std(analysis: CampaignAnalysis, releases: Sequence[Release],
+                  candidates: Sequence[float], *, releases_per_speed: int, decay_s: float,
+                  ) -> list[float]:
+    """Predicted total std of the flutter speed after releases at each candidate, m/s.
+
+    Parameters
+    ----------
+    analysis : CampaignAnalysis
+        The campaign so far (it must predict flutter).
+    releases : sequence of Release
+        Its recorded releases (hold position, force noise, information so far).
+    candidates : sequence of float
+        Wind speeds, m/s.
+    releases_per_speed : int
+        Releases the next speed would record.
+    decay_s : float
+        Their length, s.
+
+    Returns
+    -------
+    list of float
+        One per candidate, m/s (module docstring for the formula).
+    """
+    result, u = analysis.flutter, analysis.uncertainty
+    if result.speed is None or not math.isfinite(u.total):
+        raise ValueError("predicted_std needs an analysis that predicts flutter")
+    section, model = analysis.section, analysis.model
+    g = _gradient(model, section, result)
+    sigma = _noise(releases, section)
+    h0, alpha0 = _hold(releases)
+    infos = [_information(model, section, r.U, h0, alpha0, float(r.t[-1] - r.t[0]), sigma)
+             for r in releases]
+    I0 = np.sum(infos, axis=0)
+    now = _variance(g, I0)
+    # The extrapolation part is the gap between the fit and the fit without the top speed:
+    # with few releases mostly the noise of that reduced fit (module docstring).
+    top = max(distinct_wind_speeds([r.U for r in releases]))
+    below = [i for r, i in zip(releases, infos, strict=True) if r.U < top / (1 + DISTINCT_U_RTOL)]
+    I_red = np.sum(below, axis=0) if below else None
+    red_now = math.nan if I_red is None else _variance(g, I_red)
+    statistical = u.statistical
+    K_F = result.reduced_frequency
+    K_min = min(_branch_K(result, r.U, section.B) for r in releases)
+    out = []
+    for U in candidates:
+        Ic = releases_per_speed * _information(model, section, U, h0, alpha0, decay_s, sigma)
+        ratio = _ratio(_variance(g, I0 + Ic), now)
+        extrapolation = u.extrapolation
+        if I_red is not None and extrapolation > 0:
+            # Below the top speed a candidate joins the reduced fit; above it, the old top does.
+            red_new = _variance(g, I_red + Ic if U < top / (1 + DISTINCT_U_RTOL) else I0)
+            extrapolation *= _ratio(red_new, red_now)
+        if K_F is not None and math.isfinite(K_min) and K_min > K_F:
+            K_new = min(K_min, _branch_K(result, U, section.B))
+            reach = max(math.log(K_new / K_F), 0.0) / math.log(K_min / K_F)
+            extrapolation *= min(max(reach, 0.0), 1.0)
+        out.append(math.sqrt((ratio * statistical)**2 + (ratio * u.structure)**2
+                             + (ratio * u.refinement)**2 + extrapolation**2))
+    return out
+
+
+def choose_next(analysis: CampaignAnalysis, releases: Sequence[Release],
+                candidates: Sequence[float], *, bound: float, releases_per_speed: int,
+                decay_s: float) -> Choice:
+    """Choose the next wind speed, or decide to stop (module docstring).
+
+    Parameters
+    ----------
+    analysis : CampaignAnalysis
+    releases : sequence of Release
+        The campaign's recorded releases.
+    candidates : sequence of float
+        Candidate wind speeds, m/s (those above ``bound`` are never chosen).
+    bound : float
+        The safety bound, m/s (:func:`safety_bound` and the rig's limits).
+    releases_per_speed : int
+    decay_s : float
+
+    Returns
+    -------
+    Choice
+    """
+    if analysis.flutter_speed is None or analysis.flutter_std is None \
+            or not math.isfinite(analysis.flutter_std):
+        return Choice(None, "stopped: the releases so far predict no flutter speed (nothing "
+                      "to aim at: extend the candidate range or check the rig)", math.nan, (),
+                      bound)
+    current = analysis.flutter_std
+    allowed = [float(U) for U in candidates if U <= bound]
+    if not allowed:
+        return Choice(None, f"stopped: no candidate speed below the safety bound {bound:.2f} "
+                      "m/s", current, (), bound)
+    stds = predicted_std(analysis, releases, allowed, releases_per_speed=releases_per_speed,
+                         decay_s=decay_s)
+    table = tuple(zip(allowed, stds, strict=True))
+    best_U, best = min(table, key=lambda item: item[1])
+    if best > (1.0 - MIN_GAIN) * current:
+        return Choice(None, f"stopped: no candidate gains (best {best_U:.2f} m/s predicts "
+                      f"{best:.3f} m/s against {current:.3f} m/s now)", current, table, bound)
+    return Choice(best_U, f"chosen {best_U:.2f} m/s: predicted std {best:.3f} m/s (now "
+                  f"{current:.3f} m/s)", current, table, bound)

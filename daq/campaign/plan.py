@@ -1,0 +1,278 @@
+"""PLAN.toml: what a headless campaign does, parsed and checked before anything moves.
+
+Responsibility: :func:`load_plan` / :func:`parse_plan` read a campaign plan into a frozen
+:class:`CampaignPlan`, and :meth:`CampaignPlan.check_against` checks it against a rig config's
+safety limits. Every error is a :class:`~daq.errors.ConfigError` naming the table, the key and
+what is allowed, so an operator can fix the plan before the fan starts.
+
+The plan (units SI; the example plans are ``rig_configs/plans/*.toml``)::
+
+    [campaign]
+    mode = "fixed"              # "fixed": every listed speed; "adaptive": see [adaptive]
+    releases_per_speed = 2      # 1..20
+    decay_s = 5.0               # recorded decay per release, s (default: 15 slow periods)
+    settle_s = 1.0              # the wind must stay steady this long before the first release
+    steady_tolerance = 0.01     # steady: fan speed within this fraction of its set-point
+    pause_s = 0.0               # extra wait between releases, s
+    calz_start = true           # zero the scanner wind-off before the first speed
+    calz_end = true             # ... and once more wind-off after the fan is down
+
+    [speeds]
+    wind_speeds = [5.0, 7.0]    # m/s; or fan_rpm = [500, 700] (set-points, rpm), not both
+
+    [adaptive]                  # mode = "adaptive" only
+    target_std = 0.01           # stop when std(U_F) / U_F <= this
+    safety_fraction = 0.9       # never above safety_fraction * (U_F - 3 std)
+    candidate_min = 4.0         # candidate wind speeds, m/s: min..max every candidate_step
+    candidate_max = 11.0
+    candidate_step = 0.5
+    max_speeds = 6              # at most this many speeds in all (>= the listed ones)
+
+In adaptive mode the listed speeds are the first ones (two at least: E2RFC needs two wind
+speeds before it says anything); the next are chosen by :mod:`daq.campaign.adaptive`.
+
+Not supported: a hold displacement per release. The release PLC of these rigs switches a
+magnet on and off; the hold position is set by the rig's mechanics (on a simulated rig by
+``[simulation] hold_h, hold_alpha``), so a plan cannot change it and does not pretend to.
+
+Not responsible for: running the plan (:mod:`daq.campaign.runner`) or choosing speeds
+(:mod:`daq.campaign.adaptive`).
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from daq.config import RigConfig
+from daq.errors import ConfigError
+from daq.validation import check_keys, number
+
+__all__ = ["AdaptiveSettings", "CampaignPlan", "load_plan", "parse_plan"]
+
+MODES = ("fixed", "adaptive")
+MAX_RELEASES_PER_SPEED = 20
+MAX_SPEEDS = 50
+
+
+@dataclass(frozen=True)
+class AdaptiveSettings:
+    """The ``[adaptive]`` table (see the module docstring).
+
+    Attributes
+    ----------
+    target_std : float
+        Target relative standard deviation of the flutter speed (fraction, e.g. 0.01).
+    safety_fraction : float
+        Speeds stay below ``safety_fraction * (U_F - 3 std)``, (0, 1].
+    candidate_min, candidate_max, candidate_step : float
+        Candidate wind speeds, m/s.
+    max_speeds : int
+        Most wind speeds of the whole campaign.
+    """
+
+    target_std: float
+    safety_fraction: float
+    candidate_min: float
+    candidate_max: float
+    candidate_step: float
+    max_speeds: int
+
+    def candidates(self) -> list[float]:
+        """Candidate wind speeds, m/s, from ``candidate_min`` to ``candidate_max``."""
+        n = int(math.floor((self.candidate_max - self.candidate_min) / self.candidate_step
+                           + 1e-9))
+        return [self.candidate_min + i * self.candidate_step for i in range(n + 1)]
+
+
+@dataclass(frozen=True)
+class CampaignPlan:
+    """A parsed, validated campaign plan (see the module docstring).
+
+    Attributes
+    ----------
+    mode : str
+        ``"fixed"`` or ``"adaptive"``.
+    wind_speeds : tuple of float or None
+        Listed wind speeds, m/s (None when the plan gives fan set-points).
+    fan_rpm : tuple of float or None
+        Listed fan set-points, rpm (None when the plan gives wind speeds).
+    releases_per_speed : int
+    decay_s : float or None
+        Recorded decay per release, s (None: :func:`daq.procedure.default_decay_s`).
+    settle_s : float
+        Time the wind must stay steady before the first release, s.
+    steady_tolerance : float
+        Steady: fan speed within this fraction of its set-point.
+    pause_s : float
+        Extra wait between releases, s.
+    calz_start, calz_end : bool
+    adaptive : AdaptiveSettings or None
+    source : str
+    """
+
+    mode: str
+    wind_speeds: tuple[float, ...] | None
+    fan_rpm: tuple[float, ...] | None
+    releases_per_speed: int
+    decay_s: float | None
+    settle_s: float
+    steady_tolerance: float
+    pause_s: float
+    calz_start: bool
+    calz_end: bool
+    adaptive: AdaptiveSettings | None
+    source: str = ""
+
+    def listed_speeds(self, wind_per_rpm: float) -> list[float]:
+        """Return the listed speeds as wind speeds, m/s (fan set-points times the calibration)."""
+        if self.wind_speeds is not None:
+            return list(self.wind_speeds)
+        assert self.fan_rpm is not None
+        return [rpm * wind_per_rpm for rpm in self.fan_rpm]
+
+    def check_against(self, config: RigConfig) -> None:
+        """Raise ConfigError when a listed or candidate speed breaks the rig's limits.
+
+        A plan is checked as a whole before the fan starts: a speed the drive would refuse
+        halfway through a campaign is a mistake of the plan, not of the tunnel.
+        """
+        limit = min(config.limits.max_wind_speed, config.limits.max_fan_rpm * config.wind_per_rpm)
+        where = f"{self.source} [speeds]"
+        for U in self.listed_speeds(config.wind_per_rpm):
+            if U > limit + 1e-9:
+                raise ConfigError(
+                    f"{where}: {U:.3g} m/s is above the rig's limit {limit:.3g} m/s "
+                    f"({config.source}: max_wind_speed {config.limits.max_wind_speed:g} m/s, "
+                    f"max_fan_rpm {config.limits.max_fan_rpm:g} x wind_per_rpm "
+                    f"{config.wind_per_rpm:g})")
+
+
+def _bool(table: Mapping[str, Any], key: str, where: str, default: bool) -> bool:
+    value = table.get(key, default)
+    if not isinstance(value, bool):
+        raise ConfigError(f"{where} {key} must be true or false, got {value!r}")
+    return value
+
+
+def _integer(table: Mapping[str, Any], key: str, where: str, lo: int, hi: int,
+             default: int | None = None) -> int:
+    if key not in table:
+        if default is None:
+            raise ConfigError(f"{where}: missing required key {key!r}")
+        return default
+    value = table[key]
+    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+        raise ConfigError(f"{where} {key} = {value!r} must be an integer in [{lo}, {hi}]")
+    return int(value)
+
+
+def _speed_list(table: Mapping[str, Any], key: str, where: str, lo_open: float, hi: float,
+                unit: str) -> tuple[float, ...]:
+    value = table[key]
+    if not isinstance(value, list) or not value:
+        raise ConfigError(f"{where} {key} must be a non-empty list of numbers ({unit})")
+    out = []
+    for i, x in enumerate(value):
+        if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) \
+                or not lo_open < x <= hi:
+            raise ConfigError(f"{where} {key}[{i}] = {x!r} is outside the allowed range "
+                              f"({lo_open:g}, {hi:g}] {unit}")
+        out.append(float(x))
+    if len(out) > MAX_SPEEDS:
+        raise ConfigError(f"{where} {key}: {len(out)} speeds, at most {MAX_SPEEDS}")
+    return tuple(out)
+
+
+def parse_plan(text: str, source: str = "<string>") -> CampaignPlan:
+    """Parse and validate a plan's TOML text.
+
+    Parameters
+    ----------
+    text : str
+        The plan (module docstring).
+    source : str
+        Where it came from, for messages.
+
+    Returns
+    -------
+    CampaignPlan
+
+    Raises
+    ------
+    ConfigError
+        Not TOML, an unknown or missing key, a value out of its range (named).
+    """
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{source}: not valid TOML: {exc}") from exc
+    check_keys(data, source, {"campaign", "speeds"}, {"adaptive"})
+    where = f"{source} [campaign]"
+    c = data["campaign"]
+    check_keys(c, where, {"mode"}, {"releases_per_speed", "decay_s", "settle_s",
+                                    "steady_tolerance", "pause_s", "calz_start", "calz_end"})
+    mode = c["mode"]
+    if mode not in MODES:
+        raise ConfigError(f"{where} mode = {mode!r}; allowed: {', '.join(MODES)}")
+    releases = _integer(c, "releases_per_speed", where, 1, MAX_RELEASES_PER_SPEED, default=2)
+    decay_s = number(c, "decay_s", where, lo=1.0, hi=600.0) if "decay_s" in c else None
+    settle_s = number(c, "settle_s", where, lo=0.0, hi=600.0, default=1.0)
+    steady = number(c, "steady_tolerance", where, lo=0.0, hi=0.2, lo_open=True, default=0.01)
+    pause_s = number(c, "pause_s", where, lo=0.0, hi=600.0, default=0.0)
+    calz_start = _bool(c, "calz_start", where, True)
+    calz_end = _bool(c, "calz_end", where, True)
+
+    where = f"{source} [speeds]"
+    s = data["speeds"]
+    check_keys(s, where, set(), {"wind_speeds", "fan_rpm"})
+    if ("wind_speeds" in s) == ("fan_rpm" in s):
+        raise ConfigError(f"{where}: give exactly one of wind_speeds (m/s) or fan_rpm (rpm)")
+    wind = _speed_list(s, "wind_speeds", where, 0.0, 200.0, "m/s") if "wind_speeds" in s \
+        else None
+    rpm = _speed_list(s, "fan_rpm", where, 0.0, 100000.0, "rpm") if "fan_rpm" in s else None
+    listed = wind if wind is not None else rpm
+    assert listed is not None
+
+    adaptive = None
+    if mode == "adaptive":
+        where = f"{source} [adaptive]"
+        if "adaptive" not in data:
+            raise ConfigError(f"{where}: missing: mode = \"adaptive\" needs an [adaptive] table")
+        a = data["adaptive"]
+        check_keys(a, where, {"target_std", "candidate_min", "candidate_max"},
+                   {"safety_fraction", "candidate_step", "max_speeds"})
+        target = number(a, "target_std", where, lo=0.0, hi=0.5, lo_open=True)
+        fraction = number(a, "safety_fraction", where, lo=0.0, hi=1.0, lo_open=True,
+                          default=0.9)
+        lo = number(a, "candidate_min", where, lo=0.0, hi=200.0, lo_open=True)
+        hi = number(a, "candidate_max", where, lo=lo, hi=200.0)
+        step = number(a, "candidate_step", where, lo=0.01, hi=max(hi - lo, 0.01),
+                      default=max((hi - lo) / 10.0, 0.01))
+        max_speeds = _integer(a, "max_speeds", where, max(len(listed), 2), MAX_SPEEDS,
+                              default=max(len(listed), 6))
+        if len(set(listed)) < 2:
+            raise ConfigError(f"{source} [speeds]: adaptive mode needs two or more distinct "
+                              "first speeds (E2RFC needs two wind speeds), got "
+                              f"{list(listed)}")
+        adaptive = AdaptiveSettings(target, fraction, lo, hi, step, max_speeds)
+    elif "adaptive" in data:
+        raise ConfigError(f"{source} [adaptive]: only for mode = \"adaptive\" (mode is "
+                          f"{mode!r})")
+    return CampaignPlan(mode=mode, wind_speeds=wind, fan_rpm=rpm, releases_per_speed=releases,
+                        decay_s=decay_s, settle_s=settle_s, steady_tolerance=steady,
+                        pause_s=pause_s, calz_start=calz_start, calz_end=calz_end,
+                        adaptive=adaptive, source=source)
+
+
+def load_plan(path: str | Path) -> CampaignPlan:
+    """Read and validate a plan file (:func:`parse_plan`); a missing file is a ConfigError."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(f"cannot read plan {path}: {exc.strerror or exc}") from exc
+    return parse_plan(text, str(path))

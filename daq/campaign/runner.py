@@ -1,0 +1,561 @@
+"""The headless campaign loop: speed after speed, release after release, until a reason to stop.
+
+Responsibility: :func:`run_plan` runs a :class:`~daq.campaign.plan.CampaignPlan` on a rig
+through the same drivers and engine as the console (:func:`daq.recording.run.record_run`, every
+fan and release step one of the engine's commands, so an event of the run), one run file per
+wind speed (``speedNN_U<m/s>.h5``), with a line on the terminal for every step (speed, wind,
+release n of N, decay amplitude), each release's modal fit and, from two speeds on, the E2RFC
+flutter speed +- std after each speed. It stops for the first of these reasons, each written to
+``campaign.json`` as ``stopped_because``:
+
+- the plan is done (fixed mode), the target std is met (from three speeds on: with two the
+  std lacks its extrapolation part) or no candidate speed gains (adaptive mode,
+  :mod:`daq.campaign.adaptive`), or ``max_speeds`` is reached;
+- the next speed is above the safety bound ``fraction * (U_F - 3 std)`` of the current
+  estimate (both modes; fixed plans use 0.9) or the rig's limits: it is never set;
+- a decay grows (:class:`~daq.campaign.monitor.DecayMonitor`): the model is caught (re-armed)
+  and the fan stopped at once;
+- Ctrl-C: the run file in progress is finished and kept as ``*.interrupted.h5``.
+
+Whatever the reason, even an error, the fan is sent a stop and waited down before returning,
+and the plan's closing CALZ is taken wind-off. The fan stays on between the speeds of a
+campaign (the tunnel is not stopped for the analysis), so the wind-on time is the time from
+the first start to the final stop.
+
+Resumable: run files already in the output directory are read back and count as recorded
+speeds (a fixed plan goes on with the next listed speed; an adaptive one decides from them).
+
+Not responsible for: parsing the plan (:mod:`daq.campaign.plan`), choosing speeds
+(:mod:`daq.campaign.adaptive`), the report (:mod:`daq.campaign.report`), or starting a
+simulated rig's instruments (:mod:`daq.sim.rig_process`, started here only with
+``simulate=True``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+import signal
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from daq.acquisition.engine import Acquisition
+from daq.campaign.adaptive import Choice, choose_next, safety_bound
+from daq.campaign.monitor import DecayMonitor
+from daq.campaign.plan import CampaignPlan
+from daq.config import RigConfig
+from daq.errors import DeviceError
+from daq.instruments.build import build_driver
+from daq.procedure import HOLD_S, default_decay_s
+from daq.recording.run import record_run
+from ident.campaign import CampaignAnalysis, analyze_campaign
+from ident.e2rfc import distinct_wind_speeds
+from ident.errors import IdentError
+from ident.io import RunFile, campaign_section, read_run
+from ident.modal import fit_release_modes
+
+__all__ = ["CampaignOutcome", "SpeedStep", "run_plan", "run_file_name"]
+
+log = logging.getLogger(__name__)
+
+#: Safety fraction of a fixed plan (an adaptive plan gives its own).
+FIXED_SAFETY_FRACTION = 0.9
+#: Longest wait for the wind to become steady at a set-point, s (beyond the ramp).
+STEADY_TIMEOUT_S = 30.0
+#: Distinct wind speeds before an adaptive campaign may call its target met (see _loop).
+MIN_SPEEDS_FOR_TARGET = 3
+#: Fan speed counted as stopped, rpm.
+STOPPED_RPM = 5.0
+
+
+@dataclass
+class SpeedStep:
+    """One recorded wind speed.
+
+    Attributes
+    ----------
+    index : int
+        Order in the campaign, from 1.
+    U : float
+        Requested wind speed, m/s.
+    path : Path
+    releases : int
+        Releases read back from the file.
+    why : str
+        Why this speed (listed in the plan, or the adaptive choice).
+    flutter_speed, flutter_std : float or None
+        The estimate after this speed, m/s.
+    wind_on_s : float or None
+        Wind-on time of the campaign when this speed's estimate was known, s (None: read
+        back from an earlier session).
+    """
+
+    index: int
+    U: float
+    path: Path
+    releases: int
+    why: str
+    flutter_speed: float | None = None
+    flutter_std: float | None = None
+    wind_on_s: float | None = None
+
+
+@dataclass
+class CampaignOutcome:
+    """What a campaign did and found (what :mod:`daq.campaign.report` writes).
+
+    Attributes
+    ----------
+    steps : list of SpeedStep
+        In the order tested.
+    analysis : CampaignAnalysis or None
+        The last E2RFC analysis (None before two speeds).
+    stopped_because : str
+    wind_on_s : float
+        Fan start to fan stopped, s, this session plus the resumed ones.
+    wall_s : float
+        This session's wall time, s.
+    truth_flutter_speed : float or None
+        The simulated tunnel's own (``simulate=True``), m/s.
+    resumed : int
+        Speeds read back from an earlier session.
+    choices : list of Choice
+        The adaptive decisions, in order.
+    max_fan_rpm_commanded : float
+        Highest fan set-point sent this session, rpm.
+    """
+
+    steps: list[SpeedStep] = field(default_factory=list)
+    analysis: CampaignAnalysis | None = None
+    stopped_because: str = ""
+    wind_on_s: float = 0.0
+    wall_s: float = 0.0
+    truth_flutter_speed: float | None = None
+    resumed: int = 0
+    choices: list[Choice] = field(default_factory=list)
+    max_fan_rpm_commanded: float = 0.0
+
+    @property
+    def flutter_speed(self) -> float | None:
+        """Identified flutter speed, m/s."""
+        return None if self.analysis is None else self.analysis.flutter_speed
+
+    @property
+    def flutter_std(self) -> float | None:
+        """Its standard deviation, m/s."""
+        return None if self.analysis is None else self.analysis.flutter_std
+
+
+def run_file_name(index: int, U: float) -> str:
+    """File name of the ``index``-th speed (from 1) at ``U`` m/s, e.g. ``speed03_U07.50.h5``."""
+    return f"speed{index:02d}_U{U:05.2f}.h5"
+
+
+class _Session:
+    """State of one session: the fan, the clock of the wind, the files, the output."""
+
+    def __init__(self, plan: CampaignPlan, config: RigConfig, out: Path,
+                 say: Callable[[str], None]) -> None:
+        self.plan, self.config, self.out, self.say = plan, config, out, say
+        fans = config.by_role("fan")
+        if not fans:
+            raise DeviceError(f"{config.source}: a campaign needs a fan drive ([fan])")
+        self.fan_name = fans[0].name
+        self.fan_on_at: float | None = None
+        #: Set before the first fan command: from then on the campaign ends with a fan stop,
+        #: even when the start itself failed halfway.
+        self.fan_commanded = False
+        self.fan_rpm = 0.0
+        self.runs: list[RunFile] = []
+        #: Set by Ctrl-C (the runner's SIGINT handler): the actions stop at their next step.
+        self.abort = threading.Event()
+
+    # -- the fan, outside a run: the final stop ---------------------------------------------
+    def fan_down(self) -> None:
+        """Stop the fan and wait until it has stopped (always; a stop is never refused)."""
+        if not self.fan_commanded:
+            return
+        driver = build_driver(self.config.instrument(self.fan_name), self.config.limits)
+        # Sent directly to the drive: the campaign's end is decided after the last run file
+        # is closed, and a stop must not wait for an engine to start.
+        try:
+            driver.open()
+            driver.stop()
+            driver.wait_for_speed(0.0, tolerance_rpm=STOPPED_RPM)
+        finally:
+            driver.close()
+        self.fan_rpm = 0.0
+
+    def calz_wind_off(self) -> None:
+        """Take the closing CALZ, wind-off (after :meth:`fan_down`)."""
+        for inst in self.config.by_role("scanner"):
+            driver = build_driver(inst, self.config.limits)
+            try:
+                driver.open()
+                driver.calz(wind_speed_now=0.0)
+            finally:
+                driver.close()
+            self.say(f"CALZ wind-off: {inst.name} zeroed")
+
+
+def _ramp_rate(config: RigConfig, fan_name: str) -> float:
+    """Return the drive's configured ramp rate, rpm/s (its settings' default otherwise)."""
+    rate = config.instrument(fan_name).settings.get("ramp_rpm_per_s", 100.0)
+    return float(rate)
+
+
+def _read_back(out: Path, say: Callable[[str], None]) -> list[tuple[int, float, RunFile | None,
+                                                                      Path]]:
+    """Run files of earlier sessions: ``(index, U, run or None, path)`` in order."""
+    found = []
+    for path in sorted(out.glob("speed[0-9][0-9]_U*.h5")):
+        if path.name.endswith(".interrupted.h5"):
+            continue
+        index = int(path.name[5:7])
+        U = float(path.name.split("_U", 1)[1][:-3])
+        try:
+            run: RunFile | None = read_run(path)
+        except (IdentError, ValueError, OSError) as exc:  # kept on disk, left out of the fit
+            say(f"resume: {path.name} is not usable ({exc}); left out")
+            run = None
+        found.append((index, U, run, path))
+    return found
+
+
+def _analysis(runs: list[RunFile]) -> CampaignAnalysis | None:
+    releases = [r for run in runs for r in run.releases]
+    if len(distinct_wind_speeds([r.U for r in releases])) < 2:
+        return None
+    return analyze_campaign(releases, campaign_section(runs), table=False)
+
+
+def _truth_speed(config: RigConfig) -> float | None:
+    # The truth exists only for a simulated rig; imported here so that a real campaign never
+    # loads the simulators.
+    from daq.sim.campaign import simulated_truth
+    from ident import flutter
+
+    section, model = simulated_truth(config)
+    speed = flutter.analyze(section, model).speed
+    return None if speed is None else float(speed)
+
+
+def run_plan(plan: CampaignPlan, config: RigConfig, out_dir: str | Path, *,
+             simulate: bool = False, say: Callable[[str], None] = print,
+             previous: dict[str, Any] | None = None,
+             outcome: CampaignOutcome | None = None) -> CampaignOutcome:
+    """Run a campaign plan on a rig (see the module docstring).
+
+    Parameters
+    ----------
+    plan : CampaignPlan
+    config : RigConfig
+        The rig; with ``simulate`` a simulated rig, whose instruments are started here in a
+        process of their own (loopback only).
+    out_dir : str or Path
+        Run files (created; earlier ones are read back: resume).
+    simulate : bool
+        Start the simulated rig and report its truth.
+    say : callable
+        Receives each progress line.
+    previous : dict, optional
+        The earlier session's ``campaign.json`` (its wind-on time is carried on).
+    outcome : CampaignOutcome, optional
+        Filled in as the campaign goes (a caller that reports even after an error passes
+        its own).
+
+    Returns
+    -------
+    CampaignOutcome
+    """
+    started = time.monotonic()
+    plan.check_against(config)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    outcome = CampaignOutcome() if outcome is None else outcome
+    if previous:
+        outcome.wind_on_s = float(previous.get("wind_on_s", 0.0))
+    if simulate:
+        outcome.truth_flutter_speed = _truth_speed(config)
+    rig_cm: contextlib.AbstractContextManager[Any]
+    if simulate:
+        from daq.sim.rig_process import start_rig_process  # only a simulated rig needs it
+
+        rig_cm = start_rig_process(config)
+    else:
+        rig_cm = contextlib.nullcontext()
+    with rig_cm as rig:
+        live = config if rig is None else rig.config
+        session = _Session(plan, live, out, say)
+        restore = _on_sigint(session.abort)
+        try:
+            _loop(session, outcome)
+        except KeyboardInterrupt:
+            outcome.stopped_because = "interrupted by the operator (Ctrl-C)"
+            say("interrupted: stopping the fan")
+        except BaseException as exc:
+            outcome.stopped_because = f"error: {type(exc).__name__}: {exc}"
+            raise
+        finally:
+            restore()
+            fan_was_on = session.fan_on_at
+            try:
+                session.fan_down()
+            finally:
+                if fan_was_on is not None:
+                    outcome.wind_on_s += time.monotonic() - fan_was_on
+                    session.fan_on_at = None
+            say(f"fan stopped; wind on {outcome.wind_on_s:.1f} s in all")
+            if plan.calz_end and not outcome.stopped_because.startswith("error"):
+                session.calz_wind_off()
+    outcome.wall_s = time.monotonic() - started
+    return outcome
+
+
+def _on_sigint(abort: threading.Event) -> Callable[[], None]:
+    """Make Ctrl-C set ``abort`` as well as raise KeyboardInterrupt; return the undo.
+
+    The interrupt reaches the main thread, which waits in :func:`record_run` and finishes the
+    file; the actions thread learns of it from ``abort`` and commands nothing more than
+    catching the model and stopping the fan. Outside the main thread (no signals there) the
+    handler is left alone.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+
+    def handler(signum: int, frame: Any) -> None:
+        abort.set()
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGINT, handler)
+
+    def undo() -> None:
+        signal.signal(signal.SIGINT, previous)
+
+    return undo
+
+
+def _loop(session: _Session, outcome: CampaignOutcome) -> None:
+    plan, config, say = session.plan, session.config, session.say
+    listed = plan.listed_speeds(config.wind_per_rpm)
+    fraction = plan.adaptive.safety_fraction if plan.adaptive else FIXED_SAFETY_FRACTION
+    rig_limit = min(config.limits.max_wind_speed, config.limits.max_fan_rpm * config.wind_per_rpm)
+    decay_s = plan.decay_s if plan.decay_s is not None else default_decay_s(config.section)
+
+    for index, U, run, path in _read_back(session.out, say):
+        why = "listed in the plan" if index <= len(listed) else "read back"
+        n = 0 if run is None else len(run.releases)
+        outcome.steps.append(SpeedStep(index, U, path, n, f"{why} (resumed)"))
+        if run is not None:
+            session.runs.append(run)
+        outcome.resumed += 1
+    if outcome.resumed:
+        say(f"resume: {outcome.resumed} speed(s) read back from {session.out}")
+        outcome.analysis = _analysis(session.runs)
+        _say_estimate(say, outcome.analysis)
+
+    while True:
+        k = len(outcome.steps)  # speeds recorded so far
+        analysis = outcome.analysis
+        max_speeds = plan.adaptive.max_speeds if plan.adaptive else len(listed)
+        if k >= max_speeds:
+            outcome.stopped_because = (f"plan done: {k} speeds" if plan.mode == "fixed"
+                                       else f"max_speeds ({max_speeds}) reached")
+            return
+        # Three speeds at least: from two, E2RFC cannot measure the extrapolation part of the
+        # std (it refits without the top speed), so a two-speed std is only a lower bound.
+        if plan.adaptive and analysis is not None and analysis.flutter_speed is not None \
+                and k >= len(listed) and len(analysis.wind_speeds) >= MIN_SPEEDS_FOR_TARGET:
+            rel = analysis.flutter_std / analysis.flutter_speed  # type: ignore[operator]
+            if rel <= plan.adaptive.target_std:
+                outcome.stopped_because = (f"target met: std {100 * rel:.2f} % <= "
+                                           f"{100 * plan.adaptive.target_std:.2f} %")
+                return
+        bound = min(rig_limit, safety_bound(analysis, fraction))
+        if k < len(listed):
+            U, why = listed[k], "listed in the plan"
+        else:
+            assert plan.adaptive is not None and analysis is not None
+            releases = [r for run in session.runs for r in run.releases]
+            choice = choose_next(analysis, releases, plan.adaptive.candidates(), bound=bound,
+                                 releases_per_speed=plan.releases_per_speed, decay_s=decay_s)
+            outcome.choices.append(choice)
+            say(choice.summary())
+            if choice.speed is None:
+                outcome.stopped_because = choice.reason
+                return
+            U, why = choice.speed, choice.reason
+        if U > bound + 1e-9:
+            outcome.stopped_because = (
+                f"safety stop: the next speed {U:.2f} m/s is above the bound {bound:.2f} m/s "
+                f"({fraction:g} x (U_F - 3 std) of the current estimate, or the rig's limit "
+                f"{rig_limit:.3g} m/s); it was not set")
+            say(outcome.stopped_because)
+            return
+        step = _record_speed(session, outcome, k + 1, U, why, decay_s)
+        if step is None:  # grown or interrupted: the reason is set
+            return
+
+
+def _say_estimate(say: Callable[[str], None], analysis: CampaignAnalysis | None) -> None:
+    if analysis is None:
+        say("E2RFC: needs releases at two wind speeds")
+    elif analysis.flutter_speed is None:
+        say(f"E2RFC: {analysis.summary()}")
+    else:
+        std = analysis.flutter_std or math.nan
+        say(f"E2RFC: flutter speed {analysis.flutter_speed:.3f} +- {std:.3f} m/s "
+            f"({100 * std / analysis.flutter_speed:.2f} %), {analysis.structure}")
+
+
+def _record_speed(session: _Session, outcome: CampaignOutcome, index: int, U: float, why: str,
+                  decay_s: float) -> SpeedStep | None:
+    """Record one speed's file; return its step, or None when the campaign must stop."""
+    plan, config, say = session.plan, session.config, session.say
+    rpm = U / config.wind_per_rpm
+    n = plan.releases_per_speed
+    path = session.out / run_file_name(index, U)
+    say(f"[speed {index}] U = {U:.2f} m/s ({rpm:.0f} rpm): {why}")
+    section = config.section
+    monitor = DecayMonitor(1.0 / min(section.fh, section.fa))
+    done, grown = threading.Event(), threading.Event()
+    ramp = abs(rpm - session.fan_rpm) / _ramp_rate(config, session.fan_name)
+    duration = (1.5 * ramp + 2.0 + STEADY_TIMEOUT_S + plan.settle_s
+                + n * (HOLD_S + decay_s + plan.pause_s + 1.0) + 5.0)
+
+    def wait(seconds: float) -> bool:
+        """Wait ``seconds`` or until the decay grows or Ctrl-C; return True if it should stop."""
+        end = time.monotonic() + seconds
+        while (left := end - time.monotonic()) > 0:
+            if monitor.growing.wait(min(left, 0.05)) or session.abort.is_set():
+                return True
+        return False
+
+    def body(acq: Acquisition) -> None:
+        fan = acq.drivers[session.fan_name]
+        session.fan_commanded = True
+        acq.set_fan_speed(rpm)  # operator commands through the engine: events of the run
+        outcome.max_fan_rpm_commanded = max(outcome.max_fan_rpm_commanded, rpm)
+        acq.start_fan()
+        if session.fan_on_at is None:
+            session.fan_on_at = time.monotonic()
+        session.fan_rpm = rpm
+        _wait_steady(fan, rpm, plan.steady_tolerance, plan.settle_s, session.abort)
+        if session.abort.is_set():
+            return
+        say(f"  wind steady at {fan.speed() * config.wind_per_rpm:.2f} m/s")
+        for i in range(n):
+            acq.arm()
+            if wait(HOLD_S):
+                return
+            acq.release()
+            if wait(decay_s):
+                acq.arm()  # catch the model first, then take the wind away
+                acq.stop_fan()
+                if not monitor.growing.is_set():
+                    return  # Ctrl-C: caught and stopped, the runner waits the fan down
+                grown.set()
+                amp = monitor.amplitude()
+                say(f"  release {i + 1}/{n}: the decay GROWS"
+                    + ("" if amp is None else f" ({1e3 * amp.first:.2f} -> "
+                       f"{1e3 * amp.last:.2f} mm)") + ": model caught, fan stopped")
+                break
+            amp = monitor.amplitude()
+            say(f"  release {i + 1}/{n}: decay amplitude "
+                + ("?" if amp is None else f"{1e3 * amp.first:.2f} -> {1e3 * amp.last:.2f} mm "
+                   f"over {amp.windows} periods"))
+            if plan.pause_s and wait(plan.pause_s) and session.abort.is_set():
+                return
+        acq.arm()  # hold the model: the next decay is not recorded as part of this one
+        done.set()
+
+    def actions(acq: Acquisition) -> None:
+        try:
+            body(acq)
+        finally:
+            if session.abort.is_set() and acq.running:
+                acq.arm()  # Ctrl-C: the model is held before the run ends
+                acq.stop_fan()
+
+    calz = plan.calz_start and session.fan_on_at is None  # wind-off only before the first start
+    summary = record_run(config, path, duration_s=duration, calz=calz, actions=actions,
+                         progress=False, operator_notes=f"campaign speed {index}: {why}",
+                         subscribers=[monitor], until=done)
+    if not done.is_set():
+        target = path.with_name(path.name[:-3] + ".interrupted.h5")
+        path.rename(target)
+        outcome.stopped_because = "interrupted by the operator (Ctrl-C)"
+        say(f"interrupted: {target.name} kept, the speed is repeated on resume")
+        return None
+    try:
+        run = read_run(path)
+        session.runs.append(run)
+        releases = len(run.releases)
+    except (IdentError, ValueError, OSError) as exc:
+        say(f"  {path.name}: cannot be identified ({exc}); left out of the fit")
+        releases = 0
+    step = SpeedStep(index, U, path, releases, why)
+    outcome.steps.append(step)
+    say(f"  {path.name}: {summary.get('releases')} releases recorded")
+    if releases:
+        for j, mode in enumerate(_modes(session.runs[-1])):
+            say(f"  release {j + 1}: {mode}")
+    if grown.is_set():
+        outcome.stopped_because = (
+            f"safety stop: a decay grew at {U:.2f} m/s (negative total damping: at or beyond "
+            "flutter); the model was caught and the fan stopped")
+        _update(session, outcome, step)
+        return None
+    _update(session, outcome, step)
+    return step
+
+
+def _update(session: _Session, outcome: CampaignOutcome, step: SpeedStep) -> None:
+    try:
+        try:
+            outcome.analysis = _analysis(session.runs)
+        finally:  # the wind blows while the analysis runs: its time counts
+            if session.fan_on_at is not None:
+                step.wind_on_s = outcome.wind_on_s + time.monotonic() - session.fan_on_at
+    except IdentError as exc:
+        session.say(f"E2RFC: {exc}")
+        return
+    _say_estimate(session.say, outcome.analysis)
+    if outcome.analysis is not None:
+        step.flutter_speed = outcome.analysis.flutter_speed
+        step.flutter_std = outcome.analysis.flutter_std
+
+
+def _modes(run: RunFile) -> list[str]:
+    """Each release's modal fit (the one E2RFC's regressors use), one phrase each."""
+    out = []
+    for r in run.releases:
+        try:
+            m = fit_release_modes(r.t, r.h, r.alpha, run.section)
+        except (IdentError, ValueError) as exc:
+            out.append(f"no modal fit ({exc})")
+            continue
+        out.append(f"f_h {m.f_h:.3f} Hz, zeta_h {100 * m.zeta_h:.2f} %, "
+                   f"f_a {m.f_a:.3f} Hz, zeta_a {100 * m.zeta_a:.2f} %")
+    return out
+
+
+def _wait_steady(fan: Any, rpm: float, tolerance: float, settle_s: float,
+                 abort: threading.Event) -> None:
+    """Wait for the set-point, then until the speed stays within tolerance for ``settle_s``."""
+    tol = max(2.0, tolerance * rpm)
+    fan.wait_for_speed(rpm, tolerance_rpm=tol)
+    deadline = time.monotonic() + STEADY_TIMEOUT_S + settle_s
+    steady_since = time.monotonic()
+    while time.monotonic() - steady_since < settle_s and not abort.is_set():
+        if time.monotonic() > deadline:
+            raise DeviceError(f"the wind did not stay within {100 * tolerance:g} % of "
+                              f"{rpm:.0f} rpm for {settle_s:g} s within {STEADY_TIMEOUT_S:g} s")
+        if abs(fan.speed() - rpm) > tol:
+            steady_since = time.monotonic()
+        time.sleep(0.05)

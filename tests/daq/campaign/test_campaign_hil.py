@@ -1,0 +1,195 @@
+"""Headless campaigns on the simulated rig, end to end (HIL): real drivers, engine and files.
+
+Every campaign here runs the simulated instruments in a process of their own on loopback
+transports (``--simulate``), records one HDF5 file per wind speed, identifies E2RFC after each
+speed and writes the report. The simulated fan ramps fast (a simulator option) and the decays
+are short (one or two releases of 4-5 s) to keep the wall time modest; the simulated tunnel is
+deterministic (smooth flow, seeded noise), and the campaigns wait on the drive's speed and on
+the decay monitor's event, never on fixed guesses of how long the rig takes.
+"""
+
+from __future__ import annotations
+
+import _thread
+import json
+from pathlib import Path
+
+import h5py
+import pytest
+
+from daq.campaign.plan import parse_plan
+from daq.campaign.report import write_report
+from daq.campaign.runner import run_plan
+from daq.cli import main
+from daq.config import parse_rig_config
+
+REPO = Path(__file__).resolve().parents[3]
+RIG_TEXT = (REPO / "rig_configs" / "sim_flat_plate.toml").read_text()
+FAST_FAN = "\n[simulation.devices.fan]\nramp_rpm_per_s = 1000.0\n"
+#: The flat plate with a softer pitch spring (fa = 3 Hz): it flutters at 7.84 m/s, and the
+#: rig's limits allow 14 m/s, so a plan can ask for speeds beyond flutter.
+SOFT_RIG_TEXT = (RIG_TEXT.replace("fa = 4.0         # Hz", "fa = 3.0         # Hz")
+                 .replace("max_wind_speed = 11.0", "max_wind_speed = 14.0")
+                 .replace("max_fan_rpm = 1300.0", "max_fan_rpm = 1450.0"))
+SOFT_TRUTH = 7.838
+
+pytestmark = pytest.mark.slow
+
+
+def _fixed(speeds: list[float], releases: int = 1, decay_s: float = 4.0) -> str:
+    return f"""
+[campaign]
+mode = "fixed"
+releases_per_speed = {releases}
+decay_s = {decay_s}
+settle_s = 0.5
+calz_end = false
+
+[speeds]
+wind_speeds = {speeds!r}
+"""
+
+
+def _fan_set_points(path: Path) -> list[float]:
+    """Return the fan references (rpm) the campaign sent during one run file, from its events."""
+    with h5py.File(path, "r") as f:
+        events = f["/entry/events"][:]
+        assert f["/entry/releases"].shape[0] >= 1
+    return [json.loads(row["text"].decode().split(" rpm ", 1)[1])["rpm"]
+            for row in events if row["kind"] == b"fan_speed"]
+
+
+def test_adaptive_campaign_reaches_its_target_near_the_truth(tmp_path, capsys):
+    config = tmp_path / "rig.toml"
+    config.write_text(RIG_TEXT + FAST_FAN)
+    # The example plan with a 1.5 % target: from short decays the std itself scatters from
+    # campaign to campaign (its structure and one-lag-more parts), and a 1 % target is met
+    # by some campaigns within 6 speeds and not by others (benchmarks/campaign_efficiency.py).
+    plan = tmp_path / "plan.toml"
+    text = (REPO / "rig_configs" / "plans" / "adaptive.toml").read_text()
+    assert "target_std = 0.01 " in text
+    plan.write_text(text.replace("target_std = 0.01 ", "target_std = 0.015 "))
+    out = tmp_path / "campaign"
+    assert main(["campaign", str(plan), "--config", str(config), "--simulate",
+                 "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    report = json.loads((out / "campaign.json").read_text())
+
+    truth = report["truth_flutter_speed"]
+    assert truth == pytest.approx(11.849, abs=0.01)
+    assert report["stopped_because"].startswith("target met"), printed
+    U_F, std = report["flutter_speed"], report["flutter_speed_std"]
+    assert std <= 0.015 * U_F
+    assert abs(U_F - truth) <= 2 * std, printed
+    # The first two speeds are the plan's; the later ones chosen below the safety bound,
+    # each the candidate with the smallest predicted std.
+    speeds = report["speeds"]
+    assert speeds[:2] == [5.0, 7.0] and 3 <= len(speeds) <= 6
+    for choice, U in zip(report["choices"], speeds[2:], strict=False):
+        assert choice["speed"] == U and U <= choice["bound"] < truth
+        best = min(choice["predicted_std"], key=lambda row: row[1])
+        assert best[0] == U and best[1] < choice["current_std"]
+    # The std history falls from its first value to the last.
+    stds = [h["flutter_speed_std"] for h in report["history"] if h["flutter_speed_std"]]
+    assert len(stds) == len(speeds) - 1 and stds[-1] < stds[0]
+    assert 0 < report["wind_on_s"] < report["wall_s"]
+    for name in ("campaign_std_history.png", "campaign_flutter.png",
+                 "campaign_flutter_derivatives.png", "campaign.md"):
+        assert (out / name).stat().st_size > 0
+    for i, U in enumerate(speeds, start=1):
+        assert max(_fan_set_points(out / f"speed{i:02d}_U{U:05.2f}.h5")) == pytest.approx(
+            100 * U)
+
+
+def test_fixed_plan_beyond_flutter_stops_at_the_safety_bound(tmp_path):
+    config = parse_rig_config(SOFT_RIG_TEXT + FAST_FAN, "soft.toml")
+    plan = parse_plan(_fixed([3.5, 5.0, 12.0]), "plan.toml")
+    lines: list[str] = []
+    outcome = run_plan(plan, config, tmp_path, simulate=True, say=lines.append)
+    write_report(outcome, tmp_path, plots=False)
+
+    assert outcome.truth_flutter_speed == pytest.approx(SOFT_TRUTH, abs=0.01)
+    assert outcome.stopped_because.startswith("safety stop: the next speed 12.00 m/s"), lines
+    assert [s.U for s in outcome.steps] == [3.5, 5.0]
+    assert outcome.flutter_speed is not None and outcome.flutter_std is not None
+    bound = 0.9 * (outcome.flutter_speed - 3 * outcome.flutter_std)
+    assert bound < 12.0
+    # The fan was never sent more than the bound (nor anything near the truth), and stopped.
+    assert outcome.max_fan_rpm_commanded * config.wind_per_rpm <= bound
+    set_points = [rpm for s in outcome.steps for rpm in _fan_set_points(s.path)]
+    assert set_points == pytest.approx([350.0, 500.0])
+    assert any(line.startswith("fan stopped") for line in lines)
+    report = json.loads((tmp_path / "campaign.json").read_text())
+    assert report["speeds"] == [3.5, 5.0] and report["stopped_because"].startswith("safety")
+
+
+def test_a_growing_decay_is_caught_and_the_campaign_stops(tmp_path):
+    # The first speed (no estimate yet, so no bound) is beyond this rig's flutter speed.
+    config = parse_rig_config(SOFT_RIG_TEXT + FAST_FAN, "soft.toml")
+    plan = parse_plan(_fixed([8.5, 5.0], releases=2, decay_s=6.0), "plan.toml")
+    lines: list[str] = []
+    outcome = run_plan(plan, config, tmp_path, simulate=True, say=lines.append)
+
+    assert "a decay grew at 8.50 m/s" in outcome.stopped_because, lines
+    assert len(outcome.steps) == 1  # the second speed was never set
+    assert any("GROWS" in line and "model caught, fan stopped" in line for line in lines)
+    path = outcome.steps[0].path
+    with h5py.File(path, "r") as f:  # the file is finished and readable
+        kinds = [row["kind"].decode() for row in f["/entry/events"][:]]
+        assert f["/entry/releases"].shape[0] == 1  # the second release never happened
+    # After the release: the model caught (arm) before the fan was stopped.
+    after = kinds[kinds.index("release"):]
+    assert after.index("arm") < after.index("fan_stop")
+    assert any(line.startswith("fan stopped") for line in lines)
+
+
+def test_a_campaign_resumes_from_the_files_in_its_directory(tmp_path):
+    config = parse_rig_config(RIG_TEXT + FAST_FAN, "rig.toml")
+    first = run_plan(parse_plan(_fixed([5.0, 7.0]), "plan.toml"), config, tmp_path,
+                     simulate=True, say=lambda line: None)
+    write_report(first, tmp_path, plots=False)
+    recorded = {p.name: p.stat().st_mtime_ns for p in tmp_path.glob("speed*.h5")}
+    assert sorted(recorded) == ["speed01_U05.00.h5", "speed02_U07.00.h5"]
+    assert first.flutter_speed is not None
+
+    lines: list[str] = []
+    previous = json.loads((tmp_path / "campaign.json").read_text())
+    second = run_plan(parse_plan(_fixed([5.0, 7.0, 8.5]), "plan.toml"), config, tmp_path,
+                      simulate=True, say=lines.append, previous=previous)
+    assert second.resumed == 2
+    assert [s.U for s in second.steps] == [5.0, 7.0, 8.5]
+    assert any(line.startswith("resume: 2 speed(s) read back") for line in lines)
+    # The earlier files were read, not recorded again; only the third speed is new.
+    assert {p.name: p.stat().st_mtime_ns for p in tmp_path.glob("speed0[12]*.h5")} == recorded
+    assert (tmp_path / "speed03_U08.50.h5").exists()
+    assert not any(line.startswith("[speed 1]") or line.startswith("[speed 2]")
+                   for line in lines)
+    assert second.stopped_because == "plan done: 3 speeds"
+    assert second.wind_on_s > first.wind_on_s  # carried on, plus this session's
+    assert second.analysis is not None and second.analysis.n_releases == 3
+
+
+def test_ctrl_c_catches_the_model_stops_the_fan_and_finishes_the_file(tmp_path):
+    config = parse_rig_config(RIG_TEXT + FAST_FAN, "rig.toml")
+    plan = parse_plan(_fixed([5.0, 7.0], releases=2), "plan.toml")
+    lines: list[str] = []
+
+    def say(line: str) -> None:
+        lines.append(line)
+        if line.startswith("  release 1/2"):  # the operator presses Ctrl-C after a release
+            _thread.interrupt_main()
+
+    outcome = run_plan(plan, config, tmp_path, simulate=True, say=say)
+
+    assert outcome.stopped_because == "interrupted by the operator (Ctrl-C)", lines
+    assert outcome.steps == []  # the interrupted speed does not count: a resume repeats it
+    assert not list(tmp_path.glob("speed01_U05.00.h5"))
+    path = tmp_path / "speed01_U05.00.interrupted.h5"
+    with h5py.File(path, "r") as f:  # finished and readable
+        kinds = [row["kind"].decode() for row in f["/entry/events"][:]]
+        assert f["/entry/releases"].shape[0] == 1
+    assert kinds.count("release") == 1
+    last = len(kinds) - 1 - kinds[::-1].index("release")
+    assert "arm" in kinds[last:] and "fan_stop" in kinds[last:]
+    assert any(line.startswith("fan stopped") for line in lines)
+    assert not any(line.startswith("[speed 2]") for line in lines)
