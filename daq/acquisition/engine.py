@@ -450,9 +450,9 @@ class Acquisition:
         force: ``wind_speed_now`` is passed through), a new scan is started and the reader
         resumed. The interruption is marked, never silent: the scanner stream gets a gap over
         the pause (its length in frames where the frame times are absolute, else -1; see
-        ``daq.acquisition.adapters.ScannerAdapter``), so the sync view has NaN pressures and forces
-        there, and a ``"calz"`` event (at ``stop_ns``) carries the pause and the zero-offset
-        summary.
+        ``daq.instruments.scanivalve_mps4264.continuity``), so the sync view has NaN pressures
+        and forces there, and a ``"calz"`` event (at ``stop_ns``) carries the pause and the
+        zero-offset summary.
 
         Parameters
         ----------

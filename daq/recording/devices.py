@@ -18,9 +18,9 @@ Not responsible for: deciding when a device clock restarted, or the sync view an
 from __future__ import annotations
 
 import math
-from collections.abc import Collection, Mapping
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -30,7 +30,8 @@ from daq.sync.clock_map import ClockMap, trigger_times_from_flags, trigger_times
 from daq.sync.continuous_time import ContinuousTimeline
 
 __all__ = ["CLOCK_WINDOW_S", "POLLED_DEFAULTS", "POLLED_RATE_HZ", "TRIGGER_PAIRING_S",
-           "ClockObserver", "DeviceState", "new_clock_map", "take_rows"]
+           "ClockObserver", "DeviceState", "RawRows", "ScannerRawRows", "TableRawRows",
+           "laser_raw_rows", "new_clock_map", "take_rows"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -68,9 +69,67 @@ def take_rows(block: StreamBlock, lo: int, hi: int) -> StreamBlock:
         device=block.device, kind=block.kind, seq=block.seq,
         host_time_ns=block.host_time_ns[lo:hi],
         device_time=None if block.device_time is None else block.device_time[lo:hi],
-        counter=None if block.counter is None else block.counter[lo:hi],
+        counter=block.counter[lo:hi],
         values={k: np.asarray(v)[lo:hi] for k, v in block.values.items()},
-        gaps=(), raw=block.raw, overflow_samples=0)
+        gaps=(), info=block.info, overflow_samples=0)
+
+
+#: A block's values -> its raw stream's rows: the ``values`` table and the extra columns.
+RawRows = Callable[[Mapping[str, npt.NDArray[Any]], int],
+                   tuple[npt.NDArray[Any], dict[str, npt.NDArray[Any]]]]
+
+
+def laser_raw_rows(values: Mapping[str, npt.NDArray[Any]], n: int,
+                   ) -> tuple[npt.NDArray[Any], dict[str, npt.NDArray[Any]]]:
+    """Return a laser's raw rows: ``distance`` (m), its ``error_code`` and ``triggered`` flags."""
+    extra = {"error_code": values["error_code"] if "error_code" in values
+             else np.zeros(n, np.int32),
+             "triggered": values["triggered"] if "triggered" in values else np.zeros(n, bool)}
+    return values["distance"], extra
+
+
+class ScannerRawRows:
+    """A scanner's raw rows: the first ``n_taps`` pressures and the Pitot's (Pa), trigger times.
+
+    Parameters
+    ----------
+    n_taps : int
+        Pressure channels that are taps (the rig config's), the rest of the scanner unused.
+    """
+
+    def __init__(self, n_taps: int) -> None:
+        self.n_taps = int(n_taps)
+
+    def __call__(self, values: Mapping[str, npt.NDArray[Any]], n: int,
+                 ) -> tuple[npt.NDArray[Any], dict[str, npt.NDArray[Any]]]:
+        """Return the ``(n, n_taps + 1)`` table and the ``trigger_time`` column (s)."""
+        table = np.empty((n, self.n_taps + 1), np.float64)
+        table[:, :self.n_taps] = values["pressure"][:, :self.n_taps]
+        table[:, self.n_taps] = values["pitot"]
+        trigger = values["trigger_time"] if "trigger_time" in values else np.full(n, np.nan)
+        return table, {"trigger_time": trigger}
+
+
+class TableRawRows:
+    """A polled device's raw rows: its scalar channels side by side, as float64 (NaN if absent).
+
+    Parameters
+    ----------
+    channels : tuple of str
+        The columns, in order.
+    """
+
+    def __init__(self, channels: tuple[str, ...]) -> None:
+        self.channels = channels
+
+    def __call__(self, values: Mapping[str, npt.NDArray[Any]], n: int,
+                 ) -> tuple[npt.NDArray[Any], dict[str, npt.NDArray[Any]]]:
+        """Return the ``(n, channels)`` table and no extra column."""
+        table = np.full((n, len(self.channels)), np.nan)
+        for j, c in enumerate(self.channels):
+            if c in values:
+                table[:, j] = np.asarray(values[c], dtype=np.float64).reshape(n)
+        return table, {}
 
 
 @dataclass
@@ -96,15 +155,21 @@ class DeviceState:
     settle_until: float = math.nan  # device time up to which a new epoch's rows are held back
     held: list[tuple[StreamBlock, FloatArray, npt.NDArray[np.bool_]]] = field(
         default_factory=list)  # rows of the new epoch waiting for its map to settle
+    raw_rows: RawRows | None = None  # the block's values -> the raw stream's rows
+    view: str | None = None  # its stream in the sync view ("pressure", "laser.<name>") if any
 
     def anchor_triggers(self, block: StreamBlock, t_dev: FloatArray,
                         trigger_events: Collection[float]) -> None:
-        """Take the trigger times a block reveals (latched or flagged); pair those it can."""
-        if self.kind == "scanner" and "trigger_time" in block.values:
+        """Take the trigger times a block reveals (latched or flagged); pair those it can.
+
+        A ``trigger_time`` channel is a latch (the scanner's last trigger time on its clock, s);
+        a ``triggered`` channel flags the samples a trigger marked (the lasers).
+        """
+        if "trigger_time" in block.values:
             found = trigger_times_from_latch(block.values["trigger_time"], self.last_trigger)
             if found.size:
                 self.last_trigger = float(found[-1])
-        elif self.kind == "laser" and "triggered" in block.values:
+        elif "triggered" in block.values:
             ok = np.isfinite(t_dev)
             found = trigger_times_from_flags(t_dev[ok],
                                              np.asarray(block.values["triggered"])[ok],

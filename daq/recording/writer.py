@@ -51,6 +51,9 @@ from daq.recording.devices import (
     POLLED_RATE_HZ,
     ClockObserver,
     DeviceState,
+    ScannerRawRows,
+    TableRawRows,
+    laser_raw_rows,
     new_clock_map,
     take_rows,
 )
@@ -207,6 +210,8 @@ class RunWriter:
         tap_names = [f"tap{i:03d}" for i in range(n_taps)]
         streams: list[StreamSpec] = []
         for name, info in doc["devices"].items():
+            # The raw stream's layout is the file format's (docs/file_format.md): per role, so
+            # the one place the writer asks what kind of device it records.
             kind = str(info["kind"])
             describe = info.get("describe", {}) or {}
             if kind == "laser":
@@ -215,33 +220,40 @@ class RunWriter:
                 rec.add_stream(name, ["distance"], "m", rate, "float64",
                                extra={"error_code": "int32", "triggered": "bool"})
                 dev = DeviceState(name, kind, ["distance"], rate, new_clock_map(),
-                              ContinuousTimeline(1.0 / rate))
+                                  ContinuousTimeline(1.0 / rate), raw_rows=laser_raw_rows)
                 if name in self._lasers:
                     self._laser_order.append(name)
-                    streams.append(StreamSpec(f"laser.{name}", 1.0 / rate, "boxcar"))
+                    dev.view = f"laser.{name}"
+                    streams.append(StreamSpec(dev.view, 1.0 / rate, "boxcar"))
             elif kind == "scanner":
                 inst = self.config.instrument(name)
                 rate = float(inst.settings["rate_hz"])
                 rec.add_stream(name, [*tap_names, "pitot"], "Pa", rate, "float32",
                                extra={"trigger_time": "float64"})
                 dev = DeviceState(name, kind, [*tap_names, "pitot"], rate, new_clock_map(),
-                              ContinuousTimeline(1.0 / rate))
+                                  ContinuousTimeline(1.0 / rate),
+                                  raw_rows=ScannerRawRows(n_taps))
                 if name == self._scanner_name:
+                    dev.view = "pressure"
                     streams.append(StreamSpec("pressure", 1.0 / rate, "linear", n_taps))
                     streams.append(StreamSpec("pitot", 1.0 / rate, "linear"))
             else:
                 pairs = [(k, str(v.get("units", "") or "1")) for k, v in describe.items()
-                         if tuple(v.get("shape", ())) == () and k != "host_time_ns"]
+                         if tuple(v.get("shape", ())) == ()]
                 if not pairs:
                     pairs = list(POLLED_DEFAULTS.get(kind, (("value", "1"),)))
                 channels = [k for k, _ in pairs]
                 rate = POLLED_RATE_HZ.get(kind, 1.0)
                 rec.add_stream(name, channels, [u for _, u in pairs], rate, "float64")
-                dev = DeviceState(name, kind, channels, rate)
+                dev = DeviceState(name, kind, channels, rate,
+                                  raw_rows=TableRawRows(tuple(channels)))
             self._devices[name] = dev
         if len(self._laser_order) < 2:
             self._laser_order = []  # h and alpha need two lasers: no laser stream in the view
             streams = [s for s in streams if not s.name.startswith("laser.")]
+            for dev in self._devices.values():
+                if dev.view is not None and dev.view.startswith("laser."):
+                    dev.view = None
         rec.add_sync(tap_names)
         rec.start(self._t0_ns)
         if streams:
@@ -259,39 +271,22 @@ class RunWriter:
         dev.samples += n
         dev.overflow_samples += int(block.overflow_samples)
         restarts: list[int] = []  # counters after which the device restarted (length -1)
-        for after, length in block.gaps:
-            rec.add_gap(dev.name, int(after), int(length) if int(length) >= 1 else -1)
+        for gap in block.gaps:
+            rec.add_gap(dev.name, gap.after_counter, gap.length if gap.length >= 1 else -1)
             dev.gaps += 1
-            if int(length) < 0:
-                restarts.append(int(after))
+            if gap.length < 0:
+                restarts.append(gap.after_counter)
         if n == 0:
             dev.restart_pending = dev.restart_pending or bool(restarts)
             return
-        counter = (block.counter if block.counter is not None
-                   else np.arange(dev.samples - n, dev.samples, dtype=np.int64))
         values = block.values
-        if dev.kind == "laser":
-            distance = np.asarray(values["distance"], dtype=np.float64)
-            self._raw.add(dev.name, block, counter, distance,
-                             {"error_code": values.get("error_code", np.zeros(n, np.int32)),
-                              "triggered": values.get("triggered", np.zeros(n, bool))})
-        elif dev.kind == "scanner":
-            n_taps = self.config.taps.n_taps
-            pressure = np.asarray(values["pressure"], dtype=np.float64)
-            pitot = np.asarray(values["pitot"], dtype=np.float64).reshape(n, 1)
-            self._raw.add(dev.name, block, counter, np.hstack([pressure[:, :n_taps], pitot]),
-                             {"trigger_time": values.get("trigger_time", np.full(n, np.nan))})
-        else:
-            table = np.column_stack([np.asarray(values.get(c, np.full(n, np.nan)),
-                                                dtype=np.float64).reshape(n)
-                                     for c in dev.channels])
-            self._raw.add(dev.name, block, counter, table, {})
-            if dev.kind == "barometer" and "density" in values:
-                rho = float(np.asarray(values["density"], dtype=np.float64)[-1])
-                if math.isfinite(rho) and rho > 0:
-                    self._rho, self._rho_measured = rho, True
-            self._write_if_due()
-            return
+        assert dev.raw_rows is not None
+        table, extra = dev.raw_rows(values, n)
+        self._raw.add(dev.name, block, table, extra)
+        if "density" in values:  # a barometer: the air density of U and the forces
+            rho = float(values["density"][-1])
+            if math.isfinite(rho) and rho > 0:
+                self._rho, self._rho_measured = rho, True
         if block.device_time is None or dev.clock is None:
             self._write_if_due()
             return
@@ -301,6 +296,7 @@ class RunWriter:
             return
         # A restart gap splits the block: the rows before it belong to the old device clock
         # (and its map), the rows after it perhaps to a restarted one (see _map_rows).
+        counter = block.counter
         cuts = sorted({int(np.searchsorted(counter, after, side="right")) for after in restarts})
         bounds = [0, *(k for k in cuts if 0 < k < n), n]
         for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
@@ -434,15 +430,14 @@ class RunWriter:
         def rows(a: Any) -> FloatArray:
             return np.asarray(a, dtype=np.float64)[finite][keep]
 
-        if dev.kind == "laser" and dev.name in self._laser_order:
+        if dev.view == "pressure":
+            r.push("pressure", t, rows(block.values["pressure"])[:, :self.config.taps.n_taps])
+            r.push("pitot", t, rows(block.values["pitot"]))
+        elif dev.view is not None:
             d = rows(block.values["distance"])
             if "error_code" in block.values:
                 d = np.where(rows(block.values["error_code"]) != 0, np.nan, d)
-            r.push(f"laser.{dev.name}", t, d)
-        elif dev.kind == "scanner" and dev.name == self._scanner_name:
-            n_taps = self.config.taps.n_taps
-            r.push("pressure", t, rows(block.values["pressure"])[:, :n_taps])
-            r.push("pitot", t, rows(block.values["pitot"]))
+            r.push(dev.view, t, d)
 
     def _mark_break(self, dev: DeviceState, t_next: float) -> None:
         """Put a NaN sample between a device's last sample and ``t_next`` (run s) in the view.
@@ -461,11 +456,11 @@ class RunWriter:
         t_nan = (0.5 * (dev.last_host + t_next) if t_next > dev.last_host
                  else float(np.nextafter(dev.last_host, math.inf)))
         at = np.array([t_nan])
-        if dev.kind == "laser" and dev.name in self._laser_order:
-            r.push(f"laser.{dev.name}", at, np.full(1, np.nan))
-        elif dev.kind == "scanner" and dev.name == self._scanner_name:
+        if dev.view == "pressure":
             r.push("pressure", at, np.full((1, self.config.taps.n_taps), np.nan))
             r.push("pitot", at, np.full(1, np.nan))
+        elif dev.view is not None:
+            r.push(dev.view, at, np.full(1, np.nan))
 
     # -- sync view -----------------------------------------------------------------------------
     def _write_sync(self, sb: SyncBlock) -> None:
