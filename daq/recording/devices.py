@@ -34,6 +34,8 @@ __all__ = ["CLOCK_WINDOW_S", "POLLED_DEFAULTS", "POLLED_RATE_HZ", "TRIGGER_PAIRI
            "laser_raw_rows", "new_clock_map", "take_rows"]
 
 FloatArray = npt.NDArray[np.float64]
+#: No trigger time (a block without a new pulse).
+_NONE: FloatArray = np.zeros(0)
 
 #: Envelope window of the clock maps, s (see :class:`~daq.sync.clock_map.ClockMap`).
 CLOCK_WINDOW_S = 0.5
@@ -95,15 +97,19 @@ class ScannerRawRows:
     ----------
     n_taps : int
         Pressure channels that are taps (the rig config's), the rest of the scanner unused.
+    dtype : str
+        dtype of the raw stream's values: the table is built in it (one conversion, half the
+        bytes to batch for float32).
     """
 
-    def __init__(self, n_taps: int) -> None:
+    def __init__(self, n_taps: int, dtype: str = "float64") -> None:
         self.n_taps = int(n_taps)
+        self.dtype = np.dtype(dtype)
 
     def __call__(self, values: Mapping[str, npt.NDArray[Any]], n: int,
                  ) -> tuple[npt.NDArray[Any], dict[str, npt.NDArray[Any]]]:
         """Return the ``(n, n_taps + 1)`` table and the ``trigger_time`` column (s)."""
-        table = np.empty((n, self.n_taps + 1), np.float64)
+        table = np.empty((n, self.n_taps + 1), self.dtype)
         table[:, :self.n_taps] = values["pressure"][:, :self.n_taps]
         table[:, self.n_taps] = values["pitot"]
         trigger = values["trigger_time"] if "trigger_time" in values else np.full(n, np.nan)
@@ -153,7 +159,7 @@ class DeviceState:
     break_pending: bool = False  # the clock restarted: mark the break in the view (_push)
     clock_restarts: int = 0  # clock maps started afresh after a device clock restart
     settle_until: float = math.nan  # device time up to which a new epoch's rows are held back
-    held: list[tuple[StreamBlock, FloatArray, npt.NDArray[np.bool_]]] = field(
+    held: list[tuple[StreamBlock, FloatArray, npt.NDArray[np.bool_] | None]] = field(
         default_factory=list)  # rows of the new epoch waiting for its map to settle
     raw_rows: RawRows | None = None  # the block's values -> the raw stream's rows
     view: str | None = None  # its stream in the sync view ("pressure", "laser.<name>") if any
@@ -165,19 +171,28 @@ class DeviceState:
         A ``trigger_time`` channel is a latch (the scanner's last trigger time on its clock, s);
         a ``triggered`` channel flags the samples a trigger marked (the lasers).
         """
-        if "trigger_time" in block.values:
-            found = trigger_times_from_latch(block.values["trigger_time"], self.last_trigger)
+        values = block.values
+        if "trigger_time" in values:
+            latched = np.asarray(values["trigger_time"])
+            # Most blocks hold no new pulse: one comparison tells (NaN compares False).
+            if not (latched > self.last_trigger).any():
+                found = _NONE
+            else:
+                found = trigger_times_from_latch(latched, self.last_trigger)
             if found.size:
                 self.last_trigger = float(found[-1])
-        elif "triggered" in block.values:
-            ok = np.isfinite(t_dev)
-            found = trigger_times_from_flags(t_dev[ok],
-                                             np.asarray(block.values["triggered"])[ok],
-                                             1.0 / self.rate_hz)
+        elif "triggered" in values:
+            flags = np.asarray(values["triggered"])
+            if not flags.any():  # most blocks hold no flagged sample
+                found = _NONE
+            else:
+                ok = np.isfinite(t_dev)
+                found = trigger_times_from_flags(t_dev[ok], flags[ok], 1.0 / self.rate_hz)
         else:
             return
-        self.pending_triggers.extend(float(t) for t in found)
-        del self.pending_triggers[:-32]
+        if found.size:
+            self.pending_triggers.extend(float(t) for t in found)
+            del self.pending_triggers[:-32]
         self.pair_triggers(trigger_events)
 
     def pair_triggers(self, trigger_events: Collection[float]) -> None:
@@ -185,7 +200,8 @@ class DeviceState:
 
         ``trigger_events``: the host times of the PLC's trigger pulses, s from the run start.
         """
-        if self.clock is None or not self.clock.ready or not trigger_events:
+        if (not self.pending_triggers or self.clock is None or not self.clock.ready
+                or not trigger_events):
             return
         events = np.fromiter(trigger_events, dtype=np.float64)
         left: list[float] = []

@@ -232,7 +232,7 @@ class RunWriter:
                                extra={"trigger_time": "float64"})
                 dev = DeviceState(name, kind, [*tap_names, "pitot"], rate, new_clock_map(),
                                   ContinuousTimeline(1.0 / rate),
-                                  raw_rows=ScannerRawRows(n_taps))
+                                  raw_rows=ScannerRawRows(n_taps, "float32"))
                 if name == self._scanner_name:
                     dev.view = "pressure"
                     streams.append(StreamSpec("pressure", 1.0 / rate, "linear", n_taps))
@@ -318,12 +318,16 @@ class RunWriter:
         """
         assert dev.clock is not None
         t_dev = np.asarray(block.device_time, dtype=np.float64)
-        t_host = self._time(block.host_time_ns)
-        finite = np.isfinite(t_dev)
-        if not np.any(finite):
-            return
-        rows = np.flatnonzero(finite)
-        first, last = int(rows[0]), int(rows[-1])
+        finite: npt.NDArray[np.bool_] | None = np.isfinite(t_dev)
+        assert finite is not None
+        if finite.all():  # the usual case: no mask to apply downstream
+            first, last, finite = 0, t_dev.shape[0] - 1, None
+        else:
+            rows = np.flatnonzero(finite)
+            if rows.size == 0:
+                return
+            first, last = int(rows[0]), int(rows[-1])
+        host_ns = block.host_time_ns
         if dev.restart_pending:
             dev.restart_pending = False
             # Device time not after the last one mapped: the device clock restarted with the scan
@@ -332,8 +336,9 @@ class RunWriter:
             # times, and relative ones the engine continued across its own pause (Acquisition.calz),
             # move forward: their map stays valid and is kept. (NaN: nothing mapped yet.)
             if float(t_dev[first]) <= dev.last_device_time:
-                self._restart_clock(dev, float(t_dev[first]), float(t_host[first]))
-        dev.clock.update(t_dev[last], float(t_host[last]))
+                self._restart_clock(dev, float(t_dev[first]),
+                                    (int(host_ns[first]) - self._t0_ns) * 1e-9)
+        dev.clock.update(float(t_dev[last]), (int(host_ns[last]) - self._t0_ns) * 1e-9)
         if self.use_trigger_anchors:
             dev.anchor_triggers(block, t_dev, self._trigger_events)
             if dev.pending_triggers:
@@ -408,27 +413,38 @@ class RunWriter:
             self._write_sync(self._resampler.pull())
 
     def _push(self, dev: DeviceState, block: StreamBlock, t_dev: FloatArray,
-              finite: npt.NDArray[np.bool_]) -> None:
+              finite: npt.NDArray[np.bool_] | None) -> None:
+        """Map a block's timed rows onto the host clock and give them to the sync view.
+
+        ``finite``: the rows with a device time (None: all of them, the usual case, where no
+        row is copied).
+        """
         r = self._resampler
         if r is None or dev.clock is None or dev.timeline is None:
             return
-        t = dev.timeline.map(t_dev[finite], dev.clock.to_host)
+        t = dev.timeline.map(t_dev if finite is None else t_dev[finite], dev.clock.to_host)
         # Only samples after every earlier one of the block: the resampler needs increasing
         # times, and a sample compared with its neighbour alone would let one that went back
         # (device time going back inside a block) through after the first.
-        keep = (np.concatenate(([True], t[1:] > np.maximum.accumulate(t)[:-1])) if t.size
-                else np.zeros(0, bool))
-        t = t[keep]
+        keep: npt.NDArray[np.bool_] | None = None
+        if t.size > 1 and not (t[1:] > t[:-1]).all():
+            keep = np.concatenate(([True], t[1:] > np.maximum.accumulate(t)[:-1]))
+            t = t[keep]
         if dev.break_pending and t.size:
             dev.break_pending = False
             self._mark_break(dev, t[0])
         if t.size:
             dev.last_host = max(dev.last_host, float(t[-1]))
         if self.clock_truth is not None:
-            self.clock_truth.observe(dev.name, t, t_dev[finite][keep], self._t0_ns * 1e-9)
+            t_seen = t_dev if finite is None else t_dev[finite]
+            self.clock_truth.observe(dev.name, t, t_seen if keep is None else t_seen[keep],
+                                     self._t0_ns * 1e-9)
 
         def rows(a: Any) -> FloatArray:
-            return np.asarray(a, dtype=np.float64)[finite][keep]
+            out = np.asarray(a, dtype=np.float64)
+            if finite is not None:
+                out = out[finite]
+            return out if keep is None else out[keep]
 
         if dev.view == "pressure":
             r.push("pressure", t, rows(block.values["pressure"])[:, :self.config.taps.n_taps])
@@ -436,7 +452,9 @@ class RunWriter:
         elif dev.view is not None:
             d = rows(block.values["distance"])
             if "error_code" in block.values:
-                d = np.where(rows(block.values["error_code"]) != 0, np.nan, d)
+                code = block.values["error_code"]
+                if np.any(code):  # else every distance is valid as it stands
+                    d = np.where(rows(code) != 0, np.nan, d)
             r.push(dev.view, t, d)
 
     def _mark_break(self, dev: DeviceState, t_next: float) -> None:

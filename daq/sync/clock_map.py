@@ -188,6 +188,14 @@ class ClockMap:
         ValueError
             Shapes differ, or a time is not finite (a pair without a time is not evidence).
         """
+        if isinstance(t_device, float) and isinstance(t_host, float):
+            # The recorder's case (one pair per block, as floats): no arrays at all.
+            if not (math.isfinite(t_device) and math.isfinite(t_host)):
+                raise ValueError("1 of 1 clock pairs are not finite")
+            if self._origin is None:
+                self._origin = (t_device, t_host)
+            self._add_pair(t_device - self._origin[0], t_host - self._origin[1])
+            return
         d = float_1d("t_device", t_device)
         h = float_1d("t_host", t_host)
         if d.shape != h.shape:

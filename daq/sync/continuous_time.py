@@ -128,10 +128,14 @@ class ContinuousTimeline:
                     self.steps += 1
             else:
                 self.steps += 1
-        # Paid off from the previous sample on (the first sample already pays for its spacing).
-        origin = last if correction and last is not None else float(t[0])
-        remaining = np.maximum(abs(correction) - self.max_slew * (t - origin), 0.0)
-        out = mapped + math.copysign(1.0, correction) * remaining
+        if correction == 0.0 and float(t[0]) <= float(t.min()):
+            out = mapped  # nothing to pay off (the usual case between refits)
+        else:
+            # Paid off from the previous sample on (the first sample already pays for its
+            # spacing).
+            origin = last if last is not None else float(t[0])
+            remaining = np.maximum(abs(correction) - self.max_slew * (t - origin), 0.0)
+            out = mapped + math.copysign(1.0, correction) * remaining
         self._last_device = float(t[-1])
         self._last_host = float(out[-1])
         self.correction_s = float(out[-1] - mapped[-1])

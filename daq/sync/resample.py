@@ -276,18 +276,23 @@ class Resampler:
         want = (tt.size,) if spec.channels is None else (tt.size, spec.channels)
         if v.shape != want:
             raise ValueError(f"{name}: values must have shape {want}, got {v.shape}")
-        if not np.all(np.isfinite(tt)):
+        if tt.size == 0:
+            return
+        if not np.isfinite(tt).all():
             raise ValueError(f"{name}: sample times must be finite")
-        if tt.size > 1 and np.any(np.diff(tt) <= 0.0):
+        if tt.size > 1 and not (tt[1:] > tt[:-1]).all():
             raise ValueError(f"{name}: sample times must increase within a push")
         v = v.reshape(tt.size, -1)
-        if buf.last > -math.inf:
+        # The times increase: the first one tells whether any overlaps or comes late (the usual
+        # push has neither, and is kept without a copy).
+        if float(tt[0]) <= buf.last:
             keep = tt > buf.last
             buf.overlapping += int(tt.size - np.count_nonzero(keep))
             tt, v = tt[keep], v[keep]
-        if self._next > 0:
-            buf.late += int(np.count_nonzero(tt < float(self._time(self._next - 1))
-                                             - self._support(spec)))
+        if self._next > 0 and tt.size:
+            late_before = float(self._time(self._next - 1)) - self._support(spec)
+            if float(tt[0]) < late_before:
+                buf.late += int(np.count_nonzero(tt < late_before))
         buf.append(tt, v)
 
     # -- output -----------------------------------------------------------------------------------
