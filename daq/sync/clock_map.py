@@ -23,6 +23,7 @@ device time at the run start. The clock convention is that of
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any, Final, overload
 
@@ -49,9 +50,28 @@ _MAX_SLOPE_POINTS = 120
 
 def _weighted_median(values: FloatArray, weights: FloatArray) -> float:
     """Lower weighted median: the smallest value whose cumulative weight reaches half the total."""
-    order = np.argsort(values, kind="stable")
+    # Any sort gives the same value: tied values are equal, and the cumulative weight at the
+    # end of a run of ties does not depend on their order (the introsort is ~2x the stable one).
+    order = np.argsort(values)
     cum = np.cumsum(weights[order])
-    return float(values[order][np.searchsorted(cum, 0.5 * cum[-1])])
+    return float(values[order[np.searchsorted(cum, 0.5 * cum[-1])]])
+
+
+@functools.lru_cache(maxsize=8)
+def _pairs(n: int) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
+    """Index pairs ``i < j`` of ``n`` points (cached: every refit of a full map uses 120)."""
+    i, j = np.triu_indices(n, 1)
+    i.setflags(write=False)
+    j.setflags(write=False)
+    return i, j
+
+
+@functools.lru_cache(maxsize=8)
+def _thinning(n: int) -> npt.NDArray[np.intp]:
+    """Indices of ``_MAX_SLOPE_POINTS`` of ``n`` points, evenly spread (cached)."""
+    keep = np.linspace(0, n - 1, _MAX_SLOPE_POINTS).round().astype(np.intp)
+    keep.setflags(write=False)
+    return keep
 
 
 def _theil_sen_slope(x: FloatArray, y: FloatArray) -> float:
@@ -65,9 +85,9 @@ def _theil_sen_slope(x: FloatArray, y: FloatArray) -> float:
     if x.size > _MAX_SLOPE_POINTS:
         # All pairs of 600 points (a 5 min clock span) cost ~19 ms per refit; an even thinning
         # keeps the span (what the drift needs) and the robustness, at ~0.5 ms.
-        keep = np.linspace(0, x.size - 1, _MAX_SLOPE_POINTS).round().astype(np.intp)
+        keep = _thinning(x.size)
         x, y = x[keep], y[keep]
-    i, j = np.triu_indices(x.size, 1)
+    i, j = _pairs(x.size)
     dx = x[j] - x[i]
     keep = dx != 0.0
     dx, dy = dx[keep], (y[j] - y[i])[keep]

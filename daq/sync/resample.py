@@ -369,6 +369,12 @@ def _linear(t: FloatArray, v: FloatArray, times: FloatArray, max_gap: float) -> 
     ok &= dt <= max_gap
     w = ((times - t[i]) / dt)[:, None]
     # v_i + w (v_j - v_i): a NaN at either end gives NaN (a missing sample is never bridged).
+    if ok.all():  # the usual pull: every time inside the data, no long gap (no masked copy)
+        vi = v[i]
+        interp = v[i + 1] - vi
+        interp *= w
+        interp += vi
+        return np.asarray(interp)
     out[ok] = (v[i] + w * (v[i + 1] - v[i]))[ok]
     return out
 
