@@ -418,8 +418,11 @@ class MicroEpsilonIld1420:
 
     def _build_block(self) -> Reading:
         parts, self._backlog, self._backlog_size = self._backlog, [], 0
-        samples = Ild1420Samples.concatenate([p for p, _ in parts])
-        host_ns = np.concatenate([h for _, h in parts])
+        if len(parts) == 1:  # one transport read held the block: nothing to join
+            samples, host_ns = parts[0]
+        else:
+            samples = Ild1420Samples.concatenate([p for p, _ in parts])
+            host_ns = np.concatenate([h for _, h in parts])
         assert samples.counter is not None and samples.timestamp is not None
         assert samples.status is not None  # required by the settings
         counter, device_time, epoch, gaps = self._sequencer.process(

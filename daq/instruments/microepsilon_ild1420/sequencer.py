@@ -75,6 +75,10 @@ class Ild1420Sequencer:
         gaps: list[Gap] = []
         if n == 0:
             return out_c, out_t.astype(np.float64), epochs, gaps
+        if self._last is not None and not self._check_next:
+            fast = self._consecutive(counter, timestamp, host_ns)
+            if fast is not None:
+                return fast
         first_ever = self._last is None
         if self._last is None:
             prev = (int(counter[0]), int(timestamp[0]), 0, 0, int(host_ns[0]))
@@ -125,6 +129,42 @@ class Ild1420Sequencer:
                 c, t = int(run[-1]), int(out_t[b - 1])
         self._last = (int(counter[-1]), int(timestamp[-1]), c, t, int(host_ns[-1]))
         return out_c, out_t.astype(np.float64) * TIMESTAMP_TICK_S, epochs, gaps  # ticks -> s
+
+    def _consecutive(self, counter: IntArray, timestamp: IntArray, host_ns: IntArray,
+                     ) -> tuple[IntArray, FloatArray, npt.NDArray[np.int32], list[Gap]] | None:
+        """:meth:`process` of a batch that continues the last one sample by sample, else None.
+
+        The usual batch: every counter step is 1 and every timestamp step is forward and too
+        short to hide a counter wrap. Its counters and ticks then follow by a cumulative sum,
+        without the general path's wrap corrections, restart search and per-gap loop (the same
+        numbers).
+        """
+        assert self._last is not None
+        raw_c, raw_t, c, t, _ = self._last
+        n = int(counter.size)
+        dc = np.empty(n, np.int64)
+        dc[0] = int(counter[0]) - raw_c
+        np.subtract(counter[1:], counter[:-1], out=dc[1:])
+        dc %= COUNTER_MODULUS
+        if not (dc == 1).all():
+            return None
+        dt = np.empty(n, np.int64)
+        dt[0] = int(timestamp[0]) - raw_t
+        np.subtract(timestamp[1:], timestamp[:-1], out=dt[1:])
+        dt %= TIMESTAMP_MODULUS
+        longest = int(dt.max())
+        # No restart (a timestamp going back), and no step long enough for the timestamp to
+        # correct the counter by a whole period (round((expected - 1) / 2**18) would be >= 1).
+        if (longest >= TIMESTAMP_MODULUS // 2
+                or (longest * (TIMESTAMP_TICK_S * self.rate_hz) - 1) / COUNTER_MODULUS >= 0.5):
+            return None
+        out_c = np.arange(c + 1, c + n + 1, dtype=np.int64)
+        out_t = np.cumsum(dt)
+        out_t += t
+        self._last = (int(counter[-1]), int(timestamp[-1]), c + n, int(out_t[-1]),
+                      int(host_ns[-1]))
+        epochs = np.full(n, self.epoch, dtype=np.int32)
+        return out_c, out_t.astype(np.float64) * TIMESTAMP_TICK_S, epochs, []
 
     def _continues(self, dc: int, dt: int, elapsed_ns: int) -> bool:
         """Whether a step across a reconnect is consistent with the host time elapsed."""
