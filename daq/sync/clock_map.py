@@ -59,7 +59,7 @@ def _weighted_median(values: FloatArray, weights: FloatArray) -> float:
 
 @functools.lru_cache(maxsize=8)
 def _pairs(n: int) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
-    """Index pairs ``i < j`` of ``n`` points (cached: every refit of a full map uses 120)."""
+    """Return the index pairs ``i < j`` of ``n`` points (cached: a full map refits on 120)."""
     i, j = np.triu_indices(n, 1)
     i.setflags(write=False)
     j.setflags(write=False)
@@ -68,7 +68,7 @@ def _pairs(n: int) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
 
 @functools.lru_cache(maxsize=8)
 def _thinning(n: int) -> npt.NDArray[np.intp]:
-    """Indices of ``_MAX_SLOPE_POINTS`` of ``n`` points, evenly spread (cached)."""
+    """Return the indices of ``_MAX_SLOPE_POINTS`` of ``n`` points, evenly spread (cached)."""
     keep = np.linspace(0, n - 1, _MAX_SLOPE_POINTS).round().astype(np.intp)
     keep.setflags(write=False)
     return keep
