@@ -7,7 +7,8 @@ and their pairing with the PLC's trigger pulses as clock anchors
 (:meth:`DeviceState.anchor_triggers`, :meth:`DeviceState.pair_triggers`), and the state of a
 device clock restart (rows held back until a fresh map settles). :func:`take_rows` cuts a block
 at a restart gap; :data:`POLLED_DEFAULTS` names the raw channels of polled devices that do not
-describe themselves; :class:`ClockObserver` is what the writer tells the sync view's times to
+describe themselves; :func:`declare_device` declares a device's raw stream in the file and
+builds its state; :class:`ClockObserver` is what the writer tells the sync view's times to
 (a check against a simulated rig's truth).
 
 Not responsible for: deciding when a device clock restarted, or the sync view and the file
@@ -26,12 +27,14 @@ import numpy as np
 import numpy.typing as npt
 
 from daq.acquisition.records import StreamBlock
+from daq.config import RigConfig
+from daq.recording.recorder import Recorder
 from daq.sync.clock_map import ClockMap, trigger_times_from_flags, trigger_times_from_latch
 from daq.sync.continuous_time import ContinuousTimeline
 
 __all__ = ["CLOCK_WINDOW_S", "POLLED_DEFAULTS", "POLLED_RATE_HZ", "TRIGGER_PAIRING_S",
            "ClockObserver", "DeviceState", "RawRows", "ScannerRawRows", "TableRawRows",
-           "laser_raw_rows", "new_clock_map", "take_rows"]
+           "declare_device", "laser_raw_rows", "new_clock_map", "take_rows"]
 
 FloatArray = npt.NDArray[np.float64]
 #: No trigger time (a block without a new pulse).
@@ -63,6 +66,51 @@ def new_clock_map(assumed_floor_s: float = 0.0) -> ClockMap:
     # 0.5 s windows (20 laser blocks, 25 scanner blocks each): a usable slope after ~1.5 s
     # (2 s windows leave a short run with a two-point slope); 600 windows span 5 min.
     return ClockMap(window_s=CLOCK_WINDOW_S, n_windows=600, assumed_floor_s=assumed_floor_s)
+
+
+def declare_device(rec: Recorder, config: RigConfig, name: str, kind: str,
+                   describe: Mapping[str, Mapping[str, Any]]) -> DeviceState:
+    """Declare a device's raw stream in the run file; return its state, clocked or not.
+
+    The raw stream's layout is the file format's (docs/file_format.md), per role: so this is
+    where the writer asks what kind of device it records. A laser records ``distance`` (m)
+    with its ``error_code`` and ``triggered`` flags, a scanner its taps and Pitot (Pa, float32)
+    with the trigger time, a polled device the scalar channels its ``describe()`` names.
+
+    Parameters
+    ----------
+    rec : Recorder
+        The run file, declaring.
+    config : RigConfig
+        The rig config (the lasers' and the scanner's rates, the taps).
+    name, kind : str
+        The device and its engine kind.
+    describe : mapping
+        The driver's ``describe()`` (channel -> units, dtype, shape).
+    """
+    if kind == "laser":
+        lasers = {inst.name: inst for inst in config.by_role("lasers")}
+        rate = float(lasers[name].settings["rate_hz"]) if name in lasers else 4000.0
+        rec.add_stream(name, ["distance"], "m", rate, "float64",
+                       extra={"error_code": "int32", "triggered": "bool"})
+        return DeviceState(name, kind, ["distance"], rate, new_clock_map(),
+                           ContinuousTimeline(1.0 / rate), raw_rows=laser_raw_rows)
+    if kind == "scanner":
+        rate = float(config.instrument(name).settings["rate_hz"])
+        n_taps = config.taps.n_taps
+        channels = [*(f"tap{i:03d}" for i in range(n_taps)), "pitot"]
+        rec.add_stream(name, channels, "Pa", rate, "float32", extra={"trigger_time": "float64"})
+        return DeviceState(name, kind, channels, rate, new_clock_map(),
+                           ContinuousTimeline(1.0 / rate),
+                           raw_rows=ScannerRawRows(n_taps, "float32"))
+    pairs = [(k, str(v.get("units", "") or "1")) for k, v in describe.items()
+             if tuple(v.get("shape", ())) == ()]
+    if not pairs:
+        pairs = list(POLLED_DEFAULTS.get(kind, (("value", "1"),)))
+    channels = [k for k, _ in pairs]
+    rate = POLLED_RATE_HZ.get(kind, 1.0)
+    rec.add_stream(name, channels, [u for _, u in pairs], rate, "float64")
+    return DeviceState(name, kind, channels, rate, raw_rows=TableRawRows(tuple(channels)))
 
 
 def take_rows(block: StreamBlock, lo: int, hi: int) -> StreamBlock:

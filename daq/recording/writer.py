@@ -47,13 +47,9 @@ from daq.acquisition.records import Event, StreamBlock
 from daq.config import RigConfig
 from daq.errors import StorageError
 from daq.recording.devices import (
-    POLLED_DEFAULTS,
-    POLLED_RATE_HZ,
     ClockObserver,
     DeviceState,
-    ScannerRawRows,
-    TableRawRows,
-    laser_raw_rows,
+    declare_device,
     new_clock_map,
     take_rows,
 )
@@ -62,7 +58,6 @@ from daq.recording.raw_batches import RawBatches
 from daq.recording.recorder import Recorder, RunRecorder
 from daq.recording.releases import ReleaseRows
 from daq.recording.sync_view import physical_columns
-from daq.sync.continuous_time import ContinuousTimeline
 from daq.sync.resample import Resampler, StreamSpec, SyncBlock
 
 __all__ = ["DEFAULT_RHO", "DEFAULT_SYNC_RATE_HZ", "RunWriter", "default_sync_rate_hz"]
@@ -210,43 +205,17 @@ class RunWriter:
         tap_names = [f"tap{i:03d}" for i in range(n_taps)]
         streams: list[StreamSpec] = []
         for name, info in doc["devices"].items():
-            # The raw stream's layout is the file format's (docs/file_format.md): per role, so
-            # the one place the writer asks what kind of device it records.
             kind = str(info["kind"])
-            describe = info.get("describe", {}) or {}
-            if kind == "laser":
-                rate = float(self._lasers[name].settings["rate_hz"]) if name in self._lasers \
-                    else 4000.0
-                rec.add_stream(name, ["distance"], "m", rate, "float64",
-                               extra={"error_code": "int32", "triggered": "bool"})
-                dev = DeviceState(name, kind, ["distance"], rate, new_clock_map(),
-                                  ContinuousTimeline(1.0 / rate), raw_rows=laser_raw_rows)
-                if name in self._lasers:
-                    self._laser_order.append(name)
-                    dev.view = f"laser.{name}"
-                    streams.append(StreamSpec(dev.view, 1.0 / rate, "boxcar"))
-            elif kind == "scanner":
-                inst = self.config.instrument(name)
-                rate = float(inst.settings["rate_hz"])
-                rec.add_stream(name, [*tap_names, "pitot"], "Pa", rate, "float32",
-                               extra={"trigger_time": "float64"})
-                dev = DeviceState(name, kind, [*tap_names, "pitot"], rate, new_clock_map(),
-                                  ContinuousTimeline(1.0 / rate),
-                                  raw_rows=ScannerRawRows(n_taps, "float32"))
-                if name == self._scanner_name:
-                    dev.view = "pressure"
-                    streams.append(StreamSpec("pressure", 1.0 / rate, "linear", n_taps))
-                    streams.append(StreamSpec("pitot", 1.0 / rate, "linear"))
-            else:
-                pairs = [(k, str(v.get("units", "") or "1")) for k, v in describe.items()
-                         if tuple(v.get("shape", ())) == ()]
-                if not pairs:
-                    pairs = list(POLLED_DEFAULTS.get(kind, (("value", "1"),)))
-                channels = [k for k, _ in pairs]
-                rate = POLLED_RATE_HZ.get(kind, 1.0)
-                rec.add_stream(name, channels, [u for _, u in pairs], rate, "float64")
-                dev = DeviceState(name, kind, channels, rate,
-                                  raw_rows=TableRawRows(tuple(channels)))
+            dev = declare_device(rec, self.config, name, kind, info.get("describe", {}) or {})
+            # The sync view's streams: its lasers (h, alpha) and its scanner (taps, Pitot).
+            if kind == "laser" and name in self._lasers:
+                self._laser_order.append(name)
+                dev.view = f"laser.{name}"
+                streams.append(StreamSpec(dev.view, 1.0 / dev.rate_hz, "boxcar"))
+            elif kind == "scanner" and name == self._scanner_name:
+                dev.view = "pressure"
+                streams.append(StreamSpec("pressure", 1.0 / dev.rate_hz, "linear", n_taps))
+                streams.append(StreamSpec("pitot", 1.0 / dev.rate_hz, "linear"))
             self._devices[name] = dev
         if len(self._laser_order) < 2:
             self._laser_order = []  # h and alpha need two lasers: no laser stream in the view
