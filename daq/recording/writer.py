@@ -391,7 +391,8 @@ class RunWriter:
         r = self._resampler
         if r is None or dev.clock is None or dev.timeline is None:
             return
-        t = dev.timeline.map(t_dev if finite is None else t_dev[finite], dev.clock.to_host)
+        t = dev.timeline.map(t_dev if finite is None else t_dev[finite], dev.clock.to_host,
+                             version=dev.clock.version)
         # Only samples after every earlier one of the block: the resampler needs increasing
         # times, and a sample compared with its neighbour alone would let one that went back
         # (device time going back inside a block) through after the first.

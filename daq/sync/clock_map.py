@@ -174,6 +174,9 @@ class ClockMap:
         self.n_windows = n_windows
         self.max_anchors = max_anchors
         self.assumed_floor_s = floor
+        #: Changes whenever the map may have changed (a refit, an anchor, a reset): a caller
+        #: that mapped a time under one version gets the same host time under it again.
+        self.version = 0
         self.reset()
 
     def reset(self) -> None:
@@ -190,6 +193,7 @@ class ClockMap:
         self._n_anchors_total = 0
         self._envelope: tuple[float, float, float] | None = None  # slope, intercept, scatter
         self._map: tuple[float, float] | None = None
+        self.version += 1
         self._n_pairs = 0
 
     # -- feeding ----------------------------------------------------------------------------------
@@ -288,6 +292,7 @@ class ClockMap:
         self._anchors[slot] = (d - d0, h - h0, self._floor_of(d - d0, h - h0))
         self._n_anchors_total += 1
         self._map = None
+        self.version += 1
 
     # -- fitting ----------------------------------------------------------------------------------
     def _close_window(self) -> None:
@@ -322,6 +327,7 @@ class ClockMap:
         recent = (anchors[:, 0] >= d.min() - self.window_s) | np.isnan(anchors[:, 2])
         anchors[recent, 2] = (c + b * anchors[recent, 0]) - anchors[recent, 1]
         self._map = None
+        self.version += 1
 
     def _floor_of(self, d_rel: float, h_rel: float) -> float:
         if self._envelope is None:
