@@ -155,6 +155,8 @@ class RunWriter:
         self._release_rows = ReleaseRows()
         self._calz_count: dict[str, int] = {}
         self._trigger_events: deque[float] = deque(maxlen=64)
+        self._view_pieces: dict[str, list[tuple[FloatArray, FloatArray]]] = {}
+        self._n_taps = config.taps.n_taps
 
     # -- dispatch ------------------------------------------------------------------------------
     def __call__(self, name: str, doc: Any) -> None:
@@ -379,7 +381,7 @@ class RunWriter:
         assert rec is not None
         self._raw.write(rec)
         if self._resampler is not None:
-            self._write_sync(self._resampler.pull())
+            self._write_sync(self._pull())
 
     def _push(self, dev: DeviceState, block: StreamBlock, t_dev: FloatArray,
               finite: npt.NDArray[np.bool_] | None) -> None:
@@ -417,15 +419,33 @@ class RunWriter:
             return out if keep is None else out[keep]
 
         if dev.view == "pressure":
-            r.push("pressure", t, rows(block.values["pressure"])[:, :self.config.taps.n_taps])
-            r.push("pitot", t, rows(block.values["pitot"]))
+            self._to_view("pressure", t, rows(block.values["pressure"])[:, :self._n_taps])
+            self._to_view("pitot", t, rows(block.values["pitot"]))
         elif dev.view is not None:
             d = rows(block.values["distance"])
             if "error_code" in block.values:
                 code = block.values["error_code"]
                 if np.any(code):  # else every distance is valid as it stands
                     d = np.where(rows(code) != 0, np.nan, d)
-            r.push(dev.view, t, d)
+            self._to_view(dev.view, t, d)
+
+    def _to_view(self, stream: str, t: FloatArray, values: FloatArray) -> None:
+        """Queue samples of a sync-view stream for the next pull (:meth:`_pull`)."""
+        self._view_pieces.setdefault(stream, []).append((t, values))
+
+    def _pull(self) -> SyncBlock:
+        """Give the resampler the samples queued since the last pull; pull its rows.
+
+        One push per stream and pull (``Resampler.push_many``: the same as a push per block,
+        whose samples are first read at a pull) instead of one per block.
+        """
+        r = self._resampler
+        assert r is not None
+        for stream, pieces in self._view_pieces.items():
+            if pieces:
+                r.push_many(stream, pieces)
+                pieces.clear()
+        return r.pull()
 
     def _mark_break(self, dev: DeviceState, t_next: float) -> None:
         """Put a NaN sample between a device's last sample and ``t_next`` (run s) in the view.
@@ -445,10 +465,10 @@ class RunWriter:
                  else float(np.nextafter(dev.last_host, math.inf)))
         at = np.array([t_nan])
         if dev.view == "pressure":
-            r.push("pressure", at, np.full((1, self.config.taps.n_taps), np.nan))
-            r.push("pitot", at, np.full(1, np.nan))
+            self._to_view("pressure", at, np.full((1, self._n_taps), np.nan))
+            self._to_view("pitot", at, np.full(1, np.nan))
         elif dev.view is not None:
-            r.push(dev.view, at, np.full(1, np.nan))
+            self._to_view(dev.view, at, np.full(1, np.nan))
 
     # -- sync view -----------------------------------------------------------------------------
     def _write_sync(self, sb: SyncBlock) -> None:
@@ -525,7 +545,7 @@ class RunWriter:
         # partial (NaN). The view ends where every stream has data (or stalled for longer than
         # max_hold_s); the stragglers' samples stay in the raw streams.
         if self._resampler is not None:
-            self._write_sync(self._resampler.pull())
+            self._write_sync(self._pull())
         self._release_rows.finish(rec, self._sync_rows)
         fits = self.clock_fits()
         offsets = {n: f["offset_s"] for n, f in fits.items() if math.isfinite(f["offset_s"])}

@@ -295,6 +295,53 @@ class Resampler:
                 buf.late += int(np.count_nonzero(tt < late_before))
         buf.append(tt, v)
 
+    def push_many(self, name: str, pieces: Sequence[tuple[FloatArray, FloatArray]]) -> None:
+        """Add several pushes of one stream at once: the same as :meth:`push` of each in turn.
+
+        Each piece's times increase; a sample not after every earlier one of the stream is
+        dropped as overlapping, as :meth:`push` drops it (one concatenation instead of a push
+        per block: the run writer collects its blocks between two pulls).
+
+        Parameters
+        ----------
+        name : str
+            Stream name.
+        pieces : sequence of (t, values)
+            Host-mapped times (s, finite, increasing within a piece) and their values, as
+            :meth:`push` takes them, in order.
+        """
+        if len(pieces) == 1:
+            self.push(name, *pieces[0])
+            return
+        if not pieces:
+            return
+        if name not in self._buffers:
+            raise KeyError(f"unknown stream {name!r}; streams: {sorted(self._buffers)}")
+        buf = self._buffers[name]
+        spec = buf.spec
+        tt = np.concatenate([float_1d("t", t) for t, _ in pieces])
+        v = np.concatenate([np.asarray(x, dtype=np.float64).reshape(np.shape(t)[0], -1)
+                            for t, x in pieces])
+        width = 1 if spec.channels is None else spec.channels
+        if v.shape != (tt.size, width):
+            raise ValueError(f"{name}: values must have {width} channel(s), got {v.shape[1:]}")
+        if not np.isfinite(tt).all():
+            raise ValueError(f"{name}: sample times must be finite")
+        if tt.size == 0:
+            return
+        # A sample is kept when it is after every earlier one (the newest kept is the running
+        # maximum: a dropped sample is never above it), exactly as push() decides per piece.
+        before = np.maximum.accumulate(np.concatenate(([buf.last], tt[:-1])))
+        if not (tt > before).all():
+            keep = tt > before
+            buf.overlapping += int(tt.size - np.count_nonzero(keep))
+            tt, v = tt[keep], v[keep]
+        if self._next > 0 and tt.size:
+            late_before = float(self._time(self._next - 1)) - self._support(spec)
+            if float(tt[0]) < late_before:
+                buf.late += int(np.count_nonzero(tt < late_before))
+        buf.append(tt, v)
+
     # -- output -----------------------------------------------------------------------------------
     def pull(self) -> SyncBlock:
         """Return the sync samples every stream has covered (possibly none)."""
