@@ -289,16 +289,13 @@ class RunWriter:
         """
         assert dev.clock is not None
         t_dev = np.asarray(block.device_time, dtype=np.float64)
-        finite: npt.NDArray[np.bool_] | None = np.isfinite(t_dev)
-        assert finite is not None
-        if finite.all():  # the usual case: no mask to apply downstream
-            first, last, finite = 0, t_dev.shape[0] - 1, None
-        else:
-            rows = np.flatnonzero(finite)
-            if rows.size == 0:
-                return
-            first, last = int(rows[0]), int(rows[-1])
-        host_ns = block.host_time_ns
+        mask = np.isfinite(t_dev)
+        finite = None if mask.all() else mask  # None, the usual case: no mask downstream
+        rows = np.arange(t_dev.shape[0]) if finite is None else np.flatnonzero(mask)
+        if rows.size == 0:
+            return
+        first, last = int(rows[0]), int(rows[-1])
+        t_host = self._time(block.host_time_ns)
         if dev.restart_pending:
             dev.restart_pending = False
             # Device time not after the last one mapped: the device clock restarted with the scan
@@ -307,9 +304,16 @@ class RunWriter:
             # times, and relative ones the engine continued across its own pause (Acquisition.calz),
             # move forward: their map stays valid and is kept. (NaN: nothing mapped yet.)
             if float(t_dev[first]) <= dev.last_device_time:
-                self._restart_clock(dev, float(t_dev[first]),
-                                    (int(host_ns[first]) - self._t0_ns) * 1e-9)
-        dev.clock.update(float(t_dev[last]), (int(host_ns[last]) - self._t0_ns) * 1e-9)
+                self._restart_clock(dev, float(t_dev[first]), float(t_host[first]))
+        # Each read in a block (lasers: 20 ms of reads) has its own arrival stamp: the last row
+        # of every read is a tight pair for the clock map's lower envelope.
+        timed = t_host if finite is None else t_host[rows]
+        reads = np.flatnonzero(timed[1:] != timed[:-1])  # rows before a new arrival stamp
+        if reads.size == 0:  # one read: one pair, given as floats (no arrays in the map)
+            dev.clock.update(float(t_dev[last]), float(t_host[last]))
+        else:
+            ends = np.append(rows[reads], last)
+            dev.clock.update(t_dev[ends], t_host[ends])
         if self.use_trigger_anchors:
             dev.anchor_triggers(block, t_dev, self._trigger_events)
             if dev.pending_triggers:
@@ -385,11 +389,7 @@ class RunWriter:
 
     def _push(self, dev: DeviceState, block: StreamBlock, t_dev: FloatArray,
               finite: npt.NDArray[np.bool_] | None) -> None:
-        """Map a block's timed rows onto the host clock and give them to the sync view.
-
-        ``finite``: the rows with a device time (None: all of them, the usual case, where no
-        row is copied).
-        """
+        """Map a block's timed rows (``finite``; None: all, no copy) to the sync view's times."""
         r = self._resampler
         if r is None or dev.clock is None or dev.timeline is None:
             return
@@ -434,11 +434,7 @@ class RunWriter:
         self._view_pieces.setdefault(stream, []).append((t, values))
 
     def _pull(self) -> SyncBlock:
-        """Give the resampler the samples queued since the last pull; pull its rows.
-
-        One push per stream and pull (``Resampler.push_many``: the same as a push per block,
-        whose samples are first read at a pull) instead of one per block.
-        """
+        """Push the samples queued since the last pull, once per stream (as per block); pull."""
         r = self._resampler
         assert r is not None
         for stream, pieces in self._view_pieces.items():
