@@ -1,9 +1,9 @@
 # windrig: set-up and entry points.
 #
 # `make test` and `make demo` each do the whole set-up on a fresh machine that has only Python 3.11,
-# make and git: a virtualenv in .venv, the package installed editable with its test extra, and the
-# Debian libraries the Qt binding needs to start offscreen (and dask.distributed for `windrig
-# reprocess`). Re-runs skip what is already done.
+# make and git: a virtualenv in .venv, the package installed editable with its test, gui (the Qt
+# binding and pyqtgraph) and dask (dask.distributed for `windrig reprocess`) extras, and the
+# Debian libraries the Qt binding needs to start offscreen. Re-runs skip what is already done.
 #
 #   make test            run the test suite (pytest; extra arguments in PYTEST_ARGS="...")
 #   make demo            run a whole simulated campaign, results in demo_output/
@@ -69,7 +69,7 @@ $(PY):
 # Re-install when the metadata changes, or when a top-level package first appears (the editable
 # install maps the packages that exist at install time).
 $(STAMP): pyproject.toml Makefile $(wildcard daq/__init__.py ident/__init__.py simulators/__init__.py) | $(PY)
-	$(PIP) install -q --progress-bar off -e '.[test,dask]'
+	$(PIP) install -q --progress-bar off -e '.[test,dask,gui]'
 	@touch $@
 
 lint: $(VENV)/.ruff-$(RUFF_VERSION)

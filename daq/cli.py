@@ -17,7 +17,7 @@ import json
 import os
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -124,6 +124,25 @@ def _build_parser() -> argparse.ArgumentParser:
     p_acq.add_argument("--duration", type=float, required=True, help="seconds to record")
     p_acq.add_argument("--out", type=Path, required=True, help="run file to create (.h5)")
     p_acq.add_argument("--notes", default="", help="operator notes stored with the run")
+    p_acq.add_argument("--log-file", type=Path, default=None, metavar="FILE.log",
+                       help="also write the run's log (device faults, reconnects, dropped "
+                            "blocks, clock restarts) to this file, appended to")
+    p_acq.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING",
+                                                               "ERROR"),
+                       help="lowest level written to --log-file (default INFO)")
+
+    p_rec = sub.add_parser(
+        "recover",
+        help="make a run file left by a crash (SIGKILL, power cut) readable by any HDF5 tool: "
+             "keep every flushed row, trim a partly written last append, mark it recovered")
+    p_rec.add_argument("files", type=Path, nargs="+", help="windrig HDF5 run files")
+
+    p_info = sub.add_parser(
+        "info",
+        help="what a run file holds: rig, section, devices (rates, samples, gaps, clock fits), "
+             "releases, events, CALZ, and whether it was closed, crashed or recovered")
+    p_info.add_argument("file", type=Path, help="a windrig HDF5 run file")
+    p_info.add_argument("--json", action="store_true", help="print JSON instead of text")
 
     p_gui = sub.add_parser(
         "gui", help="the operator console: a live (simulated) rig, or replay of a run file")
@@ -196,6 +215,11 @@ def _acquire(args: argparse.Namespace) -> int:
                          progress=sys.stderr.isatty())
     except StorageError as exc:
         print(f"error: {exc}", file=sys.stderr)
+        if args.log_file is not None:  # else logging's last resort would print it again
+            import logging
+
+            logging.getLogger("daq.cli").error("acquire ended with an error: %s", exc,
+                                               exc_info=True)
         if failed_writes():  # HDF5 would crash the process at exit (h5py#914)
             sys.stdout.flush()
             sys.stderr.flush()
@@ -222,6 +246,29 @@ def _acquire(args: argparse.Namespace) -> int:
     for error in summary["errors"]:
         print(f"error: {error}")
     return 0 if not summary["errors"] else 1
+
+
+def _logged(args: argparse.Namespace, command: Callable[[argparse.Namespace], int]) -> int:
+    """Run ``command``, logging to ``args.log_file`` if given (its own errors logged too)."""
+    if args.log_file is None:
+        return command(args)
+    import logging
+
+    from daq.log_file import close_log_file, open_log_file
+
+    handler = open_log_file(args.log_file, args.log_level)
+    log = logging.getLogger("daq.cli")
+    log.info("windrig %s: %s", _version(), " ".join(args.argv))
+    try:
+        code = command(args)
+    except BaseException:
+        log.exception("%s ended with an error", args.command)  # the traceback, in the file
+        raise
+    else:
+        log.info("%s ended, exit status %d", args.command, code)
+        return code
+    finally:
+        close_log_file(handler)
 
 
 def _simulate(args: argparse.Namespace) -> int:
@@ -344,6 +391,33 @@ def _reprocess(args: argparse.Namespace) -> int:
     return 0
 
 
+def _recover(args: argparse.Namespace) -> int:
+    from daq.recording.recover import recover_run
+
+    for path in args.files:
+        report = recover_run(path)
+        if not report.recovered:
+            print(f"{path}: " + ("closed cleanly by its writer" if report.recovered_before is None
+                                 else f"already recovered ({report.recovered_before})")
+                  + ", nothing to recover")
+            continue
+        trimmed = sum(report.trimmed.values())
+        print(f"recovered {path}: status flags 0x{report.flags_before:02x} cleared; "
+              f"{report.sync_rows} sync rows kept (to {report.end_s:.3f} s); {trimmed} row(s) of "
+              f"a partly written last append trimmed; marked recovered")
+        for name, n in report.trimmed.items():
+            print(f"  trimmed {n:>6} row(s) of {name}")
+    return 0
+
+
+def _info(args: argparse.Namespace) -> int:
+    from daq.recording.info import format_info, run_info
+
+    info = run_info(args.file)
+    print(json.dumps(info, indent=2, allow_nan=False) if args.json else format_info(info))
+    return 0
+
+
 def _flutter(args: argparse.Namespace) -> int:
     from ident import RationalFunctionModel, SectionModel, flutter
 
@@ -422,11 +496,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     instead. Anything else is a bug and keeps its traceback.
     """
     args = _build_parser().parse_args(argv)
+    args.argv = list(sys.argv[1:] if argv is None else argv)  # for a log file's first line
     try:
         return _dispatch(args)
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # `windrig info RUN.h5 | head`: the reader has gone, not an error
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
     except (ValueError, OSError, ModuleNotFoundError) as exc:
         if args.debug:
             raise
@@ -453,10 +531,11 @@ def _is_usage(exc: BaseException) -> bool:
     Everything else failed while running (an unreachable device, data that cannot be
     identified, a full disk: exit 1).
     """
-    from daq.errors import ConfigError
+    from daq.errors import ConfigError, NotARunFileError
     from ident.io import FileFormatError
 
-    return isinstance(exc, (UsageError, ConfigError, FileFormatError, FileNotFoundError,
+    return isinstance(exc, (UsageError, ConfigError, FileFormatError, NotARunFileError,
+                            FileNotFoundError,
                             IsADirectoryError, NotADirectoryError))
 
 
@@ -492,9 +571,13 @@ def _dispatch(args: argparse.Namespace) -> int:
 
         return run_diagnose(args.files, args.out, depth=args.depth, json_path=args.json)
     if args.command == "acquire":
-        return _acquire(args)
+        return _logged(args, _acquire)
     if args.command == "gui":
         return _gui(args)
+    if args.command == "recover":
+        return _recover(args)
+    if args.command == "info":
+        return _info(args)
     raise AssertionError(f"unhandled command {args.command!r}")  # argparse rejects unknown ones
 
 

@@ -1,5 +1,9 @@
 """Rig configurations: TOML files in rig_configs/, parsed and validated into frozen objects.
 
+The simulated rigs windrig ships are package data (``daq/rig_configs/*.toml``, installed with
+the wheel; the repository's ``rig_configs`` is a link to that folder): :data:`SHIPPED_CONFIGS`,
+and :func:`load_rig_config` also takes a shipped config's bare name (``sim_flat_plate``).
+
 A rig config describes one tunnel set-up: the section model (structure and pressure taps), the
 safety limits, the tunnel calibration, the instruments (each a ``driver`` name, a transport
 ``url`` and driver-specific settings) and, for simulated rigs, the virtual tunnel's truth. Every
@@ -32,9 +36,11 @@ __all__ = [
     "InstrumentConfig",
     "Limits",
     "RigConfig",
+    "SHIPPED_CONFIGS",
     "SimulationConfig",
     "load_rig_config",
     "parse_rig_config",
+    "shipped_config",
 ]
 
 #: Instrument roles a rig may have (docs/wire_formats.md, "Transports and URLs").
@@ -149,13 +155,43 @@ class RigConfig:
         return [inst for inst in self.instruments if inst.role == role]
 
 
+#: The folder of the rig configs shipped inside the package (found without a source checkout).
+SHIPPED_CONFIGS = Path(__file__).resolve().parent / "rig_configs"
+
+
+def shipped_config(name: str) -> Path:
+    """Return the path of a shipped rig config by name (``"sim_flat_plate"``, ``.toml`` optional).
+
+    Raises
+    ------
+    ConfigError
+        If no shipped config has that name (the message lists those that do).
+    """
+    path = SHIPPED_CONFIGS / (name if name.endswith(".toml") else f"{name}.toml")
+    if not path.is_file():
+        names = sorted(p.stem for p in SHIPPED_CONFIGS.glob("*.toml"))
+        raise ConfigError(f"no shipped rig config {name!r}; shipped: {', '.join(names)}")
+    return path
+
+
 def load_rig_config(path: str | Path) -> RigConfig:
-    """Read and validate a rig config file."""
+    """Read and validate a rig config file.
+
+    A bare name with no such file in the working directory (``sim_flat_plate``, no folder) is
+    looked up among the shipped configs (:func:`shipped_config`).
+    """
     path = Path(path)
+    if not path.exists() and path.parent == Path(".") and \
+            (SHIPPED_CONFIGS / f"{path.stem}.toml").is_file():
+        path = shipped_config(path.name)
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
-        raise ConfigError(f"cannot read rig config {path}: {exc}") from exc
+        hint = ""
+        if path.parent == Path(".") and not path.exists():
+            names = sorted(p.stem for p in SHIPPED_CONFIGS.glob("*.toml"))
+            hint = f" (shipped configs, by name: {', '.join(names)})"
+        raise ConfigError(f"cannot read rig config {path}: {exc.strerror or exc}{hint}") from exc
     return parse_rig_config(text, source=str(path))
 
 

@@ -38,9 +38,11 @@ __all__ = [
     "DeviceError",
     "InsufficientSpaceError",
     "ModbusDeviceError",
+    "NotARunFileError",
     "ProtocolError",
     "RecorderError",
     "RecorderStateError",
+    "RecoveryError",
     "RecordingError",
     "RemoteError",
     "ReplayError",
@@ -143,8 +145,16 @@ class RecordingError(DaqError, RuntimeError):
     """
 
 
+class RecoveryError(RecorderError, ValueError):
+    """A run file that ``windrig recover`` cannot or must not recover (named in the message)."""
+
+
+class NotARunFileError(RecoveryError):
+    """The path is not a windrig run file: a directory, not HDF5, or another HDF5 layout."""
+
+
 class UsageError(DaqError, ValueError):
-    """A command-line value, or a file it names, that a command cannot take (exit code 2)."""
+    """A command-line value, or a file it names, that the command cannot take (exit 2)."""
 
 
 class ReplayError(DaqError, ValueError):

@@ -3,8 +3,8 @@
 It reads the synchronised view ``/entry/sync``, the releases table ``/entry/releases`` and the
 section model from the rig config stored verbatim in ``/entry/config``, and returns
 :class:`~ident.release.Release` objects and a :class:`~ident.section.SectionModel`. Nothing else
-in :mod:`ident` touches files. Files are opened read-only with ``swmr=True``, so a run still
-being written, or one left by a crash, can be read as well as a finished one.
+in :mod:`ident` touches files. Files are opened read-only, as SWMR readers when a writer has them
+open, so a run still being written, or one left by a crash, can be read as well as a finished one.
 
 Errors are specific: a missing file or dataset, a truncated file, or a release whose rows hold
 gaps (NaN) raises :class:`FileFormatError` (a ``ValueError``) naming the file and what is wrong.
@@ -81,7 +81,7 @@ def read_run(path: str | os.PathLike[str]) -> RunFile:
     if os.path.isdir(path):
         raise FileFormatError(f"{path}: a directory, not a run file")
     try:
-        handle = h5py.File(path, "r", swmr=True)
+        handle = _open(path)
     except OSError as exc:
         reason = ("not an HDF5 file (or its first bytes are lost)"
                   if "signature" in str(exc) else f"cannot be opened as HDF5: {exc}")
@@ -100,12 +100,28 @@ def read_run(path: str | os.PathLike[str]) -> RunFile:
         except KeyError as exc:
             raise FileFormatError(f"{path}: has no {part}: not a windrig run file (or an "
                                   "incomplete one)") from exc
-        except OSError as exc:  # a truncated or corrupted file fails on read
-            raise FileFormatError(f"{path}: unreadable (truncated?): {exc}") from exc
+        except (OSError, RuntimeError, ValueError) as exc:
+            # h5py's errors on a truncated or damaged file (OSError on reading data,
+            # RuntimeError on following a link, ValueError on a bad type)
+            raise FileFormatError(f"{path}: unreadable (truncated or damaged?): {exc}") from exc
     section, depth = _section(config_text, path, sync["rho"])
     releases = tuple(_release(sync, row, path, i) for i, row in enumerate(table))
     return RunFile(path=path, section=section, releases=releases, rig_name=rig_name,
                    depth=depth)
+
+
+def _open(path: str) -> h5py.File:
+    """Open read-only: plainly, or as a SWMR reader when a writer has the file (or had: a crash).
+
+    Not SWMR otherwise: a SWMR reader retries each metadata block whose checksum fails, with
+    pauses, so a damaged file would take minutes to fail instead of failing at once.
+    """
+    try:
+        return h5py.File(path, "r")
+    except OSError as exc:
+        if "already open for write" not in str(exc):
+            raise
+    return h5py.File(path, "r", libver="latest", swmr=True)
 
 
 def campaign_section(runs: Sequence[RunFile]) -> SectionModel:

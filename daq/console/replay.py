@@ -1,7 +1,8 @@
 """Play a recorded run file back, in time, as a console data source.
 
-Responsibility: open a windrig run file read-only (``swmr=True``, so a run still being written
-can be followed), check that it has the synchronised view and a usable rig config, and on each
+Responsibility: open a windrig run file read-only (as a SWMR reader when a writer has it open,
+:func:`daq.recording.layout.open_run_file`, so a run still being written can be followed),
+check that it has the synchronised view and a usable rig config, and on each
 :meth:`ReplaySource.poll` move the playback position forward by ``speed`` times the wall-clock
 time elapsed, appending the rows of ``/entry/sync`` now due to a :class:`~daq.console.ring_buffer.
 RingBuffer` that holds the visible window. :meth:`ReplaySource.snapshot` is that buffer's
@@ -27,6 +28,7 @@ from daq.config import parse_rig_config
 from daq.console.ring_buffer import RingBuffer
 from daq.console.source import SYNC_SCALARS, RingSource, SourceInfo, sync_columns
 from daq.errors import ConfigError, ReplayError
+from daq.recording.layout import open_run_file
 
 __all__ = ["MIN_HISTORY_S", "ReplaySource"]
 
@@ -90,7 +92,7 @@ class ReplaySource(RingSource):
         if not self.path.is_file():
             raise ReplayError(f"{where}: no such file")
         try:
-            f = h5py.File(self.path, "r", libver="latest", swmr=True)
+            f = open_run_file(self.path)
         except OSError as exc:
             raise ReplayError(f"{where}: cannot be opened as an HDF5 run file "
                               f"(not HDF5, or truncated): {exc}") from exc

@@ -10,7 +10,9 @@
 - :mod:`~daq.recording.sync_view`: the sync view's physical columns from the resampled streams;
 - :mod:`~daq.recording.raw_batches`: raw rows buffered between appends;
 - :mod:`~daq.recording.run`: :func:`record_run`, a rig with real URLs recorded into one file;
-- :mod:`~daq.recording.synthetic`: run files written from releases (test data for readers).
+- :mod:`~daq.recording.synthetic`: run files written from releases (test data for readers);
+- :mod:`~daq.recording.recover`: ``windrig recover``, a file left open by a crash made readable;
+- :mod:`~daq.recording.info`: ``windrig info``, what a run file holds.
 
 It knows no simulator: starting simulators is :mod:`daq.sim`'s decision. ``docs/file_format.md``
 is the file's contract for readers.

@@ -21,15 +21,17 @@ File layout
     /entry                 NXentry; default="sync", rig_name, operator_notes, start_time
     /entry/config          scalar UTF-8 string: the rig config TOML, verbatim
     /entry/instrument      NXinstrument
-    /entry/instrument/<d>  NXcollection; attrs channel_names, units (one per channel), rate (Hz)
+    /entry/instrument/<d>  NXdata (signal value, axes host_time_ns, channel); attrs channel_names,
+                           units (one per channel), rate (Hz)
         host_time_ns  (n,)          int64    host time.monotonic_ns() at arrival, ns
         device_time   (n,)          float64  device clock, s (NaN: the device has none)
         counter       (n,)          int64    unwrapped sample counter
         value         (n, ch)       float32 or float64, units as the group's attrs
         gaps          (g,) compound (after_counter int64, length int64); length -1 = unknown
         <extra>       (n,)          optional per-sample columns declared with the stream
+        channel       (ch,)         the channel names (value's second axis)
     /entry/sync            NXdata; signal="h", axes="time", time_indices=0, tap_names, t0_host_ns,
-                           clock_model, clock_offset_s.<d>, clock_drift_ppm.<d>,
+                           clock_model, clock_offset_s__<d>, clock_drift_ppm__<d>,
                            residual_misalignment_s
         time (s from run start), h (m), alpha (rad), lift (N/m), moment (N m/m), U (m/s),
         rho (kg/m^3): (n,) float64;  pressure (n, taps) float32 by default (Pa)
@@ -66,11 +68,14 @@ import numpy as np
 import numpy.typing as npt
 
 __all__ = ["CLOCK_MODEL", "EVENT_DTYPE", "EVENT_KIND_BYTES", "EVENT_TEXT_BYTES", "EXTRA_DTYPES",
-           "GAP_DTYPE", "GAP_FILL", "GZIP_LEVEL", "MAX_CHUNK_BYTES", "NAME_PATTERN",
-           "RELEASE_DTYPE", "RELEASE_UNITS", "SYNC_COLUMNS", "VALUE_DTYPES", "append_rows",
-           "check_name", "create_column", "create_stream", "create_sync", "event_row", "fill_value",
-           "metadata_name_part", "now_iso", "read_sync", "storable_metadata", "str_array",
-           "validate_metadata", "windrig_version", "write_metadata", "write_skeleton"]
+           "EXTRA_UNITS", "GAP_DTYPE", "GAP_FILL", "GZIP_LEVEL", "MAX_CHUNK_BYTES",
+           "NAME_PATTERN", "PER_DEVICE_SEPARATOR", "RELEASE_DTYPE", "RELEASE_UNITS",
+           "STREAM_TABLES", "SYNC_COLUMNS", "VALUE_DTYPES", "append_rows",
+           "attach_dimension_scales", "check_name", "create_column", "create_stream",
+           "create_sync", "event_row", "fill_value", "metadata_name_part", "now_iso",
+           "open_run_file", "per_device_attr", "per_device_attrs", "read_sync",
+           "storable_metadata", "str_array", "validate_metadata", "windrig_version",
+           "write_metadata", "write_skeleton"]
 
 #: Row of ``/entry/instrument/<device>/gaps``.
 GAP_DTYPE = np.dtype([("after_counter", "<i8"), ("length", "<i8")])
@@ -104,8 +109,40 @@ EVENT_DTYPE = np.dtype([("time", "<f8"),
 
 #: Clock mapping stored in ``/entry/sync``'s attributes (that of
 #: :class:`daq.sync.clock_map.ClockMap`).
-CLOCK_MODEL = ("device_time = clock_offset_s.<device> + (1 + 1e-6 clock_drift_ppm.<device>) t, "
+CLOCK_MODEL = ("device_time = clock_offset_s__<device> + (1 + 1e-6 clock_drift_ppm__<device>) t, "
                "t in s from run start")
+
+
+#: Separates a quantity from the device (or channel) it is for in an attribute name:
+#: ``clock_offset_s__scanner``. Files before issue 17 used ``.``, which NeXus does not allow in
+#: names; :func:`per_device_attrs` reads both.
+PER_DEVICE_SEPARATOR = "__"
+
+
+def per_device_attr(quantity: str, device: str) -> str:
+    """Return the attribute name of ``quantity`` for one device or channel.
+
+    >>> per_device_attr("clock_offset_s", "laser_front")
+    'clock_offset_s__laser_front'
+    """
+    return f"{quantity}{PER_DEVICE_SEPARATOR}{device}"
+
+
+def per_device_attrs(attrs: Mapping[str, Any], quantity: str) -> dict[str, float]:
+    """Return ``{device: value}`` of the attributes :func:`per_device_attr` names.
+
+    Reads the names of files before issue 17 too (``clock_offset_s.scanner``).
+
+    >>> per_device_attrs({"clock_offset_s__scanner": 0.5, "clock_offset_s.laser": 0.25,
+    ...                   "clock_model": "..."}, "clock_offset_s")
+    {'scanner': 0.5, 'laser': 0.25}
+    """
+    out = {}
+    for key, value in attrs.items():
+        for sep in (PER_DEVICE_SEPARATOR, "."):
+            if key.startswith(quantity + sep) and len(key) > len(quantity) + len(sep):
+                out[key[len(quantity) + len(sep):]] = float(value)
+    return out
 
 
 #: Columns of ``/entry/sync``: name -> (units, long_name). ``pressure`` is (n, taps).
@@ -136,6 +173,15 @@ NAME_PATTERN = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 
 VALUE_DTYPES = (np.dtype("float32"), np.dtype("float64"))
+
+
+#: Datasets of a raw stream that are not one row per sample (the gaps table, the channel names).
+STREAM_TABLES = ("gaps", "channel")
+
+
+#: Units of the extra per-sample columns a stream may declare (any other is a count or a flag,
+#: units "1").
+EXTRA_UNITS = {"trigger_time": "s"}
 
 
 EXTRA_DTYPES = tuple(np.dtype(t) for t in ("bool", "int8", "int16", "int32", "int64", "uint8",
@@ -211,7 +257,7 @@ def write_metadata(group: h5py.Group, name: str, value: Any) -> None:
     """Store ``value`` under ``group/name``: a dataset, or a group for a mapping."""
     if isinstance(value, Mapping):
         sub = group.create_group(name)
-        sub.attrs["NX_class"] = "NXcollection"
+        sub.attrs["NX_class"] = "NXparameters"
         for key, item in value.items():
             write_metadata(sub, key, item)
     elif isinstance(value, str):
@@ -222,6 +268,27 @@ def write_metadata(group: h5py.Group, name: str, value: Any) -> None:
             group.create_dataset(name, data=array.astype(object), dtype=h5py.string_dtype())
         else:
             group.create_dataset(name, data=array)
+
+
+def open_run_file(path: str | os.PathLike[str]) -> h5py.File:
+    """Open a run file read-only: as a plain reader, or as a SWMR reader if a writer has it.
+
+    A file that a writer still has open, or left open by a crash, carries HDF5's "open for
+    write" status flags and opens only as a SWMR reader. Any other file is opened plainly: a
+    SWMR reader retries every metadata block whose checksum fails (it may be mid-write), with
+    pauses, so a damaged closed file would take minutes to fail instead of failing at once.
+
+    Raises
+    ------
+    OSError
+        As ``h5py.File`` does (not HDF5, truncated, ...).
+    """
+    try:
+        return h5py.File(path, "r")
+    except OSError as exc:
+        if "already open for write" not in str(exc):
+            raise
+    return h5py.File(path, "r", libver="latest", swmr=True)
 
 
 def read_sync(path: str | os.PathLike[str]) -> dict[str, npt.NDArray[Any]]:
@@ -305,7 +372,9 @@ def write_skeleton(f: h5py.File, *, rig_name: str, operator_notes: str, config_t
                                   dtype=h5py.string_dtype("utf-8"))
     config.attrs["media_type"] = "application/toml"
     entry.create_group("instrument").attrs["NX_class"] = "NXinstrument"
-    entry.create_group("metadata").attrs["NX_class"] = "NXcollection"
+    # NXparameters: named values, checked by validators like any base class (NXcollection's
+    # members would each be a warning).
+    entry.create_group("metadata").attrs["NX_class"] = "NXparameters"
     releases = make_column(entry, "releases", RELEASE_DTYPE, chunk=64)
     releases.attrs["field_names"] = str_array(RELEASE_DTYPE.names or ())
     releases.attrs["units"] = str_array(RELEASE_UNITS)
@@ -324,7 +393,14 @@ def create_stream(instrument: h5py.Group, device: str, channels: list[str], unit
     ``make_column(group, name, dtype, **options)`` creates a dataset as :func:`create_column`.
     """
     group = instrument.create_group(device)
-    group.attrs["NX_class"] = "NXcollection"
+    # NXdata, plotted as value(host_time_ns, channel): NeXus validators accept a NXdata's own
+    # fields and attributes (punx warns about every member of an NXcollection, nxcheck about
+    # every field an NXlog does not define).
+    group.attrs["NX_class"] = "NXdata"
+    group.attrs["signal"] = "value"
+    group.attrs["axes"] = str_array(["host_time_ns", "channel"])
+    group.attrs["host_time_ns_indices"] = np.int32(0)
+    group.attrs["channel_indices"] = np.int32(1)
     group.attrs["channel_names"] = str_array(channels)
     group.attrs["units"] = str_array(units)
     group.attrs["rate"] = float(rate_hz)
@@ -334,7 +410,7 @@ def create_stream(instrument: h5py.Group, device: str, channels: list[str], unit
                                     long_name="host time.monotonic_ns() at arrival"),
         "device_time": make_column(group, "device_time", np.dtype("float64"), units="s",
                                    long_name="device clock"),
-        "counter": make_column(group, "counter", np.dtype("int64"),
+        "counter": make_column(group, "counter", np.dtype("int64"), units="1",
                                long_name="unwrapped sample counter"),
         "value": make_column(group, "value", dtype, width=len(channels),
                              long_name=f"{device} samples"),
@@ -346,8 +422,13 @@ def create_stream(instrument: h5py.Group, device: str, channels: list[str], unit
     ds["gaps"].attrs["description"] = (
         "samples missing from the stream: 'length' samples after the sample whose counter is "
         "'after_counter' (-1: unknown, e.g. a device restart)")
+    ds["gaps"].attrs["units"] = "1"  # both fields count samples
     for name, kind in extra.items():
-        ds[name] = make_column(group, name, kind)
+        ds[name] = make_column(group, name, kind, units=EXTRA_UNITS.get(name, "1"))
+    # The channel names as a dataset too: the axis of value's second dimension (not a row
+    # column: it is not returned, and never appended to).
+    channel = group.create_dataset("channel", data=str_array(channels))
+    channel.attrs["long_name"] = "channel name"
     return ds
 
 
@@ -373,7 +454,29 @@ def create_sync(entry: h5py.Group, taps: list[str], pressure_dtype: np.dtype[Any
         else:
             ds[name] = make_column(sync, name, np.dtype("float64"), units=units,
                                    long_name=long_name)
+    attach_dimension_scales(sync, taps)
     return sync, ds
+
+
+def attach_dimension_scales(sync: h5py.Group, taps: Sequence[str]) -> None:
+    """Make ``time`` (and ``tap``, the tap names) the dimension scales of ``/entry/sync``.
+
+    With them netCDF-4 readers (xarray with the h5netcdf engine) see ``time`` as the coordinate
+    of every column and ``tap`` as the second of ``pressure``, instead of ``phony_dim_*``.
+    Attaching writes attributes, so it happens before the file switches to SWMR mode.
+    """
+    time = sync["time"]
+    time.make_scale("time")
+    for name in SYNC_COLUMNS:
+        if name != "time":
+            sync[name].dims[0].attach_scale(time)
+            sync[name].dims[0].label = "time"
+    if len(taps):
+        tap = sync.create_dataset("tap", data=str_array(taps))
+        tap.attrs["long_name"] = "tap name"
+        tap.make_scale("tap")
+        sync["pressure"].dims[1].attach_scale(tap)
+        sync["pressure"].dims[1].label = "tap"
 
 
 def metadata_name_part(device: str) -> str:

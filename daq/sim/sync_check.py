@@ -36,6 +36,8 @@ import h5py
 import numpy as np
 import numpy.typing as npt
 
+from daq.recording.layout import per_device_attr
+
 __all__ = ["ClockTruthTracker", "check_run", "measure_alignment", "write_alignment"]
 
 FloatArray = npt.NDArray[np.float64]
@@ -149,24 +151,26 @@ def write_alignment(path: str | Path, *, clocks: Mapping[str, Any],
                     signals: Mapping[str, Any]) -> None:
     """Store the truth checks as attributes of ``/entry/sync`` (of a closed file).
 
-    Attributes: from :meth:`ClockTruthTracker.result`, ``truth_clock_error_mean_s.<device>``,
-    ``truth_clock_error_max_s.<device>``, ``truth_misalignment_s`` and
+    Attributes: from :meth:`ClockTruthTracker.result`, ``truth_clock_error_mean_s__<device>``,
+    ``truth_clock_error_max_s__<device>``, ``truth_misalignment_s`` and
     ``truth_misalignment_max_s`` (between devices, mean and largest, after the settling time
     ``truth_settle_s``); from :func:`measure_alignment`,
-    ``truth_delay_s.<channel>`` and ``truth_delay_std_s.<channel>``.
+    ``truth_delay_s__<channel>`` and ``truth_delay_std_s__<channel>``.
     """
     with h5py.File(path, "r+") as f:
         attrs = f["entry/sync"].attrs
         for name, value in clocks.get("clock_error_mean_s", {}).items():
-            attrs[f"truth_clock_error_mean_s.{name}"] = float(value)
-            attrs[f"truth_clock_error_max_s.{name}"] = float(clocks["clock_error_max_s"][name])
+            attrs[per_device_attr("truth_clock_error_mean_s", name)] = float(value)
+            attrs[per_device_attr("truth_clock_error_max_s", name)] = float(
+                clocks["clock_error_max_s"][name])
         if "misalignment_s" in clocks:
             attrs["truth_misalignment_s"] = float(clocks["misalignment_s"])
             attrs["truth_misalignment_max_s"] = float(clocks["misalignment_max_s"])
             attrs["truth_settle_s"] = float(clocks["settle_s"])
         for name, value in signals.get("delay_s", {}).items():
-            attrs[f"truth_delay_s.{name}"] = float(value)
-            attrs[f"truth_delay_std_s.{name}"] = float(signals["delay_std_s"][name])
+            attrs[per_device_attr("truth_delay_s", name)] = float(value)
+            attrs[per_device_attr("truth_delay_std_s", name)] = float(
+                signals["delay_std_s"][name])
 
 
 class ClockTruthTracker:

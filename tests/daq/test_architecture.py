@@ -36,7 +36,7 @@ LONG_MARKER = "Longer than 600 lines:"
 #: and from the layers below. ``daq.instruments.build`` (a configured instrument's driver) sits
 #: above the rig config, which validates instrument tables through the driver registry.
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("daq.errors", "daq.validation", "ident"),
+    ("daq.errors", "daq.validation", "daq.log_file", "ident"),
     ("daq.transports",),
     ("daq.instruments",),
     ("daq.config", "daq.procedure", "daq.instruments.build"),

@@ -49,6 +49,8 @@ def files(tmp_path: Path) -> Path:
         section, flat_plate.jones_model(), 0.6 * U_F, 0.004, 0.02, duration=6.0, fs=250.0))
         for _ in range(2)]
     write_release_run(tmp_path / "one_speed.h5", load_rig_config(SIM_CONFIG), one_speed)
+    data = (tmp_path / "one_speed.h5").read_bytes()
+    (tmp_path / "truncated.h5").write_bytes(data[:len(data) // 3])
     return tmp_path
 
 
@@ -89,6 +91,21 @@ CASES = [
     (["reprocess", "{d}/nothing*", "--out", "{d}/r"], 2, "nothing*: no such run file"),
     (["gui", "--replay", "{d}/nothing.h5"], 2, "nothing.h5: no such file"),
     (["gui", "--replay", "{d}/text.txt"], 2, "text.txt"),
+    (["recover", "{d}/nothing.h5"], 2, "nothing.h5: No such file or directory"),
+    (["acquire", "--config", "sim_nothing", "--simulate", "--duration", "1", "--out",
+      "{d}/r.h5"], 2, "shipped configs, by name: sim_flat_plate, sim_streamlined_deck"),
+    (["recover", "{d}/text.txt"], 2, "text.txt: not an HDF5 file"),
+    (["recover", "{d}/empty.h5"], 2, "empty.h5: has no /entry/sync: not a windrig run file"),
+    (["recover", "{d}"], 2, "a directory, not a run file"),
+    (["recover", "{d}/one_speed.h5", "{d}/text.txt"], 2, "text.txt: not an HDF5 file"),
+    (["info", "{d}/nothing.h5"], 2, "nothing.h5: No such file or directory"),
+    (["info", "{d}/text.txt"], 2, "text.txt: not an HDF5 file"),
+    (["info", "{d}/empty.h5"], 2,
+     "error: {d}/empty.h5: has no /entry/sync: not a windrig run file"),
+    (["info", "{d}", "--json"], 2, "a directory, not a run file"),
+    (["info", "{d}/truncated.h5"], 2, "truncated.h5: HDF5 cannot open it (truncated?)"),
+    (["identify", "{d}/truncated.h5"], 2, "truncated.h5: cannot be opened as HDF5"),
+    (["recover", "{d}/truncated.h5"], 1, "truncated.h5: HDF5 cannot read it even read-only"),
 ]
 
 
@@ -96,6 +113,7 @@ CASES = [
                          ids=[" ".join(c[0][:2]) + f" [{i}]" for i, c in enumerate(CASES)])
 def test_bad_input_is_one_error_line(files, capsys, argv, status, message):
     code = main([a.replace("{d}", str(files)) for a in argv])
+    message = message.replace("{d}", str(files))
     err = capsys.readouterr().err
     lines = [line for line in err.splitlines() if line.strip()]
     assert code == status, err

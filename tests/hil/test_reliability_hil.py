@@ -381,7 +381,7 @@ def test_device_disconnects_mid_run_are_marked_gaps_with_fault_and_recovery_even
         resumed_s[name] = (float(host_s[i]), float(host_s[i + 1]))
         # The samples on either side of the gap on the run's time base (the final clock fit,
         # /entry/sync attrs: device_time = offset + (1 + 1e-6 drift) t).
-        offset, drift = clock[f"clock_offset_s.{name}"], clock[f"clock_drift_ppm.{name}"]
+        offset, drift = clock[f"clock_offset_s__{name}"], clock[f"clock_drift_ppm__{name}"]
         edges = (s["device_time"][i:i + 2] - offset) / (1 + 1e-6 * drift)
         mapped_s[name] = (float(edges[0]), float(edges[1]))
 

@@ -163,7 +163,9 @@ def test_layout_is_the_contract(tmp_path: Path) -> None:
                 ("scanner", ["p0", "p1", "p2"], ["Pa"] * 3, 500.0, "float32", 57),
                 ("lasers", ["h", "alpha"], ["m", "rad"], 2000.0, "float64", 11)]:
             group = instrument[device]
-            assert group.attrs["NX_class"] == "NXcollection"
+            assert group.attrs["NX_class"] == "NXdata" and group.attrs["signal"] == "value"
+            assert list(group.attrs["axes"]) == ["host_time_ns", "channel"]
+            assert [c.decode() for c in group["channel"][:]] == channels
             assert list(group.attrs["channel_names"]) == channels
             assert list(group.attrs["units"]) == units
             assert group.attrs["rate"] == rate and group.attrs["rate_units"] == "Hz"
@@ -173,7 +175,7 @@ def test_layout_is_the_contract(tmp_path: Path) -> None:
                 "gaps": (GAP_DTYPE, (1,))}
             if device == "scanner":
                 expected["trigger_time"] = (np.float64, (rows,))
-            assert sorted(group) == sorted(expected)
+            assert sorted(group) == sorted([*expected, "channel"])
             for name, (kind, shape) in expected.items():
                 ds = group[name]
                 assert ds.dtype == np.dtype(kind), (device, name)
@@ -181,6 +183,7 @@ def test_layout_is_the_contract(tmp_path: Path) -> None:
                 assert ds.chunks is not None and ds.maxshape[0] is None, (device, name)
             assert group["host_time_ns"].attrs["units"] == "ns"
             assert group["device_time"].attrs["units"] == "s"
+            assert group["counter"].attrs["units"] == "1"
             assert list(group["gaps"].dtype.names) == ["after_counter", "length"]
         assert instrument["scanner/value"].attrs["units"] == "Pa"
         assert "units" not in instrument["lasers/value"].attrs  # mixed: per channel on the group
@@ -193,8 +196,15 @@ def test_layout_is_the_contract(tmp_path: Path) -> None:
         assert sync.attrs["t0_host_ns"] == 10**12
         sync_units = {"time": "s", "h": "m", "alpha": "rad", "lift": "N/m", "moment": "N m/m",
                       "pressure": "Pa", "U": "m/s", "rho": "kg/m^3"}
-        assert sorted(sync) == sorted(sync_units)
+        assert sorted(sync) == sorted([*sync_units, "tap"])
+        # Dimension scales: netCDF readers see time (and tap) as the coordinates.
+        assert sync["time"].is_scale and sync["tap"].is_scale
+        assert [t.decode() for t in sync["tap"][:]] == TAPS
+        assert sync["pressure"].dims[1][0] == sync["tap"]
         for name, unit in sync_units.items():
+            if name != "time":
+                assert sync[name].dims[0][0] == sync["time"], name
+                assert sync[name].dims[0].label == "time", name
             assert sync[name].attrs["units"] == unit
             assert sync[name].attrs["long_name"]
             shape = (65, len(TAPS)) if name == "pressure" else (65,)
@@ -202,10 +212,10 @@ def test_layout_is_the_contract(tmp_path: Path) -> None:
             assert sync[name].dtype == (np.float32 if name == "pressure" else np.float64)
         # clock fits: one before start (written at once), one after (written at close)
         assert sync.attrs["clock_model"] == CLOCK_MODEL
-        assert sync.attrs["clock_offset_s.scanner"] == 0.25
-        assert sync.attrs["clock_drift_ppm.scanner"] == 20.0
-        assert sync.attrs["clock_offset_s.lasers"] == -0.125
-        assert sync.attrs["clock_drift_ppm.lasers"] == -3.0
+        assert sync.attrs["clock_offset_s__scanner"] == 0.25
+        assert sync.attrs["clock_drift_ppm__scanner"] == 20.0
+        assert sync.attrs["clock_offset_s__lasers"] == -0.125
+        assert sync.attrs["clock_drift_ppm__lasers"] == -3.0
         assert sync.attrs["residual_misalignment_s"] == 1.5e-4
 
         assert entry["releases"].dtype == RELEASE_DTYPE
@@ -213,7 +223,7 @@ def test_layout_is_the_contract(tmp_path: Path) -> None:
                                                        "stop_index", "U", "h0", "alpha0"]
         assert list(entry["releases"].attrs["units"]) == ["s", "", "", "m/s", "m", "rad"]
         assert entry["events"].dtype == EVENT_DTYPE
-        assert entry["metadata"].attrs["NX_class"] == "NXcollection"
+        assert entry["metadata"].attrs["NX_class"] == "NXparameters"
 
 
 def test_nexus_default_chain_plots_h_over_time(tmp_path: Path) -> None:
@@ -295,7 +305,7 @@ def test_gaps_releases_events_and_metadata_stored(tmp_path: Path) -> None:
         assert [t.decode("utf-8") for t in events["text"]] == ["declared", "magnet off",
                                                                "gust — noted"]
         calz = f["entry/metadata/calz_scanner"]
-        assert calz.attrs["NX_class"] == "NXcollection"
+        assert calz.attrs["NX_class"] == "NXparameters"
         np.testing.assert_array_equal(calz["offsets_pa"][:], [0.1, -0.2, 0.05])
         assert bool(calz["ok"][()]) is True
         np.testing.assert_array_equal(f["entry/metadata/calz_late"][:], [1.0, 2.0])
