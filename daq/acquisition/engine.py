@@ -2,7 +2,7 @@
 
 Responsibility: open and start the instruments of a rig, read every one of them in its own
 blocking reader thread (:class:`~daq.acquisition.reader.DeviceReader`: the scanner and the
-lasers with ``read_block``, the barometer, the fan drive and the PLC by polling ``read()``),
+lasers streaming, the barometer, the fan drive and the PLC polled, every driver by ``read()``),
 turn what each driver returns into one uniform record
 (:class:`~daq.acquisition.records.StreamBlock`), pass the records through bounded per-device
 queues to one dispatcher thread (:class:`~daq.acquisition.dispatch.Dispatcher`), and hand them

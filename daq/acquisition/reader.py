@@ -142,7 +142,7 @@ class DeviceReader:
         Poll period of a polled kind, s (default: the barometer's own ``poll_interval_s``, else
         1 s; 0.1 s for the fan and the PLC).
     read_timeout_s : float
-        Timeout of one streaming ``read_block``, s: bounds how long a stop waits for a reader.
+        Timeout of one streaming ``read``, s: bounds how long a stop waits for a reader.
     stall_s : float
         A streaming device that delivers nothing for this long is reported once as stalled.
     backoff_min_s, backoff_max_s : float
