@@ -319,28 +319,34 @@ class Resampler:
             raise KeyError(f"unknown stream {name!r}; streams: {sorted(self._buffers)}")
         buf = self._buffers[name]
         spec = buf.spec
-        tt = np.concatenate([float_1d("t", t) for t, _ in pieces])
-        v = np.concatenate([np.asarray(x, dtype=np.float64).reshape(np.shape(t)[0], -1)
-                            for t, x in pieces])
         width = 1 if spec.channels is None else spec.channels
-        if v.shape != (tt.size, width):
-            raise ValueError(f"{name}: values must have {width} channel(s), got {v.shape[1:]}")
+        times = [float_1d("t", t) for t, _ in pieces]
+        values = [np.asarray(x, dtype=np.float64).reshape(t.size, -1)
+                  for t, (_, x) in zip(times, pieces, strict=True)]
+        if any(v.shape[1] != width for v in values):
+            raise ValueError(f"{name}: values must have {width} channel(s)")
+        # The times are joined to decide what to keep; the values stay in their pieces (the
+        # buffer joins them once, at the pull, as it joins a push per block).
+        tt = np.concatenate(times)
         if not np.isfinite(tt).all():
             raise ValueError(f"{name}: sample times must be finite")
         if tt.size == 0:
             return
         # A sample is kept when it is after every earlier one (the newest kept is the running
         # maximum: a dropped sample is never above it), exactly as push() decides per piece.
-        before = np.maximum.accumulate(np.concatenate(([buf.last], tt[:-1])))
-        if not (tt > before).all():
-            keep = tt > before
+        keep = tt > np.maximum.accumulate(np.concatenate(([buf.last], tt[:-1])))
+        if not keep.all():
             buf.overlapping += int(tt.size - np.count_nonzero(keep))
-            tt, v = tt[keep], v[keep]
+            parts = np.split(keep, np.cumsum([t.size for t in times])[:-1])
+            times = [t[k] for t, k in zip(times, parts, strict=True)]
+            values = [v[k] for v, k in zip(values, parts, strict=True)]
+            tt = tt[keep]
         if self._next > 0 and tt.size:
             late_before = float(self._time(self._next - 1)) - self._support(spec)
             if float(tt[0]) < late_before:
                 buf.late += int(np.count_nonzero(tt < late_before))
-        buf.append(tt, v)
+        for t, v in zip(times, values, strict=True):
+            buf.append(t, v)
 
     # -- output -----------------------------------------------------------------------------------
     def pull(self) -> SyncBlock:
