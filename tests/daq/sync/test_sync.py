@@ -27,6 +27,7 @@ import pytest
 from scipy import stats
 
 from daq.errors import SyncError
+from daq.instruments.reading import Gap
 from daq.sync.clock_map import ClockMap, trigger_times_from_flags, trigger_times_from_latch
 from daq.sync.conversions import (
     air_density,
@@ -34,7 +35,7 @@ from daq.sync.conversions import (
     heave_pitch_from_lasers,
     wind_speed,
 )
-from daq.sync.counters import CounterStep, CounterUnwrapper, Gap, find_gaps, unwrap_counter
+from daq.sync.counters import CounterStep, CounterUnwrapper, find_gaps, unwrap_counter
 from daq.sync.resample import Resampler, StreamSpec, SyncBlock, resample
 from ident.taps import TapLayout
 from simulators.clock import DeviceClock
