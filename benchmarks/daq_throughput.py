@@ -11,7 +11,7 @@ it:
    :class:`MicroEpsilonIld1420`) read in-memory transports through the engine's own adapters
    (``daq.acquisition.adapters.make_adapter``), one driver read per :class:`StreamBlock`: the
    scanner gets one legacy 0x0A packet per frame per module and is read after every frame (on a rig
-   that keeps up, ``read_block`` returns as soon as every module has sent the frame), the lasers are
+   that keeps up, ``read`` returns as soon as every module has sent the frame), the lasers are
    read every ``--laser-block`` samples (100 by default: the driver drains ``DRAIN_S`` = 20 ms after
    the first byte, i.e. 80 samples plus what arrived meanwhile; the pipeline sizes its clock windows
    for 20 laser blocks per 0.5 s, the same 100).
@@ -44,7 +44,7 @@ the PLC are left out (a few rows per second).
 
 Options: ``--seconds`` (default 600), ``--profile`` (cProfile the last ``--profile-seconds``
 of the run, the steady state, instead of timing it; top functions of RunWriter and of decoding),
-``--scan-frames-per-read`` (scanner frames per ``read_block``: 10, the default, is the driver's
+``--scan-frames-per-read`` (scanner frames per ``read``: 10, the default, is the driver's
 own 20 ms batching; 1 replays it unbatched, ``min_block_s = 0``), ``--laser-block``,
 ``--out-dir``, ``--keep``.
 
@@ -169,7 +169,7 @@ def build_config(frames_per_read: int = 10) -> RigConfig:
     """Return the streamlined-deck rig widened to 8 scanner modules and 511 taps.
 
     With ``frames_per_read == 1`` the scanner's ``min_block_s`` is set to 0 (one frame per
-    ``read_block``, the driver's unbatched mode); otherwise the driver's default batching holds
+    ``read``, the driver's unbatched mode); otherwise the driver's default batching holds
     (``ceil(min_block_s rate)`` = 10 frames at 500 Hz).
 
     The shipped config's text is edited in memory (taps, modules, Pitot channel) and parsed by
@@ -605,14 +605,14 @@ def replay(config: RigConfig, tpl: Templates, path: Path, seconds: float, *,
 
     rec.append_sync = count_sync_writes  # type: ignore[method-assign]
 
-    def read_block(dev: Device, n: int, host_ns: int) -> StreamBlock:
+    def read_once(dev: Device, n: int, host_ns: int) -> StreamBlock:
         """One driver read through the engine's adapter, as the reader thread makes it."""
-        rows = dev.adapter.read(stop)
-        assert rows is not None and len(rows.host_time_ns) == n, (dev.name, n)
+        reading = dev.adapter.read(stop)
+        assert reading is not None and len(reading) == n, (dev.name, n)
         return StreamBlock(device=dev.name, kind=dev.kind, seq=dev.seq,
                            host_time_ns=np.full(n, host_ns, np.int64),
-                           device_time=rows.device_time, counter=rows.counter,
-                           values=rows.values, gaps=rows.gaps, raw=rows.raw)
+                           device_time=reading.device_time, counter=reading.counter,
+                           values=reading.channels, gaps=reading.gaps, info=reading.info)
 
     n_chunks = round(seconds / CHUNK_S)
     profile_from = n_chunks - round(profile_s / CHUNK_S) if profilers else n_chunks
@@ -635,7 +635,7 @@ def replay(config: RigConfig, tpl: Templates, path: Path, seconds: float, *,
             for transport, piece in zip(dev.transports, read.pieces, strict=True):
                 transport.push(piece)
                 dev.wire_bytes += len(piece)
-            block = watches[dev.kind].call(read_block, dev, read.rows, read.host_ns)
+            block = watches[dev.kind].call(read_once, dev, read.rows, read.host_ns)
             dev.seq += 1
             dev.samples += read.rows
             watches["writer"].call(writer, "block", block)
@@ -817,8 +817,8 @@ def measure(args: argparse.Namespace, out_dir: Path) -> tuple[Result, dict[str, 
     seconds = math.ceil(args.seconds / CHUNK_S) * CHUNK_S
     profilers = ({"decode": cProfile.Profile(), "writer": cProfile.Profile()} if args.profile
                  else {})
-    print(f"reads: scanner {args.scan_frames_per_read} frame(s) per read_block, lasers "
-          f"{args.laser_block} samples per read_block; file {ours}")
+    print(f"reads: scanner {args.scan_frames_per_read} frame(s) per read, lasers "
+          f"{args.laser_block} samples per read; file {ours}")
     rss_before = memory_mib()[0]
     print("replaying", end="", flush=True)
     t = time.perf_counter()
@@ -853,9 +853,9 @@ def report(r: Result) -> None:
     scan_wire = sum(d.wire_bytes for d in r.devices.values() if d.kind == "scanner")
     laser_wire = sum(d.wire_bytes for d in r.devices.values() if d.kind == "laser")
     rows = [
-        ("decode scanner (8 modules, read_block)", tm.decode["scanner"], tm.timed_s,
+        ("decode scanner (8 modules, read)", tm.decode["scanner"], tm.timed_s,
          scan_wire / r.seconds),
-        ("decode lasers (3, read_block)", tm.decode["laser"], tm.timed_s, laser_wire / r.seconds),
+        ("decode lasers (3, read)", tm.decode["laser"], tm.timed_s, laser_wire / r.seconds),
         ("RunWriter (sync + HDF5)", tm.writer, tm.timed_s, per_s),
         ("total pipeline (decode + RunWriter)", tm.total, tm.timed_s, per_s),
         ("plain h5py append (the limit)", r.plain_wall, r.seconds, per_s),
@@ -950,10 +950,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--profile-seconds", type=float, default=30.0,
                         help="length of the profiled tail, s (default 30)")
     parser.add_argument("--scan-frames-per-read", type=int, default=10,
-                        help="scanner frames per read_block (default 10: the driver's 20 ms "
+                        help="scanner frames per read (default 10: the driver's 20 ms "
                         "blocks; 1: unbatched, min_block_s = 0)")
     parser.add_argument("--laser-block", type=int, default=100,
-                        help="laser samples per read_block (default 100, 25 ms)")
+                        help="laser samples per read (default 100, 25 ms)")
     parser.add_argument("--seed", type=int, default=5)
     args = parser.parse_args(argv)
     if not args.seconds > 0 or args.scan_frames_per_read < 1 or args.laser_block < 1:

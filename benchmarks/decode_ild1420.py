@@ -103,7 +103,7 @@ def run_driver(data: bytes, chunk: int, max_samples: int) -> tuple[float, int]:
     n = 0
     try:
         while True:
-            n += len(driver.read_block(timeout_s=0.0 if n else 1.0, max_samples=max_samples))
+            n += len(driver.read(timeout_s=0.0 if n else 1.0, max_samples=max_samples))
     except TransportTimeout:
         pass
     return time.perf_counter() - t0, n

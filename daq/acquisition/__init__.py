@@ -2,7 +2,8 @@
 
 - :mod:`~daq.acquisition.engine`: :class:`Acquisition`: start, stop, the operator's commands;
 - :mod:`~daq.acquisition.reader`: one device's reader thread, bounded queue, faults, recovery;
-- :mod:`~daq.acquisition.adapters`: how a reader talks to each kind of driver;
+- :mod:`~daq.acquisition.adapters`: when a reader reads (streaming or polled) and the scanner's
+  start and stop;
 - :mod:`~daq.acquisition.dispatch`: the dispatcher thread and the ``(name, doc)`` subscribers;
 - :mod:`~daq.acquisition.records`: the records handed to subscribers (blocks, events, stats);
 - :mod:`~daq.acquisition.commands`: what each operator command does and the event it records;

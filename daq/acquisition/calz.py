@@ -10,8 +10,8 @@ still zeroes), resume the reader; every failure posted as a ``"calz_failed"`` ev
 
 Not responsible for: when a CALZ is allowed (the driver refuses a nonzero wind; the console's
 interlocks, :mod:`daq.console.interlocks`, ask for the fan stopped and the wind settled), the
-reader's own parking and the gap marked over the pause (:mod:`daq.acquisition.reader`,
-:class:`~daq.acquisition.adapters.ScannerAdapter`), or the scanner's protocol (the driver).
+reader's own parking (:mod:`daq.acquisition.reader`), or the scanner's protocol and the gap it
+marks over the pause (the driver, :mod:`daq.instruments.scanivalve_mps4264.continuity`).
 """
 
 from __future__ import annotations

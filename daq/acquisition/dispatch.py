@@ -24,6 +24,7 @@ from typing import Any, Protocol
 
 from daq.acquisition.reader import DeviceReader, DropRun
 from daq.acquisition.records import Event, StreamBlock
+from daq.instruments.reading import Gap
 
 __all__ = ["Dispatcher", "Subscriber"]
 
@@ -164,14 +165,14 @@ class Dispatcher:
     def _deliver(self, reader: DeviceReader, block: StreamBlock) -> None:
         runs = reader.take_drops(block.seq)
         if runs:
-            gaps: list[tuple[int, int]] = []
+            gaps: list[Gap] = []
             for run in runs:
                 self._emit("event", self._overflow_event(reader, run))
                 # The run's own gap spans its counters; of the device gaps the dropped blocks
                 # carried, pass on those before that span (and restart markers, length -1).
                 first = run.first_counter
                 gaps.extend(g for g in run.gaps
-                            if first is None or g[1] < 0 or g[0] < first - 1)
+                            if first is None or g.length < 0 or g.after_counter < first - 1)
                 gap = run.gap()
                 if gap is not None:
                     gaps.append(gap)
@@ -187,9 +188,9 @@ class Dispatcher:
             text=(f"{run.blocks} block(s), {run.samples} sample(s) of {reader.name} dropped: "
                   "queue full (subscribers too slow)"),
             data={"blocks": run.blocks, "samples": run.samples, "first_seq": run.first_seq,
-                  "last_seq": run.last_seq, "gap": run.gap(),
+                  "last_seq": run.last_seq, "gap": gap_pair(run.gap()),
                   "first_counter": run.first_counter, "last_counter": run.last_counter,
-                  "last_time_ns": run.last_time_ns, "device_gaps": list(run.gaps),
+                  "last_time_ns": run.last_time_ns, "device_gaps": [gap_pair(g) for g in run.gaps],
                   "device_gaps_truncated": run.gaps_truncated})
 
     def _emit(self, name: str, doc: Any) -> None:
@@ -204,3 +205,8 @@ class Dispatcher:
                     log.exception("subscriber %r failed on a %r doc%s", subscriber, name,
                                   " (further failures are counted, not logged)" if n == 3
                                   else "")
+
+
+def gap_pair(gap: Gap | None) -> tuple[int, int] | None:
+    """Return a gap as ``(after_counter, length)``: plain numbers for an event's data."""
+    return None if gap is None else (gap.after_counter, gap.length)

@@ -2,7 +2,7 @@
 
 Responsibility: open and start the instruments of a rig, read every one of them in its own
 blocking reader thread (:class:`~daq.acquisition.reader.DeviceReader`: the scanner and the
-lasers with ``read_block``, the barometer, the fan drive and the PLC by polling ``read()``),
+lasers streaming, the barometer, the fan drive and the PLC polled, every driver by ``read()``),
 turn what each driver returns into one uniform record
 (:class:`~daq.acquisition.records.StreamBlock`), pass the records through bounded per-device
 queues to one dispatcher thread (:class:`~daq.acquisition.dispatch.Dispatcher`), and hand them
@@ -450,9 +450,9 @@ class Acquisition:
         force: ``wind_speed_now`` is passed through), a new scan is started and the reader
         resumed. The interruption is marked, never silent: the scanner stream gets a gap over
         the pause (its length in frames where the frame times are absolute, else -1; see
-        ``daq.acquisition.adapters.ScannerAdapter``), so the sync view has NaN pressures and forces
-        there, and a ``"calz"`` event (at ``stop_ns``) carries the pause and the zero-offset
-        summary.
+        ``daq.instruments.scanivalve_mps4264.continuity``), so the sync view has NaN pressures
+        and forces there, and a ``"calz"`` event (at ``stop_ns``) carries the pause and the
+        zero-offset summary.
 
         Parameters
         ----------

@@ -1,9 +1,9 @@
 """One instrument's reader: a blocking thread that reads its driver into a bounded queue.
 
 Responsibility: read one instrument in its own blocking reader thread (:class:`DeviceReader`: the
-scanner and the lasers with ``read_block``, the barometer, the fan drive and the PLC by polling
-``read()``, each through the adapter of its kind of driver, :mod:`daq.acquisition.adapters`),
-turn what the driver returns into
+scanner and the lasers streaming, the barometer, the fan drive and the PLC polled, each through
+the adapter of its kind of driver, :mod:`daq.acquisition.adapters`), turn the
+:class:`~daq.instruments.reading.Reading` every driver's ``read()`` returns into
 :class:`~daq.acquisition.records.StreamBlock` records and put them on the reader's bounded queue,
 which never blocks the reader: when it is full the oldest block is dropped and the loss accounted
 for (counters, and drop runs the dispatcher takes). Driver faults are reported as
@@ -53,7 +53,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from daq.acquisition.adapters import REQUIRED_METHODS, Rows, ScannerAdapter, make_adapter
+from daq.acquisition.adapters import REQUIRED_METHODS, make_adapter
 from daq.acquisition.records import (
     KINDS,
     DeviceFault,
@@ -63,6 +63,7 @@ from daq.acquisition.records import (
     StreamBlock,
 )
 from daq.errors import DaqError, TransportError, TransportTimeout
+from daq.instruments.reading import Gap, Reading
 
 __all__ = ["DeviceReader"]
 
@@ -88,14 +89,14 @@ class DropRun:
     last_counter: int | None
     first_time_ns: int
     last_time_ns: int
-    gaps: list[tuple[int, int]]
+    gaps: list[Gap]
     gaps_truncated: int = 0
 
     def add(self, block: StreamBlock) -> None:
         self.last_seq = block.seq
         self.blocks += 1
         self.samples += len(block)
-        if block.counter is not None and len(block):
+        if len(block):
             if self.first_counter is None:
                 self.first_counter = int(block.counter[0])
             self.last_counter = int(block.counter[-1])
@@ -112,11 +113,12 @@ class DropRun:
         run.add(block)
         return run
 
-    def gap(self) -> tuple[int, int] | None:
-        """Return the overflow gap ``(after_counter, length)`` (counter units), if counted."""
+    def gap(self) -> Gap | None:
+        """Return the overflow gap (counter units, kind ``"overflow"``), if counted."""
         if self.first_counter is None or self.last_counter is None:
             return None
-        return (self.first_counter - 1, self.last_counter - self.first_counter + 1)
+        return Gap(self.first_counter - 1, self.last_counter - self.first_counter + 1,
+                   "overflow")
 
 
 class DeviceReader:
@@ -140,7 +142,7 @@ class DeviceReader:
         Poll period of a polled kind, s (default: the barometer's own ``poll_interval_s``, else
         1 s; 0.1 s for the fan and the PLC).
     read_timeout_s : float
-        Timeout of one streaming ``read_block``, s: bounds how long a stop waits for a reader.
+        Timeout of one streaming ``read``, s: bounds how long a stop waits for a reader.
     stall_s : float
         A streaming device that delivers nothing for this long is reported once as stalled.
     backoff_min_s, backoff_max_s : float
@@ -265,29 +267,32 @@ class DeviceReader:
         timeout_s : float
             The reading ends after this long without a frame, s.
         """
-        if not self._parked or not isinstance(self._adapter, ScannerAdapter):
-            raise RuntimeError(f"{self.name}: drain() needs a scanner reader paused first")
-        rows = self._adapter.drain(timeout_s)
-        for r in rows:
+        self._check_paused_scanner("drain()")
+        readings = self.driver.drain(timeout_s)
+        for r in readings:
             self._offer(r)
-        return len(rows)
+        return len(readings)
 
     def restart_after_pause(self) -> None:
-        """Start a new scan after a pause (scanner only; see ``ScannerAdapter``)."""
-        if not self._parked or not isinstance(self._adapter, ScannerAdapter):
-            raise RuntimeError(f"{self.name}: restart_after_pause() needs a paused scanner")
-        self._adapter.restart_after_pause()
+        """Start a new scan after a pause, its gap measured (the scanner driver's ``scan``)."""
+        self._check_paused_scanner("restart_after_pause()")
+        self.driver.scan(after_pause=True)
 
     def note_pause(self, pause_s: float) -> None:
-        """Tell the scanner adapter how long the scan stood still, s (before :meth:`resume`)."""
-        if isinstance(self._adapter, ScannerAdapter):
-            self._adapter.note_pause(pause_s)
+        """Tell the scanner driver how long the scan stood still, s (before :meth:`resume`)."""
+        if self.kind == "scanner":
+            self.driver.note_pause(pause_s)
 
     def recent_pressure_mean(self) -> tuple[FloatArray, int]:
         """Mean pressure per channel over the last frames read, Pa, and their number."""
-        if not isinstance(self._adapter, ScannerAdapter):
+        if self.kind != "scanner":
             raise RuntimeError(f"{self.name}: not a scanner")
-        return self._adapter.recent_pressure_mean()
+        mean, rows = self.driver.recent_pressure_mean()
+        return mean, int(rows)
+
+    def _check_paused_scanner(self, what: str) -> None:
+        if not self._parked or self.kind != "scanner":
+            raise RuntimeError(f"{self.name}: {what} needs a scanner reader paused first")
 
     def report_fault(self, exc: BaseException) -> None:
         """Report a failure found outside the thread (e.g. a scan not restarted) as a fault."""
@@ -381,7 +386,7 @@ class DeviceReader:
                         self._fault(exc, consecutive)
                         continue
                 try:
-                    rows = adapter.read(stop)
+                    reading = adapter.read(stop)
                 except DaqError as exc:
                     if stop.is_set():  # closed under us while stopping: not a fault
                         log.debug("%s: read ended by stop: %s", self.name, exc)
@@ -397,7 +402,7 @@ class DeviceReader:
                         f"line lost; the driver reconnected by itself "
                         f"({count - reconnects} reconnect(s))"), consecutive)
                 reconnects = count  # also a new baseline when the driver reset its count
-                if rows is None:
+                if reading is None:
                     idle = time.monotonic() - last_data
                     if adapter.streaming and not stalled and idle > self._stall_s:
                         stalled = True
@@ -409,12 +414,12 @@ class DeviceReader:
                 # After a reconnect seen in this read, the rows may predate it (read before the
                 # line dropped): the recovery is the first data that arrived after it was seen.
                 if consecutive and (reconnected_ns is None
-                                    or (len(rows.host_time_ns) > 0
-                                        and int(rows.host_time_ns[-1]) > reconnected_ns)):
+                                    or (len(reading) > 0
+                                        and int(reading.host_time_ns[-1]) > reconnected_ns)):
                     self._recovered(consecutive)
                     consecutive, stalled, error, reconnected_ns = 0, False, None, None
                     delay = self._backoff[0]
-                self._offer(rows)
+                self._offer(reading)
         except Exception as exc:  # a bug, not a device fault: reported as fatal, never retried
             log.exception("%s: reader failed; it reads no more", self.name)
             self.failed = exc
@@ -440,11 +445,8 @@ class DeviceReader:
                              device=self.name, text=f"data again after {faults} fault(s)",
                              data={"faults": faults}))
 
-    def _offer(self, rows: Rows) -> None:
-        block = StreamBlock(device=self.name, kind=self.kind, seq=self._seq,
-                            host_time_ns=rows.host_time_ns, device_time=rows.device_time,
-                            counter=rows.counter, values=rows.values, gaps=rows.gaps,
-                            raw=rows.raw)
+    def _offer(self, reading: Reading) -> None:
+        block = StreamBlock.of(self.name, self.kind, self._seq, reading)
         self._seq += 1
         with self._lock:
             self._count["blocks"] += 1

@@ -1,11 +1,11 @@
 """The records the acquisition engine hands to its subscribers: blocks, events, faults, counters.
 
 Responsibility: define the immutable records of the engine's ``(name, doc)`` stream
-(:mod:`daq.acquisition.engine`): :class:`StreamBlock` (the ``"block"`` doc: the rows read from one
-device in one call), :class:`Event` (the ``"event"`` doc) and its :class:`DeviceFault`, and
-:class:`DeviceStats` (a reader's counters, :meth:`~daq.acquisition.engine.Acquisition.stats`); with
-the vocabulary of their ``kind`` fields (:data:`KINDS`, :data:`SYSTEM_EVENT_KINDS`) and the
-array aliases they are typed with.
+(:mod:`daq.acquisition.engine`): :class:`StreamBlock` (the ``"block"`` doc: one driver
+:class:`~daq.instruments.reading.Reading` with its device and block number), :class:`Event` (the
+``"event"`` doc) and its :class:`DeviceFault`, and :class:`DeviceStats` (a reader's counters,
+:meth:`~daq.acquisition.engine.Acquisition.stats`); with the vocabulary of their ``kind`` fields
+(:data:`KINDS`, :data:`SYSTEM_EVENT_KINDS`) and the array aliases they are typed with.
 
 Not responsible for: producing the records (the readers, :mod:`daq.acquisition.reader`; the engine,
 :mod:`daq.acquisition.engine`) or consuming them (the subscribers:
@@ -21,6 +21,8 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+
+from daq.instruments.reading import Gap, Reading
 
 __all__ = [
     "KINDS",
@@ -45,7 +47,7 @@ SYSTEM_EVENT_KINDS = frozenset({"fault", "recovered", "overflow", "release", "re
 
 IntArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
-Gaps = tuple[tuple[int, int], ...]
+Gaps = tuple[Gap, ...]
 
 
 # ------------------------------------------------------------------------------------------------
@@ -53,7 +55,10 @@ Gaps = tuple[tuple[int, int], ...]
 # ------------------------------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
 class StreamBlock:
-    """Rows read from one device in one call: the uniform record of the ``"block"`` doc.
+    """One driver reading as the engine delivers it: the ``"block"`` doc.
+
+    The fields of the driver's :class:`~daq.instruments.reading.Reading` (the same arrays), with
+    the device it came from, its block number, and the rows the engine dropped before it.
 
     Attributes
     ----------
@@ -68,19 +73,18 @@ class StreamBlock:
         Host ``time.monotonic_ns()`` when each row arrived.
     device_time : ndarray of float64, (n,), or None
         The device's own clock, s (scanner frame time, laser timestamp); None for polled devices.
-    counter : ndarray of int64, (n,), or None
-        Unwrapped device counter (scanner frames, laser samples), the barometer's poll number,
-        or the engine's poll number for the fan and the PLC (a failed poll skips one).
+    counter : ndarray of int64, (n,)
+        Unwrapped device counter (scanner frames, laser samples) or the driver's poll number
+        (the barometer, the fan, the PLC: a failed poll skips one).
     values : mapping of str to ndarray
-        Channel -> array of ``n`` rows (e.g. ``distance`` in m, ``pressure`` (n, taps) in Pa).
-    gaps : tuple of (int, int)
-        ``(after_counter, length)``: ``length`` rows missing after counter ``after_counter``,
-        before or inside this block. Device gaps come from the driver (length -1: unknown, a
-        scanner restart); polled devices get one per failed poll; rows the engine dropped on a
-        full queue are marked here too (see ``overflow_samples``).
-    raw : object
-        The driver's own block or reading (``ScanBlock``, ``LaserBlock``, ``BarometerReading``,
-        the ``read()`` dict) for specialised subscribers.
+        The reading's channels: channel -> array of ``n`` rows, as the driver's ``describe()``
+        (e.g. ``distance`` in m, ``pressure`` (n, taps) in Pa).
+    gaps : tuple of Gap
+        Rows missing before or inside this block: the reading's own (counter jumps, restarts,
+        failed polls), preceded by those of blocks the engine dropped on a full queue (kind
+        ``"overflow"``, see ``overflow_samples``).
+    info : mapping
+        The reading's facts that are not rows (``Reading.info``).
     overflow_samples : int
         Rows of this device dropped on a full queue just before this block (0 normally).
     """
@@ -90,11 +94,18 @@ class StreamBlock:
     seq: int
     host_time_ns: IntArray
     device_time: FloatArray | None
-    counter: IntArray | None
+    counter: IntArray
     values: Mapping[str, npt.NDArray[Any]]
     gaps: Gaps = ()
-    raw: Any = None
+    info: Mapping[str, Any] = field(default_factory=dict)
     overflow_samples: int = 0
+
+    @classmethod
+    def of(cls, device: str, kind: str, seq: int, reading: Reading) -> StreamBlock:
+        """Return driver ``reading`` as block ``seq`` of ``device`` (a ``kind``)."""
+        return cls(device=device, kind=kind, seq=seq, host_time_ns=reading.host_time_ns,
+                   device_time=reading.device_time, counter=reading.counter,
+                   values=reading.channels, gaps=reading.gaps, info=reading.info)
 
     def __len__(self) -> int:
         return int(self.host_time_ns.shape[0])

@@ -1,6 +1,9 @@
 """The instrument drivers: one subpackage per device, a registry, and the driver builder.
 
 - :mod:`~daq.instruments.entry`: :class:`DriverEntry`, what each driver tells the registry;
+- :mod:`~daq.instruments.reading`: the reading contract: the :class:`Reading` every driver's
+  ``read()`` returns (channels as its ``describe()``, host times, counters, device times,
+  gaps of the one :class:`Gap` type);
 - :mod:`~daq.instruments.registry`: the five shipped drivers by name (imported statically),
   the validation of an instrument table's settings;
 - :mod:`~daq.instruments.build`: :func:`build_driver`, a configured instrument's driver on the

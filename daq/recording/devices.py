@@ -7,7 +7,8 @@ and their pairing with the PLC's trigger pulses as clock anchors
 (:meth:`DeviceState.anchor_triggers`, :meth:`DeviceState.pair_triggers`), and the state of a
 device clock restart (rows held back until a fresh map settles). :func:`take_rows` cuts a block
 at a restart gap; :data:`POLLED_DEFAULTS` names the raw channels of polled devices that do not
-describe themselves; :class:`ClockObserver` is what the writer tells the sync view's times to
+describe themselves; :func:`declare_device` declares a device's raw stream in the file and
+builds its state; :class:`ClockObserver` is what the writer tells the sync view's times to
 (a check against a simulated rig's truth).
 
 Not responsible for: deciding when a device clock restarted, or the sync view and the file
@@ -18,21 +19,26 @@ Not responsible for: deciding when a device clock restarted, or the sync view an
 from __future__ import annotations
 
 import math
-from collections.abc import Collection, Mapping
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 import numpy.typing as npt
 
 from daq.acquisition.records import StreamBlock
+from daq.config import RigConfig
+from daq.recording.recorder import Recorder
 from daq.sync.clock_map import ClockMap, trigger_times_from_flags, trigger_times_from_latch
 from daq.sync.continuous_time import ContinuousTimeline
 
 __all__ = ["CLOCK_WINDOW_S", "POLLED_DEFAULTS", "POLLED_RATE_HZ", "TRIGGER_PAIRING_S",
-           "ClockObserver", "DeviceState", "new_clock_map", "take_rows"]
+           "ClockObserver", "DeviceState", "RawRows", "ScannerRawRows", "TableRawRows",
+           "declare_device", "laser_raw_rows", "new_clock_map", "take_rows"]
 
 FloatArray = npt.NDArray[np.float64]
+#: No trigger time (a block without a new pulse).
+_NONE: FloatArray = np.zeros(0)
 
 #: Envelope window of the clock maps, s (see :class:`~daq.sync.clock_map.ClockMap`).
 CLOCK_WINDOW_S = 0.5
@@ -62,15 +68,122 @@ def new_clock_map(assumed_floor_s: float = 0.0) -> ClockMap:
     return ClockMap(window_s=CLOCK_WINDOW_S, n_windows=600, assumed_floor_s=assumed_floor_s)
 
 
+def declare_device(rec: Recorder, config: RigConfig, name: str, kind: str,
+                   describe: Mapping[str, Mapping[str, Any]]) -> DeviceState:
+    """Declare a device's raw stream in the run file; return its state, clocked or not.
+
+    The raw stream's layout is the file format's (docs/file_format.md), per role: so this is
+    where the writer asks what kind of device it records. A laser records ``distance`` (m)
+    with its ``error_code`` and ``triggered`` flags, a scanner its taps and Pitot (Pa, float32)
+    with the trigger time, a polled device the scalar channels its ``describe()`` names.
+
+    Parameters
+    ----------
+    rec : Recorder
+        The run file, declaring.
+    config : RigConfig
+        The rig config (the lasers' and the scanner's rates, the taps).
+    name, kind : str
+        The device and its engine kind.
+    describe : mapping
+        The driver's ``describe()`` (channel -> units, dtype, shape).
+    """
+    if kind == "laser":
+        lasers = {inst.name: inst for inst in config.by_role("lasers")}
+        rate = float(lasers[name].settings["rate_hz"]) if name in lasers else 4000.0
+        rec.add_stream(name, ["distance"], "m", rate, "float64",
+                       extra={"error_code": "int32", "triggered": "bool"})
+        return DeviceState(name, kind, ["distance"], rate, new_clock_map(),
+                           ContinuousTimeline(1.0 / rate), raw_rows=laser_raw_rows)
+    if kind == "scanner":
+        rate = float(config.instrument(name).settings["rate_hz"])
+        n_taps = config.taps.n_taps
+        channels = [*(f"tap{i:03d}" for i in range(n_taps)), "pitot"]
+        rec.add_stream(name, channels, "Pa", rate, "float32", extra={"trigger_time": "float64"})
+        return DeviceState(name, kind, channels, rate, new_clock_map(),
+                           ContinuousTimeline(1.0 / rate),
+                           raw_rows=ScannerRawRows(n_taps, "float32"))
+    pairs = [(k, str(v.get("units", "") or "1")) for k, v in describe.items()
+             if tuple(v.get("shape", ())) == ()]
+    if not pairs:
+        pairs = list(POLLED_DEFAULTS.get(kind, (("value", "1"),)))
+    channels = [k for k, _ in pairs]
+    rate = POLLED_RATE_HZ.get(kind, 1.0)
+    rec.add_stream(name, channels, [u for _, u in pairs], rate, "float64")
+    return DeviceState(name, kind, channels, rate, raw_rows=TableRawRows(tuple(channels)))
+
+
 def take_rows(block: StreamBlock, lo: int, hi: int) -> StreamBlock:
     """Rows ``lo:hi`` of a block (every value holds one row per sample), without its gaps."""
     return StreamBlock(
         device=block.device, kind=block.kind, seq=block.seq,
         host_time_ns=block.host_time_ns[lo:hi],
         device_time=None if block.device_time is None else block.device_time[lo:hi],
-        counter=None if block.counter is None else block.counter[lo:hi],
+        counter=block.counter[lo:hi],
         values={k: np.asarray(v)[lo:hi] for k, v in block.values.items()},
-        gaps=(), raw=block.raw, overflow_samples=0)
+        gaps=(), info=block.info, overflow_samples=0)
+
+
+#: A block's values -> its raw stream's rows: the ``values`` table and the extra columns.
+RawRows = Callable[[Mapping[str, npt.NDArray[Any]], int],
+                   tuple[npt.NDArray[Any], dict[str, npt.NDArray[Any]]]]
+
+
+def laser_raw_rows(values: Mapping[str, npt.NDArray[Any]], n: int,
+                   ) -> tuple[npt.NDArray[Any], dict[str, npt.NDArray[Any]]]:
+    """Return a laser's raw rows: ``distance`` (m), its ``error_code`` and ``triggered`` flags."""
+    extra = {"error_code": values["error_code"] if "error_code" in values
+             else np.zeros(n, np.int32),
+             "triggered": values["triggered"] if "triggered" in values else np.zeros(n, bool)}
+    return values["distance"], extra
+
+
+class ScannerRawRows:
+    """A scanner's raw rows: the first ``n_taps`` pressures and the Pitot's (Pa), trigger times.
+
+    Parameters
+    ----------
+    n_taps : int
+        Pressure channels that are taps (the rig config's), the rest of the scanner unused.
+    dtype : str
+        dtype of the raw stream's values: the table is built in it (one conversion, half the
+        bytes to batch for float32).
+    """
+
+    def __init__(self, n_taps: int, dtype: str = "float64") -> None:
+        self.n_taps = int(n_taps)
+        self.dtype = np.dtype(dtype)
+
+    def __call__(self, values: Mapping[str, npt.NDArray[Any]], n: int,
+                 ) -> tuple[npt.NDArray[Any], dict[str, npt.NDArray[Any]]]:
+        """Return the ``(n, n_taps + 1)`` table and the ``trigger_time`` column (s)."""
+        table = np.empty((n, self.n_taps + 1), self.dtype)
+        table[:, :self.n_taps] = values["pressure"][:, :self.n_taps]
+        table[:, self.n_taps] = values["pitot"]
+        trigger = values["trigger_time"] if "trigger_time" in values else np.full(n, np.nan)
+        return table, {"trigger_time": trigger}
+
+
+class TableRawRows:
+    """A polled device's raw rows: its scalar channels side by side, as float64 (NaN if absent).
+
+    Parameters
+    ----------
+    channels : tuple of str
+        The columns, in order.
+    """
+
+    def __init__(self, channels: tuple[str, ...]) -> None:
+        self.channels = channels
+
+    def __call__(self, values: Mapping[str, npt.NDArray[Any]], n: int,
+                 ) -> tuple[npt.NDArray[Any], dict[str, npt.NDArray[Any]]]:
+        """Return the ``(n, channels)`` table and no extra column."""
+        table = np.full((n, len(self.channels)), np.nan)
+        for j, c in enumerate(self.channels):
+            if c in values:
+                table[:, j] = np.asarray(values[c], dtype=np.float64).reshape(n)
+        return table, {}
 
 
 @dataclass
@@ -94,25 +207,40 @@ class DeviceState:
     break_pending: bool = False  # the clock restarted: mark the break in the view (_push)
     clock_restarts: int = 0  # clock maps started afresh after a device clock restart
     settle_until: float = math.nan  # device time up to which a new epoch's rows are held back
-    held: list[tuple[StreamBlock, FloatArray, npt.NDArray[np.bool_]]] = field(
+    held: list[tuple[StreamBlock, FloatArray, npt.NDArray[np.bool_] | None]] = field(
         default_factory=list)  # rows of the new epoch waiting for its map to settle
+    raw_rows: RawRows | None = None  # the block's values -> the raw stream's rows
+    view: str | None = None  # its stream in the sync view ("pressure", "laser.<name>") if any
 
     def anchor_triggers(self, block: StreamBlock, t_dev: FloatArray,
                         trigger_events: Collection[float]) -> None:
-        """Take the trigger times a block reveals (latched or flagged); pair those it can."""
-        if self.kind == "scanner" and "trigger_time" in block.values:
-            found = trigger_times_from_latch(block.values["trigger_time"], self.last_trigger)
+        """Take the trigger times a block reveals (latched or flagged); pair those it can.
+
+        A ``trigger_time`` channel is a latch (the scanner's last trigger time on its clock, s);
+        a ``triggered`` channel flags the samples a trigger marked (the lasers).
+        """
+        values = block.values
+        if "trigger_time" in values:
+            latched = np.asarray(values["trigger_time"])
+            # Most blocks hold no new pulse: one comparison tells (NaN compares False).
+            if not (latched > self.last_trigger).any():
+                found = _NONE
+            else:
+                found = trigger_times_from_latch(latched, self.last_trigger)
             if found.size:
                 self.last_trigger = float(found[-1])
-        elif self.kind == "laser" and "triggered" in block.values:
-            ok = np.isfinite(t_dev)
-            found = trigger_times_from_flags(t_dev[ok],
-                                             np.asarray(block.values["triggered"])[ok],
-                                             1.0 / self.rate_hz)
+        elif "triggered" in values:
+            flags = np.asarray(values["triggered"])
+            if not flags.any():  # most blocks hold no flagged sample
+                found = _NONE
+            else:
+                ok = np.isfinite(t_dev)
+                found = trigger_times_from_flags(t_dev[ok], flags[ok], 1.0 / self.rate_hz)
         else:
             return
-        self.pending_triggers.extend(float(t) for t in found)
-        del self.pending_triggers[:-32]
+        if found.size:
+            self.pending_triggers.extend(float(t) for t in found)
+            del self.pending_triggers[:-32]
         self.pair_triggers(trigger_events)
 
     def pair_triggers(self, trigger_events: Collection[float]) -> None:
@@ -120,7 +248,8 @@ class DeviceState:
 
         ``trigger_events``: the host times of the PLC's trigger pulses, s from the run start.
         """
-        if self.clock is None or not self.clock.ready or not trigger_events:
+        if (not self.pending_triggers or self.clock is None or not self.clock.ready
+                or not trigger_events):
             return
         events = np.fromiter(trigger_events, dtype=np.float64)
         left: list[float] = []

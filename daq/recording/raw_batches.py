@@ -29,15 +29,15 @@ class RawBatches:
     def __init__(self) -> None:
         self._raw: dict[str, list[tuple[Any, Any, Any, Any, dict[str, Any]]]] = {}
 
-    def add(self, device: str, block: StreamBlock, counter: Any, values: Any,
+    def add(self, device: str, block: StreamBlock, values: Any,
             extra: Mapping[str, Any]) -> None:
-        """Keep a block's rows: its times and ``counter``, ``values`` (n, ch), ``extra``."""
+        """Keep a block's rows: its times and counters, ``values`` (n, ch), ``extra``."""
         n = len(block)
         t_dev = (np.full(n, np.nan) if block.device_time is None
                  else np.asarray(block.device_time, dtype=np.float64))
         self._raw.setdefault(device, []).append(
             (np.asarray(block.host_time_ns, dtype=np.int64), t_dev,
-             np.asarray(counter, dtype=np.int64), np.asarray(values),
+             np.asarray(block.counter, dtype=np.int64), np.asarray(values),
              {k: np.asarray(v) for k, v in extra.items()}))
 
     def write(self, rec: Recorder) -> None:

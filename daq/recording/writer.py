@@ -47,10 +47,9 @@ from daq.acquisition.records import Event, StreamBlock
 from daq.config import RigConfig
 from daq.errors import StorageError
 from daq.recording.devices import (
-    POLLED_DEFAULTS,
-    POLLED_RATE_HZ,
     ClockObserver,
     DeviceState,
+    declare_device,
     new_clock_map,
     take_rows,
 )
@@ -59,7 +58,6 @@ from daq.recording.raw_batches import RawBatches
 from daq.recording.recorder import Recorder, RunRecorder
 from daq.recording.releases import ReleaseRows
 from daq.recording.sync_view import physical_columns
-from daq.sync.continuous_time import ContinuousTimeline
 from daq.sync.resample import Resampler, StreamSpec, SyncBlock
 
 __all__ = ["DEFAULT_RHO", "DEFAULT_SYNC_RATE_HZ", "RunWriter", "default_sync_rate_hz"]
@@ -157,6 +155,8 @@ class RunWriter:
         self._release_rows = ReleaseRows()
         self._calz_count: dict[str, int] = {}
         self._trigger_events: deque[float] = deque(maxlen=64)
+        self._view_pieces: dict[str, list[tuple[FloatArray, FloatArray]]] = {}
+        self._n_taps = config.taps.n_taps
 
     # -- dispatch ------------------------------------------------------------------------------
     def __call__(self, name: str, doc: Any) -> None:
@@ -208,40 +208,23 @@ class RunWriter:
         streams: list[StreamSpec] = []
         for name, info in doc["devices"].items():
             kind = str(info["kind"])
-            describe = info.get("describe", {}) or {}
-            if kind == "laser":
-                rate = float(self._lasers[name].settings["rate_hz"]) if name in self._lasers \
-                    else 4000.0
-                rec.add_stream(name, ["distance"], "m", rate, "float64",
-                               extra={"error_code": "int32", "triggered": "bool"})
-                dev = DeviceState(name, kind, ["distance"], rate, new_clock_map(),
-                              ContinuousTimeline(1.0 / rate))
-                if name in self._lasers:
-                    self._laser_order.append(name)
-                    streams.append(StreamSpec(f"laser.{name}", 1.0 / rate, "boxcar"))
-            elif kind == "scanner":
-                inst = self.config.instrument(name)
-                rate = float(inst.settings["rate_hz"])
-                rec.add_stream(name, [*tap_names, "pitot"], "Pa", rate, "float32",
-                               extra={"trigger_time": "float64"})
-                dev = DeviceState(name, kind, [*tap_names, "pitot"], rate, new_clock_map(),
-                              ContinuousTimeline(1.0 / rate))
-                if name == self._scanner_name:
-                    streams.append(StreamSpec("pressure", 1.0 / rate, "linear", n_taps))
-                    streams.append(StreamSpec("pitot", 1.0 / rate, "linear"))
-            else:
-                pairs = [(k, str(v.get("units", "") or "1")) for k, v in describe.items()
-                         if tuple(v.get("shape", ())) == () and k != "host_time_ns"]
-                if not pairs:
-                    pairs = list(POLLED_DEFAULTS.get(kind, (("value", "1"),)))
-                channels = [k for k, _ in pairs]
-                rate = POLLED_RATE_HZ.get(kind, 1.0)
-                rec.add_stream(name, channels, [u for _, u in pairs], rate, "float64")
-                dev = DeviceState(name, kind, channels, rate)
+            dev = declare_device(rec, self.config, name, kind, info.get("describe", {}) or {})
+            # The sync view's streams: its lasers (h, alpha) and its scanner (taps, Pitot).
+            if kind == "laser" and name in self._lasers:
+                self._laser_order.append(name)
+                dev.view = f"laser.{name}"
+                streams.append(StreamSpec(dev.view, 1.0 / dev.rate_hz, "boxcar"))
+            elif kind == "scanner" and name == self._scanner_name:
+                dev.view = "pressure"
+                streams.append(StreamSpec("pressure", 1.0 / dev.rate_hz, "linear", n_taps))
+                streams.append(StreamSpec("pitot", 1.0 / dev.rate_hz, "linear"))
             self._devices[name] = dev
         if len(self._laser_order) < 2:
             self._laser_order = []  # h and alpha need two lasers: no laser stream in the view
             streams = [s for s in streams if not s.name.startswith("laser.")]
+            for dev in self._devices.values():
+                if dev.view is not None and dev.view.startswith("laser."):
+                    dev.view = None
         rec.add_sync(tap_names)
         rec.start(self._t0_ns)
         if streams:
@@ -259,39 +242,22 @@ class RunWriter:
         dev.samples += n
         dev.overflow_samples += int(block.overflow_samples)
         restarts: list[int] = []  # counters after which the device restarted (length -1)
-        for after, length in block.gaps:
-            rec.add_gap(dev.name, int(after), int(length) if int(length) >= 1 else -1)
+        for gap in block.gaps:
+            rec.add_gap(dev.name, gap.after_counter, gap.length if gap.length >= 1 else -1)
             dev.gaps += 1
-            if int(length) < 0:
-                restarts.append(int(after))
+            if gap.length < 0:
+                restarts.append(gap.after_counter)
         if n == 0:
             dev.restart_pending = dev.restart_pending or bool(restarts)
             return
-        counter = (block.counter if block.counter is not None
-                   else np.arange(dev.samples - n, dev.samples, dtype=np.int64))
         values = block.values
-        if dev.kind == "laser":
-            distance = np.asarray(values["distance"], dtype=np.float64)
-            self._raw.add(dev.name, block, counter, distance,
-                             {"error_code": values.get("error_code", np.zeros(n, np.int32)),
-                              "triggered": values.get("triggered", np.zeros(n, bool))})
-        elif dev.kind == "scanner":
-            n_taps = self.config.taps.n_taps
-            pressure = np.asarray(values["pressure"], dtype=np.float64)
-            pitot = np.asarray(values["pitot"], dtype=np.float64).reshape(n, 1)
-            self._raw.add(dev.name, block, counter, np.hstack([pressure[:, :n_taps], pitot]),
-                             {"trigger_time": values.get("trigger_time", np.full(n, np.nan))})
-        else:
-            table = np.column_stack([np.asarray(values.get(c, np.full(n, np.nan)),
-                                                dtype=np.float64).reshape(n)
-                                     for c in dev.channels])
-            self._raw.add(dev.name, block, counter, table, {})
-            if dev.kind == "barometer" and "density" in values:
-                rho = float(np.asarray(values["density"], dtype=np.float64)[-1])
-                if math.isfinite(rho) and rho > 0:
-                    self._rho, self._rho_measured = rho, True
-            self._write_if_due()
-            return
+        assert dev.raw_rows is not None
+        table, extra = dev.raw_rows(values, n)
+        self._raw.add(dev.name, block, table, extra)
+        if "density" in values:  # a barometer: the air density of U and the forces
+            rho = float(values["density"][-1])
+            if math.isfinite(rho) and rho > 0:
+                self._rho, self._rho_measured = rho, True
         if block.device_time is None or dev.clock is None:
             self._write_if_due()
             return
@@ -301,6 +267,7 @@ class RunWriter:
             return
         # A restart gap splits the block: the rows before it belong to the old device clock
         # (and its map), the rows after it perhaps to a restarted one (see _map_rows).
+        counter = block.counter
         cuts = sorted({int(np.searchsorted(counter, after, side="right")) for after in restarts})
         bounds = [0, *(k for k in cuts if 0 < k < n), n]
         for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
@@ -322,12 +289,13 @@ class RunWriter:
         """
         assert dev.clock is not None
         t_dev = np.asarray(block.device_time, dtype=np.float64)
-        t_host = self._time(block.host_time_ns)
-        finite = np.isfinite(t_dev)
-        if not np.any(finite):
+        mask = np.isfinite(t_dev)
+        finite = None if mask.all() else mask  # None, the usual case: no mask downstream
+        rows = np.arange(t_dev.shape[0]) if finite is None else np.flatnonzero(mask)
+        if rows.size == 0:
             return
-        rows = np.flatnonzero(finite)
         first, last = int(rows[0]), int(rows[-1])
+        t_host = self._time(block.host_time_ns)
         if dev.restart_pending:
             dev.restart_pending = False
             # Device time not after the last one mapped: the device clock restarted with the scan
@@ -339,8 +307,13 @@ class RunWriter:
                 self._restart_clock(dev, float(t_dev[first]), float(t_host[first]))
         # Each read in a block (lasers: 20 ms of reads) has its own arrival stamp: the last row
         # of every read is a tight pair for the clock map's lower envelope.
-        ends = np.append(rows[np.flatnonzero(np.diff(t_host[rows]) != 0.0)], last)
-        dev.clock.update(t_dev[ends], t_host[ends])
+        timed = t_host if finite is None else t_host[rows]
+        reads = np.flatnonzero(timed[1:] != timed[:-1])  # rows before a new arrival stamp
+        if reads.size == 0:  # one read: one pair, given as floats (no arrays in the map)
+            dev.clock.update(float(t_dev[last]), float(t_host[last]))
+        else:
+            ends = np.append(rows[reads], last)
+            dev.clock.update(t_dev[ends], t_host[ends])
         if self.use_trigger_anchors:
             dev.anchor_triggers(block, t_dev, self._trigger_events)
             if dev.pending_triggers:
@@ -412,40 +385,63 @@ class RunWriter:
         assert rec is not None
         self._raw.write(rec)
         if self._resampler is not None:
-            self._write_sync(self._resampler.pull())
+            self._write_sync(self._pull())
 
     def _push(self, dev: DeviceState, block: StreamBlock, t_dev: FloatArray,
-              finite: npt.NDArray[np.bool_]) -> None:
+              finite: npt.NDArray[np.bool_] | None) -> None:
+        """Map a block's timed rows (``finite``; None: all, no copy) to the sync view's times."""
         r = self._resampler
         if r is None or dev.clock is None or dev.timeline is None:
             return
-        t = dev.timeline.map(t_dev[finite], dev.clock.to_host)
+        t = dev.timeline.map(t_dev if finite is None else t_dev[finite], dev.clock.to_host,
+                             version=dev.clock.version)
         # Only samples after every earlier one of the block: the resampler needs increasing
         # times, and a sample compared with its neighbour alone would let one that went back
         # (device time going back inside a block) through after the first.
-        keep = (np.concatenate(([True], t[1:] > np.maximum.accumulate(t)[:-1])) if t.size
-                else np.zeros(0, bool))
-        t = t[keep]
+        keep: npt.NDArray[np.bool_] | None = None
+        if t.size > 1 and not (t[1:] > t[:-1]).all():
+            keep = np.concatenate(([True], t[1:] > np.maximum.accumulate(t)[:-1]))
+            t = t[keep]
         if dev.break_pending and t.size:
             dev.break_pending = False
             self._mark_break(dev, t[0])
         if t.size:
             dev.last_host = max(dev.last_host, float(t[-1]))
         if self.clock_truth is not None:
-            self.clock_truth.observe(dev.name, t, t_dev[finite][keep], self._t0_ns * 1e-9)
+            t_seen = t_dev if finite is None else t_dev[finite]
+            self.clock_truth.observe(dev.name, t, t_seen if keep is None else t_seen[keep],
+                                     self._t0_ns * 1e-9)
 
         def rows(a: Any) -> FloatArray:
-            return np.asarray(a, dtype=np.float64)[finite][keep]
+            out = np.asarray(a, dtype=np.float64)
+            if finite is not None:
+                out = out[finite]
+            return out if keep is None else out[keep]
 
-        if dev.kind == "laser" and dev.name in self._laser_order:
+        if dev.view == "pressure":
+            self._to_view("pressure", t, rows(block.values["pressure"])[:, :self._n_taps])
+            self._to_view("pitot", t, rows(block.values["pitot"]))
+        elif dev.view is not None:
             d = rows(block.values["distance"])
             if "error_code" in block.values:
-                d = np.where(rows(block.values["error_code"]) != 0, np.nan, d)
-            r.push(f"laser.{dev.name}", t, d)
-        elif dev.kind == "scanner" and dev.name == self._scanner_name:
-            n_taps = self.config.taps.n_taps
-            r.push("pressure", t, rows(block.values["pressure"])[:, :n_taps])
-            r.push("pitot", t, rows(block.values["pitot"]))
+                code = block.values["error_code"]
+                if np.any(code):  # else every distance is valid as it stands
+                    d = np.where(rows(code) != 0, np.nan, d)
+            self._to_view(dev.view, t, d)
+
+    def _to_view(self, stream: str, t: FloatArray, values: FloatArray) -> None:
+        """Queue samples of a sync-view stream for the next pull (:meth:`_pull`)."""
+        self._view_pieces.setdefault(stream, []).append((t, values))
+
+    def _pull(self) -> SyncBlock:
+        """Push the samples queued since the last pull, once per stream (as per block); pull."""
+        r = self._resampler
+        assert r is not None
+        for stream, pieces in self._view_pieces.items():
+            if pieces:
+                r.push_many(stream, pieces)
+                pieces.clear()
+        return r.pull()
 
     def _mark_break(self, dev: DeviceState, t_next: float) -> None:
         """Put a NaN sample between a device's last sample and ``t_next`` (run s) in the view.
@@ -464,11 +460,11 @@ class RunWriter:
         t_nan = (0.5 * (dev.last_host + t_next) if t_next > dev.last_host
                  else float(np.nextafter(dev.last_host, math.inf)))
         at = np.array([t_nan])
-        if dev.kind == "laser" and dev.name in self._laser_order:
-            r.push(f"laser.{dev.name}", at, np.full(1, np.nan))
-        elif dev.kind == "scanner" and dev.name == self._scanner_name:
-            r.push("pressure", at, np.full((1, self.config.taps.n_taps), np.nan))
-            r.push("pitot", at, np.full(1, np.nan))
+        if dev.view == "pressure":
+            self._to_view("pressure", at, np.full((1, self._n_taps), np.nan))
+            self._to_view("pitot", at, np.full(1, np.nan))
+        elif dev.view is not None:
+            self._to_view(dev.view, at, np.full(1, np.nan))
 
     # -- sync view -----------------------------------------------------------------------------
     def _write_sync(self, sb: SyncBlock) -> None:
@@ -545,7 +541,7 @@ class RunWriter:
         # partial (NaN). The view ends where every stream has data (or stalled for longer than
         # max_hold_s); the stragglers' samples stay in the raw streams.
         if self._resampler is not None:
-            self._write_sync(self._resampler.pull())
+            self._write_sync(self._pull())
         self._release_rows.finish(rec, self._sync_rows)
         fits = self.clock_fits()
         offsets = {n: f["offset_s"] for n, f in fits.items() if math.isfinite(f["offset_s"])}

@@ -23,6 +23,8 @@ FloatArray = npt.NDArray[np.float64]
 
 def float_1d(name: str, value: Any) -> FloatArray:
     """Return ``value`` as a 1-D float64 array (a scalar becomes one element)."""
+    if type(value) is np.ndarray and value.dtype == np.float64 and value.ndim == 1:
+        return value  # already one (the usual call, from the run writer): nothing to check
     arr = np.atleast_1d(np.asarray(value, dtype=np.float64))
     if arr.ndim != 1:
         raise ValueError(f"{name} must be a scalar or 1-D, got shape {arr.shape}")

@@ -23,6 +23,7 @@ device time at the run start. The clock convention is that of
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any, Final, overload
 
@@ -49,9 +50,28 @@ _MAX_SLOPE_POINTS = 120
 
 def _weighted_median(values: FloatArray, weights: FloatArray) -> float:
     """Lower weighted median: the smallest value whose cumulative weight reaches half the total."""
-    order = np.argsort(values, kind="stable")
+    # Any sort gives the same value: tied values are equal, and the cumulative weight at the
+    # end of a run of ties does not depend on their order (the introsort is ~2x the stable one).
+    order = np.argsort(values)
     cum = np.cumsum(weights[order])
-    return float(values[order][np.searchsorted(cum, 0.5 * cum[-1])])
+    return float(values[order[np.searchsorted(cum, 0.5 * cum[-1])]])
+
+
+@functools.lru_cache(maxsize=8)
+def _pairs(n: int) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
+    """Return the index pairs ``i < j`` of ``n`` points (cached: a full map refits on 120)."""
+    i, j = np.triu_indices(n, 1)
+    i.setflags(write=False)
+    j.setflags(write=False)
+    return i, j
+
+
+@functools.lru_cache(maxsize=8)
+def _thinning(n: int) -> npt.NDArray[np.intp]:
+    """Return the indices of ``_MAX_SLOPE_POINTS`` of ``n`` points, evenly spread (cached)."""
+    keep = np.linspace(0, n - 1, _MAX_SLOPE_POINTS).round().astype(np.intp)
+    keep.setflags(write=False)
+    return keep
 
 
 def _theil_sen_slope(x: FloatArray, y: FloatArray) -> float:
@@ -65,9 +85,9 @@ def _theil_sen_slope(x: FloatArray, y: FloatArray) -> float:
     if x.size > _MAX_SLOPE_POINTS:
         # All pairs of 600 points (a 5 min clock span) cost ~19 ms per refit; an even thinning
         # keeps the span (what the drift needs) and the robustness, at ~0.5 ms.
-        keep = np.linspace(0, x.size - 1, _MAX_SLOPE_POINTS).round().astype(np.intp)
+        keep = _thinning(x.size)
         x, y = x[keep], y[keep]
-    i, j = np.triu_indices(x.size, 1)
+    i, j = _pairs(x.size)
     dx = x[j] - x[i]
     keep = dx != 0.0
     dx, dy = dx[keep], (y[j] - y[i])[keep]
@@ -154,6 +174,9 @@ class ClockMap:
         self.n_windows = n_windows
         self.max_anchors = max_anchors
         self.assumed_floor_s = floor
+        #: Changes whenever the map may have changed (a refit, an anchor, a reset): a caller
+        #: that mapped a time under one version gets the same host time under it again.
+        self.version = 0
         self.reset()
 
     def reset(self) -> None:
@@ -170,6 +193,7 @@ class ClockMap:
         self._n_anchors_total = 0
         self._envelope: tuple[float, float, float] | None = None  # slope, intercept, scatter
         self._map: tuple[float, float] | None = None
+        self.version += 1
         self._n_pairs = 0
 
     # -- feeding ----------------------------------------------------------------------------------
@@ -188,6 +212,14 @@ class ClockMap:
         ValueError
             Shapes differ, or a time is not finite (a pair without a time is not evidence).
         """
+        if isinstance(t_device, float) and isinstance(t_host, float):
+            # The recorder's case (one pair per block, as floats): no arrays at all.
+            if not (math.isfinite(t_device) and math.isfinite(t_host)):
+                raise ValueError("1 of 1 clock pairs are not finite")
+            if self._origin is None:
+                self._origin = (t_device, t_host)
+            self._add_pair(t_device - self._origin[0], t_host - self._origin[1])
+            return
         d = float_1d("t_device", t_device)
         h = float_1d("t_host", t_host)
         if d.shape != h.shape:
@@ -260,6 +292,7 @@ class ClockMap:
         self._anchors[slot] = (d - d0, h - h0, self._floor_of(d - d0, h - h0))
         self._n_anchors_total += 1
         self._map = None
+        self.version += 1
 
     # -- fitting ----------------------------------------------------------------------------------
     def _close_window(self) -> None:
@@ -294,6 +327,7 @@ class ClockMap:
         recent = (anchors[:, 0] >= d.min() - self.window_s) | np.isnan(anchors[:, 2])
         anchors[recent, 2] = (c + b * anchors[recent, 0]) - anchors[recent, 1]
         self._map = None
+        self.version += 1
 
     def _floor_of(self, d_rel: float, h_rel: float) -> float:
         if self._envelope is None:

@@ -81,6 +81,7 @@ class ContinuousTimeline:
         self.max_step_s = float(max_step_s)
         self.max_gap_periods = float(max_gap_periods)
         self._last_device: float | None = None
+        self._version: int | None = None  # the map version of the last block
         self._last_host = math.nan
         #: Correction still being paid off after the last block, s (host = map + correction).
         self.correction_s = 0.0
@@ -92,9 +93,11 @@ class ContinuousTimeline:
     def restart(self) -> None:
         """Forget the previous block: the next one starts on the map (a known discontinuity)."""
         self._last_device = None
+        self._version = None
         self.correction_s = 0.0
 
-    def map(self, t_device: Any, to_host: Callable[[FloatArray], FloatArray]) -> FloatArray:
+    def map(self, t_device: Any, to_host: Callable[[FloatArray], FloatArray], *,
+            version: int | None = None) -> FloatArray:
         """Host times of one block's samples.
 
         Parameters
@@ -103,6 +106,10 @@ class ContinuousTimeline:
             Device times of the block, s, finite and increasing.
         to_host : callable
             The current clock map (device s -> host s), e.g. ``ClockMap.to_host``.
+        version : int, optional
+            The map's version (``ClockMap.version``): under the version of the previous block,
+            with nothing left to pay off, the previous sample is where the map put it, and is
+            not mapped again.
 
         Returns
         -------
@@ -120,7 +127,10 @@ class ContinuousTimeline:
             spacing = float(t[0]) - last
             if 0.0 < spacing <= self.max_gap_periods * self.period_s:
                 # Where the previous sample is on the new map, and where it was put.
-                moved = self._last_host - float(to_host(np.array([last]))[0])
+                if version is not None and version == self._version and self.correction_s == 0.0:
+                    moved = 0.0  # the same map put it there: to_host(last) == _last_host
+                else:
+                    moved = self._last_host - float(to_host(np.array([last]))[0])
                 if abs(moved) <= self.max_step_s:
                     correction = moved
                     self.largest_slewed_s = max(self.largest_slewed_s, abs(moved))
@@ -128,11 +138,16 @@ class ContinuousTimeline:
                     self.steps += 1
             else:
                 self.steps += 1
-        # Paid off from the previous sample on (the first sample already pays for its spacing).
-        origin = last if correction and last is not None else float(t[0])
-        remaining = np.maximum(abs(correction) - self.max_slew * (t - origin), 0.0)
-        out = mapped + math.copysign(1.0, correction) * remaining
+        if correction == 0.0 and float(t[0]) <= float(t.min()):
+            out = mapped  # nothing to pay off (the usual case between refits)
+        else:
+            # Paid off from the previous sample on (the first sample already pays for its
+            # spacing).
+            origin = last if last is not None else float(t[0])
+            remaining = np.maximum(abs(correction) - self.max_slew * (t - origin), 0.0)
+            out = mapped + math.copysign(1.0, correction) * remaining
         self._last_device = float(t[-1])
+        self._version = version
         self._last_host = float(out[-1])
         self.correction_s = float(out[-1] - mapped[-1])
         return out

@@ -4,7 +4,8 @@ Responsibility (the synchronised view of docs/file_format.md): pure numerical co
 run writer
 
 - :class:`CounterUnwrapper` / :func:`unwrap_counter` unwrap wrapping sample counters of any
-  modulus and list the gaps (:class:`Gap`) and the steps that are not forward
+  modulus and list the gaps (:class:`~daq.instruments.reading.Gap`, the one gap type of every
+  stream) and the steps that are not forward
   (:class:`CounterStep`): nothing is dropped or invented silently;
 - :func:`find_gaps` lists the gaps of a counter that is already unwrapped.
 
@@ -24,12 +25,12 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from daq.instruments.reading import Gap
 from daq.sync.checks import float_1d, positive
 
 __all__ = [
     "CounterStep",
     "CounterUnwrapper",
-    "Gap",
     "Unwrapped",
     "find_gaps",
     "unwrap_counter",
@@ -37,22 +38,6 @@ __all__ = [
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
-
-
-@dataclass(frozen=True)
-class Gap:
-    """Samples missing from a stream, found from its counter.
-
-    Attributes
-    ----------
-    after_counter : int
-        Unwrapped counter of the last sample before the gap.
-    length : int
-        Number of missing samples (>= 1).
-    """
-
-    after_counter: int
-    length: int
 
 
 @dataclass(frozen=True)
@@ -197,7 +182,7 @@ def unwrap_counter(raw: Any, modulus: int, *, device_time: Any = None,
     --------
     >>> u = unwrap_counter([65534, 65535, 0, 3, 4], 65536)
     >>> u.counter.tolist(), u.gaps
-    ([65534, 65535, 65536, 65539, 65540], (Gap(after_counter=65536, length=2),))
+    ([65534, 65535, 65536, 65539, 65540], (Gap(after_counter=65536, length=2, kind='missing'),))
     """
     return CounterUnwrapper(modulus, period_s=period_s).process(raw, device_time)
 

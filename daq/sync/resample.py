@@ -276,19 +276,77 @@ class Resampler:
         want = (tt.size,) if spec.channels is None else (tt.size, spec.channels)
         if v.shape != want:
             raise ValueError(f"{name}: values must have shape {want}, got {v.shape}")
-        if not np.all(np.isfinite(tt)):
+        if tt.size == 0:
+            return
+        if not np.isfinite(tt).all():
             raise ValueError(f"{name}: sample times must be finite")
-        if tt.size > 1 and np.any(np.diff(tt) <= 0.0):
+        if tt.size > 1 and not (tt[1:] > tt[:-1]).all():
             raise ValueError(f"{name}: sample times must increase within a push")
         v = v.reshape(tt.size, -1)
-        if buf.last > -math.inf:
+        # The times increase: the first one tells whether any overlaps or comes late (the usual
+        # push has neither, and is kept without a copy).
+        if float(tt[0]) <= buf.last:
             keep = tt > buf.last
             buf.overlapping += int(tt.size - np.count_nonzero(keep))
             tt, v = tt[keep], v[keep]
-        if self._next > 0:
-            buf.late += int(np.count_nonzero(tt < float(self._time(self._next - 1))
-                                             - self._support(spec)))
+        if self._next > 0 and tt.size:
+            late_before = float(self._time(self._next - 1)) - self._support(spec)
+            if float(tt[0]) < late_before:
+                buf.late += int(np.count_nonzero(tt < late_before))
         buf.append(tt, v)
+
+    def push_many(self, name: str, pieces: Sequence[tuple[FloatArray, FloatArray]]) -> None:
+        """Add several pushes of one stream at once: the same as :meth:`push` of each in turn.
+
+        Each piece's times increase; a sample not after every earlier one of the stream is
+        dropped as overlapping, as :meth:`push` drops it (one concatenation instead of a push
+        per block: the run writer collects its blocks between two pulls).
+
+        Parameters
+        ----------
+        name : str
+            Stream name.
+        pieces : sequence of (t, values)
+            Host-mapped times (s, finite, increasing within a piece) and their values, as
+            :meth:`push` takes them, in order.
+        """
+        if len(pieces) == 1:
+            self.push(name, *pieces[0])
+            return
+        if not pieces:
+            return
+        if name not in self._buffers:
+            raise KeyError(f"unknown stream {name!r}; streams: {sorted(self._buffers)}")
+        buf = self._buffers[name]
+        spec = buf.spec
+        width = 1 if spec.channels is None else spec.channels
+        times = [float_1d("t", t) for t, _ in pieces]
+        values = [np.asarray(x, dtype=np.float64).reshape(t.size, -1)
+                  for t, (_, x) in zip(times, pieces, strict=True)]
+        if any(v.shape[1] != width for v in values):
+            raise ValueError(f"{name}: values must have {width} channel(s)")
+        # The times are joined to decide what to keep; the values stay in their pieces (the
+        # buffer joins them once, at the pull, as it joins a push per block).
+        tt = np.concatenate(times)
+        if not np.isfinite(tt).all():
+            raise ValueError(f"{name}: sample times must be finite")
+        if tt.size == 0:
+            return
+        # A sample is kept when it is after every earlier one (the newest kept is the running
+        # maximum: a dropped sample is never above it), exactly as push() decides per piece.
+        keep = tt > np.maximum.accumulate(np.concatenate(([buf.last], tt[:-1])))
+        if not keep.all():
+            buf.overlapping += int(tt.size - np.count_nonzero(keep))
+            parts = np.split(keep, np.cumsum([t.size for t in times])[:-1])
+            times = [t[k] for t, k in zip(times, parts, strict=True)]
+            values = [v[k] for v, k in zip(values, parts, strict=True)]
+            tt = tt[keep]
+        if self._next > 0 and tt.size:
+            late_before = float(self._time(self._next - 1)) - self._support(spec)
+            if float(tt[0]) < late_before:
+                buf.late += int(np.count_nonzero(tt < late_before))
+        for t, v in zip(times, values, strict=True):
+            buf.append(t, v)
 
     # -- output -----------------------------------------------------------------------------------
     def pull(self) -> SyncBlock:
@@ -364,6 +422,12 @@ def _linear(t: FloatArray, v: FloatArray, times: FloatArray, max_gap: float) -> 
     ok &= dt <= max_gap
     w = ((times - t[i]) / dt)[:, None]
     # v_i + w (v_j - v_i): a NaN at either end gives NaN (a missing sample is never bridged).
+    if ok.all():  # the usual pull: every time inside the data, no long gap (no masked copy)
+        vi = v[i]
+        interp = v[i + 1] - vi
+        interp *= w
+        interp += vi
+        return np.asarray(interp)
     out[ok] = (v[i] + w * (v[i + 1] - v[i]))[ok]
     return out
 

@@ -338,5 +338,6 @@ def test_a_calz_that_times_out_still_restarts_the_scan_and_says_so(engine: Any) 
     assert event.data["stage"] == "calz" and event.data["error"] == "DeviceError"
     assert event.data["scan_restarted"] is True and event.data["pause_s"] >= 0.6
     gaps = [g for b in sink.scanner_blocks() for g in b.gaps]
-    assert len(gaps) == 1 and gaps[0][1] >= 0.6 * RATE_HZ - 2  # the pause, marked and measured
+    assert len(gaps) == 1 and gaps[0].length >= 0.6 * RATE_HZ - 2  # the pause, measured
+    assert gaps[0].kind == "restart"
     assert sink.events("calz") == []

@@ -17,9 +17,10 @@ import numpy as np
 import pytest
 
 from daq.errors import DeviceError, TransportError, TransportTimeout
-from daq.instruments.microepsilon_ild1420.blocks import Gap, LaserBlock
+from daq.instruments.microepsilon_ild1420.decoder import error_reason
 from daq.instruments.microepsilon_ild1420.driver import MicroEpsilonIld1420
 from daq.instruments.microepsilon_ild1420.settings import Ild1420Settings
+from daq.instruments.reading import Gap, Reading
 from daq.transports.byte_transport import open_transport
 from ident import SectionModel, TapLayout, flat_plate
 from simulators.clock import DeviceClock, MonotonicClock
@@ -64,16 +65,20 @@ def connect(url: str, sim: SimMicroEpsilonIld1420, **driver_options: object,
     return driver
 
 
-def read_for(driver: MicroEpsilonIld1420, seconds: float) -> list[LaserBlock]:
+def read_for(driver: MicroEpsilonIld1420, seconds: float) -> list[Reading]:
     blocks = []
     end = time.monotonic() + seconds
     while time.monotonic() < end:
-        blocks.append(driver.read_block(timeout_s=1.0))
+        blocks.append(driver.read(timeout_s=1.0))
     return blocks
 
 
-def joined(blocks: list[LaserBlock]) -> dict[str, np.ndarray]:
-    return {key: np.concatenate([b.channels[key] for b in blocks]) for key in blocks[0].channels}
+def joined(blocks: list[Reading]) -> dict[str, np.ndarray]:
+    """Join the readings: channels, counters and times end to end."""
+    out = {key: np.concatenate([b.channels[key] for b in blocks]) for key in blocks[0].channels}
+    for key in ("counter", "device_time", "host_time_ns"):
+        out[key] = np.concatenate([getattr(b, key) for b in blocks])
+    return out
 
 
 def match(truth: SimIld1420Truth, data: dict[str, np.ndarray]) -> np.ndarray:
@@ -116,13 +121,13 @@ def test_full_rate_for_10_s_loses_no_frame(make_sim, tunnel):
     sim = make_sim()
     driver = connect(sim.start("socket"), sim)
     try:
-        blocks: list[LaserBlock] = []
+        blocks: list[Reading] = []
         start = time.monotonic()
         events = [(1.0, tunnel.release), (2.5, tunnel.trigger), (6.0, tunnel.trigger)]
         while (elapsed := time.monotonic() - start) < 10.0:
             if events and elapsed >= events[0][0]:
                 events.pop(0)[1]()
-            blocks.append(driver.read_block(timeout_s=1.0))
+            blocks.append(driver.read(timeout_s=1.0))
     finally:
         driver.close()
         sim.stop()
@@ -144,7 +149,7 @@ def test_stream_and_trigger_flag_over_each_transport(make_sim, tunnel, transport
     sim = make_sim(x=-0.1)
     driver = connect(sim.start(transport), sim)
     with driver:
-        assert set(driver.read(timeout_s=1.0)) == set(driver.describe())
+        assert set(driver.read(timeout_s=1.0).channels) == set(driver.describe())
         blocks = read_for(driver, 0.1)
         pulse = tunnel.trigger()
         blocks += read_for(driver, 0.15)
@@ -184,8 +189,9 @@ def test_out_of_range_readings_give_262077_and_262078(make_sim):
     for standoff, x, code, bit in ((9.0, 0.1, 262078, 6), (1.0, -0.5, 262077, 5)):
         sim = make_sim(range_mm=10, standoff_mm=standoff, x=x)
         with connect(sim.start("pty"), sim) as driver:
-            block = driver.read_block(1.0)
-        assert set(block.error_code) == {code} and np.all(np.isnan(block.distance))
+            block = driver.read(1.0)
+        assert set(block.channels["error_code"]) == {code}
+        assert np.all(np.isnan(block.channels["distance"]))
         assert np.all(block.channels["status"] & (1 << bit))
 
 
@@ -230,9 +236,11 @@ def test_baud_budget_overflow_sends_262075(make_sim):
     sim = make_sim(baudrate=115200)
     assert sim.baud_overflow
     with connect(sim.start("pty"), sim) as driver:
-        block = driver.read_block(1.0)
-    assert set(block.error_code) == {262075} and np.all(np.isnan(block.distance))
-    assert block.reasons()[0] == "data amount too big for the selected baud rate"
+        block = driver.read(1.0)
+    assert set(block.channels["error_code"]) == {262075}
+    assert np.all(np.isnan(block.channels["distance"]))
+    assert error_reason(int(block.channels["error_code"][0])) == (
+        "data amount too big for the selected baud rate")
 
 
 def test_clock_drift_is_carried_into_device_time(make_sim):
@@ -282,7 +290,7 @@ def test_a_sensor_that_stays_away_raises_after_bounded_attempts(make_sim, caplog
     sim = make_sim()
     driver = connect(sim.start("socket"), sim, reconnect_attempts=3, reconnect_backoff_s=0.01)
     caplog.set_level(logging.WARNING, logger="daq.instruments.microepsilon_ild1420.driver")
-    driver.read_block(1.0)
+    driver.read(1.0)
     sim.stop()
     with pytest.raises(TransportError, match="did not come back after 3 reopen attempts"):
         read_for(driver, 1.0)
@@ -313,13 +321,13 @@ def test_output_none_stops_the_stream_and_the_gap_is_counted(make_sim):
         blocks = read_for(driver, 0.05)
         driver.set_output("NONE")
         try:  # samples sent before the reply, decoded while waiting for it
-            blocks.append(driver.read_block(0.05))
+            blocks.append(driver.read(0.05))
         except TransportTimeout:
             pass
         last = blocks[-1].counter[-1]
         with pytest.raises(TransportTimeout):
-            driver.read_block(0.1)
+            driver.read(0.1)
         driver.set_output("RS422")
-        block = driver.read_block(1.0)
+        block = driver.read(1.0)
     off = int(np.count_nonzero(sim.truth().fate == FATES.index("output_off")))
     assert off >= 0.1 * 4000 * 0.8 and block.gaps == (Gap(int(last), off),)

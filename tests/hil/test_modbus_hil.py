@@ -101,7 +101,8 @@ def test_fan_spins_up_along_the_ramp_and_turns_the_tunnel_fan(fan, tunnel):
     assert sim.writes_to("reference_1") == [8000]  # 600 / 1500 * 20000 (docs/wire_formats.md)
     assert sim.writes_to("control_word") == [0x0476, 0x047F]
     reading = drive.read()
-    assert set(reading) == set(drive.describe())
+    assert set(reading.channels) == set(drive.describe())
+    assert reading.channels["speed"][0] == pytest.approx(600.0, abs=1.0)
     drive.stop()  # CW 0x0476: ramp stop
     assert drive.wait_for_speed(0.0, tolerance_rpm=2.0, timeout_s=2.0) == pytest.approx(0, abs=2)
     assert drive.status().rdy_on and not drive.status().rdy_run
@@ -249,7 +250,7 @@ def test_plc_trigger_pulses_are_counted(plc, tunnel):
         drive.trigger_pulse()
     assert drive.trigger_count() == before + 5 == sim.trigger_count
     assert len(tunnel.trigger_times(since=t0)) == 5
-    assert set(drive.read()) == set(drive.describe())
+    assert set(drive.read().channels) == set(drive.describe())
 
 
 def test_plc_disconnect_is_a_transport_error_then_the_bus_reconnects(plc, caplog):

@@ -18,7 +18,8 @@ import numpy as np
 import pytest
 
 from daq.errors import DeviceError, SafetyError
-from daq.instruments.scanivalve_mps4264.blocks import STATUS_MISSING, STATUS_OK, Gap, ScanBlock
+from daq.instruments.reading import Gap
+from daq.instruments.scanivalve_mps4264.blocks import STATUS_MISSING, STATUS_OK, ScanBlock
 from daq.instruments.scanivalve_mps4264.driver import ScanivalveMps4264
 from daq.instruments.scanivalve_mps4264.settings import Mps4264Settings
 from daq.transports.byte_transport import open_transport

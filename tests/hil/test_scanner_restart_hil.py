@@ -40,6 +40,7 @@ import pytest
 
 from daq.acquisition.records import Event, StreamBlock
 from daq.config import RigConfig, parse_rig_config
+from daq.instruments.reading import Gap
 from daq.recording import writer as pipeline
 from daq.recording.writer import RunWriter
 from daq.sim.recording import record_simulated_run
@@ -236,7 +237,7 @@ def scanner_docs(base: str, old_frames: int, stall_s: float = 0.0
     items: list[tuple[float, str, Any]] = []
     for seq, lo in enumerate(range(0, true.size, 10)):
         sl = slice(lo, lo + 10)
-        gaps = ((old_frames, -1),) if lo <= old_frames < lo + 10 else ()
+        gaps = (Gap(old_frames, -1, "restart"),) if lo <= old_frames < lo + 10 else ()
         host = ns(arrival[sl])
         items.append((float(arrival[sl][-1]), "block", StreamBlock(
             device="scanner", kind="scanner", seq=seq, host_time_ns=host,

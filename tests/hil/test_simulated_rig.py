@@ -35,7 +35,7 @@ def test_every_driver_reaches_its_simulator_and_the_physics_is_shared(name):
         try:
             baro = drivers["barometer"].read()
             # The simulator adds ~2 Pa noise and slow drift to the tunnel's air: 0.1 % is ample.
-            assert baro.density_kg_m3 == pytest.approx(rig.tunnel.air.density, rel=1e-3)
+            assert baro.channels["density"][0] == pytest.approx(rig.tunnel.air.density, rel=1e-3)
 
             scanner = drivers["scanner"]
             scanner.configure()
@@ -56,7 +56,7 @@ def test_every_driver_reaches_its_simulator_and_the_physics_is_shared(name):
             scanner.scan()
             pitot: list[float] = []
             while len(pitot) < 100:  # 0.2 s at 500 Hz
-                pitot.extend(scanner.read_block(timeout_s=2.0).pitot)
+                pitot.extend(scanner.read(timeout_s=2.0).channels["pitot"])
             scanner.stop()
             qd = 0.5 * rig.tunnel.air.density * rig.tunnel.wind_speed() ** 2
             # Pitot after a wind-off zero: qd (~38 Pa) plus 1 Pa frame noise, median of many
@@ -73,7 +73,7 @@ def test_every_driver_reaches_its_simulator_and_the_physics_is_shared(name):
             # The stream is buffered since the simulators started: read through the held part
             # until the released model's motion shows (millimetres: released from 4-6 mm).
             while time.monotonic() < deadline and (not distance or np.ptp(distance) < 1e-3):
-                distance.extend(laser.read_block(timeout_s=2.0).distance)
+                distance.extend(laser.read(timeout_s=2.0).channels["distance"])
             assert np.isfinite(distance).mean() > 0.99
             assert np.ptp(distance) > 1e-3
         finally:

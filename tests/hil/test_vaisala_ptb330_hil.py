@@ -53,7 +53,7 @@ def assert_matches_truth(reading, truth):
 def test_polled_readings_are_the_simulated_air(transport):
     vt = tunnel()
     with SimVaisalaPtb330(vt, rng=1) as sim, connect(sim.start(transport)) as drv:
-        readings = [drv.read() for _ in range(3)]
+        readings = [drv.measure() for _ in range(3)]
         stats = sim.stats
     intact = [t for t in sim.truth if not t.fault]
     assert stats["lines"] == stats["intact"] == 4  # the open check plus three reads
@@ -75,7 +75,7 @@ def test_garbled_partial_and_missing_replies_are_retried_and_silence_raises():
         readings = []
         for fault in ("garbled", "partial", "no_reply"):
             sim.inject(fault)
-            readings.append(drv.read())
+            readings.append(drv.measure())
         stats = sim.stats
         truth = list(sim.truth)
         assert (stats["garbled"], stats["partial"], stats["no_reply"]) == (1, 1, 1)
@@ -89,10 +89,10 @@ def test_garbled_partial_and_missing_replies_are_retried_and_silence_raises():
         sim.inject("no_reply", count=3)
         start = time.monotonic()
         with pytest.raises(TransportTimeout, match="after 3 attempts"):
-            drv.read()
+            drv.measure()
         # 3 timeouts of 0.1 s + backoffs 0.05 + 0.1 s; 0.5 s slack for a loaded machine
         assert time.monotonic() - start < 3 * 0.1 + 0.15 + 0.5
-        after = drv.read()
+        after = drv.measure()
         assert after.counter == readings[-1].counter + 2  # the failed poll is a gap of 1
         assert_matches_truth(after, sim.truth[-1])
 
@@ -109,18 +109,18 @@ def test_unit_changes_are_followed_and_an_unknown_unit_never_gives_a_number():
         finally:
             raw.close()
         with connect(url) as drv:
-            assert drv.read().pressure_unit == "kPa"
+            assert drv.measure().pressure_unit == "kPa"
             for unit, t_unit in [("Pa", "'F"), ("mbar", "K"), ("mmHg", "'C"), ("inHg", "'F"),
                                  ("psi", "'C"), ("torr", "K"), ("bar", "'C")]:
                 sim.inject("unit_change", unit=unit, temperature_unit=t_unit)
-                reading = drv.read()
+                reading = drv.measure()
                 assert reading.pressure_unit == unit
                 assert_matches_truth(reading, sim.truth[-1])
             sim.inject("unit_change", unit="mmH2O")
             with pytest.raises(ProtocolError, match="unknown pressure unit 'mmH2O'"):
-                drv.read()
+                drv.measure()
             sim.inject("unit_change", unit="hPa")
-            assert_matches_truth(drv.read(), sim.truth[-1])
+            assert_matches_truth(drv.measure(), sim.truth[-1])
     assert sim.stats["unit_changes"] == 9
 
 
@@ -181,11 +181,11 @@ def test_driver_takes_over_a_streaming_unit_and_an_addressed_polled_unit():
     with SimVaisalaPtb330(tunnel(), mode="RUN", time_scale=20.0, rng=7) as sim:
         with connect(sim.start("pty")) as drv:
             assert not sim.running
-            assert drv.read().ok
+            assert drv.measure().ok
     with SimVaisalaPtb330(tunnel(), mode="POLLED", address=7, rng=8) as sim:
         url = sim.start("pty")
         with pytest.raises(ProtocolError, match="pressure = "):
             connect(url).open()  # FORM ignored in POLL mode: factory lines come back
         with connect(url, address=7) as drv:
-            assert_matches_truth(drv.read(), sim.truth[-1])
+            assert_matches_truth(drv.measure(), sim.truth[-1])
         assert sim.form.startswith('"P="')

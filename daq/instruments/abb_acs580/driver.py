@@ -46,9 +46,14 @@ from daq.instruments.abb_acs580.profile import (
 )
 from daq.instruments.abb_acs580.settings import AbbAcs580Settings
 from daq.instruments.entry import DriverEntry
+from daq.instruments.reading import PollSequence, Reading
 from daq.transports.modbus import RegisterBus, to_int16
 
 __all__ = ["DRIVER", "AbbAcs580"]
+
+
+#: dtypes of the channels of :meth:`AbbAcs580.read`.
+_DTYPES = {"speed": "float64", "status_word": "uint16"}
 
 
 class AbbAcs580:
@@ -77,6 +82,7 @@ class AbbAcs580:
                 or not (math.isfinite(limit_rpm) and limit_rpm > 0):
             raise ConfigError(f"limit_rpm must be a finite number > 0, got {limit_rpm!r}")
         self.bus = bus
+        self._polls = PollSequence()
         self.settings = settings
         self.limit_rpm = float(limit_rpm)
         self._regs = settings.registers
@@ -216,21 +222,22 @@ class AbbAcs580:
         return self.status(), self.speed()
 
     def describe(self) -> dict[str, dict[str, Any]]:
-        """Describe the channels of :meth:`read`: units, dtype, shape."""
-        return {
-            "speed": {"units": "rpm", "dtype": "float64", "shape": []},
-            "status_word": {"units": "", "dtype": "uint16", "shape": []},
-        }
+        """Describe the channels of :meth:`read`: units, dtype, shape (one row per poll).
 
-    def read(self) -> dict[str, dict[str, Any]]:
-        """Read every channel of :meth:`describe`: ``{channel: {value, timestamp_ns}}``.
-
-        ``timestamp_ns`` is the host's ``time.monotonic_ns()`` when the reply arrived.
+        ``speed`` (Actual 1, rpm) and ``status_word`` (the drive's status word, bits).
         """
+        return {name: {"units": units, "dtype": _DTYPES[name], "shape": ()}
+                for name, units in (("speed", "rpm"), ("status_word", "1"))}
+
+    def read(self) -> Reading:
+        """Read every channel of :meth:`describe` once: a one-row reading.
+
+        Its host time is the host's ``time.monotonic_ns()`` when the reply arrived; its counter
+        the poll number (a failed poll leaves a gap before the next reading).
+        """
+        number = self._polls.next()
         status, rpm = self.read_status_and_speed()
-        t_ns = time.monotonic_ns()
-        return {"speed": {"value": rpm, "timestamp_ns": t_ns},
-                "status_word": {"value": status.word, "timestamp_ns": t_ns}}
+        return self._polls.reading(number, {"speed": rpm, "status_word": status.word}, _DTYPES)
 
     def wait_for_speed(self, rpm: float, tolerance_rpm: float,
                        timeout_s: float | None = None, poll_s: float = 0.02) -> float:

@@ -2,6 +2,7 @@
 
 - :mod:`.settings`: the ``[[lasers]]`` table (range, rate, output values, position, line);
 - :mod:`.decoder`: the 3-byte words of the binary stream into samples (pure, resynchronising);
-- :mod:`.blocks`: counter and timestamp unwrapping, gaps and restarts, the :class:`LaserBlock`;
-- :mod:`.driver`: :class:`MicroEpsilonIld1420`, the ASCII commands, the stream, reconnects.
+- :mod:`.sequencer`: counter and timestamp unwrapping, gaps and restarts;
+- :mod:`.driver`: :class:`MicroEpsilonIld1420`, the ASCII commands, the stream, reconnects;
+  its ``read()`` returns a :class:`~daq.instruments.reading.Reading`.
 """

@@ -8,7 +8,7 @@ bounded backoff when the line drops. The pieces without I/O are the package's ot
 the 3-byte words into samples
 (:class:`~daq.instruments.microepsilon_ild1420.decoder.Ild1420Decoder`), and the unwrapping of
 the 18-bit counter and the 32-bit timestamp with its gaps and restarts
-(:class:`~daq.instruments.microepsilon_ild1420.blocks.Ild1420Sequencer`).
+(:class:`~daq.instruments.microepsilon_ild1420.sequencer.Ild1420Sequencer`).
 
 Not responsible for: opening ports (the transport is injected, see
 :mod:`daq.transports.byte_transport`; :meth:`Ild1420Settings.line` gives its serial settings),
@@ -52,13 +52,14 @@ import numpy.typing as npt
 
 from daq.errors import ConfigError, DeviceError, ProtocolError, TransportError, TransportTimeout
 from daq.instruments.entry import DriverEntry
-from daq.instruments.microepsilon_ild1420.blocks import Ild1420Sequencer, LaserBlock
 from daq.instruments.microepsilon_ild1420.decoder import (
     STATUS_TRIGGERED,
     Ild1420Decoder,
     Ild1420Samples,
 )
+from daq.instruments.microepsilon_ild1420.sequencer import Ild1420Sequencer
 from daq.instruments.microepsilon_ild1420.settings import Ild1420Settings
+from daq.instruments.reading import Reading
 from daq.transports.byte_transport import Transport
 
 __all__ = ["DRIVER", "OUTPUT_NAMES", "MicroEpsilonIld1420"]
@@ -192,21 +193,25 @@ class MicroEpsilonIld1420:
         self.close()
 
     def describe(self) -> dict[str, dict[str, Any]]:
-        """Return channel -> {units, dtype, shape} (shape of one sample) for :meth:`read`."""
+        """Return channel -> {units, dtype, shape} (shape of one sample) of :meth:`read`.
+
+        ``distance`` (m, NaN on error), ``error_code`` (0 = valid, else the sensor's error
+        value, see :data:`~daq.instruments.microepsilon_ild1420.decoder.ERROR_CODES`),
+        ``epoch`` (restarts of the sensor seen so far), ``triggered`` (status bit 15),
+        ``status`` (raw status bits); plus ``exposure`` (s) and ``intensity`` (%) when
+        selected. The counter and the device time are the reading's own fields.
+        """
         out: dict[str, dict[str, Any]] = {
-            "distance": {"units": "m", "dtype": "float64", "shape": []},
-            "error_code": {"units": "", "dtype": "int32", "shape": []},
-            "counter": {"units": "", "dtype": "int64", "shape": []},
-            "device_time": {"units": "s", "dtype": "float64", "shape": []},
-            "epoch": {"units": "", "dtype": "int32", "shape": []},
-            "triggered": {"units": "", "dtype": "bool", "shape": []},
-            "status": {"units": "", "dtype": "int64", "shape": []},
-            "host_time_ns": {"units": "ns", "dtype": "int64", "shape": []},
+            "distance": {"units": "m", "dtype": "float64", "shape": ()},
+            "error_code": {"units": "1", "dtype": "int32", "shape": ()},
+            "epoch": {"units": "1", "dtype": "int32", "shape": ()},
+            "triggered": {"units": "1", "dtype": "bool", "shape": ()},
+            "status": {"units": "1", "dtype": "int64", "shape": ()},
         }
         if "exposure" in self._settings.output:
-            out["exposure"] = {"units": "s", "dtype": "float64", "shape": []}
+            out["exposure"] = {"units": "s", "dtype": "float64", "shape": ()}
         if "intensity" in self._settings.output:
-            out["intensity"] = {"units": "%", "dtype": "float64", "shape": []}
+            out["intensity"] = {"units": "%", "dtype": "float64", "shape": ()}
         return out
 
     # -- ASCII commands -----------------------------------------------------------------------
@@ -323,12 +328,14 @@ class MicroEpsilonIld1420:
         return out
 
     # -- stream -------------------------------------------------------------------------------
-    def read(self, timeout_s: float = 1.0) -> dict[str, npt.NDArray[Any]]:
-        """Return the channels of :meth:`read_block` (keys as in :meth:`describe`)."""
-        return dict(self.read_block(timeout_s).channels)
+    def read(self, timeout_s: float = 1.0, *, max_samples: int = 100_000) -> Reading:
+        """Return the samples received so far (at least one), waiting up to ``timeout_s`` (s).
 
-    def read_block(self, timeout_s: float = 1.0, *, max_samples: int = 100_000) -> LaserBlock:
-        """Return the samples received so far (at least one), waiting up to ``timeout_s``.
+        The reading's channels are those of :meth:`describe`; its counter is the unwrapped
+        sample counter, its device time the unwrapped timestamp (s, restarting with the
+        sensor), its host times those of the read that completed each sample (ns), its gaps
+        the counter jumps and the sensor's restarts, and ``info["bytes_skipped"]`` the bytes
+        the decoder discarded meanwhile (resynchronisations).
 
         After the first sample it keeps reading, waiting for more, for :attr:`DRAIN_S` and up
         to ``max_samples`` (one read's worth more at most). A failed line is reopened (bounded
@@ -409,10 +416,13 @@ class MicroEpsilonIld1420:
             self._backlog.append((samples, np.full(len(samples), host_ns, dtype=np.int64)))
             self._backlog_size += len(samples)
 
-    def _build_block(self) -> LaserBlock:
+    def _build_block(self) -> Reading:
         parts, self._backlog, self._backlog_size = self._backlog, [], 0
-        samples = Ild1420Samples.concatenate([p for p, _ in parts])
-        host_ns = np.concatenate([h for _, h in parts])
+        if len(parts) == 1:  # one transport read held the block: nothing to join
+            samples, host_ns = parts[0]
+        else:
+            samples = Ild1420Samples.concatenate([p for p, _ in parts])
+            host_ns = np.concatenate([h for _, h in parts])
         assert samples.counter is not None and samples.timestamp is not None
         assert samples.status is not None  # required by the settings
         counter, device_time, epoch, gaps = self._sequencer.process(
@@ -420,12 +430,9 @@ class MicroEpsilonIld1420:
         channels: dict[str, npt.NDArray[Any]] = {
             "distance": samples.distance_mm * 1e-3,
             "error_code": samples.error_code,
-            "counter": counter,
-            "device_time": device_time,
             "epoch": epoch,
             "triggered": (samples.status & STATUS_TRIGGERED) != 0,
             "status": samples.status,
-            "host_time_ns": host_ns,
         }
         if samples.exposure is not None:
             channels["exposure"] = samples.exposure * 1e-7  # ET[us] = x / 10
@@ -436,12 +443,14 @@ class MicroEpsilonIld1420:
         for gap in gaps:
             log.info("%s: %d sample(s) missing after counter %d%s", self._transport.url,
                      gap.length, gap.after_counter, "" if gap.exact else " (estimated)")
-        return LaserBlock(channels=channels, gaps=tuple(gaps), bytes_skipped=skipped)
+        return Reading(channels=channels, host_time_ns=host_ns, counter=counter,
+                       device_time=device_time, gaps=tuple(gaps),
+                       info={"bytes_skipped": skipped})
 
-    def blocks(self, timeout_s: float = 1.0) -> Iterator[LaserBlock]:
-        """Yield blocks until the transport times out or fails (for simple readers)."""
+    def blocks(self, timeout_s: float = 1.0) -> Iterator[Reading]:
+        """Yield readings until the transport times out or fails (for simple readers)."""
         while True:
-            yield self.read_block(timeout_s)
+            yield self.read(timeout_s)
 
 
 def _is_code(line: str, letter: str) -> bool:

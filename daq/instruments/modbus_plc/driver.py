@@ -33,6 +33,7 @@ from typing import Any
 from daq.errors import DeviceError, SafetyError
 from daq.instruments.entry import DriverEntry
 from daq.instruments.modbus_plc.settings import ModbusPlcSettings
+from daq.instruments.reading import PollSequence, Reading
 from daq.transports.modbus import RegisterBus
 
 __all__ = ["DRIVER", "POLL_S", "ModbusPlc", "ReleaseTiming"]
@@ -62,6 +63,10 @@ class ReleaseTiming:
         return (self.confirmed_ns - self.command_ns) * 1e-9
 
 
+#: dtypes of the channels of :meth:`ModbusPlc.read`.
+_DTYPES = {"armed": "bool", "released": "bool", "trigger_count": "uint16"}
+
+
 class ModbusPlc:
     """The release/trigger PLC on a Modbus bus.
 
@@ -81,6 +86,7 @@ class ModbusPlc:
         if not isinstance(settings, ModbusPlcSettings):
             settings = ModbusPlcSettings.from_table(settings)
         self.bus = bus
+        self._polls = PollSequence()
         self.settings = settings
         self._coil = dict(settings.coils)
         self._released_di = settings.discrete_inputs["released"]
@@ -119,24 +125,24 @@ class ModbusPlc:
         return self.bus.read_holding_registers(self._count_hr, 1)[0]
 
     def describe(self) -> dict[str, dict[str, Any]]:
-        """Describe the channels of :meth:`read`: units, dtype, shape."""
-        return {
-            "armed": {"units": "", "dtype": "bool", "shape": []},
-            "released": {"units": "", "dtype": "bool", "shape": []},
-            "trigger_count": {"units": "", "dtype": "uint16", "shape": []},
-        }
+        """Describe the channels of :meth:`read`: units, dtype, shape (one row per poll).
 
-    def read(self) -> dict[str, dict[str, Any]]:
-        """Read every channel of :meth:`describe`: ``{channel: {value, timestamp_ns}}``.
-
-        Each ``timestamp_ns`` is the host's ``time.monotonic_ns()`` when its reply arrived.
+        ``armed`` (the magnet holds), ``released`` (the RELEASED input) and ``trigger_count``
+        (the PLC's count of trigger pulses, wrapping at 2**16).
         """
-        out: dict[str, dict[str, Any]] = {}
-        for name, get in (("armed", self.armed), ("released", self.released),
-                          ("trigger_count", self.trigger_count)):
-            value = get()
-            out[name] = {"value": value, "timestamp_ns": time.monotonic_ns()}
-        return out
+        return {name: {"units": "1", "dtype": dtype, "shape": ()}
+                for name, dtype in _DTYPES.items()}
+
+    def read(self) -> Reading:
+        """Read every channel of :meth:`describe` once: a one-row reading.
+
+        Its host time is the host's ``time.monotonic_ns()`` when the last reply arrived; its
+        counter the poll number (a failed poll leaves a gap before the next reading).
+        """
+        number = self._polls.next()
+        values = {"armed": self.armed(), "released": self.released(),
+                  "trigger_count": self.trigger_count()}
+        return self._polls.reading(number, values, _DTYPES)
 
     # -- commands --------------------------------------------------------------------------------
     def arm(self, timeout_s: float | None = None) -> None:

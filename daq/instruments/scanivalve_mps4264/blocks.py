@@ -2,7 +2,8 @@
 
 Responsibility: the immutable results of
 :meth:`~daq.instruments.scanivalve_mps4264.driver.ScanivalveMps4264.read_block`: :class:`ScanBlock`
-(the frames of one read merged over modules, one row per frame number), the :class:`Gap` and
+(the frames of one read merged over modules, one row per frame number; gaps are
+:class:`~daq.instruments.reading.Gap` of kind ``"missing"`` or ``"restart"``), the
 :class:`ClockStep` records it carries, and the ``module_status`` codes of its rows
 (:data:`STATUS_OK`, :data:`STATUS_MISSING`, :data:`STATUS_VALVE_CAL`). Not responsible for:
 producing them (:mod:`daq.instruments.scanivalve_mps4264.merge` and the driver) or mapping their
@@ -13,17 +14,17 @@ dataclasses only.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+
+from daq.instruments.reading import Gap
 
 __all__ = [
     "STATUS_MISSING",
     "STATUS_OK",
     "STATUS_VALVE_CAL",
     "ClockStep",
-    "Gap",
     "ScanBlock",
 ]
 
@@ -33,27 +34,6 @@ STATUS_OK = 0
 STATUS_MISSING = 1
 #: The module's calibration valve was in the Cal position (``valve_status`` 1): pressures NaN.
 STATUS_VALVE_CAL = 2
-
-
-@dataclass(frozen=True)
-class Gap:
-    """Frames that never arrived, in a block's counter sequence.
-
-    Attributes
-    ----------
-    after_counter : int
-        Unwrapped counter of the last frame before the gap (0 at the start of a scan).
-    length : int
-        Number of missing frames; -1 when unknown (a restart of the device's counter).
-    kind : str
-        ``"missing"`` (a counter jump: every module lost the frames) or ``"restart"`` (the
-        device counter restarted, e.g. after a TCP reset; the counter continues from
-        ``after_counter`` and the true gap is unknown).
-    """
-
-    after_counter: int
-    length: int
-    kind: str
 
 
 @dataclass(frozen=True)
@@ -115,14 +95,5 @@ class ScanBlock:
     clock_steps: tuple[ClockStep, ...] = ()
     time_base: str = "ptp"
 
-    #: Names of the array fields, in
-    #: :meth:`~daq.instruments.scanivalve_mps4264.driver.ScanivalveMps4264.describe` order.
-    CHANNELS = ("counter", "frame_time", "trigger_time", "host_time_ns", "pressure", "pitot",
-                "temperature", "module_status")
-
     def __len__(self) -> int:
         return int(self.counter.size)
-
-    def arrays(self) -> dict[str, npt.NDArray[Any]]:
-        """Return the block's arrays keyed exactly as :meth:`ScanivalveMps4264.describe`."""
-        return {name: getattr(self, name) for name in self.CHANNELS}

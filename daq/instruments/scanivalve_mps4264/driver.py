@@ -79,9 +79,11 @@ from daq.errors import (
     TransportTimeout,
 )
 from daq.instruments.entry import DriverEntry
+from daq.instruments.reading import Reading
 from daq.instruments.scanivalve_mps4264.blocks import (
     ScanBlock,
 )
+from daq.instruments.scanivalve_mps4264.continuity import ScanContinuity
 from daq.instruments.scanivalve_mps4264.frames import (
     CHANNELS_PER_MODULE,
     PACKET_SIZES,
@@ -169,6 +171,7 @@ class ScanivalveMps4264:
         self._streams: list[ModuleStream] = []
         self._rate_hz = settings.rate_hz
         self._stats = dict.fromkeys(("reconnects", "late_frames", "forced_emissions"), 0)
+        self._continuity = ScanContinuity()
         self._reset_run_state()
 
     # -- life cycle ----------------------------------------------------------------------------
@@ -204,17 +207,21 @@ class ScanivalveMps4264:
 
     # -- description ---------------------------------------------------------------------------
     def describe(self) -> dict[str, dict[str, Any]]:
-        """Channels of :meth:`read_block` blocks: ``{name: {units, dtype, shape}}`` (per row)."""
+        """Channels of :meth:`read`: ``{name: {units, dtype, shape}}`` (shape of one frame).
+
+        ``pressure`` (Pa, NaN where ``module_status`` is not OK), ``pitot`` (the Pitot
+        channel's pressure, Pa), ``temperature`` (degC), ``trigger_time`` (the last external
+        trigger on the frame-time base, s; NaN when none) and ``module_status`` (per module,
+        ``STATUS_OK``, ``STATUS_MISSING`` or ``STATUS_VALVE_CAL``). The counter, frame time and
+        host times are the reading's own fields.
+        """
         m = self.settings.modules
         return {
-            "counter": {"units": "1", "dtype": "int64", "shape": ()},
-            "frame_time": {"units": "s", "dtype": "float64", "shape": ()},
-            "trigger_time": {"units": "s", "dtype": "float64", "shape": ()},
-            "host_time_ns": {"units": "ns", "dtype": "int64", "shape": ()},
             "pressure": {"units": "Pa", "dtype": "float64", "shape": (CHANNELS_PER_MODULE * m,)},
             "pitot": {"units": "Pa", "dtype": "float64", "shape": ()},
             "temperature": {"units": "degC", "dtype": "float64",
                             "shape": (TEMPERATURES_PER_MODULE * m,)},
+            "trigger_time": {"units": "s", "dtype": "float64", "shape": ()},
             "module_status": {"units": "1", "dtype": "int8", "shape": (m,)},
         }
 
@@ -346,8 +353,27 @@ class ScanivalveMps4264:
             state = self.status()
         return time.monotonic() - start
 
-    def scan(self) -> None:
-        """Start scanning: fresh data connections, reset stream state, then ``SCAN``."""
+    def start(self) -> None:
+        """Begin a fresh stream: :meth:`configure`, then :meth:`scan` (the engine's start)."""
+        self._continuity = ScanContinuity()
+        self.configure()
+        self.scan()
+
+    def scan(self, *, after_pause: bool = False) -> None:
+        """Start scanning: fresh data connections, reset stream state, then ``SCAN``.
+
+        :meth:`read` continues the counters (and relative frame times) of a new scan after
+        those it delivered, behind a ``"restart"`` gap
+        (:class:`~daq.instruments.scanivalve_mps4264.continuity.ScanContinuity`).
+
+        Parameters
+        ----------
+        after_pause : bool
+            The scan stood still for a pause of the caller's (STOP, CALZ, SCAN): the gap is
+            measured from the frame times (and :meth:`note_pause`). Marked before ``SCAN`` is
+            sent, so that a recovery's scan after a failed one is measured the same way.
+        """
+        self._continuity.restarted(measure=after_pause)
         with self._cmd_lock:
             for stream in self._streams:
                 stream.transport.close()
@@ -366,6 +392,35 @@ class ScanivalveMps4264:
         state = self._command("STOP")
         if state != "READY":
             raise DeviceError(f"{self.transport.url}: state {state!r} after STOP")
+
+    def note_pause(self, pause_s: float) -> None:
+        """Tell how long the scan stood still in the last pause, s (host-measured, STOP to SCAN).
+
+        Without PTP the new scan's frame times are continued with it (see :meth:`scan`).
+        """
+        self._continuity.note_pause(pause_s)
+
+    def recover(self, error: BaseException) -> None:
+        """Start a new scan on fresh connections after a lasting TransportError.
+
+        Anything else (a timeout, a protocol error) needs no recovery: the next read goes on.
+        """
+        # read_block already retried its data connections (bounded, logged); a TransportError
+        # here means they stayed away: start over with fresh connections and a new scan.
+        if isinstance(error, TransportError) and not isinstance(error, TransportTimeout):
+            log.warning("scanner: restarting the scan after: %s", error)
+            self.close()
+            self.open()
+            self.configure()
+            self.scan()
+
+    def recent_pressure_mean(self) -> tuple[np.ndarray[Any, np.dtype[np.float64]], int]:
+        """Mean pressure per channel over the last 0.5 s of frames read, Pa, and their number.
+
+        NaN rows (a missing module) are left out per channel; before any frame: an empty
+        array and 0.
+        """
+        return self._continuity.recent_pressure_mean(self._rate_hz)
 
     def _data_transports(self) -> list[Transport]:
         if self._data_given is not None:
@@ -431,6 +486,25 @@ class ScanivalveMps4264:
                                    self._rate_hz)
         for key in self._stats:
             self._stats[key] = 0
+
+    def read(self, timeout_s: float | None = None) -> Reading:
+        """Return the frames that arrived as one reading of the stream (at least one frame).
+
+        :meth:`read_block`'s frames, their counters and frame times continued across the
+        scans of this stream (see :meth:`scan`): channels as :meth:`describe`, the counter,
+        the frame time as device time (s), ``info["time_base"]`` and ``info["clock_steps"]``.
+        Raises as :meth:`read_block`.
+        """
+        return self._continuity.reading(self.read_block(timeout_s), self._rate_hz)
+
+    def drain(self, timeout_s: float) -> list[Reading]:
+        """Read the frames still in flight after STOP, until ``timeout_s`` (s) of silence."""
+        out: list[Reading] = []
+        while True:
+            try:
+                out.append(self.read(timeout_s))
+            except TransportTimeout:
+                return out
 
     def read_block(self, timeout_s: float | None = None) -> ScanBlock:
         """Return the frames that arrived, merged over modules (at least one frame).

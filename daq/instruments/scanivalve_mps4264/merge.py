@@ -23,12 +23,12 @@ import math
 import numpy as np
 import numpy.typing as npt
 
+from daq.instruments.reading import Gap
 from daq.instruments.scanivalve_mps4264.blocks import (
     STATUS_MISSING,
     STATUS_OK,
     STATUS_VALVE_CAL,
     ClockStep,
-    Gap,
     ScanBlock,
 )
 from daq.instruments.scanivalve_mps4264.frames import CHANNELS_PER_MODULE, TEMPERATURES_PER_MODULE

@@ -46,6 +46,7 @@ from typing import Any
 
 from daq.errors import ProtocolError, TransportError, TransportTimeout
 from daq.instruments.entry import DriverEntry
+from daq.instruments.reading import PollSequence, Reading
 from daq.instruments.vaisala_ptb330.decoder import (
     BarometerReading,
     Ptb330Line,
@@ -56,6 +57,9 @@ from daq.instruments.vaisala_ptb330.settings import Ptb330Settings
 from daq.transports.byte_transport import Transport
 
 __all__ = ["DRIVER", "FORM_STRING", "SERIAL_DEFAULTS", "VaisalaPtb330"]
+
+#: dtypes of the channels of :meth:`VaisalaPtb330.read`.
+_DTYPES = {"pressure": "float64", "temperature": "float64", "density": "float64"}
 
 logger = logging.getLogger(__name__)
 
@@ -101,11 +105,11 @@ class VaisalaPtb330:
     5. a first ``SEND [aa]`` whose reply must decode: otherwise the instrument did not adopt the
        format (e.g. a POLL-mode unit without ``address``) and :class:`ProtocolError` says so.
 
-    Each :meth:`read` sends ``SEND`` (or ``SEND aa``) and decodes one line. A garbled or partial
-    line (:class:`ProtocolError`, with the bytes), no reply (:class:`TransportTimeout`) or a lost
-    connection (:class:`TransportError`; the transport is reopened) is retried up to
-    ``ATTEMPTS`` times in all, with a logged warning and exponential backoff; then the last
-    error is raised.
+    Each :meth:`read` (:meth:`measure`) sends ``SEND`` (or ``SEND aa``) and decodes one line. A
+    garbled or partial line (:class:`ProtocolError`, with the bytes), no reply
+    (:class:`TransportTimeout`) or a lost connection (:class:`TransportError`; the transport is
+    reopened) is retried up to ``ATTEMPTS`` times in all, with a logged warning and exponential
+    backoff; then the last error is raised.
     """
 
     #: Output format set by :meth:`open`; subclasses may override it (e.g. ``T`` on a PTU300).
@@ -126,7 +130,7 @@ class VaisalaPtb330:
         self._transport = transport
         self.settings = settings
         self._decoder = Ptb330LineDecoder()
-        self._counter = 0
+        self._polls = PollSequence()
         self._stats = {"reads": 0, "retries": 0, "timeouts": 0, "protocol_errors": 0,
                        "reconnects": 0}
         self._bad_lines: deque[bytes] = deque(maxlen=16)
@@ -142,8 +146,8 @@ class VaisalaPtb330:
         try:
             self._configure()
             self._opened = True
-            self.read()  # proves the format took effect
-            self._counter = 0  # the check reading is not returned: polls count from 1
+            self.measure()  # proves the format took effect
+            self._polls = PollSequence()  # the check reading is not returned: polls from 1
         except BaseException:
             self.close()
             raise
@@ -206,7 +210,11 @@ class VaisalaPtb330:
         return list(self._bad_lines)
 
     def describe(self) -> dict[str, dict[str, Any]]:
-        """Describe the channels of :meth:`BarometerReading.values`: units, dtype, shape."""
+        """Describe the channels of :meth:`read`: units, dtype, shape (one row per poll).
+
+        ``pressure`` (static, Pa), ``temperature`` (of the barometer module, K) and
+        ``density`` (dry air, kg/m^3); NaN where not available or implausible.
+        """
         return {
             "pressure": {"units": "Pa", "dtype": "float64", "shape": ()},
             "temperature": {"units": "K", "dtype": "float64", "shape": ()},
@@ -214,7 +222,20 @@ class VaisalaPtb330:
         }
 
     # -- reading ------------------------------------------------------------------------------
-    def read(self) -> BarometerReading:
+    def read(self) -> Reading:
+        """Poll one reading (:meth:`measure`): one row of :meth:`describe`'s channels.
+
+        The counter is the poll number (a failed poll leaves a gap before the next reading);
+        ``info`` keeps the line's ``status`` (why a value is NaN, empty when all are valid),
+        ``pressure_unit`` and ``resolution_pa``. Raises as :meth:`measure`.
+        """
+        r = self.measure()
+        return self._polls.reading(
+            r.counter, r.values(), _DTYPES, host_time_ns=r.host_time_ns,
+            info={"status": r.status, "pressure_unit": r.pressure_unit,
+                  "resolution_pa": r.resolution_pa})
+
+    def measure(self) -> BarometerReading:
         """Poll one reading (``SEND``), retrying garbled, partial or missing replies.
 
         Raises
@@ -228,8 +249,7 @@ class VaisalaPtb330:
         """
         if not self._opened:
             raise TransportError(f"{self._transport.url}: barometer not open")
-        self._counter += 1
-        counter = self._counter
+        counter = self._polls.next()
         last: Exception | None = None
         for attempt in range(1, self.ATTEMPTS + 1):
             if attempt > 1:
@@ -305,14 +325,14 @@ class VaisalaPtb330:
         """Yield readings every ``poll_interval_s`` until ``stop`` is set or ``count`` are done.
 
         The schedule is kept on absolute deadlines (no accumulated sleep error); a read that
-        overruns its slot skips the missed slots rather than bursting. Errors of :meth:`read`
+        overruns its slot skips the missed slots rather than bursting. Errors of :meth:`measure`
         propagate.
         """
         interval = self.settings.poll_interval_s
         next_t = time.monotonic()
         done = 0
         while (count is None or done < count) and not (stop is not None and stop.is_set()):
-            yield self.read()
+            yield self.measure()
             done += 1
             if count is not None and done >= count:
                 return

@@ -23,6 +23,7 @@ from daq.config import parse_rig_config
 from daq.console.process_source import DRIVER_COMMANDS, ENGINE_COMMANDS, _Server
 from daq.errors import SafetyError
 from daq.instruments.modbus_plc.driver import ReleaseTiming
+from daq.instruments.reading import PollSequence, Reading
 from daq.recording.writer import RunWriter
 
 CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
@@ -34,6 +35,7 @@ class FakeFan:
 
     def __init__(self) -> None:
         self.calls: list[tuple[str, Any]] = []
+        self.polls = PollSequence()
 
     def open(self) -> None:
         pass
@@ -52,10 +54,9 @@ class FakeFan:
     def stop(self) -> None:
         self.calls.append(("stop", None))
 
-    def read(self) -> dict[str, dict[str, Any]]:
-        t = time.monotonic_ns()
-        return {"speed": {"value": 0.0, "timestamp_ns": t},
-                "status_word": {"value": 0.0, "timestamp_ns": t}}
+    def read(self) -> Reading:
+        return self.polls.reading(self.polls.next(), {"speed": 0.0, "status_word": 0},
+                                  {"speed": "float64", "status_word": "uint16"})
 
 
 class FakePlc:
@@ -63,6 +64,7 @@ class FakePlc:
 
     def __init__(self) -> None:
         self.armed = False
+        self.polls = PollSequence()
 
     def open(self) -> None:
         pass
@@ -86,10 +88,9 @@ class FakePlc:
     def trigger_pulse(self) -> int:
         return time.monotonic_ns()
 
-    def read(self) -> dict[str, dict[str, Any]]:
-        t = time.monotonic_ns()
-        return {name: {"value": 0.0, "timestamp_ns": t}
-                for name in ("armed", "released", "trigger_count")}
+    def read(self) -> Reading:
+        dtypes = {"armed": "bool", "released": "bool", "trigger_count": "uint16"}
+        return self.polls.reading(self.polls.next(), dict.fromkeys(dtypes, 0), dtypes)
 
 
 @pytest.fixture

@@ -1,9 +1,11 @@
 """The acquisition engine and the live ring buffer, with test doubles of the drivers' I/O.
 
 The fakes below are plain objects with the drivers' read methods (the device I/O is what they
-replace); they return the drivers' own block types, so the engine's adapters run as they do
-against real drivers. The engine itself (readers, queues, dispatcher) is never mocked. The
-whole-rig run against the simulators is tests/hil/test_acquisition_hil.py.
+replace); they return the drivers' :class:`~daq.instruments.reading.Reading`, so the engine's
+adapters run as they do against real drivers. The fake scanner is the real scanner driver with
+its frame reading and commands replaced, so that its restarts are the driver's own. The engine
+itself (readers, queues, dispatcher) is never mocked. The whole-rig run against the simulators is
+tests/hil/test_acquisition_hil.py.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import time
 import tracemalloc
 from collections import defaultdict
 from typing import Any
+from unittest.mock import MagicMock
 
 import numpy as np
 import pytest
@@ -24,19 +27,18 @@ from daq.acquisition.engine import Acquisition
 from daq.acquisition.records import DeviceFault, Event, StreamBlock
 from daq.console.ring_buffer import Column, RingBuffer
 from daq.errors import DeviceError, ProtocolError, SafetyError, TransportError, TransportTimeout
-from daq.instruments.microepsilon_ild1420.blocks import Gap as LaserGap
-from daq.instruments.microepsilon_ild1420.blocks import LaserBlock
 from daq.instruments.modbus_plc.driver import ReleaseTiming
+from daq.instruments.reading import Gap, PollSequence, Reading
 from daq.instruments.scanivalve_mps4264.blocks import STATUS_OK, ScanBlock
-from daq.instruments.scanivalve_mps4264.blocks import Gap as ScanGap
-from daq.instruments.vaisala_ptb330.decoder import BarometerReading
+from daq.instruments.scanivalve_mps4264.driver import ScanivalveMps4264
+from daq.instruments.scanivalve_mps4264.settings import Mps4264Settings
 
 
 # ------------------------------------------------------------------------------------------------
 # Test doubles of device I/O
 # ------------------------------------------------------------------------------------------------
 class FakeLaser:
-    """ILD1420-like: ``read_block`` returns ``rows`` samples every ``period_s``.
+    """ILD1420-like: ``read`` returns ``rows`` samples every ``period_s``.
 
     ``faults`` maps a read number (1-based) to an exception raised instead of data; a
     TransportError also closes the fake (as the real driver does when it gives up), and
@@ -66,7 +68,7 @@ class FakeLaser:
         self.calls.append("close")
         self.is_open = False
 
-    def read_block(self, timeout_s: float = 1.0) -> LaserBlock:
+    def read(self, timeout_s: float = 1.0) -> Reading:
         if not self.is_open:
             raise TransportError("fake laser: not open")
         self.reads += 1
@@ -84,12 +86,11 @@ class FakeLaser:
         n = self.rows
         channels = {
             "distance": 0.025 + 1e-6 * counter, "error_code": np.zeros(n, np.int32),
-            "counter": counter, "device_time": counter / 4000.0,
             "epoch": np.zeros(n, np.int32), "triggered": np.zeros(n, bool),
             "status": np.zeros(n, np.int64),
-            "host_time_ns": np.full(n, time.monotonic_ns(), np.int64),
         }
-        return LaserBlock(channels=channels)
+        return Reading(channels=channels, host_time_ns=np.full(n, time.monotonic_ns(), np.int64),
+                       counter=counter, device_time=counter / 4000.0)
 
 
 class BlockingLaser(FakeLaser):
@@ -103,16 +104,24 @@ class BlockingLaser(FakeLaser):
         super().close()
         self.closed.set()
 
-    def read_block(self, timeout_s: float = 1.0) -> LaserBlock:
+    def read(self, timeout_s: float = 1.0) -> Reading:
         self.closed.wait()
         raise TransportError("fake laser: port closed under the read")
 
 
-class FakeScanner:
-    """MPS4264-like: one-module frames at 500 Hz once scanning; a device gap when asked."""
+class FakeScanner(ScanivalveMps4264):
+    """MPS4264-like: one-module frames at 500 Hz once scanning; a device gap when asked.
+
+    The real driver with its commands and its frame reading (``read_block``) replaced: its
+    ``read``, ``start``, ``recover`` and restarts are the driver's own.
+    """
 
     def __init__(self, frames: int = 5, gap_after: int | None = None,
                  fail_at: int | None = None) -> None:
+        super().__init__(MagicMock(url="fake://scanner"),
+                         Mps4264Settings.from_table(
+                             {"modules": 1, "rate_hz": 500.0, "byte_order": "big",
+                              "pitot_channel": 63}, "fake"))
         self.frames = frames
         self.gap_after = gap_after
         self.fail_at = fail_at  # read number whose data connections "stay away"
@@ -127,20 +136,18 @@ class FakeScanner:
     def close(self) -> None:
         self.calls.append("close")
 
-    def configure(self) -> None:
+    def configure(self, packet: str = "legacy") -> None:
         self.calls.append("configure")
 
-    def scan(self) -> None:
+    def scan(self, *, after_pause: bool = False) -> None:
         self.calls.append("scan")
+        self._continuity.restarted(measure=after_pause)  # as the driver's scan() does
         self.scanning = True
         self.next_frame = 1  # the MPS counts frames from 1 at every scan start
 
     def stop(self) -> None:
         self.calls.append("stop")
         self.scanning = False
-
-    def describe(self) -> dict[str, dict[str, Any]]:
-        return {"counter": {"units": "1", "dtype": "int64", "shape": ()}}
 
     def read_block(self, timeout_s: float | None = None) -> ScanBlock:
         if not self.scanning:
@@ -151,9 +158,9 @@ class FakeScanner:
             self.scanning = False
             raise TransportError("fake scanner: module 0 data connection stayed away")
         time.sleep(self.frames / 500.0)
-        gaps: tuple[Any, ...] = ()
+        gaps: tuple[Gap, ...] = ()
         if self.gap_after is not None and self.next_frame > self.gap_after:
-            gaps = (ScanGap(self.next_frame - 1, 3, "missing"),)
+            gaps = (Gap(self.next_frame - 1, 3, "missing"),)
             self.next_frame += 3
             self.gap_after = None
         counter = np.arange(self.next_frame, self.next_frame + self.frames, dtype=np.int64)
@@ -169,7 +176,7 @@ class FakeScanner:
 
 
 class FakePolled:
-    """ABB-drive- or PLC-like ``read()``: ``{channel: {value, timestamp_ns}}``."""
+    """ABB-drive- or PLC-like ``read()``: one row per poll, numbered as the drivers number them."""
 
     def __init__(self, channels: tuple[str, ...] = ("speed", "status_word"),
                  faults: dict[int, Exception] | None = None) -> None:
@@ -177,6 +184,7 @@ class FakePolled:
         self.faults = dict(faults or {})
         self.calls: list[str] = []
         self.reads = 0
+        self.polls = PollSequence()
 
     def open(self) -> None:
         self.calls.append("open")
@@ -184,12 +192,13 @@ class FakePolled:
     def close(self) -> None:
         self.calls.append("close")
 
-    def read(self) -> dict[str, dict[str, Any]]:
+    def read(self) -> Reading:
+        number = self.polls.next()  # a failed poll uses its number too, as in the drivers
         self.reads += 1
         if self.reads in self.faults:
             raise self.faults[self.reads]
-        t = time.monotonic_ns()
-        return {name: {"value": float(self.reads), "timestamp_ns": t} for name in self.channels}
+        return self.polls.reading(number, dict.fromkeys(self.channels, float(self.reads)),
+                                  dict.fromkeys(self.channels, "float64"))
 
 
 class FakePlc(FakePolled):
@@ -217,14 +226,13 @@ class FakePlc(FakePolled):
 
 
 class FakeBarometer(FakePolled):
-    """PTB330-like ``read()`` returning a BarometerReading with the driver's poll counter."""
+    """PTB330-like ``read()``: pressure, temperature and density, with the poll counter."""
 
-    def read(self) -> BarometerReading:  # type: ignore[override]
+    def read(self) -> Reading:
         self.reads += 1
-        return BarometerReading(pressure_pa=101325.0, temperature_k=293.15,
-                                density_kg_m3=1.204, host_time_ns=time.monotonic_ns(),
-                                counter=self.reads, status="", pressure_unit="hPa",
-                                resolution_pa=0.5, raw=b"P= 1013.250 hPa T= 20.00 'C")
+        values = {"pressure": 101325.0, "temperature": 293.15, "density": 1.204}
+        return self.polls.reading(self.polls.next(), values, dict.fromkeys(values, "float64"),
+                                  info={"status": ""})
 
 
 class Collector:
@@ -258,7 +266,7 @@ def covered(blocks: list[StreamBlock]) -> np.ndarray:
     """Counters of the delivered rows plus those the gaps account for, sorted."""
     parts = [b.counter for b in blocks if b.counter is not None]
     for b in blocks:
-        parts += [np.arange(after + 1, after + 1 + length) for after, length in b.gaps]
+        parts += [np.arange(g.after_counter + 1, g.after_counter + 1 + g.length) for g in b.gaps]
     return np.sort(np.concatenate(parts))
 
 
@@ -296,13 +304,13 @@ def test_every_kind_streams_in_order_between_start_and_stop():
         assert stats["blocks"] == stats["delivered"] == len(blocks)
         assert stats["overflows"] == stats["faults"] == 0 and not stats["running"]
         assert live[device].running and live[device].last_arrival_ns is not None
-    assert [b.gaps for b in sink.blocks("scanner") if b.gaps] == [((10, 3),)]
+    assert [b.gaps for b in sink.blocks("scanner") if b.gaps] == [(Gap(10, 3),)]
     fan_block = sink.blocks("fan")[0]
     assert fan_block.device_time is None and set(fan_block.values) == {"speed", "status_word"}
     assert len(fan_block) == 1 and fan_block.counter is not None
     laser_block = sink.blocks("laser")[0]
     assert "distance" in laser_block.values and "counter" not in laser_block.values
-    assert isinstance(laser_block.raw, LaserBlock)
+    assert laser_block.device_time is not None and laser_block.info == {}
     assert sink.blocks("baro")[0].values["density"][0] == pytest.approx(1.204)
     assert summary["reason"] == "stop" and summary["overflows"] == 0
     assert summary["threads_alive"] == [] and summary["errors"] == []
@@ -344,7 +352,9 @@ def test_slow_subscriber_overflows_are_counted_marked_and_the_reader_keeps_its_p
     index = next(i for i, (n, d) in enumerate(slow.docs) if n == "event" and d.kind == "overflow")
     name, block = slow.docs[index + 1]
     assert name == "block" and block.overflow_samples > 0
-    assert block.gaps[-1] == slow.docs[index][1].data["gap"]
+    gap = block.gaps[-1]
+    assert gap.kind == "overflow"
+    assert (gap.after_counter, gap.length) == slow.docs[index][1].data["gap"]
 
 
 def test_device_fault_is_reported_retried_with_backoff_and_recovered():
@@ -376,7 +386,7 @@ def test_device_fault_is_reported_retried_with_backoff_and_recovered():
     summary = sink.docs[-1][1]
     assert summary["devices"]["laser"]["faults"] == 3 and summary["faults"] == 4
     # The failed poll of the fan is a gap of one poll in its counter.
-    assert [b.gaps for b in sink.blocks("fan") if b.gaps] == [((1, 1),)]
+    assert [b.gaps for b in sink.blocks("fan") if b.gaps] == [(Gap(1, 1),)]
     assert len(sink.blocks("laser")) > 3  # data flows again after the recovery
 
 
@@ -395,7 +405,7 @@ def test_a_scanner_restarted_after_a_lost_connection_keeps_its_counter_increasin
     counter = np.concatenate([b.counter for b in blocks])
     assert np.all(np.diff(counter) == 1)  # continues after the last frame before the restart
     restart = [b.gaps for b in blocks if b.gaps]
-    assert restart == [((25, -1),)]  # 5 good reads of 5 frames, then a restart marker
+    assert restart == [(Gap(25, -1, "restart"),)]  # 5 good reads of 5 frames, then a restart
     assert [f.error for f in sink.events("fault")] == ["TransportError"]
 
 
@@ -548,7 +558,7 @@ def test_a_device_that_cannot_open_closes_the_others_and_nothing_runs():
 def test_arguments_are_checked_without_io():
     with pytest.raises(ValueError, match="kind must be one of"):
         Acquisition({"x": ("camera", FakeLaser())})
-    with pytest.raises(TypeError, match=r"lacks \['configure', 'scan', 'stop'\]"):
+    with pytest.raises(TypeError, match=r"lacks \['start', 'stop', 'recover', 'drain'"):
         Acquisition({"x": ("scanner", FakeLaser())})
     with pytest.raises(ValueError, match="queue_size"):
         Acquisition({"x": ("laser", FakeLaser())}, queue_size=0)
@@ -581,14 +591,14 @@ def test_device_gaps_inside_dropped_blocks_are_passed_on():
     """A gap the device reported in a block that was then dropped still reaches subscribers."""
 
     class GappyLaser(FakeLaser):
-        def read_block(self, timeout_s: float = 1.0) -> LaserBlock:
-            block = super().read_block(timeout_s)
+        def read(self, timeout_s: float = 1.0) -> Reading:
+            block = super().read(timeout_s)
             if self.reads % 7 == 0:  # the device skipped 2 samples before this block
                 counter = block.counter + 2
                 self.next_counter += 2
-                channels = {**block.channels, "counter": counter}
-                return LaserBlock(channels=channels,
-                                  gaps=(LaserGap(int(counter[0]) - 3, 2),))
+                return Reading(channels=block.channels, host_time_ns=block.host_time_ns,
+                               counter=counter, device_time=block.device_time,
+                               gaps=(Gap(int(counter[0]) - 3, 2),))
             return block
 
     laser = GappyLaser(rows=2, period_s=0.001)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from unittest.mock import MagicMock
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -221,9 +222,11 @@ def test_status_speed_and_read_use_one_request_when_adjacent():
         assert d.speed() == 600.0
         assert d.speed() == -1.5
         reading = d.read()
-    assert set(reading) == set(d.describe())
-    assert reading["speed"]["value"] == 300.0 and reading["status_word"]["value"] == SW_TRIPPED
-    assert isinstance(reading["speed"]["timestamp_ns"], int)
+    assert set(reading.channels) == set(d.describe())
+    assert reading.channels["speed"][0] == 300.0
+    assert reading.channels["status_word"][0] == SW_TRIPPED
+    assert reading.host_time_ns.dtype == np.int64 and reading.host_time_ns[0] > 0
+    assert list(reading.counter) == [1] and reading.gaps == ()
 
 
 def test_wait_for_speed_returns_when_within_tolerance_and_raises_on_trip():

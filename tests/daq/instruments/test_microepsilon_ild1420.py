@@ -18,10 +18,11 @@ from hypothesis import strategies as st
 
 from daq.errors import ConfigError, DeviceError, TransportTimeout
 from daq.instruments import registry
-from daq.instruments.microepsilon_ild1420.blocks import Gap, Ild1420Sequencer
 from daq.instruments.microepsilon_ild1420.decoder import ERROR_CODES, Ild1420Decoder, error_reason
 from daq.instruments.microepsilon_ild1420.driver import MicroEpsilonIld1420
+from daq.instruments.microepsilon_ild1420.sequencer import Ild1420Sequencer
 from daq.instruments.microepsilon_ild1420.settings import Ild1420Settings
+from daq.instruments.reading import Gap
 from daq.transports.scripted import expected_exchange
 
 TABLE = {"range_mm": 10, "rate_hz": 4000.0, "x": 0.1, "standoff_mm": 5.0}
@@ -221,7 +222,7 @@ def test_sequencer_detects_a_restart_and_estimates_the_gap_from_host_time():
     counter, t, epoch, gaps = seq.process(np.array([0, 1]), np.array([0, 100]),
                                           ns(2, 300_000_000))
     # 0.3 s at 1 kHz: about 299 samples between the last old and the first new one.
-    assert gaps == [Gap(after_counter=501, length=299, exact=False)]
+    assert gaps == [Gap(after_counter=501, length=299, kind="restart")]
     assert list(counter) == [801, 802] and list(epoch) == [1, 1]
     np.testing.assert_allclose(t, [0.0, 1e-3])
 
@@ -258,19 +259,21 @@ def test_open_then_read_the_manual_blocks():
     with expected_exchange([*OPEN_SCRIPT, (b"", BLOCK_1 + BLOCK_2)]) as t:
         drv = driver(t)
         drv.open()
-        block = drv.read_block(timeout_s=0.5)
+        block = drv.read(timeout_s=0.5)
         assert set(block.channels) == set(drv.describe())
-        assert block.distance[0] == pytest.approx(0.005) and np.isnan(block.distance[1])
-        assert list(block.error_code) == [0, 262077]
-        assert block.reasons() == ["", "peak before the measuring range"]
+        distance = block.channels["distance"]
+        assert distance[0] == pytest.approx(0.005) and np.isnan(distance[1])
+        assert list(block.channels["error_code"]) == [0, 262077]
+        assert [error_reason(int(c)) for c in block.channels["error_code"]] == [
+            "", "peak before the measuring range"]
         assert list(block.counter) == [262143, 262144]  # unwrapped across the 18-bit wrap
         np.testing.assert_allclose(block.device_time, [0x10002 * 1e-5, 0x1001B * 1e-5])
-        assert list(block.triggered) == [True, False] and block.gaps == ()
+        assert list(block.channels["triggered"]) == [True, False] and block.gaps == ()
         assert block.host_time_ns.dtype == np.int64 and block.host_time_ns[0] > 0
         for key, spec in drv.describe().items():
             assert block.channels[key].dtype == np.dtype(spec["dtype"]), key
         with pytest.raises(TransportTimeout, match="no ILD1420 block"):
-            drv.read_block(timeout_s=0.01)
+            drv.read(timeout_s=0.01)
         drv.close()
         drv.close()  # idempotent
 
@@ -280,7 +283,7 @@ def test_gaps_are_reported_with_their_length():
     with expected_exchange([*OPEN_SCRIPT, (b"", stream)]) as t:
         drv = driver(t)
         drv.open()
-        block = drv.read_block(0.5)
+        block = drv.read(0.5)
         assert list(block.counter) == [100, 101, 105, 106]
         assert block.gaps == (Gap(after_counter=101, length=3),)
 
@@ -294,7 +297,7 @@ def test_command_replies_inside_the_stream_lose_no_samples():
         drv = driver(t)
         drv.open()
         assert drv.info() == {"Name": "ILD1420-10", "Measuring range": "10.00mm"}
-        block = drv.read_block(0.5)
+        block = drv.read(0.5)
         assert list(block.counter) == [1, 2, 3, 4] and drv.bytes_skipped == 0
 
 
@@ -314,7 +317,7 @@ def test_error_replies_raise_device_error_and_master_switches_decoding():
         drv.master(5.0)
         assert drv.mastered
         # (102 * 64235 / 65520 - 51) * 10 / 100 mm
-        assert drv.read_block(0.5).distance[0] == pytest.approx(
+        assert drv.read(0.5).channels["distance"][0] == pytest.approx(
             (102 * 64235 / 65520 - 51) * 1e-4, abs=1e-12)
         with pytest.raises(ValueError, match="outside"):
             drv.master(25.0)
@@ -350,7 +353,7 @@ def test_exposure_and_intensity_when_selected():
     with expected_exchange(script) as t:
         drv = driver(t, output=output, baudrate=1000000)
         drv.open()
-        block = drv.read_block(0.5)
+        block = drv.read(0.5)
     assert set(block.channels) == set(drv.describe()) >= {"exposure", "intensity"}
     np.testing.assert_allclose(block.channels["intensity"], [100.0, 50.0])
     np.testing.assert_allclose(block.channels["exposure"], [500e-6, 0.1e-6])

@@ -128,8 +128,9 @@ def test_trigger_pulses_make_edges_and_the_count_is_read():
         plc.trigger_pulse(0.001)
         assert plc.trigger_count() == 2
         reading = plc.read()
-    assert {k: v["value"] for k, v in reading.items()} == {
-        "armed": True, "released": False, "trigger_count": 2}
+    assert {k: v.tolist() for k, v in reading.channels.items()} == {
+        "armed": [True], "released": [False], "trigger_count": [2]}
+    assert list(reading.counter) == [1] and reading.gaps == ()
     with pytest.raises(ValueError, match="width_s"):
         plc.trigger_pulse(0.0)
 

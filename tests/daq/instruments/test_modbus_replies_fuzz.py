@@ -19,6 +19,7 @@ from hypothesis import strategies as st
 from daq.instruments.abb_acs580.driver import AbbAcs580
 from daq.instruments.abb_acs580.profile import DriveStatus
 from daq.instruments.abb_acs580.settings import AbbAcs580Settings
+from daq.instruments.reading import Reading
 from daq.transports.scripted import expected_bus_calls
 
 TABLE = {
@@ -31,7 +32,7 @@ BITS = ("rdy_on", "rdy_run", "rdy_ref", "tripped", "off_2_sta", "off_3_sta", "sw
         "alarm", "at_setpoint", "remote", "above_limit")
 
 
-def reading(words: list[int]) -> dict[str, dict[str, object]]:
+def reading(words: list[int]) -> Reading:
     with expected_bus_calls([("read_holding_registers", SW, 2, words)]) as bus:
         return AbbAcs580(bus, AbbAcs580Settings.from_table(TABLE), limit_rpm=900.0).read()
 
@@ -40,13 +41,13 @@ def reading(words: list[int]) -> dict[str, dict[str, object]]:
 @given(st.integers(0, 0xFFFF), st.integers(0, 0xFFFF))
 def test_every_reply_decodes_exactly(word, counts):
     out = reading([word, counts])
-    assert out["status_word"]["value"] == word
+    assert out.channels["status_word"][0] == word
     status = DriveStatus.decode(word)
     rebuilt = sum(int(getattr(status, name)) << bit for bit, name in enumerate(BITS))
     assert rebuilt == word & 0x07FF
     assert len(status.active()) == bin(word & 0x07FF).count("1")
     signed = counts - 0x10000 if counts >= 0x8000 else counts
-    rpm = out["speed"]["value"]
+    rpm = out.channels["speed"][0]
     assert isinstance(rpm, float) and math.isfinite(rpm)
     assert rpm == signed * 1500.0 / 20000.0
 

@@ -28,11 +28,11 @@ from daq.errors import (
     TransportTimeout,
 )
 from daq.instruments import registry
+from daq.instruments.reading import Gap
 from daq.instruments.scanivalve_mps4264.blocks import (
     STATUS_MISSING,
     STATUS_OK,
     STATUS_VALVE_CAL,
-    Gap,
     ScanBlock,
 )
 from daq.instruments.scanivalve_mps4264.driver import ScanivalveMps4264
@@ -394,18 +394,19 @@ def scanning(chunks_per_module: list[list[bytes]], *, table: dict | None = None,
     return driver
 
 
-def test_describe_keys_equal_the_block_channels():
+def test_describe_keys_equal_the_reading_channels():
     driver = scanning([[eu_packet(1) + eu_packet(2)], [eu_packet(1) + eu_packet(2)]],
                       table={"modules": 2, "pitot_channel": 100})
-    block = driver.read_block(0.05)
+    reading = driver.read(0.05)
     described = driver.describe()
-    arrays = block.arrays()
+    arrays = reading.channels
     assert set(described) == set(arrays)
     for name, spec in described.items():
         assert arrays[name].dtype == np.dtype(spec["dtype"]), name
-        assert arrays[name].shape == (len(block), *spec["shape"]), name
-    np.testing.assert_array_equal(block.pitot, block.pressure[:, 100])
-    assert block.pitot[0] == 1 + 0.5 * 36  # module 1, channel 36 of packet 1
+        assert arrays[name].shape == (len(reading), *spec["shape"]), name
+    np.testing.assert_array_equal(arrays["pitot"], arrays["pressure"][:, 100])
+    assert arrays["pitot"][0] == 1 + 0.5 * 36  # module 1, channel 36 of packet 1
+    assert reading.counter.tolist() == [1, 2] and reading.device_time is not None
 
 
 def test_counter_gap_is_marked_with_its_length():

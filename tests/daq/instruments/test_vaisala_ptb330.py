@@ -264,7 +264,8 @@ def test_describe_keys_equal_the_reading_channels_and_property_docstrings_follow
         drv = driver(t)
         drv.open()
         reading = drv.read()
-    assert set(drv.describe()) == set(reading.values())
+    assert set(drv.describe()) == set(reading.channels)
+    assert reading.channels["pressure"][0] == pytest.approx(101325.0)
     assert drv.describe()["density"]["units"] == "kg/m^3"
     for cls in (VaisalaPtb330, BarometerReading, Ptb330LineDecoder):
         for name, member in inspect.getmembers(cls, lambda m: isinstance(m, property)):
@@ -276,7 +277,7 @@ def test_open_sets_the_format_and_reads_are_polled_with_send():
     with expected_exchange(OPEN_PLAIN + [(b"SEND\r", LINE), (b"SEND\r", LINE)]) as t:
         with driver(t) as drv:
             assert drv.is_open
-            first, second = drv.read(), drv.read()
+            first, second = drv.measure(), drv.measure()
     assert first.pressure_pa == pytest.approx(101325.0) and first.counter == 1
     assert first.temperature_k == pytest.approx(294.49) and second.counter == 2
     assert first.pressure_unit == "hPa" and first.raw == LINE.rstrip(b"\r\n")
@@ -295,7 +296,7 @@ def test_addressed_poll_mode_opens_the_line_for_form_and_sends_with_the_address(
     ]
     with expected_exchange(script) as t:
         with driver(t, address=7) as drv:
-            assert drv.read().pressure_pa == pytest.approx(101325.0)
+            assert drv.measure().pressure_pa == pytest.approx(101325.0)
 
 
 def test_open_fails_when_the_format_is_not_adopted():
@@ -313,7 +314,7 @@ def test_garbled_then_good_reply_is_retried_and_counted(caplog):
     garbled = b"P=  10?3.250 hPa    T= 21.34 'C \r\n"
     with expected_exchange(OPEN_PLAIN + [(b"SEND\r", garbled), (b"SEND\r", LINE)]) as t:
         with driver(t) as drv:
-            reading = drv.read()
+            reading = drv.measure()
     assert reading.pressure_pa == pytest.approx(101325.0)
     assert drv.stats["protocol_errors"] == 1 and drv.stats["retries"] == 1
     assert drv.bad_lines == [garbled.rstrip(b"\r\n")]
@@ -323,7 +324,7 @@ def test_garbled_then_good_reply_is_retried_and_counted(caplog):
 def test_partial_line_is_a_protocol_error_with_its_bytes_then_recovers():
     with expected_exchange(OPEN_PLAIN + [(b"SEND\r", b"P=  1013.2"), (b"SEND\r", LINE)]) as t:
         with driver(t) as drv:
-            assert drv.read().pressure_pa == pytest.approx(101325.0)
+            assert drv.measure().pressure_pa == pytest.approx(101325.0)
     assert drv.bad_lines == [b"P=  1013.2"]
 
 
@@ -332,7 +333,7 @@ def test_no_reply_raises_transport_timeout_after_bounded_attempts():
         with driver(t) as drv:
             start = time.monotonic()
             with pytest.raises(TransportTimeout, match=r"no reply to 'SEND'.*after 3 attempts"):
-                drv.read()
+                drv.measure()
             # two backoffs of 0.05 and 0.1 s; the scripted transport times out at once
             assert time.monotonic() - start < 1.0
     assert drv.stats["timeouts"] == 3
@@ -344,18 +345,18 @@ def test_unit_change_mid_run_is_converted_and_an_unknown_unit_is_refused():
     script = OPEN_PLAIN + [(b"SEND\r", in_mmhg)] + [(b"SEND\r", in_water)] * 3
     with expected_exchange(script) as t:
         with driver(t) as drv:
-            reading = drv.read()
+            reading = drv.measure()
             assert reading.pressure_pa == pytest.approx(101325.0144, abs=1e-3)
             assert reading.temperature_k == pytest.approx(293.15)
             with pytest.raises(ProtocolError, match="unknown pressure unit 'mmH2O'"):
-                drv.read()
+                drv.measure()
 
 
 def test_echo_of_the_command_is_skipped():
     """With ECHO ON a unit repeats the command before its reply (PTB330 p.83 example)."""
     with expected_exchange(OPEN_PLAIN + [(b"SEND\r", b"SEND\r\n" + LINE)]) as t:
         with driver(t) as drv:
-            assert drv.read().pressure_pa == pytest.approx(101325.0)
+            assert drv.measure().pressure_pa == pytest.approx(101325.0)
 
 
 class _DropsOnce(ScriptedTransport):
@@ -381,7 +382,7 @@ def test_a_lost_connection_is_reopened():
     t = _DropsOnce(OPEN_PLAIN + [(b"SEND\r", LINE), (b"SEND\r", LINE)])
     with driver(t) as drv:
         t.fail_next_read = True
-        assert drv.read().pressure_pa == pytest.approx(101325.0)
+        assert drv.measure().pressure_pa == pytest.approx(101325.0)
     assert drv.stats["reconnects"] == 1 and t.opens == 2
     t.assert_complete()
 

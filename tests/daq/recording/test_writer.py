@@ -11,6 +11,7 @@ import pytest
 
 from daq.acquisition.records import Event, StreamBlock
 from daq.config import parse_rig_config
+from daq.instruments.reading import Gap
 from daq.recording.writer import DEFAULT_RHO, RunWriter
 
 CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
@@ -78,7 +79,8 @@ def synthetic_docs(config, tap_pressure: np.ndarray,
         triggered = np.zeros(t_laser.size, bool)
         for lo in range(0, t_laser.size, 160):
             sl = slice(lo, lo + 160)
-            gaps = ((int(counter[lo]) - 1, 0),) if (name == "laser_check" and lo == 1600) else ()
+            gaps = ((Gap(int(counter[lo]) - 1, 0),) if (name == "laser_check" and lo == 1600)
+                    else ())
             block(name, "laser", t_laser[sl], t_laser[sl] + LASER_OFFSET, counter[sl],
                   {"distance": d[sl], "error_code": np.zeros(160, np.int32),
                    "triggered": triggered[sl]}, gaps)

@@ -27,6 +27,7 @@ import pytest
 from scipy import stats
 
 from daq.errors import SyncError
+from daq.instruments.reading import Gap
 from daq.sync.clock_map import ClockMap, trigger_times_from_flags, trigger_times_from_latch
 from daq.sync.conversions import (
     air_density,
@@ -34,7 +35,7 @@ from daq.sync.conversions import (
     heave_pitch_from_lasers,
     wind_speed,
 )
-from daq.sync.counters import CounterStep, CounterUnwrapper, Gap, find_gaps, unwrap_counter
+from daq.sync.counters import CounterStep, CounterUnwrapper, find_gaps, unwrap_counter
 from daq.sync.resample import Resampler, StreamSpec, SyncBlock, resample
 from ident.taps import TapLayout
 from simulators.clock import DeviceClock
@@ -724,3 +725,50 @@ def test_air_density_against_hand_values() -> None:
     with pytest.raises(ValueError, match="hPa"):
         air_density(1013.25, 293.15)
 
+
+
+def test_push_many_equals_a_push_per_piece_with_overlaps_and_late_samples() -> None:
+    """The run writer's one push per pull gives the rows and counts of a push per block."""
+    rng = np.random.default_rng(3)
+    specs = [StreamSpec("p", 1 / 500, "linear", 3), StreamSpec("x", 1 / 4000, "boxcar")]
+
+    def pieces(start: float, period: float, width: int | None, count: int = 40) -> list:
+        out, t0 = [], start
+        for _ in range(count):
+            n = int(rng.integers(1, 30))
+            t = t0 + period * np.arange(n)
+            # Some blocks start before the previous one ended (a clock-map correction).
+            t0 = float(t[-1]) + period - (5 * period if rng.random() < 0.2 else 0.0)
+            out.append((t, rng.normal(size=(n,) if width is None else (n, width))))
+        return out
+
+    streams = {"p": pieces(0.0, 1 / 500, 3), "x": pieces(0.0, 1 / 4000, None)}
+    one, many = (Resampler(specs, rate_hz=500.0, t_start=0.0, max_hold_s=0.1)
+                 for _ in range(2))
+    rows_one, rows_many = [], []
+
+    def feed(name: str, ps: list) -> None:
+        for t, v in ps:
+            one.push(name, t, v)
+        many.push_many(name, ps)
+
+    for lo, hi in ((0, 10), (10, 25), (25, 40)):  # a pull after each group of pieces
+        for name, ps in streams.items():
+            feed(name, ps[lo:hi])
+        rows_one.append(one.pull())
+        rows_many.append(many.pull())
+    # The pressures run 0.5 s ahead: past max_hold_s the rows go out without the lasers,
+    # whose samples for those times then come late.
+    feed("p", pieces(float(streams["p"][-1][0][-1]) + 0.002, 1 / 500, 3, count=20)[:])
+    rows_one.append(one.pull())
+    rows_many.append(many.pull())
+    feed("x", pieces(float(streams["x"][-1][0][-1]) + 0.00025, 1 / 4000, None, count=20))
+    rows_one.append(one.flush())
+    rows_many.append(many.flush())
+    for a, b in zip(rows_one, rows_many, strict=True):
+        assert np.array_equal(a.time, b.time)
+        for name in ("p", "x"):
+            assert np.array_equal(a.values[name], b.values[name], equal_nan=True)
+    assert one.overlapping_samples == many.overlapping_samples
+    assert one.overlapping_samples["p"] > 0 and one.overlapping_samples["x"] > 0
+    assert one.late_samples == many.late_samples and one.late_samples["x"] > 0

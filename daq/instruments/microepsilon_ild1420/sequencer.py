@@ -1,20 +1,18 @@
-"""What the ILD1420-class laser driver returns: counters unwrapped, gaps marked, blocks.
+"""The ILD1420-class laser's counters and timestamps unwrapped, gaps and restarts marked.
 
 Responsibility: :class:`Ild1420Sequencer` (pure) unwraps the 18-bit counter and the 32-bit
-timestamp of decoded samples, and marks the samples that are missing (:class:`Gap`, counted)
-and the sensor's restarts (a gap of unknown length); :class:`LaserBlock` is one read of the
-driver: the samples with their host arrival times, device times, error codes and trigger flags.
+timestamp of decoded samples, and marks the samples that are missing (a
+:class:`~daq.instruments.reading.Gap`, counted) and the sensor's restarts (a ``"restart"`` gap
+of estimated length).
 
-Not responsible for: decoding bytes (:mod:`daq.instruments.microepsilon_ild1420.decoder`) or
-reading the line (:mod:`daq.instruments.microepsilon_ild1420.driver`).
+Not responsible for: decoding bytes (:mod:`daq.instruments.microepsilon_ild1420.decoder`),
+reading the line or building the driver's :class:`~daq.instruments.reading.Reading`
+(:mod:`daq.instruments.microepsilon_ild1420.driver`).
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping
-from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -23,36 +21,15 @@ from daq.instruments.microepsilon_ild1420.decoder import (
     COUNTER_MODULUS,
     TIMESTAMP_MODULUS,
     TIMESTAMP_TICK_S,
-    error_reason,
 )
+from daq.instruments.reading import Gap
 
-__all__ = ["Gap", "Ild1420Sequencer", "LaserBlock"]
+__all__ = ["Ild1420Sequencer"]
 
-BoolArray = npt.NDArray[np.bool_]
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 
 log = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class Gap:
-    """Samples missing from the stream.
-
-    Attributes
-    ----------
-    after_counter : int
-        Unwrapped counter of the last sample before the gap.
-    length : int
-        Number of samples missing.
-    exact : bool
-        True when counted from the device counter; False when the sensor restarted (counter and
-        timestamp began again) and the length is estimated from the host time and ``rate_hz``.
-    """
-
-    after_counter: int
-    length: int
-    exact: bool = True
 
 
 class Ild1420Sequencer:
@@ -98,6 +75,10 @@ class Ild1420Sequencer:
         gaps: list[Gap] = []
         if n == 0:
             return out_c, out_t.astype(np.float64), epochs, gaps
+        if self._last is not None and not self._check_next:
+            fast = self._consecutive(counter, timestamp, host_ns)
+            if fast is not None:
+                return fast
         first_ever = self._last is None
         if self._last is None:
             prev = (int(counter[0]), int(timestamp[0]), 0, 0, int(host_ns[0]))
@@ -130,7 +111,7 @@ class Ild1420Sequencer:
                     log.warning("ILD1420 restarted (counter %d, timestamp %d): epoch %d, about "
                                 "%d samples missing", int(counter[a]), int(timestamp[a]),
                                 self.epoch, missing)
-                    gaps.append(Gap(after_counter=c, length=missing, exact=False))
+                    gaps.append(Gap(after_counter=c, length=missing, kind="restart"))
                     c, t = c + 1 + missing, int(timestamp[a])
                 out_c[a], out_t[a], epochs[a] = c, t, self.epoch
                 a += 1
@@ -149,6 +130,42 @@ class Ild1420Sequencer:
         self._last = (int(counter[-1]), int(timestamp[-1]), c, t, int(host_ns[-1]))
         return out_c, out_t.astype(np.float64) * TIMESTAMP_TICK_S, epochs, gaps  # ticks -> s
 
+    def _consecutive(self, counter: IntArray, timestamp: IntArray, host_ns: IntArray,
+                     ) -> tuple[IntArray, FloatArray, npt.NDArray[np.int32], list[Gap]] | None:
+        """:meth:`process` of a batch that continues the last one sample by sample, else None.
+
+        The usual batch: every counter step is 1 and every timestamp step is forward and too
+        short to hide a counter wrap. Its counters and ticks then follow by a cumulative sum,
+        without the general path's wrap corrections, restart search and per-gap loop (the same
+        numbers).
+        """
+        assert self._last is not None
+        raw_c, raw_t, c, t, _ = self._last
+        n = int(counter.size)
+        dc = np.empty(n, np.int64)
+        dc[0] = int(counter[0]) - raw_c
+        np.subtract(counter[1:], counter[:-1], out=dc[1:])
+        dc %= COUNTER_MODULUS
+        if not (dc == 1).all():
+            return None
+        dt = np.empty(n, np.int64)
+        dt[0] = int(timestamp[0]) - raw_t
+        np.subtract(timestamp[1:], timestamp[:-1], out=dt[1:])
+        dt %= TIMESTAMP_MODULUS
+        longest = int(dt.max())
+        # No restart (a timestamp going back), and no step long enough for the timestamp to
+        # correct the counter by a whole period (round((expected - 1) / 2**18) would be >= 1).
+        if (longest >= TIMESTAMP_MODULUS // 2
+                or (longest * (TIMESTAMP_TICK_S * self.rate_hz) - 1) / COUNTER_MODULUS >= 0.5):
+            return None
+        out_c = np.arange(c + 1, c + n + 1, dtype=np.int64)
+        out_t = np.cumsum(dt)
+        out_t += t
+        self._last = (int(counter[-1]), int(timestamp[-1]), c + n, int(out_t[-1]),
+                      int(host_ns[-1]))
+        epochs = np.full(n, self.epoch, dtype=np.int32)
+        return out_c, out_t.astype(np.float64) * TIMESTAMP_TICK_S, epochs, []
+
     def _continues(self, dc: int, dt: int, elapsed_ns: int) -> bool:
         """Whether a step across a reconnect is consistent with the host time elapsed."""
         dt_s = dt * TIMESTAMP_TICK_S
@@ -156,64 +173,3 @@ class Ild1420Sequencer:
             return False
         expected = dt_s * self.rate_hz
         return abs(dc - expected) <= 0.05 * expected + 2
-
-
-@dataclass(frozen=True)
-class LaserBlock:
-    """Samples read in one call, self-describing (keys of ``channels`` = ``describe()`` keys).
-
-    Attributes
-    ----------
-    channels : dict of str to ndarray, each shape (n,)
-        ``distance`` (m, NaN on error), ``error_code`` (0 = valid, else the sensor's error value,
-        see :data:`ERROR_CODES`), ``counter`` (unwrapped int64), ``device_time`` (s, unwrapped
-        within an epoch), ``epoch`` (restarts of the sensor seen so far), ``triggered`` (status
-        bit 15), ``status`` (raw status bits), ``host_time_ns`` (``time.monotonic_ns()`` when the
-        chunk that completed the sample arrived); plus ``exposure`` (s) and ``intensity`` (%)
-        when selected.
-    gaps : tuple of Gap
-        Samples missing before or inside this block (counter jumps, restarts).
-    bytes_skipped : int
-        Bytes the decoder discarded while producing this block (resynchronisations).
-    """
-
-    channels: Mapping[str, npt.NDArray[Any]]
-    gaps: tuple[Gap, ...] = ()
-    bytes_skipped: int = 0
-
-    def __len__(self) -> int:
-        return int(self.channels["counter"].shape[0])
-
-    @property
-    def distance(self) -> FloatArray:
-        """Measure the distances, m (NaN where the sensor reported an error)."""
-        return self.channels["distance"]
-
-    @property
-    def error_code(self) -> npt.NDArray[np.int32]:
-        """Measure the error value per sample (0 = valid)."""
-        return self.channels["error_code"]
-
-    @property
-    def counter(self) -> IntArray:
-        """Measure the unwrapped sample counter."""
-        return self.channels["counter"]
-
-    @property
-    def device_time(self) -> FloatArray:
-        """Measure the device time, s (unwrapped; restarts with the sensor)."""
-        return self.channels["device_time"]
-
-    @property
-    def triggered(self) -> BoolArray:
-        """Measure the "value triggered" flag (status bit 15) per sample."""
-        return self.channels["triggered"]
-
-    @property
-    def host_time_ns(self) -> IntArray:
-        """Measure the host arrival time of each sample, ns (``time.monotonic_ns``)."""
-        return self.channels["host_time_ns"]
-
-    def reasons(self) -> list[str]:
-        """Return the error text per sample (``""`` where valid)."""
-        return [error_reason(int(code)) for code in self.error_code]
