@@ -51,6 +51,10 @@ def test_the_wheel_ships_the_rig_configs_and_makes_qt_and_dask_extras(wheel, tmp
     with zipfile.ZipFile(wheel) as z:
         for path in shipped:
             assert z.read(f"daq/rig_configs/{path.name}") == path.read_bytes()
+        plans = sorted(CONFIGS.glob("plans/*.toml"))  # windrig campaign's example plans
+        assert [p.name for p in plans] == ["adaptive.toml", "fixed.toml"]
+        for path in plans:
+            assert z.read(f"daq/rig_configs/plans/{path.name}") == path.read_bytes()
         (meta_name,) = [n for n in z.namelist() if n.endswith(".dist-info/METADATA")]
         meta = email.message_from_bytes(z.read(meta_name))
         z.extractall(tmp_path / "site")

@@ -30,7 +30,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from daq.errors import DeviceError, SafetyError
+from daq.errors import DeviceError, ProtocolError, SafetyError
 from daq.instruments.entry import DriverEntry
 from daq.instruments.modbus_plc.settings import ModbusPlcSettings
 from daq.instruments.reading import PollSequence, Reading
@@ -121,8 +121,19 @@ class ModbusPlc:
         return self.bus.read_discrete_inputs(self._released_di, 1)[0]
 
     def trigger_count(self) -> int:
-        """Read TRIGGER_COUNT (0..65535, wraps)."""
-        return self.bus.read_holding_registers(self._count_hr, 1)[0]
+        """Read TRIGGER_COUNT (0..65535, wraps).
+
+        Raises
+        ------
+        ProtocolError
+            The register's value is not a 16-bit word (a broken bus or bridge): never wrapped or
+            clipped into a count that would pair the wrong trigger pulses.
+        """
+        word = self.bus.read_holding_registers(self._count_hr, 1)[0]
+        if not 0 <= word <= 0xFFFF:
+            raise ProtocolError(f"{self.bus.url}: TRIGGER_COUNT (holding register "
+                                f"{self._count_hr}) = {word} is outside 0..65535")
+        return int(word)
 
     def describe(self) -> dict[str, dict[str, Any]]:
         """Describe the channels of :meth:`read`: units, dtype, shape (one row per poll).
