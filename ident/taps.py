@@ -24,7 +24,11 @@ import numpy.typing as npt
 
 from ident import _validate as v
 
-__all__ = ["TapLayout"]
+__all__ = ["MAX_TAPS", "TapLayout"]
+
+#: Most taps a generated outline may have: 32 scanner modules of 64 channels. A larger count in
+#: a config is a typo, and its arrays (several per tap and sample) would not fit in memory.
+MAX_TAPS = 2048
 
 
 @dataclass(frozen=True, eq=False)
@@ -155,6 +159,12 @@ class TapLayout:
             missing, unknown = sorted(expected - keys), sorted(keys - expected)
             raise ValueError(f"taps table: missing keys {missing}, unknown keys {unknown}")
         shape = table.get("shape")
+        count = table.get("taps_per_face", table.get("n_taps"))
+        per = 2 if shape == "rectangle" else 1  # a rectangle's count is per horizontal face
+        if isinstance(count, int) and count * per > MAX_TAPS:
+            name = "taps_per_face" if shape == "rectangle" else "n_taps"
+            raise ValueError(f"taps.{name} = {count} is too many: at most {MAX_TAPS // per} "
+                             f"(MAX_TAPS = {MAX_TAPS} taps in all)")
         if shape == "rectangle":
             return cls.rectangle(table["B"], table["D"], table["taps_per_face"])
         if shape == "streamlined_deck":

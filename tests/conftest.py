@@ -5,6 +5,9 @@
   tests flaky.
 - Hardware tests (``@pytest.mark.hardware``) run only with ``--rig-config PATH``; without it they
   are skipped, and the ``rig_config`` fixture gives them the path (pymeasure's ``conftest.py``).
+- Hypothesis draws the same examples on every run (``derandomize``): a fuzz test that passes in
+  CI passes again on the next run; a new search for failures is run by hand with
+  ``--hypothesis-profile=explore``.
 """
 
 from __future__ import annotations
@@ -16,6 +19,11 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
+
+settings.register_profile("windrig", derandomize=True, print_blob=True)
+settings.register_profile("explore", derandomize=False, max_examples=2000)
+settings.load_profile("windrig")
 
 # Headless by default, so that a bare `pytest` behaves like `make test` on a machine without a
 # display (Qt aborts the whole process when it cannot open its platform). An explicit setting wins.

@@ -90,3 +90,16 @@ def test_the_checks_can_fail_both_ways():
             assert "m" in str(exc)
         else:
             raise AssertionError(f"m = {bad} was accepted")
+
+
+def test_a_huge_tap_count_is_refused_before_anything_is_allocated():
+    """Found by this fuzz: taps_per_face = 1e9 made the loader allocate until the OOM killer."""
+    for text in TEXTS:
+        (match,) = re.finditer(r"^(\s*(?:taps_per_face|n_taps)\s*=\s*)(\d+)", text, re.M)
+        huge = text[:match.start(2)] + "1000000000" + text[match.end(2):]
+        try:
+            parse_rig_config(huge, "fuzz.toml")
+        except ConfigError as exc:
+            assert "too many: at most" in str(exc), str(exc)
+        else:
+            raise AssertionError("a billion taps was accepted")
