@@ -357,31 +357,31 @@ class MicroEpsilonIld1420:
             if remaining <= 0:
                 raise TransportTimeout(f"{self._transport.url}: no ILD1420 block within "
                                        f"{timeout_s:g} s")
-            try:
-                data = self._transport.read(65536, remaining)
-            except TransportTimeout:
-                continue  # the deadline check above raises, naming the sensor
-            except TransportError as exc:
-                self._reconnect(exc)
-                continue
-            self._ingest(data, time.monotonic_ns())
+            self._receive(remaining)  # on a timeout the deadline check raises, naming the sensor
         # Keep collecting for DRAIN_S after the first sample (waiting for what is still coming)
         # and up to max_samples; each read is decoded and stamped with its own arrival time, so
         # the clock fit keeps a tight host time for the last sample of every read.
         drain_end = time.monotonic() + self.DRAIN_S
         while self._backlog_size < max_samples:
             remaining = drain_end - time.monotonic()
-            if remaining <= 0:
+            if remaining <= 0 or not self._receive(remaining):
                 break
-            try:
-                data = self._transport.read(65536, remaining)
-            except TransportTimeout:
-                break
-            except TransportError as exc:
-                self._reconnect(exc)
-                break
-            self._ingest(data, time.monotonic_ns())
         return self._build_block()
+
+    def _receive(self, timeout_s: float) -> bool:
+        """Read and decode what arrives within ``timeout_s`` (s), stamped with its arrival.
+
+        Returns False when nothing came: a timeout, or a failed line that was reopened.
+        """
+        try:
+            data = self._transport.read(65536, timeout_s)
+        except TransportTimeout:
+            return False
+        except TransportError as exc:
+            self._reconnect(exc)
+            return False
+        self._ingest(data, time.monotonic_ns())
+        return True
 
     def _reconnect(self, cause: TransportError) -> None:
         url = self._transport.url
