@@ -144,7 +144,6 @@ def test_record_a_release_from_the_console_panel(qtbot, tmp_path):
         # Time 0 is the recording's start, on the 2 ms grid of the scanner's 500 Hz.
         assert t[0] == 0.0
         assert np.max(np.abs(np.diff(t) - 1.0 / rate)) < GRID_TOL_S
-        assert t[-1] > 2.5  # the decay alone lasted 2 s (arm and release before it)
         # No NaN rows in h and alpha: every laser sample arrived (no gap marked) and the file's
         # writer was given a pre-roll, so the first rows are covered too.
         gaps = {name: int(entry[f"instrument/{name}/gaps"].shape[0]) for name in lasers}
@@ -165,6 +164,9 @@ def test_record_a_release_from_the_console_panel(qtbot, tmp_path):
         assert abs(float(row["release_time"]) - release_event_time) < 1e-9
         assert abs(float(row["release_time"]) - (live_release.host_time_ns - t0_ns) * 1e-9) < 1e-9
         start, stop = int(row["start_index"]), int(row["stop_index"])
+        # The file reaches past 2 s of decay (the live view saw them before the catch). Arm and
+        # release before it take however long the PLC needs: not a fixed 0.5 s.
+        assert t[-1] > float(row["release_time"]) + 2.0
         assert t[start - 1] < row["release_time"] <= t[start]  # the first row after the release
         assert (stop - start) / rate > 2.0 - 2.0 / rate  # >= 2 s of decay, less the catch row
         assert np.ptp(h[start:stop]) > 1e-3  # the model moved (held ~4 mm off, then released)
