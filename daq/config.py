@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from daq.calibration import TAP_KEYS, Calibration, parse_calibration
 from daq.errors import ConfigError
 from daq.instruments import registry
 from daq.validation import check_keys, number
@@ -132,6 +133,7 @@ class RigConfig:
     simulation: SimulationConfig | None
     text: str = field(repr=False)
     source: str = ""
+    calibration: Calibration = field(default_factory=Calibration)
 
     def instrument(self, name: str) -> InstrumentConfig:
         """Return the instrument called ``name`` (``scanner``, ``fan``, a laser's name, ...)."""
@@ -202,12 +204,13 @@ def parse_rig_config(text: str, source: str = "<string>") -> RigConfig:
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{source}: not valid TOML: {exc}") from exc
     check_keys(data, source, {"rig", "section", "taps", "limits", "tunnel"},
-               set(ROLES) | {"simulation"})
+               set(ROLES) | {"simulation", "air"})
     check_keys(data["rig"], f"{source} [rig]", {"name"}, {"description"})
     section, depth = _section(data["section"], f"{source} [section]")
     try:
-        taps = TapLayout.from_table(data["taps"])
-    except (ValueError, TypeError) as exc:
+        # The wiring keys (channels, dead taps) are the calibration's (daq.calibration).
+        taps = TapLayout.from_table({k: v for k, v in data["taps"].items() if k not in TAP_KEYS})
+    except (ValueError, TypeError, AttributeError) as exc:
         raise ConfigError(f"{source} [taps]: {exc}") from exc
     check_keys(data["limits"], f"{source} [limits]", {"max_wind_speed", "max_fan_rpm"})
     limits = Limits(
@@ -216,7 +219,7 @@ def parse_rig_config(text: str, source: str = "<string>") -> RigConfig:
         max_fan_rpm=number(data["limits"], "max_fan_rpm", f"{source} [limits]",
                            lo=0.0, hi=100000.0, lo_open=True),
     )
-    check_keys(data["tunnel"], f"{source} [tunnel]", {"wind_per_rpm"})
+    check_keys(data["tunnel"], f"{source} [tunnel]", {"wind_per_rpm"}, {"pitot"})
     wind_per_rpm = number(data["tunnel"], "wind_per_rpm", f"{source} [tunnel]", lo=0.0,
                           hi=10.0, lo_open=True)
     if limits.max_fan_rpm * wind_per_rpm < limits.max_wind_speed:
@@ -225,34 +228,17 @@ def parse_rig_config(text: str, source: str = "<string>") -> RigConfig:
             f"below max_fan_rpm {limits.max_fan_rpm} at {wind_per_rpm} (m/s)/rpm"
         )
     instruments = _instruments(data, source)
-    _check_scanner_channels(instruments, taps, source)
     simulation = (_simulation(data["simulation"], f"{source} [simulation]", instruments)
                   if "simulation" in data else None)
     return RigConfig(name=str(data["rig"]["name"]), section=section, depth=depth, taps=taps,
                      limits=limits, wind_per_rpm=wind_per_rpm, instruments=instruments,
-                     simulation=simulation, text=text, source=source)
-
-
-def _check_scanner_channels(instruments: tuple[InstrumentConfig, ...], taps: TapLayout,
-                            source: str) -> None:
-    """Taps occupy scanner channels 0..n_taps-1; the Pitot needs a channel of its own."""
-    for inst in instruments:
-        if inst.role != "scanner":
-            continue
-        channels = 64 * int(inst.settings["modules"])
-        pitot = int(inst.settings["pitot_channel"])
-        if taps.n_taps + 1 > channels:
-            raise ConfigError(f"{source} [scanner] modules: {taps.n_taps} taps plus the Pitot need "
-                              f"{taps.n_taps + 1} channels, {inst.settings['modules']} module(s) "
-                              f"have {channels}")
-        if pitot < taps.n_taps:
-            raise ConfigError(f"{source} [scanner] pitot_channel = {pitot} is a tap's channel; "
-                              f"taps use channels 0..{taps.n_taps - 1}")
+                     simulation=simulation, text=text, source=source,
+                     calibration=parse_calibration(data, source, taps, instruments))
 
 
 def _section(table: Mapping[str, Any], where: str) -> tuple[SectionModel, float]:
     fields_ = {"B", "m", "I", "fh", "fa", "zeta_h", "zeta_a"}
-    check_keys(table, where, fields_ | {"depth"}, {"S"})
+    check_keys(table, where, fields_ | {"depth"}, {"S", "span"})  # span: daq.calibration
     values = {key: number(table, key, where) for key in fields_ | ({"S"} & set(table))}
     try:
         section = SectionModel(**values)
@@ -278,7 +264,9 @@ def _instruments(data: Mapping[str, Any], source: str) -> tuple[InstrumentConfig
                 if key not in table:
                     raise ConfigError(f"{where}: missing required key {key!r}")
             name = str(table.get("name", role))
-            settings = {k: v for k, v in table.items() if k not in ("driver", "url", "name")}
+            # A laser's [lasers.calibration] is the calibration's (daq.calibration), not the driver's.
+            settings = {k: v for k, v in table.items()
+                        if k not in ("driver", "url", "name", "calibration")}
             registry.validate_settings(str(table["driver"]), role, settings, where)
             out.append(InstrumentConfig(role=role, name=name, driver=str(table["driver"]),
                                         url=str(table["url"]), settings=settings))

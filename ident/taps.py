@@ -15,6 +15,7 @@ pressures), so both sides use the same geometry and signs.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -134,6 +135,67 @@ class TapLayout:
                 raise ValueError(f"mean must have shape ({self.n_taps},), got {steady.shape}")
             p = p + (steady - G_pinv @ (G @ steady))
         return np.asarray(p, dtype=float)
+
+    def without(self, dead: Any) -> TapLayout:
+        """Return the layout without the ``dead`` taps, the outline still covered.
+
+        Each dead tap's tributary length goes to its nearest live neighbours on the same straight
+        piece of outline (same outward normal and same distance of the line from the origin):
+        half to the one before it and half to the one after it along that piece, or all of it
+        to the only one at the end of a face. Half-and-half keeps the force and its line of
+        action exact for a pressure that varies linearly along the face; at the end of a face
+        the dead tap's share acts one tap spacing inward. A tap on a curved outline (explicit
+        arrays, every tap its own normal) that has no live tap on its piece goes to the live
+        taps before and after it in the layout's order (explicit layouts list their taps along
+        the outline), provided their normals are within 30 degrees of its own.
+
+        Parameters
+        ----------
+        dead : sequence of int
+            Indices of the taps to leave out (0-based, in the layout's order; repeats ignored).
+
+        Returns
+        -------
+        TapLayout
+            The live taps in their order, their lengths adding up to the full outline's.
+
+        Raises
+        ------
+        ValueError
+            An index out of range, fewer than 2 live taps, or a dead tap with no live tap it
+            could hand its length to (a whole face dead: its force cannot be estimated).
+        """
+        idx = sorted({int(i) for i in np.asarray(dead, dtype=np.int64).ravel()})
+        n = self.n_taps
+        if any(i < 0 or i >= n for i in idx):
+            raise ValueError(f"dead taps must be indices in [0, {n - 1}], got {idx}")
+        live = np.ones(n, dtype=bool)
+        live[idx] = False
+        if live.sum() < 2:
+            raise ValueError(f"{len(idx)} dead taps of {n} leave fewer than 2 live taps")
+        length = self.length.copy()
+        offset = self.nx * self.x + self.nz * self.z  # distance of the tap's line from the origin
+        along = -self.nz * self.x + self.nx * self.z  # position along that line
+        for i in idx:
+            same = (live & (np.abs(self.nx - self.nx[i]) < 1e-6) & (np.abs(self.nz - self.nz[i])
+                    < 1e-6) & (np.abs(offset - offset[i]) < 1e-9 + 1e-6 * np.abs(offset[i])))
+            before = np.flatnonzero(same & (along < along[i]))
+            after = np.flatnonzero(same & (along > along[i]))
+            heirs = ([int(before[np.argmax(along[before])])] if before.size else []) + \
+                ([int(after[np.argmin(along[after])])] if after.size else [])
+            if not heirs:  # a curved outline: the neighbours in the layout's (outline) order
+                order = np.flatnonzero(live)
+                k = int(np.searchsorted(order, i))
+                candidates = {int(order[k - 1]), int(order[k % order.size])}
+                heirs = sorted(j for j in candidates
+                               if self.nx[j] * self.nx[i] + self.nz[j] * self.nz[i] > math.cos(
+                                   math.radians(30.0)))
+            if not heirs:
+                raise ValueError(f"dead tap {i} has no live tap on its face or next to it along "
+                                 "the outline: that part of the surface would carry no pressure")
+            length[heirs] += self.length[i] / len(heirs)
+        return TapLayout(x=self.x[live], z=self.z[live], nx=self.nx[live], nz=self.nz[live],
+                         length=length[live])
 
     @classmethod
     def from_table(cls, table: Mapping[str, Any]) -> TapLayout:

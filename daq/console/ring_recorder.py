@@ -117,3 +117,7 @@ class RingRecorder:
 
     def add_metadata(self, name: str, value: Any) -> None:
         """Ignore."""
+
+    def add_calibrations(self, records: Mapping[str, tuple[Mapping[str, Any],
+                                                           Mapping[str, str]]]) -> None:
+        """Ignore (the live view shows the calibrated columns; the run file keeps the values)."""

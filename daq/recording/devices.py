@@ -19,7 +19,7 @@ Not responsible for: deciding when a device clock restarted, or the sync view an
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Collection, Mapping
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -102,7 +102,8 @@ def declare_device(rec: Recorder, config: RigConfig, name: str, kind: str,
         rec.add_stream(name, channels, "Pa", rate, "float32", extra={"trigger_time": "float64"})
         return DeviceState(name, kind, channels, rate, new_clock_map(),
                            ContinuousTimeline(1.0 / rate),
-                           raw_rows=ScannerRawRows(n_taps, "float32"))
+                           raw_rows=ScannerRawRows(config.calibration.tap_channels(n_taps),
+                                                   "float32"))
     pairs = [(k, str(v.get("units", "") or "1")) for k, v in describe.items()
              if tuple(v.get("shape", ())) == ()]
     if not pairs:
@@ -139,26 +140,33 @@ def laser_raw_rows(values: Mapping[str, npt.NDArray[Any]], n: int,
 
 
 class ScannerRawRows:
-    """A scanner's raw rows: the first ``n_taps`` pressures and the Pitot's (Pa), trigger times.
+    """A scanner's raw rows: the taps' pressures and the Pitot's (Pa), trigger times.
 
     Parameters
     ----------
-    n_taps : int
-        Pressure channels that are taps (the rig config's), the rest of the scanner unused.
+    taps : int or sequence of int
+        The scanner channel of each tap, in the layout's tap order (the rig config's wiring,
+        :meth:`daq.calibration.Calibration.tap_channels`); an int ``n``: channels ``0 .. n - 1``.
+        The other channels of the scanner are not recorded.
     dtype : str
         dtype of the raw stream's values: the table is built in it (one conversion, half the
         bytes to batch for float32).
     """
 
-    def __init__(self, n_taps: int, dtype: str = "float64") -> None:
-        self.n_taps = int(n_taps)
+    def __init__(self, taps: int | Sequence[int], dtype: str = "float64") -> None:
+        cols = list(range(taps)) if isinstance(taps, int) else [int(c) for c in taps]
+        self.n_taps = len(cols)
+        # The default wiring is a slice (a view, no gather); a mapped one gathers its columns.
+        self.columns: slice | npt.NDArray[np.intp] = (
+            slice(0, self.n_taps) if cols == list(range(self.n_taps))
+            else np.asarray(cols, dtype=np.intp))
         self.dtype = np.dtype(dtype)
 
     def __call__(self, values: Mapping[str, npt.NDArray[Any]], n: int,
                  ) -> tuple[npt.NDArray[Any], dict[str, npt.NDArray[Any]]]:
         """Return the ``(n, n_taps + 1)`` table and the ``trigger_time`` column (s)."""
         table = np.empty((n, self.n_taps + 1), self.dtype)
-        table[:, :self.n_taps] = values["pressure"][:, :self.n_taps]
+        table[:, :self.n_taps] = values["pressure"][:, self.columns]
         table[:, self.n_taps] = values["pitot"]
         trigger = values["trigger_time"] if "trigger_time" in values else np.full(n, np.nan)
         return table, {"trigger_time": trigger}

@@ -183,6 +183,11 @@ class Recorder(Protocol):
         """Store a metadata entry."""
         ...
 
+    def add_calibrations(self, records: Mapping[str, tuple[Mapping[str, Any],
+                                                           Mapping[str, str]]]) -> None:
+        """Store the calibrations the run applies (before start)."""
+        ...
+
 
 class RunRecorder:
     """Write one run to an HDF5 file laid out as docs/file_format.md (see module docstring).
@@ -603,6 +608,41 @@ class RunRecorder:
             write_metadata(self._file["entry/metadata"], name, value)
         else:
             self._deferred_metadata[name] = value
+
+    def add_calibrations(self, records: Mapping[str, tuple[Mapping[str, Any],
+                                                           Mapping[str, str]]]) -> None:
+        """Store calibrations: ``name -> (values, attrs)`` (:meth:`add_calibration` each)."""
+        for name, (values, attrs) in records.items():
+            self.add_calibration(name, values, attrs)
+
+    def add_calibration(self, name: str, values: Mapping[str, Any],
+                        attrs: Mapping[str, str]) -> None:
+        """Store a calibration the run applies: ``/entry/calibration/<name>`` (before start).
+
+        Parameters
+        ----------
+        name : str
+            Name (letters, digits, ``_``), e.g. ``"pitot"``, ``"laser_front"``; each name once.
+        values : mapping
+            Its values (numbers, arrays, text), one dataset each (units in their names).
+        attrs : mapping of str to str
+            Group attributes: ``source``, ``date`` (ISO 8601) and ``configured``
+            (docs/file_format.md, "Calibrations").
+        """
+        self._require("add_calibration", "declaring")
+        check_name(name, "calibration name")
+        assert self._file is not None
+        entry = self._file["entry"]
+        if "calibration" in entry and name in entry["calibration"]:
+            raise ValueError(f"calibration {name!r} was already added")
+        with self._io(f"writing calibration {name!r}"):
+            parent = entry.require_group("calibration")
+            parent.attrs["NX_class"] = "NXcollection"
+            write_metadata(parent, name, dict(values))
+            group = parent[name]
+            group.attrs["NX_class"] = "NXcollection"
+            for key, text in attrs.items():
+                group.attrs[key] = str(text)
 
     # --------------------------------------------------------------------------------------------
     # Appending (after start)

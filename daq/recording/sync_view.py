@@ -3,8 +3,10 @@
 Responsibility: :func:`physical_columns` turns one :class:`~daq.sync.resample.SyncBlock` (the
 lasers' distances and the scanner's tap and Pitot pressures on the sync time base) into the
 columns of ``/entry/sync``: heave and pitch from two or three lasers (their ``x`` and
-``standoff_mm``), lift and moment from the tap pressures (the rig's tap layout), the wind
-speed from the Pitot with the air density in use. A column the rig has no device for is NaN.
+``standoff_mm``, each reading through its calibration), lift and moment from the live taps'
+pressures (the rig's tap layout without its dead taps), the wind speed from the Pitot through
+the tunnel calibration with the air density in use. A column the rig has no device for is NaN.
+The calibrations are the rig config's (:class:`daq.calibration.Calibration`).
 
 Not responsible for: the conversions' numerics (:mod:`daq.sync.conversions`), resampling
 (:mod:`daq.sync.resample`), or writing the rows (:class:`daq.recording.writer.RunWriter`).
@@ -12,18 +14,20 @@ Not responsible for: the conversions' numerics (:mod:`daq.sync.conversions`), re
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import NamedTuple
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
 
+from daq.calibration import AirCalibration, Calibration
 from daq.config import InstrumentConfig
 from daq.sync.conversions import forces_from_pressures, heave_pitch_from_lasers, wind_speed
 from daq.sync.resample import SyncBlock
 from ident.taps import TapLayout
 
-__all__ = ["SyncColumns", "physical_columns"]
+__all__ = ["SyncColumns", "physical_columns", "polled_conditions", "tap_columns"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -41,7 +45,8 @@ class SyncColumns(NamedTuple):
 
 
 def physical_columns(sb: SyncBlock, lasers: Sequence[InstrumentConfig], taps: TapLayout,
-                     rho_now: float) -> SyncColumns:
+                     rho_now: float, calibration: Calibration | None = None,
+                     fan_rpm: float = math.nan) -> SyncColumns:
     """Convert one block of resampled streams into the sync view's physical columns.
 
     Parameters
@@ -56,12 +61,18 @@ def physical_columns(sb: SyncBlock, lasers: Sequence[InstrumentConfig], taps: Ta
         The section's taps (coordinates, normals, tributary lengths).
     rho_now : float
         The air density in use, kg/m^3.
+    calibration : Calibration, optional
+        The rig's calibrations (dead taps, Pitot, lasers); default: none (identity).
+    fan_rpm : float
+        The fan speed now, rpm (a Pitot factor tabulated on it; NaN: unknown).
     """
+    cal = calibration if calibration is not None else Calibration()
     n = len(sb)
     nan = np.full(n, np.nan)
     h, alpha = nan, nan
     if lasers:
-        d = np.column_stack([sb.values[f"laser.{inst.name}"] for inst in lasers])
+        d = np.column_stack([cal.laser(inst.name).distance(sb.values[f"laser.{inst.name}"])
+                             for inst in lasers])
         x = [float(inst.settings["x"]) for inst in lasers]
         s = [float(inst.settings["standoff_mm"]) * 1e-3 for inst in lasers]
         if d.shape[1] > 3:  # the conversion takes 2 or 3 lasers: the first three
@@ -70,11 +81,54 @@ def physical_columns(sb: SyncBlock, lasers: Sequence[InstrumentConfig], taps: Ta
         h, alpha = hp.h, hp.alpha
     if "pressure" in sb.values:
         pressure = sb.values["pressure"]
-        lift, moment = forces_from_pressures(pressure, taps)
+        if cal.taps.dead:
+            live_taps, live = cal.live_taps(taps)
+            lift, moment = forces_from_pressures(pressure[:, live], live_taps)
+        else:
+            lift, moment = forces_from_pressures(pressure, taps)
         rho = np.full(n, rho_now)
-        U = wind_speed(sb.values["pitot"], rho).speed
+        U = wind_speed(cal.pitot.dynamic_pressure(sb.values["pitot"], fan_rpm), rho).speed
     else:
         pressure = np.full((n, taps.n_taps), np.nan)
         lift, moment, U, rho = nan, nan, nan, np.full(n, rho_now)
     return SyncColumns(h=h, alpha=alpha, lift=lift, moment=moment, pressure=pressure, U=U,
                        rho=rho)
+
+
+def tap_columns(calibration: Calibration, n_taps: int) -> slice | npt.NDArray[np.intp]:
+    """The scanner columns of the taps, in tap order: a slice for the default wiring (a view)."""
+    channels = list(calibration.tap_channels(n_taps))
+    if channels == list(range(n_taps)):
+        return slice(0, n_taps)
+    return np.asarray(channels, dtype=np.intp)
+
+
+def polled_conditions(kind: str, values: Mapping[str, Any], air: AirCalibration,
+                      fan_rpm: float) -> tuple[float, float]:
+    """The fan speed (rpm) and air density (kg/m^3) a polled device's block tells, if any.
+
+    Parameters
+    ----------
+    kind : str
+        The device's engine kind (``"fan"``: its ``speed`` is the fan speed).
+    values : mapping
+        The block's channels (a barometer's carry ``density``, ``pressure``, ``temperature``).
+    air : AirCalibration
+        The driver's dry-air ``density``, or with a configured humidity (``[air]
+        relative_humidity``) moist air by CIPM-2007 from the row's pressure and temperature.
+    fan_rpm : float
+        The fan speed known so far, rpm (returned unless the block has a finite one).
+
+    Returns
+    -------
+    fan_rpm, rho : float
+        The fan speed now, and the block's air density (NaN when it has none).
+    """
+    if kind == "fan" and "speed" in values:
+        speed = float(np.asarray(values["speed"], dtype=np.float64)[-1])
+        fan_rpm = speed if math.isfinite(speed) else fan_rpm
+    if "density" not in values:
+        return fan_rpm, math.nan
+    if air.relative_humidity is None or "temperature" not in values:
+        return fan_rpm, float(values["density"][-1])
+    return fan_rpm, air.density(float(values["pressure"][-1]), float(values["temperature"][-1]))

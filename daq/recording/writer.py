@@ -57,7 +57,7 @@ from daq.recording.layout import event_row, metadata_name_part, storable_metadat
 from daq.recording.raw_batches import RawBatches
 from daq.recording.recorder import Recorder, RunRecorder
 from daq.recording.releases import ReleaseRows
-from daq.recording.sync_view import physical_columns
+from daq.recording.sync_view import physical_columns, polled_conditions, tap_columns
 from daq.sync.resample import Resampler, StreamSpec, SyncBlock
 
 __all__ = ["DEFAULT_RHO", "DEFAULT_SYNC_RATE_HZ", "RunWriter", "default_sync_rate_hz"]
@@ -157,6 +157,8 @@ class RunWriter:
         self._trigger_events: deque[float] = deque(maxlen=64)
         self._view_pieces: dict[str, list[tuple[FloatArray, FloatArray]]] = {}
         self._n_taps = config.taps.n_taps
+        self._tap_columns = tap_columns(config.calibration, self._n_taps)  # the taps' wiring
+        self._fan_rpm = math.nan  # the fan's last speed, rpm (a Pitot factor table's input)
 
     # -- dispatch ------------------------------------------------------------------------------
     def __call__(self, name: str, doc: Any) -> None:
@@ -226,6 +228,7 @@ class RunWriter:
                 if dev.view is not None and dev.view.startswith("laser."):
                     dev.view = None
         rec.add_sync(tap_names)
+        rec.add_calibrations(self.config.calibration.records(n_taps))
         rec.start(self._t0_ns)
         if streams:
             self._resampler = Resampler(streams, rate_hz=self.sync_rate_hz, t_start=0.0,
@@ -254,10 +257,10 @@ class RunWriter:
         assert dev.raw_rows is not None
         table, extra = dev.raw_rows(values, n)
         self._raw.add(dev.name, block, table, extra)
-        if "density" in values:  # a barometer: the air density of U and the forces
-            rho = float(values["density"][-1])
-            if math.isfinite(rho) and rho > 0:
-                self._rho, self._rho_measured = rho, True
+        self._fan_rpm, rho = polled_conditions(dev.kind, values, self.config.calibration.air,
+                                               self._fan_rpm)
+        if math.isfinite(rho) and rho > 0:
+            self._rho, self._rho_measured = rho, True
         if block.device_time is None or dev.clock is None:
             self._write_if_due()
             return
@@ -419,7 +422,7 @@ class RunWriter:
             return out if keep is None else out[keep]
 
         if dev.view == "pressure":
-            self._to_view("pressure", t, rows(block.values["pressure"])[:, :self._n_taps])
+            self._to_view("pressure", t, rows(block.values["pressure"])[:, self._tap_columns])
             self._to_view("pitot", t, rows(block.values["pitot"]))
         elif dev.view is not None:
             d = rows(block.values["distance"])
@@ -474,7 +477,8 @@ class RunWriter:
         rec = self.recorder
         assert rec is not None
         cols = physical_columns(sb, [self._lasers[name] for name in self._laser_order],
-                                self.config.taps, self._rho)
+                                self.config.taps, self._rho, self.config.calibration,
+                                self._fan_rpm)
         rec.append_sync(sb.time, h=cols.h, alpha=cols.alpha, lift=cols.lift, moment=cols.moment,
                         pressure=cols.pressure, U=cols.U, rho=cols.rho)
         base = self._sync_rows

@@ -6,6 +6,11 @@ point drivers at, together with a copy of the rig config whose ``"auto"`` URLs a
 Responsible for translating config tables into simulator arguments; the simulators themselves
 live in :mod:`simulators.devices` and know nothing of rig configs.
 
+The rig config's calibrations (:mod:`daq.calibration`) are built into the simulated sensors as
+their errors, so that the calibrations undo them: the scanner puts each tap on its wired channel
+(``[taps] channels``), the Pitot reads the inverse of ``[tunnel.pitot]``, and each laser with a
+``[lasers.calibration]`` reads along its tilted beam with the inverse gain and offset.
+
 Per-instrument simulation settings come from ``[simulation.devices.<name>]``: ``clock_offset_s``,
 ``clock_drift_ppm`` and ``seed`` for every device, and any further keyword the device's simulator
 accepts (noise levels, fault options); an unknown one is a ConfigError naming it.
@@ -16,6 +21,7 @@ from __future__ import annotations
 import dataclasses
 import inspect
 import logging
+import math
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -153,7 +159,8 @@ def start_simulated_rig(
     resolved: list[InstrumentConfig] = []
     try:
         for index, inst in enumerate(config.instruments):
-            simulator = _build(inst, tunnel, sim.devices.get(inst.name, {}), index, config.source)
+            simulator = _build(inst, tunnel, sim.devices.get(inst.name, {}), index, config.source,
+                               _sensor_errors(config, inst))
             rig.simulators[inst.name] = simulator
             start = simulator.start
             url = start(serial) if "transport" in inspect.signature(start).parameters else start()
@@ -169,8 +176,22 @@ def start_simulated_rig(
     return rig
 
 
+def _sensor_errors(config: RigConfig, inst: InstrumentConfig) -> dict[str, Any]:
+    """The simulator options that make a sensor need the config's calibration of it."""
+    cal = config.calibration
+    if inst.role == "scanner":
+        p = cal.pitot
+        pitot = (p.factor, p.offset_pa, p.fan_rpm) if p.fan_rpm else (p.factor[0], p.offset_pa)
+        return {"tap_channels": cal.tap_channels(config.taps.n_taps), "pitot_error": pitot}
+    if inst.role == "lasers" and inst.name in cal.lasers:
+        laser = cal.lasers[inst.name]
+        return {"reading_error": (laser.gain, 1e3 * laser.offset_m,
+                                  math.degrees(laser.angle_rad))}
+    return {}
+
+
 def _build(inst: InstrumentConfig, tunnel: VirtualTunnel, options: Mapping[str, Any],
-           index: int, source: str) -> Any:
+           index: int, source: str, errors: Mapping[str, Any]) -> Any:
     if inst.driver not in SIMULATORS:
         raise ConfigError(f"{source}: no simulator for driver {inst.driver!r}")
     factory, cls = SIMULATORS[inst.driver]
@@ -184,6 +205,7 @@ def _build(inst: InstrumentConfig, tunnel: VirtualTunnel, options: Mapping[str, 
     kwargs["clock"] = DeviceClock(offset_s=float(options.get("clock_offset_s", 0.0)),
                                   drift_ppm=float(options.get("clock_drift_ppm", 0.0)))
     kwargs["rng"] = int(options.get("seed", index))
+    kwargs.update(errors)
     try:
         return factory(tunnel, inst.settings, **kwargs)
     except (TypeError, ValueError) as exc:

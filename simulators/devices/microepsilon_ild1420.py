@@ -134,7 +134,12 @@ class SimMicroEpsilonIld1420:
     x : float
         Chord position of the laser spot, m.
     standoff_mm : float, optional
-        Reading at the model's rest position (h = alpha = 0), mm; default MR / 2.
+        Vertical distance at the model's rest position (h = alpha = 0), mm; default MR / 2.
+    reading_error : tuple of float
+        ``(gain, offset_mm, angle_deg)`` of a sensor that needs a calibration: its beam tilted by
+        ``angle_deg`` from the vertical reads the distance along the beam, ``d / cos(angle)``,
+        and reports ``(d / cos(angle) - offset_mm) / gain`` (the inverse of the rig config's
+        ``[lasers.calibration]``); default ``(1, 0, 0)``, a perfect sensor.
     baudrate : int
         The sensor's baud rate: only used for the budget check (``33 x values x rate``); when
         exceeded every distance is 262075, as the sensor does.
@@ -166,6 +171,7 @@ class SimMicroEpsilonIld1420:
         rate_hz: float = 4000.0,
         x: float = 0.0,
         standoff_mm: float | None = None,
+        reading_error: tuple[float, float, float] = (1.0, 0.0, 0.0),
         baudrate: int = 921600,
         output: Sequence[str] = ("counter", "timestamp", "status"),
         noise_mm: float | None = None,
@@ -191,6 +197,11 @@ class SimMicroEpsilonIld1420:
         self.rate_hz = float(rate_hz)
         self.x = float(x)
         self.standoff_mm = self.range_mm / 2 if standoff_mm is None else float(standoff_mm)
+        gain, offset_mm, angle_deg = (float(v) for v in reading_error)
+        if not (gain > 0 and abs(angle_deg) < 90):
+            raise ValueError(f"reading_error (gain, offset_mm, angle_deg) needs gain > 0 and "
+                             f"|angle_deg| < 90, got {reading_error!r}")
+        self.reading_error = (gain, offset_mm, angle_deg)
         self.baudrate = int(baudrate)
         self.output = tuple(output)
         self.noise_mm = 2.5e-5 * self.range_mm if noise_mm is None else float(noise_mm)
@@ -558,6 +569,9 @@ class SimMicroEpsilonIld1420:
         physics = self.tunnel.sample(t_true)
         # Small angles: the surface under the spot moves down by h + x alpha (module docstring).
         distance = self.standoff_mm + 1000.0 * (physics["h"] + self.x * physics["alpha"])
+        gain, offset_mm, angle_deg = self.reading_error
+        if (gain, offset_mm, angle_deg) != (1.0, 0.0, 0.0):  # along the beam, uncalibrated
+            distance = (distance / math.cos(math.radians(angle_deg)) - offset_mm) / gain
         if self.noise_mm > 0:
             distance = distance + self.rng.normal(0.0, self.noise_mm, n)
         code = np.zeros(n, dtype=np.int64)

@@ -39,7 +39,7 @@ import struct
 import threading
 import time
 from collections import deque
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from types import TracebackType
 from typing import Any
@@ -176,12 +176,20 @@ class SimScanivalveMps4264:
     Parameters
     ----------
     tunnel : VirtualTunnel
-        Physical truth: taps on global channels ``0 .. n_taps - 1`` (the tunnel's tap order), the
-        Pitot dynamic pressure on ``pitot_channel``; other channels read 0 Pa plus noise.
+        Physical truth: taps on global channels ``0 .. n_taps - 1`` (the tunnel's tap order), or
+        on ``tap_channels``, the Pitot dynamic pressure on ``pitot_channel``; other channels
+        read 0 Pa plus noise.
     modules : int
         64-channel modules, 1..8.
     pitot_channel : int
         Global channel of the Pitot, not a tap channel, ``< 64 * modules``.
+    tap_channels : sequence of int, optional
+        Global channel (``64 * module + channel``) of each tap, in the tunnel's tap order
+        (the rig config's ``[taps] channels``); default ``0 .. n_taps - 1``.
+    pitot_error : tuple
+        ``(factor, offset_pa)`` or ``(factor table, offset_pa, fan_rpm table)``: the Pitot
+        reads ``(qd - offset_pa) / factor`` (the factor interpolated on the tunnel's fan
+        speed), the inverse of the rig config's ``[tunnel.pitot]``; default ``(1.0, 0.0)``.
     rate_hz : float
         Frame rate at power-up, Hz (``SET RATE`` changes it; public emulators default to 10).
     max_rate_hz : float
@@ -217,6 +225,7 @@ class SimScanivalveMps4264:
 
     def __init__(
         self, tunnel: VirtualTunnel, *, modules: int = 1, pitot_channel: int = 63,
+        tap_channels: Sequence[int] | None = None, pitot_error: tuple[Any, ...] = (1.0, 0.0),
         rate_hz: float = 10.0, max_rate_hz: float = 2000.0, byte_order: str = "big",
         noise_pa: float = 1.0, sensor_offset_pa: float = 10.0, temperature_noise_c: float = 0.02,
         calz_duration_s: float = 0.2, buffer_frames: int = 16384,
@@ -229,9 +238,17 @@ class SimScanivalveMps4264:
         n_taps = tunnel.taps.n_taps
         if n_taps > _CHANNELS * modules:
             raise ValueError(f"{n_taps} taps do not fit in {modules} module(s) of 64 channels")
-        if not n_taps <= pitot_channel < _CHANNELS * modules:
+        channels = list(range(n_taps)) if tap_channels is None else [int(c) for c in tap_channels]
+        if tap_channels is None and not n_taps <= pitot_channel < _CHANNELS * modules:
             raise ValueError(f"pitot_channel must be in [{n_taps}, {_CHANNELS * modules - 1}] "
                              f"(after the {n_taps} taps), got {pitot_channel!r}")
+        if len(channels) != n_taps or len(set(channels) | {pitot_channel}) != n_taps + 1 or \
+                not all(0 <= c < _CHANNELS * modules for c in [*channels, pitot_channel]):
+            raise ValueError(f"tap_channels must be {n_taps} distinct channels in "
+                             f"[0, {_CHANNELS * modules - 1}] besides pitot_channel = "
+                             f"{pitot_channel}, got {tap_channels!r}")
+        self.tap_channels = np.asarray(channels, dtype=np.intp)
+        self.pitot_error = tuple(pitot_error)
         if not 0 < rate_hz <= max_rate_hz:
             raise ValueError(f"rate_hz must be in (0, {max_rate_hz}], got {rate_hz!r}")
         if byte_order not in ("big", "little"):
@@ -590,9 +607,18 @@ class SimScanivalveMps4264:
         """Noise-free pressures of every channel at true times ``t_true``, Pa."""
         taps, qd = self.tunnel.pressures(t_true)
         p = np.zeros((t_true.size, _CHANNELS * self.modules))
-        p[:, :taps.shape[1]] = taps
-        p[:, self.pitot_channel] = qd
+        p[:, self.tap_channels] = taps
+        p[:, self.pitot_channel] = self._pitot_reading(qd)
         return p
+
+    def _pitot_reading(self, qd: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """What an uncalibrated Pitot reads for the tunnel's dynamic pressure ``qd``, Pa."""
+        if len(self.pitot_error) == 3:
+            factors, offset, rpm = self.pitot_error
+            factor = float(np.interp(self.tunnel.fan_rpm, rpm, factors))
+        else:
+            factor, offset = (float(v) for v in self.pitot_error)
+        return np.asarray((qd - offset) / factor, dtype=np.float64)
 
     def _generate(self) -> None:
         while not self._stop.is_set():
