@@ -77,7 +77,7 @@ class TapWiring:
     date: str = ""
 
     def live_index(self, n_taps: int) -> npt.NDArray[np.intp]:
-        """Indices of the live taps, ascending."""
+        """Return the indices of the live taps, ascending."""
         live = np.ones(n_taps, dtype=bool)
         live[list(self.dead)] = False
         return np.flatnonzero(live)
@@ -103,7 +103,7 @@ class PitotCalibration:
         return bool(self.fan_rpm)
 
     def dynamic_pressure(self, q_pitot: Any, fan_rpm: float = math.nan) -> FloatArray:
-        """The tunnel's dynamic pressure, Pa, from the Pitot's (Pa) at fan speed ``fan_rpm``.
+        """Return the tunnel's dynamic pressure, Pa, from the Pitot's (Pa) at ``fan_rpm``.
 
         With a fan-speed table and no fan speed known yet (NaN), the result is NaN: a wind
         speed from an unknown factor would look right and be wrong.
@@ -173,20 +173,20 @@ class Calibration:
     span: float | None = None
 
     def tap_channels(self, n_taps: int) -> tuple[int, ...]:
-        """Scanner channel of each tap (the default wiring when none was configured)."""
+        """Return the scanner channel of each tap (the default wiring when none was configured)."""
         return self.taps.channels if self.taps.channels else tuple(range(n_taps))
 
     def laser(self, name: str) -> LaserCalibration:
-        """The calibration of laser ``name`` (identity if none was configured)."""
+        """Return the calibration of laser ``name`` (identity if none was configured)."""
         return self.lasers.get(name, LaserCalibration())
 
     def live_taps(self, layout: TapLayout) -> tuple[TapLayout, npt.NDArray[np.intp]]:
-        """The layout of the live taps (:meth:`TapLayout.without`) and their indices."""
+        """Return the layout of the live taps (:meth:`TapLayout.without`) and their indices."""
         index = self.taps.live_index(layout.n_taps)
         return (layout.without(self.taps.dead) if self.taps.dead else layout), index
 
     def records(self, n_taps: int) -> dict[str, tuple[dict[str, Any], dict[str, str]]]:
-        """What goes into the run file: ``name -> (values, attrs)`` per calibration.
+        """Return what goes into the run file: ``name -> (values, attrs)`` per calibration.
 
         Values are numbers or arrays in SI units (names with their unit); attrs are
         ``source`` and ``date`` (``""`` when the config gave none) and ``configured``
@@ -391,7 +391,7 @@ def _pitot(table: Mapping[str, Any], where: str,
         raise ConfigError(f"{where} factor must be an array as long as fan_rpm (at least 2 "
                           f"points), got factor = {table.get('factor')!r} for fan_rpm = {rpm!r}")
     rpm_values = [number({"fan_rpm": r}, "fan_rpm", where, lo=0.0, hi=100000.0) for r in rpm]
-    if any(b <= a for a, b in zip(rpm_values, rpm_values[1:])):
+    if any(b <= a for a, b in zip(rpm_values, rpm_values[1:], strict=False)):
         raise ConfigError(f"{where} fan_rpm must increase strictly, got {rpm!r}")
     f_values = [number({"factor": f}, "factor", where, lo=0.5, hi=2.0) for f in factors]
     return PitotCalibration(factor=tuple(f_values), offset_pa=offset, fan_rpm=tuple(rpm_values),

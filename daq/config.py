@@ -264,7 +264,7 @@ def _instruments(data: Mapping[str, Any], source: str) -> tuple[InstrumentConfig
                 if key not in table:
                     raise ConfigError(f"{where}: missing required key {key!r}")
             name = str(table.get("name", role))
-            # A laser's [lasers.calibration] is the calibration's (daq.calibration), not the driver's.
+            # A laser's [lasers.calibration] belongs to daq.calibration, not to the driver.
             settings = {k: v for k, v in table.items()
                         if k not in ("driver", "url", "name", "calibration")}
             registry.validate_settings(str(table["driver"]), role, settings, where)

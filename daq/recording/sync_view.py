@@ -96,7 +96,7 @@ def physical_columns(sb: SyncBlock, lasers: Sequence[InstrumentConfig], taps: Ta
 
 
 def tap_columns(calibration: Calibration, n_taps: int) -> slice | npt.NDArray[np.intp]:
-    """The scanner columns of the taps, in tap order: a slice for the default wiring (a view)."""
+    """Return the taps' scanner columns, in tap order: a slice for the default wiring (a view)."""
     channels = list(calibration.tap_channels(n_taps))
     if channels == list(range(n_taps)):
         return slice(0, n_taps)
@@ -105,7 +105,7 @@ def tap_columns(calibration: Calibration, n_taps: int) -> slice | npt.NDArray[np
 
 def polled_conditions(kind: str, values: Mapping[str, Any], air: AirCalibration,
                       fan_rpm: float) -> tuple[float, float]:
-    """The fan speed (rpm) and air density (kg/m^3) a polled device's block tells, if any.
+    """Return the fan speed (rpm) and air density (kg/m^3) a polled device's block tells.
 
     Parameters
     ----------

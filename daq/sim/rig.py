@@ -177,7 +177,7 @@ def start_simulated_rig(
 
 
 def _sensor_errors(config: RigConfig, inst: InstrumentConfig) -> dict[str, Any]:
-    """The simulator options that make a sensor need the config's calibration of it."""
+    """Return the simulator options that make a sensor need the config's calibration of it."""
     cal = config.calibration
     if inst.role == "scanner":
         p = cal.pitot

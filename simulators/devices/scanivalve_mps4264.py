@@ -612,7 +612,7 @@ class SimScanivalveMps4264:
         return p
 
     def _pitot_reading(self, qd: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-        """What an uncalibrated Pitot reads for the tunnel's dynamic pressure ``qd``, Pa."""
+        """Return what an uncalibrated Pitot reads for the tunnel's dynamic pressure ``qd``, Pa."""
         if len(self.pitot_error) == 3:
             factors, offset, rpm = self.pitot_error
             factor = float(np.interp(self.tunnel.fan_rpm, rpm, factors))
