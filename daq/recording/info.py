@@ -138,7 +138,9 @@ def run_info(path: str | os.PathLike[str]) -> dict[str, Any]:
         restarts, clock fit: offset s, drift ppm), ``residual_misalignment_s``, ``releases``
         (time s, U m/s, h0 m, alpha0 rad, decay length s), ``events`` (counts per kind and
         every event but the trigger pulses: time s, kind, text), ``calz`` (each CALZ record's
-        scalars) and ``recovery`` (what ``windrig recover`` did, or None). NaN is None.
+        scalars), ``calibrations`` (per ``/entry/calibration`` group: ``source``, ``date``,
+        ``configured`` and its ``values``) and ``recovery`` (what ``windrig recover`` did, or
+        None). NaN is None.
 
     Raises
     ------
@@ -215,6 +217,10 @@ def _describe(path: Path, f: h5py.File) -> dict[str, Any]:
     recovery = next((_plain(metadata[name]) for name in sorted(metadata, reverse=True)
                      if name.startswith("recovery")), None)
     residual = sync.attrs.get("residual_misalignment_s")
+    calibrations = {name: {**{k: _text(v) for k, v in group.attrs.items() if k != "NX_class"},
+                           "values": _plain(group)}
+                    for name, group in (entry["calibration"].items() if "calibration" in entry
+                                        else ()) if isinstance(group, h5py.Group)}
     return _finite_or_none({
         "file": str(path),
         "size_bytes": path.stat().st_size,
@@ -233,6 +239,7 @@ def _describe(path: Path, f: h5py.File) -> dict[str, Any]:
         "releases": releases,
         "events": {"counts": dict(sorted(counts.items())), "list": events},
         "calz": calz,
+        "calibrations": calibrations,
         "recovery": recovery,
     })
 
@@ -302,6 +309,11 @@ def format_info(info: dict[str, Any]) -> str:
     lines += ["", "events     " + (", ".join(f"{k} {v}" for k, v in counts.items()) or "none")]
     for e in info["events"]["list"]:
         lines.append(f"  {_fmt(e['time_s'], '8.3f')} s  {e['kind']:<16} {e['text']}")
+    configured = {k: c for k, c in info.get("calibrations", {}).items()
+                  if c.get("configured") == "yes"}
+    lines += ["", "calibrated " + (", ".join(configured) or "none (the defaults)")]
+    for name, c in configured.items():
+        lines.append(f"  {name}: source {c.get('source') or '?'}, date {c.get('date') or '?'}")
     lines += ["", "CALZ       " + (", ".join(info["calz"]) or "none")]
     for name, record in info["calz"].items():
         scalars = {k: v for k, v in record.items() if not isinstance(v, (list, dict))} \

@@ -26,6 +26,7 @@ import h5py
 import numpy as np
 
 from daq.config import parse_rig_config
+from daq.recording.info import format_info, run_info
 from daq.sim.recording import record_simulated_run
 from ident.air import moist_air_density
 
@@ -104,6 +105,10 @@ def test_wired_and_dead_taps_and_calibrations_end_to_end(tmp_path):
         assert float(cal["air/relative_humidity"][()]) == 0.5
         assert cal["air"].attrs["configured"] == "yes"
         assert float(cal["section/span_m"][()]) == 0.6
+    info = run_info(path)  # windrig info lists them
+    assert info["calibrations"]["pitot"]["source"] == "Pitot vs reference probe"
+    assert info["calibrations"]["taps"]["values"]["dead"] == DEAD
+    assert "  laser_laser_check: source gauge blocks, date 2026-11-19" in format_info(info)
 
     release_s = seen["release"].data["command_ns"] * 1e-9 - t0_s
     decay = (t > release_s + 0.05) & np.all(np.isfinite(pressure), axis=1)
