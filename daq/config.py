@@ -100,7 +100,8 @@ class SimulationConfig:
         ``Lux, Lwx`` length scales in m, ``Cuy, Cwy`` span-wise coherence decays, ``admittance``
         ``"none"`` or ``"davenport"`` with ``decay``); needs ``static``.
     span : float or None
-        The section model's span, m (``[simulation.turbulence] span``: the span-wise coherence
+        The section model's span, m (``[simulation.turbulence] span``, else ``[section] span``;
+        the two must agree when both are given: the span-wise coherence
         of the gusts averages the buffeting over it).
     turbulence_seed : int
         Seed of the gust field (``[simulation.turbulence] seed``, default 0).
@@ -121,7 +122,11 @@ class SimulationConfig:
 
 @dataclass(frozen=True)
 class RigConfig:
-    """A validated rig configuration (see the module docstring)."""
+    """A validated rig configuration (see the module docstring).
+
+    ``calibration`` holds the optional calibrations (tap wiring and dead taps, Pitot, lasers,
+    humid air, span; :mod:`daq.calibration`, docs/calibration.md): the defaults change nothing.
+    """
 
     name: str
     section: SectionModel
@@ -228,7 +233,8 @@ def parse_rig_config(text: str, source: str = "<string>") -> RigConfig:
             f"below max_fan_rpm {limits.max_fan_rpm} at {wind_per_rpm} (m/s)/rpm"
         )
     instruments = _instruments(data, source)
-    simulation = (_simulation(data["simulation"], f"{source} [simulation]", instruments)
+    simulation = (_simulation(data["simulation"], f"{source} [simulation]", instruments,
+                              data["section"])
                   if "simulation" in data else None)
     return RigConfig(name=str(data["rig"]["name"]), section=section, depth=depth, taps=taps,
                      limits=limits, wind_per_rpm=wind_per_rpm, instruments=instruments,
@@ -277,8 +283,8 @@ def _instruments(data: Mapping[str, Any], source: str) -> tuple[InstrumentConfig
     return tuple(out)
 
 
-def _simulation(table: Mapping[str, Any], where: str,
-                instruments: tuple[InstrumentConfig, ...]) -> SimulationConfig:
+def _simulation(table: Mapping[str, Any], where: str, instruments: tuple[InstrumentConfig, ...],
+                section: Mapping[str, Any]) -> SimulationConfig:
     check_keys(table, where, {"aerodynamics", "hold_h", "hold_alpha"},
                {"rfc", "pressure_pa", "temperature_c", "devices", "static", "turbulence"})
     aerodynamics = table["aerodynamics"]
@@ -302,7 +308,8 @@ def _simulation(table: Mapping[str, Any], where: str,
         if static is None:
             raise ConfigError(f"{_subtable(where, 'turbulence')} needs a [simulation.static] "
                               "table: the buffeting forces come from the static coefficients")
-        turbulence, span, seed = _turbulence(table["turbulence"], _subtable(where, "turbulence"))
+        turbulence, span, seed = _turbulence(table["turbulence"],
+                                             _subtable(where, "turbulence"), section)
     return SimulationConfig(
         aerodynamics=aerodynamics,
         rfc=table.get("rfc"),
@@ -332,10 +339,11 @@ def _static(table: Mapping[str, Any], where: str) -> StaticCoefficients:
                                  for name in names})
 
 
-def _turbulence(table: Mapping[str, Any], where: str) -> tuple[TurbulenceSpec, float, int]:
+def _turbulence(table: Mapping[str, Any], where: str,
+                section: Mapping[str, Any]) -> tuple[TurbulenceSpec, float, int]:
     """Read the turbulence spec, the model's span (m) and the gust field's seed."""
-    check_keys(table, where, {"Iu", "Iw", "Lux", "Lwx", "span"},
-               {"Cuy", "Cwy", "admittance", "decay", "seed"})
+    check_keys(table, where, {"Iu", "Iw", "Lux", "Lwx"},
+               {"Cuy", "Cwy", "admittance", "decay", "seed", "span"})
     admittance = table.get("admittance", "none")
     if admittance not in ("none", "davenport"):
         raise ConfigError(f"{where} admittance must be 'none' or 'davenport', got {admittance!r}")
@@ -352,4 +360,10 @@ def _turbulence(table: Mapping[str, Any], where: str) -> tuple[TurbulenceSpec, f
         admittance=admittance,
         decay=number(table, "decay", where, lo=0.0, hi=100.0, lo_open=True, default=7.0),
     )
-    return spec, number(table, "span", where, lo=0.0, hi=20.0, lo_open=True), int(seed)
+    if "span" not in table and "span" not in section:
+        raise ConfigError(f"{where}: missing required key(s) ['span'] (the model's span, m; "
+                          "or give [section] span)")
+    span = (number(table, "span", where, lo=0.0, hi=20.0, lo_open=True) if "span" in table else
+            number(section, "span", f"{where[:where.rfind('[')]}[section]", lo=0.0, hi=20.0,
+                   lo_open=True))
+    return spec, span, int(seed)

@@ -208,6 +208,23 @@ def test_section_span_and_simulated_span_must_agree():
         parse_rig_config(other, "bad.toml")
 
 
+def test_the_section_span_serves_the_simulated_turbulence():
+    """[simulation.turbulence] without a span takes the section's (one model, one span)."""
+    turbulence = ("\n[simulation.static]\nC_D = 0.02\nC_L = 0.0\nC_M = 0.0\ndC_D = 0.0\n"
+                  "dC_L = -6.283\ndC_M = 1.571\n\n[simulation.turbulence]\nIu = 0.0\n"
+                  "Iw = 0.05\nLux = 1.0\nLwx = 0.3\n")
+    config = parse_rig_config(BASE.replace("[section]\n", "[section]\nspan = 0.8\n")
+                              + turbulence, "ok.toml")
+    assert config.simulation is not None and config.simulation.span == 0.8
+    assert config.calibration.span == 0.8
+    with pytest.raises(ConfigError, match=r"\[section\] span = -0.8 is outside"):
+        parse_rig_config(BASE.replace("[section]\n", "[section]\nspan = -0.8\n") + turbulence,
+                         "bad.toml")
+    with pytest.raises(ConfigError, match=r"\[simulation.turbulence\]: missing required "
+                                          r"key\(s\) \['span'\] .*or give \[section\] span"):
+        parse_rig_config(BASE + turbulence, "bad.toml")
+
+
 def test_pitot_calibration_is_applied_and_interpolated_on_the_fan_speed():
     """q_true = factor q_pitot + offset; a table is linear in rpm and held at its ends."""
     fixed = PitotCalibration(factor=(1.05,), offset_pa=-0.5)
