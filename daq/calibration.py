@@ -15,7 +15,8 @@ The keys (docs/calibration.md; each bad value is a ConfigError naming the key)::
     [tunnel.pitot]  factor = 1.02, offset_pa = 0.0    q_true = factor * q_pitot + offset_pa
                     (or fan_rpm = [...] with factor = [...]: interpolated on the fan speed)
                     source, date
-    [air]       relative_humidity = 0.5, co2_mole_fraction = 0.0004, source, date
+    [air]       relative_humidity = 0.5 (or "barometer": its RH= field), co2_mole_fraction,
+                source, date
     [[lasers]] then [lasers.calibration]  gain, offset_mm, angle_deg, source, date
 
 Each calibration table may carry ``source`` (text) and ``date`` (ISO 8601, a TOML date or a
@@ -147,19 +148,35 @@ class AirCalibration:
 
     ``relative_humidity`` None: dry air, ``p / (R_d T)`` (the default, as before). A fraction:
     moist air by CIPM-2007 (:func:`ident.air.moist_air_density`) at that fixed humidity.
+    ``from_barometer``: moist air at the humidity each barometer reading carries (a
+    PTU300-class instrument's ``RH=`` field); a reading without one has no density (NaN: the
+    run keeps the last density, as for any failed barometer reading).
     """
 
     relative_humidity: float | None = None
     co2_mole_fraction: float = CO2_MOLE_FRACTION
+    from_barometer: bool = False
     source: str = ""
     date: str = ""
 
-    def density(self, pressure_pa: float, temperature_k: float) -> float:
-        """Air density, kg/m^3 (NaN if an input is NaN)."""
-        if self.relative_humidity is None:
+    @property
+    def humid(self) -> bool:
+        """Measure whether the density is that of humid air (a fixed or a measured humidity)."""
+        return self.from_barometer or self.relative_humidity is not None
+
+    def density(self, pressure_pa: float, temperature_k: float,
+                measured_rh: float = math.nan) -> float:
+        """Return the air density, kg/m^3 (NaN if an input it needs is NaN).
+
+        ``measured_rh`` is the barometer's relative humidity (a fraction), used with
+        ``from_barometer``.
+        """
+        rh = measured_rh if self.from_barometer else self.relative_humidity
+        if rh is None:
             return float(pressure_pa / (_R_DRY_AIR * temperature_k))
-        return float(moist_air_density(pressure_pa, temperature_k, self.relative_humidity,
-                                       self.co2_mole_fraction))
+        if math.isnan(rh):
+            return math.nan
+        return float(moist_air_density(pressure_pa, temperature_k, rh, self.co2_mole_fraction))
 
 
 @dataclass(frozen=True)
@@ -212,9 +229,11 @@ class Calibration:
         a = self.air
         out["air"] = ({"relative_humidity": math.nan if a.relative_humidity is None
                        else a.relative_humidity, "co2_mole_fraction": a.co2_mole_fraction,
-                       "formula": "dry air p/(R_d T)" if a.relative_humidity is None
-                       else "CIPM-2007 (Picard et al., Metrologia 45 (2008) 149)"},
-                      _attrs(a.source, a.date, a.relative_humidity is not None))
+                       "humidity_from": "barometer" if a.from_barometer
+                       else "config" if a.relative_humidity is not None else "none",
+                       "formula": "CIPM-2007 (Picard et al., Metrologia 45 (2008) 149)"
+                       if a.humid else "dry air p/(R_d T)"},
+                      _attrs(a.source, a.date, a.humid))
         for name, cal in sorted(self.lasers.items()):
             out[f"laser_{name}"] = ({"gain": cal.gain, "offset_m": cal.offset_m,
                                      "angle_rad": cal.angle_rad},
@@ -252,7 +271,8 @@ def parse_calibration(data: Mapping[str, Any], source: str, taps: TapLayout,
     tunnel = data["tunnel"]
     pitot = (_pitot(tunnel["pitot"], f"{source} [tunnel.pitot]", instruments)
              if "pitot" in tunnel else PitotCalibration())
-    air = _air(data["air"], f"{source} [air]") if "air" in data else AirCalibration()
+    air = (_air(data["air"], f"{source} [air]", instruments) if "air" in data
+           else AirCalibration())
     lasers = {}
     raw_lasers = data.get("lasers", [])
     for index, table in enumerate(raw_lasers if isinstance(raw_lasers, list) else []):
@@ -398,12 +418,21 @@ def _pitot(table: Mapping[str, Any], where: str,
                             source=src, date=date)
 
 
-def _air(table: Mapping[str, Any], where: str) -> AirCalibration:
+def _air(table: Mapping[str, Any], where: str, instruments: Sequence[Any]) -> AirCalibration:
     check_keys(table, where, set(), {"relative_humidity", "co2_mole_fraction", "source", "date"})
     src, date = _provenance(table, where)
+    co2 = number(table, "co2_mole_fraction", where, lo=0.0, hi=0.01, default=CO2_MOLE_FRACTION)
+    value = table.get("relative_humidity")
+    if isinstance(value, str):
+        if value != "barometer":
+            raise ConfigError(f"{where} relative_humidity must be a fraction in [0, 1] (0.5 = "
+                              f"50 %RH) or \"barometer\", got {value!r}")
+        if not any(inst.role == "barometer" for inst in instruments):
+            raise ConfigError(f"{where} relative_humidity = \"barometer\" needs a [barometer] "
+                              "that reports humidity (a PTU300-class RH= field)")
+        return AirCalibration(co2_mole_fraction=co2, from_barometer=True, source=src, date=date)
     rh = (number(table, "relative_humidity", where, lo=0.0, hi=1.0)
           if "relative_humidity" in table else None)
-    co2 = number(table, "co2_mole_fraction", where, lo=0.0, hi=0.01, default=CO2_MOLE_FRACTION)
     return AirCalibration(relative_humidity=rh, co2_mole_fraction=co2, source=src, date=date)
 
 

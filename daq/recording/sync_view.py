@@ -115,7 +115,8 @@ def polled_conditions(kind: str, values: Mapping[str, Any], air: AirCalibration,
         The block's channels (a barometer's carry ``density``, ``pressure``, ``temperature``).
     air : AirCalibration
         The driver's dry-air ``density``, or with a configured humidity (``[air]
-        relative_humidity``) moist air by CIPM-2007 from the row's pressure and temperature.
+        relative_humidity``, a fraction or the barometer's own ``relative_humidity``) moist air
+        by CIPM-2007 from the row's pressure and temperature (NaN without the humidity).
     fan_rpm : float
         The fan speed known so far, rpm (returned unless the block has a finite one).
 
@@ -129,6 +130,9 @@ def polled_conditions(kind: str, values: Mapping[str, Any], air: AirCalibration,
         fan_rpm = speed if math.isfinite(speed) else fan_rpm
     if "density" not in values:
         return fan_rpm, math.nan
-    if air.relative_humidity is None or "temperature" not in values:
+    if not air.humid or "temperature" not in values:
         return fan_rpm, float(values["density"][-1])
-    return fan_rpm, air.density(float(values["pressure"][-1]), float(values["temperature"][-1]))
+    rh = (float(values["relative_humidity"][-1]) if "relative_humidity" in values
+          else math.nan)
+    return fan_rpm, air.density(float(values["pressure"][-1]), float(values["temperature"][-1]),
+                                rh)

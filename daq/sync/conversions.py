@@ -213,7 +213,8 @@ def air_density(pressure_pa: Any, temperature_k: Any) -> FloatArray:
     r"""Dry-air density ``rho = p / (R_d T)``, R_d = 287.058 J/(kg K), as the barometer driver.
 
     Humidity is neglected (moist air is lighter: rho is overestimated by ~0.4 % at 20 degC and
-    50 %RH; see :func:`daq.instruments.vaisala_ptb330.decoder.reading_from_line`).
+    50 %RH; see :func:`daq.instruments.vaisala_ptb330.decoder.reading_from_line`); a rig config's
+    ``[air]`` table makes the run writer use :func:`ident.air.moist_air_density` instead.
 
     Parameters
     ----------

@@ -175,6 +175,9 @@ class SimVaisalaPtb330:
         Noise and fault randomness (seed for reproducible runs).
     faults : mapping, optional
         Probability per line of ``garbled``, ``partial``, ``no_reply`` (each in [0, 1]).
+    relative_humidity : float, optional
+        A PTU300-class instrument (same family, with a humidity probe): every measurement line
+        ends with ``RH= 45.0 %RH`` for this fraction (0.45); default None, a PTB330 (no RH).
     """
 
     def __init__(
@@ -195,6 +198,7 @@ class SimVaisalaPtb330:
         clock: DeviceClock | None = None,
         rng: np.random.Generator | int | None = None,
         faults: Mapping[str, float] | None = None,
+        relative_humidity: float | None = None,
     ) -> None:
         if mode.upper() not in ("STOP", "RUN", "POLL", "POLLED", "SEND"):
             raise ValueError(f"mode must be STOP, RUN, POLL or SEND, got {mode!r}")
@@ -202,6 +206,10 @@ class SimVaisalaPtb330:
             raise ValueError(f"address must be in [0, 255], got {address!r}")
         if not (time_scale > 0 and interval_s >= 0 and measurement_period_s > 0):
             raise ValueError("time_scale and measurement_period_s must be > 0, interval_s >= 0")
+        if relative_humidity is not None and not 0.0 <= relative_humidity <= 1.0:
+            raise ValueError(f"relative_humidity must be a fraction in [0, 1], "
+                             f"got {relative_humidity!r}")
+        self.relative_humidity = relative_humidity
         if noise_pa < 0 or noise_k < 0:
             raise ValueError(f"noise must be >= 0, got {noise_pa!r} Pa, {noise_k!r} K")
         self.tunnel = tunnel
@@ -660,6 +668,10 @@ class SimVaisalaPtb330:
                         fault = name
                         break
             line = self._render(form, pressure, temperature, p_unit, t_unit, counter)
+            if self.relative_humidity is not None:  # a PTU300's factory form ends with RH
+                text = line.rstrip(b"\r\n")
+                line = (text + f" RH= {100.0 * self.relative_humidity:5.1f} %RH".encode()
+                        + line[len(text):])
             if fault == "garbled":
                 body = bytearray(line.rstrip(b"\r\n"))
                 n = int(self.rng.integers(1, 4))

@@ -156,9 +156,13 @@ def test_a_pitot_table_needs_a_fan():
     [
         ("relative_humidity = 50", r"\[air\] relative_humidity = 50.0 is outside the allowed "
                                    r"range \[0.0, 1.0\]"),
-        ('relative_humidity = "50%"', r"\[air\] relative_humidity must be a number"),
+        ('relative_humidity = "50%"', r"\[air\] relative_humidity must be a fraction in "
+                                      r"\[0, 1\] \(0.5 = 50 %RH\) or \"barometer\", got '50%'"),
+        ("relative_humidity = true", r"\[air\] relative_humidity must be a number"),
         ("co2_mole_fraction = 0.5", r"\[air\] co2_mole_fraction = 0.5 is outside"),
         ("humidity = 0.5", r"\[air\]: unknown key\(s\) \['humidity'\]"),
+        ('relative_humidity = "hygrometer"', r"\[air\] relative_humidity must be a fraction in "
+                                             r"\[0, 1\] \(0.5 = 50 %RH\) or \"barometer\""),
     ],
 )
 def test_bad_air_is_a_config_error_naming_the_key(table, match):
@@ -243,6 +247,25 @@ def test_laser_calibration_projects_the_tilted_beam():
     reading = (vertical / math.cos(math.radians(30.0)) - 0.001) / 2.0
     assert float(cal.distance(reading)) == pytest.approx(vertical, rel=1e-12)
     assert math.isnan(float(cal.distance(math.nan)))
+
+
+def test_the_barometers_humidity_needs_a_barometer():
+    no_baro = BASE[:BASE.index("[barometer]")] + BASE[BASE.index("[simulation]"):]
+    with pytest.raises(ConfigError, match=r"\[air\] relative_humidity = \"barometer\" needs a "
+                                          r"\[barometer\]"):
+        parse_rig_config(no_baro + '\n[air]\nrelative_humidity = "barometer"\n', "bad.toml")
+
+
+def test_the_barometers_own_humidity_gives_the_density():
+    """``relative_humidity = "barometer"``: each reading's RH; a reading without RH has none."""
+    air = parse_rig_config(BASE + '\n[air]\nrelative_humidity = "barometer"\n',
+                           "air.toml").calibration.air
+    values = {"pressure": np.array([101325.0]), "temperature": np.array([293.15]),
+              "density": np.array([1.2041]), "relative_humidity": np.array([0.3])}
+    rho = polled_conditions("barometer", values, air, math.nan)[1]
+    assert rho == pytest.approx(float(moist_air_density(101325.0, 293.15, 0.3)), rel=1e-12)
+    values["relative_humidity"] = np.array([math.nan])  # a PTB330: no humidity, no density
+    assert math.isnan(polled_conditions("barometer", values, air, math.nan)[1])
 
 
 def test_humid_air_replaces_the_drivers_dry_density():

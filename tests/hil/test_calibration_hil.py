@@ -54,8 +54,10 @@ def calibrated_config_text() -> str:
     j = text.index("[fan]", i)
     text = (text[:j] + "[lasers.calibration]\ngain = 1.02\noffset_mm = 0.5\nangle_deg = 8.0\n"
             'source = "gauge blocks"\ndate = 2026-11-19\n\n' + text[j:])
-    text += ('\n[air]\nrelative_humidity = 0.5\nsource = "hygrometer, fixed"\n'
+    # The humidity the barometer reports: a PTU300-class line's RH= field (simulated at 45 %RH).
+    text += ('\n[air]\nrelative_humidity = "barometer"\nsource = "PTU300 humidity probe"\n'
              "date = 2026-11-20\n\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n"
+             "\n[simulation.devices.barometer]\nrelative_humidity = 0.45\n"
              # 0.1 Pa per tap (1 Pa by default): the forces of 60 and 62 taps differ by
              # their noise, 0.02 N/m rms at 1 Pa, 8 % of this decay's lift.
              "\n[simulation.devices.scanner]\nnoise_pa = 0.1\n")
@@ -102,8 +104,12 @@ def test_wired_and_dead_taps_and_calibrations_end_to_end(tmp_path):
         assert abs(float(laser["offset_m"][()]) - 5e-4) < 1e-12
         assert abs(float(laser["angle_rad"][()]) - np.radians(8.0)) < 1e-12
         assert laser.attrs["source"] == "gauge blocks"
-        assert float(cal["air/relative_humidity"][()]) == 0.5
+        assert cal["air/humidity_from"][()].decode() == "barometer"
         assert cal["air"].attrs["configured"] == "yes"
+        baro = f["entry/instrument/barometer"]
+        names = [n.decode() if isinstance(n, bytes) else n for n in baro.attrs["channel_names"]]
+        humidity = baro["value"][:, names.index("relative_humidity")]
+        assert humidity.size > 0 and np.all(np.abs(humidity - 0.45) < 1e-9)
         assert float(cal["section/span_m"][()]) == 0.6
     info = run_info(path)  # windrig info lists them
     assert info["calibrations"]["pitot"]["source"] == "Pitot vs reference probe"
@@ -136,10 +142,10 @@ def test_wired_and_dead_taps_and_calibrations_end_to_end(tmp_path):
     true_all = rig.tunnel.sample(t[ok] + t0_s - seen["true_offset_s"])
     assert np.sqrt(np.mean((h[ok] - true_all["h"]) ** 2)) < 1e-4
 
-    # Humid air: the density from the barometer's p and T at 50 %RH (CIPM-2007); the simulated
-    # barometer adds ~2 Pa of noise and drift to the tunnel's air: 0.1 %.
+    # Humid air: the density from the barometer's p, T and RH (45 %RH, CIPM-2007); the
+    # simulated barometer adds ~2 Pa of noise and drift to the tunnel's air: 0.1 %.
     air = rig.tunnel.air
-    expected = float(moist_air_density(air.pressure_pa, air.temperature_k, 0.5))
+    expected = float(moist_air_density(air.pressure_pa, air.temperature_k, 0.45))
     assert abs(np.nanmedian(rho) / expected - 1.0) < 1e-3
     # The Pitot read qd / 1.05; calibrated, U matches the tunnel (humid rho is 0.4 % below the
     # tunnel's dry truth: U 0.2 % high).

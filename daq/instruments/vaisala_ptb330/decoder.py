@@ -93,7 +93,7 @@ class Ptb330Line:
     raw : bytes
         The line as received, without its terminator.
     relative_humidity : float
-        %RH if the line carries it (a PTU300's ``RH=`` field), else NaN; not used for density.
+        %RH if the line carries it (a PTU300's ``RH=`` field), else NaN.
     """
 
     pressure_pa: float
@@ -246,7 +246,8 @@ class BarometerReading:
     density_kg_m3 : float
         Dry-air density ``p / (R T)``, kg/m^3 (NaN unless both inputs are valid). Humidity is
         neglected, which overestimates rho by ~0.4 % at 20 degC and 50 %RH (see
-        :func:`reading_from_line`).
+        :func:`reading_from_line`; the run writer uses moist air when the rig config has an
+        ``[air] relative_humidity``, :mod:`daq.calibration`).
     host_time_ns : int
         ``time.monotonic_ns()`` when the line's last byte arrived.
     counter : int
@@ -259,6 +260,9 @@ class BarometerReading:
         Rounding error of the printed pressure, Pa.
     raw : bytes
         The line as received.
+    relative_humidity : float
+        Relative humidity as a fraction (0.5 = 50 %RH) when the line carries it (a PTU300-class
+        instrument's ``RH=`` field), else NaN (a PTB330 reports none).
     """
 
     pressure_pa: float
@@ -270,6 +274,7 @@ class BarometerReading:
     pressure_unit: str
     resolution_pa: float
     raw: bytes
+    relative_humidity: float = math.nan
 
     @property
     def ok(self) -> bool:
@@ -279,7 +284,7 @@ class BarometerReading:
     def values(self) -> dict[str, float]:
         """Return the channels of :meth:`VaisalaPtb330.describe` with their values."""
         return {"pressure": self.pressure_pa, "temperature": self.temperature_k,
-                "density": self.density_kg_m3}
+                "density": self.density_kg_m3, "relative_humidity": self.relative_humidity}
 
 
 def reading_from_line(line: Ptb330Line, host_time_ns: int, counter: int) -> BarometerReading:
@@ -308,9 +313,14 @@ def reading_from_line(line: Ptb330Line, host_time_ns: int, counter: int) -> Baro
     elif not TEMPERATURE_RANGE_K[0] <= t <= TEMPERATURE_RANGE_K[1]:
         problems.append(f"temperature {t:.6g} K outside {TEMPERATURE_RANGE_K} K")
         t = math.nan
+    rh = line.relative_humidity / 100.0  # NaN when the line has none
+    if not math.isnan(rh) and not 0.0 <= rh <= 1.0:
+        problems.append(f"relative humidity {line.relative_humidity:.6g} %RH outside [0, 100]")
+        rh = math.nan
     rho = p / (R_DRY_AIR * t)  # NaN propagates
     return BarometerReading(
         pressure_pa=p, temperature_k=t, density_kg_m3=rho, host_time_ns=host_time_ns,
         counter=counter, status="; ".join(problems),
         pressure_unit=line.pressure_unit, resolution_pa=line.resolution_pa, raw=line.raw,
+        relative_humidity=rh,
     )

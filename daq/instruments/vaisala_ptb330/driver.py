@@ -59,7 +59,8 @@ from daq.transports.byte_transport import Transport
 __all__ = ["DRIVER", "FORM_STRING", "SERIAL_DEFAULTS", "VaisalaPtb330"]
 
 #: dtypes of the channels of :meth:`VaisalaPtb330.read`.
-_DTYPES = {"pressure": "float64", "temperature": "float64", "density": "float64"}
+_DTYPES = {"pressure": "float64", "temperature": "float64", "density": "float64",
+           "relative_humidity": "float64"}
 
 logger = logging.getLogger(__name__)
 
@@ -213,12 +214,14 @@ class VaisalaPtb330:
         """Describe the channels of :meth:`read`: units, dtype, shape (one row per poll).
 
         ``pressure`` (static, Pa), ``temperature`` (of the barometer module, K) and
-        ``density`` (dry air, kg/m^3); NaN where not available or implausible.
+        ``density`` (dry air, kg/m^3), ``relative_humidity`` (a fraction, from a PTU300-class
+        line's ``RH=`` field; a PTB330 has none); NaN where not available or implausible.
         """
         return {
             "pressure": {"units": "Pa", "dtype": "float64", "shape": ()},
             "temperature": {"units": "K", "dtype": "float64", "shape": ()},
             "density": {"units": "kg/m^3", "dtype": "float64", "shape": ()},
+            "relative_humidity": {"units": "1", "dtype": "float64", "shape": ()},
         }
 
     # -- reading ------------------------------------------------------------------------------

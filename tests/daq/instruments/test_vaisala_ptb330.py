@@ -138,6 +138,26 @@ def test_manual_example_lines():
     assert isinstance(parse_line(b"pressure = 1013.02 hPa"), Ptb330BadLine)
 
 
+def test_the_humidity_of_a_ptu300_line_reaches_the_reading_as_a_fraction():
+    """A PTU300-class line's humidity is a channel of the reading.
+
+    RH= 38.3 %RH becomes 0.383 in the reading's ``relative_humidity`` channel; a PTB330 line
+    (no RH) gives NaN, and an impossible humidity is NaN with the reason in ``status``.
+    """
+    line = parse_line(b"P= 1013.2 hPa T= 31.1 'C RH= 38.3 %RH")
+    assert isinstance(line, Ptb330Line)
+    reading = reading_from_line(line, 0, 1)
+    assert reading.values()["relative_humidity"] == pytest.approx(0.383)
+    assert reading.ok
+    ptb = parse_line(b"P= 1013.2 hPa T= 31.1 'C")
+    assert isinstance(ptb, Ptb330Line)
+    assert math.isnan(reading_from_line(ptb, 0, 1).relative_humidity)
+    wet = parse_line(b"P= 1013.2 hPa T= 31.1 'C RH= 130.0 %RH")
+    assert isinstance(wet, Ptb330Line)
+    bad = reading_from_line(wet, 0, 1)
+    assert math.isnan(bad.relative_humidity) and "relative humidity 130" in bad.status
+
+
 @pytest.mark.parametrize(
     ("text", "reason"),
     [
