@@ -1,5 +1,4 @@
-"""Pneumatic tubing between the pressure taps and the scanner: its frequency response, the
-distortion it causes, and the correction of recorded pressures.
+"""Pneumatic tubing between the pressure taps and the scanner: its response, distortion, correction.
 
 A tap's pressure reaches the scanner's transducer through a tube (length ``L``, inner diameter
 ``D``) that ends in the transducer's internal volume ``V``. The pressure at the transducer is the
@@ -30,11 +29,12 @@ value, so that the periodic extension the FFT assumes is continuous (no jump to 
 the filter), and padded to at least twice its length, so that the tube's impulse response (tens
 of ms) does not wrap around. The pressure before the record is taken to be steady at its first
 value (a release starts from a held, steady state). The correction divides the spectrum by ``H``
-only up to a cut-off: above the lowest frequency where ``|H|`` falls below ``gain_floor``
-(default 0.5), the tube has let little through and dividing would amplify the scanner's noise
-by ``1 / |H|`` without bound; there the corrected spectrum is set to zero (a band limit,
-real-valued, so zero-phase). The section model's frequencies (a few Hz) lie far below any
-practical tube's cut-off (tens of Hz), so the band limit removes only noise.
+only up to a cut-off ``f_c``: above the lowest frequency where ``|H|`` falls below
+``gain_floor`` (default 0.5), the tube has let little through and dividing would amplify the
+scanner's noise by ``1 / |H|`` without bound; there the corrected spectrum is set to zero, with
+a raised-cosine roll-off from ``0.8 f_c`` (a real window, so zero-phase; a brick wall would
+ring). The section model's frequencies (a few Hz) lie far below any practical tube's cut-off
+(tens of Hz), so the band limit removes only noise.
 
 Units: m, m^3, Pa, K, Hz, rad. Phases are of ``H`` (negative: the transducer lags the tap).
 Pure numerics; the rig config's ``[[taps.tubing]]`` tables are parsed in
@@ -64,7 +64,10 @@ __all__ = [
     "TubingGroup",
     "TubingSet",
     "correct",
+    "cutoff",
     "distort",
+    "from_description",
+    "tubing_set",
 ]
 
 FloatArray = npt.NDArray[np.float64]
@@ -74,6 +77,8 @@ ComplexArray = npt.NDArray[np.complex128]
 R_AIR = 287.058
 #: Default fraction of the tube's gain below which the correction stops (module docstring).
 GAIN_FLOOR = 0.5
+#: Fraction of the cut-off where the correction's roll-off begins (below it: exactly 1 / H).
+TAPER_START = 0.8
 
 
 @dataclass(frozen=True)
@@ -129,7 +134,7 @@ class FrequencyResponse(Protocol):
         ...
 
     def describe(self) -> dict[str, Any]:
-        """The parameters, for the run file and reports."""
+        """Return the parameters, for the run file and reports."""
         ...
 
 
@@ -330,7 +335,7 @@ class TubingSet:
     def __post_init__(self) -> None:
         object.__setattr__(self, "groups", tuple(self.groups))
         seen: dict[int, int] = {}
-        for index, group in enumerate(self.groups):
+        for index in range(len(self.groups)):
             for tap in self.members(index):
                 if tap in seen:
                     raise ValueError(f"tap {tap} is in tubing groups {seen[tap]} and {index}")
@@ -375,15 +380,23 @@ def _padded(x: FloatArray) -> tuple[FloatArray, int]:
     return np.concatenate([base, taper]), n
 
 
-def _filtered(pressures: Any, fs: float, gains: Any) -> FloatArray:
+def _filtered(pressures: Any, fs: float, tubing: TubingSet, gains: Any) -> FloatArray:
+    """Filter the columns of taps with tubing by ``gains(freqs)`` (shape (n_freqs, n_taps))."""
     p = v.finite_array("pressures", pressures, ndim=2)
     fs = v.positive("fs", fs)
     if p.shape[0] < 2:
         raise ValueError(f"pressures need at least 2 samples, got {p.shape[0]}")
-    ext, n = _padded(p)
+    if p.shape[1] != tubing.n_taps:
+        raise ValueError(f"pressures must have shape (n_samples, {tubing.n_taps}), got {p.shape}")
+    out = p.copy()
+    if not tubing.groups:
+        return out
+    tubed = np.concatenate([tubing.members(i) for i in range(len(tubing.groups))])
+    ext, n = _padded(p[:, tubed])
     freqs = np.fft.rfftfreq(ext.shape[0], 1.0 / fs)
-    spectrum = np.fft.rfft(ext, axis=0) * gains(freqs)
-    return np.asarray(np.fft.irfft(spectrum, ext.shape[0], axis=0)[:n] + p[:1], dtype=float)
+    spectrum = np.fft.rfft(ext, axis=0) * gains(freqs)[:, tubed]
+    out[:, tubed] = np.fft.irfft(spectrum, ext.shape[0], axis=0)[:n] + p[:1, tubed]
+    return out
 
 
 def distort(pressures: Any, fs: float, tubing: TubingSet) -> FloatArray:
@@ -415,7 +428,7 @@ def distort(pressures: Any, fs: float, tubing: TubingSet) -> FloatArray:
                              "its distortion there is unknown")
         return H
 
-    return _filtered(pressures, fs, gains)
+    return _filtered(pressures, fs, tubing, gains)
 
 
 def cutoff(model: Tube | TableResponse, air: Air, fs: float,
@@ -462,11 +475,15 @@ def correct(pressures: Any, fs: float, tubing: TubingSet,
 
     def gains(freqs: FloatArray) -> ComplexArray:
         H = tubing.response(freqs)
-        inside = freqs[:, None] < limits[None, :]
+        # A raised-cosine roll-off over the top fifth of the band instead of a brick wall,
+        # whose 1/t ringing would spread an end effect over the whole record.
+        start = TAPER_START * limits[None, :]
         with np.errstate(invalid="ignore", divide="ignore"):
-            return np.where(inside, 1.0 / H, 0.0)
+            x = np.clip((freqs[:, None] - start) / (limits[None, :] - start), 0.0, 1.0)
+            window = 0.5 * (1.0 + np.cos(np.pi * x))
+            return np.where(freqs[:, None] < limits[None, :], window / H, 0.0)
 
-    return _filtered(pressures, fs, gains)
+    return _filtered(pressures, fs, tubing, gains)
 
 
 def tubing_set(groups: Iterable[TubingGroup], n_taps: int,
