@@ -98,7 +98,7 @@ def parse_tubing(tables: Sequence[Mapping[str, Any]], n_taps: int, source: str,
 
 
 def tubing_metadata(groups: Sequence[TubingGroup], n_taps: int) -> dict[str, Any]:
-    """The groups as run-file metadata: ``{"group_0": {...}, ...}`` (names, numbers, arrays)."""
+    """Return the groups as run-file metadata: ``{"group_0": {...}, ...}``."""
     described = tubing_set(groups, n_taps).describe()
     return {f"group_{i}": dict(item) for i, item in enumerate(described)}
 
