@@ -66,6 +66,7 @@ __all__ = [
     "correct",
     "cutoff",
     "distort",
+    "force_correction",
     "from_description",
     "tubing_set",
 ]
@@ -524,3 +525,39 @@ def from_description(groups: Sequence[Mapping[str, Any]], n_taps: int,
             raise ValueError(f"tubing group {index}: {exc}") from exc
         out.append(TubingGroup(taps=tap_tuple, model=model))
     return tubing_set(out, n_taps, air)
+
+
+def force_correction(pressures: Any, fs: float, tubing: TubingSet,
+                     integration: Any, gain_floor: float = GAIN_FLOOR) -> FloatArray:
+    """Change of lift and moment when the tubing is undone: ``G (correct(p) - p)``.
+
+    Added to forces integrated from the recorded pressures it gives the forces of the
+    corrected pressures, whatever else went into the recorded forces. A tap whose pressure is
+    not finite somewhere in the record (a gap, a dead channel) is left uncorrected.
+
+    Parameters
+    ----------
+    pressures : array_like, shape (n_samples, n_taps)
+        Recorded (transducer) pressures, Pa, sampled at ``fs``.
+    fs : float
+        Hz.
+    tubing : TubingSet
+    integration : array_like, shape (2, n_taps)
+        ``[L, M] = G p`` (:meth:`ident.taps.TapLayout.integration_matrix`).
+    gain_floor : float
+        See :func:`correct`.
+
+    Returns
+    -------
+    ndarray, shape (n_samples, 2)
+        Lift (N/m) and moment (N m/m) to add.
+    """
+    p = np.array(pressures, dtype=float, ndmin=2)
+    G = v.finite_array("integration", integration, ndim=2)
+    if G.shape != (2, tubing.n_taps) or p.shape[1] != tubing.n_taps:
+        raise ValueError(f"need {tubing.n_taps} taps: pressures {p.shape}, integration {G.shape}")
+    usable = np.all(np.isfinite(p), axis=0)
+    p[:, ~usable] = 0.0
+    delta = correct(p, fs, tubing, gain_floor) - p
+    delta[:, ~usable] = 0.0
+    return np.asarray(delta @ G.T, dtype=float)
