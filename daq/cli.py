@@ -69,9 +69,7 @@ def _build_parser() -> argparse.ArgumentParser:
                       help="write the model, diagnostics and flutter result to this JSON file")
     p_id.add_argument("--n-lags", type=int, default=None, choices=(0, 1, 2, 3),
                       help="number of lag terms (default: chosen by held-out error)")
-    p_id.add_argument("--no-tubing-correction", action="store_true",
-                      help="use the forces as measured behind the pressure tubing (default: "
-                           "corrected for the tubing the file records)")
+    p_id.add_argument("--no-tubing-correction", action="store_true", help="uncorrected forces")
 
     p_diag = sub.add_parser(
         "diagnose",
@@ -311,19 +309,13 @@ def _simulate(args: argparse.Namespace) -> int:
 
 def _identify(args: argparse.Namespace) -> int:
     from ident.campaign import analyze_campaign
-    from ident.io import campaign_section, read_run
+    from ident.io import campaign_section, read_run, tubing_note
 
-    runs = [read_run(path, tubing_correction=not args.no_tubing_correction)
-            for path in args.files]
+    runs = [read_run(p, tubing_correction=not args.no_tubing_correction) for p in args.files]
     section = campaign_section(runs)
     releases = [r for run in runs for r in run.releases]
-    tubed = [run for run in runs if run.tubing is not None]
-    if tubed:
-        state = "corrected for" if tubed[0].tubing_corrected else "NOT corrected for"
-        print(f"pressure tubing: forces {state} the tubing recorded in {len(tubed)} of "
-              f"{len(runs)} file(s)")
     print(f"{len(releases)} release(s) from {len(runs)} file(s); wind speeds "
-          f"{sorted({round(r.U, 2) for r in releases})} m/s")
+          f"{sorted({round(r.U, 2) for r in releases})} m/s{tubing_note(runs)}")
     analysis = analyze_campaign(releases, section, n_lags=args.n_lags, table=False)
     model, result, spread = analysis.model, analysis.flutter, analysis.structures
     u = analysis.uncertainty
@@ -363,7 +355,6 @@ def _identify(args: argparse.Namespace) -> int:
             "flutter_speed_structures": summary["flutter_structures"],
             "flutter_frequency": result.frequency,
             "critical_mode": result.critical_mode,
-            "tubing_corrected": any(run.tubing_corrected for run in runs),
             "warnings": summary["warnings"],
         }, indent=2))
         print(f"wrote {args.json}")

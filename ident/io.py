@@ -34,7 +34,8 @@ from ident.section import SectionModel
 from ident.taps import TapLayout
 from ident.tubing import R_AIR, Air, TubingSet, force_correction, from_description
 
-__all__ = ["FileFormatError", "RunFile", "TUBING_LEAD_S", "campaign_section", "read_run"]
+__all__ = ["FileFormatError", "RunFile", "TUBING_LEAD_S", "campaign_section", "read_run",
+           "tubing_note"]
 
 _SECTION_FIELDS = ("B", "m", "I", "fh", "fa", "zeta_h", "zeta_a", "S")
 #: Keys of a ``[taps]`` table that describe the layout (others: tubing, channels, ...).
@@ -247,6 +248,21 @@ def campaign_section(runs: Sequence[RunFile]) -> SectionModel:
             raise FileFormatError(f"{run.path}: its section model differs from the one of "
                                   f"{runs[0].path}; identify one section model at a time")
     return first.replace(rho=float(np.median([run.section.rho for run in runs])))
+
+
+def tubing_note(runs: Sequence[RunFile]) -> str:
+    """Say whether the runs' forces were corrected for their recorded tubing ("" if none has).
+
+    Returns
+    -------
+    str
+        E.g. ``"; forces corrected for the pressure tubing of 2 of 3 file(s)"``.
+    """
+    tubed = [run for run in runs if run.tubing is not None]
+    if not tubed:
+        return ""
+    state = "corrected for" if all(run.tubing_corrected for run in tubed) else "NOT corrected for"
+    return f"; forces {state} the pressure tubing of {len(tubed)} of {len(runs)} file(s)"
 
 
 def _text(value: Any) -> str:
