@@ -184,8 +184,9 @@ def test_a_tubing_set_survives_its_description():
 SECTION_TAPS = TapLayout.rectangle(0.3, 0.01, 28)
 
 
-def _campaign(tubes, *, correct_it: bool, seed: int = 5, fs: float = 500.0):
-    """Releases at 0.5, 0.65, 0.8 of the flutter speed, with 2 % noise on the pressures."""
+def _campaign(tubes, *, correct_it: bool, seed: int = 5, fs: float = 500.0,
+              noise: float = 0.02):
+    """Releases at 0.5, 0.65, 0.8 of the flutter speed, with noise (fraction of each RMS)."""
     from simulators.campaigns import FRACTIONS, HOLDS, SECTION
     from simulators.tunnel import simulate_release
 
@@ -196,10 +197,11 @@ def _campaign(tubes, *, correct_it: bool, seed: int = 5, fs: float = 500.0):
     for fraction in FRACTIONS:
         for h0, alpha0 in HOLDS:
             sim = simulate_release(SECTION, truth, fraction * speed, h0, alpha0, duration=7.5,
-                                   fs=fs, pre_s=1.0, noise={"h": 0.02, "alpha": 0.02}, rng=rng)
+                                   fs=fs, pre_s=1.0, noise={"h": noise, "alpha": noise},
+                                   rng=rng)
             p = sim.pressures(SECTION_TAPS)
             measured = distort(p, fs, tubes)
-            measured += rng.normal(0.0, 0.02 * float(np.std(p)), measured.shape)
+            measured += rng.normal(0.0, noise * float(np.std(p)), measured.shape)
             if correct_it:
                 measured = correct(measured, fs, tubes)
             lift, moment = SECTION_TAPS.integrate(measured)
@@ -210,24 +212,44 @@ def _campaign(tubes, *, correct_it: bool, seed: int = 5, fs: float = 500.0):
     return SECTION, speed, releases
 
 
-def test_one_metre_of_one_millimetre_tubing_moves_the_flutter_speed_and_correction_restores_it():
-    """Every tap on 1 m of 1 mm bore ending in 300 mm^3: > 2 % off, corrected within 0.5 %.
+def test_long_tubing_moves_the_flutter_speed_over_2_percent_and_correction_restores_it():
+    """Every tap on 1.5 m of 1 mm bore into 300 mm^3: 3.9 % off, corrected within 0.5 %.
 
-    300 mm^3 is Bergh and Tijdeman's transducer volume (with 50 mm^3 the error is 1.7 %). At
-    the section's 2 and 4 Hz the tube passes the amplitude within 0.3 % but delays the
-    pressures by 4.4 ms (3.2 and 6.4 degrees): the lag of the forces behind the motion is read
-    by E2RFC as aerodynamic damping, and the flutter speed comes out 2.4 % high. Corrected, it
-    is back within 0.5 % (2 % noise on pressures and displacements alone moves it ~0.1 %).
+    300 mm^3 is Bergh and Tijdeman's transducer volume. At the section's 2 and 4 Hz the tube
+    passes the amplitude within 0.4 % but delays the pressures by 8.8 ms (6.3 and 12.7
+    degrees): E2RFC reads the forces' extra lag behind the motion as aerodynamic damping, and
+    the flutter speed comes out high. With 2 % noise on pressures and displacements (which
+    alone moves it ~0.1 %) it is 3.9 % high as measured and within 0.1 % corrected (seeds 5
+    to 7). 1 m of the same tube is a borderline case (the next test).
     """
-    tube = Tube(length=1.0, diameter=1e-3, volume=300e-9)
+    tube = Tube(length=1.5, diameter=1e-3, volume=300e-9)
     H = tube.response([2.0, 4.0], AIR)
-    assert np.all(np.abs(np.abs(H) - 1.0) < 0.003)
-    assert math.degrees(-np.angle(H[1])) == pytest.approx(6.4, abs=0.1)
+    assert np.all(np.abs(np.abs(H) - 1.0) < 0.004)
+    assert math.degrees(-np.angle(H[1])) == pytest.approx(12.7, abs=0.1)
     tubes = tubing_set([TubingGroup(None, tube)], SECTION_TAPS.n_taps)
     section, truth, raw = _campaign(tubes, correct_it=False)
     off = flutter.analyze(section, e2rfc.identify(raw, section)).speed
     _, _, fixed = _campaign(tubes, correct_it=True)
     back = flutter.analyze(section, e2rfc.identify(fixed, section)).speed
     assert off is not None and back is not None
-    assert abs(off / truth - 1.0) > 0.02
+    assert off / truth - 1.0 > 0.02
     assert abs(back / truth - 1.0) < 0.005
+
+
+@pytest.mark.parametrize("volume, low, high", [(300e-9, 0.02, 0.03), (50e-9, 0.012, 0.02)])
+def test_one_metre_of_one_millimetre_tubing_is_borderline(volume, low, high):
+    """1 m of 1 mm bore, noise-free: +2.35 % with 300 mm^3, +1.73 % with 50 mm^3.
+
+    The tube lags 4.4 ms (300 mm^3) or 3.1 ms (50 mm^3) at the section's frequencies. The
+    bounds bracket the measured errors by ~0.3 %, about what 2 % noise moves them (down to
+    +2.03 % with 300 mm^3); corrected, noise-free, the error is under 0.01 %.
+    """
+    tube = Tube(length=1.0, diameter=1e-3, volume=volume)
+    tubes = tubing_set([TubingGroup(None, tube)], SECTION_TAPS.n_taps)
+    section, truth, raw = _campaign(tubes, correct_it=False, noise=0.0)
+    off = flutter.analyze(section, e2rfc.identify(raw, section)).speed
+    _, _, fixed = _campaign(tubes, correct_it=True, noise=0.0)
+    back = flutter.analyze(section, e2rfc.identify(fixed, section)).speed
+    assert off is not None and back is not None
+    assert low < off / truth - 1.0 < high
+    assert abs(back / truth - 1.0) < 1e-4
