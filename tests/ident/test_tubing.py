@@ -200,7 +200,7 @@ def _campaign(tubes, *, correct_it: bool, seed: int = 5, fs: float = 500.0,
                                    fs=fs, pre_s=1.0, noise={"h": noise, "alpha": noise},
                                    rng=rng)
             p = sim.pressures(SECTION_TAPS)
-            measured = distort(p, fs, tubes)
+            measured = sim.pressures(SECTION_TAPS, tubing=tubes)
             measured += rng.normal(0.0, noise * float(np.std(p)), measured.shape)
             if correct_it:
                 measured = correct(measured, fs, tubes)
