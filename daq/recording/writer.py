@@ -59,6 +59,7 @@ from daq.recording.recorder import Recorder, RunRecorder
 from daq.recording.releases import ReleaseRows
 from daq.recording.sync_view import physical_columns
 from daq.sync.resample import Resampler, StreamSpec, SyncBlock
+from daq.tubing_config import tubing_metadata
 
 __all__ = ["DEFAULT_RHO", "DEFAULT_SYNC_RATE_HZ", "RunWriter", "default_sync_rate_hz"]
 
@@ -204,6 +205,8 @@ class RunWriter:
             rec.open()
         self.recorder = rec
         n_taps = self.config.taps.n_taps
+        if self.config.tubing:  # what an offline reader needs to undo it (docs/file_format.md)
+            rec.add_metadata("tubing", tubing_metadata(self.config.tubing, n_taps))
         tap_names = [f"tap{i:03d}" for i in range(n_taps)]
         streams: list[StreamSpec] = []
         for name, info in doc["devices"].items():

@@ -39,7 +39,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("daq.errors", "daq.validation", "daq.log_file", "ident"),
     ("daq.transports",),
     ("daq.instruments",),
-    ("daq.config", "daq.procedure", "daq.instruments.build"),
+    ("daq.config", "daq.tubing_config", "daq.procedure", "daq.instruments.build"),
     ("daq.sync",),
     ("daq.acquisition",),
     ("daq.recording",),
