@@ -12,8 +12,8 @@ One subpackage per concern (``docs/architecture.md`` has the tree and the import
 - :mod:`daq.offline`: recorded files again (``windrig reprocess``, ``windrig diagnose``).
 
 Modules of their own: :mod:`daq.errors` (every exception of daq), :mod:`daq.validation` (checks
-of TOML tables), :mod:`daq.config` (rig configs), :mod:`daq.calibration` (the config's calibrations:
-tap wiring, dead taps, Pitot, lasers, humid air, span), :mod:`daq.procedure` (hold and decay
-times)
-and :mod:`daq.cli` (the ``windrig`` command line).
+of TOML tables), :mod:`daq.config` (rig configs), :mod:`daq.tubing_config` (its pneumatic
+tubing tables), :mod:`daq.calibration` (its calibrations: tap wiring, dead taps, Pitot, lasers,
+humid air, span), :mod:`daq.procedure` (hold and decay times) and :mod:`daq.cli` (the
+``windrig`` command line).
 """

@@ -69,6 +69,7 @@ def _build_parser() -> argparse.ArgumentParser:
                       help="write the model, diagnostics and flutter result to this JSON file")
     p_id.add_argument("--n-lags", type=int, default=None, choices=(0, 1, 2, 3),
                       help="number of lag terms (default: chosen by held-out error)")
+    p_id.add_argument("--no-tubing-correction", action="store_true", help="uncorrected forces")
 
     p_diag = sub.add_parser(
         "diagnose",
@@ -308,13 +309,13 @@ def _simulate(args: argparse.Namespace) -> int:
 
 def _identify(args: argparse.Namespace) -> int:
     from ident.campaign import analyze_campaign
-    from ident.io import campaign_section, read_run
+    from ident.io import campaign_section, read_run, tubing_note
 
-    runs = [read_run(path) for path in args.files]
+    runs = [read_run(p, tubing_correction=not args.no_tubing_correction) for p in args.files]
     section = campaign_section(runs)
     releases = [r for run in runs for r in run.releases]
     print(f"{len(releases)} release(s) from {len(runs)} file(s); wind speeds "
-          f"{sorted({round(r.U, 2) for r in releases})} m/s")
+          f"{sorted({round(r.U, 2) for r in releases})} m/s{tubing_note(runs)}")
     analysis = analyze_campaign(releases, section, n_lags=args.n_lags, table=False)
     model, result, spread = analysis.model, analysis.flutter, analysis.structures
     u = analysis.uncertainty

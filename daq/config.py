@@ -26,11 +26,13 @@ from typing import Any
 from daq.calibration import TAP_KEYS, Calibration, parse_calibration
 from daq.errors import ConfigError
 from daq.instruments import registry
+from daq.tubing_config import parse_tubing, split_tubing
 from daq.validation import check_keys, number
 from ident.flat_plate import jones_model
 from ident.rfc import RationalFunctionModel
 from ident.section import SectionModel
 from ident.taps import TapLayout
+from ident.tubing import TubingGroup
 from ident.turbulence import StaticCoefficients, TurbulenceSpec
 
 __all__ = [
@@ -105,6 +107,9 @@ class SimulationConfig:
         of the gusts averages the buffeting over it).
     turbulence_seed : int
         Seed of the gust field (``[simulation.turbulence] seed``, default 0).
+    tubing : bool
+        ``[simulation] tubing = true``: the simulated scanner sees the tap pressures through
+        the config's ``[[taps.tubing]]`` (default false: perfect tubing).
     """
 
     aerodynamics: str
@@ -118,6 +123,7 @@ class SimulationConfig:
     turbulence: TurbulenceSpec | None = None
     span: float | None = None
     turbulence_seed: int = 0
+    tubing: bool = False
 
 
 @dataclass(frozen=True)
@@ -138,6 +144,8 @@ class RigConfig:
     simulation: SimulationConfig | None
     text: str = field(repr=False)
     source: str = ""
+    #: ``[[taps.tubing]]`` (:mod:`daq.tubing_config`): the pneumatic tubing per group of taps.
+    tubing: tuple[TubingGroup, ...] = ()
     calibration: Calibration = field(default_factory=Calibration)
 
     def instrument(self, name: str) -> InstrumentConfig:
@@ -212,11 +220,14 @@ def parse_rig_config(text: str, source: str = "<string>") -> RigConfig:
                set(ROLES) | {"simulation", "air"})
     check_keys(data["rig"], f"{source} [rig]", {"name"}, {"description"})
     section, depth = _section(data["section"], f"{source} [section]")
+    taps_table, tubing_tables = split_tubing(data["taps"], source)
     try:
         # The wiring keys (channels, dead taps) are the calibration's (daq.calibration).
-        taps = TapLayout.from_table({k: v for k, v in data["taps"].items() if k not in TAP_KEYS})
+        taps = TapLayout.from_table({k: v for k, v in taps_table.items() if k not in TAP_KEYS})
     except (ValueError, TypeError, AttributeError) as exc:
         raise ConfigError(f"{source} [taps]: {exc}") from exc
+    tubing = parse_tubing(tubing_tables, taps.n_taps, source,
+                          Path(source).parent if source != "<string>" else None)
     check_keys(data["limits"], f"{source} [limits]", {"max_wind_speed", "max_fan_rpm"})
     limits = Limits(
         max_wind_speed=number(data["limits"], "max_wind_speed", f"{source} [limits]",
@@ -236,9 +247,11 @@ def parse_rig_config(text: str, source: str = "<string>") -> RigConfig:
     simulation = (_simulation(data["simulation"], f"{source} [simulation]", instruments,
                               data["section"])
                   if "simulation" in data else None)
+    if simulation is not None and simulation.tubing and not tubing:
+        raise ConfigError(f"{source} [simulation] tubing = true needs [[taps.tubing]] tables")
     return RigConfig(name=str(data["rig"]["name"]), section=section, depth=depth, taps=taps,
                      limits=limits, wind_per_rpm=wind_per_rpm, instruments=instruments,
-                     simulation=simulation, text=text, source=source,
+                     simulation=simulation, text=text, source=source, tubing=tubing,
                      calibration=parse_calibration(data, source, taps, instruments))
 
 
@@ -286,7 +299,8 @@ def _instruments(data: Mapping[str, Any], source: str) -> tuple[InstrumentConfig
 def _simulation(table: Mapping[str, Any], where: str, instruments: tuple[InstrumentConfig, ...],
                 section: Mapping[str, Any]) -> SimulationConfig:
     check_keys(table, where, {"aerodynamics", "hold_h", "hold_alpha"},
-               {"rfc", "pressure_pa", "temperature_c", "devices", "static", "turbulence"})
+               {"rfc", "pressure_pa", "temperature_c", "devices", "static", "turbulence",
+                "tubing"})
     aerodynamics = table["aerodynamics"]
     if aerodynamics not in ("flat_plate_jones", "rfc"):
         raise ConfigError(f"{where} aerodynamics must be 'flat_plate_jones' or 'rfc', "
@@ -323,7 +337,15 @@ def _simulation(table: Mapping[str, Any], where: str, instruments: tuple[Instrum
         turbulence=turbulence,
         span=span,
         turbulence_seed=seed,
+        tubing=_flag(table, "tubing", where),
     )
+
+
+def _flag(table: Mapping[str, Any], key: str, where: str) -> bool:
+    value = table.get(key, False)
+    if not isinstance(value, bool):
+        raise ConfigError(f"{where} {key} must be true or false, got {value!r}")
+    return value
 
 
 def _subtable(where: str, name: str) -> str:

@@ -8,6 +8,14 @@ open, so a run still being written, or one left by a crash, can be read as well 
 
 Errors are specific: a missing file or dataset, a truncated file, or a release whose rows hold
 gaps (NaN) raises :class:`FileFormatError` (a ``ValueError``) naming the file and what is wrong.
+
+Pneumatic tubing: ``/entry/sync/lift`` and ``moment`` are the forces of the pressures as
+measured at the scanner. When the file records its taps' tubing (``/entry/metadata/tubing``),
+each release's forces are corrected for it by default (:func:`ident.tubing.force_correction` on
+the release's pressures plus up to :data:`TUBING_LEAD_S` of the held model before it, the
+tubes' air at the run's measured density and 20 C); ``tubing_correction=False`` reads them as
+measured. Dead taps (``/entry/calibration/taps/dead``) are left out of the correction as they
+are out of the forces.
 """
 
 from __future__ import annotations
@@ -24,10 +32,22 @@ import numpy as np
 from ident.errors import IdentError
 from ident.release import Release
 from ident.section import SectionModel
+from ident.taps import TapLayout
+from ident.tubing import R_AIR, Air, TubingSet, force_correction, from_description
 
-__all__ = ["FileFormatError", "RunFile", "campaign_section", "read_run"]
+__all__ = ["FileFormatError", "RunFile", "TUBING_LEAD_S", "campaign_section", "read_run",
+           "tubing_note"]
 
 _SECTION_FIELDS = ("B", "m", "I", "fh", "fa", "zeta_h", "zeta_a", "S")
+#: Keys of a ``[taps]`` table that describe the layout (others: tubing, channels, ...).
+_LAYOUT_KEYS = {"shape", "B", "D", "taps_per_face", "n_taps", "vertices",
+                "x", "z", "nx", "nz", "length"}
+#: Seconds of the held, steady model before a release included in its tubing correction, so
+#: that the tubes' response to the release itself lies inside the corrected record.
+TUBING_LEAD_S = 1.0
+#: Temperature of the air in the tubes when correcting, K (the file records density only; 10 K
+#: off changes the 1 m, 1 mm tube's lag at 4 Hz by about 1 %).
+TUBING_TEMPERATURE_K = 293.15
 
 
 class FileFormatError(IdentError, ValueError):
@@ -48,6 +68,10 @@ class RunFile:
     rig_name : str
     depth : float or None
         Section depth D from the stored ``[section]``, m (None when the config has none).
+    tubing : TubingSet or None
+        The taps' tubing the file records (None: none recorded).
+    tubing_corrected : bool
+        Whether the releases' lift and moment were corrected for it.
     """
 
     path: str
@@ -55,15 +79,20 @@ class RunFile:
     releases: tuple[Release, ...]
     rig_name: str
     depth: float | None = None
+    tubing: TubingSet | None = None
+    tubing_corrected: bool = False
 
 
-def read_run(path: str | os.PathLike[str]) -> RunFile:
+def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True) -> RunFile:
     """Read the section and the releases of a run file.
 
     Parameters
     ----------
     path : path-like
         A windrig HDF5 run file.
+    tubing_correction : bool
+        Correct the releases' lift and moment for the recorded tubing (default; no effect on a
+        file without tubing). False: the forces as measured.
 
     Returns
     -------
@@ -97,6 +126,15 @@ def read_run(path: str | os.PathLike[str]) -> RunFile:
             part = "/entry/releases"
             table = f["entry/releases"][()]
             rig_name = _text(f["entry"].attrs.get("rig_name", ""))
+            part = "/entry/metadata/tubing"
+            tubing_meta = (_group_dict(f[part]) if part in f else None)
+            if tubing_meta is not None and tubing_correction:
+                part = "/entry/sync/pressure"
+                sync["pressure"] = np.asarray(f[part][()], dtype=float)
+            # Dead taps (since issue 18): the forces leave them out, so must their correction.
+            dead_part = "/entry/calibration/taps/dead"
+            dead = (np.asarray(f[dead_part][()], dtype=np.int64) if dead_part in f
+                    else np.zeros(0, dtype=np.int64))
         except KeyError as exc:
             raise FileFormatError(f"{path}: has no {part}: not a windrig run file (or an "
                                   "incomplete one)") from exc
@@ -105,9 +143,89 @@ def read_run(path: str | os.PathLike[str]) -> RunFile:
             # RuntimeError on following a link, ValueError on a bad type)
             raise FileFormatError(f"{path}: unreadable (truncated or damaged?): {exc}") from exc
     section, depth = _section(config_text, path, sync["rho"])
+    tubing = None
+    if tubing_meta is not None:
+        tubing, integration = _tubing(tubing_meta, config_text, path, section.rho, dead)
+        if tubing_correction:
+            if dead.size and "pressure" in sync:  # weight 0, but a dead tap's NaN would spread
+                sync["pressure"][:, dead[(dead >= 0) & (dead < sync["pressure"].shape[1])]] = 0.0
+            _correct_forces(sync, table, tubing, integration)
     releases = tuple(_release(sync, row, path, i) for i, row in enumerate(table))
     return RunFile(path=path, section=section, releases=releases, rig_name=rig_name,
-                   depth=depth)
+                   depth=depth, tubing=tubing,
+                   tubing_corrected=tubing is not None and tubing_correction)
+
+
+def _group_dict(group: Any) -> dict[str, Any]:
+    """Return an HDF5 metadata group as nested dicts (strings decoded, arrays as arrays)."""
+    out: dict[str, Any] = {}
+    for key, item in group.items():
+        if isinstance(item, h5py.Group):
+            out[key] = _group_dict(item)
+        else:
+            value = item[()]
+            out[key] = _text(value) if isinstance(value, (bytes, str)) else np.asarray(value)
+    return out
+
+
+def _tubing(meta: dict[str, Any], config_text: str, path: str, rho: float,
+            dead: np.ndarray) -> tuple[TubingSet, np.ndarray]:
+    """Return the recorded tubing (air at the run's density) and the taps' integration matrix.
+
+    The matrix is that of the forces the file holds: the live taps' (``dead`` left out, their
+    lengths shared by their neighbours, :meth:`ident.taps.TapLayout.without`), zero for the
+    dead taps' columns.
+    """
+    try:
+        table = tomllib.loads(config_text)["taps"]
+        layout = TapLayout.from_table({k: v for k, v in table.items() if k in _LAYOUT_KEYS})
+    except (tomllib.TOMLDecodeError, KeyError, TypeError, ValueError) as exc:
+        raise FileFormatError(f"{path}: /entry/config has no usable [taps] for the tubing "
+                              f"correction: {exc}") from exc
+    groups = [meta[key] for key in sorted(meta, key=lambda k: int(k.rsplit("_", 1)[-1]))]
+    for group in groups:
+        if isinstance(group.get("taps"), np.ndarray):
+            group["taps"] = group["taps"].tolist()
+    air = Air(pressure_pa=rho * R_AIR * TUBING_TEMPERATURE_K, temperature_k=TUBING_TEMPERATURE_K)
+    try:
+        tubing = from_description(groups, layout.n_taps, air)
+    except (TypeError, ValueError) as exc:
+        raise FileFormatError(f"{path}: /entry/metadata/tubing: {exc}") from exc
+    if dead.size == 0:
+        return tubing, layout.integration_matrix()
+    live = np.ones(layout.n_taps, dtype=bool)
+    try:
+        live[dead] = False
+        integration = np.zeros((2, layout.n_taps))
+        integration[:, live] = layout.without(dead).integration_matrix()
+    except (IndexError, ValueError) as exc:
+        raise FileFormatError(f"{path}: /entry/calibration/taps/dead: {exc}") from exc
+    return tubing, integration
+
+
+def _correct_forces(sync: dict[str, np.ndarray], table: Any, tubing: TubingSet,
+                    integration: np.ndarray) -> None:
+    """Replace each release's rows of lift and moment by the tubing-corrected forces."""
+    time, pressure = sync["time"], sync["pressure"]
+    if time.size < 2 or pressure.ndim != 2 or pressure.shape[1] != tubing.n_taps:
+        return  # no pressures to correct with: _release reports the forces' own gaps
+    fs = 1.0 / float(np.median(np.diff(time)))
+    lift, moment = sync["lift"].copy(), sync["moment"].copy()
+    for row in table:
+        start, stop = int(row["start_index"]), int(row["stop_index"])
+        if not 0 <= start < stop <= time.size:
+            continue  # _release names the bad rows
+        first = max(0, start - int(round(TUBING_LEAD_S * fs)))
+        # The lead must be gap-free: start after its last row with a missing force.
+        holes = np.flatnonzero(~np.isfinite(sync["lift"][first:start]))
+        if holes.size:
+            first += int(holes[-1]) + 1
+        if stop - first < 2:
+            continue
+        delta = force_correction(pressure[first:stop], fs, tubing, integration)
+        lift[start:stop] += delta[start - first:, 0]
+        moment[start:stop] += delta[start - first:, 1]
+    sync["lift"], sync["moment"] = lift, moment
 
 
 def _open(path: str) -> h5py.File:
@@ -151,6 +269,21 @@ def campaign_section(runs: Sequence[RunFile]) -> SectionModel:
             raise FileFormatError(f"{run.path}: its section model differs from the one of "
                                   f"{runs[0].path}; identify one section model at a time")
     return first.replace(rho=float(np.median([run.section.rho for run in runs])))
+
+
+def tubing_note(runs: Sequence[RunFile]) -> str:
+    """Say whether the runs' forces were corrected for their recorded tubing ("" if none has).
+
+    Returns
+    -------
+    str
+        E.g. ``"; forces corrected for the pressure tubing of 2 of 3 file(s)"``.
+    """
+    tubed = [run for run in runs if run.tubing is not None]
+    if not tubed:
+        return ""
+    state = "corrected for" if all(run.tubing_corrected for run in tubed) else "NOT corrected for"
+    return f"; forces {state} the pressure tubing of {len(tubed)} of {len(runs)} file(s)"
 
 
 def _text(value: Any) -> str:

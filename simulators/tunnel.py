@@ -30,6 +30,7 @@ from ident.rfc import RationalFunctionModel
 from ident.section import SectionModel
 from ident.simulate import CHANNELS, simulate_decay
 from ident.taps import TapLayout
+from ident.tubing import TubingSet, distort
 from ident.turbulence import GustField, StaticCoefficients, TurbulenceSpec
 
 __all__ = ["CHANNELS", "SimulatedRelease", "simulate_release"]
@@ -80,12 +81,16 @@ class SimulatedRelease:
     model: RationalFunctionModel = field(repr=False)
     effects: tuple[Effect, ...] = ()
 
-    def pressures(self, taps: TapLayout, mean: Any = None) -> FloatArray:
+    def pressures(self, taps: TapLayout, mean: Any = None,
+                  tubing: TubingSet | None = None) -> FloatArray:
         """Tap pressures (Pa), shape (n, n_taps), that integrate exactly to ``lift`` and ``moment``.
 
         See :meth:`ident.taps.TapLayout.pressures_for`; ``mean`` is a steady distribution, Pa.
+        With ``tubing``, the pressures behind the tubes (:func:`ident.tubing.distort`, the
+        record taken as steady before its first sample: simulate with ``pre_s`` for a hold).
         """
-        return taps.pressures_for(self.lift, self.moment, mean=mean)
+        p = taps.pressures_for(self.lift, self.moment, mean=mean)
+        return p if tubing is None else distort(p, self.fs, tubing)
 
 
 def simulate_release(

@@ -50,9 +50,11 @@ from ident.rfc import RationalFunctionModel
 from ident.section import SectionModel
 from ident.simulate import SimulatedDecay, simulate_decay
 from ident.taps import TapLayout
+from ident.tubing import TubingSet
 from ident.turbulence import GustField, StaticCoefficients, TurbulenceSpec, WindLoad
 from simulators.clock import Clock, MonotonicClock
 from simulators.effects import Effect
+from simulators.tubing import TubingFilter
 from simulators.tunnel import SimulatedRelease, simulate_release
 
 __all__ = ["AirState", "VirtualTunnel"]
@@ -177,6 +179,9 @@ class VirtualTunnel:
         Span of the section model, m (span-wise coherence of the gusts).
     seed : int, optional
         Seed of the gust field.
+    tubing : TubingSet, optional
+        Pneumatic tubing of the taps (:mod:`simulators.tubing`): :meth:`pressures` gives the
+        pressures at the scanner's transducers, behind the tubes. Default None: perfect tubing.
     """
 
     def __init__(
@@ -198,6 +203,7 @@ class VirtualTunnel:
         turbulence: TurbulenceSpec | None = None,
         span: float | None = None,
         seed: int | None = None,
+        tubing: TubingSet | None = None,
     ) -> None:
         if not wind_per_rpm > 0:
             raise ValueError(f"wind_per_rpm must be > 0, got {wind_per_rpm!r}")
@@ -228,6 +234,11 @@ class VirtualTunnel:
         # SVD per production step cost ~10 % of a core with 511 taps).
         self._G = taps.integration_matrix()
         self._G_pinv = np.linalg.pinv(self._G)
+        self._tubing: TubingFilter | None = None
+        if tubing is not None:
+            # p = [lift, moment] G+' + qd (cp - G+ G cp): the pressures as a linear map.
+            mean_part = self._cp_mean - self._G_pinv @ (self._G @ self._cp_mean)
+            self._tubing = TubingFilter(tubing, np.column_stack([self._G_pinv, mean_part]))
         self._lock = threading.Lock()
         self._fan_rpm = 0.0
         self._armed = True  # the magnet holds at start
@@ -379,8 +390,18 @@ class VirtualTunnel:
         return out
 
     def pressures(self, t: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """Tap pressures (n, n_taps) and Pitot dynamic pressure (n,) at true times ``t``, Pa."""
+        """Tap pressures (n, n_taps) and Pitot dynamic pressure (n,) at true times ``t``, Pa.
+
+        With tubing, the tap pressures are those behind the tubes (the Pitot's is not).
+        """
         values = self.sample(t)
+        if self._tubing is not None:
+            def channels(times: FloatArray) -> FloatArray:
+                s = self.sample(times)
+                return np.column_stack([s["lift"], s["moment"], s["qd"]])
+
+            return self._tubing.pressures(np.atleast_1d(np.asarray(t, dtype=float)),
+                                          channels), values["qd"]
         mean = np.outer(values["qd"], self._cp_mean)
         G, G_pinv = self._G, self._G_pinv
         forces = np.column_stack([values["lift"], values["moment"]])

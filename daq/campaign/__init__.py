@@ -1,8 +1,9 @@
 """Headless test campaigns: ``windrig campaign PLAN.toml --config RIG.toml [--simulate] --out DIR``.
 
 A campaign records releases at several wind speeds through the same drivers and engine as the
-console, one run file per speed, identifies E2RFC's model after each speed, and stops when the
-plan is done, the flutter speed is known well enough, or going on would not be safe.
+console, one run file per speed (or per release), identifies E2RFC's model after each speed,
+and stops when the plan is done, the flutter speed is known well enough, or going on would not
+be safe.
 
 The map of its modules (one job each):
 
@@ -14,6 +15,8 @@ The map of its modules (one job each):
 - ``adaptive``  the next wind speed: the candidate whose releases most reduce the predicted
                 variance of the flutter speed (c-optimal, from the model's covariance), and
                 the safety bound ``fraction * (U_F - 3 std)``.
+- ``files``     the run files' names (one per speed or one per release) and reading back an
+                earlier session's files, grouped by speed (resume).
 - ``runner``    the loop: fan, settle, arm/release per speed into a run file, progress lines,
                 modal fits and the flutter speed +- std after each speed; stops safely (growth,
                 bound, Ctrl-C: model caught, fan down, file finished); resumes from DIR.

@@ -16,6 +16,7 @@ The plan (units SI; the example plans are ``rig_configs/plans/*.toml``)::
     pause_s = 0.0               # extra wait between releases, s
     calz_start = true           # zero the scanner wind-off before the first speed
     calz_end = true             # ... and once more wind-off after the fan is down
+    files = "per_speed"         # one run file per speed; "per_release": one per release
 
     [speeds]
     wind_speeds = [5.0, 7.0]    # m/s; or fan_rpm = [500, 700] (set-points, rpm), not both
@@ -55,6 +56,8 @@ from daq.validation import check_keys, number
 __all__ = ["AdaptiveSettings", "CampaignPlan", "load_plan", "parse_plan"]
 
 MODES = ("fixed", "adaptive")
+#: How releases are grouped into run files (:mod:`daq.campaign.files`).
+FILE_MODES = ("per_speed", "per_release")
 MAX_RELEASES_PER_SPEED = 20
 MAX_SPEEDS = 50
 
@@ -113,6 +116,9 @@ class CampaignPlan:
     calz_start, calz_end : bool
     adaptive : AdaptiveSettings or None
     source : str
+    files : str
+        ``"per_speed"`` (one run file per wind speed) or ``"per_release"`` (one per release,
+        each closed and its modal fit reported as soon as its decay is recorded).
     """
 
     mode: str
@@ -127,6 +133,7 @@ class CampaignPlan:
     calz_end: bool
     adaptive: AdaptiveSettings | None
     source: str = ""
+    files: str = "per_speed"
 
     def listed_speeds(self, wind_per_rpm: float) -> list[float]:
         """Return the listed speeds as wind speeds, m/s (fan set-points times the calibration)."""
@@ -215,7 +222,8 @@ def parse_plan(text: str, source: str = "<string>") -> CampaignPlan:
     where = f"{source} [campaign]"
     c = data["campaign"]
     check_keys(c, where, {"mode"}, {"releases_per_speed", "decay_s", "settle_s",
-                                    "steady_tolerance", "pause_s", "calz_start", "calz_end"})
+                                    "steady_tolerance", "pause_s", "calz_start", "calz_end",
+                                    "files"})
     mode = c["mode"]
     if mode not in MODES:
         raise ConfigError(f"{where} mode = {mode!r}; allowed: {', '.join(MODES)}")
@@ -226,6 +234,9 @@ def parse_plan(text: str, source: str = "<string>") -> CampaignPlan:
     pause_s = number(c, "pause_s", where, lo=0.0, hi=600.0, default=0.0)
     calz_start = _bool(c, "calz_start", where, True)
     calz_end = _bool(c, "calz_end", where, True)
+    files = c.get("files", "per_speed")
+    if files not in FILE_MODES:
+        raise ConfigError(f"{where} files = {files!r}; allowed: {', '.join(FILE_MODES)}")
 
     where = f"{source} [speeds]"
     s = data["speeds"]
@@ -266,7 +277,7 @@ def parse_plan(text: str, source: str = "<string>") -> CampaignPlan:
     return CampaignPlan(mode=mode, wind_speeds=wind, fan_rpm=rpm, releases_per_speed=releases,
                         decay_s=decay_s, settle_s=settle_s, steady_tolerance=steady,
                         pause_s=pause_s, calz_start=calz_start, calz_end=calz_end,
-                        adaptive=adaptive, source=source)
+                        adaptive=adaptive, source=source, files=files)
 
 
 def load_plan(path: str | Path) -> CampaignPlan:

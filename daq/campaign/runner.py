@@ -3,10 +3,12 @@
 Responsibility: :func:`run_plan` runs a :class:`~daq.campaign.plan.CampaignPlan` on a rig
 through the same drivers and engine as the console (:func:`daq.recording.run.record_run`, every
 fan and release step one of the engine's commands, so an event of the run), one run file per
-wind speed (``speedNN_U<m/s>.h5``), with a line on the terminal for every step (speed, wind,
-release n of N, decay amplitude), each release's modal fit and, from two speeds on, the E2RFC
-flutter speed +- std after each speed. It stops for the first of these reasons, each written to
-``campaign.json`` as ``stopped_because``:
+wind speed (``speedNN_U<m/s>.h5``) or, with ``files = "per_release"``, one per release
+(``speedNN_U<m/s>_rMM.h5``, :mod:`daq.campaign.files`), with a line on the terminal for every
+step (speed, wind, release n of N, decay amplitude), each release's modal fit as soon as its
+file is closed (after each release with one file per release) and, from two speeds on, the
+E2RFC flutter speed +- std after each speed. It stops for the first of these reasons, each
+written to ``campaign.json`` as ``stopped_because``:
 
 - the plan is done (fixed mode), the target std is met (from three speeds on: with two the
   std lacks its extrapolation part) or no candidate speed gains (adaptive mode,
@@ -15,7 +17,8 @@ flutter speed +- std after each speed. It stops for the first of these reasons, 
   estimate (both modes; fixed plans use 0.9) or the rig's limits: it is never set;
 - a decay grows (:class:`~daq.campaign.monitor.DecayMonitor`): the model is caught (re-armed)
   and the fan stopped at once;
-- Ctrl-C: the run file in progress is finished and kept as ``*.interrupted.h5``.
+- Ctrl-C: the run file in progress is finished and kept as ``*.interrupted.h5`` (with one
+  file per release, the speed's earlier files too: the speed is repeated whole on resume).
 
 Whatever the reason, even an error, the fan is sent a stop and waited down before returning,
 and the plan's closing CALZ is taken wind-off. The fan stays on between the speeds of a
@@ -46,6 +49,7 @@ from typing import Any
 
 from daq.acquisition.engine import Acquisition
 from daq.campaign.adaptive import Choice, choose_next, safety_bound
+from daq.campaign.files import interrupted_name, read_back, run_file_name
 from daq.campaign.monitor import DecayMonitor
 from daq.campaign.plan import CampaignPlan
 from daq.config import RigConfig
@@ -59,7 +63,7 @@ from ident.errors import IdentError
 from ident.io import RunFile, campaign_section, read_run
 from ident.modal import fit_release_modes
 
-__all__ = ["CampaignOutcome", "SpeedStep", "run_plan", "run_file_name"]
+__all__ = ["CampaignOutcome", "SpeedStep", "run_plan"]
 
 log = logging.getLogger(__name__)
 
@@ -84,8 +88,9 @@ class SpeedStep:
     U : float
         Requested wind speed, m/s.
     path : Path
+        Its (first) run file.
     releases : int
-        Releases read back from the file.
+        Releases read back from its file(s).
     why : str
         Why this speed (listed in the plan, or the adaptive choice).
     flutter_speed, flutter_std : float or None
@@ -93,6 +98,8 @@ class SpeedStep:
     wind_on_s : float or None
         Wind-on time of the campaign when this speed's estimate was known, s (None: read
         back from an earlier session).
+    paths : list of Path
+        Every run file of the speed (one, or one per release).
     """
 
     index: int
@@ -103,6 +110,11 @@ class SpeedStep:
     flutter_speed: float | None = None
     flutter_std: float | None = None
     wind_on_s: float | None = None
+    paths: list[Path] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        if not self.paths:
+            self.paths = [self.path]
 
 
 @dataclass
@@ -149,11 +161,6 @@ class CampaignOutcome:
     def flutter_std(self) -> float | None:
         """Its standard deviation, m/s."""
         return None if self.analysis is None else self.analysis.flutter_std
-
-
-def run_file_name(index: int, U: float) -> str:
-    """File name of the ``index``-th speed (from 1) at ``U`` m/s, e.g. ``speed03_U07.50.h5``."""
-    return f"speed{index:02d}_U{U:05.2f}.h5"
 
 
 class _Session:
@@ -207,24 +214,6 @@ def _ramp_rate(config: RigConfig, fan_name: str) -> float:
     """Return the drive's configured ramp rate, rpm/s (its settings' default otherwise)."""
     rate = config.instrument(fan_name).settings.get("ramp_rpm_per_s", 100.0)
     return float(rate)
-
-
-def _read_back(out: Path, say: Callable[[str], None]) -> list[tuple[int, float, RunFile | None,
-                                                                      Path]]:
-    """Run files of earlier sessions: ``(index, U, run or None, path)`` in order."""
-    found = []
-    for path in sorted(out.glob("speed[0-9][0-9]_U*.h5")):
-        if path.name.endswith(".interrupted.h5"):
-            continue
-        index = int(path.name[5:7])
-        U = float(path.name.split("_U", 1)[1][:-3])
-        try:
-            run: RunFile | None = read_run(path)
-        except (IdentError, ValueError, OSError) as exc:  # kept on disk, left out of the fit
-            say(f"resume: {path.name} is not usable ({exc}); left out")
-            run = None
-        found.append((index, U, run, path))
-    return found
 
 
 def _analysis(runs: list[RunFile]) -> CampaignAnalysis | None:
@@ -347,12 +336,11 @@ def _loop(session: _Session, outcome: CampaignOutcome) -> None:
     rig_limit = min(config.limits.max_wind_speed, config.limits.max_fan_rpm * config.wind_per_rpm)
     decay_s = plan.decay_s if plan.decay_s is not None else default_decay_s(config.section)
 
-    for index, U, run, path in _read_back(session.out, say):
-        why = "listed in the plan" if index <= len(listed) else "read back"
-        n = 0 if run is None else len(run.releases)
-        outcome.steps.append(SpeedStep(index, U, path, n, f"{why} (resumed)"))
-        if run is not None:
-            session.runs.append(run)
+    for found in read_back(session.out, say):
+        why = "listed in the plan" if found.index <= len(listed) else "read back"
+        outcome.steps.append(SpeedStep(found.index, found.U, found.paths[0], found.releases,
+                                       f"{why} (resumed)", paths=found.paths))
+        session.runs.extend(found.runs)
         outcome.resumed += 1
     if outcome.resumed:
         say(f"resume: {outcome.resumed} speed(s) read back from {session.out}")
@@ -415,18 +403,83 @@ def _say_estimate(say: Callable[[str], None], analysis: CampaignAnalysis | None)
 
 def _record_speed(session: _Session, outcome: CampaignOutcome, index: int, U: float, why: str,
                   decay_s: float) -> SpeedStep | None:
-    """Record one speed's file; return its step, or None when the campaign must stop."""
+    """Record one speed (one file, or one per release); return its step, or None to stop."""
     plan, config, say = session.plan, session.config, session.say
     rpm = U / config.wind_per_rpm
     n = plan.releases_per_speed
-    path = session.out / run_file_name(index, U)
     say(f"[speed {index}] U = {U:.2f} m/s ({rpm:.0f} rpm): {why}")
+    if plan.files == "per_release":
+        batches = [(session.out / run_file_name(index, U, i + 1), range(i, i + 1))
+                   for i in range(n)]
+    else:
+        batches = [(session.out / run_file_name(index, U), range(n))]
+    paths: list[Path] = []
+    runs: list[RunFile] = []
+    status = "done"
+    for path, releases in batches:
+        status = _record_file(session, outcome, path, rpm, releases, decay_s,
+                              f"campaign speed {index}: {why}")
+        paths.append(path)
+        if status == "interrupted":
+            for kept in paths:
+                kept.rename(interrupted_name(kept))
+            outcome.stopped_because = "interrupted by the operator (Ctrl-C)"
+            say(f"interrupted: {', '.join(interrupted_name(p).name for p in paths)} kept, the "
+                "speed is repeated on resume")
+            return None
+        run = _read_recorded(path, say)
+        if run is not None:
+            runs.append(run)
+            # The modal fit of each release as soon as its file is closed (per release: live).
+            for j, mode in enumerate(_modes(run), start=releases.start + 1):
+                say(f"  release {j}: {mode}")
+        if status == "grown":
+            break
+    session.runs.extend(runs)
+    step = SpeedStep(index, U, paths[0], sum(len(r.releases) for r in runs), why, paths=paths)
+    outcome.steps.append(step)
+    if status == "grown":
+        outcome.stopped_because = (
+            f"safety stop: a decay grew at {U:.2f} m/s (negative total damping: at or beyond "
+            "flutter); the model was caught and the fan stopped")
+        _update(session, outcome, step)
+        return None
+    _update(session, outcome, step)
+    return step
+
+
+def _read_recorded(path: Path, say: Callable[[str], None]) -> RunFile | None:
+    """Read a file just recorded back for identification (None, said, when it cannot be)."""
+    try:
+        run = read_run(path)
+    except (IdentError, ValueError, OSError) as exc:
+        say(f"  {path.name}: cannot be identified ({exc}); left out of the fit")
+        return None
+    say(f"  {path.name}: {len(run.releases)} release(s) recorded")
+    return run
+
+
+def _record_file(session: _Session, outcome: CampaignOutcome, path: Path, rpm: float,
+                 releases: range, decay_s: float, notes: str) -> str:
+    """Record the releases ``releases`` (0-based, of the speed's) into one run file.
+
+    The fan is set (and started) at the start of every file, so that each file's events
+    hold its wind setting; from the second file of a speed on the wind is already steady.
+
+    Returns
+    -------
+    str
+        ``"done"``, ``"grown"`` (a decay grew: model caught, fan stopped) or
+        ``"interrupted"`` (Ctrl-C: model caught, fan stopped, the file not complete).
+    """
+    plan, config, say = session.plan, session.config, session.say
+    n = plan.releases_per_speed
     section = config.section
     monitor = DecayMonitor(1.0 / min(section.fh, section.fa))
     done, grown = threading.Event(), threading.Event()
     ramp = abs(rpm - session.fan_rpm) / _ramp_rate(config, session.fan_name)
     duration = (1.5 * ramp + 2.0 + STEADY_TIMEOUT_S + plan.settle_s
-                + n * (HOLD_S + decay_s + plan.pause_s + 1.0) + 5.0)
+                + len(releases) * (HOLD_S + decay_s + plan.pause_s + 1.0) + 5.0)
 
     def wait(seconds: float) -> bool:
         """Wait ``seconds`` or until the decay grows or Ctrl-C; return True if it should stop."""
@@ -449,7 +502,7 @@ def _record_speed(session: _Session, outcome: CampaignOutcome, index: int, U: fl
         if session.abort.is_set():
             return
         say(f"  wind steady at {fan.speed() * config.wind_per_rpm:.2f} m/s")
-        for i in range(n):
+        for i in releases:
             acq.arm()
             if wait(HOLD_S):
                 return
@@ -483,36 +536,11 @@ def _record_speed(session: _Session, outcome: CampaignOutcome, index: int, U: fl
                 acq.stop_fan()
 
     calz = plan.calz_start and session.fan_on_at is None  # wind-off only before the first start
-    summary = record_run(config, path, duration_s=duration, calz=calz, actions=actions,
-                         progress=False, operator_notes=f"campaign speed {index}: {why}",
-                         subscribers=[monitor], until=done)
+    record_run(config, path, duration_s=duration, calz=calz, actions=actions, progress=False,
+               operator_notes=notes, subscribers=[monitor], until=done)
     if not done.is_set():
-        target = path.with_name(path.name[:-3] + ".interrupted.h5")
-        path.rename(target)
-        outcome.stopped_because = "interrupted by the operator (Ctrl-C)"
-        say(f"interrupted: {target.name} kept, the speed is repeated on resume")
-        return None
-    try:
-        run = read_run(path)
-        session.runs.append(run)
-        releases = len(run.releases)
-    except (IdentError, ValueError, OSError) as exc:
-        say(f"  {path.name}: cannot be identified ({exc}); left out of the fit")
-        releases = 0
-    step = SpeedStep(index, U, path, releases, why)
-    outcome.steps.append(step)
-    say(f"  {path.name}: {summary.get('releases')} releases recorded")
-    if releases:
-        for j, mode in enumerate(_modes(session.runs[-1])):
-            say(f"  release {j + 1}: {mode}")
-    if grown.is_set():
-        outcome.stopped_because = (
-            f"safety stop: a decay grew at {U:.2f} m/s (negative total damping: at or beyond "
-            "flutter); the model was caught and the fan stopped")
-        _update(session, outcome, step)
-        return None
-    _update(session, outcome, step)
-    return step
+        return "interrupted"
+    return "grown" if grown.is_set() else "done"
 
 
 def _update(session: _Session, outcome: CampaignOutcome, step: SpeedStep) -> None:

@@ -21,11 +21,10 @@ from typing import Any, NamedTuple
 import numpy as np
 import numpy.typing as npt
 
-from daq.calibration import AirCalibration, Calibration
-from daq.config import InstrumentConfig
+from daq.calibration import Calibration
+from daq.config import InstrumentConfig, RigConfig
 from daq.sync.conversions import forces_from_pressures, heave_pitch_from_lasers, wind_speed
 from daq.sync.resample import SyncBlock
-from ident.taps import TapLayout
 
 __all__ = ["SyncColumns", "physical_columns", "polled_conditions", "tap_columns"]
 
@@ -44,9 +43,8 @@ class SyncColumns(NamedTuple):
     rho: FloatArray
 
 
-def physical_columns(sb: SyncBlock, lasers: Sequence[InstrumentConfig], taps: TapLayout,
-                     rho_now: float, calibration: Calibration | None = None,
-                     fan_rpm: float = math.nan) -> SyncColumns:
+def physical_columns(sb: SyncBlock, lasers: Sequence[InstrumentConfig], config: RigConfig,
+                     rho_now: float, fan_rpm: float = math.nan) -> SyncColumns:
     """Convert one block of resampled streams into the sync view's physical columns.
 
     Parameters
@@ -57,16 +55,15 @@ def physical_columns(sb: SyncBlock, lasers: Sequence[InstrumentConfig], taps: Ta
     lasers : sequence of InstrumentConfig
         The lasers whose streams ``sb`` holds, in order (none, or two or more; the first three
         are used).
-    taps : TapLayout
-        The section's taps (coordinates, normals, tributary lengths).
+    config : RigConfig
+        The rig: its taps (coordinates, normals, tributary lengths) and its calibrations (dead
+        taps, Pitot, lasers).
     rho_now : float
         The air density in use, kg/m^3.
-    calibration : Calibration, optional
-        The rig's calibrations (dead taps, Pitot, lasers); default: none (identity).
     fan_rpm : float
         The fan speed now, rpm (a Pitot factor tabulated on it; NaN: unknown).
     """
-    cal = calibration if calibration is not None else Calibration()
+    taps, cal = config.taps, config.calibration
     n = len(sb)
     nan = np.full(n, np.nan)
     h, alpha = nan, nan
@@ -103,7 +100,7 @@ def tap_columns(calibration: Calibration, n_taps: int) -> slice | npt.NDArray[np
     return np.asarray(channels, dtype=np.intp)
 
 
-def polled_conditions(kind: str, values: Mapping[str, Any], air: AirCalibration,
+def polled_conditions(kind: str, values: Mapping[str, Any], config: RigConfig,
                       fan_rpm: float) -> tuple[float, float]:
     """Return the fan speed (rpm) and air density (kg/m^3) a polled device's block tells.
 
@@ -113,10 +110,11 @@ def polled_conditions(kind: str, values: Mapping[str, Any], air: AirCalibration,
         The device's engine kind (``"fan"``: its ``speed`` is the fan speed).
     values : mapping
         The block's channels (a barometer's carry ``density``, ``pressure``, ``temperature``).
-    air : AirCalibration
-        The driver's dry-air ``density``, or with a configured humidity (``[air]
-        relative_humidity``, a fraction or the barometer's own ``relative_humidity``) moist air
-        by CIPM-2007 from the row's pressure and temperature (NaN without the humidity).
+    config : RigConfig
+        The rig; its ``[air]`` calibration decides the density: the driver's dry-air
+        ``density``, or with a configured humidity (``[air] relative_humidity``, a fraction or
+        the barometer's own ``relative_humidity``) moist air by CIPM-2007 from the row's
+        pressure and temperature (NaN without the humidity).
     fan_rpm : float
         The fan speed known so far, rpm (returned unless the block has a finite one).
 
@@ -125,6 +123,7 @@ def polled_conditions(kind: str, values: Mapping[str, Any], air: AirCalibration,
     fan_rpm, rho : float
         The fan speed now, and the block's air density (NaN when it has none).
     """
+    air = config.calibration.air
     if kind == "fan" and "speed" in values:
         speed = float(np.asarray(values["speed"], dtype=np.float64)[-1])
         fan_rpm = speed if math.isfinite(speed) else fan_rpm

@@ -17,11 +17,13 @@ from typing import Any
 import numpy as np
 
 from daq.recording.recorder import RunRecorder
+from daq.tubing_config import tubing_metadata
 
 __all__ = ["write_release_run"]
 
 
-def write_release_run(path: str | Path, config: Any, releases: Sequence[Any]) -> None:
+def write_release_run(path: str | Path, config: Any, releases: Sequence[Any],
+                      pressures: Sequence[Any] | None = None) -> None:
     """Write releases back to back into a run file, with the acquisition's own recorder.
 
     Parameters
@@ -37,21 +39,32 @@ def write_release_run(path: str | Path, config: Any, releases: Sequence[Any]) ->
         release's ``t = 0`` (a simulated hold, ``pre_s``) are written before its release row's
         start; its ``h0``/``alpha0`` are the release's own when it has them, else the samples
         at ``t = 0``.
+    pressures : sequence of array_like, optional
+        Each release's tap pressures, Pa, shape ``(len(r.t), n_taps)`` (default zeros). The
+        config's tubing (``[[taps.tubing]]``) is recorded as ``/entry/metadata/tubing``, as the
+        run writer does; these pressures are taken as measured behind it. The config's
+        calibrations (dead taps, ...) are recorded under ``/entry/calibration`` too.
     """
     rec = RunRecorder(path, config_text=config.text, rig_name=config.name, min_free_bytes=0,
                       reserve_bytes=0)
     rec.open()
     n_taps = config.taps.n_taps
+    if getattr(config, "tubing", ()):
+        rec.add_metadata("tubing", tubing_metadata(config.tubing, n_taps))
     rec.add_sync([f"tap{i:03d}" for i in range(n_taps)])
+    if hasattr(config, "calibration"):  # /entry/calibration, as the run writer records it
+        rec.add_calibrations(config.calibration.records(n_taps))
     rec.start()
     rows, t0 = 0, 0.0
-    for r in releases:
+    for index, r in enumerate(releases):
         t = t0 - float(r.t[0]) + r.t  # the release's first sample (held or free) at t0
         n = t.size
         first = int(np.searchsorted(r.t, 0.0))  # the release instant, t = 0
         rho = 1.2 if r.rho is None else float(r.rho)
         rec.append_sync(t, h=r.h, alpha=r.alpha, lift=r.lift, moment=r.moment,
-                        pressure=np.zeros((n, n_taps), dtype=np.float32), U=np.full(n, r.U),
+                        pressure=(np.zeros((n, n_taps), dtype=np.float32) if pressures is None
+                                  else np.asarray(pressures[index], dtype=np.float32)),
+                        U=np.full(n, r.U),
                         rho=np.full(n, rho))
         rec.add_release(release_time=float(t[first]), start_index=rows + first,
                         stop_index=rows + n, U=r.U,

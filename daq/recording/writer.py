@@ -59,6 +59,7 @@ from daq.recording.recorder import Recorder, RunRecorder
 from daq.recording.releases import ReleaseRows
 from daq.recording.sync_view import physical_columns, polled_conditions, tap_columns
 from daq.sync.resample import Resampler, StreamSpec, SyncBlock
+from daq.tubing_config import tubing_metadata
 
 __all__ = ["DEFAULT_RHO", "DEFAULT_SYNC_RATE_HZ", "RunWriter", "default_sync_rate_hz"]
 
@@ -157,8 +158,7 @@ class RunWriter:
         self._trigger_events: deque[float] = deque(maxlen=64)
         self._view_pieces: dict[str, list[tuple[FloatArray, FloatArray]]] = {}
         self._n_taps = config.taps.n_taps
-        self._tap_columns = tap_columns(config.calibration, self._n_taps)  # the taps' wiring
-        self._fan_rpm = math.nan  # the fan's last speed, rpm (a Pitot factor table's input)
+        self._tap_columns, self._fan_rpm = tap_columns(config.calibration, self._n_taps), math.nan
 
     # -- dispatch ------------------------------------------------------------------------------
     def __call__(self, name: str, doc: Any) -> None:
@@ -206,6 +206,8 @@ class RunWriter:
             rec.open()
         self.recorder = rec
         n_taps = self.config.taps.n_taps
+        if self.config.tubing:  # what an offline reader needs to undo it (docs/file_format.md)
+            rec.add_metadata("tubing", tubing_metadata(self.config.tubing, n_taps))
         tap_names = [f"tap{i:03d}" for i in range(n_taps)]
         streams: list[StreamSpec] = []
         for name, info in doc["devices"].items():
@@ -257,8 +259,7 @@ class RunWriter:
         assert dev.raw_rows is not None
         table, extra = dev.raw_rows(values, n)
         self._raw.add(dev.name, block, table, extra)
-        self._fan_rpm, rho = polled_conditions(dev.kind, values, self.config.calibration.air,
-                                               self._fan_rpm)
+        self._fan_rpm, rho = polled_conditions(dev.kind, values, self.config, self._fan_rpm)
         if math.isfinite(rho) and rho > 0:
             self._rho, self._rho_measured = rho, True
         if block.device_time is None or dev.clock is None:
@@ -477,8 +478,7 @@ class RunWriter:
         rec = self.recorder
         assert rec is not None
         cols = physical_columns(sb, [self._lasers[name] for name in self._laser_order],
-                                self.config.taps, self._rho, self.config.calibration,
-                                self._fan_rpm)
+                                self.config, self._rho, self._fan_rpm)
         rec.append_sync(sb.time, h=cols.h, alpha=cols.alpha, lift=cols.lift, moment=cols.moment,
                         pressure=cols.pressure, U=cols.U, rho=cols.rho)
         base = self._sync_rows

@@ -27,6 +27,7 @@ from typing import Any
 
 from daq.config import InstrumentConfig, RigConfig
 from daq.errors import ConfigError
+from ident.tubing import Air, tubing_set
 from simulators.clock import Clock, DeviceClock
 from simulators.devices.abb_acs580 import SimAbbAcs580
 from simulators.devices.microepsilon_ild1420 import SimMicroEpsilonIld1420
@@ -148,12 +149,16 @@ def start_simulated_rig(
     if config.simulation is None:
         raise ConfigError(f"{config.source}: not a simulated rig (no [simulation] table)")
     sim = config.simulation
+    air = AirState(pressure_pa=sim.pressure_pa, temperature_k=sim.temperature_c + 273.15)
+    tubing = None
+    if sim.tubing:  # [simulation] tubing = true: the scanner sees the taps through the tubes
+        tubing = tubing_set(config.tubing, config.taps.n_taps,
+                            Air(pressure_pa=air.pressure_pa, temperature_k=air.temperature_k))
     tunnel = VirtualTunnel(
         config.section, config.aerodynamic_model(), config.taps,
         wind_per_rpm=config.wind_per_rpm, hold=(sim.hold_h, sim.hold_alpha),
-        air=AirState(pressure_pa=sim.pressure_pa, temperature_k=sim.temperature_c + 273.15),
-        clock=clock, static=sim.static, turbulence=sim.turbulence, span=sim.span,
-        seed=None if sim.turbulence is None else sim.turbulence_seed,
+        air=air, clock=clock, static=sim.static, turbulence=sim.turbulence, span=sim.span,
+        seed=None if sim.turbulence is None else sim.turbulence_seed, tubing=tubing,
     )
     rig = SimulatedRig(config=config, tunnel=tunnel, simulators={}, urls={})
     resolved: list[InstrumentConfig] = []

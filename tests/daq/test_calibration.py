@@ -258,8 +258,7 @@ def test_the_barometers_humidity_needs_a_barometer():
 
 def test_the_barometers_own_humidity_gives_the_density():
     """``relative_humidity = "barometer"``: each reading's RH; a reading without RH has none."""
-    air = parse_rig_config(BASE + '\n[air]\nrelative_humidity = "barometer"\n',
-                           "air.toml").calibration.air
+    air = parse_rig_config(BASE + '\n[air]\nrelative_humidity = "barometer"\n', "air.toml")
     values = {"pressure": np.array([101325.0]), "temperature": np.array([293.15]),
               "density": np.array([1.2041]), "relative_humidity": np.array([0.3])}
     rho = polled_conditions("barometer", values, air, math.nan)[1]
@@ -270,13 +269,13 @@ def test_the_barometers_own_humidity_gives_the_density():
 
 def test_humid_air_replaces_the_drivers_dry_density():
     text = BASE + "\n[air]\nrelative_humidity = 0.5\n"
-    air = parse_rig_config(text, "air.toml").calibration.air
+    air = parse_rig_config(text, "air.toml")
     values = {"pressure": np.array([101325.0]), "temperature": np.array([293.15]),
               "density": np.array([1.2041])}
     fan, rho = polled_conditions("barometer", values, air, 700.0)
     assert fan == 700.0
     assert rho == pytest.approx(float(moist_air_density(101325.0, 293.15, 0.5)), rel=1e-12)
-    dry = parse_rig_config(BASE, "dry.toml").calibration.air
+    dry = parse_rig_config(BASE, "dry.toml")
     assert polled_conditions("barometer", values, dry, 700.0)[1] == 1.2041
     speed = {"speed": np.array([650.0, np.nan])}
     assert polled_conditions("fan", speed, dry, 700.0) == (700.0, pytest.approx(math.nan,

@@ -54,6 +54,9 @@ def test_defaults_and_candidates():
     plan = parse_plan(ADAPTIVE, "p.toml")
     assert plan.releases_per_speed == 2 and plan.decay_s is None
     assert plan.settle_s == 1.0 and plan.calz_start and plan.calz_end
+    assert plan.files == "per_speed"
+    assert parse_plan(FIXED.replace("decay_s = 5.0", 'decay_s = 5.0\nfiles = "per_release"')
+                      ).files == "per_release"
     assert plan.adaptive is not None
     assert plan.adaptive.safety_fraction == 0.9
     assert len(plan.adaptive.candidates()) == 13
@@ -75,6 +78,8 @@ def test_fan_set_points_become_wind_speeds():
     ("wind_speeds = [5.0, 7.0]", "wind_speeds = [5.0]\nfan_rpm = [500]",
      r"exactly one of wind_speeds"),
     ("decay_s = 5.0", "decay_s = 5.0\ncalz_end = 1", r"calz_end must be true or false"),
+    ("decay_s = 5.0", 'decay_s = 5.0\nfiles = "per_run"',
+     r"files = 'per_run'; allowed: per_speed, per_release"),
 ])
 def test_fixed_plan_errors_name_the_key(old, new, match):
     assert old in FIXED

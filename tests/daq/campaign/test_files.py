@@ -1,0 +1,29 @@
+"""A campaign directory's file names, and grouping an earlier session's files by speed."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from daq.campaign.files import interrupted_name, read_back, run_file_name
+
+
+def test_names_of_speeds_releases_and_interrupted_files():
+    assert run_file_name(1, 5.0) == "speed01_U05.00.h5"
+    assert run_file_name(12, 11.849, 3) == "speed12_U11.85_r03.h5"
+    assert interrupted_name(Path("d/speed01_U05.00_r02.h5")) == \
+        Path("d/speed01_U05.00_r02.interrupted.h5")
+
+
+def test_read_back_groups_by_speed_skips_interrupted_and_reports_unreadable(tmp_path):
+    for name in ("speed02_U07.00_r02.h5", "speed01_U05.00.h5", "speed02_U07.00_r01.h5",
+                 "speed03_U08.50_r01.interrupted.h5", "notes.txt", "speed1_U5.h5"):
+        (tmp_path / name).write_bytes(b"not hdf5")
+    said: list[str] = []
+    speeds = read_back(tmp_path, said.append)
+
+    assert [(s.index, s.U) for s in speeds] == [(1, 5.0), (2, 7.0)]
+    assert [p.name for p in speeds[1].paths] == ["speed02_U07.00_r01.h5",
+                                                "speed02_U07.00_r02.h5"]
+    # None of them is a run file: each is named once, kept out of the fit, none invented.
+    assert len(said) == 3 and all("is not usable" in line for line in said)
+    assert all(s.runs == [] and s.releases == 0 for s in speeds)
