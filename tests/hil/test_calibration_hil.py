@@ -11,7 +11,7 @@ moment of the 60 live taps against all 62 taps integrated from the same recorded
 differ by 0.42-0.49 % and 0.21-0.24 % of the decay's rms lift and moment, sample by sample
 (tolerance 1 %; the difference is the dead taps' noise: without noise the redistribution
 is exact to 0.06 % for this pressure field, tests/ident/test_taps_without.py); lift and moment
-against the tunnel's truth: correlation 0.9997-0.9998; U 9.019-9.020 m/s against 9.000
+against the tunnel's truth: correlation 0.9997-0.9998; U 9.017-9.020 m/s against 9.000
 (tolerance 1 %: the humid density is 0.4 % below the simulated dry air, so U is 0.2 % high;
 without the Pitot calibration U would be 2.4 % low).
 """
