@@ -4,7 +4,8 @@ One short recording (real drivers over loopback, the engine, the run writer, an 
 the flat-plate rig with every calibration of the rig config in use. The simulators read the same
 config and build the errors the calibrations undo (daq.sim.rig): each tap's pressure on its
 wired channel of two scanner modules, in no particular order; a Pitot that reads the dynamic
-pressure / 1.05; a check laser tilted by 8 degrees with a gain and offset error.
+pressure / 1.05; a check laser tilted by 8 degrees with a gain and offset error; a barometer
+that reports 45 %RH (a PTU300-class line), which gives the humid air density.
 
 Measured (this machine, 3 runs of 3.5 s at 9 m/s, scanner noise 0.1 Pa per tap): lift and
 moment of the 60 live taps against all 62 taps integrated from the same recorded pressures
