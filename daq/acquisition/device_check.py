@@ -538,7 +538,7 @@ def _why(exc: BaseException) -> str:
 
 
 def _span(seconds: float) -> str:
-    """A signed duration in the unit that reads best: ``+1.2 ms``, ``-329.4 d``."""
+    """Format a signed duration in the unit that reads best: ``+1.2 ms``, ``-329.4 d``."""
     size = abs(seconds)
     for unit, scale in (("d", 86400.0), ("h", 3600.0), ("s", 1.0), ("ms", 1e-3)):
         if size >= scale:

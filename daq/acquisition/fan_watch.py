@@ -60,6 +60,7 @@ class FanWatch:
         self._streak: list[tuple[int, float]] = []  # polls within tolerance: (host ns, rpm)
 
     def __call__(self, name: str, doc: Any) -> None:
+        """Take one engine doc (dispatcher thread): a fan command, or the fan's readings."""
         if name == "event" and getattr(doc, "device", None) == self.fan:
             self._command(doc)
         elif name == "block" and getattr(doc, "device", None) == self.fan:

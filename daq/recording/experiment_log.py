@@ -1,4 +1,4 @@
-"""A run's experiment log: its events as plain text next to the run file (``RUN.h5`` -> ``RUN.log``).
+"""A run's experiment log: its events as plain text beside the run file (RUN.h5 -> RUN.log).
 
 Responsibility: :class:`ExperimentLog` receives every row the recorder appends to
 ``/entry/events`` (it is the :class:`~daq.recording.recorder.RunRecorder`'s ``event_sink``) and

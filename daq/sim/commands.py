@@ -59,8 +59,9 @@ def run_check(config_path: Path, *, simulate: bool = False, json_path: Path | No
     failed = failure_lines(results)
     for line in failed:
         print(f"FAIL {line}")
+    names = ", ".join(r.device for r in results if not r.ok)
     print(f"{len(results) - len(failed)} of {len(results)} device(s) OK"
-          + ("" if not failed else f"; failing: {', '.join(r.device for r in results if not r.ok)}"))
+          + (f"; failing: {names}" if failed else ""))
     if json_path is not None:
         json_path.write_text(json.dumps({
             "config": config.source, "rig": config.name, "simulated": simulate,
