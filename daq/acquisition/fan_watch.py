@@ -56,6 +56,7 @@ class FanWatch:
         self._post = post_event
         self._setpoint = 0.0
         self._running = False
+        self._target = 0.0  # what the drive was last asked for (0 before any command)
         self._pending: tuple[float, int] | None = None  # (target, command host ns)
         self._streak: list[tuple[int, float]] = []  # polls within tolerance: (host ns, rpm)
 
@@ -76,7 +77,8 @@ class FanWatch:
         else:
             return
         target = self._setpoint if self._running else 0.0
-        if self._pending is None or self._pending[0] != target:
+        if target != self._target:
+            self._target = target
             self._pending = (target, int(event.host_time_ns))
             self._streak = []
 
