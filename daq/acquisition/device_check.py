@@ -110,10 +110,11 @@ class CheckResult:
     identity : str
         Identity and firmware as the protocol gives them ("" when it gives none).
     rate_hz : float or None
-        Measured rate, Hz: samples per second of the device's own clock (scanner, lasers), or
-        polls answered per second of the host's (the polled devices).
+        Measured rate, Hz: samples per second of the device's own clock (scanner, lasers).
     nominal_rate_hz : float or None
         The configured rate, Hz (clocked devices).
+    poll_s : float or None
+        Median round trip of one poll, s (the polled devices: fan, PLC, barometer).
     clock : str
         The device's time base and its time against the host's ("" for devices without a
         clock).
@@ -135,6 +136,7 @@ class CheckResult:
     identity: str = ""
     rate_hz: float | None = None
     nominal_rate_hz: float | None = None
+    poll_s: float | None = None
     clock: str = ""
     readings: str = ""
     problems: tuple[str, ...] = ()
@@ -162,6 +164,7 @@ class _Findings:
     identity: str = ""
     rate_hz: float | None = None
     nominal_rate_hz: float | None = None
+    poll_s: float | None = None
     clock: str = ""
     readings: str = ""
     problems: list[str] = field(default_factory=list)
@@ -253,6 +256,8 @@ def format_table(results: Sequence[CheckResult]) -> str:
         rate = "" if r.rate_hz is None else f"{r.rate_hz:.1f} Hz"
         if r.nominal_rate_hz is not None and r.rate_hz is not None:
             rate += f" (of {r.nominal_rate_hz:g})"
+        if r.poll_s is not None:
+            rate = f"poll {r.poll_s * 1e3:.1f} ms"
         rows.append((r.device, r.driver, r.url, "yes" if r.reachable else "NO",
                      r.identity or "-", rate or "-", r.clock or "-", r.readings or "-",
                      "OK" if r.ok else "FAIL"))
@@ -305,7 +310,8 @@ class _DeviceCheck:
         return CheckResult(
             device=self.inst.name, driver=self.inst.driver, url=self.inst.url, kind=self.kind,
             reachable=found.reachable, identity=found.identity, rate_hz=found.rate_hz,
-            nominal_rate_hz=found.nominal_rate_hz, clock=found.clock, readings=found.readings,
+            nominal_rate_hz=found.nominal_rate_hz, poll_s=found.poll_s, clock=found.clock,
+            readings=found.readings,
             problems=tuple(problems), notes=tuple(found.notes), elapsed_s=elapsed)
 
     # -- the device's thread ---------------------------------------------------------------------
@@ -351,18 +357,20 @@ class _DeviceCheck:
         return readings
 
     def polls(self, read: Callable[[], Reading], n: int = 3) -> list[Reading]:
-        """Poll a device ``n`` times over ``window_s``; measure the polls' rate."""
+        """Poll a device ``n`` times over ``window_s``; measure the median round trip."""
         readings: list[Reading] = []
+        trips: list[float] = []
         start = time.monotonic()
         for i in range(n):
             if self._abandoned is not None:
                 break
+            sent = time.monotonic()
             readings.append(read())
+            trips.append(time.monotonic() - sent)
             wait = start + (i + 1) * self.window_s / n - time.monotonic()
             if i + 1 < n and wait > 0:
                 time.sleep(wait)
-        took = time.monotonic() - start
-        self.found.rate_hz = len(readings) / took if took > 0 else None
+        self.found.poll_s = float(np.median(trips)) if trips else None
         return readings
 
 
