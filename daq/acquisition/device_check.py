@@ -326,7 +326,8 @@ class _DeviceCheck:
             try:
                 self.driver.open()
             except (DaqError, OSError) as exc:
-                found.problems.append(f"unreachable: {_why(exc)}")
+                if self._abandoned is None:  # else: closed under it, "no answer" says why
+                    found.problems.append(f"unreachable: {_why(exc)}")
                 return self._done()
             found.reachable = True
             INSPECT[self.kind](self, self.driver, found)

@@ -83,6 +83,25 @@ def test_check_names_a_stopped_device_and_still_checks_the_others(rig, tmp_path,
     assert took < 3.0
 
 
+def test_a_device_that_never_answers_is_given_up_after_the_timeout(rig):
+    """A port that accepts and stays silent: that device fails on time, the other passes."""
+    import dataclasses
+    import socket
+
+    with socket.create_server(("127.0.0.1", 0)) as silent:
+        url = f"tcp://127.0.0.1:{silent.getsockname()[1]}"
+        instruments = tuple(dataclasses.replace(i, url=url) if i.name == "scanner" else i
+                            for i in rig.config.instruments)
+        config = dataclasses.replace(rig.config, instruments=instruments)
+        start = time.monotonic()
+        results = {r.device: r for r in check_rig(config, timeout_s=1.0, only=["scanner",
+                                                                             "fan"])}
+        took = time.monotonic() - start
+    assert results["scanner"].problems == ("no answer within 1 s",)
+    assert results["fan"].ok
+    assert took < 2.5  # the timeout, plus at most 1 s for the closed driver's thread to end
+
+
 def test_a_running_fan_fails_the_wind_off_check(rig):
     """A plausibility rule: the fan must be stopped before a test (wind off)."""
     inst = rig.config.instrument("fan")
