@@ -139,8 +139,10 @@ class Acquisition:
                 backoff_max_s=backoff_max_s)
         self._state = "idle"  # idle -> starting -> running -> stopping -> stopped (or failed)
         self._state_lock = threading.Lock()
-        for fan in [n for n, r in self._readers.items() if r.kind == "fan"]:  # first: fan_reached
-            self._dispatch.subscribe(FanWatch(fan, self._post_event))
+        for fan, r in self._readers.items():  # first of all: fan_reached
+            if r.kind == "fan":
+                ramp = getattr(getattr(r.driver, "settings", None), "ramp_rpm_per_s", None)
+                self._dispatch.subscribe(FanWatch(fan, self._post_event, ramp))
         for sub in subscribers:
             self.subscribe(sub)
         self._metadata = dict(metadata or {})

@@ -7,7 +7,9 @@ set-point while it runs, 0 once stopped) and the drive's polled actual speed (th
 ``speed`` channel, rpm). When the target changed and the actual speed then stays within
 tolerance of it for :data:`SETTLE_POLLS` polls in a row, it posts one ``"fan_reached"`` event
 at the first of those polls, with the actual speed, the target and the time since the command:
-the run's record of when the wind was there. Runs on the dispatcher thread (no lock needed).
+the run's record of when the wind was there. A target not reached in the time the drive's ramp
+allows (the driver's own ``wait_for_speed`` allowance: 1.5 times the ramp's time, plus 2 s) is
+a ``"warning"`` event, once per command. Runs on the dispatcher thread (no lock needed).
 
 Not responsible for: commanding the fan (:mod:`daq.acquisition.commands`) or refusing speeds
 (the driver).
@@ -49,11 +51,18 @@ class FanWatch:
         The fan drive's device name.
     post_event : callable
         Posts an :class:`~daq.acquisition.records.Event` (the engine's).
+    ramp_rpm_per_s : float, optional
+        The drive's ramp (its driver's ``settings.ramp_rpm_per_s``); None: no warning when a
+        target takes long.
     """
 
-    def __init__(self, fan: str, post_event: Callable[[Event], None]) -> None:
+    def __init__(self, fan: str, post_event: Callable[[Event], None],
+                 ramp_rpm_per_s: float | None = None) -> None:
         self.fan = fan
         self._post = post_event
+        self._ramp = ramp_rpm_per_s
+        self._actual = 0.0  # the last actual speed read, rpm
+        self._deadline_ns: int | None = None  # warn when the target is not reached by then
         self._setpoint = 0.0
         self._running = False
         self._target = 0.0  # what the drive was last asked for (0 before any command)
@@ -81,6 +90,10 @@ class FanWatch:
             self._target = target
             self._pending = (target, int(event.host_time_ns))
             self._streak = []
+            self._deadline_ns = None
+            if self._ramp is not None and self._ramp > 0:
+                allowed_s = 1.5 * abs(target - self._actual) / self._ramp + 2.0
+                self._deadline_ns = int(event.host_time_ns) + round(allowed_s * 1e9)
 
     def _speeds(self, host_ns: Any, speed: Any) -> None:
         if self._pending is None or speed is None:
@@ -89,8 +102,17 @@ class FanWatch:
         tolerance = reached_tolerance_rpm(target)
         for t_ns, rpm in zip(np.asarray(host_ns).tolist(), np.asarray(speed).tolist(),
                              strict=True):
+            if math.isfinite(rpm):
+                self._actual = float(rpm)
             if t_ns < commanded:
                 continue
+            if self._deadline_ns is not None and t_ns > self._deadline_ns:
+                self._deadline_ns = None
+                self._post(Event(kind="warning", host_time_ns=int(t_ns), device=self.fan,
+                                 text=f"fan has not reached {target:g} rpm after "
+                                      f"{(t_ns - commanded) * 1e-9:.1f} s (actual {rpm:.0f} "
+                                      f"rpm, ramp {self._ramp:g} rpm/s)",
+                                 data={"rpm": rpm, "setpoint_rpm": target}))
             if not (math.isfinite(rpm) and abs(rpm - target) <= tolerance):
                 self._streak = []
                 continue

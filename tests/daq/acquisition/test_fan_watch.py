@@ -57,3 +57,20 @@ def test_a_stop_is_reached_at_zero_and_other_devices_are_ignored():
 def test_the_tolerance_is_one_percent_with_a_floor():
     assert reached_tolerance_rpm(1200.0) == pytest.approx(12.0)
     assert reached_tolerance_rpm(100.0) == 5.0
+
+
+def test_a_target_not_reached_in_the_ramp_time_is_a_warning_once():
+    posted: list[Event] = []
+    watch = FanWatch("fan", posted.append, ramp_rpm_per_s=100.0)
+    watch("event", Event(kind="fan_speed", host_time_ns=0, device="fan", data={"rpm": 300.0}))
+    watch("event", Event(kind="fan_start", host_time_ns=0, device="fan"))
+    # 300 rpm at 100 rpm/s from rest: allowed 1.5 x 3 s + 2 s = 6.5 s. The drive stalls at
+    # 250 rpm: one warning at the first poll past 6.5 s, then none.
+    for i in range(100):  # 10 s at 10 Hz
+        watch("block", _block(i, i * 100_000_000, min(100.0 * i / 10, 250.0)))
+    assert [e.kind for e in posted] == ["warning"]
+    assert posted[0].host_time_ns == 66 * 100_000_000
+    assert "has not reached 300 rpm after 6.6 s (actual 250 rpm" in posted[0].text
+    # Reached later after all: fan_reached as usual.
+    _feed_ramp(watch, 10**10, [300.0] * 3)
+    assert [e.kind for e in posted] == ["warning", "fan_reached"]
