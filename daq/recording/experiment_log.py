@@ -19,11 +19,15 @@ rows (:mod:`daq.recording.recorder`).
 from __future__ import annotations
 
 import logging
+import os
 import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
-__all__ = ["LOG_SKIPPED_KINDS", "ExperimentLog", "experiment_log_path"]
+from daq.errors import UsageError
+from daq.log_file import LOGGERS
+
+__all__ = ["LOG_SKIPPED_KINDS", "ExperimentLog", "experiment_log_path", "refuse_logging_to"]
 
 log = logging.getLogger(__name__)
 
@@ -34,6 +38,22 @@ LOG_SKIPPED_KINDS = frozenset({"trigger"})
 def experiment_log_path(run_path: str | Path) -> Path:
     """Return the text log's path of a run file: ``RUN.h5`` -> ``RUN.log``."""
     return Path(run_path).with_suffix(".log")
+
+
+def refuse_logging_to(path: str | Path) -> None:
+    """Refuse a text log that a command's log file already is (``--log-file RUN.log``).
+
+    Raises
+    ------
+    UsageError
+        A ``logging`` file handler of windrig's loggers (or the root's) writes to ``path``.
+    """
+    target = os.path.abspath(path)
+    for name in ("", *LOGGERS):
+        for handler in logging.getLogger(name).handlers:
+            if isinstance(handler, logging.FileHandler) and handler.baseFilename == target:
+                raise UsageError(f"--log-file {path} is the run's experiment log (its events "
+                                 "as text, beside the run file): give the log file another name")
 
 
 class ExperimentLog:

@@ -35,7 +35,11 @@ from daq.acquisition.engine import Acquisition
 from daq.acquisition.sync_pulses import SYNC_PULSE_INTERVAL_S, SyncPulses, start_sync_pulses
 from daq.config import RigConfig
 from daq.errors import StorageError
-from daq.recording.experiment_log import ExperimentLog, experiment_log_path
+from daq.recording.experiment_log import (
+    ExperimentLog,
+    experiment_log_path,
+    refuse_logging_to,
+)
 from daq.recording.layout import metadata_name_part
 from daq.recording.recorder import RunRecorder
 from daq.recording.writer import RunWriter
@@ -153,6 +157,7 @@ def record_run(config: RigConfig, out_path: str | Path, *, duration_s: float,
         writer.recorder = recorder  # opened above; declared and started at the "start" doc
         checked = require_devices_ok(config) if check else []
         if experiment_log:
+            refuse_logging_to(experiment_log_path(path))
             recorder.event_sink = ExperimentLog(
                 experiment_log_path(path), [i.name for i in config.instruments],
                 lambda: writer.t0_ns, run_file=path.name)

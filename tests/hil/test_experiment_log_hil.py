@@ -78,3 +78,15 @@ def test_a_scripted_session_is_in_the_events_and_the_text_log(tmp_path):
         device = m.group(4)
         assert (text == m.group(5)) if device == "-" else (text == f"{device}: {m.group(5)}")
     assert "fan_reached" in seen
+
+
+def test_a_log_file_named_as_the_experiment_log_is_refused(tmp_path, capsys):
+    """`acquire --log-file RUN.log --out RUN.h5` would write two logs into one file."""
+    from daq.cli import main
+
+    out = tmp_path / "run.h5"
+    code = main(["acquire", "--config", str(CONFIG), "--simulate", "--duration", "1", "--out",
+                 str(out), "--log-file", str(tmp_path / "run.log"), "--skip-check"])
+    assert code == 2
+    assert "is the run's experiment log" in capsys.readouterr().err
+    assert not out.exists()
