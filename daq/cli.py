@@ -112,18 +112,15 @@ def _build_parser() -> argparse.ArgumentParser:
                        help="serve serial instruments over socket:// (default) or a pty pair")
     p_sim.add_argument("--duration", type=float, default=None,
                        help="seconds to run, then stop (default: until Ctrl-C)")
-    p_sim.add_argument("--write-config", type=Path, default=None, metavar="OUT.toml",
-                       help="write a rig config whose URLs are the running simulators' (for "
-                            "windrig check / acquire --config OUT.toml, no --simulate)")
+    p_sim.add_argument("--write-config", type=Path, metavar="OUT.toml",
+                       help="write a rig config of the running simulators' URLs (a real one)")
 
     p_check = sub.add_parser(
         "check", help="contact every device of a rig config: reachable, identity, rate, clock, "
                       "plausible wind-off readings; exit 1 naming each failing device")
     p_check.add_argument("--config", type=Path, required=True, help="rig config TOML")
-    p_check.add_argument("--simulate", action="store_true",
-                         help="start the rig's simulated instruments (else: the config's URLs)")
-    p_check.add_argument("--json", type=Path, default=None, metavar="OUT.json",
-                         help="also write every device's result to this JSON file")
+    p_check.add_argument("--simulate", action="store_true", help="check the simulated rig")
+    p_check.add_argument("--json", type=Path, metavar="OUT.json", help="also write the results")
     p_check.add_argument("--timeout", type=float, default=2.0, help="per device, s (default 2)")
 
     p_acq = sub.add_parser(
@@ -142,8 +139,7 @@ def _build_parser() -> argparse.ArgumentParser:
     p_acq.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING",
                                                                "ERROR"),
                        help="lowest level written to --log-file (default INFO)")
-    p_acq.add_argument("--skip-check", action="store_true",
-                       help="record without checking every device first (windrig check)")
+    p_acq.add_argument("--skip-check", action="store_true", help="no device check first")
 
     p_rec = sub.add_parser(
         "recover",
@@ -194,8 +190,7 @@ def _build_parser() -> argparse.ArgumentParser:
     p_gui.add_argument("--auto-release", type=_rpm_list, default=(), metavar="RPM[,RPM...]",
                        help="simulated rig only: a hands-free session, one release (arm, "
                             "hold, release, decay, arm) at each fan speed in turn")
-    p_gui.add_argument("--skip-check", action="store_true",
-                       help="live mode: start without checking every device (windrig check)")
+    p_gui.add_argument("--skip-check", action="store_true", help="live: no device check first")
     return parser
 
 
