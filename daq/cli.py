@@ -164,6 +164,7 @@ def _build_parser() -> argparse.ArgumentParser:
                         help="start the rig's simulated instruments (else: the config's URLs)")
     p_camp.add_argument("--out", type=Path, required=True,
                         help="directory for the run files and the report (resumed if present)")
+    p_camp.add_argument("--skip-check", action="store_true", help="do not check every device first")
 
     p_gui = sub.add_parser(
         "gui", help="the operator console: a live (simulated) rig, or replay of a run file")
@@ -562,7 +563,8 @@ def _dispatch(args: argparse.Namespace) -> int:
     if args.command == "campaign":
         from daq.campaign.command import run_command  # per-subcommand import: fast --help
 
-        return run_command(args.plan, args.config, args.out, simulate=args.simulate)
+        return run_command(args.plan, args.config, args.out, simulate=args.simulate,
+                           check=not args.skip_check)
     if args.command == "simulate":
         from daq.sim.commands import run_simulate
 

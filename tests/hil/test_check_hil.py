@@ -182,3 +182,20 @@ def test_simulate_write_config_gives_a_real_config_that_check_and_acquire_use(tm
             proc.kill()
             proc.communicate()
     assert proc.returncode == 0
+
+
+def test_a_campaign_checks_every_device_before_the_fan_moves(rig, tmp_path, capsys):
+    """`windrig campaign` names the failing device, moves nothing and writes nothing."""
+    config = _live_config(rig, tmp_path)
+    plan = tmp_path / "plan.toml"
+    plan.write_text('[campaign]\nmode = "fixed"\n\n[speeds]\nwind_speeds = [5.0, 7.0]\n')
+    rig.simulators["laser_rear"].stop()
+    out = tmp_path / "campaign"
+    assert main(["campaign", str(plan), "--config", str(config), "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert any(line.startswith("error: laser_rear (") for line in err.splitlines()), err
+    assert "nothing recorded" in err
+    assert not out.exists()  # no directory, no run file, no report
+    fan = build_driver(load_rig_config(config).instrument("fan"), rig.config.limits)
+    with fan:
+        assert fan.speed() == 0.0  # never started
