@@ -16,7 +16,6 @@ import argparse
 import json
 import os
 import sys
-import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -114,6 +113,16 @@ def _build_parser() -> argparse.ArgumentParser:
                        help="serve serial instruments over socket:// (default) or a pty pair")
     p_sim.add_argument("--duration", type=float, default=None,
                        help="seconds to run, then stop (default: until Ctrl-C)")
+    p_sim.add_argument("--write-config", type=Path, metavar="OUT.toml",
+                       help="write a rig config of the running simulators' URLs (a real one)")
+
+    p_check = sub.add_parser(
+        "check", help="contact every device of a rig config: reachable, identity, rate, clock, "
+                      "plausible wind-off readings; exit 1 naming each failing device")
+    p_check.add_argument("--config", type=Path, required=True, help="rig config TOML")
+    p_check.add_argument("--simulate", action="store_true", help="check the simulated rig")
+    p_check.add_argument("--json", type=Path, metavar="OUT.json", help="also write the results")
+    p_check.add_argument("--timeout", type=float, default=2.0, help="per device, s (default 2)")
 
     p_acq = sub.add_parser(
         "acquire",
@@ -131,6 +140,7 @@ def _build_parser() -> argparse.ArgumentParser:
     p_acq.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING",
                                                                "ERROR"),
                        help="lowest level written to --log-file (default INFO)")
+    p_acq.add_argument("--skip-check", action="store_true", help="no device check first")
 
     p_rec = sub.add_parser(
         "recover",
@@ -154,6 +164,7 @@ def _build_parser() -> argparse.ArgumentParser:
                         help="start the rig's simulated instruments (else: the config's URLs)")
     p_camp.add_argument("--out", type=Path, required=True,
                         help="directory for the run files and the report (resumed if present)")
+    p_camp.add_argument("--skip-check", action="store_true", help="do not check every device first")
 
     p_gui = sub.add_parser(
         "gui", help="the operator console: a live (simulated) rig, or replay of a run file")
@@ -181,6 +192,7 @@ def _build_parser() -> argparse.ArgumentParser:
     p_gui.add_argument("--auto-release", type=_rpm_list, default=(), metavar="RPM[,RPM...]",
                        help="simulated rig only: a hands-free session, one release (arm, "
                             "hold, release, decay, arm) at each fan speed in turn")
+    p_gui.add_argument("--skip-check", action="store_true", help="live: no device check first")
     return parser
 
 
@@ -200,30 +212,32 @@ def _gui(args: argparse.Namespace) -> int:
                               fan_rpm=args.fan_rpm, speed=args.speed, window_s=args.window,
                               screenshot=args.screenshot, after_s=args.after,
                               size=(args.size[0], args.size[1]), record_dir=args.record_dir,
-                              auto_release=args.auto_release))
+                              auto_release=args.auto_release,
+                              check=not args.skip_check))
 
 
 def _acquire(args: argparse.Namespace) -> int:
     from daq.config import load_rig_config
     from daq.recording.run import record_run
+    from daq.sim.commands import refuse_auto_urls
     from daq.sim.recording import record_simulated_run
 
     if not args.duration > 0:
         raise UsageError(f"--duration {args.duration:g}: must be > 0 s")
     config = load_rig_config(args.config)
     if not args.simulate:
-        auto = [inst.name for inst in config.instruments if inst.url == "auto"]
-        if auto:
-            print(f"error: {args.config}: instrument(s) {auto} have url = 'auto' (a simulated "
-                  "rig): pass --simulate, or give their real URLs", file=sys.stderr)
-            return 2
-    from daq.errors import StorageError
+        refuse_auto_urls(config, args.config)
+    from daq.errors import DeviceCheckError, StorageError
     from daq.recording.recorder import failed_writes
 
     try:
         record = record_simulated_run if args.simulate else record_run
         summary = record(config, args.out, duration_s=args.duration, operator_notes=args.notes,
-                         progress=sys.stderr.isatty())
+                         progress=sys.stderr.isatty(), check=not args.skip_check)
+    except DeviceCheckError as exc:  # every failing device on a line of its own
+        print("\n".join(f"error: {line}" for line in str(exc).splitlines())
+              + "\nnothing recorded (--skip-check records anyway)", file=sys.stderr)
+        return 1
     except StorageError as exc:
         print(f"error: {exc}", file=sys.stderr)
         if args.log_file is not None:  # else logging's last resort would print it again
@@ -280,31 +294,6 @@ def _logged(args: argparse.Namespace, command: Callable[[argparse.Namespace], in
         return code
     finally:
         close_log_file(handler)
-
-
-def _simulate(args: argparse.Namespace) -> int:
-    from daq.config import load_rig_config
-    from daq.sim.rig import start_simulated_rig
-
-    if args.duration is not None and not args.duration > 0:
-        raise UsageError(f"--duration {args.duration:g}: must be > 0 s")
-    config = load_rig_config(args.config)
-    with start_simulated_rig(config, serial=args.serial) as rig:
-        print(f"{config.name}: simulated instruments on 127.0.0.1 (Ctrl-C stops them)")
-        for inst in rig.config.instruments:
-            extra = (f"  (binary data port {inst.settings['data_port']})"
-                     if "data_port" in inst.settings else "")
-            print(f"  {inst.name:<14} {inst.driver:<22} {inst.url}{extra}")
-        sys.stdout.flush()
-        try:
-            if args.duration is None:
-                while True:
-                    time.sleep(1.0)
-            else:
-                time.sleep(args.duration)
-        except KeyboardInterrupt:
-            print("stopping the simulators")
-    return 0
 
 
 def _identify(args: argparse.Namespace) -> int:
@@ -574,9 +563,18 @@ def _dispatch(args: argparse.Namespace) -> int:
     if args.command == "campaign":
         from daq.campaign.command import run_command  # per-subcommand import: fast --help
 
-        return run_command(args.plan, args.config, args.out, simulate=args.simulate)
+        return run_command(args.plan, args.config, args.out, simulate=args.simulate,
+                           check=not args.skip_check)
     if args.command == "simulate":
-        return _simulate(args)
+        from daq.sim.commands import run_simulate
+
+        return run_simulate(args.config, serial=args.serial, duration_s=args.duration,
+                            write_config=args.write_config)
+    if args.command == "check":
+        from daq.sim.commands import run_check
+
+        return run_check(args.config, simulate=args.simulate, json_path=args.json,
+                         timeout_s=args.timeout)
     if args.command == "identify":
         return _identify(args)
     if args.command == "reprocess":

@@ -25,7 +25,8 @@ The tree::
     ├── RecordingError(RuntimeError)     a console recording request that cannot be served now
     ├── ReplayError(ValueError)          a run file that cannot be replayed
     ├── AcquisitionProcessError(RuntimeError)  the console's acquisition process is gone
-    └── RemoteError(RuntimeError)        an error of that process that could not be sent as is
+    ├── RemoteError(RuntimeError)        an error of that process that could not be sent as is
+    └── DeviceCheckError(RuntimeError)   the check before a run found devices wrong (all named)
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ __all__ = [
     "CalzError",
     "ConfigError",
     "DaqError",
+    "DeviceCheckError",
     "DeviceError",
     "InsufficientSpaceError",
     "ModbusDeviceError",
@@ -169,4 +171,11 @@ class RemoteError(DaqError, RuntimeError):
     """An exception raised in the acquisition process that could not be sent as it was.
 
     Its message is the original's type name and message.
+    """
+
+
+class DeviceCheckError(DaqError, RuntimeError):
+    """The device check before a run (``windrig check``) found devices wrong.
+
+    Its message names every failing device with its reason, one per line.
     """

@@ -9,7 +9,11 @@
 - :mod:`~daq.acquisition.commands`: what each operator command does and the event it records;
 - :mod:`~daq.acquisition.calz`: a CALZ during a run (the scan paused, zeroed, restarted);
 - :mod:`~daq.acquisition.sync_pulses`: trigger pulses every 0.5 s, the clocks' anchors;
-- :mod:`~daq.acquisition.drivers`: every configured instrument's driver, for the engine.
+- :mod:`~daq.acquisition.drivers`: every configured instrument's driver, for the engine;
+- :mod:`~daq.acquisition.fan_watch`: the fan's actual speed against its set-point
+  (``fan_reached`` events);
+- :mod:`~daq.acquisition.device_check`: ``windrig check``: every device contacted, read and
+  judged before a test.
 
 Nothing here touches h5py or Qt, and nothing knows a simulator.
 """

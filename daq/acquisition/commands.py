@@ -63,14 +63,14 @@ def _command(name: str, post_event: PostEvent | None, action: Callable[[], objec
     return event
 
 
-def marker(kind: str, text: str) -> Event:
-    """Return an operator marker event (time: now); refuse an empty or reserved ``kind``."""
+def marker(kind: str, text: str, device: str | None = None) -> Event:
+    """Return a marker event of ``device`` (time: now); refuse an empty or reserved ``kind``."""
     if not isinstance(kind, str) or not kind.strip():
         raise ValueError(f"a marker kind is a non-empty string, got {kind!r}")
     if kind in SYSTEM_EVENT_KINDS:
         raise ValueError(f"marker kind {kind!r} is reserved for the engine's own events "
                          f"{sorted(SYSTEM_EVENT_KINDS)}")
-    return Event(kind=kind, host_time_ns=time.monotonic_ns(), text=str(text))
+    return Event(kind=kind, host_time_ns=time.monotonic_ns(), text=str(text), device=device)
 
 
 def release(name: str, driver: Any, post_event: PostEvent) -> Event:

@@ -49,6 +49,7 @@ from typing import Any
 from daq.acquisition import commands
 from daq.acquisition.calz import CalzResult, refuse_unsafe_calz, run_calz
 from daq.acquisition.dispatch import Dispatcher, Subscriber
+from daq.acquisition.fan_watch import FanWatch
 from daq.acquisition.reader import DeviceReader
 from daq.acquisition.records import DeviceStats, Event
 
@@ -138,6 +139,10 @@ class Acquisition:
                 backoff_max_s=backoff_max_s)
         self._state = "idle"  # idle -> starting -> running -> stopping -> stopped (or failed)
         self._state_lock = threading.Lock()
+        for fan, r in self._readers.items():  # first of all: fan_reached
+            if r.kind == "fan":
+                ramp = getattr(getattr(r.driver, "settings", None), "ramp_rpm_per_s", None)
+                self._dispatch.subscribe(FanWatch(fan, self._post_event, ramp))
         for sub in subscribers:
             self.subscribe(sub)
         self._metadata = dict(metadata or {})
@@ -340,8 +345,8 @@ class Acquisition:
                 log.warning("interrupted again: still stopping (bounded by the join timeouts)")
 
     # -- operator commands (each recorded as an event: daq.acquisition.commands) ----------------
-    def mark(self, kind: str, text: str = "") -> Event:
-        """Record an operator marker (``kind`` of the operator's choosing, e.g. ``"note"``).
+    def mark(self, kind: str, text: str = "", device: str | None = None) -> Event:
+        """Record a marker (``"note"``, ``"warning"``, ``"recording_started"``, ...) of a device.
 
         Raises
         ------
@@ -350,7 +355,7 @@ class Acquisition:
         RuntimeError
             The engine is not running (the marker would be recorded nowhere).
         """
-        event = commands.marker(kind, text)
+        event = commands.marker(kind, text, device)
         self._require_running(f"mark({kind!r})")
         self._post_event(event)
         return event

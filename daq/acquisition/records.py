@@ -43,7 +43,7 @@ KINDS = ("scanner", "laser", "barometer", "fan", "plc")
 SYSTEM_EVENT_KINDS = frozenset({"fault", "recovered", "overflow", "release", "release_failed",
                                 "arm", "arm_failed", "disarm", "disarm_failed", "trigger",
                                 "calz", "calz_failed", "fan_speed", "fan_start", "fan_stop",
-                                "fan_failed"})
+                                "fan_failed", "fan_reached"})
 
 IntArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]

@@ -17,9 +17,11 @@ The map of its modules (one job each):
                 the safety bound ``fraction * (U_F - 3 std)``.
 - ``files``     the run files' names (one per speed or one per release) and reading back an
                 earlier session's files, grouped by speed (resume).
-- ``runner``    the loop: fan, settle, arm/release per speed into a run file, progress lines,
-                modal fits and the flutter speed +- std after each speed; stops safely (growth,
-                bound, Ctrl-C: model caught, fan down, file finished); resumes from DIR.
+- ``wind``      the drive's ramp rate, and waiting for a steady wind at a set-point.
+- ``runner``    the loop: device check, fan, settle, arm/release per speed into run files,
+                progress lines, modal fits and the flutter speed +- std after each speed;
+                stops safely (growth, bound, Ctrl-C: model caught, fan down, file finished);
+                resumes from DIR.
 - ``report``    DIR/campaign.json, the std history, PNG plots and a Markdown page.
 
 Layer: a tool (with ``daq.sim`` and ``daq.offline``): it uses the recorder and the engine below,

@@ -5,8 +5,10 @@ Responsibility: :func:`run_command` loads the plan and the rig config (their err
 boundary), refuses a real rig whose URLs are still ``"auto"`` (a
 :class:`~daq.errors.UsageError`), runs the campaign (:func:`daq.campaign.runner.run_plan`),
 writes the report (:mod:`daq.campaign.report`, also after Ctrl-C or a safety stop) and prints
-the result. Exit status 0 when the campaign ended for a planned reason (plan done, target met,
-no gain, a safety stop), 1 when interrupted.
+the result. Before anything moves, every device is checked (``windrig check``; ``--skip-check``
+skips it): a failing device is named on an ``error:`` line of its own, nothing is recorded and
+no report written. Exit status 0 when the campaign ended for a planned reason (plan done,
+target met, no gain, a safety stop), 1 when interrupted or a device failed its check.
 
 Not responsible for: the command-line parser (:mod:`daq.cli`, which imports this module only
 for this subcommand).
@@ -19,9 +21,9 @@ from pathlib import Path
 
 from daq.campaign.plan import load_plan
 from daq.campaign.report import read_previous, write_report
-from daq.campaign.runner import CampaignOutcome, run_plan
+from daq.campaign.runner import CHECK_FAILED, CampaignOutcome, run_plan
 from daq.config import load_rig_config
-from daq.errors import UsageError
+from daq.errors import DeviceCheckError, UsageError
 
 __all__ = ["run_command"]
 
@@ -30,7 +32,8 @@ def _say(line: str) -> None:
     print(line, flush=True)  # one line per step: a log file shows progress as it happens
 
 
-def run_command(plan_path: Path, config_path: Path, out: Path, *, simulate: bool) -> int:
+def run_command(plan_path: Path, config_path: Path, out: Path, *, simulate: bool,
+                check: bool = True) -> int:
     """Run the command (module docstring); return the exit status."""
     plan = load_plan(plan_path)
     config = load_rig_config(config_path)
@@ -52,9 +55,14 @@ def run_command(plan_path: Path, config_path: Path, out: Path, *, simulate: bool
     outcome = CampaignOutcome()
     try:
         run_plan(plan, config, out, simulate=simulate, say=_say, previous=read_previous(out),
-                 outcome=outcome)
+                 outcome=outcome, check=check)
+    except DeviceCheckError as exc:  # every failing device on a line of its own
+        print("\n".join(f"error: {line}" for line in str(exc).splitlines())
+              + "\nnothing recorded (--skip-check runs anyway)", file=sys.stderr)
+        return 1
     finally:
-        if out.is_dir():
+        # Not after a failed check (nothing ran): an earlier session's report stays as it was.
+        if out.is_dir() and not outcome.stopped_because.startswith(CHECK_FAILED):
             paths = write_report(outcome, out, truth=truth)
             _say(f"report: {paths['json']}, {paths['markdown']}")
     _say(f"stopped because: {outcome.stopped_because}")

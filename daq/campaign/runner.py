@@ -47,13 +47,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from daq.acquisition.device_check import require_devices_ok
 from daq.acquisition.engine import Acquisition
 from daq.campaign.adaptive import Choice, choose_next, safety_bound
 from daq.campaign.files import interrupted_name, read_back, run_file_name
 from daq.campaign.monitor import DecayMonitor
 from daq.campaign.plan import CampaignPlan
+from daq.campaign.wind import STEADY_TIMEOUT_S, ramp_rate, wait_steady
 from daq.config import RigConfig
-from daq.errors import DeviceError
+from daq.errors import DeviceCheckError, DeviceError
 from daq.instruments.build import build_driver
 from daq.procedure import HOLD_S, default_decay_s
 from daq.recording.run import record_run
@@ -63,18 +65,18 @@ from ident.errors import IdentError
 from ident.io import RunFile, campaign_section, read_run
 from ident.modal import fit_release_modes
 
-__all__ = ["CampaignOutcome", "SpeedStep", "run_plan"]
+__all__ = ["CHECK_FAILED", "CampaignOutcome", "SpeedStep", "run_plan"]
 
 log = logging.getLogger(__name__)
 
 #: Safety fraction of a fixed plan (an adaptive plan gives its own).
 FIXED_SAFETY_FRACTION = 0.9
-#: Longest wait for the wind to become steady at a set-point, s (beyond the ramp).
-STEADY_TIMEOUT_S = 30.0
 #: Distinct wind speeds before an adaptive campaign may call its target met (see _loop).
 MIN_SPEEDS_FOR_TARGET = 3
 #: Fan speed counted as stopped, rpm.
 STOPPED_RPM = 5.0
+#: ``stopped_because`` of a session whose device check failed (nothing was moved or recorded).
+CHECK_FAILED = "device check failed"
 
 
 @dataclass
@@ -210,12 +212,6 @@ class _Session:
             self.say(f"CALZ wind-off: {inst.name} zeroed")
 
 
-def _ramp_rate(config: RigConfig, fan_name: str) -> float:
-    """Return the drive's configured ramp rate, rpm/s (its settings' default otherwise)."""
-    rate = config.instrument(fan_name).settings.get("ramp_rpm_per_s", 100.0)
-    return float(rate)
-
-
 def _analysis(runs: list[RunFile]) -> CampaignAnalysis | None:
     releases = [r for run in runs for r in run.releases]
     if len(distinct_wind_speeds([r.U for r in releases])) < 2:
@@ -237,7 +233,7 @@ def _truth_speed(config: RigConfig) -> float | None:
 def run_plan(plan: CampaignPlan, config: RigConfig, out_dir: str | Path, *,
              simulate: bool = False, say: Callable[[str], None] = print,
              previous: dict[str, Any] | None = None,
-             outcome: CampaignOutcome | None = None) -> CampaignOutcome:
+             outcome: CampaignOutcome | None = None, check: bool = True) -> CampaignOutcome:
     """Run a campaign plan on a rig (see the module docstring).
 
     Parameters
@@ -257,6 +253,15 @@ def run_plan(plan: CampaignPlan, config: RigConfig, out_dir: str | Path, *,
     outcome : CampaignOutcome, optional
         Filled in as the campaign goes (a caller that reports even after an error passes
         its own).
+    check : bool
+        Check every device first (:func:`~daq.acquisition.device_check.require_devices_ok`,
+        as ``windrig check``), before the fan or the release moves.
+
+    Raises
+    ------
+    DeviceCheckError
+        A device failed the check (named, with every other failing one); nothing was moved
+        or recorded, ``outcome.stopped_because`` starts with :data:`CHECK_FAILED`.
 
     Returns
     -------
@@ -265,7 +270,6 @@ def run_plan(plan: CampaignPlan, config: RigConfig, out_dir: str | Path, *,
     started = time.monotonic()
     plan.check_against(config)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     outcome = CampaignOutcome() if outcome is None else outcome
     if previous:
         outcome.wind_on_s = float(previous.get("wind_on_s", 0.0))
@@ -280,6 +284,16 @@ def run_plan(plan: CampaignPlan, config: RigConfig, out_dir: str | Path, *,
         rig_cm = contextlib.nullcontext()
     with rig_cm as rig:
         live = config if rig is None else rig.config
+        if check:
+            try:
+                results = require_devices_ok(live)
+            except DeviceCheckError as exc:
+                outcome.stopped_because = f"{CHECK_FAILED}: {exc}"
+                raise
+            notes = [f"{r.device}: {note}" for r in results for note in r.notes]
+            say(f"device check: {len(results)} device(s) OK"
+                + "".join(f"\n  note: {note}" for note in notes))
+        out.mkdir(parents=True, exist_ok=True)  # after the check: a failed one leaves nothing
         session = _Session(plan, live, out, say)
         restore = _on_sigint(session.abort)
         try:
@@ -477,7 +491,7 @@ def _record_file(session: _Session, outcome: CampaignOutcome, path: Path, rpm: f
     section = config.section
     monitor = DecayMonitor(1.0 / min(section.fh, section.fa))
     done, grown = threading.Event(), threading.Event()
-    ramp = abs(rpm - session.fan_rpm) / _ramp_rate(config, session.fan_name)
+    ramp = abs(rpm - session.fan_rpm) / ramp_rate(config, session.fan_name)
     duration = (1.5 * ramp + 2.0 + STEADY_TIMEOUT_S + plan.settle_s
                 + len(releases) * (HOLD_S + decay_s + plan.pause_s + 1.0) + 5.0)
 
@@ -498,7 +512,7 @@ def _record_file(session: _Session, outcome: CampaignOutcome, path: Path, rpm: f
         if session.fan_on_at is None:
             session.fan_on_at = time.monotonic()
         session.fan_rpm = rpm
-        _wait_steady(fan, rpm, plan.steady_tolerance, plan.settle_s, session.abort)
+        wait_steady(fan, rpm, plan.steady_tolerance, plan.settle_s, session.abort)
         if session.abort.is_set():
             return
         say(f"  wind steady at {fan.speed() * config.wind_per_rpm:.2f} m/s")
@@ -571,19 +585,3 @@ def _modes(run: RunFile) -> list[str]:
         out.append(f"f_h {m.f_h:.3f} Hz, zeta_h {100 * m.zeta_h:.2f} %, "
                    f"f_a {m.f_a:.3f} Hz, zeta_a {100 * m.zeta_a:.2f} %")
     return out
-
-
-def _wait_steady(fan: Any, rpm: float, tolerance: float, settle_s: float,
-                 abort: threading.Event) -> None:
-    """Wait for the set-point, then until the speed stays within tolerance for ``settle_s``."""
-    tol = max(2.0, tolerance * rpm)
-    fan.wait_for_speed(rpm, tolerance_rpm=tol)
-    deadline = time.monotonic() + STEADY_TIMEOUT_S + settle_s
-    steady_since = time.monotonic()
-    while time.monotonic() - steady_since < settle_s and not abort.is_set():
-        if time.monotonic() > deadline:
-            raise DeviceError(f"the wind did not stay within {100 * tolerance:g} % of "
-                              f"{rpm:.0f} rpm for {settle_s:g} s within {STEADY_TIMEOUT_S:g} s")
-        if abs(fan.speed() - rpm) > tol:
-            steady_since = time.monotonic()
-        time.sleep(0.05)

@@ -64,6 +64,9 @@ class GuiOptions:
     auto_release : tuple of float
         Simulated live rig only: fan speeds (rpm) of a hands-free programme, one release each
         (:mod:`daq.console.auto_release`); empty: none.
+    check : bool
+        Live: check every device before the engine starts (``windrig check``); a failing
+        device stops the console before it opens, every failing one named.
     """
 
     replay: Path | None = None
@@ -77,6 +80,7 @@ class GuiOptions:
     size: tuple[int, int] = (1280, 800)
     record_dir: Path | None = None
     auto_release: tuple[float, ...] = ()
+    check: bool = True
 
 
 def _error(message: str) -> int:
@@ -159,11 +163,14 @@ def _run_live(options: GuiOptions) -> int:
     # The console's recording row suggests files in record_dir (ControlPanel reads it from the
     # source: the window needs no option of its own).
     source = ProcessLiveSource(config, simulate=options.simulate, window_s=options.window_s,
-                               fan_rpm=options.fan_rpm, record_dir=options.record_dir)
+                               fan_rpm=options.fan_rpm, record_dir=options.record_dir,
+                               check=options.check)
     try:
         source.open()
     except (DaqError, RuntimeError, TimeoutError, OSError) as exc:
-        print(f"error: the live rig did not start: {exc}", file=sys.stderr)
+        first, *more = str(exc).splitlines() or [""]  # a device check: one line per device
+        print("\n".join(f"error: {line}" for line in
+                        [f"the live rig did not start: {first}", *more]), file=sys.stderr)
         return 1
     try:
         return _run_window(source, options)

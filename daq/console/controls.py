@@ -88,6 +88,8 @@ class ControlPanel(QtWidgets.QGroupBox):
     ----------
     fan_spin : QDoubleSpinBox
         The fan setpoint, rpm, within [0, ``[limits] max_fan_rpm``].
+    fan_actual : QLabel
+        The fan's actual speed as last read from the drive, rpm.
     buttons : dict of str to QPushButton
         ``fan_apply``, ``fan_stop``, ``arm``, ``release``, ``calz``, ``mark``, ``record``,
         ``stop_record``.
@@ -142,6 +144,9 @@ class ControlPanel(QtWidgets.QGroupBox):
         self.fan_spin.setToolTip(f"fan speed setpoint, 0..{self._max_rpm:g} rpm "
                                  "([limits] max_fan_rpm)")
         layout.addWidget(self.fan_spin)
+        self.fan_actual = QtWidgets.QLabel("actual - rpm")
+        self.fan_actual.setToolTip("the fan's actual speed, read back from the drive (Actual 1)")
+        layout.addWidget(self.fan_actual)
         self.buttons: dict[str, QtWidgets.QPushButton] = {}
         for key, text, slot in (("fan_apply", "apply", self._on_apply),
                                 ("fan_stop", "stop fan", self.stop_fan),
@@ -214,6 +219,9 @@ class ControlPanel(QtWidgets.QGroupBox):
             else None,
             wind_m_s=self._wind, can_record=can_record,
             recording=rec is not None and rec.error is None)
+        actual = float(self._source.fan_speed_rpm)
+        self.fan_actual.setText("actual - rpm" if math.isnan(actual)
+                                else f"actual {actual:.0f} rpm")
         reasons = self._interlocks.refusals(state, time.monotonic())
         self._show_recording(can_record, rec)
         self.reasons = reasons

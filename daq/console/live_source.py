@@ -40,6 +40,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from daq.acquisition.device_check import require_devices_ok
 from daq.acquisition.drivers import drivers_from_config
 from daq.acquisition.engine import Acquisition
 from daq.acquisition.sync_pulses import start_sync_pulses
@@ -49,6 +50,7 @@ from daq.console.ring_buffer import RingBuffer
 from daq.console.ring_recorder import RingRecorder
 from daq.console.source import DeviceHealth, RingSource, SourceInfo, sync_columns
 from daq.errors import RecordingError
+from daq.recording.experiment_log import ExperimentLog, experiment_log_path
 from daq.recording.recorder import RunRecorder
 from daq.recording.writer import RunWriter, default_sync_rate_hz
 from daq.sim.rig_process import start_rig_process
@@ -176,6 +178,11 @@ class LiveSource(RingSource):
     record_dir : str or Path, optional
         Where the console suggests run files (:mod:`daq.console.controls`); default: the current
         directory. Only stored: :meth:`start_recording` takes any path.
+    check : bool
+        Check every device before the engine starts, as ``windrig check``
+        (:func:`~daq.acquisition.device_check.require_devices_ok`): a failing device stops
+        :meth:`open` with a :class:`~daq.errors.DeviceCheckError` naming every failing one; the
+        check's notes become ``"warning"`` events.
     ring : RingBuffer, optional
         The buffer the synchronised rows go to, with the columns of :func:`sync_columns` and
         at least :func:`ring_rows` rows (a :class:`~daq.console.shared_ring.SharedRingBuffer` when
@@ -192,9 +199,11 @@ class LiveSource(RingSource):
     def __init__(self, config: RigConfig, *, simulate: bool = True, window_s: float = 20.0,
                  fan_rpm: float | None = None,
                  sync_pulse_interval_s: float | None = 0.5,
-                 record_dir: str | Path | None = None, ring: RingBuffer | None = None) -> None:
+                 record_dir: str | Path | None = None, ring: RingBuffer | None = None,
+                 check: bool = False) -> None:
         check_live_options(window_s, fan_rpm)
         self.config = config
+        self.check = bool(check)
         self.simulate = bool(simulate)
         self.window_s = float(window_s)
         self.fan_rpm = fan_rpm
@@ -246,6 +255,7 @@ class LiveSource(RingSource):
             writer.recorder = self._recorder  # a Recorder into the ring: no file
             self._writer = writer
             self._tap = _HealthTap(writer, self._files)
+            checked = require_devices_ok(live) if self.check else []
             drivers = drivers_from_config(live)
             if self.simulate:
                 for kind, driver in drivers.values():
@@ -257,6 +267,9 @@ class LiveSource(RingSource):
             self._acq.start()
             self._started_ns = time.monotonic_ns()
             self._pulser = start_sync_pulses(self._acq, drivers, self._pulse_s)
+            for result in checked:  # what the check noted, in the run's record
+                for note in result.notes:
+                    self._acq.mark("warning", f"check: {note}", result.device)
             if self.fan_rpm is not None and "fan" in self._acq.drivers:
                 # Through the engine, as an operator's commands: each is an event.
                 self._acq.set_fan_speed(self.fan_rpm, "fan")
@@ -389,7 +402,11 @@ class LiveSource(RingSource):
         try:
             writer = RunWriter(path, self._info.config, operator_notes=notes)
             writer.recorder = recorder  # opened above; declared and started by the dispatcher
+            recorder.event_sink = ExperimentLog(
+                experiment_log_path(path), [i.name for i in self.config.instruments],
+                lambda: writer.t0_ns, run_file=path.name)
             self._files.start(writer, notes, timeout_s)
+            self._acq.mark("recording_started", f"recording {path.name}")
         except Exception:
             # Not started (refused, withdrawn after the timeout, or failed on its first rows):
             # the dispatcher holds no reference to the file, nothing is recorded in it.
@@ -423,6 +440,9 @@ class LiveSource(RingSource):
         StorageError
             Writing the last rows failed; :attr:`recording` keeps the error.
         """
+        rec = self._files.recording
+        if rec is not None and rec.error is None and self.running:  # its last event
+            self._acq.mark("recording_stopped", f"recording {rec.path.name} stopped ({reason})")
         return self._files.stop(reason, timeout_s)
 
     def events(self, kind: str | None = None) -> list[Any]:

@@ -325,14 +325,14 @@ class ProcessLiveSource(RingSource):
     def __init__(self, config: RigConfig, *, simulate: bool = True, window_s: float = 20.0,
                  fan_rpm: float | None = None, sync_pulse_interval_s: float | None = 0.5,
                  record_dir: str | Path | None = None,
-                 start_timeout_s: float = START_TIMEOUT_S) -> None:
+                 start_timeout_s: float = START_TIMEOUT_S, check: bool = False) -> None:
         check_live_options(window_s, fan_rpm)  # the child's checks, before it is started
         self.config = config
         self.window_s = float(window_s)
         self.record_dir = Path.cwd() if record_dir is None else Path(record_dir)
         self._options = {"simulate": bool(simulate), "window_s": float(window_s),
                          "fan_rpm": fan_rpm, "sync_pulse_interval_s": sync_pulse_interval_s,
-                         "record_dir": self.record_dir}
+                         "record_dir": self.record_dir, "check": bool(check)}
         self._start_timeout_s = float(start_timeout_s)
         self._ring: RingBuffer | None = None
         self._info: SourceInfo | None = None

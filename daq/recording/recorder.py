@@ -290,6 +290,9 @@ class RunRecorder:
         self._n_taps = 0
         self._releases = 0
         self._events = 0
+        #: Told every event row appended, ``event_sink(time, kind, text)`` (the run's text log,
+        #: :class:`~daq.recording.experiment_log.ExperimentLog`); None: no one.
+        self.event_sink: Callable[[float, str, str], None] | None = None
         self._metadata_names: set[str] = set()
         self._deferred_attrs: dict[str, Any] = {}
         self._deferred_metadata: dict[str, Any] = {}
@@ -816,6 +819,8 @@ class RunRecorder:
         with self._io("add an event"):
             append_rows(self._events_ds, self._events, row)
         self._events += 1
+        if self.event_sink is not None:
+            self.event_sink(float(time), kind, text)
         self.flush_if_due()
 
     # --------------------------------------------------------------------------------------------

@@ -28,12 +28,18 @@ from typing import Any
 
 from tqdm import tqdm
 
+from daq.acquisition.device_check import require_devices_ok
 from daq.acquisition.dispatch import Subscriber
 from daq.acquisition.drivers import drivers_from_config
 from daq.acquisition.engine import Acquisition
 from daq.acquisition.sync_pulses import SYNC_PULSE_INTERVAL_S, SyncPulses, start_sync_pulses
 from daq.config import RigConfig
 from daq.errors import StorageError
+from daq.recording.experiment_log import (
+    ExperimentLog,
+    experiment_log_path,
+    refuse_logging_to,
+)
 from daq.recording.layout import metadata_name_part
 from daq.recording.recorder import RunRecorder
 from daq.recording.writer import RunWriter
@@ -80,7 +86,8 @@ def record_run(config: RigConfig, out_path: str | Path, *, duration_s: float,
                sync_pulse_interval_s: float | None = SYNC_PULSE_INTERVAL_S,
                recorder: RunRecorder | None = None,
                subscribers: Sequence[Subscriber] = (),
-               until: threading.Event | None = None) -> dict[str, Any]:
+               until: threading.Event | None = None, check: bool = False,
+               experiment_log: bool = True) -> dict[str, Any]:
     """Acquire a rig for ``duration_s`` into one HDF5 run file and return the summary.
 
     Parameters
@@ -121,6 +128,14 @@ def record_run(config: RigConfig, out_path: str | Path, *, duration_s: float,
     until : threading.Event, optional
         End the run early when it is set (a campaign sets it once its actions are done, so
         that a run lasts as long as its releases and not as long as a worst-case estimate).
+    check : bool
+        Check every device first (:func:`~daq.acquisition.device_check.require_devices_ok`):
+        a failing device raises :class:`~daq.errors.DeviceCheckError` naming every failing
+        one, and nothing is recorded (no file left). The check's notes become ``"warning"``
+        events of the run.
+    experiment_log : bool
+        Keep the run's events as text next to the file too (``RUN.log``,
+        :mod:`daq.recording.experiment_log`).
 
     Returns
     -------
@@ -140,6 +155,12 @@ def record_run(config: RigConfig, out_path: str | Path, *, duration_s: float,
         writer = RunWriter(out_path, config, operator_notes=operator_notes,
                            **dict(writer_options or {}))
         writer.recorder = recorder  # opened above; declared and started at the "start" doc
+        checked = require_devices_ok(config) if check else []
+        if experiment_log:
+            refuse_logging_to(experiment_log_path(path))
+            recorder.event_sink = ExperimentLog(
+                experiment_log_path(path), [i.name for i in config.instruments],
+                lambda: writer.t0_ns, run_file=path.name)
         drivers = drivers_from_config(config)
         if calz:
             for name, (kind, driver) in drivers.items():
@@ -153,6 +174,10 @@ def record_run(config: RigConfig, out_path: str | Path, *, duration_s: float,
         acq = Acquisition(drivers, subscribers=[writer, *subscribers],
                           metadata={"rig": config.name})
         acq.start()
+        acq.mark("recording_started", f"recording {path.name}: {duration_s:g} s")
+        for result in checked:  # what the check noted, in the run's record
+            for note in result.notes:
+                acq.mark("warning", f"check: {note}", result.device)
         reason = "duration"
         runner: threading.Thread | None = None
         pulser: SyncPulses | None = None
@@ -192,11 +217,15 @@ def record_run(config: RigConfig, out_path: str | Path, *, duration_s: float,
         finally:
             if pulser is not None:
                 pulser.stop()
+            if acq.running:
+                acq.mark("recording_stopped", f"recording {path.name} stopped ({reason})")
             engine = acq.stop(reason)
     finally:
         if recorder.state == "declaring":  # the engine never started: no run, no file
             recorder.close()
             path.unlink(missing_ok=True)
+            if experiment_log:
+                experiment_log_path(path).unlink(missing_ok=True)
     if writer.error is not None:
         raise writer.error
     if action_error:

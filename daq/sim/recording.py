@@ -35,7 +35,7 @@ def record_simulated_run(config: RigConfig, out_path: str | Path, *, duration_s:
                          progress: bool = True, operator_notes: str = "", calz: bool = True,
                          writer_options: Mapping[str, Any] | None = None,
                          sync_pulse_interval_s: float | None = SYNC_PULSE_INTERVAL_S,
-                         ) -> dict[str, Any]:
+                         check: bool = False) -> dict[str, Any]:
     """Record a simulated rig for ``duration_s`` into one run file; return the summary.
 
     Parameters
@@ -56,6 +56,9 @@ def record_simulated_run(config: RigConfig, out_path: str | Path, *, duration_s:
     calz : bool
         Zero the scanner before the engine starts (default: the simulated tunnel starts
         wind-off).
+    check : bool
+        Check every simulated device first, through its real transport, as
+        :func:`~daq.recording.run.record_run` does.
 
     Returns
     -------
@@ -80,7 +83,7 @@ def record_simulated_run(config: RigConfig, out_path: str | Path, *, duration_s:
             actions=None if actions is None else (lambda acq: actions(acq, rig)),
             progress=progress, operator_notes=operator_notes, calz=calz,
             writer_options=options, sync_pulse_interval_s=sync_pulse_interval_s,
-            recorder=recorder)
+            recorder=recorder, check=check)
     finally:
         rig.close()
     if "file" in summary:  # the writer finished the file (its summary is in)

@@ -231,6 +231,14 @@ class ScanivalveMps4264:
         return self._rate_hz
 
     @property
+    def serial_numbers(self) -> tuple[int | None, ...]:
+        """Measure each module's serial number, from its legacy (0x0A) packets of this scan.
+
+        None for a module that sent none yet (or only 0x6D packets, which carry none).
+        """
+        return tuple(stream.serial for stream in self._streams)
+
+    @property
     def n_channels(self) -> int:
         """Measure the number of pressure channels (64 per module)."""
         return self.settings.n_channels

@@ -72,6 +72,12 @@ def test_controls_on_a_live_simulated_rig(qtbot):
         assert not b["calz"].isEnabled()
         assert b["calz"].toolTip() == "CALZ: stop the fan first"
         assert "CALZ: stop the fan first" in panel.status_text
+        # The fan box shows the actual speed read back from the drive; the engine recorded
+        # when it settled at the set-point (fan_reached, 1 % of 500 rpm).
+        qtbot.waitUntil(lambda: window.tick() or panel.fan_actual.text() == "actual 500 rpm",
+                        timeout=5_000)
+        qtbot.waitUntil(lambda: len(_events(source, "fan_reached")) == 1, timeout=5_000)
+        assert abs(_events(source, "fan_reached")[0].data["rpm"] - 500.0) <= 5.0
 
         # The fan setpoint cannot exceed the limit; a direct call above it is refused.
         assert panel.fan_spin.maximum() == config.limits.max_fan_rpm
@@ -170,6 +176,7 @@ def test_controls_without_fan_or_plc_are_disabled_with_reasons(qtbot):
     assert panel.buttons["calz"].toolTip() == "CALZ: no scanner in this rig"
     assert panel.buttons["mark"].isEnabled()
     assert "fan: no fan in this rig" in panel.status_text
+    assert panel.fan_actual.text() == "actual - rpm"  # no reading
     source.acq.running = False
     panel.refresh()
     assert not panel.buttons["mark"].isEnabled()

@@ -157,6 +157,15 @@ def test_record_a_release_from_the_console_panel(qtbot, tmp_path):
         events = entry["events"][()]
         kinds = [_text(k) for k in events["kind"]]
         assert kinds.count("release") == 1 and kinds.count("arm") == 2
+        # The recording's own bounds are events of it, and its text log beside it has them.
+        # (A system event, a trigger pulse every 0.5 s, may fall just before or after them.)
+        actions = [k for k in kinds if k != "trigger"]
+        assert actions.count("recording_started") == actions.count("recording_stopped") == 1
+        assert actions.index("recording_started") < actions.index("arm")
+        assert actions.index("recording_stopped") > len(actions) - 1 - actions[::-1].index("arm")
+        log_kinds = [line.split()[2] for line in
+                     path.with_suffix(".log").read_text().splitlines()[1:]]
+        assert log_kinds == actions
         assert releases.shape == (1,)
         row = releases[0]
         release_event_time = float(events["time"][kinds.index("release")])
