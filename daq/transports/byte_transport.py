@@ -188,6 +188,12 @@ class SerialTransport(TransportBase):
             rest = port.read(waiting) if waiting > 0 else b""
         except _SERIAL_ERRORS as exc:
             raise TransportError(f"{self.url}: read failed: {exc}") from exc
+        except (TypeError, AttributeError) as exc:
+            # pyserial reading a port another thread closed meanwhile (its fd is None): a
+            # closed port, not a bug of ours; anything else is re-raised as it is.
+            if port.is_open:
+                raise
+            raise TransportError(f"{self.url}: closed during the read") from exc
         if not first:
             raise TransportTimeout(f"{self.url}: no data within {timeout_s:g} s")
         return first + rest

@@ -42,8 +42,8 @@ REVERSED = [(1, 61 - i) for i in range(N_TAPS)]  # module 1, channels 61 .. 0
 
 
 def test_without_calibration_keys_nothing_changes():
-    """The shipped configs parse to the identity calibration: today's behaviour."""
-    for path in sorted(CONFIGS.glob("*.toml")):
+    """The shipped simulated rigs parse to the identity calibration: today's behaviour."""
+    for path in sorted(CONFIGS.glob("sim_*.toml")):
         cal = parse_rig_config(path.read_text(), path.name).calibration
         assert cal.taps.dead == () and not cal.taps.configured
         assert cal.pitot.dynamic_pressure(50.0) == 50.0
@@ -291,3 +291,23 @@ def test_the_raw_stream_takes_each_taps_wired_column():
     assert table[0, :3].tolist() == [125.0, 124.0, 123.0] and table[0, -1] == -1.0
     assert frame[:, columns][0, :3].tolist() == [125.0, 124.0, 123.0]
     assert tap_columns(parse_rig_config(BASE, "b.toml").calibration, N_TAPS) == slice(0, N_TAPS)
+
+
+def test_the_example_real_rig_config_uses_every_calibration_with_its_source_and_date():
+    """rig_configs/example_real_rig.toml: real transports, and each calibration key in use."""
+    config = parse_rig_config((CONFIGS / "example_real_rig.toml").read_text(), "example")
+    assert config.simulation is None
+    schemes = {inst.name: inst.url.split(":", 1)[0] for inst in config.instruments}
+    assert schemes == {"scanner": "tcp", "laser_front": "serial", "laser_rear": "serial",
+                       "laser_check": "serial", "fan": "modbus+tcp", "plc": "modbus+tcp",
+                       "barometer": "serial"}
+    cal = config.calibration
+    assert cal.taps.configured and cal.taps.dead == (17, 88)
+    assert len(set(cal.tap_channels(config.taps.n_taps))) == config.taps.n_taps
+    assert cal.pitot.dynamic_pressure(100.0) == pytest.approx(101.8)
+    assert cal.air.relative_humidity == pytest.approx(0.45)
+    assert cal.span == pytest.approx(1.2)
+    assert set(cal.lasers) == {"laser_front", "laser_rear"}
+    assert config.tubing and config.tubing[0].taps is None  # every tap on one tube length
+    for part in (cal.taps, cal.pitot, cal.air, *cal.lasers.values()):
+        assert part.source and part.date, part

@@ -78,7 +78,7 @@ def test_arbitrary_text(text):
 
 def test_the_checks_can_fail_both_ways():
     """A replaced value is refused or taken on its merits (the fuzz reaches both outcomes)."""
-    base = TEXTS[0]
+    base = (CONFIGS / "sim_flat_plate.toml").read_text(encoding="utf-8")
     assert "\nm = 3.0" in base
     check(base.replace("\nm = 3.0", "\nm = 4.0"))
     assert parse_rig_config(base.replace("\nm = 3.0", "\nm = 4.0"), "x").section.m == 4.0

@@ -77,3 +77,33 @@ def test_tcp_connect_refused_is_a_transport_error():
         t.open()
     with pytest.raises(ConfigError, match="expected tcp://host:port"):
         TcpTransport("tcp://nohostport")
+
+
+def test_a_serial_read_interrupted_by_a_close_from_another_thread_is_a_transport_error():
+    """windrig check closes a device's driver under a read that outlived its timeout: the read
+    ends with a TransportError (pyserial itself raised TypeError on the closed descriptor)."""
+    import os
+
+    master, slave = os.openpty()
+    try:
+        t = open_transport(f"serial://{os.ttyname(slave)}")
+        t.open()
+        started, outcome = threading.Event(), []
+
+        def read() -> None:
+            started.set()
+            try:
+                t.read(16, timeout_s=5.0)
+            except BaseException as exc:  # recorded for the assertion, whatever it is
+                outcome.append(exc)
+
+        reader = threading.Thread(target=read)
+        reader.start()
+        started.wait(5.0)
+        t.close()
+        reader.join(10.0)
+        assert not reader.is_alive()
+        assert len(outcome) == 1 and isinstance(outcome[0], TransportError), outcome
+    finally:
+        os.close(master)
+        os.close(slave)
