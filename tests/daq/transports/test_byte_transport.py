@@ -80,8 +80,11 @@ def test_tcp_connect_refused_is_a_transport_error():
 
 
 def test_a_serial_read_interrupted_by_a_close_from_another_thread_is_a_transport_error():
-    """windrig check closes a device's driver under a read that outlived its timeout: the read
-    ends with a TransportError (pyserial itself raised TypeError on the closed descriptor)."""
+    """A read ended by a close from another thread is a TransportError.
+
+    windrig check closes a device's driver under a read that outlived its timeout; pyserial
+    itself raises TypeError on the closed descriptor.
+    """
     import os
 
     master, slave = os.openpty()
