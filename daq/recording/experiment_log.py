@@ -1,4 +1,4 @@
-"""A run's experiment log: its events as plain text beside the run file (RUN.h5 -> RUN.log).
+"""A run's experiment log: its events as plain text beside the run file (RUN.h5 -> RUN.events.log).
 
 Responsibility: :class:`ExperimentLog` receives every row the recorder appends to
 ``/entry/events`` (it is the :class:`~daq.recording.recorder.RunRecorder`'s ``event_sink``) and
@@ -36,12 +36,15 @@ LOG_SKIPPED_KINDS = frozenset({"trigger"})
 
 
 def experiment_log_path(run_path: str | Path) -> Path:
-    """Return the text log's path of a run file: ``RUN.h5`` -> ``RUN.log``."""
-    return Path(run_path).with_suffix(".log")
+    """Return the text log's path of a run file: ``RUN.h5`` -> ``RUN.events.log``.
+
+    Not ``RUN.log``: that is the name a user gives ``--log-file`` (the program's own log).
+    """
+    return Path(run_path).with_suffix(".events.log")
 
 
 def refuse_logging_to(path: str | Path) -> None:
-    """Refuse a text log that a command's log file already is (``--log-file RUN.log``).
+    """Refuse a text log that a command's log file already is (``--log-file RUN.events.log``).
 
     Raises
     ------

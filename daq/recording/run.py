@@ -134,7 +134,7 @@ def record_run(config: RigConfig, out_path: str | Path, *, duration_s: float,
         one, and nothing is recorded (no file left). The check's notes become ``"warning"``
         events of the run.
     experiment_log : bool
-        Keep the run's events as text next to the file too (``RUN.log``,
+        Keep the run's events as text next to the file too (``RUN.events.log``,
         :mod:`daq.recording.experiment_log`).
 
     Returns

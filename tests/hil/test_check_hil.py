@@ -132,7 +132,7 @@ def test_acquire_refuses_to_record_when_a_device_fails_the_check(rig, tmp_path, 
     lines = [line for line in err.splitlines() if line.startswith("error: ")]
     assert any(line.startswith("error: laser_check (") for line in lines)
     assert any(line.startswith("error: barometer (") for line in lines)
-    assert not out.exists() and not out.with_suffix(".log").exists()
+    assert not out.exists() and not out.with_suffix(".events.log").exists()
 
 
 def test_the_live_console_source_runs_the_same_check(rig, tmp_path):
@@ -173,7 +173,7 @@ def test_simulate_write_config_gives_a_real_config_that_check_and_acquire_use(tm
         run = tmp_path / "run.h5"
         assert main(["acquire", "--config", str(out), "--duration", "1.5", "--out",
                      str(run)]) == 0
-        assert run.exists() and run.with_suffix(".log").exists()
+        assert run.exists() and run.with_suffix(".events.log").exists()
     finally:
         proc.send_signal(signal.SIGINT)
         try:

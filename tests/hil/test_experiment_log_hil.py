@@ -1,4 +1,4 @@
-"""The experiment log: a scripted session's every action in ``/entry/events`` and in RUN.log.
+"""The experiment log: a scripted session's every action in ``/entry/events`` and in RUN.events.log.
 
 The simulated rig over its real transports, recorded by the production recorder; the session
 goes through the engine's commands as an operator's would (the console calls the same ones).
@@ -18,7 +18,7 @@ from daq.recording.run import record_run
 from daq.sim.rig import start_simulated_rig
 
 CONFIG = Path(__file__).resolve().parents[2] / "rig_configs" / "sim_flat_plate.toml"
-#: One line of RUN.log: UTC time, run time (s), kind, device, text.
+#: One line of RUN.events.log: UTC time, run time (s), kind, device, text.
 LINE = re.compile(r"^(\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}Z) +(-?\d+\.\d{3}) (\S+) +(\S+) +(.*)$")
 
 
@@ -65,7 +65,7 @@ def test_a_scripted_session_is_in_the_events_and_the_text_log(tmp_path):
     assert reached_rows[1].startswith("fan: fan stopped")
     assert any(x == "decay looked clean" for _, k, x in rows if k == "note")
 
-    log = out.with_suffix(".log").read_text(encoding="utf-8").splitlines()
+    log = out.with_suffix(".events.log").read_text(encoding="utf-8").splitlines()
     assert log[0].startswith("# windrig experiment log of session.h5")
     parsed = [LINE.match(line) for line in log[1:]]
     assert all(parsed), [line for line, m in zip(log[1:], parsed, strict=True) if not m]
@@ -81,12 +81,12 @@ def test_a_scripted_session_is_in_the_events_and_the_text_log(tmp_path):
 
 
 def test_a_log_file_named_as_the_experiment_log_is_refused(tmp_path, capsys):
-    """`acquire --log-file RUN.log --out RUN.h5` would write two logs into one file."""
+    """`acquire --log-file RUN.events.log --out RUN.h5` would write two logs into one file."""
     from daq.cli import main
 
     out = tmp_path / "run.h5"
     code = main(["acquire", "--config", str(CONFIG), "--simulate", "--duration", "1", "--out",
-                 str(out), "--log-file", str(tmp_path / "run.log"), "--skip-check"])
+                 str(out), "--log-file", str(tmp_path / "run.events.log"), "--skip-check"])
     assert code == 2
     assert "is the run's experiment log" in capsys.readouterr().err
     assert not out.exists()

@@ -164,7 +164,7 @@ def test_record_a_release_from_the_console_panel(qtbot, tmp_path):
         assert actions.index("recording_started") < actions.index("arm")
         assert actions.index("recording_stopped") > len(actions) - 1 - actions[::-1].index("arm")
         log_kinds = [line.split()[2] for line in
-                     path.with_suffix(".log").read_text().splitlines()[1:]]
+                     path.with_suffix(".events.log").read_text().splitlines()[1:]]
         assert log_kinds == actions
         assert releases.shape == (1,)
         row = releases[0]
