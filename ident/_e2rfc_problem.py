@@ -352,11 +352,14 @@ class _Stacked:
     """The weighted, release-demeaned residual over log(d) and its Jacobian, for one structure.
 
     The fixed columns (``q``, ``q'``, ``q''``) do not depend on the lag roots: their stacked,
-    demeaned and weighted form and their normal-equation blocks are computed once; each
-    evaluation adds only the lag columns. The Jacobian is Golub and Pereyra's exact
-    variable-projection form ``-(I - P) (dX/dlog d_l) c - X G^-1 (dX/dlog d_l)^T r`` (``P``
-    the projection on the columns, ``G`` the normal matrix): a few matrix products per lag
-    instead of a residual evaluation per lag.
+    demeaned form and their normal-equation blocks are computed once; each evaluation adds only
+    the lag columns. The channel weights are constant over a release, so the products of the
+    demeaned fixed columns and forces with the lag columns are taken unweighted-times-``w**2``
+    for both force channels in one matrix product (a demeaned column is orthogonal to a constant
+    per release, so the lag columns need no demeaning there). The Jacobian is Golub and
+    Pereyra's exact variable-projection form ``-(I - P) (dX/dlog d_l) c - X G^-1
+    (dX/dlog d_l)^T r`` (``P`` the projection on the columns, ``G`` the normal matrix), for
+    every lag at once: a few matrix products instead of a residual evaluation per lag.
     """
 
     def __init__(self, problem: Problem, with_A3: bool, which: str) -> None:
@@ -366,14 +369,17 @@ class _Stacked:
         self.sizes = sizes
         self.release = np.repeat(np.arange(sizes.size), sizes)
         self.w = problem.weights[self.release]  # (N, 2)
+        self.w2 = self.w**2
         fixed = np.vstack([v.fixed if with_A3 else v.fixed[:, :4] for v in self.views])
         y = np.vstack([v.force for v in self.views])
-        fixed_c = self._demeaned(fixed)
-        y_c = self._demeaned(y)
-        self.Fw = [fixed_c * self.w[:, i:i + 1] for i in range(2)]
-        self.yw = [y_c[:, i] * self.w[:, i] for i in range(2)]
-        self.Gff = [F.T @ F for F in self.Fw]
-        self.Fy = [F.T @ yw for F, yw in zip(self.Fw, self.yw, strict=True)]
+        self.Fc = self._demeaned(fixed)  # (N, k_f)
+        self.yc = self._demeaned(y)  # (N, 2)
+        self.k_f = self.Fc.shape[1]
+        # [F w0^2, F w1^2, y w^2]: one product with the lag columns gives every cross block.
+        self.W2FY = np.hstack([self.Fc * self.w2[:, :1], self.Fc * self.w2[:, 1:],
+                               self.yc * self.w2])
+        self.Gff = [(self.Fc * self.w2[:, i:i + 1]).T @ self.Fc for i in range(2)]
+        self.Fy = [self.W2FY[:, 2 * self.k_f + i] @ self.Fc for i in range(2)]
         self._cache: tuple[bytes, Any] | None = None
 
     def _demeaned(self, X: FloatArray) -> FloatArray:
@@ -386,41 +392,49 @@ class _Stacked:
             return self._cache[1]
         d = np.exp(theta)
         L = self._demeaned(np.vstack([v.lag_columns(d) for v in self.views]))
-        out = []
+        k_f = self.k_f
+        cross = self.W2FY.T @ L  # (2 k_f + 2, 2 m)
+        X = np.hstack([self.Fc, L])
+        k = X.shape[1]
+        coef = np.empty((k, 2))
+        solved = []
         for i in range(2):
-            Lw = L * self.w[:, i:i + 1]
-            G = np.block([[self.Gff[i], self.Fw[i].T @ Lw], [Lw.T @ self.Fw[i], Lw.T @ Lw]])
-            b = np.concatenate([self.Fy[i], Lw.T @ self.yw[i]])
+            FL = cross[i * k_f:(i + 1) * k_f]
+            G = np.block([[self.Gff[i], FL], [FL.T, (L * self.w2[:, i:i + 1]).T @ L]])
+            b = np.concatenate([self.Fy[i], cross[2 * k_f + i]])
             scale = np.sqrt(np.diag(G))
             scale[scale == 0.0] = 1.0
             G_scaled = G / np.outer(scale, scale)
-            coef = np.linalg.lstsq(G_scaled, b / scale, rcond=None)[0] / scale
-            X = np.hstack([self.Fw[i], Lw])
-            residual = self.yw[i] - X @ coef
-            out.append((X, G_scaled, scale, coef, residual))
-        self._cache = (key, (d, out))
-        return d, out
+            coef[:, i] = np.linalg.lstsq(G_scaled, b / scale, rcond=None)[0] / scale
+            solved.append((G_scaled, scale))
+        residual = self.w * (self.yc - X @ coef)  # (N, 2), weighted
+        out = (d, X, coef, residual, solved)
+        self._cache = (key, out)
+        return out
 
     def residual(self, theta: FloatArray) -> FloatArray:
         """Weighted residuals of both force channels, stacked."""
-        _, out = self._evaluate(theta)
-        return np.concatenate([o[4] for o in out])
+        residual = self._evaluate(theta)[3]
+        return np.concatenate([residual[:, 0], residual[:, 1]])
 
     def jacobian(self, theta: FloatArray) -> FloatArray:
         """Kaufman's variable-projection Jacobian over log(d), shape (2 N, m)."""
-        d, out = self._evaluate(theta)
+        d, X, coef, residual, solved = self._evaluate(theta)
         dL = self._demeaned(np.vstack([v.lag_derivatives(d) for v in self.views]))
         m = d.size
-        J = np.empty((2 * dL.shape[0], m))
-        for i, (X, G_scaled, scale, coef, residual) in enumerate(out):
-            k = X.shape[1]
-            lag_coef = coef[k - 2 * m:].reshape(m, 2)
+        N, k = X.shape
+        lag0 = k - 2 * m
+        J = np.empty((2 * N, m))
+        for i, (G_scaled, scale) in enumerate(solved):
+            lag_coef = coef[lag0:, i].reshape(m, 2)
+            # Column l: the derivative of the fitted force in log d_l (unweighted).
+            V = np.einsum("nlc,lc->nl", dL.reshape(N, m, 2), lag_coef)
+            rhs = X.T @ (V * self.w2[:, i:i + 1])  # (k, m)
+            # Golub and Pereyra's full Jacobian: -(I - P) dX c - X G^-1 dX^T r.
+            dXr = (dL.T @ (residual[:, i] * self.w[:, i])).reshape(m, 2)
             for l in range(m):
-                dX = dL[:, 2 * l:2 * l + 2] * self.w[:, i:i + 1]
-                v = dX @ lag_coef[l]
-                # Golub and Pereyra's full Jacobian: -(I - P) dX c - X G^-1 dX^T r.
-                rhs = X.T @ v
-                rhs[k - 2 * m + 2 * l:k - 2 * m + 2 * l + 2] -= dX.T @ residual
-                correction = X @ (np.linalg.lstsq(G_scaled, rhs / scale, rcond=None)[0] / scale)
-                J[i * dL.shape[0]:(i + 1) * dL.shape[0], l] = -(v - correction)
+                rhs[lag0 + 2 * l:lag0 + 2 * l + 2, l] -= dXr[l]
+            correction = X @ (np.linalg.lstsq(G_scaled, rhs / scale[:, None], rcond=None)[0]
+                              / scale[:, None])
+            J[i * N:(i + 1) * N] = -self.w[:, i:i + 1] * (V - correction)
         return J

@@ -207,6 +207,23 @@ def _real_design(basis: ComplexArray, n_complex: int) -> FloatArray:
     return np.column_stack([upper.real, upper.imag, rest.real])
 
 
+def _distinct_design(
+    tb: FloatArray, poles: ComplexArray, n_modes: int, block: int, dt: float
+) -> tuple[ComplexArray, ComplexArray, FloatArray]:
+    """``_real_design(_basis(tb, poles, ...))`` without computing the conjugates' columns.
+
+    The conjugate poles give the same real design, so only the distinct exponentials (upper
+    complex poles, real poles, the offset) are computed; ``_basis`` works column by column, so
+    these are exactly the columns ``_real_design`` would pick. Returns the distinct poles,
+    their basis and the design.
+    """
+    distinct = np.concatenate([poles[:n_modes], poles[2 * n_modes:]])
+    basis = _basis(tb, distinct, block, dt)
+    design = np.column_stack([basis[:, :n_modes].real, basis[:, :n_modes].imag,
+                              basis[:, n_modes:].real])
+    return distinct, basis, design
+
+
 def _solve_amplitudes(design: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
     coef, *_ = np.linalg.lstsq(design, y, rcond=None)
     return np.asarray(coef, dtype=float), np.asarray(y - design @ coef, dtype=float)
@@ -348,7 +365,7 @@ def fit_modes(
 
     # Amplitudes on the full-rate data (block = 1), with the refined poles.
     poles = _poles_from_params(theta, n_modes)
-    design = _real_design(_basis(t - t[0], poles, 1, dt), n_modes)
+    *_, design = _distinct_design(t - t[0], poles, n_modes, 1, dt)
     coef, resid = _solve_amplitudes(design, y)
     amplitudes, offset = _to_complex_amplitudes(coef, n_modes, n_real)
     # Undo the channel weights and shift the time origin back to t[0].
@@ -450,30 +467,27 @@ def _varpro_step(
     """Residual (flattened channel by channel) and its Kaufman Jacobian at pole parameters."""
     poles = _poles_from_params(theta, n_modes)
     n_real = theta.size - 2 * n_modes
-    basis = _basis(tb, poles, block, dt)
-    design = _real_design(basis, n_modes)
+    distinct, basis, design = _distinct_design(tb, poles, n_modes, block, dt)
     Q, R = np.linalg.qr(design)
     coef = np.linalg.solve(R, Q.T @ yb)
     resid = yb - design @ coef
     # Pole derivative of each distinct exponential column (upper complex poles, then reals).
     # d/dp of g(p) e^{p t} = (t g + g') e^{p t}: reuses the exponentials of the basis.
-    cols = np.concatenate([np.arange(n_modes), np.arange(2 * n_modes, 2 * n_modes + n_real)])
-    g, dg = _block_gain(poles[cols], block, dt)
-    d_basis = basis[:, cols] * (tb[:, None] + dg / g)
-    n_ch = yb.shape[1]
-    jac = np.empty((yb.size, theta.size))
-    for j in range(n_modes):
-        dE = d_basis[:, j]
-        c_re, c_im = coef[j], coef[n_modes + j]  # coefficients of Re(E_j) and Im(E_j)
-        # d/dRe(p) of (c_re Re E + c_im Im E) and d/dIm(p) (derivative times i).
-        for col, (dre, dim) in enumerate(((dE.real, dE.imag), (-dE.imag, dE.real))):
-            v = dre[:, None] * c_re + dim[:, None] * c_im
-            jac[:, 2 * j + col] = -(v - Q @ (Q.T @ v)).ravel(order="F")
-    for r in range(n_real):
-        dE_real = d_basis[:, n_modes + r].real
-        v = dE_real[:, None] * coef[2 * n_modes + r]
-        jac[:, 2 * n_modes + r] = -(v - Q @ (Q.T @ v)).ravel(order="F")
-    assert jac.shape[0] == resid.size and n_ch == resid.shape[1]
+    g, dg = _block_gain(distinct[:-1], block, dt)
+    d_basis = basis[:, :-1] * (tb[:, None] + dg / g)
+    n_b, n_ch = yb.shape
+    dE = d_basis[:, :n_modes, None]  # (n_b, n_modes, 1)
+    c_re, c_im = coef[None, :n_modes], coef[None, n_modes:2 * n_modes]  # of Re(E_j), Im(E_j)
+    # d/dRe(p) of (c_re Re E + c_im Im E), and d/dIm(p) (the derivative times i), interleaved
+    # per mode; then the real poles: every column's model derivative, shape (n_b, k, n_ch).
+    oscillatory = np.stack([dE.real * c_re + dE.imag * c_im,
+                            -dE.imag * c_re + dE.real * c_im], axis=2)
+    V = np.concatenate([
+        oscillatory.reshape(n_b, 2 * n_modes, n_ch),
+        d_basis[:, n_modes:, None].real * coef[None, 2 * n_modes:2 * n_modes + n_real],
+    ], axis=1).reshape(n_b, -1)
+    projected = (V - Q @ (Q.T @ V)).reshape(n_b, theta.size, n_ch)
+    jac = -projected.transpose(2, 0, 1).reshape(n_ch * n_b, theta.size)
     return resid.ravel(order="F"), jac
 
 
