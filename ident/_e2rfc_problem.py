@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy.optimize import least_squares
 
+from ident._lsq import bounded_lm
 from ident._regressors import PreparedRelease
 from ident._selection import Candidate
 from ident._stats import autocorrelation_inflation
@@ -178,9 +178,10 @@ class Problem:
         lo, hi = math.log(K_lo / 20.0), math.log(20.0 * K_hi)
         def solve(theta0: FloatArray, which: str, tol: float, nfev: int) -> Any:
             problem = self._stacked(with_A3, which)
-            return least_squares(
-                problem.residual, np.clip(theta0, lo + 1e-6, hi - 1e-6), jac=problem.jacobian,
-                bounds=(lo, hi), xtol=tol, ftol=1e-2 * tol, max_nfev=nfev)
+            return bounded_lm(
+                problem.residual, problem.jacobian, np.clip(theta0, lo + 1e-6, hi - 1e-6),
+                (np.full(theta0.size, lo), np.full(theta0.size, hi)), xtol=tol,
+                ftol=1e-2 * tol, max_nfev=nfev)
 
         # Every start is run loosely on the coarse rows. When asked to be precise, the best is
         # converged on the search rows, then moved by one Gauss-Newton step on every sample, so the
@@ -295,20 +296,22 @@ class Problem:
             np.sqrt(np.mean((r / w) ** 2, axis=0)) / np.sqrt(np.mean(y**2, axis=0))
             for r, w, (_, y) in zip(residuals, self.weights, blocks, strict=True)
         ])
+        inflation = autocorrelation_inflation(residuals)
         return FinalFit(
             A=A, d=d, with_A3=chosen.with_A3,
-            covariance=self._covariance(d, chosen.with_A3, coef, residuals),
+            covariance=self._covariance(d, chosen.with_A3, coef, residuals, inflation),
             parameter_index=tuple(index), release_residuals=release_residuals,
             condition_number=self.condition(d, chosen.with_A3),
-            residual_inflation=autocorrelation_inflation(residuals))
+            residual_inflation=inflation)
 
     def _covariance(
-        self, d: FloatArray, with_A3: bool, coef: FloatArray, residuals: list[FloatArray]
+        self, d: FloatArray, with_A3: bool, coef: FloatArray, residuals: list[FloatArray],
+        inflation: float,
     ) -> FloatArray:
         """Gauss-Newton covariance of [A entries (force row 0, row 1), log d].
 
-        The residual variance and its autocorrelation inflation come from the full-rate
-        residuals; the curvature ``J^T J`` from the search subsample, scaled by the ratio of
+        The residual variance and its autocorrelation inflation (``inflation``) come from the
+        full-rate residuals; the curvature ``J^T J`` from the search subsample, scaled by the ratio of
         sample counts (the rows are an even subsample of the same decays).
         """
         blocks = self._blocks(d, with_A3, "search")
@@ -323,29 +326,23 @@ class Problem:
                  for (X, _), w in zip(blocks, self.weights, strict=True)]
             )
         columns = [J_lin]
+        # Nonlinear part: the residual's derivative in log d_l at fixed coefficients (the
+        # intercepts re-profiled, so demeaned per release), from the lag columns' derivatives.
+        derivatives = [p.view("search").lag_derivatives(d) for p in self.prepared]
+        k_f = k - 2 * d.size
         for l in range(d.size):
-            h = 1e-6
-            d_plus, d_minus = d.copy(), d.copy()
-            d_plus[l] *= math.exp(h)
-            d_minus[l] *= math.exp(-h)
-            r_plus = self._residual_vector(d_plus, with_A3, coef)
-            r_minus = self._residual_vector(d_minus, with_A3, coef)
-            columns.append(((r_plus - r_minus) / (2 * h))[:, None])
+            column = []
+            for i in range(2):
+                c = coef[k_f + 2 * l:k_f + 2 * l + 2, i]
+                for dL, w in zip(derivatives, self.weights, strict=True):
+                    e = -(dL[:, 2 * l:2 * l + 2] @ c)
+                    column.append(w[i] * (e - e.mean()))
+            columns.append(np.concatenate(column)[:, None])
         J = np.hstack(columns)
         r = np.concatenate([np.concatenate([res[:, i] for res in residuals]) for i in range(2)])
         dof = max(r.size - J.shape[1], 1)
-        sigma2 = float(r @ r) / dof * autocorrelation_inflation(residuals)
+        sigma2 = float(r @ r) / dof * inflation
         return np.asarray(sigma2 * np.linalg.pinv(J.T @ J) * n_search / n_full, dtype=float)
-
-    def _residual_vector(self, d: FloatArray, with_A3: bool, coef: FloatArray) -> FloatArray:
-        """Weighted search-row residuals at fixed coefficients (intercepts re-profiled)."""
-        blocks = self._blocks(d, with_A3, "search")
-        out = []
-        for i in range(2):
-            for (X, y), w in zip(blocks, self.weights, strict=True):
-                e = y[:, i] - X @ coef[:, i]
-                out.append(w[i] * (e - e.mean()))
-        return np.concatenate(out)
 
 
 class _Stacked:
@@ -400,7 +397,11 @@ class _Stacked:
         solved = []
         for i in range(2):
             FL = cross[i * k_f:(i + 1) * k_f]
-            G = np.block([[self.Gff[i], FL], [FL.T, (L * self.w2[:, i:i + 1]).T @ L]])
+            G = np.empty((k, k))
+            G[:k_f, :k_f] = self.Gff[i]
+            G[:k_f, k_f:] = FL
+            G[k_f:, :k_f] = FL.T
+            G[k_f:, k_f:] = (L * self.w2[:, i:i + 1]).T @ L
             b = np.concatenate([self.Fy[i], cross[2 * k_f + i]])
             scale = np.sqrt(np.diag(G))
             scale[scale == 0.0] = 1.0

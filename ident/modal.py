@@ -21,8 +21,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
-from scipy.optimize import least_squares, linear_sum_assignment
+from scipy.optimize import linear_sum_assignment
 
+from ident._lsq import bounded_lm
 from ident._threads import single_threaded_blas
 from ident.errors import InsufficientDataError
 
@@ -441,18 +442,21 @@ def _refine(
     # pole growing faster than allowed, say): the solver needs a strictly feasible start.
     margin = 1e-6 * (hi - lo)
     theta0 = np.clip(theta0, lo + margin, hi - margin)
-    cache: dict[bytes, tuple[FloatArray, FloatArray]] = {}
+    # The solver asks for the Jacobian right after the residual at the points it accepts.
+    last: list[tuple[FloatArray, tuple[ComplexArray, ComplexArray, FloatArray, FloatArray]]] = []
 
-    def evaluate(theta: FloatArray) -> tuple[FloatArray, FloatArray]:
-        key = theta.tobytes()
-        if key not in cache:
-            cache.clear()
-            cache[key] = _varpro_step(tb, yb, block, dt, n_modes, theta)
-        return cache[key]
+    def residual(theta: FloatArray) -> FloatArray:
+        resid, parts = _varpro_residual(tb, yb, block, dt, n_modes, theta)
+        last[:] = [(theta.copy(), parts)]
+        return resid
 
-    sol = least_squares(
-        lambda th: evaluate(th)[0], theta0, jac=lambda th: evaluate(th)[1],
-        bounds=(lo, hi), x_scale="jac",
+    def jacobian(theta: FloatArray) -> FloatArray:
+        if not last or not np.array_equal(last[0][0], theta):
+            residual(theta)
+        return _varpro_jacobian(tb, yb, block, dt, n_modes, theta, last[0][1])
+
+    sol = bounded_lm(
+        residual, jacobian, theta0, (lo, hi),
         xtol=1e-6 if loose else 1e-10, ftol=1e-6 if loose else 1e-12,
         # A well-posed fit converges in ~15 evaluations; a pole the data cannot support wanders,
         # and the BIC rejects it anyway, so its search is cut short.
@@ -465,12 +469,33 @@ def _varpro_step(
     tb: FloatArray, yb: FloatArray, block: int, dt: float, n_modes: int, theta: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
     """Residual (flattened channel by channel) and its Kaufman Jacobian at pole parameters."""
+    resid, parts = _varpro_residual(tb, yb, block, dt, n_modes, theta)
+    return resid, _varpro_jacobian(tb, yb, block, dt, n_modes, theta, parts)
+
+
+def _varpro_residual(
+    tb: FloatArray, yb: FloatArray, block: int, dt: float, n_modes: int, theta: FloatArray
+) -> tuple[FloatArray, tuple[ComplexArray, ComplexArray, FloatArray, FloatArray]]:
+    """Residual (flattened channel by channel) at pole parameters, and what the Jacobian reuses.
+
+    The solver asks for the Jacobian only at the points it accepts, so it is a separate step
+    (:func:`_varpro_jacobian`) on the distinct poles, their basis, ``Q`` and the amplitudes.
+    """
     poles = _poles_from_params(theta, n_modes)
-    n_real = theta.size - 2 * n_modes
     distinct, basis, design = _distinct_design(tb, poles, n_modes, block, dt)
     Q, R = np.linalg.qr(design)
     coef = np.linalg.solve(R, Q.T @ yb)
     resid = yb - design @ coef
+    return resid.ravel(order="F"), (distinct, basis, Q, coef)
+
+
+def _varpro_jacobian(
+    tb: FloatArray, yb: FloatArray, block: int, dt: float, n_modes: int, theta: FloatArray,
+    parts: tuple[ComplexArray, ComplexArray, FloatArray, FloatArray],
+) -> FloatArray:
+    """Kaufman's Jacobian ``-P_perp (dD/dtheta) c`` of :func:`_varpro_residual`'s residual."""
+    distinct, basis, Q, coef = parts
+    n_real = theta.size - 2 * n_modes
     # Pole derivative of each distinct exponential column (upper complex poles, then reals).
     # d/dp of g(p) e^{p t} = (t g + g') e^{p t}: reuses the exponentials of the basis.
     g, dg = _block_gain(distinct[:-1], block, dt)
@@ -487,8 +512,7 @@ def _varpro_step(
         d_basis[:, n_modes:, None].real * coef[None, 2 * n_modes:2 * n_modes + n_real],
     ], axis=1).reshape(n_b, -1)
     projected = (V - Q @ (Q.T @ V)).reshape(n_b, theta.size, n_ch)
-    jac = -projected.transpose(2, 0, 1).reshape(n_ch * n_b, theta.size)
-    return resid.ravel(order="F"), jac
+    return np.asarray(-projected.transpose(2, 0, 1).reshape(n_ch * n_b, theta.size))
 
 
 # -- one release's heave and pitch modes (the console's releases table, reprocessing) ----------
