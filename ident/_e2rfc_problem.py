@@ -393,23 +393,21 @@ class _Stacked:
         cross = self.W2FY.T @ L  # (2 k_f + 2, 2 m)
         X = np.hstack([self.Fc, L])
         k = X.shape[1]
-        coef = np.empty((k, 2))
-        solved = []
+        G = np.empty((2, k, k))
+        b = np.empty((2, k))
         for i in range(2):
             FL = cross[i * k_f:(i + 1) * k_f]
-            G = np.empty((k, k))
-            G[:k_f, :k_f] = self.Gff[i]
-            G[:k_f, k_f:] = FL
-            G[k_f:, :k_f] = FL.T
-            G[k_f:, k_f:] = (L * self.w2[:, i:i + 1]).T @ L
-            b = np.concatenate([self.Fy[i], cross[2 * k_f + i]])
-            scale = np.sqrt(np.diag(G))
-            scale[scale == 0.0] = 1.0
-            G_scaled = G / np.outer(scale, scale)
-            coef[:, i] = np.linalg.lstsq(G_scaled, b / scale, rcond=None)[0] / scale
-            solved.append((G_scaled, scale))
+            G[i, :k_f, :k_f] = self.Gff[i]
+            G[i, :k_f, k_f:] = FL
+            G[i, k_f:, :k_f] = FL.T
+            G[i, k_f:, k_f:] = (L * self.w2[:, i:i + 1]).T @ L
+            b[i] = np.concatenate([self.Fy[i], cross[2 * k_f + i]])
+        scale = np.sqrt(np.diagonal(G, axis1=1, axis2=2)).copy()  # (2, k)
+        scale[scale == 0.0] = 1.0
+        solver = _PseudoInverse(G / (scale[:, :, None] * scale[:, None, :]))
+        coef = (solver.apply(b / scale) / scale).T  # (k, 2)
         residual = self.w * (self.yc - X @ coef)  # (N, 2), weighted
-        out = (d, X, coef, residual, solved)
+        out = (d, X, coef, residual, solver, scale)
         self._cache = (key, out)
         return out
 
@@ -420,22 +418,49 @@ class _Stacked:
 
     def jacobian(self, theta: FloatArray) -> FloatArray:
         """Kaufman's variable-projection Jacobian over log(d), shape (2 N, m)."""
-        d, X, coef, residual, solved = self._evaluate(theta)
+        d, X, coef, residual, solver, scale = self._evaluate(theta)
         dL = self._demeaned(np.vstack([v.lag_derivatives(d) for v in self.views]))
         m = d.size
         N, k = X.shape
         lag0 = k - 2 * m
-        J = np.empty((2 * N, m))
-        for i, (G_scaled, scale) in enumerate(solved):
+        rhs = np.empty((2, k, m))
+        V = np.empty((2, N, m))
+        for i in range(2):
             lag_coef = coef[lag0:, i].reshape(m, 2)
             # Column l: the derivative of the fitted force in log d_l (unweighted).
-            V = np.einsum("nlc,lc->nl", dL.reshape(N, m, 2), lag_coef)
-            rhs = X.T @ (V * self.w2[:, i:i + 1])  # (k, m)
+            V[i] = np.einsum("nlc,lc->nl", dL.reshape(N, m, 2), lag_coef)
+            rhs[i] = X.T @ (V[i] * self.w2[:, i:i + 1])  # (k, m)
             # Golub and Pereyra's full Jacobian: -(I - P) dX c - X G^-1 dX^T r.
             dXr = (dL.T @ (residual[:, i] * self.w[:, i])).reshape(m, 2)
             for l in range(m):
-                rhs[lag0 + 2 * l:lag0 + 2 * l + 2, l] -= dXr[l]
-            correction = X @ (np.linalg.lstsq(G_scaled, rhs / scale[:, None], rcond=None)[0]
-                              / scale[:, None])
-            J[i * N:(i + 1) * N] = -self.w[:, i:i + 1] * (V - correction)
+                rhs[i, lag0 + 2 * l:lag0 + 2 * l + 2, l] -= dXr[l]
+        solved = solver.apply(rhs / scale[:, :, None]) / scale[:, :, None]  # (2, k, m)
+        J = np.empty((2 * N, m))
+        for i in range(2):
+            J[i * N:(i + 1) * N] = -self.w[:, i:i + 1] * (V[i] - X @ solved[i])
         return J
+
+
+class _PseudoInverse:
+    """Minimum-norm solves with a batch of symmetric positive semi-definite matrices.
+
+    The same solution as ``np.linalg.lstsq(G, b, rcond=None)`` (eigenvalues below ``eps k``
+    times the largest are dropped, as ``lstsq`` drops singular values), from one symmetric
+    eigendecomposition of both force channels' normal matrices: the residual and the Jacobian
+    of the lag-root search then solve with the same factors instead of four ``lstsq`` calls.
+    """
+
+    def __init__(self, G: FloatArray) -> None:
+        values, self.vectors = np.linalg.eigh(G)  # (c, k), (c, k, k)
+        largest = np.abs(values).max(axis=1, keepdims=True)
+        keep = np.abs(values) > np.finfo(float).eps * G.shape[-1] * largest
+        self.inverse = np.where(keep, 1.0 / np.where(keep, values, 1.0), 0.0)
+
+    def apply(self, b: FloatArray) -> FloatArray:
+        """Solve for right-hand sides ``b`` of shape (c, k) or (c, k, m)."""
+        vectors, inverse = self.vectors, self.inverse
+        if b.ndim == 2:
+            projected = np.einsum("cki,ck->ci", vectors, b)
+            return np.asarray(np.einsum("cik,ck->ci", vectors, inverse * projected))
+        projected = np.einsum("cki,ckm->cim", vectors, b)
+        return np.asarray(np.einsum("cik,ckm->cim", vectors, inverse[:, :, None] * projected))
