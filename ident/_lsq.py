@@ -12,10 +12,11 @@ diagonal of ``J^T J``, which makes the steps invariant to the parameters' units,
 ``x_scale="jac"``) and Nielsen's damping update; a step is clipped to the box, so the iterate
 stays strictly feasible, and a parameter on a bound that the gradient pushes outwards is held
 there while the others move (a projected step; clipping alone would leave the damped model
-disagreeing with every step, and the search crawling along the bound). It stops as ``least_squares`` does: when the step is below
-``xtol (xtol + |x|)``, when an accepted step that the quadratic model predicted well (ratio of
-actual to predicted reduction above 0.25) lowers the cost by less than ``ftol`` of it, or after
-``max_nfev`` residual evaluations.
+disagreeing with every step, and the search crawling along the bound). It stops as
+``least_squares`` does: after a step below ``xtol (xtol + |x|)`` (taken if it lowers the cost),
+when an accepted step that the quadratic model predicted well (ratio of actual to predicted
+reduction above 0.25) lowers the cost by less than ``ftol`` of it, or after ``max_nfev``
+residual evaluations.
 
 References
 ----------
@@ -92,7 +93,8 @@ def bounded_lm(
     lo, hi = (np.asarray(b, dtype=float) for b in bounds)
     # Steps stop this far inside the box (relative to its width): the iterate stays feasible.
     margin = 1e-10 * (hi - lo)
-    x = np.clip(np.asarray(x0, dtype=float), lo + margin, hi - margin)
+    inner_lo, inner_hi = lo + margin, hi - margin
+    x = np.clip(np.asarray(x0, dtype=float), inner_lo, inner_hi)
     r = residual(x)
     cost = 0.5 * float(r @ r)
     nfev = 1
@@ -101,27 +103,30 @@ def bounded_lm(
     J = jacobian(x)
     A, g = J.T @ J, J.T @ r
     scale = np.diag(A).copy()  # Marquardt's scaling, the largest diagonal seen (as MINPACK)
+    diagonal = np.diag_indices(x.size)
     damping = 1e-3
     growth = 2.0
     while nfev < max_nfev:
-        scale = np.maximum(scale, np.diag(A))
-        D = np.where(scale > 0.0, scale, 1.0)
+        scale = np.maximum(scale, A[diagonal])
+        M = A.copy()
+        M[diagonal] += damping * np.where(scale > 0.0, scale, 1.0)
         # A parameter on its bound that the gradient pushes outwards stays there: the step is
         # solved for the others (else every clipped step would disagree with the model).
-        free = ~(((x <= lo + 2.0 * margin) & (g > 0.0)) | ((x >= hi - 2.0 * margin) & (g < 0.0)))
+        held = ((x <= lo + 2.0 * margin) & (g > 0.0)) | ((x >= hi - 2.0 * margin) & (g < 0.0))
         step = np.zeros_like(x)
-        if free.any():
-            M = (A + damping * np.diag(D))[np.ix_(free, free)]
-            try:
-                step[free] = np.linalg.solve(M, -g[free])
-            except np.linalg.LinAlgError:
-                step[free] = np.linalg.lstsq(M, -g[free], rcond=None)[0]
-        x_new = np.clip(x + step, lo + margin, hi - margin)
+        if held.any():
+            free = ~held
+            if free.any():
+                step[free] = _solve(M[np.ix_(free, free)], -g[free])
+        else:
+            step = _solve(M, -g)
+        x_new = np.clip(x + step, inner_lo, inner_hi)
         step = x_new - x
-        # A step below xtol is still taken when it lowers the cost, and is the last.
-        small = float(np.linalg.norm(step)) <= xtol * (xtol + float(np.linalg.norm(x)))
-        if not step.any():
+        step_norm = math.sqrt(float(step @ step))
+        if step_norm == 0.0:
             break
+        # A step below xtol is still taken when it lowers the cost, and is the last.
+        small = step_norm <= xtol * (xtol + math.sqrt(float(x @ x)))
         predicted = -float(g @ step + 0.5 * step @ A @ step)
         r_new = residual(x_new)
         nfev += 1
@@ -142,3 +147,11 @@ def bounded_lm(
             damping *= growth
             growth *= 2.0
     return LsqResult(x, r, cost, nfev)
+
+
+def _solve(M: FloatArray, b: FloatArray) -> FloatArray:
+    """Solve the damped normal equations (least squares if they are singular)."""
+    try:
+        return np.asarray(np.linalg.solve(M, b), dtype=float)
+    except np.linalg.LinAlgError:
+        return np.asarray(np.linalg.lstsq(M, b, rcond=None)[0], dtype=float)
