@@ -109,6 +109,10 @@ class RegressorView:
     exponentials: npt.NDArray[np.complex128]
     fit: ModalFit
     rate: float  # U / B, 1/s
+    #: The last lag roots' ``_lag_terms``: the search asks for the columns, then (at the same
+    #: roots, when it accepts them) for their derivatives, which reuse them.
+    _terms: dict[bytes, tuple[FloatArray, npt.NDArray[np.complex128], FloatArray]] = field(
+        default_factory=dict, repr=False, compare=False)
 
     def lag_columns(self, d: FloatArray) -> FloatArray:
         """Lag states ``x_l`` for lag roots ``d``, shape (n_rows, 2 m) (two columns per lag).
@@ -142,12 +146,17 @@ class RegressorView:
     def _lag_terms(self, d: FloatArray) -> tuple[FloatArray, npt.NDArray[np.complex128],
                                                 FloatArray]:
         """``mu`` (m,), gained amplitudes ``g_l C`` (n_poles, 2 m), ``e^{-mu t}`` (n_rows, m)."""
-        mu = self.rate * np.asarray(d, dtype=float)
-        poles = self.fit.poles[:, None]
-        gain = poles / (poles + mu)  # (n_poles, m)
-        gained = (gain[:, :, None] * self.fit.amplitudes[:, None, :]).reshape(poles.size, -1)
-        decay = np.exp(np.maximum(-np.outer(self.t, mu), -600.0))
-        return mu, gained, decay
+        d = np.asarray(d, dtype=float)
+        key = d.tobytes()
+        if key not in self._terms:
+            mu = self.rate * d
+            poles = self.fit.poles[:, None]
+            gain = poles / (poles + mu)  # (n_poles, m)
+            gained = (gain[:, :, None] * self.fit.amplitudes[:, None, :]).reshape(poles.size, -1)
+            decay = np.exp(np.maximum(-np.outer(self.t, mu), -600.0))
+            self._terms.clear()
+            self._terms[key] = (mu, gained, decay)
+        return self._terms[key]
 
 
 def prepare(release: Release, section: SectionModel) -> PreparedRelease:
