@@ -295,9 +295,16 @@ class Problem:
         errors = np.empty(N_FOLDS)
         for fold in range(N_FOLDS):
             n_train = counts.sum(axis=1) - counts[:, fold]
-            mean = (sums.sum(axis=1) - sums[:, fold]) / n_train[:, None]  # (n_rel, k + 2)
-            centred = (moments.sum(axis=1) - moments[:, fold]
-                       - n_train[:, None, None] * mean[:, :, None] * mean[:, None, :])
+            # A release with no training rows in this fold (its one-period blocks all fell in
+            # the fold) adds nothing to the solve, and its intercept is unknown (NaN), as
+            # in the stacked solve.
+            trained = n_train > 0
+            mean = np.full((n_rel, k + 2), np.nan)
+            mean[trained] = ((sums.sum(axis=1) - sums[:, fold])[trained]
+                             / n_train[trained, None])  # (n_rel, k + 2)
+            centred = np.zeros((n_rel, k + 2, k + 2))
+            centred[trained] = (moments.sum(axis=1) - moments[:, fold])[trained] - (
+                n_train[trained, None, None] * mean[trained, :, None] * mean[trained, None, :])
             coef = np.empty((k, 2))
             for i in range(2):
                 C = np.tensordot(w2[:, i], centred, axes=1)

@@ -1,11 +1,12 @@
-"""A small bounded Levenberg-Marquardt solver for the identification's few-parameter searches.
+"""A small bounded Levenberg-Marquardt solver for E2RFC's few-parameter lag-root searches.
 
-The modal fit's pole refinement (:mod:`ident.modal`) and E2RFC's lag-root search
-(:mod:`ident._e2rfc_problem`) are variable-projection problems with 1 to 7 nonlinear parameters
-and a few thousand residuals, solved dozens of times per identification. scipy's
-``least_squares`` (trust-region reflective) spends more time on its own bookkeeping per call and
-per iteration (set-up, an SVD of the Jacobian, scaling vectors) than on these residuals; this
-solver needs only the normal matrix ``J^T J`` of the few columns and one small solve per step.
+E2RFC's lag-root search (:mod:`ident._e2rfc_problem`) is a variable-projection problem with 1
+to 4 nonlinear parameters and a few thousand residuals, solved dozens of times per
+identification. scipy's ``least_squares`` (trust-region reflective) spends more time on its own
+bookkeeping per call and per iteration (set-up, an SVD of the Jacobian, scaling vectors) than on
+these residuals; this solver needs only the normal matrix ``J^T J`` of the few columns and one
+small solve per step. (The modal fit keeps scipy's solver: on a random response its landscape
+has many local optima, and a different search path ends in different ones.)
 
 Method: Levenberg-Marquardt with Marquardt's scaling (the damping is proportional to the
 diagonal of ``J^T J``, which makes the steps invariant to the parameters' units, as scipy's

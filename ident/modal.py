@@ -22,9 +22,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 from scipy.linalg import eigh
-from scipy.optimize import linear_sum_assignment
+from scipy.optimize import least_squares, linear_sum_assignment
 
-from ident._lsq import bounded_lm
 from ident._threads import single_threaded_blas
 from ident.errors import InsufficientDataError
 
@@ -354,15 +353,13 @@ def fit_modes(
     grid = -np.geomspace(3.0 / duration, 0.3 / dtb, 3)
     unused = [r for r in reals if bounds[0][-1] < r < bounds[1][-1]]
     for n_real in range(1, max_real_poles + 1):
-        # The pencil's next real pole when it found one; else the grid point at which the new
-        # pole, the others held, explains the most residual (one projection each, where a
-        # search from every grid point cost three times the evaluations, mostly wandering
-        # with a pole the BIC then rejects).
-        start = unused[0] if unused else min(
-            grid, key=lambda r: _start_rss(tb, yb, block, dt, n_modes, np.append(theta, r),
-                                           bounds))
-        theta_new, rss_new = _refine(tb, yb, block, dt, n_modes, n_real,
-                                     np.append(theta, start), bounds, loose=True)
+        starts = unused[:1] or list(grid)  # the pencil's next real pole when it found one
+        trials = [
+            _refine(tb, yb, block, dt, n_modes, n_real, np.append(theta, start), bounds,
+                    loose=True)
+            for start in starts
+        ]
+        theta_new, rss_new = min(trials, key=lambda trial: trial[1])
         bic_new = _bic(rss_new, yb, n_modes, n_real)
         if bic_new >= bic:
             break
@@ -432,19 +429,6 @@ def _strongest_poles(
     return z[z.imag > 0], np.asarray(z[z.imag == 0].real, dtype=float)
 
 
-def _start_rss(
-    tb: FloatArray, yb: FloatArray, block: int, dt: float, n_modes: int, theta: FloatArray,
-    bounds: tuple[FloatArray, FloatArray],
-) -> float:
-    """Residual sum of squares at start parameters (clipped into the bounds as ``_refine``)."""
-    k = theta.size
-    lo, hi = bounds[0][:k], bounds[1][:k]
-    margin = 1e-6 * (hi - lo)
-    resid, _ = _varpro_residual(tb, yb, block, dt, n_modes, np.clip(theta, lo + margin,
-                                                                     hi - margin))
-    return float(resid @ resid)
-
-
 def _refine(
     tb: FloatArray, yb: FloatArray, block: int, dt: float, n_modes: int, n_real: int,
     theta0: FloatArray, bounds: tuple[FloatArray, FloatArray], *, loose: bool,
@@ -462,7 +446,10 @@ def _refine(
     # pole growing faster than allowed, say): the solver needs a strictly feasible start.
     margin = 1e-6 * (hi - lo)
     theta0 = np.clip(theta0, lo + margin, hi - margin)
-    # The solver asks for the Jacobian right after the residual at the points it accepts.
+    # scipy asks for the Jacobian right after the residual at the points it accepts; the
+    # residual's factorisation is kept for it. (The modal fit keeps scipy's trust-region
+    # reflective search: on a random response, a poorly determined fit with many local
+    # optima, ident._lsq's Levenberg-Marquardt stopped in other ones.)
     last: list[tuple[FloatArray, tuple[ComplexArray, ComplexArray, FloatArray, FloatArray]]] = []
 
     def residual(theta: FloatArray) -> FloatArray:
@@ -475,8 +462,8 @@ def _refine(
             residual(theta)
         return _varpro_jacobian(tb, yb, block, dt, n_modes, theta, last[0][1])
 
-    sol = bounded_lm(
-        residual, jacobian, theta0, (lo, hi),
+    sol = least_squares(
+        residual, theta0, jac=jacobian, bounds=(lo, hi), x_scale="jac",
         xtol=1e-6 if loose else 1e-10, ftol=1e-6 if loose else 1e-12,
         # A well-posed fit converges in ~15 evaluations; a pole the data cannot support wanders,
         # and the BIC rejects it anyway, so its search is cut short.
