@@ -24,6 +24,7 @@ import numpy.typing as npt
 from scipy.linalg import eigh
 from scipy.optimize import least_squares, linear_sum_assignment
 
+from ident._lsq import bounded_lm
 from ident._threads import single_threaded_blas
 from ident.errors import InsufficientDataError
 
@@ -38,6 +39,12 @@ ComplexArray = npt.NDArray[np.complex128]
 
 #: Block-averaged samples per period of the fastest mode used for the fit.
 _SAMPLES_PER_PERIOD = 6
+#: The poles are searched with :func:`ident._lsq.bounded_lm` first, and again with scipy's
+#: ``least_squares`` when the fit's block-averaged residual is more than this many times the
+#: white noise: a decay fits down to the noise (about 1), a random response (turbulence, 20 and
+#: more) does not, and its fit has many local optima, in which the two solvers' different paths
+#: end differently (scipy's is the one the fit was validated with).
+FAST_SEARCH_LIMIT = 3.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -343,30 +350,13 @@ def fit_modes(
         raise InsufficientDataError(
             f"found {osc.size} of {n_modes} oscillatory modes in the data: too noisy or too short"
         )
-    # Oscillatory modes first; then real poles one at a time while BIC improves, each new one
-    # started from the pencil's real poles or from a grid of decay rates across the record.
-    # The order search uses loose tolerances (it only compares orders); the chosen order is then
-    # polished to full precision.
-    theta, rss = _refine(tb, yb, block, dt, n_modes, 0, _complex_params(osc[:n_modes]), bounds,
-                         loose=True)
-    bic = _bic(rss, yb, n_modes, 0)
-    grid = -np.geomspace(3.0 / duration, 0.3 / dtb, 3)
-    unused = [r for r in reals if bounds[0][-1] < r < bounds[1][-1]]
-    for n_real in range(1, max_real_poles + 1):
-        starts = unused[:1] or list(grid)  # the pencil's next real pole when it found one
-        trials = [
-            _refine(tb, yb, block, dt, n_modes, n_real, np.append(theta, start), bounds,
-                    loose=True)
-            for start in starts
-        ]
-        theta_new, rss_new = min(trials, key=lambda trial: trial[1])
-        bic_new = _bic(rss_new, yb, n_modes, n_real)
-        if bic_new >= bic:
-            break
-        theta, rss, bic = theta_new, rss_new, bic_new
-        unused = unused[1:]
+    # The fast search first; where it leaves more than noise (a random response, whose fit has
+    # many local optima), scipy's search, which the fit was validated with, decides.
+    search = (tb, yb, block, dt, n_modes, max_real_poles, osc, reals, bounds, duration)
+    theta, rss = _search_poles(*search, fast=True)
+    if math.sqrt(rss * block / yb.size) > FAST_SEARCH_LIMIT:
+        theta, rss = _search_poles(*search, fast=False)
     n_real = theta.size - 2 * n_modes
-    theta, rss = _refine(tb, yb, block, dt, n_modes, n_real, theta, bounds, loose=False)
 
     # Amplitudes on the full-rate data (block = 1), with the refined poles.
     poles = _poles_from_params(theta, n_modes)
@@ -382,6 +372,41 @@ def fit_modes(
         noise=noise,
         residual_rms=np.sqrt(np.mean(resid**2, axis=0)) / weights,
     )
+
+
+def _search_poles(
+    tb: FloatArray, yb: FloatArray, block: int, dt: float, n_modes: int, max_real_poles: int,
+    osc: ComplexArray, reals: FloatArray, bounds: tuple[FloatArray, FloatArray],
+    duration: float, *, fast: bool,
+) -> tuple[FloatArray, float]:
+    """Refined pole parameters and residual sum: the modes, then real poles while BIC improves.
+
+    Each new real pole starts from the pencil's real poles or from a grid of decay rates
+    across the record. The order search uses loose tolerances (it only compares orders); the
+    chosen order is then polished to full precision. ``duration``: of the record, s;
+    ``fast``: see :func:`_refine`.
+    """
+    dtb = block * dt
+    theta, rss = _refine(tb, yb, block, dt, n_modes, 0, _complex_params(osc[:n_modes]), bounds,
+                         loose=True, fast=fast)
+    bic = _bic(rss, yb, n_modes, 0)
+    grid = -np.geomspace(3.0 / duration, 0.3 / dtb, 3)
+    unused = [r for r in reals if bounds[0][-1] < r < bounds[1][-1]]
+    for n_real in range(1, max_real_poles + 1):
+        starts = unused[:1] or list(grid)  # the pencil's next real pole when it found one
+        trials = [
+            _refine(tb, yb, block, dt, n_modes, n_real, np.append(theta, start), bounds,
+                    loose=True, fast=fast)
+            for start in starts
+        ]
+        theta_new, rss_new = min(trials, key=lambda trial: trial[1])
+        bic_new = _bic(rss_new, yb, n_modes, n_real)
+        if bic_new >= bic:
+            break
+        theta, rss, bic = theta_new, rss_new, bic_new
+        unused = unused[1:]
+    n_real = theta.size - 2 * n_modes
+    return _refine(tb, yb, block, dt, n_modes, n_real, theta, bounds, loose=False, fast=fast)
 
 
 def _bounds(n_modes: int, dtb: float, duration: float) -> tuple[FloatArray, FloatArray]:
@@ -432,10 +457,13 @@ def _strongest_poles(
 def _refine(
     tb: FloatArray, yb: FloatArray, block: int, dt: float, n_modes: int, n_real: int,
     theta0: FloatArray, bounds: tuple[FloatArray, FloatArray], *, loose: bool,
+    fast: bool = False,
 ) -> tuple[FloatArray, float]:
     """Variable-projection refinement of the poles; returns parameters and residual sum.
 
     ``loose`` stops at a relative cost change of 1e-6 (enough to compare model orders).
+    ``fast`` searches with :func:`ident._lsq.bounded_lm` instead of scipy's trust-region
+    reflective ``least_squares`` (same tolerances; a fraction of the bookkeeping per call).
 
     The Jacobian is Kaufman's approximation ``-P_perp (dD/dtheta) c`` with the derivative of each
     exponential column taken in closed form through its (holomorphic) pole derivative.
@@ -446,10 +474,8 @@ def _refine(
     # pole growing faster than allowed, say): the solver needs a strictly feasible start.
     margin = 1e-6 * (hi - lo)
     theta0 = np.clip(theta0, lo + margin, hi - margin)
-    # scipy asks for the Jacobian right after the residual at the points it accepts; the
-    # residual's factorisation is kept for it. (The modal fit keeps scipy's trust-region
-    # reflective search: on a random response, a poorly determined fit with many local
-    # optima, ident._lsq's Levenberg-Marquardt stopped in other ones.)
+    # The solvers ask for the Jacobian right after the residual at the points they accept; the
+    # residual's factorisation is kept for it.
     last: list[tuple[FloatArray, tuple[ComplexArray, ComplexArray, FloatArray, FloatArray]]] = []
 
     def residual(theta: FloatArray) -> FloatArray:
@@ -462,13 +488,15 @@ def _refine(
             residual(theta)
         return _varpro_jacobian(tb, yb, block, dt, n_modes, theta, last[0][1])
 
-    sol = least_squares(
-        residual, theta0, jac=jacobian, bounds=(lo, hi), x_scale="jac",
-        xtol=1e-6 if loose else 1e-10, ftol=1e-6 if loose else 1e-12,
-        # A well-posed fit converges in ~15 evaluations; a pole the data cannot support wanders,
-        # and the BIC rejects it anyway, so its search is cut short.
-        max_nfev=20 if loose else 60,
-    )
+    # A well-posed fit converges in ~15 evaluations; a pole the data cannot support wanders,
+    # and the BIC rejects it anyway, so its search is cut short.
+    tolerances = {"xtol": 1e-6 if loose else 1e-10, "ftol": 1e-6 if loose else 1e-12,
+                  "max_nfev": 20 if loose else 60}
+    if fast:
+        sol = bounded_lm(residual, jacobian, theta0, (lo, hi), **tolerances)
+    else:
+        sol = least_squares(residual, theta0, jac=jacobian, bounds=(lo, hi), x_scale="jac",
+                            **tolerances)
     return sol.x, float(np.sum(sol.fun**2))
 
 
