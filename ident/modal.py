@@ -490,13 +490,13 @@ def _refine(
 
     # A well-posed fit converges in ~15 evaluations; a pole the data cannot support wanders,
     # and the BIC rejects it anyway, so its search is cut short.
-    tolerances = {"xtol": 1e-6 if loose else 1e-10, "ftol": 1e-6 if loose else 1e-12,
-                  "max_nfev": 20 if loose else 60}
+    xtol, ftol, max_nfev = (1e-6, 1e-6, 20) if loose else (1e-10, 1e-12, 60)
     if fast:
-        sol = bounded_lm(residual, jacobian, theta0, (lo, hi), **tolerances)
+        sol = bounded_lm(residual, jacobian, theta0, (lo, hi), xtol=xtol, ftol=ftol,
+                         max_nfev=max_nfev)
     else:
         sol = least_squares(residual, theta0, jac=jacobian, bounds=(lo, hi), x_scale="jac",
-                            **tolerances)
+                            xtol=xtol, ftol=ftol, max_nfev=max_nfev)
     return sol.x, float(np.sum(sol.fun**2))
 
 
