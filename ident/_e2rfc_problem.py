@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy.optimize import least_squares
 
+from ident._lsq import bounded_lm
 from ident._regressors import PreparedRelease
 from ident._selection import Candidate
 from ident._stats import autocorrelation_inflation
@@ -30,6 +30,9 @@ FloatArray = npt.NDArray[np.float64]
 MAX_CONDITION = 1e8
 #: Folds of the held-out error.
 N_FOLDS = 5
+#: Below this condition number the final fit solves the normal equations and refines once
+#: (``Problem._full_fit``); above, an SVD of the rows.
+NORMAL_EQUATIONS_CONDITION = 1e4
 
 
 @dataclass(frozen=True, eq=False)
@@ -61,6 +64,9 @@ class FinalFit:
     residual_inflation: float
 
 
+_Blocks = list[tuple[FloatArray, FloatArray]]
+
+
 def improves(new: list[Candidate], old: list[Candidate]) -> bool:
     """Tell whether the best new candidate beats the best old one by more than its std error."""
     new_ok = [c for c in new if not c.note]
@@ -82,21 +88,27 @@ class Problem:
         K = np.concatenate([2 * math.pi * p.fit.frequencies * p.B / p.U for p in prepared])
         self.K_range = (float(K.min()), float(K.max()))
         self._stacked_cache: dict[tuple[bool, str], _Stacked] = {}
+        self._last_blocks: tuple[tuple[bytes, bool, str], _Blocks] | None = None
+        self._fold_rows = [self._folds(p) for p in prepared]
 
     # -- linear part -------------------------------------------------------------------------
     def _blocks(
-        self, d: FloatArray, with_A3: bool, which: str, rows: list[FloatArray] | None = None
+        self, d: FloatArray, with_A3: bool, which: str
     ) -> list[tuple[FloatArray, FloatArray]]:
-        """Per release: design (n, k) and normalised forces (n, 2) on a view, or rows of it."""
+        """Per release: design (n, k) and normalised forces (n, 2) on a view.
+
+        The last result is kept: a candidate's held-out error and its condition number (and the
+        final fit's covariance and condition number) ask for the same blocks in turn.
+        """
+        key = (np.asarray(d, dtype=float).tobytes(), with_A3, which)
+        if self._last_blocks is not None and self._last_blocks[0] == key:
+            return self._last_blocks[1]
         out = []
-        for n, p in enumerate(self.prepared):
+        for p in self.prepared:
             view = p.view(which)
             fixed = view.fixed if with_A3 else view.fixed[:, :4]
-            design = np.hstack([fixed, view.lag_columns(d)])
-            force = view.force
-            if rows is not None:
-                design, force = design[rows[n]], force[rows[n]]
-            out.append((design, force))
+            out.append((np.hstack([fixed, view.lag_columns(d)]), view.force))
+        self._last_blocks = (key, out)
         return out
 
     def _solve(
@@ -141,13 +153,25 @@ class Problem:
         return coef, intercepts, residuals
 
     def condition(self, d: FloatArray, with_A3: bool) -> float:
-        """Condition number of the column-scaled, demeaned, stacked design."""
+        """Condition number of the column-scaled, demeaned, stacked design.
+
+        From the eigenvalues of its Gram matrix (a few small products) when that is accurate:
+        their square root carries a relative error of about ``eps cond^2``, 1e-8 below a
+        condition number of 1e4; above, from the design's singular values (an SVD of every
+        search row), so the ``MAX_CONDITION`` test is never decided by round-off.
+        """
         blocks = self._blocks(d, with_A3, "search")
         M = np.vstack([X - X.mean(axis=0) for X, _ in blocks])
         norms = np.linalg.norm(M, axis=0)
         if np.any(norms == 0.0):
             return math.inf
-        return float(np.linalg.cond(M / norms))
+        M = M / norms
+        eigenvalues = np.linalg.eigvalsh(M.T @ M)
+        if eigenvalues[0] > 0.0:
+            estimate = math.sqrt(float(eigenvalues[-1] / eigenvalues[0]))
+            if estimate < 1e4:
+                return estimate
+        return float(np.linalg.cond(M))
 
     # -- lag-root search ---------------------------------------------------------------------
     def starts(self, n_lags: int, previous: FloatArray | None) -> list[FloatArray]:
@@ -178,9 +202,10 @@ class Problem:
         lo, hi = math.log(K_lo / 20.0), math.log(20.0 * K_hi)
         def solve(theta0: FloatArray, which: str, tol: float, nfev: int) -> Any:
             problem = self._stacked(with_A3, which)
-            return least_squares(
-                problem.residual, np.clip(theta0, lo + 1e-6, hi - 1e-6), jac=problem.jacobian,
-                bounds=(lo, hi), xtol=tol, ftol=1e-2 * tol, max_nfev=nfev)
+            return bounded_lm(
+                problem.residual, problem.jacobian, np.clip(theta0, lo + 1e-6, hi - 1e-6),
+                (np.full(theta0.size, lo), np.full(theta0.size, hi)), xtol=tol,
+                ftol=1e-2 * tol, max_nfev=nfev)
 
         # Every start is run loosely on the coarse rows. When asked to be precise, the best is
         # converged on the search rows, then moved by one Gauss-Newton step on every sample, so the
@@ -244,20 +269,58 @@ class Problem:
         return self.final(Candidate(n_lags, with_A3, tuple(d), math.nan, math.nan, 0))
 
     def _cross_validate(self, d: FloatArray, with_A3: bool) -> FloatArray:
-        """Held-out weighted mean squared force error per fold."""
-        folds = [self._folds(p) for p in self.prepared]
-        errors = np.empty(N_FOLDS)
+        """Held-out weighted mean squared force error per fold.
+
+        Each fold's training solve is the weighted, per-release-demeaned normal equations of
+        :meth:`_solve` on the other folds' rows, assembled from per-release, per-fold moments
+        of ``[X, y]`` (computed once; each release centred on its own mean first, so that
+        removing the training mean cancels no digits) instead of stacking the rows again for
+        every fold. The held-out residuals are computed from the fold's rows.
+        """
         blocks = self._blocks(d, with_A3, "search")
-        for k in range(N_FOLDS):
-            train = [np.concatenate([f[j] for j in range(N_FOLDS) if j != k]) for f in folds]
-            training = [(X[r], y[r]) for (X, y), r in zip(blocks, train, strict=True)]
-            coef, intercepts, _ = self._solve(training)
+        k = blocks[0][0].shape[1]
+        n_rel = len(blocks)
+        Z = [np.hstack([X, y]) for X, y in blocks]
+        Z = [z - z.mean(axis=0) for z in Z]
+        moments = np.empty((n_rel, N_FOLDS, k + 2, k + 2))
+        sums = np.empty((n_rel, N_FOLDS, k + 2))
+        counts = np.empty((n_rel, N_FOLDS))
+        for r, (z, folds) in enumerate(zip(Z, self._fold_rows, strict=True)):
+            for j, rows in enumerate(folds):
+                zj = z[rows]
+                moments[r, j] = zj.T @ zj
+                sums[r, j] = zj.sum(axis=0)
+                counts[r, j] = rows.size
+        w2 = self.weights**2  # (n_rel, 2)
+        errors = np.empty(N_FOLDS)
+        for fold in range(N_FOLDS):
+            n_train = counts.sum(axis=1) - counts[:, fold]
+            # A release with no training rows in this fold (its one-period blocks all fell in
+            # the fold) adds nothing to the solve, and its intercept is unknown (NaN), as
+            # in the stacked solve.
+            trained = n_train > 0
+            mean = np.full((n_rel, k + 2), np.nan)
+            mean[trained] = ((sums.sum(axis=1) - sums[:, fold])[trained]
+                             / n_train[trained, None])  # (n_rel, k + 2)
+            centred = np.zeros((n_rel, k + 2, k + 2))
+            centred[trained] = (moments.sum(axis=1) - moments[:, fold])[trained] - (
+                n_train[trained, None, None] * mean[trained, :, None] * mean[trained, None, :])
+            coef = np.empty((k, 2))
+            for i in range(2):
+                C = np.tensordot(w2[:, i], centred, axes=1)
+                G, b = C[:k, :k], C[:k, k + i]
+                scale = np.sqrt(np.diag(G))
+                scale[scale == 0.0] = 1.0
+                scaled, *_ = np.linalg.lstsq(G / np.outer(scale, scale), b / scale, rcond=None)
+                coef[:, i] = scaled / scale
+            intercepts = mean[:, k:] - mean[:, :k] @ coef  # (n_rel, 2)
             sq, n = 0.0, 0
-            for (X, y), f, c, w in zip(blocks, folds, intercepts, self.weights, strict=True):
-                e = w * (y[f[k]] - X[f[k]] @ coef - c)
+            for z, folds, c, w in zip(Z, self._fold_rows, intercepts, self.weights, strict=True):
+                held = z[folds[fold]]
+                e = w * (held[:, k:] - held[:, :k] @ coef - c)
                 sq += float(np.sum(e**2))
                 n += e.size
-            errors[k] = sq / n
+            errors[fold] = sq / n
         return errors
 
     @staticmethod
@@ -281,8 +344,8 @@ class Problem:
     def final(self, chosen: Candidate) -> FinalFit:
         """Fit the chosen structure on every sample; return the model's arrays and statistics."""
         d = np.array(chosen.d)
-        blocks = self._blocks(d, chosen.with_A3, "full")
-        coef, _, residuals = self._solve(blocks, exact=True)
+        condition = self.condition(d, chosen.with_A3)
+        coef, residuals = self._full_fit(d, chosen.with_A3, condition)
         terms = [0, 1, 2] if chosen.with_A3 else [0, 1]
         terms += [3 + l for l in range(d.size)]
         A = np.zeros((3 + d.size, 2, 2))
@@ -292,24 +355,49 @@ class Problem:
                 A[term, i, j] = coef[col, i]
                 index.append((term, i, j))
         release_residuals = np.array([
-            np.sqrt(np.mean((r / w) ** 2, axis=0)) / np.sqrt(np.mean(y**2, axis=0))
-            for r, w, (_, y) in zip(residuals, self.weights, blocks, strict=True)
+            np.sqrt(np.mean((r / w) ** 2, axis=0))
+            / np.sqrt(np.mean(p.view("full").force ** 2, axis=0))
+            for r, w, p in zip(residuals, self.weights, self.prepared, strict=True)
         ])
+        inflation = autocorrelation_inflation(residuals)
         return FinalFit(
             A=A, d=d, with_A3=chosen.with_A3,
-            covariance=self._covariance(d, chosen.with_A3, coef, residuals),
+            covariance=self._covariance(d, chosen.with_A3, coef, residuals, inflation),
             parameter_index=tuple(index), release_residuals=release_residuals,
-            condition_number=self.condition(d, chosen.with_A3),
-            residual_inflation=autocorrelation_inflation(residuals))
+            condition_number=condition, residual_inflation=inflation)
+
+    def _full_fit(self, d: FloatArray, with_A3: bool, condition: float
+                  ) -> tuple[FloatArray, list[FloatArray]]:
+        """Coefficients (k, 2) and weighted residuals per release of the fit on every sample.
+
+        A design whose condition number (``condition``, of the search rows: an even subsample
+        of the same decays) is below ``NORMAL_EQUATIONS_CONDITION`` is solved by the
+        column-scaled normal equations of the lag-root search's stacked problem on every row,
+        then one step of iterative refinement with the residual of every row: the normal
+        equations' relative error, about ``eps cond^2`` (1e-8 at most here), shrinks by that
+        factor again, to round-off, at a few matrix products instead of an SVD of every row per
+        force channel. Other designs take the SVD-based solve of the stacked rows.
+        """
+        if not condition < NORMAL_EQUATIONS_CONDITION:
+            coef, _, residuals = self._solve(self._blocks(d, with_A3, "full"), exact=True)
+            return coef, residuals
+        stacked = self._stacked(with_A3, "full")
+        _, X, coef, _, solver, scale = stacked._evaluate(np.log(d))
+        error = stacked.yc - X @ coef  # (N, 2), unweighted
+        rhs = (X.T @ (error * stacked.w2)).T  # (2, k)
+        coef = coef + (solver.apply(rhs / scale) / scale).T
+        residual = stacked.w * (stacked.yc - X @ coef)
+        return coef, np.split(residual, np.cumsum(stacked.sizes)[:-1])
 
     def _covariance(
-        self, d: FloatArray, with_A3: bool, coef: FloatArray, residuals: list[FloatArray]
+        self, d: FloatArray, with_A3: bool, coef: FloatArray, residuals: list[FloatArray],
+        inflation: float,
     ) -> FloatArray:
         """Gauss-Newton covariance of [A entries (force row 0, row 1), log d].
 
-        The residual variance and its autocorrelation inflation come from the full-rate
-        residuals; the curvature ``J^T J`` from the search subsample, scaled by the ratio of
-        sample counts (the rows are an even subsample of the same decays).
+        The residual variance and its autocorrelation inflation (``inflation``) come from the
+        full-rate residuals; the curvature ``J^T J`` from the search subsample, scaled by the
+        ratio of sample counts (the rows are an even subsample of the same decays).
         """
         blocks = self._blocks(d, with_A3, "search")
         k = coef.shape[0]
@@ -323,40 +411,37 @@ class Problem:
                  for (X, _), w in zip(blocks, self.weights, strict=True)]
             )
         columns = [J_lin]
+        # Nonlinear part: the residual's derivative in log d_l at fixed coefficients (the
+        # intercepts re-profiled, so demeaned per release), from the lag columns' derivatives.
+        derivatives = [p.view("search").lag_derivatives(d) for p in self.prepared]
+        k_f = k - 2 * d.size
         for l in range(d.size):
-            h = 1e-6
-            d_plus, d_minus = d.copy(), d.copy()
-            d_plus[l] *= math.exp(h)
-            d_minus[l] *= math.exp(-h)
-            r_plus = self._residual_vector(d_plus, with_A3, coef)
-            r_minus = self._residual_vector(d_minus, with_A3, coef)
-            columns.append(((r_plus - r_minus) / (2 * h))[:, None])
+            column = []
+            for i in range(2):
+                c = coef[k_f + 2 * l:k_f + 2 * l + 2, i]
+                for dL, w in zip(derivatives, self.weights, strict=True):
+                    e = -(dL[:, 2 * l:2 * l + 2] @ c)
+                    column.append(w[i] * (e - e.mean()))
+            columns.append(np.concatenate(column)[:, None])
         J = np.hstack(columns)
         r = np.concatenate([np.concatenate([res[:, i] for res in residuals]) for i in range(2)])
         dof = max(r.size - J.shape[1], 1)
-        sigma2 = float(r @ r) / dof * autocorrelation_inflation(residuals)
+        sigma2 = float(r @ r) / dof * inflation
         return np.asarray(sigma2 * np.linalg.pinv(J.T @ J) * n_search / n_full, dtype=float)
-
-    def _residual_vector(self, d: FloatArray, with_A3: bool, coef: FloatArray) -> FloatArray:
-        """Weighted search-row residuals at fixed coefficients (intercepts re-profiled)."""
-        blocks = self._blocks(d, with_A3, "search")
-        out = []
-        for i in range(2):
-            for (X, y), w in zip(blocks, self.weights, strict=True):
-                e = y[:, i] - X @ coef[:, i]
-                out.append(w[i] * (e - e.mean()))
-        return np.concatenate(out)
 
 
 class _Stacked:
     """The weighted, release-demeaned residual over log(d) and its Jacobian, for one structure.
 
     The fixed columns (``q``, ``q'``, ``q''``) do not depend on the lag roots: their stacked,
-    demeaned and weighted form and their normal-equation blocks are computed once; each
-    evaluation adds only the lag columns. The Jacobian is Golub and Pereyra's exact
-    variable-projection form ``-(I - P) (dX/dlog d_l) c - X G^-1 (dX/dlog d_l)^T r`` (``P``
-    the projection on the columns, ``G`` the normal matrix): a few matrix products per lag
-    instead of a residual evaluation per lag.
+    demeaned form and their normal-equation blocks are computed once; each evaluation adds only
+    the lag columns. The channel weights are constant over a release, so the products of the
+    demeaned fixed columns and forces with the lag columns are taken unweighted-times-``w**2``
+    for both force channels in one matrix product (a demeaned column is orthogonal to a constant
+    per release, so the lag columns need no demeaning there). The Jacobian is Golub and
+    Pereyra's exact variable-projection form ``-(I - P) (dX/dlog d_l) c - X G^-1
+    (dX/dlog d_l)^T r`` (``P`` the projection on the columns, ``G`` the normal matrix), for
+    every lag at once: a few matrix products instead of a residual evaluation per lag.
     """
 
     def __init__(self, problem: Problem, with_A3: bool, which: str) -> None:
@@ -366,14 +451,17 @@ class _Stacked:
         self.sizes = sizes
         self.release = np.repeat(np.arange(sizes.size), sizes)
         self.w = problem.weights[self.release]  # (N, 2)
+        self.w2 = self.w**2
         fixed = np.vstack([v.fixed if with_A3 else v.fixed[:, :4] for v in self.views])
         y = np.vstack([v.force for v in self.views])
-        fixed_c = self._demeaned(fixed)
-        y_c = self._demeaned(y)
-        self.Fw = [fixed_c * self.w[:, i:i + 1] for i in range(2)]
-        self.yw = [y_c[:, i] * self.w[:, i] for i in range(2)]
-        self.Gff = [F.T @ F for F in self.Fw]
-        self.Fy = [F.T @ yw for F, yw in zip(self.Fw, self.yw, strict=True)]
+        self.Fc = self._demeaned(fixed)  # (N, k_f)
+        self.yc = self._demeaned(y)  # (N, 2)
+        self.k_f = self.Fc.shape[1]
+        # [F w0^2, F w1^2, y w^2]: one product with the lag columns gives every cross block.
+        self.W2FY = np.hstack([self.Fc * self.w2[:, :1], self.Fc * self.w2[:, 1:],
+                               self.yc * self.w2])
+        self.Gff = [(self.Fc * self.w2[:, i:i + 1]).T @ self.Fc for i in range(2)]
+        self.Fy = [self.W2FY[:, 2 * self.k_f + i] @ self.Fc for i in range(2)]
         self._cache: tuple[bytes, Any] | None = None
 
     def _demeaned(self, X: FloatArray) -> FloatArray:
@@ -386,41 +474,78 @@ class _Stacked:
             return self._cache[1]
         d = np.exp(theta)
         L = self._demeaned(np.vstack([v.lag_columns(d) for v in self.views]))
-        out = []
+        k_f = self.k_f
+        cross = self.W2FY.T @ L  # (2 k_f + 2, 2 m)
+        X = np.hstack([self.Fc, L])
+        k = X.shape[1]
+        G = np.empty((2, k, k))
+        b = np.empty((2, k))
         for i in range(2):
-            Lw = L * self.w[:, i:i + 1]
-            G = np.block([[self.Gff[i], self.Fw[i].T @ Lw], [Lw.T @ self.Fw[i], Lw.T @ Lw]])
-            b = np.concatenate([self.Fy[i], Lw.T @ self.yw[i]])
-            scale = np.sqrt(np.diag(G))
-            scale[scale == 0.0] = 1.0
-            G_scaled = G / np.outer(scale, scale)
-            coef = np.linalg.lstsq(G_scaled, b / scale, rcond=None)[0] / scale
-            X = np.hstack([self.Fw[i], Lw])
-            residual = self.yw[i] - X @ coef
-            out.append((X, G_scaled, scale, coef, residual))
-        self._cache = (key, (d, out))
-        return d, out
+            FL = cross[i * k_f:(i + 1) * k_f]
+            G[i, :k_f, :k_f] = self.Gff[i]
+            G[i, :k_f, k_f:] = FL
+            G[i, k_f:, :k_f] = FL.T
+            G[i, k_f:, k_f:] = (L * self.w2[:, i:i + 1]).T @ L
+            b[i] = np.concatenate([self.Fy[i], cross[2 * k_f + i]])
+        scale = np.sqrt(np.diagonal(G, axis1=1, axis2=2)).copy()  # (2, k)
+        scale[scale == 0.0] = 1.0
+        solver = _PseudoInverse(G / (scale[:, :, None] * scale[:, None, :]))
+        coef = (solver.apply(b / scale) / scale).T  # (k, 2)
+        residual = self.w * (self.yc - X @ coef)  # (N, 2), weighted
+        out = (d, X, coef, residual, solver, scale)
+        self._cache = (key, out)
+        return out
 
     def residual(self, theta: FloatArray) -> FloatArray:
         """Weighted residuals of both force channels, stacked."""
-        _, out = self._evaluate(theta)
-        return np.concatenate([o[4] for o in out])
+        residual = self._evaluate(theta)[3]
+        return np.concatenate([residual[:, 0], residual[:, 1]])
 
     def jacobian(self, theta: FloatArray) -> FloatArray:
         """Kaufman's variable-projection Jacobian over log(d), shape (2 N, m)."""
-        d, out = self._evaluate(theta)
+        d, X, coef, residual, solver, scale = self._evaluate(theta)
         dL = self._demeaned(np.vstack([v.lag_derivatives(d) for v in self.views]))
         m = d.size
-        J = np.empty((2 * dL.shape[0], m))
-        for i, (X, G_scaled, scale, coef, residual) in enumerate(out):
-            k = X.shape[1]
-            lag_coef = coef[k - 2 * m:].reshape(m, 2)
+        N, k = X.shape
+        lag0 = k - 2 * m
+        rhs = np.empty((2, k, m))
+        V = np.empty((2, N, m))
+        for i in range(2):
+            lag_coef = coef[lag0:, i].reshape(m, 2)
+            # Column l: the derivative of the fitted force in log d_l (unweighted).
+            V[i] = np.einsum("nlc,lc->nl", dL.reshape(N, m, 2), lag_coef)
+            rhs[i] = X.T @ (V[i] * self.w2[:, i:i + 1])  # (k, m)
+            # Golub and Pereyra's full Jacobian: -(I - P) dX c - X G^-1 dX^T r.
+            dXr = (dL.T @ (residual[:, i] * self.w[:, i])).reshape(m, 2)
             for l in range(m):
-                dX = dL[:, 2 * l:2 * l + 2] * self.w[:, i:i + 1]
-                v = dX @ lag_coef[l]
-                # Golub and Pereyra's full Jacobian: -(I - P) dX c - X G^-1 dX^T r.
-                rhs = X.T @ v
-                rhs[k - 2 * m + 2 * l:k - 2 * m + 2 * l + 2] -= dX.T @ residual
-                correction = X @ (np.linalg.lstsq(G_scaled, rhs / scale, rcond=None)[0] / scale)
-                J[i * dL.shape[0]:(i + 1) * dL.shape[0], l] = -(v - correction)
+                rhs[i, lag0 + 2 * l:lag0 + 2 * l + 2, l] -= dXr[l]
+        solved = solver.apply(rhs / scale[:, :, None]) / scale[:, :, None]  # (2, k, m)
+        J = np.empty((2 * N, m))
+        for i in range(2):
+            J[i * N:(i + 1) * N] = -self.w[:, i:i + 1] * (V[i] - X @ solved[i])
         return J
+
+
+class _PseudoInverse:
+    """Minimum-norm solves with a batch of symmetric positive semi-definite matrices.
+
+    The same solution as ``np.linalg.lstsq(G, b, rcond=None)`` (eigenvalues below ``eps k``
+    times the largest are dropped, as ``lstsq`` drops singular values), from one symmetric
+    eigendecomposition of both force channels' normal matrices: the residual and the Jacobian
+    of the lag-root search then solve with the same factors instead of four ``lstsq`` calls.
+    """
+
+    def __init__(self, G: FloatArray) -> None:
+        values, self.vectors = np.linalg.eigh(G)  # (c, k), (c, k, k)
+        largest = np.abs(values).max(axis=1, keepdims=True)
+        keep = np.abs(values) > np.finfo(float).eps * G.shape[-1] * largest
+        self.inverse = np.where(keep, 1.0 / np.where(keep, values, 1.0), 0.0)
+
+    def apply(self, b: FloatArray) -> FloatArray:
+        """Solve for right-hand sides ``b`` of shape (c, k) or (c, k, m)."""
+        vectors, inverse = self.vectors, self.inverse
+        if b.ndim == 2:
+            projected = np.einsum("cki,ck->ci", vectors, b)
+            return np.asarray(np.einsum("cik,ck->ci", vectors, inverse * projected))
+        projected = np.einsum("cki,ckm->cim", vectors, b)
+        return np.asarray(np.einsum("cik,ckm->cim", vectors, inverse[:, :, None] * projected))

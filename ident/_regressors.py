@@ -57,6 +57,10 @@ class PreparedRelease:
     force: FloatArray
     force_noise: FloatArray
     _views: dict[str, RegressorView] = field(default_factory=dict, repr=False)
+    #: ``e^{p t}`` of the fit's poles at every sample (n, n_poles), when :func:`prepare` has
+    #: computed them for the fixed regressors: the views take their rows instead of computing
+    #: the exponentials again.
+    exponentials: npt.NDArray[np.complex128] | None = field(default=None, repr=False)
 
     @property
     def U(self) -> float:
@@ -74,11 +78,13 @@ class PreparedRelease:
             rows = {"full": slice(None), "search": slice(None, None, step),
                     "coarse": slice(None, None, 2 * step)}[which]
             t = self.release.t[rows]
+            exponentials = (_exp(np.outer(t, self.fit.poles)) if self.exponentials is None
+                            else self.exponentials[rows])
             self._views[which] = RegressorView(
                 t=t,
                 fixed=self.fixed[rows],
                 force=self.force[rows],
-                exponentials=_exp(np.outer(t, self.fit.poles)),
+                exponentials=exponentials,
                 fit=self.fit,
                 rate=self.U / self.B,
             )
@@ -103,19 +109,22 @@ class RegressorView:
     exponentials: npt.NDArray[np.complex128]
     fit: ModalFit
     rate: float  # U / B, 1/s
+    #: The last lag roots' ``_lag_terms``: the search asks for the columns, then (at the same
+    #: roots, when it accepts them) for their derivatives, which reuse them.
+    _terms: dict[bytes, tuple[FloatArray, npt.NDArray[np.complex128], FloatArray]] = field(
+        default_factory=dict, repr=False, compare=False)
 
     def lag_columns(self, d: FloatArray) -> FloatArray:
-        """Lag states ``x_l`` for lag roots ``d``, shape (n_rows, 2 m) (two columns per lag)."""
+        """Lag states ``x_l`` for lag roots ``d``, shape (n_rows, 2 m) (two columns per lag).
+
+        Every lag in one product: ``x_l = Re[e^{pt} g_l C] - e^{-mu_l t} Re[sum g_l C]`` with
+        ``g_l = p / (p + mu_l)`` (``mu_l = rate d_l``).
+        """
         if len(d) == 0:
             return np.zeros((self.t.size, 0))
-        columns = []
-        for d_l in d:
-            mu = self.rate * d_l
-            gained = (self.fit.poles / (self.fit.poles + mu))[:, None] * self.fit.amplitudes
-            x = (self.exponentials @ gained).real
-            x -= np.exp(np.maximum(-mu * self.t, -600.0))[:, None] * gained.sum(axis=0).real
-            columns.append(x)
-        return np.hstack(columns)
+        mu, gained, decay = self._lag_terms(d)
+        return np.asarray((self.exponentials @ gained).real
+                          - np.repeat(decay, 2, axis=1) * gained.sum(axis=0).real, dtype=float)
 
     def lag_derivatives(self, d: FloatArray) -> FloatArray:
         """Return the derivatives of :meth:`lag_columns` in ``log d``, shape (n_rows, 2 m).
@@ -125,17 +134,29 @@ class RegressorView:
         """
         if len(d) == 0:
             return np.zeros((self.t.size, 0))
-        columns = []
-        poles, amplitudes = self.fit.poles, self.fit.amplitudes
-        for d_l in d:
-            mu = self.rate * d_l
-            gained = (poles / (poles + mu))[:, None] * amplitudes
-            dgained = (-poles / (poles + mu) ** 2)[:, None] * amplitudes
-            decay = np.exp(np.maximum(-mu * self.t, -600.0))[:, None]
-            dx = ((self.exponentials @ dgained).real - decay * dgained.sum(axis=0).real
-                  + self.t[:, None] * decay * gained.sum(axis=0).real)
-            columns.append(mu * dx)
-        return np.hstack(columns)
+        mu, gained, decay = self._lag_terms(d)
+        poles = self.fit.poles[:, None]
+        dgain = -poles / (poles + mu) ** 2  # (n_poles, m)
+        dgained = (dgain[:, :, None] * self.fit.amplitudes[:, None, :]).reshape(poles.size, -1)
+        decay2 = np.repeat(decay, 2, axis=1)
+        dx = ((self.exponentials @ dgained).real - decay2 * dgained.sum(axis=0).real
+              + self.t[:, None] * decay2 * gained.sum(axis=0).real)
+        return np.asarray(np.repeat(mu, 2) * dx, dtype=float)
+
+    def _lag_terms(self, d: FloatArray) -> tuple[FloatArray, npt.NDArray[np.complex128],
+                                                FloatArray]:
+        """``mu`` (m,), gained amplitudes ``g_l C`` (n_poles, 2 m), ``e^{-mu t}`` (n_rows, m)."""
+        d = np.asarray(d, dtype=float)
+        key = d.tobytes()
+        if key not in self._terms:
+            mu = self.rate * d
+            poles = self.fit.poles[:, None]
+            gain = poles / (poles + mu)  # (n_poles, m)
+            gained = (gain[:, :, None] * self.fit.amplitudes[:, None, :]).reshape(poles.size, -1)
+            decay = np.exp(np.maximum(-np.outer(self.t, mu), -600.0))
+            self._terms.clear()
+            self._terms[key] = (mu, gained, decay)
+        return self._terms[key]
 
 
 def prepare(release: Release, section: SectionModel) -> PreparedRelease:
@@ -147,10 +168,13 @@ def prepare(release: Release, section: SectionModel) -> PreparedRelease:
     fit = fit_modes(release.t, q)
     c = B / release.U
     t = release.t
-    fixed = np.hstack([fit.evaluate(t) - fit.offset, c * fit.evaluate(t, 1),
-                       c**2 * fit.evaluate(t, 2)])
+    # q - offset, q' and q'' of the fit (ModalFit.evaluate) from one set of exponentials.
+    exponentials = _exp(np.outer(t, fit.poles))
+    p = fit.poles[:, None]
+    fixed = (exponentials @ np.hstack([fit.amplitudes, c * p * fit.amplitudes,
+                                       c**2 * p**2 * fit.amplitudes])).real
     force = np.column_stack([release.lift * B, release.moment]) / (qd * B**2)
     scale = np.sqrt(np.mean((force - force.mean(axis=0)) ** 2, axis=0))
     noise = np.maximum(noise_std(force), 1e-6 * np.maximum(scale, 1e-300))
     return PreparedRelease(release=release, fit=fit, B=B, qd=qd, fixed=fixed, force=force,
-                           force_noise=noise)
+                           force_noise=noise, exponentials=exponentials)

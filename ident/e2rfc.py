@@ -13,12 +13,13 @@ noise, no noise in the regressors to bias the fit); each release and force chann
 the inverse of its own noise level; per-release intercepts absorb static forces.
 
 Lag roots are found by variable projection: for fixed lag roots the coefficients follow from a
-linear least-squares solve, so the nonlinear search runs over log(d) alone (scipy's trust-region
-least squares, several starts spread over the reduced frequencies the data cover). The number of
-lags (0 to 3) and whether the added-mass matrix A3 is fitted are chosen by five-fold held-out
-error (folds of interleaved one-period blocks of every release), with the one-standard-error rule:
-the simplest model whose held-out error is within one standard error of the best. The machinery
-of that problem is :mod:`ident._e2rfc_problem`.
+linear least-squares solve, so the nonlinear search runs over log(d) alone (a bounded
+Levenberg-Marquardt search, :mod:`ident._lsq`, from several starts spread over the reduced
+frequencies the data cover). The number of lags (0 to 3) and whether the added-mass matrix A3
+is fitted are chosen by five-fold held-out error (folds of interleaved one-period blocks of
+every release), with the one-standard-error rule: the simplest model whose held-out error is
+within one standard error of the best. The machinery of that problem is
+:mod:`ident._e2rfc_problem`.
 
 How uncertain the flutter speed is (:meth:`IdentifiedModel.uncertainty`), from four sources:
 

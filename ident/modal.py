@@ -21,8 +21,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
+from scipy.linalg import eigh
 from scipy.optimize import least_squares, linear_sum_assignment
 
+from ident._lsq import bounded_lm
 from ident._threads import single_threaded_blas
 from ident.errors import InsufficientDataError
 
@@ -37,6 +39,12 @@ ComplexArray = npt.NDArray[np.complex128]
 
 #: Block-averaged samples per period of the fastest mode used for the fit.
 _SAMPLES_PER_PERIOD = 6
+#: The poles are searched with :func:`ident._lsq.bounded_lm` first, and again with scipy's
+#: ``least_squares`` when the fit's block-averaged residual is more than this many times the
+#: white noise: a decay fits down to the noise (about 1), a random response (turbulence, 20 and
+#: more) does not, and its fit has many local optima, in which the two solvers' different paths
+#: end differently (scipy's is the one the fit was validated with).
+FAST_SEARCH_LIMIT = 3.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -207,6 +215,23 @@ def _real_design(basis: ComplexArray, n_complex: int) -> FloatArray:
     return np.column_stack([upper.real, upper.imag, rest.real])
 
 
+def _distinct_design(
+    tb: FloatArray, poles: ComplexArray, n_modes: int, block: int, dt: float
+) -> tuple[ComplexArray, ComplexArray, FloatArray]:
+    """``_real_design(_basis(tb, poles, ...))`` without computing the conjugates' columns.
+
+    The conjugate poles give the same real design, so only the distinct exponentials (upper
+    complex poles, real poles, the offset) are computed; ``_basis`` works column by column, so
+    these are exactly the columns ``_real_design`` would pick. Returns the distinct poles,
+    their basis and the design.
+    """
+    distinct = np.concatenate([poles[:n_modes], poles[2 * n_modes:]])
+    basis = _basis(tb, distinct, block, dt)
+    design = np.column_stack([basis[:, :n_modes].real, basis[:, :n_modes].imag,
+                              basis[:, n_modes:].real])
+    return distinct, basis, design
+
+
 def _solve_amplitudes(design: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
     coef, *_ = np.linalg.lstsq(design, y, rcond=None)
     return np.asarray(coef, dtype=float), np.asarray(y - design @ coef, dtype=float)
@@ -230,8 +255,12 @@ def _pencil(xb: FloatArray, order: int, dtb: float) -> ComplexArray:
     rows = n - L
     H = np.vstack([np.lib.stride_tricks.sliding_window_view(xb[:, c], L + 1)[:rows]
                    for c in range(xb.shape[1])])
-    _, _, Vh = np.linalg.svd(H, full_matrices=False)
-    V = Vh[:order].T
+    # The leading right singular vectors of H, as the leading eigenvectors of H^T H (only
+    # those are computed; the SVD's left vectors, unused, cost most of its time). Squaring
+    # costs accuracy only in directions eps^0.5 below the largest, far below the noise floor
+    # that separates the signal's subspace here.
+    _, vectors = eigh(H.T @ H, subset_by_index=[H.shape[1] - order, H.shape[1] - 1])
+    V = vectors[:, ::-1]
     z = np.linalg.eigvals(np.linalg.pinv(V[:-1]) @ V[1:])
     return np.asarray(np.log(z.astype(complex)) / dtb, dtype=complex)
 
@@ -321,34 +350,17 @@ def fit_modes(
         raise InsufficientDataError(
             f"found {osc.size} of {n_modes} oscillatory modes in the data: too noisy or too short"
         )
-    # Oscillatory modes first; then real poles one at a time while BIC improves, each new one
-    # started from the pencil's real poles or from a grid of decay rates across the record.
-    # The order search uses loose tolerances (it only compares orders); the chosen order is then
-    # polished to full precision.
-    theta, rss = _refine(tb, yb, block, dt, n_modes, 0, _complex_params(osc[:n_modes]), bounds,
-                         loose=True)
-    bic = _bic(rss, yb, n_modes, 0)
-    grid = -np.geomspace(3.0 / duration, 0.3 / dtb, 3)
-    unused = [r for r in reals if bounds[0][-1] < r < bounds[1][-1]]
-    for n_real in range(1, max_real_poles + 1):
-        starts = unused[:1] or list(grid)  # the pencil's next real pole when it found one
-        trials = [
-            _refine(tb, yb, block, dt, n_modes, n_real, np.append(theta, start), bounds,
-                    loose=True)
-            for start in starts
-        ]
-        theta_new, rss_new = min(trials, key=lambda trial: trial[1])
-        bic_new = _bic(rss_new, yb, n_modes, n_real)
-        if bic_new >= bic:
-            break
-        theta, rss, bic = theta_new, rss_new, bic_new
-        unused = unused[1:]
+    # The fast search first; where it leaves more than noise (a random response, whose fit has
+    # many local optima), scipy's search, which the fit was validated with, decides.
+    search = (tb, yb, block, dt, n_modes, max_real_poles, osc, reals, bounds, duration)
+    theta, rss = _search_poles(*search, fast=True)
+    if math.sqrt(rss * block / yb.size) > FAST_SEARCH_LIMIT:
+        theta, rss = _search_poles(*search, fast=False)
     n_real = theta.size - 2 * n_modes
-    theta, rss = _refine(tb, yb, block, dt, n_modes, n_real, theta, bounds, loose=False)
 
     # Amplitudes on the full-rate data (block = 1), with the refined poles.
     poles = _poles_from_params(theta, n_modes)
-    design = _real_design(_basis(t - t[0], poles, 1, dt), n_modes)
+    *_, design = _distinct_design(t - t[0], poles, n_modes, 1, dt)
     coef, resid = _solve_amplitudes(design, y)
     amplitudes, offset = _to_complex_amplitudes(coef, n_modes, n_real)
     # Undo the channel weights and shift the time origin back to t[0].
@@ -360,6 +372,41 @@ def fit_modes(
         noise=noise,
         residual_rms=np.sqrt(np.mean(resid**2, axis=0)) / weights,
     )
+
+
+def _search_poles(
+    tb: FloatArray, yb: FloatArray, block: int, dt: float, n_modes: int, max_real_poles: int,
+    osc: ComplexArray, reals: FloatArray, bounds: tuple[FloatArray, FloatArray],
+    duration: float, *, fast: bool,
+) -> tuple[FloatArray, float]:
+    """Refined pole parameters and residual sum: the modes, then real poles while BIC improves.
+
+    Each new real pole starts from the pencil's real poles or from a grid of decay rates
+    across the record. The order search uses loose tolerances (it only compares orders); the
+    chosen order is then polished to full precision. ``duration``: of the record, s;
+    ``fast``: see :func:`_refine`.
+    """
+    dtb = block * dt
+    theta, rss = _refine(tb, yb, block, dt, n_modes, 0, _complex_params(osc[:n_modes]), bounds,
+                         loose=True, fast=fast)
+    bic = _bic(rss, yb, n_modes, 0)
+    grid = -np.geomspace(3.0 / duration, 0.3 / dtb, 3)
+    unused = [r for r in reals if bounds[0][-1] < r < bounds[1][-1]]
+    for n_real in range(1, max_real_poles + 1):
+        starts = unused[:1] or list(grid)  # the pencil's next real pole when it found one
+        trials = [
+            _refine(tb, yb, block, dt, n_modes, n_real, np.append(theta, start), bounds,
+                    loose=True, fast=fast)
+            for start in starts
+        ]
+        theta_new, rss_new = min(trials, key=lambda trial: trial[1])
+        bic_new = _bic(rss_new, yb, n_modes, n_real)
+        if bic_new >= bic:
+            break
+        theta, rss, bic = theta_new, rss_new, bic_new
+        unused = unused[1:]
+    n_real = theta.size - 2 * n_modes
+    return _refine(tb, yb, block, dt, n_modes, n_real, theta, bounds, loose=False, fast=fast)
 
 
 def _bounds(n_modes: int, dtb: float, duration: float) -> tuple[FloatArray, FloatArray]:
@@ -410,10 +457,13 @@ def _strongest_poles(
 def _refine(
     tb: FloatArray, yb: FloatArray, block: int, dt: float, n_modes: int, n_real: int,
     theta0: FloatArray, bounds: tuple[FloatArray, FloatArray], *, loose: bool,
+    fast: bool = False,
 ) -> tuple[FloatArray, float]:
     """Variable-projection refinement of the poles; returns parameters and residual sum.
 
     ``loose`` stops at a relative cost change of 1e-6 (enough to compare model orders).
+    ``fast`` searches with :func:`ident._lsq.bounded_lm` instead of scipy's trust-region
+    reflective ``least_squares`` (same tolerances; a fraction of the bookkeeping per call).
 
     The Jacobian is Kaufman's approximation ``-P_perp (dD/dtheta) c`` with the derivative of each
     exponential column taken in closed form through its (holomorphic) pole derivative.
@@ -424,23 +474,29 @@ def _refine(
     # pole growing faster than allowed, say): the solver needs a strictly feasible start.
     margin = 1e-6 * (hi - lo)
     theta0 = np.clip(theta0, lo + margin, hi - margin)
-    cache: dict[bytes, tuple[FloatArray, FloatArray]] = {}
+    # The solvers ask for the Jacobian right after the residual at the points they accept; the
+    # residual's factorisation is kept for it.
+    last: list[tuple[FloatArray, tuple[ComplexArray, ComplexArray, FloatArray, FloatArray]]] = []
 
-    def evaluate(theta: FloatArray) -> tuple[FloatArray, FloatArray]:
-        key = theta.tobytes()
-        if key not in cache:
-            cache.clear()
-            cache[key] = _varpro_step(tb, yb, block, dt, n_modes, theta)
-        return cache[key]
+    def residual(theta: FloatArray) -> FloatArray:
+        resid, parts = _varpro_residual(tb, yb, block, dt, n_modes, theta)
+        last[:] = [(theta.copy(), parts)]
+        return resid
 
-    sol = least_squares(
-        lambda th: evaluate(th)[0], theta0, jac=lambda th: evaluate(th)[1],
-        bounds=(lo, hi), x_scale="jac",
-        xtol=1e-6 if loose else 1e-10, ftol=1e-6 if loose else 1e-12,
-        # A well-posed fit converges in ~15 evaluations; a pole the data cannot support wanders,
-        # and the BIC rejects it anyway, so its search is cut short.
-        max_nfev=20 if loose else 60,
-    )
+    def jacobian(theta: FloatArray) -> FloatArray:
+        if not last or not np.array_equal(last[0][0], theta):
+            residual(theta)
+        return _varpro_jacobian(tb, yb, block, dt, n_modes, theta, last[0][1])
+
+    # A well-posed fit converges in ~15 evaluations; a pole the data cannot support wanders,
+    # and the BIC rejects it anyway, so its search is cut short.
+    xtol, ftol, max_nfev = (1e-6, 1e-6, 20) if loose else (1e-10, 1e-12, 60)
+    if fast:
+        sol = bounded_lm(residual, jacobian, theta0, (lo, hi), xtol=xtol, ftol=ftol,
+                         max_nfev=max_nfev)
+    else:
+        sol = least_squares(residual, theta0, jac=jacobian, bounds=(lo, hi), x_scale="jac",
+                            xtol=xtol, ftol=ftol, max_nfev=max_nfev)
     return sol.x, float(np.sum(sol.fun**2))
 
 
@@ -448,33 +504,50 @@ def _varpro_step(
     tb: FloatArray, yb: FloatArray, block: int, dt: float, n_modes: int, theta: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
     """Residual (flattened channel by channel) and its Kaufman Jacobian at pole parameters."""
+    resid, parts = _varpro_residual(tb, yb, block, dt, n_modes, theta)
+    return resid, _varpro_jacobian(tb, yb, block, dt, n_modes, theta, parts)
+
+
+def _varpro_residual(
+    tb: FloatArray, yb: FloatArray, block: int, dt: float, n_modes: int, theta: FloatArray
+) -> tuple[FloatArray, tuple[ComplexArray, ComplexArray, FloatArray, FloatArray]]:
+    """Residual (flattened channel by channel) at pole parameters, and what the Jacobian reuses.
+
+    The solver asks for the Jacobian only at the points it accepts, so it is a separate step
+    (:func:`_varpro_jacobian`) on the distinct poles, their basis, ``Q`` and the amplitudes.
+    """
     poles = _poles_from_params(theta, n_modes)
-    n_real = theta.size - 2 * n_modes
-    basis = _basis(tb, poles, block, dt)
-    design = _real_design(basis, n_modes)
+    distinct, basis, design = _distinct_design(tb, poles, n_modes, block, dt)
     Q, R = np.linalg.qr(design)
     coef = np.linalg.solve(R, Q.T @ yb)
     resid = yb - design @ coef
+    return resid.ravel(order="F"), (distinct, basis, Q, coef)
+
+
+def _varpro_jacobian(
+    tb: FloatArray, yb: FloatArray, block: int, dt: float, n_modes: int, theta: FloatArray,
+    parts: tuple[ComplexArray, ComplexArray, FloatArray, FloatArray],
+) -> FloatArray:
+    """Kaufman's Jacobian ``-P_perp (dD/dtheta) c`` of :func:`_varpro_residual`'s residual."""
+    distinct, basis, Q, coef = parts
+    n_real = theta.size - 2 * n_modes
     # Pole derivative of each distinct exponential column (upper complex poles, then reals).
     # d/dp of g(p) e^{p t} = (t g + g') e^{p t}: reuses the exponentials of the basis.
-    cols = np.concatenate([np.arange(n_modes), np.arange(2 * n_modes, 2 * n_modes + n_real)])
-    g, dg = _block_gain(poles[cols], block, dt)
-    d_basis = basis[:, cols] * (tb[:, None] + dg / g)
-    n_ch = yb.shape[1]
-    jac = np.empty((yb.size, theta.size))
-    for j in range(n_modes):
-        dE = d_basis[:, j]
-        c_re, c_im = coef[j], coef[n_modes + j]  # coefficients of Re(E_j) and Im(E_j)
-        # d/dRe(p) of (c_re Re E + c_im Im E) and d/dIm(p) (derivative times i).
-        for col, (dre, dim) in enumerate(((dE.real, dE.imag), (-dE.imag, dE.real))):
-            v = dre[:, None] * c_re + dim[:, None] * c_im
-            jac[:, 2 * j + col] = -(v - Q @ (Q.T @ v)).ravel(order="F")
-    for r in range(n_real):
-        dE_real = d_basis[:, n_modes + r].real
-        v = dE_real[:, None] * coef[2 * n_modes + r]
-        jac[:, 2 * n_modes + r] = -(v - Q @ (Q.T @ v)).ravel(order="F")
-    assert jac.shape[0] == resid.size and n_ch == resid.shape[1]
-    return resid.ravel(order="F"), jac
+    g, dg = _block_gain(distinct[:-1], block, dt)
+    d_basis = basis[:, :-1] * (tb[:, None] + dg / g)
+    n_b, n_ch = yb.shape
+    dE = d_basis[:, :n_modes, None]  # (n_b, n_modes, 1)
+    c_re, c_im = coef[None, :n_modes], coef[None, n_modes:2 * n_modes]  # of Re(E_j), Im(E_j)
+    # d/dRe(p) of (c_re Re E + c_im Im E), and d/dIm(p) (the derivative times i), interleaved
+    # per mode; then the real poles: every column's model derivative, shape (n_b, k, n_ch).
+    oscillatory = np.stack([dE.real * c_re + dE.imag * c_im,
+                            -dE.imag * c_re + dE.real * c_im], axis=2)
+    V = np.concatenate([
+        oscillatory.reshape(n_b, 2 * n_modes, n_ch),
+        d_basis[:, n_modes:, None].real * coef[None, 2 * n_modes:2 * n_modes + n_real],
+    ], axis=1).reshape(n_b, -1)
+    projected = (V - Q @ (Q.T @ V)).reshape(n_b, theta.size, n_ch)
+    return np.asarray(-projected.transpose(2, 0, 1).reshape(n_ch * n_b, theta.size))
 
 
 # -- one release's heave and pitch modes (the console's releases table, reprocessing) ----------
