@@ -11,6 +11,11 @@ Method: the poles are first located by a matrix pencil on block-averaged data, t
 variable projection (for fixed poles the amplitudes are linear) with a nonlinear least-squares
 solver. Block averaging of ``e^{p t}`` has an exact closed form, so averaging reduces noise and
 cost without the edge effects of a filter. The number of real poles (0 to 3) is chosen by BIC.
+
+Longer than 600 lines: the pencil, the variable-projection fit (its Jacobian in closed form)
+and the order search share the block-averaged basis and its caches; split across modules they
+would pass those caches through private interfaces. The release-level helpers at the end
+(:func:`fit_release_modes`, :func:`release_modes`, :func:`name_modes`) are thin.
 """
 
 from __future__ import annotations
