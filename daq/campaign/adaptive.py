@@ -99,12 +99,28 @@ class Choice:
                 f"candidates <= {self.bound:.2f} m/s: {table or 'none'}]")
 
 
-def safety_bound(analysis: CampaignAnalysis | None, fraction: float) -> float:
-    """Highest wind speed allowed now, m/s: ``fraction * (U_F - 3 std)``; inf without one."""
+def safety_bound(analysis: CampaignAnalysis | None, fraction: float, held: float = 0.0
+                 ) -> float:
+    """Highest wind speed allowed now, m/s.
+
+    ``fraction * (U_F - 3 std)`` of the current estimate (inf without one), but never below
+    ``held``: the highest speed at which releases were just seen to decay, which the wind may
+    always go back to however wide the estimate's std (a std near U_F / 3 puts the estimate's
+    own bound at zero, below speeds the model has just shown to be stable).
+
+    Parameters
+    ----------
+    analysis : CampaignAnalysis or None
+        The current E2RFC estimate.
+    fraction : float
+        Safety fraction, (0, 1].
+    held : float
+        Highest wind speed held with decaying releases so far, m/s (0: none).
+    """
     if analysis is None or analysis.flutter_speed is None or analysis.flutter_std is None:
         return math.inf
     std = analysis.flutter_std if math.isfinite(analysis.flutter_std) else analysis.flutter_speed
-    return max(fraction * (analysis.flutter_speed - 3.0 * std), 0.0)
+    return max(fraction * (analysis.flutter_speed - 3.0 * std), 0.0, held)
 
 
 def _gradient(model: IdentifiedModel, section: SectionModel, result: flutter.FlutterResult

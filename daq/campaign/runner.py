@@ -14,7 +14,10 @@ written to ``campaign.json`` as ``stopped_because``:
   std lacks its extrapolation part) or no candidate speed gains (adaptive mode,
   :mod:`daq.campaign.adaptive`), or ``max_speeds`` is reached;
 - the next speed is above the safety bound ``fraction * (U_F - 3 std)`` of the current
-  estimate (both modes; fixed plans use 0.9) or the rig's limits: it is never set;
+  estimate (both modes; fixed plans use 0.9) or the rig's limits: it is never set. A speed
+  not above one this session has already held with decaying releases is allowed whatever the
+  estimate (a wide std can put the bound below speeds just shown to be stable: an FD-style
+  plan going down from its highest speed would otherwise stop);
 - a decay grows (:class:`~daq.campaign.monitor.DecayMonitor`): the model is caught (re-armed)
   and the fan stopped at once;
 - Ctrl-C: the run file in progress is finished and kept as ``*.interrupted.h5`` (with one
@@ -102,6 +105,9 @@ class SpeedStep:
         back from an earlier session).
     paths : list of Path
         Every run file of the speed (one, or one per release).
+    resumed : bool
+        Read back from an earlier session (not known to have decayed: its file may be the
+        one a growing decay stopped).
     """
 
     index: int
@@ -113,6 +119,7 @@ class SpeedStep:
     flutter_std: float | None = None
     wind_on_s: float | None = None
     paths: list[Path] = field(default_factory=list)
+    resumed: bool = False
 
     def __post_init__(self) -> None:
         if not self.paths:
@@ -353,7 +360,7 @@ def _loop(session: _Session, outcome: CampaignOutcome) -> None:
     for found in read_back(session.out, say):
         why = "listed in the plan" if found.index <= len(listed) else "read back"
         outcome.steps.append(SpeedStep(found.index, found.U, found.paths[0], found.releases,
-                                       f"{why} (resumed)", paths=found.paths))
+                                       f"{why} (resumed)", paths=found.paths, resumed=True))
         session.runs.extend(found.runs)
         outcome.resumed += 1
     if outcome.resumed:
@@ -378,7 +385,9 @@ def _loop(session: _Session, outcome: CampaignOutcome) -> None:
                 outcome.stopped_because = (f"target met: std {100 * rel:.2f} % <= "
                                            f"{100 * plan.adaptive.target_std:.2f} %")
                 return
-        bound = min(rig_limit, safety_bound(analysis, fraction))
+        # A grown decay ends the campaign: every step of this session decayed.
+        held = max((s.U for s in outcome.steps if not s.resumed), default=0.0)
+        bound = min(rig_limit, safety_bound(analysis, fraction, held))
         if k < len(listed):
             U, why = listed[k], "listed in the plan"
         else:
@@ -395,8 +404,8 @@ def _loop(session: _Session, outcome: CampaignOutcome) -> None:
         if U > bound + 1e-9:
             outcome.stopped_because = (
                 f"safety stop: the next speed {U:.2f} m/s is above the bound {bound:.2f} m/s "
-                f"({fraction:g} x (U_F - 3 std) of the current estimate, or the rig's limit "
-                f"{rig_limit:.3g} m/s); it was not set")
+                f"({fraction:g} x (U_F - 3 std) of the current estimate, the highest speed "
+                f"held so far, or the rig's limit {rig_limit:.3g} m/s); it was not set")
             say(outcome.stopped_because)
             return
         step = _record_speed(session, outcome, k + 1, U, why, decay_s)

@@ -67,6 +67,19 @@ def test_no_candidate_above_the_bound_is_ever_chosen(two_speeds):
 
 def test_safety_bound_is_infinite_without_an_estimate():
     assert safety_bound(None, 0.9) == math.inf
+    assert safety_bound(None, 0.9, held=5.0) == math.inf
+
+
+def test_a_speed_already_held_stays_allowed_when_the_std_is_wide(two_speeds):
+    """A std of U_F / 3 or more makes fraction (U_F - 3 std) zero; the held speed remains."""
+    _, analysis = two_speeds
+    wide = SimpleNamespace(flutter_speed=analysis.flutter_speed,
+                           flutter_std=0.4 * analysis.flutter_speed)
+    assert safety_bound(wide, 0.9) == 0.0
+    assert safety_bound(wide, 0.9, held=6.5) == 6.5
+    # A tight estimate's bound is kept when it is the higher one.
+    own = safety_bound(analysis, 0.9)
+    assert safety_bound(analysis, 0.9, held=own - 1.0) == own
 
 
 def _laser_block(t0_ns: int, t: np.ndarray, x: np.ndarray) -> SimpleNamespace:
