@@ -416,7 +416,12 @@ def test_device_disconnects_mid_run_are_marked_gaps_with_fault_and_recovery_even
         recovered = [e[0] for e in events if e[1] == "recovered" and e[2] == name]
         assert faults and len(recovered) == 1, (name, events)
         assert (reset_s if name == "scanner" else cut_s) < faults[0], name
-        assert faults[0] < (reset_s if name == "scanner" else cut_s) + 0.5, name
+        # Reported while the line is still down (OUTAGE_S): a laser's fault is posted when the
+        # read that saw the driver reopen its line returns: 0.10-0.11 s after the cut on an
+        # idle host (the 0.1 s backoff, then the reopen; the PLC 0.16-0.37 s), but 0.51 s once
+        # in a full suite run, where a reopen needed its second attempt (0.1 + 0.2 s backoff);
+        # the former 0.5 s bound did not allow for that path.
+        assert faults[0] < (reset_s if name == "scanner" else cut_s) + OUTAGE_S, name
         assert max(faults) < recovered[0], name
         if name in resumed_s:  # the recovery is the first data after the reconnect
             assert resumed_s[name][1] - 0.01 < recovered[0] < resumed_s[name][1] + 0.3, name
