@@ -370,8 +370,11 @@ def test_device_disconnects_mid_run_are_marked_gaps_with_fault_and_recovery_even
         index = np.searchsorted(tr.counter, counter)
         assert np.max(np.abs(s["value"][:, 0] - 1e-3 * tr.distance_mm[index])) < 1e-6, name
         # 0.8 s at 4 kHz, plus what the simulator produced but had not sent when the fault hit
-        # (its thread may run tens of ms late on 2 busy cores; measured +5-68 ms): 0.15 s.
-        assert OUTAGE_S * LASER_RATE_HZ <= length <= (OUTAGE_S + 0.15) * LASER_RATE_HZ, name
+        # and until the driver's reopen was served (its threads run late on 2 busy cores:
+        # +5-68 ms when measured alone, +286 ms once in a full suite run). The gap's exactness
+        # is checked above against the simulator's truth; this bound only says the outage was
+        # the injected one, not a second: 0.4 s.
+        assert OUTAGE_S * LASER_RATE_HZ <= length <= (OUTAGE_S + 0.4) * LASER_RATE_HZ, name
         # The device clock ran on through the outage (no restart): its step is the gap's.
         step = s["device_time"][i + 1] - s["device_time"][i]
         assert step == pytest.approx((length + 1) / LASER_RATE_HZ, abs=2e-4), name
