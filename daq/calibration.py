@@ -40,7 +40,7 @@ import numpy.typing as npt
 
 from daq.errors import ConfigError
 from daq.validation import check_keys, number
-from ident.air import CO2_MOLE_FRACTION, moist_air_density
+from ident.air import CO2_MOLE_FRACTION, R_DRY_AIR, moist_air_density
 from ident.taps import TapLayout
 
 __all__ = ["AirCalibration", "CHANNELS_PER_MODULE", "Calibration", "LaserCalibration",
@@ -52,7 +52,6 @@ FloatArray = npt.NDArray[np.float64]
 TAP_KEYS = frozenset({"channels", "dead", "source", "date"})
 #: Pressure channels per scanner module.
 CHANNELS_PER_MODULE = 64
-_R_DRY_AIR = 287.058  # J/(kg K): the dry-air density windrig uses without an [air] table
 
 
 @dataclass(frozen=True)
@@ -173,7 +172,7 @@ class AirCalibration:
         """
         rh = measured_rh if self.from_barometer else self.relative_humidity
         if rh is None:
-            return float(pressure_pa / (_R_DRY_AIR * temperature_k))
+            return float(pressure_pa / (R_DRY_AIR * temperature_k))
         if math.isnan(rh):
             return math.nan
         return float(moist_air_density(pressure_pa, temperature_k, rh, self.co2_mole_fraction))

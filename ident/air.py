@@ -26,13 +26,16 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["CO2_MOLE_FRACTION", "enhancement_factor", "moist_air_density",
+__all__ = ["CO2_MOLE_FRACTION", "R_DRY_AIR", "enhancement_factor", "moist_air_density",
            "saturation_vapour_pressure"]
 
 FloatArray = npt.NDArray[np.float64]
 
 #: Default mole fraction of CO2 in the air (the CIPM-2007 reference composition).
 CO2_MOLE_FRACTION = 0.0004
+#: Specific gas constant of dry air, J/(kg K): windrig's dry-air density ``p / (R_DRY_AIR T)``
+#: (the barometer, the air in the tap tubes, the virtual tunnel), in one place.
+R_DRY_AIR = 287.058
 
 _R = 8.314472          # J/(mol K), the value CIPM-2007 adopted
 _M_V = 18.01528e-3     # kg/mol, water

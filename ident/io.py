@@ -29,11 +29,12 @@ from typing import Any
 import h5py
 import numpy as np
 
+from ident.air import R_DRY_AIR
 from ident.errors import IdentError
 from ident.release import Release
 from ident.section import SectionModel
 from ident.taps import TapLayout
-from ident.tubing import R_AIR, Air, TubingSet, force_correction, from_description
+from ident.tubing import Air, TubingSet, force_correction, from_description
 
 __all__ = ["FileFormatError", "RunFile", "TUBING_LEAD_S", "campaign_section", "read_run",
            "tubing_note"]
@@ -186,7 +187,8 @@ def _tubing(meta: dict[str, Any], config_text: str, path: str, rho: float,
     for group in groups:
         if isinstance(group.get("taps"), np.ndarray):
             group["taps"] = group["taps"].tolist()
-    air = Air(pressure_pa=rho * R_AIR * TUBING_TEMPERATURE_K, temperature_k=TUBING_TEMPERATURE_K)
+    air = Air(pressure_pa=rho * R_DRY_AIR * TUBING_TEMPERATURE_K,
+              temperature_k=TUBING_TEMPERATURE_K)
     try:
         tubing = from_description(groups, layout.n_taps, air)
     except (TypeError, ValueError) as exc:

@@ -55,6 +55,7 @@ import numpy.typing as npt
 from scipy.special import jve
 
 from ident import _validate as v
+from ident.air import R_DRY_AIR
 
 __all__ = [
     "Air",
@@ -74,8 +75,6 @@ __all__ = [
 FloatArray = npt.NDArray[np.float64]
 ComplexArray = npt.NDArray[np.complex128]
 
-#: Gas constant of dry air, J/(kg K).
-R_AIR = 287.058
 #: Default fraction of the tube's gain below which the correction stops (module docstring).
 GAIN_FLOOR = 0.5
 #: Fraction of the cut-off where the correction's roll-off begins (below it: exactly 1 / H).
@@ -113,7 +112,7 @@ class Air:
     @property
     def density(self) -> float:
         """Density by the ideal-gas law, kg/m^3."""
-        return self.pressure_pa / (R_AIR * self.temperature_k)
+        return self.pressure_pa / (R_DRY_AIR * self.temperature_k)
 
     @property
     def viscosity(self) -> float:
@@ -124,7 +123,7 @@ class Air:
     @property
     def speed_of_sound(self) -> float:
         """Adiabatic speed of sound, m/s."""
-        return math.sqrt(self.gamma * R_AIR * self.temperature_k)
+        return math.sqrt(self.gamma * R_DRY_AIR * self.temperature_k)
 
 
 class FrequencyResponse(Protocol):

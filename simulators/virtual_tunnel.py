@@ -46,6 +46,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.interpolate import CubicSpline
 
+from ident.air import R_DRY_AIR
 from ident.rfc import RationalFunctionModel
 from ident.section import SectionModel
 from ident.simulate import SimulatedDecay, simulate_decay
@@ -60,9 +61,6 @@ from simulators.tunnel import SimulatedRelease, simulate_release
 __all__ = ["AirState", "VirtualTunnel"]
 
 FloatArray = npt.NDArray[np.float64]
-
-#: Gas constant of dry air, J/(kg K).
-R_AIR = 287.058
 
 #: Points and spacing (m) of the tunnel's gust field (see the module docstring).
 GUST_FIELD_POINTS = 2**20
@@ -82,7 +80,7 @@ class AirState:
     @property
     def density(self) -> float:
         """Air density, kg/m^3."""
-        return self.pressure_pa / (R_AIR * self.temperature_k)
+        return self.pressure_pa / (R_DRY_AIR * self.temperature_k)
 
 
 @dataclass(frozen=True, eq=False)

@@ -23,7 +23,8 @@ from typing import Any, NamedTuple
 import numpy as np
 import numpy.typing as npt
 
-from daq.instruments.vaisala_ptb330.decoder import PRESSURE_RANGE_PA, R_DRY_AIR, TEMPERATURE_RANGE_K
+from daq.instruments.vaisala_ptb330.decoder import PRESSURE_RANGE_PA, TEMPERATURE_RANGE_K
+from ident.air import R_DRY_AIR
 from ident.taps import TapLayout
 
 __all__ = [

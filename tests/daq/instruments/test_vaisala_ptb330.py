@@ -20,7 +20,6 @@ from hypothesis import strategies as st
 from daq.errors import ConfigError, ProtocolError, TransportError, TransportTimeout
 from daq.instruments import registry
 from daq.instruments.vaisala_ptb330.decoder import (
-    R_DRY_AIR,
     BarometerReading,
     Ptb330BadLine,
     Ptb330Line,
@@ -32,6 +31,7 @@ from daq.instruments.vaisala_ptb330.driver import FORM_STRING, SERIAL_DEFAULTS, 
 from daq.instruments.vaisala_ptb330.settings import Ptb330Settings
 from daq.transports.byte_transport import SerialTransport, open_transport
 from daq.transports.scripted import ScriptedTransport, expected_exchange
+from ident.air import R_DRY_AIR
 
 FORM_CMD = b"FORM " + FORM_STRING.encode() + b"\r"
 LINE = b"P=  1013.250 hPa    T= 21.34 'C \r\n"  # what FORM_STRING gives (widths [unverified])

@@ -11,8 +11,9 @@ import numpy as np
 from daq.config import parse_rig_config
 from daq.recording.synthetic import write_release_run
 from ident import flat_plate, flutter
+from ident.air import R_DRY_AIR
 from ident.io import TUBING_TEMPERATURE_K, read_run
-from ident.tubing import R_AIR, Air, distort, tubing_set
+from ident.tubing import Air, distort, tubing_set
 from simulators.campaigns import SECTION
 from simulators.tunnel import simulate_release
 
@@ -44,7 +45,7 @@ def test_a_dead_taps_garbage_stays_out_of_the_corrected_forces(tmp_path):
     taps, fs = config.taps, 500.0
     speed = flutter.analyze(SECTION, flat_plate.jones_model()).speed
     assert speed is not None
-    air = Air(pressure_pa=SECTION.rho * R_AIR * TUBING_TEMPERATURE_K,
+    air = Air(pressure_pa=SECTION.rho * R_DRY_AIR * TUBING_TEMPERATURE_K,
               temperature_k=TUBING_TEMPERATURE_K)
     sim = simulate_release(SECTION, flat_plate.jones_model(), 0.7 * speed, 0.004, 0.02,
                            duration=4.0, fs=fs, pre_s=1.0)

@@ -14,8 +14,9 @@ from daq.cli import main
 from daq.config import RigConfig, load_rig_config, parse_rig_config
 from daq.recording.synthetic import write_release_run
 from ident import flat_plate, flutter
+from ident.air import R_DRY_AIR
 from ident.io import TUBING_TEMPERATURE_K, read_run
-from ident.tubing import R_AIR, Air, Tube, distort, tubing_set
+from ident.tubing import Air, Tube, distort, tubing_set
 from simulators.campaigns import FRACTIONS, HOLDS, SECTION
 from simulators.tunnel import simulate_release
 
@@ -43,7 +44,7 @@ def _tubed_run(path: Path, config: RigConfig | None = None) -> float:
     speed = flutter.analyze(SECTION, truth).speed
     assert speed is not None
     # The tubes' air as the reader assumes it: the run's density at 20 C.
-    air = Air(pressure_pa=SECTION.rho * R_AIR * TUBING_TEMPERATURE_K,
+    air = Air(pressure_pa=SECTION.rho * R_DRY_AIR * TUBING_TEMPERATURE_K,
               temperature_k=TUBING_TEMPERATURE_K)
     tubes = tubing_set(tubed.tubing, taps.n_taps, air)
     releases, pressures = [], []
@@ -116,7 +117,7 @@ def test_a_measured_table_is_recorded_and_corrects_like_the_tube_it_measured(tub
     tube's cut-off, so both correct the same band).
     """
     path, _ = tubed_run
-    air = Air(pressure_pa=SECTION.rho * R_AIR * TUBING_TEMPERATURE_K,
+    air = Air(pressure_pa=SECTION.rho * R_DRY_AIR * TUBING_TEMPERATURE_K,
               temperature_k=TUBING_TEMPERATURE_K)
     f = np.arange(1.0, 251.0)
     H = Tube(length=1.5, diameter=1e-3, volume=300e-9).response(f, air)
