@@ -302,17 +302,13 @@ class _DeviceCheck:
 
     def result(self) -> CheckResult:
         with self._lock:
-            found = self.found
-            problems = list(found.problems)
-            if self._abandoned is not None:
-                problems.append(self._abandoned)
+            values = dataclasses.asdict(self.found)  # every finding, by the same field names
+            abandoned = [] if self._abandoned is None else [self._abandoned]
+            values["problems"] = tuple(values["problems"] + abandoned)
+            values["notes"] = tuple(values["notes"])
             elapsed = self._elapsed
-        return CheckResult(
-            device=self.inst.name, driver=self.inst.driver, url=self.inst.url, kind=self.kind,
-            reachable=found.reachable, identity=found.identity, rate_hz=found.rate_hz,
-            nominal_rate_hz=found.nominal_rate_hz, poll_s=found.poll_s, clock=found.clock,
-            readings=found.readings,
-            problems=tuple(problems), notes=tuple(found.notes), elapsed_s=elapsed)
+        return CheckResult(device=self.inst.name, driver=self.inst.driver, url=self.inst.url,
+                           kind=self.kind, elapsed_s=elapsed, **values)
 
     # -- the device's thread ---------------------------------------------------------------------
     def _run(self) -> None:
