@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -10,38 +12,8 @@ from daq.errors import ConfigError
 from daq.tubing_config import tubing_metadata
 from ident.tubing import TableResponse, Tube
 
-BASE = """
-[rig]
-name = "test rig"
-
-[section]
-B = 0.3
-m = 3.0
-I = 0.03
-fh = 2.0
-fa = 4.0
-zeta_h = 0.005
-zeta_a = 0.005
-depth = 0.01
-
-[taps]
-shape = "rectangle"
-B = 0.3
-D = 0.01
-taps_per_face = 16
-
-[limits]
-max_wind_speed = 14.0
-max_fan_rpm = 1500.0
-
-[tunnel]
-wind_per_rpm = 0.01
-
-[simulation]
-aerodynamics = "flat_plate_jones"
-hold_h = 0.004
-hold_alpha = 0.02
-"""
+#: A minimal simulated rig (tests/daq/minimal_rig.toml, shared with the other config tests).
+BASE = (Path(__file__).parent / "minimal_rig.toml").read_text(encoding="utf-8")
 
 TUBES = """
 [[taps.tubing]]
