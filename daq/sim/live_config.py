@@ -112,6 +112,9 @@ def write_live_config(config: RigConfig, urls: Mapping[str, str], out: str | Pat
             "a real rig's config (windrig check / acquire --config, no --simulate).")
     text = live_config_text(config, urls, data_ports, note=note)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        os.replace(tmp, path)
+    except OSError as exc:  # name the file asked for, not the temporary beside it
+        raise OSError(exc.errno, exc.strerror, str(path)) from exc
     return path

@@ -58,3 +58,10 @@ def test_written_atomically_with_what_it_is(tmp_path):
     assert text.startswith("# Written by `windrig simulate --write-config`")
     assert "valid while that command runs" in text
     assert list(tmp_path.iterdir()) == [out]  # no temporary file left
+
+
+def test_an_unwritable_destination_is_named_not_its_temporary_file(tmp_path):
+    out = tmp_path / "missing" / "live.toml"
+    with pytest.raises(FileNotFoundError) as caught:
+        write_live_config(_config(), URLS, out, {"scanner": 4100})
+    assert caught.value.filename == str(out)
