@@ -14,10 +14,10 @@ written to ``campaign.json`` as ``stopped_because``:
   std lacks its extrapolation part) or no candidate speed gains (adaptive mode,
   :mod:`daq.campaign.adaptive`), or ``max_speeds`` is reached;
 - the next speed is above the safety bound ``fraction * (U_F - 3 std)`` of the current
-  estimate (both modes; fixed plans use 0.9) or the rig's limits: it is never set. A speed
-  not above one this session has already held with decaying releases is allowed whatever the
-  estimate (a wide std can put the bound below speeds just shown to be stable: an FD-style
-  plan going down from its highest speed would otherwise stop);
+  estimate (both modes; fixed plans use 0.9) or the rig's limits: it is never set. A listed
+  speed not above one this session has already held with decaying releases is allowed
+  whatever the estimate (a wide std can put the bound below speeds just shown to be stable: an
+  FD-style plan going down from its highest speed would otherwise stop);
 - a decay grows (:class:`~daq.campaign.monitor.DecayMonitor`): the model is caught (re-armed)
   and the fan stopped at once;
 - Ctrl-C: the run file in progress is finished and kept as ``*.interrupted.h5`` (with one
@@ -385,12 +385,16 @@ def _loop(session: _Session, outcome: CampaignOutcome) -> None:
                 outcome.stopped_because = (f"target met: std {100 * rel:.2f} % <= "
                                            f"{100 * plan.adaptive.target_std:.2f} %")
                 return
-        # A grown decay ends the campaign: every step of this session decayed.
-        held = max((s.U for s in outcome.steps if not s.resumed), default=0.0)
-        bound = min(rig_limit, safety_bound(analysis, fraction, held))
         if k < len(listed):
+            # A listed speed may go back to what this session has held (a grown decay ends the
+            # campaign: every step of it decayed). Not an adaptive choice: a held speed offered
+            # as a candidate is chosen again and again, and repeats add no information on the
+            # structure and extrapolation parts of the std (seen in a CI run).
+            held = max((s.U for s in outcome.steps if not s.resumed), default=0.0)
+            bound = min(rig_limit, safety_bound(analysis, fraction, held))
             U, why = listed[k], "listed in the plan"
         else:
+            bound = min(rig_limit, safety_bound(analysis, fraction))
             assert plan.adaptive is not None and analysis is not None
             releases = [r for run in session.runs for r in run.releases]
             choice = choose_next(analysis, releases, plan.adaptive.candidates(), bound=bound,
