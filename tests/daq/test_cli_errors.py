@@ -57,6 +57,8 @@ def files(tmp_path: Path) -> Path:
 CASES = [
     # (arguments, exit status, what the error line must say)
     (["identify", "{d}/nothing.h5"], 2, "nothing.h5: no such file"),
+    (["check", "--config", str(SIM_CONFIG), "--simulate", "--json", "{d}/no/such/c.json"], 2,
+     "folder"),
     (["identify", "{d}/text.txt"], 2, "text.txt: not an HDF5 file"),
     (["identify", "{d}/empty.h5"], 2, "empty.h5: has no /entry/config: not a windrig run file"),
     (["identify", "{d}"], 2, "a directory, not a run file"),
