@@ -64,7 +64,7 @@ class CampaignAnalysis:
         Reduced frequencies spanning the releases (widened 20 %).
     derivatives : dict of str to ndarray
         The model's ``H1..H4, A1..A4`` at ``K``.
-    table : FlutterDerivativeTable or None
+    table : DecayDerivativeTable or None
         The indirect method's derivatives from the same decays; None when not asked for or
         when it failed (``table_error`` says why).
     table_error : str or None
@@ -81,7 +81,7 @@ class CampaignAnalysis:
     structures: e2rfc.StructureSpread
     K: FloatArray = field(repr=False)
     derivatives: dict[str, FloatArray] = field(repr=False)
-    table: fd_method.FlutterDerivativeTable | None = field(default=None, repr=False)
+    table: fd_method.DecayDerivativeTable | None = field(default=None, repr=False)
     table_error: str | None = None
 
     @property
@@ -185,7 +185,7 @@ def analyze_campaign(
     flutter, uncertainty = model.analysis(section, U_max)
     K = e2rfc.reduced_frequency_span(releases, section, K_POINTS)
     derivatives = model.flutter_derivatives(K)
-    fd_table: fd_method.FlutterDerivativeTable | None = None
+    fd_table: fd_method.DecayDerivativeTable | None = None
     table_error = None
     if table:
         try:
