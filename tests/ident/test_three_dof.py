@@ -214,3 +214,23 @@ def test_models_and_sections_must_match():
     np.testing.assert_allclose(z0[:3], [0.01 / 0.3, 0.02, 0.01])
     with pytest.raises(ValueError, match="give all 18"):
         fl.frequency_domain(SWAY, flat_plate.jones_model().flutter_derivatives)
+
+
+def test_a_release_with_sway_carries_p_and_drag():
+    """Both or neither; coordinates and forces in windrig's generalised form."""
+    from ident.release import Release
+
+    t = np.arange(400) / 100.0
+    h, alpha = 0.01 * np.cos(9 * t), 0.02 * np.cos(20 * t)
+    p, drag = 0.003 * np.cos(7 * t), 0.4 * np.sin(7 * t)
+    r = Release(t=t, h=h, alpha=alpha, lift=h, moment=alpha, U=5.0, p=p, drag=drag)
+    assert r.n_dof == 3
+    np.testing.assert_allclose(r.coordinates(0.3), np.column_stack([h / 0.3, alpha, p / 0.3]))
+    np.testing.assert_allclose(r.generalised_forces(0.3)[:, 2], drag * 0.3)
+    planar = Release(t=t, h=h, alpha=alpha, lift=h, moment=alpha, U=5.0)
+    assert planar.n_dof == 2 and planar.coordinates(0.3).shape == (400, 2)
+    with pytest.raises(ValueError, match="both p and drag"):
+        Release(t=t, h=h, alpha=alpha, lift=h, moment=alpha, U=5.0, p=p)
+    with pytest.raises(ValueError, match="drag contains 1 non-finite"):
+        Release(t=t, h=h, alpha=alpha, lift=h, moment=alpha, U=5.0, p=p,
+                drag=np.where(t == t[5], np.nan, drag))
