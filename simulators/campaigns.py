@@ -1,11 +1,11 @@
-"""Seeded simulated campaigns with a hidden effect, for the discrepancy workflow's tests.
+"""Seeded simulated campaigns with hidden effects, for the discrepancy workflow's tests.
 
 Responsibility: :func:`simulated_campaign` returns the releases of a small test campaign on the
 flat-plate rig (the section of ``rig_configs/sim_flat_plate.toml``, Jones aerodynamics): three
 wind speeds (0.5, 0.65 and 0.8 of the flutter speed), two releases each from different held
 positions, 7.5 s decays at 500 Hz (the sync view's rate), Gaussian noise of a given fraction
-of each channel's RMS, and at most one of the seven named effects hidden in the physics or the
-measurement. :data:`REALISTIC` holds one realistic strength of each effect for this rig, each
+of each channel's RMS, and named effects hidden (none, one or several at once) in the physics
+or the measurement. :data:`REALISTIC` holds one realistic strength of each effect for this rig, each
 chosen to matter about as much as the things a tunnel engineer would notice: a friction force
 of the order of the structural damping force at the release amplitude, a quadratic drag a few
 times it (in heave the wind's own damping is 10 to 35 times the structural one, and a weaker
@@ -80,15 +80,15 @@ def scaled(name: str, factor: float) -> Effect:
                                                        for p in _STRENGTHS[name]}))
 
 
-def simulated_campaign(effect: Effect | None, seed: int, *, noise: float = 0.02,
+def simulated_campaign(effect: Effect | Sequence[Effect] | None, seed: int, *, noise: float = 0.02,
                        fractions: Sequence[float] = FRACTIONS, duration: float = 7.5,
                        fs: float = 500.0) -> list[Release]:
     """Simulate a campaign with ``effect`` hidden (None: clean), seeded.
 
     Parameters
     ----------
-    effect : Effect or None
-        The hidden effect.
+    effect : Effect, sequence of Effect, or None
+        The hidden effect (or effects, at most one of each kind).
     seed : int
         Seed of the noise.
     noise : float
@@ -107,7 +107,8 @@ def simulated_campaign(effect: Effect | None, seed: int, *, noise: float = 0.02,
     speed = flutter.analyze(SECTION, truth).speed
     assert speed is not None  # the flat plate flutters
     rng = np.random.default_rng(seed)
-    effects = () if effect is None else (effect,)
+    effects = (() if effect is None else (effect,) if isinstance(effect, Effect)
+               else tuple(effect))
     releases = []
     for fraction in fractions:
         for h0, alpha0 in HOLDS:

@@ -79,6 +79,11 @@ def _as_json(report: Any, files: Sequence[Path]) -> dict[str, Any]:
     return {
         "files": [str(p) for p in files],
         "effect": report.effect,
+        "effects": [{"effect": step.name, "parameters": step.parameters,
+                     "uncertainty": step.uncertainty, "units": step.units,
+                     "gap_after": step.gap_after} for step in report.effects],
+        "explained": report.explained,
+        "unexplained": [f.text() for f in report.unexplained],
         "parameters": report.parameters,
         "uncertainty": report.uncertainty,
         "gap_before": report.gap_before,
@@ -104,7 +109,8 @@ def _plots(out: Path, releases: list[Any], report: Any, section: Any) -> dict[st
     for i, r in enumerate(releases):
         chosen.setdefault(round(r.U, 1), i)
     picks = list(chosen.values())
-    after_label = "baseline" if report.effect is None else f"with {report.effect}"
+    after_label = ("baseline" if report.effect is None
+                   else "with " + " + ".join(step.name for step in report.effects))
     plots: dict[str, Path] = {}
 
     fig, axes = plt.subplots(2, len(picks), figsize=(5 * len(picks), 6), squeeze=False,

@@ -278,7 +278,12 @@ def process_campaign(name: str, files: list[dict[str, Any]],
         report = diagnose(releases, section, baseline=model, depth=depth)
         out.update(effect=report.effect, effect_parameters=report.parameters,
                    gap_before=report.gap_before, gap_after=report.gap_after,
-                   runner_up=report.runner_up)
+                   runner_up=report.runner_up,
+                   effects=[{"effect": s.name, "parameters": s.parameters,
+                             "uncertainty": s.uncertainty, "gap_after": s.gap_after}
+                            for s in report.effects],
+                   explained=report.explained,
+                   unexplained=[f.text() for f in report.unexplained])
     return out
 
 

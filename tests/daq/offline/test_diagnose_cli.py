@@ -34,9 +34,12 @@ def test_diagnose_names_the_delay_and_writes_report_and_plots(delayed_run, tmp_p
     out, report = tmp_path / "plots", tmp_path / "report.json"
     assert main(["diagnose", str(delayed_run), "--out", str(out), "--json", str(report)]) == 0
     printed = capsys.readouterr().out
-    assert "effect: channel_delay" in printed and "runner-up:" in printed
+    assert "effect 1: channel_delay" in printed and "runner-up:" in printed
+    assert "effect 2:" not in printed and "explained: yes" in printed
     data = json.loads(report.read_text())
     assert data["effect"] == "channel_delay"
+    assert [e["effect"] for e in data["effects"]] == ["channel_delay"]
+    assert data["effects"][0]["gap_after"] == data["gap_after"] and data["explained"] is True
     # 10 ms hidden; the fit recovers it within 20 % (the tolerance; ~1 % in practice).
     assert data["parameters"]["delay_s"] == pytest.approx(0.010, rel=0.2)
     assert data["gap_after"] <= 0.5 * data["gap_before"]
