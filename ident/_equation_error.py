@@ -329,11 +329,17 @@ class StructuralProblem:
         Per candidate name, per release, its regressors whitened alike.
     chunks : list of int
         Rows per held-out chunk, per release.
+    scale : ndarray, shape (2,)
+        The whitening of the heave and pitch equations, N m/m.
+    t : list of ndarray
+        Per release, the time of its rows, s (each row is both equations).
     """
 
     y: list[FloatArray]
     X: dict[str, list[FloatArray]]
     chunks: list[int]
+    scale: FloatArray
+    t: list[FloatArray]
 
     def design(self, names: Sequence[str]) -> list[FloatArray]:
         """Per release, the columns of the candidates ``names`` side by side (a joint fit)."""
@@ -351,7 +357,8 @@ def structural_problem(signals: Sequence[DecaySignals], section: SectionModel,
     y = [(r / scale).ravel() for r in residuals]
     X = {spec.name: [np.column_stack([(c / scale).ravel() for c in spec.regressors(sig, section)])
                      for sig in signals] for spec in specs}
-    return StructuralProblem(y=y, X=X, chunks=[2 * sig.chunk for sig in signals])
+    return StructuralProblem(y=y, X=X, chunks=[2 * sig.chunk for sig in signals], scale=scale,
+                             t=[sig.t for sig in signals])
 
 
 def fit_structural(signals: Sequence[DecaySignals], section: SectionModel,

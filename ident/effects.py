@@ -4,11 +4,12 @@ These are the named physical terms used both by the virtual tunnel (:mod:`simula
 through :func:`ident.simulate.simulate_decay`), which adds them to the simulated physics, and by the
 discrepancy workflow (:mod:`ident.discrepancy`), which tries them as candidate explanations of a
 gap between an identified model and the measured releases. Each effect is a small validated
-dataclass with its own parameters, in SI units per unit span. The seven names are fixed
+dataclass with its own parameters, in SI units per unit span. The names are fixed
 (``docs/conventions.md``, "Named effects").
 
 Three kinds: structural nonlinearities (``coulomb_friction``, ``quadratic_damping``,
-``cubic_stiffness``), changes to the linear physics (``static_unbalance``, ``vortex_shedding``), and
+``cubic_stiffness``), changes to the linear physics (``static_unbalance``, ``vortex_shedding``,
+``base_vibration``), and
 measurement effects applied to the recorded channels (``channel_delay``, ``sensor_crosstalk``).
 """
 
@@ -311,7 +312,7 @@ class BaseVibration(Effect):
         return np.asarray(-self.accel * inertia @ np.array([[c, s]]), dtype=float)
 
 
-#: The seven effect names (docs/conventions.md, "Named effects"), mapped to their classes.
+#: The named effects (docs/conventions.md, "Named effects"), mapped to their classes.
 EFFECT_NAMES: dict[str, type[Effect]] = {
     cls.name: cls
     for cls in (
@@ -322,5 +323,6 @@ EFFECT_NAMES: dict[str, type[Effect]] = {
         VortexShedding,
         StaticUnbalance,
         SensorCrosstalk,
+        BaseVibration,
     )
 }

@@ -17,7 +17,8 @@ the first two limits. Each finding says where the residual is:
 
 - a **spectral line**: the averaged periodogram of the residual has a peak holding at least
   ``LINE_SHARE`` of the systematic power; its frequency per wind speed says whether it moves
-  with the wind (shedding-like) or stays put (a machine, the floor);
+  with the wind (shedding-like) or stays put (a machine, the floor); in the lowest bin it is
+  called a slow drift or offset;
 - the **amplitude range**: the systematic power in four bands of the channel's own envelope
   (quartiles); where it is largest, or "at all amplitudes" when within a factor of two;
 - the **wind speeds** at which the systematic part exceeds the limit.
@@ -98,7 +99,10 @@ class ResidualFinding:
         """Return the finding in plain words, one line."""
         parts = [f"{self.channel}: a systematic residual of {self.systematic:.1%} of the "
                  f"channel's RMS (baseline {self.baseline:.1%}, white noise {self.noise:.1%})"]
-        if self.line_hz is not None:
+        if self.line_hz is not None and self.line_hz <= 1.0 / SEGMENT_S + 1e-9:
+            parts.append(f"mostly ({self.line_share:.0%}) a slow drift or offset (below "
+                         f"{1.0 / SEGMENT_S:.2g} Hz)")
+        elif self.line_hz is not None:
             freqs = list(self.line_per_speed.values())
             speeds = list(self.line_per_speed)
             if len(freqs) > 1 and max(freqs) - min(freqs) <= 2.0 / SEGMENT_S:

@@ -29,12 +29,15 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
 
 from ident import e2rfc
+from ident._base_fit import BaseLine, accelerations, base_columns, find_line, modal_peaks
 from ident._equation_error import (
+    LOWPASS_FACTOR,
     STRUCTURAL_CANDIDATES,
     StructuralProblem,
     VortexFit,
@@ -47,6 +50,7 @@ from ident._equation_error import (
     structural_problem,
 )
 from ident.effects import (
+    BaseVibration,
     ChannelDelay,
     CoulombFriction,
     CubicStiffness,
@@ -77,9 +81,14 @@ MAX_EFFECTS = 4
 #: Samples at the start of a decay fitted by ``c0 + c2 t^2 + c3 t^3`` for its initial state.
 _START_SAMPLES = 20
 _VORTEX = "vortex_shedding"
+_BASE = "base_vibration"
+#: Quality factor of the notch that takes a base vibration's line out before E2RFC (a
+#: bandwidth of f / Q: 0.5 Hz at 5 Hz, narrow beside the modes' distance from it).
+_NOTCH_Q = 10.0
 _UNITS = {spec.name: dict(zip(spec.parameters, spec.units, strict=True))
           for spec in STRUCTURAL_CANDIDATES}
 _UNITS[_VORTEX] = {"strouhal": "1", "cl": "1", "cm": "1", "phase": "rad"}
+_UNITS[_BASE] = {"frequency_hz": "Hz", "accel": "m/s^2", "phase": "rad"}
 
 
 @dataclass(frozen=True)
@@ -208,8 +217,9 @@ def select(releases: Sequence[Release], section: SectionModel, baseline: Rationa
     chosen: list[str] = []
     added: list[tuple[str, float, float, float]] = []  # name, cv ratio, its se, gap after
     params: Params = {}
-    problem = _problem(releases, section, params, vortex)
-    remaining = [spec.name for spec in STRUCTURAL_CANDIDATES] + [_VORTEX]
+    line = _find_line(_problem(releases, section, params, vortex, None), releases, section)
+    problem = _problem(releases, section, params, vortex, line)
+    remaining = [spec.name for spec in STRUCTURAL_CANDIDATES] + [_BASE, _VORTEX]
     state: State = (baseline, (), tuple(before), gap(measured, before))
     rounds: list[tuple[CandidateEvidence, ...]] = []
     while remaining and len(chosen) < MAX_EFFECTS:
@@ -236,8 +246,8 @@ def select(releases: Sequence[Release], section: SectionModel, baseline: Rationa
                                   + f" (needs <= {NONE_RATIO} and {MIN_SIGMAS:g} standard "
                                   "errors)")
             else:
-                trial_params, trial_problem = _joint(releases, section, vortex, [*chosen, name],
-                                                     depth)
+                trial_params, trial_problem = _joint(releases, section, vortex, line,
+                                                     [*chosen, name], depth)
                 trial = _apply(releases, section, baseline, trial_params, vortex, depth)
                 if trial[3] < state[3]:
                     accepted = (name, ratio, se, trial, trial_params, trial_problem)
@@ -249,10 +259,10 @@ def select(releases: Sequence[Release], section: SectionModel, baseline: Rationa
                     remaining.remove(name)
         # Each candidate's parameters as scored: one pass on this round's data, jointly with
         # the effects chosen (a chosen measurement effect's columns fit what is left of it).
-        seen = {name: _unpack(problem, vortex, [*chosen, name], depth, params)[name]
+        seen = {name: _unpack(problem, vortex, line, [*chosen, name], depth, params)[name]
                 for name, *_ in scored}
         rounds.append(tuple(
-            CandidateEvidence(effect=name, parameters=seen[name][0], std=seen[name][1],
+            CandidateEvidence(effect=name, parameters=seen[name].values, std=seen[name].std,
                               units=_UNITS[name], cv_ratio=ratio, cv_ratio_se=se,
                               verdict=verdicts[name])
             for name, ratio, se in scored))
@@ -264,8 +274,8 @@ def select(releases: Sequence[Release], section: SectionModel, baseline: Rationa
         added.append((name, ratio, se, state[3]))
     model, physics, simulated, gap_final = state
     effects = {e.name: e for e in _effects(params, vortex, depth)}
-    steps = tuple(NamedEffect(name=name, effect=effects[name], parameters=params[name][0],
-                              uncertainty=params[name][1], units=_UNITS[name], cv_ratio=ratio,
+    steps = tuple(NamedEffect(name=name, effect=effects[name], parameters=params[name].values,
+                              uncertainty=params[name].std, units=_UNITS[name], cv_ratio=ratio,
                               cv_ratio_se=se, gap_after=g)
                   for name, ratio, se, g in added)
     return Selection(steps=steps, rounds=tuple(rounds), model=model, physics=physics,
@@ -280,20 +290,50 @@ def _clear(ratio: float, se: float) -> bool:
     return ratio <= NONE_RATIO and (1.0 - ratio) > MIN_SIGMAS * se
 
 
-Params = dict[str, tuple[dict[str, float], dict[str, float]]]
+class Fitted(NamedTuple):
+    """One effect's fitted parameters, their standard deviations, and per-release values.
+
+    ``per_release`` is, for a base vibration, each release's acceleration amplitude (m/s^2) and
+    phase (rad), shape (n_releases, 2); None for the others.
+    """
+
+    values: dict[str, float]
+    std: dict[str, float]
+    per_release: FloatArray | None = None
+
+
+Params = dict[str, Fitted]
 #: Gauss-Newton passes of a joint fit with a measurement effect (see :func:`_joint`).
 _PASSES = 4
 
 
 def _problem(releases: list[Release], section: SectionModel, params: Params,
-             vortex: VortexFit) -> StructuralProblem:
-    """Return the structural problem of the releases, the measurement effects taken out."""
+             vortex: VortexFit, line: BaseLine | None) -> StructuralProblem:
+    """Return the structural problem of the releases, the measurement effects taken out.
+
+    With ``line``, the base-vibration candidate's columns are added (:mod:`ident._base_fit`).
+    """
     corrected = _correct(releases, section, params, vortex)
-    return structural_problem([decay_signals(r, section) for r in corrected], section)
+    problem = structural_problem([decay_signals(r, section) for r in corrected], section)
+    if line is not None:
+        problem.X[_BASE] = [base_columns(problem.t, line, section, problem.scale, i)
+                            for i in range(len(problem.t))]
+    return problem
+
+
+def _find_line(problem: StructuralProblem, releases: list[Release],
+               section: SectionModel) -> BaseLine:
+    """Find the base-vibration candidate's line in the baseline's heave residual."""
+    heave = [(y.reshape(-1, 2)[:, 0] * problem.scale[0]) for y in problem.y]
+    signals = [decay_signals(r, section) for r in releases]
+    modes = [modal_peaks(sig.t, sig.q) for sig in signals]
+    cutoff = min(LOWPASS_FACTOR * max(section.fh, section.fa), 0.4 * releases[0].fs)
+    return find_line(problem.t, heave, modes, cutoff)
 
 
 def _joint(releases: list[Release], section: SectionModel, vortex: VortexFit,
-           names: Sequence[str], depth: float) -> tuple[Params, StructuralProblem]:
+           line: BaseLine, names: Sequence[str],
+           depth: float) -> tuple[Params, StructuralProblem]:
     """Fit the effects ``names`` jointly; return their parameters and the corrected problem.
 
     A delay and a crosstalk enter the equation error to first order only (``tau f'``); fitted
@@ -305,18 +345,20 @@ def _joint(releases: list[Release], section: SectionModel, vortex: VortexFit,
     params: Params = {}
     measurement = {"channel_delay", "sensor_crosstalk"} & set(names)
     for _ in range(_PASSES if measurement else 1):
-        problem = _problem(releases, section, params, vortex)
-        new = _unpack(problem, vortex, names, depth, params)
-        step = max((abs(new[n][0][k] - params[n][0][k]) / max(new[n][1][k], 1e-300)
-                    for n in measurement if n in params for k in new[n][0]), default=math.inf)
+        problem = _problem(releases, section, params, vortex, line)
+        new = _unpack(problem, vortex, line, names, depth, params)
+        step = max((abs(new[n].values[k] - params[n].values[k]) / max(new[n].std[k], 1e-300)
+                    for n in measurement if n in params for k in new[n].values),
+                   default=math.inf)
         params = new
         if step < 0.1:  # the last pass moved the totals by a tenth of their uncertainty
             break
-    return params, _problem(releases, section, params, vortex) if measurement else problem
+    return params, (_problem(releases, section, params, vortex, line) if measurement
+                    else problem)
 
 
-def _unpack(problem: StructuralProblem, vortex: VortexFit, names: Sequence[str], depth: float,
-            totals: Params) -> Params:
+def _unpack(problem: StructuralProblem, vortex: VortexFit, line: BaseLine,
+            names: Sequence[str], depth: float, totals: Params) -> Params:
     """One joint least-squares pass on ``problem``; measurement effects add to ``totals``."""
     out: Params = {}
     structural = _structural(names)
@@ -325,25 +367,41 @@ def _unpack(problem: StructuralProblem, vortex: VortexFit, names: Sequence[str],
         i = 0
         specs = {spec.name: spec for spec in STRUCTURAL_CANDIDATES}
         for name in structural:
+            if name == _BASE:
+                n = problem.X[_BASE][0].shape[1]
+                out[name] = _base_params(line, fit.theta[i:i + n], fit.std[i:i + n])
+                i += n
+                continue
             p = specs[name].parameters
             value = {k: float(x) for k, x in zip(p, fit.theta[i:i + len(p)], strict=True)}
             if name in totals and name in ("channel_delay", "sensor_crosstalk"):
-                value = {k: x + totals[name][0][k] for k, x in value.items()}
-            out[name] = (value,
-                         {k: float(x) for k, x in zip(p, fit.std[i:i + len(p)], strict=True)})
+                value = {k: x + totals[name].values[k] for k, x in value.items()}
+            out[name] = Fitted(value, {k: float(x) for k, x in zip(p, fit.std[i:i + len(p)],
+                                                                    strict=True)})
             i += len(p)
     if _VORTEX in names:
-        out[_VORTEX] = ({"strouhal": vortex.k * depth, "cl": vortex.cl, "cm": vortex.cm,
-                         "phase": vortex.phase},
-                        {"strouhal": vortex.k_std * depth, "cl": vortex.cl_std,
-                         "cm": vortex.cm_std, "phase": math.nan})
+        out[_VORTEX] = Fitted({"strouhal": vortex.k * depth, "cl": vortex.cl, "cm": vortex.cm,
+                               "phase": vortex.phase},
+                              {"strouhal": vortex.k_std * depth, "cl": vortex.cl_std,
+                               "cm": vortex.cm_std, "phase": math.nan})
     return out
+
+
+def _base_params(line: BaseLine, theta: FloatArray, std: FloatArray) -> Fitted:
+    """Return the base vibration's median amplitude and phase over the releases, and spread."""
+    accel, phase = accelerations(theta)
+    # A component's standard deviation is about the amplitude's (the two are alike).
+    accel_std = float(np.median(np.hypot(*np.asarray(std).reshape(-1, 2).T) / math.sqrt(2)))
+    return Fitted({"frequency_hz": line.frequency_hz, "accel": float(np.median(accel)),
+                   "phase": float(np.median(phase))},
+                  {"frequency_hz": math.nan, "accel": accel_std, "phase": math.nan},
+                  np.column_stack([accel, phase]))
 
 
 def _effects(params: Params, vortex: VortexFit, depth: float) -> list[Effect]:
     """Build the effects from fitted parameters (clipped to their physical range)."""
     out: list[Effect] = []
-    for name, (p, _) in params.items():
+    for name, (p, _, _) in params.items():
         if name == "coulomb_friction":
             out.append(CoulombFriction(force_h=max(p["force_h"], 0.0),
                                        moment_a=max(p["moment_a"], 0.0)))
@@ -358,6 +416,9 @@ def _effects(params: Params, vortex: VortexFit, depth: float) -> list[Effect]:
         elif name == "sensor_crosstalk":
             out.append(SensorCrosstalk(h_from_alpha=p["h_from_alpha"],
                                        alpha_from_h=p["alpha_from_h"]))
+        elif name == _BASE:
+            out.append(BaseVibration(frequency_hz=p["frequency_hz"], accel=abs(p["accel"]),
+                                     phase=p["phase"]))
         elif name == _VORTEX:
             out.append(VortexShedding(strouhal=vortex.k * depth, depth=depth, cl=vortex.cl,
                                       cm=vortex.cm, phase=vortex.phase))
@@ -367,18 +428,24 @@ def _effects(params: Params, vortex: VortexFit, depth: float) -> list[Effect]:
 
 
 def _correct(releases: list[Release], section: SectionModel, params: Params,
-             vortex: VortexFit) -> list[Release]:
-    """Take the measurement effects (and the shedding lines) out of the releases."""
+             vortex: VortexFit, *, notch: bool = False) -> list[Release]:
+    """Take the measurement effects (and the shedding lines) out of the releases.
+
+    With ``notch``, a base vibration's line too (for E2RFC; the equation error keeps it, its
+    columns fit it there).
+    """
     corrected = list(releases)
     # In the reverse of the order they happened: the shedding line is in the recorded forces
     # as they are; the delay is undone next.
     if _VORTEX in params:
         corrected = [_remove_vortex(r, section, vortex, i) for i, r in enumerate(corrected)]
+    if notch and _BASE in params:
+        corrected = [_notch(r, params[_BASE].values["frequency_hz"]) for r in corrected]
     if "channel_delay" in params:
-        delay = max(params["channel_delay"][0]["delay_s"], 0.0)
+        delay = max(params["channel_delay"].values["delay_s"], 0.0)
         corrected = [_advance_forces(r, delay) for r in corrected]
     if "sensor_crosstalk" in params:
-        p = params["sensor_crosstalk"][0]
+        p = params["sensor_crosstalk"].values
         effect = SensorCrosstalk(h_from_alpha=p["h_from_alpha"], alpha_from_h=p["alpha_from_h"])
         corrected = [_unmix(r, effect) for r in corrected]
     return corrected
@@ -391,17 +458,27 @@ def _apply(releases: list[Release], section: SectionModel, baseline: RationalFun
            params: Params, vortex: VortexFit, depth: float) -> State:
     """Add the effects to the model, identify again where the data change, simulate, gap."""
     effects = _effects(params, vortex, depth)
-    changed = bool({_VORTEX, "channel_delay", "sensor_crosstalk"} & set(params))
+    changed = bool({_VORTEX, _BASE, "channel_delay", "sensor_crosstalk"} & set(params))
     # E2RFC chooses the structure again: contaminated data can make it choose another one (a
     # shedding line cost a lag: the refit kept at the baseline's structure stayed 4x the noise
     # away from the measurements, re-chosen it is at the noise). The structural effects do not
-    # change the measured forces, hence not E2RFC's model.
-    model = (e2rfc.identify(_correct(releases, section, params, vortex), section) if changed
-             else baseline)
-    physics = tuple(e for e in effects if not isinstance(e, VortexShedding))
+    # change the measured forces, hence not E2RFC's model; a base vibration does: its forced
+    # motion near a mode biased E2RFC (the gap stayed at 2.6 times the noise with the floor's
+    # parameters right within 1 %), so its line is notched out of all four channels first.
+    model = (e2rfc.identify(_correct(releases, section, params, vortex, notch=True), section)
+             if changed else baseline)
+    physics = tuple(e for e in effects if not isinstance(e, VortexShedding | BaseVibration))
     simulated = []
     for i, r in enumerate(releases):
-        sim = simulate_channels(r, section, model, physics)
+        here = physics
+        if _BASE in params:
+            # The floor does not wait for the release: each has its own amplitude and phase.
+            per_release = params[_BASE].per_release
+            assert per_release is not None
+            here = (*physics, BaseVibration(frequency_hz=params[_BASE].values["frequency_hz"],
+                                            accel=float(per_release[i, 0]),
+                                            phase=float(per_release[i, 1])))
+        sim = simulate_channels(r, section, model, here)
         if _VORTEX in params:
             # Shedding has a phase of its own in every release: the line fitted to each is
             # added to its simulated forces (the structure's response at the shedding
@@ -410,6 +487,14 @@ def _apply(releases: list[Release], section: SectionModel, baseline: RationalFun
             sim = {**sim, "lift": sim["lift"] + lift, "moment": sim["moment"] + moment}
         simulated.append(sim)
     return model, physics, tuple(simulated), gap([channels(r) for r in releases], simulated)
+
+
+def _notch(r: Release, frequency_hz: float) -> Release:
+    """Notch a line out of all four channels (zero phase): the motion-force relation is kept."""
+    from scipy.signal import filtfilt, iirnotch
+
+    b, a = iirnotch(frequency_hz, _NOTCH_Q, fs=r.fs)
+    return replace(r, **{c: filtfilt(b, a, getattr(r, c)) for c in CHANNELS}, meta=dict(r.meta))
 
 
 def _advance_forces(r: Release, delay_s: float) -> Release:
