@@ -68,12 +68,15 @@ def main() -> None:
     parser.add_argument("--pair-seeds", type=int, default=5, help="campaigns per pair")
     parser.add_argument("--outside-seeds", type=int, default=5,
                         help="campaigns per effect outside the library")
+    parser.add_argument("--pair-first-seed", type=int, default=0,
+                        help="seed number of the first campaign of each pair (to extend a run)")
     parser.add_argument("--skip-singles", action="store_true",
                         help="only the pairs and the effects outside the library")
     args = parser.parse_args()
     if args.skip_singles:
-        _pairs(args.pair_seeds)
-        _outside(args.outside_seeds)
+        _pairs(args.pair_seeds, args.pair_first_seed)
+        if args.outside_seeds:
+            _outside(args.outside_seeds)
         return
     rows = ["none", *EFFECT_NAMES]
     columns = [*rows]
@@ -140,12 +143,12 @@ def main() -> None:
         f"{row}: {dict(c)}" for row, c in counts.items()
         if set(c) - set(columns)) + ")")
     if args.pair_seeds:
-        _pairs(args.pair_seeds)
+        _pairs(args.pair_seeds, args.pair_first_seed)
     if args.outside_seeds:
         _outside(args.outside_seeds)
 
 
-def _pairs(seeds: int) -> None:
+def _pairs(seeds: int, first: int = 0) -> None:
     """Pairs of effects: named exactly, each strength within 20 %."""
     started = time.monotonic()
     print()
@@ -157,7 +160,7 @@ def _pairs(seeds: int) -> None:
         right = both = extra = explained = 0
         gaps: list[list[float]] = []
         errors: list[float] = []
-        for seed in range(seeds):
+        for seed in range(first, first + seeds):
             truth = [REALISTIC[name] for name in pair]
             report = diagnose(simulated_campaign(truth, 50_000 + 100 * k + seed), SECTION,
                               depth=DEPTH)

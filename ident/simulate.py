@@ -2,14 +2,15 @@
 
 A release starts from rest at ``(h0, alpha0)`` with all aerodynamic lag states at zero
 (``docs/conventions.md``, "In the time domain") and runs freely. The linear physics (structure plus
-Roger self-excited forces, plus static unbalance and harmonic vortex forcing, which stay linear) is
+Roger self-excited forces, plus static unbalance and the harmonic forcing of vortex shedding and
+of a base vibration, which stay linear) is
 advanced by its exact discretisation ``z[k+1] = expm(A dt) z[k]``. Structural nonlinearities
 (friction, quadratic damping, cubic springs) are added by a second-order exponential integrator
 (ETD2RK of Cox and Matthews) on a fixed step that is a multiple of the output rate: exact for the
 linear part, second order for the nonlinear part. Measurement effects (channel delay, crosstalk) are
 applied to the recorded channels last. The forces returned are the self-excited forces (plus vortex
 forcing, plus the wind load): what the surface pressures integrate to, not the spring or friction
-forces.
+forces, nor the inertial force of a base vibration (the air does not move with the floor).
 
 Wind load (optional, :mod:`ident.turbulence`): with static coefficients the mean static load
 ``qd B^2 [C_L, C_M]`` acts in the wind (it shifts the equilibrium; ``h0, alpha0`` remain the
