@@ -242,6 +242,48 @@ def _chunk_labels(n: int, chunk: int, offset: int) -> npt.NDArray[np.intp]:
     return np.asarray(np.arange(n) // max(chunk, 1) + offset, dtype=np.intp)
 
 
+def chunk_ids(y: Sequence[FloatArray], chunks: Sequence[int]) -> tuple[npt.NDArray[np.intp],
+                                                                         npt.NDArray[np.intp]]:
+    """Return each row's chunk number and held-out fold (see :func:`fit_linear`)."""
+    labels, offset = [], 0
+    for i, (yi, chunk) in enumerate(zip(y, chunks, strict=True)):
+        lab = _chunk_labels(len(yi), chunk, offset)
+        labels.append((lab, (lab - offset + i) % N_FOLDS))
+        offset = int(lab[-1]) + 1
+    return (np.concatenate([lab for lab, _ in labels]),
+            np.concatenate([f for _, f in labels]))
+
+
+def held_out_sse(y: Sequence[FloatArray], X: Sequence[FloatArray],
+                 chunks: Sequence[int]) -> FloatArray:
+    """Return every row's squared held-out error of ``y = X theta`` (no columns: ``y^2``)."""
+    Y, Xall = np.concatenate(y), np.vstack(X)
+    if Xall.shape[1] == 0:
+        return np.asarray(Y**2, dtype=float)
+    _, fold = chunk_ids(y, chunks)
+    held_sse = np.zeros(Y.size)
+    for k in range(N_FOLDS):
+        test = fold == k
+        th_k, *_ = np.linalg.lstsq(Xall[~test], Y[~test], rcond=None)
+        held_sse[test] = (Y[test] - Xall[test] @ th_k) ** 2
+    return held_sse
+
+
+def compare_held_out(before: FloatArray, after: FloatArray,
+                     chunk_id: npt.NDArray[np.intp]) -> tuple[float, float]:
+    """Return the held-out ratio ``sum after / sum before`` and its standard error.
+
+    The standard error comes from the chunks' paired improvements (many nearly independent
+    chunks, not five folds).
+    """
+    n_chunks = int(chunk_id.max()) + 1
+    gain = np.bincount(chunk_id, weights=before - after, minlength=n_chunks)
+    total = float(before.sum())
+    ratio = 1.0 - float(gain.sum()) / total
+    se = math.sqrt(n_chunks) * float(np.std(gain, ddof=1)) / total
+    return ratio, se
+
+
 def fit_linear(y: Sequence[FloatArray], X: Sequence[FloatArray],
                chunks: Sequence[int]) -> LinearFit:
     """Fit ``y = X theta`` over releases; score by held-out error (module docstring).
@@ -262,24 +304,9 @@ def fit_linear(y: Sequence[FloatArray], X: Sequence[FloatArray],
     """
     Y, Xall = np.concatenate(y), np.vstack(X)
     theta, *_ = np.linalg.lstsq(Xall, Y, rcond=None)
-    labels, offset = [], 0
-    for i, (yi, chunk) in enumerate(zip(y, chunks, strict=True)):
-        lab = _chunk_labels(len(yi), chunk, offset)
-        labels.append((lab, (lab - offset + i) % N_FOLDS))
-        offset = int(lab[-1]) + 1
-    chunk_id = np.concatenate([lab for lab, _ in labels])
-    fold = np.concatenate([f for _, f in labels])
-    held_sse = np.zeros(Y.size)
-    for k in range(N_FOLDS):
-        test = fold == k
-        th_k, *_ = np.linalg.lstsq(Xall[~test], Y[~test], rcond=None)
-        held_sse[test] = (Y[test] - Xall[test] @ th_k) ** 2
-    base_sse = Y**2
-    n_chunks = int(chunk_id.max()) + 1
-    gain = np.bincount(chunk_id, weights=base_sse - held_sse, minlength=n_chunks)
-    total = float(base_sse.sum())
-    ratio = 1.0 - float(gain.sum()) / total
-    se = math.sqrt(n_chunks) * float(np.std(gain, ddof=1)) / total
+    chunk_id, _ = chunk_ids(y, chunks)
+    ratio, se = compare_held_out(np.asarray(Y**2, dtype=float), held_out_sse(y, X, chunks),
+                                 chunk_id)
     residuals = [yi - Xi @ theta for yi, Xi in zip(y, X, strict=True)]
     dof = max(Y.size - theta.size, 1)
     sigma2 = float(sum(float(r @ r) for r in residuals)) / dof
@@ -289,6 +316,51 @@ def fit_linear(y: Sequence[FloatArray], X: Sequence[FloatArray],
                      std=np.sqrt(np.maximum(np.diag(cov), 0.0)), cv_ratio=ratio, cv_ratio_se=se)
 
 
+@dataclass(frozen=True)
+class StructuralProblem:
+    """The whitened structural residual of all decays and every candidate's regressors.
+
+    Attributes
+    ----------
+    y : list of ndarray, shape (2 n_i,)
+        Per release, the residual ``Ms q'' + Cs q' + Ks q - f`` with each equation (heave,
+        pitch) divided by its RMS over all releases (so that neither dominates by its units).
+    X : dict of str to list of ndarray, shape (2 n_i, p)
+        Per candidate name, per release, its regressors whitened alike.
+    chunks : list of int
+        Rows per held-out chunk, per release.
+    scale : ndarray, shape (2,)
+        The whitening of the heave and pitch equations, N m/m.
+    t : list of ndarray
+        Per release, the time of its rows, s (each row is both equations).
+    """
+
+    y: list[FloatArray]
+    X: dict[str, list[FloatArray]]
+    chunks: list[int]
+    scale: FloatArray
+    t: list[FloatArray]
+
+    def design(self, names: Sequence[str]) -> list[FloatArray]:
+        """Per release, the columns of the candidates ``names`` side by side (a joint fit)."""
+        return [np.column_stack([self.X[name][i] for name in names]) if names
+                else np.zeros((yi.size, 0)) for i, yi in enumerate(self.y)]
+
+
+def structural_problem(signals: Sequence[DecaySignals], section: SectionModel,
+                       specs: Sequence[CandidateSpec] = STRUCTURAL_CANDIDATES
+                       ) -> StructuralProblem:
+    """Build the whitened structural residuals and the candidates' regressors."""
+    residuals = [structural_residual(sig, section) for sig in signals]
+    scale = np.sqrt(np.mean(np.vstack(residuals) ** 2, axis=0))
+    scale[scale == 0.0] = 1.0
+    y = [(r / scale).ravel() for r in residuals]
+    X = {spec.name: [np.column_stack([(c / scale).ravel() for c in spec.regressors(sig, section)])
+                     for sig in signals] for spec in specs}
+    return StructuralProblem(y=y, X=X, chunks=[2 * sig.chunk for sig in signals], scale=scale,
+                             t=[sig.t for sig in signals])
+
+
 def fit_structural(signals: Sequence[DecaySignals], section: SectionModel,
                    spec: CandidateSpec) -> LinearFit:
     """Fit one structural candidate to the structural residuals of all decays.
@@ -296,13 +368,8 @@ def fit_structural(signals: Sequence[DecaySignals], section: SectionModel,
     Both equations (heave, pitch) are whitened by the baseline residual's RMS of each, so
     that neither dominates by its units.
     """
-    residuals = [structural_residual(sig, section) for sig in signals]
-    scale = np.sqrt(np.mean(np.vstack(residuals) ** 2, axis=0))
-    scale[scale == 0.0] = 1.0
-    y = [(r / scale).ravel() for r in residuals]
-    X = [np.column_stack([(c / scale).ravel() for c in spec.regressors(sig, section)])
-         for sig in signals]
-    return fit_linear(y, X, [2 * sig.chunk for sig in signals])
+    problem = structural_problem(signals, section, (spec,))
+    return fit_linear(problem.y, problem.X[spec.name], problem.chunks)
 
 
 @dataclass(frozen=True)

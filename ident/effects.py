@@ -4,18 +4,20 @@ These are the named physical terms used both by the virtual tunnel (:mod:`simula
 through :func:`ident.simulate.simulate_decay`), which adds them to the simulated physics, and by the
 discrepancy workflow (:mod:`ident.discrepancy`), which tries them as candidate explanations of a
 gap between an identified model and the measured releases. Each effect is a small validated
-dataclass with its own parameters, in SI units per unit span. The seven names are fixed
+dataclass with its own parameters, in SI units per unit span. The names are fixed
 (``docs/conventions.md``, "Named effects").
 
 Three kinds: structural nonlinearities (``coulomb_friction``, ``quadratic_damping``,
-``cubic_stiffness``), changes to the linear physics (``static_unbalance``, ``vortex_shedding``), and
+``cubic_stiffness``), changes to the linear physics (``static_unbalance``, ``vortex_shedding``,
+``base_vibration``), and
 measurement effects applied to the recorded channels (``channel_delay``, ``sensor_crosstalk``).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -24,6 +26,7 @@ from ident import _validate as v
 
 __all__ = [
     "EFFECT_NAMES",
+    "BaseVibration",
     "ChannelDelay",
     "CoulombFriction",
     "CubicStiffness",
@@ -265,7 +268,51 @@ class SensorCrosstalk(Effect):
         v.finite("alpha_from_h", self.alpha_from_h)
 
 
-#: The seven effect names (docs/conventions.md, "Named effects"), mapped to their classes.
+@dataclass(frozen=True)
+class BaseVibration(Effect):
+    """The floor, and with it the rig's base, vibrates vertically at a fixed frequency.
+
+    A fan, a pump or traffic shakes the supports with the acceleration
+    ``a(t) = accel sin(2 pi frequency_hz t + phase)``. In the supports' frame the model feels
+    the inertial force ``-m a`` in heave and ``-S a`` in pitch (``S`` the static unbalance);
+    the pressure taps do not see it (the air does not move with the floor), so the measured
+    forces hold no trace of it, only the motion does.
+
+    Signature: a spectral line in h (and alpha) at a frequency that does not move with U and is
+    absent from the forces.
+
+    Parameters
+    ----------
+    frequency_hz : float
+        Frequency of the vibration, Hz, > 0.
+    accel : float
+        Amplitude of the base acceleration, m/s^2, >= 0.
+    phase : float
+        Phase at the release, rad.
+    """
+
+    name: ClassVar[str] = "base_vibration"
+    frequency_hz: float = 5.0
+    accel: float = 0.0
+    phase: float = 0.0
+
+    def __post_init__(self) -> None:
+        v.positive("frequency_hz", self.frequency_hz)
+        if v.finite("accel", self.accel) < 0.0:
+            raise ValueError(f"accel must be >= 0, got {self.accel!r}")
+        v.finite("phase", self.phase)
+
+    def gain(self, section: Any) -> npt.NDArray[np.float64]:
+        """Generalised force ``[F_h B, M]`` per unit ``[sin, cos]`` of ``2 pi f t``, N m/m.
+
+        ``section`` is the :class:`~ident.section.SectionModel` (its ``m``, ``S`` and ``B``).
+        """
+        c, s = math.cos(self.phase), math.sin(self.phase)
+        inertia = np.array([[section.m * section.B], [section.S]])
+        return np.asarray(-self.accel * inertia @ np.array([[c, s]]), dtype=float)
+
+
+#: The named effects (docs/conventions.md, "Named effects"), mapped to their classes.
 EFFECT_NAMES: dict[str, type[Effect]] = {
     cls.name: cls
     for cls in (
@@ -276,5 +323,6 @@ EFFECT_NAMES: dict[str, type[Effect]] = {
         VortexShedding,
         StaticUnbalance,
         SensorCrosstalk,
+        BaseVibration,
     )
 }

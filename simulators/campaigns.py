@@ -1,17 +1,18 @@
-"""Seeded simulated campaigns with a hidden effect, for the discrepancy workflow's tests.
+"""Seeded simulated campaigns with hidden effects, for the discrepancy workflow's tests.
 
 Responsibility: :func:`simulated_campaign` returns the releases of a small test campaign on the
 flat-plate rig (the section of ``rig_configs/sim_flat_plate.toml``, Jones aerodynamics): three
 wind speeds (0.5, 0.65 and 0.8 of the flutter speed), two releases each from different held
 positions, 7.5 s decays at 500 Hz (the sync view's rate), Gaussian noise of a given fraction
-of each channel's RMS, and at most one of the seven named effects hidden in the physics or the
-measurement. :data:`REALISTIC` holds one realistic strength of each effect for this rig, each
+of each channel's RMS, and named effects hidden (none, one or several at once) in the physics
+or the measurement. :data:`REALISTIC` holds one realistic strength of each effect for this rig, each
 chosen to matter about as much as the things a tunnel engineer would notice: a friction force
 of the order of the structural damping force at the release amplitude, a quadratic drag a few
 times it (in heave the wind's own damping is 10 to 35 times the structural one, and a weaker
 drag hides in it), a spring 5 % stiffer at the release amplitude, a centre of mass 5 mm off
 the axis, 10 ms of pressure tubing, a shedding lift coefficient of 0.05, a few per cent of
-laser crosstalk.
+laser crosstalk, a floor shaking at 6 Hz with 10 milli-g (a heave motion of about 4 % of the
+decays' RMS).
 
 Not responsible for: the physics (:mod:`ident.simulate`, :mod:`simulators.tunnel`) or the
 diagnosis (:mod:`ident.discrepancy`).
@@ -27,6 +28,7 @@ import numpy as np
 
 from ident import flat_plate, flutter
 from ident.effects import (
+    BaseVibration,
     ChannelDelay,
     CoulombFriction,
     CubicStiffness,
@@ -59,6 +61,7 @@ REALISTIC: dict[str, Effect] = {
     "vortex_shedding": VortexShedding(strouhal=0.12, depth=0.03, cl=0.05, cm=0.01, phase=0.5),
     "static_unbalance": StaticUnbalance(S=0.015),
     "sensor_crosstalk": SensorCrosstalk(h_from_alpha=0.003, alpha_from_h=0.3),
+    "base_vibration": BaseVibration(frequency_hz=6.0, accel=0.1, phase=0.3),
 }
 
 #: The parameters of each effect that a diagnosis must recover (the others are fixed shapes).
@@ -70,6 +73,7 @@ _STRENGTHS: dict[str, tuple[str, ...]] = {
     "vortex_shedding": ("cl", "cm"),
     "static_unbalance": ("S",),
     "sensor_crosstalk": ("h_from_alpha", "alpha_from_h"),
+    "base_vibration": ("accel",),
 }
 
 
@@ -80,15 +84,15 @@ def scaled(name: str, factor: float) -> Effect:
                                                        for p in _STRENGTHS[name]}))
 
 
-def simulated_campaign(effect: Effect | None, seed: int, *, noise: float = 0.02,
+def simulated_campaign(effect: Effect | Sequence[Effect] | None, seed: int, *, noise: float = 0.02,
                        fractions: Sequence[float] = FRACTIONS, duration: float = 7.5,
                        fs: float = 500.0) -> list[Release]:
     """Simulate a campaign with ``effect`` hidden (None: clean), seeded.
 
     Parameters
     ----------
-    effect : Effect or None
-        The hidden effect.
+    effect : Effect, sequence of Effect, or None
+        The hidden effect (or effects, at most one of each kind).
     seed : int
         Seed of the noise.
     noise : float
@@ -107,7 +111,8 @@ def simulated_campaign(effect: Effect | None, seed: int, *, noise: float = 0.02,
     speed = flutter.analyze(SECTION, truth).speed
     assert speed is not None  # the flat plate flutters
     rng = np.random.default_rng(seed)
-    effects = () if effect is None else (effect,)
+    effects = (() if effect is None else (effect,) if isinstance(effect, Effect)
+               else tuple(effect))
     releases = []
     for fraction in fractions:
         for h0, alpha0 in HOLDS:

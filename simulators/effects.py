@@ -7,6 +7,7 @@ which may not import :mod:`simulators`) can use the same physics; this module ke
 
 from ident.effects import (
     EFFECT_NAMES,
+    BaseVibration,
     ChannelDelay,
     CoulombFriction,
     CubicStiffness,
@@ -19,6 +20,7 @@ from ident.effects import (
 
 __all__ = [
     "EFFECT_NAMES",
+    "BaseVibration",
     "ChannelDelay",
     "CoulombFriction",
     "CubicStiffness",

@@ -9,7 +9,10 @@ write three plots (matplotlib, Agg) into the output directory:
 - ``diagnose_backbone.png``: the backbone (instantaneous frequency against amplitude) and
   damping curves of the heave and pitch modes of those releases (Hilbert transform), measured
   against both models;
-- ``diagnose_gap.png``: the gap of every release before and after.
+- ``diagnose_gap.png``: the gap of every release before and after;
+- ``diagnose_residual.png``, only when the report is not explained: per channel with a
+  systematic residual left, its averaged spectrum (the line found marked) and measured minus
+  simulated of one release per wind speed.
 
 Not responsible for: the numerics (:mod:`ident.discrepancy`) or reading files (:mod:`ident.io`).
 """
@@ -79,6 +82,11 @@ def _as_json(report: Any, files: Sequence[Path]) -> dict[str, Any]:
     return {
         "files": [str(p) for p in files],
         "effect": report.effect,
+        "effects": [{"effect": step.name, "parameters": step.parameters,
+                     "uncertainty": step.uncertainty, "units": step.units,
+                     "gap_after": step.gap_after} for step in report.effects],
+        "explained": report.explained,
+        "unexplained": [f.text() for f in report.unexplained],
         "parameters": report.parameters,
         "uncertainty": report.uncertainty,
         "gap_before": report.gap_before,
@@ -104,7 +112,8 @@ def _plots(out: Path, releases: list[Any], report: Any, section: Any) -> dict[st
     for i, r in enumerate(releases):
         chosen.setdefault(round(r.U, 1), i)
     picks = list(chosen.values())
-    after_label = "baseline" if report.effect is None else f"with {report.effect}"
+    after_label = ("baseline" if report.effect is None
+                   else "with " + " + ".join(step.name for step in report.effects))
     plots: dict[str, Path] = {}
 
     fig, axes = plt.subplots(2, len(picks), figsize=(5 * len(picks), 6), squeeze=False,
@@ -179,7 +188,49 @@ def _plots(out: Path, releases: list[Any], report: Any, section: Any) -> dict[st
     plots["gap"] = out / "diagnose_gap.png"
     fig.savefig(plots["gap"], dpi=100)
     plt.close(fig)
+    if report.unexplained:
+        plots["residual"] = _residual_plot(plt, out, releases, report, picks)
     return plots
+
+
+def _residual_plot(plt: Any, out: Path, releases: list[Any], report: Any,
+                   picks: list[int]) -> Path:
+    """Plot where the unexplained residual is: its spectrum and time history, per channel."""
+    from scipy.signal import welch
+
+    findings = report.unexplained
+    fig, axes = plt.subplots(len(findings), 2, figsize=(12, 3.2 * len(findings)),
+                             squeeze=False)
+    for row, finding in enumerate(findings):
+        name = finding.channel
+        spectra = []
+        for i, r in enumerate(releases):
+            e = np.asarray(getattr(r, name)) - report.simulated_after[i][name]
+            spectra.append(welch(e - e.mean(), fs=r.fs, nperseg=min(e.size, int(2 * r.fs))))
+        f = spectra[0][0]  # the releases' lengths may differ: on the first one's grid
+        axes[row, 0].semilogy(f, np.mean([np.interp(f, fi, pi) for fi, pi in spectra], axis=0),
+                              "k", lw=0.8)
+        if finding.line_hz is not None:
+            axes[row, 0].axvline(finding.line_hz, color="tab:red", ls="--",
+                                 label=f"line {finding.line_hz:.2f} Hz")
+            axes[row, 0].legend(fontsize=8)
+        axes[row, 0].set_xlim(0, min(50.0, f[-1]))
+        axes[row, 0].set_xlabel("frequency (Hz)")
+        axes[row, 0].set_ylabel(f"{name} residual PSD")
+        axes[row, 0].set_title(f"{name}: systematic {finding.systematic:.1%} of RMS, "
+                               f"noise {finding.noise:.1%}", fontsize=9)
+        for i in picks:
+            r = releases[i]
+            e = np.asarray(getattr(r, name)) - report.simulated_after[i][name]
+            axes[row, 1].plot(r.t, e, lw=0.6, label=f"{r.U:.1f} m/s")
+        axes[row, 1].set_xlabel("time from release (s)")
+        axes[row, 1].set_ylabel(f"{name}: measured - model")
+        axes[row, 1].legend(fontsize=8)
+    fig.tight_layout()
+    path = out / "diagnose_residual.png"
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
 
 
 def _mode_frequency(release: Any, channel: str, still_air: float) -> float:

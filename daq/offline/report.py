@@ -61,7 +61,7 @@ _RELEASE_FIELDS = ("file", "release", "U", "f_h", "zeta_h", "f_a", "zeta_a", "ca
 _CAMPAIGN_FIELDS = ("campaign", "n_files", "n_releases", "wind_speeds", "flutter_speed",
                     "flutter_std", "flutter_speed_low", "flutter_speed_high",
                     "flutter_frequency", "structure", "effect", "gap_before", "gap_after",
-                    "error")
+                    "effects", "explained", "error")
 
 
 def write_outputs(out: Path, results: dict[str, dict[str, Any]],
@@ -90,7 +90,8 @@ def write_outputs(out: Path, results: dict[str, dict[str, Any]],
             "flutter_speed_high": c.get("flutter_speed_high"),
             "flutter_frequency": c.get("flutter_frequency"), "structure": c.get("structure"),
             "effect": c.get("effect"), "gap_before": c.get("gap_before"),
-            "gap_after": c.get("gap_after"), "error": c.get("error")})
+            "gap_after": c.get("gap_after"), "effects": _sequence(c.get("effects")),
+            "explained": c.get("explained"), "error": c.get("error")})
     for name, rows, fields in (("releases", release_rows, _RELEASE_FIELDS),
                                ("campaigns", campaign_rows, _CAMPAIGN_FIELDS)):
         csv_path = out / f"{name}.csv"
@@ -112,6 +113,13 @@ def write_outputs(out: Path, results: dict[str, dict[str, Any]],
                     for kind, path in paths.items()})
     outputs["report"] = _html_report(out, summary, campaign_rows, plots)
     return outputs
+
+
+def _sequence(effects: list[dict[str, Any]] | None) -> str | None:
+    """Return the diagnosis' effects in the order added, each with its gap after, as a line."""
+    if effects is None:
+        return None
+    return " > ".join(f"{e['effect']} (gap {e['gap_after']:.4f})" for e in effects) or "none"
 
 
 def _json_default(value: Any) -> Any:
@@ -200,6 +208,21 @@ def _html_report(out: Path, summary: ReprocessSummary, campaigns: list[dict[str,
         parts.append("<tr>" + "".join(f"<td>{cell(row[f])}</td>" for f in _CAMPAIGN_FIELDS)
                      + "</tr>")
     parts.append("</table>")
+    for c in summary.campaigns:  # the diagnosis: the sequence, and a residual left unexplained
+        if c.get("effects") is None:
+            continue
+        parts.append(f"<h3>{html.escape(str(c.get('name')))}: discrepancy</h3><ol>")
+        parts.extend(
+            "<li>" + html.escape(f"{e['effect']}: " + ", ".join(
+                f"{k} = {v:.4g} +- {e['uncertainty'].get(k, float('nan')):.2g}"
+                for k, v in e["parameters"].items()) + f"; gap after {e['gap_after']:.4f}")
+            + "</li>" for e in c["effects"])
+        parts.append("</ol>")
+        if c.get("explained") is False:
+            parts.append("<p>Not explained: a systematic residual is left that no named "
+                         "effect explains:</p><ul>")
+            parts.extend(f"<li>{html.escape(text)}</li>" for text in c.get("unexplained", []))
+            parts.append("</ul>")
     for name, paths in plots.items():
         parts.append(f"<h3>{html.escape(name)}</h3>")
         parts.extend(f"<img src='{html.escape(path.name)}' width='900'>"

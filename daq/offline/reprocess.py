@@ -237,7 +237,9 @@ def process_campaign(name: str, files: list[dict[str, Any]],
         ``flutter_speed``, ``flutter_std`` (all parts: :class:`ident.e2rfc.FlutterUncertainty`),
         ``flutter_std_parts``, ``warnings``, ``flutter_frequency``, ``flutter_structures`` (the
         flutter speed of every structure within one standard error of the best, by label, None
-        for no flutter), ``effect`` and the gaps, or
+        for no flutter), ``effect`` and the gaps (with ``diagnose``: ``effects``, the named
+        effects in the order added with the gap after each, ``explained`` and ``unexplained``,
+        the located residual in words), or
         ``error`` when E2RFC cannot identify a model (one wind speed).
     """
     files = sorted(files, key=lambda f: f["path"])
@@ -278,7 +280,12 @@ def process_campaign(name: str, files: list[dict[str, Any]],
         report = diagnose(releases, section, baseline=model, depth=depth)
         out.update(effect=report.effect, effect_parameters=report.parameters,
                    gap_before=report.gap_before, gap_after=report.gap_after,
-                   runner_up=report.runner_up)
+                   runner_up=report.runner_up,
+                   effects=[{"effect": step.name, "parameters": step.parameters,
+                             "uncertainty": step.uncertainty, "gap_after": step.gap_after}
+                            for step in report.effects],
+                   explained=report.explained,
+                   unexplained=[f.text() for f in report.unexplained])
     return out
 
 

@@ -1,20 +1,24 @@
-"""The discrepancy workflow on simulated campaigns with a hidden effect (issue 7's must-show).
+"""The discrepancy workflow on simulated campaigns with hidden effects (issues 7 and 20).
 
 Each campaign: the flat-plate rig at 0.5, 0.65 and 0.8 of its flutter speed, two 7.5 s releases
 each, 2 % noise, seeded (:mod:`simulators.campaigns`). Each of the seven effects is hidden at its
 realistic strength and at twice it (different seeds); the diagnosis must name it, recover its
 strength parameters within 20 % and shrink the gap by at least half. On clean campaigns the
-answer must be None. ``benchmarks/discrepancy_confusion.py`` runs the same over 10 seeds per
-effect.
+answer must be None. Pairs of effects that occur together must both be named (forward
+selection), each within 20 %, the gap shrinking at every step. An effect outside the library
+must give ``explained = False`` and name nothing. ``benchmarks/discrepancy_confusion.py`` runs
+the same over 10 seeds per effect and pair.
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 import pytest
 
 from ident.discrepancy import CHANNELS, NONE_RATIO, backbone, diagnose, gap
-from ident.effects import EFFECT_NAMES
+from ident.effects import EFFECT_NAMES, BaseVibration
 from simulators.campaigns import _STRENGTHS, REALISTIC, SECTION, scaled, simulated_campaign
 
 DEPTH = 0.03  # m, the flat plate's (the vortex effect's depth)
@@ -37,7 +41,8 @@ def test_a_hidden_effect_is_named_recovered_and_the_gap_shrinks(name, factor, se
         assert report.uncertainty[parameter] > 0
     assert report.gap_after <= 0.5 * report.gap_before, report.summary()
     assert report.runner_up is not None and report.runner_up != name
-    assert report.effects and report.effects[0].name == name
+    assert [step.name for step in report.effects] == [name], report.summary()
+    assert report.explained, report.summary()
     assert [ev.effect for ev in report.evidence][0] == name
     assert report.evidence[0].verdict.startswith("chosen")
     # The baseline misses something smooth: its residual is far from white noise.
@@ -61,6 +66,7 @@ def test_clean_campaigns_raise_no_false_alarm(seed):
     report = diagnose(releases, SECTION, depth=DEPTH)
     assert report.effect is None, report.summary()
     assert report.gap_after == report.gap_before
+    assert report.explained and report.unexplained == (), report.summary()
     # The gap of a clean campaign is the 2 % noise (and nothing of the model): 0.02 +- 10 %.
     assert report.gap_before == pytest.approx(0.02, rel=0.10)
     assert all(ev.cv_ratio > NONE_RATIO for ev in report.evidence)
@@ -110,3 +116,70 @@ def test_backbone_of_a_linear_decay_is_flat_and_a_hardening_spring_bends_it():
     big = hard.amplitude > np.quantile(hard.amplitude, 0.75)
     small = hard.amplitude < np.quantile(hard.amplitude, 0.25)
     assert hard.frequency[big].mean() > hard.frequency[small].mean() + 0.05
+
+
+#: Pairs of effects that can occur together on one rig (a structural nonlinearity with a
+#: measurement fault, two structural ones, two measurement faults, shedding with drag ...).
+PAIRS = [
+    ("coulomb_friction", "channel_delay"),  # issue 20: the gap grew 0.40 -> 0.59 before
+    ("quadratic_damping", "sensor_crosstalk"),
+    ("cubic_stiffness", "static_unbalance"),
+    ("coulomb_friction", "cubic_stiffness"),
+    ("channel_delay", "sensor_crosstalk"),
+    ("quadratic_damping", "vortex_shedding"),
+]
+
+
+@pytest.mark.parametrize("pair", PAIRS, ids=["+".join(p) for p in PAIRS])
+def test_two_hidden_effects_are_both_named_and_each_step_shrinks_the_gap(pair):
+    effects = [REALISTIC[name] for name in pair]
+    # 5 s decays (not 7.5 s) keep the test short; the fits are as good.
+    releases = simulated_campaign(effects, 300 + PAIRS.index(pair), duration=5.0)
+    report = diagnose(releases, SECTION, depth=DEPTH)
+    assert sorted(step.name for step in report.effects) == sorted(pair), report.summary()
+    for effect in effects:
+        for parameter in _STRENGTHS[effect.name]:
+            # The issue's tolerance (the joint fits land within 15 %; a friction moment
+            # beside a cubic spring is the loosest).
+            assert report.parameters[parameter] == pytest.approx(
+                getattr(effect, parameter), rel=0.20), (parameter, report.summary())
+    gaps = [report.gap_before] + [step.gap_after for step in report.effects]
+    assert all(b < a for a, b in zip(gaps, gaps[1:], strict=False)), gaps
+    assert report.gap_after == gaps[-1]
+    assert report.gap_after <= 0.3 * report.gap_before, report.summary()
+    assert report.effect == report.effects[0].name
+    assert len(report.rounds) == 3  # two chosen, then a round where nothing is clear
+    assert report.rounds[1][0].verdict.startswith("chosen in round 2"), report.summary()
+    assert not any(ev.verdict.startswith("chosen") for ev in report.rounds[2])
+    assert "effect 2:" in report.summary()
+
+
+def test_an_effect_outside_the_library_is_not_explained_and_names_nothing():
+    # A laser whose zero drifts (warming up) by 0.05 mm/s: a slow ramp on the heave reading
+    # that no named effect produces (5 % of the heave channel's RMS over a 5 s decay).
+    clean = simulated_campaign(None, 12, duration=5.0)
+    drifting = [dataclasses.replace(r, h=r.h + 5e-5 * r.t, meta=dict(r.meta)) for r in clean]
+    report = diagnose(drifting, SECTION, depth=DEPTH)
+    assert report.effects == () and report.effect is None, report.summary()
+    assert not report.explained
+    assert [f.channel for f in report.unexplained] == ["h"], report.summary()
+    heave = report.unexplained[0]
+    # The ramp's RMS (mean removed) is 5e-5 * 5 s / sqrt(12) = 0.07 mm against a heave RMS of
+    # about 0.7 mm: 10 % seen; all of it is systematic and at the lowest frequencies.
+    assert heave.systematic > 3 * heave.noise, heave.text()
+    assert heave.systematic == pytest.approx(heave.baseline)
+    assert len(heave.wind_speeds) == 3
+    assert "slow drift" in heave.text() and "explained: NO" in report.summary()
+
+
+def test_a_floor_vibration_is_named_with_its_frequency_and_the_taps_do_not_see_it():
+    # 5 Hz, between the modes (the realistic case in simulators.campaigns is at 6 Hz), and
+    # stronger: its own test of the frequency scan.
+    floor = BaseVibration(frequency_hz=5.0, accel=0.1, phase=-1.0)
+    report = diagnose(simulated_campaign(floor, 11, duration=5.0), SECTION, depth=DEPTH)
+    assert [step.name for step in report.effects] == ["base_vibration"], report.summary()
+    # The scan's grid is 0.25 / (4.2 s) = 0.06 Hz, refined by least squares: 0.2 % seen.
+    assert report.parameters["frequency_hz"] == pytest.approx(5.0, rel=0.01)
+    assert report.parameters["accel"] == pytest.approx(0.1, rel=0.10)
+    assert report.parameters["phase"] == pytest.approx(-1.0, abs=0.1)
+    assert report.explained and report.gap_after <= 0.4 * report.gap_before, report.summary()

@@ -7,6 +7,7 @@ in its forces, written by the recorder the acquisition uses.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -15,6 +16,7 @@ import pytest
 from daq.cli import main
 from daq.config import parse_rig_config
 from daq.recording.synthetic import write_release_run
+from ident.effects import EFFECT_NAMES
 from simulators.campaigns import REALISTIC, simulated_campaign
 
 CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
@@ -34,13 +36,17 @@ def test_diagnose_names_the_delay_and_writes_report_and_plots(delayed_run, tmp_p
     out, report = tmp_path / "plots", tmp_path / "report.json"
     assert main(["diagnose", str(delayed_run), "--out", str(out), "--json", str(report)]) == 0
     printed = capsys.readouterr().out
-    assert "effect: channel_delay" in printed and "runner-up:" in printed
+    assert "effect 1: channel_delay" in printed and "runner-up:" in printed
+    assert "effect 2:" not in printed and "explained: yes" in printed
     data = json.loads(report.read_text())
     assert data["effect"] == "channel_delay"
+    assert [e["effect"] for e in data["effects"]] == ["channel_delay"]
+    assert data["effects"][0]["gap_after"] == data["gap_after"] and data["explained"] is True
     # 10 ms hidden; the fit recovers it within 20 % (the tolerance; ~1 % in practice).
     assert data["parameters"]["delay_s"] == pytest.approx(0.010, rel=0.2)
     assert data["gap_after"] <= 0.5 * data["gap_before"]
-    assert len(data["gap_per_release"]) == 6 and len(data["evidence"]) == 7
+    assert len(data["gap_per_release"]) == 6 and len(data["evidence"]) == len(EFFECT_NAMES)
+    assert not (out / "diagnose_residual.png").exists()  # explained: no residual to locate
     for name in ("decays", "backbone", "gap"):
         png = out / f"diagnose_{name}.png"
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
@@ -52,3 +58,22 @@ def test_a_file_that_is_not_a_run_is_refused_in_one_line(tmp_path, capsys):
     assert main(["diagnose", str(bad), "--out", str(tmp_path / "p")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error: ") and "notes.h5" in err[0]
+
+
+def test_diagnose_locates_a_residual_it_cannot_explain(tmp_path, capsys):
+    # A laser zero drifting 0.05 mm/s on a clean campaign: outside the library.
+    config = parse_rig_config((CONFIGS / "sim_flat_plate.toml").read_text(),
+                              "sim_flat_plate.toml")
+    releases = [dataclasses.replace(r, h=r.h + 5e-5 * r.t, meta=dict(r.meta))
+                for r in simulated_campaign(None, seed=12, duration=5.0)]
+    path = tmp_path / "drift.h5"
+    write_release_run(path, config, releases)
+    out, report = tmp_path / "plots", tmp_path / "report.json"
+    assert main(["diagnose", str(path), "--out", str(out), "--json", str(report)]) == 0
+    printed = capsys.readouterr().out
+    assert "effect: none" in printed and "explained: NO" in printed and "slow drift" in printed
+    data = json.loads(report.read_text())
+    assert data["effects"] == [] and data["explained"] is False
+    assert len(data["unexplained"]) == 1 and data["unexplained"][0].startswith("h: ")
+    png = out / "diagnose_residual.png"
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
