@@ -20,17 +20,22 @@ scaled to the identified one (``kappa``), so only ratios of information matter::
 
     var_new(U_c) = kappa g^T (I_0 + n J_c^T J_c)^+ g,  kappa = sigma_param^2 / (g^T I_0^+ g)
 
-The other parts of the standard deviation: the extrapolation part (how far the flutter speed
-moves when the top speed's releases are left out, :mod:`ident.e2rfc`) is, with few releases,
-mostly the noise of that reduced fit, so it is scaled by the predicted std ratio of the reduced
-fit (a candidate below the top speed joins it; above, the old top speed does), and by
-``log(K_min,new / K_F) / log(K_min / K_F)`` (clipped to [0, 1]; ``K_c = B omega(U_c) / U_c`` of
-the critical branch from the identified model) as the releases cover reduced frequencies closer
-to the flutter one; the structure and one-lag-more parts, which
-come from the data not telling structures apart, are taken to shrink in the same ratio as the
-noise part (an assumption: more informative data tell them apart better). The choice is the
-candidate with the smallest predicted total; none is chosen when no candidate below the bound
-gains :data:`MIN_GAIN` of the current standard deviation.
+The other parts of the standard deviation do not average down with more releases, and are
+carried into the prediction unchanged: the structure and one-lag-more parts (the data not
+telling structures apart) and the extrapolation part (how far the flutter speed moves when the
+top speed's releases are left out, :mod:`ident.e2rfc`). More releases at the top speed leave
+that reduced fit as it is (a campaign whose prediction let them shrink these parts repeated its
+top speed four times, each time expecting the std to halve, and ended at 3.4 %, the same as
+before the repeats); releases below the top speed may move the reduced fit, but by how much
+and which way the data cannot tell beforehand, so no gain is counted on. Only a candidate
+above the top speed changes the extrapolation part: it covers reduced frequencies closer to
+the flutter one, and the part is scaled by
+``log(K_c / K_F) / log(K_min / K_F)`` (clipped to [0, 1]; ``K_c = B omega(U_c) / U_c`` of the
+critical branch from the identified model, ``K_min`` the lowest covered now). So the choice
+prefers speeds closer to flutter (within the safety bound), and it stops when neither the
+statistical part nor the extrapolation part can be reduced: the candidate with the smallest
+predicted total is chosen, none when no candidate below the bound gains :data:`MIN_GAIN` of
+the current standard deviation.
 
 Safety: :func:`safety_bound` is ``fraction * (U_F - 3 std)`` of the current estimate (infinite
 without one: the first speeds are the plan's); the runner also applies the rig's limits.
@@ -242,31 +247,32 @@ def predicted_std(analysis: CampaignAnalysis, releases: Sequence[Release],
              for r in releases]
     I0 = np.sum(infos, axis=0)
     now = _variance(g, I0)
-    # The extrapolation part is the gap between the fit and the fit without the top speed:
-    # with few releases mostly the noise of that reduced fit (module docstring).
     top = max(distinct_wind_speeds([r.U for r in releases]))
-    below = [i for r, i in zip(releases, infos, strict=True) if r.U < top / (1 + DISTINCT_U_RTOL)]
-    I_red = np.sum(below, axis=0) if below else None
-    red_now = math.nan if I_red is None else _variance(g, I_red)
-    statistical = u.statistical
-    K_F = result.reduced_frequency
     K_min = min(_branch_K(result, r.U, section.B) for r in releases)
     out = []
     for U in candidates:
         Ic = releases_per_speed * _information(model, section, U, h0, alpha0, decay_s, sigma)
         ratio = _ratio(_variance(g, I0 + Ic), now)
-        extrapolation = u.extrapolation
-        if I_red is not None and extrapolation > 0:
-            # Below the top speed a candidate joins the reduced fit; above it, the old top does.
-            red_new = _variance(g, I_red + Ic if U < top / (1 + DISTINCT_U_RTOL) else I0)
-            extrapolation *= _ratio(red_new, red_now)
-        if K_F is not None and math.isfinite(K_min) and K_min > K_F:
-            K_new = min(K_min, _branch_K(result, U, section.B))
-            reach = max(math.log(K_new / K_F), 0.0) / math.log(K_min / K_F)
-            extrapolation *= min(max(reach, 0.0), 1.0)
-        out.append(math.sqrt((ratio * statistical)**2 + (ratio * u.structure)**2
-                             + (ratio * u.refinement)**2 + extrapolation**2))
+        out.append(math.sqrt((ratio * u.statistical)**2 + u.structure**2 + u.refinement**2
+                             + (_reach(result, U, top, K_min, section.B) * u.extrapolation)**2))
     return out
+
+
+def _reach(result: flutter.FlutterResult, U: float, top: float, K_min: float, B: float
+           ) -> float:
+    """Factor on the extrapolation part after releases at ``U`` (module docstring), in [0, 1].
+
+    1 unless ``U`` is a wind speed above the top one (a repeat of the top speed, or a speed
+    below it, leaves the reduced fit without the top speed as it is).
+    """
+    K_F = result.reduced_frequency
+    if U <= top * (1 + DISTINCT_U_RTOL) or K_F is None or not math.isfinite(K_min) \
+            or K_min <= K_F:
+        return 1.0
+    K_new = min(K_min, _branch_K(result, U, B))
+    if not math.isfinite(K_new):
+        return 1.0
+    return min(max(math.log(K_new / K_F) / math.log(K_min / K_F), 0.0), 1.0)
 
 
 def choose_next(analysis: CampaignAnalysis, releases: Sequence[Release],

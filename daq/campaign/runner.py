@@ -14,10 +14,11 @@ written to ``campaign.json`` as ``stopped_because``:
   std lacks its extrapolation part) or no candidate speed gains (adaptive mode,
   :mod:`daq.campaign.adaptive`), or ``max_speeds`` is reached;
 - the next speed is above the safety bound ``fraction * (U_F - 3 std)`` of the current
-  estimate (both modes; fixed plans use 0.9) or the rig's limits: it is never set. A listed
-  speed not above one this session has already held with decaying releases is allowed
-  whatever the estimate (a wide std can put the bound below speeds just shown to be stable: an
-  FD-style plan going down from its highest speed would otherwise stop);
+  estimate (both modes; fixed plans use 0.9) or the rig's limits: it is never set. A speed
+  not above one this session has already held with decaying releases is allowed whatever the
+  estimate (a wide std can put the bound below speeds just shown to be stable: an FD-style
+  plan going down from its highest speed would otherwise stop, and an adaptive one could not
+  repeat its top speed to average the noise down);
 - a decay grows (:class:`~daq.campaign.monitor.DecayMonitor`): the model is caught (re-armed)
   and the fan stopped at once;
 - Ctrl-C: the run file in progress is finished and kept as ``*.interrupted.h5`` (with one
@@ -46,15 +47,15 @@ import signal
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from daq.acquisition.device_check import require_devices_ok
 from daq.acquisition.engine import Acquisition
-from daq.campaign.adaptive import Choice, choose_next, safety_bound
+from daq.campaign.adaptive import choose_next, safety_bound
 from daq.campaign.files import interrupted_name, read_back, run_file_name
 from daq.campaign.monitor import DecayMonitor
+from daq.campaign.outcome import CampaignOutcome, SpeedStep
 from daq.campaign.plan import CampaignPlan
 from daq.campaign.wind import STEADY_TIMEOUT_S, ramp_rate, wait_steady
 from daq.config import RigConfig
@@ -80,96 +81,6 @@ MIN_SPEEDS_FOR_TARGET = 3
 STOPPED_RPM = 5.0
 #: ``stopped_because`` of a session whose device check failed (nothing was moved or recorded).
 CHECK_FAILED = "device check failed"
-
-
-@dataclass
-class SpeedStep:
-    """One recorded wind speed.
-
-    Attributes
-    ----------
-    index : int
-        Order in the campaign, from 1.
-    U : float
-        Requested wind speed, m/s.
-    path : Path
-        Its (first) run file.
-    releases : int
-        Releases read back from its file(s).
-    why : str
-        Why this speed (listed in the plan, or the adaptive choice).
-    flutter_speed, flutter_std : float or None
-        The estimate after this speed, m/s.
-    wind_on_s : float or None
-        Wind-on time of the campaign when this speed's estimate was known, s (None: read
-        back from an earlier session).
-    paths : list of Path
-        Every run file of the speed (one, or one per release).
-    resumed : bool
-        Read back from an earlier session (not known to have decayed: its file may be the
-        one a growing decay stopped).
-    """
-
-    index: int
-    U: float
-    path: Path
-    releases: int
-    why: str
-    flutter_speed: float | None = None
-    flutter_std: float | None = None
-    wind_on_s: float | None = None
-    paths: list[Path] = field(default_factory=list)
-    resumed: bool = False
-
-    def __post_init__(self) -> None:
-        if not self.paths:
-            self.paths = [self.path]
-
-
-@dataclass
-class CampaignOutcome:
-    """What a campaign did and found (what :mod:`daq.campaign.report` writes).
-
-    Attributes
-    ----------
-    steps : list of SpeedStep
-        In the order tested.
-    analysis : CampaignAnalysis or None
-        The last E2RFC analysis (None before two speeds).
-    stopped_because : str
-    wind_on_s : float
-        Fan start to fan stopped, s, this session plus the resumed ones.
-    wall_s : float
-        This session's wall time, s.
-    truth_flutter_speed : float or None
-        The simulated tunnel's own (``simulate=True``), m/s.
-    resumed : int
-        Speeds read back from an earlier session.
-    choices : list of Choice
-        The adaptive decisions, in order.
-    max_fan_rpm_commanded : float
-        Highest fan set-point sent this session, rpm.
-    """
-
-    steps: list[SpeedStep] = field(default_factory=list)
-    analysis: CampaignAnalysis | None = None
-    stopped_because: str = ""
-    wind_on_s: float = 0.0
-    wall_s: float = 0.0
-    truth_flutter_speed: float | None = None
-    resumed: int = 0
-    choices: list[Choice] = field(default_factory=list)
-    max_fan_rpm_commanded: float = 0.0
-
-    @property
-    def flutter_speed(self) -> float | None:
-        """Identified flutter speed, m/s."""
-        return None if self.analysis is None else self.analysis.flutter_speed
-
-    @property
-    def flutter_std(self) -> float | None:
-        """Its standard deviation, m/s."""
-        return None if self.analysis is None else self.analysis.flutter_std
 
 
 class _Session:
@@ -385,16 +296,14 @@ def _loop(session: _Session, outcome: CampaignOutcome) -> None:
                 outcome.stopped_because = (f"target met: std {100 * rel:.2f} % <= "
                                            f"{100 * plan.adaptive.target_std:.2f} %")
                 return
+        # The wind may always go back to what this session has held (a grown decay ends the
+        # campaign: every step of it decayed). The adaptive choice offers a held speed as a
+        # candidate too: its prediction counts a repeat's gain on the statistical part only.
+        held = max((s.U for s in outcome.steps if not s.resumed), default=0.0)
+        bound = min(rig_limit, safety_bound(analysis, fraction, held))
         if k < len(listed):
-            # A listed speed may go back to what this session has held (a grown decay ends the
-            # campaign: every step of it decayed). Not an adaptive choice: a held speed offered
-            # as a candidate is chosen again and again, and repeats add no information on the
-            # structure and extrapolation parts of the std (seen in a CI run).
-            held = max((s.U for s in outcome.steps if not s.resumed), default=0.0)
-            bound = min(rig_limit, safety_bound(analysis, fraction, held))
             U, why = listed[k], "listed in the plan"
         else:
-            bound = min(rig_limit, safety_bound(analysis, fraction))
             assert plan.adaptive is not None and analysis is not None
             releases = [r for run in session.runs for r in run.releases]
             choice = choose_next(analysis, releases, plan.adaptive.candidates(), bound=bound,
