@@ -35,7 +35,10 @@ critical branch from the identified model, ``K_min`` the lowest covered now). So
 prefers speeds closer to flutter (within the safety bound), and it stops when neither the
 statistical part nor the extrapolation part can be reduced: the candidate with the smallest
 predicted total is chosen, none when no candidate below the bound gains :data:`MIN_GAIN` of
-the current standard deviation.
+the current standard deviation. Before :data:`MIN_SPEEDS` distinct wind speeds there is no
+stop for want of gain: the std of two speeds lacks its extrapolation part (E2RFC needs a
+third speed to measure it), and a new speed does tell structures apart, which the carried
+parts do not count on; the best candidate at a speed not yet covered is chosen.
 
 Safety: :func:`safety_bound` is ``fraction * (U_F - 3 std)`` of the current estimate (infinite
 without one: the first speeds are the plan's); the runner also applies the rig's limits.
@@ -62,12 +65,15 @@ from ident.release import Release
 from ident.section import SectionModel
 from ident.simulate import simulate_decay
 
-__all__ = ["MIN_GAIN", "Choice", "choose_next", "predicted_std", "safety_bound"]
+__all__ = ["MIN_GAIN", "MIN_SPEEDS", "Choice", "choose_next", "predicted_std", "safety_bound"]
 
 FloatArray = npt.NDArray[np.float64]
 
 #: A candidate must be predicted to reduce the standard deviation by this fraction to be chosen.
 MIN_GAIN = 0.05
+#: Distinct wind speeds before a campaign's std is complete (extrapolation part measured): the
+#: target counts from here on, and before it a new speed is always chosen.
+MIN_SPEEDS = 3
 #: Sampling rate of the predicted releases, Hz: ~50 samples per period of a 4 Hz mode; only
 #: ratios of information matter, so the rate need not be the recorder's.
 PREDICT_FS = 200.0
@@ -309,6 +315,14 @@ def choose_next(analysis: CampaignAnalysis, releases: Sequence[Release],
     stds = predicted_std(analysis, releases, allowed, releases_per_speed=releases_per_speed,
                          decay_s=decay_s)
     table = tuple(zip(allowed, stds, strict=True))
+    covered = distinct_wind_speeds([r.U for r in releases])
+    new = [row for row in table
+           if all(abs(row[0] - U) > DISTINCT_U_RTOL * U for U in covered)]
+    if len(covered) < MIN_SPEEDS and new:
+        best_U, best = min(new, key=lambda item: item[1])
+        return Choice(best_U, f"chosen {best_U:.2f} m/s: a new speed ({len(covered)} so far, "
+                      f"{MIN_SPEEDS} needed), predicted std {best:.3f} m/s (now "
+                      f"{current:.3f} m/s)", current, table, bound)
     best_U, best = min(table, key=lambda item: item[1])
     if best > (1.0 - MIN_GAIN) * current:
         return Choice(None, f"stopped: no candidate gains (best {best_U:.2f} m/s predicts "

@@ -52,7 +52,7 @@ from typing import Any
 
 from daq.acquisition.device_check import require_devices_ok
 from daq.acquisition.engine import Acquisition
-from daq.campaign.adaptive import choose_next, safety_bound
+from daq.campaign.adaptive import MIN_SPEEDS, choose_next, safety_bound
 from daq.campaign.files import interrupted_name, read_back, run_file_name
 from daq.campaign.monitor import DecayMonitor
 from daq.campaign.outcome import CampaignOutcome, SpeedStep
@@ -76,7 +76,7 @@ log = logging.getLogger(__name__)
 #: Safety fraction of a fixed plan (an adaptive plan gives its own).
 FIXED_SAFETY_FRACTION = 0.9
 #: Distinct wind speeds before an adaptive campaign may call its target met (see _loop).
-MIN_SPEEDS_FOR_TARGET = 3
+MIN_SPEEDS_FOR_TARGET = MIN_SPEEDS
 #: Fan speed counted as stopped, rpm.
 STOPPED_RPM = 5.0
 #: ``stopped_because`` of a session whose device check failed (nothing was moved or recorded).
@@ -417,12 +417,17 @@ def _record_file(session: _Session, outcome: CampaignOutcome, path: Path, rpm: f
     duration = (1.5 * ramp + 2.0 + STEADY_TIMEOUT_S + plan.settle_s
                 + len(releases) * (HOLD_S + decay_s + plan.pause_s + 1.0) + 5.0)
 
-    def wait(seconds: float) -> bool:
-        """Wait ``seconds`` or until the decay grows or Ctrl-C; return True if it should stop."""
+    def wait(seconds: float, settled: bool = False) -> bool:
+        """Wait ``seconds``; True (stop) early if the decay grows or on Ctrl-C.
+
+        With ``settled``, False (go on) early once the decay has settled into the noise.
+        """
         end = time.monotonic() + seconds
         while (left := end - time.monotonic()) > 0:
             if monitor.growing.wait(min(left, 0.05)) or session.abort.is_set():
                 return True
+            if settled and monitor.settled.is_set():
+                break
         return False
 
     def body(acq: Acquisition) -> None:
@@ -443,7 +448,7 @@ def _record_file(session: _Session, outcome: CampaignOutcome, path: Path, rpm: f
             if wait(HOLD_S):
                 return
             acq.release()
-            if wait(decay_s):
+            if wait(decay_s, settled=plan.decay_end == "settled"):
                 acq.arm()  # catch the model first, then take the wind away
                 acq.stop_fan()
                 if not monitor.growing.is_set():

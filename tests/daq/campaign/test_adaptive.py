@@ -107,6 +107,40 @@ def test_decay_monitor_flags_growth_only(damping, grows):
     assert not monitor.growing.is_set() and monitor.amplitude() is None
 
 
+@pytest.mark.parametrize("damping, noise, settled_within", [
+    # The window amplitude falls by e^(-2 pi 0.05) = 0.73 a period: 2 % of the first after
+    # 12.45 periods, so the 14th window (ending at 7.0 s) is the first below it.
+    (0.05, 0.0, (6.9, 7.1)),
+    # 0.1 mm noise (2.5 % of the amplitude): its half peak-to-peak over a window is ~10 % of
+    # the first window's; the envelope is below 10 % after 3.7 s, and the amplitude stops
+    # falling in the noise before the noiseless 2 % is reached.
+    (0.05, 1e-4, (3.7, 6.9)),
+    # Hardly damped (0.5 %): still above 60 % of the first window after 10 s.
+    (0.005, 0.0, None),
+])
+def test_decay_monitor_tells_when_a_decay_has_settled(damping, noise, settled_within):
+    monitor = DecayMonitor(window_s=0.5)
+    monitor("event", SimpleNamespace(kind="release", host_time_ns=0))
+    t = np.arange(0, 10.0, 1 / 4000)
+    w = 2 * math.pi * 2.0
+    rng = np.random.default_rng(1)
+    x = (0.025 + 0.004 * np.exp(-damping * w * t) * np.cos(w * t)
+         + noise * rng.standard_normal(t.size))
+    settled_at = None
+    for start in range(0, t.size, 80):  # ~20 ms blocks, as the laser reader delivers
+        monitor("block", _laser_block(0, t[start:start + 80], x[start:start + 80]))
+        if settled_at is None and monitor.settled.is_set():
+            settled_at = t[start + 79]
+    assert not monitor.growing.is_set()
+    if settled_within is None:
+        assert settled_at is None
+    else:
+        assert settled_at is not None and settled_within[0] <= settled_at <= settled_within[1]
+    # The next release starts afresh.
+    monitor("event", SimpleNamespace(kind="release", host_time_ns=10**10))
+    assert not monitor.settled.is_set()
+
+
 def test_decay_monitor_counts_a_lost_target_as_growth():
     monitor = DecayMonitor(window_s=0.5)
     monitor("event", SimpleNamespace(kind="release", host_time_ns=0))
@@ -124,3 +158,52 @@ def test_decay_monitor_ignores_data_while_the_model_is_held():
     t = np.arange(0, 3.0, 1 / 1000)
     monitor("block", _laser_block(0, t, 0.025 + 0.004 * np.exp(t)))
     assert monitor.amplitude() is None and not monitor.growing.is_set()
+
+
+@pytest.fixture(scope="module")
+def three_speeds():
+    releases = simulated_campaign(None, seed=5, fractions=(0.4, 0.55, 0.7), duration=5.0)
+    return releases, analyze_campaign(releases, SECTION, table=False)
+
+
+def test_only_the_statistical_part_is_predicted_to_shrink_at_covered_speeds(three_speeds):
+    # A repeat of the top speed (or a speed below it) leaves the fit without the top speed as
+    # it is: the structure, one-lag-more and extrapolation parts are carried unchanged, so the
+    # prediction can never fall below them (it once did, and a campaign repeated its top speed
+    # four times expecting the std to halve each time).
+    releases, analysis = three_speeds
+    u = analysis.uncertainty
+    assert u.extrapolation > 0  # three speeds: the part is measured
+    U_F = analysis.flutter_speed
+    covered = [0.4 * U_F, 0.55 * U_F, 0.7 * U_F]
+    stds = predicted_std(analysis, releases, covered, releases_per_speed=4, decay_s=5.0)
+    for s in stds:
+        assert u.systematic <= s <= u.total * (1 + 1e-9)
+    # The statistical part does shrink: the parts combine in quadrature (e2rfc's total).
+    assert min(stds) < u.total
+
+
+def test_a_speed_above_the_top_one_is_predicted_to_reduce_the_extrapolation(three_speeds):
+    releases, analysis = three_speeds
+    u = analysis.uncertainty
+    U_F = analysis.flutter_speed
+    top, above = predicted_std(analysis, releases, [0.7 * U_F, 0.8 * U_F],
+                               releases_per_speed=1, decay_s=5.0)
+    # Above the top speed the releases reach lower reduced frequencies (closer to K_F): the
+    # extrapolation part is scaled down, which only a candidate above the top speed can do.
+    floor_at_top = math.sqrt(u.structure**2 + u.refinement**2 + u.extrapolation**2)
+    assert top >= floor_at_top
+    assert above < top
+
+
+def test_with_two_speeds_a_new_speed_is_always_chosen(two_speeds):
+    # Two speeds give a std without its extrapolation part: a third is needed whatever the
+    # prediction says of the gain (carried parts can make a covered speed look as good).
+    releases, analysis = two_speeds
+    covered = sorted({r.U for r in releases})
+    new = 0.5 * analysis.flutter_speed
+    assert all(abs(new - U) > 0.05 * U for U in covered)
+    choice = choose_next(analysis, releases, [*covered, new], bound=math.inf,
+                         releases_per_speed=1, decay_s=5.0)
+    assert choice.speed == new and "a new speed (2 so far, 3 needed)" in choice.reason
+    assert [u for u, _ in choice.predicted] == [*covered, new]
