@@ -8,8 +8,8 @@ every simulated instrument's noise, ``[simulation.devices.<name>] seed``):
 - **adaptive**: first speeds 0.55 and 0.75 of the rig's wind-speed limit (about 0.5 and 0.7 of
   U_F on these rigs, whose limits lie below flutter), then the c-optimal choice among
   candidates from 0.45 of the limit to the limit (:mod:`daq.campaign.adaptive`), target std
-  <= 1 % of U_F, at most 6 speeds; each release recorded until its decay has settled into the
-  noise (``decay_end = "settled"``), the decay length below the longest;
+  <= 1 % of U_F, at most 6 speeds; each release recorded until its decay has settled
+  (``decay_end = "settled"``: down to 20 % of its first amplitude), decay_s the longest;
 - **fixed 3-speed**: 0.5, 0.65 and 0.8 of the *true* flutter speed (the demo's plan, which an
   operator could only guess), 1 release per speed; while the std is still above 1 % after
   the third speed (or the safety bound stopped the plan), again with 2, then 4 releases per

@@ -10,12 +10,12 @@ range) over most of a window; :attr:`DecayMonitor.growing` is then set at once, 
 campaign's actions, which wait on it instead of sleeping, catch the model within a window.
 
 A decay has *settled* (:attr:`DecayMonitor.settled`; a plan with ``decay_end = "settled"``
-then ends the release's recording) when, after :data:`MIN_SETTLED_WINDOWS` windows, every
-laser's latest window is down to :data:`SETTLED_FRACTION` of its first, or below
-:data:`FLOOR_FRACTION` of it and no longer falling (within :data:`FLAT_RATIO` of the window
-before: the laser's noise). Why that is enough: a decay's information on the forces goes with
-its amplitude squared, so what follows a window at 10 % of the first holds about 1 % of the
-decay's information, and nothing once the motion is below the noise.
+then ends the release's recording) when, after :data:`MIN_SETTLED_WINDOWS` windows, the last
+two windows of every laser are down to :data:`SETTLED_FRACTION` of its first (two: where the
+two modes beat, one window can dip). Why that is enough: against white measurement noise a
+decay's information on the forces goes with its amplitude squared, so what follows a window
+at 20 % of the first holds about 4 % of the decay's information (and a decay that never gets
+there, its amplitude lost in a higher noise, is recorded for the plan's ``decay_s``).
 
 Why lasers and windows: they arrive every ~20 ms without any conversion, and a stable decay's
 amplitude never rises by half over one period, even where the two modes beat, while a
@@ -34,19 +34,15 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["FLAT_RATIO", "FLOOR_FRACTION", "GROWTH_RATIO", "MIN_SETTLED_WINDOWS",
-           "SETTLED_FRACTION", "DecayAmplitude", "DecayMonitor"]
+__all__ = ["GROWTH_RATIO", "MIN_SETTLED_WINDOWS", "SETTLED_FRACTION", "DecayAmplitude",
+           "DecayMonitor"]
 
 #: A window this many times the first window's amplitude (twice in a row) is a growing decay.
 GROWTH_RATIO = 1.5
 #: Fraction of a window's samples without a value (target out of range) that counts as growth.
 LOST_FRACTION = 0.5
-#: Settled: the latest window at most this fraction of the first (module docstring).
-SETTLED_FRACTION = 0.02
-#: ... or below this fraction and no longer falling: the laser's noise.
-FLOOR_FRACTION = 0.1
-#: No longer falling: the latest window at least this fraction of the one before.
-FLAT_RATIO = 0.8
+#: Settled: the last two windows at most this fraction of the first (module docstring).
+SETTLED_FRACTION = 0.2
 #: Windows (slow periods) a decay is recorded for at least before it may count as settled: the
 #: modal fit of E2RFC's regressors needs cycles of both modes.
 MIN_SETTLED_WINDOWS = 5
@@ -96,8 +92,8 @@ class DecayMonitor:
         self.window_s = float(window_s)
         #: Set (dispatcher thread) when a decay grows; cleared at the next release.
         self.growing = threading.Event()
-        #: Set (dispatcher thread) when a decay has settled into the noise (module
-        #: docstring); cleared at the next release.
+        #: Set (dispatcher thread) when a decay has settled (module docstring); cleared at
+        #: the next release.
         self.settled = threading.Event()
         self._lock = threading.Lock()
         self._release_ns: int | None = None
@@ -170,11 +166,9 @@ class DecayMonitor:
 
 
 def _settled(amplitudes: list[float]) -> bool:
-    """Whether one laser's window amplitudes show a decay settled into the noise."""
+    """Whether one laser's window amplitudes show a settled decay (module docstring)."""
     if len(amplitudes) < MIN_SETTLED_WINDOWS:
         return False
-    first, previous, last = amplitudes[0], amplitudes[-2], amplitudes[-1]
-    if not all(math.isfinite(a) for a in (first, previous, last)) or first <= 0:
-        return False
-    return last <= SETTLED_FRACTION * first or (last <= FLOOR_FRACTION * first
-                                                and last >= FLAT_RATIO * previous)
+    first, last_two = amplitudes[0], amplitudes[-2:]
+    return math.isfinite(first) and first > 0 and all(
+        math.isfinite(a) and a <= SETTLED_FRACTION * first for a in last_two)

@@ -11,8 +11,8 @@ The plan (units SI; the example plans are ``rig_configs/plans/*.toml``)::
     mode = "fixed"              # "fixed": every listed speed; "adaptive": see [adaptive]
     releases_per_speed = 2      # 1..20
     decay_s = 5.0               # recorded decay per release, s (default: 15 slow periods)
-    decay_end = "fixed"         # "settled": end a release's recording once its decay has
-                                # died into the noise (decay_s the longest), see monitor
+    decay_end = "fixed"         # "settled": end a release's recording once its decay is
+                                # down to 20 % (decay_s the longest), daq.campaign.monitor
     settle_s = 1.0              # the wind must stay steady this long before the first release
     steady_tolerance = 0.01     # steady: fan speed within this fraction of its set-point
     pause_s = 0.0               # extra wait between releases, s
@@ -125,7 +125,7 @@ class CampaignPlan:
         each closed and its modal fit reported as soon as its decay is recorded).
     decay_end : str
         ``"fixed"`` (every release recorded for ``decay_s``) or ``"settled"`` (a release's
-        recording ends once its decay has died into the noise,
+        recording ends once its decay has settled,
         :attr:`daq.campaign.monitor.DecayMonitor.settled`; ``decay_s`` the longest).
     """
 

@@ -420,7 +420,7 @@ def _record_file(session: _Session, outcome: CampaignOutcome, path: Path, rpm: f
     def wait(seconds: float, settled: bool = False) -> bool:
         """Wait ``seconds``; True (stop) early if the decay grows or on Ctrl-C.
 
-        With ``settled``, False (go on) early once the decay has settled into the noise.
+        With ``settled``, False (go on) early once the decay has settled (monitor).
         """
         end = time.monotonic() + seconds
         while (left := end - time.monotonic()) > 0:

@@ -108,13 +108,14 @@ def test_decay_monitor_flags_growth_only(damping, grows):
 
 
 @pytest.mark.parametrize("damping, noise, settled_within", [
-    # The window amplitude falls by e^(-2 pi 0.05) = 0.73 a period: 2 % of the first after
-    # 12.45 periods, so the 14th window (ending at 7.0 s) is the first below it.
-    (0.05, 0.0, (6.9, 7.1)),
-    # 0.1 mm noise (2.5 % of the amplitude): its half peak-to-peak over a window is ~10 % of
-    # the first window's; the envelope is below 10 % after 3.7 s, and the amplitude stops
-    # falling in the noise before the noiseless 2 % is reached.
-    (0.05, 1e-4, (3.7, 6.9)),
+    # Window amplitudes fall by e^(-2 pi 0.05) = 0.73 a period (0.5 s): the 7th and 8th
+    # windows are the first two at most 20 % of the first (0.15, 0.11), so at 4.0 s.
+    (0.05, 0.0, (3.95, 4.05)),
+    # 0.88 a period: the 14th and 15th (0.195, 0.17), at 7.5 s.
+    (0.02, 0.0, (7.45, 7.55)),
+    # 1 mm noise (25 % of the amplitude): its half peak-to-peak keeps every window above 20 %;
+    # the decay is recorded for the plan's decay_s.
+    (0.05, 1e-3, None),
     # Hardly damped (0.5 %): still above 60 % of the first window after 10 s.
     (0.005, 0.0, None),
 ])
