@@ -44,8 +44,9 @@ LOST_FRACTION = 0.5
 #: Settled: the last two windows at most this fraction of the first (module docstring).
 SETTLED_FRACTION = 0.2
 #: Windows (slow periods) a decay is recorded for at least before it may count as settled: the
-#: modal fit of E2RFC's regressors needs cycles of both modes.
-MIN_SETTLED_WINDOWS = 5
+#: modal fit of E2RFC's regressors (:func:`ident.modal.fit_modes`) needs 64 block averages at
+#: 12 a period of the dominant mode, 5.3 periods; 5 windows were seen to fall short.
+MIN_SETTLED_WINDOWS = 8
 
 
 @dataclass(frozen=True)

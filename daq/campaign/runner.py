@@ -303,8 +303,13 @@ def _loop(session: _Session, outcome: CampaignOutcome) -> None:
         bound = min(rig_limit, safety_bound(analysis, fraction, held))
         if k < len(listed):
             U, why = listed[k], "listed in the plan"
+        elif analysis is None:  # the listed speeds gave no estimate (said above): nothing to aim at
+            outcome.stopped_because = ("stopped: the listed speeds gave no E2RFC estimate (see "
+                                       "the E2RFC line above); the next speed cannot be chosen")
+            say(outcome.stopped_because)
+            return
         else:
-            assert plan.adaptive is not None and analysis is not None
+            assert plan.adaptive is not None
             releases = [r for run in session.runs for r in run.releases]
             choice = choose_next(analysis, releases, plan.adaptive.candidates(), bound=bound,
                                  releases_per_speed=plan.releases_per_speed, decay_s=decay_s)

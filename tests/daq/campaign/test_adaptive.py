@@ -113,6 +113,9 @@ def test_decay_monitor_flags_growth_only(damping, grows):
     (0.05, 0.0, (3.95, 4.05)),
     # 0.88 a period: the 14th and 15th (0.195, 0.17), at 7.5 s.
     (0.02, 0.0, (7.45, 7.55)),
+    # 0.39 a period: below 20 % from the 3rd window on, but never before 8 windows (4.0 s:
+    # the modal fit needs 5.3 periods of the dominant mode; 2.5 s were seen to be too few).
+    (0.15, 0.0, (3.95, 4.05)),
     # 1 mm noise (25 % of the amplitude): its half peak-to-peak keeps every window above 20 %;
     # the decay is recorded for the plan's decay_s.
     (0.05, 1e-3, None),
