@@ -96,6 +96,10 @@ class DecayMonitor:
         #: Set (dispatcher thread) when a decay has settled (module docstring); cleared at
         #: the next release.
         self.settled = threading.Event()
+        #: Releases seen so far (incremented after the events above are cleared): a caller
+        #: that just commanded a release waits for this to grow before trusting ``settled``,
+        #: which until the release event reaches the dispatcher still tells of the last decay.
+        self.releases = 0
         self._lock = threading.Lock()
         self._release_ns: int | None = None
         self._tracks: dict[str, _LaserTrack] = {}
@@ -110,6 +114,7 @@ class DecayMonitor:
                     self._tracks = {}
                     self.growing.clear()
                     self.settled.clear()
+                    self.releases += 1
                 elif kind == "arm":
                     self._release_ns = None  # caught: what follows is no decay
         elif name == "block" and getattr(doc, "kind", "") == "laser":
@@ -153,6 +158,16 @@ class DecayMonitor:
         if not self.growing.is_set() and self._tracks \
                 and all(_settled(t.amplitudes) for t in self._tracks.values()):
             self.settled.set()
+
+    def settled_since(self, releases: int) -> bool:
+        """Whether a decay after the first ``releases`` releases has settled.
+
+        Parameters
+        ----------
+        releases : int
+            :attr:`releases` read before the release was commanded.
+        """
+        return self.releases > releases and self.settled.is_set()
 
     def amplitude(self) -> DecayAmplitude | None:
         """Amplitude of the current (or last) decay, or None before any complete window."""

@@ -422,16 +422,17 @@ def _record_file(session: _Session, outcome: CampaignOutcome, path: Path, rpm: f
     duration = (1.5 * ramp + 2.0 + STEADY_TIMEOUT_S + plan.settle_s
                 + len(releases) * (HOLD_S + decay_s + plan.pause_s + 1.0) + 5.0)
 
-    def wait(seconds: float, settled: bool = False) -> bool:
+    def wait(seconds: float, settled_after: int | None = None) -> bool:
         """Wait ``seconds``; True (stop) early if the decay grows or on Ctrl-C.
 
-        With ``settled``, False (go on) early once the decay has settled (monitor).
+        With ``settled_after`` (the monitor's release count before this release), False (go
+        on) early once this release's decay has settled.
         """
         end = time.monotonic() + seconds
         while (left := end - time.monotonic()) > 0:
             if monitor.growing.wait(min(left, 0.05)) or session.abort.is_set():
                 return True
-            if settled and monitor.settled.is_set():
+            if settled_after is not None and monitor.settled_since(settled_after):
                 break
         return False
 
@@ -452,8 +453,9 @@ def _record_file(session: _Session, outcome: CampaignOutcome, path: Path, rpm: f
             acq.arm()
             if wait(HOLD_S):
                 return
+            seen = monitor.releases
             acq.release()
-            if wait(decay_s, settled=plan.decay_end == "settled"):
+            if wait(decay_s, seen if plan.decay_end == "settled" else None):
                 acq.arm()  # catch the model first, then take the wind away
                 acq.stop_fan()
                 if not monitor.growing.is_set():

@@ -7,6 +7,7 @@ truth is known, so that the predictions can be checked against what more data re
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from types import SimpleNamespace
 
@@ -145,6 +146,25 @@ def test_decay_monitor_tells_when_a_decay_has_settled(damping, noise, settled_wi
     assert not monitor.settled.is_set()
 
 
+def test_a_settled_decay_does_not_count_for_the_next_release():
+    # The release command returns before its event reaches the monitor (dispatcher thread):
+    # until then `settled` still tells of the last decay, which once ended a release 77 ms
+    # after it started.
+    monitor = DecayMonitor(window_s=0.5)
+    monitor("event", SimpleNamespace(kind="release", host_time_ns=0))
+    t = np.arange(0, 6.0, 1 / 4000)
+    x = 0.025 + 0.004 * np.exp(-0.1 * 4 * math.pi * t) * np.cos(4 * math.pi * t)
+    monitor("block", _laser_block(0, t, x))
+    assert monitor.settled.is_set() and monitor.settled_since(0)
+    monitor("event", SimpleNamespace(kind="arm", host_time_ns=7 * 10**9))
+    seen = monitor.releases  # read before the next release is commanded
+    assert seen == 1 and not monitor.settled_since(seen)
+    monitor("event", SimpleNamespace(kind="release", host_time_ns=8 * 10**9))
+    assert not monitor.settled.is_set() and not monitor.settled_since(seen)
+    monitor("block", _laser_block(8 * 10**9, t, x))
+    assert monitor.settled_since(seen)
+
+
 def test_decay_monitor_counts_a_lost_target_as_growth():
     monitor = DecayMonitor(window_s=0.5)
     monitor("event", SimpleNamespace(kind="release", host_time_ns=0))
@@ -212,3 +232,24 @@ def test_with_two_speeds_a_new_speed_is_always_chosen(two_speeds):
                          releases_per_speed=1, decay_s=5.0)
     assert choice.speed == new and "a new speed (2 so far, 3 needed)" in choice.reason
     assert [u for u, _ in choice.predicted] == [*covered, new]
+
+
+def test_a_large_structure_part_does_not_stop_the_campaign_by_itself(three_speeds):
+    # The structure part is carried (no gain promised for it) but new data may tell the
+    # structures apart: the choice stops only when the parts it can reduce cannot be.
+    releases, analysis = three_speeds
+    u = analysis.uncertainty
+    wide = dataclasses.replace(analysis, uncertainty=dataclasses.replace(
+        u, structure=100 * u.total))
+    U_F = analysis.flutter_speed
+    choice = choose_next(wide, releases, [0.7 * U_F, 0.8 * U_F], bound=math.inf,
+                         releases_per_speed=2, decay_s=5.0)
+    assert choice.speed == 0.8 * U_F, choice.reason
+    # Its predicted total changes by far less than MIN_GAIN: a stop rule on the total would
+    # have stopped here.
+    assert choice.predicted[1][1] > 0.99 * wide.flutter_std
+    # Without the structure part and nothing to gain (one candidate: the top speed, one
+    # release of 0.1 s), it stops.
+    stop = choose_next(analysis, releases, [0.7 * U_F], bound=math.inf, releases_per_speed=1,
+                       decay_s=0.1)
+    assert stop.speed is None and stop.reason.startswith("stopped: no candidate gains")
