@@ -11,8 +11,9 @@ E2RFC flutter speed +- std after each speed. It stops for the first of these rea
 written to ``campaign.json`` as ``stopped_because``:
 
 - the plan is done (fixed mode), the target std is met (from three speeds on: with two the
-  std lacks its extrapolation part) or no candidate speed gains (adaptive mode,
-  :mod:`daq.campaign.adaptive`), or ``max_speeds`` is reached;
+  std lacks its extrapolation part), no candidate speed gains or the listed speeds gave no
+  estimate to choose from (adaptive mode, :mod:`daq.campaign.adaptive`), or ``max_speeds`` is
+  reached;
 - the next speed is above the safety bound ``fraction * (U_F - 3 std)`` of the current
   estimate (both modes; fixed plans use 0.9) or the rig's limits: it is never set. A speed
   not above one this session has already held with decaying releases is allowed whatever the
@@ -23,6 +24,9 @@ written to ``campaign.json`` as ``stopped_because``:
   and the fan stopped at once;
 - Ctrl-C: the run file in progress is finished and kept as ``*.interrupted.h5`` (with one
   file per release, the speed's earlier files too: the speed is repeated whole on resume).
+
+Each release is recorded for the plan's ``decay_s`` or, with ``decay_end = "settled"``, until
+the decay monitor finds it settled (:mod:`daq.campaign.monitor`), whichever comes first.
 
 Whatever the reason, even an error, the fan is sent a stop and waited down before returning,
 and the plan's closing CALZ is taken wind-off. The fan stays on between the speeds of a
