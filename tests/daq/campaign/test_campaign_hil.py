@@ -67,7 +67,10 @@ def test_adaptive_campaign_reaches_its_target_near_the_truth(tmp_path, capsys):
     # time, and the analysis between speeds takes as long as the machine lets it), so no two
     # campaigns see the same noise: the test asserts what holds for any realisation: the
     # target met from three speeds of two settled decays each (the example plan's first speeds
-    # are 0.5 and 0.7 U_F), each choice the best of its prediction, the estimate within 2 std.
+    # are 0.5 and 0.7 U_F), each choice the best of its prediction, the estimate within 3 std
+    # of the truth. (2 std, the words, holds for 95 % of campaigns even with an exact
+    # std, so one run in twenty would fail: 12 campaigns of this test gave |error| / std of
+    # 0.03-1.08 and one of 2.48; the benchmark's error column shows the 2-std claim over many.)
     plan = tmp_path / "plan.toml"
     text = (REPO / "rig_configs" / "plans" / "adaptive.toml").read_text()
     assert "target_std = 0.01 " in text and 'decay_end = "settled"' in text
@@ -83,7 +86,7 @@ def test_adaptive_campaign_reaches_its_target_near_the_truth(tmp_path, capsys):
     assert report["stopped_because"].startswith("target met"), printed
     U_F, std = report["flutter_speed"], report["flutter_speed_std"]
     assert std <= 0.015 * U_F
-    assert abs(U_F - truth) <= 2 * std, printed
+    assert abs(U_F - truth) <= 3 * std, printed
     # The first two speeds are the plan's; the later ones chosen below the safety bound: a new
     # speed while fewer than three are covered (the best predicted of those), then the best.
     speeds = report["speeds"]
