@@ -55,7 +55,6 @@ from scipy.stats import t as student_t
 
 from ident import flutter as _flutter
 from ident._e2rfc_problem import FinalFit, Problem, improves
-from ident._iv import IVProblem, deterministic_decay
 from ident._regressors import PreparedRelease, prepare
 from ident._selection import Candidate, select_one_se, structure_label, within_one_se
 from ident._threads import single_threaded_blas
@@ -153,8 +152,6 @@ class E2RFCDiagnostics:
     _prepared: tuple[PreparedRelease, ...] = field(default=(), repr=False)
     _section: SectionModel | None = field(default=None, repr=False)
     _lag_roots: FloatArray = field(default_factory=lambda: np.zeros(0), repr=False)
-    #: With a random response: each release's instruments (:mod:`ident._iv`), else None.
-    _instruments: tuple[ModalFit, ...] | None = field(default=None, repr=False)
     _refits: dict[str, object] = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -183,8 +180,7 @@ class E2RFCDiagnostics:
     def finer(self) -> RationalFunctionModel | None:
         """The chosen structure with one lag more, fitted on every release."""
         return self._computed("finer", lambda: _refit_finer(  # type: ignore[return-value]
-            list(self._prepared), self._lag_roots, self.with_A3, self._instruments)
-            if self._prepared else None)
+            list(self._prepared), self._lag_roots, self.with_A3) if self._prepared else None)
 
     def _computed(self, name: str, compute: Callable[[], object]) -> object:
         if name not in self._refits:
@@ -197,24 +193,16 @@ class E2RFCDiagnostics:
             return []
         return [p for p in self._prepared if p.U < speeds[-1] / (1 + DISTINCT_U_RTOL)]
 
-    def _subset_instruments(self, kept: list[PreparedRelease]) -> tuple[ModalFit, ...] | None:
-        if self._instruments is None:
-            return None
-        by_release = {id(p): z for p, z in zip(self._prepared, self._instruments, strict=True)}
-        return tuple(by_release[id(p)] for p in kept)
-
     def _reduced(self) -> RationalFunctionModel | None:
         kept = self._below_top()
-        return (_refit(kept, self._lag_roots, self.with_A3, self._subset_instruments(kept))
-                if kept else None)
+        return _refit(kept, self._lag_roots, self.with_A3) if kept else None
 
     def _jackknife(self) -> tuple[RationalFunctionModel, ...]:
         if not self.turbulent:
             return ()
         prepared = list(self._prepared)
         subsets = [prepared[:i] + prepared[i + 1:] for i in range(len(prepared))]
-        refitted = [_refit(others, self._lag_roots, self.with_A3,
-                           self._subset_instruments(others)) for others in subsets
+        refitted = [_refit(others, self._lag_roots, self.with_A3) for others in subsets
                     if len(distinct_wind_speeds([p.U for p in others])) >= 2]
         return tuple(m for m in refitted if m is not None)
 
@@ -587,7 +575,7 @@ def identify(
 
 def _identify_prepared(
     prepared: list[PreparedRelease], section: SectionModel, n_lags: int | None,
-    with_A3: bool | None, *, checks: bool = True, smooth: bool = False,
+    with_A3: bool | None, *, checks: bool = True,
 ) -> IdentifiedModel:
     """Choose the structure, search the lag roots and fit, on prepared releases.
 
@@ -595,12 +583,7 @@ def _identify_prepared(
     ablation with differentiated raw displacements) run through the very same estimator.
     ``checks`` adds the data checks' warnings (module docstring).
     """
-    instruments: tuple[ModalFit, ...] | None = None
-    if not smooth and _is_turbulent(prepared):
-        first = _identify_prepared(prepared, section, n_lags, with_A3, checks=False,
-                                   smooth=True)
-        instruments = tuple(deterministic_decay(section, first, p) for p in prepared)
-    problem = _problem(prepared, instruments)
+    problem = Problem(prepared)
     given = n_lags is not None and with_A3 is not None
     lags = range(4) if n_lags is None else [n_lags]
     a3_options = (True, False) if with_A3 is None else (with_A3,)
@@ -628,7 +611,7 @@ def _identify_prepared(
         notes = "; ".join(f"n_lags={c.n_lags}, A3={c.with_A3}: {c.note}" for c in candidates)
         raise RankDeficiencyError(f"no model structure is determined by these releases ({notes})")
     chosen, reason = select_one_se(usable, given=given)
-    context = _Context(prepared, section, tuple(candidates), instruments)
+    context = _Context(prepared, section, tuple(candidates))
     if given:
         return context.model(problem.final(chosen), reason, checks=checks)
     alternatives = tuple(
@@ -647,7 +630,6 @@ class _Context:
     prepared: list[PreparedRelease]
     section: SectionModel
     candidates: tuple[Candidate, ...]
-    instruments: tuple[ModalFit, ...] | None
 
     def model(self, fit: FinalFit, reason: str, alternatives: tuple[IdentifiedModel, ...] = (),
               *, checks: bool) -> IdentifiedModel:
@@ -683,8 +665,7 @@ class _Context:
             parameter_index=fit.parameter_index, modal_fits=tuple(p.fit for p in prepared),
             alternatives=alternatives, random_response=random_response,
             K_range=_K_ranges(prepared, self.section), warnings=tuple(warnings),
-            _prepared=tuple(prepared), _section=self.section, _lag_roots=fit.d,
-            _instruments=self.instruments)
+            _prepared=tuple(prepared), _section=self.section, _lag_roots=fit.d)
         return IdentifiedModel(fit.A, fit.d, diagnostics)
 
 
@@ -702,28 +683,17 @@ def _K_ranges(prepared: list[PreparedRelease], section: SectionModel
     return {name: (min(v), max(v)) for name, v in K.items() if v}
 
 
-def _is_turbulent(prepared: list[PreparedRelease]) -> bool:
-    """Whether the releases hold a random response (median over releases above the limit)."""
-    return float(np.median([_random_response(p.fit) for p in prepared])) > RANDOM_RESPONSE_LIMIT
-
-
-def _problem(prepared: list[PreparedRelease], instruments: Sequence[ModalFit] | None
-             ) -> Problem | IVProblem:
-    """The least-squares problem of smooth flow, or the instrumental-variable one."""
-    return Problem(prepared) if instruments is None else IVProblem(prepared, list(instruments))
-
-
-def _refit(prepared: list[PreparedRelease], d: FloatArray, with_A3: bool,
-           instruments: Sequence[ModalFit] | None) -> RationalFunctionModel | None:
+def _refit(prepared: list[PreparedRelease], d: FloatArray, with_A3: bool
+           ) -> RationalFunctionModel | None:
     """Fit a structure (lag roots ``d`` as the start) again on some of the releases."""
-    refit = _problem(prepared, instruments).refit(d.size, with_A3, [d])
+    refit = Problem(prepared).refit(d.size, with_A3, [d])
     return None if refit is None else RationalFunctionModel(refit.A, refit.d)
 
 
-def _refit_finer(prepared: list[PreparedRelease], d: FloatArray, with_A3: bool,
-                 instruments: Sequence[ModalFit] | None) -> RationalFunctionModel | None:
+def _refit_finer(prepared: list[PreparedRelease], d: FloatArray, with_A3: bool
+                 ) -> RationalFunctionModel | None:
     """Fit a structure with one lag more (None when the data cannot determine it)."""
-    problem = _problem(prepared, instruments)
+    problem = Problem(prepared)
     K_lo, K_hi = problem.K_range
     starts = [np.sort(np.append(d, root)) for root in (K_lo / 2.0, 2.0 * K_hi)]
     refit = problem.refit(d.size + 1, with_A3, starts)
