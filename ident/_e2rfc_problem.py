@@ -332,7 +332,9 @@ class Problem:
         whole decay, and one-period blocks keep neighbouring (correlated) samples together.
         """
         t = p.view("search").t
-        period = 1.0 / float(p.fit.frequencies.min())
+        # At most a tenth of the record, so that every fold holds two blocks of every release
+        # (a spurious slow mode of a short record must not put all its rows in one fold).
+        period = min(1.0 / float(p.fit.frequencies.min()), float(t[-1] - t[0]) / (2 * N_FOLDS))
         labels = (np.floor((t - t[0]) / period).astype(int)) % N_FOLDS
         return [np.flatnonzero(labels == k) for k in range(N_FOLDS)]
 

@@ -21,7 +21,17 @@ every release), with the one-standard-error rule: the simplest model whose held-
 within one standard error of the best. The machinery of that problem is
 :mod:`ident._e2rfc_problem`.
 
-How uncertain the flutter speed is (:meth:`IdentifiedModel.uncertainty`), from four sources:
+In turbulent flow (a random response, see below) each release is fitted only while its decay
+dominates: the measured displacement is the decay plus a stationary random response that is
+narrow-band at the modal frequencies, and late in a release, where the decay has died out, the
+modal fit follows the random response (its damping drops, even below zero) and the regressors
+turn correlated with the force error ``F_se(x_rand) + F_b``. The release is cut where its decay's
+envelope meets the random response's RMS (:mod:`ident._decay_window`; measured on the benchmark's
+turbulence rows, docs/e2rfc_turbulence.md). An instrumental-variable estimator (regressors from
+the measured motion, instruments from the predicted deterministic decay) was tried and dropped:
+on the benchmark's plate it was less accurate and several times slower (the same document).
+
+How uncertain the flutter speed is (:meth:`IdentifiedModel.uncertainty`), from these sources:
 
 - *parametric*: measurement noise through the chosen model's parameter covariance;
 - *structure*: the other structures within one standard error are fitted too
@@ -40,7 +50,13 @@ How uncertain the flutter speed is (:meth:`IdentifiedModel.uncertainty`), from f
   residual exceeds ``RANDOM_RESPONSE_LIMIT`` times its white measurement noise (smooth-flow
   decays, even with friction or other nonlinear physics, stay below 5; 0.3 % turbulence gives
   about 40). Its variance falls as one over the number of releases, which is how
-  :meth:`FlutterUncertainty.releases_needed` tells how many would be needed.
+  :meth:`FlutterUncertainty.releases_needed` tells how many would be needed;
+- *below a decaying release*: a model that flutters below a wind speed at which a release was
+  seen to decay on both modes (its modal fit's damping positive) contradicts the data; the
+  random response biases E2RFC that way in strong turbulence (the modal damping comes out low,
+  and with it the flutter speed), and the jackknife cannot see a bias every release shares.
+  The distance to that wind speed is the least error of such an estimate and is added to the
+  systematic part (with a warning).
 """
 
 from __future__ import annotations
@@ -54,11 +70,12 @@ import numpy.typing as npt
 from scipy.stats import t as student_t
 
 from ident import flutter as _flutter
+from ident._decay_window import decay_window, truncated
 from ident._e2rfc_problem import FinalFit, Problem, improves
 from ident._regressors import PreparedRelease, prepare
 from ident._selection import Candidate, select_one_se, structure_label, within_one_se
 from ident._threads import single_threaded_blas
-from ident.errors import RankDeficiencyError
+from ident.errors import InsufficientDataError, RankDeficiencyError
 from ident.modal import ModalFit, name_modes
 from ident.release import Release
 from ident.rfc import RationalFunctionModel
@@ -117,6 +134,9 @@ class E2RFCDiagnostics:
         structure).
     random_response : ndarray, shape (n_releases,)
         Each release's modal-fit residual over its white measurement noise (module docstring).
+    decay_windows : ndarray, shape (n_releases,)
+        Duration of each release that was fitted, s: the whole record in smooth flow, the part
+        where the decay dominates the random response in turbulence (module docstring).
     K_range : dict
         Reduced frequencies ``B omega / U`` each mode covers over the releases (modal fits,
         modes named by their kinetic energy), ``{"heave": (lo, hi), "pitch": (lo, hi)}``.
@@ -145,6 +165,7 @@ class E2RFCDiagnostics:
     modal_fits: tuple[ModalFit, ...] = field(repr=False)
     alternatives: tuple[IdentifiedModel, ...] = field(default=(), repr=False)
     random_response: FloatArray = field(default_factory=lambda: np.zeros(0), repr=False)
+    decay_windows: FloatArray = field(default_factory=lambda: np.zeros(0), repr=False)
     K_range: dict[str, tuple[float, float]] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
     # What the refits need, and their results once computed (on first use: they cost about
@@ -159,6 +180,17 @@ class E2RFCDiagnostics:
         """Whether the releases hold a random response (median over releases above the limit)."""
         return bool(self.random_response.size
                     and float(np.median(self.random_response)) > RANDOM_RESPONSE_LIMIT)
+
+    @property
+    def decayed_at(self) -> float | None:
+        """Highest wind speed at which a release's modal fit decays on both modes, m/s.
+
+        The flutter speed lies above it: a model that flutters below contradicts the data.
+        None when no release has two decaying modes.
+        """
+        speeds = [float(U) for U, fit in zip(self.wind_speeds, self.modal_fits, strict=True)
+                  if fit.modes.size >= 2 and bool(np.all(fit.damping > 0.0))]
+        return max(speeds) if speeds else None
 
     @property
     def jackknife(self) -> tuple[RationalFunctionModel, ...]:
@@ -230,6 +262,9 @@ class FlutterUncertainty:
     n_releases : int
     warnings : tuple of str
         The identification's warnings and the flutter speed's own.
+    below_decay : float
+        How far the flutter speed lies below the highest wind speed at which a release decayed
+        on both modes (:attr:`E2RFCDiagnostics.decayed_at`); 0 when it does not.
     """
 
     speed: float | None
@@ -240,6 +275,7 @@ class FlutterUncertainty:
     turbulence: float
     n_releases: int
     warnings: tuple[str, ...] = ()
+    below_decay: float = 0.0
 
     @property
     def statistical(self) -> float:
@@ -259,7 +295,8 @@ class FlutterUncertainty:
     @property
     def systematic(self) -> float:
         """The part more releases at these wind speeds do not reduce, m/s."""
-        return math.sqrt(self.structure**2 + self.extrapolation**2 + self.refinement**2)
+        return math.sqrt(self.structure**2 + self.extrapolation**2 + self.refinement**2
+                         + self.below_decay**2)
 
     def releases_needed(self, target: float) -> int | None:
         """Releases (in the same proportion over the wind speeds) for a total std of ``target``.
@@ -283,6 +320,8 @@ class FlutterUncertainty:
         parts = [f"noise {self.parametric:.3g}"]
         if self.turbulence:
             parts.append(f"release scatter {self.turbulence:.3g}")
+        if self.below_decay:
+            parts.append(f"below a decaying release {self.below_decay:.3g}")
         parts += [f"structure {self.structure:.3g}", f"extrapolation {self.extrapolation:.3g}",
                   f"one lag more {self.refinement:.3g}"]
         return f"{self.speed:.3f} +- {self.total:.3f} m/s ({', '.join(parts)})"
@@ -471,10 +510,21 @@ class IdentifiedModel(RationalFunctionModel):
         refinement = 0.0
         if diag.finer is not None:
             refinement = abs(refit_speed(diag.finer) - speed)
+        below_decay = 0.0
+        stable = diag.decayed_at
+        if stable is not None and speed < stable:
+            # The data say the flutter speed is above a speed where a release decayed: the
+            # distance is the least error of this estimate (module docstring).
+            below_decay = stable - speed
+            warnings.append(
+                f"the model flutters at {speed:.3g} m/s, below {stable:.3g} m/s where a release "
+                "decayed on both modes: it contradicts the data (in turbulence, the random "
+                "response biases the fit); the deviation includes the difference")
         return FlutterUncertainty(speed=speed, parametric=parametric, structure=structure,
                                   extrapolation=extrapolation, refinement=refinement,
                                   turbulence=turbulence,
-                                  n_releases=diag.wind_speeds.size, warnings=tuple(warnings))
+                                  n_releases=diag.wind_speeds.size, warnings=tuple(warnings),
+                                  below_decay=below_decay)
 
     def structure_spread(self, section: SectionModel, U_max: float | None = None
                          ) -> StructureSpread:
@@ -569,19 +619,41 @@ def identify(
     _check_wind_speeds(releases)
     if n_lags is not None and (not isinstance(n_lags, int) or not 0 <= n_lags <= 3):
         raise ValueError(f"n_lags must be an integer in 0..3 or None, got {n_lags!r}")
-    return _identify_prepared([prepare(r, section) for r in releases], section, n_lags,
-                              with_A3)
+    prepared = [prepare(r, section) for r in releases]
+    random_response = np.array([_random_response(p.fit) for p in prepared])
+    if float(np.median(random_response)) > RANDOM_RESPONSE_LIMIT:
+        # Turbulence: fit each release only while its decay dominates (ident._decay_window).
+        prepared = [_windowed(p, section) for p in prepared]
+    return _identify_prepared(prepared, section, n_lags, with_A3,
+                              random_response=random_response)
+
+
+def _windowed(p: PreparedRelease, section: SectionModel) -> PreparedRelease:
+    """The release prepared again on its decay window (itself when nothing is cut).
+
+    A window too short for a modal fit of both modes keeps the whole release: the random
+    response then dominates from the start, and the release-to-release scatter says so.
+    """
+    cut = truncated(p.release, decay_window(p.release, p.fit))
+    if cut is p.release:
+        return p
+    try:
+        return prepare(cut, section)
+    except InsufficientDataError:
+        return p
 
 
 def _identify_prepared(
     prepared: list[PreparedRelease], section: SectionModel, n_lags: int | None,
-    with_A3: bool | None, *, checks: bool = True,
+    with_A3: bool | None, *, checks: bool = True, random_response: FloatArray | None = None,
 ) -> IdentifiedModel:
     """Choose the structure, search the lag roots and fit, on prepared releases.
 
     Separate from :func:`identify` so that other regressor constructions (the benchmark's
     ablation with differentiated raw displacements) run through the very same estimator.
-    ``checks`` adds the data checks' warnings (module docstring).
+    ``checks`` adds the data checks' warnings (module docstring). ``random_response``: each
+    release's modal residual over its noise on the whole record (before any decay window);
+    computed from the prepared releases when not given.
     """
     problem = Problem(prepared)
     given = n_lags is not None and with_A3 is not None
@@ -611,7 +683,9 @@ def _identify_prepared(
         notes = "; ".join(f"n_lags={c.n_lags}, A3={c.with_A3}: {c.note}" for c in candidates)
         raise RankDeficiencyError(f"no model structure is determined by these releases ({notes})")
     chosen, reason = select_one_se(usable, given=given)
-    context = _Context(prepared, section, tuple(candidates))
+    if random_response is None:
+        random_response = np.array([_random_response(p.fit) for p in prepared])
+    context = _Context(prepared, section, tuple(candidates), random_response)
     if given:
         return context.model(problem.final(chosen), reason, checks=checks)
     alternatives = tuple(
@@ -630,12 +704,13 @@ class _Context:
     prepared: list[PreparedRelease]
     section: SectionModel
     candidates: tuple[Candidate, ...]
+    random_response: FloatArray
 
     def model(self, fit: FinalFit, reason: str, alternatives: tuple[IdentifiedModel, ...] = (),
               *, checks: bool) -> IdentifiedModel:
         """Assemble an :class:`IdentifiedModel`, with the data checks when asked."""
         prepared = self.prepared
-        random_response = np.array([_random_response(p.fit) for p in prepared])
+        random_response = self.random_response
         warnings: list[str] = []
         if checks:
             if float(np.median(random_response)) > RANDOM_RESPONSE_LIMIT:
@@ -664,6 +739,7 @@ class _Context:
             condition_number=fit.condition_number, covariance=fit.covariance,
             parameter_index=fit.parameter_index, modal_fits=tuple(p.fit for p in prepared),
             alternatives=alternatives, random_response=random_response,
+            decay_windows=np.array([float(p.release.t[-1] - p.release.t[0]) for p in prepared]),
             K_range=_K_ranges(prepared, self.section), warnings=tuple(warnings),
             _prepared=tuple(prepared), _section=self.section, _lag_roots=fit.d)
         return IdentifiedModel(fit.A, fit.d, diagnostics)
