@@ -332,9 +332,7 @@ class Problem:
         whole decay, and one-period blocks keep neighbouring (correlated) samples together.
         """
         t = p.view("search").t
-        # At most a tenth of the record, so that every fold holds two blocks of every release
-        # (a spurious slow mode of a short record must not put all its rows in one fold).
-        period = min(1.0 / float(p.fit.frequencies.min()), float(t[-1] - t[0]) / (2 * N_FOLDS))
+        period = 1.0 / float(p.fit.frequencies.min())
         labels = (np.floor((t - t[0]) / period).astype(int)) % N_FOLDS
         return [np.flatnonzero(labels == k) for k in range(N_FOLDS)]
 

@@ -21,16 +21,6 @@ every release), with the one-standard-error rule: the simplest model whose held-
 within one standard error of the best. The machinery of that problem is
 :mod:`ident._e2rfc_problem`.
 
-In turbulent flow (a random response, see below) each release is fitted only while its decay
-dominates: the measured displacement is the decay plus a stationary random response that is
-narrow-band at the modal frequencies, and late in a release, where the decay has died out, the
-modal fit follows the random response (its damping drops, even below zero) and the regressors
-turn correlated with the force error ``F_se(x_rand) + F_b``. The release is cut where its decay's
-envelope meets the random response's RMS (:mod:`ident._decay_window`; measured on the benchmark's
-turbulence rows, docs/e2rfc_turbulence.md). An instrumental-variable estimator (regressors from
-the measured motion, instruments from the predicted deterministic decay) was tried and dropped:
-on the benchmark's plate it was less accurate and several times slower (the same document).
-
 How uncertain the flutter speed is (:meth:`IdentifiedModel.uncertainty`), from these sources:
 
 - *parametric*: measurement noise through the chosen model's parameter covariance;
@@ -52,11 +42,15 @@ How uncertain the flutter speed is (:meth:`IdentifiedModel.uncertainty`), from t
   about 40). Its variance falls as one over the number of releases, which is how
   :meth:`FlutterUncertainty.releases_needed` tells how many would be needed;
 - *below a decaying release*: a model that flutters below a wind speed at which a release was
-  seen to decay on both modes (its modal fit's damping positive) contradicts the data; the
-  random response biases E2RFC that way in strong turbulence (the modal damping comes out low,
-  and with it the flutter speed), and the jackknife cannot see a bias every release shares.
-  The distance to that wind speed is the least error of such an estimate and is added to the
-  systematic part (with a warning).
+  seen to decay on both modes (its modal fit's damping positive) contradicts the data. In
+  turbulence the random response biases E2RFC that way: late in a release the modal fit follows
+  the stationary random response, so its damping comes out low, and the force regression then
+  gives the aeroelastic system that damping: a flutter speed far too low (-50 to -80 % at 3 %
+  turbulence in the benchmark). Every release shares that bias, so the jackknife cannot see
+  it. The distance to that wind speed is the least error of such an estimate; it is added to
+  the systematic part, with a warning. (Fitting each release only while its decay dominates,
+  and instrumental variables with instruments from the predicted deterministic decay, were
+  measured and dropped: docs/e2rfc_turbulence.md.)
 """
 
 from __future__ import annotations
@@ -70,12 +64,11 @@ import numpy.typing as npt
 from scipy.stats import t as student_t
 
 from ident import flutter as _flutter
-from ident._decay_window import decay_window, truncated
 from ident._e2rfc_problem import FinalFit, Problem, improves
 from ident._regressors import PreparedRelease, prepare
 from ident._selection import Candidate, select_one_se, structure_label, within_one_se
 from ident._threads import single_threaded_blas
-from ident.errors import InsufficientDataError, RankDeficiencyError
+from ident.errors import RankDeficiencyError
 from ident.modal import ModalFit, name_modes
 from ident.release import Release
 from ident.rfc import RationalFunctionModel
@@ -134,9 +127,6 @@ class E2RFCDiagnostics:
         structure).
     random_response : ndarray, shape (n_releases,)
         Each release's modal-fit residual over its white measurement noise (module docstring).
-    decay_windows : ndarray, shape (n_releases,)
-        Duration of each release that was fitted, s: the whole record in smooth flow, the part
-        where the decay dominates the random response in turbulence (module docstring).
     K_range : dict
         Reduced frequencies ``B omega / U`` each mode covers over the releases (modal fits,
         modes named by their kinetic energy), ``{"heave": (lo, hi), "pitch": (lo, hi)}``.
@@ -165,7 +155,6 @@ class E2RFCDiagnostics:
     modal_fits: tuple[ModalFit, ...] = field(repr=False)
     alternatives: tuple[IdentifiedModel, ...] = field(default=(), repr=False)
     random_response: FloatArray = field(default_factory=lambda: np.zeros(0), repr=False)
-    decay_windows: FloatArray = field(default_factory=lambda: np.zeros(0), repr=False)
     K_range: dict[str, tuple[float, float]] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
     # What the refits need, and their results once computed (on first use: they cost about
@@ -289,7 +278,7 @@ class FlutterUncertainty:
 
     @property
     def total(self) -> float:
-        """Standard deviation of the flutter speed, m/s: the four parts combined."""
+        """Standard deviation of the flutter speed, m/s: every part combined."""
         return math.sqrt(self.statistical**2 + self.systematic**2)
 
     @property
@@ -619,41 +608,19 @@ def identify(
     _check_wind_speeds(releases)
     if n_lags is not None and (not isinstance(n_lags, int) or not 0 <= n_lags <= 3):
         raise ValueError(f"n_lags must be an integer in 0..3 or None, got {n_lags!r}")
-    prepared = [prepare(r, section) for r in releases]
-    random_response = np.array([_random_response(p.fit) for p in prepared])
-    if float(np.median(random_response)) > RANDOM_RESPONSE_LIMIT:
-        # Turbulence: fit each release only while its decay dominates (ident._decay_window).
-        prepared = [_windowed(p, section) for p in prepared]
-    return _identify_prepared(prepared, section, n_lags, with_A3,
-                              random_response=random_response)
-
-
-def _windowed(p: PreparedRelease, section: SectionModel) -> PreparedRelease:
-    """The release prepared again on its decay window (itself when nothing is cut).
-
-    A window too short for a modal fit of both modes keeps the whole release: the random
-    response then dominates from the start, and the release-to-release scatter says so.
-    """
-    cut = truncated(p.release, decay_window(p.release, p.fit))
-    if cut is p.release:
-        return p
-    try:
-        return prepare(cut, section)
-    except InsufficientDataError:
-        return p
+    return _identify_prepared([prepare(r, section) for r in releases], section, n_lags,
+                              with_A3)
 
 
 def _identify_prepared(
     prepared: list[PreparedRelease], section: SectionModel, n_lags: int | None,
-    with_A3: bool | None, *, checks: bool = True, random_response: FloatArray | None = None,
+    with_A3: bool | None, *, checks: bool = True,
 ) -> IdentifiedModel:
     """Choose the structure, search the lag roots and fit, on prepared releases.
 
     Separate from :func:`identify` so that other regressor constructions (the benchmark's
     ablation with differentiated raw displacements) run through the very same estimator.
-    ``checks`` adds the data checks' warnings (module docstring). ``random_response``: each
-    release's modal residual over its noise on the whole record (before any decay window);
-    computed from the prepared releases when not given.
+    ``checks`` adds the data checks' warnings (module docstring).
     """
     problem = Problem(prepared)
     given = n_lags is not None and with_A3 is not None
@@ -683,9 +650,7 @@ def _identify_prepared(
         notes = "; ".join(f"n_lags={c.n_lags}, A3={c.with_A3}: {c.note}" for c in candidates)
         raise RankDeficiencyError(f"no model structure is determined by these releases ({notes})")
     chosen, reason = select_one_se(usable, given=given)
-    if random_response is None:
-        random_response = np.array([_random_response(p.fit) for p in prepared])
-    context = _Context(prepared, section, tuple(candidates), random_response)
+    context = _Context(prepared, section, tuple(candidates))
     if given:
         return context.model(problem.final(chosen), reason, checks=checks)
     alternatives = tuple(
@@ -704,13 +669,12 @@ class _Context:
     prepared: list[PreparedRelease]
     section: SectionModel
     candidates: tuple[Candidate, ...]
-    random_response: FloatArray
 
     def model(self, fit: FinalFit, reason: str, alternatives: tuple[IdentifiedModel, ...] = (),
               *, checks: bool) -> IdentifiedModel:
         """Assemble an :class:`IdentifiedModel`, with the data checks when asked."""
         prepared = self.prepared
-        random_response = self.random_response
+        random_response = np.array([_random_response(p.fit) for p in prepared])
         warnings: list[str] = []
         if checks:
             if float(np.median(random_response)) > RANDOM_RESPONSE_LIMIT:
@@ -739,7 +703,6 @@ class _Context:
             condition_number=fit.condition_number, covariance=fit.covariance,
             parameter_index=fit.parameter_index, modal_fits=tuple(p.fit for p in prepared),
             alternatives=alternatives, random_response=random_response,
-            decay_windows=np.array([float(p.release.t[-1] - p.release.t[0]) for p in prepared]),
             K_range=_K_ranges(prepared, self.section), warnings=tuple(warnings),
             _prepared=tuple(prepared), _section=self.section, _lag_roots=fit.d)
         return IdentifiedModel(fit.A, fit.d, diagnostics)
