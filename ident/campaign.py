@@ -140,7 +140,7 @@ class CampaignAnalysis:
             "flutter_std_parts": None if self.flutter_speed is None else {
                 "noise": u.parametric, "structure": u.structure,
                 "extrapolation": u.extrapolation, "one_lag_more": u.refinement,
-                "release_scatter": u.turbulence},
+                "release_scatter": u.turbulence, "below_decaying_release": u.below_decay},
             "flutter_structures": dict(zip(self.structures.labels, self.structures.speeds,
                                            strict=True)),
             "flutter_speed_low": self.structures.low,
