@@ -39,7 +39,9 @@ model, ``K_min`` the lowest covered now). So the choice prefers speeds closer to
 The candidate with the smallest predicted total is chosen (ranked by the predicted parts that
 differ between candidates, so that a large carried part does not drown the differences), none
 when no candidate below the bound is predicted to reduce those parts (statistical,
-one-lag-more, extrapolation) by :data:`MIN_GAIN`. The structure part, carried in the predicted
+one-lag-more, extrapolation) by :data:`MIN_GAIN`. The part below a decaying release (turbulent
+flow, :mod:`ident.e2rfc`) is carried too: it is a bias the releases share. The structure part,
+carried in the predicted
 total, does not stop a campaign by itself: no gain is promised for it, but new data may tell
 the structures apart (on the plate a third speed took it from 0.24 to 0.006 m/s; on the deck
 one took the std to 44 %, a structure without flutter below the search limit).
@@ -67,7 +69,12 @@ from scipy.signal import lfilter
 
 from ident import flutter
 from ident.campaign import CampaignAnalysis
-from ident.e2rfc import DISTINCT_U_RTOL, IdentifiedModel, distinct_wind_speeds
+from ident.e2rfc import (
+    DISTINCT_U_RTOL,
+    FlutterUncertainty,
+    IdentifiedModel,
+    distinct_wind_speeds,
+)
 from ident.modal import noise_std
 from ident.release import Release
 from ident.section import SectionModel
@@ -253,8 +260,18 @@ def predicted_std(analysis: CampaignAnalysis, releases: Sequence[Release],
     result, u = analysis.flutter, analysis.uncertainty
     if result.speed is None or not math.isfinite(u.total):
         raise ValueError("predicted_std needs an analysis that predicts flutter")
-    return [math.sqrt(u.structure**2 + v) for v in _reducible(analysis, releases, candidates,
-                                                             releases_per_speed, decay_s)]
+    carried = _carried(u)
+    return [math.sqrt(carried**2 + v) for v in _reducible(analysis, releases, candidates,
+                                                          releases_per_speed, decay_s)]
+
+
+def _carried(u: FlutterUncertainty) -> float:
+    """Return the parts carried unchanged into every prediction, m/s.
+
+    The structure spread and the distance below a decaying release (a bias of the fit in
+    turbulence that more releases at the same speeds share, :mod:`ident.e2rfc`).
+    """
+    return math.sqrt(u.structure**2 + u.below_decay**2)
 
 
 def _reducible(analysis: CampaignAnalysis, releases: Sequence[Release],
@@ -337,9 +354,9 @@ def choose_next(analysis: CampaignAnalysis, releases: Sequence[Release],
     # Ranked by the parts that differ between candidates: a large carried structure part
     # would round their differences away in the totals.
     reducible = _reducible(analysis, releases, allowed, releases_per_speed, decay_s)
-    structure = analysis.uncertainty.structure
-    table = tuple((U, math.sqrt(structure**2 + v)) for U, v in zip(allowed, reducible,
-                                                                   strict=True))
+    carried = _carried(analysis.uncertainty)
+    table = tuple((U, math.sqrt(carried**2 + v)) for U, v in zip(allowed, reducible,
+                                                                 strict=True))
     covered = distinct_wind_speeds([r.U for r in releases])
     new = [i for i, U in enumerate(allowed)
            if all(abs(U - c) > DISTINCT_U_RTOL * c for c in covered)]

@@ -69,6 +69,8 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
                  f"extrapolation {u.extrapolation:.3f}", f"one lag more {u.refinement:.3f}"]
         if u.turbulence:
             parts.insert(1, f"release scatter {u.turbulence:.3f}")
+        if u.below_decay:
+            parts.append(f"below a decaying release {u.below_decay:.3f}")
         print("  its std (m/s): " + ", ".join(parts))
     for label, speed, speed_std in zip(spread.labels[1:], spread.speeds[1:], spread.stds[1:],
                                        strict=True):
