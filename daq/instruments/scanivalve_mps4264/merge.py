@@ -31,7 +31,11 @@ from daq.instruments.scanivalve_mps4264.blocks import (
     ClockStep,
     ScanBlock,
 )
-from daq.instruments.scanivalve_mps4264.frames import CHANNELS_PER_MODULE, TEMPERATURES_PER_MODULE
+from daq.instruments.scanivalve_mps4264.frames import (
+    CHANNELS_PER_MODULE,
+    TEMPERATURES_PER_MODULE,
+    PacketBatch,
+)
 from daq.instruments.scanivalve_mps4264.streams import KEY_BITS, KEY_MASK, Part, aligned
 
 __all__ = ["FrameMerger"]
@@ -132,6 +136,29 @@ class FrameMerger:
                 np.maximum(host, hosts, out=host)
         return self._finish(keys, first.frame_time.copy(), first.trigger_time.copy(), host,
                             pressure, temperature, status)
+
+    def assemble_in_step(self, keys: npt.NDArray[np.int64], batch: PacketBatch,
+                         host: npt.NDArray[np.int64]) -> ScanBlock:
+        """:meth:`assemble_aligned` of one batch holding every module's packets of ``keys``.
+
+        ``batch`` holds module 0's ``n = keys.size`` packets, then module 1's, ...; ``host`` is
+        each frame's latest arrival over the modules, ns. The same block, without a part per
+        module: the modules' columns are put side by side by one transposing copy.
+        """
+        n, m = keys.size, self.modules
+        pressure = batch.pressure.reshape(m, n, CHANNELS_PER_MODULE).transpose(1, 0, 2) \
+            .reshape(n, CHANNELS_PER_MODULE * m)
+        temperature = batch.temperature.reshape(m, n, TEMPERATURES_PER_MODULE) \
+            .transpose(1, 0, 2).reshape(n, TEMPERATURES_PER_MODULE * m)
+        status = np.zeros((n, m), np.int8)  # STATUS_OK
+        valve = batch.valve_cal.reshape(m, n)
+        if valve.any():
+            for k in np.flatnonzero(valve.any(axis=1)).tolist():
+                cols = slice(CHANNELS_PER_MODULE * k, CHANNELS_PER_MODULE * (k + 1))
+                pressure[valve[k], cols] = np.nan
+                status[valve[k], k] = STATUS_VALVE_CAL
+        return self._finish(keys, batch.frame_time[:n].copy(), batch.trigger_time[:n].copy(),
+                            host, pressure, temperature, status)
 
     def _finish(self, keys: npt.NDArray[np.int64], frame_time: npt.NDArray[np.float64],
                 trigger: npt.NDArray[np.float64], host: npt.NDArray[np.int64],

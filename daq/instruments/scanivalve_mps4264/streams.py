@@ -209,3 +209,45 @@ def aligned(parts: list[Part]) -> bool:
     if hi - lo != n - 1:
         return False
     return all(k.size == n and int(k[0]) == lo and int(k[-1]) == hi for k, _, _ in parts[1:])
+
+
+def in_step(streams: list[ModuleStream], last_key: int | None) -> bool:
+    """Whether every module has bytes, holds no frame and is at the last frame emitted.
+
+    Then, if every module's bytes continue its counter one by one with the same frame numbers
+    (:func:`continue_in_step`), their frames need no per-module holding or merging: the driver
+    builds the block at once.
+    """
+    if last_key is None:
+        return False
+    for s in streams:
+        if (not s.raw or s.n_pending or s.last_raw is None
+                or (s.epoch << KEY_BITS) + s.u_last != last_key):
+            return False
+    return True
+
+
+def continue_in_step(streams: list[ModuleStream], frames: npt.NDArray[np.int64],
+                     ) -> npt.NDArray[np.int64] | None:
+    """Take frames that continue every module's counter one by one, the same for all modules.
+
+    ``frames`` are the raw counters, ``(modules, n)``, of modules :func:`in_step`. Returns their
+    merge keys, with each module's unwrapping advanced as :meth:`ModuleStream.ingest` and
+    :meth:`ModuleStream.take_upto` of them would leave it; None, touching nothing, otherwise.
+    """
+    first = frames[:, 0]
+    if ((first - np.array([s.last_raw for s in streams], np.int64)) % U32 != 1).any():
+        return None
+    if frames.shape[0] > 1 and (frames[1:] != frames[0]).any():
+        return None
+    if ((frames[0, 1:] - frames[0, :-1]) != 1).any():
+        return None
+    s0 = streams[0]
+    n = frames.shape[1]
+    keys = (s0.epoch << KEY_BITS) + s0.u_last + np.arange(1, n + 1, dtype=np.int64)
+    last_raw, last_key = int(frames[0, -1]), int(keys[-1])
+    for s in streams:
+        s.u_last += n
+        s.last_raw = last_raw
+        s.watermark = last_key
+    return keys
