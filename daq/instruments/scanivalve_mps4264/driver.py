@@ -88,6 +88,7 @@ from daq.instruments.scanivalve_mps4264.frames import (
     CHANNELS_PER_MODULE,
     PACKET_SIZES,
     TEMPERATURES_PER_MODULE,
+    TYPE_LEGACY,
     Mps4264Decoder,
     PacketBatch,
 )
@@ -658,16 +659,17 @@ class ScanivalveMps4264:
         batch, ends = joined
         m, n = ends.shape
         frames = batch.frame.reshape(m, n)
-        order_ok = bool(batch.big_endian[0]) == (self.settings.byte_order == "big")
-        serials = batch.serial.reshape(m, n)
+        kind = int(batch.kind[0])
         rate = float(batch.rate_hz[-1])
         # Only the common case here, where _check_packets would count, warn of and choose
-        # nothing but the last packet's rate: else each stream goes through it.
-        usual = (order_ok
+        # nothing but the last packet's rate: else each stream goes through it. (0x6D packets
+        # carry no serial number: -1.)
+        known = [s.serial for s in streams]
+        usual = (bool(batch.big_endian[0]) == (self.settings.byte_order == "big")
                  and ((rate > 0 and math.isfinite(rate)) or bool(np.isnan(batch.rate_hz).all()))
-                 and all(s.serial == (int(row[0]) if row[0] >= 0 else None)
-                         and bool((row == row[0]).all())
-                         for s, row in zip(streams, serials, strict=True)))
+                 and (kind != TYPE_LEGACY
+                      or (None not in known and bool((batch.serial.reshape(m, n)
+                                                      == np.array(known)[:, None]).all()))))
         keys = continue_in_step(streams, frames) if usual else None
         if keys is None:
             self._hold(streams, [(batch.take(slice(k * n, (k + 1) * n)), ends[k])
@@ -678,7 +680,7 @@ class ScanivalveMps4264:
             np.maximum(host, streams[k].arrival_times(ends[k]), out=host)
         if rate > 0 and math.isfinite(rate):
             self._rate_hz = rate
-        size = PACKET_SIZES[int(batch.kind[0])]
+        size = PACKET_SIZES[kind]
         for s in streams:
             s.packet_size = size
             s.silent = False

@@ -223,21 +223,34 @@ class FrameMerger:
                           frame_time: npt.NDArray[np.float64]) -> None:
         """Record jumps of the frame time against ``counter / rate`` (same counter epoch)."""
         ok = np.isfinite(frame_time)
-        c, t, e = counter[ok], frame_time[ok], (keys >> KEY_BITS)[ok]
-        if self._last_time_key >= 0 and c.size:
+        epoch = int(keys[0]) >> KEY_BITS
+        last_key = self._last_time_key
+        # The usual block: every frame timed, one counter epoch (keys are sorted), the one of
+        # the last timed frame: no row to leave out and no epoch to compare.
+        one_epoch = (bool(ok.all()) and int(keys[-1]) >> KEY_BITS == epoch
+                     and (last_key < 0 or last_key >> KEY_BITS == epoch))
+        if one_epoch:
+            c, t = counter, frame_time
+        else:
+            c, t, e = counter[ok], frame_time[ok], (keys >> KEY_BITS)[ok]
+        if last_key >= 0 and c.size:
             c = np.concatenate([[self._last_time_counter], c])
             t = np.concatenate([[self._last_time], t])
-            e = np.concatenate([[self._last_time_key >> KEY_BITS], e])
+            if not one_epoch:
+                e = np.concatenate([[last_key >> KEY_BITS], e])
         if c.size:
             self._last_time, self._last_time_counter = float(t[-1]), int(c[-1])
-            self._last_time_key = int(keys[ok][-1]) if ok.any() else self._last_time_key
+            self._last_time_key = int(keys[ok][-1]) if ok.any() else last_key
         if c.size < 2:
             return
         residual = np.diff(t) - np.diff(c) / self.rate_hz
         # A quarter frame, at least 1 ms: ordinary frames sit within microseconds of the counter
         # (the s/ns fields are exact); a PTP lock or a rate mismatch is far larger.
         tol = max(0.25 / self.rate_hz, 1e-3)
-        for i in np.flatnonzero((np.abs(residual) > tol) & (np.diff(e) == 0)).tolist():
+        stepped = np.abs(residual) > tol
+        if not one_epoch:
+            stepped &= np.diff(e) == 0
+        for i in np.flatnonzero(stepped).tolist():
             step = ClockStep(int(c[i + 1]), float(residual[i]))
             self._steps_seen += 1
             if self._steps_seen <= 5:
@@ -248,6 +261,8 @@ class FrameMerger:
             self._pending_steps.append(step)
 
     def _block_time_base(self, frame_time: npt.NDArray[np.float64]) -> str:
+        if frame_time.size and frame_time.min() >= 1e9 and self._time_base == "ptp":
+            return "ptp"  # the usual block: every time finite (a NaN makes min NaN) and PTP
         finite = frame_time[np.isfinite(frame_time)]
         relative = finite < 1e9  # before 2001-09-09: a clock started at epoch 0 (no PTP time)
         base = "mixed" if relative.any() and not relative.all() else \
