@@ -240,10 +240,14 @@ class FrameMerger:
                 e = np.concatenate([[last_key >> KEY_BITS], e])
         if c.size:
             self._last_time, self._last_time_counter = float(t[-1]), int(c[-1])
-            self._last_time_key = int(keys[ok][-1]) if ok.any() else last_key
+            self._last_time_key = (int(keys[-1]) if one_epoch
+                                   else int(keys[ok][-1]) if ok.any() else last_key)
         if c.size < 2:
             return
-        residual = np.diff(t) - np.diff(c) / self.rate_hz
+        if one_epoch and int(c[-1]) - int(c[0]) == c.size - 1:  # consecutive: every step 1
+            residual = np.diff(t) - 1 / self.rate_hz
+        else:
+            residual = np.diff(t) - np.diff(c) / self.rate_hz
         # A quarter frame, at least 1 ms: ordinary frames sit within microseconds of the counter
         # (the s/ns fields are exact); a PTP lock or a rate mismatch is far larger.
         tol = max(0.25 / self.rate_hz, 1e-3)

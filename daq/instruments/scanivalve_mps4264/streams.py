@@ -235,15 +235,13 @@ def continue_in_step(streams: list[ModuleStream], frames: npt.NDArray[np.int64],
     merge keys, with each module's unwrapping advanced as :meth:`ModuleStream.ingest` and
     :meth:`ModuleStream.take_upto` of them would leave it; None, touching nothing, otherwise.
     """
-    first = frames[:, 0]
-    if ((first - np.array([s.last_raw for s in streams], np.int64)) % U32 != 1).any():
-        return None
-    if frames.shape[0] > 1 and (frames[1:] != frames[0]).any():
-        return None
-    if ((frames[0, 1:] - frames[0, :-1]) != 1).any():
-        return None
     s0 = streams[0]
     n = frames.shape[1]
+    start = s0.last_raw + 1
+    # The frames after the last one, one by one (a uint32 wrap inside goes the general way).
+    if (start + n > U32 or any(s.last_raw != s0.last_raw for s in streams)
+            or not bool((frames == np.arange(start, start + n, dtype=np.int64)).all())):
+        return None
     keys = (s0.epoch << KEY_BITS) + s0.u_last + np.arange(1, n + 1, dtype=np.int64)
     last_raw, last_key = int(frames[0, -1]), int(keys[-1])
     for s in streams:
