@@ -53,7 +53,12 @@ frame is complete it keeps reading for at most ``min_block_s`` (default 20 ms, 1
 fewer if that many frames are complete sooner), then decodes the bytes of every module in one numpy
 pass (:meth:`~daq.instruments.scanivalve_mps4264.frames.Mps4264Decoder.feed_many`) and returns every
 complete frame in one block. A block costs a fixed ~0.2 ms of Python whatever its size; one block
-per frame made the decoding most of a core at 8 modules x 500 Hz.
+per frame made the decoding most of a core at 8 modules x 500 Hz. The usual block, in which every
+module sent the frames that follow the last block, the same ones, is built at once
+(:meth:`ScanivalveMps4264._in_step_block`: one decode of all the modules' bytes and one
+transposing copy, without holding and merging per module); anything else (a lost, late, duplicated
+or split packet, garbage, a restart, a serial number or byte order to check) goes through the
+modules' streams and the merger as before, with the same result.
 """
 
 from __future__ import annotations

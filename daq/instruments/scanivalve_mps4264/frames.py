@@ -4,7 +4,8 @@ Responsibility: know the binary packets a scanner's TCP binary server sends (the
 field layouts and byte orders), find them in a byte stream that may hold garbage or partial packets,
 check their fields, and decode them into :class:`PacketBatch` es (:class:`Mps4264Decoder`), one
 stream at a time or the streams of several modules in one numpy pass
-(:meth:`Mps4264Decoder.feed_many`). Not responsible for: connections and reads or host arrival
+(:meth:`Mps4264Decoder.feed_many`, or joined for modules in step:
+:meth:`Mps4264Decoder.feed_in_step`). Not responsible for: connections and reads or host arrival
 times (:mod:`daq.instruments.scanivalve_mps4264.driver`), counter unwrapping
 (:mod:`daq.instruments.scanivalve_mps4264.streams`), or merging the modules frame by frame
 (:mod:`daq.instruments.scanivalve_mps4264.merge`). Pure: no I/O, no threads, no clock.

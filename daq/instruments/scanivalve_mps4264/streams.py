@@ -4,8 +4,10 @@ Responsibility: :class:`ModuleStream` holds what the driver keeps per module (on
 connection each): the bytes read and the host time of each read, the decoder
 (:class:`~daq.instruments.scanivalve_mps4264.frames.Mps4264Decoder`), and the unwrapping of the
 module's frame counter into merge keys (``epoch << KEY_BITS | u``); :func:`aligned` tells the
-driver when the modules' frames need no merging. Pure bookkeeping: no I/O (the driver reads the
-transport and hands the bytes over) and no clock of its own (the driver passes its times in).
+driver when the modules' frames need no merging, :func:`in_step` and :func:`continue_in_step`
+when a block can be built at once without holding them per module. Pure bookkeeping: no I/O
+(the driver reads the transport and hands the bytes over) and no clock of its own (the driver
+passes its times in).
 
 Not responsible for: reading or reconnecting the data connection, merging the modules' frames
 into blocks (:mod:`daq.instruments.scanivalve_mps4264.driver`), or decoding packets
