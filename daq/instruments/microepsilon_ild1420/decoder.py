@@ -257,7 +257,8 @@ class Ild1420Decoder:
         else:
             valid = raw <= MAX_DISTANCE_16
             shift = 1.0
-        distance = (102.0 * raw / 65520.0 - shift) * self.range_mm / 100.0
+        distance = np.asarray((102.0 * raw / 65520.0 - shift) * self.range_mm / 100.0,
+                              dtype=np.float64)  # float64 already: no copy
         errors = count - int(np.count_nonzero(valid))
         if errors:
             distance[~valid] = np.nan

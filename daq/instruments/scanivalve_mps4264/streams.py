@@ -239,6 +239,7 @@ def continue_in_step(streams: list[ModuleStream], frames: npt.NDArray[np.int64],
     """
     s0 = streams[0]
     n = frames.shape[1]
+    assert s0.last_raw is not None  # in_step
     start = s0.last_raw + 1
     # The frames after the last one, one by one (a uint32 wrap inside goes the general way).
     if (start + n > U32 or any(s.last_raw != s0.last_raw for s in streams)
