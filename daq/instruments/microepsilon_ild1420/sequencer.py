@@ -142,16 +142,18 @@ class Ild1420Sequencer:
         assert self._last is not None
         raw_c, raw_t, c, t, _ = self._last
         n = int(counter.size)
-        dc = np.empty(n, np.int64)
-        dc[0] = int(counter[0]) - raw_c
-        np.subtract(counter[1:], counter[:-1], out=dc[1:])
-        dc %= COUNTER_MODULUS
-        if not (dc == 1).all():
+        if (int(counter[0]) - raw_c) % COUNTER_MODULUS != 1:
             return None
+        steps = counter[1:] - counter[:-1]
+        if not (steps == 1).all():  # a wrap of the counter inside the batch, or not consecutive
+            steps %= COUNTER_MODULUS
+            if not (steps == 1).all():
+                return None
         dt = np.empty(n, np.int64)
-        dt[0] = int(timestamp[0]) - raw_t
+        dt[0] = (int(timestamp[0]) - raw_t) % TIMESTAMP_MODULUS
         np.subtract(timestamp[1:], timestamp[:-1], out=dt[1:])
-        dt %= TIMESTAMP_MODULUS
+        if n > 1 and int(dt[1:].min()) < 0:  # the timestamp wrapped inside the batch
+            dt[1:] %= TIMESTAMP_MODULUS
         longest = int(dt.max())
         # No restart (a timestamp going back), and no step long enough for the timestamp to
         # correct the counter by a whole period (round((expected - 1) / 2**18) would be >= 1).

@@ -158,10 +158,13 @@ class ScanContinuity:
 
     def _remember(self, block: ScanBlock, frame_time: FloatArray, rate_hz: float) -> None:
         """Keep the last frame time and the last ``RECENT_S`` of pressure rows."""
-        finite = np.flatnonzero(np.isfinite(frame_time))
-        if finite.size:
-            self._last_time = float(frame_time[finite[-1]])
-            self._last_host_ns = int(block.host_time_ns[finite[-1]])
+        last = frame_time.size - 1
+        if last >= 0 and not math.isfinite(frame_time[last]):  # else the usual: the last row
+            finite = np.flatnonzero(np.isfinite(frame_time))
+            last = int(finite[-1]) if finite.size else -1
+        if last >= 0:
+            self._last_time = float(frame_time[last])
+            self._last_host_ns = int(block.host_time_ns[last])
             self._last_base = block.time_base
         keep = self._keep_rows(rate_hz)
         self._recent.append(block.pressure)

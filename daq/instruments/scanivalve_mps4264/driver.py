@@ -53,7 +53,12 @@ frame is complete it keeps reading for at most ``min_block_s`` (default 20 ms, 1
 fewer if that many frames are complete sooner), then decodes the bytes of every module in one numpy
 pass (:meth:`~daq.instruments.scanivalve_mps4264.frames.Mps4264Decoder.feed_many`) and returns every
 complete frame in one block. A block costs a fixed ~0.2 ms of Python whatever its size; one block
-per frame made the decoding most of a core at 8 modules x 500 Hz.
+per frame made the decoding most of a core at 8 modules x 500 Hz. The usual block, in which every
+module sent the frames that follow the last block, the same ones, is built at once
+(:meth:`ScanivalveMps4264._in_step_block`: one decode of all the modules' bytes and one
+transposing copy, without holding and merging per module); anything else (a lost, late, duplicated
+or split packet, garbage, a restart, a serial number or byte order to check) goes through the
+modules' streams and the merger as before, with the same result.
 """
 
 from __future__ import annotations
@@ -88,6 +93,7 @@ from daq.instruments.scanivalve_mps4264.frames import (
     CHANNELS_PER_MODULE,
     PACKET_SIZES,
     TEMPERATURES_PER_MODULE,
+    TYPE_LEGACY,
     Mps4264Decoder,
     PacketBatch,
 )
@@ -98,6 +104,8 @@ from daq.instruments.scanivalve_mps4264.settings import (
 )
 from daq.instruments.scanivalve_mps4264.streams import (
     ModuleStream,
+    continue_in_step,
+    in_step,
 )
 from daq.transports.byte_transport import Transport, open_transport
 
@@ -559,8 +567,10 @@ class ScanivalveMps4264:
                 block_end = min(now + self.settings.min_block_s, deadline)
             if block_end is not None and (now >= block_end
                                           or self._likely_complete(now, self._block_frames())):
-                self._decode_all()
-                block = self._emit()
+                block = self._in_step_block()
+                if block is None:
+                    self._decode_all()
+                    block = self._emit()
                 if block is not None:
                     return block
                 block_end = None  # no complete frame after all (garbage, late or duplicates)
@@ -621,13 +631,66 @@ class ScanivalveMps4264:
         if not todo:
             return
         chunks = [s.take_raw() for s in todo]
-        decoded = Mps4264Decoder.feed_many([s.decoder for s in todo], chunks)
+        self._hold(todo, Mps4264Decoder.feed_many([s.decoder for s in todo], chunks))
+
+    def _hold(self, todo: Sequence[ModuleStream],
+              decoded: Sequence[tuple[PacketBatch, np.ndarray[Any, np.dtype[np.int64]]]],
+              ) -> None:
+        """Check and hold each stream's decoded packets (``decoded``: batch, packet ends)."""
         for stream, (batch, ends) in zip(todo, decoded, strict=True):
             hosts = stream.arrival_times(ends)
             if len(batch):
                 stream.packet_size = PACKET_SIZES[int(batch.kind[-1])]
                 self._check_packets(stream, batch)
                 stream.ingest(batch, hosts)
+
+    def _in_step_block(self) -> ScanBlock | None:
+        """Return the usual block at once: every module sent the next frames, the same ones.
+
+        One decode of all the modules' bytes, no per-module holding, one assembly: the block
+        :meth:`_decode_all` and :meth:`_emit` would return, and the same state left behind.
+        None otherwise, with the bytes decoded and held as :meth:`_decode_all` does (the
+        general path then goes on).
+        """
+        streams = self._streams
+        if not in_step(streams, self._merger.last_key):
+            return None
+        chunks = [s.take_raw() for s in streams]
+        decoders = [s.decoder for s in streams]
+        joined = Mps4264Decoder.feed_in_step(decoders, chunks)
+        if joined is None:
+            self._hold(streams, Mps4264Decoder.feed_many(decoders, chunks))
+            return None
+        batch, ends = joined
+        m, n = ends.shape
+        frames = batch.frame.reshape(m, n)
+        kind = int(batch.kind[0])
+        rate = float(batch.rate_hz[-1])
+        # Only the common case here, where _check_packets would count, warn of and choose
+        # nothing but the last packet's rate: else each stream goes through it. (0x6D packets
+        # carry no serial number: -1.)
+        known = [s.serial for s in streams]
+        usual = (bool(batch.big_endian[0]) == (self.settings.byte_order == "big")
+                 and ((rate > 0 and math.isfinite(rate)) or bool(np.isnan(batch.rate_hz).all()))
+                 and (kind != TYPE_LEGACY
+                      or (None not in known and bool((batch.serial.reshape(m, n)
+                                                      == np.array(known)[:, None]).all()))))
+        keys = continue_in_step(streams, frames) if usual else None
+        if keys is None:
+            self._hold(streams, [(batch.take(slice(k * n, (k + 1) * n)), ends[k])
+                                 for k in range(m)])
+            return None
+        host = streams[0].arrival_times(ends[0])
+        for k in range(1, m):
+            np.maximum(host, streams[k].arrival_times(ends[k]), out=host)
+        if rate > 0 and math.isfinite(rate):
+            self._rate_hz = rate
+        size = PACKET_SIZES[kind]
+        for s in streams:
+            s.packet_size = size
+            s.silent = False
+        self._merger.rate_hz = self._rate_hz
+        return self._merger.assemble_in_step(keys, batch, host)
 
     def _check_packets(self, stream: ModuleStream, batch: PacketBatch) -> None:
         expected = self.settings.byte_order == "big"

@@ -4,7 +4,8 @@ Responsibility: know the binary packets a scanner's TCP binary server sends (the
 field layouts and byte orders), find them in a byte stream that may hold garbage or partial packets,
 check their fields, and decode them into :class:`PacketBatch` es (:class:`Mps4264Decoder`), one
 stream at a time or the streams of several modules in one numpy pass
-(:meth:`Mps4264Decoder.feed_many`). Not responsible for: connections and reads or host arrival
+(:meth:`Mps4264Decoder.feed_many`, or joined for modules in step:
+:meth:`Mps4264Decoder.feed_in_step`). Not responsible for: connections and reads or host arrival
 times (:mod:`daq.instruments.scanivalve_mps4264.driver`), counter unwrapping
 (:mod:`daq.instruments.scanivalve_mps4264.streams`), or merging the modules frame by frame
 (:mod:`daq.instruments.scanivalve_mps4264.merge`). Pure: no I/O, no threads, no clock.
@@ -345,6 +346,40 @@ class Mps4264Decoder:
             d._base += count * size
             d.packets += count
         return out
+
+    @staticmethod
+    def feed_in_step(decoders: Sequence[Mps4264Decoder], chunks: Sequence[bytes],
+                     ) -> tuple[PacketBatch, npt.NDArray[np.int64]] | None:
+        """:meth:`feed_many` when every decoder completes the same number of packets, joined.
+
+        Returns the packets of all the decoders as one batch, decoder after decoder (``n``
+        rows each), and their ends as stream offsets, ``(decoders, n)``; the decoders are then
+        where :meth:`feed_many` would leave them. None, with no decoder touched, when
+        :meth:`feed_many` would do anything else (a decoder out of step, a packet held back,
+        unequal counts, a packet failing its checks, RAW units): call it then.
+        """
+        plan = _in_step(decoders, chunks)
+        if plan is None:
+            return None
+        (kind, order), bufs, checked, accepted = plan
+        n = accepted[0]
+        if n == 0 or checked != accepted or any(a != n for a in accepted):
+            return None
+        size = PACKET_SIZES[kind]
+        joined = b"".join([buf[:n * size] for buf in bufs])
+        total = n * len(bufs)
+        if not Mps4264Decoder._run_ok(joined, 0, kind, order, size, total).all():
+            return None
+        batch, keep = _decode_packets(joined, 0, kind, order, total)
+        if keep is not None:
+            return None
+        step = np.arange(size, (n + 1) * size, size, dtype=np.int64)
+        ends = np.array([d._base for d in decoders], np.int64)[:, None] + step
+        for d, buf in zip(decoders, bufs, strict=True):
+            d._rest = buf[n * size:]
+            d._base += n * size
+            d.packets += n
+        return batch, ends
 
     # -- internals ---------------------------------------------------------------------------------
     def _reject(self, pos: int) -> int:

@@ -31,7 +31,11 @@ from daq.instruments.scanivalve_mps4264.blocks import (
     ClockStep,
     ScanBlock,
 )
-from daq.instruments.scanivalve_mps4264.frames import CHANNELS_PER_MODULE, TEMPERATURES_PER_MODULE
+from daq.instruments.scanivalve_mps4264.frames import (
+    CHANNELS_PER_MODULE,
+    TEMPERATURES_PER_MODULE,
+    PacketBatch,
+)
 from daq.instruments.scanivalve_mps4264.streams import KEY_BITS, KEY_MASK, Part, aligned
 
 __all__ = ["FrameMerger"]
@@ -133,6 +137,29 @@ class FrameMerger:
         return self._finish(keys, first.frame_time.copy(), first.trigger_time.copy(), host,
                             pressure, temperature, status)
 
+    def assemble_in_step(self, keys: npt.NDArray[np.int64], batch: PacketBatch,
+                         host: npt.NDArray[np.int64]) -> ScanBlock:
+        """:meth:`assemble_aligned` of one batch holding every module's packets of ``keys``.
+
+        ``batch`` holds module 0's ``n = keys.size`` packets, then module 1's, ...; ``host`` is
+        each frame's latest arrival over the modules, ns. The same block, without a part per
+        module: the modules' columns are put side by side by one transposing copy.
+        """
+        n, m = keys.size, self.modules
+        pressure = batch.pressure.reshape(m, n, CHANNELS_PER_MODULE).transpose(1, 0, 2) \
+            .reshape(n, CHANNELS_PER_MODULE * m)
+        temperature = batch.temperature.reshape(m, n, TEMPERATURES_PER_MODULE) \
+            .transpose(1, 0, 2).reshape(n, TEMPERATURES_PER_MODULE * m)
+        status = np.zeros((n, m), np.int8)  # STATUS_OK
+        valve = batch.valve_cal.reshape(m, n)
+        if valve.any():
+            for k in np.flatnonzero(valve.any(axis=1)).tolist():
+                cols = slice(CHANNELS_PER_MODULE * k, CHANNELS_PER_MODULE * (k + 1))
+                pressure[valve[k], cols] = np.nan
+                status[valve[k], k] = STATUS_VALVE_CAL
+        return self._finish(keys, batch.frame_time[:n].copy(), batch.trigger_time[:n].copy(),
+                            host, pressure, temperature, status)
+
     def _finish(self, keys: npt.NDArray[np.int64], frame_time: npt.NDArray[np.float64],
                 trigger: npt.NDArray[np.float64], host: npt.NDArray[np.int64],
                 pressure: npt.NDArray[np.float64], temperature: npt.NDArray[np.float64],
@@ -196,21 +223,38 @@ class FrameMerger:
                           frame_time: npt.NDArray[np.float64]) -> None:
         """Record jumps of the frame time against ``counter / rate`` (same counter epoch)."""
         ok = np.isfinite(frame_time)
-        c, t, e = counter[ok], frame_time[ok], (keys >> KEY_BITS)[ok]
-        if self._last_time_key >= 0 and c.size:
+        epoch = int(keys[0]) >> KEY_BITS
+        last_key = self._last_time_key
+        # The usual block: every frame timed, one counter epoch (keys are sorted), the one of
+        # the last timed frame: no row to leave out and no epoch to compare.
+        one_epoch = (bool(ok.all()) and int(keys[-1]) >> KEY_BITS == epoch
+                     and (last_key < 0 or last_key >> KEY_BITS == epoch))
+        if one_epoch:
+            c, t = counter, frame_time
+        else:
+            c, t, e = counter[ok], frame_time[ok], (keys >> KEY_BITS)[ok]
+        if last_key >= 0 and c.size:
             c = np.concatenate([[self._last_time_counter], c])
             t = np.concatenate([[self._last_time], t])
-            e = np.concatenate([[self._last_time_key >> KEY_BITS], e])
+            if not one_epoch:
+                e = np.concatenate([[last_key >> KEY_BITS], e])
         if c.size:
             self._last_time, self._last_time_counter = float(t[-1]), int(c[-1])
-            self._last_time_key = int(keys[ok][-1]) if ok.any() else self._last_time_key
+            self._last_time_key = (int(keys[-1]) if one_epoch
+                                   else int(keys[ok][-1]) if ok.any() else last_key)
         if c.size < 2:
             return
-        residual = np.diff(t) - np.diff(c) / self.rate_hz
+        if one_epoch and int(c[-1]) - int(c[0]) == c.size - 1:  # consecutive: every step 1
+            residual = np.diff(t) - 1 / self.rate_hz
+        else:
+            residual = np.diff(t) - np.diff(c) / self.rate_hz
         # A quarter frame, at least 1 ms: ordinary frames sit within microseconds of the counter
         # (the s/ns fields are exact); a PTP lock or a rate mismatch is far larger.
         tol = max(0.25 / self.rate_hz, 1e-3)
-        for i in np.flatnonzero((np.abs(residual) > tol) & (np.diff(e) == 0)).tolist():
+        stepped = np.abs(residual) > tol
+        if not one_epoch:
+            stepped &= np.diff(e) == 0
+        for i in np.flatnonzero(stepped).tolist():
             step = ClockStep(int(c[i + 1]), float(residual[i]))
             self._steps_seen += 1
             if self._steps_seen <= 5:
@@ -221,6 +265,8 @@ class FrameMerger:
             self._pending_steps.append(step)
 
     def _block_time_base(self, frame_time: npt.NDArray[np.float64]) -> str:
+        if frame_time.size and frame_time.min() >= 1e9 and self._time_base == "ptp":
+            return "ptp"  # the usual block: every time finite (a NaN makes min NaN) and PTP
         finite = frame_time[np.isfinite(frame_time)]
         relative = finite < 1e9  # before 2001-09-09: a clock started at epoch 0 (no PTP time)
         base = "mixed" if relative.any() and not relative.all() else \

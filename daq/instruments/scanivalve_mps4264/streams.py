@@ -4,8 +4,10 @@ Responsibility: :class:`ModuleStream` holds what the driver keeps per module (on
 connection each): the bytes read and the host time of each read, the decoder
 (:class:`~daq.instruments.scanivalve_mps4264.frames.Mps4264Decoder`), and the unwrapping of the
 module's frame counter into merge keys (``epoch << KEY_BITS | u``); :func:`aligned` tells the
-driver when the modules' frames need no merging. Pure bookkeeping: no I/O (the driver reads the
-transport and hands the bytes over) and no clock of its own (the driver passes its times in).
+driver when the modules' frames need no merging, :func:`in_step` and :func:`continue_in_step`
+when a block can be built at once without holding them per module. Pure bookkeeping: no I/O
+(the driver reads the transport and hands the bytes over) and no clock of its own (the driver
+passes its times in).
 
 Not responsible for: reading or reconnecting the data connection, merging the modules' frames
 into blocks (:mod:`daq.instruments.scanivalve_mps4264.driver`), or decoding packets
@@ -209,3 +211,44 @@ def aligned(parts: list[Part]) -> bool:
     if hi - lo != n - 1:
         return False
     return all(k.size == n and int(k[0]) == lo and int(k[-1]) == hi for k, _, _ in parts[1:])
+
+
+def in_step(streams: list[ModuleStream], last_key: int | None) -> bool:
+    """Whether every module has bytes, holds no frame and is at the last frame emitted.
+
+    Then, if every module's bytes continue its counter one by one with the same frame numbers
+    (:func:`continue_in_step`), their frames need no per-module holding or merging: the driver
+    builds the block at once.
+    """
+    if last_key is None:
+        return False
+    for s in streams:
+        if (not s.raw or s.n_pending or s.last_raw is None
+                or (s.epoch << KEY_BITS) + s.u_last != last_key):
+            return False
+    return True
+
+
+def continue_in_step(streams: list[ModuleStream], frames: npt.NDArray[np.int64],
+                     ) -> npt.NDArray[np.int64] | None:
+    """Take frames that continue every module's counter one by one, the same for all modules.
+
+    ``frames`` are the raw counters, ``(modules, n)``, of modules :func:`in_step`. Returns their
+    merge keys, with each module's unwrapping advanced as :meth:`ModuleStream.ingest` and
+    :meth:`ModuleStream.take_upto` of them would leave it; None, touching nothing, otherwise.
+    """
+    s0 = streams[0]
+    n = frames.shape[1]
+    assert s0.last_raw is not None  # in_step
+    start = s0.last_raw + 1
+    # The frames after the last one, one by one (a uint32 wrap inside goes the general way).
+    if (start + n > U32 or any(s.last_raw != s0.last_raw for s in streams)
+            or not bool((frames == np.arange(start, start + n, dtype=np.int64)).all())):
+        return None
+    keys = (s0.epoch << KEY_BITS) + s0.u_last + np.arange(1, n + 1, dtype=np.int64)
+    last_raw, last_key = int(frames[0, -1]), int(keys[-1])
+    for s in streams:
+        s.u_last += n
+        s.last_raw = last_raw
+        s.watermark = last_key
+    return keys

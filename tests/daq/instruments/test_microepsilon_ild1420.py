@@ -206,6 +206,44 @@ def test_sequencer_unwraps_counter_and_timestamp_and_marks_gaps():
     assert list(counter) == [262151] and gaps == [Gap(262149, 1)]
 
 
+@settings(max_examples=80, deadline=None, database=None)
+@given(st.one_of(st.integers((1 << 18) - 600, (1 << 18) - 1), st.integers(0, (1 << 18) - 1)),
+       st.one_of(st.integers((1 << 32) - 30_000, (1 << 32) - 1), st.integers(0, (1 << 32) - 1)),
+       st.lists(st.integers(1, 300), min_size=1, max_size=8), st.sets(st.integers(0, 1500)),
+       st.sets(st.integers(0, 1500), max_size=2))
+def test_sequencer_shortcut_for_consecutive_batches_equals_the_general_path(c0, ts0, sizes,
+                                                                           lost, jumps):
+    """The consecutive-batch shortcut gives the general path's counters, times and gaps.
+
+    Batches that continue sample by sample (counter and timestamp wraps included) take it;
+    lost samples and long timestamp jumps send a batch the general way.
+    """
+    n = sum(sizes) + len(lost)
+    keep = np.array([i not in lost for i in range(n)])
+    ticks = np.cumsum(np.where(np.isin(np.arange(n), list(jumps)), 2_000_000, 25))
+    counter = ((c0 + np.arange(n)) % (1 << 18))[keep]
+    timestamp = ((ts0 + ticks) % (1 << 32))[keep]
+    host = (np.arange(n) * 250_000)[keep]
+
+    def run(shortcut: bool) -> list:
+        seq = Ild1420Sequencer(rate_hz=4000.0)
+        if not shortcut:
+            seq._consecutive = lambda *args: None  # type: ignore[method-assign]
+        out, start = [], 0
+        for size in sizes:
+            sl = slice(start, start + size)
+            if counter[sl].size:
+                out.append(seq.process(counter[sl], timestamp[sl], host[sl]))
+            start += size
+        return out
+
+    for (c1, t1, e1, g1), (c2, t2, e2, g2) in zip(run(True), run(False), strict=True):
+        np.testing.assert_array_equal(c1, c2)
+        np.testing.assert_array_equal(t1, t2)
+        np.testing.assert_array_equal(e1, e2)
+        assert g1 == g2
+
+
 def test_sequencer_resolves_a_gap_longer_than_the_counter_period_with_the_timestamp():
     seq = Ild1420Sequencer(rate_hz=4000.0)
     seq.process(np.array([10]), np.array([1000]), ns(1))

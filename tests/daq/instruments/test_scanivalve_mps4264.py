@@ -934,3 +934,85 @@ def test_batching_changes_the_blocks_not_the_frames(clock, modules, n, data):
                                       err_msg=name)
     assert [g for b in batched for g in b.gaps] == [g for b in single for g in b.gaps]
     assert stats_b == stats_s
+
+
+@settings(max_examples=60, deadline=None, database=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(st.integers(1, 3), st.integers(5, 60), st.sampled_from(["legacy", "eu"]), st.data())
+def test_the_in_step_path_gives_the_blocks_and_state_of_the_general_one(clock, modules, n,
+                                                                         kind, data):
+    """Blocks built at once for modules in step equal those of the per-module merge.
+
+    Lost, duplicated and split packets, garbage, lagging modules, a valve in calibration, a
+    changed serial number or rate, a counter restart: read once as the driver does (taking the
+    in-step path where it applies) and once with that path switched off, the blocks, stats, rate
+    and serial numbers are the same.
+    """
+    restart = data.draw(st.one_of(st.none(), st.integers(2, n)))
+    arrivals = []
+    for _ in range(modules):
+        lost = data.draw(st.sets(st.integers(1, n), max_size=2))
+        dup = data.draw(st.sets(st.integers(1, n), max_size=2))
+        valve = data.draw(st.sets(st.integers(1, n), max_size=2))
+        serial_change = data.draw(st.one_of(st.none(), st.integers(1, n)))
+        rate = data.draw(st.sampled_from([500.0, 250.0, float("nan")]))
+        garbage = data.draw(st.one_of(st.none(), st.integers(1, n)))
+        lag = data.draw(st.floats(0.0, 0.01))
+        module = []
+        for i in range(1, n + 1):
+            frame = i if restart is None or i < restart else i - restart + 1
+            if i in lost:
+                continue
+            t = 0.0005 + 0.002 * i + lag
+            if kind == "eu":
+                packet = eu_packet(frame, 1_767_225_600, 2_000_000 * i)
+            else:
+                serial = 4264001 if serial_change is None or i < serial_change else 4264009
+                packet = legacy_packet(frame, 1_767_225_600, 2_000_000 * i, serial=serial,
+                                       valve=int(i in valve), rate=rate if i == n else 500.0)
+            if i == garbage:
+                packet = b"\x00\x01\x02" + packet
+            cut = data.draw(st.integers(0, len(packet)))
+            module += [(t, packet[:cut]), (t + 1e-5, packet[cut:])] * (2 if i in dup else 1)
+        arrivals.append(module)
+
+    def run(general: bool) -> tuple[list[ScanBlock], dict, float, tuple]:
+        clock.t = 1000.0
+        driver = timed_driver(clock, arrivals)
+        if general:
+            driver._in_step_block = lambda: None  # type: ignore[method-assign]
+        blocks = [b for b, _ in read_all(driver, clock, timeout_s=0.3)]
+        return blocks, driver.stats, driver.rate_hz, driver.serial_numbers
+
+    fast, stats_f, rate_f, serials_f = run(False)
+    slow, stats_s, rate_s, serials_s = run(True)
+    assert [len(b) for b in fast] == [len(b) for b in slow]
+    for a, b in zip(fast, slow, strict=True):
+        for name in ("counter", "frame_time", "trigger_time", "host_time_ns", "pressure",
+                     "pitot", "temperature", "module_status"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+        assert (a.gaps, a.clock_steps, a.time_base) == (b.gaps, b.clock_steps, b.time_base)
+    assert stats_f == stats_s
+    assert (rate_f, serials_f) == (rate_s, serials_s) or math.isnan(rate_f) and math.isnan(rate_s)
+
+
+def test_modules_in_step_take_the_in_step_path(clock):
+    """Three modules sending the same frames: every block after the first is built at once."""
+    n = 200
+    arrivals = [[(0.0005 + 0.002 * f + 1e-4 * k, legacy_packet(f, 1_767_225_600, 2_000_000 * f))
+                 for f in range(1, n + 1)] for k in range(3)]
+    driver = timed_driver(clock, arrivals)
+    built: list[bool] = []
+    in_step_block = driver._in_step_block
+
+    def counted():
+        block = in_step_block()
+        built.append(block is not None)
+        return block
+
+    driver._in_step_block = counted  # type: ignore[method-assign]
+    blocks = [b for b, _ in read_all(driver, clock)]
+    np.testing.assert_array_equal(np.concatenate([b.counter for b in blocks]),
+                                  np.arange(1, n + 1))
+    # The first block sets the merge keys and the serial numbers: the general path.
+    assert built[0] is False and all(built[1:]) and len(built) == len(blocks) >= 20
