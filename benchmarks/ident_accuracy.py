@@ -30,10 +30,11 @@ not exact and the flow not smooth: 3 wind speeds (0.4/0.6/0.8 U_F) x 2 releases 
 
 Printed per row: the median and 90th percentile of |error|, the coverage of the 2-std interval
 (``IdentifiedModel.flutter``'s std: noise, structure, extrapolation, one lag more, release
-scatter), the median std, the median time of identification plus uncertainty, and the count of
-identifications without flutter below the searched speeds (counted as not covered); then the
-coverage over all rows. ``benchmarks/flutter_crb.py`` gives the Cramer-Rao bound of the
-turbulence rows.
+scatter, below a decaying release), the median std, the median time of identification plus
+uncertainty, and the count of identifications without flutter below the searched speeds
+(counted as not covered); then the coverage over all rows. ``benchmarks/flutter_crb.py`` gives
+the Cramer-Rao bound of the turbulence rows; docs/e2rfc_turbulence.md the table before and
+after, and the estimators tried.
 
 Run: ``.venv/bin/python benchmarks/ident_accuracy.py [--seeds 20] [--workers 2] [--part all]``.
 BLAS is kept single-threaded in every process, so the times are one-core times.

@@ -14,6 +14,7 @@ One subpackage per concern (``docs/architecture.md`` has the tree and the import
 Modules of their own: :mod:`daq.errors` (every exception of daq), :mod:`daq.validation` (checks
 of TOML tables), :mod:`daq.config` (rig configs), :mod:`daq.tubing_config` (its pneumatic
 tubing tables), :mod:`daq.calibration` (its calibrations: tap wiring, dead taps, Pitot, lasers,
-humid air, span), :mod:`daq.procedure` (hold and decay times) and :mod:`daq.cli` (the
+humid air, span), :mod:`daq.procedure` (hold and decay times), :mod:`daq.report_plots` (the
+flutter-derivative and flutter-diagram plots of every campaign page) and :mod:`daq.cli` (the
 ``windrig`` command line).
 """

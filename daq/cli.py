@@ -19,8 +19,6 @@ import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-import numpy as np
-
 from daq.errors import UsageError
 
 __all__ = ["main"]
@@ -46,15 +44,22 @@ def _build_parser() -> argparse.ArgumentParser:
                         help="a simulated rig config (default: rig_configs/sim_flat_plate.toml)")
 
     p_flutter = sub.add_parser(
-        "flutter", help="flutter speed of a section with a rational-function model (JSON files)"
+        "flutter", help="flutter speed of a section (2 or 3 DOF) with a rational-function model "
+                        "(JSON) or a flutter-derivative table (CSV)"
     )
     p_flutter.add_argument(
         "--section", type=Path, required=True,
-        help="JSON of SectionModel fields (B, m, I, fh, fa, zeta_h, zeta_a, ...)",
+        help="JSON of SectionModel fields (B, m, I, fh, fa, zeta_h, zeta_a, ...; fp, zeta_p, "
+             "m_p for sway)",
     )
-    p_flutter.add_argument("--model", type=Path, required=True,
-                           help='JSON of a RationalFunctionModel ({"A": ..., "d": ...}), or '
-                                "what `windrig identify --json` writes")
+    aero = p_flutter.add_mutually_exclusive_group(required=True)
+    aero.add_argument("--model", type=Path,
+                      help='JSON of a RationalFunctionModel ({"A": ..., "d": ...}), or what '
+                           "`windrig identify --json` writes")
+    aero.add_argument("--table", type=Path,
+                      help="CSV flutter-derivative table: K or Ur, then H1..H6, A1..A6, P1..P6")
+    p_flutter.add_argument("--convention", choices=("scanlan", "z_up"), default="scanlan",
+                           help="sign convention of --table (default: scanlan, windrig's)")
     p_flutter.add_argument("--u-max", type=float, default=None,
                            help="upper wind speed of the search, m/s (default: K down to 0.2)")
     p_flutter.add_argument("--json", type=Path, default=None,
@@ -296,60 +301,6 @@ def _logged(args: argparse.Namespace, command: Callable[[argparse.Namespace], in
         close_log_file(handler)
 
 
-def _identify(args: argparse.Namespace) -> int:
-    from ident.campaign import analyze_campaign
-    from ident.io import campaign_section, read_run, tubing_note
-
-    runs = [read_run(p, tubing_correction=not args.no_tubing_correction) for p in args.files]
-    section = campaign_section(runs)
-    releases = [r for run in runs for r in run.releases]
-    print(f"{len(releases)} release(s) from {len(runs)} file(s); wind speeds "
-          f"{sorted({round(r.U, 2) for r in releases})} m/s{tubing_note(runs)}")
-    analysis = analyze_campaign(releases, section, n_lags=args.n_lags, table=False)
-    model, result, spread = analysis.model, analysis.flutter, analysis.structures
-    u = analysis.uncertainty
-    diagnostics = model.diagnostics
-    print(f"structure: {diagnostics.reason}")
-    print(f"lag roots d = {np.round(model.d, 4).tolist()}")
-    for k, A_k in enumerate(model.A, start=1):
-        print(f"A{k} = {np.round(A_k, 4).tolist()}")
-    if result.speed is None:
-        print(result.summary())
-    else:
-        print(f"flutter speed {result.speed:.3f} +/- {u.total:.3f} m/s, frequency "
-              f"{result.frequency:.3f} Hz ({result.critical_mode} branch); "
-              f"{spread.summary()}")
-        parts = [f"noise {u.parametric:.3f}", f"structure {u.structure:.3f}",
-                 f"extrapolation {u.extrapolation:.3f}", f"one lag more {u.refinement:.3f}"]
-        if u.turbulence:
-            parts.insert(1, f"release scatter {u.turbulence:.3f}")
-        print("  its std (m/s): " + ", ".join(parts))
-    for label, speed, speed_std in zip(spread.labels[1:], spread.speeds[1:], spread.stds[1:],
-                                       strict=True):
-        print(f"  also within one SE: {label}: " + (
-            f"no flutter below {spread.U_max:.3g} m/s" if speed is None or speed_std is None
-            else f"flutter speed {speed:.3f} +/- {speed_std:.3f} m/s"))
-    for warning in analysis.warnings:
-        print(f"warning: {warning}")
-    if args.json is not None:
-        summary = analysis.to_dict()
-        args.json.write_text(json.dumps({
-            "files": [str(p) for p in args.files],
-            "model": summary["model"],
-            "structure": summary["reason"],
-            "release_residuals": diagnostics.release_residuals.tolist(),
-            "flutter_speed": result.speed,
-            "flutter_speed_std": analysis.flutter_std,
-            "flutter_speed_std_parts": summary["flutter_std_parts"],
-            "flutter_speed_structures": summary["flutter_structures"],
-            "flutter_frequency": result.frequency,
-            "critical_mode": result.critical_mode,
-            "warnings": summary["warnings"],
-        }, indent=2))
-        print(f"wrote {args.json}")
-    return 0
-
-
 def _reprocess(args: argparse.Namespace) -> int:
     from daq.offline.reprocess import ReprocessSettings, load_reprocess_config, reprocess
 
@@ -416,65 +367,6 @@ def _info(args: argparse.Namespace) -> int:
     info = run_info(args.file)
     print(json.dumps(info, indent=2, allow_nan=False) if args.json else format_info(info))
     return 0
-
-
-def _flutter(args: argparse.Namespace) -> int:
-    from ident import RationalFunctionModel, SectionModel, flutter
-
-    if args.u_max is not None and not args.u_max > 0:
-        raise UsageError(f"--u-max {args.u_max:g}: must be > 0 m/s")
-
-    section_data = _read_json(args.section, "section")
-    if not isinstance(section_data, dict):
-        raise UsageError(f"{args.section}: expected a JSON object of SectionModel fields")
-    try:
-        section = SectionModel.from_dict(section_data)
-    except (TypeError, ValueError) as exc:
-        raise UsageError(f"{args.section}: {exc}") from exc
-    if "rho" not in section_data:
-        print(f"note: {args.section} gives no air density rho: using {section.rho} kg/m^3")
-    model_data = _read_json(args.model, "model")
-    if isinstance(model_data, dict) and "model" in model_data:  # `windrig identify --json`
-        model_data = model_data["model"]
-    if not isinstance(model_data, dict):
-        raise UsageError(f"{args.model}: expected a JSON object, the model or `windrig "
-                          "identify --json` output")
-    try:
-        model = RationalFunctionModel.from_dict(model_data)
-    except (TypeError, ValueError, KeyError) as exc:
-        raise UsageError(f"{args.model}: not a rational-function model ({exc}); expected "
-                         '{"A": [[[...]]], "d": [...]} or `windrig identify --json` output'
-                         ) from exc
-    result = flutter.analyze(section, model, U_max=args.u_max)
-    print(result.summary())
-    frequency_domain = flutter.frequency_domain(section, model.flutter_derivatives)
-    if frequency_domain.speed is not None:
-        print(f"frequency domain (flutter derivatives of the model): U_F = "
-              f"{frequency_domain.speed:.3f} m/s")
-    if args.json is not None:
-        args.json.write_text(json.dumps({
-            "flutter_speed": result.speed, "flutter_frequency": result.frequency,
-            "critical_mode": result.critical_mode,
-            "flutter_speed_frequency_domain": frequency_domain.speed,
-            "flutter_frequency_frequency_domain": frequency_domain.frequency,
-            "U_max": result.U_max, "section": section.to_dict(), "model": model.to_dict(),
-        }, indent=2))
-        print(f"wrote {args.json}")
-    return 0
-
-
-def _read_json(path: Path, what: str) -> object:
-    """Read a JSON file named on the command line (a bad one: a usage error naming it)."""
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise UsageError(f"{path}: cannot read the {what} file: {exc.strerror or exc}"
-                          ) from exc
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise UsageError(f"{path}: not valid JSON ({exc.msg}, line {exc.lineno} column "
-                          f"{exc.colno})") from exc
 
 
 def _version() -> str:
@@ -559,7 +451,10 @@ def _dispatch(args: argparse.Namespace) -> int:
 
         return demo.run(args.out, args.config)
     if args.command == "flutter":
-        return _flutter(args)
+        from daq.offline.flutter_commands import run_flutter
+
+        return run_flutter(args.section, model_path=args.model, table_path=args.table,
+                           convention=args.convention, u_max=args.u_max, json_path=args.json)
     if args.command == "campaign":
         from daq.campaign.command import run_command  # per-subcommand import: fast --help
 
@@ -576,7 +471,10 @@ def _dispatch(args: argparse.Namespace) -> int:
         return run_check(args.config, simulate=args.simulate, json_path=args.json,
                          timeout_s=args.timeout)
     if args.command == "identify":
-        return _identify(args)
+        from daq.offline.flutter_commands import run_identify
+
+        return run_identify(args.files, json_path=args.json, n_lags=args.n_lags,
+                            tubing_correction=not args.no_tubing_correction)
     if args.command == "reprocess":
         return _reprocess(args)
     if args.command == "diagnose":

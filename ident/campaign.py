@@ -64,7 +64,7 @@ class CampaignAnalysis:
         Reduced frequencies spanning the releases (widened 20 %).
     derivatives : dict of str to ndarray
         The model's ``H1..H4, A1..A4`` at ``K``.
-    table : FlutterDerivativeTable or None
+    table : DecayDerivativeTable or None
         The indirect method's derivatives from the same decays; None when not asked for or
         when it failed (``table_error`` says why).
     table_error : str or None
@@ -81,7 +81,7 @@ class CampaignAnalysis:
     structures: e2rfc.StructureSpread
     K: FloatArray = field(repr=False)
     derivatives: dict[str, FloatArray] = field(repr=False)
-    table: fd_method.FlutterDerivativeTable | None = field(default=None, repr=False)
+    table: fd_method.DecayDerivativeTable | None = field(default=None, repr=False)
     table_error: str | None = None
 
     @property
@@ -140,7 +140,7 @@ class CampaignAnalysis:
             "flutter_std_parts": None if self.flutter_speed is None else {
                 "noise": u.parametric, "structure": u.structure,
                 "extrapolation": u.extrapolation, "one_lag_more": u.refinement,
-                "release_scatter": u.turbulence},
+                "release_scatter": u.turbulence, "below_decaying_release": u.below_decay},
             "flutter_structures": dict(zip(self.structures.labels, self.structures.speeds,
                                            strict=True)),
             "flutter_speed_low": self.structures.low,
@@ -185,7 +185,7 @@ def analyze_campaign(
     flutter, uncertainty = model.analysis(section, U_max)
     K = e2rfc.reduced_frequency_span(releases, section, K_POINTS)
     derivatives = model.flutter_derivatives(K)
-    fd_table: fd_method.FlutterDerivativeTable | None = None
+    fd_table: fd_method.DecayDerivativeTable | None = None
     table_error = None
     if table:
         try:

@@ -8,6 +8,14 @@ same self-excited forces. With generalised coordinates ``q = [h/B, alpha]``, gen
     Q(iK) = K^2 [[H4* + i H1*, H3* + i H2*],
                  [A4* + i A1*, A3* + i A2*]]
 
+and with the lateral degree of freedom (``q = [h/B, alpha, p/B]``, ``f = [L B, M, D B]``, p and
+the drag D positive downwind; ``docs/conventions.md``, "Three degrees of freedom") the 18 of
+Scanlan's later work::
+
+    Q(iK) = K^2 [[H4* + i H1*, H3* + i H2*, H6* + i H5*],
+                 [A4* + i A1*, A3* + i A2*, A6* + i A5*],
+                 [P6* + i P5*, P3* + i P2*, P4* + i P1*]]
+
 Signs are Scanlan's: h positive downward, alpha positive nose-up, L positive downward, M positive
 nose-up. Everything else in :mod:`ident` converts through the two functions here.
 """
@@ -23,6 +31,8 @@ from ident import _validate as v
 
 __all__ = [
     "FLUTTER_DERIVATIVE_NAMES",
+    "FLUTTER_DERIVATIVE_NAMES_3DOF",
+    "derivative_names",
     "flutter_derivatives_from_Q",
     "Q_from_flutter_derivatives",
     "reduced_frequency",
@@ -30,6 +40,9 @@ __all__ = [
 
 #: The eight flutter derivatives, in the order used by tables and plots.
 FLUTTER_DERIVATIVE_NAMES: tuple[str, ...] = ("H1", "H2", "H3", "H4", "A1", "A2", "A3", "A4")
+#: The 18 of three degrees of freedom, in the order used by tables and plots.
+FLUTTER_DERIVATIVE_NAMES_3DOF: tuple[str, ...] = tuple(
+    f"{letter}{i}" for letter in "HAP" for i in range(1, 7))
 
 # (row, column, part) of Q(iK)/K^2 that holds each flutter derivative.
 _LAYOUT: dict[str, tuple[int, int, str]] = {
@@ -42,6 +55,33 @@ _LAYOUT: dict[str, tuple[int, int, str]] = {
     "A2": (1, 1, "imag"),
     "A3": (1, 1, "real"),
 }
+# ... and of the ten more of three degrees of freedom.
+_LAYOUT_3DOF: dict[str, tuple[int, int, str]] = {
+    **_LAYOUT,
+    "H5": (0, 2, "imag"),
+    "H6": (0, 2, "real"),
+    "A5": (1, 2, "imag"),
+    "A6": (1, 2, "real"),
+    "P5": (2, 0, "imag"),
+    "P6": (2, 0, "real"),
+    "P2": (2, 1, "imag"),
+    "P3": (2, 1, "real"),
+    "P1": (2, 2, "imag"),
+    "P4": (2, 2, "real"),
+}
+
+
+def derivative_names(n_dof: int) -> tuple[str, ...]:
+    """Return the flutter derivatives of ``n_dof`` (2 or 3) degrees of freedom, in table order."""
+    if n_dof == 2:
+        return FLUTTER_DERIVATIVE_NAMES
+    if n_dof == 3:
+        return FLUTTER_DERIVATIVE_NAMES_3DOF
+    raise ValueError(f"n_dof must be 2 or 3, got {n_dof!r}")
+
+
+def _layout(n_dof: int) -> dict[str, tuple[int, int, str]]:
+    return _LAYOUT if n_dof == 2 else _LAYOUT_3DOF
 
 
 def reduced_frequency(K: Any) -> npt.NDArray[np.float64]:
@@ -58,28 +98,31 @@ def reduced_frequency(K: Any) -> npt.NDArray[np.float64]:
 def flutter_derivatives_from_Q(
     K: Any, Q: npt.NDArray[np.complex128]
 ) -> dict[str, npt.NDArray[np.float64]]:
-    """Convert ``Q(iK)`` to Scanlan's eight flutter derivatives.
+    """Convert ``Q(iK)`` to Scanlan's flutter derivatives (8 for 2x2, 18 for 3x3).
 
     Parameters
     ----------
     K : array_like, shape (n,)
         Reduced frequencies ``B omega / U``, > 0.
-    Q : ndarray, shape (n, 2, 2), complex
+    Q : ndarray, shape (n, 2, 2) or (n, 3, 3), complex
         Aerodynamic transfer matrix at ``p = iK``.
 
     Returns
     -------
     dict
-        Keys ``H1..H4, A1..A4``; each value has shape (n,) (non-dimensional).
+        Keys ``H1..H4, A1..A4`` (or ``H1..H6, A1..A6, P1..P6``) in sorted order; each value has
+        shape (n,) (non-dimensional).
     """
     K = reduced_frequency(np.atleast_1d(K))
     Q = np.asarray(Q, dtype=complex)
-    if Q.shape != K.shape + (2, 2):
-        raise ValueError(f"Q must have shape {K.shape + (2, 2)}, got {Q.shape}")
+    n_dof = Q.shape[-1] if Q.ndim == K.ndim + 2 else 0
+    if n_dof not in (2, 3) or Q.shape != K.shape + (n_dof, n_dof):
+        raise ValueError(f"Q must have shape {K.shape + (2, 2)} or {K.shape + (3, 3)}, got "
+                         f"{Q.shape}")
     scaled = Q / (K**2)[..., None, None]
     return {
         name: np.array(getattr(scaled[..., i, j], part), dtype=float)
-        for name, (i, j, part) in sorted(_LAYOUT.items(), key=lambda kv: kv[0])
+        for name, (i, j, part) in sorted(_layout(n_dof).items(), key=lambda kv: kv[0])
     }
 
 
@@ -91,21 +134,25 @@ def Q_from_flutter_derivatives(K: Any, fd: dict[str, Any]) -> npt.NDArray[np.com
     K : array_like, shape (n,)
         Reduced frequencies, > 0.
     fd : dict
-        Keys ``H1..H4, A1..A4`` with arrays broadcastable to shape (n,); all eight are required.
+        Keys ``H1..H4, A1..A4`` (2 DOF) or ``H1..H6, A1..A6, P1..P6`` (3 DOF) with arrays
+        broadcastable to shape (n,); all of the one set or the other are required (a table with
+        missing derivatives fills them explicitly: :mod:`ident.fd_table`).
 
     Returns
     -------
-    ndarray, shape (n, 2, 2), complex
+    ndarray, shape (n, 2, 2) or (n, 3, 3), complex
     """
     K = reduced_frequency(np.atleast_1d(K))
-    missing = [name for name in FLUTTER_DERIVATIVE_NAMES if name not in fd]
-    if missing:
-        raise ValueError(f"flutter derivatives missing: {missing}")
-    extra = sorted(set(fd) - set(FLUTTER_DERIVATIVE_NAMES))
+    n_dof = 3 if set(fd) - set(FLUTTER_DERIVATIVE_NAMES) else 2
+    names = derivative_names(n_dof)
+    extra = sorted(set(fd) - set(names))
     if extra:
         raise ValueError(f"unknown flutter derivative name(s): {extra}")
-    Q = np.zeros(K.shape + (2, 2), dtype=complex)
-    for name, (i, j, part) in _LAYOUT.items():
+    missing = [name for name in names if name not in fd]
+    if missing:
+        raise ValueError(f"flutter derivatives missing: {missing}")
+    Q = np.zeros(K.shape + (n_dof, n_dof), dtype=complex)
+    for name, (i, j, part) in _layout(n_dof).items():
         values = np.broadcast_to(v.finite_array(name, fd[name]), K.shape)
         Q[..., i, j] += values if part == "real" else 1j * values
     return Q * (K**2)[..., None, None]

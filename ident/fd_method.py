@@ -41,10 +41,9 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy.optimize import least_squares
 
 from ident import _validate as v
-from ident._selection import Candidate, select_one_se
+from ident._selection import Candidate
 from ident._threads import single_threaded_blas
 from ident.conventions import (
     FLUTTER_DERIVATIVE_NAMES,
@@ -55,14 +54,14 @@ from ident.errors import InsufficientDataError, NonUniformSamplingError, RankDef
 from ident.modal import ModalFit, fit_modes, name_modes
 from ident.release import SAMPLING_RTOL, Release
 from ident.rfc import RationalFunctionModel
-from ident.roger import _fit_entries, roger_basis
+from ident.roger_table import RogerProblem, select_structure
 from ident.section import SectionModel
 
 __all__ = [
     "Candidate",
     "FDDiagnostics",
     "FDIdentifiedModel",
-    "FlutterDerivativeTable",
+    "DecayDerivativeTable",
     "flutter_derivatives",
     "identify",
 ]
@@ -94,7 +93,7 @@ PITCH_COLUMN: tuple[str, ...] = ("H2", "H3", "A2", "A3")
 
 
 @dataclass(frozen=True, eq=False)
-class FlutterDerivativeTable:
+class DecayDerivativeTable:
     """Flutter derivatives identified from free decays, one row per wind speed.
 
     Attributes
@@ -164,7 +163,7 @@ def flutter_derivatives(
     releases: Sequence[Release],
     section: SectionModel,
     still_air: Sequence[tuple[Any, Any, Any]] | None = None,
-) -> FlutterDerivativeTable:
+) -> DecayDerivativeTable:
     """Identify flutter derivatives from the displacements of free decays at several wind speeds.
 
     Releases whose wind speeds agree within 2 % form one row of the table: each is identified on
@@ -186,7 +185,7 @@ def flutter_derivatives(
 
     Returns
     -------
-    FlutterDerivativeTable
+    DecayDerivativeTable
 
     Raises
     ------
@@ -225,7 +224,7 @@ def flutter_derivatives(
     groups = _group_by_speed(releases)
     rows = [_group_row(group, section, K_0, C_0) for group in groups]
     names = FLUTTER_DERIVATIVE_NAMES
-    return FlutterDerivativeTable(
+    return DecayDerivativeTable(
         U=np.array([row["U"] for row in rows]),
         K_h=np.array([row["K_h"] for row in rows]),
         K_a=np.array([row["K_a"] for row in rows]),
@@ -420,7 +419,7 @@ class FDIdentifiedModel(RationalFunctionModel):
 
     Attributes
     ----------
-    table : FlutterDerivativeTable
+    table : DecayDerivativeTable
         The flutter derivatives it was fitted to.
     diagnostics : FDDiagnostics
         Chosen structure and the candidates tried.
@@ -429,7 +428,7 @@ class FDIdentifiedModel(RationalFunctionModel):
     __slots__ = ("table", "diagnostics")
 
     def __init__(
-        self, A: FloatArray, d: FloatArray, table: FlutterDerivativeTable,
+        self, A: FloatArray, d: FloatArray, table: DecayDerivativeTable,
         diagnostics: FDDiagnostics,
     ) -> None:
         super().__init__(A, d)
@@ -513,35 +512,14 @@ def identify(
         raise ValueError(f"n_lags must be an integer in 0..3 or None, got {n_lags!r}")
     _check_wind_speeds(releases)  # before the modal fits: refuse cheaply
     table = flutter_derivatives(releases, section, still_air)
-    problem = _RogerProblem(*table.Q_entries())
-
-    lags = range(4) if n_lags is None else [n_lags]
-    a3_options = (True, False) if with_A3 is None else (with_A3,)
-    candidates: list[Candidate] = []
-    previous: FloatArray | None = None  # lag roots of the best structure with one lag fewer
-    for m in lags:
-        starts = problem.starts(m, previous)
-        found: list[tuple[Candidate, FloatArray]] = []
-        for a3 in a3_options:
-            candidate, d_found = problem.candidate(m, a3, starts)
-            candidates.append(candidate)
-            if d_found is not None:
-                found.append((candidate, d_found))
-                starts = [d_found, *starts]  # the other A3 option also tries these roots
-        previous = min(found, key=lambda f: f[0].cv_error)[1] if found else None
-    usable = [c for c in candidates if not c.note]
-    if not usable:
-        notes = "; ".join(f"n_lags={c.n_lags}, A3={c.with_A3}: {c.note}" for c in candidates)
-        raise RankDeficiencyError(
-            f"no Roger structure is determined by this flutter-derivative table ({notes})"
-        )
-    chosen, reason = select_one_se(usable, given=n_lags is not None and with_A3 is not None)
-    model = problem.fit(np.array(chosen.d), chosen.with_A3)
+    problem = RogerProblem(*table.Q_entries(), max_condition=MAX_CONDITION,
+                           row_name="wind speeds")
+    model, chosen, reason, candidates = select_structure(problem, n_lags, with_A3)
     diagnostics = FDDiagnostics(
         n_lags=chosen.n_lags,
         with_A3=chosen.with_A3,
         reason=reason,
-        candidates=tuple(candidates),
+        candidates=candidates,
         relative_residual=problem.relative_residual(model),
     )
     return FDIdentifiedModel(model.A, model.d, table, diagnostics)
@@ -561,129 +539,3 @@ def _check_wind_speeds(releases: list[Release]) -> None:
             "speeds (in practice many), one row per speed; this is the method's known weakness "
             "(E2RFC, ident.e2rfc.identify, works from two)"
         )
-
-
-class _RogerProblem:
-    """Roger fit of ``Q`` samples (each entry at its own K), for any structure.
-
-    Each entry's residual is scaled by the inverse of that entry's RMS over the table, so that the
-    shared lag roots and the held-out score weigh the four entries alike whatever their size
-    (in ``q = [h/B, alpha]`` coordinates ``Q11`` grows like ``K`` and ``Q22`` is ~4 times smaller
-    than ``Q12`` for a plate). The scale does not change each entry's own linear solution.
-    """
-
-    def __init__(self, K: FloatArray, Q: ComplexArray) -> None:
-        self.K = K
-        self.Q = Q
-        scale = np.sqrt(np.mean(np.abs(Q) ** 2, axis=0))  # (2, 2)
-        self.entry_weight = 1.0 / np.where(scale > 0.0, scale, 1.0)
-        self.n_speeds = K.shape[0]
-
-    def fit(
-        self, d: FloatArray, with_A3: bool, rows: Any = slice(None), *, check_rank: bool = True
-    ) -> RationalFunctionModel:
-        """Coefficients for fixed lag roots, on some rows (wind speeds) of the table."""
-        return _fit_entries(self.K[rows], self.Q[rows], d, with_A3, check_rank=check_rank)
-
-    def residual(self, model: RationalFunctionModel, rows: Any = slice(None)) -> ComplexArray:
-        """Scaled residual ``w_ij (Q_model - Q)``, shape (n_rows, 2, 2), complex."""
-        K = self.K[rows]
-        Q_model = np.empty(K.shape, dtype=complex)
-        for j in range(2):  # both rows of a column share their K
-            Q_model[:, :, j] = model.Q(1j * K[:, 0, j])[:, :, j]
-        return np.asarray((Q_model - self.Q[rows]) * self.entry_weight, dtype=complex)
-
-    def relative_residual(self, model: RationalFunctionModel) -> FloatArray:
-        """RMS scaled residual per entry, shape (2, 2)."""
-        return np.asarray(np.sqrt(np.mean(np.abs(self.residual(model)) ** 2, axis=0)), dtype=float)
-
-    def condition(self, d: FloatArray, with_A3: bool) -> float:
-        """Largest condition number over the entries of the column-scaled real design."""
-        keep = [0, 1] + ([2] if with_A3 else []) + list(range(3, 3 + d.size))
-        worst = 0.0
-        for j in range(2):  # both rows of a column share their K, hence their design
-            basis = roger_basis(self.K[:, 0, j], d, with_A3)[:, keep]
-            design = np.vstack([basis.real, basis.imag])
-            norms = np.linalg.norm(design, axis=0)
-            if np.any(norms == 0.0):
-                return math.inf
-            worst = max(worst, float(np.linalg.cond(design / norms)))
-        return worst
-
-    def starts(self, n_lags: int, previous: FloatArray | None) -> list[FloatArray]:
-        """Start values of the lag-root search for ``n_lags`` lags.
-
-        Three evenly spread sets over (and a little beyond) the reduced frequencies the table
-        covers; with the roots found for one lag fewer, also those plus one new root at three
-        places (nested starts, which usually converge fastest).
-        """
-        if n_lags == 0:
-            return []
-        K_lo, K_hi = float(self.K.min()), float(self.K.max())
-        spread = np.geomspace(K_lo / 3.0, 3.0 * K_hi, n_lags + 2)[1:-1]
-        out = [spread, spread * 0.3, spread * 3.0]
-        if previous is not None and previous.size == n_lags - 1:
-            new_roots = np.geomspace(K_lo / 3.0, 3.0 * K_hi, 3)
-            out += [np.sort(np.append(previous, r)) for r in new_roots]
-        return out
-
-    def _search(self, n_lags: int, with_A3: bool, starts: list[FloatArray]) -> FloatArray:
-        """Lag roots by variable projection over ``log d`` (coefficients solved inside)."""
-        if n_lags == 0:
-            return np.zeros(0)
-        K_lo, K_hi = float(self.K.min()), float(self.K.max())
-        lo, hi = math.log(K_lo / 20.0), math.log(20.0 * K_hi)
-
-        def residual(theta: FloatArray) -> FloatArray:
-            model = self.fit(np.exp(theta), with_A3, check_rank=False)
-            r = self.residual(model)
-            return np.concatenate([r.real.ravel(), r.imag.ravel()])
-
-        best = None
-        for start in starts:
-            theta0 = np.clip(np.log(start), lo + 1e-6, hi - 1e-6)
-            sol = least_squares(residual, theta0, bounds=(lo, hi), xtol=1e-10, ftol=1e-12,
-                                max_nfev=60 * (n_lags + 1))
-            if best is None or sol.cost < best.cost:
-                best = sol
-        assert best is not None
-        return np.sort(np.exp(best.x))
-
-    def candidate(
-        self, n_lags: int, with_A3: bool, starts: list[FloatArray]
-    ) -> tuple[Candidate, FloatArray | None]:
-        """Search the lag roots of one structure and score it by leave-one-speed-out error."""
-        per_entry = 2 + int(with_A3) + n_lags
-        n_params = 4 * per_entry + n_lags
-
-        def skipped(note: str, d: tuple[float, ...] = ()) -> tuple[Candidate, None]:
-            return Candidate(n_lags, with_A3, d, math.inf, math.inf, n_params, note), None
-
-        # Each wind speed gives every entry one complex (two real) equations.
-        if 2 * (self.n_speeds - 1) < per_entry or 8 * self.n_speeds < n_params:
-            return skipped(
-                f"too few wind speeds ({self.n_speeds}) for {per_entry} coefficients per entry "
-                "with one speed held out"
-            )
-        d = self._search(n_lags, with_A3, starts)
-        roots = tuple(float(x) for x in d)
-        if n_lags and np.min(np.diff(np.concatenate([[0.0], d]))) <= 1e-6 * d.max():
-            return skipped("lag roots merged: fewer lags describe the table", roots)
-        cond = self.condition(d, with_A3)
-        if cond > MAX_CONDITION:
-            return skipped(f"ill-conditioned (condition number {cond:.2g})", roots)
-        try:
-            errors = self._cross_validate(d, with_A3)
-        except RankDeficiencyError as err:
-            return skipped(f"rank deficient: {err}", roots)
-        return Candidate(n_lags, with_A3, roots, float(errors.mean()),
-                           float(errors.std(ddof=1) / math.sqrt(errors.size)), n_params), d
-
-    def _cross_validate(self, d: FloatArray, with_A3: bool) -> FloatArray:
-        """Mean squared scaled error of each held-out wind speed (lag roots kept fixed)."""
-        errors = np.empty(self.n_speeds)
-        for k in range(self.n_speeds):
-            train = np.delete(np.arange(self.n_speeds), k)
-            model = self.fit(d, with_A3, train)
-            errors[k] = float(np.mean(np.abs(self.residual(model, [k])) ** 2))
-        return errors

@@ -31,7 +31,8 @@ from ident.statespace import AeroelasticSystem
 
 __all__ = ["FlutterResult", "analyze", "default_U_max", "frequency_domain", "speed_sensitivity"]
 
-MODE_NAMES: tuple[str, str] = ("heave", "pitch")
+#: Branch names, in the order of the coordinates (a 2-DOF section has the first two).
+MODE_NAMES: tuple[str, ...] = ("heave", "pitch", "sway")
 
 #: Lowest reduced frequency the default search range reaches for the faster structural mode.
 #: Below K ~ 0.2 almost no section-model test has data, so a prediction there is extrapolation.
@@ -52,15 +53,15 @@ class FlutterResult:
     frequency : float or None
         Flutter frequency, Hz (None without flutter).
     critical_mode : str or None
-        Which structural mode goes unstable: ``"heave"`` or ``"pitch"`` (the branch is named by the
-        degree of freedom that dominates it in still air).
+        Which structural mode goes unstable: ``"heave"``, ``"pitch"`` or ``"sway"`` (the branch is
+        named by the degree of freedom that dominates it in still air).
     U_max : float
         Upper end of the searched wind-speed range, m/s.
     U : ndarray, shape (n,)
         Wind speeds of the mode curves, m/s.
-    frequencies : ndarray, shape (n, 2)
+    frequencies : ndarray, shape (n, n_dof)
         Damped frequency of each mode against U, Hz (0 where a mode is overdamped).
-    damping : ndarray, shape (n, 2)
+    damping : ndarray, shape (n, n_dof)
         Damping ratio ``-Re(lambda)/|lambda|`` of each mode against U.
     mode_names : tuple of str
         Column names of ``frequencies`` and ``damping``.
@@ -80,7 +81,7 @@ class FlutterResult:
     U: npt.NDArray[np.float64] = field(repr=False)
     frequencies: npt.NDArray[np.float64] = field(repr=False)
     damping: npt.NDArray[np.float64] = field(repr=False)
-    mode_names: tuple[str, ...] = MODE_NAMES
+    mode_names: tuple[str, ...] = MODE_NAMES[:2]
     divergence_speed: float | None = None
     method: str = "state-space"
     reduced_frequency: float | None = None
@@ -107,8 +108,9 @@ class FlutterResult:
 def default_U_max(section: SectionModel) -> float:
     """Default upper wind speed of a flutter search, m/s.
 
-    The range reaches a reduced frequency of 0.2 for the faster structural mode, i.e. a reduced
-    velocity ``U / (f B)`` of about 31, beyond the flutter point of any practical deck.
+    The range reaches a reduced frequency of 0.2 for the faster of heave and pitch, i.e. a
+    reduced velocity ``U / (f B)`` of about 31, beyond the flutter point of any practical deck.
+    (Sway is left out: it is the slowest mode of most rigs and rarely the one that flutters.)
     """
     return 2.0 * math.pi * max(section.fh, section.fa) * section.B / _K_MIN_DEFAULT
 
@@ -133,17 +135,18 @@ def _follow(
 def _initial_branches(
     section: SectionModel, model: RationalFunctionModel, U0: float
 ) -> npt.NDArray[np.complex128]:
-    """Return the two structural eigenvalues at ``U0``, ordered (heave, pitch)."""
+    """Return the structural eigenvalues at ``U0``, ordered (heave, pitch(, sway))."""
     system = AeroelasticSystem(section, model, U0)
     lam, vec = np.linalg.eig(system.matrix())
+    n = section.n_dof
     # Lag states have real eigenvalues; the structural ones are the complex pairs.
     oscillatory = np.flatnonzero(lam.imag > 1e-9 * np.abs(lam))
-    if oscillatory.size != 2:
+    if oscillatory.size != n:
         raise ValueError(
-            f"expected 2 oscillatory still-air modes, found {oscillatory.size}: the section is "
+            f"expected {n} oscillatory still-air modes, found {oscillatory.size}: the section is "
             "overdamped or the aerodynamic model dominates the structure at low wind speed"
         )
-    order = list(name_modes(vec[0:2, oscillatory].T, section.mass_matrix()))
+    order = list(name_modes(vec[0:n, oscillatory].T, section.mass_matrix()))
     return np.asarray(lam[oscillatory[order]], dtype=complex)
 
 
@@ -170,7 +173,7 @@ def analyze(
         Upper end of the search, m/s; default :func:`default_U_max`.
     n_points : int, optional
         Grid points of the mode curves (>= 20). The grid must be fine enough to follow crossing
-        branches; 400 is ample for two-degree-of-freedom sections.
+        branches; 400 is ample for section models of two or three degrees of freedom.
 
     Returns
     -------
@@ -192,7 +195,7 @@ def analyze(
     U_max = default_U_max(section) if U_max is None else v.positive("U_max", U_max)
     n_points = _grid_size(n_points)
     U = np.linspace(0.0, U_max, n_points)
-    branches = np.empty((n_points, 2), dtype=complex)
+    branches = np.empty((n_points, section.n_dof), dtype=complex)
     branches[0] = _initial_branches(section, model, 0.0)
     for i in range(1, n_points):
         # Linear extrapolation of each branch makes crossing branches easy to tell apart.
@@ -227,7 +230,8 @@ def analyze(
         U=U,
         frequencies=branches.imag / (2 * math.pi),
         damping=-branches.real / np.abs(branches),
-        divergence_speed=_divergence_speed(section, model.A[0], U),
+        mode_names=MODE_NAMES[: section.n_dof],
+        divergence_speed=_divergence_speed(section, model.A[0, :section.n_dof, :section.n_dof], U),
         method="state-space",
         reduced_frequency=_reduced_frequency(section, speed, frequency),
     )
@@ -281,13 +285,17 @@ def _frequency_roots(
     With ``U = B omega / K`` the flutter equation is the quadratic eigenvalue problem
     ``[-omega^2 (Ms + rho/2 B^4 Q(iK)/K^2) + i omega Cs + Ks] q = 0``; growth means Im(omega) < 0.
     """
+    n = section.n_dof
     Q = Q_from_flutter_derivatives(np.array([K]), fd(np.array([K])))[0]
-    M = section.mass_matrix() + 0.5 * section.rho * section.B**4 * Q / K**2
+    if Q.shape[-1] < n:
+        raise ValueError("the section has a lateral spring (3 degrees of freedom) but the flutter "
+                         "derivatives are the 8 of heave and pitch: give all 18")
+    M = section.mass_matrix() + 0.5 * section.rho * section.B**4 * Q[:n, :n] / K**2
     M_inv = np.linalg.inv(M)
-    companion = np.zeros((4, 4), dtype=complex)
-    companion[0:2, 2:4] = np.eye(2)
-    companion[2:4, 0:2] = -M_inv @ section.stiffness_matrix()
-    companion[2:4, 2:4] = -M_inv @ section.damping_matrix()
+    companion = np.zeros((2 * n, 2 * n), dtype=complex)
+    companion[0:n, n:] = np.eye(n)
+    companion[n:, 0:n] = -M_inv @ section.stiffness_matrix()
+    companion[n:, n:] = -M_inv @ section.damping_matrix()
     omega = -1j * np.linalg.eigvals(companion)  # lambda = i omega
     return np.asarray(np.sort_complex(omega[omega.real > 0.0]), dtype=complex)
 
@@ -310,9 +318,11 @@ def frequency_domain(
     ----------
     section : SectionModel
     flutter_derivatives : callable
-        ``f(K) -> dict`` of ``H1..H4, A1..A4`` arrays at an array of reduced frequencies (for
-        example :func:`ident.flat_plate.flutter_derivatives` or
-        :meth:`RationalFunctionModel.flutter_derivatives`).
+        ``f(K) -> dict`` of ``H1..H4, A1..A4`` arrays (all 18 ``H1..P6`` for a section with
+        sway) at an array of reduced frequencies (for example
+        :func:`ident.flat_plate.flutter_derivatives`,
+        :meth:`RationalFunctionModel.flutter_derivatives` or a table's
+        :meth:`ident.fd_table.FlutterDerivativeTable.interpolator`).
     K_range : (float, float)
         Reduced frequencies searched, low and high, > 0.
     n_points : int
@@ -335,13 +345,15 @@ def frequency_domain(
     n_points = _grid_size(n_points)
     K = np.geomspace(K_hi, K_lo, n_points)  # wind speed rises as K falls
 
+    n = section.n_dof
+
     def roots(k: float) -> npt.NDArray[np.complex128]:
         omega = _frequency_roots(section, flutter_derivatives, k)
-        if omega.size != 2:
-            raise ValueError(f"expected 2 oscillatory roots at K = {k:.4g}, found {omega.size}")
+        if omega.size != n:
+            raise ValueError(f"expected {n} oscillatory roots at K = {k:.4g}, found {omega.size}")
         return omega
 
-    branches = np.empty((n_points, 2), dtype=complex)
+    branches = np.empty((n_points, n), dtype=complex)
     branches[0] = roots(K[0])
     for i in range(1, n_points):
         cost = np.abs(branches[i - 1][:, None] - roots(K[i])[None, :])
@@ -352,7 +364,7 @@ def frequency_domain(
     branches = branches[:, order]
 
     candidates: list[tuple[float, float, str]] = []
-    for j in range(2):
+    for j in range(n):
         growth = branches[:, j].imag
         flips = np.flatnonzero((growth[:-1] > 0.0) & (growth[1:] <= 0.0))
         for i in (int(x) for x in flips):
@@ -380,6 +392,7 @@ def frequency_domain(
         U=U_grid.mean(axis=1),
         frequencies=branches.real / (2 * math.pi),
         damping=branches.imag / np.abs(branches),
+        mode_names=MODE_NAMES[:n],
         method="frequency-domain",
         reduced_frequency=_reduced_frequency(section, speed, frequency),
     )
@@ -388,8 +401,9 @@ def frequency_domain(
 def _frequency_domain_names(
     section: SectionModel, omega: npt.NDArray[np.complex128]
 ) -> list[int]:
-    """Order (heave, pitch) two roots at the highest K (near still air) by frequency proximity."""
-    structural = np.array([section.omega_h, section.omega_a])
+    """Order the roots at the highest K (near still air) (heave, pitch(, sway)) by frequency."""
+    structural = np.array([section.omega_h, section.omega_a, section.omega_p or 0.0]
+                          [: section.n_dof])
     _, cols = linear_sum_assignment(np.abs(structural[:, None] - omega.real[None, :]))
     return [int(c) for c in cols]
 
@@ -413,7 +427,7 @@ def speed_sensitivity(
 
     Returns
     -------
-    dU_dA : ndarray, shape (3 + m, 2, 2)
+    dU_dA : ndarray, shape (3 + m, n_dof, n_dof)
         m/s per unit change of each coefficient.
     dU_dd : ndarray, shape (m,)
         m/s per unit change of each lag root.

@@ -13,9 +13,9 @@ Pneumatic tubing: ``/entry/sync/lift`` and ``moment`` are the forces of the pres
 measured at the scanner. When the file records its taps' tubing (``/entry/metadata/tubing``),
 each release's forces are corrected for it by default (:func:`ident.tubing.force_correction` on
 the release's pressures plus up to :data:`TUBING_LEAD_S` of the held model before it, the
-tubes' air at the run's measured density and 20 C); ``tubing_correction=False`` reads them as
-measured. Dead taps (``/entry/calibration/taps/dead``) are left out of the correction as they
-are out of the forces.
+tubes' air at the run's measured density and its barometer's median temperature, 20 C without
+one); ``tubing_correction=False`` reads them as measured. Dead taps
+(``/entry/calibration/taps/dead``) are left out of the correction as they are out of the forces.
 """
 
 from __future__ import annotations
@@ -46,9 +46,11 @@ _LAYOUT_KEYS = {"shape", "B", "D", "taps_per_face", "n_taps", "vertices",
 #: Seconds of the held, steady model before a release included in its tubing correction, so
 #: that the tubes' response to the release itself lies inside the corrected record.
 TUBING_LEAD_S = 1.0
-#: Temperature of the air in the tubes when correcting, K (the file records density only; 10 K
-#: off changes the 1 m, 1 mm tube's lag at 4 Hz by about 1 %).
+#: Temperature of the air in the tubes when correcting a file without a barometer's
+#: temperature, K (10 K off changes the 1 m, 1 mm tube's lag at 4 Hz by about 1 %).
 TUBING_TEMPERATURE_K = 293.15
+#: Plausible tunnel air temperatures, K: a barometer reading outside is not used for the tubes.
+_TEMPERATURE_RANGE_K = (233.15, 333.15)
 
 
 class FileFormatError(IdentError, ValueError):
@@ -129,6 +131,7 @@ def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True) ->
             rig_name = _text(f["entry"].attrs.get("rig_name", ""))
             part = "/entry/metadata/tubing"
             tubing_meta = (_group_dict(f[part]) if part in f else None)
+            tube_temperature = _barometer_temperature(f) if tubing_meta is not None else None
             if tubing_meta is not None and tubing_correction:
                 part = "/entry/sync/pressure"
                 sync["pressure"] = np.asarray(f[part][()], dtype=float)
@@ -146,7 +149,8 @@ def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True) ->
     section, depth = _section(config_text, path, sync["rho"])
     tubing = None
     if tubing_meta is not None:
-        tubing, integration = _tubing(tubing_meta, config_text, path, section.rho, dead)
+        tubing, integration = _tubing(tubing_meta, config_text, path, section.rho, dead,
+                                      tube_temperature or TUBING_TEMPERATURE_K)
         if tubing_correction:
             if dead.size and "pressure" in sync:  # weight 0, but a dead tap's NaN would spread
                 sync["pressure"][:, dead[(dead >= 0) & (dead < sync["pressure"].shape[1])]] = 0.0
@@ -169,9 +173,34 @@ def _group_dict(group: Any) -> dict[str, Any]:
     return out
 
 
+def _barometer_temperature(f: Any) -> float | None:
+    """Return the median air temperature the run's barometer measured, K (None without one).
+
+    The barometer's raw stream (``/entry/instrument/<device>``, channels ``pressure``,
+    ``temperature``, ...) is the only record of the temperature; readings outside
+    ``_TEMPERATURE_RANGE_K`` (a disconnected probe) are not used.
+    """
+    instruments = f.get("entry/instrument")
+    if instruments is None:
+        return None
+    for group in instruments.values():
+        names = [_text(c) for c in group.attrs.get("channel_names", [])]
+        if "temperature" not in names or "pressure" not in names or "value" not in group:
+            continue
+        column = np.asarray(group["value"][:, names.index("temperature")], dtype=float)
+        low, high = _TEMPERATURE_RANGE_K
+        valid = column[np.isfinite(column) & (column > low) & (column < high)]
+        if valid.size:
+            return float(np.median(valid))
+    return None
+
+
 def _tubing(meta: dict[str, Any], config_text: str, path: str, rho: float,
-            dead: np.ndarray) -> tuple[TubingSet, np.ndarray]:
-    """Return the recorded tubing (air at the run's density) and the taps' integration matrix.
+            dead: np.ndarray, temperature_k: float) -> tuple[TubingSet, np.ndarray]:
+    """Return the recorded tubing and the taps' integration matrix.
+
+    The tubes' air has the run's density ``rho`` (kg/m^3) at ``temperature_k`` (K): the
+    barometer's temperature, or :data:`TUBING_TEMPERATURE_K` without one.
 
     The matrix is that of the forces the file holds: the live taps' (``dead`` left out, their
     lengths shared by their neighbours, :meth:`ident.taps.TapLayout.without`), zero for the
@@ -187,8 +216,7 @@ def _tubing(meta: dict[str, Any], config_text: str, path: str, rho: float,
     for group in groups:
         if isinstance(group.get("taps"), np.ndarray):
             group["taps"] = group["taps"].tolist()
-    air = Air(pressure_pa=rho * R_DRY_AIR * TUBING_TEMPERATURE_K,
-              temperature_k=TUBING_TEMPERATURE_K)
+    air = Air(pressure_pa=rho * R_DRY_AIR * temperature_k, temperature_k=temperature_k)
     try:
         tubing = from_description(groups, layout.n_taps, air)
     except (TypeError, ValueError) as exc:

@@ -123,31 +123,32 @@ class ModalFit:
         return np.asarray((E @ (gain[:, None] * self.amplitudes)).real, dtype=float)
 
 
-def name_modes(shapes: ComplexArray, mass_matrix: FloatArray) -> tuple[int, int]:
-    """Return the indices of the heave- and pitch-dominated modes, by kinetic-energy share.
+def name_modes(shapes: ComplexArray, mass_matrix: FloatArray) -> tuple[int, ...]:
+    """Return the indices of the heave-, pitch- (and sway-) dominated modes by kinetic energy.
 
     ``|phi|^2`` weighted by the diagonal of the mass matrix is each coordinate's share of a
-    mode's kinetic energy; comparing shares (not raw amplitudes) makes ``h/B`` and ``alpha``
-    comparable. With more than two modes, the two that are most heave and most pitch (jointly,
-    an assignment) are named.
+    mode's kinetic energy; comparing shares (not raw amplitudes) makes ``h/B``, ``alpha`` and
+    ``p/B`` comparable. With more modes than coordinates, the ones that are most heave, most
+    pitch (and most sway) jointly, an assignment, are named.
 
     Parameters
     ----------
-    shapes : ndarray, complex, shape (n_modes, 2)
-        Each mode's amplitudes of ``[h/B, alpha]`` (any complex scale per mode), n_modes >= 2.
-    mass_matrix : ndarray, shape (2, 2)
-        The section's mass matrix for ``q = [h/B, alpha]`` (:meth:`SectionModel.mass_matrix`).
+    shapes : ndarray, complex, shape (n_modes, n)
+        Each mode's amplitudes of ``[h/B, alpha]`` or ``[h/B, alpha, p/B]`` (any complex scale
+        per mode), n_modes >= n.
+    mass_matrix : ndarray, shape (n, n)
+        The section's mass matrix for those coordinates (:meth:`SectionModel.mass_matrix`).
 
     Returns
     -------
-    (int, int)
-        Row of ``shapes`` of the heave mode, then of the pitch mode.
+    tuple of int
+        Row of ``shapes`` of the heave mode, then of the pitch mode (then of the sway mode).
     """
     share = np.abs(np.asarray(shapes).T) ** 2 * np.diag(mass_matrix)[:, None]  # (coord, mode)
     share = share / share.sum(axis=0, keepdims=True)
-    rows, cols = linear_sum_assignment(-share)  # row 0 = heave, row 1 = pitch
+    rows, cols = linear_sum_assignment(-share)  # row 0 = heave, row 1 = pitch, row 2 = sway
     by_row = dict(zip(rows.tolist(), cols.tolist(), strict=True))
-    return int(by_row[0]), int(by_row[1])
+    return tuple(int(by_row[i]) for i in range(share.shape[0]))
 
 
 def noise_std(x: FloatArray) -> FloatArray:

@@ -46,6 +46,9 @@ class Release:
         integrated surface pressures.
     U : float
         Mean wind speed, m/s, > 0.
+    p, drag : array_like, shape (n,), optional
+        Sway (m, positive downwind) and drag (N/m, positive downwind) of a release with three
+        degrees of freedom: both or neither (default: a 2-DOF release).
     rho : float, optional
         Air density, kg/m^3 (None: use the section's).
     meta : dict, optional
@@ -70,10 +73,15 @@ class Release:
     U: float
     rho: float | None = None
     meta: dict[str, Any] = field(default_factory=dict)
+    p: FloatArray | None = None
+    drag: FloatArray | None = None
 
     def __post_init__(self) -> None:
+        if (self.p is None) != (self.drag is None):
+            raise ValueError("a release with sway needs both p and drag (or neither)")
         arrays = {}
-        for name in ("t", "h", "alpha", "lift", "moment"):
+        names = ("t", "h", "alpha", "lift", "moment") + (() if self.p is None else ("p", "drag"))
+        for name in names:
             arr = np.array(getattr(self, name), dtype=float)  # a private copy
             if arr.ndim != 1:
                 raise ValueError(f"{name} must be a 1-D array, got shape {arr.shape}")
@@ -113,6 +121,21 @@ class Release:
             )
 
     @property
+    def n_dof(self) -> int:
+        """Degrees of freedom of the record: 2 (heave, pitch) or 3 (with sway)."""
+        return 2 if self.p is None else 3
+
+    def coordinates(self, B: float) -> FloatArray:
+        """Return ``q = [h/B, alpha(, p/B)]``, shape (n, n_dof), for a deck width ``B`` (m)."""
+        columns = [self.h / B, self.alpha] + ([] if self.p is None else [self.p / B])
+        return np.column_stack(columns)
+
+    def generalised_forces(self, B: float) -> FloatArray:
+        """Return ``f = [L B, M(, D B)]``, shape (n, n_dof), N m/m, for a deck width ``B`` (m)."""
+        columns = [self.lift * B, self.moment] + ([] if self.drag is None else [self.drag * B])
+        return np.column_stack(columns)
+
+    @property
     def dt(self) -> float:
         """Sampling interval, s."""
         return float((self.t[-1] - self.t[0]) / (self.t.size - 1))
@@ -131,9 +154,12 @@ class Release:
     def from_simulation(cls, sim: Any, *, meta: dict[str, Any] | None = None) -> Release:
         """Build a release from a :class:`simulators.tunnel.SimulatedRelease` (t >= 0 part only)."""
         after = sim.t >= 0.0
+        sway = getattr(sim, "p", None)
         return cls(
             t=sim.t[after], h=sim.h[after], alpha=sim.alpha[after], lift=sim.lift[after],
             moment=sim.moment[after], U=sim.U, rho=sim.rho, meta=dict(meta or {}),
+            p=None if sway is None else sway[after],
+            drag=None if sway is None else sim.drag[after],
         )
 
 

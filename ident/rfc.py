@@ -1,9 +1,10 @@
 """Roger's rational-function model of the self-excited forces (the object E2RFC identifies).
 
-``Q(p) = A1 + A2 p + A3 p^2 + sum_l A_{l+3} p / (p + d_l)`` with real 2x2 matrices ``A_k`` and lag
-roots ``d_l > 0`` shared by all four entries (``docs/conventions.md``,
-"Reduced frequency and the self-excited forces"). The model is a value: it is
-immutable, validated on construction, and serialisable to JSON through :meth:`to_dict`.
+``Q(p) = A1 + A2 p + A3 p^2 + sum_l A_{l+3} p / (p + d_l)`` with real 2x2 matrices ``A_k`` (3x3
+with sway: ``docs/conventions.md``, "Three degrees of freedom") and lag roots ``d_l > 0`` shared by
+all entries (``docs/conventions.md``, "Reduced frequency and the self-excited forces"). The model
+is a value: it is immutable, validated on construction, and serialisable to JSON through
+:meth:`to_dict`.
 """
 
 from __future__ import annotations
@@ -24,9 +25,10 @@ class RationalFunctionModel:
 
     Parameters
     ----------
-    A : array_like, shape (3 + m, 2, 2)
+    A : array_like, shape (3 + m, n, n), n = 2 or 3
         Real coefficient matrices ``A1, A2, A3, A4 .. A_{m+3}`` (non-dimensional), for the
-        coordinates ``q = [h/B, alpha]`` and forces ``[L B, M]``.
+        coordinates ``q = [h/B, alpha]`` and forces ``[L B, M]`` (n = 2), or
+        ``q = [h/B, alpha, p/B]`` and ``[L B, M, D B]`` (n = 3).
     d : array_like, shape (m,)
         Lag roots, non-dimensional (in units of ``U/B``), each > 0. ``m = 0`` is allowed.
 
@@ -65,11 +67,12 @@ class RationalFunctionModel:
             raise ValueError(f"d must be a 1-D array of lag roots, got shape {d_arr.shape}")
         if d_arr.size and np.any(d_arr <= 0.0):
             raise ValueError(f"d must be > 0 everywhere, got minimum {float(d_arr.min())!r}")
-        expected = (3 + d_arr.size, 2, 2)
+        n = A_arr.shape[-1] if A_arr.ndim == 3 and A_arr.shape[-1] in (2, 3) else 2
+        expected = (3 + d_arr.size, n, n)
         if A_arr.shape != expected:
             raise ValueError(
-                f"A must have shape (3 + m, 2, 2) = {expected} for m = {d_arr.size} lag root(s), "
-                f"got {A_arr.shape}"
+                f"A must have shape (3 + m, n, n) = {expected} for m = {d_arr.size} lag root(s) "
+                f"and n = 2 or 3 degrees of freedom, got {A_arr.shape}"
             )
         # Immutable copies: a model is a value and may be shared between threads and plots.
         A_arr = A_arr.copy()
@@ -81,8 +84,37 @@ class RationalFunctionModel:
 
     @property
     def A(self) -> npt.NDArray[np.float64]:
-        """Coefficient matrices, shape (3 + m, 2, 2), read-only."""
+        """Coefficient matrices, shape (3 + m, n_dof, n_dof), read-only."""
         return self._A
+
+    @property
+    def n_dof(self) -> int:
+        """Degrees of freedom the model is for: 2 (heave, pitch) or 3 (with sway)."""
+        return int(self._A.shape[-1])
+
+    def planar(self) -> RationalFunctionModel:
+        """Return the heave-pitch part: the leading 2x2 block of every ``A_k`` (same lags)."""
+        return RationalFunctionModel(self._A[:, :2, :2], self._d)
+
+    def with_sway(self, sway: RationalFunctionModel) -> RationalFunctionModel:
+        """Return a 3-DOF model: this 2-DOF model plus the sway rows and columns of ``sway``.
+
+        ``sway`` is a 3-DOF model (e.g. :func:`ident.quasi_steady.quasi_steady_model`) whose
+        heave-pitch block is ignored; the lags of both are kept (the sway terms' own lag
+        coefficients on their own roots). Used to complete a 2-DOF model, e.g. a flat plate's
+        Theodorsen forces, with drag terms it does not have.
+        """
+        if self.n_dof != 2 or sway.n_dof != 3:
+            raise ValueError(f"with_sway needs a 2-DOF model and a 3-DOF sway model, got "
+                             f"{self.n_dof} and {sway.n_dof}")
+        m1, m2 = self.n_lags, sway.n_lags
+        A = np.zeros((3 + m1 + m2, 3, 3))
+        A[: 3 + m1, :2, :2] = self._A
+        outside = np.ones((3, 3), dtype=bool)
+        outside[:2, :2] = False
+        A[:3][:, outside] = sway.A[:3][:, outside]
+        A[3 + m1:][:, outside] = sway.A[3:][:, outside]
+        return RationalFunctionModel(A, np.concatenate([self._d, sway.d]))
 
     @property
     def d(self) -> npt.NDArray[np.float64]:
@@ -104,7 +136,7 @@ class RationalFunctionModel:
 
         Returns
         -------
-        ndarray, shape ``p.shape + (2, 2)``, complex
+        ndarray, shape ``p.shape + (n_dof, n_dof)``, complex
         """
         p_arr = np.asarray(p, dtype=complex)
         if not np.all(np.isfinite(p_arr)):
@@ -116,12 +148,13 @@ class RationalFunctionModel:
         return np.asarray(out, dtype=complex)
 
     def flutter_derivatives(self, K: Any) -> dict[str, npt.NDArray[np.float64]]:
-        """Scanlan flutter derivatives ``H1..H4, A1..A4`` at reduced frequencies ``K`` (> 0).
+        """Scanlan flutter derivatives at reduced frequencies ``K`` (> 0).
 
         Returns
         -------
         dict
-            Eight arrays of the shape of ``K`` (1-D), non-dimensional.
+            ``H1..H4, A1..A4`` (2 DOF) or all 18 ``H1..H6, A1..A6, P1..P6`` (3 DOF): arrays of
+            the shape of ``K`` (1-D), non-dimensional.
         """
         K_arr = reduced_frequency(np.atleast_1d(K))
         return flutter_derivatives_from_Q(K_arr, self.Q(1j * K_arr))

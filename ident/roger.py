@@ -56,7 +56,8 @@ def roger_fit(
     K : array_like, shape (n,)
         Reduced frequencies ``B omega / U`` of the table, > 0.
     flutter_derivatives : dict
-        ``H1..H4, A1..A4``, each of shape (n,), Scanlan notation.
+        ``H1..H4, A1..A4`` (or the 18 ``H1..P6`` of three degrees of freedom), each of shape
+        (n,), Scanlan notation.
     d : array_like, shape (m,)
         Lag roots, > 0 (fixed; choose them by an outer search when needed).
     with_A3 : bool, optional
@@ -120,22 +121,22 @@ def _fit_entries(
     """Least-squares Roger fit of each entry of ``Q`` at that entry's own reduced frequencies.
 
     For fixed lag roots every entry ``Q_ij(iK) = A1 + A2 iK + A3 (iK)^2 + sum_l A_l iK/(iK + d_l)``
-    is linear in its own coefficients, so the four entries are four independent real least-squares
+    is linear in its own coefficients, so the entries are independent real least-squares
     problems (real and imaginary parts stacked). Entries may be known at different ``K``: the
     classical flutter-derivative method measures the heave column at the heave-mode frequency and
     the pitch column at the pitch-mode frequency (:mod:`ident.fd_method`).
 
     Parameters
     ----------
-    K : ndarray, shape (n, 2, 2)
+    K : ndarray, shape (n, k, k), k = 2 or 3 degrees of freedom
         Reduced frequency of each row of each entry, > 0 (not validated here).
-    Q : ndarray, shape (n, 2, 2), complex
+    Q : ndarray, shape (n, k, k), complex
         ``Q(iK)`` values, entry ``[:, i, j]`` at ``K[:, i, j]``.
     d : ndarray, shape (m,)
         Lag roots, > 0 (not validated here).
     with_A3 : bool
         Fit ``A3``; when False it is exactly zero.
-    weights : ndarray, shape (n, 2, 2), optional
+    weights : ndarray, shape (n, k, k), optional
         Non-negative weight of each squared residual (default all 1).
     check_rank : bool, optional
         Raise on a rank-deficient entry (default). The lag-root search turns it off: it may pass
@@ -151,9 +152,10 @@ def _fit_entries(
         When ``check_rank`` and an entry's rows cannot determine its coefficients.
     """
     keep = [0, 1] + ([2] if with_A3 else []) + list(range(3, 3 + d.size))
-    A = np.zeros((3 + d.size, 2, 2))
-    for i in range(2):
-        for j in range(2):
+    n = Q.shape[-1]
+    A = np.zeros((3 + d.size, n, n))
+    for i in range(n):
+        for j in range(n):
             w = np.ones(K.shape[0]) if weights is None else weights[:, i, j]
             sqrt_w = np.sqrt(w)[:, None]
             basis = roger_basis(K[:, i, j], d, with_A3)

@@ -1,8 +1,10 @@
-"""The structural model of a spring-mounted section model (two degrees of freedom: heave and pitch).
+"""The structural model of a spring-mounted section model: heave and pitch, and optionally sway.
 
 This module owns the structural matrices in windrig's generalised coordinates ``q = [h/B, alpha]``
-(``docs/conventions.md``, "Signs and coordinates"). It knows nothing of aerodynamics;
-:mod:`ident.statespace` couples it with a :class:`~ident.rfc.RationalFunctionModel`.
+or, with the lateral spring, ``q = [h/B, alpha, p/B]`` (``docs/conventions.md``, "Signs and
+coordinates", "Three degrees of freedom"). A 2-DOF section's matrices are the leading 2x2 block
+of the 3-DOF ones: sway adds a row and a column and changes nothing else. It knows nothing of
+aerodynamics; :mod:`ident.statespace` couples it with a :class:`~ident.rfc.RationalFunctionModel`.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ __all__ = ["SectionModel"]
 
 @dataclass(frozen=True)
 class SectionModel:
-    """Mass, stiffness and damping of a two-degree-of-freedom section model, per unit span.
+    """Mass, stiffness and damping of a section model, per unit span (2 or 3 degrees of freedom).
 
     Parameters
     ----------
@@ -41,12 +43,21 @@ class SectionModel:
     S : float, optional
         Static unbalance ``m x_cg`` per unit span, kg m/m (x_cg: distance from the elastic axis to
         the centre of mass, positive downstream). Default 0.
+    fp : float, optional
+        Natural frequency of the lateral (along-wind, sway) spring in still vacuum, Hz. A section
+        without it has two degrees of freedom (the default).
+    zeta_p : float, optional
+        Structural damping ratio of sway, in [0, 1); only with ``fp``. Default 0.
+    m_p : float, optional
+        Mass per unit span that moves in sway, kg/m (a sway carriage may carry more than the
+        heave springs); only with ``fp``. Default ``m``.
 
     Raises
     ------
     ValueError
-        If a mass, frequency, width or density is not > 0, a damping ratio is outside [0, 1), or
-        the mass matrix is not positive definite (``S^2 >= m I``). The message names the field.
+        If a mass, frequency, width or density is not > 0, a damping ratio is outside [0, 1), the
+        mass matrix is not positive definite (``S^2 >= m I``), or ``zeta_p`` or ``m_p`` is given
+        without ``fp``. The message names the field.
 
     Examples
     --------
@@ -58,6 +69,12 @@ class SectionModel:
     Traceback (most recent call last):
     ...
     ValueError: m must be > 0, got -3.0
+
+    With the lateral spring the matrices grow by a row and a column:
+
+    >>> s3 = s.replace(fp=1.0, zeta_p=0.01)
+    >>> s3.n_dof, s3.stiffness_matrix()[:2, :2].tolist() == s.stiffness_matrix().tolist()
+    (3, True)
     """
 
     B: float
@@ -69,6 +86,9 @@ class SectionModel:
     zeta_a: float
     rho: float = 1.225
     S: float = 0.0
+    fp: float | None = None
+    zeta_p: float | None = None
+    m_p: float | None = None
 
     def __post_init__(self) -> None:
         # Convert and check every field once, here, so nothing downstream sees a bad value.
@@ -82,6 +102,26 @@ class SectionModel:
                 f"S must satisfy S^2 < m I for a positive-definite mass matrix, got S={self.S!r} "
                 f"with m I={self.m * self.I!r}"
             )
+        if self.fp is None:
+            for name in ("zeta_p", "m_p"):
+                if getattr(self, name) is not None:
+                    raise ValueError(f"{name} needs fp (the lateral spring's frequency): a "
+                                     "section without fp has two degrees of freedom")
+        else:
+            object.__setattr__(self, "fp", v.positive("fp", self.fp))
+            object.__setattr__(self, "zeta_p", v.in_range("zeta_p", self.zeta_p or 0.0, 0.0, 1.0))
+            object.__setattr__(self, "m_p", v.positive("m_p", self.m if self.m_p is None
+                                                       else self.m_p))
+
+    @property
+    def n_dof(self) -> int:
+        """Degrees of freedom: 2 (heave, pitch) or 3 (heave, pitch, sway)."""
+        return 2 if self.fp is None else 3
+
+    @property
+    def omega_p(self) -> float | None:
+        """Sway natural circular frequency, rad/s (None without the lateral spring)."""
+        return None if self.fp is None else 2.0 * math.pi * self.fp
 
     @property
     def omega_h(self) -> float:
@@ -94,23 +134,43 @@ class SectionModel:
         return 2.0 * math.pi * self.fa
 
     def mass_matrix(self) -> npt.NDArray[np.float64]:
-        """Structural mass matrix ``Ms`` for ``q = [h/B, alpha]``, shape (2, 2), kg m^2/m."""
+        """Structural mass matrix ``Ms`` for ``q``, shape (n_dof, n_dof), kg m^2/m."""
         B = self.B
-        return np.array([[self.m * B**2, self.S * B], [self.S * B, self.I]])
+        M = np.array([[self.m * B**2, self.S * B], [self.S * B, self.I]])
+        return self._with_sway(M, self.m_p)
 
     def damping_matrix(self) -> npt.NDArray[np.float64]:
-        """Structural damping matrix ``Cs`` for ``q = [h/B, alpha]``, shape (2, 2), kg m^2/(m s)."""
+        """Structural damping matrix ``Cs`` for ``q``, shape (n_dof, n_dof), kg m^2/(m s)."""
         B = self.B
-        return np.diag(
+        C = np.diag(
             [
                 2.0 * self.m * self.zeta_h * self.omega_h * B**2,
                 2.0 * self.I * self.zeta_a * self.omega_a,
             ]
         )
+        sway = (None if self.m_p is None or self.omega_p is None
+                else 2.0 * self.m_p * (self.zeta_p or 0.0) * self.omega_p)
+        return self._with_sway(C, sway)
 
     def stiffness_matrix(self) -> npt.NDArray[np.float64]:
-        """Structural stiffness matrix ``Ks`` for ``q = [h/B, alpha]``, shape (2, 2), N m/m."""
-        return np.diag([self.m * self.omega_h**2 * self.B**2, self.I * self.omega_a**2])
+        """Structural stiffness matrix ``Ks`` for ``q``, shape (n_dof, n_dof), N m/m."""
+        K = np.diag([self.m * self.omega_h**2 * self.B**2, self.I * self.omega_a**2])
+        sway = None if self.m_p is None or self.omega_p is None else self.m_p * self.omega_p**2
+        return self._with_sway(K, sway)
+
+    def _with_sway(self, matrix: npt.NDArray[np.float64],
+                   per_B2: float | None) -> npt.NDArray[np.float64]:
+        """Append the sway row and column (``per_B2 B^2`` on the diagonal) to a 2x2 matrix."""
+        if self.n_dof == 2 or per_B2 is None:
+            return matrix
+        out = np.zeros((3, 3))
+        out[:2, :2] = matrix
+        out[2, 2] = per_B2 * self.B**2
+        return out
+
+    def planar(self) -> SectionModel:
+        """Return the section without its lateral spring (heave and pitch only)."""
+        return self.replace(fp=None, zeta_p=None, m_p=None)
 
     def replace(self, **changes: Any) -> SectionModel:
         """Return a copy with some fields changed (validated again)."""
@@ -120,8 +180,15 @@ class SectionModel:
         return SectionModel(**{**asdict(self), **changes})
 
     def to_dict(self) -> dict[str, float]:
-        """Return the fields as a plain dict of floats (JSON-ready)."""
-        return asdict(self)
+        """Return the fields as a plain dict of floats (JSON-ready).
+
+        A 2-DOF section's dict has no lateral keys (as before three degrees of freedom).
+        """
+        data = asdict(self)
+        if self.fp is None:
+            for name in ("fp", "zeta_p", "m_p"):
+                del data[name]
+        return data
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> SectionModel:

@@ -24,6 +24,11 @@ explicit term, which is the same first-order hold. Linear interpolation between 
 the force by ``sinc^2(f / f_grid)`` (0.13 % in power at 4 Hz on a 200 Hz grid): keep the grid
 rate well above the structural frequencies.
 
+Three degrees of freedom: with a section that has a lateral spring (``fp``) and a 3-DOF model,
+the release starts from ``(h0, alpha0, p0)`` and the record adds the sway ``p`` (m, downwind) and
+the drag (N/m, downwind) to the four channels (:func:`channels`). The structural nonlinearities
+and the sensor crosstalk act on heave and pitch only; a channel delay delays every force.
+
 This is the noise-free physics shared by the virtual tunnel
 (:func:`simulators.tunnel.simulate_release` adds measurement noise and the held stretch before the
 release) and by the discrepancy workflow, which simulates an identified model, with candidate
@@ -58,10 +63,17 @@ from ident.section import SectionModel
 from ident.statespace import AeroelasticSystem
 from ident.turbulence import GustField, StaticCoefficients, TurbulenceSpec, WindLoad
 
-__all__ = ["CHANNELS", "SimulatedDecay", "simulate_decay"]
+__all__ = ["CHANNELS", "CHANNELS_3DOF", "SimulatedDecay", "channels", "simulate_decay"]
 
 #: Recorded channels of a release, in order.
 CHANNELS: tuple[str, ...] = ("h", "alpha", "lift", "moment")
+#: ... and of a release with sway.
+CHANNELS_3DOF: tuple[str, ...] = CHANNELS + ("p", "drag")
+
+
+def channels(n_dof: int) -> tuple[str, ...]:
+    """Return the recorded channels of a release of ``n_dof`` (2 or 3) degrees of freedom."""
+    return CHANNELS if n_dof == 2 else CHANNELS_3DOF
 
 #: Samples of a record that the force spline of its continuation runs through.
 _SPLINE_LEAD = 16
@@ -103,9 +115,13 @@ class SimulatedDecay:
         Static coefficients of the mean and buffeting load (None: no wind load).
     gusts : GustField or None
         The effective gusts that drove the model (None: smooth flow).
-    wind_load : ndarray, shape (n, 2), or None
-        Mean plus buffeting generalised force ``[L B, M]`` (N m/m) at ``t``, included in
-        ``clean["lift"]`` (times B) and ``clean["moment"]``.
+    wind_load : ndarray, shape (n, n_dof), or None
+        Mean plus buffeting generalised force ``[L B, M(, D B)]`` (N m/m) at ``t``, included in
+        ``clean["lift"]`` (times B) and ``clean["moment"]`` (and ``clean["drag"]``).
+    p, drag : ndarray, shape (n,), or None
+        Sway (m, downwind) and drag (N/m, downwind) as measured: with sway only.
+    p0 : float
+        Sway of the release position, m (0 without sway).
     """
 
     t: FloatArray
@@ -132,6 +148,14 @@ class SimulatedDecay:
     _z_end: FloatArray | None = field(default=None, repr=False)
     _substeps: int = field(default=1, repr=False)
     _before: Callable[[FloatArray], FloatArray] | None = field(default=None, repr=False)
+    p: FloatArray | None = None
+    drag: FloatArray | None = None
+    p0: float = 0.0
+
+    @property
+    def n_dof(self) -> int:
+        """Degrees of freedom simulated: 2 or 3."""
+        return self.section.n_dof
 
     @property
     def rho(self) -> float:
@@ -140,8 +164,8 @@ class SimulatedDecay:
 
     @property
     def measured(self) -> dict[str, FloatArray]:
-        """The four measured channels by name (``h, alpha, lift, moment``)."""
-        return {name: getattr(self, name) for name in CHANNELS}
+        """The measured channels by name (``h, alpha, lift, moment``, then ``p, drag``)."""
+        return {name: getattr(self, name) for name in channels(self.n_dof)}
 
     def held(self, t: npt.ArrayLike) -> tuple[dict[str, FloatArray], dict[str, FloatArray]]:
         """Channels of the model held still at ``(h0, alpha0)`` before the release.
@@ -179,6 +203,8 @@ class SimulatedDecay:
             "lift": force[:, 0] / B,
             "moment": force[:, 1],
         }
+        if self.n_dof == 3:
+            clean.update(p=np.full(t_arr.size, self.p0), drag=force[:, 2] / B)
         measured = _measure(clean, t_arr, self.effects, self._before, self._delay_spline, 0.0, B)
         return clean, measured
 
@@ -216,9 +242,8 @@ class SimulatedDecay:
             # the seam is inside it (a cubic spline's end condition fades by 0.27 per knot).
             lead = slice(max(0, self.t.size - 1 - _SPLINE_LEAD), self.t.size - 1)
             t_spline = np.concatenate([self.t[lead], t])
-            forces = np.column_stack([clean["lift"] * B, clean["moment"]])
-            lead_forces = np.column_stack([self.clean["lift"][lead] * B,
-                                           self.clean["moment"][lead]])
+            forces = _generalised_forces(clean, B)
+            lead_forces = _generalised_forces({k: v[lead] for k, v in self.clean.items()}, B)
             spline = CubicSpline(t_spline, np.vstack([lead_forces, forces]), axis=0)
             t_start = float(t_spline[0])
         previous = self._delay_spline
@@ -232,7 +257,8 @@ class SimulatedDecay:
         measured = _measure(clean, t[keep], self.effects, before, spline, t_start, B)
         return dataclasses.replace(
             self, t=t[keep], h=measured["h"], alpha=measured["alpha"], lift=measured["lift"],
-            moment=measured["moment"], clean=clean,
+            moment=measured["moment"], p=measured.get("p"), drag=measured.get("drag"),
+            clean=clean,
             wind_load=None if wind is None else wind[keep], _z_end=z[-1].copy(),
             _delay_spline=spline, _before=None,
         )
@@ -254,6 +280,7 @@ def simulate_decay(
     span: float | None = None,
     rng: np.random.Generator | int | None = None,
     pre_s: float = 0.0,
+    p0: float = 0.0,
 ) -> SimulatedDecay:
     """Simulate the free decay of a section model released from rest at wind speed ``U``.
 
@@ -298,6 +325,8 @@ def simulate_decay(
     pre_s : float, optional
         Seconds before the release that :meth:`SimulatedDecay.held` must cover with generated
         turbulence, >= 0.
+    p0 : float, optional
+        Sway held before the release, m (a section with sway only; default 0).
 
     Returns
     -------
@@ -341,7 +370,7 @@ def simulate_decay(
         if isinstance(effect, StaticUnbalance):
             section = section.replace(S=section.S + effect.S)
     system = AeroelasticSystem(section, model, U)
-    z0 = system.initial_state(h0, alpha0)  # validates h0, alpha0
+    z0 = system.initial_state(h0, alpha0, p0)  # validates h0, alpha0, p0
     dt = 1.0 / fs
 
     plant = _Plant(system, effects)
@@ -364,13 +393,14 @@ def simulate_decay(
         """Generalised force on the held model at times ``ts`` < 0."""
         force = plant.vortex_force(ts) + static_force
         if wind is not None:
-            force = force + wind.force(ts)[:, :2]
+            force = force + wind.force(ts)[:, : plant.k]
         return np.asarray(force, dtype=float)
 
     measured = _measure(clean, t, effects, before, spline, 0.0, section.B)
     return SimulatedDecay(
         t=t,
         **measured,
+        p0=float(p0),
         U=U,
         fs=fs,
         h0=float(h0),
@@ -462,20 +492,23 @@ class _Plant:
     def __init__(self, system: AeroelasticSystem, effects: tuple[Effect, ...]) -> None:
         self.system = system
         self.B = system.section.B
+        self.k = system.n_dof
+        self.qdd_rows = slice(self.k, 2 * self.k)  # the rows of q'' in the state matrix
         self.nonlinear_effects = [e for e in effects if e.nonlinear]
         self.nonlinear = bool(self.nonlinear_effects)
         self.M_inv = np.linalg.inv(system.effective_mass())
         vortex = [e for e in effects if isinstance(e, VortexShedding)]
         self.vortex = vortex[0] if vortex and system.U > 0.0 else None
         base = [e for e in effects if isinstance(e, BaseVibration)]
-        # Harmonic sources: (angular frequency, gain [L B, M] per [sin, cos], seen by the taps).
+        # Harmonic sources: (angular frequency, gain [L B, M(, D B)] per [sin, cos], seen by the
+        # taps). Both act on heave and pitch only: a sway row of zeros with three DOF.
         self.sources: list[tuple[float, FloatArray, bool]] = []
         if self.vortex is not None:
             self.sources.append((2.0 * math.pi * self.vortex.frequency(system.U),
-                                 self._vortex_gain(), True))
+                                 self._padded(self._vortex_gain()), True))
         if base and base[0].accel > 0.0:
             self.sources.append((2.0 * math.pi * base[0].frequency_hz,
-                                 base[0].gain(system.section), False))
+                                 self._padded(base[0].gain(system.section)), False))
         n = system.n_states
         A = system.matrix()
         if self.sources:
@@ -486,10 +519,16 @@ class _Plant:
                 i = n + 2 * j
                 A_aug[i, i + 1] = w  # s' = w c
                 A_aug[i + 1, i] = -w  # c' = -w s
-                A_aug[2:4, i : i + 2] = self.M_inv @ gain
+                A_aug[self.qdd_rows, i : i + 2] = self.M_inv @ gain
             A = A_aug
         self.A = A
         self.n_struct = n
+
+    def _padded(self, heave_pitch: FloatArray) -> FloatArray:
+        """Return a force gain on ``[L B, M]`` with zero rows for the other coordinates."""
+        out = np.zeros((self.k,) + heave_pitch.shape[1:])
+        out[:2] = heave_pitch
+        return out
 
     def _vortex_gain(self) -> FloatArray:
         """Generalised vortex force per oscillator state ``[s, c]``: ``[L B, M] = G [s, c]``."""
@@ -507,12 +546,12 @@ class _Plant:
         return np.concatenate([z0, [0.0, 1.0] * len(self.sources)])  # sin(0) = 0, cos(0) = 1
 
     def vortex_force(self, t: FloatArray) -> FloatArray:
-        """Generalised harmonic force the taps see at times ``t`` (any sign), shape (len(t), 2).
+        """Generalised harmonic force the taps see at times ``t`` (any sign), shape (len(t), k).
 
         Vortex shedding acts through the air, so the pressures measure it; a base vibration
         shakes the supports and is not in the measured forces.
         """
-        out = np.zeros((t.size, 2))
+        out = np.zeros((t.size, self.k))
         for w, gain, seen in self.sources:
             if seen:
                 out += np.column_stack([np.sin(w * t), np.cos(w * t)]) @ gain.T
@@ -520,13 +559,13 @@ class _Plant:
 
     def static_force(self, z0: FloatArray) -> FloatArray:
         """Self-excited generalised force on the held model (no motion, lag states at zero)."""
-        return np.asarray(self.system.forces(z0, np.zeros(2)), dtype=float)
+        return np.asarray(self.system.forces(z0, np.zeros(self.k)), dtype=float)
 
     def nonlinear_acceleration(self, z: FloatArray) -> FloatArray:
         """``q''`` contribution of the structural nonlinearities at state ``z``."""
-        force = np.zeros(2)
-        for effect in self.nonlinear_effects:
-            force = force + effect.structural_force(z[0:2], z[2:4], self.B)
+        force = np.zeros(self.k)
+        for effect in self.nonlinear_effects:  # on heave and pitch (q[0:2], q'[0:2])
+            force[:2] += effect.structural_force(z[0:2], z[self.k : self.k + 2], self.B)
         return np.asarray(self.M_inv @ force, dtype=float)
 
     def integrate_linear(self, z0: FloatArray, n: int, dt: float) -> tuple[FloatArray, FloatArray]:
@@ -550,7 +589,7 @@ class _Plant:
             m = min(block, n - s)
             z[s : s + m] = powers[:m] @ start
             start = step @ start
-        qdd = z @ self.A[2:4, :].T
+        qdd = z @ self.A[self.qdd_rows, :].T
         return z, qdd
 
     def substeps(self, dt: float, oversample: int) -> int:
@@ -575,8 +614,8 @@ class _Plant:
         big[n_aug : 2 * n_aug, 2 * n_aug :] = np.eye(n_aug)
         blocks = expm(big * h)
         phi = blocks[:n_aug, :n_aug]
-        gamma1 = blocks[:n_aug, n_aug : 2 * n_aug][:, 2:4]  # only q'' rows receive the force
-        gamma2 = blocks[:n_aug, 2 * n_aug :][:, 2:4] / h
+        gamma1 = blocks[:n_aug, n_aug : 2 * n_aug][:, self.qdd_rows]  # only q'' gets the force
+        gamma2 = blocks[:n_aug, 2 * n_aug :][:, self.qdd_rows] / h
         return phi, gamma1, gamma2
 
     def integrate_nonlinear(
@@ -595,7 +634,8 @@ class _Plant:
                 a = phi @ u + gamma1 @ n_u
                 u = a + gamma2 @ (self.nonlinear_acceleration(a) - n_u)
             z[k] = u
-        qdd = z @ self.A[2:4, :].T + np.array([self.nonlinear_acceleration(zk) for zk in z])
+        qdd = (z @ self.A[self.qdd_rows, :].T
+               + np.array([self.nonlinear_acceleration(zk) for zk in z]))
         return z, qdd
 
     def integrate_forced(
@@ -604,7 +644,7 @@ class _Plant:
         """Advance from the augmented state ``z_start`` under an external force.
 
         ``accel`` is ``M_eff^-1`` times the external generalised force on the integrator's grid,
-        shape ``((n - 1) substeps + 1, 2)``, held piecewise linear between its points (first-order
+        shape ``((n - 1) substeps + 1, k)``, held piecewise linear between its points (first-order
         hold, exact for the linear part). Returns the states and the accelerations ``q''`` at the
         ``n`` output samples.
         """
@@ -618,7 +658,7 @@ class _Plant:
             for k in range(1, n):
                 u = phi @ u + drive[k - 1]
                 z[k] = u
-            return z, z @ self.A[2:4, :].T + accel
+            return z, z @ self.A[self.qdd_rows, :].T + accel
         i = 0
         for k in range(1, n):
             for _ in range(substeps):
@@ -628,10 +668,10 @@ class _Plant:
                 i += 1
             z[k] = u
         nonlinear = np.array([self.nonlinear_acceleration(zk) for zk in z])
-        return z, z @ self.A[2:4, :].T + nonlinear + accel[::substeps]
+        return z, z @ self.A[self.qdd_rows, :].T + nonlinear + accel[::substeps]
 
     def forces(self, z: FloatArray, qdd: FloatArray, t: FloatArray) -> FloatArray:
-        """Generalised aerodynamic forces ``[L B, M]`` recorded at the output samples."""
+        """Generalised aerodynamic forces ``[L B, M(, D B)]`` recorded at the output samples."""
         aero = self.system.forces(z[:, : self.n_struct], qdd)
         return np.asarray(aero + self.vortex_force(t), dtype=float)
 
@@ -640,10 +680,11 @@ def _integrate(
     plant: _Plant, wind: WindLoad | None, z_start: FloatArray, t_start: float, n: int,
     dt: float, substeps: int,
 ) -> tuple[FloatArray, FloatArray, FloatArray | None]:
-    """States, accelerations and wind load ``[L B, M]`` at ``n`` samples from ``t_start``."""
+    """States, accelerations and wind load ``[L B, M(, D B)]`` at ``n`` samples from ``t_start``."""
     t_grid = t_start + np.arange((n - 1) * substeps + 1) * (dt / substeps)
     # A continuation of a record without wind load is driven by a zero force.
-    force = np.zeros((t_grid.size, 2)) if wind is None else wind.force(t_grid)[:, :2]
+    k = plant.k
+    force = np.zeros((t_grid.size, k)) if wind is None else wind.force(t_grid)[:, :k]
     z, qdd = plant.integrate_forced(z_start, n, dt, substeps, force @ plant.M_inv.T)
     return z, qdd, None if wind is None else np.asarray(force[::substeps], dtype=float)
 
@@ -652,7 +693,7 @@ def _clean_channels(
     plant: _Plant, z: FloatArray, qdd: FloatArray, t: FloatArray, wind: FloatArray | None,
     effects: tuple[Effect, ...], B: float,
 ) -> tuple[dict[str, FloatArray], Any]:
-    """Return the four physical channels, and the spline of the forces a channel delay needs."""
+    """Return the physical channels, and the spline of the forces a channel delay needs."""
     forces = plant.forces(z, qdd, t)
     if wind is not None:
         forces = forces + wind
@@ -662,13 +703,21 @@ def _clean_channels(
         "lift": forces[:, 0] / B,
         "moment": forces[:, 1],
     }
+    if plant.k == 3:
+        clean.update(p=z[:, 2] * B, drag=forces[:, 2] / B)
     spline = None
     if any(isinstance(e, ChannelDelay) and e.delay_s > 0.0 for e in effects):
         # Smooth after the release; the release itself is a kink (the added-mass force jumps),
         # so the spline only spans t >= 0 and earlier times take the held value.
-        generalised = np.column_stack([clean["lift"] * B, clean["moment"]])
-        spline = CubicSpline(t, generalised, axis=0)
+        spline = CubicSpline(t, _generalised_forces(clean, B), axis=0)
     return clean, spline
+
+
+def _generalised_forces(clean: dict[str, FloatArray], B: float) -> FloatArray:
+    """Return ``[L B, M(, D B)]`` of a record's channels, shape (n, n_dof)."""
+    columns = [clean["lift"] * B, clean["moment"]] + (
+        [clean["drag"] * B] if "drag" in clean else [])
+    return np.column_stack(columns)
 
 
 def _measure(
@@ -682,11 +731,11 @@ def _measure(
 ) -> dict[str, FloatArray]:
     """Apply the measurement effects (delay, crosstalk) to the clean channels at times ``t``.
 
-    ``spline`` interpolates the clean generalised forces ``[L B, M]`` from ``t_start`` on; a
+    ``spline`` interpolates the clean generalised forces ``[L B, M(, D B)]`` from ``t_start`` on; a
     delayed sample whose source time is earlier takes ``before(t_src)`` (the held force before a
     release, the previous record for a continuation).
     """
-    out = {name: clean[name].copy() for name in CHANNELS}
+    out = {name: values.copy() for name, values in clean.items()}
     for effect in effects:
         if isinstance(effect, ChannelDelay) and effect.delay_s > 0.0:
             assert before is not None
@@ -697,6 +746,8 @@ def _measure(
                 before(t_src),
             )
             out["lift"], out["moment"] = delayed[:, 0] / B, delayed[:, 1]
+            if "drag" in out:
+                out["drag"] = delayed[:, 2] / B
         elif isinstance(effect, SensorCrosstalk):
             out["h"] = clean["h"] + effect.h_from_alpha * clean["alpha"]
             out["alpha"] = clean["alpha"] + effect.alpha_from_h * clean["h"]

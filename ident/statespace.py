@@ -3,10 +3,12 @@
 With the Roger model of the self-excited forces, the aeroelastic equations of motion become a
 linear, frequency-independent state-space model whose matrix depends explicitly on the wind speed U
 (``docs/conventions.md``, "In the time domain"). The state is ``z = [q, q', x_1, ..., x_m]`` with
-``q = [h/B, alpha]`` and one 2-vector of lag states per lag root, ``x_l' = q' - (U/B) d_l x_l``; a
-model released from rest has ``x_l = 0`` at the release. The self-excited generalised force is::
+``q = [h/B, alpha]`` (or ``[h/B, alpha, p/B]`` with sway: n = 3 degrees of freedom) and one
+n-vector of lag states per lag root, ``x_l' = q' - (U/B) d_l x_l``; a model released from rest
+has ``x_l = 0`` at the release. The self-excited generalised force is::
 
-    f = [L B, M] = rho/2 [U^2 B^2 A1 q + U B^3 A2 q' + B^4 A3 q'' + U^2 B^2 sum_l A_{l+3} x_l]
+    f = [L B, M(, D B)]
+      = rho/2 [U^2 B^2 A1 q + U B^3 A2 q' + B^4 A3 q'' + U^2 B^2 sum_l A_{l+3} x_l]
 
 written with U factored out so that U = 0 (still air, added mass only) is not a special case.
 This module builds the matrices; :mod:`ident.flutter` analyses them and :mod:`ident.simulate`
@@ -62,19 +64,32 @@ class AeroelasticSystem:
         if U < 0.0:
             raise ValueError(f"U must be >= 0, got {U!r}")
         object.__setattr__(self, "U", U)
+        if self.model.n_dof > self.section.n_dof:
+            # A 2-DOF section feels the heave-pitch block of a 3-DOF model: sway is held.
+            object.__setattr__(self, "model", self.model.planar())
+        elif self.model.n_dof < self.section.n_dof:
+            raise ValueError(
+                "the section has a lateral spring (3 degrees of freedom) but the aerodynamic model "
+                "has no sway or drag terms: give a 3-DOF model (e.g. model.with_sway("
+                "ident.quasi_steady.quasi_steady_model(static)))")
+
+    @property
+    def n_dof(self) -> int:
+        """Degrees of freedom n: 2 or 3."""
+        return self.section.n_dof
 
     @property
     def n_states(self) -> int:
-        """Number of states, ``4 + 2 m``."""
-        return 4 + 2 * self.model.n_lags
+        """Number of states, ``2 n + n m``."""
+        return self.n_dof * (2 + self.model.n_lags)
 
     def effective_mass(self) -> npt.NDArray[np.float64]:
-        """Structural plus aerodynamic (added) mass ``Ms - rho/2 B^4 A3``, shape (2, 2)."""
+        """Structural plus aerodynamic (added) mass ``Ms - rho/2 B^4 A3``, shape (n, n)."""
         s = self.section
         return s.mass_matrix() - 0.5 * s.rho * s.B**4 * self.model.A[2]
 
     def _aero_terms(self) -> tuple[npt.NDArray[np.float64], ...]:
-        """Aerodynamic stiffness, damping and lag-state gains (each 2 x 2) at this U."""
+        """Aerodynamic stiffness, damping and lag-state gains (each n x n) at this U."""
         s, A, U = self.section, self.model.A, self.U
         stiffness = 0.5 * s.rho * U**2 * s.B**2 * A[0]
         damping = 0.5 * s.rho * U * s.B**3 * A[1]
@@ -83,41 +98,41 @@ class AeroelasticSystem:
 
     def matrix(self) -> npt.NDArray[np.float64]:
         """Return the state matrix ``A(U)``, shape (n, n), 1/s."""
-        s = self.section
-        n = self.n_states
+        s, k = self.section, self.n_dof
+        q, qd = slice(0, k), slice(k, 2 * k)
         stiffness, damping, *lag_gains = self._aero_terms()
         M_inv = np.linalg.inv(self.effective_mass())
-        A = np.zeros((n, n))
-        A[0:2, 2:4] = np.eye(2)
-        A[2:4, 0:2] = M_inv @ (stiffness - s.stiffness_matrix())
-        A[2:4, 2:4] = M_inv @ (damping - s.damping_matrix())
+        A = np.zeros((self.n_states, self.n_states))
+        A[q, qd] = np.eye(k)
+        A[qd, q] = M_inv @ (stiffness - s.stiffness_matrix())
+        A[qd, qd] = M_inv @ (damping - s.damping_matrix())
         for l, gain in enumerate(lag_gains):  # noqa: E741 - lag index
-            rows = slice(4 + 2 * l, 6 + 2 * l)
-            A[2:4, rows] = M_inv @ gain
-            A[rows, 2:4] = np.eye(2)
-            A[rows, rows] = -(self.U / s.B) * self.model.d[l] * np.eye(2)
+            rows = slice((2 + l) * k, (3 + l) * k)
+            A[qd, rows] = M_inv @ gain
+            A[rows, qd] = np.eye(k)
+            A[rows, rows] = -(self.U / s.B) * self.model.d[l] * np.eye(k)
         return A
 
     def force_matrix(self) -> npt.NDArray[np.float64]:
-        """Output matrix ``F`` with ``[L B, M] = F z``, shape (2, n).
+        """Output matrix ``F`` with ``f = F z`` (``[L B, M]``, with sway ``[L B, M, D B]``).
 
-        The added-mass term needs ``q''``, which is itself linear in the state
-        (rows 2:4 of ``A z``).
+        Shape (n, n_states). The added-mass term needs ``q''``, which is itself linear in the
+        state (the rows of ``q''`` in ``A z``).
         """
-        s = self.section
+        s, k = self.section, self.n_dof
         stiffness, damping, *lag_gains = self._aero_terms()
-        F = np.zeros((2, self.n_states))
-        F[:, 0:2] = stiffness
-        F[:, 2:4] = damping
+        F = np.zeros((k, self.n_states))
+        F[:, 0:k] = stiffness
+        F[:, k : 2 * k] = damping
         for l, gain in enumerate(lag_gains):  # noqa: E741 - lag index
-            F[:, 4 + 2 * l : 6 + 2 * l] = gain
+            F[:, (2 + l) * k : (3 + l) * k] = gain
         added_mass = 0.5 * s.rho * s.B**4 * self.model.A[2]
-        return F + added_mass @ self.matrix()[2:4, :]
+        return F + added_mass @ self.matrix()[k : 2 * k, :]
 
     def forces(
         self, z: npt.NDArray[np.float64], qdd: npt.NDArray[np.float64]
     ) -> npt.NDArray[np.float64]:
-        """Self-excited generalised forces ``[L B, M]`` for states and accelerations.
+        """Self-excited generalised forces ``[L B, M(, D B)]`` for states and accelerations.
 
         Use this instead of :meth:`force_matrix` when the accelerations are not those of the linear
         system (a structure with nonlinear springs or friction still feels the same air).
@@ -126,26 +141,34 @@ class AeroelasticSystem:
         ----------
         z : ndarray, shape (..., n)
             States.
-        qdd : ndarray, shape (..., 2)
+        qdd : ndarray, shape (..., n)
             Accelerations ``q''``, 1/s^2 (first entry ``h''/B``).
 
         Returns
         -------
-        ndarray, shape (..., 2)
-            ``[L B, M]``, N m/m.
+        ndarray, shape (..., n)
+            ``[L B, M(, D B)]``, N m/m.
         """
-        s = self.section
+        s, k = self.section, self.n_dof
         stiffness, damping, *lag_gains = self._aero_terms()
-        f = z[..., 0:2] @ stiffness.T + z[..., 2:4] @ damping.T
+        f = z[..., 0:k] @ stiffness.T + z[..., k : 2 * k] @ damping.T
         for l, gain in enumerate(lag_gains):  # noqa: E741 - lag index
-            f = f + z[..., 4 + 2 * l : 6 + 2 * l] @ gain.T
+            f = f + z[..., (2 + l) * k : (3 + l) * k] @ gain.T
         return np.asarray(f + qdd @ (0.5 * s.rho * s.B**4 * self.model.A[2]).T, dtype=float)
 
-    def initial_state(self, h0: float, alpha0: float) -> npt.NDArray[np.float64]:
-        """State at a release from rest at heave ``h0`` (m) and pitch ``alpha0`` (rad)."""
+    def initial_state(self, h0: float, alpha0: float, p0: float = 0.0) -> npt.NDArray[np.float64]:
+        """Return the state at a release from rest at ``h0`` (m), ``alpha0`` (rad), ``p0`` (m).
+
+        ``p0`` must be 0 for a 2-DOF section (it has no sway).
+        """
         z0 = np.zeros(self.n_states)
         z0[0] = v.finite("h0", h0) / self.section.B
         z0[1] = v.finite("alpha0", alpha0)
+        p0 = v.finite("p0", p0)
+        if self.n_dof == 3:
+            z0[2] = p0 / self.section.B
+        elif p0 != 0.0:
+            raise ValueError(f"p0 must be 0 for a section without sway, got {p0!r}")
         return z0
 
     def eigenvalues(self) -> npt.NDArray[np.complex128]:

@@ -1,4 +1,4 @@
-"""Surface-pressure taps around a section outline, and their integration into lift and moment.
+"""Surface-pressure taps around a section outline, and their integration into lift, moment, drag.
 
 A tap is a point of the outline with an outward unit normal and a tributary length. The pressure
 ``p`` (Pa, relative to the free-stream static pressure) acts on the surface as ``-p n ds`` per unit
@@ -7,6 +7,10 @@ elastic axis. Then (Scanlan's signs, ``docs/conventions.md``, "Signs and coordin
 
     L = -sum p_i nz_i ds_i              (positive downward)
     M =  sum (x_i dFz_i - z_i dFx_i)    (positive nose-up), with dF_i = -p_i n_i ds_i
+    D = -sum p_i nx_i ds_i              (positive downwind: the drag of three degrees of freedom)
+
+Only an outline with faces across the wind (a bluff deck's leading and trailing faces) carries
+pressure drag; a flat plate's taps see none (:attr:`TapLayout.carries_drag`).
 
 Nose-up is the rotation that takes +x towards +z here (the leading edge, at x < 0, moves to z < 0).
 This module is shared by the acquisition (pressures to forces) and the simulators (forces to
@@ -77,11 +81,27 @@ class TapLayout:
         """Number of taps."""
         return int(self.x.size)
 
-    def integration_matrix(self) -> npt.NDArray[np.float64]:
-        """Matrix ``G`` with ``[L, M] = G p``, shape (2, n); L in N/m and M in N m/m for p in Pa."""
+    def integration_matrix(self, drag: bool = False) -> npt.NDArray[np.float64]:
+        """Matrix ``G`` with ``[L, M] = G p``, shape (2, n); L in N/m and M in N m/m for p in Pa.
+
+        With ``drag``, a third row gives the drag ``D`` (N/m): shape (3, n).
+        """
         dFx = -self.nx * self.length  # force per unit pressure, N/m per Pa
         dFz = -self.nz * self.length
-        return np.vstack([dFz, self.x * dFz - self.z * dFx])
+        rows = [dFz, self.x * dFz - self.z * dFx] + ([dFx] if drag else [])
+        return np.vstack(rows)
+
+    @property
+    def carries_drag(self) -> bool:
+        """True when the taps' pressures determine a drag independently of lift and moment."""
+        return bool(np.linalg.matrix_rank(self.integration_matrix(drag=True)) == 3)
+
+    def integrate_drag(self, pressures: Any) -> npt.NDArray[np.float64]:
+        """Return the pressure drag (N/m, positive downwind) of tap pressures (Pa), per sample."""
+        p = np.asarray(pressures, dtype=float)
+        if p.ndim != 2 or p.shape[1] != self.n_taps:
+            raise ValueError(f"pressures must have shape (n_samples, {self.n_taps}), got {p.shape}")
+        return np.asarray(p @ (-self.nx * self.length), dtype=float)
 
     def integrate(self, pressures: Any) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
         """Lift and moment from tap pressures.
@@ -104,9 +124,9 @@ class TapLayout:
         return forces[:, 0], forces[:, 1]
 
     def pressures_for(
-        self, lift: Any, moment: Any, mean: Any = None
+        self, lift: Any, moment: Any, mean: Any = None, drag: Any = None
     ) -> npt.NDArray[np.float64]:
-        """Tap pressures that integrate exactly to the given lift and moment.
+        """Tap pressures that integrate exactly to the given lift and moment (and drag).
 
         The dynamic part is the minimum-norm distribution (pseudo-inverse of the integration
         matrix); ``mean`` adds a steady distribution with its lift and moment removed, so that
@@ -118,15 +138,22 @@ class TapLayout:
             N/m and N m/m.
         mean : array_like, shape (n_taps,), optional
             Steady pressure distribution, Pa (e.g. ``qd * Cp_mean``).
+        drag : array_like, shape (n_samples,), optional
+            N/m; only for an outline that :attr:`carries_drag` (else ``ValueError``).
 
         Returns
         -------
         ndarray, shape (n_samples, n_taps)
             Pa.
         """
-        forces = np.column_stack([v.finite_array("lift", lift, ndim=1),
-                                  v.finite_array("moment", moment, ndim=1)])
-        G = self.integration_matrix()
+        columns = [v.finite_array("lift", lift, ndim=1), v.finite_array("moment", moment, ndim=1)]
+        if drag is not None:
+            if not self.carries_drag:
+                raise ValueError("this tap outline has no faces across the wind: its pressures "
+                                 "cannot carry a drag (a flat plate's taps see none)")
+            columns.append(v.finite_array("drag", drag, ndim=1))
+        forces = np.column_stack(columns)
+        G = self.integration_matrix(drag=drag is not None)
         G_pinv = np.linalg.pinv(G)
         p = forces @ G_pinv.T
         if mean is not None:

@@ -28,7 +28,7 @@ from ident import _validate as v
 from ident.effects import Effect
 from ident.rfc import RationalFunctionModel
 from ident.section import SectionModel
-from ident.simulate import CHANNELS, simulate_decay
+from ident.simulate import CHANNELS, CHANNELS_3DOF, channels, simulate_decay
 from ident.taps import TapLayout
 from ident.tubing import TubingSet, distort
 from ident.turbulence import GustField, StaticCoefficients, TurbulenceSpec
@@ -64,6 +64,11 @@ class SimulatedRelease:
         The aerodynamic model simulated.
     effects : tuple of Effect
         Extra physics included.
+    p, drag : ndarray, shape (n,), or None
+        Sway (m, downwind) and drag (N/m, downwind), with measurement noise: a section with a
+        lateral spring and a 3-DOF model only.
+    p0 : float
+        Sway of the release position, m.
     """
 
     t: FloatArray
@@ -80,16 +85,22 @@ class SimulatedRelease:
     section: SectionModel = field(repr=False)
     model: RationalFunctionModel = field(repr=False)
     effects: tuple[Effect, ...] = ()
+    p: FloatArray | None = None
+    drag: FloatArray | None = None
+    p0: float = 0.0
 
     def pressures(self, taps: TapLayout, mean: Any = None,
                   tubing: TubingSet | None = None) -> FloatArray:
         """Tap pressures (Pa), shape (n, n_taps), that integrate exactly to ``lift`` and ``moment``.
 
         See :meth:`ident.taps.TapLayout.pressures_for`; ``mean`` is a steady distribution, Pa.
+        With sway, they integrate to the ``drag`` too when the outline has faces across the wind
+        (:attr:`~ident.taps.TapLayout.carries_drag`; a plate's taps cannot carry it).
         With ``tubing``, the pressures behind the tubes (:func:`ident.tubing.distort`, the
         record taken as steady before its first sample: simulate with ``pre_s`` for a hold).
         """
-        p = taps.pressures_for(self.lift, self.moment, mean=mean)
+        drag = self.drag if self.drag is not None and taps.carries_drag else None
+        p = taps.pressures_for(self.lift, self.moment, mean=mean, drag=drag)
         return p if tubing is None else distort(p, self.fs, tubing)
 
 
@@ -110,6 +121,7 @@ def simulate_release(
     static: StaticCoefficients | None = None,
     turbulence: TurbulenceSpec | GustField | None = None,
     span: float | None = None,
+    p0: float = 0.0,
 ) -> SimulatedRelease:
     """Simulate a free-vibration release of a section model at wind speed ``U``.
 
@@ -128,8 +140,8 @@ def simulate_release(
     fs : float
         Output sampling rate, Hz, > 0.
     noise : float or dict, optional
-        Gaussian measurement noise as a fraction of each channel's RMS (one number for all four
-        channels, or a dict by channel name ``h, alpha, lift, moment``).
+        Gaussian measurement noise as a fraction of each channel's RMS (one number for all
+        channels, or a dict by channel name ``h, alpha, lift, moment``, with sway ``p, drag``).
     rng : numpy.random.Generator or int, optional
         Random source (or seed) of the noise and of the turbulence (drawn first); required when
         ``noise`` is not zero or ``turbulence`` is a spec, so that every simulation is
@@ -144,6 +156,8 @@ def simulate_release(
     static, turbulence, span : optional
         Wind load: static coefficients (mean load), turbulence (spec or gust field) and the
         section model's span, m; see :func:`ident.simulate.simulate_decay`.
+    p0 : float, optional
+        Sway held before the release, m (a section with sway: three degrees of freedom).
 
     Returns
     -------
@@ -176,18 +190,22 @@ def simulate_release(
     spec_rng = generator if isinstance(turbulence, TurbulenceSpec) else None
     decay = simulate_decay(section, model, U, h0, alpha0, n=n, fs=fs, effects=effects,
                            oversample=oversample, static=static, turbulence=turbulence,
-                           span=span, rng=spec_rng, pre_s=pre_s)
+                           span=span, rng=spec_rng, pre_s=pre_s, p0=p0)
     t, clean, measured = decay.t, decay.clean, decay.measured
+    names = channels(decay.n_dof)
+    if decay.n_dof == 2 and isinstance(noise, Mapping) and any(noise.get(n) for n in ("p", "drag")):
+        raise ValueError("noise on p or drag needs a section with sway (fp)")
     if pre_s > 0.0:
         n_pre = int(round(pre_s * fs))
         t_pre = np.asarray(-np.arange(n_pre, 0, -1) * (1.0 / fs), dtype=np.float64)
         held_clean, held_measured = decay.held(t_pre)
         t = np.concatenate([t_pre, t])
-        clean = {name: np.concatenate([held_clean[name], clean[name]]) for name in CHANNELS}
+        clean = {name: np.concatenate([held_clean[name], clean[name]]) for name in names}
         measured = {name: np.concatenate([held_measured[name], measured[name]])
-                    for name in CHANNELS}
+                    for name in names}
     if generator is not None:
-        for name, frac in noise_frac.items():
+        for name in names:  # in CHANNELS_3DOF order: a 2-DOF record draws as before
+            frac = noise_frac[name]
             if frac:
                 rms = math.sqrt(float(np.mean(clean[name] ** 2)))
                 measured[name] = measured[name] + generator.normal(0.0, frac * rms, t.size)
@@ -203,17 +221,19 @@ def simulate_release(
         section=decay.section,
         model=model,
         effects=decay.effects,
+        p0=decay.p0,
     )
 
 
 def _noise_fractions(noise: float | Mapping[str, float]) -> dict[str, float]:
     if isinstance(noise, Mapping):
-        unknown = sorted(set(noise) - set(CHANNELS))
+        unknown = sorted(set(noise) - set(CHANNELS_3DOF))
         if unknown:
-            raise ValueError(f"noise has unknown channel(s) {unknown}; channels are {CHANNELS}")
-        fractions = {name: float(noise.get(name, 0.0)) for name in CHANNELS}
+            raise ValueError(f"noise has unknown channel(s) {unknown}; channels are "
+                             f"{CHANNELS_3DOF}")
+        fractions = {name: float(noise.get(name, 0.0)) for name in CHANNELS_3DOF}
     else:
-        fractions = dict.fromkeys(CHANNELS, v.finite("noise", noise))
+        fractions = dict.fromkeys(CHANNELS_3DOF, v.finite("noise", noise))
     for name, frac in fractions.items():
         if not (math.isfinite(frac) and frac >= 0.0):
             raise ValueError(f"noise for {name} must be a finite fraction >= 0, got {frac!r}")

@@ -22,6 +22,8 @@ The map of its modules (one job each):
                 progress lines, modal fits and the flutter speed +- std after each speed;
                 stops safely (growth, bound, Ctrl-C: model caught, fan down, file finished);
                 resumes from DIR.
+- ``outcome``   what a campaign did and found: each speed's step (files, why, estimate,
+                wind-on time) and the campaign's outcome (what the report writes).
 - ``report``    DIR/campaign.json, the std history, PNG plots and a Markdown page.
 
 Layer: a tool (with ``daq.sim`` and ``daq.offline``): it uses the recorder and the engine below,

@@ -9,6 +9,14 @@ at or beyond flutter) when two consecutive windows after the first exceed
 range) over most of a window; :attr:`DecayMonitor.growing` is then set at once, so that the
 campaign's actions, which wait on it instead of sleeping, catch the model within a window.
 
+A decay has *settled* (:attr:`DecayMonitor.settled`; a plan with ``decay_end = "settled"``
+then ends the release's recording) when, after :data:`MIN_SETTLED_WINDOWS` windows, the last
+two windows of every laser are down to :data:`SETTLED_FRACTION` of its first (two: where the
+two modes beat, one window can dip). Why that is enough: against white measurement noise a
+decay's information on the forces goes with its amplitude squared, so what follows a window
+at 20 % of the first holds about 4 % of the decay's information (and a decay that never gets
+there, its amplitude lost in a higher noise, is recorded for the plan's ``decay_s``).
+
 Why lasers and windows: they arrive every ~20 ms without any conversion, and a stable decay's
 amplitude never rises by half over one period, even where the two modes beat, while a
 flutter-unstable one does within a few periods.
@@ -26,12 +34,19 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["GROWTH_RATIO", "DecayAmplitude", "DecayMonitor"]
+__all__ = ["GROWTH_RATIO", "MIN_SETTLED_WINDOWS", "SETTLED_FRACTION", "DecayAmplitude",
+           "DecayMonitor"]
 
 #: A window this many times the first window's amplitude (twice in a row) is a growing decay.
 GROWTH_RATIO = 1.5
 #: Fraction of a window's samples without a value (target out of range) that counts as growth.
 LOST_FRACTION = 0.5
+#: Settled: the last two windows at most this fraction of the first (module docstring).
+SETTLED_FRACTION = 0.2
+#: Windows (slow periods) a decay is recorded for at least before it may count as settled: the
+#: modal fit of E2RFC's regressors (:func:`ident.modal.fit_modes`) needs 64 block averages at
+#: 12 a period of the dominant mode, 5.3 periods; 5 windows were seen to fall short.
+MIN_SETTLED_WINDOWS = 8
 
 
 @dataclass(frozen=True)
@@ -78,6 +93,13 @@ class DecayMonitor:
         self.window_s = float(window_s)
         #: Set (dispatcher thread) when a decay grows; cleared at the next release.
         self.growing = threading.Event()
+        #: Set (dispatcher thread) when a decay has settled (module docstring); cleared at
+        #: the next release.
+        self.settled = threading.Event()
+        #: Releases seen so far (incremented after the events above are cleared): a caller
+        #: that just commanded a release waits for this to grow before trusting ``settled``,
+        #: which until the release event reaches the dispatcher still tells of the last decay.
+        self.releases = 0
         self._lock = threading.Lock()
         self._release_ns: int | None = None
         self._tracks: dict[str, _LaserTrack] = {}
@@ -91,6 +113,8 @@ class DecayMonitor:
                     self._release_ns = int(doc.host_time_ns)
                     self._tracks = {}
                     self.growing.clear()
+                    self.settled.clear()
+                    self.releases += 1
                 elif kind == "arm":
                     self._release_ns = None  # caught: what follows is no decay
         elif name == "block" and getattr(doc, "kind", "") == "laser":
@@ -131,6 +155,19 @@ class DecayMonitor:
             grown = all(math.isfinite(a) and a > GROWTH_RATIO * first for a in recent)
             if grown or all(track.lost[-2:]):
                 self.growing.set()
+        if not self.growing.is_set() and self._tracks \
+                and all(_settled(t.amplitudes) for t in self._tracks.values()):
+            self.settled.set()
+
+    def settled_since(self, releases: int) -> bool:
+        """Whether a decay after the first ``releases`` releases has settled.
+
+        Parameters
+        ----------
+        releases : int
+            :attr:`releases` read before the release was commanded.
+        """
+        return self.releases > releases and self.settled.is_set()
 
     def amplitude(self) -> DecayAmplitude | None:
         """Amplitude of the current (or last) decay, or None before any complete window."""
@@ -142,3 +179,12 @@ class DecayMonitor:
             last = max(t.amplitudes[-1] for t in tracks)
             windows = min(len(t.amplitudes) for t in tracks)
         return DecayAmplitude(first, last, windows, self.growing.is_set())
+
+
+def _settled(amplitudes: list[float]) -> bool:
+    """Whether one laser's window amplitudes show a settled decay (module docstring)."""
+    if len(amplitudes) < MIN_SETTLED_WINDOWS:
+        return False
+    first, last_two = amplitudes[0], amplitudes[-2:]
+    return math.isfinite(first) and first > 0 and all(
+        math.isfinite(a) and a <= SETTLED_FRACTION * first for a in last_two)

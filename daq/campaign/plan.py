@@ -11,6 +11,8 @@ The plan (units SI; the example plans are ``rig_configs/plans/*.toml``)::
     mode = "fixed"              # "fixed": every listed speed; "adaptive": see [adaptive]
     releases_per_speed = 2      # 1..20
     decay_s = 5.0               # recorded decay per release, s (default: 15 slow periods)
+    decay_end = "fixed"         # "settled": end a release's recording once its decay is
+                                # down to 20 % (decay_s the longest), daq.campaign.monitor
     settle_s = 1.0              # the wind must stay steady this long before the first release
     steady_tolerance = 0.01     # steady: fan speed within this fraction of its set-point
     pause_s = 0.0               # extra wait between releases, s
@@ -58,6 +60,8 @@ __all__ = ["AdaptiveSettings", "CampaignPlan", "load_plan", "parse_plan"]
 MODES = ("fixed", "adaptive")
 #: How releases are grouped into run files (:mod:`daq.campaign.files`).
 FILE_MODES = ("per_speed", "per_release")
+#: When a release's recording ends: after decay_s, or once the decay has settled (or decay_s).
+DECAY_ENDS = ("fixed", "settled")
 MAX_RELEASES_PER_SPEED = 20
 MAX_SPEEDS = 50
 
@@ -119,6 +123,10 @@ class CampaignPlan:
     files : str
         ``"per_speed"`` (one run file per wind speed) or ``"per_release"`` (one per release,
         each closed and its modal fit reported as soon as its decay is recorded).
+    decay_end : str
+        ``"fixed"`` (every release recorded for ``decay_s``) or ``"settled"`` (a release's
+        recording ends once its decay has settled,
+        :attr:`daq.campaign.monitor.DecayMonitor.settled`; ``decay_s`` the longest).
     """
 
     mode: str
@@ -134,6 +142,7 @@ class CampaignPlan:
     adaptive: AdaptiveSettings | None
     source: str = ""
     files: str = "per_speed"
+    decay_end: str = "fixed"
 
     def listed_speeds(self, wind_per_rpm: float) -> list[float]:
         """Return the listed speeds as wind speeds, m/s (fan set-points times the calibration)."""
@@ -223,7 +232,7 @@ def parse_plan(text: str, source: str = "<string>") -> CampaignPlan:
     c = data["campaign"]
     check_keys(c, where, {"mode"}, {"releases_per_speed", "decay_s", "settle_s",
                                     "steady_tolerance", "pause_s", "calz_start", "calz_end",
-                                    "files"})
+                                    "files", "decay_end"})
     mode = c["mode"]
     if mode not in MODES:
         raise ConfigError(f"{where} mode = {mode!r}; allowed: {', '.join(MODES)}")
@@ -237,6 +246,10 @@ def parse_plan(text: str, source: str = "<string>") -> CampaignPlan:
     files = c.get("files", "per_speed")
     if files not in FILE_MODES:
         raise ConfigError(f"{where} files = {files!r}; allowed: {', '.join(FILE_MODES)}")
+    decay_end = c.get("decay_end", "fixed")
+    if decay_end not in DECAY_ENDS:
+        raise ConfigError(f"{where} decay_end = {decay_end!r}; allowed: "
+                          f"{', '.join(DECAY_ENDS)}")
 
     where = f"{source} [speeds]"
     s = data["speeds"]
@@ -277,7 +290,7 @@ def parse_plan(text: str, source: str = "<string>") -> CampaignPlan:
     return CampaignPlan(mode=mode, wind_speeds=wind, fan_rpm=rpm, releases_per_speed=releases,
                         decay_s=decay_s, settle_s=settle_s, steady_tolerance=steady,
                         pause_s=pause_s, calz_start=calz_start, calz_end=calz_end,
-                        adaptive=adaptive, source=source, files=files)
+                        adaptive=adaptive, source=source, files=files, decay_end=decay_end)
 
 
 def load_plan(path: str | Path) -> CampaignPlan:

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from daq.campaign.runner import CampaignOutcome
+from daq.report_plots import DerivativeCurves, ModeCurves, flutter_derivative_grid, flutter_diagram
 from ident import flutter
 from ident.rfc import RationalFunctionModel
 from ident.section import SectionModel
@@ -179,44 +180,19 @@ def _plots(outcome: CampaignOutcome, out: Path,
     if analysis is None:
         return paths
     U_max = analysis.flutter.U_max
-    curves = [(analysis.flutter, "--", "identified")]
+    curves = [ModeCurves(analysis.flutter, "--", "identified")]
     if truth is not None:
-        curves.insert(0, (flutter.analyze(truth[0], truth[1], U_max), "-", "truth"))
-    fig, (ax_f, ax_z) = plt.subplots(2, 1, figsize=(9, 7), sharex=True)
-    for res, style, who in curves:
-        for j, mode in enumerate(res.mode_names):
-            ax_f.plot(res.U, res.frequencies[:, j], style, label=f"{mode}, {who}")
-            ax_z.plot(res.U, res.damping[:, j], style, label=f"{mode}, {who}")
-        if res.speed is not None:
-            ax_z.axvline(res.speed, ls=style, color="grey", lw=0.8)
-    for s in outcome.steps:
-        ax_z.axvline(s.U, color="tab:green", lw=0.6, alpha=0.6)
-    ax_z.axhline(0.0, color="k", lw=0.6)
-    ax_z.set_ylim(-0.05, 0.3)
-    if analysis.flutter_speed is not None:  # the curves far beyond flutter say nothing here
-        ax_z.set_xlim(0.0, min(U_max, 1.6 * analysis.flutter_speed))
-    ax_f.set_ylabel("frequency (Hz)")
-    ax_z.set_ylabel("damping ratio")
-    ax_z.set_xlabel("U (m/s)")
-    ax_f.legend(fontsize=8)
-    ax_f.set_title("flutter diagram (green: speeds tested)")
-    fig.tight_layout()
-    paths["flutter"] = out / "campaign_flutter.png"
-    fig.savefig(paths["flutter"], dpi=100)
-    plt.close(fig)
+        curves.insert(0, ModeCurves(flutter.analyze(truth[0], truth[1], U_max), "-", "truth"))
+    # Up to 1.6 times the flutter speed: the curves far beyond flutter say nothing here.
+    reach = None if analysis.flutter_speed is None else min(U_max, 1.6 * analysis.flutter_speed)
+    paths["flutter"] = flutter_diagram(
+        out / "campaign_flutter.png", curves, [s.U for s in outcome.steps],
+        title="flutter diagram (green: speeds tested)", damping_top=0.3, U_limit=reach)
 
     K = analysis.K
-    fig, grid = plt.subplots(2, 4, figsize=(14, 6))
-    truth_fd = None if truth is None else truth[1].flutter_derivatives(K)
-    for ax, name in zip(grid.ravel(), analysis.derivatives, strict=False):
-        if truth_fd is not None:
-            ax.plot(1.0 / K, truth_fd[name], "k-", lw=1.2, label="truth")
-        ax.plot(1.0 / K, analysis.derivatives[name], "r--", lw=1.2, label="identified")
-        ax.set_title(f"{name}*")
-        ax.set_xlabel("1/K")
-    grid[0, 0].legend(fontsize=8)
-    fig.tight_layout()
-    paths["flutter_derivatives"] = out / "campaign_flutter_derivatives.png"
-    fig.savefig(paths["flutter_derivatives"], dpi=100)
-    plt.close(fig)
+    derivatives = [DerivativeCurves("identified", "r--", analysis.derivatives)]
+    if truth is not None:
+        derivatives.insert(0, DerivativeCurves("truth", "k-", truth[1].flutter_derivatives(K)))
+    paths["flutter_derivatives"] = flutter_derivative_grid(
+        out / "campaign_flutter_derivatives.png", K, derivatives)
     return paths

@@ -11,17 +11,22 @@ E2RFC flutter speed +- std after each speed. It stops for the first of these rea
 written to ``campaign.json`` as ``stopped_because``:
 
 - the plan is done (fixed mode), the target std is met (from three speeds on: with two the
-  std lacks its extrapolation part) or no candidate speed gains (adaptive mode,
-  :mod:`daq.campaign.adaptive`), or ``max_speeds`` is reached;
+  std lacks its extrapolation part), no candidate speed gains or the listed speeds gave no
+  estimate to choose from (adaptive mode, :mod:`daq.campaign.adaptive`), or ``max_speeds`` is
+  reached;
 - the next speed is above the safety bound ``fraction * (U_F - 3 std)`` of the current
-  estimate (both modes; fixed plans use 0.9) or the rig's limits: it is never set. A listed
-  speed not above one this session has already held with decaying releases is allowed
-  whatever the estimate (a wide std can put the bound below speeds just shown to be stable: an
-  FD-style plan going down from its highest speed would otherwise stop);
+  estimate (both modes; fixed plans use 0.9) or the rig's limits: it is never set. A speed
+  not above one this session has already held with decaying releases is allowed whatever the
+  estimate (a wide std can put the bound below speeds just shown to be stable: an FD-style
+  plan going down from its highest speed would otherwise stop, and an adaptive one could not
+  repeat its top speed to average the noise down);
 - a decay grows (:class:`~daq.campaign.monitor.DecayMonitor`): the model is caught (re-armed)
   and the fan stopped at once;
 - Ctrl-C: the run file in progress is finished and kept as ``*.interrupted.h5`` (with one
   file per release, the speed's earlier files too: the speed is repeated whole on resume).
+
+Each release is recorded for the plan's ``decay_s`` or, with ``decay_end = "settled"``, until
+the decay monitor finds it settled (:mod:`daq.campaign.monitor`), whichever comes first.
 
 Whatever the reason, even an error, the fan is sent a stop and waited down before returning,
 and the plan's closing CALZ is taken wind-off. The fan stays on between the speeds of a
@@ -46,15 +51,15 @@ import signal
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from daq.acquisition.device_check import require_devices_ok
 from daq.acquisition.engine import Acquisition
-from daq.campaign.adaptive import Choice, choose_next, safety_bound
+from daq.campaign.adaptive import MIN_SPEEDS, choose_next, safety_bound
 from daq.campaign.files import interrupted_name, read_back, run_file_name
 from daq.campaign.monitor import DecayMonitor
+from daq.campaign.outcome import CampaignOutcome, SpeedStep
 from daq.campaign.plan import CampaignPlan
 from daq.campaign.wind import STEADY_TIMEOUT_S, ramp_rate, wait_steady
 from daq.config import RigConfig
@@ -75,101 +80,11 @@ log = logging.getLogger(__name__)
 #: Safety fraction of a fixed plan (an adaptive plan gives its own).
 FIXED_SAFETY_FRACTION = 0.9
 #: Distinct wind speeds before an adaptive campaign may call its target met (see _loop).
-MIN_SPEEDS_FOR_TARGET = 3
+MIN_SPEEDS_FOR_TARGET = MIN_SPEEDS
 #: Fan speed counted as stopped, rpm.
 STOPPED_RPM = 5.0
 #: ``stopped_because`` of a session whose device check failed (nothing was moved or recorded).
 CHECK_FAILED = "device check failed"
-
-
-@dataclass
-class SpeedStep:
-    """One recorded wind speed.
-
-    Attributes
-    ----------
-    index : int
-        Order in the campaign, from 1.
-    U : float
-        Requested wind speed, m/s.
-    path : Path
-        Its (first) run file.
-    releases : int
-        Releases read back from its file(s).
-    why : str
-        Why this speed (listed in the plan, or the adaptive choice).
-    flutter_speed, flutter_std : float or None
-        The estimate after this speed, m/s.
-    wind_on_s : float or None
-        Wind-on time of the campaign when this speed's estimate was known, s (None: read
-        back from an earlier session).
-    paths : list of Path
-        Every run file of the speed (one, or one per release).
-    resumed : bool
-        Read back from an earlier session (not known to have decayed: its file may be the
-        one a growing decay stopped).
-    """
-
-    index: int
-    U: float
-    path: Path
-    releases: int
-    why: str
-    flutter_speed: float | None = None
-    flutter_std: float | None = None
-    wind_on_s: float | None = None
-    paths: list[Path] = field(default_factory=list)
-    resumed: bool = False
-
-    def __post_init__(self) -> None:
-        if not self.paths:
-            self.paths = [self.path]
-
-
-@dataclass
-class CampaignOutcome:
-    """What a campaign did and found (what :mod:`daq.campaign.report` writes).
-
-    Attributes
-    ----------
-    steps : list of SpeedStep
-        In the order tested.
-    analysis : CampaignAnalysis or None
-        The last E2RFC analysis (None before two speeds).
-    stopped_because : str
-    wind_on_s : float
-        Fan start to fan stopped, s, this session plus the resumed ones.
-    wall_s : float
-        This session's wall time, s.
-    truth_flutter_speed : float or None
-        The simulated tunnel's own (``simulate=True``), m/s.
-    resumed : int
-        Speeds read back from an earlier session.
-    choices : list of Choice
-        The adaptive decisions, in order.
-    max_fan_rpm_commanded : float
-        Highest fan set-point sent this session, rpm.
-    """
-
-    steps: list[SpeedStep] = field(default_factory=list)
-    analysis: CampaignAnalysis | None = None
-    stopped_because: str = ""
-    wind_on_s: float = 0.0
-    wall_s: float = 0.0
-    truth_flutter_speed: float | None = None
-    resumed: int = 0
-    choices: list[Choice] = field(default_factory=list)
-    max_fan_rpm_commanded: float = 0.0
-
-    @property
-    def flutter_speed(self) -> float | None:
-        """Identified flutter speed, m/s."""
-        return None if self.analysis is None else self.analysis.flutter_speed
-
-    @property
-    def flutter_std(self) -> float | None:
-        """Its standard deviation, m/s."""
-        return None if self.analysis is None else self.analysis.flutter_std
 
 
 class _Session:
@@ -385,17 +300,20 @@ def _loop(session: _Session, outcome: CampaignOutcome) -> None:
                 outcome.stopped_because = (f"target met: std {100 * rel:.2f} % <= "
                                            f"{100 * plan.adaptive.target_std:.2f} %")
                 return
+        # The wind may always go back to what this session has held (a grown decay ends the
+        # campaign: every step of it decayed). The adaptive choice offers a held speed as a
+        # candidate too: its prediction counts a repeat's gain on the statistical part only.
+        held = max((s.U for s in outcome.steps if not s.resumed), default=0.0)
+        bound = min(rig_limit, safety_bound(analysis, fraction, held))
         if k < len(listed):
-            # A listed speed may go back to what this session has held (a grown decay ends the
-            # campaign: every step of it decayed). Not an adaptive choice: a held speed offered
-            # as a candidate is chosen again and again, and repeats add no information on the
-            # structure and extrapolation parts of the std (seen in a CI run).
-            held = max((s.U for s in outcome.steps if not s.resumed), default=0.0)
-            bound = min(rig_limit, safety_bound(analysis, fraction, held))
             U, why = listed[k], "listed in the plan"
+        elif analysis is None:  # the listed speeds gave no estimate (said above): nothing to aim at
+            outcome.stopped_because = ("stopped: the listed speeds gave no E2RFC estimate (see "
+                                       "the E2RFC line above); the next speed cannot be chosen")
+            say(outcome.stopped_because)
+            return
         else:
-            bound = min(rig_limit, safety_bound(analysis, fraction))
-            assert plan.adaptive is not None and analysis is not None
+            assert plan.adaptive is not None
             releases = [r for run in session.runs for r in run.releases]
             choice = choose_next(analysis, releases, plan.adaptive.candidates(), bound=bound,
                                  releases_per_speed=plan.releases_per_speed, decay_s=decay_s)
@@ -508,12 +426,18 @@ def _record_file(session: _Session, outcome: CampaignOutcome, path: Path, rpm: f
     duration = (1.5 * ramp + 2.0 + STEADY_TIMEOUT_S + plan.settle_s
                 + len(releases) * (HOLD_S + decay_s + plan.pause_s + 1.0) + 5.0)
 
-    def wait(seconds: float) -> bool:
-        """Wait ``seconds`` or until the decay grows or Ctrl-C; return True if it should stop."""
+    def wait(seconds: float, settled_after: int | None = None) -> bool:
+        """Wait ``seconds``; True (stop) early if the decay grows or on Ctrl-C.
+
+        With ``settled_after`` (the monitor's release count before this release), False (go
+        on) early once this release's decay has settled.
+        """
         end = time.monotonic() + seconds
         while (left := end - time.monotonic()) > 0:
             if monitor.growing.wait(min(left, 0.05)) or session.abort.is_set():
                 return True
+            if settled_after is not None and monitor.settled_since(settled_after):
+                break
         return False
 
     def body(acq: Acquisition) -> None:
@@ -533,8 +457,9 @@ def _record_file(session: _Session, outcome: CampaignOutcome, path: Path, rpm: f
             acq.arm()
             if wait(HOLD_S):
                 return
+            seen = monitor.releases
             acq.release()
-            if wait(decay_s):
+            if wait(decay_s, seen if plan.decay_end == "settled" else None):
                 acq.arm()  # catch the model first, then take the wind away
                 acq.stop_fan()
                 if not monitor.growing.is_set():

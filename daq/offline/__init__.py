@@ -3,5 +3,7 @@
 - :mod:`~daq.offline.reprocess`: ``windrig reprocess``: per-file modal fits and per-campaign
   E2RFC on a Dask cluster, with a cache;
 - :mod:`~daq.offline.report`: its tables, plots and HTML report;
-- :mod:`~daq.offline.diagnosis`: ``windrig diagnose``: the discrepancy workflow with its plots.
+- :mod:`~daq.offline.diagnosis`: ``windrig diagnose``: the discrepancy workflow with its plots;
+- :mod:`~daq.offline.flutter_commands`: ``windrig identify`` (E2RFC on run files) and
+  ``windrig flutter`` (a section with a model or a flutter-derivative table).
 """

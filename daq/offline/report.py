@@ -22,6 +22,8 @@ from typing import Any
 
 import numpy as np
 
+from daq.report_plots import DerivativeCurves, flutter_derivative_grid
+
 __all__ = ["ReprocessSummary", "write_outputs"]
 
 
@@ -149,16 +151,9 @@ def _campaign_plots(out: Path, name: str, campaign: dict[str, Any],
     paths = {"flutter_derivatives": out / f"{name}_flutter_derivatives.png",
              "modes": out / f"{name}_modes.png"}
 
-    fig, axes = plt.subplots(2, 4, figsize=(14, 6))
-    K = np.asarray(campaign["K"])
-    for ax, (deriv, values) in zip(axes.ravel(), campaign["derivatives"].items(), strict=False):
-        ax.plot(1.0 / K, values, "r-")
-        ax.set_title(f"{deriv}*")
-        ax.set_xlabel("1/K")
-    fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(paths["flutter_derivatives"], dpi=90)
-    plt.close(fig)
+    flutter_derivative_grid(paths["flutter_derivatives"], np.asarray(campaign["K"]),
+                            [DerivativeCurves("", "r-", campaign["derivatives"])],
+                            title=title, dpi=90)
 
     curves = campaign["curves"]
     releases = [r for path in campaign["files"] for r in results[path].get("releases", [])]

@@ -31,6 +31,7 @@ from daq.acquisition.engine import Acquisition
 from daq.config import RigConfig
 from daq.procedure import HOLD_S, default_decay_s
 from daq.recording.run import record_run
+from daq.report_plots import DerivativeCurves, ModeCurves, flutter_derivative_grid, flutter_diagram
 from daq.sim.rig_process import start_rig_process
 from ident import e2rfc, flutter
 from ident.campaign import CampaignAnalysis, analyze_campaign
@@ -280,43 +281,19 @@ def _plots(out: Path, releases: list[Release], section: SectionModel,
 
     # Flutter derivatives over the K range the releases cover (both modes, all wind speeds).
     K = e2rfc.reduced_frequency_span(releases, section, 200)
-    ident_fd = model.flutter_derivatives(K)
-    truth_fd = truth_model.flutter_derivatives(K)
-    fig, grid = plt.subplots(2, 4, figsize=(14, 6))
-    names = [f"H{i}" for i in range(1, 5)] + [f"A{i}" for i in range(1, 5)]
-    for ax, name in zip(grid.ravel(), names, strict=True):
-        ax.plot(1.0 / K, truth_fd[name], "k-", lw=1.2, label="truth")
-        ax.plot(1.0 / K, ident_fd[name], "r--", lw=1.2, label="identified")
-        ax.set_title(f"{name}*")
-        ax.set_xlabel("1/K = U/(B omega)")
-    grid[0, 0].legend(fontsize=8)
-    fig.tight_layout()
-    plots["flutter_derivatives"] = out / "campaign_flutter_derivatives.png"
-    fig.savefig(plots["flutter_derivatives"], dpi=110)
-    plt.close(fig)
+    plots["flutter_derivatives"] = flutter_derivative_grid(
+        out / "campaign_flutter_derivatives.png", K,
+        [DerivativeCurves("truth", "k-", truth_model.flutter_derivatives(K)),
+         DerivativeCurves("identified", "r--", model.flutter_derivatives(K))], dpi=110)
 
     # Damping and frequency against U, identified vs truth.
     U_max = max(truth.U_max, identified.U_max)
-    ident_curves = flutter.analyze(section, model, U_max)
     truth_curves = flutter.analyze(truth_section, truth_model, U_max)
-    fig, (ax_f, ax_z) = plt.subplots(2, 1, figsize=(9, 7), sharex=True)
-    for res, style, who in ((truth_curves, "-", "truth"), (ident_curves, "--", "identified")):
-        for j, mode in enumerate(res.mode_names):
-            ax_f.plot(res.U, res.frequencies[:, j], style, label=f"{mode}, {who}")
-            ax_z.plot(res.U, res.damping[:, j], style, label=f"{mode}, {who}")
-        if res.speed is not None:
-            ax_z.axvline(res.speed, ls=style, color="grey", lw=0.8)
-    for r in releases:
-        ax_z.axvline(r.U, color="tab:green", lw=0.5, alpha=0.5)
-    ax_z.axhline(0.0, color="k", lw=0.6)
-    ax_f.set_ylabel("frequency (Hz)")
-    ax_z.set_ylabel("damping ratio")
-    ax_z.set_xlabel("U (m/s)")
-    ax_z.set_ylim(-0.05, max(0.2, float(np.nanmax(truth_curves.damping)) * 0.5))
-    ax_f.legend(fontsize=8)
-    ax_f.set_title("state-space flutter analysis: identified (--) vs truth (-)")
-    fig.tight_layout()
-    plots["flutter"] = out / "campaign_flutter.png"
-    fig.savefig(plots["flutter"], dpi=110)
-    plt.close(fig)
+    plots["flutter"] = flutter_diagram(
+        out / "campaign_flutter.png",
+        [ModeCurves(truth_curves, "-", "truth"),
+         ModeCurves(flutter.analyze(section, model, U_max), "--", "identified")],
+        [r.U for r in releases],
+        title="state-space flutter analysis: identified (--) vs truth (-)",
+        damping_top=max(0.2, float(np.nanmax(truth_curves.damping)) * 0.5), dpi=110)
     return plots

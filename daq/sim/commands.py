@@ -46,6 +46,9 @@ def run_check(config_path: Path, *, simulate: bool = False, json_path: Path | No
     if not (timeout_s > 0.5):
         raise UsageError(f"--timeout {timeout_s:g}: must be > 0.5 s (each device is read for "
                          "0.5 s)")
+    if json_path is not None and not json_path.parent.is_dir():
+        # Checked first: a report that cannot be written is known before the devices are.
+        raise UsageError(f"--json {json_path}: folder {json_path.parent} does not exist")
     config = load_rig_config(config_path)
     with ExitStack() as stack:
         live = config

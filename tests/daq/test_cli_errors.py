@@ -39,6 +39,9 @@ def files(tmp_path: Path) -> Path:
     (tmp_path / "bad_mass.toml").write_text(bad_mass)
     (tmp_path / "bad.json").write_text('{"B": 0.3')
     (tmp_path / "section.json").write_text(json.dumps(SECTION))
+    (tmp_path / "sway.json").write_text(json.dumps({**SECTION, "fp": 1.0}))
+    (tmp_path / "table.csv").write_text("K,H1,A2\n0.5,-12,-0.4\n1,-6,-0.2\n")
+    (tmp_path / "bad_table.csv").write_text("K,H1,A2\n0.5,-12,-0.4\n1,-6,x\n")
     (tmp_path / "bad_section.json").write_text(json.dumps({**SECTION, "m": -1.0}))
     (tmp_path / "list.json").write_text("[1, 2]")
     (tmp_path / "model_bad.json").write_text(json.dumps({"A": [[[0, 0], [0, 0]]], "d": []}))
@@ -57,6 +60,8 @@ def files(tmp_path: Path) -> Path:
 CASES = [
     # (arguments, exit status, what the error line must say)
     (["identify", "{d}/nothing.h5"], 2, "nothing.h5: no such file"),
+    (["check", "--config", str(SIM_CONFIG), "--simulate", "--json", "{d}/no/such/c.json"], 2,
+     "folder"),
     (["identify", "{d}/text.txt"], 2, "text.txt: not an HDF5 file"),
     (["identify", "{d}/empty.h5"], 2, "empty.h5: has no /entry/config: not a windrig run file"),
     (["identify", "{d}"], 2, "a directory, not a run file"),
@@ -86,6 +91,14 @@ CASES = [
      "bad_section.json: m must be > 0"),
     (["flutter", "--section", "{d}/section.json", "--model", "{d}/model_bad.json"], 2,
      "model_bad.json: not a rational-function model"),
+    (["flutter", "--section", "{d}/sway.json", "--model", "{d}/model.json"], 2,
+     "is a model of heave and pitch only"),
+    (["flutter", "--section", "{d}/sway.json", "--table", "{d}/table.csv"], 2,
+     "has the derivatives of heave and pitch only"),
+    (["flutter", "--section", "{d}/section.json", "--table", "{d}/bad_table.csv"], 2,
+     "bad_table.csv, line 3: 'x' is not a number"),
+    (["flutter", "--section", "{d}/section.json", "--table", "{d}/nothing.csv"], 2,
+     "nothing.csv: no such file"),
     (["flutter", "--section", "{d}/section.json", "--model", "{d}/model.json", "--u-max", "-3"],
      2, "--u-max -3: must be > 0 m/s"),
     (["reprocess", "{d}/nothing*", "--out", "{d}/r"], 2, "nothing*: no such run file"),

@@ -27,6 +27,7 @@ from ident import (
 )
 from ident.conventions import FLUTTER_DERIVATIVE_NAMES
 from ident.roger import _fit_entries
+from ident.roger_table import RogerProblem
 from simulators import simulate_release
 
 SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
@@ -327,7 +328,7 @@ def test_entrywise_fit_and_lag_search_recover_an_exact_roger_model():
     fitted = _fit_entries(K, Q, np.array(flat_plate.JONES_LAGS), True)
     # Linear least squares on exact data with a well-conditioned design: round-off.
     np.testing.assert_allclose(fitted.A, JONES.A, atol=1e-9 * np.abs(JONES.A).max())
-    problem = fd_method._RogerProblem(K, Q)
-    d = problem._search(2, True, problem.starts(2, None))
+    problem = RogerProblem(K, Q)
+    d = problem.search(2, True, problem.starts(2, None))
     # Exact data: the variable-projection optimum is the truth, to the solver's tolerance.
     np.testing.assert_allclose(d, flat_plate.JONES_LAGS, rtol=1e-5)

@@ -107,3 +107,28 @@ def test_wrong_pressure_shape_is_refused():
     """Pressures must be (n_samples, n_taps)."""
     with pytest.raises(ValueError, match=rf"shape \(n_samples, {PLATE.n_taps}\)"):
         PLATE.integrate(np.zeros((3, 10)))
+
+
+def test_drag_from_the_faces_across_the_wind():
+    """Stagnation pressure on the front face pushes downwind: D = p D_face; back again exactly."""
+    box = TapLayout.rectangle(B=0.3, D=0.05, taps_per_face=16)
+    assert box.carries_drag
+    p = np.zeros((1, box.n_taps))
+    p[0, box.nx < -0.5] = 100.0  # Pa on the upstream face (outward normal upstream)
+    assert box.integrate_drag(p)[0] == pytest.approx(100.0 * 0.05, rel=1e-12)
+    assert box.integration_matrix(drag=True).shape == (3, box.n_taps)
+    rng = np.random.default_rng(9)
+    lift, moment, drag = rng.normal(size=(3, 50))
+    back = box.pressures_for(lift, moment, drag=drag)
+    np.testing.assert_allclose(box.integrate(back)[0], lift, atol=1e-9)
+    np.testing.assert_allclose(box.integrate(back)[1], moment, atol=1e-9)
+    np.testing.assert_allclose(box.integrate_drag(back), drag, atol=1e-9)
+
+
+def test_a_plate_of_upper_and_lower_taps_carries_no_drag():
+    x = np.tile(np.linspace(-0.14, 0.14, 8), 2)
+    nz = np.repeat([-1.0, 1.0], 8)
+    flat = TapLayout(x=x, z=0.0 * x, nx=0.0 * x, nz=nz, length=np.full(16, 0.0375))
+    assert not flat.carries_drag
+    with pytest.raises(ValueError, match="cannot carry a drag"):
+        flat.pressures_for([1.0], [0.0], drag=[0.5])

@@ -117,8 +117,10 @@ def test_section_is_frozen():
             [0.1, 0.2],
             r"^A contains 4 non-finite",
         ),
-        (np.zeros((4, 2, 2)), [0.1, 0.2], r"^A must have shape \(3 \+ m, 2, 2\) = \(5, 2, 2\)"),
-        (np.zeros((3, 3, 3)), [], r"^A must have shape \(3 \+ m, 2, 2\) = \(3, 2, 2\)"),
+        (np.zeros((4, 2, 2)), [0.1, 0.2], r"^A must have shape \(3 \+ m, n, n\) = \(5, 2, 2\)"),
+        (np.zeros((4, 3, 3)), [0.1, 0.2], r"^A must have shape \(3 \+ m, n, n\) = \(5, 3, 3\)"),
+        (np.zeros((3, 4, 4)), [], r"^A must have shape .* = \(3, 2, 2\) .* n = 2 or 3"),
+        (np.zeros((3, 2, 3)), [], r"^A must have shape"),
         (np.zeros((5, 2, 2)), [0.1], r"^A must have shape .* for m = 1 lag"),
         (np.zeros((2, 2)), [], r"^A must have shape"),
     ],
@@ -182,12 +184,15 @@ def _fd(value=1.0):
 
 
 def test_Q_from_flutter_derivatives_rejects_missing_and_unknown_names():
-    """All eight derivatives are required and no others accepted (a typo is not ignored)."""
+    """All eight (or all 18) derivatives are required and no others accepted.
+
+    A typo is not ignored; one derivative of sway with the eight asks for the other nine of 3 DOF.
+    """
     missing = _fd()
     del missing["A4"]
     with pytest.raises(ValueError, match=r"flutter derivatives missing: \['A4'\]"):
         conventions.Q_from_flutter_derivatives([1.0], missing)
-    with pytest.raises(ValueError, match=r"unknown flutter derivative name\(s\): \['H5'\]"):
+    with pytest.raises(ValueError, match=r"flutter derivatives missing: \['H6', 'A5', 'A6', 'P1'"):
         conventions.Q_from_flutter_derivatives([1.0], {**_fd(), "H5": np.array([1.0])})
     with pytest.raises(ValueError, match=r"unknown flutter derivative name\(s\): \['h1'\]"):
         conventions.Q_from_flutter_derivatives([1.0], {**_fd(), "h1": np.array([1.0])})
@@ -204,8 +209,8 @@ def test_Q_from_flutter_derivatives_rejects_non_finite_values_and_bad_K():
 
 
 def test_flutter_derivatives_from_Q_rejects_wrong_shape():
-    """Q must be (n, 2, 2) for n reduced frequencies."""
-    with pytest.raises(ValueError, match=r"^Q must have shape \(2, 2, 2\)"):
+    """Q must be (n, 2, 2) or (n, 3, 3) for n reduced frequencies."""
+    with pytest.raises(ValueError, match=r"^Q must have shape \(2, 2, 2\) or \(2, 3, 3\)"):
         conventions.flutter_derivatives_from_Q([0.5, 1.0], np.zeros((3, 2, 2), dtype=complex))
 
 

@@ -7,6 +7,7 @@ truth is known, so that the predictions can be checked against what more data re
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from types import SimpleNamespace
 
@@ -107,6 +108,63 @@ def test_decay_monitor_flags_growth_only(damping, grows):
     assert not monitor.growing.is_set() and monitor.amplitude() is None
 
 
+@pytest.mark.parametrize("damping, noise, settled_within", [
+    # Window amplitudes fall by e^(-2 pi 0.05) = 0.73 a period (0.5 s): the 7th and 8th
+    # windows are the first two at most 20 % of the first (0.15, 0.11), so at 4.0 s.
+    (0.05, 0.0, (3.95, 4.05)),
+    # 0.88 a period: the 14th and 15th (0.195, 0.17), at 7.5 s.
+    (0.02, 0.0, (7.45, 7.55)),
+    # 0.39 a period: below 20 % from the 3rd window on, but never before 8 windows (4.0 s:
+    # the modal fit needs 5.3 periods of the dominant mode; 2.5 s were seen to be too few).
+    (0.15, 0.0, (3.95, 4.05)),
+    # 1 mm noise (25 % of the amplitude): its half peak-to-peak keeps every window above 20 %;
+    # the decay is recorded for the plan's decay_s.
+    (0.05, 1e-3, None),
+    # Hardly damped (0.5 %): still above 60 % of the first window after 10 s.
+    (0.005, 0.0, None),
+])
+def test_decay_monitor_tells_when_a_decay_has_settled(damping, noise, settled_within):
+    monitor = DecayMonitor(window_s=0.5)
+    monitor("event", SimpleNamespace(kind="release", host_time_ns=0))
+    t = np.arange(0, 10.0, 1 / 4000)
+    w = 2 * math.pi * 2.0
+    rng = np.random.default_rng(1)
+    x = (0.025 + 0.004 * np.exp(-damping * w * t) * np.cos(w * t)
+         + noise * rng.standard_normal(t.size))
+    settled_at = None
+    for start in range(0, t.size, 80):  # ~20 ms blocks, as the laser reader delivers
+        monitor("block", _laser_block(0, t[start:start + 80], x[start:start + 80]))
+        if settled_at is None and monitor.settled.is_set():
+            settled_at = t[start + 79]
+    assert not monitor.growing.is_set()
+    if settled_within is None:
+        assert settled_at is None
+    else:
+        assert settled_at is not None and settled_within[0] <= settled_at <= settled_within[1]
+    # The next release starts afresh.
+    monitor("event", SimpleNamespace(kind="release", host_time_ns=10**10))
+    assert not monitor.settled.is_set()
+
+
+def test_a_settled_decay_does_not_count_for_the_next_release():
+    # The release command returns before its event reaches the monitor (dispatcher thread):
+    # until then `settled` still tells of the last decay, which once ended a release 77 ms
+    # after it started.
+    monitor = DecayMonitor(window_s=0.5)
+    monitor("event", SimpleNamespace(kind="release", host_time_ns=0))
+    t = np.arange(0, 6.0, 1 / 4000)
+    x = 0.025 + 0.004 * np.exp(-0.1 * 4 * math.pi * t) * np.cos(4 * math.pi * t)
+    monitor("block", _laser_block(0, t, x))
+    assert monitor.settled.is_set() and monitor.settled_since(0)
+    monitor("event", SimpleNamespace(kind="arm", host_time_ns=7 * 10**9))
+    seen = monitor.releases  # read before the next release is commanded
+    assert seen == 1 and not monitor.settled_since(seen)
+    monitor("event", SimpleNamespace(kind="release", host_time_ns=8 * 10**9))
+    assert not monitor.settled.is_set() and not monitor.settled_since(seen)
+    monitor("block", _laser_block(8 * 10**9, t, x))
+    assert monitor.settled_since(seen)
+
+
 def test_decay_monitor_counts_a_lost_target_as_growth():
     monitor = DecayMonitor(window_s=0.5)
     monitor("event", SimpleNamespace(kind="release", host_time_ns=0))
@@ -124,3 +182,74 @@ def test_decay_monitor_ignores_data_while_the_model_is_held():
     t = np.arange(0, 3.0, 1 / 1000)
     monitor("block", _laser_block(0, t, 0.025 + 0.004 * np.exp(t)))
     assert monitor.amplitude() is None and not monitor.growing.is_set()
+
+
+@pytest.fixture(scope="module")
+def three_speeds():
+    releases = simulated_campaign(None, seed=5, fractions=(0.4, 0.55, 0.7), duration=5.0)
+    return releases, analyze_campaign(releases, SECTION, table=False)
+
+
+def test_the_structure_and_extrapolation_parts_are_carried_at_covered_speeds(three_speeds):
+    # A repeat of the top speed (or a speed below it) leaves the fit without the top speed as
+    # it is: the structure and extrapolation parts are carried unchanged, so the prediction can
+    # never fall below them (it once did, and a campaign repeated its top speed four times
+    # expecting the std to halve each time).
+    releases, analysis = three_speeds
+    u = analysis.uncertainty
+    assert u.extrapolation > 0  # three speeds: the part is measured
+    U_F = analysis.flutter_speed
+    covered = [0.4 * U_F, 0.55 * U_F, 0.7 * U_F]
+    stds = predicted_std(analysis, releases, covered, releases_per_speed=4, decay_s=5.0)
+    carried = math.hypot(u.structure, u.extrapolation)
+    for s in stds:
+        assert carried <= s <= u.total * (1 + 1e-9)
+    # The statistical part does shrink: the parts combine in quadrature (e2rfc's total).
+    assert min(stds) < u.total
+
+
+def test_a_speed_above_the_top_one_is_predicted_to_reduce_the_extrapolation(three_speeds):
+    releases, analysis = three_speeds
+    u = analysis.uncertainty
+    U_F = analysis.flutter_speed
+    top, above = predicted_std(analysis, releases, [0.7 * U_F, 0.8 * U_F],
+                               releases_per_speed=1, decay_s=5.0)
+    # Above the top speed the releases reach lower reduced frequencies (closer to K_F): the
+    # extrapolation part is scaled down, which only a candidate above the top speed can do.
+    floor_at_top = math.sqrt(u.structure**2 + u.refinement**2 + u.extrapolation**2)
+    assert top >= floor_at_top
+    assert above < top
+
+
+def test_with_two_speeds_a_new_speed_is_always_chosen(two_speeds):
+    # Two speeds give a std without its extrapolation part: a third is needed whatever the
+    # prediction says of the gain (carried parts can make a covered speed look as good).
+    releases, analysis = two_speeds
+    covered = sorted({r.U for r in releases})
+    new = 0.5 * analysis.flutter_speed
+    assert all(abs(new - U) > 0.05 * U for U in covered)
+    choice = choose_next(analysis, releases, [*covered, new], bound=math.inf,
+                         releases_per_speed=1, decay_s=5.0)
+    assert choice.speed == new and "a new speed (2 so far, 3 needed)" in choice.reason
+    assert [u for u, _ in choice.predicted] == [*covered, new]
+
+
+def test_a_large_structure_part_does_not_stop_the_campaign_by_itself(three_speeds):
+    # The structure part is carried (no gain promised for it) but new data may tell the
+    # structures apart: the choice stops only when the parts it can reduce cannot be.
+    releases, analysis = three_speeds
+    u = analysis.uncertainty
+    wide = dataclasses.replace(analysis, uncertainty=dataclasses.replace(
+        u, structure=100 * u.total))
+    U_F = analysis.flutter_speed
+    choice = choose_next(wide, releases, [0.7 * U_F, 0.8 * U_F], bound=math.inf,
+                         releases_per_speed=2, decay_s=5.0)
+    assert choice.speed == 0.8 * U_F, choice.reason
+    # Its predicted total changes by far less than MIN_GAIN: a stop rule on the total would
+    # have stopped here.
+    assert choice.predicted[1][1] > 0.99 * wide.flutter_std
+    # Without the structure part and nothing to gain (one candidate: the top speed, one
+    # release of 0.1 s), it stops.
+    stop = choose_next(analysis, releases, [0.7 * U_F], bound=math.inf, releases_per_speed=1,
+                       decay_s=0.1)
+    assert stop.speed is None and stop.reason.startswith("stopped: no candidate gains")

@@ -57,6 +57,9 @@ def test_defaults_and_candidates():
     assert plan.files == "per_speed"
     assert parse_plan(FIXED.replace("decay_s = 5.0", 'decay_s = 5.0\nfiles = "per_release"')
                       ).files == "per_release"
+    assert plan.decay_end == "fixed"
+    assert parse_plan(FIXED.replace("decay_s = 5.0", 'decay_s = 5.0\ndecay_end = "settled"')
+                      ).decay_end == "settled"
     assert plan.adaptive is not None
     assert plan.adaptive.safety_fraction == 0.9
     assert len(plan.adaptive.candidates()) == 13
@@ -80,6 +83,8 @@ def test_fan_set_points_become_wind_speeds():
     ("decay_s = 5.0", "decay_s = 5.0\ncalz_end = 1", r"calz_end must be true or false"),
     ("decay_s = 5.0", 'decay_s = 5.0\nfiles = "per_run"',
      r"files = 'per_run'; allowed: per_speed, per_release"),
+    ("decay_s = 5.0", 'decay_s = 5.0\ndecay_end = "noise"',
+     r"\[campaign\] decay_end = 'noise'; allowed: fixed, settled"),
 ])
 def test_fixed_plan_errors_name_the_key(old, new, match):
     assert old in FIXED

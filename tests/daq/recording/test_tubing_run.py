@@ -135,3 +135,31 @@ def test_a_measured_table_is_recorded_and_corrects_like_the_tube_it_measured(tub
     for a, b in zip(by_table.releases, by_tube.releases, strict=True):
         np.testing.assert_allclose(a.lift, b.lift, atol=1e-3 * float(np.ptp(b.lift)))
         np.testing.assert_allclose(a.moment, b.moment, atol=1e-3 * float(np.ptp(b.moment)))
+
+
+def test_the_tubes_air_has_the_barometers_temperature(tubed_run, tmp_path):
+    """A file whose barometer read 5 C: the tubes' air is at 5 C (median of the valid readings).
+
+    The barometer group is added by hand in the layout's form (channel_names attribute, value
+    columns); one reading of a disconnected probe (-999 K) and a NaN are not used. The
+    correction then differs from the 20 C one: the tube's response depends on the air's
+    viscosity and speed of sound, so the corrected forces move (by ~1e-3 of their range).
+    """
+    path, _ = tubed_run
+    copy = tmp_path / "cold.h5"
+    copy.write_bytes(path.read_bytes())
+    temperatures = [278.0, 278.15, 278.3, -999.0, np.nan]
+    with h5py.File(copy, "a") as f:
+        group = f.require_group("entry/instrument").create_group("baro")
+        group.attrs["channel_names"] = np.array(
+            [b"pressure", b"temperature", b"density", b"relative_humidity"])
+        group["value"] = np.array([[1.0e5, T, 1.2, np.nan] for T in temperatures])
+    cold, warm = read_run(copy), read_run(path)
+    assert cold.tubing is not None and warm.tubing is not None
+    assert cold.tubing.air.temperature_k == pytest.approx(278.15)
+    assert warm.tubing.air.temperature_k == pytest.approx(TUBING_TEMPERATURE_K)
+    # Same density either way (the run's measured one): only the temperature moved.
+    assert cold.tubing.air.density == pytest.approx(warm.tubing.air.density)
+    moved = max(float(np.max(np.abs(a.lift - b.lift))) / float(np.ptp(b.lift))
+                for a, b in zip(cold.releases, warm.releases, strict=True))
+    assert moved > 5e-4, moved  # 1.5e-3 measured: 15 K colder air; float noise is ~1e-12

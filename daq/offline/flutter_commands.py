@@ -1,0 +1,241 @@
+"""``windrig identify`` and ``windrig flutter``: E2RFC on run files, flutter of a section.
+
+``windrig identify FILES`` reads recorded runs, identifies the rational-function model of their
+releases (E2RFC with its uncertainty, :func:`ident.campaign.analyze_campaign`) and prints the
+flutter speed. ``windrig flutter --section S.json (--model M.json | --table T.csv)`` analyses a
+section of two or three degrees of freedom with a model (``windrig identify --json`` output or
+``{"A": ..., "d": ...}``) or a flutter-derivative table (``docs/flutter_derivative_tables.md``):
+the state-space analysis (a table is first fitted with rational functions,
+:func:`ident.roger_table.fit_table`) and the frequency-domain one as its check.
+
+Every mistake in what the user gave (a file that cannot be read, a section or model that is not
+valid, a 2-DOF model for a section with sway) is a :class:`~daq.errors.UsageError` naming the file.
+
+Not responsible for: parsing the command line or the error boundary (:mod:`daq.cli`).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from daq.errors import UsageError
+
+__all__ = ["run_flutter", "run_identify"]
+
+
+def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
+                 n_lags: int | None = None, tubing_correction: bool = True) -> int:
+    """Identify the releases of run files and print the model and flutter speed; return 0.
+
+    Parameters
+    ----------
+    files : sequence of Path
+        windrig HDF5 run files of one section.
+    json_path : Path, optional
+        Also write the model, its diagnostics and the flutter result here.
+    n_lags : int, optional
+        Number of lag terms (default: chosen by held-out error).
+    tubing_correction : bool
+        Correct the forces for the taps' pneumatic tubing recorded in the files.
+    """
+    from ident.campaign import analyze_campaign
+    from ident.io import campaign_section, read_run, tubing_note
+
+    runs = [read_run(p, tubing_correction=tubing_correction) for p in files]
+    section = campaign_section(runs)
+    releases = [r for run in runs for r in run.releases]
+    print(f"{len(releases)} release(s) from {len(runs)} file(s); wind speeds "
+          f"{sorted({round(r.U, 2) for r in releases})} m/s{tubing_note(runs)}")
+    analysis = analyze_campaign(releases, section, n_lags=n_lags, table=False)
+    model, result, spread = analysis.model, analysis.flutter, analysis.structures
+    u = analysis.uncertainty
+    diagnostics = model.diagnostics
+    print(f"structure: {diagnostics.reason}")
+    print(f"lag roots d = {np.round(model.d, 4).tolist()}")
+    for k, A_k in enumerate(model.A, start=1):
+        print(f"A{k} = {np.round(A_k, 4).tolist()}")
+    if result.speed is None:
+        print(result.summary())
+    else:
+        print(f"flutter speed {result.speed:.3f} +/- {u.total:.3f} m/s, frequency "
+              f"{result.frequency:.3f} Hz ({result.critical_mode} branch); "
+              f"{spread.summary()}")
+        parts = [f"noise {u.parametric:.3f}", f"structure {u.structure:.3f}",
+                 f"extrapolation {u.extrapolation:.3f}", f"one lag more {u.refinement:.3f}"]
+        if u.turbulence:
+            parts.insert(1, f"release scatter {u.turbulence:.3f}")
+        if u.below_decay:
+            parts.append(f"below a decaying release {u.below_decay:.3f}")
+        print("  its std (m/s): " + ", ".join(parts))
+    for label, speed, speed_std in zip(spread.labels[1:], spread.speeds[1:], spread.stds[1:],
+                                       strict=True):
+        print(f"  also within one SE: {label}: " + (
+            f"no flutter below {spread.U_max:.3g} m/s" if speed is None or speed_std is None
+            else f"flutter speed {speed:.3f} +/- {speed_std:.3f} m/s"))
+    for warning in analysis.warnings:
+        print(f"warning: {warning}")
+    if json_path is not None:
+        summary = analysis.to_dict()
+        json_path.write_text(json.dumps({
+            "files": [str(p) for p in files],
+            "model": summary["model"],
+            "structure": summary["reason"],
+            "release_residuals": diagnostics.release_residuals.tolist(),
+            "flutter_speed": result.speed,
+            "flutter_speed_std": analysis.flutter_std,
+            "flutter_speed_std_parts": summary["flutter_std_parts"],
+            "flutter_speed_structures": summary["flutter_structures"],
+            "flutter_frequency": result.frequency,
+            "critical_mode": result.critical_mode,
+            "warnings": summary["warnings"],
+        }, indent=2))
+        print(f"wrote {json_path}")
+    return 0
+
+
+def run_flutter(section_path: Path, *, model_path: Path | None = None,
+                table_path: Path | None = None, convention: str = "scanlan",
+                u_max: float | None = None, json_path: Path | None = None) -> int:
+    """Analyse the flutter of a section with a model or a table; print it; return 0.
+
+    Parameters
+    ----------
+    section_path : Path
+        JSON of :class:`ident.section.SectionModel` fields (with ``fp``: three degrees of
+        freedom).
+    model_path, table_path : Path
+        Exactly one: a rational-function model (JSON) or a flutter-derivative table (CSV).
+    convention : str
+        Sign convention of the table (:data:`ident.fd_table.CONVENTIONS`).
+    u_max : float, optional
+        Upper wind speed of the state-space search, m/s.
+    json_path : Path, optional
+        Write the result (DESIGN's keys), the section and the model used here.
+    """
+    from ident import flutter
+
+    if u_max is not None and not u_max > 0:
+        raise UsageError(f"--u-max {u_max:g}: must be > 0 m/s")
+    section = _read_section(section_path)
+    out: dict[str, Any] = {}
+    if table_path is not None:
+        model, check = _table_model(table_path, convention, section, out)
+    else:
+        assert model_path is not None
+        model = _read_model(model_path, section.n_dof, section_path)
+        check = flutter.frequency_domain(section, model.flutter_derivatives)
+    result = flutter.analyze(section, model, U_max=u_max)
+    print(result.summary())
+    if check.speed is not None:
+        source = "the table" if table_path is not None else "the model"
+        print(f"frequency domain (flutter derivatives of {source}): U_F = {check.speed:.3f} m/s")
+    elif table_path is not None:
+        print(f"frequency domain: no flutter within the table's reduced frequencies "
+              f"({check.summary()})")
+    if json_path is not None:
+        json_path.write_text(json.dumps({
+            "flutter_speed": result.speed, "flutter_frequency": result.frequency,
+            "critical_mode": result.critical_mode,
+            "flutter_speed_frequency_domain": check.speed,
+            "flutter_frequency_frequency_domain": check.frequency,
+            "U_max": result.U_max, "n_dof": section.n_dof, "section": section.to_dict(),
+            "model": model.to_dict(), **out,
+        }, indent=2))
+        print(f"wrote {json_path}")
+    return 0
+
+
+def _read_section(path: Path) -> Any:
+    from ident import SectionModel
+
+    data = read_json(path, "section")
+    if not isinstance(data, dict):
+        raise UsageError(f"{path}: expected a JSON object of SectionModel fields")
+    try:
+        section = SectionModel.from_dict(data)
+    except (TypeError, ValueError) as exc:
+        raise UsageError(f"{path}: {exc}") from exc
+    if "rho" not in data:
+        print(f"note: {path} gives no air density rho: using {section.rho} kg/m^3")
+    return section
+
+
+def _read_model(path: Path, n_dof: int, section_path: Path) -> Any:
+    from ident import RationalFunctionModel
+
+    data = read_json(path, "model")
+    if isinstance(data, dict) and "model" in data:  # `windrig identify --json`
+        data = data["model"]
+    if not isinstance(data, dict):
+        raise UsageError(f"{path}: expected a JSON object, the model or `windrig identify "
+                         "--json` output")
+    try:
+        model = RationalFunctionModel.from_dict(data)
+    except (TypeError, ValueError, KeyError) as exc:
+        raise UsageError(f"{path}: not a rational-function model ({exc}); expected "
+                         '{"A": [[[...]]], "d": [...]} or `windrig identify --json` output'
+                         ) from exc
+    if model.n_dof < n_dof:
+        raise UsageError(f"{section_path} has a lateral spring (fp: three degrees of freedom) "
+                         f"but {path} is a model of heave and pitch only: give a 3-DOF model "
+                         "(3x3 matrices A)")
+    if model.n_dof > n_dof:
+        print(f"note: {section_path} has no lateral spring: using the heave-pitch part of "
+              f"{path}'s 3-DOF model")
+        model = model.planar()
+    return model
+
+
+def _table_model(path: Path, convention: str, section: Any,
+                 out: dict[str, Any]) -> tuple[Any, Any]:
+    """Read a table, fit it, and return the model and the table's frequency-domain result."""
+    from ident import flutter
+    from ident.errors import IdentError
+    from ident.fd_table import FlutterDerivativeTable
+    from ident.roger_table import fit_table
+
+    try:
+        table = FlutterDerivativeTable.from_csv(path, convention=convention)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from exc
+    if table.n_dof < section.n_dof:
+        raise UsageError(f"{path} has the derivatives of heave and pitch only, but the section "
+                         "has a lateral spring (fp): give all 18 (H1..H6, A1..A6, P1..P6)")
+    if table.filled:
+        print(f"note: {path} gives no {', '.join(table.filled)}: taken as zero")
+    if table.K.size < 4:
+        raise UsageError(f"{path}: {table.K.size} row(s); a flutter analysis from a table "
+                         "needs at least 4 reduced frequencies")
+    try:
+        fit = fit_table(table)
+    except IdentError as exc:
+        raise UsageError(f"{path}: {exc}") from exc
+    print(f"{path}: {table.K.size} rows, K {table.K[0]:.3g} to {table.K[-1]:.3g}; "
+          f"{fit.summary()}")
+    model = fit.model if section.n_dof == 3 else fit.model.planar()
+    interpolate = table.interpolator()
+    check = flutter.frequency_domain(section, interpolate,
+                                     (float(table.K[0]), float(table.K[-1])))
+    out.update({"table": str(path), "table_convention": convention,
+                "table_filled": list(table.filled),
+                "table_fit_relative_error": fit.relative_error.tolist()})
+    return model, check
+
+
+def read_json(path: Path, what: str) -> object:
+    """Read a JSON file named on the command line (a bad one: a usage error naming it)."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise UsageError(f"{path}: cannot read the {what} file: {exc.strerror or exc}"
+                         ) from exc
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise UsageError(f"{path}: not valid JSON ({exc.msg}, line {exc.lineno} column "
+                         f"{exc.colno})") from exc
