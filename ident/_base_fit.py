@@ -37,6 +37,11 @@ BASE_HZ_MIN = 0.5
 BASE_HZ_MAX_FRACTION = 0.9
 #: Left out around each release's modal frequencies, as a fraction of them.
 MODE_GUARD = 0.15
+#: The candidate is offered only if its line stands out this much (peak over median of the
+#: scanned periodogram): a floor at 6 Hz and 10 milli-g gave about 5000, residuals without a
+#: line 4 to 23 (clean, friction, drag with crosstalk, ...; at 13 a spurious "floor" was named
+#: beside drag and crosstalk before this test).
+MIN_PROMINENCE = 100.0
 
 
 @dataclass(frozen=True)
@@ -47,9 +52,13 @@ class BaseLine:
     ----------
     frequency_hz : float
         Its frequency, Hz.
+    prominence : float
+        The summed periodogram's peak over its median on the scanned grid (a line stands out
+        by orders of magnitude; a broadband residual's highest point by a few times).
     """
 
     frequency_hz: float
+    prominence: float = math.inf
 
 
 def modal_peaks(t: FloatArray, q: FloatArray) -> tuple[float, float]:
@@ -107,7 +116,8 @@ def find_line(ts: Sequence[FloatArray], heave: Sequence[FloatArray],
 
     res = minimize_scalar(rss, bounds=(f0 - 2 * step, f0 + 2 * step), method="bounded",
                           options={"xatol": step * 1e-3})
-    return BaseLine(frequency_hz=float(res.x))
+    prominence = float(power.max() / max(float(np.median(power)), np.finfo(float).tiny))
+    return BaseLine(frequency_hz=float(res.x), prominence=prominence)
 
 
 def base_columns(ts: Sequence[FloatArray], line: BaseLine, section: SectionModel,

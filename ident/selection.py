@@ -10,7 +10,8 @@ at a time, in rounds:
    Vortex shedding has a residual of its own (the forces above the motion's band), so its score
    does not change from round to round.
 2. **Clear?** A candidate qualifies if it leaves at most ``NONE_RATIO`` of the held-out residual
-   and its improvement is ``MIN_SIGMAS`` standard errors clear of nothing.
+   and its improvement is ``MIN_SIGMAS`` standard errors clear of nothing (a base vibration
+   also needs a line that stands out, :data:`ident._base_fit.MIN_PROMINENCE`).
 3. **Gap**: the best qualifying candidate is added: all chosen effects take the joint fit's
    parameters, the measurement effects are taken out of the data, the aerodynamic model is
    identified again by E2RFC (when the data changed), every release is simulated again and the
@@ -35,7 +36,14 @@ import numpy as np
 import numpy.typing as npt
 
 from ident import e2rfc
-from ident._base_fit import BaseLine, accelerations, base_columns, find_line, modal_peaks
+from ident._base_fit import (
+    MIN_PROMINENCE,
+    BaseLine,
+    accelerations,
+    base_columns,
+    find_line,
+    modal_peaks,
+)
 from ident._equation_error import (
     LOWPASS_FACTOR,
     STRUCTURAL_CANDIDATES,
@@ -245,6 +253,10 @@ def select(releases: Sequence[Release], section: SectionModel, baseline: Rationa
                                    else f"not clear of {against}")
                                   + f" (needs <= {NONE_RATIO} and {MIN_SIGMAS:g} standard "
                                   "errors)")
+            elif name == _BASE and line.prominence < MIN_PROMINENCE:
+                verdicts[name] = (f"rejected: no line stands out in the heave residual (peak "
+                                  f"{line.prominence:.3g} x the median, needs "
+                                  f"{MIN_PROMINENCE:g})")
             else:
                 trial_params, trial_problem = _joint(releases, section, vortex, line,
                                                      [*chosen, name], depth)
