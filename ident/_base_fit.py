@@ -15,7 +15,7 @@ frequencies left out (there the residual of every structural effect lives, and a
 line would soak part of it up), between ``BASE_HZ_MIN`` and ``BASE_HZ_MAX_FRACTION`` of the
 low-pass band; then refined by least squares.
 
-Not responsible for: scoring or choosing (:mod:`ident.selection`).
+Not responsible for: scoring or choosing (:mod:`ident.effect_selection`).
 """
 
 from __future__ import annotations

@@ -7,10 +7,11 @@ aerodynamics, identified by E2RFC unless given) with the releases it came from:
    (:func:`ident.simulate.simulate_decay`) and compared with what was measured:
    :func:`gap` is the RMS difference of h, alpha, lift and moment over all releases, each
    channel divided by its own RMS, averaged over the four channels.
-2. **Forward selection** (:mod:`ident.selection`): the named effects (``docs/conventions.md``,
-   "Named effects") are fitted to the data as physical terms with their own parameters
-   (:mod:`ident._equation_error`: the residual of the structural equation for most, the forces'
-   line above the motion's band for vortex shedding) and scored by the held-out fraction of that
+2. **Forward selection** (:mod:`ident.effect_selection`): the named effects
+   (``docs/conventions.md``, "Named effects") are fitted to the data as physical terms with
+   their own parameters (:mod:`ident._equation_error`: the residual of the structural equation
+   for most, the forces' line above the motion's band for vortex shedding) and scored by the
+   held-out fraction of that
    residual they explain. The best is added if it is clearly supported (``NONE_RATIO``,
    ``MIN_SIGMAS``) *and* the simulated gap shrinks; then the next one is scored jointly with
    those chosen, and so on. Nothing clearly supported: the answer is None (no false alarms).
@@ -39,12 +40,7 @@ import numpy.typing as npt
 
 from ident import e2rfc
 from ident.coupling import ZeroWindCoupling, coupling_verdict, zero_wind_coupling
-from ident.effects import Effect
-from ident.release import Release
-from ident.residual_check import ResidualFinding, locate_residual
-from ident.rfc import RationalFunctionModel
-from ident.section import SectionModel
-from ident.selection import (
+from ident.effect_selection import (
     CHANNELS,
     MAX_EFFECTS,
     MIN_SIGMAS,
@@ -56,6 +52,11 @@ from ident.selection import (
     select,
     simulate_channels,
 )
+from ident.effects import Effect
+from ident.release import Release
+from ident.residual_check import ResidualFinding, locate_residual
+from ident.rfc import RationalFunctionModel
+from ident.section import SectionModel
 
 __all__ = ["CHANNELS", "MAX_EFFECTS", "MIN_SIGMAS", "NONE_RATIO", "Backbone",
            "CandidateEvidence", "DiscrepancyReport", "NamedEffect", "ResidualFinding",
@@ -88,7 +89,7 @@ class DiscrepancyReport:
     evidence : tuple of CandidateEvidence
         Every candidate of the first round (against the baseline), best first.
     rounds : tuple of tuple of CandidateEvidence
-        Every round of the forward selection (:mod:`ident.selection`), best first.
+        Every round of the forward selection (:mod:`ident.effect_selection`), best first.
     runner_up : str or None
         The second-best candidate of the first round.
     baseline : RationalFunctionModel

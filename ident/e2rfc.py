@@ -21,6 +21,10 @@ every release), with the one-standard-error rule: the simplest model whose held-
 within one standard error of the best. The machinery of that problem is
 :mod:`ident._e2rfc_problem`.
 
+Longer than 600 lines: the identified model, its diagnostics and its uncertainty (the parts,
+the refits they need, the warnings) are one result and stay together; the least-squares problem
+itself is :mod:`ident._e2rfc_problem`, the regressors :mod:`ident._regressors`.
+
 How uncertain the flutter speed is (:meth:`IdentifiedModel.uncertainty`), from these sources:
 
 - *parametric*: measurement noise through the chosen model's parameter covariance;

@@ -23,7 +23,7 @@ the first two limits. Each finding says where the residual is:
   (quartiles); where it is largest, or "at all amplitudes" when within a factor of two;
 - the **wind speeds** at which the systematic part exceeds the limit.
 
-Not responsible for: choosing effects (:mod:`ident.selection`) or the report
+Not responsible for: choosing effects (:mod:`ident.effect_selection`) or the report
 (:mod:`ident.discrepancy`).
 """
 

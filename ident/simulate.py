@@ -29,6 +29,11 @@ the release starts from ``(h0, alpha0, p0)`` and the record adds the sway ``p`` 
 the drag (N/m, downwind) to the four channels (:func:`channels`). The structural nonlinearities
 and the sensor crosstalk act on heave and pitch only; a channel delay delays every force.
 
+Longer than 600 lines: the decay record (:class:`SimulatedDecay`, with its hold and its
+continuation), the plant that steps it (exact, ETD2RK and first-order-hold integrators sharing
+one augmented state matrix) and the measurement effects belong together: they share the
+augmented state layout, and split apart each would need the others' private indices.
+
 This is the noise-free physics shared by the virtual tunnel
 (:func:`simulators.tunnel.simulate_release` adds measurement noise and the held stretch before the
 release) and by the discrepancy workflow, which simulates an identified model, with candidate

@@ -28,6 +28,9 @@ Geometry: the laser looks down at chord position ``x`` (m, positive downstream o
 axis); with h positive down and alpha positive nose-up (Scanlan), the surface under the spot moves
 down by ``h + x alpha`` (small angles), so the reading is ``d = standoff + 1000 (h + x alpha)`` mm.
 Readings outside ``[-0.01 MR, 1.01 MR]`` give 262077 (peak before the range) / 262078 (behind).
+
+Longer than 600 lines: the laser's ASCII commands, its binary output words and its faults
+share one device state and one output loop; one module keeps them in one place.
 """
 
 from __future__ import annotations

@@ -28,6 +28,10 @@ the scan start), ``ptp_lock`` (a step of the frame time), drift (the :class:`Dev
 CALZ with the wind on (no injection needed: the zero then holds the wind's pressures, an offset
 error on every tap), ``invalid_command``, and ``tcp_reset`` (the data connections are reset with
 an RST mid-scan and the scan restarts with the counter from 1).
+
+Longer than 600 lines: the instrument's whole command set (ASCII commands and their
+replies, settings, calibration, the binary frame stream and its faults) is one state machine
+over one device state; split, each part would reach into the others' state.
 """
 
 from __future__ import annotations

@@ -28,6 +28,9 @@ Behaviour (manual facts, with the simulator's own choices marked [sim]):
   mmH2O, inH2O) or temperature ('C, 'F, K) units (PTB330 Table 13);
 - reply texts of ``SMODE``, ``INTV``, ``ADDR``, ``UNIT`` follow the manuals' examples; there is
   no echo and no ``>`` prompt [sim: the POLL-mode behaviour, where echo is off].
+
+Longer than 600 lines: the barometer's command set, its units and formats, its run and poll
+modes and its faults act on one device state; one module keeps that state in one place.
 """
 
 from __future__ import annotations
