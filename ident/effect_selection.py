@@ -71,15 +71,13 @@ from ident.effects import (
 from ident.release import Release
 from ident.rfc import RationalFunctionModel
 from ident.section import SectionModel
-from ident.simulate import simulate_decay
+from ident.simulate import CHANNELS, simulate_decay
 
 __all__ = ["CHANNELS", "MAX_EFFECTS", "MIN_SIGMAS", "NONE_RATIO", "CandidateEvidence",
            "NamedEffect", "Selection", "gap", "select"]
 
 FloatArray = npt.NDArray[np.float64]
 
-#: Compared channels.
-CHANNELS = ("h", "alpha", "lift", "moment")
 #: A candidate must leave at most this fraction of the held-out residual (explain >= 2 %).
 NONE_RATIO = 0.98
 #: ... and its improvement must exceed this many standard errors (over the chunks).

@@ -37,13 +37,13 @@ import numpy as np
 import numpy.typing as npt
 
 from ident.release import Release
+from ident.simulate import CHANNELS
 
 __all__ = ["LINE_SHARE", "NOISE_RATIO", "SHARE_LIMIT", "SYSTEMATIC_LIMIT", "ResidualFinding",
            "locate_residual", "systematic_levels"]
 
 FloatArray = npt.NDArray[np.float64]
 
-CHANNELS = ("h", "alpha", "lift", "moment")
 #: A channel's systematic residual must exceed this fraction of the channel's RMS (module doc) ...
 SYSTEMATIC_LIMIT = 0.02
 #: ... and this multiple of the white noise's RMS ...
