@@ -37,6 +37,7 @@ from ident.turbulence import StaticCoefficients, TurbulenceSpec
 
 __all__ = [
     "InstrumentConfig",
+    "is_sway_laser",
     "Limits",
     "RigConfig",
     "SHIPPED_CONFIGS",
@@ -89,6 +90,8 @@ class SimulationConfig:
         ``{"A": ..., "d": ...}`` when ``aerodynamics = "rfc"``.
     hold_h, hold_alpha : float
         Hold position of the electromagnet, m and rad.
+    hold_p : float
+        Sway of the hold position, m (``hold_p``, a 3-DOF rig only; default 0).
     pressure_pa, temperature_c : float
         Ambient air.
     devices : dict
@@ -124,6 +127,7 @@ class SimulationConfig:
     span: float | None = None
     turbulence_seed: int = 0
     tubing: bool = False
+    hold_p: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -168,6 +172,22 @@ class RigConfig:
     def by_role(self, role: str) -> list[InstrumentConfig]:
         """Return every instrument of a role (``lasers`` may have several)."""
         return [inst for inst in self.instruments if inst.role == role]
+
+    @property
+    def sway_laser(self) -> InstrumentConfig | None:
+        """The laser that gives the sway p (``axis = "sway"``): a 3-DOF rig's; None on 2-DOF."""
+        found = [inst for inst in self.by_role("lasers") if is_sway_laser(inst)]
+        return found[0] if found else None
+
+    @property
+    def heave_pitch_lasers(self) -> list[InstrumentConfig]:
+        """The lasers looking down at the model (h and alpha), in config order."""
+        return [inst for inst in self.by_role("lasers") if not is_sway_laser(inst)]
+
+
+def is_sway_laser(inst: InstrumentConfig) -> bool:
+    """Whether an instrument is a laser measuring the sway (``axis = "sway"``)."""
+    return inst.role == "lasers" and inst.settings.get("axis", "vertical") == "sway"
 
 
 #: The folder of the rig configs shipped inside the package (found without a source checkout).
@@ -244,6 +264,7 @@ def parse_rig_config(text: str, source: str = "<string>") -> RigConfig:
             f"below max_fan_rpm {limits.max_fan_rpm} at {wind_per_rpm} (m/s)/rpm"
         )
     instruments = _instruments(data, source)
+    _check_sway(section, instruments, source)
     simulation = (_simulation(data["simulation"], f"{source} [simulation]", instruments,
                               data["section"])
                   if "simulation" in data else None)
@@ -257,14 +278,39 @@ def parse_rig_config(text: str, source: str = "<string>") -> RigConfig:
 
 def _section(table: Mapping[str, Any], where: str) -> tuple[SectionModel, float]:
     fields_ = {"B", "m", "I", "fh", "fa", "zeta_h", "zeta_a"}
-    check_keys(table, where, fields_ | {"depth"}, {"S", "span"})  # span: daq.calibration
+    sway = {"fp", "zeta_p", "m_p"}  # the lateral spring: a section with fp has 3 DOF
+    check_keys(table, where, fields_ | {"depth"}, {"S", "span"} | sway)  # span: daq.calibration
     values = {key: number(table, key, where) for key in fields_ | ({"S"} & set(table))}
+    for key in sorted(sway & set(table) - {"fp"}):
+        if "fp" not in table:
+            raise ConfigError(f"{where} {key} needs fp (the sway spring's frequency, Hz): a "
+                              "section without fp has two degrees of freedom")
+    if "fp" in table:
+        values["fp"] = number(table, "fp", where, lo=0.0, hi=1000.0, lo_open=True)
+        values["zeta_p"] = number(table, "zeta_p", where, lo=0.0, hi=0.5, default=0.0)
+        if "m_p" in table:
+            values["m_p"] = number(table, "m_p", where, lo=0.0, hi=1e5, lo_open=True)
     try:
         section = SectionModel(**values)
     except ValueError as exc:
         raise ConfigError(f"{where}: {exc}") from exc
     depth = number(table, "depth", where, lo=0.0, hi=section.B, lo_open=True)
     return section, depth
+
+
+def _check_sway(section: SectionModel, instruments: tuple[InstrumentConfig, ...],
+                source: str) -> None:
+    """A rig is 3-DOF exactly when its section has fp: then one sway laser gives p."""
+    sway = [inst.name for inst in instruments if is_sway_laser(inst)]
+    if section.n_dof == 3 and not sway:
+        raise ConfigError(f"{source} [section] fp = {section.fp:g} Hz makes the rig 3-DOF: it "
+                          "needs a sway laser ([[lasers]] with axis = \"sway\") to measure p")
+    if sway and section.n_dof == 2:
+        raise ConfigError(f"{source} [[lasers]] {sway[0]!r} axis = \"sway\" needs the sway "
+                          "spring in [section] (fp, Hz): a section without fp has 2 DOF")
+    if len(sway) > 1:
+        raise ConfigError(f"{source} [[lasers]]: one sway laser (axis = \"sway\") gives p, "
+                          f"got {len(sway)}: {sway}")
 
 
 def _instruments(data: Mapping[str, Any], source: str) -> tuple[InstrumentConfig, ...]:
@@ -300,7 +346,10 @@ def _simulation(table: Mapping[str, Any], where: str, instruments: tuple[Instrum
                 section: Mapping[str, Any]) -> SimulationConfig:
     check_keys(table, where, {"aerodynamics", "hold_h", "hold_alpha"},
                {"rfc", "pressure_pa", "temperature_c", "devices", "static", "turbulence",
-                "tubing"})
+                "tubing", "hold_p"})
+    if "hold_p" in table and "fp" not in section:
+        raise ConfigError(f"{where} hold_p needs the sway spring in [section] (fp, Hz): a "
+                          "section without fp has two degrees of freedom")
     aerodynamics = table["aerodynamics"]
     if aerodynamics not in ("flat_plate_jones", "rfc"):
         raise ConfigError(f"{where} aerodynamics must be 'flat_plate_jones' or 'rfc', "
@@ -338,6 +387,7 @@ def _simulation(table: Mapping[str, Any], where: str, instruments: tuple[Instrum
         span=span,
         turbulence_seed=seed,
         tubing=_flag(table, "tubing", where),
+        hold_p=number(table, "hold_p", where, lo=-0.05, hi=0.05, default=0.0),
     )
 
 

@@ -16,6 +16,11 @@ the release's pressures plus up to :data:`TUBING_LEAD_S` of the held model befor
 tubes' air at the run's measured density and its barometer's median temperature, 20 C without
 one); ``tubing_correction=False`` reads them as measured. Dead taps
 (``/entry/calibration/taps/dead``) are left out of the correction as they are out of the forces.
+The drag of a 3-DOF file is read as measured (the correction covers lift and moment).
+
+Three degrees of freedom: a file of a rig with a sway spring (``[section] fp``) has ``p`` and
+``drag`` in ``/entry/sync``; its section is 3-DOF (``fp``, ``zeta_p``, ``m_p``) and each release
+carries them (``Release(p=, drag=)``). A 2-DOF file reads exactly as before.
 """
 
 from __future__ import annotations
@@ -39,7 +44,9 @@ from ident.tubing import Air, TubingSet, force_correction, from_description
 __all__ = ["FileFormatError", "RunFile", "TUBING_LEAD_S", "campaign_section", "read_run",
            "tubing_note"]
 
-_SECTION_FIELDS = ("B", "m", "I", "fh", "fa", "zeta_h", "zeta_a", "S")
+_SECTION_FIELDS = ("B", "m", "I", "fh", "fa", "zeta_h", "zeta_a", "S", "fp", "zeta_p", "m_p")
+#: Columns of ``/entry/sync`` a 3-DOF file has (docs/file_format.md).
+_SWAY_COLUMNS = ("p", "drag")
 #: Keys of a ``[taps]`` table that describe the layout (others: tubing, channels, ...).
 _LAYOUT_KEYS = {"shape", "B", "D", "taps_per_face", "n_taps", "vertices",
                 "x", "z", "nx", "nz", "length"}
@@ -126,6 +133,9 @@ def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True) ->
             for name in ("time", "h", "alpha", "lift", "moment", "U", "rho"):
                 part = f"/entry/sync/{name}"
                 sync[name] = np.asarray(f[part][()], dtype=float)
+            for name in _SWAY_COLUMNS:  # a 3-DOF rig's file has both
+                if f"entry/sync/{name}" in f:
+                    sync[name] = np.asarray(f[f"entry/sync/{name}"][()], dtype=float)
             part = "/entry/releases"
             table = f["entry/releases"][()]
             rig_name = _text(f["entry"].attrs.get("rig_name", ""))
@@ -147,6 +157,12 @@ def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True) ->
             # RuntimeError on following a link, ValueError on a bad type)
             raise FileFormatError(f"{path}: unreadable (truncated or damaged?): {exc}") from exc
     section, depth = _section(config_text, path, sync["rho"])
+    if section.n_dof == 3 and not all(name in sync for name in _SWAY_COLUMNS):
+        raise FileFormatError(f"{path}: its [section] has fp (3 DOF) but /entry/sync has no "
+                              "p and drag: a 2-DOF recording of a 3-DOF section")
+    if section.n_dof == 2:  # releases of a 2-DOF section have no sway, whatever the file holds
+        for name in _SWAY_COLUMNS:
+            sync.pop(name, None)
     tubing = None
     if tubing_meta is not None:
         tubing, integration = _tubing(tubing_meta, config_text, path, section.rho, dead,
@@ -347,7 +363,8 @@ def _release(sync: dict[str, np.ndarray], row: Any, path: str, index: int) -> Re
         raise FileFormatError(f"{path}: release {index} rows {start}..{stop} are outside the "
                               f"{n} rows of /entry/sync (truncated run?)")
     rows = slice(start, stop)
-    channels = {name: sync[name][rows] for name in ("h", "alpha", "lift", "moment")}
+    names = ("h", "alpha", "lift", "moment") + (_SWAY_COLUMNS if "p" in sync else ())
+    channels = {name: sync[name][rows] for name in names}
     for name, values in channels.items():
         bad = int(np.count_nonzero(~np.isfinite(values)))
         if bad:

@@ -7,12 +7,19 @@ the motion and aerodynamic forces of the model, which come from
 Instruments ask it for values at true times (:mod:`simulators.clock`); it never pushes data to
 them.
 
-Motion: while the magnet holds, the model sits at the hold position ``(h0, alpha0)``; a release
+Motion: while the magnet holds, the model sits at the hold position ``(h0, alpha0)`` (with
+sway, ``(h0, alpha0, p0)``); a release
 at wind speed U computes the free decay once (on a fine grid, then interpolated with cubic splines)
 and the model follows it; re-arming pulls it back to the hold position. Forces are the
 self-excited forces plus any vortex forcing and wind load; tap pressures integrate exactly to
 them, plus a mean pressure distribution that integrates to zero. The Pitot channel reads the
 mean dynamic pressure.
+
+Three degrees of freedom (a section with a sway spring, ``fp``, and a 3x3 model): the tunnel
+serves the sway ``p`` (m, downwind) and the drag (N/m, downwind) too (:meth:`VirtualTunnel.sample`,
+:meth:`VirtualTunnel.decay_truth`), and the tap pressures integrate to the drag as well when the
+taps' outline carries it (:attr:`ident.taps.TapLayout.carries_drag`: faces across the wind; a
+plate's taps cannot, and then the drag is in no pressure, as on a real rig).
 
 Turbulent flow (optional: static coefficients, a :class:`~ident.turbulence.TurbulenceSpec`, the
 model's span and a seed): one periodic field of effective gusts along the distance the air
@@ -96,6 +103,8 @@ class _Decay:
 
 
 _NAMES = ("h", "alpha", "lift", "moment")
+#: The channels of a section with sway (three degrees of freedom).
+_NAMES_3DOF = _NAMES + ("p", "drag")
 
 #: Samples of the previous chunk that a continuation chunk's splines run through.
 _SPLINE_LEAD = 16
@@ -105,6 +114,7 @@ class _Continuation:
     """The random response after a computed decay in turbulence, extended on demand in chunks."""
 
     def __init__(self, sim: SimulatedDecay, n_chunk: int) -> None:
+        self._names = _NAMES if sim.n_dof == 2 else _NAMES_3DOF
         self._lock = threading.Lock()
         self._last = sim
         self._n_chunk = n_chunk
@@ -123,7 +133,7 @@ class _Continuation:
             chunks = list(self._chunks)
         for i, (start, splines) in enumerate(chunks):
             inside = mask & (tau > start) if i else mask  # older times: the oldest chunk kept
-            for name in _NAMES:
+            for name in self._names:
                 out[name][inside] = splines[name](np.maximum(tau[inside], start))
 
     def _extend(self) -> None:
@@ -135,7 +145,7 @@ class _Continuation:
         t = np.concatenate([last.t[lead], nxt.t])
         splines = {name: CubicSpline(t, np.concatenate([getattr(last, name)[lead],
                                                         getattr(nxt, name)]))
-                   for name in _NAMES}
+                   for name in self._names}
         seam = float(last.t[-1])
         self._chunks = [*self._chunks, (seam, splines)][-CONTINUATION_CHUNKS_KEPT:]
         self._last = nxt
@@ -155,8 +165,9 @@ class VirtualTunnel:
         Pressure taps of the section.
     wind_per_rpm : float
         Tunnel calibration: wind speed per fan speed, (m/s)/rpm.
-    hold : (float, float)
-        Hold position of the magnet, (h0 m, alpha0 rad).
+    hold : (float, float) or (float, float, float)
+        Hold position of the magnet, (h0 m, alpha0 rad), with sway (h0, alpha0, p0 m); p0 is 0
+        when a 3-DOF section gets two numbers, and must be absent for a 2-DOF one.
     effects : sequence of Effect, optional
         Extra physics of the model in this tunnel.
     air : AirState, optional
@@ -189,7 +200,7 @@ class VirtualTunnel:
         taps: TapLayout,
         *,
         wind_per_rpm: float,
-        hold: tuple[float, float] = (0.004, 0.02),
+        hold: tuple[float, ...] = (0.004, 0.02),
         effects: Sequence[Effect] = (),
         air: AirState | None = None,
         mean_cp_upper: float = -0.6,
@@ -210,7 +221,14 @@ class VirtualTunnel:
         self.model = model
         self.taps = taps
         self.wind_per_rpm = float(wind_per_rpm)
+        if len(hold) not in (2, self.section.n_dof):
+            raise ValueError(f"hold must be (h0, alpha0) or, with sway, (h0, alpha0, p0); got "
+                             f"{hold!r} for a {self.section.n_dof}-DOF section")
         self.hold = (float(hold[0]), float(hold[1]))
+        #: Sway of the hold position, m (0 without sway).
+        self.hold_p = float(hold[2]) if len(hold) == 3 else 0.0
+        #: The channels :meth:`sample` and :meth:`decay_truth` give besides U and qd.
+        self.channels = _NAMES if self.section.n_dof == 2 else _NAMES_3DOF
         self.effects = tuple(effects)
         self.clock: Clock = clock or MonotonicClock()
         self.decay_duration_s = float(decay_duration_s)
@@ -228,13 +246,15 @@ class VirtualTunnel:
         self._t_ref = 0.0
         self._x_ref = 0.0
         self._cp_mean = np.where(taps.nz < 0, mean_cp_upper, mean_cp_lower)
+        #: Whether the tap pressures carry the drag (a 3-DOF section whose outline can).
+        self.pressures_carry_drag = self.section.n_dof == 3 and taps.carries_drag
         # The taps are fixed: their force matrix and its pseudo-inverse are computed once (an
         # SVD per production step cost ~10 % of a core with 511 taps).
-        self._G = taps.integration_matrix()
+        self._G = taps.integration_matrix(drag=self.pressures_carry_drag)
         self._G_pinv = np.linalg.pinv(self._G)
         self._tubing: TubingFilter | None = None
         if tubing is not None:
-            # p = [lift, moment] G+' + qd (cp - G+ G cp): the pressures as a linear map.
+            # p = [lift, moment(, drag)] G+' + qd (cp - G+ G cp): the pressures as a linear map.
             mean_part = self._cp_mean - self._G_pinv @ (self._G @ self._cp_mean)
             self._tubing = TubingFilter(tubing, np.column_stack([self._G_pinv, mean_part]))
         self._lock = threading.Lock()
@@ -328,7 +348,8 @@ class VirtualTunnel:
         -------
         dict
             ``h`` (m), ``alpha`` (rad), ``lift`` (N/m), ``moment`` (N m/m), ``U`` (m/s) and
-            ``qd`` (dynamic pressure, Pa), each of shape ``t.shape``.
+            ``qd`` (dynamic pressure, Pa), each of shape ``t.shape``; with sway also ``p`` (m)
+            and ``drag`` (N/m).
         """
         t = np.atleast_1d(np.asarray(t, dtype=float))
         if t.ndim != 1:
@@ -345,18 +366,22 @@ class VirtualTunnel:
         h0, a0 = self.hold
         B = self.section.B
         # Held: motionless, with the static aerodynamic force of the held position.
-        static = np.outer(qd * B**2, self.model.A[0] @ np.array([h0 / B, a0]))
+        k = self.section.n_dof
+        q0 = np.array([h0 / B, a0, self.hold_p / B][:k])
+        static = np.outer(qd * B**2, self.model.A[0] @ q0)
         if self.static is not None:
             gusts = None if self._gusts is None else self._gusts.shifted(x_origin)
             wind = WindLoad(self.static, U_now, B, self.air.density, gusts)
-            static = static + wind.force(t)[:, :2]
+            static = static + wind.force(t)[:, :k]
         out = {"h": np.full(t.shape, h0), "alpha": np.full(t.shape, a0),
                "lift": static[:, 0] / B, "moment": static[:, 1], "U": U, "qd": qd}
+        if k == 3:
+            out.update(p=np.full(t.shape, self.hold_p), drag=static[:, 2] / B)
         if decay is not None:
             tau = t - decay.t0
             after = tau >= 0
             inside = after & (tau <= decay.duration)
-            for name in _NAMES:
+            for name in self.channels:
                 values = out[name].copy()
                 values[inside] = decay.splines[name](tau[inside])
                 values[after & ~inside] = decay.final[name]
@@ -374,10 +399,11 @@ class VirtualTunnel:
         Returns
         -------
         dict
-            ``h`` (m), ``alpha`` (rad), ``lift`` (N/m), ``moment`` (N m/m), shape ``t.shape``.
+            ``h`` (m), ``alpha`` (rad), ``lift`` (N/m), ``moment`` (N m/m), with sway ``p`` (m)
+            and ``drag`` (N/m), shape ``t.shape``.
         """
         t = np.atleast_1d(np.asarray(t, dtype=float))
-        out = {name: np.full(t.shape, np.nan) for name in ("h", "alpha", "lift", "moment")}
+        out = {name: np.full(t.shape, np.nan) for name in self.channels}
         with self._lock:
             history = list(self._history)
         for decay, end in history:
@@ -390,19 +416,21 @@ class VirtualTunnel:
     def pressures(self, t: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Tap pressures (n, n_taps) and Pitot dynamic pressure (n,) at true times ``t``, Pa.
 
-        With tubing, the tap pressures are those behind the tubes (the Pitot's is not).
+        With tubing, the tap pressures are those behind the tubes (the Pitot's is not). With
+        sway they integrate to the drag too when :attr:`pressures_carry_drag`.
         """
         values = self.sample(t)
+        names = ("lift", "moment", "drag") if self.pressures_carry_drag else ("lift", "moment")
         if self._tubing is not None:
             def channels(times: FloatArray) -> FloatArray:
                 s = self.sample(times)
-                return np.column_stack([s["lift"], s["moment"], s["qd"]])
+                return np.column_stack([*(s[name] for name in names), s["qd"]])
 
             return self._tubing.pressures(np.atleast_1d(np.asarray(t, dtype=float)),
                                           channels), values["qd"]
         mean = np.outer(values["qd"], self._cp_mean)
         G, G_pinv = self._G, self._G_pinv
-        forces = np.column_stack([values["lift"], values["moment"]])
+        forces = np.column_stack([values[name] for name in names])
         # Remove the mean field's own lift and moment so that taps integrate to the forces.
         p = forces @ G_pinv.T + mean - (mean @ G.T) @ G_pinv.T
         return p, values["qd"]
@@ -415,7 +443,7 @@ class VirtualTunnel:
         if self.static is None:
             sim = simulate_release(
                 self.section, self.model, U, *self.hold, duration=self.decay_duration_s,
-                fs=self.fs_internal, effects=self.effects,
+                fs=self.fs_internal, effects=self.effects, p0=self.hold_p,
             )
         else:
             # Noise-free and without a held stretch, simulate_release is simulate_decay; the
@@ -424,10 +452,10 @@ class VirtualTunnel:
             gusts = None if self._gusts is None else self._gusts.shifted(x0)
             sim = simulate_decay(self.section, self.model, U, *self.hold, n=n,
                                  fs=self.fs_internal, effects=self.effects, static=self.static,
-                                 turbulence=gusts)
+                                 turbulence=gusts, p0=self.hold_p)
             if gusts is not None and U > 0.0:
                 continuation = _Continuation(sim, n)
-        splines = {name: CubicSpline(sim.t, getattr(sim, name)) for name in _NAMES}
+        splines = {name: CubicSpline(sim.t, getattr(sim, name)) for name in self.channels}
         final = {name: float(getattr(sim, name)[-1]) for name in splines}
         return _Decay(t0=math.nan, U=U, duration=float(sim.t[-1]), splines=splines, final=final,
                       continuation=continuation)

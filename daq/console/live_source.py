@@ -395,7 +395,8 @@ class LiveSource(RingSource):
         self._files.check_idle()
         path = Path(path)
         recorder = RunRecorder(path, config_text=self.config.text, rig_name=self.config.name,
-                               operator_notes=notes, **dict(recorder_options or {}))
+                               operator_notes=notes, sway=self.config.section.n_dof == 3,
+                               **dict(recorder_options or {}))
         # The checks record_run relies on (a missing or read-only directory, an existing file,
         # too little free space), before anything starts: open() creates the file or raises.
         recorder.open()

@@ -26,7 +26,13 @@ import h5py
 import numpy as np
 
 from daq.errors import NotARunFileError
-from daq.recording.layout import STREAM_TABLES, SYNC_COLUMNS, open_run_file, per_device_attrs
+from daq.recording.layout import (
+    STREAM_TABLES,
+    SWAY_COLUMNS,
+    SYNC_COLUMNS,
+    open_run_file,
+    per_device_attrs,
+)
 from daq.recording.recover import holders, read_superblock
 
 __all__ = ["format_info", "run_info"]
@@ -177,7 +183,7 @@ def run_info(path: str | os.PathLike[str]) -> dict[str, Any]:
 def _describe(path: Path, f: h5py.File) -> dict[str, Any]:
     entry, sync = f["entry"], f["entry/sync"]
     section, device_config = _config_tables(_text(entry["config"][()]))
-    columns = [sync[name] for name in SYNC_COLUMNS if name in sync]
+    columns = [sync[name] for name in (*SYNC_COLUMNS, *SWAY_COLUMNS) if name in sync]
     for ds in columns:
         ds.refresh()
     shortest = min((ds.shape[0] for ds in columns), default=0)
@@ -201,6 +207,8 @@ def _describe(path: Path, f: h5py.File) -> dict[str, Any]:
             start, stop = int(row["start_index"]), int(row["stop_index"])
             releases.append({"time_s": float(row["release_time"]), "U": float(row["U"]),
                              "h0": float(row["h0"]), "alpha0": float(row["alpha0"]),
+                             **({"p0": float(row["p0"])} if "p0" in (row.dtype.names or ())
+                                else {}),
                              "decay_s": (stop - start) / rate if rate else None})
     events: list[dict[str, Any]] = []
     counts: Counter[str] = Counter()

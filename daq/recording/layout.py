@@ -34,9 +34,11 @@ File layout
                            clock_model, clock_offset_s__<d>, clock_drift_ppm__<d>,
                            residual_misalignment_s
         time (s from run start), h (m), alpha (rad), lift (N/m), moment (N m/m), U (m/s),
-        rho (kg/m^3): (n,) float64;  pressure (n, taps) float32 by default (Pa)
+        rho (kg/m^3): (n,) float64;  pressure (n, taps) float32 by default (Pa);
+        a 3-DOF rig only: p (m), drag (N/m): (n,) float64
     /entry/releases        (r,) compound: release_time f8 (s), start_index i8, stop_index i8,
-                           U f8 (m/s), h0 f8 (m), alpha0 f8 (rad); attrs field_names, units
+                           U f8 (m/s), h0 f8 (m), alpha0 f8 (rad), a 3-DOF rig's p0 f8 (m);
+                           attrs field_names, units
     /entry/events          (e,) compound: time f8 (s), kind S32, text S1024 (UTF-8 bytes)
     /entry/metadata        NXcollection: calibrations, CALZ results (``RunRecorder.add_metadata``)
 
@@ -69,8 +71,8 @@ import numpy.typing as npt
 
 __all__ = ["CLOCK_MODEL", "EVENT_DTYPE", "EVENT_KIND_BYTES", "EVENT_TEXT_BYTES", "EXTRA_DTYPES",
            "EXTRA_UNITS", "GAP_DTYPE", "GAP_FILL", "GZIP_LEVEL", "MAX_CHUNK_BYTES",
-           "NAME_PATTERN", "PER_DEVICE_SEPARATOR", "RELEASE_DTYPE", "RELEASE_UNITS",
-           "STREAM_TABLES", "SYNC_COLUMNS", "VALUE_DTYPES", "append_rows",
+           "NAME_PATTERN", "PER_DEVICE_SEPARATOR", "RELEASE_DTYPE", "RELEASE_DTYPE_SWAY",
+           "RELEASE_UNITS", "STREAM_TABLES", "SWAY_COLUMNS", "SYNC_COLUMNS", "VALUE_DTYPES", "append_rows",
            "attach_dimension_scales", "check_name", "create_column", "create_stream",
            "create_sync", "event_row", "fill_value", "metadata_name_part", "now_iso",
            "open_run_file", "per_device_attr", "per_device_attrs", "read_sync",
@@ -91,6 +93,10 @@ RELEASE_DTYPE = np.dtype([("release_time", "<f8"), ("start_index", "<i8"), ("sto
 
 
 RELEASE_UNITS = ("s", "", "", "m/s", "m", "rad")
+
+
+#: Row of ``/entry/releases`` of a 3-DOF rig: the sway held before the release, ``p0`` (m), added.
+RELEASE_DTYPE_SWAY = np.dtype(RELEASE_DTYPE.descr + [("p0", "<f8")])
 
 
 #: Longest event kind and text, in UTF-8 bytes (fixed-length fields: SWMR appends must not use
@@ -155,6 +161,13 @@ SYNC_COLUMNS: dict[str, tuple[str, str]] = {
     "pressure": ("Pa", "tap pressures"),
     "U": ("m/s", "wind speed"),
     "rho": ("kg/m^3", "air density"),
+}
+
+
+#: Columns of ``/entry/sync`` of a rig with three degrees of freedom only (absent otherwise).
+SWAY_COLUMNS: dict[str, tuple[str, str]] = {
+    "p": ("m", "sway p (positive downwind)"),
+    "drag": ("N/m", "drag per unit span (positive downwind)"),
 }
 
 
@@ -306,11 +319,13 @@ def read_sync(path: str | os.PathLike[str]) -> dict[str, npt.NDArray[Any]]:
     -------
     dict of str to ndarray
         ``time`` (s), ``h`` (m), ``alpha`` (rad), ``lift`` (N/m), ``moment`` (N m/m), ``U``
-        (m/s), ``rho`` (kg/m^3), each (n,); ``pressure`` (n, taps), Pa.
+        (m/s), ``rho`` (kg/m^3), each (n,); ``pressure`` (n, taps), Pa; a 3-DOF rig's file
+        also ``p`` (m) and ``drag`` (N/m).
     """
     with h5py.File(path, "r", libver="latest", swmr=True) as f:
         sync = f["entry/sync"]
-        datasets = {name: sync[name] for name in SYNC_COLUMNS}
+        datasets = {name: sync[name] for name in (*SYNC_COLUMNS, *SWAY_COLUMNS)
+                    if name in SYNC_COLUMNS or name in sync}
         for ds in datasets.values():
             ds.refresh()
         n = min(ds.shape[0] for ds in datasets.values())
@@ -354,10 +369,12 @@ def create_column(group: h5py.Group, name: str, dtype: np.dtype[Any], *, chunk_r
 
 
 def write_skeleton(f: h5py.File, *, rig_name: str, operator_notes: str, config_text: str,
-                   make_column: Callable[..., h5py.Dataset]) -> tuple[h5py.Dataset, h5py.Dataset]:
+                   make_column: Callable[..., h5py.Dataset],
+                   sway: bool = False) -> tuple[h5py.Dataset, h5py.Dataset]:
     """Write a new run file's root attributes and fixed groups; return releases and events.
 
-    ``make_column(group, name, dtype, **options)`` creates a dataset as :func:`create_column`.
+    ``make_column(group, name, dtype, **options)`` creates a dataset as :func:`create_column`;
+    ``sway``: a 3-DOF rig's file (releases with ``p0``, :data:`RELEASE_DTYPE_SWAY`).
     """
     f.attrs["windrig_version"] = windrig_version()
     f.attrs["created"] = now_iso()
@@ -375,9 +392,10 @@ def write_skeleton(f: h5py.File, *, rig_name: str, operator_notes: str, config_t
     # NXparameters: named values, checked by validators like any base class (NXcollection's
     # members would each be a warning).
     entry.create_group("metadata").attrs["NX_class"] = "NXparameters"
-    releases = make_column(entry, "releases", RELEASE_DTYPE, chunk=64)
-    releases.attrs["field_names"] = str_array(RELEASE_DTYPE.names or ())
-    releases.attrs["units"] = str_array(RELEASE_UNITS)
+    dtype = RELEASE_DTYPE_SWAY if sway else RELEASE_DTYPE
+    releases = make_column(entry, "releases", dtype, chunk=64)
+    releases.attrs["field_names"] = str_array(dtype.names or ())
+    releases.attrs["units"] = str_array(RELEASE_UNITS + (("m",) if sway else ()))
     releases.attrs["description"] = ("one row per release; times in s from run start, "
                                      "start_index <= row < stop_index of /entry/sync")
     events = make_column(entry, "events", EVENT_DTYPE, chunk=64)
@@ -433,11 +451,12 @@ def create_stream(instrument: h5py.Group, device: str, channels: list[str], unit
 
 
 def create_sync(entry: h5py.Group, taps: list[str], pressure_dtype: np.dtype[Any], *,
-                make_column: Callable[..., h5py.Dataset],
+                make_column: Callable[..., h5py.Dataset], sway: bool = False,
                 ) -> tuple[h5py.Group, dict[str, h5py.Dataset]]:
     """Create ``/entry/sync`` (NXdata, plotted as h(time)): its attributes and its columns.
 
-    ``make_column(group, name, dtype, **options)`` creates a dataset as :func:`create_column`.
+    ``make_column(group, name, dtype, **options)`` creates a dataset as :func:`create_column`;
+    ``sway``: a 3-DOF rig's view, with the :data:`SWAY_COLUMNS` too.
     """
     ds: dict[str, h5py.Dataset] = {}
     sync = entry.create_group("sync")
@@ -454,6 +473,8 @@ def create_sync(entry: h5py.Group, taps: list[str], pressure_dtype: np.dtype[Any
         else:
             ds[name] = make_column(sync, name, np.dtype("float64"), units=units,
                                    long_name=long_name)
+    for name, (units, long_name) in (SWAY_COLUMNS.items() if sway else ()):
+        ds[name] = make_column(sync, name, np.dtype("float64"), units=units, long_name=long_name)
     attach_dimension_scales(sync, taps)
     return sync, ds
 
@@ -467,7 +488,7 @@ def attach_dimension_scales(sync: h5py.Group, taps: Sequence[str]) -> None:
     """
     time = sync["time"]
     time.make_scale("time")
-    for name in SYNC_COLUMNS:
+    for name in (*SYNC_COLUMNS, *(n for n in SWAY_COLUMNS if n in sync)):
         if name != "time":
             sync[name].dims[0].attach_scale(time)
             sync[name].dims[0].label = "time"

@@ -75,6 +75,7 @@ from daq.recording.layout import (
     EXTRA_DTYPES,
     GAP_DTYPE,
     RELEASE_DTYPE,
+    RELEASE_DTYPE_SWAY,
     VALUE_DTYPES,
     append_rows,
     check_name,
@@ -156,8 +157,8 @@ class Recorder(Protocol):
         ...
 
     def append_sync(self, time: Any, *, h: Any, alpha: Any, lift: Any, moment: Any,
-                    pressure: Any, U: Any, rho: Any) -> None:
-        """Append rows of the synchronised view."""
+                    pressure: Any, U: Any, rho: Any, p: Any = None, drag: Any = None) -> None:
+        """Append rows of the synchronised view (``p``, ``drag``: a 3-DOF rig's)."""
         ...
 
     def add_gap(self, device: str, after_counter: int, length: int) -> None:
@@ -169,8 +170,8 @@ class Recorder(Protocol):
         ...
 
     def add_release(self, *, release_time: float, start_index: int, stop_index: int, U: float,
-                    h0: float, alpha0: float) -> Any:
-        """Add a free decay to the releases table."""
+                    h0: float, alpha0: float, p0: float | None = None) -> Any:
+        """Add a free decay to the releases table (``p0``: a 3-DOF rig's)."""
         ...
 
     def set_sync_attrs(self, *, clock_offset_s: Mapping[str, float] | None = None,
@@ -237,6 +238,10 @@ class RunRecorder:
         default. A seam for tests (a full disk cannot be made without root).
     clock : callable, optional
         Monotonic clock in s for the flush interval; ``time.monotonic`` by default.
+    sway : bool
+        A rig with three degrees of freedom: ``/entry/sync`` gets the ``p`` and ``drag``
+        columns (``append_sync(p=, drag=)`` then required) and ``/entry/releases`` the ``p0``
+        field. Default False: the 2-DOF layout, unchanged.
 
     Notes
     -----
@@ -249,7 +254,7 @@ class RunRecorder:
                  min_free_bytes: int = 1 << 30, reserve_bytes: int = 64 << 20,
                  overwrite: bool = False, fsync: bool = False,
                  disk_free: Callable[[Path], int] | None = None,
-                 clock: Callable[[], float] | None = None) -> None:
+                 clock: Callable[[], float] | None = None, sway: bool = False) -> None:
         if not isinstance(config_text, str):
             raise TypeError(f"config_text must be str (the TOML text), got "
                             f"{type(config_text).__name__}")
@@ -267,6 +272,7 @@ class RunRecorder:
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 raise ValueError(f"{name} = {value!r} must be an int >= 0")
         self.path = Path(path)
+        self.sway = bool(sway)
         self.config_text = config_text
         self.rig_name = rig_name
         self.operator_notes = operator_notes
@@ -543,7 +549,7 @@ class RunRecorder:
             raise ValueError(f"pressure_dtype = {pressure_dtype!r}; allowed: float32, float64")
         assert self._file is not None
         sync, self._sync_ds = create_sync(self._file["entry"], taps, p_dtype,
-                                          make_column=self._column)
+                                          make_column=self._column, sway=self.sway)
         self._sync = sync
         self._n_taps = len(taps)
 
@@ -730,7 +736,8 @@ class RunRecorder:
 
     def append_sync(self, time: npt.ArrayLike, *, h: npt.ArrayLike, alpha: npt.ArrayLike,
                     lift: npt.ArrayLike, moment: npt.ArrayLike, pressure: npt.ArrayLike,
-                    U: npt.ArrayLike, rho: npt.ArrayLike) -> None:
+                    U: npt.ArrayLike, rho: npt.ArrayLike, p: npt.ArrayLike | None = None,
+                    drag: npt.ArrayLike | None = None) -> None:
         """Append rows to the synchronised view ``/entry/sync``.
 
         Parameters
@@ -745,11 +752,20 @@ class RunRecorder:
             Tap pressures, Pa.
         U, rho : array_like, (n,)
             Wind speed (m/s) and air density (kg/m^3).
+        p, drag : array_like, (n,)
+            Sway (m, positive downwind) and drag (N/m, positive downwind): required by a
+            ``sway`` recorder, refused by a 2-DOF one.
         """
         self._require("append_sync", "recording")
+        if (p is not None or drag is not None) != self.sway or (p is None) != (drag is None):
+            raise ValueError("p and drag go together, and exactly into a 3-DOF run (sway="
+                             f"{self.sway}); got p {'given' if p is not None else 'None'}, "
+                             f"drag {'given' if drag is not None else 'None'}")
         t = _column_of(time, None, np.float64, "sync time")
         n = t.shape[0]
         cols = {"h": h, "alpha": alpha, "lift": lift, "moment": moment, "U": U, "rho": rho}
+        if self.sway:
+            cols.update(p=p, drag=drag)
         arrays = {name: _column_of(v, n, np.float64, f"sync {name}") for name, v in cols.items()}
         p = np.asarray(pressure, dtype=self._sync_ds["pressure"].dtype)
         if p.shape != (n, self._n_taps):
@@ -767,7 +783,7 @@ class RunRecorder:
         self.flush_if_due()
 
     def add_release(self, *, release_time: float, start_index: int, stop_index: int, U: float,
-                    h0: float, alpha0: float) -> int:
+                    h0: float, alpha0: float, p0: float | None = None) -> int:
         """Append a release to ``/entry/releases`` and return its row number.
 
         Parameters
@@ -780,13 +796,23 @@ class RunRecorder:
             Wind speed during the decay, m/s.
         h0, alpha0 : float
             Displacement held before the release, m and rad.
+        p0 : float, optional
+            Sway held before the release, m: a ``sway`` recorder's (NaN when not given); refused
+            by a 2-DOF one.
         """
         self._require("add_release", "recording")
         if not 0 <= int(start_index) <= int(stop_index):
             raise ValueError(f"release rows start_index = {start_index}, stop_index = "
                              f"{stop_index}: need 0 <= start_index <= stop_index")
-        row = np.array([(float(release_time), int(start_index), int(stop_index), float(U),
-                         float(h0), float(alpha0))], dtype=RELEASE_DTYPE)
+        if p0 is not None and not self.sway:
+            raise ValueError("p0 goes into a 3-DOF run's releases only (RunRecorder(sway=True))")
+        fields = (float(release_time), int(start_index), int(stop_index), float(U), float(h0),
+                  float(alpha0))
+        if self.sway:
+            row = np.array([(*fields, math.nan if p0 is None else float(p0))],
+                           dtype=RELEASE_DTYPE_SWAY)
+        else:
+            row = np.array([fields], dtype=RELEASE_DTYPE)
         assert self._releases_ds is not None
         with self._io("add a release"):
             append_rows(self._releases_ds, self._releases, row)
@@ -851,7 +877,7 @@ class RunRecorder:
     def _write_skeleton(self, f: h5py.File) -> None:
         self._releases_ds, self._events_ds = write_skeleton(
             f, rig_name=self.rig_name, operator_notes=self.operator_notes,
-            config_text=self.config_text, make_column=self._column)
+            config_text=self.config_text, make_column=self._column, sway=self.sway)
 
     def _column(self, group: h5py.Group, name: str, dtype: np.dtype[Any],
                 **options: Any) -> h5py.Dataset:

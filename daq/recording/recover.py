@@ -45,6 +45,7 @@ import numpy as np
 from daq.errors import NotARunFileError, RecoveryError
 from daq.recording.layout import (
     STREAM_TABLES,
+    SWAY_COLUMNS,
     SYNC_COLUMNS,
     append_rows,
     now_iso,
@@ -296,7 +297,7 @@ def _resize(ds: h5py.Dataset, n: int, report: RecoveryReport) -> None:
 
 def _trim_sync(entry: h5py.Group, report: RecoveryReport) -> int:
     sync = entry["sync"]
-    columns = [sync[name] for name in SYNC_COLUMNS if name in sync]
+    columns = [sync[name] for name in (*SYNC_COLUMNS, *SWAY_COLUMNS) if name in sync]
     n = min((ds.shape[0] for ds in columns), default=0)
     if "time" in sync:
         # A real row always has a finite time; a fill row (size written, chunk not) has NaN.

@@ -4,7 +4,8 @@ Responsibility: :class:`ReleaseRows` turns the engine's ``"release"`` and ``"arm
 rows of ``/entry/releases``: the release instant, the sync rows of the free decay (from the
 first row after the release to the row before the model is armed again, or to the next
 release, or to the end of the run), the median wind speed over it, and the position held
-before it (``h0``, ``alpha0``: the median over :data:`HOLD_WINDOW_S` before the release). A row
+before it (``h0``, ``alpha0``, a 3-DOF rig's ``p0``: the median over :data:`HOLD_WINDOW_S`
+before the release). A row
 is written once its decay has ended, so a live reader never sees one change.
 
 Not responsible for: the sync rows themselves (:class:`daq.recording.writer.RunWriter`) or the
@@ -39,6 +40,7 @@ class _Release:
     stop_index: int | None = None
     h0: float = math.nan
     alpha0: float = math.nan
+    p0: float = math.nan
     U: list[FloatArray] = field(default_factory=list)
 
 
@@ -52,7 +54,9 @@ class ReleaseRows:
     """
 
     def __init__(self) -> None:
-        self._recent: deque[tuple[FloatArray, FloatArray, FloatArray]] = deque()
+        # (t, h, alpha) of the recent sync rows, and p on a 3-DOF rig
+        self._recent: deque[tuple[FloatArray, ...]] = deque()
+        self._sway = False
         self._releases: list[_Release] = []
         self._sync_rows = 0
         self.written = 0
@@ -70,15 +74,19 @@ class ReleaseRows:
         return t_end
 
     def track(self, rec: Recorder, base: int, t: FloatArray, h: FloatArray, alpha: FloatArray,
-              U: FloatArray) -> None:
-        """Take sync rows ``base, base + 1, ...`` (times ``t``, s); write the decays ended."""
-        self._recent.append((t, h, alpha))
+              U: FloatArray, p: FloatArray | None = None) -> None:
+        """Take sync rows ``base, base + 1, ...`` (times ``t``, s); write the decays ended.
+
+        ``p``: the sway (m) of a 3-DOF rig, whose rows then get ``p0``.
+        """
+        self._sway = p is not None
+        self._recent.append((t, h, alpha) if p is None else (t, h, alpha, p))
         while len(self._recent) > 1 and self._recent[1][0][0] < t[-1] - 2 * HOLD_WINDOW_S[0]:
             self._recent.popleft()
         for rel in self._releases[self.written:]:
             if rel.start_index is None and t[-1] >= rel.time:
                 rel.start_index = base + int(np.searchsorted(t, rel.time, side="left"))
-                rel.h0, rel.alpha0 = self._held(rel.time)
+                rel.h0, rel.alpha0, rel.p0 = self._held(rel.time)
             if (rel.stop_index is None and rel.end_time is not None
                     and t[-1] >= rel.end_time):
                 rel.stop_index = base + int(np.searchsorted(t, rel.end_time, side="left"))
@@ -89,17 +97,18 @@ class ReleaseRows:
                     rel.U.append(U[lo:hi])
         self._write_finished(rec, final=False)
 
-    def _held(self, t_release: float) -> tuple[float, float]:
+    def _held(self, t_release: float) -> tuple[float, float, float]:
+        """Return h0, alpha0 and p0 (NaN on a 2-DOF rig) held before a release."""
         if not self._recent:  # a rig without lasers or scanner has no sync rows
-            return math.nan, math.nan
+            return math.nan, math.nan, math.nan
         t = np.concatenate([b[0] for b in self._recent])
         sel = (t >= t_release - HOLD_WINDOW_S[0]) & (t < t_release - HOLD_WINDOW_S[1])
         out = []
-        for col in (1, 2):
+        for col in range(1, len(self._recent[-1])):
             v = np.concatenate([b[col] for b in self._recent])[sel]
             v = v[np.isfinite(v)]
             out.append(float(np.median(v)) if v.size else math.nan)
-        return out[0], out[1]
+        return out[0], out[1], out[2] if len(out) > 2 else math.nan
 
     def finish(self, rec: Recorder, sync_rows: int) -> None:
         """Write every release not written yet (the run ends after ``sync_rows`` rows)."""
@@ -120,11 +129,11 @@ class ReleaseRows:
                 return
             start = rel.start_index if rel.start_index is not None else stop
             if rel.start_index is None:
-                rel.h0, rel.alpha0 = self._held(rel.time)
+                rel.h0, rel.alpha0, rel.p0 = self._held(rel.time)
             u = np.concatenate(rel.U) if rel.U else np.zeros(0)
             u = u[: max(stop - start, 0)]
             u = u[np.isfinite(u)]
             rec.add_release(release_time=rel.time, start_index=start, stop_index=max(stop, start),
                             U=float(np.median(u)) if u.size else math.nan, h0=rel.h0,
-                            alpha0=rel.alpha0)
+                            alpha0=rel.alpha0, **({"p0": rel.p0} if self._sway else {}))
             self.written += 1

@@ -74,7 +74,8 @@ def open_run_file(config: RigConfig, out_path: str | Path, *, operator_notes: st
         raise StorageError(errno.EEXIST, f"run file {path} already exists; refusing to "
                            "overwrite a recorded run", str(path))
     recorder = RunRecorder(path, config_text=config.text, rig_name=config.name,
-                           operator_notes=operator_notes, **recorder_options)
+                           operator_notes=operator_notes, sway=config.section.n_dof == 3,
+                           **recorder_options)
     recorder.open()  # a missing or read-only directory, a full disk: fail before anything starts
     return recorder
 

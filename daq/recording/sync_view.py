@@ -6,6 +6,9 @@ columns of ``/entry/sync``: heave and pitch from two or three lasers (their ``x`
 ``standoff_mm``, each reading through its calibration), lift and moment from the live taps'
 pressures (the rig's tap layout without its dead taps), the wind speed from the Pitot through
 the tunnel calibration with the air density in use. A column the rig has no device for is NaN.
+A rig with three degrees of freedom (``[section] fp``) adds the sway ``p`` from its sway laser
+(``axis = "sway"``) and the drag from the taps' pressures (NaN when the taps' outline has no
+faces across the wind, :attr:`ident.taps.TapLayout.carries_drag`); a 2-DOF rig has neither.
 The calibrations are the rig config's (:class:`daq.calibration.Calibration`).
 
 Not responsible for: the conversions' numerics (:mod:`daq.sync.conversions`), resampling
@@ -22,8 +25,13 @@ import numpy as np
 import numpy.typing as npt
 
 from daq.calibration import Calibration
-from daq.config import InstrumentConfig, RigConfig
-from daq.sync.conversions import forces_from_pressures, heave_pitch_from_lasers, wind_speed
+from daq.config import InstrumentConfig, RigConfig, is_sway_laser
+from daq.sync.conversions import (
+    forces_from_pressures,
+    heave_pitch_from_lasers,
+    sway_from_laser,
+    wind_speed,
+)
 from daq.sync.resample import SyncBlock
 
 __all__ = ["SyncColumns", "physical_columns", "polled_conditions", "tap_columns"]
@@ -32,7 +40,10 @@ FloatArray = npt.NDArray[np.float64]
 
 
 class SyncColumns(NamedTuple):
-    """The columns of one block of sync rows (SI units; see ``SYNC_COLUMNS`` of the layout)."""
+    """The columns of one block of sync rows (SI units; see ``SYNC_COLUMNS`` of the layout).
+
+    ``p`` (m) and ``drag`` (N/m): a 3-DOF rig's (``SWAY_COLUMNS``), None on a 2-DOF one.
+    """
 
     h: FloatArray
     alpha: FloatArray
@@ -41,6 +52,14 @@ class SyncColumns(NamedTuple):
     pressure: FloatArray
     U: FloatArray
     rho: FloatArray
+    p: FloatArray | None = None
+    drag: FloatArray | None = None
+
+    def sway(self) -> dict[str, FloatArray]:
+        """Return ``{"p": ..., "drag": ...}`` of a 3-DOF rig, ``{}`` of a 2-DOF one."""
+        if self.p is None or self.drag is None:
+            return {}
+        return {"p": self.p, "drag": self.drag}
 
 
 def physical_columns(sb: SyncBlock, lasers: Sequence[InstrumentConfig], config: RigConfig,
@@ -53,8 +72,8 @@ def physical_columns(sb: SyncBlock, lasers: Sequence[InstrumentConfig], config: 
         Rows on the sync time base: ``laser.<name>`` distances (m), ``pressure`` (n, taps) and
         ``pitot`` (Pa) when the rig has a scanner.
     lasers : sequence of InstrumentConfig
-        The lasers whose streams ``sb`` holds, in order (none, or two or more; the first three
-        are used).
+        The lasers whose streams ``sb`` holds, in order: the vertical ones (none, or two or
+        more; the first three are used) and a 3-DOF rig's sway laser.
     config : RigConfig
         The rig: its taps (coordinates, normals, tributary lengths) and its calibrations (dead
         taps, Pitot, lasers).
@@ -67,7 +86,9 @@ def physical_columns(sb: SyncBlock, lasers: Sequence[InstrumentConfig], config: 
     n = len(sb)
     nan = np.full(n, np.nan)
     h, alpha = nan, nan
-    if lasers:
+    sway_lasers = [inst for inst in lasers if is_sway_laser(inst)]
+    lasers = [inst for inst in lasers if not is_sway_laser(inst)]
+    if len(lasers) >= 2:
         d = np.column_stack([cal.laser(inst.name).distance(sb.values[f"laser.{inst.name}"])
                              for inst in lasers])
         x = [float(inst.settings["x"]) for inst in lasers]
@@ -88,8 +109,33 @@ def physical_columns(sb: SyncBlock, lasers: Sequence[InstrumentConfig], config: 
     else:
         pressure = np.full((n, taps.n_taps), np.nan)
         lift, moment, U, rho = nan, nan, nan, np.full(n, rho_now)
+    p = drag = None
+    if config.section.n_dof == 3:
+        p, drag = _sway_columns(sb, sway_lasers, config, alpha, pressure)
     return SyncColumns(h=h, alpha=alpha, lift=lift, moment=moment, pressure=pressure, U=U,
-                       rho=rho)
+                       rho=rho, p=p, drag=drag)
+
+
+def _sway_columns(sb: SyncBlock, sway_lasers: Sequence[InstrumentConfig], config: RigConfig,
+                  alpha: FloatArray, pressure: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Return a 3-DOF rig's sway (m) and drag (N/m) columns (NaN without their device)."""
+    n = len(sb)
+    p = np.full(n, np.nan)
+    if sway_lasers:
+        inst = sway_lasers[0]
+        distance = config.calibration.laser(inst.name).distance(sb.values[f"laser.{inst.name}"])
+        p = sway_from_laser(distance, float(inst.settings["standoff_mm"]) * 1e-3,
+                            float(inst.settings.get("z", 0.0)), alpha)
+    taps, cal = config.taps, config.calibration
+    drag = np.full(n, np.nan)
+    if "pressure" in sb.values and taps.carries_drag:
+        if cal.taps.dead:
+            live_taps, live = cal.live_taps(taps)
+            if live_taps.carries_drag:
+                drag = live_taps.integrate_drag(pressure[:, live])
+        else:
+            drag = taps.integrate_drag(pressure)
+    return p, drag
 
 
 def tap_columns(calibration: Calibration, n_taps: int) -> slice | npt.NDArray[np.intp]:

@@ -20,9 +20,9 @@ itself) would otherwise place the new epoch late by that delay. Device times tha
 across the gap (PTP, or relative ones the engine continued, as after ``Acquisition.calz``) keep
 their map. The final clock fit in ``/entry/sync`` attrs then describes the last clock epoch only.
 
-Not responsible for: reading devices or threads (the engine), the numerics of clocks, resampling and
-conversions (:mod:`daq.sync`), the file itself (:mod:`daq.recording.recorder`), running a
-rig into a file (:mod:`daq.recording.run`), or any simulator.
+Not responsible for: reading devices or threads (the engine), the numerics of clocks, resampling
+and conversions (:mod:`daq.sync`), the file (:mod:`daq.recording.recorder`), running a rig into
+a file (:mod:`daq.recording.run`), or any simulator. A 3-DOF rig's p, drag, p0: see the layout.
 
 Threads: the writer runs on the engine's dispatcher thread only (one thread touches h5py); the
 readers never wait for it (the engine's per-device queues are between them). A failure inside
@@ -44,7 +44,7 @@ import numpy as np
 import numpy.typing as npt
 
 from daq.acquisition.records import Event, StreamBlock
-from daq.config import RigConfig
+from daq.config import RigConfig, is_sway_laser
 from daq.errors import StorageError
 from daq.recording.devices import (
     ClockObserver,
@@ -71,7 +71,6 @@ DEFAULT_SYNC_RATE_HZ = 500.0
 _CALZ_FIELDS = ("pause_s", "calz_s", "wind_speed_now", "frames_averaged", "offsets_before_pa")
 #: Air density used before the barometer's first reading, kg/m^3 (recorded in the rho column).
 DEFAULT_RHO = 1.2
-
 
 #: A trigger pulse whose command took longer than this (round trip, s) is no anchor: its host
 #: time, the midpoint, is off by at most half of it, and typically far less (the two legs are
@@ -143,6 +142,7 @@ class RunWriter:
         self.sync_rate_hz = float(default_sync_rate_hz(config) if sync_rate_hz is None
                                   else sync_rate_hz)
         self._lasers = {inst.name: inst for inst in config.by_role("lasers")}
+        self._sway = config.section.n_dof == 3  # 3-DOF: p and drag in the view, p0 per release
         self.recorder: Recorder | None = None
         self.error: BaseException | None = None
         self.summary: dict[str, Any] | None = None
@@ -199,7 +199,7 @@ class RunWriter:
     def _start(self, doc: Mapping[str, Any]) -> None:
         self._t0_ns = int(doc["host_time_ns"])
         rec = self.recorder or RunRecorder(self.path, config_text=self.config.text,
-                                           rig_name=self.config.name,
+                                           rig_name=self.config.name, sway=self._sway,
                                            operator_notes=self.operator_notes,
                                            **self._recorder_options)
         if rec.state == "new":
@@ -213,7 +213,7 @@ class RunWriter:
         for name, info in doc["devices"].items():
             kind = str(info["kind"])
             dev = declare_device(rec, self.config, name, kind, info.get("describe", {}) or {})
-            # The sync view's streams: its lasers (h, alpha) and its scanner (taps, Pitot).
+            # The sync view's streams: its lasers (h, alpha; p) and its scanner (taps, Pitot).
             if kind == "laser" and name in self._lasers:
                 self._laser_order.append(name)
                 dev.view = f"laser.{name}"
@@ -223,7 +223,7 @@ class RunWriter:
                 streams.append(StreamSpec("pressure", 1.0 / dev.rate_hz, "linear", n_taps))
                 streams.append(StreamSpec("pitot", 1.0 / dev.rate_hz, "linear"))
             self._devices[name] = dev
-        if len(self._laser_order) < 2:
+        if sum(not is_sway_laser(self._lasers[n]) for n in self._laser_order) < 2:
             self._laser_order = []  # h and alpha need two lasers: no laser stream in the view
             streams = [s for s in streams if not s.name.startswith("laser.")]
             for dev in self._devices.values():
@@ -480,10 +480,10 @@ class RunWriter:
         cols = physical_columns(sb, [self._lasers[name] for name in self._laser_order],
                                 self.config, self._rho, self._fan_rpm)
         rec.append_sync(sb.time, h=cols.h, alpha=cols.alpha, lift=cols.lift, moment=cols.moment,
-                        pressure=cols.pressure, U=cols.U, rho=cols.rho)
+                        pressure=cols.pressure, U=cols.U, rho=cols.rho, **cols.sway())
         base = self._sync_rows
         self._sync_rows += n
-        self._release_rows.track(rec, base, sb.time, cols.h, cols.alpha, cols.U)
+        self._release_rows.track(rec, base, sb.time, cols.h, cols.alpha, cols.U, p=cols.p)
 
     # -- events --------------------------------------------------------------------------------
     def _calz_record(self, event: Event, t: float) -> None:

@@ -50,7 +50,7 @@ def _scanner(tunnel: VirtualTunnel, s: Mapping[str, Any], **kw: Any) -> SimScani
 
 
 def _laser(tunnel: VirtualTunnel, s: Mapping[str, Any], **kw: Any) -> SimMicroEpsilonIld1420:
-    keys = ("range_mm", "rate_hz", "x", "standoff_mm", "baudrate", "output")
+    keys = ("range_mm", "rate_hz", "x", "standoff_mm", "baudrate", "output", "axis", "z")
     return SimMicroEpsilonIld1420(tunnel, **{k: s[k] for k in keys if k in s}, **kw)
 
 
@@ -156,7 +156,8 @@ def start_simulated_rig(
                             Air(pressure_pa=air.pressure_pa, temperature_k=air.temperature_k))
     tunnel = VirtualTunnel(
         config.section, config.aerodynamic_model(), config.taps,
-        wind_per_rpm=config.wind_per_rpm, hold=(sim.hold_h, sim.hold_alpha),
+        wind_per_rpm=config.wind_per_rpm,
+        hold=(sim.hold_h, sim.hold_alpha, sim.hold_p)[:config.section.n_dof],
         air=air, clock=clock, static=sim.static, turbulence=sim.turbulence, span=sim.span,
         seed=None if sim.turbulence is None else sim.turbulence_seed, tubing=tubing,
     )

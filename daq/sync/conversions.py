@@ -5,6 +5,8 @@ run writer
 
 - :func:`heave_pitch_from_lasers` (:class:`HeavePitch`): heave and pitch of the section from 2
   or 3 laser distances;
+- :func:`sway_from_laser`: the sway of a section with three degrees of freedom from the sway
+  laser's distance (and the pitch);
 - :func:`forces_from_pressures`: lift and moment per unit span from the tap pressures;
 - :func:`wind_speed` (:class:`WindSpeed`): wind speed from the Pitot dynamic pressure;
 - :func:`air_density`: dry-air density from the barometer's pressure and temperature.
@@ -33,6 +35,7 @@ __all__ = [
     "air_density",
     "forces_from_pressures",
     "heave_pitch_from_lasers",
+    "sway_from_laser",
     "wind_speed",
 ]
 
@@ -127,6 +130,38 @@ def heave_pitch_from_lasers(distances_m: Any, x_positions_m: Any, standoff_m: An
         a12 = (y[:, 1] - y[:, 0]) / (x[1] - x[0])
         check = y[:, 2] - (y[:, 0] + (x[2] - x[0]) * a12)
     return HeavePitch(h, alpha, check)
+
+
+def sway_from_laser(distance_m: Any, standoff_m: float, z_m: float, alpha: Any) -> FloatArray:
+    r"""Sway ``p`` (m, positive downwind) from the sway laser's distance.
+
+    Geometry (the simulated laser's, :mod:`simulators.devices.microepsilon_ild1420`): the laser
+    sits downstream of the model looking upwind at its trailing face, the spot at height ``z``
+    (positive down from the elastic axis). The face moves downwind by ``p - z alpha`` (a nose-up
+    pitch takes a point below the axis upwind), towards the laser: ``d = standoff - (p - z
+    alpha)``, so ``p = standoff - d + z alpha`` (small angles, as for heave and pitch).
+
+    Parameters
+    ----------
+    distance_m : array_like, shape (n,)
+        The sway laser's readings, m (NaN where invalid: p is NaN there).
+    standoff_m : float
+        Its reading with the model at rest, m.
+    z_m : float
+        Height of its spot below the elastic axis, m (0: no pitch correction).
+    alpha : array_like, shape (n,)
+        Pitch, rad (used only when ``z_m`` is not 0; NaN there makes p NaN).
+
+    Examples
+    --------
+    >>> sway_from_laser([0.024, 0.026], 0.025, 0.0, [0.0, 0.0]).tolist()
+    [0.001, -0.001]
+    """
+    d = np.asarray(distance_m, dtype=np.float64)
+    p = float(standoff_m) - d
+    if z_m != 0.0:
+        p = p + float(z_m) * np.asarray(alpha, dtype=np.float64)
+    return np.asarray(p, dtype=np.float64)
 
 
 def forces_from_pressures(pressures: Any, taps: TapLayout) -> tuple[FloatArray, FloatArray]:

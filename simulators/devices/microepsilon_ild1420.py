@@ -27,6 +27,10 @@ distance word; 18-bit counter; timestamp two 16-bit words in 10 us ticks (low wo
 Geometry: the laser looks down at chord position ``x`` (m, positive downstream of the elastic
 axis); with h positive down and alpha positive nose-up (Scanlan), the surface under the spot moves
 down by ``h + x alpha`` (small angles), so the reading is ``d = standoff + 1000 (h + x alpha)`` mm.
+A sway laser (``axis="sway"``, a tunnel with three degrees of freedom) sits downstream of the
+model looking upwind at its trailing face, the spot at height ``z`` (m, positive down from the
+elastic axis): the face moves downwind by ``p - z alpha`` (a nose-up pitch takes a point below
+the axis upwind), towards the laser, so it reads ``d = standoff - 1000 (p - z alpha)`` mm.
 Readings outside ``[-0.01 MR, 1.01 MR]`` give 262077 (peak before the range) / 262078 (behind).
 
 Longer than 600 lines: the laser's ASCII commands, its binary output words and its faults
@@ -135,7 +139,12 @@ class SimMicroEpsilonIld1420:
     rate_hz : float
         Measuring rate, Hz (device clock), in (0, 4000].
     x : float
-        Chord position of the laser spot, m.
+        Chord position of the laser spot, m (a vertical laser).
+    axis : {"vertical", "sway"}
+        What the laser looks at (module docstring, "Geometry"); a sway laser needs a tunnel with
+        sway.
+    z : float
+        A sway laser's spot height, m, positive down from the elastic axis.
     standoff_mm : float, optional
         Vertical distance at the model's rest position (h = alpha = 0), mm; default MR / 2.
     reading_error : tuple of float
@@ -173,6 +182,8 @@ class SimMicroEpsilonIld1420:
         range_mm: int = 10,
         rate_hz: float = 4000.0,
         x: float = 0.0,
+        axis: str = "vertical",
+        z: float = 0.0,
         standoff_mm: float | None = None,
         reading_error: tuple[float, float, float] = (1.0, 0.0, 0.0),
         baudrate: int = 921600,
@@ -195,6 +206,13 @@ class SimMicroEpsilonIld1420:
             raise ValueError(f"counter_start must be in [0, 262143], got {counter_start!r}")
         if period_s <= 0 or master_timeout_s <= 0:
             raise ValueError("period_s and master_timeout_s must be > 0")
+        if axis not in ("vertical", "sway"):
+            raise ValueError(f"axis must be 'vertical' or 'sway', got {axis!r}")
+        if axis == "sway" and "p" not in tunnel.channels:
+            raise ValueError("a sway laser (axis='sway') needs a tunnel with sway: a section "
+                             "with fp and a 3x3 aerodynamic model")
+        self.axis = axis
+        self.z = float(z)
         self.tunnel = tunnel
         self.range_mm = int(range_mm)
         self.rate_hz = float(rate_hz)
@@ -570,8 +588,12 @@ class SimMicroEpsilonIld1420:
             return
         n = index.size
         physics = self.tunnel.sample(t_true)
-        # Small angles: the surface under the spot moves down by h + x alpha (module docstring).
-        distance = self.standoff_mm + 1000.0 * (physics["h"] + self.x * physics["alpha"])
+        # Small angles: the surface under the spot moves down by h + x alpha, a sway laser's
+        # face towards it by p - z alpha (module docstring).
+        if self.axis == "sway":
+            distance = self.standoff_mm - 1000.0 * (physics["p"] - self.z * physics["alpha"])
+        else:
+            distance = self.standoff_mm + 1000.0 * (physics["h"] + self.x * physics["alpha"])
         gain, offset_mm, angle_deg = self.reading_error
         if (gain, offset_mm, angle_deg) != (1.0, 0.0, 0.0):  # along the beam, uncalibrated
             distance = (distance / math.cos(math.radians(angle_deg)) - offset_mm) / gain

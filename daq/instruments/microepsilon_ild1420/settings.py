@@ -1,6 +1,7 @@
 """Settings of the Micro-Epsilon ILD1420-class laser driver: the ``[[lasers]]`` table, validated.
 
-Responsibility: :class:`Ild1420Settings` (measuring range, rate, output values, position ``x``
+Responsibility: :class:`Ild1420Settings` (measuring range, rate, output values, what the laser
+looks at (``axis``: down at the model for heave and pitch, or along the wind for sway), position
 and standoff of the laser on the model, line settings) with the ranges the sensor family
 allows, and the line budget check (the values of a block must fit the baud rate). Each check
 raises a :class:`~daq.errors.ConfigError` naming the key.
@@ -18,11 +19,17 @@ from typing import Any, Final
 from daq.errors import ConfigError
 from daq.validation import check_keys, number
 
-__all__ = ["BAUDRATE_RANGE", "BITS_PER_VALUE", "DEFAULT_BAUDRATE", "DEFAULT_OUTPUT", "MAX_RATE_HZ",
+__all__ = ["AXES", "BAUDRATE_RANGE", "BITS_PER_VALUE", "DEFAULT_BAUDRATE", "DEFAULT_OUTPUT", "MAX_RATE_HZ",
            "RANGES_MM", "REQUIRED_OUTPUT", "WORDS_PER_VALUE", "Ild1420Settings"]
 
 #: Measuring ranges of the ILD1420 family, mm (docs/wire_formats.md, "Laser displacement").
 RANGES_MM: Final = (10, 25, 50, 100, 200, 500)
+
+
+#: What a laser looks at: ``vertical`` (down at the model at chord position ``x``: heave and
+#: pitch) or ``sway`` (along the wind at the model's face at height ``z``: the lateral motion of
+#: a rig with three degrees of freedom).
+AXES: Final = ("vertical", "sway")
 
 
 #: Highest measuring rate, Hz ("The maximum measuring rate is 4 kHz").
@@ -64,7 +71,8 @@ class Ild1420Settings:
     rate_hz : float
         Measuring rate, Hz, in (0, 4000].
     x : float
-        Chord position of the laser spot, m, in [-1, 1], positive downstream of the elastic axis.
+        Chord position of the laser spot, m, in [-1, 1], positive downstream of the elastic axis
+        (a ``vertical`` laser; a sway laser has none: 0).
     standoff_mm : float
         Distance reading at the model's rest position, mm, within [0, MR].
     baudrate : int
@@ -73,6 +81,14 @@ class Ild1420Settings:
         Additional values in block order; must contain ``counter``, ``timestamp`` and ``status``,
         may add ``exposure`` and ``intensity``. ``33 bits x values x rate_hz`` must fit in
         ``baudrate`` (else the sensor sends 262075).
+    axis : {"vertical", "sway"}
+        ``vertical`` (default): the laser looks down at the model and reads
+        ``standoff + h + x alpha``. ``sway``: it sits downstream of the model, looking upwind
+        at its trailing face, and reads ``standoff - (p - z alpha)`` (p positive downwind).
+    z : float
+        A sway laser's spot height, m, in [-1, 1], positive downward from the elastic axis (a
+        pitch nose-up moves a face point at height z upwind by ``z alpha``); 0 for a vertical
+        laser.
     """
 
     range_mm: int
@@ -81,17 +97,25 @@ class Ild1420Settings:
     standoff_mm: float
     baudrate: int = DEFAULT_BAUDRATE
     output: tuple[str, ...] = DEFAULT_OUTPUT
+    axis: str = "vertical"
+    z: float = 0.0
 
     def __post_init__(self) -> None:
         _validate_settings(where="ILD1420 settings", range_mm=self.range_mm,
                            rate_hz=self.rate_hz, x=self.x, standoff_mm=self.standoff_mm,
                            baudrate=self.baudrate, output=self.output)
+        _validate_axis("ILD1420 settings", self.axis, self.x, self.z)
 
     @classmethod
     def from_table(cls, table: Mapping[str, Any], where: str) -> Ild1420Settings:
         """Validate a rig-config table; raise ConfigError naming the key and its allowed range."""
-        check_keys(table, where, {"range_mm", "rate_hz", "x", "standoff_mm"},
-                   {"baudrate", "output"})
+        axis = table.get("axis", "vertical")
+        if axis not in AXES:
+            raise ConfigError(f"{where} axis = {axis!r} is not one of {list(AXES)}")
+        # A vertical laser is placed along the chord (x), a sway laser in height (z).
+        place = "x" if axis == "vertical" else "z"
+        check_keys(table, where, {"range_mm", "rate_hz", "standoff_mm"} | (
+            {"x"} if axis == "vertical" else set()), {"baudrate", "output", "axis", place})
         range_mm = table["range_mm"]
         if (isinstance(range_mm, bool) or not isinstance(range_mm, (int, float))
                 or range_mm not in RANGES_MM):
@@ -105,12 +129,15 @@ class Ild1420Settings:
         settings: dict[str, Any] = {
             "range_mm": int(range_mm),
             "rate_hz": number(table, "rate_hz", where, lo=0.0, hi=MAX_RATE_HZ, lo_open=True),
-            "x": number(table, "x", where, lo=-1.0, hi=1.0),
+            "x": number(table, "x", where, lo=-1.0, hi=1.0, default=0.0),
             "standoff_mm": number(table, "standoff_mm", where, lo=0.0, hi=float(range_mm)),
             "baudrate": baudrate,
             "output": tuple(output),
+            "axis": str(axis),
+            "z": number(table, "z", where, lo=-1.0, hi=1.0, default=0.0),
         }
-        _validate_settings(where=where, **settings)
+        _validate_settings(where=where, **{k: v for k, v in settings.items()
+                                           if k not in ("axis", "z")})
         return cls(**settings)
 
     @property
@@ -126,6 +153,18 @@ class Ild1420Settings:
     def line(self) -> dict[str, Any]:
         """Return the serial settings (8N1) for ``open_transport``."""
         return {"baudrate": self.baudrate, "bytesize": 8, "parity": "N", "stopbits": 1}
+
+
+def _validate_axis(where: str, axis: Any, x: Any, z: Any) -> None:
+    """Check what the laser looks at and where its spot is."""
+    if axis not in AXES:
+        raise ConfigError(f"{where} axis = {axis!r} is not one of {list(AXES)}")
+    if not (isinstance(z, (int, float)) and -1.0 <= z <= 1.0):
+        raise ConfigError(f"{where} z = {z!r} m is outside [-1, 1]")
+    if axis == "vertical" and z != 0.0:
+        raise ConfigError(f"{where} z = {z!r}: only a sway laser has a spot height z")
+    if axis == "sway" and x != 0.0:
+        raise ConfigError(f"{where} x = {x!r}: a sway laser has no chord position x")
 
 
 def _validate_settings(*, where: str, range_mm: Any, rate_hz: Any, x: Any, standoff_mm: Any,
