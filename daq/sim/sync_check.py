@@ -44,6 +44,8 @@ FloatArray = npt.NDArray[np.float64]
 
 #: Which device each sync channel comes from.
 CHANNEL_SOURCES = {"h": "lasers", "alpha": "lasers", "lift": "scanner", "moment": "scanner"}
+#: The channels a 3-DOF rig's file adds (checked when the file has them).
+SWAY_SOURCES = {"p": "lasers", "drag": "scanner"}
 #: Rows skipped after each release, s: the first instants depend on the release mechanism.
 SKIP_AFTER_RELEASE_S = 0.05
 #: Step of the central difference that gives the truth's derivative, s.
@@ -93,8 +95,9 @@ def measure_alignment(path: str | Path, truth: Callable[[FloatArray], Mapping[st
     path : str or Path
         A closed run file.
     truth : callable
-        True times (s, tunnel clock) -> dict of ``h``, ``alpha``, ``lift``, ``moment`` (NaN
-        outside the decays), e.g. ``VirtualTunnel.decay_truth``.
+        True times (s, tunnel clock) -> dict of ``h``, ``alpha``, ``lift``, ``moment`` (and a
+        3-DOF tunnel's ``p``, ``drag``, checked when the file has them; NaN outside the
+        decays), e.g. ``VirtualTunnel.decay_truth``.
     true_time_of_run_start : float
         The tunnel's true time at the run's time 0, s (``/entry/sync`` times are from the run
         start on the host clock).
@@ -107,7 +110,8 @@ def measure_alignment(path: str | Path, truth: Callable[[FloatArray], Mapping[st
         and ``rows`` used; empty dicts and NaN when the run holds no usable decay.
     """
     with h5py.File(path, "r") as f:
-        sync = {k: f["entry/sync"][k][:] for k in ("time", *CHANNEL_SOURCES)}
+        names = [*CHANNEL_SOURCES, *(k for k in SWAY_SOURCES if k in f["entry/sync"])]
+        sync = {k: f["entry/sync"][k][:] for k in ("time", *names)}
         releases = f["entry/releases"][:]
     keep = np.zeros(sync["time"].size, dtype=bool)
     for row in releases:
@@ -121,7 +125,9 @@ def measure_alignment(path: str | Path, truth: Callable[[FloatArray], Mapping[st
     delay: dict[str, float] = {}
     delay_std: dict[str, float] = {}
     rows = 0
-    for name in CHANNEL_SOURCES:
+    for name in names:
+        if name not in x:
+            continue
         y = sync[name][keep]
         dx = (x_plus[name] - x_minus[name]) / (2 * _DERIVATIVE_STEP_S)
         ok = np.isfinite(y) & np.isfinite(x[name]) & np.isfinite(dx)
