@@ -46,8 +46,8 @@ def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.mark.slow
 def test_the_wheel_ships_the_rig_configs_and_makes_qt_and_dask_extras(wheel, tmp_path):
     shipped = sorted(CONFIGS.glob("*.toml"))
-    assert [p.name for p in shipped] == ["example_real_rig.toml", "sim_flat_plate.toml",
-                                      "sim_streamlined_deck.toml"]
+    assert [p.name for p in shipped] == ["example_real_rig.toml", "sim_bluff_deck_3dof.toml",
+                                      "sim_flat_plate.toml", "sim_streamlined_deck.toml"]
     assert (ROOT / "rig_configs").resolve() == CONFIGS.resolve()  # the repository's link
     with zipfile.ZipFile(wheel) as z:
         for path in shipped:

@@ -22,6 +22,9 @@ correlated.
 
 from __future__ import annotations
 
+import re
+import subprocess
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -29,6 +32,7 @@ from typing import Any
 import h5py
 import numpy as np
 import pytest
+import xarray as xr
 
 from daq.config import parse_rig_config
 from daq.sim.recording import record_simulated_run
@@ -121,3 +125,26 @@ def test_ident_io_reads_the_3dof_releases(run):
         assert np.array_equal(release.drag, f["entry/sync/drag"][rows])
     # The release starts held at p0 = 4 mm: its first samples are within the laser noise.
     assert abs(release.p[0] - HOLD_P) < 1e-4
+
+
+def test_xarray_sees_time_as_the_coordinate_of_p_and_drag(run):
+    """As tests/hil/test_nexus_hil.py on a 2-DOF run: the sway columns are ordinary columns."""
+    with xr.open_dataset(run["path"], engine="h5netcdf", group="entry/sync",
+                         phony_dims="access") as ds:
+        assert set(ds.coords) == {"time", "tap"}
+        for name in ("h", "alpha", "lift", "moment", "U", "rho", "p", "drag"):
+            assert ds[name].dims == ("time",), name
+        assert ds["p"].attrs["units"] == "m" and ds["drag"].attrs["units"] == "N/m"
+        assert ds["pressure"].dims == ("time", "tap") and ds.sizes["tap"] == 90
+
+
+@pytest.mark.slow
+def test_nxcheck_finds_no_error_in_a_3dof_run(run):
+    """nexusformat's nxcheck: no error, no warning beyond the 2-DOF file's 8 (test_nexus_hil)."""
+    nxcheck = Path(sys.executable).with_name("nxcheck")
+    done = subprocess.run([str(nxcheck), str(run["path"])], capture_output=True, text=True,
+                          timeout=300)
+    text = re.sub(r"\x1b\[[0-9;]*m", "", done.stdout + done.stderr)
+    assert "Total number of errors: 0" in text, text[-3000:]
+    warnings = int(re.search(r"Total number of warnings: (\d+)", text).group(1))
+    assert warnings <= 8, text
