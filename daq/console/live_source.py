@@ -282,7 +282,7 @@ class LiveSource(RingSource):
 
     def _make_ring(self, config: RigConfig) -> RingBuffer:
         """Return the given ring (checked against the config) or a new one."""
-        columns = sync_columns(config.taps.n_taps)
+        columns = sync_columns(config.taps.n_taps, sway=config.section.n_dof == 3)
         rows = ring_rows(config, self.window_s)
         ring = self._given_ring
         if ring is None:

@@ -364,7 +364,8 @@ class ProcessLiveSource(RingSource):
             return
         ctx = multiprocessing.get_context("spawn")  # no fork of a threaded (Qt) parent
         ring = SharedRingBuffer(ring_rows(self.config, self.window_s),
-                                *sync_columns(self.config.taps.n_taps))
+                                *sync_columns(self.config.taps.n_taps,
+                                              sway=self.config.section.n_dof == 3))
         self._ring = ring
         conn, child = ctx.Pipe()
         # Not a daemon: the child starts the simulated rig's process itself.

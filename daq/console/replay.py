@@ -26,7 +26,7 @@ import numpy as np
 
 from daq.config import parse_rig_config
 from daq.console.ring_buffer import RingBuffer
-from daq.console.source import SYNC_SCALARS, RingSource, SourceInfo, sync_columns
+from daq.console.source import SWAY_SCALARS, SYNC_SCALARS, RingSource, SourceInfo, sync_columns
 from daq.errors import ConfigError, ReplayError
 from daq.recording.layout import open_run_file
 
@@ -107,6 +107,8 @@ class ReplaySource(RingSource):
         try:
             sync = f["entry/sync"]
             self._ds = {name: sync[name] for name in (*SYNC_SCALARS, "pressure")}
+            if all(name in sync for name in SWAY_SCALARS):  # a 3-DOF rig's run
+                self._ds.update({name: sync[name] for name in SWAY_SCALARS})
             raw = f["entry/config"][()]
         except KeyError as exc:
             raise ReplayError(f"{where}: not a windrig run file: missing "
@@ -140,7 +142,7 @@ class ReplaySource(RingSource):
         rate = 1.0 / float(np.median(steps))
         history_s = max(self.window_s, MIN_HISTORY_S)  # a whole decay, for the releases table
         self._ring = RingBuffer(int(math.ceil(history_s * rate)) + 2,
-                                *sync_columns(config.taps.n_taps))
+                                *sync_columns(config.taps.n_taps, sway="p" in self._ds))
         self._info = SourceInfo(label=self.path.name, config=config, rate_hz=rate,
                                 duration_s=float(t[-1] - t[0]))
 

@@ -95,10 +95,11 @@ class RingRecorder:
                 self.plc_armed = (int(hosts[-1]), bool(table[-1, channels.index("armed")]))
 
     def append_sync(self, time: Any, *, h: Any, alpha: Any, lift: Any, moment: Any,
-                    pressure: Any, U: Any, rho: Any) -> None:
-        """Append sync rows to the ring."""
+                    pressure: Any, U: Any, rho: Any, p: Any = None, drag: Any = None) -> None:
+        """Append sync rows to the ring (a 3-DOF rig's with ``p`` and ``drag``)."""
+        sway = {} if p is None else {"p": p, "drag": drag}
         self.ring.append({"time": time, "h": h, "alpha": alpha, "lift": lift, "moment": moment,
-                          "U": U, "rho": rho, "pressure": pressure})
+                          "U": U, "rho": rho, "pressure": pressure, **sway})
 
     def add_gap(self, device: str, after_counter: int, length: int) -> None:
         """Ignore (gaps are counted by the engine's stats)."""
@@ -107,7 +108,7 @@ class RingRecorder:
         """Ignore (faults reach the health panel through the live source's own subscriber)."""
 
     def add_release(self, *, release_time: float, start_index: int, stop_index: int, U: float,
-                    h0: float, alpha0: float) -> None:
+                    h0: float, alpha0: float, p0: float | None = None) -> None:
         """Ignore (the live releases come from the writer's ``release_hook``)."""
 
     def set_sync_attrs(self, *, clock_offset_s: Mapping[str, float] | None = None,

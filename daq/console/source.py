@@ -29,7 +29,7 @@ import numpy.typing as npt
 from daq.config import RigConfig
 from daq.console.ring_buffer import Column, RingBuffer
 
-__all__ = ["SYNC_SCALARS", "DataSource", "DeviceHealth", "HealthSource", "RingSource",
+__all__ = ["SWAY_SCALARS", "SYNC_SCALARS", "DataSource", "DeviceHealth", "HealthSource", "RingSource",
            "SourceInfo", "sync_columns"]
 
 #: Scalar columns of the synchronised view and their units (``pressure`` is the one 2-D column).
@@ -37,15 +37,20 @@ SYNC_SCALARS: dict[str, str] = {
     "time": "s", "h": "m", "alpha": "rad", "lift": "N/m", "moment": "N m/m", "U": "m/s",
     "rho": "kg/m^3",
 }
+#: The scalar columns a rig with three degrees of freedom adds (``/entry/sync`` of its files).
+SWAY_SCALARS: dict[str, str] = {"p": "m", "drag": "N/m"}
 
 
-def sync_columns(n_taps: int) -> tuple[Column, ...]:
+def sync_columns(n_taps: int, sway: bool = False) -> tuple[Column, ...]:
     """Return the ring-buffer columns of the synchronised view.
 
     Parameters
     ----------
     n_taps : int
         Number of pressure taps (the width of the ``pressure`` column), >= 0.
+    sway : bool
+        A 3-DOF rig's view: the :data:`SWAY_SCALARS` ``p`` (m) and ``drag`` (N/m) too, before
+        ``pressure``.
 
     Returns
     -------
@@ -59,7 +64,9 @@ def sync_columns(n_taps: int) -> tuple[Column, ...]:
     >>> [c.name for c in sync_columns(4)][-1], sync_columns(4)[-1].shape
     ('pressure', (4,))
     """
-    return (*(Column(name) for name in SYNC_SCALARS), Column("pressure", np.float32, (n_taps,)))
+    return (*(Column(name) for name in SYNC_SCALARS),
+            *(Column(name) for name in (SWAY_SCALARS if sway else ())),
+            Column("pressure", np.float32, (n_taps,)))
 
 
 @dataclass(frozen=True)

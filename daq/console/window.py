@@ -42,10 +42,12 @@ __all__ = ["TRACE_BINS", "ConsoleWindow", "peak_decimate"]
 #: (measured with 511 taps live: 40 ms gave 18.8-21.6 frames/s, 33 ms 22.4).
 FRAME_MS = 33
 #: Trace colours (pen specs), by channel.
-_PENS = {"h": "c", "alpha": "y", "lift": "m", "moment": "g"}
+_PENS = {"h": "c", "alpha": "y", "lift": "m", "moment": "g", "p": "r"}
 #: Displayed unit and scale factor from SI, by channel.
 _DISPLAY = {"h": ("mm", 1e3), "alpha": ("deg", 180.0 / math.pi), "lift": ("N/m", 1.0),
-            "moment": ("N m/m", 1.0)}
+            "moment": ("N m/m", 1.0), "p": ("mm", 1e3)}
+#: The traces drawn, top to bottom; a rig with three degrees of freedom adds the sway p.
+_TRACES = ("h", "alpha", "lift", "moment")
 #: The columns drawn over the whole window (the pressures are drawn for the latest row only).
 _TRACE_COLUMNS = ("time", "h", "alpha", "lift", "moment", "U", "rho")
 #: The traces are drawn as the minimum and maximum of this many bins (about the plot's width in
@@ -164,9 +166,10 @@ class ConsoleWindow(QtWidgets.QMainWindow):
     Attributes
     ----------
     curves : dict of str to pyqtgraph.PlotDataItem
-        The ``h`` (mm), ``alpha`` (deg), ``lift`` (N/m) and ``moment`` (N m/m) traces against
-        time (``xData``: s from run start), as set by the last redraw; each is drawn shifted
-        so that its latest sample is at 0 of the fixed time axis (s before the latest sample).
+        The ``h`` (mm), ``alpha`` (deg), ``lift`` (N/m) and ``moment`` (N m/m) traces (and the
+        sway ``p`` (mm) of a rig with three degrees of freedom) against time (``xData``: s
+        from run start), as set by the last redraw; each is drawn shifted so that its latest
+        sample is at 0 of the fixed time axis (s before the latest sample).
     cp_curve : pyqtgraph.PlotDataItem
         Cp of the latest row against perimeter position (m).
     spectrum_curves : dict of str to pyqtgraph.PlotDataItem
@@ -237,7 +240,9 @@ class ConsoleWindow(QtWidgets.QMainWindow):
         self._y_ranges: dict[str, _RangeKeeper] = {}
         self._plots: list[pg.PlotWidget] = []
         first: pg.PlotWidget | None = None
-        for row, name in enumerate(("h", "alpha", "lift", "moment"), start=1):
+        traces = _TRACES + (("p",) if info.config.section.n_dof == 3 else ())
+        self._trace_columns = (*_TRACE_COLUMNS, *traces[len(_TRACES):])
+        for row, name in enumerate(traces, start=1):
             unit, _ = _DISPLAY[name]
             plot = _plot_widget(self._plots)
             plot.setLabel("left", f"{name} ({unit})")
@@ -246,7 +251,7 @@ class ConsoleWindow(QtWidgets.QMainWindow):
                 first = plot
             else:
                 plot.setXLink(first)
-            if row == 4:
+            if row == len(traces):
                 plot.setLabel("bottom", "time before the latest sample (s)")
             else:  # one time axis with numbers is enough (the grid lines stay)
                 plot.getAxis("bottom").setStyle(showValues=False)
@@ -309,7 +314,7 @@ class ConsoleWindow(QtWidgets.QMainWindow):
         self.health_table: QtWidgets.QTableWidget | None = None
         self.alarm_label: QtWidgets.QLabel | None = None
         self._frames = 0
-        grid.addWidget(self.releases_panel, 5, 0)
+        grid.addWidget(self.releases_panel, len(traces) + 1, 0)
         self.releases_panel.setVisible(self.identifier is not None)
         if self._health_source is None:
             grid.addWidget(self.tabs, 3, 1, 3, 1)
@@ -319,7 +324,7 @@ class ConsoleWindow(QtWidgets.QMainWindow):
         self.controls: ControlPanel | None = None
         if self._health_source is not None and hasattr(source, "acq"):
             self.controls = ControlPanel(source, confirm=confirm)
-            grid.addWidget(self.controls, 6, 0, 1, 2)
+            grid.addWidget(self.controls, len(traces) + 2, 0, 1, 2)
         grid.setColumnStretch(0, 3)
         grid.setColumnStretch(1, 2)
 
@@ -356,7 +361,7 @@ class ConsoleWindow(QtWidgets.QMainWindow):
         if self._source.total_rows != self._drawn_rows:
             self._drawn_rows = self._source.total_rows
             # The scalars of the whole window, the (wide) pressures of the latest row only.
-            snap = self._source.snapshot(columns=_TRACE_COLUMNS)
+            snap = self._source.snapshot(columns=self._trace_columns)
             t_end = float(snap["time"][-1]) if snap["time"].size else math.nan
             slow = not t_end < self._slow_drawn_at + _SLOW_PERIOD_S  # NaN: draw
             latest = self._source.snapshot(1, columns=("time", "pressure")) if slow else None

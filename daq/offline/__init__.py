@@ -5,5 +5,8 @@
 - :mod:`~daq.offline.report`: its tables, plots and HTML report;
 - :mod:`~daq.offline.diagnosis`: ``windrig diagnose``: the discrepancy workflow with its plots;
 - :mod:`~daq.offline.flutter_commands`: ``windrig identify`` (E2RFC on run files) and
-  ``windrig flutter`` (a section with a model or a flutter-derivative table).
+  ``windrig flutter`` (a section with a model or a flutter-derivative table);
+- :mod:`~daq.offline.derivative_table`: an identified model's flutter derivatives (all 18 with
+  sway) as ``windrig identify`` prints them, and the check that it has the section's degrees
+  of freedom.
 """

@@ -2,7 +2,9 @@
 
 ``windrig identify FILES`` reads recorded runs, identifies the rational-function model of their
 releases (E2RFC with its uncertainty, :func:`ident.campaign.analyze_campaign`) and prints the
-flutter speed. ``windrig flutter --section S.json (--model M.json | --table T.csv)`` analyses a
+flutter speed; for runs of three degrees of freedom also the 18 flutter derivatives over the
+releases' reduced frequencies (:mod:`daq.offline.derivative_table`; a model that left out the
+sway is refused). ``windrig flutter --section S.json (--model M.json | --table T.csv)`` analyses a
 section of two or three degrees of freedom with a model (``windrig identify --json`` output or
 ``{"A": ..., "d": ...}``) or a flutter-derivative table (``docs/flutter_derivative_tables.md``):
 the state-space analysis (a table is first fitted with rational functions,
@@ -43,7 +45,13 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
     tubing_correction : bool
         Correct the forces for the taps' pneumatic tubing recorded in the files.
     """
+    from daq.offline.derivative_table import (
+        check_model_dof,
+        derivative_rows,
+        format_derivative_table,
+    )
     from ident.campaign import analyze_campaign
+    from ident.errors import IdentError
     from ident.io import campaign_section, read_run, tubing_note
 
     runs = [read_run(p, tubing_correction=tubing_correction) for p in files]
@@ -51,7 +59,14 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
     releases = [r for run in runs for r in run.releases]
     print(f"{len(releases)} release(s) from {len(runs)} file(s); wind speeds "
           f"{sorted({round(r.U, 2) for r in releases})} m/s{tubing_note(runs)}")
-    analysis = analyze_campaign(releases, section, n_lags=n_lags, table=False)
+    try:
+        analysis = analyze_campaign(releases, section, n_lags=n_lags, table=False)
+    except ValueError as exc:
+        if section.n_dof == 2 or isinstance(exc, IdentError):
+            raise
+        raise IdentError(f"E2RFC could not identify the 3-DOF releases ({exc}): a 3-DOF "
+                         "campaign needs E2RFC in 3x3") from exc
+    check_model_dof(analysis.model, section)
     model, result, spread = analysis.model, analysis.flutter, analysis.structures
     u = analysis.uncertainty
     diagnostics = model.diagnostics
@@ -59,6 +74,8 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
     print(f"lag roots d = {np.round(model.d, 4).tolist()}")
     for k, A_k in enumerate(model.A, start=1):
         print(f"A{k} = {np.round(A_k, 4).tolist()}")
+    if section.n_dof == 3:  # the 18 derivatives (a 2-DOF run prints as it always did)
+        print("\n".join(format_derivative_table(model, analysis.K)))
     if result.speed is None:
         print(result.summary())
     else:
@@ -81,6 +98,7 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
         print(f"warning: {warning}")
     if json_path is not None:
         summary = analysis.to_dict()
+        K_table, derivative_values = derivative_rows(model, analysis.K)
         json_path.write_text(json.dumps({
             "files": [str(p) for p in files],
             "model": summary["model"],
@@ -93,6 +111,9 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
             "flutter_frequency": result.frequency,
             "critical_mode": result.critical_mode,
             "warnings": summary["warnings"],
+            **({} if section.n_dof == 2 else {"flutter_derivatives": {
+                name: values.tolist() for name, values in
+                (("K", K_table), *derivative_values.items())}}),
         }, indent=2))
         print(f"wrote {json_path}")
     return 0

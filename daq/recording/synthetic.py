@@ -38,15 +38,17 @@ def write_release_run(path: str | Path, config: Any, releases: Sequence[Any],
         and the release's air density (1.2 kg/m^3 when it has none). Samples before a
         release's ``t = 0`` (a simulated hold, ``pre_s``) are written before its release row's
         start; its ``h0``/``alpha0`` are the release's own when it has them, else the samples
-        at ``t = 0``.
+        at ``t = 0``. A config with three degrees of freedom (``[section] fp``) writes each
+        release's ``p`` and ``drag`` (and ``p0``) too; its releases must have them.
     pressures : sequence of array_like, optional
         Each release's tap pressures, Pa, shape ``(len(r.t), n_taps)`` (default zeros). The
         config's tubing (``[[taps.tubing]]``) is recorded as ``/entry/metadata/tubing``, as the
         run writer does; these pressures are taken as measured behind it. The config's
         calibrations (dead taps, ...) are recorded under ``/entry/calibration`` too.
     """
+    sway = config.section.n_dof == 3
     rec = RunRecorder(path, config_text=config.text, rig_name=config.name, min_free_bytes=0,
-                      reserve_bytes=0)
+                      reserve_bytes=0, sway=sway)
     rec.open()
     n_taps = config.taps.n_taps
     if getattr(config, "tubing", ()):
@@ -65,11 +67,12 @@ def write_release_run(path: str | Path, config: Any, releases: Sequence[Any],
                         pressure=(np.zeros((n, n_taps), dtype=np.float32) if pressures is None
                                   else np.asarray(pressures[index], dtype=np.float32)),
                         U=np.full(n, r.U),
-                        rho=np.full(n, rho))
+                        rho=np.full(n, rho), **({"p": r.p, "drag": r.drag} if sway else {}))
         rec.add_release(release_time=float(t[first]), start_index=rows + first,
                         stop_index=rows + n, U=r.U,
                         h0=float(getattr(r, "h0", r.h[first])),
-                        alpha0=float(getattr(r, "alpha0", r.alpha[first])))
+                        alpha0=float(getattr(r, "alpha0", r.alpha[first])),
+                        **({"p0": float(getattr(r, "p0", r.p[first]))} if sway else {}))
         rows += n
         t0 = float(t[-1]) + float(r.t[1] - r.t[0])
     rec.close()

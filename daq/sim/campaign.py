@@ -12,6 +12,11 @@ rational-function model from all releases (:func:`ident.e2rfc.identify`), comput
 flutter speed with its standard deviation and compares it with the truth. Plots (matplotlib, Agg)
 are written next to the files.
 
+Three degrees of freedom (a rig config with ``[section] fp`` and a sway laser): the same
+campaign, the releases carrying the sway and the drag; the decays plot shows p too. Until
+:func:`ident.e2rfc.identify` identifies 3x3 models, the campaign stops after reading the files
+back: ``identification_error`` says why, and the plots show the decays and the truth.
+
 Not responsible for: the drivers, the engine or the file (:mod:`daq.recording`), the numerics
 (:mod:`ident`), or the decay length (:mod:`daq.procedure`). Real rigs are not driven here: the truth
 (``U_F``) that sets the wind speeds exists only for a simulated rig.
@@ -35,6 +40,7 @@ from daq.report_plots import DerivativeCurves, ModeCurves, flutter_derivative_gr
 from daq.sim.rig_process import start_rig_process
 from ident import e2rfc, flutter
 from ident.campaign import CampaignAnalysis, analyze_campaign
+from ident.errors import IdentError
 from ident.io import campaign_section, read_run
 from ident.release import Release
 from ident.rfc import RationalFunctionModel
@@ -80,6 +86,8 @@ class CampaignResult:
         The releases identified, in the order of the model's diagnostics.
     analysis : CampaignAnalysis or None
         The whole campaign analysis (:func:`ident.campaign.analyze_campaign`).
+    identification_error : str or None
+        Why a 3-DOF campaign was not identified (None: it was, or the rig is 2-DOF).
     """
 
     files: list[Path]
@@ -96,6 +104,7 @@ class CampaignResult:
     releases: list[Release] = field(default_factory=list, repr=False)
     structures: e2rfc.StructureSpread | None = None
     analysis: CampaignAnalysis | None = field(default=None, repr=False)
+    identification_error: str | None = None
 
     def summary(self) -> str:
         """Plain-text summary for operators and logs."""
@@ -105,7 +114,9 @@ class CampaignResult:
             f"({self.decay_s:.1f} s decays), {len(self.files)} run files",
             f"truth flutter speed       {self.truth_speed:.3f} m/s",
         ]
-        if self.identified_speed is None:
+        if self.identification_error is not None:
+            lines.append(f"identified flutter speed  not identified: {self.identification_error}")
+        elif self.identified_speed is None:
             lines.append("identified flutter speed  none found")
         else:
             std = "" if self.identified_std is None else f" +- {self.identified_std:.3f}"
@@ -232,29 +243,51 @@ def run_campaign(config: RigConfig, out_dir: str | Path, *,
     runs = [read_run(path) for path in files]
     releases = [r for run in runs for r in run.releases]
     file_section = campaign_section(runs)  # as `windrig identify` does
-    analysis = analyze_campaign(releases, file_section, n_lags=n_lags, with_A3=with_A3,
-                                table=False)
-    speed = analysis.flutter_speed
+    analysis, why = _identify(releases, file_section, n_lags, with_A3)
+    speed = None if analysis is None else analysis.flutter_speed
     error = None if speed is None else speed / U_F - 1.0
     t_ident = time.monotonic() - t1
 
     t2 = time.monotonic()
-    plots = _plots(out, releases, file_section, analysis.model, section, truth_model,
-                   analysis.flutter, truth)
+    plots = _plots(out, releases, file_section, None if analysis is None else analysis.model,
+                   section, truth_model, None if analysis is None else analysis.flutter, truth)
     t_plots = time.monotonic() - t2
     return CampaignResult(
         files=files, wind_speeds=speeds, truth_speed=U_F, identified_speed=speed,
-        identified_std=analysis.flutter_std, relative_error=error, n_releases=len(releases),
-        decay_s=decay_s,
+        identified_std=None if analysis is None else analysis.flutter_std, relative_error=error,
+        n_releases=len(releases), decay_s=decay_s,
         timings={"acquisition": t_acq, "identification": t_ident, "plots": t_plots,
                  "total": time.monotonic() - started},
-        plots=plots, model=analysis.model, releases=releases, structures=analysis.structures,
-        analysis=analysis)
+        plots=plots, model=None if analysis is None else analysis.model, releases=releases,
+        structures=None if analysis is None else analysis.structures, analysis=analysis,
+        identification_error=why)
+
+
+def _identify(releases: list[Release], section: SectionModel, n_lags: int | None,
+              with_A3: bool | None) -> tuple[CampaignAnalysis | None, str | None]:
+    """Identify the campaign; a 3-DOF one E2RFC cannot identify yet gives ``(None, why)``.
+
+    A 2-DOF campaign's errors propagate as ever. A 3-DOF one's identification error, or a
+    model of fewer degrees of freedom than the section (an E2RFC that ignores the sway), is
+    returned as the reason, so that the campaign's files and plots still come out.
+    """
+    if section.n_dof == 2:
+        return analyze_campaign(releases, section, n_lags=n_lags, with_A3=with_A3,
+                                table=False), None
+    try:
+        analysis = analyze_campaign(releases, section, n_lags=n_lags, with_A3=with_A3,
+                                    table=False)
+    except (IdentError, ValueError) as exc:  # reported as the campaign's outcome
+        return None, f"E2RFC on 3-DOF releases: {type(exc).__name__}: {exc}"
+    if analysis.model.n_dof != section.n_dof:
+        return None, (f"E2RFC identified a {analysis.model.n_dof}-DOF model from 3-DOF "
+                      "releases (it ignores the sway)")
+    return analysis, None
 
 
 def _plots(out: Path, releases: list[Release], section: SectionModel,
-           model: RationalFunctionModel, truth_section: SectionModel,
-           truth_model: RationalFunctionModel, identified: flutter.FlutterResult,
+           model: RationalFunctionModel | None, truth_section: SectionModel,
+           truth_model: RationalFunctionModel, identified: flutter.FlutterResult | None,
            truth: flutter.FlutterResult) -> dict[str, Path]:
     import matplotlib  # here: the backend is chosen before pyplot loads, only when plotting
 
@@ -263,15 +296,20 @@ def _plots(out: Path, releases: list[Release], section: SectionModel,
 
     plots: dict[str, Path] = {}
 
-    # Decays: h and alpha of each release.
-    fig, axes = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
+    # Decays: h and alpha of each release (and p, with sway).
+    sway = any(r.p is not None for r in releases)
+    fig, axes = plt.subplots(3 if sway else 2, 1, figsize=(10, 8 if sway else 6), sharex=True)
     for i, r in enumerate(releases):
         label = f"#{i} U = {r.U:.2f} m/s"
         axes[0].plot(r.t, 1e3 * r.h, lw=0.7, label=label)
         axes[1].plot(r.t, 1e3 * r.alpha, lw=0.7, label=label)
+        if sway and r.p is not None:
+            axes[2].plot(r.t, 1e3 * r.p, lw=0.7, label=label)
     axes[0].set_ylabel("h (mm)")
     axes[1].set_ylabel("alpha (mrad)")
-    axes[1].set_xlabel("time from release (s)")
+    if sway:
+        axes[2].set_ylabel("p (mm)")
+    axes[-1].set_xlabel("time from release (s)")
     axes[0].legend(fontsize=7, ncol=2)
     axes[0].set_title("recorded free decays")
     fig.tight_layout()
@@ -281,19 +319,21 @@ def _plots(out: Path, releases: list[Release], section: SectionModel,
 
     # Flutter derivatives over the K range the releases cover (both modes, all wind speeds).
     K = e2rfc.reduced_frequency_span(releases, section, 200)
+    derivatives = [DerivativeCurves("truth", "k-", truth_model.flutter_derivatives(K))]
+    if model is not None:
+        derivatives.append(DerivativeCurves("identified", "r--", model.flutter_derivatives(K)))
     plots["flutter_derivatives"] = flutter_derivative_grid(
-        out / "campaign_flutter_derivatives.png", K,
-        [DerivativeCurves("truth", "k-", truth_model.flutter_derivatives(K)),
-         DerivativeCurves("identified", "r--", model.flutter_derivatives(K))], dpi=110)
+        out / "campaign_flutter_derivatives.png", K, derivatives, dpi=110)
 
     # Damping and frequency against U, identified vs truth.
-    U_max = max(truth.U_max, identified.U_max)
+    U_max = truth.U_max if identified is None else max(truth.U_max, identified.U_max)
     truth_curves = flutter.analyze(truth_section, truth_model, U_max)
+    modes = [ModeCurves(truth_curves, "-", "truth")]
+    if model is not None:
+        modes.append(ModeCurves(flutter.analyze(section, model, U_max), "--", "identified"))
     plots["flutter"] = flutter_diagram(
-        out / "campaign_flutter.png",
-        [ModeCurves(truth_curves, "-", "truth"),
-         ModeCurves(flutter.analyze(section, model, U_max), "--", "identified")],
-        [r.U for r in releases],
-        title="state-space flutter analysis: identified (--) vs truth (-)",
+        out / "campaign_flutter.png", modes, [r.U for r in releases],
+        title=("state-space flutter analysis: identified (--) vs truth (-)" if model is not None
+               else "state-space flutter analysis of the truth (not identified)"),
         damping_top=max(0.2, float(np.nanmax(truth_curves.damping)) * 0.5), dpi=110)
     return plots

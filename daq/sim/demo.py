@@ -67,6 +67,9 @@ def run(out: Path, config_path: Path | None = None, *, progress: bool = True) ->
     print(f"section: B = {section.B:g} m, m = {section.m:g} kg/m, I = {section.I:g} kg m^2/m, "
           f"fh = {section.fh:g} Hz, fa = {section.fa:g} Hz, zeta = {section.zeta_h:.2%} / "
           f"{section.zeta_a:.2%}")
+    if section.n_dof == 3:  # the sway spring: three degrees of freedom
+        print(f"sway: fp = {section.fp:g} Hz, zeta_p = {section.zeta_p:.2%}, "
+              f"m_p = {section.m_p:g} kg/m (three degrees of freedom: h, alpha, p)")
     started = time.monotonic()
     result = run_campaign(config, out, progress=progress)
     truth_section = config.section.replace(rho=_simulated_density(config))
@@ -98,6 +101,9 @@ def run(out: Path, config_path: Path | None = None, *, progress: bool = True) ->
         verdict = ("within" if abs(result.relative_error) <= TARGET_RELATIVE_ERROR
                    else "NOT within")
         print(f"identified flutter speed {verdict} {TARGET_RELATIVE_ERROR:.0%} of the truth")
+    elif result.identification_error is not None:
+        print(f"not identified ({result.identification_error}): the run files, the decays and "
+              "the truth's plots are written")
     else:
         print("no flutter speed identified: see the plots and the summary")
     summary = _summary(result, truth, rows, time.monotonic() - started)
@@ -151,6 +157,7 @@ def _summary(result: Any, truth: Any, rows: list[dict[str, Any]],
             None if result.analysis is None
             else result.analysis.to_dict()["flutter_std_parts"]),
         "warnings": [] if result.analysis is None else list(result.analysis.warnings),
+        "identification_error": result.identification_error,
         "releases": rows,
         "timings_s": {**result.timings, "demo_total": wall_s},
         "plots": {k: str(v) for k, v in result.plots.items()},
