@@ -2,7 +2,7 @@
 
 Real drivers over loopback transports, the acquisition engine and the RunWriter record the
 bluff deck on its sway spring: two lasers for heave and pitch, a sway laser downstream, 90 taps
-on a rectangle whose end faces carry the drag. One run (a fan ramp, one release) is recorded
+on a rectangle whose end faces carry the drag (62 taps, one scanner module). One run (a fan ramp, one release) is recorded
 per module and checked against the virtual tunnel's truth: ``p`` and ``drag`` are in
 ``/entry/sync`` (the 2-DOF columns as ever), the releases table has ``p0``, and
 :func:`ident.io.read_run` gives 3-DOF releases.
@@ -10,14 +10,13 @@ per module and checked against the virtual tunnel's truth: ``p`` and ``drag`` ar
 Tolerances, and why: the sway laser reads p with the laser's own errors (noise 2.5e-5 of its
 50 mm range, 1.25 um; 16-bit words, 0.8 um) plus the clock maps' timing error (the sway's peak
 speed is ~4 mm x 2 pi x 2.6 Hz = 65 mm/s, so 0.3 ms of timing is 20 um at the fastest
-instants). Measured in 2 runs: p rms error 4-8 um, max 17-22 um, p0 within 0.05 um; the
-bounds are ~5x. The drag is the pressures of the 10 end-face taps (0.04 m each) integrated: the
-scanner's noise (1 Pa per tap, independent) gives it a noise of 1 Pa x sqrt(10) x 0.04 m =
-0.126 N/m per frame, lowered to ~0.82 of that by the sync view's linear interpolation between
-frames (variance w^2 + (1 - w)^2, 2/3 on average): measured rms errors 0.104 and 0.109 N/m
-against a true drag of rms 0.19 N/m (so the correlation is only ~0.87). The test bounds the
-error by that noise (x 1.3) and its mean by 4 standard errors: the drag is right, not just
-correlated.
+instants). Measured in 5 runs: p rms error 4-14 um, max 17-39 um, p0 within 0.07 um; the
+bounds are 3-5x. The drag is the pressures of the 6 end-face taps (0.2/3 m each) integrated: the
+scanner's noise (1 Pa per tap, independent) gives it a noise of 1 Pa x sqrt(6) x 0.0667 m =
+0.163 N/m per frame, lowered to ~0.82 of that by the sync view's linear interpolation between
+frames (variance w^2 + (1 - w)^2, 2/3 on average): measured rms errors 0.120-0.149 N/m against a
+true drag of rms ~0.19 N/m (so the correlation is only 0.79-0.84). The test bounds the error by
+that noise (x 1.3) and its mean by 4 standard errors: the drag is right, not just correlated.
 """
 
 from __future__ import annotations
@@ -95,18 +94,19 @@ def test_the_3dof_run_records_p_and_drag_matching_the_tunnel_truth(run):
     # The model sways after the release (p from 4 mm, decaying at 2.6 Hz with coupling).
     assert np.ptp(p[ok][decay]) > 2e-3
     err_p = p[ok] - true["p"]
-    assert np.sqrt(np.mean(err_p**2)) < 4e-5           # 40 um rms (measured 4-8 um)
-    assert np.max(np.abs(err_p)) < 1.5e-4              # 0.15 mm (measured 17-22 um)
+    assert np.sqrt(np.mean(err_p**2)) < 4e-5           # 40 um rms (measured 4-14 um)
+    assert np.max(np.abs(err_p)) < 1.5e-4              # 0.15 mm (measured 17-39 um)
     assert np.corrcoef(p[ok][decay], true["p"][decay])[0, 1] > 0.999  # measured 0.99998
     # The drag integrated from the end faces' taps against the tunnel's drag: off by the
     # scanner's noise through the integration (module docstring), no more.
     taps = rig.tunnel.taps
     noise = 1.0 * float(np.sqrt(np.sum((taps.nx * taps.length) ** 2)))  # N/m, 1 Pa per tap
-    assert abs(noise - 0.1265) < 1e-3
+    assert abs(noise - 0.1633) < 1e-3
     err_d = drag[ok][decay] - true["drag"][decay]
-    assert np.sqrt(np.mean(err_d**2)) < 1.3 * noise    # measured 0.104-0.109 N/m
+    assert np.sqrt(np.mean(err_d**2)) < 1.3 * noise    # measured 0.120-0.149 N/m
     assert abs(np.mean(err_d)) < 4 * noise / np.sqrt(err_d.size)
-    assert np.corrcoef(drag[ok][decay], true["drag"][decay])[0, 1] > 0.75  # measured 0.86-0.87
+    # Expected ~0.19 / hypot(0.19, 0.134) = 0.82 from the noise alone (measured 0.79-0.84).
+    assert np.corrcoef(drag[ok][decay], true["drag"][decay])[0, 1] > 0.6
     # The alignment check covers the sway channels too (delay against the tunnel's decay).
     delays = summary["alignment"]["signals"]["delay_s"]
     assert abs(delays["p"]) < 2e-3 and abs(delays["drag"]) < 1e-2
@@ -135,7 +135,7 @@ def test_xarray_sees_time_as_the_coordinate_of_p_and_drag(run):
         for name in ("h", "alpha", "lift", "moment", "U", "rho", "p", "drag"):
             assert ds[name].dims == ("time",), name
         assert ds["p"].attrs["units"] == "m" and ds["drag"].attrs["units"] == "N/m"
-        assert ds["pressure"].dims == ("time", "tap") and ds.sizes["tap"] == 90
+        assert ds["pressure"].dims == ("time", "tap") and ds.sizes["tap"] == 62
 
 
 @pytest.mark.slow
