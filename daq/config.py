@@ -300,7 +300,7 @@ def _section(table: Mapping[str, Any], where: str) -> tuple[SectionModel, float]
 
 def _check_sway(section: SectionModel, instruments: tuple[InstrumentConfig, ...],
                 source: str) -> None:
-    """A rig is 3-DOF exactly when its section has fp: then one sway laser gives p."""
+    """Check that a rig is 3-DOF exactly when its section has fp, with one sway laser for p."""
     sway = [inst.name for inst in instruments if is_sway_laser(inst)]
     if section.n_dof == 3 and not sway:
         raise ConfigError(f"{source} [section] fp = {section.fp:g} Hz makes the rig 3-DOF: it "

@@ -29,8 +29,8 @@ import numpy.typing as npt
 from daq.config import RigConfig
 from daq.console.ring_buffer import Column, RingBuffer
 
-__all__ = ["SWAY_SCALARS", "SYNC_SCALARS", "DataSource", "DeviceHealth", "HealthSource", "RingSource",
-           "SourceInfo", "sync_columns"]
+__all__ = ["SWAY_SCALARS", "SYNC_SCALARS", "DataSource", "DeviceHealth", "HealthSource",
+           "RingSource", "SourceInfo", "sync_columns"]
 
 #: Scalar columns of the synchronised view and their units (``pressure`` is the one 2-D column).
 SYNC_SCALARS: dict[str, str] = {

@@ -764,7 +764,7 @@ class RunRecorder:
         t = _column_of(time, None, np.float64, "sync time")
         n = t.shape[0]
         cols = {"h": h, "alpha": alpha, "lift": lift, "moment": moment, "U": U, "rho": rho}
-        if self.sway:
+        if p is not None and drag is not None:  # a sway recorder's (checked above)
             cols.update(p=p, drag=drag)
         arrays = {name: _column_of(v, n, np.float64, f"sync {name}") for name, v in cols.items()}
         p = np.asarray(pressure, dtype=self._sync_ds["pressure"].dtype)

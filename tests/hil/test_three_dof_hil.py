@@ -1,11 +1,11 @@
 """A recorded run of the simulated 3-DOF rig (``rig_configs/sim_bluff_deck_3dof.toml``).
 
 Real drivers over loopback transports, the acquisition engine and the RunWriter record the
-bluff deck on its sway spring: two lasers for heave and pitch, a sway laser downstream, 90 taps
-on a rectangle whose end faces carry the drag (62 taps, one scanner module). One run (a fan ramp, one release) is recorded
-per module and checked against the virtual tunnel's truth: ``p`` and ``drag`` are in
-``/entry/sync`` (the 2-DOF columns as ever), the releases table has ``p0``, and
-:func:`ident.io.read_run` gives 3-DOF releases.
+bluff deck on its sway spring: two lasers for heave and pitch, a sway laser downstream, 62 taps
+(one scanner module) on a rectangle whose end faces carry the drag. One run (a fan ramp, one
+release) is recorded per module and checked against the virtual tunnel's truth: ``p`` and
+``drag`` are in ``/entry/sync`` (the 2-DOF columns as ever), the releases table has ``p0``,
+and :func:`ident.io.read_run` gives 3-DOF releases.
 
 Tolerances, and why: the sway laser reads p with the laser's own errors (noise 2.5e-5 of its
 50 mm range, 1.25 um; 16-bit words, 0.8 um) plus the clock maps' timing error (the sway's peak
@@ -140,7 +140,7 @@ def test_xarray_sees_time_as_the_coordinate_of_p_and_drag(run):
 
 @pytest.mark.slow
 def test_nxcheck_finds_no_error_in_a_3dof_run(run):
-    """nexusformat's nxcheck: no error, no warning beyond the 2-DOF file's 8 (test_nexus_hil)."""
+    """Nexusformat's nxcheck: no error, and no warning beyond a 2-DOF file's 8 (test_nexus_hil)."""
     nxcheck = Path(sys.executable).with_name("nxcheck")
     done = subprocess.run([str(nxcheck), str(run["path"])], capture_output=True, text=True,
                           timeout=300)
