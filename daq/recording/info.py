@@ -142,11 +142,11 @@ def run_info(path: str | os.PathLike[str]) -> dict[str, Any]:
         of rows with h finite), ``devices`` (per device: driver,
         rate in Hz, channels, samples, time span in s from the run start, gaps, missing samples,
         restarts, clock fit: offset s, drift ppm), ``residual_misalignment_s``, ``releases``
-        (time s, U m/s, h0 m, alpha0 rad, decay length s), ``events`` (counts per kind and
-        every event but the trigger pulses: time s, kind, text), ``calz`` (each CALZ record's
-        scalars), ``calibrations`` (per ``/entry/calibration`` group: ``source``, ``date``,
-        ``configured`` and its ``values``) and ``recovery`` (what ``windrig recover`` did, or
-        None). NaN is None.
+        (time s, U m/s, h0 m, alpha0 rad, a 3-DOF run's p0 m, decay length s), ``events``
+        (counts per kind and every event but the trigger pulses: time s, kind, text), ``calz``
+        (each CALZ record's scalars), ``calibrations`` (per ``/entry/calibration`` group:
+        ``source``, ``date``, ``configured`` and its ``values``) and ``recovery`` (what
+        ``windrig recover`` did, or None). NaN is None.
 
     Raises
     ------
@@ -310,9 +310,10 @@ def format_info(info: dict[str, Any]) -> str:
     lines += ["", f"releases   {len(info['releases'])}"]
     for i, r in enumerate(info["releases"]):
         decay = f", decay {r['decay_s']:.2f} s" if r["decay_s"] is not None else ""
+        sway = f"  p0 = {_fmt(r['p0'], '+7.3f', 1e3)} mm" if "p0" in r else ""  # 3 DOF
         lines.append(f"  #{i}  t = {_fmt(r['time_s'], '8.3f')} s  U = {_fmt(r['U'], '6.3f')} m/s"
                      f"  h0 = {_fmt(r['h0'], '+7.3f', 1e3)} mm  alpha0 = "
-                     f"{_fmt(r['alpha0'], '+7.3f', 180 / np.pi)} deg{decay}")
+                     f"{_fmt(r['alpha0'], '+7.3f', 180 / np.pi)} deg{sway}{decay}")
     counts = info["events"]["counts"]
     lines += ["", "events     " + (", ".join(f"{k} {v}" for k, v in counts.items()) or "none")]
     for e in info["events"]["list"]:
