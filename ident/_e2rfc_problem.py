@@ -41,13 +41,13 @@ class FinalFit:
 
     Attributes
     ----------
-    A : ndarray, shape (3 + n_lags, 2, 2)
+    A : ndarray, shape (3 + n_lags, n_dof, n_dof)
     d : ndarray, shape (n_lags,)
     with_A3 : bool
     covariance : ndarray
         Of the fitted ``A`` entries (``parameter_index``) then ``log d``.
     parameter_index : tuple of (int, int, int)
-    release_residuals : ndarray, shape (n_releases, 2)
+    release_residuals : ndarray, shape (n_releases, n_dof)
         RMS force residual per release and channel relative to that channel's RMS.
     condition_number : float
     residual_inflation : float
@@ -79,11 +79,18 @@ def improves(new: list[Candidate], old: list[Candidate]) -> bool:
 
 
 class Problem:
-    """The stacked weighted least-squares problem over all releases, for any structure."""
+    """The stacked weighted least-squares problem over all releases, for any structure.
+
+    Each of the ``n_dof`` force rows (lift, moment and, with sway, drag) is its own weighted
+    least-squares problem in the same regressors; only the lag roots are shared.
+    """
 
     def __init__(self, prepared: list[PreparedRelease]) -> None:
         self.prepared = prepared
-        self.weights = np.array([1.0 / p.force_noise for p in prepared])  # (n_releases, 2)
+        self.n = prepared[0].n_dof
+        if any(p.n_dof != self.n for p in prepared):
+            raise ValueError("releases mix two and three degrees of freedom")
+        self.weights = np.array([1.0 / p.force_noise for p in prepared])  # (n_releases, n)
         # Reduced frequencies the data cover, from the modal frequencies: where lags can live.
         K = np.concatenate([2 * math.pi * p.fit.frequencies * p.B / p.U for p in prepared])
         self.K_range = (float(K.min()), float(K.max()))
@@ -95,7 +102,7 @@ class Problem:
     def _blocks(
         self, d: FloatArray, with_A3: bool, which: str
     ) -> list[tuple[FloatArray, FloatArray]]:
-        """Per release: design (n, k) and normalised forces (n, 2) on a view.
+        """Per release: design (rows, k) and normalised forces (rows, n_dof) on a view.
 
         The last result is kept: a candidate's held-out error and its condition number (and the
         final fit's covariance and condition number) ask for the same blocks in turn.
@@ -106,7 +113,7 @@ class Problem:
         out = []
         for p in self.prepared:
             view = p.view(which)
-            fixed = view.fixed if with_A3 else view.fixed[:, :4]
+            fixed = view.fixed if with_A3 else view.fixed[:, :2 * self.n]
             out.append((np.hstack([fixed, view.lag_columns(d)]), view.force))
         self._last_blocks = (key, out)
         return out
@@ -114,7 +121,7 @@ class Problem:
     def _solve(
         self, blocks: list[tuple[FloatArray, FloatArray]], *, exact: bool = False
     ) -> tuple[FloatArray, list[FloatArray], list[FloatArray]]:
-        """Coefficients (k, 2), per-release intercepts and weighted residuals.
+        """Coefficients (k, n_dof), per-release intercepts and weighted residuals.
 
         Per-release intercepts are profiled out by demeaning each release (Frisch-Waugh). The
         many solves of the lag-root search and of cross-validation use column-scaled normal
@@ -131,10 +138,10 @@ class Problem:
         release = np.repeat(np.arange(sizes.size), sizes)
         Xc = X - X_mean[release]
         yc = y - y_mean[release]
-        w = self.weights[release]  # (n_rows, 2)
+        w = self.weights[release]  # (n_rows, n_dof)
         k = X.shape[1]
-        coef = np.empty((k, 2))
-        for i in range(2):
+        coef = np.empty((k, self.n))
+        for i in range(self.n):
             Xw = Xc * w[:, i : i + 1]
             yw = yc[:, i] * w[:, i]
             if exact:
@@ -239,7 +246,8 @@ class Problem:
         Without ``score`` (a structure given by the caller) the search runs at full precision
         at once and no held-out error is computed (it is reported as NaN).
         """
-        k = 2 * ((6 if with_A3 else 4) + 2 * n_lags) + n_lags
+        n = self.n
+        k = n * n * ((3 if with_A3 else 2) + n_lags) + n_lags
         d = self.search(n_lags, with_A3, starts, loose=score)
         if n_lags and np.min(np.diff(np.concatenate([[0.0], d]))) <= 1e-6 * d.max():
             return Candidate(n_lags, with_A3, tuple(d), math.inf, math.inf, k,
@@ -282,8 +290,9 @@ class Problem:
         n_rel = len(blocks)
         Z = [np.hstack([X, y]) for X, y in blocks]
         Z = [z - z.mean(axis=0) for z in Z]
-        moments = np.empty((n_rel, N_FOLDS, k + 2, k + 2))
-        sums = np.empty((n_rel, N_FOLDS, k + 2))
+        n = self.n
+        moments = np.empty((n_rel, N_FOLDS, k + n, k + n))
+        sums = np.empty((n_rel, N_FOLDS, k + n))
         counts = np.empty((n_rel, N_FOLDS))
         for r, (z, folds) in enumerate(zip(Z, self._fold_rows, strict=True)):
             for j, rows in enumerate(folds):
@@ -291,7 +300,7 @@ class Problem:
                 moments[r, j] = zj.T @ zj
                 sums[r, j] = zj.sum(axis=0)
                 counts[r, j] = rows.size
-        w2 = self.weights**2  # (n_rel, 2)
+        w2 = self.weights**2  # (n_rel, n)
         errors = np.empty(N_FOLDS)
         for fold in range(N_FOLDS):
             n_train = counts.sum(axis=1) - counts[:, fold]
@@ -299,28 +308,28 @@ class Problem:
             # the fold) adds nothing to the solve, and its intercept is unknown (NaN), as
             # in the stacked solve.
             trained = n_train > 0
-            mean = np.full((n_rel, k + 2), np.nan)
+            mean = np.full((n_rel, k + n), np.nan)
             mean[trained] = ((sums.sum(axis=1) - sums[:, fold])[trained]
-                             / n_train[trained, None])  # (n_rel, k + 2)
-            centred = np.zeros((n_rel, k + 2, k + 2))
+                             / n_train[trained, None])  # (n_rel, k + n)
+            centred = np.zeros((n_rel, k + n, k + n))
             centred[trained] = (moments.sum(axis=1) - moments[:, fold])[trained] - (
                 n_train[trained, None, None] * mean[trained, :, None] * mean[trained, None, :])
-            coef = np.empty((k, 2))
-            for i in range(2):
+            coef = np.empty((k, n))
+            for i in range(n):
                 C = np.tensordot(w2[:, i], centred, axes=1)
                 G, b = C[:k, :k], C[:k, k + i]
                 scale = np.sqrt(np.diag(G))
                 scale[scale == 0.0] = 1.0
                 scaled, *_ = np.linalg.lstsq(G / np.outer(scale, scale), b / scale, rcond=None)
                 coef[:, i] = scaled / scale
-            intercepts = mean[:, k:] - mean[:, :k] @ coef  # (n_rel, 2)
-            sq, n = 0.0, 0
+            intercepts = mean[:, k:] - mean[:, :k] @ coef  # (n_rel, n)
+            sq, count = 0.0, 0
             for z, folds, c, w in zip(Z, self._fold_rows, intercepts, self.weights, strict=True):
                 held = z[folds[fold]]
                 e = w * (held[:, k:] - held[:, :k] @ coef - c)
                 sq += float(np.sum(e**2))
-                n += e.size
-            errors[fold] = sq / n
+                count += e.size
+            errors[fold] = sq / count
         return errors
 
     @staticmethod
@@ -348,10 +357,11 @@ class Problem:
         coef, residuals = self._full_fit(d, chosen.with_A3, condition)
         terms = [0, 1, 2] if chosen.with_A3 else [0, 1]
         terms += [3 + l for l in range(d.size)]
-        A = np.zeros((3 + d.size, 2, 2))
+        n = self.n
+        A = np.zeros((3 + d.size, n, n))
         index: list[tuple[int, int, int]] = []
-        for i in range(2):
-            for col, (term, j) in enumerate((t, j) for t in terms for j in range(2)):
+        for i in range(n):
+            for col, (term, j) in enumerate((t, j) for t in terms for j in range(n)):
                 A[term, i, j] = coef[col, i]
                 index.append((term, i, j))
         release_residuals = np.array([
@@ -368,7 +378,7 @@ class Problem:
 
     def _full_fit(self, d: FloatArray, with_A3: bool, condition: float
                   ) -> tuple[FloatArray, list[FloatArray]]:
-        """Coefficients (k, 2) and weighted residuals per release of the fit on every sample.
+        """Coefficients (k, n_dof) and weighted residuals per release of the fit on every sample.
 
         A design whose condition number (``condition``, of the search rows: an even subsample
         of the same decays) is below ``NORMAL_EQUATIONS_CONDITION`` is solved by the
@@ -383,8 +393,8 @@ class Problem:
             return coef, residuals
         stacked = self._stacked(with_A3, "full")
         _, X, coef, _, solver, scale = stacked._evaluate(np.log(d))
-        error = stacked.yc - X @ coef  # (N, 2), unweighted
-        rhs = (X.T @ (error * stacked.w2)).T  # (2, k)
+        error = stacked.yc - X @ coef  # (N, n_dof), unweighted
+        rhs = (X.T @ (error * stacked.w2)).T  # (n_dof, k)
         coef = coef + (solver.apply(rhs / scale) / scale).T
         residual = stacked.w * (stacked.yc - X @ coef)
         return coef, np.split(residual, np.cumsum(stacked.sizes)[:-1])
@@ -393,7 +403,7 @@ class Problem:
         self, d: FloatArray, with_A3: bool, coef: FloatArray, residuals: list[FloatArray],
         inflation: float,
     ) -> FloatArray:
-        """Gauss-Newton covariance of [A entries (force row 0, row 1), log d].
+        """Gauss-Newton covariance of [A entries (force row 0, row 1, ...), log d].
 
         The residual variance and its autocorrelation inflation (``inflation``) come from the
         full-rate residuals; the curvature ``J^T J`` from the search subsample, scaled by the
@@ -401,11 +411,12 @@ class Problem:
         """
         blocks = self._blocks(d, with_A3, "search")
         k = coef.shape[0]
+        n = self.n
         n_search = sum(X.shape[0] for X, _ in blocks)
         n_full = sum(r.shape[0] for r in residuals)
-        # Linear part: block diagonal over the two force rows.
-        J_lin = np.zeros((2 * n_search, 2 * k))
-        for i in range(2):
+        # Linear part: block diagonal over the force rows.
+        J_lin = np.zeros((n * n_search, n * k))
+        for i in range(n):
             J_lin[i * n_search : (i + 1) * n_search, i * k : (i + 1) * k] = np.vstack(
                 [-w[i] * (X - X.mean(axis=0))
                  for (X, _), w in zip(blocks, self.weights, strict=True)]
@@ -414,17 +425,17 @@ class Problem:
         # Nonlinear part: the residual's derivative in log d_l at fixed coefficients (the
         # intercepts re-profiled, so demeaned per release), from the lag columns' derivatives.
         derivatives = [p.view("search").lag_derivatives(d) for p in self.prepared]
-        k_f = k - 2 * d.size
+        k_f = k - n * d.size
         for l in range(d.size):
             column = []
-            for i in range(2):
-                c = coef[k_f + 2 * l:k_f + 2 * l + 2, i]
+            for i in range(n):
+                c = coef[k_f + n * l:k_f + n * l + n, i]
                 for dL, w in zip(derivatives, self.weights, strict=True):
-                    e = -(dL[:, 2 * l:2 * l + 2] @ c)
+                    e = -(dL[:, n * l:n * l + n] @ c)
                     column.append(w[i] * (e - e.mean()))
             columns.append(np.concatenate(column)[:, None])
         J = np.hstack(columns)
-        r = np.concatenate([np.concatenate([res[:, i] for res in residuals]) for i in range(2)])
+        r = np.concatenate([np.concatenate([res[:, i] for res in residuals]) for i in range(n)])
         dof = max(r.size - J.shape[1], 1)
         sigma2 = float(r @ r) / dof * inflation
         return np.asarray(sigma2 * np.linalg.pinv(J.T @ J) * n_search / n_full, dtype=float)
@@ -437,7 +448,7 @@ class _Stacked:
     demeaned form and their normal-equation blocks are computed once; each evaluation adds only
     the lag columns. The channel weights are constant over a release, so the products of the
     demeaned fixed columns and forces with the lag columns are taken unweighted-times-``w**2``
-    for both force channels in one matrix product (a demeaned column is orthogonal to a constant
+    for every force channel in one matrix product (a demeaned column is orthogonal to a constant
     per release, so the lag columns need no demeaning there). The Jacobian is Golub and
     Pereyra's exact variable-projection form ``-(I - P) (dX/dlog d_l) c - X G^-1
     (dX/dlog d_l)^T r`` (``P`` the projection on the columns, ``G`` the normal matrix), for
@@ -450,18 +461,19 @@ class _Stacked:
         self.starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
         self.sizes = sizes
         self.release = np.repeat(np.arange(sizes.size), sizes)
-        self.w = problem.weights[self.release]  # (N, 2)
+        self.n = n = problem.n
+        self.w = problem.weights[self.release]  # (N, n)
         self.w2 = self.w**2
-        fixed = np.vstack([v.fixed if with_A3 else v.fixed[:, :4] for v in self.views])
+        fixed = np.vstack([v.fixed if with_A3 else v.fixed[:, :2 * n] for v in self.views])
         y = np.vstack([v.force for v in self.views])
         self.Fc = self._demeaned(fixed)  # (N, k_f)
-        self.yc = self._demeaned(y)  # (N, 2)
+        self.yc = self._demeaned(y)  # (N, n)
         self.k_f = self.Fc.shape[1]
-        # [F w0^2, F w1^2, y w^2]: one product with the lag columns gives every cross block.
-        self.W2FY = np.hstack([self.Fc * self.w2[:, :1], self.Fc * self.w2[:, 1:],
-                               self.yc * self.w2])
-        self.Gff = [(self.Fc * self.w2[:, i:i + 1]).T @ self.Fc for i in range(2)]
-        self.Fy = [self.W2FY[:, 2 * self.k_f + i] @ self.Fc for i in range(2)]
+        # [F w0^2, F w1^2, ..., y w^2]: one product with the lag columns gives every cross block.
+        self.W2FY = np.hstack([self.Fc * self.w2[:, i:i + 1] for i in range(n)]
+                              + [self.yc * self.w2])
+        self.Gff = [(self.Fc * self.w2[:, i:i + 1]).T @ self.Fc for i in range(n)]
+        self.Fy = [self.W2FY[:, n * self.k_f + i] @ self.Fc for i in range(n)]
         self._cache: tuple[bytes, Any] | None = None
 
     def _demeaned(self, X: FloatArray) -> FloatArray:
@@ -474,54 +486,54 @@ class _Stacked:
             return self._cache[1]
         d = np.exp(theta)
         L = self._demeaned(np.vstack([v.lag_columns(d) for v in self.views]))
-        k_f = self.k_f
-        cross = self.W2FY.T @ L  # (2 k_f + 2, 2 m)
+        k_f, n = self.k_f, self.n
+        cross = self.W2FY.T @ L  # (n k_f + n, n m)
         X = np.hstack([self.Fc, L])
         k = X.shape[1]
-        G = np.empty((2, k, k))
-        b = np.empty((2, k))
-        for i in range(2):
+        G = np.empty((n, k, k))
+        b = np.empty((n, k))
+        for i in range(n):
             FL = cross[i * k_f:(i + 1) * k_f]
             G[i, :k_f, :k_f] = self.Gff[i]
             G[i, :k_f, k_f:] = FL
             G[i, k_f:, :k_f] = FL.T
             G[i, k_f:, k_f:] = (L * self.w2[:, i:i + 1]).T @ L
-            b[i] = np.concatenate([self.Fy[i], cross[2 * k_f + i]])
-        scale = np.sqrt(np.diagonal(G, axis1=1, axis2=2)).copy()  # (2, k)
+            b[i] = np.concatenate([self.Fy[i], cross[n * k_f + i]])
+        scale = np.sqrt(np.diagonal(G, axis1=1, axis2=2)).copy()  # (n, k)
         scale[scale == 0.0] = 1.0
         solver = _PseudoInverse(G / (scale[:, :, None] * scale[:, None, :]))
-        coef = (solver.apply(b / scale) / scale).T  # (k, 2)
-        residual = self.w * (self.yc - X @ coef)  # (N, 2), weighted
+        coef = (solver.apply(b / scale) / scale).T  # (k, n)
+        residual = self.w * (self.yc - X @ coef)  # (N, n), weighted
         out = (d, X, coef, residual, solver, scale)
         self._cache = (key, out)
         return out
 
     def residual(self, theta: FloatArray) -> FloatArray:
-        """Weighted residuals of both force channels, stacked."""
+        """Weighted residuals of every force channel, stacked."""
         residual = self._evaluate(theta)[3]
-        return np.concatenate([residual[:, 0], residual[:, 1]])
+        return np.asarray(residual.T.ravel(), dtype=float)
 
     def jacobian(self, theta: FloatArray) -> FloatArray:
-        """Kaufman's variable-projection Jacobian over log(d), shape (2 N, m)."""
+        """Kaufman's variable-projection Jacobian over log(d), shape (n_dof N, m)."""
         d, X, coef, residual, solver, scale = self._evaluate(theta)
         dL = self._demeaned(np.vstack([v.lag_derivatives(d) for v in self.views]))
-        m = d.size
+        m, n = d.size, self.n
         N, k = X.shape
-        lag0 = k - 2 * m
-        rhs = np.empty((2, k, m))
-        V = np.empty((2, N, m))
-        for i in range(2):
-            lag_coef = coef[lag0:, i].reshape(m, 2)
+        lag0 = k - n * m
+        rhs = np.empty((n, k, m))
+        V = np.empty((n, N, m))
+        for i in range(n):
+            lag_coef = coef[lag0:, i].reshape(m, n)
             # Column l: the derivative of the fitted force in log d_l (unweighted).
-            V[i] = np.einsum("nlc,lc->nl", dL.reshape(N, m, 2), lag_coef)
+            V[i] = np.einsum("nlc,lc->nl", dL.reshape(N, m, n), lag_coef)
             rhs[i] = X.T @ (V[i] * self.w2[:, i:i + 1])  # (k, m)
             # Golub and Pereyra's full Jacobian: -(I - P) dX c - X G^-1 dX^T r.
-            dXr = (dL.T @ (residual[:, i] * self.w[:, i])).reshape(m, 2)
+            dXr = (dL.T @ (residual[:, i] * self.w[:, i])).reshape(m, n)
             for l in range(m):
-                rhs[i, lag0 + 2 * l:lag0 + 2 * l + 2, l] -= dXr[l]
-        solved = solver.apply(rhs / scale[:, :, None]) / scale[:, :, None]  # (2, k, m)
-        J = np.empty((2 * N, m))
-        for i in range(2):
+                rhs[i, lag0 + n * l:lag0 + n * l + n, l] -= dXr[l]
+        solved = solver.apply(rhs / scale[:, :, None]) / scale[:, :, None]  # (n, k, m)
+        J = np.empty((n * N, m))
+        for i in range(n):
             J[i * N:(i + 1) * N] = -self.w[:, i:i + 1] * (V[i] - X @ solved[i])
         return J
 
@@ -531,7 +543,7 @@ class _PseudoInverse:
 
     The same solution as ``np.linalg.lstsq(G, b, rcond=None)`` (eigenvalues below ``eps k``
     times the largest are dropped, as ``lstsq`` drops singular values), from one symmetric
-    eigendecomposition of both force channels' normal matrices: the residual and the Jacobian
+    eigendecomposition of every force channel's normal matrix: the residual and the Jacobian
     of the lag-root search then solve with the same factors instead of four ``lstsq`` calls.
     """
 

@@ -1,7 +1,7 @@
 """Per-release regressors of the E2RFC least-squares problem.
 
-For a release at wind speed U the normalised generalised force ``f~ = [L B, M] / (qd B^2)`` obeys
-(``docs/conventions.md``, "In the time domain")::
+For a release at wind speed U the normalised generalised force ``f~ = [L B, M(, D B)] / (qd B^2)``
+obeys (``docs/conventions.md``, "In the time domain"; n = 2 or 3 degrees of freedom)::
 
     f~ = A1 q + A2 (B/U) q' + A3 (B/U)^2 q'' + sum_l A_{l+3} x_l,   x_l' = q' - (U/B) d_l x_l
 
@@ -38,14 +38,14 @@ class PreparedRelease:
     ----------
     release : Release
     fit : ModalFit
-        Fit of ``q = [h/B, alpha]``.
+        Fit of ``q = [h/B, alpha(, p/B)]`` with as many modes as degrees of freedom.
     qd : float
         Dynamic pressure, Pa.
-    fixed : ndarray, shape (n, 6)
-        ``[q, (B/U) q', (B/U)^2 q'']`` (two columns each).
-    force : ndarray, shape (n, 2)
-        ``[L B, M] / (qd B^2)``.
-    force_noise : ndarray, shape (2,)
+    fixed : ndarray, shape (n, 3 n_dof)
+        ``[q, (B/U) q', (B/U)^2 q'']`` (``n_dof`` columns each).
+    force : ndarray, shape (n, n_dof)
+        ``[L B, M(, D B)] / (qd B^2)``.
+    force_noise : ndarray, shape (n_dof,)
         Noise estimate of each normalised force channel (sets its weight).
     """
 
@@ -66,6 +66,11 @@ class PreparedRelease:
     def U(self) -> float:
         """Wind speed, m/s."""
         return self.release.U
+
+    @property
+    def n_dof(self) -> int:
+        """Degrees of freedom (force channels) of the release: 2 or 3."""
+        return int(self.force.shape[1])
 
     def view(self, which: str) -> RegressorView:
         """Return the regressors on a set of rows.
@@ -114,8 +119,13 @@ class RegressorView:
     _terms: dict[bytes, tuple[FloatArray, npt.NDArray[np.complex128], FloatArray]] = field(
         default_factory=dict, repr=False, compare=False)
 
+    @property
+    def n_dof(self) -> int:
+        """Degrees of freedom: columns of ``q`` (one lag state per lag and coordinate)."""
+        return int(self.fit.amplitudes.shape[1])
+
     def lag_columns(self, d: FloatArray) -> FloatArray:
-        """Lag states ``x_l`` for lag roots ``d``, shape (n_rows, 2 m) (two columns per lag).
+        """Lag states ``x_l`` for lag roots ``d``, shape (n_rows, n_dof m) (n_dof per lag).
 
         Every lag in one product: ``x_l = Re[e^{pt} g_l C] - e^{-mu_l t} Re[sum g_l C]`` with
         ``g_l = p / (p + mu_l)`` (``mu_l = rate d_l``).
@@ -124,10 +134,11 @@ class RegressorView:
             return np.zeros((self.t.size, 0))
         mu, gained, decay = self._lag_terms(d)
         return np.asarray((self.exponentials @ gained).real
-                          - np.repeat(decay, 2, axis=1) * gained.sum(axis=0).real, dtype=float)
+                          - np.repeat(decay, self.n_dof, axis=1) * gained.sum(axis=0).real,
+                          dtype=float)
 
     def lag_derivatives(self, d: FloatArray) -> FloatArray:
-        """Return the derivatives of :meth:`lag_columns` in ``log d``, shape (n_rows, 2 m).
+        """Return the derivatives of :meth:`lag_columns` in ``log d``, shape (n_rows, n_dof m).
 
         With ``g = p / (p + mu)`` (``mu = rate d``), ``x = Re[e^{pt} g C] - e^{-mu t} Re[sum g C]``
         and ``dg/dmu = -p / (p + mu)^2``; times ``dmu/dlog d = mu``.
@@ -138,14 +149,14 @@ class RegressorView:
         poles = self.fit.poles[:, None]
         dgain = -poles / (poles + mu) ** 2  # (n_poles, m)
         dgained = (dgain[:, :, None] * self.fit.amplitudes[:, None, :]).reshape(poles.size, -1)
-        decay2 = np.repeat(decay, 2, axis=1)
-        dx = ((self.exponentials @ dgained).real - decay2 * dgained.sum(axis=0).real
-              + self.t[:, None] * decay2 * gained.sum(axis=0).real)
-        return np.asarray(np.repeat(mu, 2) * dx, dtype=float)
+        decay_n = np.repeat(decay, self.n_dof, axis=1)
+        dx = ((self.exponentials @ dgained).real - decay_n * dgained.sum(axis=0).real
+              + self.t[:, None] * decay_n * gained.sum(axis=0).real)
+        return np.asarray(np.repeat(mu, self.n_dof) * dx, dtype=float)
 
     def _lag_terms(self, d: FloatArray) -> tuple[FloatArray, npt.NDArray[np.complex128],
                                                 FloatArray]:
-        """``mu`` (m,), gained amplitudes ``g_l C`` (n_poles, 2 m), ``e^{-mu t}`` (n_rows, m)."""
+        """Return ``mu`` (m,), ``g_l C`` (n_poles, n_dof m) and ``e^{-mu t}`` (n_rows, m)."""
         d = np.asarray(d, dtype=float)
         key = d.tobytes()
         if key not in self._terms:
@@ -160,12 +171,17 @@ class RegressorView:
 
 
 def prepare(release: Release, section: SectionModel) -> PreparedRelease:
-    """Fit the modes of one release and build its fixed regressors and normalised forces."""
+    """Fit the modes of one release and build its fixed regressors and normalised forces.
+
+    A release with sway (three degrees of freedom) is fitted with three modes: the coordinates
+    share the poles, and every mode must be in the decay (released from a displacement that
+    excites it) for the force regression to see it.
+    """
     B = section.B
     rho = section.rho if release.rho is None else release.rho
     qd = 0.5 * rho * release.U**2
-    q = np.column_stack([release.h / B, release.alpha])
-    fit = fit_modes(release.t, q)
+    q = release.coordinates(B)
+    fit = fit_modes(release.t, q, n_modes=release.n_dof)
     c = B / release.U
     t = release.t
     # q - offset, q' and q'' of the fit (ModalFit.evaluate) from one set of exponentials.
@@ -173,7 +189,7 @@ def prepare(release: Release, section: SectionModel) -> PreparedRelease:
     p = fit.poles[:, None]
     fixed = (exponentials @ np.hstack([fit.amplitudes, c * p * fit.amplitudes,
                                        c**2 * p**2 * fit.amplitudes])).real
-    force = np.column_stack([release.lift * B, release.moment]) / (qd * B**2)
+    force = release.generalised_forces(B) / (qd * B**2)
     scale = np.sqrt(np.mean((force - force.mean(axis=0)) ** 2, axis=0))
     noise = np.maximum(noise_std(force), 1e-6 * np.maximum(scale, 1e-300))
     return PreparedRelease(release=release, fit=fit, B=B, qd=qd, fixed=fixed, force=force,

@@ -80,6 +80,15 @@ def derivative_names(n_dof: int) -> tuple[str, ...]:
     raise ValueError(f"n_dof must be 2 or 3, got {n_dof!r}")
 
 
+def derivative_layout(n_dof: int) -> dict[str, tuple[int, int, str]]:
+    """Return where each flutter derivative sits in ``Q(iK) / K^2``.
+
+    ``name -> (row, column, "real" or "imag")`` for ``n_dof`` (2 or 3) degrees of freedom.
+    """
+    derivative_names(n_dof)  # validates n_dof
+    return dict(_layout(n_dof))
+
+
 def _layout(n_dof: int) -> dict[str, tuple[int, int, str]]:
     return _LAYOUT if n_dof == 2 else _LAYOUT_3DOF
 

@@ -97,6 +97,34 @@ def test_flutter_command_from_a_table_in_z_up_signs(tmp_path, capsys):
     assert wrong is None or abs(wrong / exact - 1.0) > 0.1
 
 
+def test_flutter_command_gives_the_iabse_benchmark_flutter_speed(tmp_path, capsys):
+    """The IABSE superstructure benchmark, step 1.1a: a 2-DOF flat plate, 77.45 m/s within 1 %.
+
+    Section data of the benchmark (B = 31 m, m = 22 740 kg/m, I = 2.47e6 kg m^2/m, f_h =
+    0.100 Hz, f_alpha = 0.278 Hz, damping 0.3 %, rho = 1.22 kg/m^3) and Theodorsen's flutter
+    derivatives, given as a table over reduced velocities Ur = U/(f B) (30 rows, 1 to 60) as a
+    published table would be; 1 % is the issue's tolerance for the benchmark's 77.45 m/s.
+    """
+    import numpy as np
+
+    section = SectionModel(B=31.0, m=22740.0, I=2.47e6, fh=0.100, fa=0.278, zeta_h=0.003,
+                           zeta_a=0.003, rho=1.22)
+    Ur = np.geomspace(1.0, 60.0, 30)
+    fd = flat_plate.flutter_derivatives(2 * np.pi / Ur)
+    names = ["H1", "H2", "H3", "H4", "A1", "A2", "A3", "A4"]
+    rows = [",".join([repr(float(u))] + [repr(float(fd[n][i])) for n in names])
+            for i, u in enumerate(Ur)]
+    (tmp_path / "iabse.csv").write_text("Ur," + ",".join(names) + "\n" + "\n".join(rows) + "\n")
+    (tmp_path / "s.json").write_text(json.dumps(section.to_dict()))
+    out = tmp_path / "out.json"
+    assert main(["flutter", "--section", str(tmp_path / "s.json"), "--table",
+                 str(tmp_path / "iabse.csv"), "--json", str(out)]) == 0
+    result = json.loads(out.read_text())
+    assert result["flutter_speed"] == pytest.approx(77.45, rel=0.01)
+    assert result["flutter_speed_frequency_domain"] == pytest.approx(77.45, rel=0.01)
+    assert "flutter at U" in capsys.readouterr().out
+
+
 def test_unknown_subcommand_exits_with_usage(capsys):
     """An unknown command is rejected by argparse with exit status 2."""
     with pytest.raises(SystemExit) as exc:
