@@ -128,7 +128,7 @@ def _release_rows(result: Any, truth: Any) -> list[dict[str, Any]]:
     j_h = names.index("heave") if "heave" in names else 0
     j_a = names.index("pitch") if "pitch" in names else 1
     for i, (U, modes) in enumerate(zip(analysis.release_speeds, analysis.modes, strict=True)):
-        truth_z = [float(np.interp(U, truth.U, truth.damping[:, j])) for j in range(2)]
+        truth_z = {j: float(np.interp(U, truth.U, truth.damping[:, j])) for j in (j_h, j_a)}
         source = result.releases[i].meta
         rows.append({"release": f"{Path(str(source['file'])).name} #{source['release']}",
                      "U": U, "f_h": modes.f_h, "f_a": modes.f_a, "zeta_h": modes.zeta_h,
