@@ -105,6 +105,8 @@ def flutter_derivative_grid(path: Path, K: FloatArray, curves: Sequence[Derivati
                         label=curve.label or None)
         ax.set_title(f"{name}*")
         ax.set_xlabel("1/K = U/(B omega)")
+    for ax in grid.ravel()[len(names):]:  # 18 derivatives (3 DOF) leave two panels empty
+        ax.set_visible(False)
     if any(curve.label for curve in curves):
         grid[0, 0].legend(fontsize=8)
     if title:
