@@ -187,7 +187,10 @@ def analyze_campaign(
     derivatives = model.flutter_derivatives(K)
     fd_table: fd_method.DecayDerivativeTable | None = None
     table_error = None
-    if table:
+    if table and section.n_dof == 3:  # the indirect method fits heave and pitch modes only
+        table_error = ("the indirect method's table is of 2-DOF sections (heave and pitch); "
+                       "this section has sway")
+    elif table:
         try:
             fd_table = fd_method.flutter_derivatives(releases, section)
         except IdentError as exc:  # shown next to the curves; the model itself stands

@@ -11,6 +11,10 @@ the rational-function model from all of them together (:func:`identify_releases`
 warnings, the model's flutter derivatives, and the indirect method's table of flutter derivatives
 from the same decays to plot against), again whenever a release is added.
 
+A section with sway (three degrees of freedom): the decays carry ``p`` and ``drag`` too (the
+releases E2RFC identifies in 3x3); the table's modes are still the heave and pitch ones, fitted
+from h and alpha as for 2 DOF (the section's heave-pitch part).
+
 The fits run in one worker *process*: a campaign fit takes ~1 s of CPU, which in the console's
 process would hold the interpreter lock against the acquisition threads and the redraws. The
 GUI thread only submits jobs and collects finished ones; nothing here blocks it.
@@ -42,15 +46,17 @@ from ident.modal import ReleaseModes, fit_release_modes
 from ident.release import Release
 from ident.section import SectionModel
 
-__all__ = ["DECAY_COLUMNS", "MIN_DECAY_S", "STILL_AIR_U", "DecaySource",
+__all__ = ["DECAY_COLUMNS", "MIN_DECAY_S", "STILL_AIR_U", "SWAY_COLUMNS", "DecaySource",
            "LiveIdentifier", "ReleaseRow", "identify_releases"]
 
 log = logging.getLogger(__name__)
 
 FloatArray = npt.NDArray[np.float64]
 
-#: The sync-view columns a decay is cut from.
+#: The sync-view columns a decay is cut from (a 3-DOF rig's add :data:`SWAY_COLUMNS`).
 DECAY_COLUMNS = ("time", "h", "alpha", "lift", "moment", "U", "rho")
+#: The sway and drag of a 3-DOF rig's decays.
+SWAY_COLUMNS = ("p", "drag")
 #: Shortest decay worth a modal fit, s (a release caught sooner is listed, not fitted).
 MIN_DECAY_S = 2.0
 #: Below this mean wind speed a release is a still-air decay (fitted, not used by E2RFC), m/s.
@@ -153,6 +159,11 @@ class LiveIdentifier:
         if not (math.isfinite(rate_hz) and rate_hz > 0):
             raise ValueError(f"rate_hz = {rate_hz!r} must be a number of Hz > 0")
         self.section = section
+        sway = section.n_dof == 3
+        self._columns = DECAY_COLUMNS + (SWAY_COLUMNS if sway else ())
+        # The table's heave and pitch modes come from h and alpha: the heave-pitch section.
+        self._modal_section = (section.replace(fp=None, zeta_p=None, m_p=None) if sway
+                               else section)
         self.rate_hz = float(rate_hz)
         self.decay_s = float(default_decay_s(section) if decay_s is None else decay_s)
         if not (math.isfinite(self.decay_s) and self.decay_s >= MIN_DECAY_S):
@@ -229,7 +240,7 @@ class LiveIdentifier:
             if t_latest < end:
                 break  # later decays are not complete either
             if snap is None:
-                snap = source.snapshot(columns=DECAY_COLUMNS)
+                snap = source.snapshot(columns=self._columns)
             self._cut(row, snap, release, end)
             changed = True
         return changed
@@ -245,12 +256,12 @@ class LiveIdentifier:
             self._set(index, status=f"not in the buffer any more (released at {release:.1f} s, "
                                     f"oldest row {oldest:.1f} s); not used")
             return
-        cols = {name: np.asarray(snap[name][i0:i1], dtype=float) for name in DECAY_COLUMNS}
+        cols = {name: np.asarray(snap[name][i0:i1], dtype=float) for name in self._columns}
         length = float(cols["time"][-1] - release) if i1 > i0 else 0.0
         u = cols["U"][np.isfinite(cols["U"])]
         U = float(np.median(u)) if u.size else math.nan
         self._set(index, length_s=length, U=U)
-        for name in ("h", "alpha", "lift", "moment"):
+        for name in ("h", "alpha", "lift", "moment", *self._columns[len(DECAY_COLUMNS):]):
             bad = ~np.isfinite(cols[name])
             if bad.any():
                 first = float(cols["time"][np.argmax(bad)] - release)
@@ -268,13 +279,16 @@ class LiveIdentifier:
                 release_obj = Release(t=cols["time"] - release, h=cols["h"], alpha=cols["alpha"],
                                       lift=cols["lift"], moment=cols["moment"], U=U,
                                       rho=float(np.median(rho)) if rho.size else None,
-                                      meta={"release": row.number, "time_s": release})
+                                      meta={"release": row.number, "time_s": release},
+                                      **{name: cols[name] for name in SWAY_COLUMNS
+                                         if name in cols})
             except (IdentError, ValueError) as exc:
                 self._set(index, status=f"not used: {exc}")
                 return
         self._set(index, status="fitting", release=release_obj)
         self._modal_jobs[index] = self._submit(
-            fit_release_modes, cols["time"] - release, cols["h"], cols["alpha"], self.section)
+            fit_release_modes, cols["time"] - release, cols["h"], cols["alpha"],
+            self._modal_section)
 
     # -- fits ------------------------------------------------------------------------------------
     def _collect_modal(self) -> bool:
