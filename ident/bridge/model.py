@@ -233,7 +233,7 @@ follows 1
         return out
 
     def mode_labels(self) -> list[str]:
-        """A short label per mode: number, frequency and dominant deck motion.
+        """Return a short label per mode: number, frequency and dominant deck motion.
 
         The motion is vertical, torsional or lateral after the largest of ``int h^2``,
         ``int (alpha B/2)^2`` and ``int p^2`` along the deck (edge displacement of the pitch).

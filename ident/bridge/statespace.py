@@ -9,8 +9,9 @@ with ``Akm = sum_ij A_k[i, j] G_ij`` (n_modes x n_modes). The lag states can be 
 station the section's lag state of lag ``l`` obeys ``x_l(x)' = q(x)' - (U/B) d_l x_l(x)`` with
 ``q(x) = Phi(x) eta``; the equation is linear and the same at every station, so
 ``x_l(x) = Phi(x) x_l`` with one modal vector ``x_l`` of size n_modes per lag and
-``x_l' = eta' - (U/B) d_l x_l``. The state is ``z = [eta, eta', x_1, ..., x_m]``: ``n_modes (2 + m)``
-states, whatever the number of deck nodes (the nodes only enter the integrals ``G_ij``).
+``x_l' = eta' - (U/B) d_l x_l``. The state is ``z = [eta, eta', x_1, ..., x_m]``:
+``n_modes (2 + m)`` states, whatever the number of deck nodes (the nodes only enter the
+integrals ``G_ij``).
 
 With the modal structure ``Ms eta'' + Cs eta' + Ks eta = F + F_ext`` (``Ms = diag(M_r)``,
 ``Cs = diag(2 M_r zeta_r omega_r)``, ``Ks = diag(M_r omega_r^2)``) the model is ``z' = S(U) z
@@ -128,7 +129,7 @@ class BridgeStateSpace:
         return np.asarray(lam, dtype=complex), np.asarray(vec, dtype=complex)
 
     def modal_part(self, z: Any) -> npt.NDArray[Any]:
-        """The modal coordinates ``eta`` of states ``z`` (shape (..., n_states))."""
+        """Return the modal coordinates ``eta`` of states ``z`` (shape (..., n_states))."""
         return np.asarray(z)[..., : self.n_modes]
 
 
