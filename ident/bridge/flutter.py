@@ -53,8 +53,9 @@ _K_MIN_DEFAULT = 0.2
 #: An eigenvalue is oscillatory when its imaginary part exceeds this fraction of its modulus.
 _OSCILLATORY_RTOL = 1e-9
 #: Real part, relative to |lambda|, that counts as growth: keeps round-off of an undamped
-#: structure in still air (~1e-16 |lambda|) from counting as instability.
-_GROWTH_RTOL = 1e-9
+#: structure in still air (~1e-16 |lambda|) from counting as instability; it moves a flutter
+#: speed by ~1e-11 relative.
+_GROWTH_RTOL = 1e-12
 #: Share of the strain energy above which a mode is listed as participating.
 PARTICIPATION_THRESHOLD = 0.01
 
