@@ -26,7 +26,7 @@ EXAMPLES = Path(__file__).resolve().parents[3] / "rig_configs" / "bridges"
 
 def _uniform_bridge(section: SectionModel, length: float = 1.0, nodes: int = 2,
                     shapes: tuple[str, ...] = ("h", "alpha")) -> BridgeModel:
-    """The section as a bridge: uniform modes (shape 1) on a deck of ``length``."""
+    """Return the section as a bridge: uniform modes (shape 1) on a deck of ``length``."""
     x = np.linspace(0.0, length, nodes).tolist()
     data = {"h": (section.fh, section.zeta_h, section.m), "alpha": (section.fa, section.zeta_a,
                                                                   section.I)}
