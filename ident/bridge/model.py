@@ -263,8 +263,9 @@ follows 1
         if self.n_modes > 1:
             # Deck-only products of whole-structure modes are not orthogonal in general; report
             # the largest normalised product for information only.
+            # Products of the deck's displacements: h, the edge's alpha B/2, p.
             G = self.shape_integrals()
-            gram = G[0, 0] + G[1, 1] + G[2, 2]
+            gram = self.B**2 * (G[0, 0] + G[1, 1] / 4.0 + G[2, 2])
             diag = np.sqrt(np.clip(np.diag(gram), 1e-300, None))
             corr = np.abs(gram / np.outer(diag, diag))
             np.fill_diagonal(corr, 0.0)
