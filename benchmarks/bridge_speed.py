@@ -9,9 +9,7 @@ analysis (:func:`ident.bridge.flutter.analyze`, 120 wind speeds: eigenvalues of 
 ``n (2 + 2)`` states, bracket and Brent) and the frequency-domain one
 (:func:`ident.bridge.flutter.frequency_domain`, 400 reduced frequencies: a quadratic eigenvalue
 problem of ``2 n``), wall time and flutter speeds. The buffeting columns come from the buffeting
-analysis (its own benchmark rows). Measured on the shared two-core host (load average ~9):
-12 modes 0.1 s / 0.6 s (state space / frequency domain), 50 modes 2 s / 8-10 s, 200 modes
-48-142 s / 190-250 s; both 78.960 m/s throughout (``docs/bridge.md``, "Speed").
+analysis (its own benchmark rows).
 
 Run: ``.venv/bin/python benchmarks/bridge_speed.py [--modes 12,50,200] [--nodes 100,1000]``.
 """
