@@ -226,3 +226,30 @@ def test_the_lag_states_are_modal_the_input_matrix_is_the_inverse_effective_mass
     np.testing.assert_allclose(z[: bridge.n_modes], np.linalg.solve(K_eff, F), rtol=1e-9)
     np.testing.assert_allclose(z[bridge.n_modes:], 0.0, atol=1e-12 * np.abs(z).max())
     assert math.isclose(float(np.abs(ss.modal_part(z) - z[:6]).max()), 0.0)
+
+
+def test_a_table_of_18_derivatives_gives_what_the_completed_model_gives():
+    """Sway from an 18-derivative table equals the 2-DOF model completed quasi-steadily.
+
+    The table tabulates the flat plate (Jones) with the quasi-steady drag and sway terms of the
+    example's static coefficients at 25 reduced velocities from 1 to 40; its Roger fit is exact
+    up to the fit (the model is of Roger's form: relative error < 1e-6 at every row), so the
+    flutter speed equals the one from the 2-DOF model, which the bridge completes with the same
+    terms, to 1e-5. The frequency domain interpolates the table's rows (monotone cubic between
+    reduced velocities 1.6 apart): 0.1 % (measured 0.025 %).
+    """
+    from ident.quasi_steady import quasi_steady_model
+
+    bridge = _example()
+    model_3dof = flat_plate.jones_model().with_sway(quasi_steady_model(bridge.static))
+    K = 2 * np.pi / np.linspace(1.0, 40.0, 25)
+    table = FlutterDerivativeTable.from_model(model_3dof, K)
+    assert table.n_dof == 3
+    aero = aero_from_table(bridge, table)
+    assert aero.notes == [] and aero.model.n_dof == 3
+    assert aero.table_fit is not None and aero.table_fit.relative_error.max() < 1e-6
+    completed = aero_from_model(bridge, flat_plate.jones_model())
+    truth = bf.analyze(bridge, completed.model).speed
+    assert bf.analyze(bridge, aero.model).speed == pytest.approx(truth, rel=1e-5)
+    fd = bf.frequency_domain(bridge, aero.flutter_derivatives, aero.K_range)
+    assert fd.speed == pytest.approx(truth, rel=1e-3)
