@@ -9,4 +9,6 @@
 - :mod:`~daq.offline.derivative_table`: an identified model's flutter derivatives (all 18 with
   sway) as ``windrig identify`` prints them, and the check that it has the section's degrees
   of freedom.
+- :mod:`~daq.offline.bridge_commands`: ``windrig bridge``: multimode flutter (and buffeting) of
+  a full bridge from its modes and the section's model or table (:mod:`ident.bridge`).
 """
