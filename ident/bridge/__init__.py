@@ -1,16 +1,25 @@
-"""Full-bridge flutter and buffeting from section aerodynamics (strip theory on still-air modes).
+"""The full bridge in the wind: multimode flutter and buffeting from section aerodynamics.
 
-Modules
--------
-modal_system
-    The bridge in modal coordinates: strip-theory projection of Roger's form, state space with
-    lag states and a buffeting input.
-wind
-    WIND.toml (turbulence intensities, length scales, coherence, admittance) and span-wise
-    coherence.
-buffeting
-    Modal buffeting forces (quasi-steady, coherence, admittance) and the frequency-domain
-    response: spectra and RMS along the deck.
-buffeting_time
-    Time-domain buffeting: a simulated multi-point turbulence field through the state space.
+Strip theory takes a deck section's self-excited forces (a rational-function model from E2RFC or
+a flutter-derivative table) to the whole structure's still-air modes (DESIGN, "Full-bridge
+flutter and buffeting"):
+
+- :mod:`~ident.bridge.model`: :class:`~ident.bridge.model.BridgeModel`, the bridge model file
+  (deck nodes, modes, static coefficients), its validation, and the integrals of mode-shape
+  products along the deck that give the modal aerodynamic matrices;
+- :mod:`~ident.bridge.statespace`: the modal state-space model with modal lag states, whose
+  matrix depends explicitly on U;
+- :mod:`~ident.bridge.flutter`: multimode flutter without iteration (state space), the
+  multimode frequency-domain check from flutter derivatives, and every mode's in-wind frequency
+  and damping against U;
+- :mod:`~ident.bridge.aero`: the section aerodynamics for a bridge: an RFC model or a
+  Roger-fitted flutter-derivative table (with its relative error at every tabulated K);
+- :mod:`~ident.bridge.mode_tables`: plain CSV tables of mode shapes (one per mode, as exported
+  from a finite-element program) to the bridge model file;
+- :mod:`~ident.bridge.wind`: the wind file (WIND.toml: turbulence intensities, length scales,
+  span-wise coherence, admittance) and the coherence of the gusts between deck nodes;
+- :mod:`~ident.bridge.buffeting`: buffeting in turbulent wind in the frequency domain (modal gust
+  forces with coherence and admittance, response spectra and RMS along the deck);
+- :mod:`~ident.bridge.buffeting_time`: buffeting in the time domain (a simulated multi-point
+  turbulence field through the modal state space).
 """
