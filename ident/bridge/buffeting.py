@@ -19,7 +19,7 @@ admittance ``chi(f)`` multiplies the amplitude of each (the spectrum by ``chi^2`
 **On the modes.** With the generalised shapes ``Phi(x) = [h/B, alpha, p/B]`` per unit modal
 coordinate (3 x n_modes) and strip widths ``w_k`` (trapezoid rule over the nodes), the modal
 buffeting force is ``F = sum_k w_k Phi_k^T [L_b B, M_b, D_b B]_k`` (``h L + alpha M + p D``
-integrated along the deck). u and w are independent; each has the coherence
+integrated along the deck: :meth:`ident.bridge.model.BridgeModel.load_matrix`). u and w are independent; each has the coherence
 ``exp(-C f |x_k - x_l| / U)`` between nodes, so the one-sided cross-spectral matrix of ``F`` is::
 
     S_F(f) = (qd B^2 / U)^2 chi(f)^2 sum_{c = u, w} S_c(f) P_c Coh_c(f) P_c^T,
@@ -29,7 +29,7 @@ integrated along the deck). u and w are independent; each has the coherence
 is a product of the neighbours' coherences, so ``Coh P^T`` is a forward and a backward recursion.
 
 **Response.** The modal equations with the self-excited forces (Roger's form projected,
-:class:`ModalSystem`) give the transfer matrix at ``omega = 2 pi f``, ``K = B omega / U``::
+:class:`~ident.bridge.statespace.BridgeStateSpace`) give the transfer matrix at ``omega = 2 pi f``, ``K = B omega / U``::
 
     H(omega) = [-omega^2 M + i omega C + K_s - qd B^2 Qbar(iK)]^-1,
     Qbar(p) = sum_k w_k Phi_k^T Q(p) Phi_k
@@ -61,7 +61,8 @@ import numpy as np
 import numpy.typing as npt
 
 from ident import _validate as v
-from ident.bridge.modal_system import ModalSystem
+from ident.bridge.model import BridgeModel
+from ident.bridge.statespace import BridgeStateSpace
 from ident.turbulence import StaticCoefficients, TurbulenceSpec
 
 __all__ = [
@@ -69,8 +70,10 @@ __all__ = [
     "frequency_domain",
     "frequency_grid",
     "gust_gain",
+    "impedance",
     "modal_force_spectrum",
     "modal_gust_projection",
+    "physical_shapes",
     "transfer_matrix",
 ]
 
@@ -96,14 +99,22 @@ def gust_gain(static: StaticCoefficients) -> FloatArray:
                      [2.0 * s.C_D, s.dC_D + s.C_L]])
 
 
-def modal_gust_projection(system: ModalSystem) -> FloatArray:
+def _static(bridge: BridgeModel) -> StaticCoefficients:
+    if bridge.static is None:
+        raise ValueError(f"bridge {bridge.name!r} has no static coefficients (key static: C_D, "
+                         f"C_L, C_M, dC_D, dC_L, dC_M): buffeting needs them")
+    return bridge.static
+
+
+def modal_gust_projection(bridge: BridgeModel) -> FloatArray:
     """``P[c, i, k] = w_k Phi_k[:, i] . g[:, c]``: node k's gust c on mode i, m, shape (2, n, nodes).
 
     Multiplied by ``qd B^2 / U`` and the gust (m/s) at node k it is the contribution of that
-    node's strip to the modal force of mode i.
+    node's strip to the modal force of mode i. Needs the bridge's static coefficients.
     """
-    g = gust_gain(system.static)
-    return np.einsum("k,kai,ac->cik", system.weights, system.shapes, g)
+    g = gust_gain(_static(bridge))
+    per_span = g / np.array([bridge.B, 1.0, bridge.B])[:, None]  # [L, M, D] over qd B^2 / U
+    return np.einsum("ika,ac->cik", bridge.load_matrix(), per_span)
 
 
 def _coherent_quadratic(P: FloatArray, x: FloatArray, decay: FloatArray) -> FloatArray:
@@ -136,13 +147,14 @@ def _coherent_quadratic(P: FloatArray, x: FloatArray, decay: FloatArray) -> Floa
     return out
 
 
-def modal_force_spectrum(system: ModalSystem, spec: TurbulenceSpec, U: float,
+def modal_force_spectrum(bridge: BridgeModel, spec: TurbulenceSpec, U: float,
                          f: Any) -> FloatArray:
     """One-sided cross-spectral matrix of the modal buffeting forces, shape (nf, n, n).
 
     Parameters
     ----------
-    system : ModalSystem
+    bridge : BridgeModel
+        Deck nodes, modes and static coefficients.
     spec : TurbulenceSpec
         Gust statistics, coherence and admittance.
     U : float
@@ -158,30 +170,46 @@ def modal_force_spectrum(system: ModalSystem, spec: TurbulenceSpec, U: float,
     """
     U = v.positive("U", U)
     f_arr = np.atleast_1d(np.asarray(f, dtype=float))
-    P = modal_gust_projection(system)
+    P = modal_gust_projection(bridge)
     S_u, S_w = spec.gust_spectra(f_arr, U)
-    chi2 = spec.admittance_squared(f_arr, U, system.B)
-    scale = (0.5 * system.rho * U**2 * system.B**2 / U) ** 2
-    out = np.zeros((f_arr.size, system.n_modes, system.n_modes))
+    chi2 = spec.admittance_squared(f_arr, U, bridge.B)
+    scale = (0.5 * bridge.rho * U**2 * bridge.B**2 / U) ** 2
+    out = np.zeros((f_arr.size, bridge.n_modes, bridge.n_modes))
     for c, (S_c, C) in enumerate(((S_u, spec.Cuy), (S_w, spec.Cwy))):
         if not np.any(P[c]) or not np.any(S_c):
             continue  # no gain (e.g. u on a flat plate) or no turbulence of this kind
-        quad = _coherent_quadratic(P[c], system.x, C * f_arr / U)
+        quad = _coherent_quadratic(P[c], bridge.nodes_x, C * f_arr / U)
         out += (scale * S_c * chi2)[:, None, None] * quad
     return out
 
 
-def transfer_matrix(system: ModalSystem, U: float, f: Any) -> ComplexArray:
+def impedance(ss: BridgeStateSpace, U: float, f: Any) -> ComplexArray:
+    """``-omega^2 M + i omega C + K - qd B^2 Qbar(iK)`` at frequencies ``f`` (Hz), (nf, n, n).
+
+    ``Qbar`` is the section's ``Q(iK)`` projected on the modes
+    (:meth:`~ident.bridge.model.BridgeModel.modal_coefficients`), ``K = 2 pi f B / U``; at
+    ``U = 0`` only the added mass ``-rho/2 B^4 A3`` is left of it.
+    """
+    U = v.finite("U", U)
+    bridge, model = ss.bridge, ss.model
+    omega = 2.0 * np.pi * np.atleast_1d(np.asarray(f, dtype=float))[:, None, None]
+    Z = -omega**2 * ss.mass + 1j * omega * bridge.damping_matrix() + bridge.stiffness_matrix()
+    if U <= 0.0:
+        return np.asarray(Z + omega**2 * (0.5 * bridge.rho * bridge.B**4 * ss.modal_A[2]),
+                          dtype=complex)
+    Qbar = bridge.modal_coefficients(model.Q(1j * omega[:, 0, 0] * bridge.B / U))
+    return np.asarray(Z - 0.5 * bridge.rho * U**2 * bridge.B**2 * Qbar, dtype=complex)
+
+
+def transfer_matrix(ss: BridgeStateSpace, U: float, f: Any) -> ComplexArray:
     """Aeroelastic transfer matrix ``H`` from modal force to modal coordinate, shape (nf, n, n).
 
-    ``H = [-omega^2 M + i omega C + K - qd B^2 Qbar(iK)]^-1`` with the projected Roger model
-    (module docstring); ``U >= 0`` (0: still air).
+    ``H = [-omega^2 M + i omega C + K - qd B^2 Qbar(iK)]^-1`` (:func:`impedance`); ``U >= 0``.
     """
-    f_arr = np.atleast_1d(np.asarray(f, dtype=float))
-    return np.asarray(np.linalg.inv(system.impedance(U, f_arr)), dtype=complex)
+    return np.asarray(np.linalg.inv(impedance(ss, U, f)), dtype=complex)
 
 
-def frequency_grid(system: ModalSystem, U: float, *, f_max: float | None = None,
+def frequency_grid(ss: BridgeStateSpace, U: float, *, f_max: float | None = None,
                    per_decade: int = 60, pole_points: int = _POLE_POINTS) -> FloatArray:
     """Frequencies (Hz, sorted, from 0) that resolve every resonance of the bridge at ``U``.
 
@@ -191,11 +219,11 @@ def frequency_grid(system: ModalSystem, U: float, *, f_max: float | None = None,
     ``omega_d / 2 pi + (sigma / 2 pi) tan(theta)`` with theta uniform in (-1.55, 1.55): a
     Lorentzian peak is then sampled evenly in its own angle, whatever its width.
     """
-    lam = system.eigenvalues(U)
+    lam = ss.eigenvalues(U)
     osc = lam[lam.imag > 1e-9 * max(1.0, float(np.abs(lam).max()))]
     f_d = osc.imag / (2.0 * np.pi)
     gamma = np.maximum(-osc.real, 1e-6 * osc.imag) / (2.0 * np.pi)
-    f_modes = system.frequencies
+    f_modes = ss.bridge.frequencies
     f_top = float(max(f_d.max(initial=0.0), f_modes.max()))
     f_hi = 10.0 * f_top if f_max is None else v.positive("f_max", f_max)
     f_lo = 1e-3 * float(f_modes.min())
@@ -279,15 +307,16 @@ def _default_spectrum_nodes(n_nodes: int, count: int = 25) -> npt.NDArray[np.int
     return np.unique(np.round(np.linspace(0, n_nodes - 1, count)).astype(np.int64))
 
 
-def frequency_domain(system: ModalSystem, spec: TurbulenceSpec, U: float, *,
+def frequency_domain(ss: BridgeStateSpace, spec: TurbulenceSpec, U: float, *,
                      f: Any | None = None,
                      spectrum_nodes: Sequence[int] | None = None) -> BuffetingResponse:
     """Buffeting response of the bridge at mean speed ``U`` in the frequency domain.
 
     Parameters
     ----------
-    system : ModalSystem
-        Modes, structure, static coefficients and the projected self-excited forces.
+    ss : BridgeStateSpace
+        The bridge (modes, structure, static coefficients) with the section's self-excited
+        forces projected on its modes.
     spec : TurbulenceSpec
         The wind (:func:`ident.bridge.wind.read_wind`).
     U : float
@@ -305,29 +334,31 @@ def frequency_domain(system: ModalSystem, spec: TurbulenceSpec, U: float, *,
         RMS at every node, spectra and correlation times at ``spectrum_nodes``.
     """
     U = v.positive("U", U)
-    lam = system.eigenvalues(U)
+    bridge = ss.bridge
+    _static(bridge)
+    lam = ss.eigenvalues(U)
     if np.any(lam.real > 0.0):
         raise ValueError(f"U = {U:g} m/s is at or above the flutter speed (an eigenvalue has "
                          f"real part {float(lam.real.max()):.3g} 1/s > 0): no stationary "
                          f"buffeting response")
-    f_arr = frequency_grid(system, U) if f is None else np.asarray(f, dtype=float)
+    f_arr = frequency_grid(ss, U) if f is None else np.asarray(f, dtype=float)
     if f_arr.ndim != 1 or f_arr.size < 2 or np.any(np.diff(f_arr) <= 0.0) or f_arr[0] < 0.0:
         raise ValueError("f must be an increasing 1-D grid of at least 2 frequencies >= 0 Hz")
-    nodes = (_default_spectrum_nodes(system.x.size) if spectrum_nodes is None
+    nodes = (_default_spectrum_nodes(bridge.n_nodes) if spectrum_nodes is None
              else np.asarray(spectrum_nodes, dtype=np.int64))
-    n = system.n_modes
+    n = bridge.n_modes
     # Response components at the chosen nodes: rows of the physical shapes (m or rad per unit
     # modal coordinate).
-    phys = system.physical_shapes()  # (nodes, 3, n)
+    phys = physical_shapes(bridge)  # (nodes, 3, n)
     sel = phys[nodes]  # (s, 3, n)
     cov = np.zeros((n, n))
     spectra = np.zeros((f_arr.size, 3, nodes.size))
     weights = _trapezoid_weights(f_arr)
-    chunk = max(1, _CHUNK_BYTES // (16 * n * max(n, system.x.size)))
+    chunk = max(1, _CHUNK_BYTES // (16 * n * max(n, bridge.n_nodes)))
     for start in range(0, f_arr.size, chunk):
         sl = slice(start, min(f_arr.size, start + chunk))
-        S_F = modal_force_spectrum(system, spec, U, f_arr[sl])
-        H = transfer_matrix(system, U, f_arr[sl])
+        S_F = modal_force_spectrum(bridge, spec, U, f_arr[sl])
+        H = transfer_matrix(ss, U, f_arr[sl])
         S_xi = H @ S_F @ np.conj(np.swapaxes(H, -1, -2))
         cov += np.einsum("f,fij->ij", weights[sl], S_xi.real)
         spectra[sl] = np.einsum("sai,fij,saj->fas", sel, S_xi, sel).real
@@ -339,10 +370,15 @@ def frequency_domain(system: ModalSystem, spec: TurbulenceSpec, U: float, *,
         t_c = np.where(total > 0.0, square / total**2, np.nan)
     names = ("h", "alpha", "p")
     return BuffetingResponse(
-        U=U, x=system.x.copy(), rms_h=rms[:, 0], rms_alpha=rms[:, 1], rms_p=rms[:, 2],
+        U=U, x=np.array(bridge.nodes_x), rms_h=rms[:, 0], rms_alpha=rms[:, 1], rms_p=rms[:, 2],
         method="frequency", f=f_arr, spectrum_nodes=nodes,
         spectra={name: spectra[:, a, :] for a, name in enumerate(names)},
         correlation_time={name: t_c[a] for a, name in enumerate(names)})
+
+
+def physical_shapes(bridge: BridgeModel) -> FloatArray:
+    """Shapes ``[h, alpha, p]`` at the nodes (m, rad, m per unit modal coordinate), (nodes, 3, n)."""
+    return bridge.shapes() * np.array([bridge.B, 1.0, bridge.B])[None, :, None]
 
 
 def _trapezoid_weights(f: FloatArray) -> FloatArray:

@@ -17,8 +17,8 @@ zero. Each node's field is projected on the modes as it is made (``P`` of
 :func:`ident.bridge.buffeting.modal_gust_projection`), so only the modal forces are kept.
 
 **The response.** The modal buffeting forces drive the modal state space of
-:class:`~ident.bridge.modal_system.ModalSystem` (structure, self-excited forces with their lag
-states), discretised exactly for a force linear between samples (first-order hold, one matrix
+:class:`~ident.bridge.statespace.BridgeStateSpace` (structure, self-excited forces with their
+lag states, and its input matrix for external generalised forces), discretised exactly for a force linear between samples (first-order hold, one matrix
 exponential). The record is periodic, so the simulation first runs through its last part (a
 warm-up of ``7 / sigma_min`` s, ``sigma_min`` the slowest decay rate of the in-wind poles, at most
 one period) and then the whole period: the transient of the start from rest has decayed to
@@ -42,8 +42,9 @@ import numpy.typing as npt
 from scipy.linalg import expm
 
 from ident import _validate as v
-from ident.bridge.buffeting import BuffetingResponse, modal_gust_projection
-from ident.bridge.modal_system import ModalSystem
+from ident.bridge.buffeting import BuffetingResponse, modal_gust_projection, physical_shapes
+from ident.bridge.model import BridgeModel
+from ident.bridge.statespace import BridgeStateSpace
 from ident.turbulence import TurbulenceSpec
 
 __all__ = ["modal_force_history", "simulate", "time_step"]
@@ -63,21 +64,22 @@ def _generator(rng: Any) -> np.random.Generator:
                     f"reproducible), got {type(rng).__name__}")
 
 
-def time_step(system: ModalSystem, U: float) -> float:
+def time_step(ss: BridgeStateSpace, U: float) -> float:
     """Default step, s: 1/20 of the period of the highest in-wind or still-air frequency."""
-    lam = system.eigenvalues(U)
+    lam = ss.eigenvalues(U)
     f_top = max(float(np.abs(lam.imag).max(initial=0.0)) / (2.0 * np.pi),
-                float(system.frequencies.max()))
+                float(ss.bridge.frequencies.max()))
     return 1.0 / (20.0 * f_top)
 
 
-def modal_force_history(system: ModalSystem, spec: TurbulenceSpec, U: float, *, n: int,
+def modal_force_history(bridge: BridgeModel, spec: TurbulenceSpec, U: float, *, n: int,
                         dt: float, rng: Any) -> FloatArray:
     """One period of the modal buffeting forces from a simulated multi-point gust field.
 
     Parameters
     ----------
-    system : ModalSystem
+    bridge : BridgeModel
+        Deck nodes, modes and static coefficients.
     spec : TurbulenceSpec
     U : float
         Mean wind speed, m/s, > 0.
@@ -102,20 +104,20 @@ def modal_force_history(system: ModalSystem, spec: TurbulenceSpec, U: float, *, 
     gen = _generator(rng)
     T = n * dt
     f = np.arange(n // 2 + 1) / T
-    P = modal_gust_projection(system)  # (2, n_modes, nodes)
+    P = modal_gust_projection(bridge)  # (2, n_modes, nodes)
     S_u, S_w = spec.gust_spectra(f, U)
-    chi = np.sqrt(spec.admittance_squared(f, U, system.B))
-    F_hat = np.zeros((f.size, system.n_modes), dtype=complex)
-    dx = np.diff(system.x)
+    chi = np.sqrt(spec.admittance_squared(f, U, bridge.B))
+    F_hat = np.zeros((f.size, bridge.n_modes), dtype=complex)
+    dx = np.diff(bridge.nodes_x)
     for c, (S_c, C) in enumerate(((S_u, spec.Cuy), (S_w, spec.Cwy))):
         amp = 0.5 * n * np.sqrt(S_c / T) * chi
         amp[0] = 0.0
         amp[-1] = 0.0  # Nyquist: a real coefficient would need another scale; drop it
         if not np.any(P[c]) or not np.any(amp):
-            gen.standard_normal((system.x.size, f.size, 2))  # same draws whatever the gains
+            gen.standard_normal((bridge.n_nodes, f.size, 2))  # same draws whatever the gains
             continue
         X = np.zeros(f.size, dtype=complex)
-        for k in range(system.x.size):
+        for k in range(bridge.n_nodes):
             z = gen.standard_normal((f.size, 2)) @ np.array([1.0, 1j]) / np.sqrt(2.0)
             if k == 0:
                 X = z
@@ -123,7 +125,7 @@ def modal_force_history(system: ModalSystem, spec: TurbulenceSpec, U: float, *, 
                 r = np.exp(-C * f * dx[k - 1] / U)
                 X = r * X + np.sqrt(1.0 - r**2) * z
             F_hat += (amp * X)[:, None] * P[c][:, k][None, :]
-    scale = 0.5 * system.rho * U**2 * system.B**2 / U
+    scale = 0.5 * bridge.rho * U**2 * bridge.B**2 / U
     # Standard complex Gaussians have E|z|^2 = 1, the GustField convention z1 + i z2 has 2:
     # hence sqrt(2) on the amplitude.
     return np.asarray(np.fft.irfft(np.sqrt(2.0) * scale * F_hat, n=n, axis=0), dtype=float)
@@ -142,7 +144,7 @@ def _discretise(A: FloatArray, B_in: FloatArray,
     return Phi, Gam1 - Gam2, Gam2
 
 
-def simulate(system: ModalSystem, spec: TurbulenceSpec, U: float, duration: float, *,
+def simulate(ss: BridgeStateSpace, spec: TurbulenceSpec, U: float, duration: float, *,
              rng: Any, dt: float | None = None,
              progress: Callable[[int, int], None] | None = None,
              keep_history: bool = False) -> tuple[BuffetingResponse, FloatArray | None]:
@@ -150,7 +152,8 @@ def simulate(system: ModalSystem, spec: TurbulenceSpec, U: float, duration: floa
 
     Parameters
     ----------
-    system : ModalSystem
+    ss : BridgeStateSpace
+        The bridge with the section's self-excited forces.
     spec : TurbulenceSpec
     U : float
         Mean wind speed, m/s, > 0, below the flutter speed.
@@ -175,22 +178,22 @@ def simulate(system: ModalSystem, spec: TurbulenceSpec, U: float, duration: floa
     """
     U = v.positive("U", U)
     duration = v.positive("duration", duration)
-    A, B_in = system.state_space(U)
+    A, B_in = ss.matrix(U), ss.input_matrix()
     lam = np.linalg.eigvals(A)
     if np.any(lam.real >= 0.0):
         raise ValueError(f"U = {U:g} m/s is at or above the flutter speed: the response grows "
                          f"without bound")
-    step = time_step(system, U) if dt is None else v.positive("dt", dt)
+    step = time_step(ss, U) if dt is None else v.positive("dt", dt)
     n = max(4, 2 * int(np.ceil(duration / step / 2.0)))
-    forces = modal_force_history(system, spec, U, n=n, dt=step, rng=rng)
+    forces = modal_force_history(ss.bridge, spec, U, n=n, dt=step, rng=rng)
     Phi, G0, G1 = _discretise(A, B_in, step)
     sigma_min = float(-lam.real.max())
     n_warm = min(n, int(np.ceil(7.0 / sigma_min / step)))
     # Warm-up over the record's last n_warm samples (periodic), then the whole record.
     order = np.concatenate([np.arange(n - n_warm, n), np.arange(n), [0]])
     total = order.size - 1
-    z = np.zeros(system.n_states)
-    nm = system.n_modes
+    z = np.zeros(ss.n_states)
+    nm = ss.n_modes
     cov = np.zeros((nm, nm))
     history = np.empty((n, nm)) if keep_history else None
     done = 0
@@ -211,8 +214,8 @@ def simulate(system: ModalSystem, spec: TurbulenceSpec, U: float, duration: floa
         if progress is not None:
             progress(done, total)
     cov /= n
-    phys = system.physical_shapes()
+    phys = physical_shapes(ss.bridge)
     rms = np.sqrt(np.maximum(np.einsum("kai,ij,kaj->ka", phys, cov, phys), 0.0))
-    response = BuffetingResponse(U=U, x=system.x.copy(), rms_h=rms[:, 0], rms_alpha=rms[:, 1],
+    response = BuffetingResponse(U=U, x=np.array(ss.bridge.nodes_x), rms_h=rms[:, 0], rms_alpha=rms[:, 1],
                                  rms_p=rms[:, 2], method="time", duration=n * step)
     return response, history
