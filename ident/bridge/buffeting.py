@@ -19,7 +19,8 @@ admittance ``chi(f)`` multiplies the amplitude of each (the spectrum by ``chi^2`
 **On the modes.** With the generalised shapes ``Phi(x) = [h/B, alpha, p/B]`` per unit modal
 coordinate (3 x n_modes) and strip widths ``w_k`` (trapezoid rule over the nodes), the modal
 buffeting force is ``F = sum_k w_k Phi_k^T [L_b B, M_b, D_b B]_k`` (``h L + alpha M + p D``
-integrated along the deck: :meth:`ident.bridge.model.BridgeModel.load_matrix`). u and w are independent; each has the coherence
+integrated along the deck: :meth:`ident.bridge.model.BridgeModel.load_matrix`). u and w are
+independent; each has the coherence
 ``exp(-C f |x_k - x_l| / U)`` between nodes, so the one-sided cross-spectral matrix of ``F`` is::
 
     S_F(f) = (qd B^2 / U)^2 chi(f)^2 sum_{c = u, w} S_c(f) P_c Coh_c(f) P_c^T,
@@ -29,7 +30,8 @@ integrated along the deck: :meth:`ident.bridge.model.BridgeModel.load_matrix`). 
 is a product of the neighbours' coherences, so ``Coh P^T`` is a forward and a backward recursion.
 
 **Response.** The modal equations with the self-excited forces (Roger's form projected,
-:class:`~ident.bridge.statespace.BridgeStateSpace`) give the transfer matrix at ``omega = 2 pi f``, ``K = B omega / U``::
+:class:`~ident.bridge.statespace.BridgeStateSpace`) give the transfer matrix at
+``omega = 2 pi f``, ``K = B omega / U``::
 
     H(omega) = [-omega^2 M + i omega C + K_s - qd B^2 Qbar(iK)]^-1,
     Qbar(p) = sum_k w_k Phi_k^T Q(p) Phi_k
@@ -107,7 +109,9 @@ def _static(bridge: BridgeModel) -> StaticCoefficients:
 
 
 def modal_gust_projection(bridge: BridgeModel) -> FloatArray:
-    """``P[c, i, k] = w_k Phi_k[:, i] . g[:, c]``: node k's gust c on mode i, m, shape (2, n, nodes).
+    """Return ``P[c, i, k] = w_k Phi_k[:, i] . g[:, c]`` (m): node k's gust c on mode i.
+
+    Shape (2, n_modes, nodes).
 
     Multiplied by ``qd B^2 / U`` and the gust (m/s) at node k it is the contribution of that
     node's strip to the modal force of mode i. Needs the bridge's static coefficients.
@@ -296,7 +300,7 @@ class BuffetingResponse:
         return {k: 0.5 * np.sqrt(tc / T) for k, tc in self.correlation_time.items()}
 
     def to_dict(self) -> dict[str, Any]:
-        """``{"U", "x", "rms_h", "rms_alpha", "rms_p"}`` as in shared DESIGN's JSON (m/s, m, rad)."""
+        """Return ``{"U", "x", "rms_h", "rms_alpha", "rms_p"}`` as DESIGN's JSON (m/s, m, rad)."""
         return {"U": float(self.U), "x": self.x.tolist(), "rms_h": self.rms_h.tolist(),
                 "rms_alpha": self.rms_alpha.tolist(), "rms_p": self.rms_p.tolist()}
 
@@ -377,7 +381,10 @@ def frequency_domain(ss: BridgeStateSpace, spec: TurbulenceSpec, U: float, *,
 
 
 def physical_shapes(bridge: BridgeModel) -> FloatArray:
-    """Shapes ``[h, alpha, p]`` at the nodes (m, rad, m per unit modal coordinate), (nodes, 3, n)."""
+    """Return the shapes ``[h, alpha, p]`` at the nodes (m, rad, m per unit modal coordinate).
+
+    Shape (nodes, 3, n_modes).
+    """
     return bridge.shapes() * np.array([bridge.B, 1.0, bridge.B])[None, :, None]
 
 

@@ -1,4 +1,4 @@
-"""Buffeting of a full bridge in the time domain: a simulated turbulence field through the state space.
+"""Buffeting of a full bridge in the time domain: a simulated gust field through the state space.
 
 The check of the frequency domain (:mod:`ident.bridge.buffeting`) by an independent route, and
 the route that can take nonlinearities and control later.
@@ -18,7 +18,8 @@ zero. Each node's field is projected on the modes as it is made (``P`` of
 
 **The response.** The modal buffeting forces drive the modal state space of
 :class:`~ident.bridge.statespace.BridgeStateSpace` (structure, self-excited forces with their
-lag states, and its input matrix for external generalised forces), discretised exactly for a force linear between samples (first-order hold, one matrix
+lag states, and its input matrix for external generalised forces), discretised exactly for a
+force linear between samples (first-order hold, one matrix
 exponential). The record is periodic, so the simulation first runs through its last part (a
 warm-up of ``7 / sigma_min`` s, ``sigma_min`` the slowest decay rate of the in-wind poles, at most
 one period) and then the whole period: the transient of the start from rest has decayed to
@@ -216,6 +217,7 @@ def simulate(ss: BridgeStateSpace, spec: TurbulenceSpec, U: float, duration: flo
     cov /= n
     phys = physical_shapes(ss.bridge)
     rms = np.sqrt(np.maximum(np.einsum("kai,ij,kaj->ka", phys, cov, phys), 0.0))
-    response = BuffetingResponse(U=U, x=np.array(ss.bridge.nodes_x), rms_h=rms[:, 0], rms_alpha=rms[:, 1],
+    response = BuffetingResponse(U=U, x=np.array(ss.bridge.nodes_x), rms_h=rms[:, 0],
+                                 rms_alpha=rms[:, 1],
                                  rms_p=rms[:, 2], method="time", duration=n * step)
     return response, history

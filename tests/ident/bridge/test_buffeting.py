@@ -162,7 +162,7 @@ def test_coherent_sum_equals_the_dense_matrix() -> None:
 
 
 def _suspension_like() -> BridgeStateSpace:
-    """A 600 m simply supported deck, 25 nodes: first vertical, lateral and torsional modes."""
+    """Return a 600 m simply supported deck, 25 nodes: two vertical, a lateral, a torsional mode."""
     x = np.linspace(0.0, 600.0, 25)
     s1 = np.sin(np.pi * x / 600.0)
     s2 = np.sin(2 * np.pi * x / 600.0)
@@ -185,7 +185,7 @@ def _suspension_like() -> BridgeStateSpace:
 
 
 def test_partially_coherent_field_time_equals_frequency_domain() -> None:
-    """u and w with span-wise decay on four modes: mid-span RMS of h, alpha, p agree.
+    """Gusts u and w with span-wise decay on four modes: RMS of h, alpha, p agree.
 
     One seeded 8000 s record at 25 m/s; each RMS within 3 of its stated standard deviations.
     The second (antisymmetric) vertical mode is driven only through the partial coherence.
