@@ -63,6 +63,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ident import _validate as v
+from ident._threads import single_threaded_blas
 from ident.bridge.model import BridgeModel
 from ident.bridge.statespace import BridgeStateSpace
 from ident.turbulence import StaticCoefficients, TurbulenceSpec
@@ -85,7 +86,7 @@ ComplexArray = npt.NDArray[np.complex128]
 #: Bytes a frequency chunk may use for its largest temporary array.
 _CHUNK_BYTES = 64 * 2**20
 #: Points packed around each in-wind pole of the frequency grid.
-_POLE_POINTS = 64
+_POLE_POINTS = 24
 
 
 def gust_gain(static: StaticCoefficients) -> FloatArray:
@@ -214,14 +215,16 @@ def transfer_matrix(ss: BridgeStateSpace, U: float, f: Any) -> ComplexArray:
 
 
 def frequency_grid(ss: BridgeStateSpace, U: float, *, f_max: float | None = None,
-                   per_decade: int = 60, pole_points: int = _POLE_POINTS) -> FloatArray:
+                   per_decade: int = 120, pole_points: int = _POLE_POINTS) -> FloatArray:
     """Frequencies (Hz, sorted, from 0) that resolve every resonance of the bridge at ``U``.
 
     A logarithmic grid from ``f_1 / 1000`` to ``f_max`` (default ten times the highest in-wind
     modal frequency) with ``per_decade`` points, plus ``pole_points`` points around each
     oscillatory pole ``-sigma + i omega_d`` of the state matrix, at
     ``omega_d / 2 pi + (sigma / 2 pi) tan(theta)`` with theta uniform in (-1.55, 1.55): a
-    Lorentzian peak is then sampled evenly in its own angle, whatever its width.
+    Lorentzian peak is then sampled evenly in its own angle, whatever its width (in theta a
+    Lorentzian is constant, so few points integrate it). Against a 200 000-point grid the default
+    RMS differ by at most 0.3 % on the IABSE deck and the tests' four-mode deck.
     """
     lam = ss.eigenvalues(U)
     osc = lam[lam.imag > 1e-9 * max(1.0, float(np.abs(lam).max()))]
@@ -311,6 +314,7 @@ def _default_spectrum_nodes(n_nodes: int, count: int = 25) -> npt.NDArray[np.int
     return np.unique(np.round(np.linspace(0, n_nodes - 1, count)).astype(np.int64))
 
 
+@single_threaded_blas
 def frequency_domain(ss: BridgeStateSpace, spec: TurbulenceSpec, U: float, *,
                      f: Any | None = None,
                      spectrum_nodes: Sequence[int] | None = None) -> BuffetingResponse:
@@ -336,6 +340,11 @@ def frequency_domain(ss: BridgeStateSpace, spec: TurbulenceSpec, U: float, *,
     -------
     BuffetingResponse
         RMS at every node, spectra and correlation times at ``spectrum_nodes``.
+
+    Notes
+    -----
+    BLAS runs single-threaded here (:mod:`ident._threads`): the many small matrix products per
+    frequency ran 10 to 40 times slower with OpenBLAS's threads on the shared two-core host.
     """
     U = v.positive("U", U)
     bridge = ss.bridge
@@ -354,18 +363,22 @@ def frequency_domain(ss: BridgeStateSpace, spec: TurbulenceSpec, U: float, *,
     # Response components at the chosen nodes: rows of the physical shapes (m or rad per unit
     # modal coordinate).
     phys = physical_shapes(bridge)  # (nodes, 3, n)
-    sel = phys[nodes]  # (s, 3, n)
+    sel_rows = np.ascontiguousarray(phys[nodes].reshape(-1, n))  # (s 3, n): node-major rows
     cov = np.zeros((n, n))
     spectra = np.zeros((f_arr.size, 3, nodes.size))
     weights = _trapezoid_weights(f_arr)
     chunk = max(1, _CHUNK_BYTES // (16 * n * max(n, bridge.n_nodes)))
     for start in range(0, f_arr.size, chunk):
         sl = slice(start, min(f_arr.size, start + chunk))
-        S_F = modal_force_spectrum(bridge, spec, U, f_arr[sl])
+        S_F = modal_force_spectrum(bridge, spec, U, f_arr[sl]).astype(complex)
         H = transfer_matrix(ss, U, f_arr[sl])
-        S_xi = H @ S_F @ np.conj(np.swapaxes(H, -1, -2))
-        cov += np.einsum("f,fij->ij", weights[sl], S_xi.real)
-        spectra[sl] = np.einsum("sai,fij,saj->fas", sel, S_xi, sel).real
+        # Contiguous operands: numpy's stacked matmul uses BLAS only for those.
+        H_adj = np.ascontiguousarray(np.conj(np.swapaxes(H, -1, -2)))
+        HS = H @ S_F
+        cov += np.tensordot(weights[sl], (HS @ H_adj).real, axes=1)
+        R = sel_rows @ H  # (m, 3 s, n): response at the chosen nodes per unit modal force
+        spectra[sl] = np.sum((R @ S_F) * np.conj(R), axis=-1).real.reshape(
+            -1, nodes.size, 3).transpose(0, 2, 1)
     variance = np.einsum("kai,ij,kaj->ka", phys, cov, phys)
     rms = np.sqrt(np.maximum(variance, 0.0))
     total = np.einsum("f,fas->as", weights, spectra)

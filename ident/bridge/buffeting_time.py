@@ -43,6 +43,7 @@ import numpy.typing as npt
 from scipy.linalg import expm
 
 from ident import _validate as v
+from ident._threads import single_threaded_blas
 from ident.bridge.buffeting import BuffetingResponse, modal_gust_projection, physical_shapes
 from ident.bridge.model import BridgeModel
 from ident.bridge.statespace import BridgeStateSpace
@@ -145,6 +146,7 @@ def _discretise(A: FloatArray, B_in: FloatArray,
     return Phi, Gam1 - Gam2, Gam2
 
 
+@single_threaded_blas
 def simulate(ss: BridgeStateSpace, spec: TurbulenceSpec, U: float, duration: float, *,
              rng: Any, dt: float | None = None,
              progress: Callable[[int, int], None] | None = None,
