@@ -65,6 +65,9 @@ def _build_parser() -> argparse.ArgumentParser:
     p_flutter.add_argument("--json", type=Path, default=None,
                            help="write the flutter speed and frequency (state space and "
                                 "frequency domain), the section and the model to this file")
+    from daq.offline import bridge_commands  # light: imports numerics only when it runs
+
+    bridge_commands.add_parser(sub)
     p_id = sub.add_parser(
         "identify", help="E2RFC on the releases of recorded run files; prints the flutter speed"
     )
@@ -455,6 +458,10 @@ def _dispatch(args: argparse.Namespace) -> int:
 
         return run_flutter(args.section, model_path=args.model, table_path=args.table,
                            convention=args.convention, u_max=args.u_max, json_path=args.json)
+    if args.command == "bridge":
+        from daq.offline.bridge_commands import run as run_bridge
+
+        return run_bridge(args)
     if args.command == "campaign":
         from daq.campaign.command import run_command  # per-subcommand import: fast --help
 

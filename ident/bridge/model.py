@@ -232,21 +232,24 @@ follows 1
             out[r, :, 2] = w * mode.p
         return out
 
-    def mode_labels(self) -> list[str]:
-        """Return a short label per mode: number, frequency and dominant deck motion.
+    def mode_kinds(self) -> list[str]:
+        """Return each mode's dominant deck motion: vertical, torsional, lateral (or none).
 
-        The motion is vertical, torsional or lateral after the largest of ``int h^2``,
-        ``int (alpha B/2)^2`` and ``int p^2`` along the deck (edge displacement of the pitch).
+        The largest of ``int h^2``, ``int (alpha B/2)^2`` (the deck edge's displacement in
+        pitch) and ``int p^2`` along the deck decides.
         """
         w = self.quadrature_weights()
         kinds = ("vertical", "torsional", "lateral")
-        labels = []
-        for r, mode in enumerate(self.modes):
+        out = []
+        for mode in self.modes:
             energy = [w @ mode.h**2, w @ (mode.alpha * self.B / 2.0) ** 2, w @ mode.p**2]
-            kind = kinds[int(np.argmax(energy))] if max(energy) > 0.0 else "no deck motion"
-            label = mode.name or f"mode {r + 1}"
-            labels.append(f"{label} ({mode.frequency:.4g} Hz, {kind})")
-        return labels
+            out.append(kinds[int(np.argmax(energy))] if max(energy) > 0.0 else "no deck motion")
+        return out
+
+    def mode_labels(self) -> list[str]:
+        """Return a short label per mode: name or number, frequency and dominant deck motion."""
+        return [f"{mode.name or f'mode {r + 1}'} ({mode.frequency:.4g} Hz, {kind})"
+                for r, (mode, kind) in enumerate(zip(self.modes, self.mode_kinds(), strict=True))]
 
     def notes(self) -> list[str]:
         """Remarks on the input that are not errors (for the user to read, not to fix)."""
@@ -260,8 +263,9 @@ follows 1
         if self.n_modes > 1:
             # Deck-only products of whole-structure modes are not orthogonal in general; report
             # the largest normalised product for information only.
+            # Products of the deck's displacements: h, the edge's alpha B/2, p.
             G = self.shape_integrals()
-            gram = G[0, 0] + G[1, 1] + G[2, 2]
+            gram = self.B**2 * (G[0, 0] + G[1, 1] / 4.0 + G[2, 2])
             diag = np.sqrt(np.clip(np.diag(gram), 1e-300, None))
             corr = np.abs(gram / np.outer(diag, diag))
             np.fill_diagonal(corr, 0.0)

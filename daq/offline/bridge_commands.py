@@ -1,0 +1,347 @@
+"""``windrig bridge``: multimode flutter (and buffeting) of a full bridge from section aerodynamics.
+
+``windrig bridge BRIDGE.json --aero MODEL.json|TABLE.csv`` reads the bridge model file
+(:class:`ident.bridge.model.BridgeModel`) and the deck section's aerodynamics: a rational-function
+model (what ``windrig identify --json`` writes, or ``{"A": ..., "d": ...}``: the same reading as
+``windrig flutter --model``) or a flutter-derivative table (``docs/flutter_derivative_tables.md``),
+Roger-fitted for the state space with its relative error at every tabulated K reported. It
+prints the state-space flutter speed, frequency and participating modes, the frequency-domain
+check, and writes the JSON of DESIGN (``--json``) and the in-wind frequency and damping of every
+mode against U as a table and a plot (``--out``).
+
+``--modes M1.csv M2.csv ...`` builds the bridge from plain mode tables
+(:mod:`ident.bridge.mode_tables`, ``docs/bridge.md``); BRIDGE.json then holds the deck data only
+(``B``, ``rho``, ``name``, ``static``) and ``--write-bridge OUT.json`` writes the whole bridge model
+file. ``--buffeting U1,U2 --wind WIND.toml [--time-domain SECONDS]`` hands over to
+:mod:`ident.bridge.buffeting`.
+
+Every mistake in what the user gave is a :class:`~daq.errors.UsageError` naming the file or
+option.
+
+Not responsible for: the numerics (:mod:`ident.bridge`), the error boundary (:mod:`daq.cli`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+from pathlib import Path
+from typing import Any
+
+from daq.errors import UsageError
+
+__all__ = ["add_parser", "run", "run_bridge"]
+
+
+def add_parser(sub: Any) -> None:
+    """Register the ``bridge`` subcommand on the subparsers ``sub`` of :mod:`daq.cli`."""
+    p = sub.add_parser(
+        "bridge", help="multimode flutter (and buffeting) of a full bridge from its still-air "
+                       "modes and the section's RFC model or flutter-derivative table")
+    p.add_argument("bridge", type=Path,
+                   help="bridge model file (JSON: B, rho, nodes_x, modes, static); with --modes "
+                        "the deck data only")
+    p.add_argument("--aero", type=Path, default=None,
+                   help="the section's aerodynamics: an RFC model (.json, e.g. `windrig "
+                        "identify --json` output) or a flutter-derivative table (.csv)")
+    p.add_argument("--convention", choices=("scanlan", "z_up"), default="scanlan",
+                   help="sign convention of a .csv table (default: scanlan, windrig's)")
+    p.add_argument("--u-max", type=float, default=None,
+                   help="top wind speed of the flutter search, m/s (default: the lowest "
+                        "torsional mode at a reduced frequency of 0.2)")
+    p.add_argument("--json", type=Path, default=None,
+                   help="write the flutter speeds, frequency, participating modes, mode curves "
+                        "(and buffeting RMS) to this file")
+    p.add_argument("--out", type=Path, default=None,
+                   help="folder for the mode curves' table (CSV) and plot (PNG)")
+    p.add_argument("--modes", type=Path, nargs="+", default=None, metavar="MODE.csv",
+                   help="build the bridge from mode tables (one CSV per mode, docs/bridge.md)")
+    p.add_argument("--write-bridge", type=Path, default=None,
+                   help="with --modes: write the whole bridge model file (JSON) here")
+    p.add_argument("--buffeting", type=_speed_list, default=None, metavar="U1,U2,...",
+                   help="buffeting response at these mean wind speeds, m/s (needs --wind)")
+    p.add_argument("--wind", type=Path, default=None,
+                   help="WIND.toml: Iu, Iw, Lux, Lwx, Cuy, Cwy, admittance")
+    p.add_argument("--time-domain", type=float, default=None, metavar="SECONDS",
+                   help="also simulate the buffeting in time over this record length, s")
+
+
+def _speed_list(text: str) -> tuple[float, ...]:
+    try:
+        speeds = tuple(float(part) for part in text.split(",") if part.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected wind speeds in m/s separated by "
+                                         "commas, e.g. 30,45") from None
+    if not speeds or any(not u > 0 for u in speeds):
+        raise argparse.ArgumentTypeError(f"{text!r}: wind speeds must be > 0 m/s")
+    return speeds
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``windrig bridge`` from parsed arguments."""
+    return run_bridge(args.bridge, aero_path=args.aero, convention=args.convention,
+                      u_max=args.u_max, json_path=args.json, out=args.out,
+                      mode_tables=args.modes, write_bridge=args.write_bridge,
+                      buffeting=args.buffeting, wind=args.wind, time_domain=args.time_domain)
+
+
+def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: str = "scanlan",
+               u_max: float | None = None, json_path: Path | None = None,
+               out: Path | None = None, mode_tables: list[Path] | None = None,
+               write_bridge: Path | None = None, buffeting: tuple[float, ...] | None = None,
+               wind: Path | None = None, time_domain: float | None = None) -> int:
+    """Analyse a bridge's multimode flutter (see the module docstring); return 0.
+
+    Parameters
+    ----------
+    bridge_path : Path
+        Bridge model file, or with ``mode_tables`` its deck data.
+    aero_path : Path, optional
+        RFC model (.json) or flutter-derivative table (.csv); required unless only converting.
+    convention : str
+        Signs of a table (:data:`ident.fd_table.CONVENTIONS`).
+    u_max : float, optional
+        Top of the state-space search, m/s.
+    json_path, out : Path, optional
+        JSON result; folder of the mode curves' CSV and PNG.
+    mode_tables, write_bridge : optional
+        Mode tables to build the bridge from, and where to write it.
+    buffeting, wind, time_domain : optional
+        Buffeting speeds (m/s), the wind file, the time-domain record length (s).
+    """
+    from ident.bridge import flutter as bridge_flutter
+
+    if u_max is not None and not u_max > 0:
+        raise UsageError(f"--u-max {u_max:g}: must be > 0 m/s")
+    if write_bridge is not None and mode_tables is None:
+        raise UsageError("--write-bridge needs --modes (the mode tables to build the bridge "
+                         "from)")
+    if buffeting is not None and wind is None:
+        raise UsageError("--buffeting needs --wind WIND.toml (turbulence intensities, length "
+                         "scales, coherence, admittance)")
+    if time_domain is not None and (buffeting is None or not time_domain > 0):
+        raise UsageError(f"--time-domain {time_domain:g}: needs --buffeting and a record "
+                         "length > 0 s")
+    bridge = _read_bridge(bridge_path, mode_tables)
+    print(f"{bridge_path}: {bridge.name}: {bridge.n_modes} modes, {bridge.n_nodes} deck nodes "
+          f"over {bridge.nodes_x[-1] - bridge.nodes_x[0]:.4g} m, B = {bridge.B:g} m, "
+          f"rho = {bridge.rho:g} kg/m^3")
+    for note in bridge.notes():
+        print(f"note: {note}")
+    if write_bridge is not None:
+        write_bridge.write_text(json.dumps(bridge.to_dict(), indent=1), encoding="utf-8")
+        print(f"wrote {write_bridge}")
+    if aero_path is None:
+        if write_bridge is not None:
+            return 0
+        raise UsageError("--aero is required: the section's RFC model (.json) or "
+                         "flutter-derivative table (.csv)")
+    aero = _read_aero(aero_path, bridge, convention)
+    for note in aero.notes:
+        print(f"note: {note}")
+
+    result = bridge_flutter.analyze(bridge, aero.model, U_max=u_max)
+    check = bridge_flutter.frequency_domain(bridge, aero.flutter_derivatives, aero.K_range,
+                                            U_max=result.U_max)
+    print(result.summary())
+    source = "the table" if aero.table is not None else "the model"
+    if check.speed is not None:
+        text = f"frequency domain (flutter derivatives of {source}): U_F = {check.speed:.4g} m/s"
+        if result.speed is not None:
+            text += f" ({100 * (check.speed / result.speed - 1):+.2f} % of the state space)"
+        print(text)
+    else:
+        print(f"frequency domain: {check.summary()}")
+    for label, share in result.participating():
+        print(f"  {label}: {100 * share:.1f} % of the flutter mode's strain energy")
+
+    summary: dict[str, Any] = {
+        "flutter_speed": result.speed, "flutter_frequency": result.frequency,
+        "flutter_speed_frequency_domain": check.speed,
+        "flutter_frequency_frequency_domain": check.frequency,
+        "reduced_frequency": result.reduced_frequency,
+        "critical_mode": None if result.critical_mode is None
+        else result.mode_labels[result.critical_mode],
+        "participation": [{"mode": label, "share": share}
+                          for label, share in result.participating()],
+        "divergence_speed": result.divergence_speed, "U_max": result.U_max,
+        "bridge": {"file": str(bridge_path), "name": bridge.name, "B": bridge.B,
+                   "rho": bridge.rho, "n_modes": bridge.n_modes, "n_nodes": bridge.n_nodes},
+        "aero": str(aero_path), "model": aero.model.to_dict(),
+        "modes": {"labels": list(result.mode_labels), "U": result.U.tolist(),
+                  "frequencies": result.frequencies.tolist(),
+                  "damping": result.damping.tolist()},
+    }
+    if aero.table is not None and aero.table_fit is not None:
+        summary.update({"table_convention": convention, "table_K": aero.table.K.tolist(),
+                        "table_fit_relative_error": aero.table_fit.relative_error.tolist()})
+    if buffeting is not None:
+        assert wind is not None
+        summary.update(_buffeting(bridge, aero.model, buffeting, wind, time_domain))
+    if out is not None:
+        _write_curves(out, result, check)
+    if json_path is not None:
+        json_path.write_text(json.dumps(summary, indent=2), encoding="utf-8")
+        print(f"wrote {json_path}")
+    return 0
+
+
+def _read_bridge(path: Path, mode_tables: list[Path] | None) -> Any:
+    from ident.bridge.mode_tables import bridge_from_mode_tables
+    from ident.bridge.model import BridgeModel
+
+    try:
+        if mode_tables is None:
+            return BridgeModel.from_json(path)
+        template = _read_json(path, "deck data")
+        if not isinstance(template, dict):
+            raise UsageError(f"{path}: expected a JSON object of the deck data (B, rho, name, "
+                             "static)")
+        try:
+            return bridge_from_mode_tables(template, mode_tables)
+        except ValueError as exc:
+            raise UsageError(f"{path} with --modes: {exc}") from exc
+    except UsageError:
+        raise
+    except ValueError as exc:
+        raise UsageError(str(exc)) from exc
+
+
+def _read_aero(path: Path, bridge: Any, convention: str) -> Any:
+    from ident.bridge.aero import aero_from_model, aero_from_table
+    from ident.errors import IdentError
+    from ident.fd_table import FlutterDerivativeTable
+    from ident.rfc import RationalFunctionModel
+
+    suffix = path.suffix.lower()
+    if suffix == ".json":
+        data = _read_json(path, "model")
+        if isinstance(data, dict) and "model" in data:  # `windrig identify --json`
+            data = data["model"]
+        if not isinstance(data, dict):
+            raise UsageError(f"{path}: expected a JSON object, the model or `windrig identify "
+                             "--json` output")
+        try:
+            model = RationalFunctionModel.from_dict(data)
+        except (TypeError, ValueError, KeyError) as exc:
+            raise UsageError(f"{path}: not a rational-function model ({exc}); expected "
+                             '{"A": [[[...]]], "d": [...]} or `windrig identify --json` '
+                             "output") from exc
+        return aero_from_model(bridge, model, source=str(path))
+    if suffix == ".csv":
+        try:
+            table = FlutterDerivativeTable.from_csv(path, convention=convention)
+            aero = aero_from_table(bridge, table, source=str(path))
+        except (ValueError, IdentError) as exc:
+            raise UsageError(str(exc) if str(path) in str(exc) else f"{path}: {exc}") from exc
+        assert aero.table_fit is not None
+        fit = aero.table_fit
+        print(f"{path}: {table.K.size} rows, K {table.K[0]:.3g} to {table.K[-1]:.3g}; "
+              f"{fit.summary()}")
+        return aero
+    raise UsageError(f"--aero {path}: expected an RFC model (.json) or a flutter-derivative "
+                     "table (.csv)")
+
+
+def _read_json(path: Path, what: str) -> object:
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise UsageError(f"{path}: cannot read the {what} file: {exc.strerror or exc}") from exc
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise UsageError(f"{path}: not valid JSON ({exc.msg}, line {exc.lineno} column "
+                         f"{exc.colno})") from exc
+
+
+def _write_curves(out: Path, result: Any, check: Any) -> None:
+    """Write the in-wind frequency and damping of every mode against U: CSV and PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out.mkdir(parents=True, exist_ok=True)
+    table = out / "bridge_modes.csv"
+    with table.open("w", newline="", encoding="utf-8") as handle:
+        writer = csv.writer(handle)
+        names = [label.split(" (")[0] for label in result.mode_labels]
+        writer.writerow(["U_m_s", *(f"f_{n}_Hz" for n in names), *(f"zeta_{n}" for n in names)])
+        for i, U in enumerate(result.U):
+            writer.writerow([f"{U:.6g}", *(f"{x:.6g}" for x in result.frequencies[i]),
+                             *(f"{x:.6g}" for x in result.damping[i])])
+    fig, (ax_f, ax_z) = plt.subplots(2, 1, figsize=(9, 7), sharex=True)
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for j, label in enumerate(result.mode_labels):
+        color = colors[j % len(colors)]
+        ax_f.plot(result.U, result.frequencies[:, j], "-", color=color, label=label)
+        ax_z.plot(result.U, result.damping[:, j], "-", color=color)
+        keep = check.U[:, j] <= result.U_max
+        ax_f.plot(check.U[keep, j], check.frequencies[keep, j], ":", color=color)
+        ax_z.plot(check.U[keep, j], check.damping[keep, j], ":", color=color)
+    if result.speed is not None:
+        for ax in (ax_f, ax_z):
+            ax.axvline(result.speed, color="grey", lw=0.8)
+    ax_z.axhline(0.0, color="k", lw=0.6)
+    ax_z.set_ylim(-0.05, max(0.1, float(min(1.0, result.damping.max()))))
+    ax_z.set_xlim(0.0, result.U_max)
+    ax_f.set_ylabel("frequency (Hz)")
+    ax_z.set_ylabel("damping ratio")
+    ax_z.set_xlabel("U (m/s)")
+    ax_f.legend(fontsize=7, ncol=2)
+    ax_f.set_title("in-wind modes: state space (solid), frequency domain (dotted)")
+    fig.tight_layout()
+    plot = out / "bridge_modes.png"
+    fig.savefig(plot, dpi=100)
+    plt.close(fig)
+    print(f"wrote {table} and {plot}")
+
+
+def _buffeting(bridge: Any, model: Any, speeds: tuple[float, ...], wind: Path,
+               time_domain: float | None) -> dict[str, Any]:
+    """Hand the buffeting options over to :mod:`ident.bridge.buffeting` (its own branch)."""
+    import importlib
+
+    # Imported by name: the buffeting modules come from their own branch (issue 22's second
+    # half); without them this option says so instead of failing at start-up.
+    try:
+        buffeting = importlib.import_module("ident.bridge.buffeting")
+        buffeting_time = importlib.import_module("ident.bridge.buffeting_time")
+        wind_file = importlib.import_module("ident.bridge.wind")
+    except ImportError as exc:
+        raise UsageError(f"--buffeting: this build has no buffeting analysis ({exc})") from exc
+    from ident.bridge.statespace import BridgeStateSpace
+
+    try:
+        spec = wind_file.read_wind(wind)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from exc
+    ss = BridgeStateSpace(bridge, model)
+    out: dict[str, Any] = {"buffeting": []}
+    if time_domain is not None:
+        out["time_domain"] = []
+    for U in speeds:
+        try:
+            response = buffeting.frequency_domain(ss, spec, U)
+        except ValueError as exc:
+            raise UsageError(f"--buffeting {U:g}: {exc}") from exc
+        out["buffeting"].append(response.to_dict())
+        print(f"buffeting at U = {U:g} m/s (frequency domain): largest RMS h "
+              f"{response.rms_h.max():.4g} m, alpha {response.rms_alpha.max():.4g} rad, "
+              f"p {response.rms_p.max():.4g} m")
+        if time_domain is not None:
+            from tqdm import tqdm
+
+            with tqdm(total=1, unit="step", mininterval=0.5) as bar:
+                def progress(done: int, total: int, bar: Any = bar) -> None:
+                    bar.total = total
+                    bar.update(done - bar.n)
+
+                simulated, _ = buffeting_time.simulate(ss, spec, U, time_domain, rng=0,
+                                                       progress=progress)
+            out["time_domain"].append(simulated.to_dict())
+            print(f"buffeting at U = {U:g} m/s (time domain, {time_domain:g} s): largest RMS h "
+                  f"{simulated.rms_h.max():.4g} m, alpha {simulated.rms_alpha.max():.4g} rad")
+    return out

@@ -1,0 +1,139 @@
+"""The deck section's aerodynamics for a bridge: an RFC model or a Roger-fitted derivative table.
+
+A bridge analysis needs the section's self-excited forces twice: as a rational-function model
+for the state space (:func:`ident.bridge.flutter.analyze`) and as flutter-derivative functions
+for the frequency-domain check (:func:`ident.bridge.flutter.frequency_domain`). From an RFC model
+(``windrig identify --json``) both are the model's; from a flutter-derivative table the state
+space gets its Roger fit (:func:`ident.roger_table.fit_table`, weighted so that each force's
+relative error counts alike at every tabulated K, which it reports) and the frequency domain the
+table itself (monotone interpolation, only within its K range).
+
+**Sway.** When the bridge's modes move the deck sideways (``p``) and the aerodynamics are of
+heave and pitch only (2 DOF), the drag and sway terms are taken quasi-steady from the bridge's
+static coefficients (:func:`ident.quasi_steady.quasi_steady_model`) if it has them; otherwise
+the deck's sway feels no air, and a note says so.
+
+Not responsible for: reading the model or table files (:mod:`ident.fd_table`, the command line),
+the fit itself (:mod:`ident.roger_table`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from ident.bridge.model import BridgeModel
+from ident.conventions import FLUTTER_DERIVATIVE_NAMES
+from ident.fd_table import FlutterDerivativeTable
+from ident.quasi_steady import quasi_steady_derivatives, quasi_steady_model
+from ident.rfc import RationalFunctionModel
+from ident.roger_table import TableFit, fit_table
+
+__all__ = ["BridgeAero", "aero_from_model", "aero_from_table"]
+
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True, eq=False)
+class BridgeAero:
+    """Self-excited forces of the deck section, in the two forms a bridge analysis uses.
+
+    Attributes
+    ----------
+    model : RationalFunctionModel
+        For the state space (2 or 3 DOF).
+    flutter_derivatives : callable
+        ``f(K) -> dict`` of derivatives, for the frequency-domain check.
+    K_range : (float, float) or None
+        The reduced frequencies the derivatives are known at (a table's range), or None (all).
+    source : str
+        Where they came from, for messages.
+    table_fit : TableFit or None
+        The Roger fit of a table, with its relative error at every tabulated K.
+    table : FlutterDerivativeTable or None
+    notes : list of str
+        What was assumed (sway terms, missing derivatives).
+    """
+
+    model: RationalFunctionModel
+    flutter_derivatives: Callable[[Any], dict[str, FloatArray]]
+    K_range: tuple[float, float] | None
+    source: str
+    table_fit: TableFit | None = None
+    table: FlutterDerivativeTable | None = None
+    notes: list[str] = field(default_factory=list)
+
+
+def _sways(bridge: BridgeModel) -> bool:
+    return any(np.any(mode.p) for mode in bridge.modes)
+
+
+def _with_sway(bridge: BridgeModel, model: RationalFunctionModel,
+               fd: Callable[[Any], dict[str, FloatArray]], source: str,
+               notes: list[str]) -> tuple[RationalFunctionModel,
+                                          Callable[[Any], dict[str, FloatArray]]]:
+    """Complete 2-DOF aerodynamics with quasi-steady sway terms when the modes sway."""
+    if model.n_dof == 3 or not _sways(bridge):
+        return model, fd
+    static = bridge.static
+    if static is None:
+        notes.append(f"{source} has heave and pitch only and the bridge gives no static "
+                     "coefficients: the deck's sway (p) feels no air")
+        return model, fd
+    notes.append(f"{source} has heave and pitch only: drag and sway terms quasi-steady from the "
+                 "bridge's static coefficients (ident.quasi_steady)")
+
+    def derivatives(K: Any) -> dict[str, FloatArray]:
+        planar = fd(K)
+        full = quasi_steady_derivatives(static, K)
+        full.update({name: planar[name] for name in FLUTTER_DERIVATIVE_NAMES})
+        return full
+
+    return model.with_sway(quasi_steady_model(static)), derivatives
+
+
+def aero_from_model(bridge: BridgeModel, model: RationalFunctionModel,
+                    source: str = "model") -> BridgeAero:
+    """Aerodynamics from a rational-function model (its own derivatives for the check)."""
+    notes: list[str] = []
+    full, fd = _with_sway(bridge, model, model.flutter_derivatives, source, notes)
+    return BridgeAero(model=full, flutter_derivatives=fd, K_range=None, source=source,
+                      notes=notes)
+
+
+def aero_from_table(bridge: BridgeModel, table: FlutterDerivativeTable,
+                    source: str = "table", *, n_lags: int | None = None) -> BridgeAero:
+    """Aerodynamics from a flutter-derivative table: its Roger fit and its interpolation.
+
+    Parameters
+    ----------
+    bridge : BridgeModel
+    table : FlutterDerivativeTable
+        At least 4 rows (2 or 3 DOF).
+    source : str
+        Name for messages.
+    n_lags : int, optional
+        Lags of the fit; default chosen by held-out rows (:func:`ident.roger_table.fit_table`).
+
+    Raises
+    ------
+    ValueError
+        A table of fewer than 4 rows.
+    ident.errors.RankDeficiencyError
+        When no Roger structure is determined by the table.
+    """
+    if table.K.size < 4:
+        raise ValueError(f"{source}: {table.K.size} row(s); a flutter analysis from a table "
+                         "needs at least 4 reduced frequencies")
+    notes: list[str] = []
+    if table.filled:
+        notes.append(f"{source} gives no {', '.join(table.filled)}: taken as zero")
+    fit = fit_table(table, n_lags=n_lags)
+    full, fd = _with_sway(bridge, fit.model, table.interpolator(), source, notes)
+    return BridgeAero(model=full, flutter_derivatives=fd,
+                      K_range=(float(table.K[0]), float(table.K[-1])), source=source,
+                      table_fit=fit, table=table, notes=notes)
