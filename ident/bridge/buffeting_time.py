@@ -47,6 +47,7 @@ from ident._threads import single_threaded_blas
 from ident.bridge.buffeting import BuffetingResponse, modal_gust_projection, physical_shapes
 from ident.bridge.model import BridgeModel
 from ident.bridge.statespace import BridgeStateSpace
+from ident.bridge.wind import coherence
 from ident.turbulence import TurbulenceSpec
 
 __all__ = ["modal_force_history", "simulate", "time_step"]
@@ -124,7 +125,7 @@ def modal_force_history(bridge: BridgeModel, spec: TurbulenceSpec, U: float, *, 
             if k == 0:
                 X = z
             else:
-                r = np.exp(-C * f * dx[k - 1] / U)
+                r = coherence(f, dx[k - 1], U, C)  # of neighbours k - 1 and k
                 X = r * X + np.sqrt(1.0 - r**2) * z
             F_hat += (amp * X)[:, None] * P[c][:, k][None, :]
     scale = 0.5 * bridge.rho * U**2 * bridge.B**2 / U

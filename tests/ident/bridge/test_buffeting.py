@@ -227,3 +227,34 @@ def test_above_flutter_and_without_static_coefficients_are_refused(
     bare = BridgeStateSpace(BridgeModel.from_dict(data), flat_plate.jones_model())
     with pytest.raises(ValueError, match="static coefficients"):
         bf.frequency_domain(bare, IABSE_WIND, 30.0)
+
+
+def test_uniform_bridge_equals_the_section_analysis(iabse: BridgeStateSpace) -> None:
+    """The IABSE bridge against the section per unit span, by ident's section-level code.
+
+    The section route: SectionModel's matrices, ident.turbulence.buffeting_force_spectrum of
+    the span-averaged forces (span 1 m, full coherence: J = 1) and Q(iK) of the same model; the
+    response ``S_q = H S_F H^H`` on the same grid. Equal to rounding (1e-9): a uniform deck of
+    unit length is the section per unit span.
+    """
+    from ident.section import SectionModel
+    from ident.turbulence import buffeting_force_spectrum
+
+    section = SectionModel(B=B, m=M_H, I=I_A, fh=0.100, fa=0.278, zeta_h=0.003, zeta_a=0.003,
+                           rho=1.22)
+    static = iabse.bridge.static
+    assert static is not None
+    U = 45.0
+    r = bf.frequency_domain(iabse, IABSE_WIND, U)
+    f = r.f
+    omega = 2.0 * np.pi * f[:, None, None]
+    Q = iabse.model.Q(1j * 2.0 * np.pi * f * B / U)
+    Z = (-omega**2 * section.mass_matrix() + 1j * omega * section.damping_matrix()
+         + section.stiffness_matrix() - 0.5 * 1.22 * U**2 * B**2 * Q)
+    H = np.linalg.inv(Z)
+    S_F = buffeting_force_spectrum(IABSE_WIND, static, f, U=U, B=B, span=1.0, rho=1.22)[:, :2, :2]
+    S_q = (H @ S_F @ np.conj(np.swapaxes(H, -1, -2))).real
+    rms_h = B * math.sqrt(np.trapezoid(S_q[:, 0, 0], f))
+    rms_alpha = math.sqrt(np.trapezoid(S_q[:, 1, 1], f))
+    assert r.rms_h[0] == pytest.approx(rms_h, rel=1e-9)
+    assert r.rms_alpha[0] == pytest.approx(rms_alpha, rel=1e-9)
