@@ -66,7 +66,7 @@ from ident import _validate as v
 from ident._threads import single_threaded_blas
 from ident.bridge.model import BridgeModel
 from ident.bridge.statespace import BridgeStateSpace
-from ident.turbulence import StaticCoefficients, TurbulenceSpec
+from ident.turbulence import StaticCoefficients, TurbulenceSpec, buffeting_gain
 
 __all__ = [
     "BuffetingResponse",
@@ -96,10 +96,9 @@ def gust_gain(static: StaticCoefficients) -> FloatArray:
     module docstring); the same matrix as :func:`ident.turbulence.buffeting_gain` without the
     factor ``qd B^2 / U``.
     """
-    s = static
-    return np.array([[2.0 * s.C_L, s.dC_L - s.C_D],
-                     [2.0 * s.C_M, s.dC_M],
-                     [2.0 * s.C_D, s.dC_D + s.C_L]])
+    # One linearisation for section and bridge: ident.turbulence's gain at U = 1 m/s, B = 1 m,
+    # rho = 2 kg/m^3, where its factor qd B^2 / U is 1.
+    return buffeting_gain(static, 1.0, 1.0, 2.0)
 
 
 def _static(bridge: BridgeModel) -> StaticCoefficients:
