@@ -5,5 +5,7 @@
 - :mod:`~daq.offline.report`: its tables, plots and HTML report;
 - :mod:`~daq.offline.diagnosis`: ``windrig diagnose``: the discrepancy workflow with its plots;
 - :mod:`~daq.offline.flutter_commands`: ``windrig identify`` (E2RFC on run files) and
-  ``windrig flutter`` (a section with a model or a flutter-derivative table).
+  ``windrig flutter`` (a section with a model or a flutter-derivative table);
+- :mod:`~daq.offline.bridge_commands`: ``windrig bridge``: multimode flutter (and buffeting) of
+  a full bridge from its modes and the section's model or table (:mod:`ident.bridge`).
 """

@@ -19,6 +19,10 @@ with ``Q_modal`` the section's ``Q(iK)`` (from the derivatives) projected on the
 scanned from high to low (wind rising); each branch is followed from its still-air mode; flutter
 is where a branch's root becomes real (zero damping), refined by Brent's method on K.
 
+Both run with single-threaded BLAS (:mod:`ident._threads`): the matrices are small enough that
+a thread pool costs more than it saves (eigenvalues of 200 states: 22 ms on one thread, 155 ms
+on two of the shared two-core reference machine).
+
 Not responsible for: the bridge's data (:mod:`ident.bridge.model`), the state matrix
 (:mod:`ident.bridge.statespace`), where the aerodynamics come from (:mod:`ident.bridge.aero`).
 """
@@ -36,6 +40,7 @@ import numpy.typing as npt
 from scipy.optimize import brentq, linear_sum_assignment
 
 from ident import _validate as v
+from ident._threads import single_threaded_blas
 from ident.bridge.model import BridgeModel
 from ident.bridge.statespace import BridgeStateSpace
 from ident.conventions import Q_from_flutter_derivatives
@@ -167,13 +172,22 @@ def _grid_size(n_points: Any) -> int:
     return n
 
 
-def _oscillatory(lam: ComplexArray) -> ComplexArray:
-    return lam[lam.imag > _OSCILLATORY_RTOL * np.abs(lam)]
+def _is_oscillatory(lam: ComplexArray, floor: float) -> npt.NDArray[np.bool_]:
+    """Eigenvalues with an imaginary part above round-off: relative, and ``floor`` (rad/s).
+
+    The floor keeps the lag states' eigenvalues, which are zero in still air, from counting as
+    oscillatory when round-off gives them an imaginary part of ~1e-17.
+    """
+    return np.asarray(lam.imag > np.maximum(_OSCILLATORY_RTOL * np.abs(lam), floor))
 
 
-def _growth(lam: ComplexArray) -> float:
+def _floor(bridge: BridgeModel) -> float:
+    return 1e-6 * 2.0 * math.pi * float(bridge.frequencies.min())
+
+
+def _growth(lam: ComplexArray, floor: float) -> float:
     """Largest real part of an oscillatory eigenvalue, less the round-off allowance, 1/s."""
-    osc = _oscillatory(lam)
+    osc = lam[_is_oscillatory(lam, floor)]
     if osc.size == 0:
         return -math.inf
     return float(np.max(osc.real - _GROWTH_RTOL * np.abs(osc)))
@@ -188,7 +202,7 @@ def _still_air_branches(bridge: BridgeModel, ss: BridgeStateSpace) -> ComplexArr
     """Return the oscillatory eigenvalues at U = 0, one per mode (its share of each vector)."""
     lam, vec = ss.eig(0.0)
     n = bridge.n_modes
-    idx = np.flatnonzero(lam.imag > _OSCILLATORY_RTOL * np.abs(lam))
+    idx = np.flatnonzero(_is_oscillatory(lam, _floor(bridge)))
     if idx.size != n:
         raise ValueError(f"expected {n} oscillatory still-air modes, found {idx.size}: the "
                          "aerodynamic added mass dominates the structure")
@@ -208,6 +222,7 @@ def _follow(guess: ComplexArray, lam: ComplexArray) -> ComplexArray:
     return out
 
 
+@single_threaded_blas
 def analyze(bridge: BridgeModel, model: RationalFunctionModel, U_max: float | None = None, *,
             n_points: int = 120) -> BridgeFlutterResult:
     """State-space multimode flutter analysis: bracket the growth's sign change, then Brent.
@@ -250,10 +265,11 @@ def analyze(bridge: BridgeModel, model: RationalFunctionModel, U_max: float | No
     branches = np.empty((n_points, n), dtype=complex)
     growth = np.empty(n_points)
     branches[0] = _still_air_branches(bridge, ss)
-    growth[0] = _growth(ss.eigenvalues(0.0))
+    floor = _floor(bridge)
+    growth[0] = _growth(ss.eigenvalues(0.0), floor)
     for i in range(1, n_points):
         lam = ss.eigenvalues(float(U[i]))
-        growth[i] = _growth(lam)
+        growth[i] = _growth(lam, floor)
         # Linear extrapolation of each branch tells crossing branches apart.
         guess = branches[i - 1] if i == 1 else 2 * branches[i - 1] - branches[i - 2]
         branches[i] = _follow(guess, lam)
@@ -264,10 +280,10 @@ def analyze(bridge: BridgeModel, model: RationalFunctionModel, U_max: float | No
     unstable = np.flatnonzero(growth[1:] > 0.0)
     if unstable.size:
         i = int(unstable[0]) + 1
-        speed = float(brentq(lambda u: _growth(ss.eigenvalues(u)), U[i - 1], U[i],
+        speed = float(brentq(lambda u: _growth(ss.eigenvalues(u), floor), U[i - 1], U[i],
                              xtol=1e-12 * U_max, rtol=1e-12))
         lam, vec = ss.eig(speed)
-        osc = np.flatnonzero(lam.imag > _OSCILLATORY_RTOL * np.abs(lam))
+        osc = np.flatnonzero(_is_oscillatory(lam, floor))
         k = int(osc[np.argmax(lam[osc].real - _GROWTH_RTOL * np.abs(lam[osc]))])
         frequency = float(lam[k].imag / (2.0 * math.pi))
         participation = _strain_energy_shares(bridge, vec[:n, k])
@@ -342,6 +358,7 @@ def _frequency_roots(bridge: BridgeModel, fd: FlutterDerivativeFunction, K: floa
             None if vec is None else np.asarray(vec[:n, keep], dtype=complex))
 
 
+@single_threaded_blas
 def frequency_domain(bridge: BridgeModel, flutter_derivatives: FlutterDerivativeFunction,
                      K_range: tuple[float, float] | None = None, *, U_max: float | None = None,
                      n_points: int = 400) -> BridgeFlutterResult:

@@ -31,6 +31,7 @@ flutter (:mod:`ident.bridge.flutter`).
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
@@ -190,9 +191,17 @@ follows 1
         ``i, j`` index the section coordinates ``h/B, alpha, p/B`` (trapezoid rule over the
         nodes).
         """
+        return self._shape_integrals
+
+    @functools.cached_property
+    def _shape_integrals(self) -> FloatArray:
+        # Computed once (the frequency-domain scan projects Q at every K); read-only, since
+        # the bridge is a value.
         phi = self.shapes()
         weighted = phi * self.quadrature_weights()[:, None, None]
-        return np.asarray(np.einsum("nir,njs->ijrs", weighted, phi), dtype=float)
+        G = np.asarray(np.einsum("nir,njs->ijrs", weighted, phi), dtype=float)
+        G.flags.writeable = False
+        return G
 
     def modal_coefficients(self, A: Any) -> FloatArray:
         """Project section matrices on the modes: ``sum_ij A[..., i, j] G_ij``.

@@ -1,0 +1,88 @@
+"""Speed of the full-bridge flutter analysis: state space against frequency domain (not a test).
+
+A simply supported deck (the IABSE section: B = 31 m, m = 22740 kg/m, I = 2.47e6 kg m^2/m) of
+1200 m with ``n`` sine modes, a third each vertical (0.085 Hz + 0.03 Hz per half-wave), torsional
+(0.28 Hz + 0.09 Hz) and lateral (0.05 Hz + 0.04 Hz, with 0.002 rad/m of torsion), damping 0.5 %,
+generalised masses of the deck; the flat plate's aerodynamics (Jones's two lags) with
+quasi-steady sway terms. For each number of modes and deck nodes: the state-space flutter
+analysis (:func:`ident.bridge.flutter.analyze`, 120 wind speeds: eigenvalues of a matrix of
+``n (2 + 2)`` states, bracket and Brent) and the frequency-domain one
+(:func:`ident.bridge.flutter.frequency_domain`, 400 reduced frequencies: a quadratic eigenvalue
+problem of ``2 n``), wall time and flutter speeds. The buffeting columns come from the buffeting
+analysis (its own benchmark rows).
+
+Run: ``.venv/bin/python benchmarks/bridge_speed.py [--modes 12,50,200] [--nodes 100,1000]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from ident import flat_plate
+from ident.bridge import flutter as bf
+from ident.bridge.aero import aero_from_model
+from ident.bridge.model import BridgeModel
+
+B, M, I, SPAN = 31.0, 22740.0, 2.47e6, 1200.0
+STATIC = {"C_D": 0.08, "C_L": -0.1, "C_M": 0.02, "dC_D": 0.0, "dC_L": -5.0, "dC_M": 1.2}
+
+
+def sine_bridge(n_modes: int, n_nodes: int) -> BridgeModel:
+    """Return the benchmark's deck with ``n_modes`` sine modes on ``n_nodes`` nodes."""
+    x = np.linspace(0.0, SPAN, n_nodes)
+    modes = []
+    for r in range(n_modes):
+        kind, k = r % 3, r // 3 + 1
+        shape = np.sin(k * np.pi * x / SPAN)
+        if kind == 0:
+            modes.append({"name": f"V{k}", "frequency": 0.085 + 0.03 * (k - 1),
+                          "damping": 0.005, "generalised_mass": M * SPAN / 2,
+                          "h": shape.tolist()})
+        elif kind == 1:
+            modes.append({"name": f"T{k}", "frequency": 0.28 + 0.09 * (k - 1),
+                          "damping": 0.005, "generalised_mass": I * SPAN / 2,
+                          "alpha": shape.tolist()})
+        else:
+            modes.append({"name": f"L{k}", "frequency": 0.05 + 0.04 * (k - 1),
+                          "damping": 0.005,
+                          "generalised_mass": (M + I * 0.002**2) * SPAN / 2,
+                          "p": shape.tolist(), "alpha": (0.002 * shape).tolist()})
+    return BridgeModel.from_dict({"name": f"{n_modes} sine modes", "B": B, "rho": 1.22,
+                                  "nodes_x": x.tolist(), "modes": modes, "static": STATIC})
+
+
+def _ints(text: str) -> list[int]:
+    return [int(part) for part in text.split(",") if part.strip()]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--modes", type=_ints, default=[12, 50, 200])
+    parser.add_argument("--nodes", type=_ints, default=[100, 1000])
+    args = parser.parse_args()
+    print("| modes | nodes | states | SS time (s) | SS U_F (m/s) | FD time (s) | FD U_F (m/s) "
+          "| FD - SS |")
+    print("|---|---|---|---|---|---|---|---|")
+    for n_modes in args.modes:
+        for n_nodes in args.nodes:
+            start = time.perf_counter()
+            bridge = sine_bridge(n_modes, n_nodes)
+            aero = aero_from_model(bridge, flat_plate.jones_model())
+            t0 = time.perf_counter()
+            ss = bf.analyze(bridge, aero.model)
+            t1 = time.perf_counter()
+            fd = bf.frequency_domain(bridge, aero.flutter_derivatives, U_max=ss.U_max)
+            t2 = time.perf_counter()
+            states = n_modes * (2 + aero.model.n_lags)
+            diff = ("-" if ss.speed is None or fd.speed is None
+                    else f"{100 * (fd.speed / ss.speed - 1):+.3f} %")
+            print(f"| {n_modes} | {n_nodes} | {states} | {t1 - t0 + (t0 - start):.2f} | "
+                  f"{ss.speed or float('nan'):.3f} | {t2 - t1:.2f} | "
+                  f"{fd.speed or float('nan'):.3f} | {diff} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
