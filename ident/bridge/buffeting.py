@@ -196,13 +196,22 @@ def impedance(ss: BridgeStateSpace, U: float, f: Any) -> ComplexArray:
     """
     U = v.finite("U", U)
     bridge, model = ss.bridge, ss.model
-    omega = 2.0 * np.pi * np.atleast_1d(np.asarray(f, dtype=float))[:, None, None]
-    Z = -omega**2 * ss.mass + 1j * omega * bridge.damping_matrix() + bridge.stiffness_matrix()
+    omega = 2.0 * np.pi * np.atleast_1d(np.asarray(f, dtype=float))
+    n, k = bridge.n_modes, model.n_dof
     if U <= 0.0:
-        return np.asarray(Z + omega**2 * (0.5 * bridge.rho * bridge.B**4 * ss.modal_A[2]),
-                          dtype=complex)
-    Qbar = bridge.modal_coefficients(model.Q(1j * omega[:, 0, 0] * bridge.B / U))
-    return np.asarray(Z - 0.5 * bridge.rho * U**2 * bridge.B**2 * Qbar, dtype=complex)
+        Z = (omega[:, None, None] ** 2 * (0.5 * bridge.rho * bridge.B**4 * ss.modal_A[2])
+             ).astype(complex)
+    else:
+        # Qbar = sum_ij Q_ij G_ij as one product (nf, k^2) @ (k^2, n^2): BLAS, not einsum.
+        Q = model.Q(1j * omega * bridge.B / U).reshape(omega.size, k * k)
+        G = bridge.shape_integrals()[:k, :k].reshape(k * k, n * n)
+        Z = (-0.5 * bridge.rho * U**2 * bridge.B**2 * (Q @ G)).reshape(omega.size, n, n)
+    # The modal structure is diagonal: add it on the diagonal only.
+    idx = np.arange(n)
+    m, c, s = (np.diag(a) for a in (ss.mass, bridge.damping_matrix(),
+                                     bridge.stiffness_matrix()))
+    Z[:, idx, idx] += -omega[:, None] ** 2 * m + 1j * omega[:, None] * c + s
+    return np.asarray(Z, dtype=complex)
 
 
 def transfer_matrix(ss: BridgeStateSpace, U: float, f: Any) -> ComplexArray:
@@ -369,14 +378,17 @@ def frequency_domain(ss: BridgeStateSpace, spec: TurbulenceSpec, U: float, *,
     chunk = max(1, _CHUNK_BYTES // (16 * n * max(n, bridge.n_nodes)))
     for start in range(0, f_arr.size, chunk):
         sl = slice(start, min(f_arr.size, start + chunk))
-        S_F = modal_force_spectrum(bridge, spec, U, f_arr[sl]).astype(complex)
+        S_F = modal_force_spectrum(bridge, spec, U, f_arr[sl])  # real, symmetric
         H = transfer_matrix(ss, U, f_arr[sl])
-        # Contiguous operands: numpy's stacked matmul uses BLAS only for those.
-        H_adj = np.ascontiguousarray(np.conj(np.swapaxes(H, -1, -2)))
-        HS = H @ S_F
-        cov += np.tensordot(weights[sl], (HS @ H_adj).real, axes=1)
-        R = sel_rows @ H  # (m, 3 s, n): response at the chosen nodes per unit modal force
-        spectra[sl] = np.sum((R @ S_F) * np.conj(R), axis=-1).real.reshape(
+        # Real arithmetic: Re(H S_F H^H) = Hr S_F Hr^T + Hi S_F Hi^T for a real S_F (half the
+        # work of complex products); contiguous operands for numpy's stacked BLAS matmul.
+        Hr, Hi = np.ascontiguousarray(H.real), np.ascontiguousarray(H.imag)
+        HrT = np.ascontiguousarray(np.swapaxes(Hr, -1, -2))
+        HiT = np.ascontiguousarray(np.swapaxes(Hi, -1, -2))
+        cov += np.tensordot(weights[sl], (Hr @ S_F) @ HrT + (Hi @ S_F) @ HiT, axes=1)
+        # Response at the chosen nodes per unit modal force, (m, 3 s, n), and its spectrum.
+        Rr, Ri = sel_rows @ Hr, sel_rows @ Hi
+        spectra[sl] = np.sum((Rr @ S_F) * Rr + (Ri @ S_F) * Ri, axis=-1).reshape(
             -1, nodes.size, 3).transpose(0, 2, 1)
     variance = np.einsum("kai,ij,kaj->ka", phys, cov, phys)
     rms = np.sqrt(np.maximum(variance, 0.0))
