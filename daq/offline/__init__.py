@@ -7,5 +7,7 @@
 - :mod:`~daq.offline.flutter_commands`: ``windrig identify`` (E2RFC on run files) and
   ``windrig flutter`` (a section with a model or a flutter-derivative table);
 - :mod:`~daq.offline.bridge_commands`: ``windrig bridge``: multimode flutter (and buffeting) of
-  a full bridge from its modes and the section's model or table (:mod:`ident.bridge`).
+  a full bridge from its modes and the section's model or table (:mod:`ident.bridge`);
+- :mod:`~daq.offline.buffeting_plots`: its buffeting plots (RMS along the span, response
+  spectra) and RMS table.
 """
