@@ -11,6 +11,10 @@ linearisation as the self-excited quasi-steady terms of :mod:`ident.quasi_steady
     M_b = qd B^2 [2 C_M u/U + dC_M w/U]
     D_b = qd B   [2 C_D u/U + (dC_D + C_L) w/U]
 
+In short: the relative wind ``(U + u)`` downwind and ``w`` up has ``|V|^2 ~ U^2 (1 + 2 u/U)``
+and meets the deck at a nose-up angle larger by ``phi = w/U``; lift and drag in wind axes
+(``qd (1 + 2 u/U) B (C + dC phi)``) turned back by ``phi`` into the fixed axes (down and
+downwind: ``L = L_w - D_w phi``, ``D = D_w + L_w phi``) give the lines above to first order;
 i.e. ``[L_b B, M_b, D_b B] = (qd B^2 / U) g [u, w]`` with ``g = [[2 C_L, dC_L - C_D],
 [2 C_M, dC_M], [2 C_D, dC_D + C_L]]``. (For a flat plate, ``C_* = 0``, ``dC_L = -2 pi``: an
 upward gust ``w > 0`` lifts the plate, ``L_b < 0``, and pitches it nose-up, ``M_b > 0``.) The
