@@ -158,6 +158,11 @@ def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: 
         print(f"frequency domain: {check.summary()}")
     for label, share in result.participating():
         print(f"  {label}: {100 * share:.1f} % of the flutter mode's strain energy")
+    K_F = result.reduced_frequency
+    if aero.K_range is not None and K_F is not None and not (
+            aero.K_range[0] <= K_F <= aero.K_range[1]):
+        print(f"warning: flutter at K = {K_F:.3g}, outside the table's K {aero.K_range[0]:.3g} "
+              f"to {aero.K_range[1]:.3g}: the Roger fit is extrapolated there")
 
     summary: dict[str, Any] = {
         "flutter_speed": result.speed, "flutter_frequency": result.frequency,

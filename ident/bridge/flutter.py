@@ -417,13 +417,18 @@ def frequency_domain(bridge: BridgeModel, flutter_derivatives: FlutterDerivative
         growth = branches[:, j].imag
         for i in (int(x) for x in np.flatnonzero((growth[:-1] > 0.0) & (growth[1:] <= 0.0))):
 
-            def damping(k: float, i: int = i, j: int = j) -> float:
+            def on_branch(k: float, i: int = i, j: int = j) -> complex:
+                # The root nearest the branch interpolated (in log K) between its two grid
+                # points: exactly the branch at both ends, so the bracket holds even where
+                # another branch passes close by.
+                t = math.log(k / K[i]) / math.log(K[i + 1] / K[i])
+                target = branches[i, j] + t * (branches[i + 1, j] - branches[i, j])
                 omega_k = roots(k)
-                return float(omega_k[np.argmin(np.abs(omega_k - branches[i, j]))].imag)
+                return complex(omega_k[np.argmin(np.abs(omega_k - target))])
 
-            K_f = float(brentq(damping, K[i + 1], K[i], xtol=1e-14, rtol=1e-12))
-            omega_f = roots(K_f)
-            omega_f = omega_f[np.argmin(np.abs(omega_f - branches[i, j]))]
+            K_f = float(brentq(lambda k: on_branch(k).imag, K[i + 1], K[i], xtol=1e-14,
+                               rtol=1e-12))
+            omega_f = on_branch(K_f)
             candidates.append((bridge.B * omega_f.real / K_f, omega_f.real / (2 * math.pi), j,
                                K_f))
     U_grid = bridge.B * branches.real / K[:, None]

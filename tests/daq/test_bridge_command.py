@@ -122,3 +122,18 @@ def test_a_bad_speed_list_is_argparse_usage():
     with pytest.raises(SystemExit) as stop:
         main(["bridge", str(BRIDGE), "--buffeting", "30,fast"])
     assert stop.value.code == 2
+
+
+def test_flutter_outside_a_tables_range_is_flagged_as_extrapolation(tmp_path, capsys):
+    """The bluff table cut to K >= 0.75: flutter (K = 0.63) is beyond its rows: a warning.
+
+    The frequency domain, which never leaves the table, finds no flutter within it.
+    """
+    lines = (EXAMPLES / "example_deck_table.csv").read_text().splitlines()
+    rows = [line for line in lines[2:] if float(line.split(",")[0]) > 0.75]
+    narrow = tmp_path / "narrow.csv"
+    narrow.write_text("\n".join(lines[1:2] + rows) + "\n")
+    assert main(["bridge", str(BRIDGE), "--aero", str(narrow)]) == 0
+    out = capsys.readouterr().out
+    assert "warning: flutter at K = 0.63, outside the table's K 0.785 to 3.14" in out
+    assert "frequency domain: no flutter below" in out
