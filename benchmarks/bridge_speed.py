@@ -8,10 +8,18 @@ quasi-steady sway terms. For each number of modes and deck nodes: the state-spac
 analysis (:func:`ident.bridge.flutter.analyze`, 120 wind speeds: eigenvalues of a matrix of
 ``n (2 + 2)`` states, bracket and Brent) and the frequency-domain one
 (:func:`ident.bridge.flutter.frequency_domain`, 400 reduced frequencies: a quadratic eigenvalue
-problem of ``2 n``), wall time and flutter speeds. The buffeting columns come from the buffeting
-analysis (its own benchmark rows).
+problem of ``2 n``), wall time and flutter speeds.
 
-Run: ``.venv/bin/python benchmarks/bridge_speed.py [--modes 12,50,200] [--nodes 100,1000]``.
+A second table times the buffeting analysis of the same decks at ``--buffeting-U`` (default
+40 m/s) in the wind of ``rig_configs/bridges/example_wind.toml`` (u and w, span-wise coherence,
+Davenport admittance): the frequency domain (:func:`ident.bridge.buffeting.frequency_domain`,
+its default grid) and a seeded time-domain record of ``--record`` s
+(:func:`ident.bridge.buffeting_time.simulate`: the multi-point field at every node, then the
+state space), with the largest RMS heave of each and their difference against the stated
+relative standard deviation of the record's RMS.
+
+Run: ``.venv/bin/python benchmarks/bridge_speed.py [--modes 12,50,200] [--nodes 100,1000]
+[--buffeting-U 40] [--record 600] [--no-buffeting]``.
 """
 
 from __future__ import annotations
@@ -62,6 +70,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--modes", type=_ints, default=[12, 50, 200])
     parser.add_argument("--nodes", type=_ints, default=[100, 1000])
+    parser.add_argument("--buffeting-U", type=float, default=40.0)
+    parser.add_argument("--record", type=float, default=600.0)
+    parser.add_argument("--no-buffeting", action="store_true")
     args = parser.parse_args()
     print("| modes | nodes | states | SS time (s) | SS U_F (m/s) | FD time (s) | FD U_F (m/s) "
           "| FD - SS |")
@@ -82,6 +93,40 @@ def main() -> None:
             print(f"| {n_modes} | {n_nodes} | {states} | {t1 - t0 + (t0 - start):.2f} | "
                   f"{ss.speed or float('nan'):.3f} | {t2 - t1:.2f} | "
                   f"{fd.speed or float('nan'):.3f} | {diff} |", flush=True)
+    if not args.no_buffeting:
+        buffeting_rows(args.modes, args.nodes, args.buffeting_U, args.record)
+
+
+def buffeting_rows(modes: list[int], nodes: list[int], U: float, record: float) -> None:
+    """Print the buffeting table (module docstring) for every number of modes and nodes."""
+    from pathlib import Path
+
+    from ident.bridge import buffeting, buffeting_time
+    from ident.bridge.statespace import BridgeStateSpace
+    from ident.bridge.wind import read_wind
+
+    wind = read_wind(Path(__file__).resolve().parents[1] / "rig_configs" / "bridges"
+                     / "example_wind.toml")
+    print(f"\nbuffeting at U = {U:g} m/s, time-domain record {record:g} s\n")
+    print("| modes | nodes | FD frequencies | FD time (s) | TD time (s) | RMS h FD (m) "
+          "| RMS h TD (m) | TD - FD | stated std |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for n_modes in modes:
+        for n_nodes in nodes:
+            bridge = sine_bridge(n_modes, n_nodes)
+            ss = BridgeStateSpace(bridge, aero_from_model(bridge, flat_plate.jones_model()).model)
+            t0 = time.perf_counter()
+            fd = buffeting.frequency_domain(ss, wind, U)
+            t1 = time.perf_counter()
+            td, _ = buffeting_time.simulate(ss, wind, U, record, rng=0)
+            t2 = time.perf_counter()
+            j = int(np.argmax(fd.rms_h[fd.spectrum_nodes]))
+            k = int(fd.spectrum_nodes[j])
+            std = fd.rms_relative_std(td.duration)["h"][j]
+            print(f"| {n_modes} | {n_nodes} | {fd.f.size} | {t1 - t0:.2f} | {t2 - t1:.2f} | "
+                  f"{fd.rms_h[k]:.4g} | {td.rms_h[k]:.4g} | "
+                  f"{100 * (td.rms_h[k] / fd.rms_h[k] - 1):+.1f} % | {100 * std:.1f} % |",
+                  flush=True)
 
 
 if __name__ == "__main__":

@@ -10,5 +10,7 @@
   sway) as ``windrig identify`` prints them, and the check that it has the section's degrees
   of freedom.
 - :mod:`~daq.offline.bridge_commands`: ``windrig bridge``: multimode flutter (and buffeting) of
-  a full bridge from its modes and the section's model or table (:mod:`ident.bridge`).
+  a full bridge from its modes and the section's model or table (:mod:`ident.bridge`);
+- :mod:`~daq.offline.buffeting_plots`: its buffeting plots (RMS along the span, response
+  spectra) and RMS table.
 """

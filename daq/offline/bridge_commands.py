@@ -12,8 +12,10 @@ mode against U as a table and a plot (``--out``).
 ``--modes M1.csv M2.csv ...`` builds the bridge from plain mode tables
 (:mod:`ident.bridge.mode_tables`, ``docs/bridge.md``); BRIDGE.json then holds the deck data only
 (``B``, ``rho``, ``name``, ``static``) and ``--write-bridge OUT.json`` writes the whole bridge model
-file. ``--buffeting U1,U2 --wind WIND.toml [--time-domain SECONDS]`` hands over to
-:mod:`ident.bridge.buffeting`.
+file. ``--buffeting U1,U2 --wind WIND.toml [--time-domain SECONDS]`` adds the buffeting response
+(:mod:`ident.bridge.buffeting`, :mod:`ident.bridge.buffeting_time`): RMS along the deck in the
+JSON and, with ``--out``, plots of it and of the response spectra
+(:mod:`daq.offline.buffeting_plots`).
 
 Every mistake in what the user gave is a :class:`~daq.errors.UsageError` naming the file or
 option.
@@ -124,6 +126,7 @@ def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: 
         raise UsageError(f"--time-domain {time_domain:g}: needs --buffeting and a record "
                          "length > 0 s")
     bridge = _read_bridge(bridge_path, mode_tables)
+    spec = _read_wind(wind) if buffeting is not None and wind is not None else None
     print(f"{bridge_path}: {bridge.name}: {bridge.n_modes} modes, {bridge.n_nodes} deck nodes "
           f"over {bridge.nodes_x[-1] - bridge.nodes_x[0]:.4g} m, B = {bridge.B:g} m, "
           f"rho = {bridge.rho:g} kg/m^3")
@@ -182,8 +185,7 @@ def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: 
         summary.update({"table_convention": convention, "table_K": aero.table.K.tolist(),
                         "table_fit_relative_error": aero.table_fit.relative_error.tolist()})
     if buffeting is not None:
-        assert wind is not None
-        summary.update(_buffeting(bridge, aero.model, buffeting, wind, time_domain))
+        summary.update(_buffeting(bridge, aero.model, buffeting, spec, time_domain, out))
     if out is not None:
         _write_curves(out, result, check)
     if json_path is not None:
@@ -304,49 +306,79 @@ def _write_curves(out: Path, result: Any, check: Any) -> None:
     print(f"wrote {table} and {plot}")
 
 
-def _buffeting(bridge: Any, model: Any, speeds: tuple[float, ...], wind: Path,
-               time_domain: float | None) -> dict[str, Any]:
-    """Hand the buffeting options over to :mod:`ident.bridge.buffeting` (its own branch)."""
-    import importlib
-
-    # Imported by name: the buffeting modules come from their own branch (issue 22's second
-    # half); without them this option says so instead of failing at start-up.
-    try:
-        buffeting = importlib.import_module("ident.bridge.buffeting")
-        buffeting_time = importlib.import_module("ident.bridge.buffeting_time")
-        wind_file = importlib.import_module("ident.bridge.wind")
-    except ImportError as exc:
-        raise UsageError(f"--buffeting: this build has no buffeting analysis ({exc})") from exc
-    from ident.bridge.statespace import BridgeStateSpace
+def _read_wind(path: Path) -> Any:
+    from ident.bridge.wind import read_wind
 
     try:
-        spec = wind_file.read_wind(wind)
+        return read_wind(path)
     except ValueError as exc:
         raise UsageError(str(exc)) from exc
+
+
+def _none_for_nan(values: Any) -> list[float | None]:
+    return [None if v != v else float(v) for v in values]  # JSON has no NaN
+
+
+def _buffeting(bridge: Any, model: Any, speeds: tuple[float, ...], spec: Any,
+               time_domain: float | None, out: Path | None) -> dict[str, Any]:
+    """Buffeting at every speed (:mod:`ident.bridge.buffeting`), JSON entries, plots in ``out``.
+
+    The time-domain record is seeded (0); its RMS is compared with the frequency domain at the
+    node of largest RMS heave, against the stated relative standard deviation
+    ``0.5 sqrt(T_c / T)`` of an RMS from a record of length T.
+    """
+    import numpy as np
+    from tqdm import tqdm
+
+    from ident.bridge.buffeting import frequency_domain
+    from ident.bridge.buffeting_time import simulate
+    from ident.bridge.statespace import BridgeStateSpace
+
     ss = BridgeStateSpace(bridge, model)
-    out: dict[str, Any] = {"buffeting": []}
+    result: dict[str, Any] = {"buffeting": []}
     if time_domain is not None:
-        out["time_domain"] = []
+        result["time_domain"] = []
+    responses, simulations = [], []
     for U in speeds:
         try:
-            response = buffeting.frequency_domain(ss, spec, U)
+            response = frequency_domain(ss, spec, U)
         except ValueError as exc:
             raise UsageError(f"--buffeting {U:g}: {exc}") from exc
-        out["buffeting"].append(response.to_dict())
+        responses.append(response)
+        result["buffeting"].append(response.to_dict())
         print(f"buffeting at U = {U:g} m/s (frequency domain): largest RMS h "
               f"{response.rms_h.max():.4g} m, alpha {response.rms_alpha.max():.4g} rad, "
               f"p {response.rms_p.max():.4g} m")
-        if time_domain is not None:
-            from tqdm import tqdm
+        if time_domain is None:
+            continue
+        with tqdm(total=1, unit="step", mininterval=0.5, desc=f"time domain {U:g} m/s") as bar:
+            def progress(done: int, total: int, bar: Any = bar) -> None:
+                bar.total = total
+                bar.update(done - bar.n)
 
-            with tqdm(total=1, unit="step", mininterval=0.5) as bar:
-                def progress(done: int, total: int, bar: Any = bar) -> None:
-                    bar.total = total
-                    bar.update(done - bar.n)
+            simulated, _ = simulate(ss, spec, U, time_domain, rng=0, progress=progress)
+        simulations.append(simulated)
+        std = response.rms_relative_std(simulated.duration)
+        entry = simulated.to_dict()
+        entry["duration"] = simulated.duration
+        entry["rms_relative_std"] = {
+            "x": response.x[response.spectrum_nodes].tolist(),
+            **{name: _none_for_nan(values) for name, values in std.items()}}
+        result["time_domain"].append(entry)
+        j = int(np.argmax(response.rms_h[response.spectrum_nodes]))
+        node = int(response.spectrum_nodes[j])
+        parts = []
+        for name in ("h", "alpha", "p"):
+            ref = getattr(response, f"rms_{name}")[node]
+            if ref > 0.0:
+                ratio = getattr(simulated, f"rms_{name}")[node] / ref
+                parts.append(f"{name} {100 * (ratio - 1):+.1f} % (stated std "
+                             f"{100 * std[name][j]:.1f} %)")
+        print(f"buffeting at U = {U:g} m/s (time domain, {simulated.duration:.4g} s): at x = "
+              f"{response.x[node]:.4g} m, against the frequency domain: " + ", ".join(parts))
+    if out is not None:
+        from daq.offline.buffeting_plots import write_buffeting_outputs
 
-                simulated, _ = buffeting_time.simulate(ss, spec, U, time_domain, rng=0,
-                                                       progress=progress)
-            out["time_domain"].append(simulated.to_dict())
-            print(f"buffeting at U = {U:g} m/s (time domain, {time_domain:g} s): largest RMS h "
-                  f"{simulated.rms_h.max():.4g} m, alpha {simulated.rms_alpha.max():.4g} rad")
-    return out
+        written = write_buffeting_outputs(out, responses, simulations)
+        print("wrote " + ", ".join(str(p) for p in written))
+    return result

@@ -16,5 +16,10 @@ flutter and buffeting"):
   Roger-fitted flutter-derivative table (with its relative error at every tabulated K);
 - :mod:`~ident.bridge.mode_tables`: plain CSV tables of mode shapes (one per mode, as exported
   from a finite-element program) to the bridge model file;
-- :mod:`~ident.bridge.buffeting`: buffeting in turbulent wind (frequency and time domain).
+- :mod:`~ident.bridge.wind`: the wind file (WIND.toml: turbulence intensities, length scales,
+  span-wise coherence, admittance) and the coherence of the gusts between deck nodes;
+- :mod:`~ident.bridge.buffeting`: buffeting in turbulent wind in the frequency domain (modal gust
+  forces with coherence and admittance, response spectra and RMS along the deck);
+- :mod:`~ident.bridge.buffeting_time`: buffeting in the time domain (a simulated multi-point
+  turbulence field through the modal state space).
 """
