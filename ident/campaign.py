@@ -27,7 +27,7 @@ from ident import e2rfc, fd_method
 from ident import flutter as _flutter
 from ident.conventions import FLUTTER_DERIVATIVE_NAMES
 from ident.errors import IdentError
-from ident.modal import ModalFit, ReleaseModes, name_modes, release_modes
+from ident.modal import ReleaseModes, release_modes
 from ident.release import Release
 from ident.section import SectionModel
 
@@ -199,26 +199,9 @@ def analyze_campaign(
         section=section, n_releases=len(releases),
         wind_speeds=tuple(e2rfc.distinct_wind_speeds([r.U for r in releases])),
         release_speeds=tuple(float(r.U) for r in releases),
-        modes=tuple(_heave_pitch_modes(fit, section) for fit in model.diagnostics.modal_fits),
+        modes=tuple(release_modes(fit, section) for fit in model.diagnostics.modal_fits),
         model=model, flutter=flutter, uncertainty=uncertainty,
         structures=model.structure_spread(section, U_max), K=K,
         derivatives={name: np.asarray(derivatives[name], dtype=float)
                      for name in FLUTTER_DERIVATIVE_NAMES},
         table=fd_table, table_error=table_error)
-
-
-def _heave_pitch_modes(fit: ModalFit, section: SectionModel) -> ReleaseModes:
-    """Return a release's heave and pitch modes; with sway, those two of its three modes.
-
-    :func:`ident.modal.release_modes` names the two modes of a 2-DOF fit; a 3-DOF fit (of
-    ``[h/B, alpha, p/B]``) has a sway mode too, named here and left out of the summary.
-    """
-    if section.n_dof == 2:
-        return release_modes(fit, section)
-    if fit.frequencies.size < 3:
-        raise IdentError(f"found {fit.frequencies.size} oscillatory mode(s) in a 3-DOF decay, "
-                         "need 3 (heave, pitch and sway)")
-    j_h, j_a, _ = name_modes(fit.mode_shapes(), section.mass_matrix())
-    f, z = fit.frequencies, fit.damping
-    return ReleaseModes(f_h=float(f[j_h]), zeta_h=float(z[j_h]), f_a=float(f[j_a]),
-                        zeta_a=float(z[j_a]))

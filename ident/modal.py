@@ -559,7 +559,7 @@ def _varpro_jacobian(
 # -- one release's heave and pitch modes (the console's releases table, reprocessing) ----------
 @dataclass(frozen=True)
 class ReleaseModes:
-    """Frequency and damping of the heave and pitch modes of one decay.
+    """Frequency and damping of the heave and pitch (and sway) modes of one decay.
 
     Attributes
     ----------
@@ -567,12 +567,16 @@ class ReleaseModes:
         Frequencies of the heave- and pitch-dominated modes, Hz.
     zeta_h, zeta_a : float
         Their damping ratios (1 = critical).
+    f_p, zeta_p : float or None
+        The sway-dominated mode's, with three degrees of freedom (else None).
     """
 
     f_h: float
     zeta_h: float
     f_a: float
     zeta_a: float
+    f_p: float | None = None
+    zeta_p: float | None = None
 
 
 def fit_release_modes(t: FloatArray, h: FloatArray, alpha: FloatArray,
@@ -603,17 +607,28 @@ def fit_release_modes(t: FloatArray, h: FloatArray, alpha: FloatArray,
 
 
 def release_modes(fit: ModalFit, section: SectionModel) -> ReleaseModes:
-    """Name the two modes of a decay's modal fit (of ``[h/B, alpha]``) heave and pitch.
+    """Name the modes of a decay's modal fit heave and pitch (and sway).
+
+    The fit is of ``[h/B, alpha]``, or of ``[h/B, alpha, p/B]`` on a section with sway.
 
     Raises
     ------
     InsufficientDataError
-        The fit holds fewer than two oscillatory modes.
+        The fit holds fewer oscillatory modes than the section has degrees of freedom.
+    ValueError
+        The fit's coordinates are not the section's.
     """
-    if fit.frequencies.size < 2:
+    n = section.n_dof
+    if fit.amplitudes.shape[1] != n:
+        raise ValueError(f"a fit of {fit.amplitudes.shape[1]} coordinates cannot name the modes "
+                         f"of a section with {n} degrees of freedom")
+    if fit.frequencies.size < n:
+        names = "heave and pitch" if n == 2 else "heave, pitch and sway"
         raise InsufficientDataError(f"found {fit.frequencies.size} oscillatory mode(s) in the "
-                                    "decay, need 2 (heave and pitch)")
-    j_h, j_a = name_modes(fit.mode_shapes(), section.mass_matrix())
+                                    f"decay, need {n} ({names})")
+    named = name_modes(fit.mode_shapes(), section.mass_matrix())
     f, z = fit.frequencies, fit.damping
+    j_h, j_a = named[:2]
+    sway = {} if n == 2 else {"f_p": float(f[named[2]]), "zeta_p": float(z[named[2]])}
     return ReleaseModes(f_h=float(f[j_h]), zeta_h=float(z[j_h]), f_a=float(f[j_a]),
-                        zeta_a=float(z[j_a]))
+                        zeta_a=float(z[j_a]), **sway)
