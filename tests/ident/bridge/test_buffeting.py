@@ -264,13 +264,12 @@ def test_uniform_bridge_equals_the_section_analysis(iabse: BridgeStateSpace) -> 
     assert r.rms_alpha[0] == pytest.approx(rms_alpha, rel=1e-9)
 
 
-def test_a_short_record_of_a_lightly_damped_mode_is_not_biased():
-    """The example bridge's lateral mode (0.052 Hz, half-power width ~0.001 Hz) over 600 s.
+def test_short_records_of_a_lightly_damped_mode_scatter_as_stated():
+    """The example bridge's lateral mode (0.052 Hz, half-power width ~0.001 Hz), 600 s records.
 
-    With the field's period equal to the record, the resonance fell between the field's bins and
-    every seed's sway RMS came out 84-86 % above the frequency domain. The field now resolves the
-    narrowest resonance (``FIELD_BINS_PER_WIDTH``), so over four seeds the mean ratio is within
-    3 of its stated standard error (stated std of one record / sqrt(4)).
+    Sixteen seeds: the mean of the time-domain sway RMS over the frequency domain's is within 3
+    standard errors of 1 (stated std / 4), and the seeds' scatter is within 0.6-1.5 times the
+    stated std (the sample std of 16 is itself uncertain by about 18 %; measured 1.06 times).
     """
     from pathlib import Path
 
@@ -285,8 +284,9 @@ def test_a_short_record_of_a_lightly_damped_mode_is_not_biased():
     spec = read_wind(folder / "example_wind.toml")
     reference = bf.frequency_domain(ss, spec, 30.0)
     node = int(np.argmax(reference.rms_p))
-    ratios = [bt.simulate(ss, spec, 30.0, 600.0, rng=seed)[0].rms_p[node]
-              / reference.rms_p[node] for seed in range(4)]
+    ratios = np.array([bt.simulate(ss, spec, 30.0, 600.0, rng=seed)[0].rms_p[node]
+                       / reference.rms_p[node] for seed in range(16)])
     j = int(np.argmin(np.abs(reference.x[reference.spectrum_nodes] - reference.x[node])))
-    stated = reference.rms_relative_std(600.0)["p"][j]
-    assert abs(np.mean(ratios) - 1.0) < 3.0 * stated / 2.0
+    stated = float(reference.rms_relative_std(600.0)["p"][j])
+    assert abs(ratios.mean() - 1.0) < 3.0 * stated / 4.0
+    assert 0.6 * stated < ratios.std(ddof=1) < 1.5 * stated
