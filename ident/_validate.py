@@ -7,6 +7,7 @@ offending field, so that a user reading the traceback knows what to fix without 
 from __future__ import annotations
 
 import math
+import operator
 from typing import Any
 
 import numpy as np
@@ -61,3 +62,14 @@ def positive_array(name: str, value: Any, *, ndim: int | None = None) -> npt.NDA
     if np.any(arr <= 0.0):
         raise ValueError(f"{name} must be > 0 everywhere, got minimum {float(arr.min())!r}")
     return arr
+
+
+def grid_size(n_points: Any) -> int:
+    """Validate the size of a wind-speed grid: an integer (Python or numpy) >= 20."""
+    try:
+        n = operator.index(n_points)
+    except TypeError:
+        raise ValueError(f"n_points must be an integer >= 20, got {n_points!r}") from None
+    if n < 20:
+        raise ValueError(f"n_points must be an integer >= 20, got {n_points!r}")
+    return n

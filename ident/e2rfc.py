@@ -509,7 +509,7 @@ class IdentifiedModel(RationalFunctionModel):
         if diag.jackknife:
             pseudo = np.array([refit_speed(m) for m in diag.jackknife])
             n = pseudo.size
-            jackknife = math.sqrt((n - 1) / n * float(np.sum((pseudo - pseudo.mean())**2)))
+            jackknife = float(_jackknife_std(pseudo))
             # A deviation estimated from n releases has n - 1 degrees of freedom: scaled so
             # that 2 of it span Student's 95 % interval (x1.31 for 6 releases, 1.09 for 20).
             turbulence = jackknife * float(student_t.ppf(0.975, max(n - 1, 1))) / 1.96
@@ -594,11 +594,9 @@ class IdentifiedModel(RationalFunctionModel):
         if len(refits) >= 3:
             # Leave-one-release-out scatter: it also holds the modal fits' errors, which the
             # force regression's covariance (regressors taken as exact) cannot see.
-            n = len(refits)
             values = [m.flutter_derivatives(K_arr) for m in refits]
             for name in out:
-                pseudo = np.array([v[name] for v in values])
-                jack = np.sqrt((n - 1) / n * np.sum((pseudo - pseudo.mean(axis=0)) ** 2, axis=0))
+                jack = _jackknife_std(np.array([v[name] for v in values]))
                 out[name] = np.maximum(out[name], jack)
         if self.diagnostics.alternatives:
             values = [own] + [m.flutter_derivatives(K_arr) for m in self.diagnostics.alternatives]
@@ -837,6 +835,13 @@ def _refit_finer(prepared: list[PreparedRelease], d: FloatArray, with_A3: bool
     starts = [np.sort(np.append(d, root)) for root in (K_lo / 2.0, 2.0 * K_hi)]
     refit = problem.refit(d.size + 1, with_A3, starts)
     return None if refit is None else RationalFunctionModel(refit.A, refit.d)
+
+
+def _jackknife_std(pseudo: FloatArray) -> FloatArray:
+    """Jackknife standard deviation from leave-one-out estimates (first axis: the n refits)."""
+    n = pseudo.shape[0]
+    return np.asarray(np.sqrt((n - 1) / n * np.sum((pseudo - pseudo.mean(axis=0)) ** 2, axis=0)),
+                      dtype=float)
 
 
 def _random_response(fit: ModalFit) -> float:

@@ -12,7 +12,6 @@ model.
 from __future__ import annotations
 
 import math
-import operator
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -193,7 +192,7 @@ def analyze(
     ('pitch', 11.75)
     """
     U_max = default_U_max(section) if U_max is None else v.positive("U_max", U_max)
-    n_points = _grid_size(n_points)
+    n_points = v.grid_size(n_points)
     U = np.linspace(0.0, U_max, n_points)
     branches = np.empty((n_points, section.n_dof), dtype=complex)
     branches[0] = _initial_branches(section, model, 0.0)
@@ -244,17 +243,6 @@ def _reduced_frequency(
     if speed is None or frequency is None:
         return None
     return 2.0 * math.pi * frequency * section.B / speed
-
-
-def _grid_size(n_points: Any) -> int:
-    """Validate a grid size: an integer (Python or numpy) >= 20."""
-    try:
-        n = operator.index(n_points)
-    except TypeError:
-        raise ValueError(f"n_points must be an integer >= 20, got {n_points!r}") from None
-    if n < 20:
-        raise ValueError(f"n_points must be an integer >= 20, got {n_points!r}")
-    return n
 
 
 def _divergence_speed(
@@ -342,7 +330,7 @@ def frequency_domain(
     K_lo, K_hi = (v.positive("K_range", k) for k in K_range)
     if not K_lo < K_hi:
         raise ValueError(f"K_range must be increasing, got {K_range!r}")
-    n_points = _grid_size(n_points)
+    n_points = v.grid_size(n_points)
     K = np.geomspace(K_hi, K_lo, n_points)  # wind speed rises as K falls
 
     n = section.n_dof

@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from daq.errors import UsageError
+from daq.offline.flutter_commands import read_json, read_model
 
 __all__ = ["add_parser", "run", "run_bridge"]
 
@@ -201,7 +202,7 @@ def _read_bridge(path: Path, mode_tables: list[Path] | None) -> Any:
     try:
         if mode_tables is None:
             return BridgeModel.from_json(path)
-        template = _read_json(path, "deck data")
+        template = read_json(path, "deck data")
         if not isinstance(template, dict):
             raise UsageError(f"{path}: expected a JSON object of the deck data (B, rho, name, "
                              "static)")
@@ -219,23 +220,10 @@ def _read_aero(path: Path, bridge: Any, convention: str) -> Any:
     from ident.bridge.aero import aero_from_model, aero_from_table
     from ident.errors import IdentError
     from ident.fd_table import FlutterDerivativeTable
-    from ident.rfc import RationalFunctionModel
 
     suffix = path.suffix.lower()
     if suffix == ".json":
-        data = _read_json(path, "model")
-        if isinstance(data, dict) and "model" in data:  # `windrig identify --json`
-            data = data["model"]
-        if not isinstance(data, dict):
-            raise UsageError(f"{path}: expected a JSON object, the model or `windrig identify "
-                             "--json` output")
-        try:
-            model = RationalFunctionModel.from_dict(data)
-        except (TypeError, ValueError, KeyError) as exc:
-            raise UsageError(f"{path}: not a rational-function model ({exc}); expected "
-                             '{"A": [[[...]]], "d": [...]} or `windrig identify --json` '
-                             "output") from exc
-        return aero_from_model(bridge, model, source=str(path))
+        return aero_from_model(bridge, read_model(path), source=str(path))
     if suffix == ".csv":
         try:
             table = FlutterDerivativeTable.from_csv(path, convention=convention)
@@ -249,18 +237,6 @@ def _read_aero(path: Path, bridge: Any, convention: str) -> Any:
         return aero
     raise UsageError(f"--aero {path}: expected an RFC model (.json) or a flutter-derivative "
                      "table (.csv)")
-
-
-def _read_json(path: Path, what: str) -> object:
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise UsageError(f"{path}: cannot read the {what} file: {exc.strerror or exc}") from exc
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise UsageError(f"{path}: not valid JSON ({exc.msg}, line {exc.lineno} column "
-                         f"{exc.colno})") from exc
 
 
 def _write_curves(out: Path, result: Any, check: Any) -> None:

@@ -186,7 +186,11 @@ def _read_section(path: Path) -> Any:
     return section
 
 
-def _read_model(path: Path, n_dof: int, section_path: Path) -> Any:
+def read_model(path: Path) -> Any:
+    """Read a rational-function model: its JSON, or ``windrig identify --json`` output.
+
+    A bad file is a usage error naming it and what was expected.
+    """
     from ident import RationalFunctionModel
 
     data = read_json(path, "model")
@@ -196,11 +200,15 @@ def _read_model(path: Path, n_dof: int, section_path: Path) -> Any:
         raise UsageError(f"{path}: expected a JSON object, the model or `windrig identify "
                          "--json` output")
     try:
-        model = RationalFunctionModel.from_dict(data)
+        return RationalFunctionModel.from_dict(data)
     except (TypeError, ValueError, KeyError) as exc:
         raise UsageError(f"{path}: not a rational-function model ({exc}); expected "
                          '{"A": [[[...]]], "d": [...]} or `windrig identify --json` output'
                          ) from exc
+
+
+def _read_model(path: Path, n_dof: int, section_path: Path) -> Any:
+    model = read_model(path)
     if model.n_dof < n_dof:
         raise UsageError(f"{section_path} has a lateral spring (fp: three degrees of freedom) "
                          f"but {path} is a model of heave and pitch only: give a 3-DOF model "

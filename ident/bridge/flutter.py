@@ -30,7 +30,6 @@ Not responsible for: the bridge's data (:mod:`ident.bridge.model`), the state ma
 from __future__ import annotations
 
 import math
-import operator
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -162,16 +161,6 @@ def default_U_max(bridge: BridgeModel) -> float:
     return 2.0 * math.pi * f * bridge.B / _K_MIN_DEFAULT
 
 
-def _grid_size(n_points: Any) -> int:
-    try:
-        n = operator.index(n_points)
-    except TypeError:
-        raise ValueError(f"n_points must be an integer >= 20, got {n_points!r}") from None
-    if n < 20:
-        raise ValueError(f"n_points must be an integer >= 20, got {n_points!r}")
-    return n
-
-
 def _is_oscillatory(lam: ComplexArray, floor: float) -> npt.NDArray[np.bool_]:
     """Eigenvalues with an imaginary part above round-off: relative, and ``floor`` (rad/s).
 
@@ -259,7 +248,7 @@ def analyze(bridge: BridgeModel, model: RationalFunctionModel, U_max: float | No
     """
     ss = BridgeStateSpace(bridge, model)
     U_max = default_U_max(bridge) if U_max is None else v.positive("U_max", U_max)
-    n_points = _grid_size(n_points)
+    n_points = v.grid_size(n_points)
     U = np.linspace(0.0, U_max, n_points)
     n = bridge.n_modes
     branches = np.empty((n_points, n), dtype=complex)
@@ -394,7 +383,7 @@ def frequency_domain(bridge: BridgeModel, flutter_derivatives: FlutterDerivative
     K_lo, K_hi = (v.positive("K_range", k) for k in K_range)
     if not K_lo < K_hi:
         raise ValueError(f"K_range must be increasing, got {K_range!r}")
-    n_points = _grid_size(n_points)
+    n_points = v.grid_size(n_points)
     K = np.geomspace(K_hi, K_lo, n_points)  # wind speed rises as K falls
 
     def roots(k: float) -> ComplexArray:
