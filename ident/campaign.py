@@ -25,6 +25,7 @@ import numpy.typing as npt
 
 from ident import e2rfc, fd_method
 from ident import flutter as _flutter
+from ident._selection import structure_label
 from ident.conventions import FLUTTER_DERIVATIVE_NAMES
 from ident.errors import IdentError
 from ident.modal import ReleaseModes, release_modes
@@ -182,7 +183,13 @@ def analyze_campaign(
     """
     releases = list(releases)
     model = e2rfc.identify(releases, section, n_lags=n_lags, with_A3=with_A3)
-    flutter, uncertainty = model.analysis(section, U_max)
+    try:
+        flutter, uncertainty = model.analysis(section, U_max)
+    except _flutter.StillAirModesError as exc:
+        structure = structure_label(model.diagnostics.n_lags, model.diagnostics.with_A3)
+        raise IdentError(
+            f"the identified model ({structure}) has no flutter analysis: {exc}; releases at "
+            "more wind speeds, or the structure given, would determine it") from exc
     K = e2rfc.reduced_frequency_span(releases, section, K_POINTS)
     derivatives = model.flutter_derivatives(K)
     fd_table: fd_method.DecayDerivativeTable | None = None

@@ -359,7 +359,8 @@ class StructureSpread:
     labels : tuple of str
         The structures, the chosen one first (e.g. ``n_lags=2, A3=zero``).
     speeds : tuple of float or None
-        Flutter speed of each, m/s; None when it has no flutter below ``U_max``.
+        Flutter speed of each, m/s; None when it has no flutter below ``U_max`` (or, for an
+        alternative, no oscillatory still-air modes to start the search from).
     stds : tuple of float or None
         Standard deviation of each from its own parameter covariance, m/s.
     U_max : float
@@ -456,8 +457,8 @@ class IdentifiedModel(RationalFunctionModel):
         for model in diag.jackknife:
             try:
                 found = _flutter.analyze(section, model, U_max, n_points=REFIT_GRID).speed
-            except ValueError:
-                continue
+            except _flutter.StillAirModesError:
+                continue  # a wild refit: it says nothing about flutter below U_max
             if found is not None:
                 speeds.append(float(found))
         if not speeds:
@@ -497,7 +498,7 @@ class IdentifiedModel(RationalFunctionModel):
             """
             try:
                 found = _flutter.analyze(section, model, U_max, n_points=REFIT_GRID).speed
-            except ValueError:
+            except _flutter.StillAirModesError:
                 return U_max
             return U_max if found is None else float(found)
 
@@ -628,13 +629,21 @@ class IdentifiedModel(RationalFunctionModel):
         -------
         StructureSpread
         """
-        models = (self, *self.diagnostics.alternatives)
-        labels, speeds, stds = [], [], []
-        searched = math.nan
-        for model in models:
-            result, std = model._parametric(section, U_max)
-            searched = result.U_max
+        result, std = self._parametric(section, U_max)
+        searched = result.U_max
+        labels = [structure_label(self.diagnostics.n_lags, self.diagnostics.with_A3)]
+        speeds, stds = [result.speed], [std]
+        for model in self.diagnostics.alternatives:
             labels.append(structure_label(model.diagnostics.n_lags, model.diagnostics.with_A3))
+            try:
+                result, std = model._parametric(section, U_max)
+            except _flutter.StillAirModesError:
+                # As in the flutter speed's structure term: an alternative whose added mass
+                # overturns the structure's (from releases at two low speeds, it happens) has
+                # no flutter the search can find; it widens the spread to "no flutter".
+                speeds.append(None)
+                stds.append(None)
+                continue
             speeds.append(result.speed)
             stds.append(std)
         return StructureSpread(tuple(labels), tuple(speeds), tuple(stds), float(searched))

@@ -28,7 +28,8 @@ from ident.rfc import RationalFunctionModel
 from ident.section import SectionModel
 from ident.statespace import AeroelasticSystem
 
-__all__ = ["FlutterResult", "analyze", "default_U_max", "frequency_domain", "speed_sensitivity"]
+__all__ = ["FlutterResult", "StillAirModesError", "analyze", "default_U_max", "frequency_domain",
+           "speed_sensitivity"]
 
 #: Branch names, in the order of the coordinates (a 2-DOF section has the first two).
 MODE_NAMES: tuple[str, ...] = ("heave", "pitch", "sway")
@@ -131,6 +132,14 @@ def _follow(
     return out
 
 
+class StillAirModesError(ValueError):
+    """The model at the start of the search has not one oscillatory mode per degree of freedom.
+
+    A wild refit (an alternative structure, a jackknife refit) can have an added mass that
+    overturns the structure's: its flutter search has nowhere to start.
+    """
+
+
 def _initial_branches(
     section: SectionModel, model: RationalFunctionModel, U0: float
 ) -> npt.NDArray[np.complex128]:
@@ -141,7 +150,7 @@ def _initial_branches(
     # Lag states have real eigenvalues; the structural ones are the complex pairs.
     oscillatory = np.flatnonzero(lam.imag > 1e-9 * np.abs(lam))
     if oscillatory.size != n:
-        raise ValueError(
+        raise StillAirModesError(
             f"expected {n} oscillatory still-air modes, found {oscillatory.size}: the section is "
             "overdamped or the aerodynamic model dominates the structure at low wind speed"
         )

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -174,6 +176,30 @@ def test_a_structure_given_by_the_caller_has_no_alternatives():
     assert spread.labels == ("n_lags=2, A3=fitted",)
     assert spread.low == spread.high == pytest.approx(U_F, rel=1e-6)
     assert spread.summary() == "one structure within one SE"
+
+
+def test_an_alternative_without_still_air_modes_widens_the_spread_instead_of_failing():
+    """A wild alternative (an added mass that overturns the structure's) has no flutter search.
+
+    Seen in a campaign's first two speeds: the spread and the flutter speed's structure term
+    then count it as "no flutter below U_max", as the refits do, rather than raising.
+    """
+    data = releases(JONES, (0.5, 0.8), duration=6.0, fs=250.0)
+    model = e2rfc.identify(data, SECTION, n_lags=2, with_A3=True)
+    A = model.A.copy()
+    A[2] = 1e3 * np.eye(2)  # A3 1000 times the plate's: the heave and pitch inertia overturned
+    wild = e2rfc.IdentifiedModel(A, model.d, model.diagnostics)
+    with pytest.raises(flutter.StillAirModesError, match="oscillatory still-air modes"):
+        flutter.analyze(SECTION, wild)
+    with_wild = e2rfc.IdentifiedModel(model.A, model.d, dataclasses.replace(
+        model.diagnostics, alternatives=(wild,)))
+    spread = with_wild.structure_spread(SECTION)
+    assert spread.speeds[0] == pytest.approx(U_F, rel=1e-6) and spread.speeds[1] is None
+    assert spread.high == np.inf
+    uncertainty = with_wild.uncertainty(SECTION)
+    # The wild one counted at U_max: the structure term is the spread of (U_F, U_max).
+    assert uncertainty.structure == pytest.approx(
+        float(np.std([U_F, spread.U_max], ddof=1)), rel=1e-3)
 
 
 def test_a_structure_without_flutter_leaves_the_spread_open_above():
