@@ -97,7 +97,7 @@ class KeyedNoise:
         the instrument's ``clock``, whose grid runs at ``rate_hz``.
         """
         releases = np.asarray(release_times, dtype=float)
-        epoch, index = sample_keys(releases, np.asarray(t_true, dtype=float),
+        epoch, index = sample_keys(releases.tolist(), np.asarray(t_true, dtype=float),
                                    np.asarray(device_time, dtype=float),
                                    np.asarray(clock.device_time(releases)), rate_hz)  # type: ignore[arg-type]
         return self.normal(epoch, index)

@@ -63,8 +63,11 @@ def _laser(seed: int) -> tuple[SimMicroEpsilonIld1420, VirtualTunnel, ManualCloc
 
 
 def _run(seed: int, hold_s: float, step_s: float) -> dict[int, float]:
-    """Hold ``hold_s``, release, sample 2 s in steps of ``step_s``; return the noise (mm) by
-    the sample's time since the release in periods, rounded (the laser's clock is the true)."""
+    """Hold ``hold_s``, release, sample 2 s in steps of ``step_s``; return the noise after.
+
+    The noise (mm) by the sample's time since the release in periods, rounded (the laser's
+    clock is the true one).
+    """
     laser, tunnel, clock = _laser(seed)
     for _ in range(int(round(hold_s / step_s))):
         clock.advance(step_s)
