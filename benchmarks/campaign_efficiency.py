@@ -9,7 +9,9 @@ every simulated instrument's noise, ``[simulation.devices.<name>] seed``):
   U_F on these rigs, whose limits lie below flutter), then the c-optimal choice among
   candidates from 0.45 of the limit to the limit (:mod:`daq.campaign.adaptive`), target std
   <= 1 % of U_F, at most 6 speeds; each release recorded until its decay has settled
-  (``decay_end = "settled"``: down to 20 % of its first amplitude), decay_s the longest;
+  (``decay_end = "settled"``: down to 20 % of its first amplitude), decay_s the longest; one
+  release per speed, or (**adaptive, n chosen**) 1-4 releases at each chosen speed, as many as
+  the predicted gain per wind-on second says (``max_releases_per_speed = 4``);
 - **fixed 3-speed**: 0.5, 0.65 and 0.8 of the *true* flutter speed (the demo's plan, which an
   operator could only guess), 1 release per speed; while the std is still above 1 % after
   the third speed (or the safety bound stopped the plan), again with 2, then 4 releases per
@@ -203,8 +205,12 @@ def main() -> None:
                         f"candidate_step = {limit / 22:.2f}\nmax_speeds = 6\n")
             decay = DECAY_PERIODS / min(config.section.fh, config.section.fa)
             fixed = [f * truth for f in (0.5, 0.65, 0.8)]
-            cases = [("adaptive", plan_text("adaptive", [0.55 * limit, 0.75 * limit], decay,
-                                            adaptive=adaptive, decay_end="settled")),
+            first = [0.55 * limit, 0.75 * limit]
+            cases = [("adaptive", plan_text("adaptive", first, decay, adaptive=adaptive,
+                                            decay_end="settled")),
+                     ("adaptive, n chosen",
+                      plan_text("adaptive", first, decay, decay_end="settled",
+                                adaptive=adaptive + "max_releases_per_speed = 4\n")),
                      ("fixed 3-speed x1", plan_text("fixed", fixed, decay, 1))]
             for label, text in cases:
                 rows.append((name, seed, label, *run(config, text), truth))
