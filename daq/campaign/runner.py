@@ -25,6 +25,11 @@ written to ``campaign.json`` as ``stopped_because``:
 - Ctrl-C: the run file in progress is finished and kept as ``*.interrupted.h5`` (with one
   file per release, the speed's earlier files too: the speed is repeated whole on resume).
 
+Every speed gets the plan's ``releases_per_speed``, or, in adaptive mode with
+``max_releases_per_speed``, the chosen speeds as many as the choice says (it is given the wind-on
+cost of a speed: settle time, the wait for a steady wind and the last analysis, and of a
+release: hold, the mean decay recorded so far and the pause).
+
 Each release is recorded for the plan's ``decay_s`` or, with ``decay_end = "settled"``, until
 the decay monitor finds it settled (:mod:`daq.campaign.monitor`), whichever comes first.
 
