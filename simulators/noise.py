@@ -14,7 +14,10 @@ same seed thus gives the same noise on the same samples of every decay, whatever
 
 What is left to timing: where the instrument's grid falls relative to the release (a fraction
 of a sample period: the decay is sampled a little earlier or later, the noise values are the
-same), and which held samples a CALZ or a hold window averages.
+same), and which held samples a CALZ or a hold window averages. Outside the simulators, the
+release time a recording takes (the host's time of the PLC's acknowledgement, measured 2-23
+ms after the simulated magnet let go on a loaded two-core host) moves each decay's time origin
+from run to run, and E2RFC's fit with it; keyed noise does not remove that.
 
 Not responsible for: the noise level (each instrument scales the standard normals) or the
 physics (:mod:`simulators.virtual_tunnel`).
