@@ -87,6 +87,11 @@ class KeyedNoise:
         if index.size and int(index.min()) < 0:
             raise ValueError(f"sample indices must be >= 0, got {int(index.min())}")
         c_all = index // self.chunk
+        if index.size and epoch[0] == epoch[-1] and c_all[0] == c_all[-1]:
+            # One epoch, one chunk (a batch nearly always: the indices increase): no grouping.
+            e, c = int(epoch[0]), int(c_all[0])
+            if np.all(epoch == e) and np.all(c_all == c):
+                return self._chunk(e, c)[index - c * self.chunk]
         for e, c in sorted(set(zip(epoch.tolist(), c_all.tolist(), strict=True))):
             sel = (epoch == e) & (c_all == c)
             out[sel] = self._chunk(e, c)[index[sel] - c * self.chunk]
