@@ -50,6 +50,15 @@ two speeds lacks its extrapolation part (E2RFC needs a third speed to measure it
 speed does tell structures apart, which the carried parts do not count on; the best candidate
 at a speed not yet covered is chosen.
 
+Releases per speed (optional, ``release_options``): the choice is then over pairs (speed,
+number of releases ``n``), each costing the wind-on time ``overhead_s + n per_release_s`` (the
+settling and the analysis between speeds, then each release's hold, decay and pause). The
+pair with the largest predicted reduction of the reducible variance per wind-on second is
+chosen among those that gain (the stop for want of gain judges each speed at its most
+releases, so offering fewer never stops a campaign sooner). Few releases at a new top speed
+buy its extrapolation gain cheaply; many pay off where the overhead of a speed is large
+against a release. Without options every speed gets ``releases_per_speed``, as before.
+
 Safety: :func:`safety_bound` is ``fraction * (U_F - 3 std)`` of the current estimate (infinite
 without one: the first speeds are the plan's); the runner also applies the rig's limits.
 
@@ -59,6 +68,7 @@ Not responsible for: recording (:mod:`daq.campaign.runner`) or the identificatio
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -110,6 +120,8 @@ class Choice:
         ``(U_c, predicted std)`` of each candidate below the bound, m/s.
     bound : float
         The safety bound applied, m/s.
+    releases : int or None
+        Releases to record at ``speed`` (None: the plan's ``releases_per_speed``).
     """
 
     speed: float | None
@@ -117,6 +129,7 @@ class Choice:
     current_std: float
     predicted: tuple[tuple[float, float], ...]
     bound: float
+    releases: int | None = None
 
     def summary(self) -> str:
         """One line per decision, with the candidates' predictions."""
@@ -322,7 +335,8 @@ def _reach(result: flutter.FlutterResult, U: float, top: float, K_min: float, B:
 
 def choose_next(analysis: CampaignAnalysis, releases: Sequence[Release],
                 candidates: Sequence[float], *, bound: float, releases_per_speed: int,
-                decay_s: float) -> Choice:
+                decay_s: float, release_options: Sequence[int] = (),
+                overhead_s: float = 0.0, per_release_s: float | None = None) -> Choice:
     """Choose the next wind speed, or decide to stop (module docstring).
 
     Parameters
@@ -336,6 +350,12 @@ def choose_next(analysis: CampaignAnalysis, releases: Sequence[Release],
         The safety bound, m/s (:func:`safety_bound` and the rig's limits).
     releases_per_speed : int
     decay_s : float
+    release_options : sequence of int, optional
+        Numbers of releases to choose among at the next speed (empty: ``releases_per_speed``).
+    overhead_s : float
+        Wind-on time a speed costs besides its releases, s (with ``release_options``).
+    per_release_s : float, optional
+        Wind-on time of one release, s (default ``decay_s``).
 
     Returns
     -------
@@ -351,26 +371,58 @@ def choose_next(analysis: CampaignAnalysis, releases: Sequence[Release],
     if not allowed:
         return Choice(None, f"stopped: no candidate speed below the safety bound {bound:.2f} "
                       "m/s", current, (), bound)
+    options = sorted({int(n) for n in release_options}) or [releases_per_speed]
     # Ranked by the parts that differ between candidates: a large carried structure part
     # would round their differences away in the totals.
-    reducible = _reducible(analysis, releases, allowed, releases_per_speed, decay_s)
+    by_n = {n: _reducible(analysis, releases, allowed, n, decay_s) for n in options}
+    most = by_n[options[-1]]
     carried = _carried(analysis.uncertainty)
+    u = analysis.uncertainty
+    reducible_now = u.statistical**2 + u.refinement**2 + u.extrapolation**2
+    cost = {n: overhead_s + n * (decay_s if per_release_s is None else per_release_s)
+            for n in options}
+
+    def rate(i: int, n: int) -> float:
+        """Predicted reducible variance removed per wind-on second, m^2/s^3."""
+        return (reducible_now - by_n[n][i]) / max(cost[n], 1e-9)
+
+    # Each speed's number of releases: the one of the best rate there (one option: that one).
+    n_at = [max(options, key=functools.partial(rate, i)) for i in range(len(allowed))]
+    reducible = [by_n[n][i] for i, n in enumerate(n_at)]
     table = tuple((U, math.sqrt(carried**2 + v)) for U, v in zip(allowed, reducible,
                                                                  strict=True))
+    several = len(options) > 1
+
+    def said(i: int) -> str:
+        return f" with {n_at[i]} release(s)" if several else ""
+
     covered = distinct_wind_speeds([r.U for r in releases])
     new = [i for i, U in enumerate(allowed)
            if all(abs(U - c) > DISTINCT_U_RTOL * c for c in covered)]
     if len(covered) < MIN_SPEEDS and new:
-        best_U, best = table[min(new, key=lambda i: reducible[i])]
-        return Choice(best_U, f"chosen {best_U:.2f} m/s: a new speed ({len(covered)} so far, "
-                      f"{MIN_SPEEDS} needed), predicted std {best:.3f} m/s (now "
-                      f"{current:.3f} m/s)", current, table, bound)
-    i_best = int(np.argmin(reducible))
-    best_U, best = table[i_best]
-    u = analysis.uncertainty
-    reducible_now = u.statistical**2 + u.refinement**2 + u.extrapolation**2
-    if math.sqrt(reducible[i_best]) > (1.0 - MIN_GAIN) * math.sqrt(reducible_now):
+        i_new = (max(new, key=lambda i: rate(i, n_at[i])) if several
+                 else min(new, key=lambda i: reducible[i]))
+        best_U, best = table[i_new]
+        return Choice(best_U, f"chosen {best_U:.2f} m/s{said(i_new)}: a new speed "
+                      f"({len(covered)} so far, {MIN_SPEEDS} needed), predicted std {best:.3f} "
+                      f"m/s (now {current:.3f} m/s)", current, table, bound,
+                      n_at[i_new] if several else None)
+    # The stop for want of gain: judged at each speed's most releases.
+    i_most = int(np.argmin(most))
+    if math.sqrt(most[i_most]) > (1.0 - MIN_GAIN) * math.sqrt(reducible_now):
+        best_U = allowed[i_most]
+        best = math.sqrt(carried**2 + most[i_most])
         return Choice(None, f"stopped: no candidate gains (best {best_U:.2f} m/s predicts "
                       f"{best:.3f} m/s against {current:.3f} m/s now)", current, table, bound)
-    return Choice(best_U, f"chosen {best_U:.2f} m/s: predicted std {best:.3f} m/s (now "
-                  f"{current:.3f} m/s)", current, table, bound)
+    i_best = i_most
+    if several:  # the best rate among the speeds that gain at their chosen number
+        gaining = [i for i in range(len(allowed))
+                   if math.sqrt(reducible[i]) <= (1.0 - MIN_GAIN) * math.sqrt(reducible_now)]
+        if gaining:
+            i_best = max(gaining, key=lambda i: rate(i, n_at[i]))
+        else:  # only the most releases gain: take them where they gain most
+            n_at[i_most] = options[-1]
+    best_U, best = allowed[i_best], math.sqrt(carried**2 + by_n[n_at[i_best]][i_best])
+    return Choice(best_U, f"chosen {best_U:.2f} m/s{said(i_best)}: predicted std {best:.3f} "
+                  f"m/s (now {current:.3f} m/s)", current, table, bound,
+                  n_at[i_best] if several else None)

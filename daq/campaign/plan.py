@@ -30,6 +30,9 @@ The plan (units SI; the example plans are ``rig_configs/plans/*.toml``)::
     candidate_max = 11.0
     candidate_step = 0.5
     max_speeds = 6              # at most this many speeds in all (>= the listed ones)
+    max_releases_per_speed = 4  # optional: each chosen speed gets 1..4 releases, as many as
+                                # the predicted gain per wind-on second says (default: the
+                                # plan's releases_per_speed at every speed)
 
 In adaptive mode the listed speeds are the first ones (two at least: E2RFC needs two wind
 speeds before it says anything); the next are chosen by :mod:`daq.campaign.adaptive`.
@@ -80,6 +83,10 @@ class AdaptiveSettings:
         Candidate wind speeds, m/s.
     max_speeds : int
         Most wind speeds of the whole campaign.
+    max_releases_per_speed : int or None
+        With a number, each chosen speed gets 1 to this many releases, as many as the
+        predicted gain per wind-on second says (:mod:`daq.campaign.adaptive`); None: the
+        plan's ``releases_per_speed`` at every speed.
     """
 
     target_std: float
@@ -88,6 +95,12 @@ class AdaptiveSettings:
     candidate_max: float
     candidate_step: float
     max_speeds: int
+    max_releases_per_speed: int | None = None
+
+    def release_options(self) -> list[int]:
+        """Numbers of releases a chosen speed may get (empty: the plan's fixed number)."""
+        n = self.max_releases_per_speed
+        return [] if n is None else list(range(1, n + 1))
 
     def candidates(self) -> list[float]:
         """Candidate wind speeds, m/s, from ``candidate_min`` to ``candidate_max``."""
@@ -269,7 +282,8 @@ def parse_plan(text: str, source: str = "<string>") -> CampaignPlan:
             raise ConfigError(f"{where}: missing: mode = \"adaptive\" needs an [adaptive] table")
         a = data["adaptive"]
         check_keys(a, where, {"target_std", "candidate_min", "candidate_max"},
-                   {"safety_fraction", "candidate_step", "max_speeds"})
+                   {"safety_fraction", "candidate_step", "max_speeds",
+                    "max_releases_per_speed"})
         target = number(a, "target_std", where, lo=0.0, hi=0.5, lo_open=True)
         fraction = number(a, "safety_fraction", where, lo=0.0, hi=1.0, lo_open=True,
                           default=0.9)
@@ -283,7 +297,9 @@ def parse_plan(text: str, source: str = "<string>") -> CampaignPlan:
             raise ConfigError(f"{source} [speeds]: adaptive mode needs two or more distinct "
                               "first speeds (E2RFC needs two wind speeds), got "
                               f"{list(listed)}")
-        adaptive = AdaptiveSettings(target, fraction, lo, hi, step, max_speeds)
+        most = (_integer(a, "max_releases_per_speed", where, 1, MAX_RELEASES_PER_SPEED,
+                         default=1) if "max_releases_per_speed" in a else None)
+        adaptive = AdaptiveSettings(target, fraction, lo, hi, step, max_speeds, most)
     elif "adaptive" in data:
         raise ConfigError(f"{source} [adaptive]: only for mode = \"adaptive\" (mode is "
                           f"{mode!r})")

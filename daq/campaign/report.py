@@ -66,7 +66,8 @@ def report_dict(outcome: CampaignOutcome) -> dict[str, Any]:
                      "why": s.why, "flutter_speed": _number(s.flutter_speed),
                      "flutter_speed_std": _number(s.flutter_std),
                      "wind_on_s": s.wind_on_s} for s in outcome.steps],
-        "choices": [{"speed": c.speed, "reason": c.reason, "current_std": _number(c.current_std),
+        "choices": [{"speed": c.speed, "releases": c.releases, "reason": c.reason,
+                     "current_std": _number(c.current_std),
                      "bound": _number(c.bound),
                      "predicted_std": [[u, s] for u, s in c.predicted]}
                     for c in outcome.choices],

@@ -25,6 +25,11 @@ written to ``campaign.json`` as ``stopped_because``:
 - Ctrl-C: the run file in progress is finished and kept as ``*.interrupted.h5`` (with one
   file per release, the speed's earlier files too: the speed is repeated whole on resume).
 
+Every speed gets the plan's ``releases_per_speed``, or, in adaptive mode with
+``max_releases_per_speed``, the chosen speeds as many as the choice says (it is given the wind-on
+cost of a speed: settle time, the wait for a steady wind and the last analysis, and of a
+release: hold, the mean decay recorded so far and the pause).
+
 Each release is recorded for the plan's ``decay_s`` or, with ``decay_end = "settled"``, until
 the decay monitor finds it settled (:mod:`daq.campaign.monitor`), whichever comes first.
 
@@ -72,6 +77,7 @@ from ident.e2rfc import distinct_wind_speeds
 from ident.errors import IdentError
 from ident.io import RunFile, campaign_section, read_run
 from ident.modal import fit_release_modes
+from ident.release import Release
 
 __all__ = ["CHECK_FAILED", "CampaignOutcome", "SpeedStep", "run_plan"]
 
@@ -81,6 +87,9 @@ log = logging.getLogger(__name__)
 FIXED_SAFETY_FRACTION = 0.9
 #: Distinct wind speeds before an adaptive campaign may call its target met (see _loop).
 MIN_SPEEDS_FOR_TARGET = MIN_SPEEDS
+#: Wind-on seconds a new speed takes besides its settle time and analysis: the ramp and the
+#: wait for a steady wind (the adaptive choice of the releases per speed counts them).
+STEADY_OVERHEAD_S = 2.0
 #: Fan speed counted as stopped, rpm.
 STOPPED_RPM = 5.0
 #: ``stopped_because`` of a session whose device check failed (nothing was moved or recorded).
@@ -103,6 +112,9 @@ class _Session:
         self.fan_commanded = False
         self.fan_rpm = 0.0
         self.runs: list[RunFile] = []
+        #: Wind-on seconds the last analysis between speeds took (the adaptive choice counts it
+        #: in the cost of a speed).
+        self.analysis_s = 0.0
         #: Set by Ctrl-C (the runner's SIGINT handler): the actions stop at their next step.
         self.abort = threading.Event()
 
@@ -305,6 +317,7 @@ def _loop(session: _Session, outcome: CampaignOutcome) -> None:
         # candidate too: its prediction counts a repeat's gain on the statistical part only.
         held = max((s.U for s in outcome.steps if not s.resumed), default=0.0)
         bound = min(rig_limit, safety_bound(analysis, fraction, held))
+        n_releases = plan.releases_per_speed
         if k < len(listed):
             U, why = listed[k], "listed in the plan"
         elif analysis is None:  # the listed speeds gave no estimate (said above): nothing to aim at
@@ -316,13 +329,17 @@ def _loop(session: _Session, outcome: CampaignOutcome) -> None:
             assert plan.adaptive is not None
             releases = [r for run in session.runs for r in run.releases]
             choice = choose_next(analysis, releases, plan.adaptive.candidates(), bound=bound,
-                                 releases_per_speed=plan.releases_per_speed, decay_s=decay_s)
+                                 releases_per_speed=plan.releases_per_speed, decay_s=decay_s,
+                                 release_options=plan.adaptive.release_options(),
+                                 overhead_s=plan.settle_s + STEADY_OVERHEAD_S + session.analysis_s,
+                                 per_release_s=_per_release_s(releases, plan.pause_s))
             outcome.choices.append(choice)
             say(choice.summary())
             if choice.speed is None:
                 outcome.stopped_because = choice.reason
                 return
             U, why = choice.speed, choice.reason
+            n_releases = choice.releases or plan.releases_per_speed
         if U > bound + 1e-9:
             outcome.stopped_because = (
                 f"safety stop: the next speed {U:.2f} m/s is above the bound {bound:.2f} m/s "
@@ -330,9 +347,15 @@ def _loop(session: _Session, outcome: CampaignOutcome) -> None:
                 f"held so far, or the rig's limit {rig_limit:.3g} m/s); it was not set")
             say(outcome.stopped_because)
             return
-        step = _record_speed(session, outcome, k + 1, U, why, decay_s)
+        step = _record_speed(session, outcome, k + 1, U, why, decay_s, n_releases)
         if step is None:  # grown or interrupted: the reason is set
             return
+
+
+def _per_release_s(releases: list[Release], pause_s: float) -> float:
+    """Wind-on seconds one more release costs: hold, its decay as recorded so far, pause."""
+    decays = [float(r.t[-1] - r.t[0]) for r in releases]
+    return HOLD_S + (sum(decays) / len(decays) if decays else 0.0) + pause_s + 1.0
 
 
 def _say_estimate(say: Callable[[str], None], analysis: CampaignAnalysis | None) -> None:
@@ -347,11 +370,10 @@ def _say_estimate(say: Callable[[str], None], analysis: CampaignAnalysis | None)
 
 
 def _record_speed(session: _Session, outcome: CampaignOutcome, index: int, U: float, why: str,
-                  decay_s: float) -> SpeedStep | None:
-    """Record one speed (one file, or one per release); return its step, or None to stop."""
+                  decay_s: float, n: int) -> SpeedStep | None:
+    """Record one speed's ``n`` releases (one file, or one per release); its step, or None."""
     plan, config, say = session.plan, session.config, session.say
     rpm = U / config.wind_per_rpm
-    n = plan.releases_per_speed
     say(f"[speed {index}] U = {U:.2f} m/s ({rpm:.0f} rpm): {why}")
     if plan.files == "per_release":
         batches = [(session.out / run_file_name(index, U, i + 1), range(i, i + 1))
@@ -362,7 +384,7 @@ def _record_speed(session: _Session, outcome: CampaignOutcome, index: int, U: fl
     runs: list[RunFile] = []
     status = "done"
     for path, releases in batches:
-        status = _record_file(session, outcome, path, rpm, releases, decay_s,
+        status = _record_file(session, outcome, path, rpm, releases, n, decay_s,
                               f"campaign speed {index}: {why}")
         paths.append(path)
         if status == "interrupted":
@@ -405,8 +427,8 @@ def _read_recorded(path: Path, say: Callable[[str], None]) -> RunFile | None:
 
 
 def _record_file(session: _Session, outcome: CampaignOutcome, path: Path, rpm: float,
-                 releases: range, decay_s: float, notes: str) -> str:
-    """Record the releases ``releases`` (0-based, of the speed's) into one run file.
+                 releases: range, n: int, decay_s: float, notes: str) -> str:
+    """Record the releases ``releases`` (0-based, of the speed's ``n``) into one run file.
 
     The fan is set (and started) at the start of every file, so that each file's events
     hold its wind setting; from the second file of a speed on the wind is already steady.
@@ -418,7 +440,6 @@ def _record_file(session: _Session, outcome: CampaignOutcome, path: Path, rpm: f
         ``"interrupted"`` (Ctrl-C: model caught, fan stopped, the file not complete).
     """
     plan, config, say = session.plan, session.config, session.say
-    n = plan.releases_per_speed
     section = config.section
     monitor = DecayMonitor(1.0 / min(section.fh, section.fa))
     done, grown = threading.Event(), threading.Event()
@@ -496,10 +517,12 @@ def _record_file(session: _Session, outcome: CampaignOutcome, path: Path, rpm: f
 
 
 def _update(session: _Session, outcome: CampaignOutcome, step: SpeedStep) -> None:
+    started = time.monotonic()
     try:
         try:
             outcome.analysis = _analysis(session.runs)
         finally:  # the wind blows while the analysis runs: its time counts
+            session.analysis_s = time.monotonic() - started
             if session.fan_on_at is not None:
                 step.wind_on_s = outcome.wind_on_s + time.monotonic() - session.fan_on_at
     except IdentError as exc:

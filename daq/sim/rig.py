@@ -12,8 +12,9 @@ their errors, so that the calibrations undo them: the scanner puts each tap on i
 ``[lasers.calibration]`` reads along its tilted beam with the inverse gain and offset.
 
 Per-instrument simulation settings come from ``[simulation.devices.<name>]``: ``clock_offset_s``,
-``clock_drift_ppm`` and ``seed`` for every device, and any further keyword the device's simulator
-accepts (noise levels, fault options); an unknown one is a ConfigError naming it.
+``clock_drift_ppm`` and ``seed`` (with the instrument's place in the config: equal seeds give
+different instruments different noise) for every device, and any further keyword the device's
+simulator accepts (noise levels, fault options); an unknown one is a ConfigError naming it.
 """
 
 from __future__ import annotations
@@ -24,6 +25,8 @@ import logging
 import math
 from collections.abc import Callable, Mapping
 from typing import Any
+
+import numpy as np
 
 from daq.config import InstrumentConfig, RigConfig
 from daq.errors import ConfigError
@@ -210,7 +213,13 @@ def _build(inst: InstrumentConfig, tunnel: VirtualTunnel, options: Mapping[str, 
     kwargs = {k: v for k, v in options.items() if k not in _COMMON_KEYS}
     kwargs["clock"] = DeviceClock(offset_s=float(options.get("clock_offset_s", 0.0)),
                                   drift_ppm=float(options.get("clock_drift_ppm", 0.0)))
-    kwargs["rng"] = int(options.get("seed", index))
+    if "seed" in options:
+        # With the instrument's place: one seed given to every instrument (a benchmark's
+        # "seed 3") still gives each its own noise; keyed noise (simulators.noise) from equal
+        # seeds would be the same on every laser, and cancel in the pitch.
+        kwargs["rng"] = np.random.default_rng([int(options["seed"]), index])
+    else:
+        kwargs["rng"] = index
     kwargs.update(errors)
     try:
         return factory(tunnel, inst.settings, **kwargs)

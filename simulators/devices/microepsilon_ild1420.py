@@ -57,6 +57,7 @@ import numpy as np
 import numpy.typing as npt
 
 from simulators.clock import DeviceClock
+from simulators.noise import KeyedNoise, key_from
 from simulators.virtual_tunnel import VirtualTunnel
 
 __all__ = ["FATES", "SimIld1420Truth", "SimMicroEpsilonIld1420"]
@@ -229,6 +230,9 @@ class SimMicroEpsilonIld1420:
         self.counter_start = int(counter_start)
         self.clock = clock if clock is not None else DeviceClock()
         self.rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+        # The distance noise is keyed to the release and the sample (simulators.noise): a
+        # seed gives the same noise on every decay whatever the timing of the release.
+        self._noise = KeyedNoise(key_from(self.rng), 1, 4096)
         self.master_timeout_s = float(master_timeout_s)
         self.period_s = float(period_s)
         self.truth_limit = int(truth_limit)
@@ -598,7 +602,8 @@ class SimMicroEpsilonIld1420:
         if (gain, offset_mm, angle_deg) != (1.0, 0.0, 0.0):  # along the beam, uncalibrated
             distance = (distance / math.cos(math.radians(angle_deg)) - offset_mm) / gain
         if self.noise_mm > 0:
-            distance = distance + self.rng.normal(0.0, self.noise_mm, n)
+            distance = distance + self.noise_mm * self._noise.sampled(
+                self.tunnel.release_times(), t_true, tau, self.clock, self.rate_hz)[:, 0]
         code = np.zeros(n, dtype=np.int64)
         lo, hi = -0.01 * self.range_mm, 1.01 * self.range_mm
         code[distance < lo] = BEFORE_RANGE

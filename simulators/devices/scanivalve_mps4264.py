@@ -52,6 +52,7 @@ import numpy as np
 import numpy.typing as npt
 
 from simulators.clock import DeviceClock
+from simulators.noise import KeyedNoise, key_from
 from simulators.virtual_tunnel import VirtualTunnel
 
 __all__ = ["FAULTS", "FrameRuns", "SimScanivalveMps4264", "SimTruth"]
@@ -275,6 +276,9 @@ class SimScanivalveMps4264:
         self._rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
         n_ch = _CHANNELS * modules
         self._sensor_offset = self._rng.normal(0.0, sensor_offset_pa, n_ch)
+        # Pressure and temperature noise keyed to the release and the frame (simulators.noise):
+        # a seed gives the same noise on every decay whatever the timing of the release.
+        self._noise = KeyedNoise(key_from(self._rng), n_ch + _TEMPS * modules, 512)
         self._calz_offset = np.zeros(n_ch)
         self.truth = SimTruth(produced=[FrameRuns() for _ in range(modules)],
                               sent=[FrameRuns() for _ in range(modules)],
@@ -655,12 +659,13 @@ class SimScanivalveMps4264:
         t_dev = self._t0_dev + elapsed_ns.astype(np.float64) * 1e-9
         t_true = ((t_dev - self.clock.offset_s) / scale).astype(np.float64)
         p = self._truth_pressures(t_true) + self._sensor_offset - self._calz_offset
-        p += self._rng.normal(0.0, self.noise_pa, p.shape)
+        normals = self._noise.sampled(self.tunnel.release_times(), t_true, t_dev, self.clock,
+                                      self._rate_hz)
+        p += self.noise_pa * normals[:, :p.shape[1]]
         index, conversion = _UNITS[self._units]
         p_units = (p * (conversion / _PSI_PA)).astype(np.float32)
         temps = (self.tunnel.air.temperature_k - 273.15
-                 + self._rng.normal(0.0, self.temperature_noise_c, (n, _TEMPS * self.modules))
-                 ).astype(np.float32)
+                 + self.temperature_noise_c * normals[:, p.shape[1]:]).astype(np.float32)
         t_ns = self._base_ns + self._step_ns + elapsed_ns
         ext = np.full(n, -1, np.int64)
         triggers = np.asarray(self.tunnel.trigger_times(since=self._t_start))

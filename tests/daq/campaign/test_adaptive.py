@@ -253,3 +253,26 @@ def test_a_large_structure_part_does_not_stop_the_campaign_by_itself(three_speed
     stop = choose_next(analysis, releases, [0.7 * U_F], bound=math.inf, releases_per_speed=1,
                        decay_s=0.1)
     assert stop.speed is None and stop.reason.startswith("stopped: no candidate gains")
+
+
+def test_the_releases_per_speed_follow_the_gain_per_wind_on_second(two_speeds):
+    # The statistical part falls as 1 / (1 + n b) with n releases: the gain per release falls
+    # with n, so with nothing to pay per speed one release gives the most per second, and with
+    # a speed costing far more than its releases (an overhead of 10^4 s) the most releases do.
+    releases, analysis = two_speeds  # two speeds: a new one is chosen, gain or not
+    U_F = analysis.flutter_speed
+    candidates = [0.6 * U_F, 0.7 * U_F]
+    cheap, costly = (choose_next(analysis, releases, candidates, bound=math.inf,
+                                 releases_per_speed=2, decay_s=5.0,
+                                 release_options=(1, 2, 3, 4), overhead_s=overhead,
+                                 per_release_s=8.0) for overhead in (0.0, 1e4))
+    assert cheap.speed is not None and costly.speed is not None, (cheap, costly)
+    assert cheap.releases == 1 and costly.releases == 4, (cheap.reason, costly.reason)
+    assert "with 1 release(s)" in cheap.reason
+    # Without options, as before: no number chosen (the plan's), and the same speed as the
+    # ranking by predicted std alone (the new speed predicted best).
+    plain = choose_next(analysis, releases, candidates, bound=math.inf, releases_per_speed=4,
+                        decay_s=5.0)
+    assert plain.releases is None
+    assert plain.speed == min(plain.predicted, key=lambda row: row[1])[0]
+    assert costly.speed == plain.speed  # the overhead is the same at every speed

@@ -4,8 +4,9 @@ Every campaign here runs the simulated instruments in a process of their own on 
 transports (``--simulate``), records one HDF5 file per wind speed, identifies E2RFC after each
 speed and writes the report. The simulated fan ramps fast (a simulator option) and the decays
 are short (one or two releases of 4-5 s) to keep the wall time modest; the simulated tunnel is
-deterministic (smooth flow, seeded noise), and the campaigns wait on the drive's speed and on
-the decay monitor's event, never on fixed guesses of how long the rig takes.
+deterministic (smooth flow, noise keyed to the release and the sample), and the campaigns
+wait on the drive's speed and on the decay monitor's event, never on fixed guesses of how
+long the rig takes.
 """
 
 from __future__ import annotations
@@ -62,15 +63,16 @@ def _fan_set_points(path: Path) -> list[float]:
 def test_adaptive_campaign_reaches_its_target_near_the_truth(tmp_path, capsys):
     config = tmp_path / "rig.toml"
     config.write_text(RIG_TEXT + FAST_FAN)
-    # The example plan with a 2 % target. The noise is seeded, but which of its samples fall
-    # on a decay depends on when the release happens (the simulated instruments sample in real
-    # time, and the analysis between speeds takes as long as the machine lets it), so no two
-    # campaigns see the same noise. The test asserts what held for every realisation seen:
-    # the target met (20 campaigns aiming at 1.5 % stopped at 0.67-1.61 %; the one at 1.61 %
-    # for want of gain: its extrapolation part carried, no speed above its top one allowed),
-    # each choice the best of its prediction, and the estimate within 3 std of the truth (2 std,
-    # the issue's words, fails one campaign in twenty even with an exact std: 12 of these gave
-    # |error| / std of 0.03-1.08 and one 2.48; the benchmark's error column covers the claim).
+    # The example plan with a 2 % target, on the shipped rig with its instruments' default
+    # seeds. The simulated instruments key their noise to the release and the sample after it
+    # (simulators.noise), so every campaign of this seed sees the same noise on its decays;
+    # what still moves from run to run is each decay's time origin (the release time the DAQ
+    # records is the host's time of the PLC's acknowledgement, 3-20 ms after the magnet let
+    # go on a loaded host), and with it the fit a little. Measured (campaign_efficiency.py
+    # --hil-check): five campaigns of this seed gave U_F = 11.819-11.858 m/s, std 0.127-0.151
+    # (1.07-1.28 %), |U_F - truth| / std 0.001-0.20, all with 3-4 speeds: far inside 2 std.
+    # The seed is not a lucky one: seeds 1-8 run the same way all met the target, within
+    # 0.09-0.75 std of the truth (8 of 8; about 95 % is what an exact std would give).
     plan = tmp_path / "plan.toml"
     text = (REPO / "rig_configs" / "plans" / "adaptive.toml").read_text()
     assert "target_std = 0.01 " in text and 'decay_end = "settled"' in text
@@ -86,7 +88,7 @@ def test_adaptive_campaign_reaches_its_target_near_the_truth(tmp_path, capsys):
     assert report["stopped_because"].startswith("target met"), printed
     U_F, std = report["flutter_speed"], report["flutter_speed_std"]
     assert std <= 0.02 * U_F
-    assert abs(U_F - truth) <= 3 * std, printed
+    assert abs(U_F - truth) <= 2 * std, printed
     # The first two speeds are the plan's; the later ones chosen below the safety bound: a new
     # speed while fewer than three are covered (the best predicted of those), then the best.
     speeds = report["speeds"]

@@ -63,6 +63,9 @@ def test_defaults_and_candidates():
     assert plan.adaptive is not None
     assert plan.adaptive.safety_fraction == 0.9
     assert len(plan.adaptive.candidates()) == 13
+    assert plan.adaptive.release_options() == []  # the plan's releases_per_speed everywhere
+    chosen = parse_plan(ADAPTIVE + "max_releases_per_speed = 3\n").adaptive
+    assert chosen is not None and chosen.release_options() == [1, 2, 3]
 
 
 def test_fan_set_points_become_wind_speeds():
@@ -102,6 +105,8 @@ def test_fixed_plan_errors_name_the_key(old, new, match):
     ("wind_speeds = [5.0, 7.0]", "wind_speeds = [5.0]", r"two or more distinct first speeds"),
     ("target_std = 0.01", "target_std = 0.01\nmax_speeds = 1",
      r"max_speeds = 1 must be an integer in \[2, 50\]"),
+    ("target_std = 0.01", "target_std = 0.01\nmax_releases_per_speed = 0",
+     r"\[adaptive\] max_releases_per_speed = 0 must be an integer in \[1, 20\]"),
 ])
 def test_adaptive_plan_errors_name_the_key(old, new, match):
     assert old in ADAPTIVE
