@@ -12,8 +12,8 @@ times it (in heave the wind's own damping is 10 to 35 times the structural one, 
 drag hides in it), a spring 5 % stiffer at the release amplitude, a centre of mass 5 mm off
 the axis, 10 ms of pressure tubing, a shedding lift coefficient of 0.05, a few per cent of
 laser crosstalk, a floor shaking at 6 Hz with 10 milli-g (a heave motion of about 4 % of the
-decays' RMS), aerodynamic damping that changes by a quarter (heave) to a half (pitch) between
-the release amplitude and small amplitudes, and the tubing of 2 m tubes of 0.8 mm bore into
+decays' RMS), aerodynamic damping that grows by 40 % (heave) to 75 % (pitch) from small amplitudes
+to the release amplitude, and the tubing of 2 m tubes of 0.8 mm bore into
 50 mm^3 transducer volumes (Bergh-Tijdeman: as a second-order low-pass 16.9 Hz with damping
 0.99, :meth:`ident.effects.TubingDistortion.from_tube`; 5 % gain loss at 4 Hz, 18 ms lag).
 
@@ -67,7 +67,7 @@ REALISTIC: dict[str, Effect] = {
     "static_unbalance": StaticUnbalance(S=0.015),
     "sensor_crosstalk": SensorCrosstalk(h_from_alpha=0.003, alpha_from_h=0.3),
     "base_vibration": BaseVibration(frequency_hz=6.0, accel=0.1, phase=0.3),
-    "aerodynamic_nonlinearity": AerodynamicNonlinearity(e_h=-2.0, e_a=-0.1),
+    "aerodynamic_nonlinearity": AerodynamicNonlinearity(e_h=-3.0, e_a=-0.15),
     "tubing_distortion": TubingDistortion(frequency_hz=17.0, damping=1.0),
 }
 
