@@ -10,16 +10,18 @@ aerodynamics, identified by E2RFC unless given) with the releases it came from:
 2. **Forward selection** (:mod:`ident.effect_selection`): the named effects
    (``docs/conventions.md``, "Named effects") are fitted to the data as physical terms with
    their own parameters (:mod:`ident._equation_error`: the residual of the structural equation
-   for most, the forces' line above the motion's band for vortex shedding) and scored by the
+   for most, the forces' line above the motion's band for vortex shedding;
+   :mod:`ident._force_fit`: the force equation for the aerodynamic nonlinearity, which the
+   taps measure) and scored by the
    held-out fraction of that
    residual they explain. The best is added if it is clearly supported (``NONE_RATIO``,
    ``MIN_SIGMAS``) *and* the simulated gap shrinks; then the next one is scored jointly with
    those chosen, and so on. Nothing clearly supported: the answer is None (no false alarms).
 3. **Refit and gap after each step**: the effects are added to the model (a measurement effect
-   is taken out of the data and the aerodynamic model identified again, its structure chosen
-   again; a structural one joins the structure; vortex forcing is taken out of the forces
-   before E2RFC and added to each release's simulated forces), every release is simulated
-   again, and the gap measured the same way.
+   (or a named aerodynamic nonlinearity's force) is taken out of the data and the aerodynamic
+   model identified again, its structure chosen again; a structural one joins the structure;
+   vortex forcing is taken out of the forces before E2RFC and added to each release's
+   simulated forces), every release is simulated again, and the gap measured the same way.
 4. **Honesty** (:mod:`ident.residual_check`): what is left of measured minus simulated is
    checked for a systematic part (beyond the white measurement noise); if there is one, the
    report is not ``explained`` and says where it is (channel, frequency, amplitudes, wind

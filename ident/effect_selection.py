@@ -8,10 +8,14 @@ at a time, in rounds:
    :mod:`ident._equation_error`, so the joint fit is one least-squares problem) and scored by its
    held-out residual relative to that of the chosen effects alone (the same chunks, paired).
    Vortex shedding has a residual of its own (the forces above the motion's band), so its score
-   does not change from round to round.
+   does not change from round to round; the aerodynamic nonlinearity has the force equation
+   (:mod:`ident._force_fit`), scored each round on the data with the measurement effects found
+   so far taken out.
 2. **Clear?** A candidate qualifies if it leaves at most ``NONE_RATIO`` of the held-out residual
    and its improvement is ``MIN_SIGMAS`` standard errors clear of nothing (a base vibration
-   also needs a line that stands out, :data:`ident._base_fit.MIN_PROMINENCE`).
+   also needs a line that stands out, :data:`ident._base_fit.MIN_PROMINENCE`; a candidate that
+   contains another, a tube containing a delay, must be clear of that one fitted exactly; and
+   the parameters must be in range, a tube needs a resonance).
 3. **Gap**: the best qualifying candidate is added: all chosen effects take the joint fit's
    parameters, the measurement effects are taken out of the data, the aerodynamic model is
    identified again by E2RFC (when the data changed), every release is simulated again and the

@@ -129,6 +129,8 @@ PAIRS = [
     ("coulomb_friction", "cubic_stiffness"),
     ("channel_delay", "sensor_crosstalk"),
     ("quadratic_damping", "vortex_shedding"),
+    ("aerodynamic_nonlinearity", "coulomb_friction"),  # the air's and the suspension's damping
+    ("tubing_distortion", "cubic_stiffness"),
 ]
 
 
