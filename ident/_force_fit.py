@@ -75,7 +75,7 @@ class ForceProblem:
     n_shared : int
         Number of ``A_k`` columns (the first of :attr:`linear`).
     with_A3 : bool
-        Whether ``A3`` is fitted (as in the given model).
+        Whether ``A3`` is fitted (always, see :func:`force_problem`).
     """
 
     y: list[FloatArray]
@@ -124,7 +124,9 @@ def force_problem(signals: Sequence[DecaySignals], section: SectionModel,
     A = np.asarray(model.A, dtype=float)
     if A.shape[-1] != 2:
         raise ValueError("the force equation is for two-degree-of-freedom models")
-    with_A3 = bool(np.any(A[2] != 0.0))
+    # A3 always: E2RFC may leave it out of a model fitted to data with the nonlinearity in,
+    # and without it the linear part cannot follow the forces (e came out 9 % low).
+    with_A3 = True
     B = section.B
     f = [sig.f for sig in signals]
     scale = np.sqrt(np.mean(np.vstack(f) ** 2, axis=0))
@@ -178,3 +180,4 @@ def fit_aerodynamic(problem: ForceProblem) -> AerodynamicFit:
                                  held_out_sse(problem.y, joint, problem.chunks), chunk_id)
     return AerodynamicFit(e=fit.theta[-2:], e_std=fit.std[-2:], cv_ratio=ratio,
                           cv_ratio_se=se)
+
