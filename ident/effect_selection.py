@@ -25,6 +25,11 @@ at a time, in rounds:
 So an effect whose addition does not clearly reduce the held-out residual is never named, and
 the gap after each step is smaller than before it.
 
+Longer than 600 lines: the selection loop, the joint fits of the candidates it scores, the
+corrections that take the named measurement effects out of the data, and the simulation of
+each trial model share one state (the fitted parameters of every named effect, the shedding
+and floor lines); split apart, every part would pass all of it back and forth.
+
 Not responsible for: the report, the whiteness and location of what is left
 (:mod:`ident.discrepancy`, :mod:`ident.residual_check`).
 """

@@ -136,7 +136,7 @@ PAIRS = [
     ("channel_delay", "sensor_crosstalk"),
     ("quadratic_damping", "vortex_shedding"),
     ("aerodynamic_nonlinearity", "coulomb_friction"),  # the air's and the suspension's damping
-    ("tubing_distortion", "cubic_stiffness"),
+    ("tubing_distortion", "quadratic_damping"),
 ]
 
 
