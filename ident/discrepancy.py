@@ -93,7 +93,9 @@ class DiscrepancyReport:
     rounds : tuple of tuple of CandidateEvidence
         Every round of the forward selection (:mod:`ident.effect_selection`), best first.
     runner_up : str or None
-        The second-best candidate of the first round.
+        The best candidate of the first round other than the effect named first (nothing
+        named: the second best; a richer candidate rejected for containing the chosen one,
+        a tube beside a delay, can be it).
     baseline : RationalFunctionModel
         The aerodynamic model of the baseline.
     refitted : RationalFunctionModel
@@ -252,11 +254,20 @@ def diagnose(releases: Sequence[Release], section: SectionModel,
         effect=chosen.steps[0].name if chosen.steps else None, parameters=parameters,
         uncertainty=uncertainty, gap_before=gap_before, gap_after=chosen.gap,
         gap_per_release=per_release, evidence=first, rounds=chosen.rounds,
-        runner_up=first[1].effect if len(first) > 1 else None, baseline=baseline,
+        runner_up=_runner_up(first, chosen.steps[0].name if chosen.steps else None),
+        baseline=baseline,
         refitted=chosen.model, section=section, effects=chosen.steps, physics=chosen.physics,
         simulated_before=tuple(before), simulated_after=tuple(after),
         whiteness_before=whiteness(measured, before), whiteness_after=whiteness(measured, after),
         explained=not findings, unexplained=findings, zero_wind_coupling=coupling)
+
+
+def _runner_up(first: Sequence[CandidateEvidence], named: str | None) -> str | None:
+    """Return the best first-round candidate other than ``named`` (None named: the second)."""
+    others = [ev.effect for ev in first if ev.effect != named]
+    if named is None:
+        return first[1].effect if len(first) > 1 else None
+    return others[0] if others else None
 
 
 @dataclass(frozen=True)
