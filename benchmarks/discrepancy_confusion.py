@@ -7,7 +7,8 @@ diagnosed by :func:`ident.discrepancy.diagnose` (E2RFC baseline). Printed: the c
 the median gap before and after, the median and worst parameter error of the correctly named
 cases, how often the zero-wind coupling look (:mod:`ident.coupling`) found in-phase coupling in
 both modes, the time per campaign. Targets (issue 7): >= 95 % named correctly, no false alarm on
-clean data.
+clean data. The rows cover every effect of :data:`ident.effects.EFFECT_NAMES` (ten since issue
+20 added ``aerodynamic_nonlinearity`` and ``tubing_distortion``).
 
 Then (issue 20) pairs of effects that occur together, ``--pair-seeds`` campaigns each: a pair is
 *fully right* when exactly its two effects are named and every strength parameter is within
@@ -38,7 +39,8 @@ from simulators.campaigns import _STRENGTHS, REALISTIC, SECTION, scaled, simulat
 
 DEPTH = 0.03  # m, the flat plate's depth (the vortex effect's)
 
-#: Pairs that occur together on one rig (tests/ident/test_discrepancy.py has six of them).
+#: Pairs that occur together on one rig (tests/ident/test_discrepancy.py has eight of them);
+#: the last four with the effects added by issue 20 (an aerodynamic nonlinearity, tubing).
 PAIRS = [
     ("coulomb_friction", "channel_delay"),
     ("quadratic_damping", "sensor_crosstalk"),
@@ -49,6 +51,10 @@ PAIRS = [
     ("static_unbalance", "channel_delay"),
     ("base_vibration", "coulomb_friction"),
     ("base_vibration", "channel_delay"),
+    ("aerodynamic_nonlinearity", "coulomb_friction"),
+    ("aerodynamic_nonlinearity", "static_unbalance"),
+    ("tubing_distortion", "cubic_stiffness"),
+    ("tubing_distortion", "quadratic_damping"),
 ]
 
 #: Effects outside the library, applied to a clean campaign's releases: a laser whose zero

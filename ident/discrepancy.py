@@ -10,16 +10,18 @@ aerodynamics, identified by E2RFC unless given) with the releases it came from:
 2. **Forward selection** (:mod:`ident.effect_selection`): the named effects
    (``docs/conventions.md``, "Named effects") are fitted to the data as physical terms with
    their own parameters (:mod:`ident._equation_error`: the residual of the structural equation
-   for most, the forces' line above the motion's band for vortex shedding) and scored by the
+   for most, the forces' line above the motion's band for vortex shedding;
+   :mod:`ident._force_fit`: the force equation for the aerodynamic nonlinearity, which the
+   taps measure) and scored by the
    held-out fraction of that
    residual they explain. The best is added if it is clearly supported (``NONE_RATIO``,
    ``MIN_SIGMAS``) *and* the simulated gap shrinks; then the next one is scored jointly with
    those chosen, and so on. Nothing clearly supported: the answer is None (no false alarms).
 3. **Refit and gap after each step**: the effects are added to the model (a measurement effect
-   is taken out of the data and the aerodynamic model identified again, its structure chosen
-   again; a structural one joins the structure; vortex forcing is taken out of the forces
-   before E2RFC and added to each release's simulated forces), every release is simulated
-   again, and the gap measured the same way.
+   (or a named aerodynamic nonlinearity's force) is taken out of the data and the aerodynamic
+   model identified again, its structure chosen again; a structural one joins the structure;
+   vortex forcing is taken out of the forces before E2RFC and added to each release's
+   simulated forces), every release is simulated again, and the gap measured the same way.
 4. **Honesty** (:mod:`ident.residual_check`): what is left of measured minus simulated is
    checked for a systematic part (beyond the white measurement noise); if there is one, the
    report is not ``explained`` and says where it is (channel, frequency, amplitudes, wind
@@ -91,7 +93,9 @@ class DiscrepancyReport:
     rounds : tuple of tuple of CandidateEvidence
         Every round of the forward selection (:mod:`ident.effect_selection`), best first.
     runner_up : str or None
-        The second-best candidate of the first round.
+        The best candidate of the first round other than the effect named first (nothing
+        named: the second best; a richer candidate rejected for containing the chosen one,
+        a tube beside a delay, can be it).
     baseline : RationalFunctionModel
         The aerodynamic model of the baseline.
     refitted : RationalFunctionModel
@@ -250,11 +254,20 @@ def diagnose(releases: Sequence[Release], section: SectionModel,
         effect=chosen.steps[0].name if chosen.steps else None, parameters=parameters,
         uncertainty=uncertainty, gap_before=gap_before, gap_after=chosen.gap,
         gap_per_release=per_release, evidence=first, rounds=chosen.rounds,
-        runner_up=first[1].effect if len(first) > 1 else None, baseline=baseline,
+        runner_up=_runner_up(first, chosen.steps[0].name if chosen.steps else None),
+        baseline=baseline,
         refitted=chosen.model, section=section, effects=chosen.steps, physics=chosen.physics,
         simulated_before=tuple(before), simulated_after=tuple(after),
         whiteness_before=whiteness(measured, before), whiteness_after=whiteness(measured, after),
         explained=not findings, unexplained=findings, zero_wind_coupling=coupling)
+
+
+def _runner_up(first: Sequence[CandidateEvidence], named: str | None) -> str | None:
+    """Return the best first-round candidate other than ``named`` (None named: the second)."""
+    others = [ev.effect for ev in first if ev.effect != named]
+    if named is None:
+        return first[1].effect if len(first) > 1 else None
+    return others[0] if others else None
 
 
 @dataclass(frozen=True)

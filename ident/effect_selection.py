@@ -8,10 +8,14 @@ at a time, in rounds:
    :mod:`ident._equation_error`, so the joint fit is one least-squares problem) and scored by its
    held-out residual relative to that of the chosen effects alone (the same chunks, paired).
    Vortex shedding has a residual of its own (the forces above the motion's band), so its score
-   does not change from round to round.
+   does not change from round to round; the aerodynamic nonlinearity has the force equation
+   (:mod:`ident._force_fit`), scored each round on the data with the measurement effects found
+   so far taken out.
 2. **Clear?** A candidate qualifies if it leaves at most ``NONE_RATIO`` of the held-out residual
    and its improvement is ``MIN_SIGMAS`` standard errors clear of nothing (a base vibration
-   also needs a line that stands out, :data:`ident._base_fit.MIN_PROMINENCE`).
+   also needs a line that stands out, :data:`ident._base_fit.MIN_PROMINENCE`; a candidate that
+   contains another, a tube containing a delay, must be clear of that one fitted exactly; and
+   the parameters must be in range, a tube needs a resonance).
 3. **Gap**: the best qualifying candidate is added: all chosen effects take the joint fit's
    parameters, the measurement effects are taken out of the data, the aerodynamic model is
    identified again by E2RFC (when the data changed), every release is simulated again and the
@@ -20,6 +24,11 @@ at a time, in rounds:
 
 So an effect whose addition does not clearly reduce the held-out residual is never named, and
 the gap after each step is smaller than before it.
+
+Longer than 600 lines: the selection loop, the joint fits of the candidates it scores, the
+corrections that take the named measurement effects out of the data, and the simulation of
+each trial model share one state (the fitted parameters of every named effect, the shedding
+and floor lines); split apart, every part would pass all of it back and forth.
 
 Not responsible for: the report, the whiteness and location of what is left
 (:mod:`ident.discrepancy`, :mod:`ident.residual_check`).
@@ -35,7 +44,7 @@ from typing import NamedTuple
 import numpy as np
 import numpy.typing as npt
 
-from ident import e2rfc
+from ident import e2rfc, tubing
 from ident._base_fit import (
     MIN_PROMINENCE,
     BaseLine,
@@ -57,7 +66,9 @@ from ident._equation_error import (
     held_out_sse,
     structural_problem,
 )
+from ident._force_fit import AerodynamicFit, fit_aerodynamic, force_problem
 from ident.effects import (
+    AerodynamicNonlinearity,
     BaseVibration,
     ChannelDelay,
     CoulombFriction,
@@ -66,6 +77,7 @@ from ident.effects import (
     QuadraticDamping,
     SensorCrosstalk,
     StaticUnbalance,
+    TubingDistortion,
     VortexShedding,
 )
 from ident.release import Release
@@ -88,6 +100,11 @@ MAX_EFFECTS = 4
 _START_SAMPLES = 20
 _VORTEX = "vortex_shedding"
 _BASE = "base_vibration"
+_AERO = "aerodynamic_nonlinearity"
+_TUBING = "tubing_distortion"
+#: A candidate that contains another (a second-order tube far below its resonance is a delay)
+#: must also be clear of it, in the same round, to be chosen.
+_CONTAINS = {_TUBING: "channel_delay"}
 #: Quality factor of the notch that takes a base vibration's line out before E2RFC (a
 #: bandwidth of f / Q: 0.5 Hz at 5 Hz, narrow beside the modes' distance from it).
 _NOTCH_Q = 10.0
@@ -95,6 +112,8 @@ _UNITS = {spec.name: dict(zip(spec.parameters, spec.units, strict=True))
           for spec in STRUCTURAL_CANDIDATES}
 _UNITS[_VORTEX] = {"strouhal": "1", "cl": "1", "cm": "1", "phase": "rad"}
 _UNITS[_BASE] = {"frequency_hz": "Hz", "accel": "m/s^2", "phase": "rad"}
+_UNITS[_AERO] = {"e_h": "1", "e_a": "1"}
+_UNITS[_TUBING] = {"frequency_hz": "Hz", "damping": "1"}
 
 
 @dataclass(frozen=True)
@@ -225,16 +244,20 @@ def select(releases: Sequence[Release], section: SectionModel, baseline: Rationa
     params: Params = {}
     line = _find_line(_problem(releases, section, params, vortex, None), releases, section)
     problem = _problem(releases, section, params, vortex, line)
-    remaining = [spec.name for spec in STRUCTURAL_CANDIDATES] + [_BASE, _VORTEX]
+    remaining = [spec.name for spec in STRUCTURAL_CANDIDATES] + [_BASE, _VORTEX, _AERO]
     state: State = (baseline, (), tuple(before), gap(measured, before))
     rounds: list[tuple[CandidateEvidence, ...]] = []
     while remaining and len(chosen) < MAX_EFFECTS:
         chunk_id, _ = chunk_ids(problem.y, problem.chunks)
         current = held_out_sse(problem.y, problem.design(_structural(chosen)), problem.chunks)
+        aero = _aerodynamic(releases, section, params, vortex, baseline)
         scored = []
         for name in remaining:
             if name == _VORTEX:
                 scored.append((name, vortex.fit.cv_ratio, vortex.fit.cv_ratio_se))
+                continue
+            if name == _AERO:
+                scored.append((name, aero.cv_ratio, aero.cv_ratio_se))
                 continue
             sse = held_out_sse(problem.y, problem.design(_structural([*chosen, name])),
                                problem.chunks)
@@ -255,9 +278,19 @@ def select(releases: Sequence[Release], section: SectionModel, baseline: Rationa
                 verdicts[name] = (f"rejected: no line stands out in the heave residual (peak "
                                   f"{line.prominence:.3g} x the median, needs "
                                   f"{MIN_PROMINENCE:g})")
+            elif (name in _CONTAINS and _CONTAINS[name] in remaining
+                  and not _clear(*(beyond := _beyond(releases, section, vortex, line, chosen,
+                                                     _CONTAINS[name], name, depth, aero)))):
+                verdicts[name] = (f"rejected: not clear of {_CONTAINS[name]}, which it "
+                                  f"contains ({beyond[0]:.4f} +- {beyond[1]:.4f} of the "
+                                  f"held-out residual with {_CONTAINS[name]} taken out)")
             else:
                 trial_params, trial_problem = _joint(releases, section, vortex, line,
-                                                     [*chosen, name], depth)
+                                                     [*chosen, name], depth, aero)
+                if not all(math.isfinite(x) for x in trial_params[name].values.values()):
+                    verdicts[name] = "rejected: its fitted parameters are outside their range"
+                    remaining.remove(name)
+                    continue
                 trial = _apply(releases, section, baseline, trial_params, vortex, depth)
                 if trial[3] < state[3]:
                     accepted = (name, ratio, se, trial, trial_params, trial_problem)
@@ -269,7 +302,7 @@ def select(releases: Sequence[Release], section: SectionModel, baseline: Rationa
                     remaining.remove(name)
         # Each candidate's parameters as scored: one pass on this round's data, jointly with
         # the effects chosen (a chosen measurement effect's columns fit what is left of it).
-        seen = {name: _unpack(problem, vortex, line, [*chosen, name], depth, params)[name]
+        seen = {name: _unpack(problem, vortex, line, [*chosen, name], depth, params, aero)[name]
                 for name, *_ in scored}
         rounds.append(tuple(
             CandidateEvidence(effect=name, parameters=seen[name].values, std=seen[name].std,
@@ -293,7 +326,32 @@ def select(releases: Sequence[Release], section: SectionModel, baseline: Rationa
 
 
 def _structural(names: Sequence[str]) -> list[str]:
-    return [n for n in names if n != _VORTEX]
+    return [n for n in names if n not in (_VORTEX, _AERO)]
+
+
+def _beyond(releases: list[Release], section: SectionModel, vortex: VortexFit, line: BaseLine,
+            chosen: Sequence[str], simpler: str, richer: str, depth: float,
+            aero: AerodynamicFit) -> tuple[float, float]:
+    """Held-out ratio (and its standard error) of ``richer`` beyond ``simpler``, which it contains.
+
+    ``simpler`` is fitted with the effects chosen (a measurement effect exactly, taken out of
+    the data: a delay's linear column alone misses its second-order term, which a tube's
+    columns would take for a tube); then ``richer`` is scored against that.
+    """
+    _, problem = _joint(releases, section, vortex, line, [*chosen, simpler], depth, aero)
+    ids, _ = chunk_ids(problem.y, problem.chunks)
+    base = _structural([*chosen, simpler])
+    return compare_held_out(held_out_sse(problem.y, problem.design(base), problem.chunks),
+                            held_out_sse(problem.y, problem.design([*base, richer]),
+                                         problem.chunks), ids)
+
+
+def _aerodynamic(releases: list[Release], section: SectionModel, params: Params,
+                 vortex: VortexFit, model: RationalFunctionModel) -> AerodynamicFit:
+    """Fit the aerodynamic-nonlinearity candidate on the data, measurement effects taken out."""
+    corrected = _correct(releases, section, params, vortex, notch=True, untube=True)
+    signals = [decay_signals(r, section) for r in corrected]
+    return fit_aerodynamic(force_problem(signals, section, model))
 
 
 def _clear(ratio: float, se: float) -> bool:
@@ -342,8 +400,8 @@ def _find_line(problem: StructuralProblem, releases: list[Release],
 
 
 def _joint(releases: list[Release], section: SectionModel, vortex: VortexFit,
-           line: BaseLine, names: Sequence[str],
-           depth: float) -> tuple[Params, StructuralProblem]:
+           line: BaseLine, names: Sequence[str], depth: float,
+           aero: AerodynamicFit) -> tuple[Params, StructuralProblem]:
     """Fit the effects ``names`` jointly; return their parameters and the corrected problem.
 
     A delay and a crosstalk enter the equation error to first order only (``tau f'``); fitted
@@ -356,7 +414,7 @@ def _joint(releases: list[Release], section: SectionModel, vortex: VortexFit,
     measurement = {"channel_delay", "sensor_crosstalk"} & set(names)
     for _ in range(_PASSES if measurement else 1):
         problem = _problem(releases, section, params, vortex, line)
-        new = _unpack(problem, vortex, line, names, depth, params)
+        new = _unpack(problem, vortex, line, names, depth, params, aero)
         step = max((abs(new[n].values[k] - params[n].values[k]) / max(new[n].std[k], 1e-300)
                     for n in measurement if n in params for k in new[n].values),
                    default=math.inf)
@@ -368,7 +426,8 @@ def _joint(releases: list[Release], section: SectionModel, vortex: VortexFit,
 
 
 def _unpack(problem: StructuralProblem, vortex: VortexFit, line: BaseLine,
-            names: Sequence[str], depth: float, totals: Params) -> Params:
+            names: Sequence[str], depth: float, totals: Params,
+            aero: AerodynamicFit) -> Params:
     """One joint least-squares pass on ``problem``; measurement effects add to ``totals``."""
     out: Params = {}
     structural = _structural(names)
@@ -383,18 +442,42 @@ def _unpack(problem: StructuralProblem, vortex: VortexFit, line: BaseLine,
                 i += n
                 continue
             p = specs[name].parameters
+            if name == _TUBING:
+                out[name] = _tubing_params(fit.theta[i:i + 2], fit.std[i:i + 2])
+                i += 2
+                continue
             value = {k: float(x) for k, x in zip(p, fit.theta[i:i + len(p)], strict=True)}
             if name in totals and name in ("channel_delay", "sensor_crosstalk"):
                 value = {k: x + totals[name].values[k] for k, x in value.items()}
             out[name] = Fitted(value, {k: float(x) for k, x in zip(p, fit.std[i:i + len(p)],
                                                                     strict=True)})
             i += len(p)
+    if _AERO in names:
+        out[_AERO] = Fitted({"e_h": float(aero.e[0]), "e_a": float(aero.e[1])},
+                            {"e_h": float(aero.e_std[0]), "e_a": float(aero.e_std[1])})
     if _VORTEX in names:
         out[_VORTEX] = Fitted({"strouhal": vortex.k * depth, "cl": vortex.cl, "cm": vortex.cm,
                                "phase": vortex.phase},
                               {"strouhal": vortex.k_std * depth, "cl": vortex.cl_std,
                                "cm": vortex.cm_std, "phase": math.nan})
     return out
+
+
+def _tubing_params(theta: FloatArray, std: FloatArray) -> Fitted:
+    """Return the second-order tube of ``1 / H = 1 + a1 s + a2 s^2`` and its uncertainty.
+
+    ``w = 1 / sqrt(a2)``, ``damping = a1 w / 2``; without a resonance (``a2 <= 0`` or
+    ``a1 <= 0``) the values are NaN (the candidate is then rejected).
+    """
+    a1, a2 = float(theta[0]), float(theta[1])
+    if a1 <= 0.0 or a2 <= 0.0:
+        nan = {"frequency_hz": math.nan, "damping": math.nan}
+        return Fitted(nan, dict(nan))
+    wn = 1.0 / math.sqrt(a2)
+    rel_a2 = 0.5 * float(std[1]) / a2  # w and a2^(-1/2): half the relative error
+    return Fitted({"frequency_hz": wn / (2 * math.pi), "damping": 0.5 * a1 * wn},
+                  {"frequency_hz": rel_a2 * wn / (2 * math.pi),
+                   "damping": 0.5 * a1 * wn * math.hypot(float(std[0]) / a1, rel_a2)})
 
 
 def _base_params(line: BaseLine, theta: FloatArray, std: FloatArray) -> Fitted:
@@ -426,6 +509,10 @@ def _effects(params: Params, vortex: VortexFit, depth: float) -> list[Effect]:
         elif name == "sensor_crosstalk":
             out.append(SensorCrosstalk(h_from_alpha=p["h_from_alpha"],
                                        alpha_from_h=p["alpha_from_h"]))
+        elif name == _TUBING:
+            out.append(TubingDistortion(frequency_hz=p["frequency_hz"], damping=p["damping"]))
+        elif name == _AERO:
+            out.append(AerodynamicNonlinearity(e_h=p["e_h"], e_a=p["e_a"]))
         elif name == _BASE:
             out.append(BaseVibration(frequency_hz=p["frequency_hz"], accel=abs(p["accel"]),
                                      phase=p["phase"]))
@@ -438,11 +525,12 @@ def _effects(params: Params, vortex: VortexFit, depth: float) -> list[Effect]:
 
 
 def _correct(releases: list[Release], section: SectionModel, params: Params,
-             vortex: VortexFit, *, notch: bool = False) -> list[Release]:
+             vortex: VortexFit, *, notch: bool = False, untube: bool = False) -> list[Release]:
     """Take the measurement effects (and the shedding lines) out of the releases.
 
     With ``notch``, a base vibration's line too (for E2RFC; the equation error keeps it, its
-    columns fit it there).
+    columns fit it there); with ``untube``, the tubing (for E2RFC and the force equation; the
+    structural equation keeps it: its columns are exact for it).
     """
     corrected = list(releases)
     # In the reverse of the order they happened: the shedding line is in the recorded forces
@@ -451,6 +539,10 @@ def _correct(releases: list[Release], section: SectionModel, params: Params,
         corrected = [_remove_vortex(r, section, vortex, i) for i, r in enumerate(corrected)]
     if notch and _BASE in params:
         corrected = [_notch(r, params[_BASE].values["frequency_hz"]) for r in corrected]
+    if untube and _TUBING in params:
+        p = params[_TUBING].values
+        corrected = [_untube(r, TubingDistortion(frequency_hz=p["frequency_hz"],
+                                                 damping=p["damping"])) for r in corrected]
     if "channel_delay" in params:
         delay = max(params["channel_delay"].values["delay_s"], 0.0)
         corrected = [_advance_forces(r, delay) for r in corrected]
@@ -468,15 +560,20 @@ def _apply(releases: list[Release], section: SectionModel, baseline: RationalFun
            params: Params, vortex: VortexFit, depth: float) -> State:
     """Add the effects to the model, identify again where the data change, simulate, gap."""
     effects = _effects(params, vortex, depth)
-    changed = bool({_VORTEX, _BASE, "channel_delay", "sensor_crosstalk"} & set(params))
+    changed = bool({_VORTEX, _BASE, "channel_delay", "sensor_crosstalk", _TUBING} & set(params))
     # E2RFC chooses the structure again: contaminated data can make it choose another one (a
     # shedding line cost a lag: the refit kept at the baseline's structure stayed 4x the noise
     # away from the measurements, re-chosen it is at the noise). The structural effects do not
     # change the measured forces, hence not E2RFC's model; a base vibration does: its forced
     # motion near a mode biased E2RFC (the gap stayed at 2.6 times the noise with the floor's
     # parameters right within 1 %), so its line is notched out of all four channels first.
-    model = (e2rfc.identify(_correct(releases, section, params, vortex, notch=True), section)
-             if changed else baseline)
+    corrected = _correct(releases, section, params, vortex, notch=True, untube=True)
+    if _AERO in params:
+        p = params[_AERO].values
+        aero_effect = AerodynamicNonlinearity(e_h=p["e_h"], e_a=p["e_a"])
+        corrected = [_remove_aero(r, section, aero_effect) for r in corrected]
+    model: RationalFunctionModel = (e2rfc.identify(corrected, section)
+                                    if changed or _AERO in params else baseline)
     physics = tuple(e for e in effects if not isinstance(e, VortexShedding | BaseVibration))
     simulated = []
     for i, r in enumerate(releases):
@@ -505,6 +602,27 @@ def _notch(r: Release, frequency_hz: float) -> Release:
 
     b, a = iirnotch(frequency_hz, _NOTCH_Q, fs=r.fs)
     return replace(r, **{c: filtfilt(b, a, getattr(r, c)) for c in CHANNELS}, meta=dict(r.meta))
+
+
+def _remove_aero(r: Release, section: SectionModel, effect: AerodynamicNonlinearity) -> Release:
+    """Take a named aerodynamic nonlinearity's force (from the low-passed motion) out."""
+    sig = decay_signals(r, section)
+    assert sig.q_full is not None and sig.q1_full is not None
+    rho = section.rho if r.rho is None else r.rho
+    force = effect.aerodynamic_force(sig.q_full, sig.q1_full, section.B, r.U, rho)
+    return replace(r, lift=r.lift - force[:, 0] / section.B, moment=r.moment - force[:, 1],
+                   meta=dict(r.meta))
+
+
+def _untube(r: Release, effect: TubingDistortion) -> Release:
+    """Undo a tubing distortion of the forces (:func:`ident.tubing.correct`, band-limited)."""
+    f = np.arange(0.25, r.fs / 2.0 + 1.0, 0.25)
+    H = effect.response(f)
+    table = tubing.TableResponse(frequency=f, gain=np.abs(H), phase=np.unwrap(np.angle(H)),
+                                 source="tubing_distortion")
+    tubes = tubing.tubing_set([tubing.TubingGroup(taps=None, model=table)], 2)
+    forces = tubing.correct(np.column_stack([r.lift, r.moment]), r.fs, tubes)
+    return replace(r, lift=forces[:, 0], moment=forces[:, 1], meta=dict(r.meta))
 
 
 def _advance_forces(r: Release, delay_s: float) -> Release:

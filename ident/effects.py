@@ -7,10 +7,11 @@ gap between an identified model and the measured releases. Each effect is a smal
 dataclass with its own parameters, in SI units per unit span. The names are fixed
 (``docs/conventions.md``, "Named effects").
 
-Three kinds: structural nonlinearities (``coulomb_friction``, ``quadratic_damping``,
-``cubic_stiffness``), changes to the linear physics (``static_unbalance``, ``vortex_shedding``,
-``base_vibration``), and
-measurement effects applied to the recorded channels (``channel_delay``, ``sensor_crosstalk``).
+Four kinds: structural nonlinearities (``coulomb_friction``, ``quadratic_damping``,
+``cubic_stiffness``), an aerodynamic nonlinearity that the pressure taps measure
+(``aerodynamic_nonlinearity``), changes to the linear physics (``static_unbalance``,
+``vortex_shedding``, ``base_vibration``), and measurement effects applied to the recorded
+channels (``channel_delay``, ``sensor_crosstalk``, ``tubing_distortion``).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from ident import _validate as v
 
 __all__ = [
     "EFFECT_NAMES",
+    "AerodynamicNonlinearity",
     "BaseVibration",
     "ChannelDelay",
     "CoulombFriction",
@@ -34,6 +36,7 @@ __all__ = [
     "QuadraticDamping",
     "SensorCrosstalk",
     "StaticUnbalance",
+    "TubingDistortion",
     "VortexShedding",
 ]
 
@@ -44,6 +47,8 @@ class Effect:
     name: ClassVar[str]
     #: True for effects that need a nonlinear (fixed-step) integration.
     nonlinear: ClassVar[bool] = False
+    #: True for a force that acts through the air (the pressure taps measure it).
+    aerodynamic: ClassVar[bool] = False
 
     def structural_force(
         self, q: npt.NDArray[np.float64], qd: npt.NDArray[np.float64], B: float
@@ -54,6 +59,11 @@ class Effect:
     def stiffness_rate(self, effective_mass: npt.NDArray[np.float64], B: float) -> float:
         """Return the largest rate (1/s) at which the force changes with velocity (step sizing)."""
         return 0.0
+
+    def aerodynamic_force(self, q: npt.NDArray[np.float64], qd: npt.NDArray[np.float64],
+                          B: float, U: float, rho: float) -> npt.NDArray[np.float64]:
+        """Return the extra aerodynamic force ``[L B, M]``, N m/m (here 0; see ``aerodynamic``)."""
+        return np.zeros(np.shape(q))
 
 
 @dataclass(frozen=True)
@@ -312,6 +322,132 @@ class BaseVibration(Effect):
         return np.asarray(-self.accel * inertia @ np.array([[c, s]]), dtype=float)
 
 
+@dataclass(frozen=True)
+class AerodynamicNonlinearity(Effect):
+    """Aerodynamic damping that depends on the amplitude: amplitude-dependent flutter derivatives.
+
+    The linear model's aerodynamic damping terms ``qd B^2 A2 (B/U) q'`` (``A2[0, 0] = K H1*``,
+    ``A2[1, 1] = K A2*`` for harmonic motion) each gain a part that grows with the square of
+    the displacement::
+
+        [L B, M] += qd B^2 (B / U) [e_h (q_h / q_ref)^2 q_h', e_a (alpha / q_ref)^2 alpha']
+
+    with ``q_h = h / B``. For harmonic motion of amplitude ``a`` the fundamental of that force
+    is a change of ``K H1*`` by ``e_h (a / q_ref)^2 / 4`` (of ``K A2*`` alike): a flutter
+    derivative that depends on the amplitude. The force is ``0.5 rho U B^3`` times the bracket,
+    proportional to the wind speed and zero at zero wind (unlike ``quadratic_damping``, which
+    acts in still air too), and it acts through the air, so the pressure taps measure it.
+
+    Signature: the decays' aerodynamic damping changes with the amplitude at wind-on, and the
+    measured forces are not a linear function of the motion; the structural equation holds.
+
+    Parameters
+    ----------
+    e_h, e_a : float
+        Changes of ``A2[0, 0]`` and ``A2[1, 1]`` (non-dimensional) at an instantaneous
+        displacement of ``q_ref``; negative: more damping at larger amplitudes (Scanlan's
+        signs: a negative ``A2`` diagonal damps).
+    q_ref : float
+        Reference displacement (``h / B`` and rad), > 0; a fixed shape parameter.
+    """
+
+    name: ClassVar[str] = "aerodynamic_nonlinearity"
+    nonlinear: ClassVar[bool] = True
+    aerodynamic: ClassVar[bool] = True
+    e_h: float = 0.0
+    e_a: float = 0.0
+    q_ref: float = 0.01
+
+    def __post_init__(self) -> None:
+        v.finite("e_h", self.e_h)
+        v.finite("e_a", self.e_a)
+        v.positive("q_ref", self.q_ref)
+
+    def aerodynamic_force(self, q: npt.NDArray[np.float64], qd: npt.NDArray[np.float64],
+                          B: float, U: float, rho: float) -> npt.NDArray[np.float64]:
+        """Return the extra generalised force ``[L B, M]``, N m/m, at ``q``, ``q'``.
+
+        ``q`` and ``q'`` hold ``[h/B, alpha]`` (and their rates) in their last axis.
+        """
+        q = np.asarray(q, dtype=float)
+        qd = np.asarray(qd, dtype=float)
+        scale = 0.5 * rho * U * B**3  # qd B^2 (B / U)
+        return np.asarray(scale * np.stack([
+            self.e_h * (q[..., 0] / self.q_ref) ** 2 * qd[..., 0],
+            self.e_a * (q[..., 1] / self.q_ref) ** 2 * qd[..., 1]], axis=-1), dtype=float)
+
+
+@dataclass(frozen=True)
+class TubingDistortion(Effect):
+    """The pressure tubing filters the measured forces: gain and phase that change with frequency.
+
+    Every tap's tube (:mod:`ident.tubing`) filters its pressure, so the integrated lift and
+    moment are the true ones through the tube's response. At the section's frequencies, far
+    below the tube's first organ-pipe resonance, a tube acts as a second-order low-pass::
+
+        H(s) = w^2 / (s^2 + 2 damping w s + w^2),   w = 2 pi frequency_hz
+
+    (:meth:`from_tube` gives the one that matches a Bergh-Tijdeman tube at low frequencies).
+    The displacements are not affected. A pure delay ``tau`` has the same first-order term,
+    ``2 damping / w = tau``; what tells a tube from a delay is its gain, ``|H| != 1``, which
+    differs from 1 by ``(2 damping^2 - 1) (f / frequency_hz)^2`` at low frequencies.
+
+    Signature: the measured forces lag the motion by a delay and are too weak (damping above
+    0.71) or too strong (below) by an amount that grows with the square of the frequency.
+
+    Parameters
+    ----------
+    frequency_hz : float
+        Natural frequency of the equivalent second-order tube, Hz, > 0.
+    damping : float
+        Its damping ratio, > 0.
+    """
+
+    name: ClassVar[str] = "tubing_distortion"
+    frequency_hz: float = 20.0
+    damping: float = 0.7
+
+    def __post_init__(self) -> None:
+        v.positive("frequency_hz", self.frequency_hz)
+        v.positive("damping", self.damping)
+
+    def response(self, f: npt.ArrayLike) -> npt.NDArray[np.complex128]:
+        """``measured / true`` force at frequencies ``f`` (Hz)."""
+        x = np.asarray(f, dtype=float) / self.frequency_hz
+        return np.asarray(1.0 / (1.0 - x**2 + 2j * self.damping * x), dtype=complex)
+
+    def state_space(self) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """Return ``(A, b)`` of ``x' = A x + b u``, ``x = [y, y']`` (``y`` the measured force)."""
+        w = 2.0 * math.pi * self.frequency_hz
+        return (np.array([[0.0, 1.0], [-w * w, -2.0 * self.damping * w]]),
+                np.array([0.0, w * w]))
+
+    @classmethod
+    def from_tube(cls, tube: Any, air: Any, band_hz: float = 10.0) -> TubingDistortion:
+        """Return the second-order tube that matches ``tube`` below ``band_hz`` (Hz).
+
+        ``tube`` is an :class:`ident.tubing.Tube` (or anything with its ``response(f, air)``).
+        ``1 / H = 1 + a1 s + a2 s^2`` is fitted (least squares, 50 frequencies up to
+        ``band_hz``) to the tube's ``1 / H``; then ``w = 1 / sqrt(a2)``, ``damping = a1 w / 2``.
+
+        Raises
+        ------
+        ValueError
+            If the tube's gain does not fall at low frequencies like a second-order low-pass
+            (``a2 <= 0``).
+        """
+        f = np.linspace(band_hz / 50.0, band_hz, 50)
+        w = 2.0 * np.pi * f
+        inverse = 1.0 / tube.response(f, air)
+        a1 = float(np.dot(w, inverse.imag) / np.dot(w, w))
+        a2 = float(np.dot(w**2, 1.0 - inverse.real) / np.dot(w**2, w**2))
+        if not a2 > 0.0:
+            raise ValueError(f"the tube's response is not a second-order low-pass below "
+                             f"{band_hz:g} Hz (a2 = {a2:.3g} s^2)")
+        wn = 1.0 / math.sqrt(a2)
+        return cls(frequency_hz=wn / (2.0 * math.pi), damping=0.5 * a1 * wn)
+
+
 #: The named effects (docs/conventions.md, "Named effects"), mapped to their classes.
 EFFECT_NAMES: dict[str, type[Effect]] = {
     cls.name: cls
@@ -324,5 +460,7 @@ EFFECT_NAMES: dict[str, type[Effect]] = {
         StaticUnbalance,
         SensorCrosstalk,
         BaseVibration,
+        AerodynamicNonlinearity,
+        TubingDistortion,
     )
 }

@@ -7,10 +7,11 @@ of a base vibration, which stay linear) is
 advanced by its exact discretisation ``z[k+1] = expm(A dt) z[k]``. Structural nonlinearities
 (friction, quadratic damping, cubic springs) are added by a second-order exponential integrator
 (ETD2RK of Cox and Matthews) on a fixed step that is a multiple of the output rate: exact for the
-linear part, second order for the nonlinear part. Measurement effects (channel delay, crosstalk) are
-applied to the recorded channels last. The forces returned are the self-excited forces (plus vortex
-forcing, plus the wind load): what the surface pressures integrate to, not the spring or friction
-forces, nor the inertial force of a base vibration (the air does not move with the floor).
+linear part, second order for the nonlinear part. Measurement effects (channel delay, crosstalk,
+tubing) are applied to the recorded channels last. The forces returned are the self-excited forces
+(plus vortex forcing, plus an aerodynamic nonlinearity, plus the wind load): what the surface
+pressures integrate to, not the spring or friction forces, nor the inertial force of a base
+vibration (the air does not move with the floor).
 
 Wind load (optional, :mod:`ident.turbulence`): with static coefficients the mean static load
 ``qd B^2 [C_L, C_M]`` acts in the wind (it shifts the equilibrium; ``h0, alpha0`` remain the
@@ -61,6 +62,7 @@ from ident.effects import (
     Effect,
     SensorCrosstalk,
     StaticUnbalance,
+    TubingDistortion,
     VortexShedding,
 )
 from ident.rfc import RationalFunctionModel
@@ -153,6 +155,8 @@ class SimulatedDecay:
     _z_end: FloatArray | None = field(default=None, repr=False)
     _substeps: int = field(default=1, repr=False)
     _before: Callable[[FloatArray], FloatArray] | None = field(default=None, repr=False)
+    #: The tubes' state at the record's end and their last input (a continuation goes on).
+    _tube_end: tuple[FloatArray, FloatArray] | None = field(default=None, repr=False)
     p: FloatArray | None = None
     drag: FloatArray | None = None
     p0: float = 0.0
@@ -210,7 +214,8 @@ class SimulatedDecay:
         }
         if self.n_dof == 3:
             clean.update(p=np.full(t_arr.size, self.p0), drag=force[:, 2] / B)
-        measured = _measure(clean, t_arr, self.effects, self._before, self._delay_spline, 0.0, B)
+        measured, _ = _measure(clean, t_arr, self.effects, self._before, self._delay_spline,
+                               0.0, B)
         return clean, measured
 
     def continued(self, n: int) -> SimulatedDecay:
@@ -259,13 +264,14 @@ class SimulatedDecay:
 
         keep = slice(1, None)
         clean = {name: values[keep] for name, values in clean.items()}
-        measured = _measure(clean, t[keep], self.effects, before, spline, t_start, B)
+        measured, tube_end = _measure(clean, t[keep], self.effects, before, spline, t_start, B,
+                                      self._tube_end)
         return dataclasses.replace(
             self, t=t[keep], h=measured["h"], alpha=measured["alpha"], lift=measured["lift"],
             moment=measured["moment"], p=measured.get("p"), drag=measured.get("drag"),
             clean=clean,
             wind_load=None if wind is None else wind[keep], _z_end=z[-1].copy(),
-            _delay_spline=spline, _before=None,
+            _delay_spline=spline, _before=None, _tube_end=tube_end,
         )
 
 
@@ -401,7 +407,7 @@ def simulate_decay(
             force = force + wind.force(ts)[:, : plant.k]
         return np.asarray(force, dtype=float)
 
-    measured = _measure(clean, t, effects, before, spline, 0.0, section.B)
+    measured, tube_end = _measure(clean, t, effects, before, spline, 0.0, section.B)
     return SimulatedDecay(
         t=t,
         **measured,
@@ -425,6 +431,7 @@ def simulate_decay(
         _z_end=z[-1].copy(),
         _substeps=substeps,
         _before=before,
+        _tube_end=tube_end,
     )
 
 
@@ -571,7 +578,21 @@ class _Plant:
         force = np.zeros(self.k)
         for effect in self.nonlinear_effects:  # on heave and pitch (q[0:2], q'[0:2])
             force[:2] += effect.structural_force(z[0:2], z[self.k : self.k + 2], self.B)
+        force[:2] += self.aerodynamic_force(z)
         return np.asarray(self.M_inv @ force, dtype=float)
+
+    def aerodynamic_force(self, z: FloatArray) -> FloatArray:
+        """Nonlinear aerodynamic force ``[L B, M]`` at states ``z`` (rows), shape (..., 2).
+
+        It acts through the air: the taps measure it (:meth:`forces` adds it to the record).
+        """
+        out = np.zeros(z.shape[:-1] + (2,))
+        section = self.system.section
+        for effect in self.nonlinear_effects:
+            if effect.aerodynamic and self.system.U > 0.0:
+                out += effect.aerodynamic_force(z[..., 0:2], z[..., self.k : self.k + 2],
+                                                self.B, self.system.U, section.rho)
+        return out
 
     def integrate_linear(self, z0: FloatArray, n: int, dt: float) -> tuple[FloatArray, FloatArray]:
         """Step the free linear system exactly: ``z[k] = expm(A dt)^k z[0]``.
@@ -678,6 +699,7 @@ class _Plant:
     def forces(self, z: FloatArray, qdd: FloatArray, t: FloatArray) -> FloatArray:
         """Generalised aerodynamic forces ``[L B, M(, D B)]`` recorded at the output samples."""
         aero = self.system.forces(z[:, : self.n_struct], qdd)
+        aero[:, :2] += self.aerodynamic_force(z)
         return np.asarray(aero + self.vortex_force(t), dtype=float)
 
 
@@ -733,13 +755,78 @@ def _measure(
     spline: Any,
     t_start: float,
     B: float,
-) -> dict[str, FloatArray]:
-    """Apply the measurement effects (delay, crosstalk) to the clean channels at times ``t``.
+    tube_start: tuple[FloatArray, FloatArray] | None = None,
+) -> tuple[dict[str, FloatArray], tuple[FloatArray, FloatArray] | None]:
+    """Apply the measurement effects (delay, crosstalk, tubing) to the clean channels at ``t``.
 
     ``spline`` interpolates the clean generalised forces ``[L B, M(, D B)]`` from ``t_start`` on; a
     delayed sample whose source time is earlier takes ``before(t_src)`` (the held force before a
-    release, the previous record for a continuation).
+    release, the previous record for a continuation). The tubing filters the (delayed) forces
+    last; it starts from ``tube_start`` (the previous record's end state and last input) or,
+    without it, at rest at the force just before ``t[0]`` (a held model's force is steady).
+    Returns the channels and the tubes' end state.
     """
+    out, tube_end = _delay_and_crosstalk(clean, t, effects, before, spline, t_start, B), None
+    for effect in effects:
+        if isinstance(effect, TubingDistortion) and t.size:
+            forces = _generalised_forces(out, B)
+            if tube_start is None:
+                delay = sum(e.delay_s for e in effects if isinstance(e, ChannelDelay))
+                if before is not None:
+                    u0 = before(np.array([t[0] - delay - 1e-9]))[0]
+                else:
+                    u0 = forces[0]
+                x0 = np.column_stack([u0, np.zeros(u0.size)])
+                filtered, tube_end = _tube(effect, t, forces, x0, None)
+            else:
+                filtered, tube_end = _tube(effect, t, forces, tube_start[0],
+                                           (t_start, tube_start[1]))
+            out["lift"], out["moment"] = filtered[:, 0] / B, filtered[:, 1]
+            if "drag" in out:
+                out["drag"] = filtered[:, 2] / B
+    return out, tube_end
+
+
+def _tube(effect: TubingDistortion, t: FloatArray, u: FloatArray, x0: FloatArray,
+          previous: tuple[float, FloatArray] | None) -> tuple[FloatArray,
+                                                               tuple[FloatArray, FloatArray]]:
+    """Filter the columns of ``u`` (at times ``t``) by the tube from states ``x0`` (rows).
+
+    The input is piecewise linear between samples (first-order hold: exact for it); with
+    ``previous`` = (time, input) the first interval starts from the previous record's last
+    input and its output is dropped. Returns the output and (end states, last input).
+    """
+    from scipy.signal import lsim
+
+    A, b = effect.state_space()
+    system = (A, b[:, None], np.array([[1.0, 0.0]]), np.zeros((1, 1)))
+    times, inputs = t, u
+    if previous is not None:
+        times = np.concatenate([[previous[0]], t])
+        inputs = np.vstack([previous[1][None, :], u])
+    out = np.empty_like(inputs)
+    end = np.empty((u.shape[1], 2))
+    for j in range(u.shape[1]):
+        if times.size == 1:
+            out[:, j], end[j] = x0[j, 0], x0[j]
+            continue
+        _, y, x = lsim(system, inputs[:, j], times - times[0], X0=x0[j], interp=True)
+        out[:, j], end[j] = y, x[-1]
+    if previous is not None:
+        out = out[1:]
+    return np.asarray(out, dtype=float), (end, np.asarray(inputs[-1], dtype=float))
+
+
+def _delay_and_crosstalk(
+    clean: dict[str, FloatArray],
+    t: FloatArray,
+    effects: tuple[Effect, ...],
+    before: Callable[[FloatArray], FloatArray] | None,
+    spline: Any,
+    t_start: float,
+    B: float,
+) -> dict[str, FloatArray]:
+    """Apply a channel delay and sensor crosstalk (see :func:`_measure`)."""
     out = {name: values.copy() for name, values in clean.items()}
     for effect in effects:
         if isinstance(effect, ChannelDelay) and effect.delay_s > 0.0:

@@ -12,7 +12,10 @@ times it (in heave the wind's own damping is 10 to 35 times the structural one, 
 drag hides in it), a spring 5 % stiffer at the release amplitude, a centre of mass 5 mm off
 the axis, 10 ms of pressure tubing, a shedding lift coefficient of 0.05, a few per cent of
 laser crosstalk, a floor shaking at 6 Hz with 10 milli-g (a heave motion of about 4 % of the
-decays' RMS).
+decays' RMS), aerodynamic damping that grows by 40 % (heave) to 75 % (pitch) from small amplitudes
+to the release amplitude, and the tubing of 2 m tubes of 0.8 mm bore into
+50 mm^3 transducer volumes (Bergh-Tijdeman: as a second-order low-pass 16.9 Hz with damping
+0.99, :meth:`ident.effects.TubingDistortion.from_tube`; 5 % gain loss at 4 Hz, 18 ms lag).
 
 Not responsible for: the physics (:mod:`ident.simulate`, :mod:`simulators.tunnel`) or the
 diagnosis (:mod:`ident.discrepancy`).
@@ -28,6 +31,7 @@ import numpy as np
 
 from ident import flat_plate, flutter
 from ident.effects import (
+    AerodynamicNonlinearity,
     BaseVibration,
     ChannelDelay,
     CoulombFriction,
@@ -36,6 +40,7 @@ from ident.effects import (
     QuadraticDamping,
     SensorCrosstalk,
     StaticUnbalance,
+    TubingDistortion,
     VortexShedding,
 )
 from ident.release import Release
@@ -62,6 +67,8 @@ REALISTIC: dict[str, Effect] = {
     "static_unbalance": StaticUnbalance(S=0.015),
     "sensor_crosstalk": SensorCrosstalk(h_from_alpha=0.003, alpha_from_h=0.3),
     "base_vibration": BaseVibration(frequency_hz=6.0, accel=0.1, phase=0.3),
+    "aerodynamic_nonlinearity": AerodynamicNonlinearity(e_h=-3.0, e_a=-0.15),
+    "tubing_distortion": TubingDistortion(frequency_hz=17.0, damping=1.0),
 }
 
 #: The parameters of each effect that a diagnosis must recover (the others are fixed shapes).
@@ -74,14 +81,27 @@ _STRENGTHS: dict[str, tuple[str, ...]] = {
     "static_unbalance": ("S",),
     "sensor_crosstalk": ("h_from_alpha", "alpha_from_h"),
     "base_vibration": ("accel",),
+    "aerodynamic_nonlinearity": ("e_h", "e_a"),
+    "tubing_distortion": ("frequency_hz", "damping"),
 }
+
+#: Strength parameters that weaken the effect as they grow: :func:`scaled` divides them (a
+#: tube twice as strong resonates at half the frequency; its damping is a shape, kept).
+_INVERSE: dict[str, tuple[str, ...]] = {"tubing_distortion": ("frequency_hz",)}
 
 
 def scaled(name: str, factor: float) -> Effect:
-    """Return the realistic effect ``name`` with its strength parameters times ``factor``."""
+    """Return the realistic effect ``name`` made ``factor`` times as strong.
+
+    Its strength parameters are multiplied by ``factor`` (those in :data:`_INVERSE` divided;
+    a tubing's damping ratio is its shape and stays).
+    """
     effect: Any = REALISTIC[name]  # a frozen dataclass (every Effect is)
-    return cast(Effect, dataclasses.replace(effect, **{p: getattr(effect, p) * factor
-                                                       for p in _STRENGTHS[name]}))
+    if name in _INVERSE:
+        changes = {p: getattr(effect, p) / factor for p in _INVERSE[name]}
+    else:
+        changes = {p: getattr(effect, p) * factor for p in _STRENGTHS[name]}
+    return cast(Effect, dataclasses.replace(effect, **changes))
 
 
 def simulated_campaign(effect: Effect | Sequence[Effect] | None, seed: int, *, noise: float = 0.02,

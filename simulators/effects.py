@@ -7,6 +7,7 @@ which may not import :mod:`simulators`) can use the same physics; this module ke
 
 from ident.effects import (
     EFFECT_NAMES,
+    AerodynamicNonlinearity,
     BaseVibration,
     ChannelDelay,
     CoulombFriction,
@@ -15,11 +16,13 @@ from ident.effects import (
     QuadraticDamping,
     SensorCrosstalk,
     StaticUnbalance,
+    TubingDistortion,
     VortexShedding,
 )
 
 __all__ = [
     "EFFECT_NAMES",
+    "AerodynamicNonlinearity",
     "BaseVibration",
     "ChannelDelay",
     "CoulombFriction",
@@ -28,5 +31,6 @@ __all__ = [
     "QuadraticDamping",
     "SensorCrosstalk",
     "StaticUnbalance",
+    "TubingDistortion",
     "VortexShedding",
 ]

@@ -14,6 +14,7 @@ from scipy.signal import find_peaks
 from ident import AeroelasticSystem, RationalFunctionModel, SectionModel, flat_plate, flutter
 from simulators import EFFECT_NAMES, simulate_release
 from simulators.effects import (
+    AerodynamicNonlinearity,
     BaseVibration,
     ChannelDelay,
     CoulombFriction,
@@ -21,6 +22,7 @@ from simulators.effects import (
     QuadraticDamping,
     SensorCrosstalk,
     StaticUnbalance,
+    TubingDistortion,
     VortexShedding,
 )
 
@@ -42,6 +44,7 @@ def test_the_design_names_are_all_there():
     assert set(EFFECT_NAMES) == {
         "coulomb_friction", "quadratic_damping", "cubic_stiffness", "channel_delay",
         "vortex_shedding", "static_unbalance", "sensor_crosstalk", "base_vibration",
+        "aerodynamic_nonlinearity", "tubing_distortion",
     }
 
 
@@ -193,6 +196,8 @@ def test_base_vibration_forces_the_model_as_a_moving_support_and_the_taps_see_no
         StaticUnbalance(0.05),
         SensorCrosstalk(h_from_alpha=0.01, alpha_from_h=0.2),
         BaseVibration(frequency_hz=6.0, accel=0.2),
+        AerodynamicNonlinearity(e_h=-4.0, e_a=-0.2),
+        TubingDistortion(frequency_hz=10.0, damping=1.0),
     ],
     ids=lambda e: e.name,
 )
@@ -227,6 +232,10 @@ def test_every_effect_works_in_the_wind(effect):
         (lambda: SensorCrosstalk(h_from_alpha=float("nan")), "h_from_alpha must be finite"),
         (lambda: BaseVibration(frequency_hz=0.0), "frequency_hz must be > 0"),
         (lambda: BaseVibration(accel=-1.0), "accel must be >= 0"),
+        (lambda: AerodynamicNonlinearity(e_h=float("nan")), "e_h must be finite"),
+        (lambda: AerodynamicNonlinearity(q_ref=0.0), "q_ref must be > 0"),
+        (lambda: TubingDistortion(frequency_hz=-1.0), "frequency_hz must be > 0"),
+        (lambda: TubingDistortion(damping=0.0), "damping must be > 0"),
     ],
 )
 def test_effect_parameters_are_validated(make, match):
@@ -250,3 +259,97 @@ def test_static_unbalance_beyond_the_mass_matrix_limit_is_refused():
     with pytest.raises(ValueError, match="positive-definite"):
         simulate_release(SECTION, STILL_AIR, 0.0, 0.001, 0.0, duration=1.0, fs=100.0,
                          effects=[StaticUnbalance(0.4)])
+
+
+def test_aerodynamic_nonlinearity_is_an_amplitude_dependent_flutter_derivative():
+    """Harmonic motion of amplitude a: the force's fundamental changes K H1* by e (a/q_ref)^2/4.
+
+    Closed form: the fundamental of cos^2 sin is sin / 4. And there is no force at zero wind.
+    """
+    effect = AerodynamicNonlinearity(e_h=-2.0, e_a=-0.1, q_ref=0.01)
+    B, U, rho, w = 0.3, 6.0, 1.2, 2 * np.pi * 2.0
+    t = np.linspace(0.0, 1.0, 4000, endpoint=False)  # two whole periods
+    for a in (0.005, 0.02):
+        q = np.column_stack([a * np.cos(w * t), a * np.cos(w * t)])
+        qd = np.column_stack([-a * w * np.sin(w * t), -a * w * np.sin(w * t)])
+        force = effect.aerodynamic_force(q, qd, B, U, rho)
+        # Linear damping force qd B^2 dA2 (B/U) q' has the sine coefficient -qd B^3/U dA2 a w.
+        sine = 2 * np.mean(force * np.sin(w * t)[:, None], axis=0)
+        dA2 = sine / (-0.5 * rho * U * B**3 * a * w)
+        assert dA2 == pytest.approx([e * (a / 0.01) ** 2 / 4 for e in (-2.0, -0.1)], rel=1e-9)
+        assert np.all(effect.aerodynamic_force(q, qd, B, 0.0, rho) == 0.0)
+    # In still air the effect does nothing to a release (unlike quadratic damping).
+    still = simulate_release(SECTION, flat_plate.jones_model(), 0.0, 0.004, 0.02, duration=2.0,
+                             fs=500.0)
+    with_effect = simulate_release(SECTION, flat_plate.jones_model(), 0.0, 0.004, 0.02,
+                                   duration=2.0, fs=500.0, effects=[effect])
+    # (The nonlinear integrator runs instead of the exact one: equal to rounding.)
+    for channel in ("h", "alpha", "lift", "moment"):
+        a, b = getattr(still, channel), getattr(with_effect, channel)
+        assert np.allclose(a, b, rtol=0.0, atol=1e-9 * np.abs(a).max()), channel
+
+
+def test_aerodynamic_nonlinearity_damps_large_amplitudes_more_and_the_taps_see_it():
+    """Negative e: the decay's start is damped more; the force record holds the extra force."""
+    model = flat_plate.jones_model()
+    U = 0.65 * flutter.analyze(SECTION, model).speed
+    effect = AerodynamicNonlinearity(e_h=-3.0, e_a=-0.15)
+    base = simulate_release(SECTION, model, U, 0.004, 0.02, duration=4.0, fs=500.0)
+    changed = simulate_release(SECTION, model, U, 0.004, 0.02, duration=4.0, fs=500.0,
+                               effects=[effect])
+    first = slice(0, 250)  # the first half second, at large amplitude
+    assert np.abs(changed.alpha[first]).max() <= np.abs(base.alpha[first]).max()
+    assert np.sqrt(np.mean(changed.alpha[250:] ** 2)) < np.sqrt(np.mean(base.alpha[250:] ** 2))
+    # The taps see the force: at the release (same position, no velocity) the records agree,
+    # half a second in they differ by more than the motion's change alone would explain.
+    assert changed.moment[0] == pytest.approx(base.moment[0])
+    diff_moment = np.abs(changed.moment[:250] - base.moment[:250]).max()
+    assert diff_moment > 0.01 * np.abs(base.moment[:250]).max()
+
+
+def test_tubing_distortion_filters_the_forces_as_its_frequency_response_says():
+    """The time-domain tube matches ident.tubing's FFT filter with the same response."""
+    from ident.tubing import Air, TableResponse, Tube, TubingGroup, distort, tubing_set
+
+    model = flat_plate.jones_model()
+    U = 0.65 * flutter.analyze(SECTION, model).speed
+    tube = TubingDistortion(frequency_hz=12.0, damping=0.6)
+    base = simulate_release(SECTION, model, U, 0.004, 0.02, duration=6.0, fs=500.0)
+    tubed = simulate_release(SECTION, model, U, 0.004, 0.02, duration=6.0, fs=500.0,
+                             effects=[tube])
+    assert np.array_equal(base.h, tubed.h) and np.array_equal(base.alpha, tubed.alpha)
+    f = np.arange(0.25, 251.0, 0.25)
+    H = tube.response(f)
+    table = TableResponse(frequency=f, gain=np.abs(H), phase=np.unwrap(np.angle(H)))
+    expected = distort(np.column_stack([base.lift, base.moment]), 500.0,
+                       tubing_set([TubingGroup(taps=None, model=table)], 2))
+    late = slice(250, None)  # after the release's transient (the FFT filter starts steady)
+    for k, channel in enumerate(("lift", "moment")):
+        got = getattr(tubed, channel)[late]
+        rms = np.sqrt(np.mean(expected[late, k] ** 2))
+        # Two discretisations of one filter (first-order hold against FFT): 0.5 % of the RMS.
+        assert np.sqrt(np.mean((got - expected[late, k]) ** 2)) < 0.005 * rms
+    # From a Bergh-Tijdeman tube: 2 m of 0.8 mm into 50 mm^3 is a 16.9 Hz, 0.99 low-pass that
+    # matches the tube's gain at 4 Hz within 0.5 % and its phase (-0.47 rad) within 3 %.
+    air = Air()
+    real = Tube(length=2.0, diameter=0.8e-3, volume=50e-9)
+    equivalent = TubingDistortion.from_tube(real, air)
+    assert equivalent.frequency_hz == pytest.approx(16.9, abs=0.1)
+    assert equivalent.damping == pytest.approx(0.99, abs=0.01)
+    h_real, h_eq = real.response([4.0], air)[0], equivalent.response([4.0])[0]
+    assert abs(h_eq) == pytest.approx(abs(h_real), rel=0.005)
+    assert np.angle(h_eq) == pytest.approx(np.angle(h_real), rel=0.03)
+
+
+def test_tubing_distortion_continues_across_records():
+    """A continued record goes on from the tubes' state: the same as one long record."""
+    from ident.simulate import simulate_decay
+
+    model = flat_plate.jones_model()
+    U = 0.65 * flutter.analyze(SECTION, model).speed
+    tube = TubingDistortion(frequency_hz=12.0, damping=0.6)
+    whole = simulate_decay(SECTION, model, U, 0.004, 0.02, n=1000, fs=500.0, effects=[tube])
+    part = simulate_decay(SECTION, model, U, 0.004, 0.02, n=600, fs=500.0, effects=[tube])
+    rest = part.continued(400)
+    rms = np.sqrt(np.mean(whole.moment**2))
+    assert np.allclose(rest.moment, whole.moment[600:], atol=1e-6 * rms)
