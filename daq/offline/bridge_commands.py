@@ -327,7 +327,7 @@ def _buffeting(bridge: Any, model: Any, speeds: tuple[float, ...], spec: Any,
               f"p {response.rms_p.max():.4g} m")
         if time_domain is None:
             continue
-        with tqdm(total=1, unit="step", mininterval=0.5, desc=f"time domain {U:g} m/s") as bar:
+        with tqdm(total=None, unit="step", mininterval=0.5, desc=f"time domain {U:g} m/s") as bar:
             def progress(done: int, total: int, bar: Any = bar) -> None:
                 bar.total = total
                 bar.update(done - bar.n)
