@@ -13,7 +13,9 @@ residual of those IV coefficients (prediction error) instead of its projection o
 instruments; ``PEM_HOLD=10`` the releases simulated with a 10 s hold before each and the AR
 noise model fitted to the held model's force (buffeting plus noise alone: no motion), fixed,
 instead of iterated from the fit's residual; ``PEM_CAUSAL=1`` the same causal low-pass on both
-sides instead of the zero-phase one; ``PEM_TRUTH_D=1`` with an ``f`` variant: the simulated
+sides instead of the zero-phase one; ``PEM_NOISE_FROM_FORCE=1`` the fixed AR noise model
+fitted to each release's own measured force instead (no hold); ``PEM_PMAX`` the largest order of
+a fixed AR noise model (20); ``PEM_TRUTH_D=1`` with an ``f`` variant: the simulated
 model's lag roots, given (oracle). ``oracle`` mode: the true lag roots and the AR model of the
 TRUE residual, on many releases pooled, with the whitened residual's correlation with each
 regressor (the consistency condition).
@@ -62,6 +64,10 @@ D_HI = float(os.environ.get("PEM_DHI", "1.0"))
 DECIM = int(os.environ.get("PEM_DECIM", "10"))
 FC = float(os.environ.get("PEM_FC", "3.0"))
 D_OBJECTIVE = os.environ.get("PEM_DOBJ", "projected")
+#: Largest order of the fixed AR noise models (a hold's or the force's own).
+P_MAX = int(os.environ.get("PEM_PMAX", "20"))
+#: Fit the fixed AR noise model to each release's own measured force (no hold needed).
+NOISE_FROM_FORCE = os.environ.get("PEM_NOISE_FROM_FORCE", "0") == "1"
 #: Seconds of hold recorded before each release (0: none); its force gives the noise model.
 HOLD_S = float(os.environ.get("PEM_HOLD", "0"))
 ORDER = int(os.environ.get("PEM_ORDER", "4"))
@@ -102,13 +108,19 @@ class Rel:
         # Noise level of each normalised force channel (for the weights): first differences.
         self.w = 1.0 / (np.std(np.diff(f, axis=0), axis=0) / math.sqrt(2))
         self.hold_ar = None
-        if hold is not None:
+        if NOISE_FROM_FORCE:
+            # No hold: the AR model of the release's own measured force (buffeting dominates it
+            # in turbulence; the self-excited part is narrow-band at the modes).
+            fd = ff[self.rows]
+            self.hold_ar = [ar_fit(fd[:, i] - fd[:, i].mean(), P_MAX) for i in range(fd.shape[1])]
+        elif hold is not None:
             # The held model's force is buffeting plus noise alone (no motion): its AR model,
             # after the same low-pass and decimation, is the noise model of the release.
             fh = hold / (qd * B**2)
             fh = (sosfiltfilt(sos, fh, axis=0) if not CAUSAL
                   else sosfilt(sos, fh - fh[0], axis=0))[::DECIM]
-            self.hold_ar = [ar_fit(fh[:, i] - fh[:, i].mean()) for i in range(fh.shape[1])]
+            self.hold_ar = [ar_fit(fh[:, i] - fh[:, i].mean(), P_MAX)
+                            for i in range(fh.shape[1])]
 
     def lags(self, d):
         cols = []
