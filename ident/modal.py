@@ -388,9 +388,11 @@ def _search_poles(
     """Refined pole parameters and residual sum: the modes, then real poles while BIC improves.
 
     Each new real pole starts from the pencil's real poles or from a grid of decay rates
-    across the record. The order search uses loose tolerances (it only compares orders); the
-    chosen order is then polished to full precision. ``duration``: of the record, s;
-    ``fast``: see :func:`_refine`.
+    across the record: scipy's search (``fast=False``) refines from each of three grid points
+    and keeps the best; the fast search refines from the best of a finer grid only
+    (:func:`_scanned_start`), one refinement instead of three. The order search uses loose
+    tolerances (it only compares orders); the chosen order is then polished to full precision.
+    ``duration``: of the record, s; ``fast``: see :func:`_refine`.
     """
     dtb = block * dt
     theta, rss = _refine(tb, yb, block, dt, n_modes, 0, _complex_params(osc[:n_modes]), bounds,
@@ -400,6 +402,8 @@ def _search_poles(
     unused = [r for r in reals if bounds[0][-1] < r < bounds[1][-1]]
     for n_real in range(1, max_real_poles + 1):
         starts = unused[:1] or list(grid)  # the pencil's next real pole when it found one
+        if fast and not unused:
+            starts = [_scanned_start(tb, yb, block, dt, n_modes, theta, grid)]
         trials = [
             _refine(tb, yb, block, dt, n_modes, n_real, np.append(theta, start), bounds,
                     loose=True, fast=fast)
@@ -413,6 +417,31 @@ def _search_poles(
         unused = unused[1:]
     n_real = theta.size - 2 * n_modes
     return _refine(tb, yb, block, dt, n_modes, n_real, theta, bounds, loose=False, fast=fast)
+
+
+#: Grid points per factor of 10 of the decay rate in the fast search's scan for a new real
+#: pole's start (:func:`_scanned_start`).
+_SCAN_PER_DECADE = 4
+
+
+def _scanned_start(tb: FloatArray, yb: FloatArray, block: int, dt: float, n_modes: int,
+                   theta: FloatArray, grid: FloatArray) -> float:
+    """Return the start of a new real pole: the best of a grid, the other poles held.
+
+    The residual of the fit with the poles found so far and one real pole more is evaluated
+    (one linear solve each) at ``_SCAN_PER_DECADE`` points per decade over the span of
+    ``grid`` (decay rates, 1/s, negative); the search then refines from the best point alone.
+    Measured on the benchmark's decays (500 Hz, 20-30 s): where the three grid starts were each
+    refined, their optima agreed to the noise, and the scan's point lies in the same basin, at a
+    third of the cost.
+    """
+    lo, hi = float(np.min(-grid)), float(np.max(-grid))
+    points = -np.geomspace(lo, hi, max(3, int(math.ceil(_SCAN_PER_DECADE
+                                                            * math.log10(hi / lo))) + 1))
+    costs = [float(np.sum(_varpro_residual(tb, yb, block, dt, n_modes,
+                                           np.append(theta, point))[0] ** 2))
+             for point in points]
+    return float(points[int(np.argmin(costs))])
 
 
 def _bounds(n_modes: int, dtb: float, duration: float) -> tuple[FloatArray, FloatArray]:
