@@ -224,7 +224,7 @@ class Problem:
         # Jacobian's columns are smooth functions of time (the modal fit's), which the even
         # subsample sums to a small fraction of their (already small) step, and the full
         # Jacobian was a third of the precise search's cost.
-        best = min((solve(np.log(start), "coarse", 1e-3, 20) for start in starts),
+        best = min((solve(np.log(start), "coarse", 1e-3, 20) for start in _distinct(starts)),
                    key=lambda sol: sol.cost)
         theta = best.x
         if not loose:
@@ -445,6 +445,18 @@ class Problem:
         dof = max(r.size - J.shape[1], 1)
         sigma2 = float(r @ r) / dof * inflation
         return np.asarray(sigma2 * np.linalg.pinv(J.T @ J) * n_search / n_full, dtype=float)
+
+
+def _distinct(starts: list[FloatArray]) -> list[FloatArray]:
+    """Return the starts without repeats (the search from a start is deterministic).
+
+    With one lag, the evenly spread start is the middle one of the nested starts.
+    """
+    out: list[FloatArray] = []
+    for start in starts:
+        if not any(s.shape == start.shape and np.array_equal(s, start) for s in out):
+            out.append(start)
+    return out
 
 
 class _Stacked:
