@@ -224,8 +224,18 @@ class Problem:
         # Jacobian's columns are smooth functions of time (the modal fit's), which the even
         # subsample sums to a small fraction of their (already small) step, and the full
         # Jacobian was a third of the precise search's cost.
-        best = min((solve(np.log(start), "coarse", 1e-3, 20) for start in _distinct(starts)),
-                   key=lambda sol: sol.cost)
+        # The starts are tried in turn until two of them end at the same optimum (the same
+        # roots to 1 %, the same cost to 1e-4): the landscape then leads the starts tried so
+        # far to one minimum, and the remaining starts are not run (measured on the
+        # benchmark's releases: with one and two lags every start ends at the same optimum).
+        solutions: list[Any] = []
+        for start in _distinct(starts):
+            sol = solve(np.log(start), "coarse", 1e-3, 20)
+            agrees = any(_same_optimum(sol, other) for other in solutions)
+            solutions.append(sol)
+            if agrees:
+                break
+        best = min(solutions, key=lambda sol: sol.cost)
         theta = best.x
         if not loose:
             theta = solve(theta, "search", 1e-8, 40).x
@@ -457,6 +467,13 @@ def _distinct(starts: list[FloatArray]) -> list[FloatArray]:
         if not any(s.shape == start.shape and np.array_equal(s, start) for s in out):
             out.append(start)
     return out
+
+
+def _same_optimum(a: Any, b: Any) -> bool:
+    """Tell whether two loose lag-root searches ended at one optimum (roots 1 %, cost 1e-4)."""
+    roots_a, roots_b = np.sort(a.x), np.sort(b.x)  # log d
+    return bool(np.all(np.abs(roots_a - roots_b) <= 1e-2)
+                and abs(a.cost - b.cost) <= 1e-4 * max(a.cost, b.cost))
 
 
 class _Stacked:
