@@ -410,7 +410,7 @@ class Problem:
         stacked = self._stacked(with_A3, "full")
         _, X, coef, _, solver, scale = stacked._evaluate(np.log(d))
         error = stacked.yc - X @ coef  # (N, n_dof), unweighted
-        rhs = (X.T @ (error * stacked.w2)).T  # (n_dof, k)
+        rhs = X.transpose_times(error * stacked.w2).T  # (n_dof, k)
         coef = coef + (solver.apply(rhs / scale) / scale).T
         residual = stacked.w * (stacked.yc - X @ coef)
         return coef, np.split(residual, np.cumsum(stacked.sizes)[:-1])
@@ -511,19 +511,23 @@ class _Stacked:
         self.Fy = [self.W2FY[:, n * self.k_f + i] @ self.Fc for i in range(n)]
         self._cache: tuple[bytes, Any] | None = None
 
-    def _demeaned(self, X: FloatArray) -> FloatArray:
-        means = np.add.reduceat(X, self.starts, axis=0) / self.sizes[:, None]
-        return np.asarray(X - means[self.release], dtype=float)
+    def _demeaned(self, X: FloatArray, *, in_place: bool = False) -> FloatArray:
+        """Return ``X`` with each release's mean removed (in place for a fresh array)."""
+        out = X if in_place else np.array(X, dtype=float)
+        for start, size in zip(self.starts, self.sizes, strict=True):
+            block = out[start:start + size]
+            block -= block.mean(axis=0)
+        return out
 
     def _evaluate(self, theta: FloatArray) -> Any:
         key = theta.tobytes()
         if self._cache is not None and self._cache[0] == key:
             return self._cache[1]
         d = np.exp(theta)
-        L = self._demeaned(np.vstack([v.lag_columns(d) for v in self.views]))
+        L = self._demeaned(np.vstack([v.lag_columns(d) for v in self.views]), in_place=True)
         k_f, n = self.k_f, self.n
         cross = self.W2FY.T @ L  # (n k_f + n, n m)
-        X = np.hstack([self.Fc, L])
+        X = _Columns(self.Fc, L)
         k = X.shape[1]
         G = np.empty((n, k, k))
         b = np.empty((n, k))
@@ -571,7 +575,7 @@ class _Stacked:
     def jacobian(self, theta: FloatArray) -> FloatArray:
         """Kaufman's variable-projection Jacobian over log(d), shape (n_dof N, m)."""
         d, X, coef, residual, solver, scale = self._evaluate(theta)
-        dL = self._demeaned(np.vstack([v.lag_derivatives(d) for v in self.views]))
+        dL = self._demeaned(np.vstack([v.lag_derivatives(d) for v in self.views]), in_place=True)
         m, n = d.size, self.n
         N, k = X.shape
         lag0 = k - n * m
@@ -581,7 +585,7 @@ class _Stacked:
             lag_coef = coef[lag0:, i].reshape(m, n)
             # Column l: the derivative of the fitted force in log d_l (unweighted).
             V[i] = np.einsum("nlc,lc->nl", dL.reshape(N, m, n), lag_coef)
-            rhs[i] = X.T @ (V[i] * self.w2[:, i:i + 1])  # (k, m)
+            rhs[i] = X.transpose_times(V[i] * self.w2[:, i:i + 1])  # (k, m)
             # Golub and Pereyra's full Jacobian: -(I - P) dX c - X G^-1 dX^T r.
             dXr = (dL.T @ (residual[:, i] * self.w[:, i])).reshape(m, n)
             for l in range(m):
@@ -591,6 +595,27 @@ class _Stacked:
         for i in range(n):
             J[i * N:(i + 1) * N] = -self.w[:, i:i + 1] * (V[i] - X @ solved[i])
         return J
+
+
+class _Columns:
+    """The design ``[F, L]`` (fixed and lag columns) as its two parts, never copied into one.
+
+    Its products are the two parts' products: on every sample the design is 10^5 rows, and
+    joining the parts cost more than the products themselves.
+    """
+
+    def __init__(self, F: FloatArray, L: FloatArray) -> None:
+        self.F, self.L = F, L
+        self.k_f = F.shape[1]
+        self.shape = (F.shape[0], F.shape[1] + L.shape[1])
+
+    def __matmul__(self, M: FloatArray) -> FloatArray:
+        """``[F, L] @ M``."""
+        return np.asarray(self.F @ M[:self.k_f] + self.L @ M[self.k_f:], dtype=float)
+
+    def transpose_times(self, M: FloatArray) -> FloatArray:
+        """``[F, L]^T @ M``."""
+        return np.concatenate([self.F.T @ M, self.L.T @ M])
 
 
 class _PseudoInverse:
