@@ -589,23 +589,25 @@ def _varpro_jacobian(
     """Kaufman's Jacobian ``-P_perp (dD/dtheta) c`` of :func:`_varpro_residual`'s residual."""
     distinct, basis, Q, coef = parts
     n_real = theta.size - 2 * n_modes
-    # Pole derivative of each distinct exponential column (upper complex poles, then reals).
-    # d/dp of g(p) e^{p t} = (t g + g') e^{p t}: reuses the exponentials of the basis.
-    g, dg = _block_gain(distinct[:-1], block, dt)
-    d_basis = basis[:, :-1] * (tb[:, None] + dg / g)
     n_b, n_ch = yb.shape
-    dE = d_basis[:, :n_modes, None]  # (n_b, n_modes, 1)
-    c_re, c_im = coef[None, :n_modes], coef[None, n_modes:2 * n_modes]  # of Re(E_j), Im(E_j)
+    # Pole derivative of each distinct exponential column (upper complex poles, then reals).
+    # d/dp of g(p) e^{p t} = (t g + g') e^{p t}: reuses the exponentials of the basis. The
+    # arrays are laid out (column, channel, sample): the sample axis innermost keeps numpy's
+    # loops long (the columns and channels are a handful; with them innermost, broadcasting
+    # cost most of the Jacobian's time).
+    g, dg = _block_gain(distinct[:-1], block, dt)
+    d_basis = basis[:, :-1].T * (tb[None, :] + (dg / g)[:, None])  # (n_poles, n_b)
+    real, imag = d_basis.real[:, None, :], d_basis.imag[:, None, :]
+    c_re, c_im = coef[:n_modes, :, None], coef[n_modes:2 * n_modes, :, None]  # Re(E_j), Im(E_j)
     # d/dRe(p) of (c_re Re E + c_im Im E), and d/dIm(p) (the derivative times i), interleaved
-    # per mode; then the real poles: every column's model derivative, shape (n_b, k, n_ch).
-    oscillatory = np.stack([dE.real * c_re + dE.imag * c_im,
-                            -dE.imag * c_re + dE.real * c_im], axis=2)
-    V = np.concatenate([
-        oscillatory.reshape(n_b, 2 * n_modes, n_ch),
-        d_basis[:, n_modes:, None].real * coef[None, 2 * n_modes:2 * n_modes + n_real],
-    ], axis=1).reshape(n_b, -1)
-    projected = (V - Q @ (Q.T @ V)).reshape(n_b, theta.size, n_ch)
-    return np.asarray(-projected.transpose(2, 0, 1).reshape(n_ch * n_b, theta.size))
+    # per mode; then the real poles: every column's model derivative, shape (k, n_ch, n_b).
+    V = np.empty((theta.size, n_ch, n_b))
+    V[0:2 * n_modes:2] = real[:n_modes] * c_re + imag[:n_modes] * c_im
+    V[1:2 * n_modes:2] = real[:n_modes] * c_im - imag[:n_modes] * c_re
+    V[2 * n_modes:] = real[n_modes:] * coef[2 * n_modes:2 * n_modes + n_real, :, None]
+    V = V.reshape(theta.size * n_ch, n_b)
+    projected = (V - (V @ Q) @ Q.T).reshape(theta.size, n_ch * n_b)
+    return np.asarray(-projected.T)
 
 
 # -- one release's heave and pitch modes (the console's releases table, reprocessing) ----------
