@@ -219,11 +219,7 @@ class Problem:
         # lag roots use all the data: the subsample's optimum lies within the estimation noise of
         # the full-data one, and from there one step of this nearly quadratic problem leaves d
         # within 0.15 of its own standard deviation of the converged value (measured at 5 %
-        # noise). The step's gradient is taken on every sample; its curvature J^T J on the
-        # search rows, scaled by the ratio of sample counts (as the covariance's): the
-        # Jacobian's columns are smooth functions of time (the modal fit's), which the even
-        # subsample sums to a small fraction of their (already small) step, and the full
-        # Jacobian was a third of the precise search's cost.
+        # noise).
         # The starts are tried in turn until two of them end at the same optimum (the same
         # roots to 1 %, the same cost to 1e-4): the landscape then leads the starts tried so
         # far to one minimum, and the remaining starts are not run (measured on the
@@ -240,9 +236,7 @@ class Problem:
         if not loose:
             theta = solve(theta, "search", 1e-8, 40).x
             full = self._stacked(with_A3, "full")
-            J = self._stacked(with_A3, "search").jacobian(theta)
-            curvature = J.T @ J * (full.yc.shape[0] / J.shape[0] * self.n)
-            step, *_ = np.linalg.lstsq(curvature, -full.gradient(theta), rcond=None)
+            step, *_ = np.linalg.lstsq(full.jacobian(theta), -full.residual(theta), rcond=None)
             theta = np.clip(theta + step, lo + 1e-9, hi - 1e-9)
         return np.sort(np.exp(theta))
 
@@ -551,26 +545,6 @@ class _Stacked:
         """Weighted residuals of every force channel, stacked."""
         residual = self._evaluate(theta)[3]
         return np.asarray(residual.T.ravel(), dtype=float)
-
-    def gradient(self, theta: FloatArray) -> FloatArray:
-        """Gradient ``J^T r`` of half the squared residual over log(d), shape (m,).
-
-        At the coefficients that solve the linear part, ``X^T W r = 0``, so of Golub and
-        Pereyra's Jacobian only ``-(dX/dlog d_l) c`` meets the residual: ``J^T r = -V^T W r``
-        (:meth:`jacobian`'s ``V``); the residual is zero-mean over each release, so the lag
-        columns' derivatives need no demeaning either.
-        """
-        d, X, coef, residual, _, _ = self._evaluate(theta)
-        dL = np.vstack([v.lag_derivatives(d) for v in self.views])
-        m, n = d.size, self.n
-        lag0 = X.shape[1] - n * m
-        # (dX/dlog d_l)^T W r for every channel at once: (n m, n_dof), then each channel's
-        # lag coefficients.
-        dXr = dL.T @ (residual * self.w)
-        g = np.zeros(m)
-        for i in range(n):
-            g -= np.einsum("lc,lc->l", dXr[:, i].reshape(m, n), coef[lag0:, i].reshape(m, n))
-        return g
 
     def jacobian(self, theta: FloatArray) -> FloatArray:
         """Kaufman's variable-projection Jacobian over log(d), shape (n_dof N, m)."""
