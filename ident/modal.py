@@ -605,8 +605,8 @@ def _varpro_jacobian(
     V[0:2 * n_modes:2] = real[:n_modes] * c_re + imag[:n_modes] * c_im
     V[1:2 * n_modes:2] = real[:n_modes] * c_im - imag[:n_modes] * c_re
     V[2 * n_modes:] = real[n_modes:] * coef[2 * n_modes:2 * n_modes + n_real, :, None]
-    V = V.reshape(theta.size * n_ch, n_b)
-    projected = (V - (V @ Q) @ Q.T).reshape(theta.size, n_ch * n_b)
+    rows = V.reshape(theta.size * n_ch, n_b)
+    projected = (rows - (rows @ Q) @ Q.T).reshape(theta.size, n_ch * n_b)
     return np.asarray(-projected.T)
 
 
