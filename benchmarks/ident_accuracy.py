@@ -40,7 +40,8 @@ Run: ``.venv/bin/python benchmarks/ident_accuracy.py [--seeds 20] [--workers 2] 
 ``--part timing [--repeats 9]`` prints only the timing table. BLAS is kept single-threaded in
 every process, so the times are one-core times. The timing table gives wall and CPU time
 (``time.process_time``), minimum and median over the repeats: the host is shared, and the CPU
-time is what the identification itself costs.
+time is what the identification itself costs (docs/e2rfc_speed.md: the times before and after
+the speed work, and what it changed).
 """
 
 from __future__ import annotations

@@ -18,6 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ident._lsq import bounded_lm
+from ident._normal_equations import PseudoInverse, SplitDesign
 from ident._regressors import PreparedRelease
 from ident._selection import Candidate
 from ident._stats import autocorrelation_inflation
@@ -532,7 +533,7 @@ class _Stacked:
         L = self._demeaned(np.vstack([v.lag_columns(d) for v in self.views]), in_place=True)
         k_f, n = self.k_f, self.n
         cross = self.W2FY.T @ L  # (n k_f + n, n m)
-        X = _Columns(self.Fc, L)
+        X = SplitDesign(self.Fc, L)
         k = X.shape[1]
         G = np.empty((n, k, k))
         b = np.empty((n, k))
@@ -545,7 +546,7 @@ class _Stacked:
             b[i] = np.concatenate([self.Fy[i], cross[n * k_f + i]])
         scale = np.sqrt(np.diagonal(G, axis1=1, axis2=2)).copy()  # (n, k)
         scale[scale == 0.0] = 1.0
-        solver = _PseudoInverse(G / (scale[:, :, None] * scale[:, None, :]))
+        solver = PseudoInverse(G / (scale[:, :, None] * scale[:, None, :]))
         coef = (solver.apply(b / scale) / scale).T  # (k, n)
         residual = self.w * (self.yc - X @ coef)  # (N, n), weighted
         out = (d, X, coef, residual, solver, scale)
@@ -580,49 +581,3 @@ class _Stacked:
         for i in range(n):
             J[i * N:(i + 1) * N] = -self.w[:, i:i + 1] * (V[i] - X @ solved[i])
         return J
-
-
-class _Columns:
-    """The design ``[F, L]`` (fixed and lag columns) as its two parts, never copied into one.
-
-    Its products are the two parts' products: on every sample the design is 10^5 rows, and
-    joining the parts cost more than the products themselves.
-    """
-
-    def __init__(self, F: FloatArray, L: FloatArray) -> None:
-        self.F, self.L = F, L
-        self.k_f = F.shape[1]
-        self.shape = (F.shape[0], F.shape[1] + L.shape[1])
-
-    def __matmul__(self, M: FloatArray) -> FloatArray:
-        """``[F, L] @ M``."""
-        return np.asarray(self.F @ M[:self.k_f] + self.L @ M[self.k_f:], dtype=float)
-
-    def transpose_times(self, M: FloatArray) -> FloatArray:
-        """``[F, L]^T @ M``."""
-        return np.concatenate([self.F.T @ M, self.L.T @ M])
-
-
-class _PseudoInverse:
-    """Minimum-norm solves with a batch of symmetric positive semi-definite matrices.
-
-    The same solution as ``np.linalg.lstsq(G, b, rcond=None)`` (eigenvalues below ``eps k``
-    times the largest are dropped, as ``lstsq`` drops singular values), from one symmetric
-    eigendecomposition of every force channel's normal matrix: the residual and the Jacobian
-    of the lag-root search then solve with the same factors instead of four ``lstsq`` calls.
-    """
-
-    def __init__(self, G: FloatArray) -> None:
-        values, self.vectors = np.linalg.eigh(G)  # (c, k), (c, k, k)
-        largest = np.abs(values).max(axis=1, keepdims=True)
-        keep = np.abs(values) > np.finfo(float).eps * G.shape[-1] * largest
-        self.inverse = np.where(keep, 1.0 / np.where(keep, values, 1.0), 0.0)
-
-    def apply(self, b: FloatArray) -> FloatArray:
-        """Solve for right-hand sides ``b`` of shape (c, k) or (c, k, m)."""
-        vectors, inverse = self.vectors, self.inverse
-        if b.ndim == 2:
-            projected = np.einsum("cki,ck->ci", vectors, b)
-            return np.asarray(np.einsum("cik,ck->ci", vectors, inverse * projected))
-        projected = np.einsum("cki,ckm->cim", vectors, b)
-        return np.asarray(np.einsum("cik,ckm->cim", vectors, inverse[:, :, None] * projected))
