@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from ident.modal import ModalFit, _exp, fit_modes, noise_std
+from ident.modal import ModalFit, _exponentials, fit_modes, noise_std
 from ident.release import Release
 from ident.section import SectionModel
 
@@ -83,7 +83,7 @@ class PreparedRelease:
             rows = {"full": slice(None), "search": slice(None, None, step),
                     "coarse": slice(None, None, 2 * step)}[which]
             t = self.release.t[rows]
-            exponentials = (_exp(np.outer(t, self.fit.poles)) if self.exponentials is None
+            exponentials = (_exponentials(t, self.fit.poles) if self.exponentials is None
                             else self.exponentials[rows])
             self._views[which] = RegressorView(
                 t=t,
@@ -185,7 +185,7 @@ def prepare(release: Release, section: SectionModel) -> PreparedRelease:
     c = B / release.U
     t = release.t
     # q - offset, q' and q'' of the fit (ModalFit.evaluate) from one set of exponentials.
-    exponentials = _exp(np.outer(t, fit.poles))
+    exponentials = _exponentials(t, fit.poles)
     p = fit.poles[:, None]
     fixed = (exponentials @ np.hstack([fit.amplitudes, c * p * fit.amplitudes,
                                        c**2 * p**2 * fit.amplitudes])).real
