@@ -8,11 +8,16 @@
 - Hypothesis draws the same examples on every run (``derandomize``): a fuzz test that passes in
   CI passes again on the next run; a new search for failures is run by hand with
   ``--hypothesis-profile=explore``.
+- Ctrl-C works in the tests even when the suite was started in the background by a shell without
+  job control (``make test &`` in a script, some CI runners): such a shell starts it with SIGINT
+  ignored, Python then installs no KeyboardInterrupt handler, and the tests of Ctrl-C (the
+  engine's ``run_until``, ``windrig simulate`` stopped by SIGINT) would hang until their timeout.
 """
 
 from __future__ import annotations
 
 import os
+import signal
 import threading
 import time
 from collections.abc import Iterator
@@ -29,6 +34,11 @@ settings.load_profile("windrig")
 # display (Qt aborts the whole process when it cannot open its platform). An explicit setting wins.
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 os.environ.setdefault("MPLBACKEND", "Agg")
+
+# Python's own handler, as in a foreground run; a child process then starts with SIGINT at its
+# default again (an ignored signal stays ignored across exec, a caught one does not).
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 #: How long a test's threads get to finish after the test before they count as leaked, in s.
 THREAD_GRACE_S = 2.0
