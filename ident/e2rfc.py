@@ -457,8 +457,10 @@ class IdentifiedModel(RationalFunctionModel):
         for model in diag.jackknife:
             try:
                 found = _flutter.analyze(section, model, U_max, n_points=REFIT_GRID).speed
-            except _flutter.StillAirModesError:
-                continue  # a wild refit: it says nothing about flutter below U_max
+            except ValueError:
+                # A wild refit (StillAirModesError, a branch the search lost): it says nothing
+                # about flutter below U_max.
+                continue
             if found is not None:
                 speeds.append(float(found))
         if not speeds:
@@ -498,7 +500,7 @@ class IdentifiedModel(RationalFunctionModel):
             """
             try:
                 found = _flutter.analyze(section, model, U_max, n_points=REFIT_GRID).speed
-            except _flutter.StillAirModesError:
+            except ValueError:  # StillAirModesError, or a branch the search lost
                 return U_max
             return U_max if found is None else float(found)
 
@@ -637,10 +639,11 @@ class IdentifiedModel(RationalFunctionModel):
             labels.append(structure_label(model.diagnostics.n_lags, model.diagnostics.with_A3))
             try:
                 result, std = model._parametric(section, U_max)
-            except _flutter.StillAirModesError:
+            except ValueError:
                 # As in the flutter speed's structure term: an alternative whose added mass
-                # overturns the structure's (from releases at two low speeds, it happens) has
-                # no flutter the search can find; it widens the spread to "no flutter".
+                # overturns the structure's (StillAirModesError: from releases at two low
+                # speeds, it happens) or whose branch the search loses has no flutter the
+                # search can find; it widens the spread to "no flutter".
                 speeds.append(None)
                 stds.append(None)
                 continue
