@@ -1,8 +1,11 @@
-"""The virtual tunnel: section-model physics in the wind, and (later) simulated instruments.
+"""The virtual tunnel: section-model physics in the wind, and the simulated instruments.
 
 :mod:`simulators.tunnel` simulates free-vibration releases; :mod:`simulators.effects` holds the
-named physical effects that can be added to them. This package may import :mod:`ident` (for the
-aerodynamic model) but never :mod:`daq`.
+named physical effects that can be added to them; :mod:`simulators.virtual_tunnel` is the one
+tunnel that every simulated instrument of :mod:`simulators.devices` samples in real time (with
+:mod:`simulators.clock` for their clocks and :mod:`simulators.noise` for noise keyed to the
+release and the sample). This package may import :mod:`ident` (for the aerodynamic model) but
+never :mod:`daq`.
 """
 
 from simulators import effects, tunnel
