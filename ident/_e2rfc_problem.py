@@ -368,9 +368,10 @@ class Problem:
         Contiguous folds would hold out the large-amplitude start of a decay in one fold and
         judge it by coefficients fitted to the small tail; interleaving gives every fold the
         whole decay, and one-period blocks keep neighbouring (correlated) samples together.
+        A release shorter than N_FOLDS periods gets shorter blocks, so that no fold is empty.
         """
         t = p.view("search").t
-        period = 1.0 / float(p.fit.frequencies.min())
+        period = min(1.0 / float(p.fit.frequencies.min()), float(t[-1] - t[0]) / N_FOLDS)
         labels = (np.floor((t - t[0]) / period).astype(int)) % N_FOLDS
         return [np.flatnonzero(labels == k) for k in range(N_FOLDS)]
 
