@@ -305,6 +305,10 @@ class Problem:
             return None
         return self.final(Candidate(n_lags, with_A3, tuple(d), math.nan, math.nan, 0))
 
+    def held_out_error(self, d: FloatArray, with_A3: bool) -> float:
+        """Held-out error of a structure with lag roots ``d`` (the candidates' score)."""
+        return float(self._cross_validate(d, with_A3).mean())
+
     def _cross_validate(self, d: FloatArray, with_A3: bool) -> FloatArray:
         """Held-out weighted mean squared force error per fold.
 
