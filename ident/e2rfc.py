@@ -66,6 +66,13 @@ How uncertain the flutter speed is (:meth:`IdentifiedModel.uncertainty`), from t
   the systematic part, with a warning. (Fitting each release only while its decay dominates,
   and instrumental variables with instruments from the predicted deterministic decay, were
   measured and dropped: docs/e2rfc_turbulence.md.)
+
+The refits of the extrapolation and one-lag-more parts never count below that same bound (a
+refit fluttering below a decaying release contradicts the data: it counts as fluttering
+there), and a one-lag-more refit that flutters outside what the data allow (below the bound, or
+not at all below the searched speed) counts only when the held-out error does not reject its
+structure (:attr:`E2RFCDiagnostics.finer_rejected`): from one short release per wind speed such
+refits had made the std as large as the flutter speed.
 """
 
 from __future__ import annotations
