@@ -369,10 +369,9 @@ class Problem:
     def _folds(p: PreparedRelease) -> list[npt.NDArray[np.intp]]:
         """Split a release's search rows into folds of interleaved blocks, each one period long.
 
-        Contiguous folds would hold out the large-amplitude start of a decay in one fold and
-        judge it by coefficients fitted to the small tail; interleaving gives every fold the
-        whole decay, and one-period blocks keep neighbouring (correlated) samples together.
-        A release shorter than N_FOLDS periods gets shorter blocks, so that no fold is empty.
+        Contiguous folds would hold out a decay's large start in one fold and judge it by the
+        tail's coefficients; interleaving gives every fold the whole decay, one-period blocks
+        keep correlated neighbours together (shorter ones below N_FOLDS periods: no empty fold).
         """
         t = p.view("search").t
         period = min(1.0 / float(p.fit.frequencies.min()), float(t[-1] - t[0]) / N_FOLDS)
