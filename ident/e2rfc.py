@@ -66,18 +66,28 @@ How uncertain the flutter speed is (:meth:`IdentifiedModel.uncertainty`), from t
   the systematic part, with a warning. (Fitting each release only while its decay dominates,
   and instrumental variables with instruments from the predicted deterministic decay, were
   measured and dropped: docs/e2rfc_turbulence.md.)
+
+The turbulence branch (issue 16): when the releases hold a random response and every release
+carries a hold of at least :data:`ident._turbulent_fit.MIN_HOLD_S` (the model held in the wind
+before it, :class:`~ident.release.ReleaseHold`), the model is fitted again by refined
+instrumental variables with each hold's force as the noise model (:mod:`ident._turbulent_fit`),
+its structure (one or two lags) chosen by leave-one-release-out prediction error; those refits
+are the jackknife of the turbulence part, the other structure within one standard error the
+structure part. ``diagnostics.estimator`` says which estimator ran. Without such holds today's
+estimator runs, with a warning that says what turbulence needs. In smooth flow nothing changes.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import numpy.typing as npt
 from scipy.stats import t as student_t
 
+from ident import _turbulent_fit
 from ident import flutter as _flutter
 from ident._e2rfc_problem import FinalFit, Problem, improves
 from ident._regressors import PreparedRelease, prepare
@@ -116,6 +126,12 @@ REFIT_GRID = 150
 #: Largest extrapolation, as the ratio of the lowest covered reduced frequency to the flutter
 #: one, accepted without a warning.
 EXTRAPOLATION_WARN = 1.1
+#: ``diagnostics.estimator`` of today's E2RFC and of the turbulence branch (module docstring).
+ESTIMATOR_E2RFC = "E2RFC (modal-fit regressors, least squares)"
+ESTIMATOR_TURBULENT = "refined IV with the holds' noise model (turbulence branch)"
+#: A3 in the turbulence branch: "fitted" always, or "e2rfc" as E2RFC's own structure choice on
+#: the same releases has it (docs/e2rfc_turbulence.md measures both).
+TURBULENT_A3 = "fitted"
 
 
 @dataclass(frozen=True, eq=False)
@@ -181,6 +197,7 @@ class E2RFCDiagnostics:
     random_response: FloatArray = field(default_factory=lambda: np.zeros(0), repr=False)
     K_range: dict[str, tuple[float, float]] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
+    estimator: str = ESTIMATOR_E2RFC
     # What the refits need, and their results once computed (on first use: they cost about
     # as much as the identification, and not every caller asks for the uncertainty).
     _prepared: tuple[PreparedRelease, ...] = field(default=(), repr=False)
@@ -719,7 +736,64 @@ def identify(
     prepared = [prepare(r, section) for r in releases]
     if section.n_dof == 3:
         _check_modes_excited(prepared, section)
-    return _identify_prepared(prepared, section, n_lags, with_A3)
+    model = _identify_prepared(prepared, section, n_lags, with_A3)
+    if not model.diagnostics.turbulent:
+        return model
+    if not _turbulent_fit.holds_suffice(releases):
+        held = [r.hold.duration for r in releases if r.hold is not None]
+        have = (f"the shortest hold here is {min(held):.3g} s" if len(held) == len(releases)
+                else f"{len(releases) - len(held)} of {len(releases)} releases have none")
+        note = (f"turbulence needs a hold of >= {_turbulent_fit.MIN_HOLD_S:g} s before each "
+                f"release (the model held in the wind; {have}): with it the refined-IV "
+                "estimator runs, without it today's, biased low in turbulence")
+        diagnostics = replace(model.diagnostics, warnings=(*model.diagnostics.warnings, note))
+        return IdentifiedModel(model.A, model.d, diagnostics)
+    return _turbulent_model(model, releases, section, n_lags, with_A3)
+
+
+def _turbulent_model(model: IdentifiedModel, releases: list[Release], section: SectionModel,
+                     n_lags: int | None, with_A3: bool | None) -> IdentifiedModel:
+    """Refit E2RFC's turbulent releases by refined IV with the holds' noise model.
+
+    The result keeps E2RFC's data diagnostics (modal fits, random response, covered reduced
+    frequencies); its coefficients, structure, covariance, alternatives and refits are the
+    branch's, so that :meth:`IdentifiedModel.uncertainty` combines the same parts.
+    """
+    base = model.diagnostics
+    if with_A3 is None:
+        with_A3 = True if TURBULENT_A3 == "fitted" else base.with_A3
+    speeds = distinct_wind_speeds([r.U for r in releases])
+    reduced_below = speeds[-1] / (1 + DISTINCT_U_RTOL) if len(speeds) >= 3 else None
+    found = _turbulent_fit.fit_turbulent(
+        releases, section, with_A3=with_A3, n_lags=n_lags, reduced_below=reduced_below)
+    note = (f"turbulence: coefficients by {ESTIMATOR_TURBULENT} from holds of "
+            f"{min(r.hold.duration for r in releases if r.hold is not None):.3g} s or more; "
+            f"{found.reason}")
+
+    def assemble(fit: _turbulent_fit.TurbulentFit, reason: str,
+                 alternatives: tuple[IdentifiedModel, ...], refits: dict[str, object]
+                 ) -> IdentifiedModel:
+        diagnostics = replace(
+            base, n_lags=fit.d.size, with_A3=fit.with_A3, reason=reason,
+            candidates=found.candidates, release_residuals=fit.release_residuals,
+            condition_number=math.nan, covariance=fit.covariance,
+            parameter_index=fit.parameter_index, alternatives=alternatives,
+            warnings=(*base.warnings, note), estimator=ESTIMATOR_TURBULENT,
+            _lag_roots=fit.d, _refits=refits)
+        return IdentifiedModel(fit.A, fit.d, diagnostics)
+
+    # The branch's refits replace E2RFC's (filled here: they came with the structure choice).
+    none: dict[str, object] = {"jackknife": (), "release_jackknife": (), "reduced": None,
+                               "finer": None}
+    alternatives = tuple(
+        assemble(f, "within one standard error of the best, not chosen", (), dict(none))
+        for f in found.alternatives)
+    jackknife = tuple(RationalFunctionModel(f.A, f.d) for f in found.leave_one_out)
+    reduced = (None if found.reduced is None
+               else RationalFunctionModel(found.reduced.A, found.reduced.d))
+    return assemble(found.chosen, found.reason, alternatives,
+                    {"jackknife": jackknife, "release_jackknife": jackknife,
+                     "reduced": reduced, "finer": None})
 
 
 def _identify_prepared(
