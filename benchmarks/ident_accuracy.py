@@ -288,7 +288,18 @@ def tunnel_releases(row, seed, hold_s=TUNNEL_HOLD_S):
 
 
 def tunnel_run(args):
-    row, seed, mode = args
+    """One tunnel identification; an exception is reported as a failed row, not raised."""
+    try:
+        return _tunnel_run(args)
+    except Exception as exc:  # noqa: BLE001 - a benchmark reports every failure and goes on
+        row, seed, mode, _ = args
+        print(f"FAILED {row} seed {seed} {mode}: {exc!r}", flush=True)
+        return row, mode, np.inf, np.nan, np.nan, False, seed
+
+
+def _tunnel_run(args):
+    row, seed, mode, a3 = args
+    e2rfc.TURBULENT_A3 = a3  # the turbulence branch's A3 option (set in each worker)
     section, make_model, _, _, truth = TUNNEL_ROWS[row]
     U_F = truth() if truth is not None else fl.analyze(section, make_model()).speed
     releases = tunnel_releases(row, seed)
@@ -305,15 +316,19 @@ def tunnel_run(args):
             seed)
 
 
-def tunnel_part(seeds, workers, modes=("after",), which="all"):
+def tunnel_part(seeds, workers, modes=("after",), which="all", a3="choose"):
     names = [row for row in TUNNEL_ROWS
              if which == "all" or (which == "turbulent") == (TUNNEL_ROWS[row][3] > 0)]
-    jobs = [(row, seed, mode) for row in names for mode in modes for seed in range(seeds)]
+    jobs = [(row, seed, mode, a3) for row in names for mode in modes for seed in range(seeds)]
+    results = []
     with ProcessPoolExecutor(workers) as pool:
-        results = list(tqdm(pool.map(tunnel_run, jobs), total=len(jobs), desc="tunnel rows"))
-    for row, mode, err, std, elapsed, branch, seed in results:
-        print(f"  {row:<24} {mode:<6} seed {seed:2d} err {100 * err:+8.2f} % std "
-              f"{100 * std:7.2f} % {elapsed:5.1f} s{' IV branch' if branch else ''}")
+        # Each result printed as it arrives: a long run stopped halfway keeps what it measured.
+        for result in pool.map(tunnel_run, jobs):
+            row, mode, err, std, elapsed, branch, seed = result
+            print(f"  {row:<24} {mode:<6} seed {seed:2d} err {100 * err:+8.2f} % std "
+                  f"{100 * std:7.2f} % {elapsed:5.1f} s{' IV branch' if branch else ''}",
+                  flush=True)
+            results.append(result)
     for mode in modes:
         _tunnel_table([r for r in results if r[1] == mode], names, seeds, mode)
 
@@ -352,13 +367,15 @@ def main():
                         help="tunnel rows: as shipped, with the holds taken away, or both")
     parser.add_argument("--rows", choices=("all", "turbulent", "clean"), default="all",
                         help="which tunnel rows to run")
+    parser.add_argument("--turbulent-a3", choices=("choose", "fitted", "e2rfc"), default="choose",
+                        help="A3 in E2RFC's turbulence branch (ident.e2rfc.TURBULENT_A3)")
     args = parser.parse_args()
     if args.part == "timing":
         timing_part(args.repeats)
         return
     if args.part in ("all", "tunnel"):
         modes = ("before", "after") if args.tunnel_mode == "both" else (args.tunnel_mode,)
-        tunnel_part(args.seeds, args.workers, modes, args.rows)
+        tunnel_part(args.seeds, args.workers, modes, args.rows, args.turbulent_a3)
     if args.part == "tunnel":
         return
     jobs = [(s, m, n, seed) for s in SECTIONS for m in METHODS for n in NOISES

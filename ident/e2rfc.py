@@ -129,9 +129,10 @@ EXTRAPOLATION_WARN = 1.1
 #: ``diagnostics.estimator`` of today's E2RFC and of the turbulence branch (module docstring).
 ESTIMATOR_E2RFC = "E2RFC (modal-fit regressors, least squares)"
 ESTIMATOR_TURBULENT = "refined IV with the holds' noise model (turbulence branch)"
-#: A3 in the turbulence branch: "fitted" always, or "e2rfc" as E2RFC's own structure choice on
-#: the same releases has it (docs/e2rfc_turbulence.md measures both).
-TURBULENT_A3 = "fitted"
+#: A3 in the turbulence branch: "choose" (fitted or zero, by held-out error with the other
+#: structures), "fitted" always, or "e2rfc" as E2RFC's own choice on the same releases has it
+#: (docs/e2rfc_turbulence.md measures them).
+TURBULENT_A3 = "choose"
 
 
 @dataclass(frozen=True, eq=False)
@@ -760,12 +761,27 @@ def _turbulent_model(model: IdentifiedModel, releases: list[Release], section: S
     branch's, so that :meth:`IdentifiedModel.uncertainty` combines the same parts.
     """
     base = model.diagnostics
-    if with_A3 is None:
-        with_A3 = True if TURBULENT_A3 == "fitted" else base.with_A3
+    a3_options: tuple[bool, ...] = (
+        (with_A3,) if with_A3 is not None else (True, False) if TURBULENT_A3 == "choose"
+        else (True,) if TURBULENT_A3 == "fitted" else (base.with_A3,))
     speeds = distinct_wind_speeds([r.U for r in releases])
     reduced_below = speeds[-1] / (1 + DISTINCT_U_RTOL) if len(speeds) >= 3 else None
+    stable = base.decayed_at
+
+    def admissible(fit: _turbulent_fit.TurbulentFit) -> bool:
+        """Whether a fit's flutter speed (if any) lies above every decaying release's speed."""
+        if stable is None:
+            return True
+        try:
+            found = _flutter.analyze(section, RationalFunctionModel(fit.A, fit.d),
+                                     n_points=REFIT_GRID).speed
+        except ValueError:  # no still-air modes, a lost branch: nothing to trust
+            return False
+        return found is None or float(found) >= stable
+
     found = _turbulent_fit.fit_turbulent(
-        releases, section, with_A3=with_A3, n_lags=n_lags, reduced_below=reduced_below)
+        releases, section, a3_options=a3_options, n_lags=n_lags, reduced_below=reduced_below,
+        admissible=admissible)
     note = (f"turbulence: coefficients by {ESTIMATOR_TURBULENT} from holds of "
             f"{min(r.hold.duration for r in releases if r.hold is not None):.3g} s or more; "
             f"{found.reason}")
@@ -829,9 +845,13 @@ def _identify_prepared(
             improves(history[j], [c for h in history[:j] for c in h]) for j in (m - 1, m)
         ):
             break
-    usable = [c for c in candidates if not c.note]
+    # A structure whose held-out error is NaN (a fold's fit that failed numerically:
+    # seen once in 64 turbulent benchmark cases) cannot be compared; the one-SE rule would
+    # find nothing within NaN of the best.
+    usable = [c for c in candidates if not c.note and (given or not math.isnan(c.cv_error))]
     if not usable:
-        notes = "; ".join(f"n_lags={c.n_lags}, A3={c.with_A3}: {c.note}" for c in candidates)
+        notes = "; ".join(f"n_lags={c.n_lags}, A3={c.with_A3}: "
+                          f"{c.note or 'held-out error not a number'}" for c in candidates)
         raise RankDeficiencyError(f"no model structure is determined by these releases ({notes})")
     chosen, reason = select_one_se(usable, given=given)
     context = _Context(prepared, section, tuple(candidates))
