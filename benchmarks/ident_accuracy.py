@@ -316,7 +316,7 @@ def _tunnel_run(args):
             seed)
 
 
-def tunnel_part(seeds, workers, modes=("after",), which="all", a3="choose"):
+def tunnel_part(seeds, workers, modes=("after",), which="all", a3="fitted-or-zero"):
     names = [row for row in TUNNEL_ROWS
              if which == "all" or (which == "turbulent") == (TUNNEL_ROWS[row][3] > 0)]
     jobs = [(row, seed, mode, a3) for row in names for mode in modes for seed in range(seeds)]
@@ -367,7 +367,8 @@ def main():
                         help="tunnel rows: as shipped, with the holds taken away, or both")
     parser.add_argument("--rows", choices=("all", "turbulent", "clean"), default="all",
                         help="which tunnel rows to run")
-    parser.add_argument("--turbulent-a3", choices=("choose", "fitted", "e2rfc"), default="choose",
+    parser.add_argument("--turbulent-a3", choices=("fitted-or-zero", "fitted", "choose", "e2rfc"),
+                        default="fitted-or-zero",
                         help="A3 in E2RFC's turbulence branch (ident.e2rfc.TURBULENT_A3)")
     args = parser.parse_args()
     if args.part == "timing":

@@ -133,6 +133,8 @@ class TurbulentResult:
         of a left-out release; 1 = the hold's innovation level) and standard error.
     reason : str
         Why the chosen structure was chosen.
+    contradicted : bool
+        Whether ``admissible`` rejected every structure tried (all were scored then).
     """
 
     chosen: TurbulentFit
@@ -141,6 +143,7 @@ class TurbulentResult:
     reduced: TurbulentFit | None
     candidates: tuple[Candidate, ...]
     reason: str
+    contradicted: bool = False
 
 
 def holds_suffice(releases: Sequence[Release]) -> bool:
@@ -357,7 +360,8 @@ def fit_turbulent(releases: Sequence[Release], section: SectionModel, *,
     fulls = [_fit(signals, m, a3, _starts(m)) for m in options for a3 in a3_options]
     kept = [f for f in fulls if admissible is None or admissible(f)]
     rejected = len(fulls) - len(kept)
-    if not kept:  # every structure contradicted: score them all (the interval says so)
+    contradicted = not kept
+    if contradicted:  # every structure contradicted: score them all (the interval says so)
         kept, rejected = fulls, 0
     given = n_lags is not None and len(a3_options) == 1
     scored = []
@@ -395,4 +399,5 @@ def fit_turbulent(releases: Sequence[Release], section: SectionModel, *,
             reduced = _fit(below, chosen[1].d.size, chosen[1].with_A3, chosen[1].d)
     return TurbulentResult(chosen=chosen[1], leave_one_out=chosen[2], alternatives=alternatives,
                            reduced=reduced, candidates=tuple(candidates),
-                           reason=f"refined IV with the holds' noise model: {reason}")
+                           reason=f"refined IV with the holds' noise model: {reason}",
+                           contradicted=contradicted)

@@ -129,10 +129,13 @@ EXTRAPOLATION_WARN = 1.1
 #: ``diagnostics.estimator`` of today's E2RFC and of the turbulence branch (module docstring).
 ESTIMATOR_E2RFC = "E2RFC (modal-fit regressors, least squares)"
 ESTIMATOR_TURBULENT = "refined IV with the holds' noise model (turbulence branch)"
-#: A3 in the turbulence branch: "choose" (fitted or zero, by held-out error with the other
-#: structures), "fitted" always, or "e2rfc" as E2RFC's own choice on the same releases has it
-#: (docs/e2rfc_turbulence.md measures them).
-TURBULENT_A3 = "choose"
+#: A3 in the turbulence branch: "fitted-or-zero" (fitted; zero only when every structure with
+#: A3 fitted flutters below a wind speed where a release decayed), "fitted" always, "choose"
+#: (fitted or zero by held-out error with the lag count), or "e2rfc" as E2RFC's own choice on
+#: the same releases has it. docs/e2rfc_turbulence.md measures them: A3 zero lands at -99 %
+#: on some bluff-deck seeds whose held-out error prefers it, A3 fitted on some plate seeds
+#: whose every A3-fitted structure contradicts the data.
+TURBULENT_A3 = "fitted-or-zero"
 
 
 @dataclass(frozen=True, eq=False)
@@ -763,7 +766,7 @@ def _turbulent_model(model: IdentifiedModel, releases: list[Release], section: S
     base = model.diagnostics
     a3_options: tuple[bool, ...] = (
         (with_A3,) if with_A3 is not None else (True, False) if TURBULENT_A3 == "choose"
-        else (True,) if TURBULENT_A3 == "fitted" else (base.with_A3,))
+        else (base.with_A3,) if TURBULENT_A3 == "e2rfc" else (True,))
     speeds = distinct_wind_speeds([r.U for r in releases])
     reduced_below = speeds[-1] / (1 + DISTINCT_U_RTOL) if len(speeds) >= 3 else None
     stable = base.decayed_at
@@ -782,6 +785,13 @@ def _turbulent_model(model: IdentifiedModel, releases: list[Release], section: S
     found = _turbulent_fit.fit_turbulent(
         releases, section, a3_options=a3_options, n_lags=n_lags, reduced_below=reduced_below,
         admissible=admissible)
+    if found.contradicted and with_A3 is None and TURBULENT_A3 == "fitted-or-zero":
+        fallback = _turbulent_fit.fit_turbulent(
+            releases, section, a3_options=(False,), n_lags=n_lags,
+            reduced_below=reduced_below, admissible=admissible)
+        if not fallback.contradicted:
+            found = _with_reason(fallback, "every structure with A3 fitted "
+                                               "flutters below a decaying release's wind speed")
     note = (f"turbulence: coefficients by {ESTIMATOR_TURBULENT} from holds of "
             f"{min(r.hold.duration for r in releases if r.hold is not None):.3g} s or more; "
             f"{found.reason}")
@@ -910,6 +920,12 @@ class _Context:
             K_range=_K_ranges(prepared, self.section), warnings=tuple(warnings),
             _prepared=tuple(prepared), _section=self.section, _lag_roots=fit.d)
         return IdentifiedModel(fit.A, fit.d, diagnostics)
+
+
+def _with_reason(found: _turbulent_fit.TurbulentResult, why: str
+                               ) -> _turbulent_fit.TurbulentResult:
+    """Return a turbulence-branch result whose reason starts with ``why``."""
+    return replace(found, reason=f"{why}: {found.reason}")
 
 
 def _K_ranges(prepared: list[PreparedRelease], section: SectionModel
