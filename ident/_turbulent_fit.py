@@ -25,7 +25,7 @@ This module fits the same rational-function model another way, measured in
   nearly consistent (-0.5 % in the same oracle test).
 - *Lag roots* by a bounded search of the whitened residual of the IV coefficients (the
   prediction error), from roots spread over the reduced frequencies.
-- *Structure* (one or two lags, A3 fitted or zero) by held-out error over releases: each
+- *Structure* (one or two lags, A3 as the caller offers) by held-out error over releases: each
   release left out in turn is predicted by the model fitted on the others (whitened by its own
   hold's noise model), with the one-standard-error rule. Those refits are the jackknife the
   uncertainty needs, so the choice costs nothing extra. A structure whose fit on all releases

@@ -71,10 +71,12 @@ The turbulence branch (issue 16): when the releases hold a random response and e
 carries a hold of at least :data:`ident._turbulent_fit.MIN_HOLD_S` (the model held in the wind
 before it, :class:`~ident.release.ReleaseHold`), the model is fitted again by refined
 instrumental variables with each hold's force as the noise model (:mod:`ident._turbulent_fit`),
-its structure (one or two lags) chosen by leave-one-release-out prediction error; those refits
-are the jackknife of the turbulence part, the other structure within one standard error the
-structure part. ``diagnostics.estimator`` says which estimator ran. Without such holds today's
-estimator runs, with a warning that says what turbulence needs. In smooth flow nothing changes.
+its structure (one or two lags, A3 fitted) chosen by leave-one-release-out prediction error
+among the structures that do not flutter below a wind speed at which a release decayed (A3 zero
+only when every A3-fitted structure does, :data:`TURBULENT_A3`); those refits are the jackknife
+of the turbulence part, the other structures within one standard error the structure part.
+``diagnostics.estimator`` says which estimator ran. Without such holds today's estimator runs,
+with a warning that says what turbulence needs. In smooth flow nothing changes.
 """
 
 from __future__ import annotations
