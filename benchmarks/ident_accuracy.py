@@ -316,10 +316,12 @@ def _tunnel_run(args):
             seed)
 
 
-def tunnel_part(seeds, workers, modes=("after",), which="all", a3="fitted-or-zero"):
+def tunnel_part(seeds, workers, modes=("after",), which="all", a3="fitted-or-zero",
+                first_seed=0):
     names = [row for row in TUNNEL_ROWS
              if which == "all" or (which == "turbulent") == (TUNNEL_ROWS[row][3] > 0)]
-    jobs = [(row, seed, mode, a3) for row in names for mode in modes for seed in range(seeds)]
+    jobs = [(row, seed, mode, a3) for row in names for mode in modes
+            for seed in range(first_seed, first_seed + seeds)]
     results = []
     with ProcessPoolExecutor(workers) as pool:
         # Each result printed as it arrives: a long run stopped halfway keeps what it measured.
@@ -367,6 +369,8 @@ def main():
                         help="tunnel rows: as shipped, with the holds taken away, or both")
     parser.add_argument("--rows", choices=("all", "turbulent", "clean"), default="all",
                         help="which tunnel rows to run")
+    parser.add_argument("--first-seed", type=int, default=0,
+                        help="tunnel rows: the first seed (more seeds in another run)")
     parser.add_argument("--turbulent-a3", choices=("fitted-or-zero", "fitted", "choose", "e2rfc"),
                         default="fitted-or-zero",
                         help="A3 in E2RFC's turbulence branch (ident.e2rfc.TURBULENT_A3)")
@@ -376,7 +380,8 @@ def main():
         return
     if args.part in ("all", "tunnel"):
         modes = ("before", "after") if args.tunnel_mode == "both" else (args.tunnel_mode,)
-        tunnel_part(args.seeds, args.workers, modes, args.rows, args.turbulent_a3)
+        tunnel_part(args.seeds, args.workers, modes, args.rows, args.turbulent_a3,
+                    args.first_seed)
     if args.part == "tunnel":
         return
     jobs = [(s, m, n, seed) for s in SECTIONS for m in METHODS for n in NOISES
