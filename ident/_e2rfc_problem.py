@@ -305,6 +305,10 @@ class Problem:
             return None
         return self.final(Candidate(n_lags, with_A3, tuple(d), math.nan, math.nan, 0))
 
+    def held_out_error(self, d: FloatArray, with_A3: bool) -> float:
+        """Held-out error of a structure with lag roots ``d`` (the candidates' score)."""
+        return float(self._cross_validate(d, with_A3).mean())
+
     def _cross_validate(self, d: FloatArray, with_A3: bool) -> FloatArray:
         """Held-out weighted mean squared force error per fold.
 
@@ -368,9 +372,10 @@ class Problem:
         Contiguous folds would hold out the large-amplitude start of a decay in one fold and
         judge it by coefficients fitted to the small tail; interleaving gives every fold the
         whole decay, and one-period blocks keep neighbouring (correlated) samples together.
+        A release shorter than N_FOLDS periods gets shorter blocks, so that no fold is empty.
         """
         t = p.view("search").t
-        period = 1.0 / float(p.fit.frequencies.min())
+        period = min(1.0 / float(p.fit.frequencies.min()), float(t[-1] - t[0]) / N_FOLDS)
         labels = (np.floor((t - t[0]) / period).astype(int)) % N_FOLDS
         return [np.flatnonzero(labels == k) for k in range(N_FOLDS)]
 

@@ -67,6 +67,13 @@ How uncertain the flutter speed is (:meth:`IdentifiedModel.uncertainty`), from t
   and instrumental variables with instruments from the predicted deterministic decay, were
   measured and dropped: docs/e2rfc_turbulence.md.)
 
+The refits of the extrapolation and one-lag-more parts never count below that same bound (a
+refit fluttering below a decaying release contradicts the data: it counts as fluttering
+there), and a one-lag-more refit that flutters outside what the data allow (below the bound, or
+not at all below the searched speed) counts only when the held-out error does not reject its
+structure (:attr:`E2RFCDiagnostics.finer_rejected`): from one short release per wind speed such
+refits had made the std as large as the flutter speed.
+
 The turbulence branch (issue 16): when the releases hold a random response and every release
 carries a hold of at least :data:`ident._turbulent_fit.MIN_HOLD_S` (the model held in the wind
 before it, :class:`~ident.release.ReleaseHold`), the model is fitted again by refined
@@ -186,7 +193,7 @@ class E2RFCDiagnostics:
     whose removal leaves two wind speeds), :attr:`reduced` (fitted without the releases at the
     highest wind speed, with three or more speeds) and :attr:`reduced_K` (what those releases
     cover), :attr:`finer` (one lag more, on every release; None when the data do not
-    determine it).
+    determine it) and :attr:`finer_rejected`.
     """
 
     n_lags: int
@@ -247,9 +254,16 @@ class E2RFCDiagnostics:
 
     @property
     def finer(self) -> RationalFunctionModel | None:
-        """The chosen structure with one lag more, fitted on every release."""
+        """The chosen structure with one lag more, fitted on every release (or None)."""
         return self._computed("finer", lambda: _refit_finer(  # type: ignore[return-value]
             list(self._prepared), self._lag_roots, self.with_A3) if self._prepared else None)
+
+    @property
+    def finer_rejected(self) -> bool:
+        """Whether the held-out error rejects :attr:`finer` (see :func:`_rejected`)."""
+        return self._computed("finer_rejected", lambda: (  # type: ignore[return-value]
+            self.finer is not None and _rejected(list(self._prepared), self.finer,
+                                                 self.with_A3, self.candidates)))
 
     def _computed(self, name: str, compute: Callable[[], object]) -> object:
         if name not in self._refits:
@@ -539,6 +553,13 @@ class IdentifiedModel(RationalFunctionModel):
             # A deviation estimated from n releases has n - 1 degrees of freedom: scaled so
             # that 2 of it span Student's 95 % interval (x1.31 for 6 releases, 1.09 for 20).
             turbulence = jackknife * float(student_t.ppf(0.975, max(n - 1, 1))) / 1.96
+        # The data bound the flutter speed from below: a release decayed on every mode at
+        # `stable`. A refit of the extrapolation or refinement that flutters below it
+        # contradicts the data (from a few short releases a four-lag refit was seen to flutter
+        # at 0.1 m/s); it counts as fluttering there. Not when the chosen model itself lies
+        # below (turbulence): the below-decay part says that.
+        stable = diag.decayed_at
+        lower = stable if stable is not None and speed >= stable else -math.inf
         extrapolation = 0.0
         K_F = result.reduced_frequency
         mode = result.critical_mode or ""
@@ -553,14 +574,22 @@ class IdentifiedModel(RationalFunctionModel):
             if diag.reduced is not None and reduced_K_min > K_F:
                 # How far the flutter speed moves when the coverage shrinks, scaled by the
                 # ratio of the extrapolation distances (in log K).
-                moved = refit_speed(diag.reduced)
+                moved = max(refit_speed(diag.reduced), lower)
                 reach = max(math.log(K_min / K_F), 0.0) / math.log(reduced_K_min / K_F)
                 extrapolation = abs(moved - speed) * min(reach, 1.0)
         refinement = 0.0
         if diag.finer is not None:
-            refinement = abs(refit_speed(diag.finer) - speed)
+            moved = refit_speed(diag.finer)
+            # A lag more that flutters outside what the data allow (below `stable`, or not at
+            # all below U_max: a "move" set by the searched range) and that the held-out error
+            # rejects is fitting the noise: from a few short releases such refits made the std
+            # as large as the speed itself. Otherwise its move counts, whatever its held-out
+            # error: it is how much the truncation of Roger's form matters (dropping every
+            # rejected one cost the 3-DOF bluff deck's 2-std coverage 90 -> 30 %).
+            outside = moved >= U_max or moved < lower
+            if not (outside and diag.finer_rejected):
+                refinement = abs(max(moved, lower) - speed)
         below_decay = 0.0
-        stable = diag.decayed_at
         if stable is not None and speed < stable:
             # The data say the flutter speed is above a speed where a release decayed: the
             # distance is the least error of this estimate (module docstring).
@@ -959,6 +988,21 @@ def _refit_finer(prepared: list[PreparedRelease], d: FloatArray, with_A3: bool
     starts = [np.sort(np.append(d, root)) for root in (K_lo / 2.0, 2.0 * K_hi)]
     refit = problem.refit(d.size + 1, with_A3, starts)
     return None if refit is None else RationalFunctionModel(refit.A, refit.d)
+
+
+def _rejected(prepared: list[PreparedRelease], model: RationalFunctionModel, with_A3: bool,
+              candidates: Sequence[Candidate]) -> bool:
+    """Whether the held-out error rejects a refitted structure.
+
+    Rejected: its held-out error is more than one standard error above the best scored
+    candidate's (an alternative structure must be within it). Never with no scored candidate
+    (a structure given by the caller).
+    """
+    scored = [c for c in candidates if math.isfinite(c.cv_error)]
+    if not scored:
+        return False
+    best = min(scored, key=lambda c: c.cv_error)
+    return Problem(prepared).held_out_error(model.d, with_A3) > best.cv_error + best.cv_se
 
 
 def _jackknife_std(pseudo: FloatArray) -> FloatArray:

@@ -366,8 +366,12 @@ def fit_modes(
     f_peak = float(freqs[usable][np.argmax(spectrum[usable])]) if usable.any() else float(
         freqs[1:][np.argmax(spectrum[1:])])
     block = max(1, int(1.0 / (2.0 * f_peak * _SAMPLES_PER_PERIOD * dt)))
+    # A short record gets shorter blocks rather than too few of them (more averaged samples per
+    # period only help the pencil); a record that had enough blocks keeps its block size.
+    needed = 8 * (2 * n_modes + max_real_poles + 1)
+    block = max(1, min(block, t.size // needed))
     tb, yb = _block_average(t - t[0], y, block)
-    if tb.size < 8 * (2 * n_modes + max_real_poles + 1):
+    if tb.size < needed:
         raise InsufficientDataError(f"{t.size} samples are too few for {n_modes} modes")
 
     dtb = block * dt

@@ -355,7 +355,12 @@ class VirtualTunnel:
         if t.ndim != 1:
             raise ValueError(f"t must be 1-D, got shape {t.shape}")
         with self._lock:
-            decay = self._decay
+            # Each decay from its release to the arm that caught it: an instrument's sample
+            # times lie a little in the past (a laser averages, a scanner frame takes time),
+            # and a sample taken before a catch must still show the free decay (it showed the
+            # held position, a step a few ms before the arm command, in the decay's last rows).
+            decays = [(decay, end) for decay, end in self._history if end > t[0]] \
+                if t.size else []
             U_now = self._fan_rpm * self.wind_per_rpm
             x_origin = self._x_ref - U_now * self._t_ref
         # The wind follows the fan at all times (the Pitot and the mean pressures see it). A
@@ -377,9 +382,9 @@ class VirtualTunnel:
                "lift": static[:, 0] / B, "moment": static[:, 1], "U": U, "qd": qd}
         if k == 3:
             out.update(p=np.full(t.shape, self.hold_p), drag=static[:, 2] / B)
-        if decay is not None:
+        for decay, end in decays:
             tau = t - decay.t0
-            after = tau >= 0
+            after = (tau >= 0) & (t < end)
             inside = after & (tau <= decay.duration)
             for name in self.channels:
                 values = out[name].copy()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -92,6 +93,23 @@ def test_a_record_starting_after_the_release_is_handled():
     model = e2rfc.identify(late, SECTION, n_lags=2, with_A3=True)
     # The modal fit extrapolates exactly back to t = 0 on noise-free data.
     np.testing.assert_allclose(model.d, JONES.d, rtol=1e-5)
+
+
+@pytest.mark.parametrize("duration", [1.6, 2.4])
+def test_short_releases_are_identified(duration):
+    """Releases of 3-5 heave periods (a campaign that ends each decay once it has settled).
+
+    Such a record used to be refused as "too few samples" (its modal fit's blocks were sized
+    for the slowest mode alone) or crash the structure search (a cross-validation fold with no
+    rows). Noise-free, the model is exact (round-off); at 2 % noise within 1 %, about five
+    times the flutter-speed std measured on these records (0.15-0.18 %).
+    """
+    exact = e2rfc.identify(releases(JONES, duration=duration, seed=1), SECTION)
+    assert exact.flutter(SECTION)[0].speed == pytest.approx(U_F, rel=1e-9)
+    noisy = e2rfc.identify(releases(JONES, duration=duration, noise=0.02, seed=1), SECTION)
+    result, std = noisy.flutter(SECTION)
+    assert result.speed == pytest.approx(U_F, rel=0.01)
+    assert std is not None and 0.0 < std < 0.01 * U_F
 
 
 def test_one_wind_speed_is_refused_with_a_clear_message():
@@ -200,6 +218,61 @@ def test_an_alternative_without_still_air_modes_widens_the_spread_instead_of_fai
     # The wild one counted at U_max: the structure term is the spread of (U_F, U_max).
     assert uncertainty.structure == pytest.approx(
         float(np.std([U_F, spread.U_max], ddof=1)), rel=1e-3)
+
+
+@pytest.mark.parametrize("finer_kind, rejected, expected", [
+    ("none", True, "zero"),          # no flutter below U_max, rejected: fitting the noise
+    ("none", False, "to U_max"),     # no flutter, as good as the best: counts to U_max
+    ("low", True, "zero"),           # flutters below a decayed release, rejected
+    ("low", False, "to stable"),     # flutters below a decayed release: counted from there
+    ("in range", True, "its move"),  # flutters where the data allow: its move counts
+])
+def test_one_lag_more_counts_only_where_the_data_allow_it(finer_kind, rejected, expected):
+    """The refinement part of the flutter speed's std (the model with one lag more).
+
+    Seen in campaigns of one short release per speed: a four-lag refit, rejected by the held-out
+    error, fluttered at 0.1 m/s (or not at all) and made the std as large as the speed. Such a
+    refit counts only when the held-out error does not reject it, and never below the highest
+    wind speed where a release decayed on both modes (the data bound the flutter speed there).
+    """
+    model = e2rfc.identify(releases(JONES, noise=0.02, seed=2), SECTION)
+    diag = model.diagnostics
+    stable = diag.decayed_at
+    assert stable == pytest.approx(0.8 * U_F)
+    finer = {"none": RationalFunctionModel(np.zeros_like(JONES.A), JONES.d),
+             "low": RationalFunctionModel(10.0 * JONES.A, JONES.d),
+             "in range": RationalFunctionModel(1.05 * JONES.A, JONES.d)}[finer_kind]
+    finer_speed = flutter.analyze(SECTION, finer).speed
+    injected = e2rfc.IdentifiedModel(model.A, model.d, dataclasses.replace(
+        diag, _refits={**diag._refits, "finer": finer, "finer_rejected": rejected}))
+    u = injected.uncertainty(SECTION)
+    move = {"zero": 0.0, "to U_max": flutter.analyze(SECTION, model).U_max - u.speed,
+            "to stable": u.speed - stable,
+            "its move": abs((finer_speed or math.nan) - u.speed)}[expected]
+    # The refit's speed comes from a coarser grid (REFIT_GRID points) than the chosen model's.
+    assert u.refinement == pytest.approx(move, rel=1e-3, abs=1e-9)
+    if finer_kind == "low":
+        assert finer_speed is not None and finer_speed < stable
+    if finer_kind == "none":
+        assert finer_speed is None
+
+
+def test_the_rejection_of_one_lag_more_is_the_candidates_held_out_error():
+    """``finer_rejected`` scores the refit as the structure search scores its candidates."""
+    from ident._e2rfc_problem import Problem
+
+    model = e2rfc.identify(releases(JONES, noise=0.02, seed=2), SECTION)
+    diag = model.diagnostics
+    problem = Problem(list(diag._prepared))
+    for c in diag.candidates:
+        if math.isfinite(c.cv_error):
+            assert problem.held_out_error(np.array(c.d), c.with_A3) == pytest.approx(
+                c.cv_error, rel=1e-9)
+    best = min((c for c in diag.candidates if math.isfinite(c.cv_error)),
+               key=lambda c: c.cv_error)
+    assert diag.finer is not None
+    error = problem.held_out_error(diag.finer.d, diag.with_A3)
+    assert diag.finer_rejected == (error > best.cv_error + best.cv_se)
 
 
 def test_a_structure_without_flutter_leaves_the_spread_open_above():

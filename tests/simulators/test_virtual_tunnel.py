@@ -41,6 +41,35 @@ def test_held_model_is_static_and_release_follows_the_simulated_decay():
     assert vt.armed and np.all(vt.sample(t)["alpha"] == 0.02)
 
 
+def test_a_sample_taken_before_the_catch_still_shows_the_free_decay():
+    """Instruments sample a little in the past: the catch must not reach back before the arm.
+
+    A laser's or scanner's sample time lies a few ms before the moment it asks; a tunnel that
+    answered with its present (held) state put a step into the decay's last rows, before the
+    arm command (seen in recorded campaigns: a release's modal-fit residual 19 times its noise).
+    """
+    clock = ManualClock()
+    vt = tunnel(clock)
+    vt.set_fan_speed(700.0)
+    clock.advance(1.0)
+    t0 = vt.release()
+    clock.advance(2.0)
+    t = t0 + np.array([1.0, 1.5, 1.99, 2.0, 2.5])
+    before = vt.sample(t[:3])
+    vt.arm()
+    after = vt.sample(t)
+    np.testing.assert_array_equal(after["alpha"][:3], before["alpha"])
+    assert np.all(after["alpha"][:3] != 0.02)
+    assert np.all(after["alpha"][3:] == 0.02) and np.all(after["h"][3:] == 0.004)
+    # A second release: the first decay stays where it was, the second starts at its release.
+    clock.advance(1.0)
+    t1 = vt.release()
+    clock.advance(1.0)
+    both = vt.sample(np.array([t0 + 1.0, t1 - 0.5, t1 + 0.5]))
+    assert both["alpha"][0] == before["alpha"][0] and both["alpha"][1] == 0.02
+    assert both["alpha"][2] != 0.02
+
+
 def test_the_wind_follows_the_fan_after_a_release_too():
     """A fan stopped while the model is free stops the wind (it stayed at the release's)."""
     clock = ManualClock()
