@@ -28,6 +28,12 @@ not exact and the flow not smooth: 3 wind speeds (0.4/0.6/0.8 U_F) x 2 releases 
   1 m span, quasi-steady buffeting from the static coefficients) on the plate and on the bluff
   deck.
 
+The turbulence rows' releases are recorded with a hold of ``TUNNEL_HOLD_S`` (10 s) before each
+(a real release always has one: the operator holds the model in the wind before letting go);
+E2RFC then runs its turbulence branch (refined IV with the holds' noise model,
+``ident._turbulent_fit``). ``--tunnel-mode before`` identifies the same releases with their holds
+taken away (today's estimator), ``both`` prints the two; ``--rows turbulent|clean`` runs a subset.
+
 Printed per row: the median and 90th percentile of |error|, the coverage of the 2-std interval
 (``IdentifiedModel.flutter``'s std: noise, structure, extrapolation, one lag more, release
 scatter, below a decaying release), the median std, the median time of identification plus
@@ -36,7 +42,8 @@ uncertainty, and the count of identifications without flutter below the searched
 the Cramer-Rao bound of the turbulence rows; docs/e2rfc_turbulence.md the table before and
 after, and the estimators tried.
 
-Run: ``.venv/bin/python benchmarks/ident_accuracy.py [--seeds 20] [--workers 2] [--part all]``;
+Run: ``.venv/bin/python benchmarks/ident_accuracy.py [--seeds 20] [--workers 2] [--part all]
+[--tunnel-mode after|before|both] [--rows all|turbulent|clean]``;
 ``--part timing [--repeats 9]`` prints only the timing table. BLAS is kept single-threaded in
 every process, so the times are one-core times. The timing table gives wall and CPU time
 (``time.process_time``), minimum and median over the repeats: the host is shared, and the CPU
@@ -52,6 +59,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: one-core tim
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
+import dataclasses  # noqa: E402
 import time  # noqa: E402
 from concurrent.futures import ProcessPoolExecutor  # noqa: E402
 from dataclasses import dataclass  # noqa: E402
@@ -255,11 +263,22 @@ TUNNEL_ROWS = {
 }
 
 
-def tunnel_releases(row, seed):
+#: Seconds of hold recorded before each release of the turbulence rows (issue 16).
+TUNNEL_HOLD_S = 10.0
+
+
+def tunnel_releases(row, seed, hold_s=TUNNEL_HOLD_S):
+    """Simulate the row's releases; in turbulence each with a hold of ``hold_s`` before it.
+
+    The clean rows are drawn without a hold, exactly as before the holds were added (a hold
+    changes the noise draws, and in smooth flow E2RFC does not use it). ``hold_s=0`` gives the
+    turbulence rows' releases as drawn before issue 16's holds.
+    """
     section, make_model, static, Iw, _ = TUNNEL_ROWS[row]
     model = make_model()
     U_F = fl.analyze(section, model).speed
-    wind = {} if not Iw else {"static": static, "turbulence": vertical_gusts(Iw), "span": 1.0}
+    wind = {} if not Iw else {"static": static, "turbulence": vertical_gusts(Iw), "span": 1.0,
+                              "pre_s": hold_s}
     return [
         Release.from_simulation(simulate_release(
             section, model, f * U_F, h0, alpha0, duration=20.0, fs=500.0, noise=0.02,
@@ -269,32 +288,64 @@ def tunnel_releases(row, seed):
 
 
 def tunnel_run(args):
-    row, seed = args
+    """One tunnel identification; an exception is reported as a failed row, not raised."""
+    try:
+        return _tunnel_run(args)
+    except Exception as exc:  # noqa: BLE001 - a benchmark reports every failure and goes on
+        row, seed, mode, _ = args
+        print(f"FAILED {row} seed {seed} {mode}: {exc!r}", flush=True)
+        return row, mode, np.inf, np.nan, np.nan, False, seed
+
+
+def _tunnel_run(args):
+    row, seed, mode, a3 = args
+    e2rfc.TURBULENT_A3 = a3  # the turbulence branch's A3 option (set in each worker)
     section, make_model, _, _, truth = TUNNEL_ROWS[row]
     U_F = truth() if truth is not None else fl.analyze(section, make_model()).speed
     releases = tunnel_releases(row, seed)
+    if mode == "before":  # today's estimator: the same releases without their holds
+        releases = [dataclasses.replace(r, hold=None) for r in releases]
     start = time.perf_counter()
     model = e2rfc.identify(releases, section)
     uncertainty = model.uncertainty(section)
     elapsed = time.perf_counter() - start
+    branch = model.diagnostics.estimator == e2rfc.ESTIMATOR_TURBULENT
     if uncertainty.speed is None:
-        return row, np.inf, np.nan, elapsed
-    return row, uncertainty.speed / U_F - 1.0, uncertainty.total / U_F, elapsed
+        return row, mode, np.inf, np.nan, elapsed, branch, seed
+    return (row, mode, uncertainty.speed / U_F - 1.0, uncertainty.total / U_F, elapsed, branch,
+            seed)
 
 
-def tunnel_part(seeds, workers):
-    jobs = [(row, seed) for row in TUNNEL_ROWS for seed in range(seeds)]
+def tunnel_part(seeds, workers, modes=("after",), which="all", a3="fitted-or-zero",
+                first_seed=0):
+    names = [row for row in TUNNEL_ROWS
+             if which == "all" or (which == "turbulent") == (TUNNEL_ROWS[row][3] > 0)]
+    jobs = [(row, seed, mode, a3) for row in names for mode in modes
+            for seed in range(first_seed, first_seed + seeds)]
+    results = []
     with ProcessPoolExecutor(workers) as pool:
-        results = list(tqdm(pool.map(tunnel_run, jobs), total=len(jobs), desc="tunnel rows"))
-    print(f"\nE2RFC in a real tunnel: 3 wind speeds (0.4/0.6/0.8 U_F) x 2 releases, 20 s at 500 Hz,"
-          f" 2 % noise; {seeds} seeds per row; std = IdentifiedModel.flutter's (total).\n")
+        # Each result printed as it arrives: a long run stopped halfway keeps what it measured.
+        for result in pool.map(tunnel_run, jobs):
+            row, mode, err, std, elapsed, branch, seed = result
+            print(f"  {row:<24} {mode:<6} seed {seed:2d} err {100 * err:+8.2f} % std "
+                  f"{100 * std:7.2f} % {elapsed:5.1f} s{' IV branch' if branch else ''}",
+                  flush=True)
+            results.append(result)
+    for mode in modes:
+        _tunnel_table([r for r in results if r[1] == mode], names, seeds, mode)
+
+
+def _tunnel_table(results, names, seeds, mode):
+    print(f"\nE2RFC in a real tunnel ({mode}): 3 wind speeds (0.4/0.6/0.8 U_F) x 2 releases, 20 s"
+          f" at 500 Hz, 2 % noise, turbulence rows with a {TUNNEL_HOLD_S:g} s hold before each "
+          f"release; {seeds} seeds per row; std = IdentifiedModel.flutter's (total).\n")
     header = (f"{'case':<26}{'|err| med':>10}{'|err| p90':>10}{'2-std cover':>12}"
-              f"{'std med':>9}{'time med':>10}{'no flutter':>11}")
+              f"{'std med':>9}{'time med':>10}{'no flutter':>11}{'IV branch':>10}")
     print(header)
     print("-" * len(header))
     covered = total = 0
-    for row in TUNNEL_ROWS:
-        rows = [r for r in results if r[0] == row]
+    for row in names:
+        rows = [(r[0], r[2], r[3], r[4], r[5]) for r in results if r[0] == row]
         err = np.abs([r[1] for r in rows]) * 100
         std = np.array([r[2] for r in rows]) * 100
         inside = np.isfinite(err) & (err <= 2 * std)
@@ -302,7 +353,8 @@ def tunnel_part(seeds, workers):
         total += len(rows)
         print(f"{row:<26}{np.median(err):>9.2f}%{np.percentile(err, 90):>9.2f}%"
               f"{100 * inside.mean():>11.0f}%{np.nanmedian(std):>8.2f}%"
-              f"{np.median([r[3] for r in rows]):>9.2f}s{int(np.sum(~np.isfinite(err))):>11d}")
+              f"{np.median([r[3] for r in rows]):>9.2f}s{int(np.sum(~np.isfinite(err))):>11d}"
+              f"{sum(r[4] for r in rows):>10d}")
     print(f"\ncoverage of the 2-std interval over all rows: {covered}/{total} "
           f"({100 * covered / total:.0f} %)")
 
@@ -313,12 +365,23 @@ def main():
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--part", choices=("all", "classic", "tunnel", "timing"), default="all")
     parser.add_argument("--repeats", type=int, default=9, help="timed runs of the timing table")
+    parser.add_argument("--tunnel-mode", choices=("after", "before", "both"), default="after",
+                        help="tunnel rows: as shipped, with the holds taken away, or both")
+    parser.add_argument("--rows", choices=("all", "turbulent", "clean"), default="all",
+                        help="which tunnel rows to run")
+    parser.add_argument("--first-seed", type=int, default=0,
+                        help="tunnel rows: the first seed (more seeds in another run)")
+    parser.add_argument("--turbulent-a3", choices=("fitted-or-zero", "fitted", "choose", "e2rfc"),
+                        default="fitted-or-zero",
+                        help="A3 in E2RFC's turbulence branch (ident.e2rfc.TURBULENT_A3)")
     args = parser.parse_args()
     if args.part == "timing":
         timing_part(args.repeats)
         return
     if args.part in ("all", "tunnel"):
-        tunnel_part(args.seeds, args.workers)
+        modes = ("before", "after") if args.tunnel_mode == "both" else (args.tunnel_mode,)
+        tunnel_part(args.seeds, args.workers, modes, args.rows, args.turbulent_a3,
+                    args.first_seed)
     if args.part == "tunnel":
         return
     jobs = [(s, m, n, seed) for s in SECTIONS for m in METHODS for n in NOISES

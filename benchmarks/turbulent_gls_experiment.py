@@ -306,7 +306,7 @@ def _run(args):
     if HOLD_S:
         releases, holds = releases_with_holds(row, seed, HOLD_S)
     else:
-        releases = ia.tunnel_releases(row, seed)
+        releases = ia.tunnel_releases(row, seed, hold_s=0.0)
     t0 = time.perf_counter()
     if variant == "today":
         model = e2rfc.identify(releases, section)
@@ -331,7 +331,7 @@ def oracle(row, n_seeds):
     section, make_model, _, _, truth = ia.TUNNEL_ROWS[row]
     model = make_model()
     U_F = truth() if truth is not None else fl.analyze(section, model).speed
-    raw = [r for s in range(100, 100 + n_seeds) for r in ia.tunnel_releases(row, s)]
+    raw = [r for s in range(100, 100 + n_seeds) for r in ia.tunnel_releases(row, s, hold_s=0.0)]
     rels = [Rel(r, section, FC * max(section.fh, section.fa)) for r in raw]
     terms = [0, 1, 2] + [3 + l for l in range(model.d.size)]
     coef_true = np.zeros((2 * len(terms), 2))

@@ -73,18 +73,30 @@ there), and a one-lag-more refit that flutters outside what the data allow (belo
 not at all below the searched speed) counts only when the held-out error does not reject its
 structure (:attr:`E2RFCDiagnostics.finer_rejected`): from one short release per wind speed such
 refits had made the std as large as the flutter speed.
+
+The turbulence branch (issue 16): when the releases hold a random response and every release
+carries a hold of at least :data:`ident._turbulent_fit.MIN_HOLD_S` (the model held in the wind
+before it, :class:`~ident.release.ReleaseHold`), the model is fitted again by refined
+instrumental variables with each hold's force as the noise model (:mod:`ident._turbulent_fit`),
+its structure (one or two lags, A3 fitted) chosen by leave-one-release-out prediction error
+among the structures that do not flutter below a wind speed at which a release decayed (A3 zero
+only when every A3-fitted structure does, :data:`TURBULENT_A3`); those refits are the jackknife
+of the turbulence part, the other structures within one standard error the structure part.
+``diagnostics.estimator`` says which estimator ran. Without such holds today's estimator runs,
+with a warning that says what turbulence needs. In smooth flow nothing changes.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import numpy.typing as npt
 from scipy.stats import t as student_t
 
+from ident import _turbulent_fit
 from ident import flutter as _flutter
 from ident._e2rfc_problem import FinalFit, Problem, improves
 from ident._regressors import PreparedRelease, prepare
@@ -123,6 +135,16 @@ REFIT_GRID = 150
 #: Largest extrapolation, as the ratio of the lowest covered reduced frequency to the flutter
 #: one, accepted without a warning.
 EXTRAPOLATION_WARN = 1.1
+#: ``diagnostics.estimator`` of today's E2RFC and of the turbulence branch (module docstring).
+ESTIMATOR_E2RFC = "E2RFC (modal-fit regressors, least squares)"
+ESTIMATOR_TURBULENT = "refined IV with the holds' noise model (turbulence branch)"
+#: A3 in the turbulence branch: "fitted-or-zero" (fitted; zero only when every structure with
+#: A3 fitted flutters below a wind speed where a release decayed), "fitted" always, "choose"
+#: (fitted or zero by held-out error with the lag count), or "e2rfc" as E2RFC's own choice on
+#: the same releases has it. docs/e2rfc_turbulence.md measures them: A3 zero lands at -99 %
+#: on some bluff-deck seeds whose held-out error prefers it, A3 fitted on some plate seeds
+#: whose every A3-fitted structure contradicts the data.
+TURBULENT_A3 = "fitted-or-zero"
 
 
 @dataclass(frozen=True, eq=False)
@@ -188,6 +210,7 @@ class E2RFCDiagnostics:
     random_response: FloatArray = field(default_factory=lambda: np.zeros(0), repr=False)
     K_range: dict[str, tuple[float, float]] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
+    estimator: str = ESTIMATOR_E2RFC
     # What the refits need, and their results once computed (on first use: they cost about
     # as much as the identification, and not every caller asks for the uncertainty).
     _prepared: tuple[PreparedRelease, ...] = field(default=(), repr=False)
@@ -748,7 +771,86 @@ def identify(
     prepared = [prepare(r, section) for r in releases]
     if section.n_dof == 3:
         _check_modes_excited(prepared, section)
-    return _identify_prepared(prepared, section, n_lags, with_A3)
+    model = _identify_prepared(prepared, section, n_lags, with_A3)
+    if not model.diagnostics.turbulent:
+        return model
+    if not _turbulent_fit.holds_suffice(releases):
+        held = [r.hold.duration for r in releases if r.hold is not None]
+        have = (f"the shortest hold here is {min(held):.3g} s" if len(held) == len(releases)
+                else f"{len(releases) - len(held)} of {len(releases)} releases have none")
+        note = (f"turbulence needs a hold of >= {_turbulent_fit.MIN_HOLD_S:g} s before each "
+                f"release (the model held in the wind; {have}): with it the refined-IV "
+                "estimator runs, without it today's, biased low in turbulence")
+        diagnostics = replace(model.diagnostics, warnings=(*model.diagnostics.warnings, note))
+        return IdentifiedModel(model.A, model.d, diagnostics)
+    return _turbulent_model(model, releases, section, n_lags, with_A3)
+
+
+def _turbulent_model(model: IdentifiedModel, releases: list[Release], section: SectionModel,
+                     n_lags: int | None, with_A3: bool | None) -> IdentifiedModel:
+    """Refit E2RFC's turbulent releases by refined IV with the holds' noise model.
+
+    The result keeps E2RFC's data diagnostics (modal fits, random response, covered reduced
+    frequencies); its coefficients, structure, covariance, alternatives and refits are the
+    branch's, so that :meth:`IdentifiedModel.uncertainty` combines the same parts.
+    """
+    base = model.diagnostics
+    a3_options: tuple[bool, ...] = (
+        (with_A3,) if with_A3 is not None else (True, False) if TURBULENT_A3 == "choose"
+        else (base.with_A3,) if TURBULENT_A3 == "e2rfc" else (True,))
+    speeds = distinct_wind_speeds([r.U for r in releases])
+    reduced_below = speeds[-1] / (1 + DISTINCT_U_RTOL) if len(speeds) >= 3 else None
+    stable = base.decayed_at
+
+    def admissible(fit: _turbulent_fit.TurbulentFit) -> bool:
+        """Whether a fit's flutter speed (if any) lies above every decaying release's speed."""
+        if stable is None:
+            return True
+        try:
+            found = _flutter.analyze(section, RationalFunctionModel(fit.A, fit.d),
+                                     n_points=REFIT_GRID).speed
+        except ValueError:  # no still-air modes, a lost branch: nothing to trust
+            return False
+        return found is None or float(found) >= stable
+
+    found = _turbulent_fit.fit_turbulent(
+        releases, section, a3_options=a3_options, n_lags=n_lags, reduced_below=reduced_below,
+        admissible=admissible)
+    if found.contradicted and with_A3 is None and TURBULENT_A3 == "fitted-or-zero":
+        fallback = _turbulent_fit.fit_turbulent(
+            releases, section, a3_options=(False,), n_lags=n_lags,
+            reduced_below=reduced_below, admissible=admissible)
+        if not fallback.contradicted:
+            found = _with_reason(fallback, "every structure with A3 fitted "
+                                               "flutters below a decaying release's wind speed")
+    note = (f"turbulence: coefficients by {ESTIMATOR_TURBULENT} from holds of "
+            f"{min(r.hold.duration for r in releases if r.hold is not None):.3g} s or more; "
+            f"{found.reason}")
+
+    def assemble(fit: _turbulent_fit.TurbulentFit, reason: str,
+                 alternatives: tuple[IdentifiedModel, ...], refits: dict[str, object]
+                 ) -> IdentifiedModel:
+        diagnostics = replace(
+            base, n_lags=fit.d.size, with_A3=fit.with_A3, reason=reason,
+            candidates=found.candidates, release_residuals=fit.release_residuals,
+            condition_number=math.nan, covariance=fit.covariance,
+            parameter_index=fit.parameter_index, alternatives=alternatives,
+            warnings=(*base.warnings, note), estimator=ESTIMATOR_TURBULENT,
+            _lag_roots=fit.d, _refits=refits)
+        return IdentifiedModel(fit.A, fit.d, diagnostics)
+
+    # The branch's refits replace E2RFC's (filled here: they came with the structure choice).
+    none: dict[str, object] = {"jackknife": (), "release_jackknife": (), "reduced": None,
+                               "finer": None}
+    alternatives = tuple(
+        assemble(f, "within one standard error of the best, not chosen", (), dict(none))
+        for f in found.alternatives)
+    jackknife = tuple(RationalFunctionModel(f.A, f.d) for f in found.leave_one_out)
+    reduced = (None if found.reduced is None
+               else RationalFunctionModel(found.reduced.A, found.reduced.d))
+    return assemble(found.chosen, found.reason, alternatives,
+                    {"jackknife": jackknife, "release_jackknife": jackknife,
+                     "reduced": reduced, "finer": None})
 
 
 def _identify_prepared(
@@ -784,9 +886,13 @@ def _identify_prepared(
             improves(history[j], [c for h in history[:j] for c in h]) for j in (m - 1, m)
         ):
             break
-    usable = [c for c in candidates if not c.note]
+    # A structure whose held-out error is NaN (a fold's fit that failed numerically:
+    # seen once in 64 turbulent benchmark cases) cannot be compared; the one-SE rule would
+    # find nothing within NaN of the best.
+    usable = [c for c in candidates if not c.note and (given or not math.isnan(c.cv_error))]
     if not usable:
-        notes = "; ".join(f"n_lags={c.n_lags}, A3={c.with_A3}: {c.note}" for c in candidates)
+        notes = "; ".join(f"n_lags={c.n_lags}, A3={c.with_A3}: "
+                          f"{c.note or 'held-out error not a number'}" for c in candidates)
         raise RankDeficiencyError(f"no model structure is determined by these releases ({notes})")
     chosen, reason = select_one_se(usable, given=given)
     context = _Context(prepared, section, tuple(candidates))
@@ -845,6 +951,12 @@ class _Context:
             K_range=_K_ranges(prepared, self.section), warnings=tuple(warnings),
             _prepared=tuple(prepared), _section=self.section, _lag_roots=fit.d)
         return IdentifiedModel(fit.A, fit.d, diagnostics)
+
+
+def _with_reason(found: _turbulent_fit.TurbulentResult, why: str
+                               ) -> _turbulent_fit.TurbulentResult:
+    """Return a turbulence-branch result whose reason starts with ``why``."""
+    return replace(found, reason=f"{why}: {found.reason}")
 
 
 def _K_ranges(prepared: list[PreparedRelease], section: SectionModel

@@ -21,6 +21,16 @@ The drag of a 3-DOF file is read as measured (the correction covers lift and mom
 Three degrees of freedom: a file of a rig with a sway spring (``[section] fp``) has ``p`` and
 ``drag`` in ``/entry/sync``; its section is 3-DOF (``fp``, ``zeta_p``, ``m_p``) and each release
 carries them (``Release(p=, drag=)``). A 2-DOF file reads exactly as before.
+
+The hold before each release (:class:`~ident.release.ReleaseHold`, since issue 16): the rows of
+``/entry/sync`` while the model was held in the wind just before the release, read from the
+same columns (the file format is unchanged). They start :data:`HOLD_SETTLE_S` after the last
+``arm`` event of ``/entry/events`` since the previous release (without one: at the previous
+release's ``stop_index``, or the first row), end :data:`HOLD_GUARD_S` before ``release_time``,
+and are cut to the last stretch without gaps and with the wind on (``U`` within
+:data:`HOLD_U_RTOL` of the release's). Fewer than 2 such rows: no hold. With a tubing
+correction the hold's forces are corrected too (a window of their own, so the release's
+corrected forces are exactly as before).
 """
 
 from __future__ import annotations
@@ -36,13 +46,13 @@ import numpy as np
 
 from ident.air import R_DRY_AIR
 from ident.errors import IdentError
-from ident.release import Release
+from ident.release import Release, ReleaseHold
 from ident.section import SectionModel
 from ident.taps import TapLayout
 from ident.tubing import Air, TubingSet, force_correction, from_description
 
-__all__ = ["FileFormatError", "RunFile", "TUBING_LEAD_S", "campaign_section", "read_run",
-           "tubing_note"]
+__all__ = ["FileFormatError", "HOLD_GUARD_S", "HOLD_SETTLE_S", "HOLD_U_RTOL", "RunFile",
+           "TUBING_LEAD_S", "campaign_section", "read_run", "tubing_note"]
 
 _SECTION_FIELDS = ("B", "m", "I", "fh", "fa", "zeta_h", "zeta_a", "S", "fp", "zeta_p", "m_p")
 #: Columns of ``/entry/sync`` a 3-DOF file has (docs/file_format.md).
@@ -56,6 +66,14 @@ TUBING_LEAD_S = 1.0
 #: Temperature of the air in the tubes when correcting a file without a barometer's
 #: temperature, K (10 K off changes the 1 m, 1 mm tube's lag at 4 Hz by about 1 %).
 TUBING_TEMPERATURE_K = 293.15
+#: Seconds after arming before the hold is taken: arming catches a moving model, and the catch
+#: shakes it for a moment.
+HOLD_SETTLE_S = 0.25
+#: Seconds before ``release_time`` left out of the hold: the PLC acknowledges the release after
+#: the magnet lets go (the same 0.05 s as ``h0``'s median, docs/file_format.md).
+HOLD_GUARD_S = 0.05
+#: A hold row has the wind on when its ``U`` is within this fraction of the release's.
+HOLD_U_RTOL = 0.1
 #: Plausible tunnel air temperatures, K: a barometer reading outside is not used for the tubes.
 _TEMPERATURE_RANGE_K = (233.15, 333.15)
 
@@ -149,6 +167,15 @@ def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True) ->
             dead_part = "/entry/calibration/taps/dead"
             dead = (np.asarray(f[dead_part][()], dtype=np.int64) if dead_part in f
                     else np.zeros(0, dtype=np.int64))
+            # Arm events mark where each hold starts (issue 16); a file without events has
+            # none, and its holds start at the previous release's end.
+            arms = np.zeros(0)
+            if "entry/events" in f:
+                part = "/entry/events"
+                events = f["entry/events"][()]
+                if events.size:
+                    kinds = np.array([_text(k) for k in events["kind"]])
+                    arms = np.sort(np.asarray(events["time"], dtype=float)[kinds == "arm"])
         except KeyError as exc:
             raise FileFormatError(f"{path}: has no {part}: not a windrig run file (or an "
                                   "incomplete one)") from exc
@@ -163,6 +190,7 @@ def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True) ->
     if section.n_dof == 2:  # releases of a 2-DOF section have no sway, whatever the file holds
         for name in _SWAY_COLUMNS:
             sync.pop(name, None)
+    holds = _hold_rows(sync, table, arms)
     tubing = None
     if tubing_meta is not None:
         tubing, integration = _tubing(tubing_meta, config_text, path, section.rho, dead,
@@ -170,8 +198,8 @@ def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True) ->
         if tubing_correction:
             if dead.size and "pressure" in sync:  # weight 0, but a dead tap's NaN would spread
                 sync["pressure"][:, dead[(dead >= 0) & (dead < sync["pressure"].shape[1])]] = 0.0
-            _correct_forces(sync, table, tubing, integration)
-    releases = tuple(_release(sync, row, path, i) for i, row in enumerate(table))
+            _correct_forces(sync, table, tubing, integration, holds)
+    releases = tuple(_release(sync, row, path, i, holds[i]) for i, row in enumerate(table))
     return RunFile(path=path, section=section, releases=releases, rig_name=rig_name,
                    depth=depth, tubing=tubing,
                    tubing_corrected=tubing is not None and tubing_correction)
@@ -250,15 +278,17 @@ def _tubing(meta: dict[str, Any], config_text: str, path: str, rho: float,
 
 
 def _correct_forces(sync: dict[str, np.ndarray], table: Any, tubing: TubingSet,
-                    integration: np.ndarray) -> None:
-    """Replace each release's rows of lift and moment by the tubing-corrected forces."""
+                    integration: np.ndarray, holds: Sequence[slice | None]) -> None:
+    """Replace each release's rows of lift and moment, and its hold's, by corrected forces."""
     time, pressure = sync["time"], sync["pressure"]
     if time.size < 2 or pressure.ndim != 2 or pressure.shape[1] != tubing.n_taps:
         return  # no pressures to correct with: _release reports the forces' own gaps
     fs = 1.0 / float(np.median(np.diff(time)))
     lift, moment = sync["lift"].copy(), sync["moment"].copy()
-    for row in table:
-        start, stop = int(row["start_index"]), int(row["stop_index"])
+    spans = [(int(row["start_index"]), int(row["stop_index"])) for row in table]
+    # Each hold in a window of its own: the releases' windows stay as they were.
+    spans += [(hold.start, hold.stop) for hold in holds if hold is not None]
+    for start, stop in spans:
         if not 0 <= start < stop <= time.size:
             continue  # _release names the bad rows
         first = max(0, start - int(round(TUBING_LEAD_S * fs)))
@@ -272,6 +302,38 @@ def _correct_forces(sync: dict[str, np.ndarray], table: Any, tubing: TubingSet,
         lift[start:stop] += delta[start - first:, 0]
         moment[start:stop] += delta[start - first:, 1]
     sync["lift"], sync["moment"] = lift, moment
+
+
+def _hold_rows(sync: dict[str, np.ndarray], table: Any, arms: np.ndarray) -> list[slice | None]:
+    """Return the rows of ``/entry/sync`` that are each release's hold (module docstring).
+
+    None for a release without one (fewer than 2 rows; rows that are not a release's).
+    """
+    time = sync["time"]
+    names = ("h", "alpha", "lift", "moment") + (_SWAY_COLUMNS if "p" in sync else ())
+    holds: list[slice | None] = []
+    previous_stop, previous_release = 0, -np.inf
+    for row in table:
+        start, release_time = int(row["start_index"]), float(row["release_time"])
+        first = previous_stop
+        armed = arms[(arms > previous_release) & (arms < release_time)]
+        if armed.size:
+            first = max(first, int(np.searchsorted(time, armed[-1] + HOLD_SETTLE_S)))
+        last = min(start, int(np.searchsorted(time, release_time - HOLD_GUARD_S)))
+        previous_stop = max(previous_stop, int(row["stop_index"]))
+        previous_release = release_time
+        if not 0 <= first < last <= time.size:
+            holds.append(None)
+            continue
+        good = np.all([np.isfinite(sync[name][first:last]) for name in names], axis=0)
+        good &= np.isfinite(time[first:last])
+        U = sync["U"][first:last]
+        # The wind on: a NaN speed (no pitot reading) does not count against a row.
+        good &= ~(np.abs(U - float(row["U"])) > HOLD_U_RTOL * abs(float(row["U"])))
+        bad = np.flatnonzero(~good)
+        first += int(bad[-1]) + 1 if bad.size else 0
+        holds.append(slice(first, last) if last - first >= 2 else None)
+    return holds
 
 
 def _open(path: str) -> h5py.File:
@@ -356,7 +418,8 @@ def _section(config_text: str, path: str,
         raise FileFormatError(f"{path}: [section] of the stored config: {exc}") from exc
 
 
-def _release(sync: dict[str, np.ndarray], row: Any, path: str, index: int) -> Release:
+def _release(sync: dict[str, np.ndarray], row: Any, path: str, index: int,
+             hold_rows: slice | None = None) -> Release:
     start, stop = int(row["start_index"]), int(row["stop_index"])
     n = sync["time"].size
     if not 0 <= start < stop <= n:
@@ -375,7 +438,11 @@ def _release(sync: dict[str, np.ndarray], row: Any, path: str, index: int) -> Re
     rho = sync["rho"][rows]
     rho_value = float(np.median(rho)) if np.any(np.isfinite(rho)) else None
     try:
+        hold = None
+        if hold_rows is not None:
+            hold = ReleaseHold(t=sync["time"][hold_rows] - float(row["release_time"]),
+                               **{name: sync[name][hold_rows] for name in names})
         return Release(t=t, **channels, U=U, rho=rho_value,
-                       meta={"file": path, "release": index})
+                       meta={"file": path, "release": index}, hold=hold)
     except ValueError as exc:
         raise FileFormatError(f"{path}: release {index}: {exc}") from exc

@@ -280,8 +280,7 @@ class LiveIdentifier:
                                       lift=cols["lift"], moment=cols["moment"], U=U,
                                       rho=float(np.median(rho)) if rho.size else None,
                                       meta={"release": row.number, "time_s": release},
-                                      **{name: cols[name] for name in SWAY_COLUMNS
-                                         if name in cols})
+                                      p=cols.get("p"), drag=cols.get("drag"))
             except (IdentError, ValueError) as exc:
                 self._set(index, status=f"not used: {exc}")
                 return

@@ -1,0 +1,128 @@
+"""E2RFC's turbulence branch: refined IV with the noise model of the hold before each release.
+
+Seeded cases of ``benchmarks/ident_accuracy.py --part tunnel``'s plate campaign (0.4/0.6/0.8 U_F
+x 2 holds, 20 s at 500 Hz, 2 % noise, vertical turbulence, a 10 s hold before each release).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from scipy.signal import lfilter
+
+from ident import Release, SectionModel, e2rfc, flat_plate
+from ident import flutter as fl
+from ident._turbulent_fit import MIN_HOLD_S, ar_fit
+from ident.release import ReleaseHold
+from ident.turbulence import StaticCoefficients, TurbulenceSpec
+from simulators import simulate_release
+
+PLATE = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+HOLDS = ((0.004, 0.02), (-0.003, 0.012))
+#: The smooth-flow campaign's flutter speed (seed 0, no holds) identified by main at 235df92,
+#: before the branch existed, m/s (repr of the float).
+SMOOTH_BEFORE = 11.754930947127962
+
+
+def campaign(*, seed, Iw, hold_s):
+    """Return the benchmark's plate campaign; each release with a hold of ``hold_s`` s."""
+    model = flat_plate.jones_model()
+    U_F = fl.analyze(PLATE, model).speed
+    wind = {}
+    if Iw:
+        wind = {"static": StaticCoefficients.flat_plate(), "span": 1.0,
+                "turbulence": TurbulenceSpec(Iu=0.0, Iw=Iw, Lux=1.0, Lwx=0.3, Cuy=10.0, Cwy=8.0)}
+    if hold_s:
+        wind["pre_s"] = hold_s
+    return [Release.from_simulation(simulate_release(
+        PLATE, model, f * U_F, h0, a0, duration=20.0, fs=500.0, noise=0.02,
+        rng=(seed, i, j, int(1000 * Iw)), **wind))
+        for i, f in enumerate((0.4, 0.6, 0.8)) for j, (h0, a0) in enumerate(HOLDS)]
+
+
+@pytest.fixture(scope="module")
+def turbulent_releases():
+    return campaign(seed=0, Iw=0.01, hold_s=10.0)
+
+
+def test_the_branch_finds_the_flutter_speed_in_1_percent_turbulence(turbulent_releases):
+    """Plate, Iw 1 %, seed 0: within 8 % of the truth and covered by 2 std.
+
+    Tolerance from the measured scatter (benchmark, 32 seeds of this row with the branch):
+    median |error| 4.7 %, 90th percentile 27.8 %; this seed gives 2.1 %, and 8 % lies between
+    the median and the 90th percentile (a regression to today's estimator, 11.7 % median,
+    would likely fail it). Today's estimator on the same releases misses by more (checked
+    below), and its interval says nothing (a median std of 146 %). Truth: the frequency-domain flutter analysis of
+    the simulated (Jones) model, independent of the identification.
+    """
+    U_F = fl.analyze(PLATE, flat_plate.jones_model()).speed
+    model = e2rfc.identify(turbulent_releases, PLATE)
+    diagnostics = model.diagnostics
+    assert diagnostics.turbulent
+    assert diagnostics.estimator == e2rfc.ESTIMATOR_TURBULENT
+    assert diagnostics.n_lags in (1, 2)
+    assert len(diagnostics.jackknife) == len(turbulent_releases)
+    u = model.uncertainty(PLATE)
+    assert u.speed is not None
+    error = abs(u.speed / U_F - 1.0)
+    assert error < 0.08
+    assert abs(u.speed - U_F) <= 2 * u.total
+    assert u.turbulence > 0.0  # the jackknife's part, Student-scaled
+    # The interval is not a blanket: under half the speed (today's median std exceeds 100 %).
+    assert u.total < 0.5 * U_F
+    # releases_needed still answers: more releases shrink the scatter part.
+    needed = u.releases_needed(max(u.systematic * 1.1, 0.5 * u.total))
+    assert needed is None or needed >= len(turbulent_releases)
+    before = e2rfc.identify([dataclasses.replace(r, hold=None) for r in turbulent_releases],
+                            PLATE).uncertainty(PLATE)
+    before_error = np.inf if before.speed is None else abs(before.speed / U_F - 1.0)
+    assert before_error > error
+
+
+def test_short_holds_leave_todays_estimator_with_a_warning(turbulent_releases):
+    """Holds of 3 s (under MIN_HOLD_S): today's estimator runs and says what turbulence needs."""
+    short = []
+    for r in turbulent_releases:
+        h = r.hold
+        keep = h.t >= -3.0 - 1e-9
+        cut = ReleaseHold(t=h.t[keep], h=h.h[keep], alpha=h.alpha[keep], lift=h.lift[keep],
+                          moment=h.moment[keep])
+        short.append(dataclasses.replace(r, hold=cut))
+    model = e2rfc.identify(short, PLATE)
+    assert model.diagnostics.estimator == e2rfc.ESTIMATOR_E2RFC
+    assert any(f">= {MIN_HOLD_S:g} s before each release" in w
+               for w in model.diagnostics.warnings)
+
+
+def test_smooth_flow_identification_is_unchanged():
+    """Smooth flow: the flutter speed is main's before the branch, to 1e-12 relative.
+
+    And a hold changes nothing in smooth flow: the same releases with and without their holds
+    give the identical model.
+    """
+    u = e2rfc.identify(campaign(seed=0, Iw=0.0, hold_s=0.0), PLATE).uncertainty(PLATE)
+    assert u.speed == pytest.approx(SMOOTH_BEFORE, rel=1e-12, abs=0.0)
+    held = campaign(seed=1, Iw=0.0, hold_s=MIN_HOLD_S)
+    with_hold = e2rfc.identify(held, PLATE)
+    without = e2rfc.identify([dataclasses.replace(r, hold=None) for r in held], PLATE)
+    assert with_hold.diagnostics.estimator == e2rfc.ESTIMATOR_E2RFC
+    np.testing.assert_array_equal(with_hold.A, without.A)
+    np.testing.assert_array_equal(with_hold.d, without.d)
+
+
+def test_the_hold_noise_model_recovers_a_known_ar_process():
+    """ar_fit on an AR(2) process (poles 0.9 e^{+-0.5i}): coefficients within 0.05.
+
+    The estimates' standard deviation is about sqrt((1 - a2^2) / n) = 0.006 for n = 5000, so
+    0.05 is far outside the scatter; BIC must pick order 2 (or a little more, with tiny extra
+    coefficients).
+    """
+    a1, a2 = -2 * 0.9 * np.cos(0.5), 0.81
+    rng = np.random.default_rng(3)
+    x = lfilter([1.0], [1.0, a1, a2], rng.normal(size=5000))
+    a = ar_fit(x, 20)
+    assert a[0] == 1.0 and a.size >= 3
+    assert a[1] == pytest.approx(a1, abs=0.05) and a[2] == pytest.approx(a2, abs=0.05)
+    assert np.all(np.abs(a[3:]) < 0.05)
