@@ -54,8 +54,8 @@ def test_the_branch_finds_the_flutter_speed_in_1_percent_turbulence(turbulent_re
     median |error| 4.7 %, 90th percentile 27.8 %; this seed gives 2.1 %, and 8 % lies between
     the median and the 90th percentile (a regression to today's estimator, 11.7 % median,
     would likely fail it). Today's estimator on the same releases misses by more (checked
-    below), and its interval says nothing (a median std of 146 %). Truth: the frequency-domain flutter analysis of
-    the simulated (Jones) model, independent of the identification.
+    below), and its interval says nothing (a median std of 146 %). Truth: the frequency-domain
+    flutter analysis of the simulated (Jones) model, independent of the identification.
     """
     U_F = fl.analyze(PLATE, flat_plate.jones_model()).speed
     model = e2rfc.identify(turbulent_releases, PLATE)
