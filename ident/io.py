@@ -27,10 +27,10 @@ The hold before each release (:class:`~ident.release.ReleaseHold`, since issue 1
 same columns (the file format is unchanged). They start :data:`HOLD_SETTLE_S` after the last
 ``arm`` event of ``/entry/events`` since the previous release (without one: at the previous
 release's ``stop_index``, or the first row), end :data:`HOLD_GUARD_S` before ``release_time``,
-and are cut to the last stretch without gaps and with the wind on (``U`` within
-:data:`HOLD_U_RTOL` of the release's). Fewer than 2 such rows: no hold. With a tubing
-correction the hold's forces are corrected too (a window of their own, so the release's
-corrected forces are exactly as before).
+and are cut to the last stretch without gaps and with the wind on (``U``, as a running median
+over :data:`HOLD_U_WINDOW_S`, within :data:`HOLD_U_RTOL` of the release's). Fewer than 2 such
+rows: no hold. With a tubing correction the hold's forces are corrected too (a window of their
+own, so the release's corrected forces are exactly as before).
 """
 
 from __future__ import annotations
@@ -43,6 +43,7 @@ from typing import Any
 
 import h5py
 import numpy as np
+from scipy.ndimage import median_filter
 
 from ident.air import R_DRY_AIR
 from ident.errors import IdentError
@@ -72,8 +73,12 @@ HOLD_SETTLE_S = 0.25
 #: Seconds before ``release_time`` left out of the hold: the PLC acknowledges the release after
 #: the magnet lets go (the same 0.05 s as ``h0``'s median, docs/file_format.md).
 HOLD_GUARD_S = 0.05
-#: A hold row has the wind on when its ``U`` is within this fraction of the release's.
+#: A hold row has the wind on when its ``U``, as a running median over :data:`HOLD_U_WINDOW_S`,
+#: is within this fraction of the release's.
 HOLD_U_RTOL = 0.1
+#: Window of that running median, s: a Pitot's single rows scatter by more than 10 % at low
+#: wind (5 m/s on the simulated plate rig: 7 rows of an 11 s hold), the fan's ramp does not.
+HOLD_U_WINDOW_S = 0.5
 #: Plausible tunnel air temperatures, K: a barometer reading outside is not used for the tubes.
 _TEMPERATURE_RANGE_K = (233.15, 333.15)
 
@@ -327,9 +332,13 @@ def _hold_rows(sync: dict[str, np.ndarray], table: Any, arms: np.ndarray) -> lis
             continue
         good = np.all([np.isfinite(sync[name][first:last]) for name in names], axis=0)
         good &= np.isfinite(time[first:last])
-        U = sync["U"][first:last]
         # The wind on: a NaN speed (no pitot reading) does not count against a row.
-        good &= ~(np.abs(U - float(row["U"])) > HOLD_U_RTOL * abs(float(row["U"])))
+        U_release = float(row["U"])
+        U = np.where(np.isfinite(sync["U"][first:last]), sync["U"][first:last], U_release)
+        if U.size > 2 and np.isfinite(U_release):
+            rows = max(1, int(round(HOLD_U_WINDOW_S / float(np.median(np.diff(time[first:last]))))))
+            U = median_filter(U, size=rows, mode="nearest")
+        good &= ~(np.abs(U - U_release) > HOLD_U_RTOL * abs(U_release))
         bad = np.flatnonzero(~good)
         first += int(bad[-1]) + 1 if bad.size else 0
         holds.append(slice(first, last) if last - first >= 2 else None)

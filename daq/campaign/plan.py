@@ -16,6 +16,9 @@ The plan (units SI; the example plans are ``rig_configs/plans/*.toml``)::
     settle_s = 1.0              # the wind must stay steady this long before the first release
     steady_tolerance = 0.01     # steady: fan speed within this fraction of its set-point
     pause_s = 0.0               # extra wait between releases, s
+    hold_s = 0.5                # held in the wind between arming and releasing, s; in
+                                # turbulence >= 10.5: E2RFC's turbulence branch takes its
+                                # noise model from >= 10 s of each hold (docs/e2rfc_turbulence.md)
     calz_start = true           # zero the scanner wind-off before the first speed
     calz_end = true             # ... and once more wind-off after the fan is down
     files = "per_speed"         # one run file per speed; "per_release": one per release
@@ -56,6 +59,7 @@ from typing import Any
 
 from daq.config import RigConfig
 from daq.errors import ConfigError
+from daq.procedure import HOLD_S
 from daq.validation import check_keys, number
 
 __all__ = ["AdaptiveSettings", "CampaignPlan", "load_plan", "parse_plan"]
@@ -130,6 +134,10 @@ class CampaignPlan:
         Steady: fan speed within this fraction of its set-point.
     pause_s : float
         Extra wait between releases, s.
+    hold_s : float
+        Time the model is held in the wind between arming and releasing, s (default
+        :data:`daq.procedure.HOLD_S`). ``ident.io`` reads the hold from 0.25 s after the arm
+        event to 0.05 s before the release; E2RFC's turbulence branch needs 10 s of it.
     calz_start, calz_end : bool
     adaptive : AdaptiveSettings or None
     source : str
@@ -156,6 +164,7 @@ class CampaignPlan:
     source: str = ""
     files: str = "per_speed"
     decay_end: str = "fixed"
+    hold_s: float = HOLD_S
 
     def listed_speeds(self, wind_per_rpm: float) -> list[float]:
         """Return the listed speeds as wind speeds, m/s (fan set-points times the calibration)."""
@@ -245,7 +254,7 @@ def parse_plan(text: str, source: str = "<string>") -> CampaignPlan:
     c = data["campaign"]
     check_keys(c, where, {"mode"}, {"releases_per_speed", "decay_s", "settle_s",
                                     "steady_tolerance", "pause_s", "calz_start", "calz_end",
-                                    "files", "decay_end"})
+                                    "files", "decay_end", "hold_s"})
     mode = c["mode"]
     if mode not in MODES:
         raise ConfigError(f"{where} mode = {mode!r}; allowed: {', '.join(MODES)}")
@@ -254,6 +263,7 @@ def parse_plan(text: str, source: str = "<string>") -> CampaignPlan:
     settle_s = number(c, "settle_s", where, lo=0.0, hi=600.0, default=1.0)
     steady = number(c, "steady_tolerance", where, lo=0.0, hi=0.2, lo_open=True, default=0.01)
     pause_s = number(c, "pause_s", where, lo=0.0, hi=600.0, default=0.0)
+    hold_s = number(c, "hold_s", where, lo=0.1, hi=600.0, default=HOLD_S)
     calz_start = _bool(c, "calz_start", where, True)
     calz_end = _bool(c, "calz_end", where, True)
     files = c.get("files", "per_speed")
@@ -306,7 +316,8 @@ def parse_plan(text: str, source: str = "<string>") -> CampaignPlan:
     return CampaignPlan(mode=mode, wind_speeds=wind, fan_rpm=rpm, releases_per_speed=releases,
                         decay_s=decay_s, settle_s=settle_s, steady_tolerance=steady,
                         pause_s=pause_s, calz_start=calz_start, calz_end=calz_end,
-                        adaptive=adaptive, source=source, files=files, decay_end=decay_end)
+                        adaptive=adaptive, source=source, files=files, decay_end=decay_end,
+                        hold_s=hold_s)
 
 
 def load_plan(path: str | Path) -> CampaignPlan:

@@ -70,7 +70,7 @@ from daq.campaign.wind import STEADY_TIMEOUT_S, ramp_rate, wait_steady
 from daq.config import RigConfig
 from daq.errors import DeviceCheckError, DeviceError
 from daq.instruments.build import build_driver
-from daq.procedure import HOLD_S, default_decay_s
+from daq.procedure import default_decay_s
 from daq.recording.run import record_run
 from ident.campaign import CampaignAnalysis, analyze_campaign
 from ident.e2rfc import distinct_wind_speeds
@@ -332,7 +332,7 @@ def _loop(session: _Session, outcome: CampaignOutcome) -> None:
                                  releases_per_speed=plan.releases_per_speed, decay_s=decay_s,
                                  release_options=plan.adaptive.release_options(),
                                  overhead_s=plan.settle_s + STEADY_OVERHEAD_S + session.analysis_s,
-                                 per_release_s=_per_release_s(releases, plan.pause_s))
+                                 per_release_s=_per_release_s(releases, plan))
             outcome.choices.append(choice)
             say(choice.summary())
             if choice.speed is None:
@@ -352,10 +352,10 @@ def _loop(session: _Session, outcome: CampaignOutcome) -> None:
             return
 
 
-def _per_release_s(releases: list[Release], pause_s: float) -> float:
+def _per_release_s(releases: list[Release], plan: CampaignPlan) -> float:
     """Wind-on seconds one more release costs: hold, its decay as recorded so far, pause."""
     decays = [float(r.t[-1] - r.t[0]) for r in releases]
-    return HOLD_S + (sum(decays) / len(decays) if decays else 0.0) + pause_s + 1.0
+    return plan.hold_s + (sum(decays) / len(decays) if decays else 0.0) + plan.pause_s + 1.0
 
 
 def _say_estimate(say: Callable[[str], None], analysis: CampaignAnalysis | None) -> None:
@@ -445,7 +445,7 @@ def _record_file(session: _Session, outcome: CampaignOutcome, path: Path, rpm: f
     done, grown = threading.Event(), threading.Event()
     ramp = abs(rpm - session.fan_rpm) / ramp_rate(config, session.fan_name)
     duration = (1.5 * ramp + 2.0 + STEADY_TIMEOUT_S + plan.settle_s
-                + len(releases) * (HOLD_S + decay_s + plan.pause_s + 1.0) + 5.0)
+                + len(releases) * (plan.hold_s + decay_s + plan.pause_s + 1.0) + 5.0)
 
     def wait(seconds: float, settled_after: int | None = None) -> bool:
         """Wait ``seconds``; True (stop) early if the decay grows or on Ctrl-C.
@@ -476,7 +476,7 @@ def _record_file(session: _Session, outcome: CampaignOutcome, path: Path, rpm: f
         say(f"  wind steady at {fan.speed() * config.wind_per_rpm:.2f} m/s")
         for i in releases:
             acq.arm()
-            if wait(HOLD_S):
+            if wait(plan.hold_s):
                 return
             seen = monitor.releases
             acq.release()

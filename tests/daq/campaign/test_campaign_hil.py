@@ -159,6 +159,32 @@ def test_a_growing_decay_is_caught_and_the_campaign_stops(tmp_path):
     assert any(line.startswith("fan stopped") for line in lines)
 
 
+def test_the_plans_hold_is_recorded_and_read_back_as_each_releases_hold(tmp_path):
+    """``hold_s``: the model held that long in the wind before each release, in the file.
+
+    ``ident.io`` reads a release's hold from 0.25 s after its arm event to 0.05 s before the
+    release (E2RFC's turbulence branch takes its noise model from it and needs 10 s): a plan's
+    11 s hold gives about 10.7 s (the default 0.5 s about 0.2 s). A single noisy Pitot row (at
+    5 m/s they scatter by more than 10 %) must not cut the hold short.
+    """
+    from ident.io import read_run
+
+    config = parse_rig_config(RIG_TEXT + FAST_FAN, "rig.toml")
+    plan = _fixed([5.0, 7.0], decay_s=3.0).replace("settle_s = 0.5", "settle_s = 0.5\nhold_s = 11")
+    outcome = run_plan(parse_plan(plan, "plan.toml"), config, tmp_path, simulate=True,
+                       say=lambda line: None)
+    assert outcome.stopped_because == "plan done: 2 speeds"
+    releases = [r for path in sorted(tmp_path.glob("speed*.h5")) for r in read_run(path).releases]
+    assert len(releases) == 2
+    for release in releases:
+        assert release.hold is not None
+        # 11 s - 0.25 s - 0.05 s = 10.7 s, plus the arm and release commands' own time (tens
+        # of ms: 10.74 s measured), less a sync row or two at each end.
+        assert 10.5 <= release.hold.duration <= 11.0
+    # The wind-on time counts the holds: two speeds of at least 11 s + 3 s.
+    assert outcome.wind_on_s is not None and outcome.wind_on_s > 2 * 14.0
+
+
 def test_a_campaign_resumes_from_the_files_in_its_directory(tmp_path):
     config = parse_rig_config(RIG_TEXT + FAST_FAN, "rig.toml")
     first = run_plan(parse_plan(_fixed([5.0, 7.0]), "plan.toml"), config, tmp_path,

@@ -58,6 +58,8 @@ def test_defaults_and_candidates():
     assert parse_plan(FIXED.replace("decay_s = 5.0", 'decay_s = 5.0\nfiles = "per_release"')
                       ).files == "per_release"
     assert plan.decay_end == "fixed"
+    assert plan.hold_s == 0.5  # daq.procedure.HOLD_S, the console's
+    assert parse_plan(FIXED.replace("decay_s = 5.0", "decay_s = 5.0\nhold_s = 11")).hold_s == 11.0
     assert parse_plan(FIXED.replace("decay_s = 5.0", 'decay_s = 5.0\ndecay_end = "settled"')
                       ).decay_end == "settled"
     assert plan.adaptive is not None
@@ -88,6 +90,8 @@ def test_fan_set_points_become_wind_speeds():
      r"files = 'per_run'; allowed: per_speed, per_release"),
     ("decay_s = 5.0", 'decay_s = 5.0\ndecay_end = "noise"',
      r"\[campaign\] decay_end = 'noise'; allowed: fixed, settled"),
+    ("decay_s = 5.0", "decay_s = 5.0\nhold_s = 0.0",
+     r"\[campaign\] hold_s = 0.0 is outside the allowed range \[0.1, 600.0\]"),
 ])
 def test_fixed_plan_errors_name_the_key(old, new, match):
     assert old in FIXED
