@@ -17,8 +17,8 @@ The plan (units SI; the example plans are ``rig_configs/plans/*.toml``)::
     steady_tolerance = 0.01     # steady: fan speed within this fraction of its set-point
     pause_s = 0.0               # extra wait between releases, s
     hold_s = 0.5                # held in the wind between arming and releasing, s; in
-                                # turbulence >= 10.5: E2RFC's turbulence branch takes its
-                                # noise model from >= 10 s of each hold (docs/e2rfc_turbulence.md)
+                                # turbulence 11: E2RFC's turbulence branch takes its noise
+                                # model from >= 10 s of each hold (docs/e2rfc_turbulence.md)
     calz_start = true           # zero the scanner wind-off before the first speed
     calz_end = true             # ... and once more wind-off after the fan is down
     files = "per_speed"         # one run file per speed; "per_release": one per release
