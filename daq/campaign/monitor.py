@@ -4,9 +4,12 @@ Responsibility: :class:`DecayMonitor` is an engine subscriber (``(name, doc)``, 
 dispatcher thread) that follows the laser distances from each ``"release"`` event to the next
 ``"arm"``. It cuts the decay into windows of one slow structural period and takes each window's
 half peak-to-peak amplitude per laser. A decay *grows* (negative total damping: the wind speed is
-at or beyond flutter) when two consecutive windows after the first exceed
-:data:`GROWTH_RATIO` times the first window's amplitude, or when a laser loses the target (out of
-range) over most of a window; :attr:`DecayMonitor.growing` is then set at once, so that the
+at or beyond flutter) when two consecutive windows after the first of some laser exceed
+:data:`GROWTH_RATIO` times the largest first-window amplitude of any laser (the release's own
+amplitude: a laser that saw little of the release must not trip on turbulence's random response,
+as one did at 0.8 U_F in 1 % turbulence, while a flutter mode barely excited at the release is
+still caught before the motion exceeds the release's by half), or when a laser loses the
+target (out of range) over most of a window; :attr:`DecayMonitor.growing` is then set at once, so that the
 campaign's actions, which wait on it instead of sleeping, catch the model within a window.
 
 A decay has *settled* (:attr:`DecayMonitor.settled`; a plan with ``decay_end = "settled"``
@@ -151,7 +154,9 @@ class DecayMonitor:
         lost = valid.size < (1.0 - LOST_FRACTION) * values.size
         track.lost.append(lost)
         track.amplitudes.append(0.5 * float(np.ptp(valid)) if valid.size else math.nan)
-        first = track.amplitudes[0]
+        firsts = [t.amplitudes[0] for t in self._tracks.values()
+                  if t.amplitudes and math.isfinite(t.amplitudes[0])]
+        first = max(firsts) if firsts else math.nan
         if len(track.amplitudes) >= 3 and math.isfinite(first) and first > 0:
             recent = track.amplitudes[-2:]
             grown = all(math.isfinite(a) and a > GROWTH_RATIO * first for a in recent)

@@ -108,6 +108,33 @@ def test_decay_monitor_flags_growth_only(damping, grows):
     assert not monitor.growing.is_set() and monitor.amplitude() is None
 
 
+@pytest.mark.parametrize("second, grows", [
+    # Turbulence's random response on a laser that saw little of the release: 3 times its own
+    # first window, but under 1.5 times the release's (the other laser's): no growth.
+    ("random", False),
+    # A flutter mode barely excited at the release, growing on that laser: caught once it
+    # exceeds 1.5 times the release's amplitude.
+    ("flutter", True),
+])
+def test_decay_growth_is_judged_against_the_release_amplitude(second, grows):
+    monitor = DecayMonitor(window_s=0.5)
+    monitor("event", SimpleNamespace(kind="release", host_time_ns=0))
+    t = np.arange(0, 8.0, 1 / 2000)
+    w = 2 * math.pi * 2.0
+    front = 0.025 + 0.004 * np.exp(-0.05 * w * t) * np.cos(w * t)
+    if second == "random":  # a steady 1.2 mm oscillation after a 0.4 mm start
+        rear = 0.030 + (0.0004 + 0.0008 * np.minimum(t, 1.0)) * np.cos(1.1 * w * t)
+    else:  # 0.4 mm growing 3 % of critical: 0.4 mm * e^(0.38 t), above 6 mm after 7 s
+        rear = 0.030 + 0.0004 * np.exp(0.03 * 1.1 * w * t) * np.cos(1.1 * w * t)
+    for start in range(0, t.size, 40):
+        rows = slice(start, start + 40)
+        monitor("block", _laser_block(0, t[rows], front[rows]))
+        block = _laser_block(0, t[rows], rear[rows])
+        block.device = "laser_rear"
+        monitor("block", block)
+    assert monitor.growing.is_set() is grows
+
+
 @pytest.mark.parametrize("damping, noise, settled_within", [
     # Window amplitudes fall by e^(-2 pi 0.05) = 0.73 a period (0.5 s): the 7th and 8th
     # windows are the first two at most 20 % of the first (0.15, 0.11), so at 4.0 s.
