@@ -9,8 +9,9 @@ at or beyond flutter) when two consecutive windows after the first of some laser
 amplitude: a laser that saw little of the release must not trip on turbulence's random response,
 as one did at 0.8 U_F in 1 % turbulence, while a flutter mode barely excited at the release is
 still caught before the motion exceeds the release's by half), or when a laser loses the
-target (out of range) over most of a window; :attr:`DecayMonitor.growing` is then set at once, so that the
-campaign's actions, which wait on it instead of sleeping, catch the model within a window.
+target (out of range) over most of a window; :attr:`DecayMonitor.growing` is then set at once,
+so that the campaign's actions, which wait on it instead of sleeping, catch the model within a
+window.
 
 A decay has *settled* (:attr:`DecayMonitor.settled`; a plan with ``decay_end = "settled"``
 then ends the release's recording) when, after :data:`MIN_SETTLED_WINDOWS` windows, the last
