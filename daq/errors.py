@@ -24,6 +24,7 @@ The tree::
     │   └── RecorderStateError(RuntimeError)  a call out of the writer's order
     ├── RecordingError(RuntimeError)     a console recording request that cannot be served now
     ├── ReplayError(ValueError)          a run file that cannot be replayed
+    ├── RingStalledError(RuntimeError)   the shared ring's lock not released in time
     ├── AcquisitionProcessError(RuntimeError)  the console's acquisition process is gone
     ├── RemoteError(RuntimeError)        an error of that process that could not be sent as is
     └── DeviceCheckError(RuntimeError)   the check before a run found devices wrong (all named)
@@ -48,6 +49,7 @@ __all__ = [
     "RecordingError",
     "RemoteError",
     "ReplayError",
+    "RingStalledError",
     "SafetyError",
     "StorageError",
     "SyncError",
@@ -161,6 +163,10 @@ class UsageError(DaqError, ValueError):
 
 class ReplayError(DaqError, ValueError):
     """A run file cannot be replayed: missing, not HDF5, truncated, or not a windrig run."""
+
+
+class RingStalledError(DaqError, RuntimeError):
+    """The shared ring's lock was not released in time: its writer died holding it, or is stuck."""
 
 
 class AcquisitionProcessError(DaqError, RuntimeError):

@@ -29,6 +29,10 @@ Why a process: on two cores the acquisition threads (readers, dispatcher, sync v
 interpreter lock against the GUI thread in one process: measured, the GUI thread waited for the
 lock 22 % of the time and drew 6.7 frames/s with 511 taps (``benchmarks/console_frame_rate.py``).
 
+Longer than 600 lines: the parent's source and the child's server are the two ends of one
+protocol (requests, answers, the shared ring, the child's end and a lock it may die holding);
+split, each half would have to be read with the other open beside it.
+
 Not responsible for: acquisition, recording and health themselves (:mod:`daq.console.live_source`,
 run unchanged in the child), or drawing (:mod:`daq.console.window`).
 """
@@ -43,9 +47,11 @@ import multiprocessing.util
 import pickle
 import signal
 import threading
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
+
+import numpy.typing as npt
 
 from daq.config import RigConfig, parse_rig_config
 from daq.console.file_recording import Recording
@@ -53,7 +59,7 @@ from daq.console.live_source import LiveSource, check_live_options, ring_rows
 from daq.console.ring_buffer import RingBuffer
 from daq.console.shared_ring import SharedRingBuffer, SharedRingHandle
 from daq.console.source import DeviceHealth, RingSource, SourceInfo, sync_columns
-from daq.errors import AcquisitionProcessError, RemoteError
+from daq.errors import AcquisitionProcessError, RemoteError, RingStalledError
 
 __all__ = ["DRIVER_COMMANDS", "ProcessLiveSource",]
 
@@ -335,6 +341,7 @@ class ProcessLiveSource(RingSource):
                          "record_dir": self.record_dir, "check": bool(check)}
         self._start_timeout_s = float(start_timeout_s)
         self._ring: RingBuffer | None = None
+        self._last_total = 0
         self._info: SourceInfo | None = None
         self._process: Any = None
         self._conn: Any = None
@@ -492,6 +499,11 @@ class ProcessLiveSource(RingSource):
             with self._send_lock:
                 self._gone = reason
                 pending, self._pending = self._pending, {}
+            ring = self._ring
+            if isinstance(ring, SharedRingBuffer):
+                # The writer is gone, perhaps killed holding the ring's lock: its rows no longer
+                # change, so they are read unlocked from now on (the GUI froze on that lock).
+                ring.abandon_lock()
             for future in pending.values():
                 future.set_exception(AcquisitionProcessError(reason))
 
@@ -511,6 +523,32 @@ class ProcessLiveSource(RingSource):
         total = self.total_rows
         new, self._seen_rows = total - self._seen_rows, total
         return new
+
+    @property
+    def total_rows(self) -> int:
+        """Count rows made available so far (the last count while the ring's lock stalls)."""
+        try:
+            self._last_total = super().total_rows
+        except RingStalledError:
+            # The child was killed holding the ring's lock; its reader thread sees the pipe
+            # close and abandons the lock, so the next read goes through.
+            log.warning("the shared ring's lock stalled; the acquisition process: %s",
+                        self._gone or "running")
+        return self._last_total
+
+    def snapshot(self, last: int | None = None,
+                 columns: Sequence[str] | None = None) -> dict[str, npt.NDArray[Any]]:
+        """Return copies of the most recent rows, oldest first (``RingBuffer.snapshot``).
+
+        Raises
+        ------
+        RingStalledError
+            The ring's lock stalled twice (its writer stuck while its process still runs).
+        """
+        try:
+            return super().snapshot(last, columns)
+        except RingStalledError:
+            return super().snapshot(last, columns)  # abandoned by now if the child died
 
     def refresh(self) -> None:
         """Read the child's state now (waiting for it), for a caller that cannot poll."""

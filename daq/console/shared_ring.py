@@ -28,6 +28,7 @@ import numpy as np
 import numpy.typing as npt
 
 from daq.console.ring_buffer import Column, RingBuffer
+from daq.errors import RingStalledError
 
 __all__ = ["SharedRingBuffer", "SharedRingHandle"]
 
@@ -35,6 +36,29 @@ __all__ = ["SharedRingBuffer", "SharedRingHandle"]
 _ALIGN = 64
 #: The counters at the start of the block: next row index, rows appended (int64 each).
 _COUNTERS = 2
+#: Longest wait for the ring's lock, s: an append or a snapshot holds it for about a
+#: millisecond; a writer killed while holding it (SIGKILL) would block every reader forever
+#: (the console's GUI froze so, once, in a test that kills the acquisition process).
+LOCK_TIMEOUT_S = 0.5
+
+
+class _TimedLock:
+    """A multiprocessing lock taken with a timeout (:data:`LOCK_TIMEOUT_S`), or not at all."""
+
+    def __init__(self, lock: Any) -> None:
+        self.lock = lock
+        self.abandoned = False
+
+    def __enter__(self) -> _TimedLock:
+        if not self.abandoned and not self.lock.acquire(timeout=LOCK_TIMEOUT_S):
+            raise RingStalledError(
+                f"the shared ring's lock was not released within {LOCK_TIMEOUT_S:g} s (its "
+                "writer died holding it, or is stuck)")
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if not self.abandoned:
+            self.lock.release()
 
 
 @dataclass(frozen=True)
@@ -96,7 +120,7 @@ class SharedRingBuffer(RingBuffer):
     def __init__(self, capacity_rows: int, *columns: str | Column) -> None:
         self._owner = True
         super().__init__(capacity_rows, *columns)
-        self._lock = multiprocessing.get_context("spawn").Lock()
+        self._lock = _TimedLock(multiprocessing.get_context("spawn").Lock())
 
     def _allocate(self, capacity_rows: int,
                   specs: tuple[Column, ...]) -> dict[str, npt.NDArray[Any]]:
@@ -133,12 +157,20 @@ class SharedRingBuffer(RingBuffer):
         ring._columns = {c.name: c for c in handle.columns}
         ring._shm = SharedMemory(name=handle.name)
         ring._data = ring._views(ring._capacity, tuple(handle.columns))
-        ring._lock = handle.lock
+        ring._lock = _TimedLock(handle.lock)
         return ring
 
     def handle(self) -> SharedRingHandle:
         """Return what another process needs to attach (pass it to the child at its start)."""
-        return SharedRingHandle(self._shm.name, self._capacity, self.columns, self._lock)
+        return SharedRingHandle(self._shm.name, self._capacity, self.columns, self._lock.lock)
+
+    def abandon_lock(self) -> None:
+        """Read without the lock from now on: every writer is gone (its process ended).
+
+        A writer killed while holding the lock never releases it; with no writer left the
+        rows no longer change, so reading them unlocked is safe.
+        """
+        self._lock.abandoned = True
 
     # The counters are in the block, so that every process sees the same ring.
     @property

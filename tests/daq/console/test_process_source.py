@@ -27,7 +27,13 @@ from daq.console.process_source import ProcessLiveSource, _portable
 from daq.console.ring_buffer import Column
 from daq.console.shared_ring import SharedRingBuffer
 from daq.console.window import ConsoleWindow
-from daq.errors import AcquisitionProcessError, ConfigError, RemoteError, SafetyError
+from daq.errors import (
+    AcquisitionProcessError,
+    ConfigError,
+    RemoteError,
+    RingStalledError,
+    SafetyError,
+)
 
 # The shared-ring test's child imports its target by module name: a top-level one.
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -167,6 +173,31 @@ def _children(pid: int) -> list[int]:
         return [int(p) for p in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]
     except OSError:
         return []
+
+
+def test_a_ring_lock_its_writer_never_releases_stalls_a_reader_only_briefly():
+    """A writer killed holding the ring's lock must not block the GUI forever (it did once).
+
+    The lock is taken here and never released, as by a writer killed mid-append: a read gives
+    up after LOCK_TIMEOUT_S with RingStalledError; once the writer is known gone the ring is
+    read unlocked, its rows as they were.
+    """
+    from daq.console.shared_ring import LOCK_TIMEOUT_S
+
+    ring = SharedRingBuffer(16, "t")
+    try:
+        ring.append({"t": np.arange(5.0)})
+        assert ring._lock.lock.acquire(timeout=1.0)  # the "dead writer" holds it from now on
+        start = time.monotonic()
+        with pytest.raises(RingStalledError, match="not released within 0.5 s"):
+            _ = ring.total_rows
+        assert LOCK_TIMEOUT_S <= time.monotonic() - start < LOCK_TIMEOUT_S + 2.0
+        ring.abandon_lock()
+        assert ring.total_rows == 5
+        np.testing.assert_array_equal(ring.snapshot()["t"], np.arange(5.0))
+    finally:
+        ring.close()
+        ring.unlink()
 
 
 def test_an_acquisition_process_that_dies_is_shown_and_refused(qtbot):
