@@ -30,8 +30,44 @@ MIN_SAMPLES = 64
 FloatArray = npt.NDArray[np.float64]
 
 
+class _Record:
+    """What a release and its hold share: channels as coordinates and forces, the sampling.
+
+    A mixin of the two frozen dataclasses below, which declare the fields ``t, h, alpha, lift,
+    moment, p, drag``.
+    """
+
+    t: FloatArray
+    h: FloatArray
+    alpha: FloatArray
+    lift: FloatArray
+    moment: FloatArray
+    p: FloatArray | None
+    drag: FloatArray | None
+
+    @property
+    def n_dof(self) -> int:
+        """Degrees of freedom of the record: 2 (heave, pitch) or 3 (with sway)."""
+        return 2 if self.p is None else 3
+
+    def coordinates(self, B: float) -> FloatArray:
+        """Return ``q = [h/B, alpha(, p/B)]``, shape (n, n_dof), for a deck width ``B`` (m)."""
+        columns = [self.h / B, self.alpha] + ([] if self.p is None else [self.p / B])
+        return np.column_stack(columns)
+
+    def generalised_forces(self, B: float) -> FloatArray:
+        """Return ``f = [L B, M(, D B)]``, shape (n, n_dof), N m/m, for a deck width ``B`` (m)."""
+        columns = [self.lift * B, self.moment] + ([] if self.drag is None else [self.drag * B])
+        return np.column_stack(columns)
+
+    @property
+    def dt(self) -> float:
+        """Sampling interval, s."""
+        return float((self.t[-1] - self.t[0]) / (self.t.size - 1))
+
+
 @dataclass(frozen=True, eq=False)
-class ReleaseHold:
+class ReleaseHold(_Record):
     """The record of the model held still in the wind just before a release (times < 0).
 
     While the model is held the self-excited force is a constant: what the force channels
@@ -77,29 +113,9 @@ class ReleaseHold:
             object.__setattr__(self, name, arr)
 
     @property
-    def n_dof(self) -> int:
-        """Degrees of freedom of the record: 2 (heave, pitch) or 3 (with sway)."""
-        return 2 if self.p is None else 3
-
-    @property
-    def dt(self) -> float:
-        """Sampling interval, s."""
-        return float((self.t[-1] - self.t[0]) / (self.t.size - 1))
-
-    @property
     def duration(self) -> float:
         """Length of the hold, s: its samples times the sampling interval."""
         return float(self.t.size * self.dt)
-
-    def coordinates(self, B: float) -> FloatArray:
-        """Return ``q = [h/B, alpha(, p/B)]``, shape (n, n_dof), for a deck width ``B`` (m)."""
-        columns = [self.h / B, self.alpha] + ([] if self.p is None else [self.p / B])
-        return np.column_stack(columns)
-
-    def generalised_forces(self, B: float) -> FloatArray:
-        """Return ``f = [L B, M(, D B)]``, shape (n, n_dof), N m/m, for a deck width ``B`` (m)."""
-        columns = [self.lift * B, self.moment] + ([] if self.drag is None else [self.drag * B])
-        return np.column_stack(columns)
 
 
 def _channel_arrays(record: Any, what: str) -> dict[str, FloatArray]:
@@ -137,7 +153,7 @@ def _check_uniform(t: FloatArray) -> float:
 
 
 @dataclass(frozen=True, eq=False)
-class Release:
+class Release(_Record):
     """One free decay after a release from rest, in SI units.
 
     Parameters
@@ -218,25 +234,6 @@ class Release:
                 f"displacements show about {periods:.1f} in {self.duration:.3g} s"
             )
 
-    @property
-    def n_dof(self) -> int:
-        """Degrees of freedom of the record: 2 (heave, pitch) or 3 (with sway)."""
-        return 2 if self.p is None else 3
-
-    def coordinates(self, B: float) -> FloatArray:
-        """Return ``q = [h/B, alpha(, p/B)]``, shape (n, n_dof), for a deck width ``B`` (m)."""
-        columns = [self.h / B, self.alpha] + ([] if self.p is None else [self.p / B])
-        return np.column_stack(columns)
-
-    def generalised_forces(self, B: float) -> FloatArray:
-        """Return ``f = [L B, M(, D B)]``, shape (n, n_dof), N m/m, for a deck width ``B`` (m)."""
-        columns = [self.lift * B, self.moment] + ([] if self.drag is None else [self.drag * B])
-        return np.column_stack(columns)
-
-    @property
-    def dt(self) -> float:
-        """Sampling interval, s."""
-        return float((self.t[-1] - self.t[0]) / (self.t.size - 1))
 
     @property
     def fs(self) -> float:
