@@ -48,7 +48,8 @@ one took the std to 44 %, a structure without flutter below the search limit).
 Before :data:`MIN_SPEEDS` distinct wind speeds there is no stop for want of gain: the std of
 two speeds lacks its extrapolation part (E2RFC needs a third speed to measure it), and a new
 speed does tell structures apart, which the carried parts do not count on; the best candidate
-at a speed not yet covered is chosen.
+at a speed not yet covered is chosen, and among candidates whose predicted totals lie within
+:data:`TIE_RTOL` of the best (a wide structure part makes them all alike) the highest.
 
 Releases per speed (optional, ``release_options``): the choice is then over pairs (speed,
 number of releases ``n``), each costing the wind-on time ``overhead_s + n per_release_s`` (the
@@ -90,12 +91,15 @@ from ident.release import Release
 from ident.section import SectionModel
 from ident.simulate import simulate_decay
 
-__all__ = ["MIN_GAIN", "MIN_SPEEDS", "Choice", "choose_next", "predicted_std", "safety_bound"]
+__all__ = ["MIN_GAIN", "MIN_SPEEDS", "TIE_RTOL", "Choice", "choose_next", "predicted_std",
+           "safety_bound"]
 
 FloatArray = npt.NDArray[np.float64]
 
 #: A candidate must be predicted to reduce the standard deviation by this fraction to be chosen.
 MIN_GAIN = 0.05
+#: Predicted totals within this fraction of the best are a tie, broken towards the highest speed.
+TIE_RTOL = 0.005
 #: Distinct wind speeds before a campaign's std is complete (extrapolation part measured): the
 #: target counts from here on, and before it a new speed is always chosen.
 MIN_SPEEDS = 3
@@ -402,6 +406,13 @@ def choose_next(analysis: CampaignAnalysis, releases: Sequence[Release],
     if len(covered) < MIN_SPEEDS and new:
         i_new = (max(new, key=lambda i: rate(i, n_at[i])) if several
                  else min(new, key=lambda i: reducible[i]))
+        # Candidates that promise the same total (a large carried structure part can make every
+        # prediction alike): the highest of them, whose forces (~U^2) stand out most from the
+        # same noise, rather than whichever the rounding favours (a deck campaign once chose
+        # 0.4 U_F this way, and needed a fourth speed).
+        tied = [i for i in new if table[i][1] <= (1.0 + TIE_RTOL) * table[i_new][1]
+                and n_at[i] <= n_at[i_new]]
+        i_new = max(tied, key=lambda i: allowed[i])
         best_U, best = table[i_new]
         return Choice(best_U, f"chosen {best_U:.2f} m/s{said(i_new)}: a new speed "
                       f"({len(covered)} so far, {MIN_SPEEDS} needed), predicted std {best:.3f} "

@@ -261,6 +261,30 @@ def test_with_two_speeds_a_new_speed_is_always_chosen(two_speeds):
     assert [u for u, _ in choice.predicted] == [*covered, new]
 
 
+def test_a_third_speed_that_nothing_tells_apart_is_the_highest(two_speeds):
+    # Nothing to reduce (the std all structure, as when a structure without flutter nearby
+    # widens it): every new candidate promises the same total. The highest is taken (forces
+    # ~U^2 against the same noise), not the first listed: a deck campaign once spent its third
+    # speed at 0.4 U_F this way and needed a fourth.
+    releases, analysis = two_speeds
+    u = analysis.uncertainty
+    flat = dataclasses.replace(analysis, uncertainty=dataclasses.replace(
+        u, parametric=0.0, turbulence=0.0, refinement=0.0, structure=u.total))
+    U_F = analysis.flutter_speed
+    low, high = 0.2 * U_F, 0.3 * U_F  # below both covered speeds (0.4, 0.55 U_F)
+    for options in ((), (1, 2)):
+        choice = choose_next(flat, releases, [low, high], bound=math.inf,
+                             releases_per_speed=1, decay_s=5.0, release_options=options,
+                             overhead_s=2.0, per_release_s=6.0)
+        assert choice.predicted[0][1] == pytest.approx(choice.predicted[1][1], rel=1e-12)
+        assert choice.speed == high, choice.reason
+    # A real difference is not a tie: with the statistical part back the most informative new
+    # speed is chosen by its prediction, whatever its place in the list.
+    choice = choose_next(analysis, releases, [high, low], bound=math.inf,
+                         releases_per_speed=1, decay_s=5.0)
+    assert choice.speed == min(choice.predicted, key=lambda row: row[1])[0]
+
+
 def test_a_large_structure_part_does_not_stop_the_campaign_by_itself(three_speeds):
     # The structure part is carried (no gain promised for it) but new data may tell the
     # structures apart: the choice stops only when the parts it can reduce cannot be.
