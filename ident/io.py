@@ -105,6 +105,9 @@ class RunFile:
         The taps' tubing the file records (None: none recorded).
     tubing_corrected : bool
         Whether the releases' lift and moment were corrected for it.
+    cuts : tuple of str
+        With ``read_run(cut_at_gaps=True)``: one sentence per release cut short before a gap
+        or left out for one (empty otherwise).
     """
 
     path: str
@@ -114,9 +117,16 @@ class RunFile:
     depth: float | None = None
     tubing: TubingSet | None = None
     tubing_corrected: bool = False
+    cuts: tuple[str, ...] = ()
 
 
-def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True) -> RunFile:
+#: With ``cut_at_gaps``, a release cut before a gap is kept when at least this many periods of
+#: the section's slower mode remain (E2RFC identifies releases of 3-5 periods).
+MIN_CUT_PERIODS = 3.0
+
+
+def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True,
+             cut_at_gaps: bool = False) -> RunFile:
     """Read the section and the releases of a run file.
 
     Parameters
@@ -126,6 +136,11 @@ def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True) ->
     tubing_correction : bool
         Correct the releases' lift and moment for the recorded tubing (default; no effect on a
         file without tubing). False: the forces as measured.
+    cut_at_gaps : bool
+        False (default): a gap (NaN) in a release's rows is an error. True: such a release
+        ends before its first gap, or is left out when less than :data:`MIN_CUT_PERIODS`
+        periods of the slower mode remain; :attr:`RunFile.cuts` says which and why (a
+        campaign goes on with what its files hold). Nothing is filled either way.
 
     Returns
     -------
@@ -135,7 +150,8 @@ def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True) ->
     ------
     FileFormatError
         If the file cannot be opened as HDF5 or lacks a part of the layout, or if a release's rows
-        contain gaps (NaN): identification never silently fills a gap.
+        contain gaps (NaN) and ``cut_at_gaps`` is False: identification never silently fills a
+        gap.
     """
     path = os.fspath(path)
     if not os.path.exists(path):
@@ -204,10 +220,39 @@ def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True) ->
             if dead.size and "pressure" in sync:  # weight 0, but a dead tap's NaN would spread
                 sync["pressure"][:, dead[(dead >= 0) & (dead < sync["pressure"].shape[1])]] = 0.0
             _correct_forces(sync, table, tubing, integration, holds)
-    releases = tuple(_release(sync, row, path, i, holds[i]) for i, row in enumerate(table))
-    return RunFile(path=path, section=section, releases=releases, rig_name=rig_name,
+    cuts: list[str] = []
+    min_s = MIN_CUT_PERIODS / min(section.fh, section.fa)
+    releases = []
+    for i, row in enumerate(table):
+        stop = _gap_free_stop(sync, row, section) if cut_at_gaps else int(row["stop_index"])
+        start = int(row["start_index"])
+        if stop < int(row["stop_index"]):
+            gap_s = float(sync["time"][stop] - row["release_time"])
+            kept_s = float(sync["time"][stop - 1] - row["release_time"]) if stop > start else 0.0
+            if kept_s < min_s:
+                cuts.append(f"release {i} left out: a gap {gap_s:.2f} s after its release "
+                            f"(less than {MIN_CUT_PERIODS:g} periods, {min_s:.2f} s)")
+                continue
+            cuts.append(f"release {i} cut before a gap {gap_s:.2f} s after its release")
+            row = row.copy()
+            row["stop_index"] = stop
+        releases.append(_release(sync, row, path, i, holds[i]))
+    return RunFile(path=path, section=section, releases=tuple(releases), rig_name=rig_name,
                    depth=depth, tubing=tubing,
-                   tubing_corrected=tubing is not None and tubing_correction)
+                   tubing_corrected=tubing is not None and tubing_correction, cuts=tuple(cuts))
+
+
+def _gap_free_stop(sync: dict[str, np.ndarray], row: Any, section: SectionModel) -> int:
+    """Return the end row of a release's gap-free start: its first NaN row, or its stop."""
+    start, stop = int(row["start_index"]), int(row["stop_index"])
+    names = ("h", "alpha", "lift", "moment") + (_SWAY_COLUMNS if section.n_dof == 3 else ())
+    n = sync["time"].size
+    if not 0 <= start < stop <= n:
+        return stop  # _release says what is wrong
+    bad = np.zeros(stop - start, dtype=bool)
+    for name in names:
+        bad |= ~np.isfinite(sync[name][start:stop])
+    return start + int(np.argmax(bad)) if bad.any() else stop
 
 
 def _group_dict(group: Any) -> dict[str, Any]:

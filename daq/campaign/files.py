@@ -100,7 +100,7 @@ def read_back(out: Path, say: Callable[[str], None]) -> list[RecordedSpeed]:
         speed = speeds.setdefault(key, RecordedSpeed(key[0], float(key[1])))
         speed.paths.append(path)
         try:
-            speed.runs.append(read_run(path))
+            speed.runs.append(read_run(path, cut_at_gaps=True))  # as when recorded
         except (IdentError, ValueError, OSError) as exc:
             say(f"resume: {path.name} is not usable ({exc}); left out")
     return [speeds[key] for key in sorted(speeds)]

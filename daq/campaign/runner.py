@@ -418,11 +418,15 @@ def _record_speed(session: _Session, outcome: CampaignOutcome, index: int, U: fl
 def _read_recorded(path: Path, say: Callable[[str], None]) -> RunFile | None:
     """Read a file just recorded back for identification (None, said, when it cannot be)."""
     try:
-        run = read_run(path)
+        # A gap (a device fault, frames lost on a busy host) ends a release early, or leaves
+        # it out when too little remains: the campaign goes on with the rest, and says so.
+        run = read_run(path, cut_at_gaps=True)
     except (IdentError, ValueError, OSError) as exc:
         say(f"  {path.name}: cannot be identified ({exc}); left out of the fit")
         return None
     say(f"  {path.name}: {len(run.releases)} release(s) recorded")
+    for cut in run.cuts:
+        say(f"  {path.name}: {cut}")
     return run
 
 

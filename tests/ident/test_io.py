@@ -26,8 +26,12 @@ depth = 0.01
 SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
 
 
-def write_run(path, *, gap=False):
-    """Write a run file with two releases through the real recorder."""
+def write_run(path, *, gap=False, gap_row=300):
+    """Write a run file with two releases through the real recorder.
+
+    ``gap``: the second release's h is NaN at ``gap_row`` of its rows (0.5 s of hold at 200 Hz
+    first: row 300 is 1.0 s after the release).
+    """
     recorder = RunRecorder(path, config_text=CONFIG, rig_name="test", min_free_bytes=0)
     recorder.open()
     recorder.add_sync(["p0", "p1"])
@@ -41,7 +45,7 @@ def write_run(path, *, gap=False):
                    "U": np.full(n, U), "rho": np.full(n, SECTION.rho),
                    "pressure": np.zeros((n, 2), dtype=np.float32)}
         if gap and U == 8.0:
-            columns["h"][300] = np.nan
+            columns["h"][gap_row] = np.nan
         recorder.append_sync(t0 + 0.5 + sim.t, **columns)
         after = int(np.flatnonzero(sim.t >= 0)[0])
         recorder.add_release(release_time=t0 + 0.5, start_index=row + after, stop_index=row + n,
@@ -74,6 +78,33 @@ def test_a_gap_inside_a_release_is_refused_by_name(tmp_path):
     write_run(path, gap=True)
     with pytest.raises(FileFormatError, match="release 1 has 1 gap sample"):
         read_run(path)
+
+
+@pytest.mark.parametrize("gap_row, kept_s", [(600, 2.5), (300, None)])
+def test_a_campaign_reads_a_release_with_a_gap_cut_before_it_or_leaves_it_out(
+        tmp_path, gap_row, kept_s):
+    """``cut_at_gaps``: the release ends before its first NaN row, or is left out when less than
+    3 periods of the slower mode (2 Hz: 1.5 s) remain; the other release is untouched, the
+    cut is said, nothing is filled."""
+    path = tmp_path / "gap.h5"
+    sims = write_run(path, gap=True, gap_row=gap_row)
+    run = read_run(path, cut_at_gaps=True)
+    first = run.releases[0]
+    np.testing.assert_allclose(first.alpha, sims[0].alpha[sims[0].t >= 0])
+    if kept_s is None:
+        assert len(run.releases) == 1
+        assert run.cuts == ("release 1 left out: a gap 1.00 s after its release (less than 3 "
+                            "periods, 1.50 s)",)
+        return
+    assert len(run.releases) == 2
+    cut = run.releases[1]
+    # Rows up to the one before the gap (0.005 s at 200 Hz), all finite, values as written.
+    assert cut.t[-1] == pytest.approx(kept_s - 0.005, abs=1e-9)
+    assert np.all(np.isfinite(cut.h))
+    np.testing.assert_allclose(cut.h, sims[1].h[100:gap_row])
+    assert run.cuts == ("release 1 cut before a gap 2.50 s after its release",)
+    with pytest.raises(FileFormatError, match="release 1 has 1 gap sample"):
+        read_run(path)  # the default: refused, as before
 
 
 def test_not_hdf5_truncated_and_incomplete_files_fail_clearly(tmp_path):
