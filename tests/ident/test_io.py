@@ -83,9 +83,11 @@ def test_a_gap_inside_a_release_is_refused_by_name(tmp_path):
 @pytest.mark.parametrize("gap_row, kept_s", [(600, 2.5), (300, None)])
 def test_a_campaign_reads_a_release_with_a_gap_cut_before_it_or_leaves_it_out(
         tmp_path, gap_row, kept_s):
-    """``cut_at_gaps``: the release ends before its first NaN row, or is left out when less than
-    3 periods of the slower mode (2 Hz: 1.5 s) remain; the other release is untouched, the
-    cut is said, nothing is filled."""
+    """``cut_at_gaps``: a release ends before its first NaN row, or is left out.
+
+    Left out when less than 3 periods of the slower mode (2 Hz: 1.5 s) remain; the other
+    release is untouched, the cut is said, nothing is filled.
+    """
     path = tmp_path / "gap.h5"
     sims = write_run(path, gap=True, gap_row=gap_row)
     run = read_run(path, cut_at_gaps=True)
