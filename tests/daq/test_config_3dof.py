@@ -14,6 +14,7 @@ import pytest
 from daq.config import SHIPPED_CONFIGS, is_sway_laser, load_rig_config, parse_rig_config
 from daq.errors import ConfigError
 from daq.instruments.microepsilon_ild1420.settings import Ild1420Settings
+from ident import flutter as fl
 from simulators.decks import BLUFF_DECK_3DOF, bluff_deck_3dof_model
 
 SHIPPED = SHIPPED_CONFIGS / "sim_bluff_deck_3dof.toml"
@@ -36,7 +37,14 @@ def test_the_shipped_3dof_config_is_the_simulated_bluff_deck():
     assert rig.section.n_dof == 3
     truth = bluff_deck_3dof_model()
     model = rig.aerodynamic_model()
-    assert np.array_equal(model.A, truth.A) and np.array_equal(model.d, truth.d)
+    # The config stores the model's numbers; the model's Theodorsen lags come from a fit
+    # (ident.flat_plate.theodorsen_model) whose optimum moves by ~1e-6 with the host's BLAS (3e-6
+    # measured on a fresh host): equal to 1e-5, and the same flutter speed to 1e-8.
+    np.testing.assert_allclose(model.A, truth.A, rtol=1e-5, atol=1e-12)
+    np.testing.assert_allclose(model.d, truth.d, rtol=1e-5, atol=0)
+    assert model.A.shape == truth.A.shape and np.array_equal(model.A == 0, truth.A == 0)
+    speeds = [fl.analyze(BLUFF_DECK_3DOF, m).speed for m in (model, truth)]
+    assert speeds[0] == pytest.approx(speeds[1], rel=1e-8)
     assert rig.sway_laser is not None and rig.sway_laser.name == "laser_sway"
     assert [inst.name for inst in rig.heave_pitch_lasers] == ["laser_front", "laser_rear"]
     assert rig.taps.carries_drag  # the rectangle's end faces
