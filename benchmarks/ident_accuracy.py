@@ -32,7 +32,9 @@ The turbulence rows' releases are recorded with a hold of ``TUNNEL_HOLD_S`` (10 
 (a real release always has one: the operator holds the model in the wind before letting go);
 E2RFC then runs its turbulence branch (refined IV with the holds' noise model,
 ``ident._turbulent_fit``). ``--tunnel-mode before`` identifies the same releases with their holds
-taken away (today's estimator), ``both`` prints the two; ``--rows turbulent|clean`` runs a subset.
+taken away (today's estimator), ``both`` prints the two; ``--rows turbulent|clean`` runs a subset;
+``--turbulent-motion filter|smoother|smoother-sg`` selects how the branch builds its regressors'
+motion (``ident._turbulent_fit.MOTION``; docs/e2rfc_turbulence.md measures the three).
 
 Printed per row: the median and 90th percentile of |error|, the coverage of the 2-std interval
 (``IdentifiedModel.flutter``'s std: noise, structure, extrapolation, one lag more, release
@@ -68,7 +70,7 @@ import numpy as np  # noqa: E402
 from scipy.signal import lfilter  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
-from ident import Release, SectionModel, e2rfc, flat_plate  # noqa: E402
+from ident import Release, SectionModel, _turbulent_fit, e2rfc, flat_plate  # noqa: E402
 from ident import flutter as fl  # noqa: E402
 from ident._regressors import PreparedRelease, RegressorView, prepare  # noqa: E402
 from ident.conventions import FLUTTER_DERIVATIVE_NAMES  # noqa: E402
@@ -292,14 +294,15 @@ def tunnel_run(args):
     try:
         return _tunnel_run(args)
     except Exception as exc:  # noqa: BLE001 - a benchmark reports every failure and goes on
-        row, seed, mode, _ = args
+        row, seed, mode, *_ = args
         print(f"FAILED {row} seed {seed} {mode}: {exc!r}", flush=True)
         return row, mode, np.inf, np.nan, np.nan, False, seed
 
 
 def _tunnel_run(args):
-    row, seed, mode, a3 = args
+    row, seed, mode, a3, motion = args
     e2rfc.TURBULENT_A3 = a3  # the turbulence branch's A3 option (set in each worker)
+    _turbulent_fit.MOTION = motion  # and how its regressors' motion is estimated
     section, make_model, _, _, truth = TUNNEL_ROWS[row]
     U_F = truth() if truth is not None else fl.analyze(section, make_model()).speed
     releases = tunnel_releases(row, seed)
@@ -317,10 +320,10 @@ def _tunnel_run(args):
 
 
 def tunnel_part(seeds, workers, modes=("after",), which="all", a3="fitted-or-zero",
-                first_seed=0):
+                first_seed=0, motion="filter"):
     names = [row for row in TUNNEL_ROWS
              if which == "all" or (which == "turbulent") == (TUNNEL_ROWS[row][3] > 0)]
-    jobs = [(row, seed, mode, a3) for row in names for mode in modes
+    jobs = [(row, seed, mode, a3, motion) for row in names for mode in modes
             for seed in range(first_seed, first_seed + seeds)]
     results = []
     with ProcessPoolExecutor(workers) as pool:
@@ -374,6 +377,10 @@ def main():
     parser.add_argument("--turbulent-a3", choices=("fitted-or-zero", "fitted", "choose", "e2rfc"),
                         default="fitted-or-zero",
                         help="A3 in E2RFC's turbulence branch (ident.e2rfc.TURBULENT_A3)")
+    parser.add_argument("--turbulent-motion", choices=("filter", "smoother", "smoother-sg"),
+                        default=_turbulent_fit.MOTION,
+                        help="how the turbulence branch estimates its regressors' motion "
+                             "(ident._turbulent_fit.MOTION)")
     args = parser.parse_args()
     if args.part == "timing":
         timing_part(args.repeats)
@@ -381,7 +388,7 @@ def main():
     if args.part in ("all", "tunnel"):
         modes = ("before", "after") if args.tunnel_mode == "both" else (args.tunnel_mode,)
         tunnel_part(args.seeds, args.workers, modes, args.rows, args.turbulent_a3,
-                    args.first_seed)
+                    args.first_seed, args.turbulent_motion)
     if args.part == "tunnel":
         return
     jobs = [(s, m, n, seed) for s in SECTIONS for m in METHODS for n in NOISES

@@ -35,7 +35,8 @@ This module fits the same rational-function model another way, measured in
   another structure of the same releases then does not.
 
 Only a turbulence branch: in smooth flow these regressors (filtered, differentiated measured
-motion) carry a 1-6 % error floor that E2RFC's modal-fit regressors do not, so :mod:`ident.e2rfc`
+motion; :data:`MOTION` offers a Kalman smoother instead, measured and not the default) carry a
+1-6 % error floor that E2RFC's modal-fit regressors do not, so :mod:`ident.e2rfc`
 calls this only when its releases hold a random response and each carries a hold of at least
 :data:`MIN_HOLD_S`.
 """
@@ -48,6 +49,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+from scipy.linalg import expm, solve_discrete_are
 from scipy.optimize import least_squares
 from scipy.signal import butter, lfilter, savgol_filter, sosfiltfilt
 
@@ -84,6 +86,14 @@ AR_MAX_ORDER = 20
 D_BOUNDS = (1e-3, 20.0)
 #: Lag counts the branch chooses among.
 LAG_OPTIONS = (1, 2)
+#: How the regressors' motion is estimated: ``"filter"`` low-passes the measured displacements
+#: and differentiates them (Savitzky-Golay); ``"smoother"`` takes ``q``, ``q'`` from a Kalman
+#: (RTS) smoother of the known structure driven by the measured force (:func:`smoothed_motion`)
+#: and ``q''`` from its equation of motion; ``"smoother-sg"`` the smoother's ``q``, ``q'`` with
+#: the filter's ``q''``. Measured (docs/e2rfc_turbulence.md): the smoother's motion is 5-20
+#: times closer to the truth and removes most of the smooth-flow floor, but the branch in
+#: turbulence is worse with it (plate Iw 1 % median 11 % against 2.6 %), so the filter stays.
+MOTION = "filter"
 
 
 @dataclass(frozen=True)
@@ -169,12 +179,28 @@ class _Signals:
         self.sos = butter(FILTER_ORDER, fc / (fs / 2), output="sos")
         self.decim = max(1, min(int(round(fs / TARGET_FS)), int(fs // (4.0 * fc))))
         q = release.coordinates(B)
-        f = release.generalised_forces(B) / (qd * B**2)
-        qf = sosfiltfilt(self.sos, q, axis=0)
-        ff = sosfiltfilt(self.sos, f, axis=0)
+        forces = release.generalised_forces(B)
+        f = forces / (qd * B**2)
         window = int(round(SG_WINDOW_S * fs)) | 1
-        qdot = savgol_filter(qf, window, 3, deriv=1, delta=release.dt, axis=0)
-        qdd = savgol_filter(qf, window, 3, deriv=2, delta=release.dt, axis=0)
+        if MOTION == "filter":
+            qf = sosfiltfilt(self.sos, q, axis=0)
+            qdot = savgol_filter(qf, window, 3, deriv=1, delta=release.dt, axis=0)
+            qdd = savgol_filter(qf, window, 3, deriv=2, delta=release.dt, axis=0)
+        elif MOTION in ("smoother", "smoother-sg"):
+            # The same zero-phase low-pass as the force's: a linear filter on both sides keeps
+            # the model's relation between them.
+            q_s, qdot_s, qdd_s = smoothed_motion(q, forces, section, release.dt)
+            qf = sosfiltfilt(self.sos, q_s, axis=0)
+            qdot = sosfiltfilt(self.sos, qdot_s, axis=0)
+            if MOTION == "smoother":
+                qdd = sosfiltfilt(self.sos, qdd_s, axis=0)
+            else:  # q'' as "filter" makes it: free of the tap noise the smoother's q'' carries
+                qdd = savgol_filter(sosfiltfilt(self.sos, q, axis=0), window, 3, deriv=2,
+                                    delta=release.dt, axis=0)
+        else:
+            raise ValueError(f"MOTION must be 'filter', 'smoother' or 'smoother-sg', got "
+                             f"{MOTION!r}")
+        ff = sosfiltfilt(self.sos, f, axis=0)
         c = B / release.U
         edge = int(round(EDGE_S * fs))
         self.rows = slice(edge, q.shape[0] - edge, self.decim)
@@ -211,6 +237,108 @@ class _Signals:
         Z = Z - Z.mean(axis=0)  # the means: static forces and the hold's offset
         Zw = lfilter(a, [1.0], Z, axis=0)[a.size - 1:] * self.weight[channel]
         return Zw[:, :-1], Zw[:, -1]
+
+
+def smoothed_motion(q: FloatArray, forces: FloatArray, section: SectionModel, dt: float
+                    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Estimate a release's motion by a Kalman (RTS) smoother of the structure and its force.
+
+    The measured generalised force is the whole aerodynamic force (self-excited plus
+    buffeting) plus white tap noise, and drives the known structure:
+    ``M q'' + C q' + K q = f - n_f``. So the state ``[q, q']`` follows from the force (with
+    the tap noise as process noise) and the lasers (measurement noise); the smoother's
+    ``q'`` integrates the force instead of differentiating noisy displacements, and
+    ``q'' = M^-1 (f - C q' - K q)``.
+
+    Parameters
+    ----------
+    q : ndarray, shape (n, n_dof)
+        Measured coordinates ``[h/B, alpha(, p/B)]`` (1, rad), from the release (at rest).
+    forces : ndarray, shape (n, n_dof)
+        Measured generalised forces ``[L B, M(, D B)]``, N m/m.
+    section : SectionModel
+        The structure (``M``, ``C``, ``K`` for ``q``).
+    dt : float
+        Sampling interval, s.
+
+    Returns
+    -------
+    q, q', q'' : ndarray, shape (n, n_dof)
+        Smoothed coordinates (1, rad), their rates (1/s, rad/s) and accelerations (1/s^2,
+        rad/s^2).
+    """
+    n, n_dof = q.shape
+    M, C, K = section.mass_matrix(), section.damping_matrix(), section.stiffness_matrix()
+    Minv = np.linalg.inv(M)
+    eye, zero = np.eye(n_dof), np.zeros((n_dof, n_dof))
+    Ac = np.block([[zero, eye], [-Minv @ K, -Minv @ C]])
+    Bc = np.vstack([zero, Minv])
+    # A constant force the record does not show (a zero offset of the taps or the lasers, a
+    # static load the lasers' zero already holds): the record's mean of M q'' + C q' + K q - f,
+    # with mean q'' ~ 0 (the release starts and ends near rest: an error of M v_end / T) and
+    # mean q' = (q_end - q_0) / T.
+    T = dt * (n - 1)
+    offset = K @ q.mean(axis=0) + C @ (q[-1] - q[0]) / T - forces.mean(axis=0)
+    u = forces + offset
+    # First-order hold on the force (piecewise linear between samples): a zero-order hold
+    # would delay it by half a sample, a phase error of the order of the aerodynamic damping.
+    ns = 2 * n_dof
+    big = np.zeros((ns + 2 * n_dof, ns + 2 * n_dof))
+    big[:ns, :ns] = Ac * dt
+    big[:ns, ns:ns + n_dof] = Bc * dt
+    big[ns:ns + n_dof, ns + n_dof:] = eye
+    phi = expm(big)
+    A, G1, G2 = phi[:ns, :ns], phi[:ns, ns:ns + n_dof], phi[:ns, ns + n_dof:]
+    G0 = G1 - G2  # x[k+1] = A x[k] + G0 u[k] + G2 u[k+1]
+    # White-noise levels from third differences (20 sigma^2 for white noise; the motion's and
+    # the buffeting's own share is (2 pi f dt)^3 small at these rates).
+    sig_f = np.std(np.diff(forces, 3, axis=0), axis=0) / math.sqrt(20.0)
+    sig_q = np.std(np.diff(q, 3, axis=0), axis=0) / math.sqrt(20.0)
+    S_f = np.diag(sig_f**2)
+    Q = G0 @ S_f @ G0.T + G2 @ S_f @ G2.T
+    R = np.diag(np.maximum(sig_q, 1e-12 * np.max(np.abs(q)) + 1e-300) ** 2)
+    H = np.hstack([eye, zero])
+    # Steady-state gains: the smoother's own start-up is short next to the edges cut. Q is
+    # singular (the force enters through n_dof columns); a negligible floor keeps the Riccati
+    # solver well posed.
+    P_pred = solve_discrete_are(A.T, H.T, Q + 1e-30 * np.eye(ns), R)
+    gain = P_pred @ H.T @ np.linalg.inv(H @ P_pred @ H.T + R)
+    P_filt = (np.eye(ns) - gain @ H) @ P_pred
+    J = P_filt @ A.T @ np.linalg.inv(P_pred)
+    drive = u[:-1] @ G0.T + u[1:] @ G2.T
+    # Forward: x_pred[k+1] = (A - A gain H) x_pred[k] + A gain y[k] + drive[k], from rest.
+    x0 = np.concatenate([q[0], np.zeros(n_dof)])
+    x_pred = _recursion(A - A @ gain @ H, q[:-1] @ (A @ gain).T + drive, x0)
+    x_filt = x_pred + (q - x_pred[:, :n_dof]) @ gain.T
+    # Backward (RTS): x_s[k] = J x_s[k+1] + x_filt[k] - J x_pred[k+1], from x_s[-1] = x_filt[-1].
+    inputs = x_filt[:-1] - x_pred[1:] @ J.T
+    x_s = _recursion(J, inputs[::-1], x_filt[-1])[::-1]
+    q_s, v_s = x_s[:, :n_dof], x_s[:, n_dof:]
+    a_s = (u - v_s @ C.T - q_s @ K.T) @ Minv.T
+    return q_s, v_s, a_s
+
+
+def _recursion(F: FloatArray, g: FloatArray, x0: FloatArray) -> FloatArray:
+    """Return ``x`` with ``x[0] = x0``, ``x[k+1] = F x[k] + g[k]``, shape (len(g) + 1, n).
+
+    By the eigenvectors of ``F``: each modal coordinate is a first-order recursion that
+    :func:`scipy.signal.lfilter` runs in compiled code (a Python loop over 10^4 samples costs
+    about 50 ms a pass). A defective ``F`` (ill-conditioned eigenvectors) takes the loop.
+    """
+    lam, V = np.linalg.eig(F)
+    if np.linalg.cond(V) < 1e8:
+        z0 = np.linalg.solve(V, x0.astype(complex))
+        gz = np.linalg.solve(V, g.T.astype(complex)).T
+        z = np.empty((g.shape[0] + 1, lam.size), dtype=complex)
+        z[0] = z0
+        for i, root in enumerate(lam):
+            z[1:, i], _ = lfilter([1.0], [1.0, -root], gz[:, i], zi=[root * z0[i]])
+        return np.real(z @ V.T)
+    x = np.empty((g.shape[0] + 1, x0.size))
+    x[0] = x0
+    for k in range(g.shape[0]):
+        x[k + 1] = F @ x[k] + g[k]
+    return x
 
 
 def ar_fit(e: FloatArray, p_max: int) -> FloatArray:
