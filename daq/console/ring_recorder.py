@@ -113,8 +113,7 @@ class RingRecorder:
 
     def set_sync_attrs(self, *, clock_offset_s: Mapping[str, float] | None = None,
                        clock_drift_ppm: Mapping[str, float] | None = None,
-                       residual_misalignment_s: float | None = None,
-                       time_base_note: str | None = None) -> None:
+                       residual_misalignment_s: float | None = None) -> None:
         """Ignore."""
 
     def add_metadata(self, name: str, value: Any) -> None:

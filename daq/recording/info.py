@@ -141,9 +141,7 @@ def run_info(path: str | os.PathLike[str]) -> dict[str, Any]:
         whole, rows sized but never written (a crash), rate in Hz, duration in s, the fraction
         of rows with h finite), ``devices`` (per device: driver,
         rate in Hz, channels, samples, time span in s from the run start, gaps, missing samples,
-        restarts, clock fit: offset s, drift ppm), ``residual_misalignment_s``,
-        ``time_base_note`` (which clock maps placed the sync rows, None before it existed),
-        ``releases``
+        restarts, clock fit: offset s, drift ppm), ``residual_misalignment_s``, ``releases``
         (time s, U m/s, h0 m, alpha0 rad, a 3-DOF run's p0 m, decay length s), ``events``
         (counts per kind and every event but the trigger pulses: time s, kind, text), ``calz``
         (each CALZ record's scalars), ``calibrations`` (per ``/entry/calibration`` group:
@@ -246,8 +244,6 @@ def _describe(path: Path, f: h5py.File) -> dict[str, Any]:
                  "h_finite": float(np.isfinite(h).mean()) if h.size else None},
         "devices": devices,
         "residual_misalignment_s": None if residual is None else float(residual),
-        "time_base_note": (None if "time_base_note" not in sync.attrs
-                           else _text(sync.attrs["time_base_note"])),
         "releases": releases,
         "events": {"counts": dict(sorted(counts.items())), "list": events},
         "calz": calz,
@@ -311,8 +307,6 @@ def format_info(info: dict[str, Any]) -> str:
     elif info["state"] != "closed":
         lines.append("no clock fits: they are written when the file is closed, and the crash "
                      "lost them (the raw streams keep every time stamp)")
-    if info["time_base_note"] is not None:
-        lines.append(f"sync view placed on the {info['time_base_note']}")
     lines += ["", f"releases   {len(info['releases'])}"]
     for i, r in enumerate(info["releases"]):
         decay = f", decay {r['decay_s']:.2f} s" if r["decay_s"] is not None else ""

@@ -176,8 +176,7 @@ class Recorder(Protocol):
 
     def set_sync_attrs(self, *, clock_offset_s: Mapping[str, float] | None = None,
                        clock_drift_ppm: Mapping[str, float] | None = None,
-                       residual_misalignment_s: float | None = None,
-                       time_base_note: str | None = None) -> None:
+                       residual_misalignment_s: float | None = None) -> None:
         """Store the clock fits with the synchronised view."""
         ...
 
@@ -556,8 +555,7 @@ class RunRecorder:
 
     def set_sync_attrs(self, *, clock_offset_s: Mapping[str, float] | None = None,
                        clock_drift_ppm: Mapping[str, float] | None = None,
-                       residual_misalignment_s: float | None = None,
-                       time_base_note: str | None = None) -> None:
+                       residual_misalignment_s: float | None = None) -> None:
         """Record how each device's clock maps onto the run's time base.
 
         The convention of :class:`daq.sync.clock_map.ClockMap` and
@@ -576,15 +574,12 @@ class RunRecorder:
             Per declared device: its clock rate against the host's, ppm (positive: runs fast).
         residual_misalignment_s : float, optional
             Misalignment left between the streams after the fit, s.
-        time_base_note : str, optional
-            Which clock maps placed the rows (``"final clock maps: ..."`` or ``"online clock
-            maps: <why>"``, :mod:`daq.recording.refine`), attribute ``time_base_note``.
         """
         self._require("set_sync_attrs", "declaring", "recording")
         if self._sync is None:
             raise RecorderStateError("set_sync_attrs() needs the synchronised view: call "
                                      "add_sync() first")
-        attrs: dict[str, float | str] = {}
+        attrs: dict[str, float] = {}
         for label, mapping in (("clock_offset_s", clock_offset_s),
                                ("clock_drift_ppm", clock_drift_ppm)):
             for device, value in (mapping or {}).items():
@@ -595,8 +590,6 @@ class RunRecorder:
         if residual_misalignment_s is not None:
             attrs["residual_misalignment_s"] = _finite(residual_misalignment_s,
                                                      "residual_misalignment_s")
-        if time_base_note is not None:
-            attrs["time_base_note"] = str(time_base_note)
         if self._state == "declaring":
             self._sync.attrs.update(attrs)
         else:
@@ -788,54 +781,6 @@ class RunRecorder:
             append_rows(self._sync_ds["time"], start, t)
         self._sync_rows = start + n
         self.flush_if_due()
-
-    @property
-    def sync_rows(self) -> int:
-        """Rows appended to ``/entry/sync`` so far."""
-        return self._sync_rows
-
-    def read_raw(self, device: str) -> dict[str, npt.NDArray[Any]]:
-        """Read back a declared stream's columns as written so far.
-
-        ``value``, ``device_time``, ``host_time_ns``, ``counter`` and its extra columns
-        (:meth:`append_raw`), e.g. to map them again at the run's end.
-        """
-        self._require("read_raw", "recording")
-        stream = self._stream(device)
-        with self._io(f"read back {device}"):
-            return {name: ds[:stream.rows] for name, ds in stream.datasets.items()}
-
-    def read_sync(self, name: str) -> npt.NDArray[Any]:
-        """Read back the sync column ``name`` as written so far."""
-        self._require("read_sync", "recording")
-        with self._io(f"read back sync {name}"):
-            return np.asarray(self._sync_ds[name][:self._sync_rows])
-
-    def rewrite_sync(self, start: int, columns: Mapping[str, npt.ArrayLike]) -> None:
-        """Overwrite rows ``start ..`` of existing ``/entry/sync`` columns in place.
-
-        SWMR lets a writer overwrite what it wrote (not add objects): the run's end uses this
-        to put the sync view on the final clock maps (:mod:`daq.recording.refine`).
-
-        Parameters
-        ----------
-        start : int
-            First row, >= 0.
-        columns : mapping of str to array_like
-            Sync columns other than ``time`` (``h``, ``alpha``, ``lift``, ``moment``,
-            ``pressure``, ...), each of the same number of rows, ending at or before the last
-            row written.
-        """
-        self._require("rewrite_sync", "recording")
-        arrays = {name: np.asarray(v, dtype=self._sync_ds[name].dtype)
-                  for name, v in columns.items() if name != "time"}
-        lengths = {a.shape[0] for a in arrays.values()}
-        if len(lengths) > 1 or start < 0 or start + max(lengths, default=0) > self._sync_rows:
-            raise ValueError(f"rewrite_sync: rows {start} + {sorted(lengths)} do not fit in the "
-                             f"{self._sync_rows} sync rows written (one length for all columns)")
-        with self._io("rewrite sync"):
-            for name, array in arrays.items():
-                self._sync_ds[name][start:start + array.shape[0]] = array
 
     def add_release(self, *, release_time: float, start_index: int, stop_index: int, U: float,
                     h0: float, alpha0: float, p0: float | None = None) -> int:

@@ -20,15 +20,6 @@ itself) would otherwise place the new epoch late by that delay. Device times tha
 across the gap (PTP, or relative ones the engine continued, as after ``Acquisition.calz``) keep
 their map. The final clock fit in ``/entry/sync`` attrs then describes the last clock epoch only.
 
-At the run's end, once every map has seen the whole run, the sync view's rows from clocked
-devices are mapped again on the final clock maps (:mod:`daq.recording.refine`: early in a run the
-online maps were off by up to 1.5 ms); ``/entry/sync``'s ``time_base_note`` says which maps
-placed them, and why not the final ones when they could not be used.
-
-Longer than 600 lines: the block path (clock epochs, restarts, the hold-back after one) and the
-start and stop sequences share every device's state; split, they would pass it through private
-interfaces.
-
 Not responsible for: reading devices or threads (the engine), the numerics of clocks, resampling
 and conversions (:mod:`daq.sync`), the file (:mod:`daq.recording.recorder`), running a rig into
 a file (:mod:`daq.recording.run`), or any simulator. A 3-DOF rig's p, drag, p0: see the layout.
@@ -54,7 +45,7 @@ import numpy.typing as npt
 
 from daq.acquisition.records import Event, StreamBlock
 from daq.config import RigConfig, is_sway_laser
-from daq.errors import StorageError, SyncError
+from daq.errors import StorageError
 from daq.recording.devices import (
     ClockObserver,
     DeviceState,
@@ -65,7 +56,6 @@ from daq.recording.devices import (
 from daq.recording.layout import event_row, metadata_name_part, storable_metadata
 from daq.recording.raw_batches import RawBatches
 from daq.recording.recorder import Recorder, RunRecorder
-from daq.recording.refine import refine_sync_view
 from daq.recording.releases import ReleaseRows
 from daq.recording.sync_view import physical_columns, polled_conditions, tap_columns
 from daq.sync.resample import Resampler, StreamSpec, SyncBlock
@@ -159,7 +149,6 @@ class RunWriter:
         self._t0_ns = 0
         self._devices: dict[str, DeviceState] = {}
         self._resampler: Resampler | None = None
-        self._view_streams: list[StreamSpec] = []
         self._laser_order: list[str] = []
         self._rho = DEFAULT_RHO
         self._rho_measured = False
@@ -243,7 +232,6 @@ class RunWriter:
         rec.add_sync(tap_names)
         rec.add_calibrations(self.config.calibration.records(n_taps))
         rec.start(self._t0_ns)
-        self._view_streams = streams
         if streams:
             self._resampler = Resampler(streams, rate_hz=self.sync_rate_hz, t_start=0.0,
                                         max_hold_s=self.max_hold_s)
@@ -559,31 +547,16 @@ class RunWriter:
         if self._resampler is not None:
             self._write_sync(self._pull())
         self._release_rows.finish(rec, self._sync_rows)
-        note = self._refine(rec)
         fits = self.clock_fits()
         offsets = {n: f["offset_s"] for n, f in fits.items() if math.isfinite(f["offset_s"])}
         drifts = {n: f["drift_ppm"] for n, f in fits.items() if math.isfinite(f["drift_ppm"])}
         residuals = [f["residual_s"] for f in fits.values() if math.isfinite(f["residual_s"])]
         rec.set_sync_attrs(clock_offset_s=offsets, clock_drift_ppm=drifts,
-                           residual_misalignment_s=max(residuals) if residuals else None,
-                           time_base_note=note)
+                           residual_misalignment_s=max(residuals) if residuals else None)
         summary = self._summary(doc)
         rec.add_metadata("acquisition_summary", storable_metadata(summary))
         rec.close()
         self.summary = summary
-
-    def _refine(self, rec: Recorder) -> str:
-        """Put the sync view on the final clock maps (:mod:`daq.recording.refine`); its note."""
-        if not isinstance(rec, RunRecorder):
-            return "online clock maps: not a run file"
-        try:
-            return refine_sync_view(rec, self._devices, self._view_streams,
-                                    rate_hz=self.sync_rate_hz, t0_ns=self._t0_ns,
-                                    config=self.config,
-                                    lasers=[self._lasers[n] for n in self._laser_order])
-        except (SyncError, ValueError) as exc:  # the online rows stand; the file says why
-            log.warning("%s: sync view left on the online clock maps: %s", self.path, exc)
-            return f"online clock maps: mapping again failed: {exc}"
 
     @property
     def t0_ns(self) -> int:

@@ -41,7 +41,6 @@ import pytest
 from daq.acquisition.records import Event, StreamBlock
 from daq.config import RigConfig, parse_rig_config
 from daq.instruments.reading import Gap
-from daq.recording import refine
 from daq.recording import writer as pipeline
 from daq.recording.writer import RunWriter
 from daq.sim.recording import record_simulated_run
@@ -295,59 +294,25 @@ def test_a_restart_gap_restarts_the_map_only_when_the_device_clock_went_back(
         sync_t, sync_p = f["entry/sync/time"][:], f["entry/sync/pressure"][:]
         kinds = [k.decode() if isinstance(k, bytes) else k for k in f["entry/events"]["kind"]]
         gaps = f["entry/instrument/scanner/gaps"][:]
-        note = str(f["entry/sync"].attrs["time_base_note"])
     assert kinds.count("clock_restart") == int(restarted)
     assert [(int(g["after_counter"]), int(g["length"])) for g in gaps] == [(old_frames, -1)]
-    # A kept map: at the run's end the view is mapped again with the final map (exact here:
-    # its anchors measured the latency), from the first frame on (daq.recording.refine). A
-    # restarted clock: the online rows stay (two epochs, two maps), and the file says so.
-    if restarted:
-        assert note == "online clock maps: a device clock restarted during the run", note
-        placed, on_time_from = t_run, 1.0
-    else:
-        assert note.startswith("final clock maps: rows 0-"), note
-        placed = writer._devices["scanner"].clock.to_host(device)  # the final map
-        np.testing.assert_allclose(placed, true, rtol=0, atol=1e-6)
-        on_time_from = -1.0
     # NaN exactly where no pair of samples brackets the row: before the first frame, and
     # between the old scan's last frame and the new scan's first (8.3 periods apart), as
-    # placed. Everything else finite, to the last frame.
-    last_old, first_new = placed[old_frames - 1], placed[old_frames]
-    expected = (sync_t < placed[0]) | ((sync_t >= last_old) & (sync_t < first_new))
+    # mapped; the same rows whether the map was kept or restarted. Everything else finite, to
+    # the last frame.
+    last_old, first_new = t_run[old_frames - 1], t_run[old_frames]
+    expected = (sync_t < t_run[0]) | ((sync_t >= last_old) & (sync_t < first_new))
     assert np.array_equal(~np.all(np.isfinite(sync_p), axis=1), expected)
-    assert sync_t[-1] > placed[-1] - PERIOD_S
-    # Values on the right time (online from 1 s, where the map is exact; refined from the
-    # start, where the online rows were a latency late): the linear interpolation of a 3 Hz
-    # sine sampled at 500 Hz is within A (w T)^2 / 8 = 1.78e-4 of it
-    # (daq.sync.resample.Resampler; float32 storage adds 1e-8); 1 ms late is up to w 1 ms =
-    # 0.019 off, a frame period up to 0.038.
-    ok = ~expected & (sync_t > on_time_from)
+    assert sync_t[-1] > t_run[-1] - PERIOD_S
+    # Values on the right time (from 1 s, where the map is exact): the linear interpolation of a 3
+    # Hz sine sampled at 500 Hz is within A (w T)^2 / 8 = 1.78e-4 of it
+    # (daq.sync.resample.Resampler; float32 storage adds 1e-8); a frame period off would be up to w
+    # T = 0.038 off.
+    ok = ~expected & (sync_t > 1.0)
     assert np.count_nonzero(ok & (sync_t > first_new)) > 900  # the new scan's rows
-    assert restarted or np.count_nonzero(ok & (sync_t < 1.0)) > 450  # the first second's
     truth = np.sin(2 * np.pi * 3.0 * sync_t[ok])
     assert np.max(np.abs(sync_p[ok, 0] - truth)) < 2e-4
     assert math.isfinite(writer.summary["clock_fits"]["scanner"]["offset_s"])
-
-
-def test_a_run_longer_than_a_clock_map_spans_keeps_its_online_rows(
-        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    # The final map is local to the run's end: over a run longer than it spans it would be an
-    # extrapolation at the start, so the online rows stay (here: a 4 s run against a span cut
-    # to 1 s), and the file says why. Its first rows are then a latency late, as mapped online.
-    monkeypatch.setattr(refine, "MAX_SPAN_S", 1.0)
-    docs, true, device, _ = scanner_docs("continued", 1000)
-    writer = RunWriter(tmp_path / "run.h5", config(), write_interval_s=0.0)
-    for name, doc in docs:
-        writer(name, doc)
-    assert writer.error is None
-    with h5py.File(tmp_path / "run.h5", "r") as f:
-        sync_t, sync_p = f["entry/sync/time"][:], f["entry/sync/pressure"][:, 0]
-        note = str(f["entry/sync"].attrs["time_base_note"])
-    assert note == "online clock maps: the run (4 s) is longer than a clock map's span (1 s)"
-    early = np.isfinite(sync_p) & (sync_t < 0.05)
-    assert np.count_nonzero(early) > 10
-    # 1 ms late on a 3 Hz sine near t = 0: ~w 1 ms = 0.019 off (on time: < 2e-4).
-    assert np.max(np.abs(sync_p[early] - np.sin(2 * np.pi * 3.0 * sync_t[early]))) > 0.01
 
 
 @pytest.mark.parametrize("settle_s", [pipeline.RESTART_SETTLE_S, 0.0],
