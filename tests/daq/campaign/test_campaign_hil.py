@@ -179,8 +179,9 @@ def test_the_plans_hold_is_recorded_and_read_back_as_each_releases_hold(tmp_path
     for release in releases:
         assert release.hold is not None
         # 11 s - 0.25 s - 0.05 s = 10.7 s, plus the arm and release commands' own time (tens
-        # of ms: 10.74 s measured), less a sync row or two at each end.
-        assert 10.5 <= release.hold.duration <= 11.0
+        # of ms: 10.74 s measured; 11.07 s once on two cores at a load of 4, the release's
+        # Modbus write queued behind other work), less a sync row or two at each end.
+        assert 10.5 <= release.hold.duration <= 11.5
     # The wind-on time counts the holds: two speeds of at least 11 s + 3 s.
     assert outcome.wind_on_s is not None and outcome.wind_on_s > 2 * 14.0
 
