@@ -224,7 +224,7 @@ def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True,
     min_s = MIN_CUT_PERIODS / min(section.fh, section.fa)
     releases = []
     for i, row in enumerate(table):
-        stop = _gap_free_stop(sync, row, section) if cut_at_gaps else int(row["stop_index"])
+        stop = _gap_free_stop(sync, row) if cut_at_gaps else int(row["stop_index"])
         start = int(row["start_index"])
         if stop < int(row["stop_index"]):
             gap_s = float(sync["time"][stop] - row["release_time"])
@@ -242,15 +242,19 @@ def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True,
                    tubing_corrected=tubing is not None and tubing_correction, cuts=tuple(cuts))
 
 
-def _gap_free_stop(sync: dict[str, np.ndarray], row: Any, section: SectionModel) -> int:
+def _release_channels(sync: dict[str, np.ndarray]) -> tuple[str, ...]:
+    """Return the sync columns a release is made of (sway ones only kept for a 3-DOF section)."""
+    return ("h", "alpha", "lift", "moment") + (_SWAY_COLUMNS if "p" in sync else ())
+
+
+def _gap_free_stop(sync: dict[str, np.ndarray], row: Any) -> int:
     """Return the end row of a release's gap-free start: its first NaN row, or its stop."""
     start, stop = int(row["start_index"]), int(row["stop_index"])
-    names = ("h", "alpha", "lift", "moment") + (_SWAY_COLUMNS if section.n_dof == 3 else ())
     n = sync["time"].size
     if not 0 <= start < stop <= n:
         return stop  # _release says what is wrong
     bad = np.zeros(stop - start, dtype=bool)
-    for name in names:
+    for name in _release_channels(sync):
         bad |= ~np.isfinite(sync[name][start:stop])
     return start + int(np.argmax(bad)) if bad.any() else stop
 
@@ -360,7 +364,7 @@ def _hold_rows(sync: dict[str, np.ndarray], table: Any, arms: np.ndarray) -> lis
     None for a release without one (fewer than 2 rows; rows that are not a release's).
     """
     time = sync["time"]
-    names = ("h", "alpha", "lift", "moment") + (_SWAY_COLUMNS if "p" in sync else ())
+    names = _release_channels(sync)
     holds: list[slice | None] = []
     previous_stop, previous_release = 0, -np.inf
     for row in table:
@@ -480,8 +484,7 @@ def _release(sync: dict[str, np.ndarray], row: Any, path: str, index: int,
         raise FileFormatError(f"{path}: release {index} rows {start}..{stop} are outside the "
                               f"{n} rows of /entry/sync (truncated run?)")
     rows = slice(start, stop)
-    names = ("h", "alpha", "lift", "moment") + (_SWAY_COLUMNS if "p" in sync else ())
-    channels = {name: sync[name][rows] for name in names}
+    channels = {name: sync[name][rows] for name in _release_channels(sync)}
     for name, values in channels.items():
         bad = int(np.count_nonzero(~np.isfinite(values)))
         if bad:
@@ -495,7 +498,7 @@ def _release(sync: dict[str, np.ndarray], row: Any, path: str, index: int,
         hold = None
         if hold_rows is not None:
             hold = ReleaseHold(t=sync["time"][hold_rows] - float(row["release_time"]),
-                               **{name: sync[name][hold_rows] for name in names})
+                               **{name: sync[name][hold_rows] for name in channels})
         return Release(t=t, **channels, U=U, rho=rho_value,
                        meta={"file": path, "release": index}, hold=hold)
     except ValueError as exc:

@@ -234,7 +234,6 @@ class Release(_Record):
                 f"displacements show about {periods:.1f} in {self.duration:.3g} s"
             )
 
-
     @property
     def fs(self) -> float:
         """Sampling rate, Hz."""

@@ -80,9 +80,9 @@ def test_a_gap_inside_a_release_is_refused_by_name(tmp_path):
         read_run(path)
 
 
-@pytest.mark.parametrize("gap_row, kept_s", [(600, 2.5), (300, None)])
+@pytest.mark.parametrize("gap_row, gap_s", [(600, 2.5), (300, None)])
 def test_a_campaign_reads_a_release_with_a_gap_cut_before_it_or_leaves_it_out(
-        tmp_path, gap_row, kept_s):
+        tmp_path, gap_row, gap_s):
     """``cut_at_gaps``: a release ends before its first NaN row, or is left out.
 
     Left out when less than 3 periods of the slower mode (2 Hz: 1.5 s) remain; the other
@@ -93,7 +93,7 @@ def test_a_campaign_reads_a_release_with_a_gap_cut_before_it_or_leaves_it_out(
     run = read_run(path, cut_at_gaps=True)
     first = run.releases[0]
     np.testing.assert_allclose(first.alpha, sims[0].alpha[sims[0].t >= 0])
-    if kept_s is None:
+    if gap_s is None:
         assert len(run.releases) == 1
         assert run.cuts == ("release 1 left out: a gap 1.00 s after its release (less than 3 "
                             "periods, 1.50 s)",)
@@ -101,7 +101,7 @@ def test_a_campaign_reads_a_release_with_a_gap_cut_before_it_or_leaves_it_out(
     assert len(run.releases) == 2
     cut = run.releases[1]
     # Rows up to the one before the gap (0.005 s at 200 Hz), all finite, values as written.
-    assert cut.t[-1] == pytest.approx(kept_s - 0.005, abs=1e-9)
+    assert cut.t[-1] == pytest.approx(gap_s - 0.005, abs=1e-9)
     assert np.all(np.isfinite(cut.h))
     np.testing.assert_allclose(cut.h, sims[1].h[100:gap_row])
     assert run.cuts == ("release 1 cut before a gap 2.50 s after its release",)
