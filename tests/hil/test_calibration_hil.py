@@ -34,6 +34,7 @@ from ident.air import moist_air_density
 CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
 FAN_RPM = 900.0  # 9 m/s on this rig: lift and moment well above the scanner's noise
 DEAD = [10, 45]  # an interior tap of the upper face and one of the lower face
+MAX_LAG_S = 0.05  # the wiring check's lag search, s (in-process simulators, see below)
 
 
 def calibrated_config_text() -> str:
@@ -130,12 +131,27 @@ def test_wired_and_dead_taps_and_calibrations_end_to_end(tmp_path):
     assert abs(np.std(moment[decay]) / np.std(full_moment) - 1.0) < 0.01
 
     # The wiring is right end to end: the forces follow the tunnel's truth (a wrong channel map
-    # would scramble the pressures and the correlation with them).
-    true = rig.tunnel.sample(t[decay] + t0_s - seen["true_offset_s"])
-    r_lift = np.corrcoef(lift[decay], true["lift"])[0, 1]
-    r_moment = np.corrcoef(moment[decay], true["moment"])[0, 1]
-    print(f"correlation with the truth: lift {r_lift:.4f}, moment {r_moment:.4f}")
+    # would scramble the pressures and the correlation with them, at any lag). The correlation
+    # is taken at its best lag within +-MAX_LAG_S: the simulators run in this process, and
+    # their share of the interpreter lock delays the scanner's frames by 5-30 ms on a slow
+    # host (a latency floor the clock map cannot see; no real instrument has it), while the
+    # lasers stay within 1 ms. The sync view's timing is tested against the truth with the
+    # rig in a process of its own (test_sync_alignment_hil).
+    lags = np.arange(-MAX_LAG_S, MAX_LAG_S + 1e-9, 5e-4)
+    best = {"lift": (-1.0, 0.0), "moment": (-1.0, 0.0)}
+    for lag in lags:
+        true = rig.tunnel.sample(t[decay] + t0_s - seen["true_offset_s"] - lag)
+        for name, measured in (("lift", lift[decay]), ("moment", moment[decay])):
+            best[name] = max(best[name], (float(np.corrcoef(measured, true[name])[0, 1]),
+                                          float(lag)))
+    (r_lift, lag_lift), (r_moment, lag_moment) = best["lift"], best["moment"]
+    print(f"correlation with the truth: lift {r_lift:.4f} at {lag_lift * 1e3:+.1f} ms, "
+          f"moment {r_moment:.4f} at {lag_moment * 1e3:+.1f} ms")
     assert r_lift > 0.99 and r_moment > 0.99
+    # The optimum inside the window, and one lag for both forces (the same scanner frames;
+    # 1 ms: two grid steps).
+    assert max(abs(lag_lift), abs(lag_moment)) < MAX_LAG_S - 1e-3
+    assert abs(lag_lift - lag_moment) <= 1e-3
 
     # Heave through the calibrated, tilted check laser against the truth (0.1 mm rms; the
     # uncalibrated reading would be off by ~0.7 mm).
