@@ -239,9 +239,13 @@ def _acquire(args: argparse.Namespace) -> int:
     from daq.recording.recorder import failed_writes
 
     try:
-        record = record_simulated_run if args.simulate else record_run
-        summary = record(config, args.out, duration_s=args.duration, operator_notes=args.notes,
-                         progress=sys.stderr.isatty(), check=not args.skip_check)
+        options = {"operator_notes": args.notes, "progress": sys.stderr.isatty(),
+                   "check": not args.skip_check}
+        if args.simulate:  # the instruments in a process of their own, as real ones are
+            summary = record_simulated_run(config, args.out, duration_s=args.duration,
+                                           own_process=True, **options)
+        else:
+            summary = record_run(config, args.out, duration_s=args.duration, **options)
     except DeviceCheckError as exc:  # every failing device on a line of its own
         print("\n".join(f"error: {line}" for line in str(exc).splitlines())
               + "\nnothing recorded (--skip-check records anyway)", file=sys.stderr)

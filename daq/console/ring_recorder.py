@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from contextlib import AbstractContextManager, nullcontext
 from typing import Any
 
 import numpy as np
@@ -69,6 +70,10 @@ class RingRecorder:
     def close(self) -> None:
         """Stop (the ring keeps its rows)."""
         self._state = "closed"
+
+    def batch(self) -> AbstractContextManager[None]:
+        """Group appends: nothing to do (the ring has no file to flush)."""
+        return nullcontext()
 
     def add_stream(self, device: str, channels: Sequence[str], units: Any, rate_hz: float,
                    value_dtype: Any = "float32", *,

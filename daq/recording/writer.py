@@ -387,9 +387,10 @@ class RunWriter:
         self._last_write = now
         rec = self.recorder
         assert rec is not None
-        self._raw.write(rec)
-        if self._resampler is not None:
-            self._write_sync(self._pull())
+        with rec.batch():  # flushed after the sync rows, not between them and their raw rows
+            self._raw.write(rec)
+            if self._resampler is not None:
+                self._write_sync(self._pull())
 
     def _push(self, dev: DeviceState, block: StreamBlock, t_dev: FloatArray,
               finite: npt.NDArray[np.bool_] | None) -> None:

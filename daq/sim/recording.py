@@ -2,16 +2,16 @@
 
 Responsibility: :func:`record_simulated_run` is ``windrig acquire --simulate``: it creates the
 run file (the checks that must fail before anything starts), starts every simulated instrument
-of a rig config on loopback in this process (:func:`daq.sim.rig.start_simulated_rig`), records
+of a rig config on loopback, in this process (:func:`daq.sim.rig.start_simulated_rig`: tests
+reach into the simulators to inject faults) or in a process of its own
+(:mod:`daq.sim.rig_process`, the command line's choice), records
 them with the production recorder (:func:`daq.recording.run.record_run`, given the simulators'
 URLs), zeroes the scanner first (the simulated tunnel starts wind-off), stops the simulators,
 and measures the file's synchronised view against the simulators' truth
 (:func:`daq.sim.sync_check.check_run`: the clock error of every block, the delay of every
 channel), which it stores in the file and returns as the summary's ``alignment``.
 
-Not responsible for: recording (:mod:`daq.recording`), the simulators (:mod:`simulators`), or a
-simulated rig in a process of its own (:mod:`daq.sim.rig_process`, which the campaign and the
-console use).
+Not responsible for: recording (:mod:`daq.recording`), the simulators (:mod:`simulators`).
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ from daq.acquisition.sync_pulses import SYNC_PULSE_INTERVAL_S
 from daq.config import RigConfig
 from daq.recording.run import open_run_file, record_run
 from daq.sim.rig import SimulatedRig, start_simulated_rig
+from daq.sim.rig_process import start_rig_process
 from daq.sim.sync_check import ClockTruthTracker, check_run
 
 __all__ = ["check_alignment", "record_simulated_run"]
@@ -35,7 +36,7 @@ def record_simulated_run(config: RigConfig, out_path: str | Path, *, duration_s:
                          progress: bool = True, operator_notes: str = "", calz: bool = True,
                          writer_options: Mapping[str, Any] | None = None,
                          sync_pulse_interval_s: float | None = SYNC_PULSE_INTERVAL_S,
-                         check: bool = False) -> dict[str, Any]:
+                         check: bool = False, own_process: bool = False) -> dict[str, Any]:
     """Record a simulated rig for ``duration_s`` into one run file; return the summary.
 
     Parameters
@@ -59,6 +60,12 @@ def record_simulated_run(config: RigConfig, out_path: str | Path, *, duration_s:
     check : bool
         Check every simulated device first, through its real transport, as
         :func:`~daq.recording.run.record_run` does.
+    own_process : bool
+        Serve the simulators from a process of their own (:mod:`daq.sim.rig_process`), as
+        ``windrig acquire --simulate`` does: in this process they share the recorder's
+        interpreter lock, which on a loaded host delays the scanner's frames by 5-30 ms and
+        the writer by seconds. ``actions`` then gets the
+        :class:`~daq.sim.rig_process.RigProcess` (its config and truth, not the simulators).
 
     Returns
     -------
@@ -72,7 +79,8 @@ def record_simulated_run(config: RigConfig, out_path: str | Path, *, duration_s:
     recorder = open_run_file(config, out_path, operator_notes=operator_notes,
                              writer_options=options)
     try:
-        rig = start_simulated_rig(config)
+        rig: Any = start_rig_process(config) if own_process else start_simulated_rig(config)
+        alignment: dict[str, Any] = {}
     except BaseException:
         recorder.close()
         Path(out_path).unlink(missing_ok=True)
@@ -84,10 +92,16 @@ def record_simulated_run(config: RigConfig, out_path: str | Path, *, duration_s:
             progress=progress, operator_notes=operator_notes, calz=calz,
             writer_options=options, sync_pulse_interval_s=sync_pulse_interval_s,
             recorder=recorder, check=check)
+        tracker = options["clock_truth"]
+        if own_process and "file" in summary and tracker is not None:
+            # Asked of the child while it still runs (the in-process truth outlives the rig).
+            alignment = check_run(Path(out_path), tracker, true_time_of=rig.true_time_of,
+                                  decay_truth=rig.decay_truth, origin_s=rig.origin_s)
     finally:
         rig.close()
     if "file" in summary:  # the writer finished the file (its summary is in)
-        summary["alignment"] = check_alignment(Path(out_path), rig, options["clock_truth"])
+        summary["alignment"] = alignment if own_process else \
+            check_alignment(Path(out_path), rig, tracker)
     return summary
 
 

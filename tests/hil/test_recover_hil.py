@@ -18,6 +18,15 @@ killed just after a flush, 0.51-0.58 s half-way to the next, 0.73-0.81 s just be
 (just before a flush), 2.94 s (half-way), and once the PLC's newest sample was 1.17 s old: the
 writer had fallen behind its sources, and those runs fail. With the former 1 s flush interval a
 kill just before a flush lost 1.22 s on the quiet machine: hence 0.5 s.
+
+On a slower host (2026-11-27; the CI's: the whole suite 1330-1420 s) a kill just before a flush
+lost 0.76-0.99 s, and 1.1-2.9 s in 4 of 9 runs. Two changes brought it to 0.60-0.64 s (9 runs,
+none failed; 0.17-0.20 s just after a flush, 0.41-0.51 s half-way): the simulated instruments of
+``windrig acquire --simulate`` run in a process of their own (they shared the writer's
+interpreter lock), and the writer flushes after a batch's sync rows, not between them and their
+raw rows (``RunRecorder.batch``: the sync rows waited for the next flush, 0.6 s later). A 0.25 s
+flush interval was measured and not taken: a 60 s run's file grew from 74 to 117 MB (gzip
+chunks rewritten at each flush); a 0.1 s write interval made the writer fall behind (2.9 s).
 """
 
 from __future__ import annotations

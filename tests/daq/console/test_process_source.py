@@ -14,6 +14,7 @@ import multiprocessing
 import os
 import signal
 import sys
+import threading
 import time
 from multiprocessing.shared_memory import SharedMemory
 from pathlib import Path
@@ -90,8 +91,15 @@ def test_only_the_owner_removes_a_shared_ring():
 
 
 class _Unpicklable(Exception):
+    """An error that holds what no pickle can carry (a lock: think of an open socket).
+
+    Not merely a constructor pickling cannot replay: once ``dask.distributed`` is imported
+    (another test may do it), tblib makes such exceptions pickle by their ``__dict__``.
+    """
+
     def __init__(self, code: int, where: str) -> None:
         super().__init__(f"code {code} at {where}")
+        self.lock = threading.Lock()
 
 
 def test_an_exception_that_cannot_cross_becomes_a_remote_error_naming_it():
