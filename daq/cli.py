@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 from collections.abc import Callable, Sequence
@@ -270,7 +271,9 @@ def _acquire(args: argparse.Namespace) -> int:
         fit = summary["clock_fits"].get(name)
         clock = ("" if fit is None else
                  f"offset {fit['offset_s']:.6f} s, drift {fit['drift_ppm']:+.2f} ppm, "
-                 f"residual {fit['residual_s'] * 1e6:.1f} us, {int(fit['anchors'])} anchor(s)")
+                 f"residual {fit['residual_s'] * 1e6:.1f} us, {int(fit['anchors'])} anchor(s)"
+                 + (f" (absolute time +-{fit['anchor_uncertainty_s'] * 1e3:.2f} ms)"
+                    if math.isfinite(fit.get("anchor_uncertainty_s", math.nan)) else ""))
         print(f"{name:<14} {n:>9} {summary['gaps'][name]:>5} "
               f"{summary['overflow_samples'][name]:>9}  {clock}")
     clocks = summary.get("alignment", {}).get("clocks", {})

@@ -221,7 +221,7 @@ class DeviceState:
     view: str | None = None  # its stream in the sync view ("pressure", "laser.<name>") if any
 
     def anchor_triggers(self, block: StreamBlock, t_dev: FloatArray,
-                        trigger_events: Collection[float]) -> None:
+                        trigger_events: Collection[tuple[float, float]]) -> None:
         """Take the trigger times a block reveals (latched or flagged); pair those it can.
 
         A ``trigger_time`` channel is a latch (the scanner's last trigger time on its clock, s);
@@ -251,21 +251,23 @@ class DeviceState:
             del self.pending_triggers[:-32]
         self.pair_triggers(trigger_events)
 
-    def pair_triggers(self, trigger_events: Collection[float]) -> None:
+    def pair_triggers(self, trigger_events: Collection[tuple[float, float]]) -> None:
         """Give the clock map an anchor per trigger time that matches a PLC trigger event.
 
-        ``trigger_events``: the host times of the PLC's trigger pulses, s from the run start.
+        ``trigger_events``: the PLC's trigger pulses as (host time, s from the run start; its
+        uncertainty, s: half the pulse command's round trip).
         """
         if (not self.pending_triggers or self.clock is None or not self.clock.ready
                 or not trigger_events):
             return
-        events = np.fromiter(trigger_events, dtype=np.float64)
+        pulses = np.array(list(trigger_events), dtype=np.float64).reshape(-1, 2)
+        events, uncertainty = pulses[:, 0], pulses[:, 1]
         left: list[float] = []
         for td in self.pending_triggers:
             predicted = self.clock.to_host(td)
             k = int(np.argmin(np.abs(events - predicted)))
             if abs(events[k] - predicted) <= TRIGGER_PAIRING_S:
-                self.clock.add_anchor(td, float(events[k]))
+                self.clock.add_anchor(td, float(events[k]), float(uncertainty[k]))
             elif predicted > events[-1]:
                 left.append(td)  # its PLC event may still come
         self.pending_triggers = left
@@ -277,4 +279,5 @@ class DeviceState:
             return None
         return {"offset_s": cm.offset_s, "drift_ppm": cm.drift_ppm, "residual_s": cm.residual_s,
                 "latency_floor_s": cm.latency_floor_s, "anchors": float(cm.n_anchors),
+                "anchor_uncertainty_s": cm.anchor_uncertainty_s,
                 "pairs": float(cm.n_pairs)}

@@ -155,7 +155,8 @@ class RunWriter:
         self._sync_rows = 0
         self._release_rows = ReleaseRows()
         self._calz_count: dict[str, int] = {}
-        self._trigger_events: deque[float] = deque(maxlen=64)
+        # The PLC's trigger pulses: (host time, s; uncertainty, s: half the round trip).
+        self._trigger_events: deque[tuple[float, float]] = deque(maxlen=64)
         self._view_pieces: dict[str, list[tuple[FloatArray, FloatArray]]] = {}
         self._n_taps = config.taps.n_taps
         self._tap_columns, self._fan_rpm = tap_columns(config.calibration, self._n_taps), math.nan
@@ -529,7 +530,7 @@ class RunWriter:
             round_trip = float(event.data.get("round_trip_s", 0.0))
             if round_trip > MAX_ANCHOR_ROUND_TRIP_S:
                 return
-            self._trigger_events.append(t)
+            self._trigger_events.append((t, 0.5 * round_trip))
             for dev in self._devices.values():
                 if dev.pending_triggers:
                     dev.pair_triggers(self._trigger_events)

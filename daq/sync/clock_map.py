@@ -34,6 +34,7 @@ from daq.errors import SyncError
 from daq.sync.checks import float_1d, positive
 
 __all__ = [
+    "MIN_FLOOR_ANCHORS",
     "ClockMap",
     "trigger_times_from_flags",
     "trigger_times_from_latch",
@@ -43,6 +44,9 @@ FloatArray = npt.NDArray[np.float64]
 
 #: Scale from the median absolute deviation to the standard deviation of a normal distribution.
 _MAD_TO_SIGMA: Final = 1.4826
+
+#: Fewest anchors whose median is the latency floor (robust to one mis-paired pulse).
+MIN_FLOOR_ANCHORS: Final = 3
 
 #: Points used by :func:`_theil_sen_slope` (more are thinned evenly): 7140 pairs.
 _MAX_SLOPE_POINTS = 120
@@ -121,8 +125,8 @@ class ClockMap:
        transport: the PLC's trigger pulse (seen by the scanner as its external-trigger time and
        by the lasers as the "value triggered" sample, see :func:`trigger_times_from_latch` and
        :func:`trigger_times_from_flags`) or the release. Each anchor measures the floor,
-       ``L_min = envelope(t_device) - t_host``; the map uses the median over anchors (robust to
-       one mis-paired pulse). Because the floor is a property of the transport, it is stored
+       ``L_min = envelope(t_device) - t_host``; the map uses the median over the least
+       uncertain anchors (:attr:`ClockMap.latency_floor_s`; robust to one mis-paired pulse). Because the floor is a property of the transport, it is stored
        per anchor and frozen once the anchor is older than the fitted span, so old anchors keep
        counting after the envelope has moved on. Without anchors the floor is the
        ``assumed_floor_s`` given (0 by default: the map is then late by the true floor).
@@ -189,7 +193,8 @@ class ClockMap:
         self._n_closed = 0  # windows closed so far (the ring holds min(n, n_windows))
         self._open: tuple[int, float, float, float] | None = None  # id, d_rel, h_rel, key
         self._ref_slope = 1.0
-        self._anchors = np.full((self.max_anchors, 3), np.nan)  # ring: d_rel, h_rel, floor
+        # ring: d_rel, h_rel, floor, uncertainty of h (s; 0: exact)
+        self._anchors = np.full((self.max_anchors, 4), np.nan)
         self._n_anchors_total = 0
         self._envelope: tuple[float, float, float] | None = None  # slope, intercept, scatter
         self._map: tuple[float, float] | None = None
@@ -270,7 +275,7 @@ class ClockMap:
         if self._n_closed < 2:
             self._refit()
 
-    def add_anchor(self, t_device: float, t_host: float) -> None:
+    def add_anchor(self, t_device: float, t_host: float, uncertainty_s: float = 0.0) -> None:
         """Add an event seen by the device at ``t_device`` that happened at host time ``t_host``.
 
         ``t_host`` may come from the host (the time the PLC pulsed the trigger line) or from
@@ -281,15 +286,22 @@ class ClockMap:
         ----------
         t_device, t_host : float
             The event's device time and host time, s.
+        uncertainty_s : float
+            How far ``t_host`` may be off, s (>= 0): half the round trip of the command that
+            pulsed the line. The floor comes from the least uncertain anchors held
+            (:attr:`latency_floor_s`).
         """
-        d, h = float(t_device), float(t_host)
+        d, h, u = float(t_device), float(t_host), float(uncertainty_s)
         if not (math.isfinite(d) and math.isfinite(h)):
             raise ValueError(f"anchor times must be finite, got ({t_device!r}, {t_host!r})")
+        if not (math.isfinite(u) and u >= 0.0):
+            raise ValueError(f"an anchor's uncertainty must be finite and >= 0 s, got "
+                             f"{uncertainty_s!r}")
         if self._origin is None:
             self._origin = (d, h)
         d0, h0 = self._origin
         slot = self._n_anchors_total % self.max_anchors
-        self._anchors[slot] = (d - d0, h - h0, self._floor_of(d - d0, h - h0))
+        self._anchors[slot] = (d - d0, h - h0, self._floor_of(d - d0, h - h0), u)
         self._n_anchors_total += 1
         self._map = None
         self.version += 1
@@ -420,12 +432,37 @@ class ClockMap:
     def latency_floor_s(self) -> float:
         """Transport latency floor subtracted from the envelope, s.
 
-        The median over anchors of ``envelope(t_device) - t_host``, or ``assumed_floor_s`` when
-        no anchor has been measured against the envelope yet.
+        The median of ``envelope(t_device) - t_host`` over the least uncertain anchors (the
+        third with the smallest ``uncertainty_s``, at least :data:`MIN_FLOOR_ANCHORS`), or
+        ``assumed_floor_s`` when no anchor has been measured against the envelope yet. The
+        choice is NTP's clock filter: a command's host time is the midpoint of its round trip,
+        off by the asymmetry of the two legs, which grows with the round trip (a loaded host
+        wakes the thread that waits for the reply late); the median keeps one mis-paired pulse
+        from moving the floor.
         """
-        floors = self._anchors[: min(self._n_anchors_total, self.max_anchors), 2]
-        floors = floors[np.isfinite(floors)]
-        return float(np.median(floors)) if floors.size else self.assumed_floor_s
+        return float(np.median(floors)) if (floors := self._best_floors()).size \
+            else self.assumed_floor_s
+
+    @property
+    def anchor_uncertainty_s(self) -> float:
+        """How far the floor may be off by its anchors' host times, s; NaN without anchors.
+
+        The largest ``uncertainty_s`` of the anchors :attr:`latency_floor_s` is the median
+        of: the error of the map's absolute time that no envelope can tell.
+        """
+        best = self._best_anchors()
+        return float(best[:, 3].max()) if best.shape[0] else math.nan
+
+    def _best_anchors(self) -> FloatArray:
+        held = self._anchors[: min(self._n_anchors_total, self.max_anchors)]
+        held = held[np.isfinite(held[:, 2])]
+        if held.shape[0] <= MIN_FLOOR_ANCHORS:
+            return held
+        n = max(MIN_FLOOR_ANCHORS, held.shape[0] // 3)
+        return held[np.argsort(held[:, 3], kind="stable")[:n]]
+
+    def _best_floors(self) -> FloatArray:
+        return self._best_anchors()[:, 2]
 
     @property
     def anchor_residual_s(self) -> float:

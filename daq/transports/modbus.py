@@ -36,6 +36,7 @@ import math
 import threading
 import time
 from collections.abc import Callable
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from typing import Any, Protocol, TypeVar, runtime_checkable
 from urllib.parse import parse_qs, unquote, urlsplit
@@ -224,6 +225,10 @@ class RegisterBus(Protocol):
     def close(self) -> None:
         """Disconnect; idempotent."""
 
+    def exclusive(self) -> AbstractContextManager[Any]:
+        """Hold the bus: no other thread's request runs until the block ends (reentrant)."""
+        ...
+
     def read_coils(self, address: int, count: int = 1) -> list[bool]:
         """Read ``count`` coils (FC01)."""
         ...
@@ -409,6 +414,14 @@ class ModbusBus:
             error = ProtocolError(f"{self.url}: {what}: bad reply: {exc}")
         error.__cause__ = exc
         return error
+
+    def exclusive(self) -> AbstractContextManager[Any]:
+        """Hold the bus: no other thread's request runs until the block ends (reentrant).
+
+        For a caller that times a request (the PLC's trigger pulse): its clock readings then
+        bracket the request alone, not the wait for another thread's poll.
+        """
+        return self._lock
 
     def _request(self, what: str, function_code: int,
                  send: Callable[[Any], ModbusPDU]) -> ModbusPDU:

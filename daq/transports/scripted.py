@@ -15,7 +15,7 @@ the Modbus drivers: it yields a :class:`ScriptedBus` (a
 from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager, nullcontext
 from typing import Any
 
 from daq.errors import TransportError, TransportTimeout
@@ -147,6 +147,10 @@ class ScriptedBus:
     def open(self) -> None:
         """Open (no I/O)."""
         self._open = True
+
+    def exclusive(self) -> AbstractContextManager[Any]:
+        """Hold the bus (a script plays in one thread: nothing to hold)."""
+        return nullcontext()
 
     def close(self) -> None:
         """Close; idempotent."""

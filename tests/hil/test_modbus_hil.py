@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import math
+import threading
 import time
 from collections.abc import Iterator
 
@@ -251,6 +252,41 @@ def test_plc_trigger_pulses_are_counted(plc, tunnel):
     assert drive.trigger_count() == before + 5 == sim.trigger_count
     assert len(tunnel.trigger_times(since=t0)) == 5
     assert set(drive.read().channels) == set(drive.describe())
+
+
+def test_plc_trigger_round_trip_is_the_write_alone_not_a_wait_for_the_bus(plc, tunnel):
+    """Another thread's request holding the bus: the pulse's time is bracketed after the wait.
+
+    The pulse's host time is the midpoint of its write's round trip, and the writer takes it as
+    a clock anchor only if the round trip is short (3 ms). A wait for a poll of the same bus
+    (the engine reads the PLC at 10 Hz) counted in that round trip would refuse good anchors
+    and move the midpoint before the edge.
+    """
+    sim, drive = plc
+    bus = drive.bus
+    holding, hold_s = threading.Event(), 0.2
+    results: list[int] = []
+    drive.trigger_pulse()  # the line is low after a pulse: the next write is the timed one
+
+    def hold() -> None:
+        with bus.exclusive():
+            holding.set()
+            time.sleep(hold_s)  # a long poll: the condition under test, not a wait for data
+
+    holder = threading.Thread(target=hold)
+    holder.start()
+    assert holding.wait(5.0)
+    t_called = time.monotonic()
+    results.append(drive.trigger_pulse())
+    holder.join()
+    t_edge = tunnel.clock.origin_s + tunnel.trigger_times()[-1]
+    # The call waited for the bus (at least the rest of the hold) ...
+    assert time.monotonic() - t_called > 0.5 * hold_s
+    # ... but the round trip is the write's alone (a loopback write takes ~1-5 ms here;
+    # the hold was 200 ms), and the midpoint lies within it of the simulator's edge.
+    round_trip_s = drive.last_trigger_round_trip_ns * 1e-9
+    assert round_trip_s < 0.25 * hold_s
+    assert abs(results[0] * 1e-9 - t_edge) <= round_trip_s
 
 
 def test_plc_disconnect_is_a_transport_error_then_the_bus_reconnects(plc, caplog):

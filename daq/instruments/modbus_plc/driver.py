@@ -231,9 +231,10 @@ class ModbusPlc:
             self.bus.write_coil(self._coil["trigger"], False)
             self._trigger_low = True
         self._trigger_low = False
-        sent = time.monotonic_ns()
-        self.bus.write_coil(self._coil["trigger"], True)
-        acknowledged = time.monotonic_ns()
+        with self.bus.exclusive():  # the round trip of this write alone, not a poll's wait
+            sent = time.monotonic_ns()
+            self.bus.write_coil(self._coil["trigger"], True)
+            acknowledged = time.monotonic_ns()
         self.last_trigger_round_trip_ns = acknowledged - sent
         t_ns = (sent + acknowledged) // 2
         try:

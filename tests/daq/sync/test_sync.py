@@ -307,6 +307,43 @@ def test_cross_device_anchor_aligns_lasers_to_the_scanner() -> None:
     assert np.max(np.abs(gap)) < TOLERANCE_S
 
 
+def test_floor_from_the_anchors_of_the_shortest_round_trips() -> None:
+    """Uncertain anchors late by up to half their round trip do not move the floor.
+
+    A PLC pulse's host time is the midpoint of a Modbus round trip; on a loaded host the legs
+    are unequal and the midpoint is off by up to half the round trip, one-sided. Twelve anchors:
+    four with 0.2 ms round trips (their midpoints off by <= 0.1 ms), eight with 6-8 ms round
+    trips off by 1-3 ms. The median over all is pulled late (0.5 ms here); the map's floor comes
+    from the least uncertain third and says how far it may be off.
+    """
+    rng = np.random.default_rng(5)
+    duration = 60.0
+    d, t = samples(LASER, duration)
+    cm = ClockMap()
+    cm.update(*block_pairs(LASER, d, t, rng))
+    pulses = pulse_times(rng, 5.0, duration - 5.0, 4.0)[:12]
+    dev_t = laser_anchor_times(LASER, d, t, pulses)
+    round_trip = np.where(np.arange(12) % 3 == 0, 0.2e-3, rng.uniform(6e-3, 8e-3, 12))
+    error = np.where(round_trip < 1e-3, rng.uniform(-0.1e-3, 0.1e-3, 12),
+                     rng.uniform(1e-3, 3e-3, 12))  # the host time given late
+    assert np.all(np.abs(error) <= round_trip / 2)
+    for k in range(12):
+        cm.add_anchor(float(dev_t[k]), float(pulses[k] + error[k]), float(round_trip[k] / 2))
+    t_check = np.linspace(5.0, duration - 5.0, 200)
+    mapped = cm.to_host(device_time(LASER.clock, t_check))
+    # 0.1 ms from the anchors, the laser flag's +-half sample (0.125 ms) and the envelope.
+    assert np.max(np.abs(mapped - t_check)) < 0.3e-3
+    assert cm.anchor_uncertainty_s == pytest.approx(0.1e-3)
+    # Without the uncertainties (all equal) the median of all is the late majority's.
+    plain = ClockMap()
+    plain.update(*block_pairs(LASER, d, t, np.random.default_rng(5)))
+    for k in range(12):
+        plain.add_anchor(float(dev_t[k]), float(pulses[k] + error[k]))
+    assert np.median(plain.to_host(device_time(LASER.clock, t_check)) - t_check) > 0.4e-3
+    with pytest.raises(ValueError, match="uncertainty"):
+        cm.add_anchor(1.0, 1.0, -1e-3)
+
+
 def test_clock_map_conventions_inverse_and_reset() -> None:
     clock = DeviceClock(offset_s=3.0, drift_ppm=-20.0)
     t = np.linspace(0.0, 100.0, 5001)
