@@ -126,9 +126,10 @@ class ClockMap:
        by the lasers as the "value triggered" sample, see :func:`trigger_times_from_latch` and
        :func:`trigger_times_from_flags`) or the release. Each anchor measures the floor,
        ``L_min = envelope(t_device) - t_host``; the map uses the median over the least
-       uncertain anchors (:attr:`ClockMap.latency_floor_s`; robust to one mis-paired pulse). Because the floor is a property of the transport, it is stored
-       per anchor and frozen once the anchor is older than the fitted span, so old anchors keep
-       counting after the envelope has moved on. Without anchors the floor is the
+       uncertain anchors (:attr:`ClockMap.latency_floor_s`; robust to one mis-paired pulse).
+       Because the floor is a property of the transport, it is stored per anchor and frozen
+       once the anchor is older than the fitted span, so old anchors keep counting after the
+       envelope has moved on. Without anchors the floor is the
        ``assumed_floor_s`` given (0 by default: the map is then late by the true floor).
 
     The slope comes from the envelope (hundreds of pairs over minutes, against a few anchors);
