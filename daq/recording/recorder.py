@@ -431,13 +431,10 @@ class RunRecorder:
 
     @contextmanager
     def batch(self) -> Iterator[None]:
-        """Append several things as one: a flush that falls due inside waits for the end.
+        """Append several things as one: a flush due inside waits for the end (not on error).
 
-        A writer that appends a batch of raw rows, then the sync rows made from them, would
-        otherwise flush between the two whenever the interval ran out there: the sync rows
-        would wait a whole interval more for the file, and a crash would lose them. At the end
-        of the batch :meth:`flush_if_due` runs (not when the batch raised: the error is the
-        caller's to handle first).
+        Else raw rows and the sync rows made from them could be split by a flush, and the sync
+        rows would wait a whole interval more for the file (lost in a crash).
         """
         self._batch_depth += 1
         try:

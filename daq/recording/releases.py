@@ -30,6 +30,11 @@ FloatArray = npt.NDArray[np.float64]
 
 #: Window of the held position before a release (h0, alpha0): [t - 0.3 s, t - 0.05 s].
 HOLD_WINDOW_S = (0.3, 0.05)
+#: How long sync rows are kept for the events that arrive after them, s. A release event
+#: exists once the PLC confirmed it (its RELEASED input, polled), an arm event once the command
+#: returned; on a loaded host that came after the rows of the release instant were written,
+#: and the release started at the next block (10 ms late) with no rows left to give h0.
+RECENT_S = 5.0
 
 
 @dataclass
@@ -81,21 +86,31 @@ class ReleaseRows:
         """
         self._sway = p is not None
         self._recent.append((t, h, alpha) if p is None else (t, h, alpha, p))
-        while len(self._recent) > 1 and self._recent[1][0][0] < t[-1] - 2 * HOLD_WINDOW_S[0]:
+        while len(self._recent) > 1 and self._recent[1][0][0] < t[-1] - RECENT_S:
             self._recent.popleft()
         for rel in self._releases[self.written:]:
             if rel.start_index is None and t[-1] >= rel.time:
-                rel.start_index = base + int(np.searchsorted(t, rel.time, side="left"))
+                rel.start_index = self._row_at(base + t.size, rel.time)
                 rel.h0, rel.alpha0, rel.p0 = self._held(rel.time)
             if (rel.stop_index is None and rel.end_time is not None
                     and t[-1] >= rel.end_time):
-                rel.stop_index = base + int(np.searchsorted(t, rel.end_time, side="left"))
+                rel.stop_index = self._row_at(base + t.size, rel.end_time)
             if rel.start_index is not None:
                 lo = max(rel.start_index - base, 0)
                 hi = t.size if rel.stop_index is None else max(rel.stop_index - base, lo)
                 if lo < min(hi, t.size):
                     rel.U.append(U[lo:hi])
         self._write_finished(rec, final=False)
+
+    def _row_at(self, end: int, t_event: float) -> int:
+        """Index of the first sync row at or after ``t_event`` among the recent rows.
+
+        ``end``: the index after the newest row. The rows kept are contiguous up to it, so an
+        event older than the newest block (it arrived late) still finds its row; one older
+        than every row kept starts at the oldest.
+        """
+        t = np.concatenate([b[0] for b in self._recent])
+        return end - t.size + int(np.searchsorted(t, t_event, side="left"))
 
     def _held(self, t_release: float) -> tuple[float, float, float]:
         """Return h0, alpha0 and p0 (NaN on a 2-DOF rig) held before a release."""

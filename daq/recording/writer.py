@@ -155,8 +155,7 @@ class RunWriter:
         self._sync_rows = 0
         self._release_rows = ReleaseRows()
         self._calz_count: dict[str, int] = {}
-        # The PLC's trigger pulses: (host time, s; uncertainty, s: half the round trip).
-        self._trigger_events: deque[tuple[float, float]] = deque(maxlen=64)
+        self._trigger_events: deque[tuple[float, float]] = deque(maxlen=64)  # (t, +-s) pulses
         self._view_pieces: dict[str, list[tuple[FloatArray, FloatArray]]] = {}
         self._n_taps = config.taps.n_taps
         self._tap_columns, self._fan_rpm = tap_columns(config.calibration, self._n_taps), math.nan
@@ -525,8 +524,7 @@ class RunWriter:
             if t_end is not None and self.release_hook is not None:
                 self.release_hook("caught", t_end)
         elif event.kind == "trigger":
-            # Its host time is known to half the command's round trip: an anchor only if that
-            # is well inside the alignment the sync view promises.
+            # Its host time is known to half the command's round trip: an anchor if that is short.
             round_trip = float(event.data.get("round_trip_s", 0.0))
             if round_trip > MAX_ANCHOR_ROUND_TRIP_S:
                 return

@@ -153,7 +153,10 @@ def _serve(conn: Any, config_text: str, source: str) -> None:
     try:
         conn.send(("ok", (rig.config, origin)))
         while True:
-            request = conn.recv()
+            try:
+                request = conn.recv()
+            except (EOFError, OSError):  # the parent went away (killed): the instruments stop
+                return
             try:
                 if request[0] == "close":
                     break
