@@ -71,6 +71,7 @@ from daq.config import RigConfig
 from daq.errors import DeviceCheckError, DeviceError
 from daq.instruments.build import build_driver
 from daq.procedure import default_decay_s
+from daq.recording.devices import CLOCK_SETTLE_S
 from daq.recording.run import record_run
 from ident.campaign import CampaignAnalysis, analyze_campaign
 from ident.e2rfc import distinct_wind_speeds
@@ -448,7 +449,7 @@ def _record_file(session: _Session, outcome: CampaignOutcome, path: Path, rpm: f
     monitor = DecayMonitor(1.0 / min(section.fh, section.fa))
     done, grown = threading.Event(), threading.Event()
     ramp = abs(rpm - session.fan_rpm) / ramp_rate(config, session.fan_name)
-    duration = (1.5 * ramp + 2.0 + STEADY_TIMEOUT_S + plan.settle_s
+    duration = (1.5 * ramp + 2.0 + STEADY_TIMEOUT_S + plan.settle_s + CLOCK_SETTLE_S
                 + len(releases) * (plan.hold_s + decay_s + plan.pause_s + 1.0) + 5.0)
 
     def wait(seconds: float, settled_after: int | None = None) -> bool:
@@ -466,6 +467,7 @@ def _record_file(session: _Session, outcome: CampaignOutcome, path: Path, rpm: f
         return False
 
     def body(acq: Acquisition) -> None:
+        body_started = time.monotonic()
         fan = acq.drivers[session.fan_name]
         session.fan_commanded = True
         acq.set_fan_speed(rpm)  # operator commands through the engine: events of the run
@@ -475,7 +477,9 @@ def _record_file(session: _Session, outcome: CampaignOutcome, path: Path, rpm: f
             session.fan_on_at = time.monotonic()
         session.fan_rpm = rpm
         wait_steady(fan, rpm, plan.steady_tolerance, plan.settle_s, session.abort)
-        if session.abort.is_set():
+        # The file's clock maps settle too before the first release (its hold counts).
+        if wait(CLOCK_SETTLE_S - plan.hold_s - (time.monotonic() - body_started)) or \
+                session.abort.is_set():
             return
         say(f"  wind steady at {fan.speed() * config.wind_per_rpm:.2f} m/s")
         for i in releases:

@@ -35,6 +35,7 @@ import numpy as np
 from daq.acquisition.engine import Acquisition
 from daq.config import RigConfig
 from daq.procedure import HOLD_S, default_decay_s
+from daq.recording.devices import CLOCK_SETTLE_S
 from daq.recording.run import record_run
 from daq.report_plots import DerivativeCurves, ModeCurves, flutter_derivative_grid, flutter_diagram
 from daq.sim.rig_process import start_rig_process
@@ -210,14 +211,18 @@ def run_campaign(config: RigConfig, out_dir: str | Path, *,
         path = out / f"campaign_U{U:05.2f}.h5"
         # Each file starts its own simulated rig: the fan ramps from rest.
         ramp_s = rpm / ramp_rate + 1.0
-        duration = ramp_s + releases_per_speed * (HOLD_S + decay_s) + 1.0
+        duration = max(ramp_s, CLOCK_SETTLE_S) + releases_per_speed * (HOLD_S + decay_s) + 1.0
 
         def actions(acq: Acquisition, rpm: float = rpm, ramp_s: float = ramp_s) -> None:
+            started = time.monotonic()
             acq.set_fan_speed(rpm)  # operator commands through the engine: events of the run
             acq.start_fan()
             acq.drivers["fan"].wait_for_speed(rpm, tolerance_rpm=max(2.0, 0.002 * rpm),
                                               timeout_s=ramp_s + 5.0)
-            time.sleep(0.3)  # let the wind settle at the set point
+            # Let the wind settle at the set point, and the clock maps (CLOCK_SETTLE_S; the
+            # first hold counts): with the fast simulated fan the first release came ~1.5 s
+            # into each file, and the demo was 2.2-3.5 % off on a slow host.
+            time.sleep(max(0.3, CLOCK_SETTLE_S - HOLD_S - (time.monotonic() - started)))
             for _ in range(releases_per_speed):
                 acq.arm()
                 time.sleep(HOLD_S)
