@@ -109,18 +109,22 @@ class ReleaseRows:
         event older than the newest block (it arrived late) still finds its row; one older
         than every row kept starts at the oldest.
         """
-        t = np.concatenate([b[0] for b in self._recent])
+        t = self._recent_column(0)
         return end - t.size + int(np.searchsorted(t, t_event, side="left"))
+
+    def _recent_column(self, col: int) -> FloatArray:
+        """One column of the recent rows (0: t, 1: h, 2: alpha, 3: p), oldest first."""
+        return np.concatenate([b[col] for b in self._recent])
 
     def _held(self, t_release: float) -> tuple[float, float, float]:
         """Return h0, alpha0 and p0 (NaN on a 2-DOF rig) held before a release."""
         if not self._recent:  # a rig without lasers or scanner has no sync rows
             return math.nan, math.nan, math.nan
-        t = np.concatenate([b[0] for b in self._recent])
+        t = self._recent_column(0)
         sel = (t >= t_release - HOLD_WINDOW_S[0]) & (t < t_release - HOLD_WINDOW_S[1])
         out = []
         for col in range(1, len(self._recent[-1])):
-            v = np.concatenate([b[col] for b in self._recent])[sel]
+            v = self._recent_column(col)[sel]
             v = v[np.isfinite(v)]
             out.append(float(np.median(v)) if v.size else math.nan)
         return out[0], out[1], out[2] if len(out) > 2 else math.nan

@@ -437,12 +437,12 @@ class ClockMap:
         third with the smallest ``uncertainty_s``, at least :data:`MIN_FLOOR_ANCHORS`), or
         ``assumed_floor_s`` when no anchor has been measured against the envelope yet. The
         choice is NTP's clock filter: a command's host time is the midpoint of its round trip,
-        off by the asymmetry of the two legs, which grows with the round trip (a loaded host
-        wakes the thread that waits for the reply late); the median keeps one mis-paired pulse
-        from moving the floor.
+        off by the asymmetry of its two legs, which can grow with the round trip (on a loaded
+        host, a request or its reply waits for a busy process); the median keeps one mis-paired
+        pulse from moving the floor.
         """
-        return float(np.median(floors)) if (floors := self._best_floors()).size \
-            else self.assumed_floor_s
+        best = self._best_anchors()
+        return float(np.median(best[:, 2])) if best.shape[0] else self.assumed_floor_s
 
     @property
     def anchor_uncertainty_s(self) -> float:
@@ -454,22 +454,23 @@ class ClockMap:
         best = self._best_anchors()
         return float(best[:, 3].max()) if best.shape[0] else math.nan
 
-    def _best_anchors(self) -> FloatArray:
+    def _measured_anchors(self) -> FloatArray:
+        """Return the anchors held whose floor was measured against the envelope (rows)."""
         held = self._anchors[: min(self._n_anchors_total, self.max_anchors)]
-        held = held[np.isfinite(held[:, 2])]
+        return held[np.isfinite(held[:, 2])]
+
+    def _best_anchors(self) -> FloatArray:
+        """Return the least uncertain third of the measured anchors (>= MIN_FLOOR_ANCHORS)."""
+        held = self._measured_anchors()
         if held.shape[0] <= MIN_FLOOR_ANCHORS:
             return held
         n = max(MIN_FLOOR_ANCHORS, held.shape[0] // 3)
         return held[np.argsort(held[:, 3], kind="stable")[:n]]
 
-    def _best_floors(self) -> FloatArray:
-        return self._best_anchors()[:, 2]
-
     @property
     def anchor_residual_s(self) -> float:
         """Robust scatter (1.4826 MAD) of the anchors' floors, s; NaN with fewer than 2."""
-        floors = self._anchors[: min(self._n_anchors_total, self.max_anchors), 2]
-        floors = floors[np.isfinite(floors)]
+        floors = self._measured_anchors()[:, 2]
         if floors.size < 2:
             return math.nan
         return _MAD_TO_SIGMA * float(np.median(np.abs(floors - np.median(floors))))
