@@ -74,7 +74,7 @@ def marker(kind: str, text: str, device: str | None = None) -> Event:
 
 
 def release(name: str, driver: Any, post_event: PostEvent) -> Event:
-    """Release the model; post ``"release"`` at the PLC's acknowledgement of the RELEASE coil."""
+    """Release the model; post ``"release"`` when the PLC took the RELEASE coil write."""
     requested = time.monotonic_ns()
     try:
         timing = driver.release()
@@ -83,9 +83,11 @@ def release(name: str, driver: Any, post_event: PostEvent) -> Event:
         raise
     command = int(getattr(timing, "command_ns", requested))
     confirmed = int(getattr(timing, "confirmed_ns", command))
+    round_trip = int(getattr(timing, "round_trip_ns", 0))
     event = Event(kind="release", host_time_ns=command, device=name, text="model released",
                   data={"requested_ns": requested, "command_ns": command,
-                        "confirmed_ns": confirmed, "delay_s": (confirmed - command) * 1e-9})
+                        "confirmed_ns": confirmed, "delay_s": (confirmed - command) * 1e-9,
+                        "round_trip_s": round_trip * 1e-9})
     post_event(event)
     return event
 

@@ -289,6 +289,34 @@ def test_plc_trigger_round_trip_is_the_write_alone_not_a_wait_for_the_bus(plc, t
     assert abs(results[0] * 1e-9 - t_edge) <= round_trip_s
 
 
+def test_plc_release_time_is_the_write_alone_not_a_wait_for_the_bus(plc, tunnel):
+    """As the trigger above: a release timed after a poll's wait, at its write's midpoint.
+
+    The release's time starts the free decay in the run file. Timed at the acknowledgement
+    after such a wait, the decay started up to 36 ms late on a loaded host (the 3-DOF HIL
+    test's first sway sample had moved 0.7 mm from the hold).
+    """
+    sim, drive = plc
+    bus = drive.bus
+    holding, hold_s = threading.Event(), 0.2
+    assert drive.armed()
+
+    def hold() -> None:
+        with bus.exclusive():
+            holding.set()
+            time.sleep(hold_s)  # a long poll: the condition under test, not a wait for data
+
+    holder = threading.Thread(target=hold)
+    holder.start()
+    assert holding.wait(5.0)
+    timing = drive.release()
+    holder.join()
+    t_release = tunnel.clock.origin_s + tunnel.release_times()[-1]
+    round_trip_s = timing.round_trip_ns * 1e-9
+    assert 0 < round_trip_s < 0.25 * hold_s  # the write's alone (~1-5 ms), not the 200 ms hold
+    assert abs(timing.command_ns * 1e-9 - t_release) <= round_trip_s
+
+
 def test_plc_disconnect_is_a_transport_error_then_the_bus_reconnects(plc, caplog):
     sim, drive = plc
     assert drive.armed()

@@ -49,13 +49,17 @@ class ReleaseTiming:
     Attributes
     ----------
     command_ns : int
-        When the PLC acknowledged the RELEASE coil write.
+        When the PLC took the RELEASE coil write: the midpoint between sending it and its
+        acknowledgement, timed while holding the bus (so not counting a poll's wait).
     confirmed_ns : int
         When RELEASED was first read set (polled every 2 ms, so up to one poll late).
+    round_trip_ns : int
+        The write's round trip: ``command_ns`` is within half of it of the PLC's action.
     """
 
     command_ns: int
     confirmed_ns: int
+    round_trip_ns: int = 0
 
     @property
     def delay_s(self) -> float:
@@ -196,8 +200,13 @@ class ModbusPlc:
             raise SafetyError(f"{self.bus.url}: release refused: the PLC is not armed "
                               f"(ARM coil {self._coil['arm']} is 0); arm() first")
         timeout_s = self.settings.release_timeout_s
-        self.bus.write_coil(self._coil["release"], True)
-        command_ns = time.monotonic_ns()
+        with self.bus.exclusive():  # the write's own round trip, not a poll's wait before it
+            sent = time.monotonic_ns()
+            self.bus.write_coil(self._coil["release"], True)
+            acknowledged = time.monotonic_ns()
+        # The PLC acts between the two; on a loaded host the acknowledgement came 10-36 ms
+        # after it, and a decay timed from the acknowledgement started that late.
+        command_ns = (sent + acknowledged) // 2
         try:
             deadline = time.monotonic() + timeout_s
             while not self.released():
@@ -207,7 +216,8 @@ class ModbusPlc:
                         f"within {timeout_s:g} s of the release command: the magnet may still "
                         "hold the model")
                 time.sleep(POLL_S)
-            return ReleaseTiming(command_ns=command_ns, confirmed_ns=time.monotonic_ns())
+            return ReleaseTiming(command_ns=command_ns, confirmed_ns=time.monotonic_ns(),
+                                 round_trip_ns=acknowledged - sent)
         finally:
             # Back to 0 so that the next release is an edge (the PLC acts on 0->1 only).
             self.bus.write_coil(self._coil["release"], False)
