@@ -74,7 +74,7 @@ def marker(kind: str, text: str, device: str | None = None) -> Event:
 
 
 def release(name: str, driver: Any, post_event: PostEvent) -> Event:
-    """Release the model; post ``"release"`` when the PLC took the RELEASE coil write."""
+    """Release the model; post ``"release"`` at the PLC's acknowledgement of the RELEASE coil."""
     requested = time.monotonic_ns()
     try:
         timing = driver.release()

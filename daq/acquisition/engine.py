@@ -363,10 +363,10 @@ class Acquisition:
     def release(self, plc: str | None = None) -> Event:
         """Release the model through the PLC and record a ``"release"`` event; return it.
 
-        The event's ``host_time_ns`` is when the PLC took the RELEASE coil write
-        (``ReleaseTiming.command_ns``, the midpoint of the write's round trip); ``data`` holds
-        ``requested_ns`` (before the command), ``command_ns``, ``confirmed_ns`` (RELEASED read
-        set), ``delay_s`` and ``round_trip_s`` (the write's).
+        The event's ``host_time_ns`` is when the PLC acknowledged the RELEASE coil write
+        (``ReleaseTiming.command_ns``); ``data`` holds ``requested_ns`` (before the command),
+        ``command_ns``, ``confirmed_ns`` (RELEASED read set), ``delay_s`` and ``round_trip_s``
+        (the write's: the release came within it).
 
         Parameters
         ----------

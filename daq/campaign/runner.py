@@ -332,7 +332,7 @@ def _loop(session: _Session, outcome: CampaignOutcome) -> None:
             choice = choose_next(analysis, releases, plan.adaptive.candidates(), bound=bound,
                                  releases_per_speed=plan.releases_per_speed, decay_s=decay_s,
                                  release_options=plan.adaptive.release_options(),
-                                 overhead_s=plan.settle_s + STEADY_OVERHEAD_S + session.analysis_s,
+                                 overhead_s=_speed_overhead_s(plan) + session.analysis_s,
                                  per_release_s=_per_release_s(releases, plan))
             outcome.choices.append(choice)
             say(choice.summary())
@@ -351,6 +351,15 @@ def _loop(session: _Session, outcome: CampaignOutcome) -> None:
         step = _record_speed(session, outcome, k + 1, U, why, decay_s, n_releases)
         if step is None:  # grown or interrupted: the reason is set
             return
+
+
+def _speed_overhead_s(plan: CampaignPlan) -> float:
+    """Wind-on seconds a new speed costs before its first release, s.
+
+    The wind's ramp and settling, or the file's clock settling (the first release comes no
+    earlier than :data:`CLOCK_SETTLE_S` into the file, its hold counted), whichever is longer.
+    """
+    return max(plan.settle_s + STEADY_OVERHEAD_S, CLOCK_SETTLE_S - plan.hold_s)
 
 
 def _per_release_s(releases: list[Release], plan: CampaignPlan) -> float:

@@ -4,7 +4,8 @@ Responsibility: :func:`start_rig_process` runs :func:`daq.sim.rig.start_simulate
 a child process (``spawn``) and returns a :class:`RigProcess` holding the rig config with the
 simulators' loopback URLs filled in; on request it answers questions about the truth (the true
 time of a device timestamp, the tunnel's decays), so that a recording made by the parent can be
-checked against it.
+checked against it; it injects the simulators' faults (a scanner's TCP reset, ...) and reads
+their state (a scanner's zero error).
 
 Why a process: in one process the simulators, the drivers and the recorder share one
 interpreter lock. Every simulated device then waits for the others' Python code, which
@@ -57,6 +58,16 @@ class RigProcess:
         """Return the tunnel's decays at true times ``t`` (see ``VirtualTunnel.decay_truth``)."""
         self._conn.send(("decay_truth", np.asarray(t, dtype=np.float64)))
         return dict(self._reply())
+
+    def inject(self, name: str, fault: str, **params: Any) -> None:
+        """Inject ``fault`` into simulator ``name`` (its ``inject``: a reset, a dropout, ...)."""
+        self._conn.send(("inject", name, fault, params))
+        self._reply()
+
+    def attribute(self, name: str, attribute: str) -> Any:
+        """Return an attribute of simulator ``name`` (its truth: a scanner's zero error, ...)."""
+        self._conn.send(("attribute", name, attribute))
+        return self._reply()
 
     def clocked_devices(self) -> list[str]:
         """Return the devices whose timestamps have a truth (scanner, lasers)."""
@@ -165,6 +176,10 @@ def _serve(conn: Any, config_text: str, source: str) -> None:
                     answer: Any = origin + sim.true_time_of(request[2])
                 elif request[0] == "decay_truth":
                     answer = rig.tunnel.decay_truth(request[1])
+                elif request[0] == "inject":
+                    answer = rig.simulators[request[1]].inject(request[2], **request[3])
+                elif request[0] == "attribute":
+                    answer = getattr(rig.simulators[request[1]], request[2])
                 elif request[0] == "clocked_devices":
                     answer = [n for n, s in rig.simulators.items() if hasattr(s, "true_time_of")]
                 else:

@@ -214,6 +214,31 @@ class ClockTruthTracker:
         """Devices observed so far."""
         return sorted(self._points)
 
+    def errors(self, truth: Mapping[str, Callable[[FloatArray], FloatArray]]
+               ) -> dict[str, tuple[FloatArray, FloatArray]]:
+        """Clock error of each device over the run after ``settle_s``.
+
+        Parameters
+        ----------
+        truth : mapping of str to callable
+            As :meth:`result`; devices without one, or with fewer than two blocks, are left out.
+
+        Returns
+        -------
+        dict of str to (ndarray, ndarray)
+            Device name -> (mapped run times of the blocks' first and last samples, s; their
+            mapped minus true times, s), in the order observed.
+        """
+        series: dict[str, tuple[FloatArray, FloatArray]] = {}
+        for name, points in self._points.items():
+            arr = np.array([p for p in points if p[0] >= self.settle_s]).reshape(-1, 4)
+            if name not in truth or arr.shape[0] < 2:
+                continue
+            t_run = arr[:, :2].ravel()
+            true = np.asarray(truth[name](arr[:, 2:].ravel()), dtype=np.float64) - self._t0_s
+            series[name] = (t_run, t_run - true)
+        return series
+
     def result(self, truth: Mapping[str, Callable[[FloatArray], FloatArray]]) -> dict[str, Any]:
         """Headline figures after ``settle_s``: per device mean and max error, misalignment.
 
@@ -232,19 +257,9 @@ class ClockTruthTracker:
             land in the sync view) averaged over the run, and ``misalignment_max_s``, its
             largest value (NaN with fewer than two devices); ``settle_s``.
         """
-        mean: dict[str, float] = {}
-        worst: dict[str, float] = {}
-        series: dict[str, tuple[FloatArray, FloatArray]] = {}
-        for name, points in self._points.items():
-            arr = np.array([p for p in points if p[0] >= self.settle_s]).reshape(-1, 4)
-            if name not in truth or arr.shape[0] < 2:
-                continue
-            t_run = arr[:, :2].ravel()
-            true = np.asarray(truth[name](arr[:, 2:].ravel()), dtype=np.float64) - self._t0_s
-            err = t_run - true
-            mean[name] = float(np.mean(err))
-            worst[name] = float(np.max(np.abs(err)))
-            series[name] = (t_run, err)
+        series = self.errors(truth)
+        mean = {name: float(np.mean(err)) for name, (_, err) in series.items()}
+        worst = {name: float(np.max(np.abs(err))) for name, (_, err) in series.items()}
         misalignment = worst_misalignment = math.nan
         names = sorted(series)
         if len(names) >= 2:

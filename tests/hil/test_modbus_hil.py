@@ -289,12 +289,11 @@ def test_plc_trigger_round_trip_is_the_write_alone_not_a_wait_for_the_bus(plc, t
     assert abs(results[0] * 1e-9 - t_edge) <= round_trip_s
 
 
-def test_plc_release_time_is_the_write_alone_not_a_wait_for_the_bus(plc, tunnel):
-    """As the trigger above: a release timed after a poll's wait, at its write's midpoint.
+def test_plc_release_round_trip_is_the_write_alone_not_a_wait_for_the_bus(plc, tunnel):
+    """As the trigger above: the release's round trip does not count a poll's wait.
 
-    The release's time starts the free decay in the run file. Timed at the acknowledgement
-    after such a wait, the decay started up to 36 ms late on a loaded host (the 3-DOF HIL
-    test's first sway sample had moved 0.7 mm from the hold).
+    The release's time (the acknowledgement) starts the free decay in the run file; the round
+    trip says how far before it the release may have come.
     """
     sim, drive = plc
     bus = drive.bus
@@ -313,8 +312,11 @@ def test_plc_release_time_is_the_write_alone_not_a_wait_for_the_bus(plc, tunnel)
     holder.join()
     t_release = tunnel.clock.origin_s + tunnel.release_times()[-1]
     round_trip_s = timing.round_trip_ns * 1e-9
-    assert 0 < round_trip_s < 0.25 * hold_s  # the write's alone (~1-5 ms), not the 200 ms hold
-    assert abs(timing.command_ns * 1e-9 - t_release) <= round_trip_s
+    # The write's alone: ~1-5 ms here, or the simulator's decay computation (~25 ms) on a
+    # loaded host, not the 200 ms hold.
+    assert 0 < round_trip_s < 0.25 * hold_s
+    # The simulated PLC releases before it acknowledges, within the round trip.
+    assert 0 <= timing.command_ns * 1e-9 - t_release <= round_trip_s
 
 
 def test_plc_disconnect_is_a_transport_error_then_the_bus_reconnects(plc, caplog):

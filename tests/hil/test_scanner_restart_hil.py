@@ -7,8 +7,8 @@ start a fresh clock map for the scanner: the old one maps the new scan's frames 
 the old scan lasted.
 
 1. The real driver against the simulated scanner (``rig_configs/sim_flat_plate.toml`` with
-   ``ptp = false``), recorded by the real recorder
-   (:func:`~daq.sim.recording.record_simulated_run`); the scanner resets
+   ``ptp = false``) in its own process (:func:`~daq.sim.rig_process.start_rig_process`),
+   recorded by the real recorder (:func:`~daq.recording.run.record_run`); the scanner resets
    its data connection 2 s into the run (``tcp_reset``: an RST, then a new scan with the
    counter from 1 and the frame time from 0). The reference is the simulator's truth: the new
    scan's :meth:`true_time_of` (valid for the scan in progress, i.e. the one after the reset).
@@ -42,8 +42,9 @@ from daq.acquisition.records import Event, StreamBlock
 from daq.config import RigConfig, parse_rig_config
 from daq.instruments.reading import Gap
 from daq.recording import writer as pipeline
+from daq.recording.run import record_run
 from daq.recording.writer import RunWriter
-from daq.sim.recording import record_simulated_run
+from daq.sim.rig_process import start_rig_process
 from daq.sim.sync_check import ClockTruthTracker
 
 CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
@@ -84,28 +85,36 @@ def test_after_a_reset_without_ptp_the_sync_view_is_finite_and_aligned_again(
     path = tmp_path / "restart.h5"
     seen: dict[str, Any] = {}
 
-    def actions(acq: Any, rig: Any) -> None:
-        seen["rig"] = rig
-        time.sleep(2.0)  # clock maps settled, trigger anchors paired (pulses every 0.5 s)
-        seen["reset_ns"] = time.monotonic_ns()
-        rig.simulators["scanner"].inject("tcp_reset")  # RST; the scan restarts at frame 1, t=0
-
     tracker = RecordingTracker()
-    summary = record_simulated_run(config(NO_PTP), path, duration_s=5.0, actions=actions,
-                                   progress=False, writer_options={"clock_truth": tracker})
-    assert summary["errors"] == [] and summary["subscriber_errors"] == {}
-    sim = seen["rig"].simulators["scanner"]
-    origin_s = seen["rig"].tunnel.clock.origin_s
-    with h5py.File(path, "r") as f:
-        t0_s = int(f["entry/sync"].attrs["t0_host_ns"]) * 1e-9
-        raw = f["entry/instrument/scanner"]
-        counter, t_dev, gaps = raw["counter"][:], raw["device_time"][:], raw["gaps"][:]
-        sync_t, sync_p = f["entry/sync/time"][:], f["entry/sync/pressure"][:]
-        sync_lift = f["entry/sync/lift"][:]
-        events = f["entry/events"][:]
+    # The simulators in their own process, as real instruments are: in this one their frames
+    # would queue behind the recorder's interpreter lock (5-30 ms on a loaded host).
+    with start_rig_process(config(NO_PTP)) as rig:
+
+        def actions(acq: Any) -> None:
+            time.sleep(2.0)  # clock maps settled, trigger anchors paired (pulses every 0.5 s)
+            seen["reset_ns"] = time.monotonic_ns()
+            rig.inject("scanner", "tcp_reset")  # RST; the scan restarts at frame 1, t=0
+
+        summary = record_run(rig.config, path, duration_s=5.0, actions=actions, progress=False,
+                             calz=True, writer_options={"clock_truth": tracker})
+        assert summary["errors"] == [] and summary["subscriber_errors"] == {}
+        with h5py.File(path, "r") as f:
+            t0_s = int(f["entry/sync"].attrs["t0_host_ns"]) * 1e-9
+            raw = f["entry/instrument/scanner"]
+            counter, t_dev, gaps = raw["counter"][:], raw["device_time"][:], raw["gaps"][:]
+            sync_t, sync_p = f["entry/sync/time"][:], f["entry/sync/pressure"][:]
+            sync_lift = f["entry/sync/lift"][:]
+            events = f["entry/events"][:]
+        t_run = np.concatenate([m[0] for m in tracker.mapped])
+        t_device = np.concatenate([m[1] for m in tracker.mapped])
+        back = np.flatnonzero(np.diff(t_device) < 0)
+        assert back.size == 1  # the one restart (the writer maps no frame twice)
+        new = slice(int(back[0]) + 1, None)
+        # The truth of the scan in progress (the one after the reset), asked of the child.
+        true_new = rig.true_time_of("scanner", t_device[new]) - t0_s
+        # The new scan's first frame (counter 1, frame time 0) on the run's time axis.
+        restart_s = float(rig.true_time_of("scanner", [0.0])[0]) - t0_s
     reset_s = seen["reset_ns"] * 1e-9 - t0_s
-    # The new scan's first frame (counter 1, frame time 0) on the run's time axis: the truth.
-    restart_s = origin_s + float(sim.true_time_of(0.0)) - t0_s
     report = f"reset at {reset_s:.4f} s, new scan from {restart_s:.4f} s; summary {summary}"
 
     # -- the scenario: one restart gap, and the frame time went back to 0 at it ----------------
@@ -128,12 +137,7 @@ def test_after_a_reset_without_ptp_the_sync_view_is_finite_and_aligned_again(
     assert restart_s < when < restart_s + 1.0, report
 
     # -- the scanner's mapped times against the truth, new scan only --------------------------
-    t_run = np.concatenate([m[0] for m in tracker.mapped])
-    t_device = np.concatenate([m[1] for m in tracker.mapped])
-    back = np.flatnonzero(np.diff(t_device) < 0)
-    assert back.size == 1  # the one restart (the writer maps no frame twice)
-    new = slice(int(back[0]) + 1, None)
-    err = t_run[new] - (origin_s + sim.true_time_of(t_device[new]) - t0_s)
+    err = t_run[new] - true_new
     since = t_run[new] - restart_s
     # The fresh map starts from the least-latency block of the new scan's first 0.25 s (the
     # writer holds its rows back until then; late by that block's latency over the floor kept

@@ -18,16 +18,17 @@ import numpy as np
 import pytest
 
 from daq.config import parse_rig_config
+from daq.recording.devices import CLOCK_SETTLE_S
 from daq.recording.run import record_run
 from daq.sim.rig_process import start_rig_process
 from daq.sim.sync_check import ClockTruthTracker, check_run
 
 CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
 TARGET_S = 0.2e-3
-#: Length of the recorded run, s. The online clock maps settle over a file's first ~6 s (the
-#: README's known limitation: 0.3-0.9 ms common error at 2-6 s on a slow host, 0.1-0.3 ms
-#: after), and the figures are means over the run after 2 s: a 9 s run was mostly that
-#: settling, a real run is 30-120 s. 20 s weighs the two as a short real run would.
+#: Length of the recorded run, s. The online clock maps settle over a file's first
+#: CLOCK_SETTLE_S = 6 s (the README's known limitation: 0.3-0.9 ms common error at 2-6 s on a
+#: slow host, 0.1-0.3 ms after). Campaigns release no earlier, and so do this test's actions;
+#: the figures are over the run after it (14 s; a real run is 30-120 s).
 RUN_S = 20.0
 
 # Scanner and lasers on clocks 20 ms off the host's and 50 ppm fast or slow: between the
@@ -54,7 +55,7 @@ def actions(acq, rig=None):
     fan = acq.drivers["fan"]
     fan.set_speed(700.0)
     fan.start()
-    time.sleep(1.0)
+    time.sleep(CLOCK_SETTLE_S - 0.5)  # the first release at CLOCK_SETTLE_S, as a campaign's
     for _ in range(2):
         acq.arm()
         time.sleep(0.5)
@@ -67,7 +68,7 @@ def test_sync_view_is_aligned_to_the_truth(tmp_path):
     config = parse_rig_config((CONFIGS / "sim_flat_plate.toml").read_text() + CLOCKS,
                               "sim_flat_plate.toml")
     path = tmp_path / "aligned.h5"
-    tracker = ClockTruthTracker()
+    tracker = ClockTruthTracker(settle_s=CLOCK_SETTLE_S)
     with start_rig_process(config) as rig:
         # record_run pulses the PLC's trigger line every 0.5 s: the clock maps' anchors.
         summary = record_run(rig.config, path, duration_s=RUN_S, calz=True,
@@ -86,8 +87,8 @@ def test_sync_view_is_aligned_to_the_truth(tmp_path):
         assert attrs[f"truth_clock_error_mean_s__{name}"] == clocks["clock_error_mean_s"][name]
         assert summary["clock_fits"][name]["anchors"] >= 2, report
     # The 40 ms and 100 ppm between devices are undone: the samples of one instant land in the
-    # sync view < 0.2 ms apart on average over the run. (The largest spread, during the first
-    # seconds or right after a refit, is reported: 0.24-0.47 ms in development runs.)
+    # sync view < 0.2 ms apart on average over the run after the settling. (The largest spread,
+    # right after a refit, is reported: 0.24-0.47 ms in development runs.)
     assert clocks["misalignment_s"] < TARGET_S, report
     assert clocks["misalignment_max_s"] < 1e-3, report
     # Against the host's true time, each device is off by the anchors' error: the PLC pulse's
@@ -100,15 +101,19 @@ def test_sync_view_is_aligned_to_the_truth(tmp_path):
         known = summary["clock_fits"][name]["anchor_uncertainty_s"]
         assert 0.0 < known <= 1.5e-3, report
         assert abs(err) < max(0.5e-3, known), report
-    # End to end on the signals: h and alpha (lasers) against the tunnel's decays, known to
-    # 1-30 us (the fit's residual includes the clock error's slow wander, not only noise): at
-    # most a tenth of the bound checked; lift and moment (62 taps, 1 Pa noise) only to ~0.25
-    # ms: checked at 4 sigma.
+    # End to end on the signals, against the tunnel's decays: each is off by its device's clock
+    # error, so within the same bound. h and alpha (lasers) are known to 1-30 us (the fit's
+    # residual includes the clock error's slow wander, not only noise): at most a tenth of the
+    # bound checked; lift and moment (62 taps, 1 Pa noise) only to ~0.25 ms: checked at 4 sigma.
+    known = {name: max(0.5e-3, fit["anchor_uncertainty_s"])
+             for name, fit in summary["clock_fits"].items()}
+    lasers = max(known[name] for name in ("laser_front", "laser_rear", "laser_check"))
     for name in ("h", "alpha"):
-        assert abs(signals["delay_s"][name]) < 0.5e-3, report
+        assert abs(signals["delay_s"][name]) < lasers, report
         assert signals["delay_std_s"][name] < 50e-6, report
     for name in ("lift", "moment"):
-        assert abs(signals["delay_s"][name]) < 0.5e-3 + 4 * signals["delay_std_s"][name], report
+        bound = known["scanner"] + 4 * signals["delay_std_s"][name]
+        assert abs(signals["delay_s"][name]) < bound, report
     assert np.isfinite(attrs["truth_delay_s__h"])
 
 

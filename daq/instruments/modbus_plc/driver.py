@@ -49,12 +49,14 @@ class ReleaseTiming:
     Attributes
     ----------
     command_ns : int
-        When the PLC took the RELEASE coil write: the midpoint between sending it and its
-        acknowledgement, timed while holding the bus (so not counting a poll's wait).
+        When the PLC acknowledged the RELEASE coil write: it acted on it before (a real PLC
+        switches its output within a scan, the simulated one computes the decay first), so
+        this is late by the acknowledgement's way back at most.
     confirmed_ns : int
         When RELEASED was first read set (polled every 2 ms, so up to one poll late).
     round_trip_ns : int
-        The write's round trip: ``command_ns`` is within half of it of the PLC's action.
+        The write's round trip, timed while holding the bus (not counting a poll's wait):
+        the release happened within it, before ``command_ns``.
     """
 
     command_ns: int
@@ -203,10 +205,7 @@ class ModbusPlc:
         with self.bus.exclusive():  # the write's own round trip, not a poll's wait before it
             sent = time.monotonic_ns()
             self.bus.write_coil(self._coil["release"], True)
-            acknowledged = time.monotonic_ns()
-        # The PLC acts between the two; on a loaded host the acknowledgement came 10-36 ms
-        # after it, and a decay timed from the acknowledgement started that late.
-        command_ns = (sent + acknowledged) // 2
+            command_ns = time.monotonic_ns()
         try:
             deadline = time.monotonic() + timeout_s
             while not self.released():
@@ -217,7 +216,7 @@ class ModbusPlc:
                         "hold the model")
                 time.sleep(POLL_S)
             return ReleaseTiming(command_ns=command_ns, confirmed_ns=time.monotonic_ns(),
-                                 round_trip_ns=acknowledged - sent)
+                                 round_trip_ns=command_ns - sent)
         finally:
             # Back to 0 so that the next release is an edge (the PLC acts on 0->1 only).
             self.bus.write_coil(self._coil["release"], False)
