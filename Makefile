@@ -33,8 +33,21 @@ test demo screenshot: export MPLBACKEND := Agg
 
 .PHONY: test demo screenshot lint typecheck setup qt-libs clean
 
+# The pure computations (ident, simulators and the clock fits: no device, no real clock, no
+# socket) run on two workers; everything that streams in real time (drivers, the simulated rig,
+# recorder, campaigns, console) and the Dask clusters of the offline tests (each would want the
+# dashboard's port) run after them on their own, so that their timing is never measured against
+# a CPU busy with another test. (Exit code 5, nothing collected, is a PYTEST_ARGS filter's doing.)
+PARALLEL_TESTS := tests/ident tests/simulators tests/daq/sync ident simulators
+
+# Both parts always run; the target fails if either did.
 test: setup
-	$(PY) -m pytest -q -p no:cacheprovider $(PYTEST_ARGS)
+	@status=0; \
+	$(PY) -m pytest -q -p no:cacheprovider -n 2 $(PARALLEL_TESTS) $(PYTEST_ARGS) \
+	  || [ $$? -eq 5 ] || status=1; \
+	$(PY) -m pytest -q -p no:cacheprovider $(addprefix --ignore=,$(PARALLEL_TESTS)) \
+	  $(PYTEST_ARGS) || [ $$? -eq 5 ] || status=1; \
+	exit $$status
 
 demo: setup
 	$(VENV)/bin/windrig demo --out demo_output

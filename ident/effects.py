@@ -108,9 +108,9 @@ class CoulombFriction(Effect):
     ) -> npt.NDArray[np.float64]:
         """Return the extra generalised force ``[F_h B, M]``, N m/m (see :class:`Effect`)."""
         h_dot, a_dot = qd[0] * B, qd[1]
-        return np.array([
-            -self.force_h * np.tanh(h_dot / self.v_smooth_h) * B,
-            -self.moment_a * np.tanh(a_dot / self.v_smooth_a),
+        return np.array([  # math.tanh: scalars, at every substep of the integrator
+            -self.force_h * math.tanh(h_dot / self.v_smooth_h) * B,
+            -self.moment_a * math.tanh(a_dot / self.v_smooth_a),
         ])
 
 
@@ -372,6 +372,9 @@ class AerodynamicNonlinearity(Effect):
         q = np.asarray(q, dtype=float)
         qd = np.asarray(qd, dtype=float)
         scale = 0.5 * rho * U * B**3  # qd B^2 (B / U)
+        if q.ndim == 1:  # one state: the integrator's every substep, kept to scalar arithmetic
+            return np.array([self.e_h * (q[0] / self.q_ref) ** 2 * qd[0],
+                             self.e_a * (q[1] / self.q_ref) ** 2 * qd[1]]) * scale
         return np.asarray(scale * np.stack([
             self.e_h * (q[..., 0] / self.q_ref) ** 2 * qd[..., 0],
             self.e_a * (q[..., 1] / self.q_ref) ** 2 * qd[..., 1]], axis=-1), dtype=float)
