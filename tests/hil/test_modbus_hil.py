@@ -8,6 +8,7 @@ fault of docs/wire_formats.md, "Faults") is injected and the driver's reaction c
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import threading
@@ -254,6 +255,32 @@ def test_plc_trigger_pulses_are_counted(plc, tunnel):
     assert set(drive.read().channels) == set(drive.describe())
 
 
+#: How long another thread holds the bus in the round-trip tests below, s.
+HOLD_S = 0.2
+
+
+@contextlib.contextmanager
+def bus_held_by_another_thread(bus: ModbusBus) -> Iterator[None]:
+    """Run the body while another thread holds ``bus`` for HOLD_S (a long poll of the engine).
+
+    The body starts once the bus is held, so its first request waits for the rest of the hold.
+    """
+    holding = threading.Event()
+
+    def hold() -> None:
+        with bus.exclusive():
+            holding.set()
+            time.sleep(HOLD_S)  # a long poll: the condition under test, not a wait for data
+
+    holder = threading.Thread(target=hold)
+    holder.start()
+    try:
+        assert holding.wait(5.0)
+        yield
+    finally:
+        holder.join()
+
+
 def test_plc_trigger_round_trip_is_the_write_alone_not_a_wait_for_the_bus(plc, tunnel):
     """Another thread's request holding the bus: the pulse's time is bracketed after the wait.
 
@@ -263,58 +290,37 @@ def test_plc_trigger_round_trip_is_the_write_alone_not_a_wait_for_the_bus(plc, t
     and move the midpoint before the edge.
     """
     sim, drive = plc
-    bus = drive.bus
-    holding, hold_s = threading.Event(), 0.2
-    results: list[int] = []
     drive.trigger_pulse()  # the line is low after a pulse: the next write is the timed one
-
-    def hold() -> None:
-        with bus.exclusive():
-            holding.set()
-            time.sleep(hold_s)  # a long poll: the condition under test, not a wait for data
-
-    holder = threading.Thread(target=hold)
-    holder.start()
-    assert holding.wait(5.0)
-    t_called = time.monotonic()
-    results.append(drive.trigger_pulse())
-    holder.join()
+    with bus_held_by_another_thread(drive.bus):
+        t_called = time.monotonic()
+        t_pulse_ns = drive.trigger_pulse()
     t_edge = tunnel.clock.origin_s + tunnel.trigger_times()[-1]
     # The call waited for the bus (at least the rest of the hold) ...
-    assert time.monotonic() - t_called > 0.5 * hold_s
+    assert time.monotonic() - t_called > 0.5 * HOLD_S
     # ... but the round trip is the write's alone (a loopback write takes ~1-5 ms here;
     # the hold was 200 ms), and the midpoint lies within it of the simulator's edge.
     round_trip_s = drive.last_trigger_round_trip_ns * 1e-9
-    assert round_trip_s < 0.25 * hold_s
-    assert abs(results[0] * 1e-9 - t_edge) <= round_trip_s
+    assert round_trip_s < 0.25 * HOLD_S
+    assert abs(t_pulse_ns * 1e-9 - t_edge) <= round_trip_s
 
 
 def test_plc_release_round_trip_is_the_write_alone_not_a_wait_for_the_bus(plc, tunnel):
-    """As the trigger above: the release's round trip does not count a poll's wait.
+    """The release's time and round trip, with another thread's request holding the bus.
 
     The release's time (the acknowledgement) starts the free decay in the run file; the round
-    trip says how far before it the release may have come.
+    trip says how far before it the release may have come. (Here the driver's armed() check
+    before the write already waits out the hold, so that the write's exclusive timing, shared
+    with the trigger pulse's (``ModbusPlc._timed_set``), is what the test above checks.)
     """
     sim, drive = plc
-    bus = drive.bus
-    holding, hold_s = threading.Event(), 0.2
     assert drive.armed()
-
-    def hold() -> None:
-        with bus.exclusive():
-            holding.set()
-            time.sleep(hold_s)  # a long poll: the condition under test, not a wait for data
-
-    holder = threading.Thread(target=hold)
-    holder.start()
-    assert holding.wait(5.0)
-    timing = drive.release()
-    holder.join()
+    with bus_held_by_another_thread(drive.bus):
+        timing = drive.release()
     t_release = tunnel.clock.origin_s + tunnel.release_times()[-1]
     round_trip_s = timing.round_trip_ns * 1e-9
     # The write's alone: ~1-5 ms here, or the simulator's decay computation (~25 ms) on a
     # loaded host, not the 200 ms hold.
-    assert 0 < round_trip_s < 0.25 * hold_s
+    assert 0 < round_trip_s < 0.25 * HOLD_S
     # The simulated PLC releases before it acknowledges, within the round trip.
     assert 0 <= timing.command_ns * 1e-9 - t_release <= round_trip_s
 

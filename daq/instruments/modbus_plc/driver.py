@@ -202,10 +202,7 @@ class ModbusPlc:
             raise SafetyError(f"{self.bus.url}: release refused: the PLC is not armed "
                               f"(ARM coil {self._coil['arm']} is 0); arm() first")
         timeout_s = self.settings.release_timeout_s
-        with self.bus.exclusive():  # the write's own round trip, not a poll's wait before it
-            sent = time.monotonic_ns()
-            self.bus.write_coil(self._coil["release"], True)
-            command_ns = time.monotonic_ns()
+        sent, command_ns = self._timed_set(self._coil["release"])
         try:
             deadline = time.monotonic() + timeout_s
             while not self.released():
@@ -220,6 +217,17 @@ class ModbusPlc:
         finally:
             # Back to 0 so that the next release is an edge (the PLC acts on 0->1 only).
             self.bus.write_coil(self._coil["release"], False)
+
+    def _timed_set(self, coil: int) -> tuple[int, int]:
+        """Set ``coil`` to 1; return the host times (ns) of sending it and of its acknowledgement.
+
+        Timed while holding the bus: the round trip of this write alone, not a wait for
+        another thread's request (the engine polls the PLC at 10 Hz on the same bus).
+        """
+        with self.bus.exclusive():
+            sent = time.monotonic_ns()
+            self.bus.write_coil(coil, True)
+            return sent, time.monotonic_ns()
 
     def trigger_pulse(self, width_s: float | None = None) -> int:
         """Pulse DAQ_TRIGGER (1 for ``width_s``, default ``trigger_pulse_s``, then 0).
@@ -240,10 +248,7 @@ class ModbusPlc:
             self.bus.write_coil(self._coil["trigger"], False)
             self._trigger_low = True
         self._trigger_low = False
-        with self.bus.exclusive():  # the round trip of this write alone, not a poll's wait
-            sent = time.monotonic_ns()
-            self.bus.write_coil(self._coil["trigger"], True)
-            acknowledged = time.monotonic_ns()
+        sent, acknowledged = self._timed_set(self._coil["trigger"])
         self.last_trigger_round_trip_ns = acknowledged - sent
         t_ns = (sent + acknowledged) // 2
         try:
