@@ -64,8 +64,33 @@ def actions(acq, rig=None):
     acq.arm()
 
 
-def test_sync_view_is_aligned_to_the_truth(tmp_path):
-    config = parse_rig_config((CONFIGS / "sim_flat_plate.toml").read_text() + CLOCKS,
+# Grid turbulence (issue 16's vertical 1 %): the tunnel computes the buffeting for every block
+# the simulated instruments sample. Each block once cost ~12 ms (the gust field interpolated
+# over its whole period): the instruments starved each other in the rig's process and their
+# clocks were mapped 1-2 ms off, opposite ways for scanner and lasers (force against motion
+# 2.5 ms apart, E2RFC in turbulence then found a flutter speed of 0.05 m/s).
+TURBULENCE = """
+[simulation.static]
+C_D = 0.02
+C_L = 0.0
+C_M = 0.0
+dC_D = 0.0
+dC_L = -6.283
+dC_M = 1.571
+[simulation.turbulence]
+Iu = 0.0
+Iw = 0.01
+Lux = 1.0
+Lwx = 0.3
+span = 1.0
+seed = 1
+"""
+
+
+@pytest.mark.parametrize("flow", ["smooth", "turbulent"])
+def test_sync_view_is_aligned_to_the_truth(tmp_path, flow):
+    text = (CONFIGS / "sim_flat_plate.toml").read_text() + CLOCKS
+    config = parse_rig_config(text + (TURBULENCE if flow == "turbulent" else ""),
                               "sim_flat_plate.toml")
     path = tmp_path / "aligned.h5"
     tracker = ClockTruthTracker(settle_s=CLOCK_SETTLE_S)
@@ -89,7 +114,12 @@ def test_sync_view_is_aligned_to_the_truth(tmp_path):
     # The 40 ms and 100 ppm between devices are undone: the samples of one instant land in the
     # sync view < 0.2 ms apart on average over the run after the settling. (The largest spread,
     # right after a refit, is reported: 0.24-0.47 ms in development runs.)
-    assert clocks["misalignment_s"] < TARGET_S, report
+    # In turbulence each release's decay takes ~150 ms of the rig process's time to compute
+    # (~40 ms in smooth flow), and the instruments' streams stall meanwhile: there the bound is
+    # the one that matters to E2RFC, force and motion within 0.5 ms (the fault above: 2.5 ms;
+    # 0.17-0.21 ms measured after its fix, 0.21 with a campaign running beside it).
+    target = TARGET_S if flow == "smooth" else 0.5e-3
+    assert clocks["misalignment_s"] < target, report
     assert clocks["misalignment_max_s"] < 1e-3, report
     # Against the host's true time, each device is off by the anchors' error: the PLC pulse's
     # host time is the midpoint of a Modbus round trip of up to 3 ms, and the floor comes from

@@ -171,3 +171,22 @@ def test_the_gust_field_is_one_field_of_distance_for_every_speed():
     np.testing.assert_allclose(field.shifted(0.05).gusts(1.0, np.arange(1000) * 0.01),
                                np.roll(field.values, -5, axis=0), atol=1e-12)
     assert field.length == pytest.approx(10.0)
+
+
+def test_the_gust_field_is_linear_between_its_samples_and_wraps_around():
+    """Between samples: numpy's linear interpolation of the periodic field (an independent one).
+
+    Times before zero and beyond one period (the tunnel samples the field at x = x0 + U t for
+    minutes) wrap around. Tolerance 1e-12 m/s: the two interpolations differ by rounding only.
+    """
+    field = GustField.generate(SPEC, B=B, span=SPAN, n=1000, dx=0.01, rng=3).shifted(2.345)
+    rng = np.random.default_rng(0)
+    t = np.sort(rng.uniform(-30.0, 30.0, 5000))
+    speed = 7.3
+    n = field.values.shape[0]
+    grid = np.arange(n + 1) * field.dx
+    periodic = np.vstack([field.values, field.values[:1]])
+    x = np.mod(field.x0 + speed * t, field.length)
+    expected = speed * np.column_stack([np.interp(x, grid, periodic[:, j]) for j in range(2)])
+    np.testing.assert_allclose(field.gusts(speed, t), expected, atol=1e-12)
+    assert np.all(field.gusts(0.0, t) == 0.0)
