@@ -115,6 +115,9 @@ def test_controls_on_a_live_simulated_rig(qtbot):
         b["release"].click()
         qtbot.waitUntil(lambda: panel.busy is None, timeout=5_000)
         assert "release: done" in panel.status_text, panel.status_text
+        # The event comes from the acquisition process through the dispatcher, as the arm's:
+        # soon after the panel's "done", not with it (a fresh-clone CI run found none yet).
+        qtbot.waitUntil(lambda: len(_events(source, "release")) >= 1, timeout=2_000)
         assert len(_events(source, "release")) == 1
         t_end = float(before["time"][-1])
         # The model moved before the PLC confirmed (RELEASED follows the magnet), so rows 1.5 s
@@ -140,6 +143,7 @@ def test_controls_on_a_live_simulated_rig(qtbot):
         b["calz"].click()
         qtbot.waitUntil(lambda: panel.busy is None, timeout=15_000)
         assert "calz: done (scanner zeroed; scan paused" in panel.status_text, panel.status_text
+        qtbot.waitUntil(lambda: len(_events(source, "calz")) >= 1, timeout=2_000)  # as above
         assert len(_events(source, "calz")) == 1
         rows = source.snapshot(1)["time"]
         qtbot.waitUntil(lambda: float(source.snapshot(1)["time"][-1]) > float(rows[-1]) + 0.5,
