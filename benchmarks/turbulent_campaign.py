@@ -28,6 +28,7 @@ from pathlib import Path
 from daq.campaign.plan import parse_plan
 from daq.campaign.runner import run_plan
 from daq.config import parse_rig_config
+from daq.errors import ConfigError
 
 REPO = Path(__file__).resolve().parents[1]
 RIG = REPO / "rig_configs" / "sim_flat_plate.toml"
@@ -72,12 +73,19 @@ def main() -> None:
     parser.add_argument("--iw", type=float, default=0.01, help="vertical intensity (fraction)")
     parser.add_argument("--log", type=Path, help="write every campaign's progress lines here")
     args = parser.parse_args()
+    if args.log is not None and not args.log.parent.is_dir():
+        parser.error(f"--log {args.log}: folder {args.log.parent} does not exist")
     log: list[str] = []
+    try:  # every seed's rig first: a wrong value is one error line, before any wind blows
+        configs = {seed: parse_rig_config(rig_text(seed, args.iw), f"flat plate, Iw {args.iw:g}")
+                   for seed in args.seeds}
+    except ConfigError as exc:
+        parser.error(str(exc))
     speeds = ", ".join(f"{f * U_F:.2f}" for f in (0.4, 0.6, 0.8))
     plan = parse_plan(PLAN.format(speeds=speeds), "turbulent plan")
     rows = []
     for seed in args.seeds:
-        config = parse_rig_config(rig_text(seed, args.iw), f"flat plate, Iw {args.iw:g}")
+        config = configs[seed]
         with tempfile.TemporaryDirectory() as out:
             log.append(f"--- seed {seed}")
             outcome = run_plan(plan, config, out, simulate=True, say=log.append)
