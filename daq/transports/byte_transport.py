@@ -150,16 +150,27 @@ class SerialTransport(TransportBase):
 
     def close(self) -> None:
         """Close the port; idempotent."""
-        if self._serial is not None:
-            try:
-                self._serial.close()
-            finally:
-                self._serial = None
+        # Detach before closing: pyserial drops its descriptor before it clears is_open, so
+        # a read in another thread that fails in between must already see the port as ours
+        # to close (not a bug to re-raise).
+        port, self._serial = self._serial, None
+        if port is not None:
+            port.close()
 
     def _port_or_raise(self) -> serial.SerialBase:
         if self._serial is None or not self._serial.is_open:
             raise TransportError(f"{self.url}: not open")
         return self._serial
+
+    def _raise_if_not_closed_under(self, port: serial.SerialBase) -> None:
+        """Re-raise the exception being handled unless ``port`` was closed meanwhile.
+
+        pyserial using a port that another thread closed (its descriptor is None) raises
+        TypeError or AttributeError: a closed port, not a bug of ours. Anything else is
+        re-raised as it is.
+        """
+        if port.is_open and self._serial is port:
+            raise
 
     def write(self, data: bytes) -> None:
         """Send all of ``data``."""
@@ -169,6 +180,9 @@ class SerialTransport(TransportBase):
             port.flush()
         except _SERIAL_ERRORS as exc:
             raise TransportError(f"{self.url}: write failed: {exc}") from exc
+        except (TypeError, AttributeError) as exc:
+            self._raise_if_not_closed_under(port)
+            raise TransportError(f"{self.url}: closed during the write") from exc
 
     def read(self, max_bytes: int, timeout_s: float) -> bytes:
         """Return 1..max_bytes bytes, or raise TransportTimeout after ``timeout_s``.
@@ -189,10 +203,7 @@ class SerialTransport(TransportBase):
         except _SERIAL_ERRORS as exc:
             raise TransportError(f"{self.url}: read failed: {exc}") from exc
         except (TypeError, AttributeError) as exc:
-            # pyserial reading a port another thread closed meanwhile (its fd is None): a
-            # closed port, not a bug of ours; anything else is re-raised as it is.
-            if port.is_open:
-                raise
+            self._raise_if_not_closed_under(port)
             raise TransportError(f"{self.url}: closed during the read") from exc
         if not first:
             raise TransportTimeout(f"{self.url}: no data within {timeout_s:g} s")
