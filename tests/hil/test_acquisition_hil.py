@@ -60,6 +60,20 @@ def test_engine_streams_the_whole_simulated_rig_and_records_a_release():
             acq.arm("plc")
             release = acq.release("plc")
             time.sleep(0.8)
+
+            def enough() -> bool:
+                """Tell whether the data the checks below count has been delivered."""
+                blocks = sink.blocks()
+                after = [sum(int(np.count_nonzero(b.host_time_ns
+                                                  > release.host_time_ns + 50_000_000))
+                             for b in blocks[name]) for name in LASERS]
+                return (len(blocks["fan"]) >= 10 and len(blocks["barometer"]) >= 1
+                        and min(after) > 1000)
+
+            deadline = time.monotonic() + 10.0
+            while not enough():
+                assert time.monotonic() < deadline, "too little data after the release in 10 s"
+                time.sleep(0.05)
         summary = sink.docs[-1][1]
         truth = {name: rig.simulators[name].truth() for name in LASERS}
         scanner_sim = rig.simulators["scanner"]

@@ -248,6 +248,14 @@ def frames_after(sink: Collector, t_ns: int) -> int:
     return sum(int(np.count_nonzero(b.host_time_ns > t_ns)) for b in sink.scanner_blocks())
 
 
+def wait_until(condition: Any, what: str, timeout_s: float = 10.0) -> None:
+    """Poll ``condition`` until it holds; fail naming ``what`` after ``timeout_s`` (loaded host)."""
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        assert time.monotonic() < deadline, f"{what}: not within {timeout_s:g} s"
+        time.sleep(0.01)
+
+
 FAST_FAN = "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n"
 
 
@@ -257,13 +265,16 @@ def test_calz_with_the_wind_on_is_refused_and_the_scan_goes_on(engine: Any) -> N
     fan = acq.drivers["fan"]
     fan.set_speed(600.0)  # 6 m/s at wind_per_rpm 0.01 of sim_flat_plate.toml
     fan.start()
-    deadline = time.monotonic() + 3.0
-    while rig.tunnel.wind_speed() < 5.0 and time.monotonic() < deadline:
-        time.sleep(0.05)
-    time.sleep(0.1)
-    # The wind speed measured by the Pitot (channel 63) over the last 0.1 s of frames.
-    pitot = np.concatenate([b.values["pitot"] for b in sink.scanner_blocks()])[-50:]
-    measured = float(np.mean(wind_speed(pitot, np.full(pitot.size, 1.2)).speed))
+    wait_until(lambda: rig.tunnel.wind_speed() >= 5.0, "the tunnel at 5 m/s")
+
+    def pitot_wind() -> float:
+        """Return the wind speed the Pitot (channel 63) measured over the last 0.1 s of frames."""
+        pitot = np.concatenate([b.values["pitot"] for b in sink.scanner_blocks()])[-50:]
+        return float(np.mean(wind_speed(pitot, np.full(pitot.size, 1.2)).speed))
+
+    # The frames of the new wind reach the sink through the dispatcher: soon, not at once.
+    wait_until(lambda: pitot_wind() > 4.0, "the Pitot reading the wind")
+    measured = pitot_wind()
     assert measured > 4.0
     zero_before = rig.simulators["scanner"].zero_error_pa
     scan_id = rig.simulators["scanner"].scan_id
@@ -272,7 +283,10 @@ def test_calz_with_the_wind_on_is_refused_and_the_scan_goes_on(engine: Any) -> N
     with pytest.raises(SafetyError, match="refusing CALZ with wind speed"):
         acq.calz(wind_speed_now=measured)
 
+    # Frames keep coming (counted as they arrive: a loaded host may deliver 0.2 s of frames
+    # later than 0.3 s after the call).
     time.sleep(0.3)
+    wait_until(lambda: frames_after(sink, t_call) > 0.2 * RATE_HZ, "frames after the refusal")
     # Refused before anything was touched: same scan, same zero, no gap, frames keep coming.
     assert rig.simulators["scanner"].scan_id == scan_id
     assert rig.simulators["scanner"].truth.calz_wind_speeds == []
@@ -316,18 +330,17 @@ def test_a_second_calz_while_one_runs_is_refused(engine: Any) -> None:
     first = threading.Thread(target=lambda: results.append(acq.calz(wind_speed_now=0.0)))
     first.start()
     try:
-        deadline = time.monotonic() + 2.0
-        while sim.state != "CALZ" and time.monotonic() < deadline:  # the simulator's side
-            time.sleep(0.01)
+        # the simulator's side (after the engine's 0.5 s zero average and its STOP)
+        wait_until(lambda: sim.state == "CALZ", "the simulator in CALZ")
         assert sim.state == "CALZ"
         with pytest.raises(RuntimeError, match="already in progress"):
             acq.calz(wind_speed_now=0.0)
     finally:
-        first.join(5.0)
+        first.join(15.0)
+    assert not first.is_alive()
     assert len(results) == 1 and len(sim.truth.calz_wind_speeds) == 1  # one CALZ, not two
-    deadline = time.monotonic() + 1.0  # events reach subscribers on the dispatcher thread
-    while not sink.events("calz") and time.monotonic() < deadline:
-        time.sleep(0.01)
+    # events reach subscribers on the dispatcher thread: soon, not with the call's return
+    wait_until(lambda: sink.events("calz"), "the calz event")
     assert [e.data["pause_s"] for e in sink.events("calz")] == [results[0].pause_s]
 
 
@@ -340,6 +353,10 @@ def test_a_calz_that_times_out_still_restarts_the_scan_and_says_so(engine: Any) 
         acq.calz(wind_speed_now=0.0, timeout_s=0.1)  # the simulator takes 0.6 s
     t_back = time.monotonic_ns()
     time.sleep(0.3)
+    # Data flows again, and the failure's event arrives, through the dispatcher (a loaded host
+    # may take longer than 0.3 s to deliver 0.2 s of frames).
+    wait_until(lambda: frames_after(sink, t_back) > 0.2 * RATE_HZ and sink.events("calz_failed"),
+               "frames and the calz_failed event after the timeout")
     assert sim.state == "SCAN" and sim.scan_id == 2  # restarted once the zero was done
     assert frames_after(sink, t_back) > 0.2 * RATE_HZ  # data flows again
     (event,) = sink.events("calz_failed")

@@ -4,7 +4,8 @@ The simulator encodes from the manual facts with its own code; the driver decode
 these tests cross-check the two and prove, with the simulator's truth record, that every sample
 the simulator put on the wire intact arrives, with its value, counter, device time and trigger
 flag, and that each fault of docs/wire_formats.md, "Faults") is recovered from or raised.
-Only ``test_full_rate_for_10_s_loses_no_frame`` is long (10 s, required by the issue).
+Only ``test_full_rate_for_10_s_loses_no_frame`` is long (10 s, required by the issue); the
+clock drift test reads 3 s.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
 import pytest
@@ -69,6 +71,21 @@ def read_for(driver: MicroEpsilonIld1420, seconds: float) -> list[Reading]:
     blocks = []
     end = time.monotonic() + seconds
     while time.monotonic() < end:
+        blocks.append(driver.read(timeout_s=1.0))
+    return blocks
+
+
+def read_until(driver: MicroEpsilonIld1420, done: Any, seconds: float, what: str,
+               timeout_s: float = 10.0) -> list[Reading]:
+    """Read for ``seconds``, then on until ``done(blocks)`` holds (at most ``timeout_s``).
+
+    What a fault or a pulse does reaches the reader with the stream's latency, which a loaded
+    host stretches past a short fixed read: such a test reads until it has what it checks.
+    """
+    blocks = read_for(driver, seconds)
+    deadline = time.monotonic() + timeout_s
+    while not done(blocks):
+        assert time.monotonic() < deadline, f"{what}: not read within {timeout_s:g} s more"
         blocks.append(driver.read(timeout_s=1.0))
     return blocks
 
@@ -152,7 +169,8 @@ def test_stream_and_trigger_flag_over_each_transport(make_sim, tunnel, transport
         assert set(driver.read(timeout_s=1.0).channels) == set(driver.describe())
         blocks = read_for(driver, 0.1)
         pulse = tunnel.trigger()
-        blocks += read_for(driver, 0.15)
+        blocks += read_until(driver, lambda new: any(b.channels["triggered"].any() for b in new),
+                             0.15, "the flagged sample")
     data, truth = joined(blocks), sim.truth()
     index = match(truth, data)
     assert_nothing_lost_that_was_sent(truth, index)
@@ -171,7 +189,9 @@ def test_error_sentinels_become_nan_with_their_reason(make_sim):
         read_for(driver, 0.05)
         sim.inject("error_code", code=262080, count=5)
         sim.inject("dark_target", count=3)
-        data = joined(read_for(driver, 0.1))
+        data = joined(read_until(
+            driver, lambda new: sum(int(np.count_nonzero(b.channels["error_code"])) for b in new)
+            >= 8, 0.1, "the 8 error samples"))
     codes = data["error_code"][data["error_code"] != 0]
     assert list(codes) == [262080] * 5 + [262076] * 3
     assert np.all(np.isnan(data["distance"][data["error_code"] != 0]))
@@ -203,7 +223,10 @@ def test_lost_and_inserted_bytes_resynchronise_and_mark_the_gap(make_sim):
         sim.inject("drop_bytes", n=1, offset=4)  # mid-word, in the counter's M byte
         blocks += read_for(driver, 0.05)
         sim.inject("insert_bytes", data=b"\xc5\x3a", offset=7)  # an H- and an L-class byte
-        blocks += read_for(driver, 0.1)
+        # both damaged blocks cut from the stream, the samples after them read
+        blocks += read_until(driver, lambda new: driver.bytes_skipped >= 14 + 17, 0.1,
+                             "the damaged blocks")
+        blocks += read_for(driver, 0.05)
     data, truth = joined(blocks), sim.truth()
     index = match(truth, data)
     desync = np.flatnonzero(truth.fate == FATES.index("desync"))
@@ -224,7 +247,10 @@ def test_counter_and_timestamp_wraps_are_unwrapped(make_sim):
     wrap_s = (1 << 32) * 1e-5
     sim = make_sim(counter_start=262100, clock=DeviceClock(offset_s=wrap_s - 0.05))
     with connect(sim.start("pty"), sim) as driver:
-        data = joined(read_for(driver, 0.3))
+        data = joined(read_until(
+            driver, lambda new: any(b.counter.size and b.counter[-1] > 262144
+                                    and b.device_time[-1] > wrap_s for b in new),
+            0.3, "samples past both wraps"))
     assert np.all(np.diff(data["counter"]) == 1) and data["counter"][-1] > 262144
     # 4 kHz = 25 ticks of 10 us: every step exactly 0.25 ms (float64 spacing at 4.3e4 s ~ 7e-12).
     np.testing.assert_allclose(np.diff(data["device_time"]), 2.5e-4, atol=1e-9)
@@ -247,7 +273,9 @@ def test_clock_drift_is_carried_into_device_time(make_sim):
     """A sensor clock 2 % fast: device time runs 1.02 x true time, visible against the host."""
     sim = make_sim(clock=DeviceClock(offset_s=100.0, drift_ppm=20000.0))
     with connect(sim.start("pty"), sim) as driver:
-        data = joined(read_for(driver, 1.0))
+        # 3 s, not 1 (as the scanner's drift test): a fifth of the run in which no sample
+        # arrives on time on a loaded host moves the host slope by less than its tolerance.
+        data = joined(read_for(driver, 3.0))
     truth = sim.truth()
     index = match(truth, data)
     slope_true = np.polyfit(truth.t_true[index], data["device_time"], 1)[0]
@@ -271,7 +299,9 @@ def test_disconnect_reconnects_with_backoff_and_marks_the_restart(make_sim, capl
     with driver:
         blocks = read_for(driver, 0.1)
         sim.inject("disconnect", downtime_s=0.3, restart=True)
-        blocks += read_for(driver, 0.6)
+        # the reopened sensor's samples (epoch 1), however late a loaded host reconnects
+        blocks += read_until(driver, lambda new: any((b.channels["epoch"] == 1).any()
+                                                     for b in new), 0.6, "the reconnect")
     data, truth = joined(blocks), sim.truth()
     assert driver.reconnects == 1 and "reopened after" in caplog.text
     assert set(data["epoch"]) == {0, 1} and set(truth.epoch) == {0, 1}

@@ -255,8 +255,10 @@ def test_plc_trigger_pulses_are_counted(plc, tunnel):
     assert set(drive.read().channels) == set(drive.describe())
 
 
-#: How long another thread holds the bus in the round-trip tests below, s.
-HOLD_S = 0.2
+#: How long another thread holds the bus in the round-trip tests below, s. Long against a
+#: loopback round trip (1-5 ms; ~25 ms seen on a loaded host) so that the bound of a quarter of
+#: it (125 ms) still tells the write alone from one that waited out the hold on a loaded host.
+HOLD_S = 0.5
 
 
 @contextlib.contextmanager
@@ -298,7 +300,7 @@ def test_plc_trigger_round_trip_is_the_write_alone_not_a_wait_for_the_bus(plc, t
     # The call waited for the bus (at least the rest of the hold) ...
     assert time.monotonic() - t_called > 0.5 * HOLD_S
     # ... but the round trip is the write's alone (a loopback write takes ~1-5 ms here;
-    # the hold was 200 ms), and the midpoint lies within it of the simulator's edge.
+    # the hold was 500 ms), and the midpoint lies within it of the simulator's edge.
     round_trip_s = drive.last_trigger_round_trip_ns * 1e-9
     assert round_trip_s < 0.25 * HOLD_S
     assert abs(t_pulse_ns * 1e-9 - t_edge) <= round_trip_s
@@ -319,7 +321,7 @@ def test_plc_release_round_trip_is_the_write_alone_not_a_wait_for_the_bus(plc, t
     t_release = tunnel.clock.origin_s + tunnel.release_times()[-1]
     round_trip_s = timing.round_trip_ns * 1e-9
     # The write's alone: ~1-5 ms here, or the simulator's decay computation (~25 ms) on a
-    # loaded host, not the 200 ms hold.
+    # loaded host, not the 500 ms hold.
     assert 0 < round_trip_s < 0.25 * HOLD_S
     # The simulated PLC releases before it acknowledges, within the round trip.
     assert 0 <= timing.command_ns * 1e-9 - t_release <= round_trip_s
@@ -336,7 +338,18 @@ def test_plc_disconnect_is_a_transport_error_then_the_bus_reconnects(plc, caplog
     with pytest.raises(TransportError, match="connection failed"):
         drive.armed()
     time.sleep(0.35)
-    assert drive.armed()  # reconnected
+    # The server listens again after its outage, on its own loop's timer (late on a loaded
+    # host): retried until it is back, for a generous while.
+    deadline = time.monotonic() + 5.0
+    while True:
+        try:
+            armed = drive.armed()
+        except TransportError:
+            assert time.monotonic() < deadline, "the bus did not reconnect within 5 s"
+            time.sleep(0.05)
+        else:
+            break
+    assert armed  # reconnected
     assert sim.counters["disconnects"] == 2
 
 

@@ -259,7 +259,9 @@ def test_sigkill_mid_run_keeps_every_flushed_row_and_a_live_reader_follows(tmp_p
     with open(tmp_path / "stdout.txt", "wb") as out, open(tmp_path / "stderr.txt", "wb") as err:
         proc = subprocess.Popen(acquire_command(path, 120.0), cwd=REPO, stdout=out, stderr=err)
         try:
-            live = follow_live(proc, path, steps=3, timeout_s=14.0)
+            # 60 s, as test_recover_hil's: the process, its simulators' process and the first
+            # flushes can take seconds each to come on a loaded host
+            live = follow_live(proc, path, steps=3, timeout_s=60.0)
             children = child_pids(proc.pid)
             ports = [port for child in children for port in listening_ports(child)]
             kill_ns = time.monotonic_ns()

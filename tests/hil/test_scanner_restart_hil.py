@@ -94,6 +94,7 @@ def test_after_a_reset_without_ptp_the_sync_view_is_finite_and_aligned_again(
             time.sleep(2.0)  # clock maps settled, trigger anchors paired (pulses every 0.5 s)
             seen["reset_ns"] = time.monotonic_ns()
             rig.inject("scanner", "tcp_reset")  # RST; the scan restarts at frame 1, t=0
+            seen["injected_ns"] = time.monotonic_ns()  # the child has taken the request
 
         summary = record_run(rig.config, path, duration_s=5.0, actions=actions, progress=False,
                              calz=True, writer_options={"clock_truth": tracker})
@@ -115,15 +116,19 @@ def test_after_a_reset_without_ptp_the_sync_view_is_finite_and_aligned_again(
         # The new scan's first frame (counter 1, frame time 0) on the run's time axis.
         restart_s = float(rig.true_time_of("scanner", [0.0])[0]) - t0_s
     reset_s = seen["reset_ns"] * 1e-9 - t0_s
-    report = f"reset at {reset_s:.4f} s, new scan from {restart_s:.4f} s; summary {summary}"
+    injected_s = seen["injected_ns"] * 1e-9 - t0_s
+    report = (f"reset at {reset_s:.4f} s (taken by {injected_s:.4f} s), new scan from "
+              f"{restart_s:.4f} s; summary {summary}")
 
     # -- the scenario: one restart gap, and the frame time went back to 0 at it ----------------
     assert [(int(g["after_counter"]), int(g["length"])) for g in gaps] == [(gaps[0][0], -1)]
     assert np.all(np.diff(counter) == 1)  # the driver keeps the counter going
     i = int(np.flatnonzero(counter == gaps[0]["after_counter"])[0])
     assert t_dev[i] > 1.5 and t_dev[i + 1] < 0.1, (t_dev[i], t_dev[i + 1])
-    # The simulator applies the fault within its production step (<= 5 ms) of the request.
-    assert reset_s <= restart_s < reset_s + 0.05, report
+    # The simulator applies the fault within its production step (<= 5 ms) of the request,
+    # counted from when its process took the request: the pipe to it crosses a process
+    # boundary, which a loaded host may delay by more than the step.
+    assert reset_s <= restart_s < injected_s + 0.05, report
 
     # -- the writer started a fresh map for the scanner only, and said so ----------------------
     assert summary["clock_restarts"] == {"scanner": 1, "laser_front": 0, "laser_rear": 0,

@@ -180,8 +180,10 @@ def test_the_plans_hold_is_recorded_and_read_back_as_each_releases_hold(tmp_path
         assert release.hold is not None
         # 11 s - 0.25 s - 0.05 s = 10.7 s, plus the arm and release commands' own time (tens
         # of ms: 10.74 s measured; 11.07 s once on two cores at a load of 4, the release's
-        # Modbus write queued behind other work), less a sync row or two at each end.
-        assert 10.5 <= release.hold.duration <= 11.5
+        # Modbus write queued behind other work), less a sync row or two at each end. The
+        # upper bound leaves those commands 1.3 s on a loaded host (0.8 s left 0.43 s above
+        # the 11.07 s seen); a hold of the default 0.5 s or twice 11 s is still far outside.
+        assert 10.5 <= release.hold.duration <= 12.0
     # The wind-on time counts the holds: two speeds of at least 11 s + 3 s.
     assert outcome.wind_on_s is not None and outcome.wind_on_s > 2 * 14.0
 

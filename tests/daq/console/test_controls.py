@@ -92,14 +92,15 @@ def test_controls_on_a_live_simulated_rig(qtbot):
         panel.note_edit.setText("steady at 500 rpm")
         b["mark"].click()
         qtbot.waitUntil(lambda: any(e.text == "steady at 500 rpm" for e in _events(source, "note")),
-                        timeout=2_000)
+                        timeout=5_000)
 
         # Arm, then release with the confirmation refused: nothing happens.
         assert b["arm"].isEnabled()
         b["arm"].click()
         qtbot.waitUntil(lambda: panel.busy is None and b["release"].isEnabled(), timeout=5_000)
         # the engine's event reaches the source through the dispatcher thread: soon, not now
-        qtbot.waitUntil(lambda: len(_events(source, "arm")) == 1, timeout=2_000)
+        # (each check asks the acquisition process; 5 s, as the panel's waits, for a loaded host)
+        qtbot.waitUntil(lambda: len(_events(source, "arm")) == 1, timeout=5_000)
         assert not b["arm"].isEnabled()
         answers.append(False)
         b["release"].click()
@@ -117,7 +118,7 @@ def test_controls_on_a_live_simulated_rig(qtbot):
         assert "release: done" in panel.status_text, panel.status_text
         # The event comes from the acquisition process through the dispatcher, as the arm's:
         # soon after the panel's "done", not with it (a fresh-clone CI run found none yet).
-        qtbot.waitUntil(lambda: len(_events(source, "release")) >= 1, timeout=2_000)
+        qtbot.waitUntil(lambda: len(_events(source, "release")) >= 1, timeout=5_000)
         assert len(_events(source, "release")) == 1
         t_end = float(before["time"][-1])
         # The model moved before the PLC confirmed (RELEASED follows the magnet), so rows 1.5 s
@@ -143,7 +144,7 @@ def test_controls_on_a_live_simulated_rig(qtbot):
         b["calz"].click()
         qtbot.waitUntil(lambda: panel.busy is None, timeout=15_000)
         assert "calz: done (scanner zeroed; scan paused" in panel.status_text, panel.status_text
-        qtbot.waitUntil(lambda: len(_events(source, "calz")) >= 1, timeout=2_000)  # as above
+        qtbot.waitUntil(lambda: len(_events(source, "calz")) >= 1, timeout=5_000)  # as above
         assert len(_events(source, "calz")) == 1
         rows = source.snapshot(1)["time"]
         qtbot.waitUntil(lambda: float(source.snapshot(1)["time"][-1]) > float(rows[-1]) + 0.5,

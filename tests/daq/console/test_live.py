@@ -59,9 +59,12 @@ def test_live_window_traces_move_and_every_device_reports_health(qtbot):
             return {table.item(r, 0).text(): float(table.item(r, 1).text())
                     for r in range(table.rowCount()) if table.item(r, 1) is not None}
 
-        # Every device, the 1 Hz barometer included, with a nonzero rate and no alarm.
+        # Every device, the 1 Hz barometer included, with a nonzero rate and no alarm. The
+        # rates are averaged over the last 2 s of wall-clock time, the start included at first
+        # (devices that came up late on a loaded host): waited for, as the nonzero ones.
         qtbot.waitUntil(lambda: sorted(rates()) == sorted(names)
-                        and min(rates().values()) > 0, timeout=8_000)
+                        and min(rates().values()) > 0 and rates()["laser_front"] > 1000.0
+                        and rates()["scanner"] > 100.0, timeout=10_000)
         assert rates()["laser_front"] > 1000.0 and rates()["scanner"] > 100.0
         assert window.alarm_label.text() == "all devices OK"
         qtbot.waitUntil(lambda: source.fan_speed_rpm > 0, timeout=5_000)  # the fan stream

@@ -653,6 +653,7 @@ def test_swmr_reader_in_another_process_sees_rows_grow(tmp_path: Path) -> None:
     blocks, rows = 8, 25
     reader = subprocess.Popen([sys.executable, str(CHILD), "follow", str(path),
                                str(blocks * rows)], stdout=subprocess.PIPE, text=True)
+    lines: list[str] = []
     try:
         assert reader.stdout is not None
         assert reader.stdout.readline().strip() == "ready"
@@ -661,8 +662,14 @@ def test_swmr_reader_in_another_process_sees_rows_grow(tmp_path: Path) -> None:
             rec.append_raw("lasers", block["host_time_ns"], block["device_time"],
                            block["counter"], block["values"])
             rec.flush()
-            time.sleep(0.05)
+            # The next block only once the reader has seen this one: a fixed pause let a reader
+            # descheduled on a loaded host skip steps (it prints every size it sees).
+            while not (lines and int(lines[-1].split()[1]) >= (i + 1) * rows):
+                line = reader.stdout.readline()
+                assert line, f"the reader ended early: {lines}"
+                lines.append(line)
         out, _ = reader.communicate(timeout=10)
+        out = "".join(lines) + out
     finally:
         if reader.poll() is None:
             reader.kill()

@@ -60,7 +60,8 @@ def test_tcp_transport_against_a_loopback_server():
         t.write(b"STATUS")
         assert t.read_until(b"\r\n", 2.0) == b"STATUS: READY\r\n"
         assert t.read_exactly(10, 2.0) == bytes(range(10))
-        thread.join(2.0)
+        thread.join(10.0)  # the server has closed its end (a loaded host: not within 1 s)
+        assert not thread.is_alive()
         with pytest.raises(TransportError, match="closed by the peer"):
             t.read(1, 1.0)
     finally:
@@ -105,7 +106,7 @@ def test_a_serial_read_interrupted_by_a_close_from_another_thread_is_a_transport
 
             reader = threading.Thread(target=read)
             reader.start()
-            started.wait(5.0)
+            assert started.wait(5.0)
             t.close()
             reader.join(10.0)
             assert not reader.is_alive()
