@@ -372,6 +372,12 @@ class Problem:
         Contiguous folds would hold out a decay's large start in one fold and judge it by the
         tail's coefficients; interleaving gives every fold the whole decay, one-period blocks
         keep correlated neighbours together (shorter ones below N_FOLDS periods: no empty fold).
+
+        Every release's first period falls in fold 0, on purpose: that fold then judges the
+        largest amplitudes by coefficients trained without them, which is where too few lags
+        show. Dealing the first periods round-robin instead (a fold starting each release)
+        made the one-lag model tie with the two-lag one on three demo campaigns (held-out
+        errors 1.587 against 1.577 +- 0.016) and moved the demo's flutter speed by +3.5 %.
         """
         t = p.view("search").t
         period = min(1.0 / float(p.fit.frequencies.min()), float(t[-1] - t[0]) / N_FOLDS)
