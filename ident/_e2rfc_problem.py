@@ -369,15 +369,9 @@ class Problem:
     def _folds(p: PreparedRelease) -> list[npt.NDArray[np.intp]]:
         """Split a release's search rows into folds of interleaved blocks, each one period long.
 
-        Contiguous folds would hold out a decay's large start in one fold and judge it by the
-        tail's coefficients; interleaving gives every fold the whole decay, one-period blocks
-        keep correlated neighbours together (shorter ones below N_FOLDS periods: no empty fold).
-
-        Every release's first period falls in fold 0, on purpose: that fold then judges the
-        largest amplitudes by coefficients trained without them, which is where too few lags
-        show. Dealing the first periods round-robin instead (a fold starting each release)
-        made the one-lag model tie with the two-lag one on three demo campaigns (held-out
-        errors 1.587 against 1.577 +- 0.016) and moved the demo's flutter speed by +3.5 %.
+        Interleaving gives every fold the whole decay; one-period blocks keep neighbours together
+        (shorter below N_FOLDS periods). Each release's first period is in fold 0: too few lags
+        show at the largest amplitudes (dealt round-robin, one lag tied two on the demo's runs).
         """
         t = p.view("search").t
         period = min(1.0 / float(p.fit.frequencies.min()), float(t[-1] - t[0]) / N_FOLDS)

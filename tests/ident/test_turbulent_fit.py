@@ -18,6 +18,7 @@ from ident._turbulent_fit import MIN_HOLD_S, ar_fit
 from ident.release import ReleaseHold
 from ident.turbulence import StaticCoefficients, TurbulenceSpec
 from simulators import simulate_release
+from simulators.decks import BLUFF_DECK, BLUFF_DECK_STATIC, bluff_deck_model
 
 PLATE = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
 HOLDS = ((0.004, 0.02), (-0.003, 0.012))
@@ -26,18 +27,24 @@ HOLDS = ((0.004, 0.02), (-0.003, 0.012))
 SMOOTH_BEFORE = 11.754930947127962
 
 
-def campaign(*, seed, Iw, hold_s):
-    """Return the benchmark's plate campaign; each release with a hold of ``hold_s`` s."""
-    model = flat_plate.jones_model()
-    U_F = fl.analyze(PLATE, model).speed
+def campaign(*, seed, Iw, hold_s, deck="plate"):
+    """Return the benchmark's campaign; each release with a hold of ``hold_s`` s.
+
+    ``deck``: ``"plate"`` (Jones's aerodynamics, a flat plate's static coefficients) or
+    ``"bluff"`` (:mod:`simulators.decks`' bluff deck, outside Roger's form).
+    """
+    section, model, static = ((PLATE, flat_plate.jones_model(), StaticCoefficients.flat_plate())
+                              if deck == "plate" else
+                              (BLUFF_DECK, bluff_deck_model(), BLUFF_DECK_STATIC))
+    U_F = fl.analyze(section, model).speed
     wind = {}
     if Iw:
-        wind = {"static": StaticCoefficients.flat_plate(), "span": 1.0,
+        wind = {"static": static, "span": 1.0,
                 "turbulence": TurbulenceSpec(Iu=0.0, Iw=Iw, Lux=1.0, Lwx=0.3, Cuy=10.0, Cwy=8.0)}
     if hold_s:
         wind["pre_s"] = hold_s
     return [Release.from_simulation(simulate_release(
-        PLATE, model, f * U_F, h0, a0, duration=20.0, fs=500.0, noise=0.02,
+        section, model, f * U_F, h0, a0, duration=20.0, fs=500.0, noise=0.02,
         rng=(seed, i, j, int(1000 * Iw)), **wind))
         for i, f in enumerate((0.4, 0.6, 0.8)) for j, (h0, a0) in enumerate(HOLDS)]
 
