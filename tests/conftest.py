@@ -3,6 +3,8 @@
 - Every test must stop the threads it starts (autouse ``no_leaked_threads``), in the manner of
   pymodbus's ``system_health_check``: a leaked reader thread keeps a port open and makes later
   tests flaky.
+- ``wait_until(condition, what, timeout_s)`` (fixture): the one poll for what another thread or
+  process delivers, failing with ``what`` at its deadline, instead of a fixed sleep.
 - Hardware tests (``@pytest.mark.hardware``) run only with ``--rig-config PATH``; without it they
   are skipped, and the ``rig_config`` fixture gives them the path (pymeasure's ``conftest.py``).
 - Hypothesis draws the same examples on every run (``derandomize``): a fuzz test that passes in
@@ -20,7 +22,7 @@ import os
 import signal
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -74,6 +76,24 @@ def rig_config(pytestconfig: pytest.Config) -> Path:
     if not path.is_file():
         raise pytest.UsageError(f"--rig-config: no such file: {path}")
     return path
+
+
+def _wait_until(condition: Callable[[], object], what: str, timeout_s: float = 10.0) -> None:
+    """Poll ``condition`` until it holds; fail naming ``what`` after ``timeout_s``.
+
+    Threads and processes deliver on their own schedule, and a loaded host takes far longer
+    than an idle one: a test waits for what it needs rather than for a fixed time.
+    """
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        assert time.monotonic() < deadline, f"{what}: not within {timeout_s:g} s"
+        time.sleep(0.01)
+
+
+@pytest.fixture
+def wait_until() -> Callable[..., None]:
+    """Return the poll ``wait_until(condition, what, timeout_s=10.0)`` (:func:`_wait_until`)."""
+    return _wait_until
 
 
 @pytest.fixture(autouse=True)

@@ -248,19 +248,12 @@ def frames_after(sink: Collector, t_ns: int) -> int:
     return sum(int(np.count_nonzero(b.host_time_ns > t_ns)) for b in sink.scanner_blocks())
 
 
-def wait_until(condition: Any, what: str, timeout_s: float = 10.0) -> None:
-    """Poll ``condition`` until it holds; fail naming ``what`` after ``timeout_s`` (loaded host)."""
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        assert time.monotonic() < deadline, f"{what}: not within {timeout_s:g} s"
-        time.sleep(0.01)
-
-
 FAST_FAN = "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n"
 
 
 @pytest.mark.parametrize("engine", [FAST_FAN], indirect=True)
-def test_calz_with_the_wind_on_is_refused_and_the_scan_goes_on(engine: Any) -> None:
+def test_calz_with_the_wind_on_is_refused_and_the_scan_goes_on(
+        engine: Any, wait_until: Any) -> None:
     acq, rig, sink = engine
     fan = acq.drivers["fan"]
     fan.set_speed(600.0)  # 6 m/s at wind_per_rpm 0.01 of sim_flat_plate.toml
@@ -323,7 +316,7 @@ SLOW_CALZ = "\n[simulation.devices.scanner]\ncalz_duration_s = 0.6\n"
 
 
 @pytest.mark.parametrize("engine", [SLOW_CALZ], indirect=True)
-def test_a_second_calz_while_one_runs_is_refused(engine: Any) -> None:
+def test_a_second_calz_while_one_runs_is_refused(engine: Any, wait_until: Any) -> None:
     acq, rig, sink = engine
     sim = rig.simulators["scanner"]
     results: list[CalzResult] = []
@@ -345,7 +338,8 @@ def test_a_second_calz_while_one_runs_is_refused(engine: Any) -> None:
 
 
 @pytest.mark.parametrize("engine", [SLOW_CALZ], indirect=True)
-def test_a_calz_that_times_out_still_restarts_the_scan_and_says_so(engine: Any) -> None:
+def test_a_calz_that_times_out_still_restarts_the_scan_and_says_so(
+        engine: Any, wait_until: Any) -> None:
     acq, rig, sink = engine
     sim = rig.simulators["scanner"]
     with pytest.raises(CalzError, match=r"failed at calz: .*not finished after 0.1 s; the scan "

@@ -256,18 +256,6 @@ class Collector:
         return [d for n, d in self.docs if n == "event" and (kind is None or d.kind == kind)]
 
 
-def wait_for(condition: Any, what: str, timeout_s: float = 10.0) -> None:
-    """Poll ``condition`` until it holds; fail naming ``what`` after ``timeout_s``.
-
-    The engine's threads deliver on their own schedule: a loaded host may take far longer than
-    an idle one, so a test waits for what it needs rather than for a fixed time.
-    """
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        assert time.monotonic() < deadline, f"{what}: not within {timeout_s:g} s"
-        time.sleep(0.01)
-
-
 def fast(**kw: Any) -> dict[str, Any]:
     """Engine options that keep the unit tests short."""
     return {"read_timeout_s": 0.05, "backoff_min_s": 0.01, "backoff_max_s": 0.05,
@@ -285,7 +273,7 @@ def covered(blocks: list[StreamBlock]) -> np.ndarray:
 # ------------------------------------------------------------------------------------------------
 # Engine
 # ------------------------------------------------------------------------------------------------
-def test_every_kind_streams_in_order_between_start_and_stop():
+def test_every_kind_streams_in_order_between_start_and_stop(wait_until):
     scanner, laser, fan, plc, baro = (FakeScanner(gap_after=10), FakeLaser(), FakePolled(),
                                       FakePlc(), FakeBarometer())
     sink = Collector()
@@ -296,7 +284,7 @@ def test_every_kind_streams_in_order_between_start_and_stop():
     devices = ("scanner", "laser", "fan", "plc", "baro")
     with acq:
         time.sleep(0.3)
-        wait_for(lambda: all(len(sink.blocks(d)) >= 3 for d in devices), "3 blocks per device")
+        wait_until(lambda: all(len(sink.blocks(d)) >= 3 for d in devices), "3 blocks per device")
         live = acq.stats()
     summary = sink.docs[-1][1]
 
@@ -375,7 +363,7 @@ def test_slow_subscriber_overflows_are_counted_marked_and_the_reader_keeps_its_p
     assert (gap.after_counter, gap.length) == slow.docs[index][1].data["gap"]
 
 
-def test_device_fault_is_reported_retried_with_backoff_and_recovered():
+def test_device_fault_is_reported_retried_with_backoff_and_recovered(wait_until):
     laser = FakeLaser(faults={3: TransportError("fake laser: line dropped")}, open_failures=2)
     other = FakePolled(faults={2: ProtocolError("fake drive: bad reply 01 83 02")})
     sink = Collector()
@@ -383,7 +371,7 @@ def test_device_fault_is_reported_retried_with_backoff_and_recovered():
                      poll_interval_s={"fan": 0.02}, **fast(backoff_min_s=0.02,
                                                            backoff_max_s=0.04)):
         # Both recovered, and data after it: the laser's blocks, the fan's block with its gap.
-        wait_for(lambda: len(sink.events("recovered")) >= 2 and len(sink.blocks("laser")) > 3
+        wait_until(lambda: len(sink.events("recovered")) >= 2 and len(sink.blocks("laser")) > 3
                  and any(b.gaps for b in sink.blocks("fan")), "both devices recovered")
         time.sleep(0.05)
 
@@ -408,11 +396,11 @@ def test_device_fault_is_reported_retried_with_backoff_and_recovered():
     assert len(sink.blocks("laser")) > 3  # data flows again after the recovery
 
 
-def test_a_scanner_restarted_after_a_lost_connection_keeps_its_counter_increasing():
+def test_a_scanner_restarted_after_a_lost_connection_keeps_its_counter_increasing(wait_until):
     scanner = FakeScanner(fail_at=6)
     sink = Collector()
     with Acquisition({"scanner": ("scanner", scanner)}, subscribers=[sink], **fast()):
-        wait_for(lambda: sink.events("recovered") and any(b.gaps for b in sink.blocks()),
+        wait_until(lambda: sink.events("recovered") and any(b.gaps for b in sink.blocks()),
                  "the scanner recovered, its restart gap delivered")
         time.sleep(0.05)
     assert scanner.calls[:8] == ["open", "configure", "scan",  # start
@@ -426,25 +414,25 @@ def test_a_scanner_restarted_after_a_lost_connection_keeps_its_counter_increasin
     assert [f.error for f in sink.events("fault")] == ["TransportError"]
 
 
-def test_a_stalled_stream_is_reported_once_and_its_return_announced():
+def test_a_stalled_stream_is_reported_once_and_its_return_announced(wait_until):
     laser = FakeLaser(silent_reads=range(2, 9))  # 7 reads of 50 ms with nothing: 0.35 s
     sink = Collector()
     with Acquisition({"laser": ("laser", laser)}, subscribers=[sink], **fast(stall_s=0.2)):
-        wait_for(lambda: sink.events("recovered"), "the stream's return")
+        wait_until(lambda: sink.events("recovered"), "the stream's return")
     faults = sink.events("fault")
     assert len(faults) == 1 and faults[0].error == "TransportTimeout"
     assert "no data for" in faults[0].text
     assert len(sink.events("recovered")) == 1
 
 
-def test_a_bug_in_one_reader_is_fatal_for_it_alone():
+def test_a_bug_in_one_reader_is_fatal_for_it_alone(wait_until):
     broken = FakePolled(faults={2: ZeroDivisionError("a bug, not a device fault")})
     laser = FakeLaser()
     sink = Collector()
     with Acquisition({"fan": ("fan", broken), "laser": ("laser", laser)}, subscribers=[sink],
                      poll_interval_s={"fan": 0.01}, **fast()) as acq:
         time.sleep(0.2)
-        wait_for(lambda: not acq.stats()["fan"].running and len(sink.blocks("laser")) > 10,
+        wait_until(lambda: not acq.stats()["fan"].running and len(sink.blocks("laser")) > 10,
                  "the fan's reader failed, the laser's delivered")
         stats = acq.stats()
         reads_at_failure = broken.reads
@@ -516,7 +504,7 @@ def test_operator_actions_are_events_and_a_refused_release_is_recorded():
     assert sink.docs[-1][1]["releases"] == [release]
 
 
-def test_a_failing_subscriber_is_counted_and_does_not_starve_the_others():
+def test_a_failing_subscriber_is_counted_and_does_not_starve_the_others(wait_until):
     def broken(name: str, doc: Any) -> None:
         if name == "block":
             raise ValueError("subscriber bug")
@@ -524,7 +512,7 @@ def test_a_failing_subscriber_is_counted_and_does_not_starve_the_others():
     sink = Collector()
     with Acquisition({"laser": ("laser", FakeLaser())}, subscribers=[broken, sink], **fast()):
         time.sleep(0.1)
-        wait_for(lambda: len(sink.blocks()) > 5, "blocks past the failing subscriber")
+        wait_until(lambda: len(sink.blocks()) > 5, "blocks past the failing subscriber")
     summary = sink.docs[-1][1]
     n_blocks = len(sink.blocks())
     assert n_blocks > 5
@@ -589,12 +577,12 @@ def test_arguments_are_checked_without_io():
         acq.mark("note", "before the start")
 
 
-def test_ordering_per_device_survives_many_devices_and_a_small_queue():
+def test_ordering_per_device_survives_many_devices_and_a_small_queue(wait_until):
     lasers = {f"laser{i}": ("laser", FakeLaser(rows=3, period_s=0.0005)) for i in range(4)}
     sink = Collector(sleep_s=0.001)
     with Acquisition(lasers, queue_size=2, subscribers=[sink], **fast()):
         time.sleep(0.3)
-        wait_for(lambda: {b.device for b in sink.blocks()} == set(lasers), "every laser's blocks")
+        wait_until(lambda: {b.device for b in sink.blocks()} == set(lasers), "every laser's blocks")
     per_device: dict[str, list[StreamBlock]] = defaultdict(list)
     for block in sink.blocks():
         per_device[block.device].append(block)
@@ -606,7 +594,7 @@ def test_ordering_per_device_survives_many_devices_and_a_small_queue():
         assert np.array_equal(covered(blocks), np.arange(0, last + 1))  # first may be dropped
 
 
-def test_device_gaps_inside_dropped_blocks_are_passed_on():
+def test_device_gaps_inside_dropped_blocks_are_passed_on(wait_until):
     """A gap the device reported in a block that was then dropped still reaches subscribers."""
 
     class GappyLaser(FakeLaser):
@@ -625,7 +613,7 @@ def test_device_gaps_inside_dropped_blocks_are_passed_on():
     with Acquisition({"laser": ("laser", laser)}, queue_size=3, subscribers=[sink], **fast()):
         time.sleep(0.3)
         # a dropped block that held a device gap: one drop in several, so waited for
-        wait_for(lambda: any(e.data["device_gaps"] for e in sink.events("overflow")),
+        wait_until(lambda: any(e.data["device_gaps"] for e in sink.events("overflow")),
                  "an overflow that dropped a device gap")
     blocks = sink.blocks()
     assert sink.docs[-1][1]["overflows"] > 0

@@ -39,6 +39,7 @@ from daq.errors import (
 # The shared-ring test's child imports its target by module name: a top-level one.
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _ring_child import BLOCK, ROWS, append_rows  # noqa: E402
+from _run_files import sync_rows  # noqa: E402
 
 CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
 FAST_FAN = "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n"
@@ -162,7 +163,7 @@ def test_the_console_over_an_acquisition_process_draws_acts_refuses_and_records(
         qtbot.wait(1500)
         # The rows reach the file as the child synchronises them, which lags real time on a
         # loaded host: wait until a reader of the file sees them, not a fixed 1.5 s only.
-        qtbot.waitUntil(lambda: _sync_rows(path) > 400, timeout=15_000)
+        qtbot.waitUntil(lambda: sync_rows(path) > 400, timeout=15_000)
         summary = source.stop_recording()
         assert summary["sync_rows"] > 400 and source.recording is None
         with h5py.File(path, "r") as f:
@@ -182,13 +183,6 @@ def test_the_console_over_an_acquisition_process_draws_acts_refuses_and_records(
         SharedMemory(name=ring_name)
 
 
-def _sync_rows(path: Path) -> int:
-    """Rows of /entry/sync a SWMR reader sees now (0 while the file is not readable yet)."""
-    try:
-        with h5py.File(path, "r", swmr=True) as f:
-            return int(f["entry/sync/time"].shape[0])
-    except (OSError, KeyError):  # not yet in SWMR mode, or the datasets not created yet
-        return 0
 
 
 def _children(pid: int) -> list[int]:

@@ -12,6 +12,7 @@ while recording (the file is complete).
 from __future__ import annotations
 
 import re
+import sys
 import threading
 from pathlib import Path
 from typing import Any
@@ -27,21 +28,16 @@ from daq.console.window import ConsoleWindow
 from daq.errors import RecordingError
 from ident.io import read_run
 
+# The shared run-file helper beside this file: importable as a top-level module.
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _run_files import sync_rows  # noqa: E402
+
 CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
 FAST_FAN = "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n"
 #: Sync rows are placed at exactly t_k = k / rate (computed from k, never accumulated): the
 #: grid holds to float64 rounding of values of a few seconds.
 GRID_TOL_S = 1e-9
 
-
-
-def _sync_rows(path: Path) -> int:
-    """Rows of /entry/sync a SWMR reader sees now (0 while the file is not readable yet)."""
-    try:
-        with h5py.File(path, "r", swmr=True) as f:
-            return int(f["entry/sync/time"].shape[0])
-    except (OSError, KeyError):  # not yet in SWMR mode, or the datasets not created yet
-        return 0
 
 def live_config_text() -> str:
     return (CONFIGS / "sim_flat_plate.toml").read_text() + FAST_FAN
@@ -248,7 +244,7 @@ def test_recording_refusals_a_full_disk_and_closing_while_recording(qtbot, tmp_p
                                            recorder_options=options)
         # Some rows reach the file first (read as a live SWMR reader would; a loaded host may
         # take longer than a fixed wait).
-        qtbot.waitUntil(lambda: _sync_rows(full_path) > 0, timeout=8_000)
+        qtbot.waitUntil(lambda: sync_rows(full_path) > 0, timeout=8_000)
         full.set()
         qtbot.waitUntil(lambda: source.recording is not None
                         and source.recording.error is not None, timeout=8_000)  # loaded host
@@ -275,7 +271,7 @@ def test_recording_refusals_a_full_disk_and_closing_while_recording(qtbot, tmp_p
         # At least a quarter second of rows in the file before closing: they reach it as the
         # sync view synchronises them, which lags real time on a loaded host.
         closing_rate = sync_rate_hz(live_config())
-        qtbot.waitUntil(lambda: _sync_rows(tmp_path / "closing.h5") > 0.25 * closing_rate,
+        qtbot.waitUntil(lambda: sync_rows(tmp_path / "closing.h5") > 0.25 * closing_rate,
                         timeout=10_000)
         panel.shutdown()
     finally:
