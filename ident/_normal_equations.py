@@ -59,3 +59,9 @@ class PseudoInverse:
             return np.asarray(np.einsum("cik,ck->ci", vectors, inverse * projected))
         projected = np.einsum("cki,ckm->cim", vectors, b)
         return np.asarray(np.einsum("cik,ckm->cim", vectors, inverse[:, :, None] * projected))
+
+    def apply_one(self, channel: int, b: FloatArray) -> FloatArray:
+        """Solve one channel's system for ``b`` of shape (k,) or (k, m)."""
+        vectors = self.vectors[channel]
+        inverse = self.inverse[channel] if b.ndim == 1 else self.inverse[channel][:, None]
+        return np.asarray(vectors @ (inverse * (vectors.T @ b)), dtype=float)

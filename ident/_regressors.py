@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from ident.modal import ModalFit, _exponentials, fit_modes, noise_std
+from ident.modal import ModalFit, _exponentials, _fit_modes_and_exponentials, noise_std
 from ident.release import Release
 from ident.section import SectionModel
 
@@ -181,11 +181,9 @@ def prepare(release: Release, section: SectionModel) -> PreparedRelease:
     rho = section.rho if release.rho is None else release.rho
     qd = 0.5 * rho * release.U**2
     q = release.coordinates(B)
-    fit = fit_modes(release.t, q, n_modes=release.n_dof)
+    fit, exponentials = _fit_modes_and_exponentials(release.t, q, n_modes=release.n_dof)
     c = B / release.U
-    t = release.t
     # q - offset, q' and q'' of the fit (ModalFit.evaluate) from one set of exponentials.
-    exponentials = _exponentials(t, fit.poles)
     p = fit.poles[:, None]
     fixed = (exponentials @ np.hstack([fit.amplitudes, c * p * fit.amplitudes,
                                        c**2 * p**2 * fit.amplitudes])).real

@@ -343,6 +343,25 @@ def fit_modes(
     >>> round(float(fit.frequencies[0]), 6), round(float(fit.damping[0]), 6)
     (2.0, 0.023866)
     """
+    return _fit_modes_and_exponentials(t, x, n_modes=n_modes, max_real_poles=max_real_poles,
+                                       weights=weights)[0]
+
+
+@single_threaded_blas
+def _fit_modes_and_exponentials(
+    t: FloatArray,
+    x: FloatArray,
+    *,
+    n_modes: int = 2,
+    max_real_poles: int = 3,
+    weights: FloatArray | None = None,
+) -> tuple[ModalFit, ComplexArray]:
+    """Fit as :func:`fit_modes`; also return ``e^{p t}`` of the fit's poles at ``t``, (n, n_poles).
+
+    The exponentials are the amplitude fit's own basis (a running product over the uniform
+    samples, relative error ~1e-12 after 10^4 samples): E2RFC's regressors reuse them instead
+    of computing 10^5 complex exponentials again.
+    """
     t = np.asarray(t, dtype=float)
     x = np.asarray(x, dtype=float)
     if x.ndim != 2 or x.shape[0] != t.size:
@@ -393,18 +412,22 @@ def fit_modes(
 
     # Amplitudes on the full-rate data (block = 1), with the refined poles.
     poles = _poles_from_params(theta, n_modes)
-    *_, design = _distinct_design(t - t[0], poles, n_modes, 1, dt)
+    _, basis, design = _distinct_design(t - t[0], poles, n_modes, 1, dt)
     coef, resid = _solve_amplitudes(design, y)
     amplitudes, offset = _to_complex_amplitudes(coef, n_modes, n_real)
     # Undo the channel weights and shift the time origin back to t[0].
     amplitudes = amplitudes / weights * np.exp(-poles[:-1] * t[0])[:, None]
-    return ModalFit(
+    fit = ModalFit(
         poles=poles[:-1],
         amplitudes=amplitudes,
         offset=offset / weights,
         noise=noise,
         residual_rms=np.sqrt(np.mean(resid**2, axis=0)) / weights,
     )
+    # e^{p t} of every pole from the distinct ones' e^{p (t - t[0])} (the offset's column last).
+    upper = basis[:, :n_modes] * np.exp(poles[:n_modes] * t[0])
+    reals = basis[:, n_modes:-1] * np.exp(poles[2 * n_modes:-1] * t[0])
+    return fit, np.hstack([upper, upper.conj(), reals])
 
 
 def _search_poles(
@@ -456,8 +479,9 @@ def _scanned_start(tb: FloatArray, yb: FloatArray, block: int, dt: float, n_mode
     """Return the start of a new real pole: the best of a grid, the other poles held.
 
     The residual of the fit with the poles found so far and one real pole more is evaluated
-    (one linear solve each) at ``_SCAN_PER_DECADE`` points per decade over the span of
-    ``grid`` (decay rates, 1/s, negative); the search then refines from the best point alone.
+    (a rank-one update of the current fit's projection) at ``_SCAN_PER_DECADE`` points per
+    decade over the span of ``grid`` (decay rates, 1/s, negative); the search then refines
+    from the best point alone.
     Measured on the benchmark's decays (500 Hz, 20-30 s): where the three grid starts were each
     refined, their optima agreed to the noise, and the scan's point lies in the same basin, at a
     third of the cost.
@@ -465,10 +489,18 @@ def _scanned_start(tb: FloatArray, yb: FloatArray, block: int, dt: float, n_mode
     lo, hi = float(np.min(-grid)), float(np.max(-grid))
     points = -np.geomspace(lo, hi, max(3, int(math.ceil(_SCAN_PER_DECADE
                                                             * math.log10(hi / lo))) + 1))
-    costs = [float(np.sum(_varpro_residual(tb, yb, block, dt, n_modes,
-                                           np.append(theta, point))[0] ** 2))
-             for point in points]
-    return float(points[int(np.argmin(costs))])
+    # One column more than the current fit: the new residual sum is the current one less the
+    # residual's projection on the column's part orthogonal to the current design (a rank-one
+    # update of the projection), for every point at once instead of one solve each.
+    resid, (_, _, Q, _) = _varpro_residual(tb, yb, block, dt, n_modes, theta)
+    resid = resid.reshape(yb.shape, order="F")
+    columns = _basis(tb, points.astype(complex), block, dt).real
+    orthogonal = columns - Q @ (Q.T @ columns)
+    norms = np.sum(orthogonal**2, axis=0)
+    explained = np.sum((orthogonal.T @ resid) ** 2, axis=1) / np.where(norms > 0.0, norms, 1.0)
+    # A column inside the current design's span (to round-off) explains nothing new.
+    explained[norms <= 1e-12 * np.sum(columns**2, axis=0)] = 0.0
+    return float(points[int(np.argmax(explained))])
 
 
 def _bounds(n_modes: int, dtb: float, duration: float) -> tuple[FloatArray, FloatArray]:

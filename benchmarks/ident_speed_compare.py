@@ -1,0 +1,143 @@
+"""E2RFC's identification time in this checkout and in others, on the same data (not a test).
+
+Issue 16's speed target (5 releases x 30 s at 500 Hz in under 0.5 s on one core, structure chosen
+by evidence) was set on one host; the shared hosts this project runs on differ by a factor of
+three and more from day to day. Timing another checkout of windrig (the code at the issue's
+start, say) next to this one, on the same releases, in turns, gives a ratio that does not depend
+on the host.
+
+The releases are those of ``ident_accuracy.py --part timing`` (flat-plate section, 0.4-0.8 of the
+flutter speed, 2 % noise), simulated once by this checkout and handed to every checkout as
+arrays; each checkout builds its own ``Release`` objects and runs its own ``e2rfc.identify``, in
+a process of its own with BLAS on one thread. The checkouts take turns (``--rounds``), so that a
+slow spell of the host falls on all of them; each turn times ``--repeats`` identifications after
+one untimed warm-up. Printed: per checkout and structure option, the minimum and median of the
+process's CPU time over all turns, and the ratio of each minimum to this checkout's.
+
+Run: ``git worktree add /tmp/start 789df70`` (issue 16's start), then
+``.venv/bin/python benchmarks/ident_speed_compare.py --tree /tmp/start [--tree ...]
+[--rounds 3] [--repeats 5]``.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: one-core timings
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+
+#: Run inside each checkout: build the releases from the arrays, time identify, print JSON.
+_TIMER = r"""
+import json, os, sys, time
+os.environ["OPENBLAS_NUM_THREADS"] = "1"
+import numpy as np
+from ident import SectionModel, e2rfc
+from ident.release import Release
+data = np.load(sys.argv[1])
+section = SectionModel(**json.loads(sys.argv[2]))
+releases = [Release(t=data[f"t{i}"], h=data[f"h{i}"], alpha=data[f"alpha{i}"],
+                    lift=data[f"lift{i}"], moment=data[f"moment{i}"], U=float(data["U"][i]))
+            for i in range(data["U"].size)]
+out = {}
+for label, kwargs in (("chosen", {}), ("given", {"n_lags": 2, "with_A3": True})):
+    e2rfc.identify(releases, section, **kwargs)  # warm-up
+    times = []
+    for _ in range(int(sys.argv[3])):
+        start = time.process_time()
+        e2rfc.identify(releases, section, **kwargs)
+        times.append(time.process_time() - start)
+    out[label] = times
+print(json.dumps(out))
+"""
+
+SECTION = {"B": 0.3, "m": 3.0, "I": 0.03, "fh": 2.0, "fa": 4.0, "zeta_h": 0.005,
+           "zeta_a": 0.005, "rho": 1.225}
+
+
+def write_releases(path: Path) -> None:
+    """Simulate the timing releases with this checkout and save their arrays to ``path``."""
+    sys.path.insert(0, str(HERE))
+    sys.path.insert(0, str(ROOT))
+    import ident_accuracy as accuracy
+
+    from ident import SectionModel
+    from ident import flutter as fl
+
+    section = SectionModel(**SECTION)
+    U_F = fl.analyze(section, accuracy.TRUTH).speed
+    releases = accuracy.make_releases(section, U_F, (0.4, 0.5, 0.6, 0.7, 0.8), 0.02, 0,
+                                      duration=30.0)
+    arrays = {f"{name}{i}": getattr(r, name) for i, r in enumerate(releases)
+              for name in ("t", "h", "alpha", "lift", "moment")}
+    np.savez(path, U=np.array([r.U for r in releases]), **arrays)
+
+
+def time_tree(tree: Path, data: Path, repeats: int) -> dict[str, list[float]]:
+    """Run the timer in ``tree`` (its own ``ident``) and return its CPU times per option."""
+    env = dict(os.environ, PYTHONPATH=str(tree), OPENBLAS_NUM_THREADS="1")
+    done = subprocess.run(
+        [sys.executable, "-c", _TIMER, str(data), json.dumps(SECTION), str(repeats)],
+        cwd=tree, env=env, capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        last = (done.stderr.strip().splitlines() or ["no output"])[-1]
+        raise SystemExit(f"ident_speed_compare: the checkout {tree} failed: {last}")
+    result: dict[str, list[float]] = json.loads(done.stdout.strip().splitlines()[-1])
+    return result
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--tree", action="append", default=[], type=Path,
+                        help="another windrig checkout to time (repeatable)")
+    parser.add_argument("--rounds", type=int, default=3, help="turns of every checkout")
+    parser.add_argument("--repeats", type=int, default=5, help="timed runs per turn")
+    args = parser.parse_args()
+    trees = [ROOT, *(t.resolve() for t in args.tree)]
+    for tree in trees[1:]:
+        if not (tree / "ident" / "e2rfc.py").is_file():
+            parser.error(f"--tree {tree}: not a windrig checkout (no ident/e2rfc.py)")
+    if args.rounds < 1 or args.repeats < 1:
+        parser.error("--rounds and --repeats must be at least 1")
+    times: dict[Path, dict[str, list[float]]] = {t: {"chosen": [], "given": []} for t in trees}
+    with tempfile.TemporaryDirectory() as tmp:
+        data = Path(tmp) / "releases.npz"
+        write_releases(data)
+        for _ in range(args.rounds):
+            for tree in trees:
+                for label, values in time_tree(tree, data, args.repeats).items():
+                    times[tree][label].extend(values)
+    print(f"E2RFC CPU time, 5 releases of 30 s at 500 Hz, one core; {args.rounds} turns x "
+          f"{args.repeats} runs per checkout; ratio = this minimum / this checkout's minimum")
+    print(f"  {'checkout':<44}{'option':<8}{'min':>8}{'median':>8}{'ratio':>7}")
+    for tree in trees:
+        name = f"{tree} ({_commit(tree)})"
+        for label in ("chosen", "given"):
+            values = np.array(times[tree][label])
+            ratio = values.min() / np.min(times[ROOT][label])
+            print(f"  {name[-44:]:<44}{label:<8}{values.min():>7.3f}s{np.median(values):>7.3f}s"
+                  f"{ratio:>7.2f}")
+
+
+def _commit(tree: Path) -> str:
+    """Return a checkout's short commit (``+`` when tracked files changed), or ``?``."""
+    head = subprocess.run(["git", "-C", str(tree), "rev-parse", "--short", "HEAD"],
+                          capture_output=True, text=True, check=False)
+    if head.returncode != 0:
+        return "?"
+    dirty = subprocess.run(["git", "-C", str(tree), "diff", "--quiet", "HEAD"], check=False)
+    return head.stdout.strip() + ("+" if dirty.returncode else "")
+
+
+if __name__ == "__main__":
+    main()
