@@ -133,9 +133,12 @@ class RegressorView:
         if len(d) == 0:
             return np.zeros((self.t.size, 0))
         mu, gained, decay = self._lag_terms(d)
-        return np.asarray((self.exponentials @ gained).real
-                          - np.repeat(decay, self.n_dof, axis=1) * gained.sum(axis=0).real,
-                          dtype=float)
+        # Each lag's decay multiplies its n_dof columns: broadcast over (rows, lag, coordinate)
+        # rather than repeating the decays into a new array.
+        shape = (self.t.size, mu.size, self.n_dof)
+        columns = decay[:, :, None] * gained.sum(axis=0).real.reshape(shape[1:])
+        np.subtract((self.exponentials @ gained).real.reshape(shape), columns, out=columns)
+        return columns.reshape(self.t.size, -1)
 
     def lag_derivatives(self, d: FloatArray) -> FloatArray:
         """Return the derivatives of :meth:`lag_columns` in ``log d``, shape (n_rows, n_dof m).
@@ -149,10 +152,13 @@ class RegressorView:
         poles = self.fit.poles[:, None]
         dgain = -poles / (poles + mu) ** 2  # (n_poles, m)
         dgained = (dgain[:, :, None] * self.fit.amplitudes[:, None, :]).reshape(poles.size, -1)
-        decay_n = np.repeat(decay, self.n_dof, axis=1)
-        dx = ((self.exponentials @ dgained).real - decay_n * dgained.sum(axis=0).real
-              + self.t[:, None] * decay_n * gained.sum(axis=0).real)
-        return np.asarray(np.repeat(mu, self.n_dof) * dx, dtype=float)
+        shape = (self.t.size, mu.size, self.n_dof)
+        per_lag = (mu.size, self.n_dof)
+        dx = decay[:, :, None] * dgained.sum(axis=0).real.reshape(per_lag)
+        np.subtract((self.exponentials @ dgained).real.reshape(shape), dx, out=dx)
+        dx += (self.t[:, None] * decay)[:, :, None] * gained.sum(axis=0).real.reshape(per_lag)
+        dx *= mu[:, None]
+        return dx.reshape(self.t.size, -1)
 
     def _lag_terms(self, d: FloatArray) -> tuple[FloatArray, npt.NDArray[np.complex128],
                                                 FloatArray]:

@@ -68,7 +68,9 @@ class Stacked:
         along the rows of a few columns is a slow reduction in numpy, a product is not.
         """
         out = X if in_place else np.array(X, dtype=float)
-        out -= np.repeat(self._averaging @ out, self.sizes, axis=0)
+        means = self._averaging @ out
+        for mean, start, size in zip(means, self.starts, self.sizes, strict=True):
+            out[start:start + size] -= mean  # in place: no repeated copy of the means
         return out
 
     def _evaluate(self, theta: FloatArray) -> Any:
