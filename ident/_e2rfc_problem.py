@@ -118,6 +118,10 @@ class Problem:
         self._full_rows_cache: dict[bool, FullRows] = {}
         self._last_blocks: tuple[tuple[bytes, bool, str], _Blocks] | None = None
         self._fold_rows = [self._folds(p) for p in prepared]
+        # Each release's search rows in fold order, and where each fold starts and ends there:
+        # one copy of the rows per candidate, every fold a slice of it.
+        self._fold_order = [np.concatenate(folds) for folds in self._fold_rows]
+        self._fold_bounds = [np.cumsum([0] + [f.size for f in folds]) for folds in self._fold_rows]
 
     # -- linear part -------------------------------------------------------------------------
     def _blocks(
@@ -341,18 +345,19 @@ class Problem:
         blocks = self._blocks(d, with_A3, "search")
         k = blocks[0][0].shape[1]
         n_rel = len(blocks)
-        Z = [np.hstack([X, y]) for X, y in blocks]
+        Z = [np.hstack([X, y])[order] for (X, y), order in zip(blocks, self._fold_order,
+                                                               strict=True)]
         Z = [z - z.mean(axis=0) for z in Z]
         n = self.n
         moments = np.empty((n_rel, N_FOLDS, k + n, k + n))
         sums = np.empty((n_rel, N_FOLDS, k + n))
         counts = np.empty((n_rel, N_FOLDS))
-        for r, (z, folds) in enumerate(zip(Z, self._fold_rows, strict=True)):
-            for j, rows in enumerate(folds):
-                zj = z[rows]
+        for r, (z, bounds) in enumerate(zip(Z, self._fold_bounds, strict=True)):
+            for j in range(N_FOLDS):
+                zj = z[bounds[j]:bounds[j + 1]]
                 moments[r, j] = zj.T @ zj
                 sums[r, j] = zj.sum(axis=0)
-                counts[r, j] = rows.size
+                counts[r, j] = zj.shape[0]
         w2 = self.weights**2  # (n_rel, n)
         errors = np.empty(N_FOLDS)
         for fold in range(N_FOLDS):
@@ -377,8 +382,9 @@ class Problem:
                 coef[:, i] = scaled / scale
             intercepts = mean[:, k:] - mean[:, :k] @ coef  # (n_rel, n)
             sq, count = 0.0, 0
-            for z, folds, c, w in zip(Z, self._fold_rows, intercepts, self.weights, strict=True):
-                held = z[folds[fold]]
+            for z, bounds, c, w in zip(Z, self._fold_bounds, intercepts, self.weights,
+                                       strict=True):
+                held = z[bounds[fold]:bounds[fold + 1]]
                 e = w * (held[:, k:] - held[:, :k] @ coef - c)
                 sq += float(np.sum(e**2))
                 count += e.size

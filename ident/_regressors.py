@@ -118,6 +118,9 @@ class RegressorView:
     #: roots, when it accepts them) for their derivatives, which reuse them.
     _terms: dict[bytes, tuple[FloatArray, npt.NDArray[np.complex128], FloatArray]] = field(
         default_factory=dict, repr=False, compare=False)
+    #: ``_real_design``'s result, computed on first use.
+    _real: list[tuple[FloatArray, npt.NDArray[np.intp], npt.NDArray[np.intp]]] = field(
+        default_factory=list, repr=False, compare=False)
 
     @property
     def n_dof(self) -> int:
@@ -137,7 +140,7 @@ class RegressorView:
         # rather than repeating the decays into a new array.
         shape = (self.t.size, mu.size, self.n_dof)
         columns = decay[:, :, None] * gained.sum(axis=0).real.reshape(shape[1:])
-        np.subtract((self.exponentials @ gained).real.reshape(shape), columns, out=columns)
+        np.subtract(self._real_product(gained).reshape(shape), columns, out=columns)
         return columns.reshape(self.t.size, -1)
 
     def lag_derivatives(self, d: FloatArray) -> FloatArray:
@@ -155,10 +158,46 @@ class RegressorView:
         shape = (self.t.size, mu.size, self.n_dof)
         per_lag = (mu.size, self.n_dof)
         dx = decay[:, :, None] * dgained.sum(axis=0).real.reshape(per_lag)
-        np.subtract((self.exponentials @ dgained).real.reshape(shape), dx, out=dx)
+        np.subtract(self._real_product(dgained).reshape(shape), dx, out=dx)
         dx += (self.t[:, None] * decay)[:, :, None] * gained.sum(axis=0).real.reshape(per_lag)
         dx *= mu[:, None]
         return dx.reshape(self.t.size, -1)
+
+    def _real_product(self, G: npt.NDArray[np.complex128]) -> FloatArray:
+        """``Re(exponentials @ G)`` for ``G`` of shape (n_poles, c), as one real product."""
+        design, kept, imaginary = self._real_design()
+        return np.asarray(design @ np.concatenate([G[kept].real, G[imaginary].imag]),
+                          dtype=float)
+
+    def _real_design(self) -> tuple[FloatArray, npt.NDArray[np.intp], npt.NDArray[np.intp]]:
+        """Real columns whose products give ``Re(exponentials @ G)``; the rows of ``G`` they take.
+
+        ``Re(e G) = Re(e) Re(G) - Im(e) Im(G)``, and a conjugate pair (conjugate amplitudes:
+        a real signal) gives twice the upper pole's real part: its conjugate needs no columns.
+        So ``[2 Re e_upper, Re e_real, -2 Im e_upper]`` times ``[Re G_upper; Re G_real;
+        Im G_upper]``: as many columns as poles, in a real product a quarter of the complex
+        one's work. Poles without their conjugate pair keep both of their columns.
+        """
+        if not self._real:
+            poles, amplitudes, E = self.fit.poles, self.fit.amplitudes, self.exponentials
+            upper = np.flatnonzero(poles.imag > 0)
+            lower = np.flatnonzero(poles.imag < 0)
+            partners = [np.flatnonzero((poles == poles[u].conjugate())
+                                       & np.all(amplitudes == amplitudes[u].conjugate(), axis=1))
+                        for u in upper]
+            paired = lower.size == upper.size and all(p.size == 1 for p in partners) and (
+                np.unique(np.concatenate(partners or [np.zeros(0, np.intp)])).size
+                == lower.size)
+            if paired:  # each upper pole stands for its pair: twice its real part
+                kept = np.concatenate([upper, np.flatnonzero(poles.imag == 0)])
+                imaginary, factor = upper, 2.0
+            else:
+                kept = np.arange(poles.size)
+                imaginary, factor = np.flatnonzero(poles.imag != 0), 1.0
+            real_factor = np.where(poles[kept].imag != 0, factor, 1.0)
+            design = np.hstack([E[:, kept].real * real_factor, -factor * E[:, imaginary].imag])
+            self._real.append((np.ascontiguousarray(design), kept, imaginary))
+        return self._real[0]
 
     def _lag_terms(self, d: FloatArray) -> tuple[FloatArray, npt.NDArray[np.complex128],
                                                 FloatArray]:
