@@ -74,7 +74,7 @@ def test_the_final_coefficients_from_gram_matrices_are_the_row_solves(problem, w
 
 
 def _complex_lag_columns(view: RegressorView, d: np.ndarray) -> np.ndarray:
-    """The lag states by the complex formula over every pole (the docstring's definition)."""
+    """Return the lag states by the complex formula over every pole (their definition)."""
     mu = view.rate * d
     poles = view.fit.poles[:, None]
     gained = ((poles / (poles + mu))[:, :, None] * view.fit.amplitudes[:, None, :]).reshape(
