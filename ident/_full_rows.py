@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
-from ident._normal_equations import PseudoInverse
+from ident._normal_equations import ScaledSolver, SplitDesign
 
 if TYPE_CHECKING:
     from ident._e2rfc_problem import Problem
@@ -83,13 +83,6 @@ class FullRows:
             grams.append(Q)
         return np.tensordot(self.w2.T, np.array(grams), axes=1), lags
 
-    @staticmethod
-    def _solver(G: FloatArray) -> tuple[PseudoInverse, FloatArray]:
-        """Minimum-norm solver of column-scaled normal matrices (n, k, k), and the scales."""
-        scale = np.sqrt(np.diagonal(G, axis1=1, axis2=2)).copy()
-        scale[scale == 0.0] = 1.0
-        return PseudoInverse(G / (scale[:, :, None] * scale[:, None, :])), scale
-
     def gauss_newton_step(self, theta: FloatArray) -> FloatArray:
         """Gauss-Newton step in ``log d`` of the variable-projection problem on every sample."""
         JtJ, Jtr = self._normal_form(theta)
@@ -119,14 +112,14 @@ class FullRows:
         Q, _ = self._weighted_grams(d, derivatives=True)
         JtJ = np.zeros((m, m))
         Jtr = np.zeros(m)
-        solver, scale = self._solver(Q[:, :k, :k])
+        solver = ScaledSolver(Q[:, :k, :k])
         for i in range(n):
             G = Q[i, :k, :k]
             XD = Q[i, :k, k:k + n * m]
             DD = Q[i, k:k + n * m, k:k + n * m]
             y = k + n * m + i
             b, Dy = Q[i, :k, y], Q[i, k:k + n * m, y]
-            coef = self._apply(solver, scale, i, b)
+            coef = solver.solve_one(i, b)
             C = np.zeros((n * m, m))  # lag l's coefficients in column l
             for l in range(m):
                 C[n * l:n * l + n, l] = coef[k_f + n * l:k_f + n * l + n]
@@ -134,17 +127,11 @@ class FullRows:
             rhs = XD @ C
             for l in range(m):
                 rhs[k_f + n * l:k_f + n * l + n, l] -= e[n * l:n * l + n]
-            s = self._apply(solver, scale, i, rhs)
+            s = solver.solve_one(i, rhs)
             cross = C.T @ XD.T @ s
             JtJ += C.T @ DD @ C - cross - cross.T + s.T @ G @ s
             Jtr -= C.T @ e - s.T @ (b - G @ coef)
         return JtJ, Jtr
-
-    @staticmethod
-    def _apply(solver: PseudoInverse, scale: FloatArray, i: int, rhs: FloatArray) -> FloatArray:
-        """Solve channel ``i``'s column-scaled normal equations for ``rhs`` (k,) or (k, m)."""
-        s = scale[i] if rhs.ndim == 1 else scale[i][:, None]
-        return solver.apply_one(i, rhs / s) / s
 
     def fit(self, d: FloatArray) -> tuple[FloatArray, list[FloatArray]]:
         """Coefficients (k, n) and weighted residuals per release at lag roots ``d``.
@@ -155,19 +142,14 @@ class FullRows:
         """
         Q, lags = self._weighted_grams(d, derivatives=False)
         k = Q.shape[1] - self.n
-        solver, scale = self._solver(Q[:, :k, :k])
+        solver = ScaledSolver(Q[:, :k, :k])
         b = np.stack([Q[i, :k, k + i] for i in range(self.n)])  # (n, k)
-        coef = (solver.apply(b / scale) / scale).T  # (k, n)
+        coef = solver.solve(b).T  # (k, n)
+        designs = [SplitDesign(F, L) for F, L in zip(self.fixed, lags, strict=True)]
         rhs = np.zeros((self.n, k))
-        for F, L, y, w2 in zip(self.fixed, lags, self.force, self.w2, strict=True):
-            error = y - self._predict(F, L, coef)  # (rows, n), unweighted
-            rhs += w2[:, None] * np.vstack([F.T @ error, L.T @ error]).T
-        coef = coef + (solver.apply(rhs / scale) / scale).T
-        residuals = [w * (y - self._predict(F, L, coef))
-                     for F, L, y, w in zip(self.fixed, lags, self.force, self.weights,
-                                           strict=True)]
+        for X, y, w2 in zip(designs, self.force, self.w2, strict=True):
+            rhs += w2[:, None] * X.transpose_times(y - X @ coef).T  # unweighted error
+        coef = coef + solver.solve(rhs).T
+        residuals = [w * (y - X @ coef)
+                     for X, y, w in zip(designs, self.force, self.weights, strict=True)]
         return coef, residuals
-
-    def _predict(self, F: FloatArray, L: FloatArray, coef: FloatArray) -> FloatArray:
-        """``[F, L] @ coef`` without joining the two parts."""
-        return np.asarray(F @ coef[:self.k_f] + L @ coef[self.k_f:], dtype=float)

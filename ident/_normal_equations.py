@@ -1,8 +1,8 @@
 """Linear algebra of E2RFC's stacked least-squares problem (private to ident._e2rfc_problem).
 
 The lag-root search evaluates the variable-projection residual and Jacobian hundreds of times:
-its design is a split matrix (:class:`SplitDesign`) and its normal equations are solved for
-every force channel at once (:class:`PseudoInverse`).
+its design is a split matrix (:class:`SplitDesign`) and its column-scaled normal equations are
+solved for every force channel at once (:class:`ScaledSolver` over :class:`PseudoInverse`).
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["PseudoInverse", "SplitDesign"]
+__all__ = ["PseudoInverse", "ScaledSolver", "SplitDesign"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -65,3 +65,33 @@ class PseudoInverse:
         vectors = self.vectors[channel]
         inverse = self.inverse[channel] if b.ndim == 1 else self.inverse[channel][:, None]
         return np.asarray(vectors @ (inverse * (vectors.T @ b)), dtype=float)
+
+
+class ScaledSolver:
+    """Minimum-norm solves of every force channel's normal equations, columns scaled first.
+
+    Each normal matrix is scaled to a unit diagonal (columns of a zero norm keep a scale of 1)
+    before :class:`PseudoInverse`: the lag columns and the fixed ones differ by orders of
+    magnitude, and the eigenvalue cut-off must not depend on their units.
+
+    Parameters
+    ----------
+    G : ndarray, shape (c, k, k)
+        The channels' normal matrices.
+    """
+
+    def __init__(self, G: FloatArray) -> None:
+        scale = np.sqrt(np.diagonal(G, axis1=1, axis2=2)).copy()  # (c, k)
+        scale[scale == 0.0] = 1.0
+        self.scale = scale
+        self.inverse = PseudoInverse(G / (scale[:, :, None] * scale[:, None, :]))
+
+    def solve(self, b: FloatArray) -> FloatArray:
+        """Solve every channel for ``b`` of shape (c, k) or (c, k, m)."""
+        scale = self.scale if b.ndim == 2 else self.scale[:, :, None]
+        return np.asarray(self.inverse.apply(b / scale) / scale, dtype=float)
+
+    def solve_one(self, channel: int, b: FloatArray) -> FloatArray:
+        """Solve one channel for ``b`` of shape (k,) or (k, m)."""
+        scale = self.scale[channel] if b.ndim == 1 else self.scale[channel][:, None]
+        return self.inverse.apply_one(channel, b / scale) / scale

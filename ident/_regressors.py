@@ -13,6 +13,7 @@ release instant t = 0 even when the record starts a little later.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import numpy.typing as npt
@@ -118,9 +119,6 @@ class RegressorView:
     #: roots, when it accepts them) for their derivatives, which reuse them.
     _terms: dict[bytes, tuple[FloatArray, npt.NDArray[np.complex128], FloatArray]] = field(
         default_factory=dict, repr=False, compare=False)
-    #: ``_real_design``'s result, computed on first use.
-    _real: list[tuple[FloatArray, npt.NDArray[np.intp], npt.NDArray[np.intp]]] = field(
-        default_factory=list, repr=False, compare=False)
 
     @property
     def n_dof(self) -> int:
@@ -165,10 +163,11 @@ class RegressorView:
 
     def _real_product(self, G: npt.NDArray[np.complex128]) -> FloatArray:
         """``Re(exponentials @ G)`` for ``G`` of shape (n_poles, c), as one real product."""
-        design, kept, imaginary = self._real_design()
+        design, kept, imaginary = self._real_design
         return np.asarray(design @ np.concatenate([G[kept].real, G[imaginary].imag]),
                           dtype=float)
 
+    @cached_property
     def _real_design(self) -> tuple[FloatArray, npt.NDArray[np.intp], npt.NDArray[np.intp]]:
         """Real columns whose products give ``Re(exponentials @ G)``; the rows of ``G`` they take.
 
@@ -178,26 +177,24 @@ class RegressorView:
         Im G_upper]``: as many columns as poles, in a real product a quarter of the complex
         one's work. Poles without their conjugate pair keep both of their columns.
         """
-        if not self._real:
-            poles, amplitudes, E = self.fit.poles, self.fit.amplitudes, self.exponentials
-            upper = np.flatnonzero(poles.imag > 0)
-            lower = np.flatnonzero(poles.imag < 0)
-            partners = [np.flatnonzero((poles == poles[u].conjugate())
-                                       & np.all(amplitudes == amplitudes[u].conjugate(), axis=1))
-                        for u in upper]
-            paired = lower.size == upper.size and all(p.size == 1 for p in partners) and (
-                np.unique(np.concatenate(partners or [np.zeros(0, np.intp)])).size
-                == lower.size)
-            if paired:  # each upper pole stands for its pair: twice its real part
-                kept = np.concatenate([upper, np.flatnonzero(poles.imag == 0)])
-                imaginary, factor = upper, 2.0
-            else:
-                kept = np.arange(poles.size)
-                imaginary, factor = np.flatnonzero(poles.imag != 0), 1.0
-            real_factor = np.where(poles[kept].imag != 0, factor, 1.0)
-            design = np.hstack([E[:, kept].real * real_factor, -factor * E[:, imaginary].imag])
-            self._real.append((np.ascontiguousarray(design), kept, imaginary))
-        return self._real[0]
+        poles, amplitudes, E = self.fit.poles, self.fit.amplitudes, self.exponentials
+        upper = np.flatnonzero(poles.imag > 0)
+        lower = np.flatnonzero(poles.imag < 0)
+        partners = [np.flatnonzero((poles == poles[u].conjugate())
+                                   & np.all(amplitudes == amplitudes[u].conjugate(), axis=1))
+                    for u in upper]
+        # Every lower pole the conjugate partner of exactly one upper pole.
+        paired = (all(p.size == 1 for p in partners)
+                  and len({int(p[0]) for p in partners}) == lower.size == upper.size)
+        if paired:  # each upper pole stands for its pair: twice its real part
+            kept = np.concatenate([upper, np.flatnonzero(poles.imag == 0)])
+            imaginary, factor = upper, 2.0
+        else:
+            kept = np.arange(poles.size)
+            imaginary, factor = np.flatnonzero(poles.imag != 0), 1.0
+        real_factor = np.where(poles[kept].imag != 0, factor, 1.0)
+        design = np.hstack([E[:, kept].real * real_factor, -factor * E[:, imaginary].imag])
+        return np.ascontiguousarray(design), kept, imaginary
 
     def _lag_terms(self, d: FloatArray) -> tuple[FloatArray, npt.NDArray[np.complex128],
                                                 FloatArray]:
@@ -227,6 +224,7 @@ def prepare(release: Release, section: SectionModel) -> PreparedRelease:
     qd = 0.5 * rho * release.U**2
     q = release.coordinates(B)
     fit, exponentials = _fit_modes_and_exponentials(release.t, q, n_modes=release.n_dof)
+    assert exponentials is not None  # asked for (the default)
     c = B / release.U
     # q - offset, q' and q'' of the fit (ModalFit.evaluate) from one set of exponentials.
     p = fit.poles[:, None]

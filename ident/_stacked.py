@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
-from ident._normal_equations import PseudoInverse, SplitDesign
+from ident._normal_equations import ScaledSolver, SplitDesign
 
 if TYPE_CHECKING:
     from ident._e2rfc_problem import Problem
@@ -92,12 +92,10 @@ class Stacked:
             G[i, k_f:, :k_f] = FL.T
             G[i, k_f:, k_f:] = (L * self.w2[:, i:i + 1]).T @ L
             b[i] = np.concatenate([self.Fy[i], cross[n * k_f + i]])
-        scale = np.sqrt(np.diagonal(G, axis1=1, axis2=2)).copy()  # (n, k)
-        scale[scale == 0.0] = 1.0
-        solver = PseudoInverse(G / (scale[:, :, None] * scale[:, None, :]))
-        coef = (solver.apply(b / scale) / scale).T  # (k, n)
+        solver = ScaledSolver(G)
+        coef = solver.solve(b).T  # (k, n)
         residual = self.w * (self.yc - X @ coef)  # (N, n), weighted
-        out = (d, X, coef, residual, solver, scale)
+        out = (d, X, coef, residual, solver)
         self._cache = (key, out)
         return out
 
@@ -108,7 +106,7 @@ class Stacked:
 
     def jacobian(self, theta: FloatArray) -> FloatArray:
         """Kaufman's variable-projection Jacobian over log(d), shape (n_dof N, m)."""
-        d, X, coef, residual, solver, scale = self._evaluate(theta)
+        d, X, coef, residual, solver = self._evaluate(theta)
         dL = self._demeaned(np.vstack([v.lag_derivatives(d) for v in self.views]), in_place=True)
         m, n = d.size, self.n
         N, k = X.shape
@@ -124,7 +122,7 @@ class Stacked:
             dXr = (dL.T @ (residual[:, i] * self.w[:, i])).reshape(m, n)
             for l in range(m):
                 rhs[i, lag0 + n * l:lag0 + n * l + n, l] -= dXr[l]
-        solved = solver.apply(rhs / scale[:, :, None]) / scale[:, :, None]  # (n, k, m)
+        solved = solver.solve(rhs)  # (n, k, m)
         J = np.empty((n * N, m))
         for i in range(n):
             J[i * N:(i + 1) * N] = -self.w[:, i:i + 1] * (V[i] - X @ solved[i])

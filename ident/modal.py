@@ -344,7 +344,7 @@ def fit_modes(
     (2.0, 0.023866)
     """
     return _fit_modes_and_exponentials(t, x, n_modes=n_modes, max_real_poles=max_real_poles,
-                                       weights=weights)[0]
+                                       weights=weights, exponentials=False)[0]
 
 
 @single_threaded_blas
@@ -355,12 +355,14 @@ def _fit_modes_and_exponentials(
     n_modes: int = 2,
     max_real_poles: int = 3,
     weights: FloatArray | None = None,
-) -> tuple[ModalFit, ComplexArray]:
+    exponentials: bool = True,
+) -> tuple[ModalFit, ComplexArray | None]:
     """Fit as :func:`fit_modes`; also return ``e^{p t}`` of the fit's poles at ``t``, (n, n_poles).
 
     The exponentials are the amplitude fit's own basis (a running product over the uniform
     samples, relative error ~1e-12 after 10^4 samples): E2RFC's regressors reuse them instead
-    of computing 10^5 complex exponentials again.
+    of computing 10^5 complex exponentials again. ``exponentials=False`` returns None instead
+    (:func:`fit_modes`, whose callers do not use them).
     """
     t = np.asarray(t, dtype=float)
     x = np.asarray(x, dtype=float)
@@ -424,6 +426,8 @@ def _fit_modes_and_exponentials(
         noise=noise,
         residual_rms=np.sqrt(np.mean(resid**2, axis=0)) / weights,
     )
+    if not exponentials:
+        return fit, None
     # e^{p t} of every pole from the distinct ones' e^{p (t - t[0])} (the offset's column last).
     upper = basis[:, :n_modes] * np.exp(poles[:n_modes] * t[0])
     reals = basis[:, n_modes:-1] * np.exp(poles[2 * n_modes:-1] * t[0])

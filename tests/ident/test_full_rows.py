@@ -91,7 +91,7 @@ def test_the_real_lag_product_is_the_complex_one_with_and_without_conjugate_pair
     """
     view = problem.prepared[1].view("search")
     d = np.array([0.09, 0.6])
-    design, kept, _ = view._real_design()
+    design, kept, _ = view._real_design
     assert kept.size < view.fit.poles.size  # the modal fit's conjugate pairs were found
     paired = view.lag_columns(d)
     assert np.max(np.abs(paired - _complex_lag_columns(view, d))) <= 1e-12 * np.max(
@@ -103,7 +103,7 @@ def test_the_real_lag_product_is_the_complex_one_with_and_without_conjugate_pair
     single = RegressorView(t=view.t, fixed=view.fixed, force=view.force,
                            exponentials=_exponentials(view.t, fit.poles), fit=fit,
                            rate=view.rate)
-    assert single._real_design()[1].size == lone.size
+    assert single._real_design[1].size == lone.size
     columns = single.lag_columns(d)
     assert np.max(np.abs(columns - _complex_lag_columns(single, d))) <= 1e-12 * np.max(
         np.abs(columns))
