@@ -11,6 +11,8 @@ import json
 import re
 from pathlib import Path
 
+import h5py
+import numpy as np
 import pytest
 
 from daq.cli import main
@@ -49,8 +51,18 @@ def test_demo_campaign_identifies_the_flutter_speed_within_3_percent(tmp_path, c
     for path in files:
         run = read_run(path)
         assert len(run.releases) == 2
-        for release in run.releases:
-            assert 7.0 < release.t[-1] < 7.6  # the decay, cut before the model is caught
+        with h5py.File(path, "r") as f:
+            released = f["entry/releases"]["release_time"]
+            events = f["entry/events"][()]
+        arms = np.sort(events["time"][events["kind"] == b"arm"])
+        for release, t0 in zip(run.releases, released, strict=True):
+            # The decay is cut before the model is caught: its last row comes before the
+            # next arm event (the catch). The plan sleeps 7.5 s between release and catch;
+            # the catch is logged when the PLC command returns, which on a loaded 2-core host
+            # has come up to ~0.1 s late (7.61 s once), so the length is bounded by the
+            # file's own catch, not by a wall-clock guess.
+            catch = arms[arms > t0][0]
+            assert 7.0 < release.t[-1] <= catch - t0 + 1e-9
     assert sorted({round(u, 2) for u in summary["wind_speeds"]}) == pytest.approx(
         [0.5 * 11.849, 0.65 * 11.849, 0.8 * 11.849], abs=0.02)
     # One table row per release: measured damping next to the truth's, within 5 % of it
