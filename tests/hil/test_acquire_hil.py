@@ -85,7 +85,10 @@ def test_record_run_writes_a_release_matching_the_tunnel_truth(tmp_path):
     assert row["stop_index"] == t.size
     wind = rig.tunnel.wind_speed()
     assert abs(row["U"] - wind) < 0.02 * wind
-    assert abs(row["h0"] - 0.004) < 5e-5 and abs(row["alpha0"] - 0.02) < 5e-4
+    # The held position is the simulated rig's hold (tolerances as measured since issue 5).
+    held = config.simulation
+    assert held is not None
+    assert abs(row["h0"] - held.hold_h) < 5e-5 and abs(row["alpha0"] - held.hold_alpha) < 5e-4
 
     # The model is held before the release and moves after it.
     before = h[(t < release_s - 0.05) & (t > 0.2)]
@@ -103,7 +106,13 @@ def test_record_run_writes_a_release_matching_the_tunnel_truth(tmp_path):
     assert np.sqrt(np.mean(err_a**2)) < 1e-3          # 1 mrad rms
     decay = t[ok] > release_s
     assert np.corrcoef(h[ok][decay], true["h"][decay])[0, 1] > 0.99
-    assert np.isfinite(U).mean() > 0.98
+    # U comes from the scanner's Pitot tap: its rows are NaN until the scanner's first frame
+    # (its SCAN is sent as the run starts; that frame came 0.26 s in once on the loaded CI
+    # host, 0.05 s typically), and finite from there on.
+    has_U = np.isfinite(U)
+    first_U = int(np.argmax(has_U))
+    assert has_U.any() and t[first_U] < 1.0, t[first_U] if has_U.any() else "no U"
+    assert has_U[first_U:].mean() > 0.99
 
 
 def test_cli_acquire_simulated_prints_the_summary(tmp_path, capsys):
