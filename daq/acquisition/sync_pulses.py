@@ -15,7 +15,6 @@ from __future__ import annotations
 import logging
 import math
 import threading
-import time
 from collections.abc import Mapping
 from typing import Any
 
@@ -49,16 +48,7 @@ class SyncPulses:
         self._thread.start()
 
     def _run(self) -> None:
-        # A fixed-rate schedule: pulse k is due k intervals after the start, however long the
-        # pulses before it took. Waiting a whole interval after each pulse instead let the
-        # pulses drift by their own duration (two writes and 10 ms, longer while a release
-        # command holds the PLC's bus): a 4 s run then held 5 pulses instead of 7. Slots
-        # missed while one pulse took longer than an interval are not made up for: one pulse
-        # goes out at once, the next at its own slot.
-        due = time.monotonic() + self._interval_s
-        while not self._stop.wait(max(0.0, due - time.monotonic())):
-            now = time.monotonic()
-            due += self._interval_s * max(1, math.ceil((now - due) / self._interval_s))
+        while not self._stop.wait(self._interval_s):
             try:
                 self._acq.trigger()
             except DaqError as exc:  # the PLC's own fault reporting covers the link

@@ -73,10 +73,13 @@ def test_record_run_writes_a_release_matching_the_tunnel_truth(tmp_path):
         calz = f["entry/metadata/calz_scanner_start"]
         assert 0.2 <= float(calz["calz_s"][()]) < 0.6 and float(calz["wind_speed_now"][()]) == 0
     assert t.size > 1500 and np.isfinite(h).mean() > 0.98
-    # Two pulses from the actions, and the sync pulses record_run sends every 0.5 s (the first
-    # after 0.5 s, the last possibly cut by the stop).
+    # Two pulses from the actions, and the sync pulses record_run sends: each 0.5 s after the
+    # previous one ended (the first after 0.5 s, the last possibly cut by the stop). A pulse
+    # takes its 10 ms width and two Modbus round trips, longer while an arm or a release holds
+    # the PLC's bus, so the 4 s run holds 5 to 8 (5 in 2 of 30 runs on a loaded host). A fixed
+    # 0.5 s grid was tried and left: its pulses met the scripted releases of the HIL tests.
     assert kinds.count("release") == 1
-    assert 2 + 6 <= kinds.count("trigger") <= 2 + 8
+    assert 2 + 5 <= kinds.count("trigger") <= 2 + 8
 
     (row,) = releases
     release_s = (seen["release"].data["command_ns"] * 1e-9) - t0_s

@@ -139,8 +139,14 @@ def test_ident_io_reads_the_3dof_releases(run):
         rows = slice(int(row["start_index"]), int(row["stop_index"]))
         assert np.array_equal(release.p, f["entry/sync/p"][rows])
         assert np.array_equal(release.drag, f["entry/sync/drag"][rows])
-    # The release starts held at p0 = 4 mm: its first samples are within the laser noise.
-    assert abs(release.p[0] - HOLD_P) < 1e-4
+    # The release's first row is where the tunnel had the model at that time (to the 0.15 mm
+    # bound above), and close to the 4 mm hold: the row comes at the PLC's acknowledgement,
+    # 14-36 ms after the magnet let go on a loaded host (module fixture), when the sway at
+    # 2.6 Hz has moved up to 0.7 mm (0.34 and 0.44 mm seen under the CI's load).
+    start = int(row["start_index"])
+    true_p = run["truth"]["p"][start]
+    assert np.isfinite(true_p) and abs(release.p[0] - true_p) < 1.5e-4
+    assert abs(release.p[0] - HOLD_P) < 1e-3
 
 
 def test_xarray_sees_time_as_the_coordinate_of_p_and_drag(run):
