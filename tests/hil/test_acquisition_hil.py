@@ -112,7 +112,7 @@ def test_engine_streams_the_whole_simulated_rig_and_records_a_release():
         before = d[t < event.data["requested_ns"]]
         after = d[t > event.host_time_ns + 50_000_000]
         assert before.size > 1000 and after.size > 1000, name
-        # Held: noise of ~1 um. Released from h = 4 mm, alpha = 0.02 rad: millimetres.
+        # Held: noise of ~1 um. Released from h = 8 mm, alpha = 0.04 rad: millimetres.
         assert np.ptp(before) < 1e-4 and np.ptp(after) > 1e-3, name
 
     # The fan command went through while the drive was polled at 10 Hz.

@@ -31,14 +31,14 @@ def test_demo_campaign_identifies_the_flutter_speed_within_3_percent(tmp_path, c
     summary = json.loads((out / "summary.json").read_text())
     truth, speed = summary["truth_flutter_speed"], summary["identified_flutter_speed"]
     assert truth == pytest.approx(11.849, abs=0.01)
-    # The end-to-end target of the issue is 3 %. On the slow 2-core CI host the identified
-    # speed lands at -0.2..+0.3 % in most runs and at +3.2..+3.7 % in some (4 of ~10): the
-    # modal fits agree with the truth's damping to 0.1 % every time; what changes is the
-    # structure the one-standard-error rule picks among the ~5 the data cannot tell apart
-    # (their flutter speeds 11.84-12.23 m/s), and the reported std (0.35-0.45 m/s, 3-4 %)
-    # includes that spread. So: within 3 %, or else the truth among the flutter speeds of the
-    # structures the data cannot tell apart; in both cases within 2 reported std, which is
-    # itself under 5 % (the closing note of this change: the point estimate needs work).
+    # The end-to-end target of the issue is 3 %. Released from 4 mm and 0.02 rad (the rig's
+    # hold before 2026-11-28) the demo landed at -0.2..+0.3 % in most runs and at +3.2..+3.7 %
+    # in about 4 of 10: one lag came within one standard error of the best held-out error
+    # (the tap noise) and the one-standard-error rule took it. From today's 8 mm and 0.04 rad
+    # it is 4-17 standard errors behind, and 7 runs gave -0.36..+0.12 % (std 0.45-1.3 %).
+    # The assertion keeps its fallback for such a tie: within 3 %, or else the truth among
+    # the flutter speeds of the structures the data cannot tell apart; in both cases within 2
+    # reported std, which is itself under 5 %.
     structures = [v for v in summary["identified_flutter_speed_structures"].values()
                   if v is not None]
     assert (abs(summary["relative_error"]) < 0.03

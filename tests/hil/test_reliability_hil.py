@@ -564,7 +564,7 @@ def test_disk_full_mid_run_leaves_the_file_readable_up_to_its_last_flush(disk_fu
     assert n > SYNC_RATE_HZ and np.isfinite(t[:n]).all()
     assert np.allclose(np.diff(t[:n]), 1 / SYNC_RATE_HZ) and t[0] < 0.1
     assert np.isfinite(sync["h"][:n]).mean() > 0.98
-    # ... and no invented zeros anywhere (the model is held at h = 4 mm, alpha = 0.02 rad).
+    # ... and no invented zeros anywhere (the model is held at h = 8 mm, alpha = 0.04 rad).
     for name in ("h", "alpha", "rho"):
         assert not np.any(sync[name] == 0.0), name
     for device, (counter, host_ns, value) in raw.items():
