@@ -35,7 +35,7 @@ def test_demo_campaign_identifies_the_flutter_speed_within_3_percent(tmp_path, c
     # hold before 2026-11-28) the demo landed at -0.2..+0.3 % in most runs and at +3.2..+3.7 %
     # in about 4 of 10: one lag came within one standard error of the best held-out error
     # (the tap noise) and the one-standard-error rule took it. From today's 8 mm and 0.04 rad
-    # it is 4-17 standard errors behind, and 7 runs gave -0.36..+0.12 % (std 0.45-1.3 %).
+    # it is 4-17 standard errors behind, and 12 runs gave -0.36..+0.12 % (std 0.45-1.3 %).
     # The assertion keeps its fallback for such a tie: within 3 %, or else the truth among
     # the flutter speeds of the structures the data cannot tell apart; in both cases within 2
     # reported std, which is itself under 5 %.
