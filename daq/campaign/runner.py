@@ -1,12 +1,14 @@
 """The headless campaign loop: speed after speed, release after release, until a reason to stop.
 
 Responsibility: :func:`run_plan` runs a :class:`~daq.campaign.plan.CampaignPlan` on a rig
-through the same drivers and engine as the console (:func:`daq.recording.run.record_run`, every
-fan and release step one of the engine's commands, so an event of the run), one run file per
-wind speed (``speedNN_U<m/s>.h5``) or, with ``files = "per_release"``, one per release
-(``speedNN_U<m/s>_rMM.h5``, :mod:`daq.campaign.files`), with a line on the terminal for every
-step (speed, wind, release n of N, decay amplitude), each release's modal fit as soon as its
-file is closed (after each release with one file per release) and, from two speeds on, the
+through the same drivers, engine and run writer as the console (one engine for the whole
+campaign, :class:`daq.recording.session.RecordingSession`, so that its clock maps settle once
+and not at every speed; every fan and release step one of the engine's commands, so an event of
+the run), one run file per wind speed (``speedNN_U<m/s>.h5``) or, with ``files =
+"per_release"``, one per release (``speedNN_U<m/s>_rMM.h5``, :mod:`daq.campaign.files`), with a
+line on the terminal for every step (speed, wind, release n of N, decay amplitude), each
+release's modal fit as soon as its file is closed (after each release with one file per
+release) and, from two speeds on, the
 E2RFC flutter speed +- std after each speed. It stops for the first of these reasons, each
 written to ``campaign.json`` as ``stopped_because``:
 
@@ -72,7 +74,7 @@ from daq.errors import DeviceCheckError, DeviceError
 from daq.instruments.build import build_driver
 from daq.procedure import default_decay_s
 from daq.recording.devices import CLOCK_SETTLE_S
-from daq.recording.run import record_run
+from daq.recording.session import RecordingSession
 from ident.campaign import CampaignAnalysis, analyze_campaign
 from ident.e2rfc import distinct_wind_speeds
 from ident.errors import IdentError
@@ -118,6 +120,29 @@ class _Session:
         self.analysis_s = 0.0
         #: Set by Ctrl-C (the runner's SIGINT handler): the actions stop at their next step.
         self.abort = threading.Event()
+        section = config.section
+        #: Follows every decay of the session (its releases count across the files).
+        self.monitor = DecayMonitor(1.0 / min(section.fh, section.fa))
+        self._recording: RecordingSession | None = None
+        self._stack = contextlib.ExitStack()
+
+    # -- the acquisition: one engine for the whole campaign ---------------------------------
+    def recording(self) -> RecordingSession:
+        """Return the campaign's running acquisition, started at the first call.
+
+        The scanner is zeroed wind-off before it starts if the plan says so and the fan has
+        not been started yet.
+        """
+        if self._recording is None:
+            calz = self.plan.calz_start and self.fan_on_at is None
+            self._recording = self._stack.enter_context(
+                RecordingSession(self.config, calz=calz, subscribers=[self.monitor]))
+        return self._recording
+
+    def close_recording(self) -> None:
+        """Stop the acquisition (a file still recording is finished); idempotent."""
+        self._recording = None
+        self._stack.close()
 
     # -- the fan, outside a run: the final stop ---------------------------------------------
     def fan_down(self) -> None:
@@ -232,7 +257,10 @@ def run_plan(plan: CampaignPlan, config: RigConfig, out_dir: str | Path, *,
         session = _Session(plan, live, out, say)
         restore = _on_sigint(session.abort)
         try:
-            _loop(session, outcome)
+            try:
+                _loop(session, outcome)
+            finally:
+                session.close_recording()
         except KeyboardInterrupt:
             outcome.stopped_because = "interrupted by the operator (Ctrl-C)"
             say("interrupted: stopping the fan")
@@ -354,12 +382,12 @@ def _loop(session: _Session, outcome: CampaignOutcome) -> None:
 
 
 def _speed_overhead_s(plan: CampaignPlan) -> float:
-    """Wind-on seconds a new speed costs before its first release, s.
+    """Wind-on seconds a new speed costs before its first release, s: the wind's ramp and settling.
 
-    The wind's ramp and settling, or the file's clock settling (the first release comes no
-    earlier than :data:`CLOCK_SETTLE_S` into the file, its hold counted), whichever is longer.
+    The clock maps' settling (:data:`CLOCK_SETTLE_S`) is paid once, at the campaign's start:
+    every later file's writer starts from the session's last seconds of data.
     """
-    return max(plan.settle_s + STEADY_OVERHEAD_S, CLOCK_SETTLE_S - plan.hold_s)
+    return plan.settle_s + STEADY_OVERHEAD_S
 
 
 def _per_release_s(releases: list[Release], plan: CampaignPlan) -> float:
@@ -454,8 +482,7 @@ def _record_file(session: _Session, outcome: CampaignOutcome, path: Path, rpm: f
         ``"interrupted"`` (Ctrl-C: model caught, fan stopped, the file not complete).
     """
     plan, config, say = session.plan, session.config, session.say
-    section = config.section
-    monitor = DecayMonitor(1.0 / min(section.fh, section.fa))
+    monitor = session.monitor
     done, grown = threading.Event(), threading.Event()
     ramp = abs(rpm - session.fan_rpm) / ramp_rate(config, session.fan_name)
     duration = (1.5 * ramp + 2.0 + STEADY_TIMEOUT_S + plan.settle_s + CLOCK_SETTLE_S
@@ -476,7 +503,6 @@ def _record_file(session: _Session, outcome: CampaignOutcome, path: Path, rpm: f
         return False
 
     def body(acq: Acquisition) -> None:
-        body_started = time.monotonic()
         fan = acq.drivers[session.fan_name]
         session.fan_commanded = True
         acq.set_fan_speed(rpm)  # operator commands through the engine: events of the run
@@ -486,9 +512,9 @@ def _record_file(session: _Session, outcome: CampaignOutcome, path: Path, rpm: f
             session.fan_on_at = time.monotonic()
         session.fan_rpm = rpm
         wait_steady(fan, rpm, plan.steady_tolerance, plan.settle_s, session.abort)
-        # The file's clock maps settle too before the first release (its hold counts).
-        if wait(CLOCK_SETTLE_S - plan.hold_s - (time.monotonic() - body_started)) or \
-                session.abort.is_set():
+        # The engine's clock maps settle before the first release (its hold counts): only the
+        # campaign's first file waits, later ones start from the session's last seconds.
+        if wait(recording.clock_wait_s() - plan.hold_s) or session.abort.is_set():
             return
         say(f"  wind steady at {fan.speed() * config.wind_per_rpm:.2f} m/s")
         for i in releases:
@@ -525,9 +551,9 @@ def _record_file(session: _Session, outcome: CampaignOutcome, path: Path, rpm: f
                 acq.arm()  # Ctrl-C: the model is held before the run ends
                 acq.stop_fan()
 
-    calz = plan.calz_start and session.fan_on_at is None  # wind-off only before the first start
-    record_run(config, path, duration_s=duration, calz=calz, actions=actions, progress=False,
-               operator_notes=notes, subscribers=[monitor], until=done)
+    recording = session.recording()
+    recording.record(path, actions=actions, until=done, duration_s=duration,
+                     operator_notes=notes)
     if not done.is_set():
         return "interrupted"
     return "grown" if grown.is_set() else "done"

@@ -13,7 +13,6 @@
 - :mod:`~daq.console.replay`: a run file played back in time;
 - :mod:`~daq.console.live_source`: a rig acquired now, synchronised into a ring;
 - :mod:`~daq.console.ring_recorder`: the live view's run writer target (the ring, no file);
-- :mod:`~daq.console.file_recording`: the operator's recordings to run files;
 - :mod:`~daq.console.process_source`: the live source in a process of its own;
 - :mod:`~daq.console.ring_buffer`, :mod:`~daq.console.shared_ring`: the rows the views draw.
 """

@@ -21,11 +21,11 @@ writer lives on the engine's dispatcher thread (the one thread that touches its 
 thread creates the file (every check of :meth:`RunRecorder.open
 <daq.recording.recorder.RunRecorder.open>` runs before anything starts), then posts a request and
 waits, with a timeout, for the dispatcher to start or finish the recording at its next doc
-(:class:`~daq.console.file_recording.FileRecording`).
+(:class:`~daq.recording.file_switch.FileRecording`).
 
 Not responsible for: drawing (:mod:`daq.console.window`), the sync numerics (:mod:`daq.sync` through
 :class:`~daq.recording.writer.RunWriter`), the file layout (:mod:`daq.recording.layout`), the
-recordings' hand-over (:mod:`daq.console.file_recording`), or the operator controls
+recordings' hand-over (:mod:`daq.recording.file_switch`), or the operator controls
 (:mod:`daq.console.controls`, which use :attr:`LiveSource.acq` and the recording methods).
 """
 
@@ -45,12 +45,12 @@ from daq.acquisition.drivers import drivers_from_config
 from daq.acquisition.engine import Acquisition
 from daq.acquisition.sync_pulses import start_sync_pulses
 from daq.config import RigConfig
-from daq.console.file_recording import RECORDING_TIMEOUT_S, FileRecording, Recording
 from daq.console.ring_buffer import RingBuffer
 from daq.console.ring_recorder import RingRecorder
 from daq.console.source import DeviceHealth, RingSource, SourceInfo, sync_columns
 from daq.errors import RecordingError
 from daq.recording.experiment_log import ExperimentLog, experiment_log_path
+from daq.recording.file_switch import RECORDING_TIMEOUT_S, FileRecording, Recording
 from daq.recording.recorder import RunRecorder
 from daq.recording.writer import RunWriter, default_sync_rate_hz
 from daq.sim.rig_process import start_rig_process

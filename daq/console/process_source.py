@@ -54,12 +54,12 @@ from typing import Any
 import numpy.typing as npt
 
 from daq.config import RigConfig, parse_rig_config
-from daq.console.file_recording import Recording
 from daq.console.live_source import LiveSource, check_live_options, ring_rows
 from daq.console.ring_buffer import RingBuffer
 from daq.console.shared_ring import SharedRingBuffer, SharedRingHandle
 from daq.console.source import DeviceHealth, RingSource, SourceInfo, sync_columns
 from daq.errors import AcquisitionProcessError, RemoteError, RingStalledError
+from daq.recording.file_switch import Recording
 
 __all__ = ["DRIVER_COMMANDS", "ProcessLiveSource",]
 

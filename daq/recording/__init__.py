@@ -10,6 +10,9 @@
 - :mod:`~daq.recording.sync_view`: the sync view's physical columns from the resampled streams;
 - :mod:`~daq.recording.raw_batches`: raw rows buffered between appends;
 - :mod:`~daq.recording.run`: :func:`record_run`, a rig with real URLs recorded into one file;
+- :mod:`~daq.recording.file_switch`: run files started and stopped on request under a running
+  engine (the console's recordings);
+- :mod:`~daq.recording.session`: one engine across several run files (a campaign's speeds);
 - :mod:`~daq.recording.experiment_log`: the run's events as text beside it (RUN.events.log);
 - :mod:`~daq.recording.synthetic`: run files written from releases (test data for readers);
 - :mod:`~daq.recording.recover`: ``windrig recover``, a file left open by a crash made readable;

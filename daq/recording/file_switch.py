@@ -1,14 +1,18 @@
-"""The operator's recordings from the live console: a run file started and stopped on request.
+"""Run files started and stopped on request under a running engine (console, campaign).
 
 Responsibility: :class:`FileRecording` feeds the engine's docs to a second, ordinary
 :class:`~daq.recording.writer.RunWriter` and its :class:`~daq.recording.recorder.RunRecorder`
-(the pair ``windrig acquire`` uses, so the file has the same layout by construction) while the
-operator records. The writer lives on the engine's dispatcher thread (the one thread that
-touches its h5py file): the GUI thread creates the file, then posts a request and waits, with a
-timeout, for the dispatcher to start or finish the recording at its next doc. A new recording's
-writer is first fed the last :data:`PREROLL_S` of blocks, so that its clock maps start warm; a
-stop waits for the blocks that arrived before it was asked. :class:`Recording` is what the GUI
-sees of it.
+(the pair ``windrig acquire`` uses, so the file has the same layout by construction) while a
+recording is on: the operator's recordings in the live console, and each wind speed's file of a
+campaign (:mod:`daq.recording.session`), one engine running across all of them. The writer
+lives on the engine's dispatcher thread (the one thread that touches its h5py file): the
+caller's thread (the GUI's, the campaign's) creates the file, then posts a request and waits,
+with a timeout, for the dispatcher to start or finish the recording at its next doc. A new
+recording's writer is first fed the last ``preroll_s`` of blocks, and the trigger pulses among
+them, so that its clock maps start warm (:data:`PREROLL_S` for the console; a campaign asks
+for :data:`~daq.recording.devices.CLOCK_SETTLE_S`, so that its releases need not wait for the
+maps to settle in every file); a stop waits for the blocks that arrived before it was asked.
+:class:`Recording` is what the caller sees of it.
 
 Not responsible for: the live view (:mod:`daq.console.live_source`), the file's content
 (:mod:`daq.recording`), or the controls (:mod:`daq.console.controls`).
@@ -19,6 +23,7 @@ from __future__ import annotations
 import dataclasses
 import datetime
 import logging
+import math
 import threading
 import time
 from collections import deque
@@ -33,7 +38,8 @@ __all__ = ["PREROLL_S", "RECORDING_TIMEOUT_S", "SLOW_BLOCKS_S", "STOP_CATCH_UP_S
 
 log = logging.getLogger(__name__)
 
-#: A recording's file writer is first fed this much of the blocks already delivered, s: every
+#: A console recording's file writer is first fed this much of the blocks already delivered
+#: (and the trigger pulses among them), s: every
 #: stream then covers time 0 (no NaN rows at the start of the file's sync view) and the clock
 #: maps have closed their first two 0.5 s windows (a fitted slope, not a cold start; see
 #: :func:`daq.recording.devices.new_clock_map`). Those raw samples precede time 0 in the file.
@@ -116,9 +122,18 @@ class FileRecording:
     ``_lock``. The dispatcher serves a request holding ``_lock``, so a request the GUI thread
     finds still posted after its timeout was never touched and can be withdrawn.
     :attr:`recording` is one immutable object, swapped whole (atomic for the GUI thread).
+
+    Parameters
+    ----------
+    preroll_s : float
+        How much of the blocks already delivered a new recording's writer is fed first, s
+        (module docstring).
     """
 
-    def __init__(self) -> None:
+    def __init__(self, preroll_s: float = PREROLL_S) -> None:
+        if not (math.isfinite(preroll_s) and preroll_s >= 0):
+            raise ValueError(f"preroll_s must be >= 0 s, got {preroll_s!r}")
+        self.preroll_s = float(preroll_s)
         self._lock = threading.Lock()
         self._request: _Request | None = None
         self._writer: Any = None  # the active file writer (dispatcher thread only)
@@ -173,12 +188,12 @@ class FileRecording:
         return True
 
     def _keep(self, block: Any) -> None:
-        """Keep the last :data:`PREROLL_S` of a device's blocks for the next recording."""
+        """Keep the last ``preroll_s`` of a device's blocks for the next recording."""
         if not len(block):
             return
         kept = self._preroll.setdefault(block.device, deque())
         kept.append(block)
-        oldest = int(block.host_time_ns[-1]) - int(PREROLL_S * 1e9)
+        oldest = int(block.host_time_ns[-1]) - int(self.preroll_s * 1e9)
         while kept and int(kept[0].host_time_ns[-1]) < oldest:
             kept.popleft()
 
@@ -234,11 +249,19 @@ class FileRecording:
         # recording like any later one (``recording.error``).
         request.done.set()
         # Oldest first across devices, as the engine delivered them; before the current doc.
-        for block in sorted((b for kept in self._preroll.values() for b in kept),
-                            key=lambda b: int(b.host_time_ns[-1])):
+        # The trigger pulses among the pre-roll's blocks go with them: the clock maps' anchors
+        # (they precede time 0 in the events table, as the raw samples do).
+        blocks = [b for kept in self._preroll.values() for b in kept]
+        oldest = min((int(b.host_time_ns[0]) for b in blocks), default=t0)
+        pulses = [e for e in self._recent_events if getattr(e, "kind", "") == "trigger"
+                  and oldest <= int(getattr(e, "host_time_ns", -1)) < t0]
+        preroll = sorted([("block", b, int(b.host_time_ns[-1])) for b in blocks]
+                         + [("event", e, int(e.host_time_ns)) for e in pulses],
+                         key=lambda item: item[2])
+        for name, doc, _ in preroll:
             if self._writer is None:
                 return
-            self._write("block", block)
+            self._write(name, doc)
         # Events already delivered that belong to the recording (trigger pulses, faults, made
         # between the request and now).
         for event in list(self._recent_events):
