@@ -242,6 +242,33 @@ def main() -> None:
           f"{'std (%)':>8} {'error (%)':>9}  stopped because")
     for row in rows:
         print(_row(*row))
+    _totals(rows)
+
+
+def _totals(rows: list[tuple]) -> None:
+    """Print the wind-on totals to 1 %: adaptive (one release per speed) against fixed.
+
+    Per rig and seed the fixed plan counts with its first variant (x1, x2, x4) that reached
+    the target, as if one had known beforehand how many releases per speed are enough.
+    """
+    adaptive: dict[tuple[str, int], float] = {}
+    fixed: dict[tuple[str, int], float] = {}
+    for name, seed, label, outcome, _, _ in rows:
+        reached = first_reaching(outcome)
+        if reached is None:
+            continue
+        if label == "adaptive":
+            adaptive[(name, seed)] = reached[1]
+        elif label.startswith("fixed") and (name, seed) not in fixed:
+            fixed[(name, seed)] = reached[1]
+    both = sorted(set(adaptive) & set(fixed))
+    if not both:
+        return
+    ratios = [adaptive[k] / fixed[k] for k in both]
+    total_a, total_f = sum(adaptive[k] for k in both), sum(fixed[k] for k in both)
+    print(f"\nadaptive / fixed wind-on to 1 % over {len(both)} campaigns: "
+          f"{total_a:.1f} s / {total_f:.1f} s = {total_a / total_f:.2f} in all; per campaign "
+          f"{min(ratios):.2f}-{max(ratios):.2f}, median {float(np.median(ratios)):.2f}")
 
 
 def _row(name: str, seed: int, label: str, outcome: CampaignOutcome, fd_speed: float | None,

@@ -39,7 +39,9 @@ model, ``K_min`` the lowest covered now). So the choice prefers speeds closer to
 The candidate with the smallest predicted total is chosen (ranked by the predicted parts that
 differ between candidates, so that a large carried part does not drown the differences), none
 when no candidate below the bound is predicted to reduce those parts (statistical,
-one-lag-more, extrapolation) by :data:`MIN_GAIN`. The part below a decaying release (turbulent
+one-lag-more, extrapolation) by :data:`MIN_GAIN`, unless the best is predicted to meet the
+campaign's target (a campaign at 1.002 % once stopped there, its best candidate predicting
+0.97 %: a gain of 2.5 % was all it lacked). The part below a decaying release (turbulent
 flow, :mod:`ident.e2rfc`) is carried too: it is a bias the releases share. The structure part,
 carried in the predicted
 total, does not stop a campaign by itself: no gain is promised for it, but new data may tell
@@ -340,7 +342,8 @@ def _reach(result: flutter.FlutterResult, U: float, top: float, K_min: float, B:
 def choose_next(analysis: CampaignAnalysis, releases: Sequence[Release],
                 candidates: Sequence[float], *, bound: float, releases_per_speed: int,
                 decay_s: float, release_options: Sequence[int] = (),
-                overhead_s: float = 0.0, per_release_s: float | None = None) -> Choice:
+                overhead_s: float = 0.0, per_release_s: float | None = None,
+                target: float | None = None) -> Choice:
     """Choose the next wind speed, or decide to stop (module docstring).
 
     Parameters
@@ -360,6 +363,9 @@ def choose_next(analysis: CampaignAnalysis, releases: Sequence[Release],
         Wind-on time a speed costs besides its releases, s (with ``release_options``).
     per_release_s : float, optional
         Wind-on time of one release, s (default ``decay_s``).
+    target : float, optional
+        The campaign's target std, m/s: a candidate predicted to meet it is chosen even when it
+        gains less than :data:`MIN_GAIN`.
 
     Returns
     -------
@@ -420,9 +426,10 @@ def choose_next(analysis: CampaignAnalysis, releases: Sequence[Release],
                       n_at[i_new] if several else None)
     # The stop for want of gain: judged at each speed's most releases.
     i_most = int(np.argmin(most))
-    if math.sqrt(most[i_most]) > (1.0 - MIN_GAIN) * math.sqrt(reducible_now):
-        best_U = allowed[i_most]
-        best = math.sqrt(carried**2 + most[i_most])
+    best_most = math.sqrt(carried**2 + most[i_most])
+    small_gain = math.sqrt(most[i_most]) > (1.0 - MIN_GAIN) * math.sqrt(reducible_now)
+    if small_gain and not (target is not None and best_most <= target < current):
+        best_U, best = allowed[i_most], best_most
         return Choice(None, f"stopped: no candidate gains (best {best_U:.2f} m/s predicts "
                       f"{best:.3f} m/s against {current:.3f} m/s now)", current, table, bound)
     i_best = i_most
@@ -434,6 +441,7 @@ def choose_next(analysis: CampaignAnalysis, releases: Sequence[Release],
         else:  # only the most releases gain: take them where they gain most
             n_at[i_most] = options[-1]
     best_U, best = allowed[i_best], math.sqrt(carried**2 + by_n[n_at[i_best]][i_best])
+    why = f", less than {100 * MIN_GAIN:g} % but the target" if small_gain else ""
     return Choice(best_U, f"chosen {best_U:.2f} m/s{said(i_best)}: predicted std {best:.3f} "
-                  f"m/s (now {current:.3f} m/s)", current, table, bound,
+                  f"m/s (now {current:.3f} m/s{why})", current, table, bound,
                   n_at[i_best] if several else None)

@@ -361,7 +361,9 @@ def _loop(session: _Session, outcome: CampaignOutcome) -> None:
                                  releases_per_speed=plan.releases_per_speed, decay_s=decay_s,
                                  release_options=plan.adaptive.release_options(),
                                  overhead_s=_speed_overhead_s(plan) + session.analysis_s,
-                                 per_release_s=_per_release_s(releases, plan))
+                                 per_release_s=_per_release_s(releases, plan),
+                                 target=plan.adaptive.target_std * analysis.flutter_speed
+                                 if analysis.flutter_speed else None)
             outcome.choices.append(choice)
             say(choice.summary())
             if choice.speed is None:

@@ -1,4 +1,4 @@
-"""One engine, several run files (a campaign's speeds): each later file's clocks are settled at once.
+"""One engine, several run files (a campaign's speeds): later files start on settled clocks.
 
 :class:`daq.recording.session.RecordingSession` records files on request under one running
 engine; a later file's writer starts from the session's last CLOCK_SETTLE_S of blocks and

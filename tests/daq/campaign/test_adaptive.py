@@ -306,6 +306,25 @@ def test_a_large_structure_part_does_not_stop_the_campaign_by_itself(three_speed
     assert stop.speed is None and stop.reason.startswith("stopped: no candidate gains")
 
 
+def test_a_candidate_that_meets_the_target_is_taken_however_small_its_gain(three_speeds):
+    # A campaign at 1.002 % of U_F stopped for want of gain when its best candidate predicted
+    # 0.97 %: the target was a 3 % gain away. A prediction that meets the target is taken; one
+    # that does not, or a target already met, still stops the campaign.
+    releases, analysis = three_speeds
+    U_F, now = analysis.flutter_speed, analysis.flutter_std
+    kwargs = {"bound": math.inf, "releases_per_speed": 1, "decay_s": 0.1}
+    stop = choose_next(analysis, releases, [0.7 * U_F], **kwargs)
+    assert stop.speed is None and stop.reason.startswith("stopped: no candidate gains")
+    predicted = stop.predicted[0][1]
+    assert predicted < now  # a 0.1 s release still tells a little
+    met = choose_next(analysis, releases, [0.7 * U_F], target=0.5 * (predicted + now),
+                      **kwargs)
+    assert met.speed == 0.7 * U_F and "but the target" in met.reason, met.reason
+    for target in (0.99 * predicted, 1.01 * now):
+        again = choose_next(analysis, releases, [0.7 * U_F], target=target, **kwargs)
+        assert again.speed is None, (target, again.reason)
+
+
 def test_the_releases_per_speed_follow_the_gain_per_wind_on_second(two_speeds):
     # The statistical part falls as 1 / (1 + n b) with n releases: the gain per release falls
     # with n, so with nothing to pay per speed one release gives the most per second, and with
