@@ -36,9 +36,11 @@ and the sample's place after it (:mod:`simulators.noise`), so each decay gets th
 whatever the thread timing. What still varies from run to run is the release instant the DAQ
 records (the host's time of the PLC's acknowledgement, 3-20 ms after the simulated magnet let
 go on the loaded two-core host), which moves each decay's time origin. Measured with
-``--hil-check``: five campaigns of the shipped rig's seeds gave U_F 11.819-11.858 m/s (std
-0.127-0.151); three of seed 3 gave 11.883 +- 0.060, 11.829 +- 0.109 and once no estimate from
-the first two speeds (a heavier load then: the benchmark ran beside it).
+``--hil-check --repeats 3 --seeds 1 2 3`` (2026-11-28: one engine per campaign, the plate
+released from 8 mm; truth 11.849 m/s): the shipped rig's seeds three times gave U_F
+11.865 +- 0.074, 11.876 +- 0.056 and 11.882 +- 0.074 m/s, seeds 1-3 11.899 +- 0.046,
+11.808 +- 0.041 and 11.880 +- 0.044 m/s; all six met the 2 % target at three speeds, within
+0.23-1.09 std of the truth.
 
 ``--hil-check``: the adaptive HIL test's campaign (the example plan at a 2 % target on the flat
 plate) for the shipped rig (its instruments' default seeds, as the test) ``--repeats`` times
@@ -50,7 +52,8 @@ with the bluff deck's aerodynamics (:func:`bluff_rig_text`: outside E2RFC's form
 flutter).
 
 Run: ``.venv/bin/python benchmarks/campaign_efficiency.py [--seeds 1 2] [--rigs flat_plate deck
-bluff]`` (about 6 minutes per seed on the plate, 10 on each deck, on two cores).
+bluff]`` (with ``--no-fd`` about 2-4 minutes per seed on the plate, 3-5 on each deck, on two
+cores; the FD route adds about as much again).
 """
 
 from __future__ import annotations
