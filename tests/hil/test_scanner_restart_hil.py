@@ -96,7 +96,7 @@ def test_after_a_reset_without_ptp_the_sync_view_is_finite_and_aligned_again(
             rig.inject("scanner", "tcp_reset")  # RST; the scan restarts at frame 1, t=0
             seen["injected_ns"] = time.monotonic_ns()  # the child has taken the request
 
-        summary = record_run(rig.config, path, duration_s=5.0, actions=actions, progress=False,
+        summary = record_run(rig.config, path, duration_s=6.0, actions=actions, progress=False,
                              calz=True, writer_options={"clock_truth": tracker})
         assert summary["errors"] == [] and summary["subscriber_errors"] == {}
         with h5py.File(path, "r") as f:
@@ -155,9 +155,15 @@ def test_after_a_reset_without_ptp_the_sync_view_is_finite_and_aligned_again(
     # refits still move it by up to ~3 ms, slewed off at 1 % (measured over 17 runs: 0.1-1.4 ms
     # typically, 2.3 and 3.1 ms in two), as a map fitted from scratch at the run start does
     # (ClockTruthTracker does not count its first 2 s). 5 ms (2.5 frame periods) bounds that
-    # and is 400 times below the 2 s the broken map was off.
-    assert since.max() > 2.5  # the run went on long enough to see it
-    assert np.max(np.abs(err[since > 1.0])) < 5e-3, report
+    # and is 400 times below the 2 s the broken map was off. When the host keeps every block of
+    # the new scan's first second late (seen once in a CI run, 2026-11-29: 10.6 ms late until
+    # ~1 s after the restart, the blocks of 18 idle and 12 hogged runs were 0.1-1.0 ms), no map
+    # can know better before an on-time block or a paired pulse arrives, and the 1 % slew then
+    # takes 1 s per 10 ms: so from 1 s on the error must not grow beyond the first 0.5 s's 20 ms,
+    # and from 3 s on (2 s of slewing: the 20 ms bound gone) it must be under the 5 ms.
+    assert since.max() > 3.5  # the run went on long enough to see it
+    assert np.max(np.abs(err[since > 1.0])) < 0.02, report
+    assert np.max(np.abs(err[since > 3.0])) < 5e-3, report
 
     # -- the sync view: NaN across the restart only, finite and to the end after it ------------
     assert np.allclose(np.diff(sync_t), PERIOD_S, rtol=0, atol=1e-9)  # uniform time base
