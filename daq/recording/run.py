@@ -44,7 +44,7 @@ from daq.recording.layout import metadata_name_part
 from daq.recording.recorder import RunRecorder
 from daq.recording.writer import RunWriter
 
-__all__ = ["open_run_file", "record_run"]
+__all__ = ["open_run_file", "record_run", "recording_bar"]
 
 log = logging.getLogger(__name__)
 
@@ -78,6 +78,14 @@ def open_run_file(config: RigConfig, out_path: str | Path, *, operator_notes: st
                            **recorder_options)
     recorder.open()  # a missing or read-only directory, a full disk: fail before anything starts
     return recorder
+
+
+def recording_bar(path: Path, duration_s: float) -> tqdm:
+    """Return a progress bar over a recording of at most ``duration_s`` s (``update`` in s)."""
+    # mininterval: redrawn at most twice a second (a log file gets a line per redraw).
+    return tqdm(total=round(float(duration_s), 1), unit="s", mininterval=0.5,
+                desc=f"recording {path.name}",
+                bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} s [{elapsed}<{remaining}]")
 
 
 def record_run(config: RigConfig, out_path: str | Path, *, duration_s: float,
@@ -196,10 +204,7 @@ def record_run(config: RigConfig, out_path: str | Path, *, duration_s: float,
                 runner.start()
             pulser = start_sync_pulses(acq, drivers, sync_pulse_interval_s)
             end = time.monotonic() + float(duration_s)
-            # mininterval: redrawn at most twice a second (a log file gets a line per redraw).
-            bar = (tqdm(total=round(float(duration_s), 1), unit="s", mininterval=0.5,
-                        desc=f"recording {path.name}", bar_format="{l_bar}{bar}| "
-                        "{n:.1f}/{total:.1f} s [{elapsed}<{remaining}]") if progress else None)
+            bar = recording_bar(path, duration_s) if progress else None
             try:
                 while ((left := end - time.monotonic()) > 0 and writer.error is None
                        and not (until is not None and until.is_set())):

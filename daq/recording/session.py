@@ -34,7 +34,7 @@ from daq.recording.devices import CLOCK_SETTLE_S
 from daq.recording.experiment_log import ExperimentLog, experiment_log_path, refuse_logging_to
 from daq.recording.file_switch import RECORDING_TIMEOUT_S, FileRecording
 from daq.recording.layout import metadata_name_part
-from daq.recording.run import open_run_file
+from daq.recording.run import open_run_file, recording_bar
 from daq.recording.writer import RunWriter
 
 __all__ = ["RecordingSession"]
@@ -110,7 +110,8 @@ class RecordingSession:
 
     def record(self, path: str | Path, *, actions: Callable[[Acquisition], None],
                until: threading.Event, duration_s: float, operator_notes: str = "",
-               writer_options: Mapping[str, Any] | None = None) -> tuple[str, dict[str, Any]]:
+               writer_options: Mapping[str, Any] | None = None,
+               progress: bool = False) -> tuple[str, dict[str, Any]]:
         """Record one run file while ``actions`` runs; return why it ended and the summary.
 
         Parameters
@@ -129,6 +130,8 @@ class RecordingSession:
         writer_options : mapping, optional
             Further keyword arguments of :class:`~daq.recording.writer.RunWriter` (a simulated
             rig's ``clock_truth``); their ``recorder_options`` apply to the file.
+        progress : bool
+            Show a progress bar over ``duration_s`` (tqdm, on stderr).
 
         Returns
         -------
@@ -181,18 +184,26 @@ class RecordingSession:
         runner = threading.Thread(target=run_actions, name="windrig-actions", daemon=True)
         runner.start()
         reason = "duration"
+        bar = recording_bar(path, duration_s) if progress else None
         try:
-            end = time.monotonic() + float(duration_s)
+            start = time.monotonic()
+            end = start + float(duration_s)
             while time.monotonic() < end and not until.is_set() and runner.is_alive():
                 rec = self.files.recording
                 if rec is not None and rec.error is not None:
                     break  # the file failed (e.g. a full disk): raised by the stop below
                 until.wait(0.05)
+                if bar is not None:
+                    bar.update(round(min(time.monotonic() - start, duration_s), 1) - bar.n)
             reason = "done" if until.is_set() else reason
         except KeyboardInterrupt:  # Ctrl-C: the actions catch the model; the file is finished
             log.warning("interrupted: stopping the recording of %s", path.name)
             reason = "interrupted"
         finally:
+            if bar is not None:
+                if until.is_set():  # done before the bound: the bar ends full
+                    bar.total = bar.n
+                bar.close()
             runner.join(max(1.0, 0.25 * float(duration_s)))
             if acq.running:
                 acq.mark("recording_stopped", f"recording {path.name} stopped ({reason})")

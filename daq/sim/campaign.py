@@ -1,12 +1,13 @@
 """A whole simulated test campaign: releases at several wind speeds -> E2RFC -> flutter speed.
 
 Responsibility: :func:`run_campaign` drives a *simulated* rig, started in a process of its own
-(:mod:`daq.sim.rig_process`), through the real drivers, the acquisition engine and the production
-recorder (:func:`daq.recording.run.record_run`, every fan and release step one of the engine's
-commands, so an event of the run): for each fraction ``f`` of the true
-flutter speed it sets the fan so that the wind is ``f U_F``, waits for the ramp, then arms, holds
-and releases the model ``releases_per_speed`` times, recording each free decay for ``decay_s``
-seconds, one HDF5 run file per wind speed (``campaign_U<speed>.h5``). It then reads the files back
+(:mod:`daq.sim.rig_process`), through the real drivers, one acquisition engine for the whole
+campaign and the production writer (:class:`daq.recording.session.RecordingSession`, every fan and
+release step one of the engine's commands, so an event of the run): for each fraction ``f`` of
+the true flutter speed it sets the fan so that the wind is ``f U_F``, waits for the ramp, then
+arms, holds and releases the model ``releases_per_speed`` times, recording each free decay for
+``decay_s`` seconds, one HDF5 run file per wind speed (``campaign_U<speed>.h5``), switched under the
+running engine as ``windrig campaign`` does. It then reads the files back
 (:func:`ident.io.read_run`: each release ends where the model is armed again), identifies the
 rational-function model from all releases (:func:`ident.e2rfc.identify`), computes the identified
 flutter speed with its standard deviation and compares it with the truth. Plots (matplotlib, Agg)
@@ -24,7 +25,9 @@ Not responsible for: the drivers, the engine or the file (:mod:`daq.recording`),
 
 from __future__ import annotations
 
+import errno
 import math
+import threading
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -34,9 +37,9 @@ import numpy as np
 
 from daq.acquisition.engine import Acquisition
 from daq.config import RigConfig
+from daq.errors import StorageError
 from daq.procedure import HOLD_S, default_decay_s
-from daq.recording.devices import CLOCK_SETTLE_S
-from daq.recording.run import record_run
+from daq.recording.session import RecordingSession
 from daq.report_plots import DerivativeCurves, ModeCurves, flutter_derivative_grid, flutter_diagram
 from daq.sim.rig_process import start_rig_process
 from ident import e2rfc, flutter
@@ -199,8 +202,7 @@ def run_campaign(config: RigConfig, out_dir: str | Path, *,
     out.mkdir(parents=True, exist_ok=True)
     ramp_rate = _ramp_rate(config)
 
-    files: list[Path] = []
-    speeds: list[float] = []
+    plan: list[tuple[float, float, float, Path]] = []  # (fraction, U, rpm, path)
     for f in fractions:
         U = f * U_F
         rpm = U / config.wind_per_rpm
@@ -208,40 +210,57 @@ def run_campaign(config: RigConfig, out_dir: str | Path, *,
             raise ValueError(f"{f:g} U_F = {U:.3g} m/s ({rpm:.0f} rpm) exceeds the rig's limits "
                              f"({config.limits.max_wind_speed:g} m/s, "
                              f"{config.limits.max_fan_rpm:g} rpm)")
-        path = out / f"campaign_U{U:05.2f}.h5"
-        # Each file starts its own simulated rig: the fan ramps from rest.
-        ramp_s = rpm / ramp_rate + 1.0
-        duration = max(ramp_s, CLOCK_SETTLE_S) + releases_per_speed * (HOLD_S + decay_s) + 1.0
+        plan.append((f, U, rpm, out / f"campaign_U{U:05.2f}.h5"))
+    for *_, path in plan:  # refused before the fan turns, not after a speed's recording
+        if path.exists():
+            raise StorageError(errno.EEXIST, f"run file {path} already exists; refusing to "
+                               "overwrite a recorded run", str(path))
 
-        def actions(acq: Acquisition, rpm: float = rpm, ramp_s: float = ramp_s) -> None:
-            started = time.monotonic()
-            acq.set_fan_speed(rpm)  # operator commands through the engine: events of the run
-            acq.start_fan()
-            acq.drivers["fan"].wait_for_speed(rpm, tolerance_rpm=max(2.0, 0.002 * rpm),
-                                              timeout_s=ramp_s + 5.0)
-            # Let the wind settle at the set point, and the clock maps (CLOCK_SETTLE_S; the
-            # first hold counts): with the fast simulated fan the first release came ~1.5 s
-            # into each file, and the demo was 2.2-3.5 % off on a slow host.
-            time.sleep(max(0.3, CLOCK_SETTLE_S - HOLD_S - (time.monotonic() - started)))
-            for _ in range(releases_per_speed):
-                acq.arm()
-                time.sleep(HOLD_S)
-                acq.release()
-                time.sleep(decay_s)
-            acq.arm()  # catch the model: the next decay is not recorded as part of this one
+    # The simulated instruments run in their own process, as real ones run on their own
+    # hardware: sharing the recorder's interpreter lock would add milliseconds of
+    # simulated-device latency, which misaligns forces and motion (see daq.sim.rig_process).
+    # One engine records all the speeds (daq.recording.session): its clock maps settle once,
+    # and the fan goes from one speed to the next without stopping.
+    files: list[Path] = []
+    speeds: list[float] = []
+    with start_rig_process(config) as rig, RecordingSession(rig.config, calz=True) as session:
+        fan_rpm = 0.0
+        for f, U, rpm, path in plan:
+            ramp_s = abs(rpm - fan_rpm) / ramp_rate + 1.0
+            duration = (max(ramp_s, session.clock_wait_s()) + releases_per_speed
+                        * (HOLD_S + decay_s) + 5.0)
+            done = threading.Event()
 
-        # The simulated instruments run in their own process, as real ones run on their own
-        # hardware: sharing the recorder's interpreter lock would add milliseconds of
-        # simulated-device latency, which misaligns forces and motion (see daq.sim.rig_process).
-        with start_rig_process(config) as rig:
-            summary = record_run(rig.config, path, duration_s=duration, calz=True,
-                                 actions=actions, progress=progress,
-                                 operator_notes=f"campaign, {f:g} U_F")
-        if summary.get("releases") != releases_per_speed:
-            raise RuntimeError(f"{path}: recorded {summary.get('releases')} releases, expected "
-                               f"{releases_per_speed} (fan ramp slower than assumed?)")
-        files.append(path)
-        speeds.append(U)
+            def actions(acq: Acquisition, rpm: float = rpm, ramp_s: float = ramp_s,
+                        done: threading.Event = done) -> None:
+                acq.set_fan_speed(rpm)  # operator commands through the engine: events of the run
+                acq.start_fan()
+                acq.drivers["fan"].wait_for_speed(rpm, tolerance_rpm=max(2.0, 0.002 * rpm),
+                                                  timeout_s=ramp_s + 5.0)
+                # Let the wind settle at the set point (0.3 s), and on the first speed the
+                # engine's clock maps (CLOCK_SETTLE_S from its start; the first hold counts):
+                # releases ~1.5 s into a fresh engine left the demo 2.2-3.5 % off on a slow host.
+                time.sleep(max(0.3, session.clock_wait_s() - HOLD_S))
+                for _ in range(releases_per_speed):
+                    acq.arm()
+                    time.sleep(HOLD_S)
+                    acq.release()
+                    time.sleep(decay_s)
+                acq.arm()  # catch the model: the next decay is not recorded as part of this one
+                done.set()
+
+            reason, summary = session.record(path, actions=actions, until=done,
+                                             duration_s=duration, progress=progress,
+                                             operator_notes=f"campaign, {f:g} U_F")
+            if reason != "done" or summary.get("releases") != releases_per_speed:
+                raise RuntimeError(f"{path}: recorded {summary.get('releases')} releases "
+                                   f"({reason}), expected {releases_per_speed} (fan ramp "
+                                   "slower than assumed?)")
+            fan_rpm = rpm
+            files.append(path)
+            speeds.append(U)
+        assert session.acq is not None
+        session.acq.stop_fan()  # wind off before the engine stops: its last event
     t_acq = time.monotonic() - started
 
     t1 = time.monotonic()
