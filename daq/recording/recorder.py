@@ -93,7 +93,23 @@ __all__ = [
     "Recorder",
     "RunRecorder",
     "failed_writes",
+    "refuse_existing_run_file",
 ]
+
+
+def refuse_existing_run_file(path: Path, hint: str = "") -> None:
+    """Raise :class:`StorageError` (``EEXIST``) if ``path`` exists: a recorded run is kept.
+
+    Parameters
+    ----------
+    path : Path
+        The run file about to be created.
+    hint : str
+        Appended to the message (how the caller would replace it, if it can).
+    """
+    if path.exists():
+        raise StorageError(errno.EEXIST, f"run file {path} already exists; refusing to "
+                           f"overwrite a recorded run{hint}", str(path))
 
 
 def _disk_free(directory: Path) -> int:
@@ -341,10 +357,8 @@ class RunRecorder:
                          else (errno.ENOENT, "does not exist"))
             raise StorageError(code, f"cannot create run file {self.path}: {directory} {why}",
                                str(self.path))
-        if self.path.exists() and not self.overwrite:
-            raise StorageError(errno.EEXIST, f"run file {self.path} already exists; refusing to "
-                               "overwrite a recorded run (pass overwrite=True to replace it)",
-                               str(self.path))
+        if not self.overwrite:
+            refuse_existing_run_file(self.path, " (pass overwrite=True to replace it)")
         free = self._free_bytes(directory)
         if free < self.min_free_bytes:
             raise InsufficientSpaceError(

@@ -17,7 +17,6 @@ the writer's numerics (:mod:`daq.recording.writer`), or the file layout
 
 from __future__ import annotations
 
-import errno
 import logging
 import math
 import threading
@@ -34,14 +33,13 @@ from daq.acquisition.drivers import drivers_from_config
 from daq.acquisition.engine import Acquisition
 from daq.acquisition.sync_pulses import SYNC_PULSE_INTERVAL_S, SyncPulses, start_sync_pulses
 from daq.config import RigConfig
-from daq.errors import StorageError
 from daq.recording.experiment_log import (
     ExperimentLog,
     experiment_log_path,
     refuse_logging_to,
 )
 from daq.recording.layout import metadata_name_part
-from daq.recording.recorder import RunRecorder
+from daq.recording.recorder import RunRecorder, refuse_existing_run_file
 from daq.recording.writer import RunWriter
 
 __all__ = ["open_run_file", "record_run", "recording_bar"]
@@ -70,9 +68,8 @@ def open_run_file(config: RigConfig, out_path: str | Path, *, operator_notes: st
     """
     path = Path(out_path)
     recorder_options = dict(dict(writer_options or {}).get("recorder_options", {}))
-    if path.exists() and not bool(recorder_options.get("overwrite", False)):
-        raise StorageError(errno.EEXIST, f"run file {path} already exists; refusing to "
-                           "overwrite a recorded run", str(path))
+    if not bool(recorder_options.get("overwrite", False)):
+        refuse_existing_run_file(path)
     recorder = RunRecorder(path, config_text=config.text, rig_name=config.name,
                            operator_notes=operator_notes, sway=config.section.n_dof == 3,
                            **recorder_options)

@@ -25,7 +25,6 @@ Not responsible for: the drivers, the engine or the file (:mod:`daq.recording`),
 
 from __future__ import annotations
 
-import errno
 import math
 import threading
 import time
@@ -37,8 +36,8 @@ import numpy as np
 
 from daq.acquisition.engine import Acquisition
 from daq.config import RigConfig
-from daq.errors import StorageError
 from daq.procedure import HOLD_S, default_decay_s
+from daq.recording.recorder import refuse_existing_run_file
 from daq.recording.session import RecordingSession
 from daq.report_plots import DerivativeCurves, ModeCurves, flutter_derivative_grid, flutter_diagram
 from daq.sim.rig_process import start_rig_process
@@ -212,9 +211,7 @@ def run_campaign(config: RigConfig, out_dir: str | Path, *,
                              f"{config.limits.max_fan_rpm:g} rpm)")
         plan.append((f, U, rpm, out / f"campaign_U{U:05.2f}.h5"))
     for *_, path in plan:  # refused before the fan turns, not after a speed's recording
-        if path.exists():
-            raise StorageError(errno.EEXIST, f"run file {path} already exists; refusing to "
-                               "overwrite a recorded run", str(path))
+        refuse_existing_run_file(path)
 
     # The simulated instruments run in their own process, as real ones run on their own
     # hardware: sharing the recorder's interpreter lock would add milliseconds of
