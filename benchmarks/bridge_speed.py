@@ -29,10 +29,10 @@ import time
 
 import numpy as np
 
-from ident import flat_plate
 from ident.bridge import flutter as bf
 from ident.bridge.aero import aero_from_model
 from ident.bridge.model import BridgeModel
+from ident.model import flat_plate
 
 B, M, I, SPAN = 31.0, 22740.0, 2.47e6, 1200.0
 STATIC = {"C_D": 0.08, "C_L": -0.1, "C_M": 0.02, "dC_D": 0.0, "dC_L": -5.0, "dC_M": 1.2}

@@ -17,8 +17,8 @@ every simulated instrument's noise, ``[simulation.devices.<name>] seed``):
   the third speed (or the safety bound stopped the plan), again with 2, then 4 releases per
   speed;
 - **FD route**: 10 speeds from 0.8 down to 0.3 of the true flutter speed, 1 release each, the
-  flutter derivatives (:func:`ident.fd_method.identify`, no forces used) and their flutter
-  speed (the indirect route has no std of its own).
+  flutter derivatives (:func:`ident.identification.fd_method.identify`, no forces used) and their
+  flutter speed (the indirect route has no std of its own).
 
 All with decays of 15 periods of the slower mode (7.5 s on the plate, 12.5 s on the deck; 1 release
 per speed unless said) and a fast simulated fan ramp (1000 rpm/s; the wind-on time then counts
@@ -69,10 +69,10 @@ from daq.campaign.adaptive import MIN_SPEEDS
 from daq.campaign.plan import parse_plan
 from daq.campaign.runner import CampaignOutcome, run_plan
 from daq.config import RigConfig, parse_rig_config
-from ident import flutter
-from ident.e2rfc import distinct_wind_speeds
-from ident.fd_method import identify as fd_identify
-from ident.io import campaign_section, read_run
+from ident.identification.e2rfc import distinct_wind_speeds
+from ident.identification.fd_method import identify as fd_identify
+from ident.model import flutter
+from ident.records.run_file import campaign_section, read_run
 
 REPO = Path(__file__).resolve().parents[1]
 RIGS = {"flat_plate": REPO / "rig_configs" / "sim_flat_plate.toml",

@@ -3,12 +3,12 @@
 Each row is 10 seeded simulated campaigns (:func:`simulators.campaigns.simulated_campaign`: the
 flat-plate rig at 0.5, 0.65 and 0.8 U_F, two 7.5 s releases each, 2 % noise) with one effect
 hidden at its realistic strength (:data:`simulators.campaigns.REALISTIC`), or none. Each is
-diagnosed by :func:`ident.discrepancy.diagnose` (E2RFC baseline). Printed: the confusion table,
-the median gap before and after, the median and worst parameter error of the correctly named
-cases, how often the zero-wind coupling look (:mod:`ident.coupling`) found in-phase coupling in
-both modes, the time per campaign. Targets (issue 7): >= 95 % named correctly, no false alarm on
-clean data. The rows cover every effect of :data:`ident.effects.EFFECT_NAMES` (ten since issue
-20 added ``aerodynamic_nonlinearity`` and ``tubing_distortion``).
+diagnosed by :func:`ident.discrepancy.workflow.diagnose` (E2RFC baseline). Printed: the confusion
+table, the median gap before and after, the median and worst parameter error of the correctly named
+cases, how often the zero-wind coupling look (:mod:`ident.discrepancy.coupling`) found in-phase
+coupling in both modes, the time per campaign. Targets (issue 7): >= 95 % named correctly, no false
+alarm on clean data. The rows cover every effect of :data:`ident.physics.effects.EFFECT_NAMES` (ten
+since issue 20 added ``aerodynamic_nonlinearity`` and ``tubing_distortion``).
 
 Then (issue 20) pairs of effects that occur together, ``--pair-seeds`` campaigns each: a pair is
 *fully right* when exactly its two effects are named and every strength parameter is within
@@ -32,9 +32,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ident.discrepancy import diagnose
-from ident.effects import EFFECT_NAMES
-from ident.release import Release
+from ident.discrepancy.workflow import diagnose
+from ident.physics.effects import EFFECT_NAMES
+from ident.records.release import Release
 from simulators.campaigns import _STRENGTHS, REALISTIC, SECTION, scaled, simulated_campaign
 
 DEPTH = 0.03  # m, the flat plate's depth (the vortex effect's)
@@ -134,7 +134,7 @@ def main() -> None:
               + f"{correct / args.seeds:>9.0%}{before:>12.4f}{after:>11.4f}{err_text:>19}"
               + f"{coupled[row]:>9}")
     print("coupled = campaigns whose baseline lacks in-phase heave-pitch coupling at zero wind in "
-          "both modes (ident.coupling)")
+          "both modes (ident.discrepancy.coupling)")
     false_alarms = args.seeds - counts["none"]["none"]
     rate = correct_total / n_campaigns
     print()

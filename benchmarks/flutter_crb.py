@@ -16,7 +16,7 @@ moment]``:
 with derivatives by central differences. The buffeting spectrum's level (a 2 x 2 matrix) and
 shape (a polynomial in log frequency, ``--shape`` terms) are nuisance parameters per release:
 an estimator does not know them. The bound on the flutter speed's standard deviation is
-``g^T F^-1 g`` with ``g`` its gradient (``ident.flutter.speed_sensitivity``); "deterministic
+``g^T F^-1 g`` with ``g`` its gradient (``ident.model.flutter.speed_sensitivity``); "deterministic
 only" keeps the first term alone (what an estimator that treats the random response as noise can
 reach). The random response starts at rest at the release and the DFT treats it as stationary:
 the bound is slightly optimistic.
@@ -39,10 +39,12 @@ import math
 
 import numpy as np
 
-from ident import SectionModel, flat_plate
-from ident import flutter as fl
-from ident.rfc import RationalFunctionModel
-from ident.turbulence import StaticCoefficients, TurbulenceSpec, buffeting_force_spectrum
+from ident import SectionModel
+from ident.model import flat_plate
+from ident.model import flutter as fl
+from ident.model.quasi_steady import StaticCoefficients
+from ident.model.rfc import RationalFunctionModel
+from ident.physics.turbulence import TurbulenceSpec, buffeting_force_spectrum
 from simulators import simulate_release
 from simulators.decks import BLUFF_DECK, BLUFF_DECK_STATIC, bluff_deck_model
 

@@ -6,7 +6,8 @@ closed form), releases are simulated by ``simulators.tunnel`` from (4 mm, 0.02 r
 500 Hz, with Gaussian noise of 0, 2 and 5 % of each channel's RMS on all four channels:
 
 - E2RFC: 3 wind speeds (0.4, 0.6, 0.8 of the true flutter speed), structure chosen by evidence;
-- FD route (``ident.fd_method``): 10 wind speeds from 0.3 to 0.85 of the flutter speed;
+- FD route (``ident.identification.fd_method``): 10 wind speeds from 0.3 to 0.85 of the flutter
+speed;
 - E2RFC raw: the ablation of E2RFC's noise design (regressors differentiated from the noisy
   displacements instead of computed from the modal fit), 3 wind speeds.
 
@@ -31,10 +32,12 @@ not exact and the flow not smooth: 3 wind speeds (0.4/0.6/0.8 U_F) x 2 releases 
 The turbulence rows' releases are recorded with a hold of ``TUNNEL_HOLD_S`` (10 s) before each
 (a real release always has one: the operator holds the model in the wind before letting go);
 E2RFC then runs its turbulence branch (refined IV with the holds' noise model,
-``ident._turbulent_fit``). ``--tunnel-mode before`` identifies the same releases with their holds
-taken away (today's estimator), ``both`` prints the two; ``--rows turbulent|clean`` runs a subset;
+``ident.identification._turbulent_fit``). ``--tunnel-mode before`` identifies the same releases with
+their holds taken away (today's estimator), ``both`` prints the two; ``--rows turbulent|clean`` runs
+a subset;
 ``--turbulent-motion filter|smoother|smoother-sg`` selects how the branch builds its regressors'
-motion (``ident._turbulent_fit.MOTION``; docs/e2rfc_turbulence.md measures the three).
+motion (``ident.identification._turbulent_fit.MOTION``; docs/e2rfc_turbulence.md measures the
+three).
 
 Printed per row: the median and 90th percentile of |error|, the coverage of the 2-std interval
 (``IdentifiedModel.flutter``'s std: noise, structure, extrapolation, one lag more, release
@@ -70,12 +73,15 @@ import numpy as np  # noqa: E402
 from scipy.signal import lfilter  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
-from ident import Release, SectionModel, _turbulent_fit, e2rfc, flat_plate  # noqa: E402
-from ident import flutter as fl  # noqa: E402
-from ident._regressors import PreparedRelease, RegressorView, prepare  # noqa: E402
-from ident.conventions import FLUTTER_DERIVATIVE_NAMES  # noqa: E402
-from ident.modal import fit_modes  # noqa: E402
-from ident.turbulence import StaticCoefficients, TurbulenceSpec  # noqa: E402
+from ident import Release, SectionModel
+from ident.identification import _turbulent_fit, e2rfc
+from ident.identification._regressors import PreparedRelease, RegressorView, prepare
+from ident.identification.modal import fit_modes
+from ident.model import flat_plate
+from ident.model import flutter as fl
+from ident.model.conventions import FLUTTER_DERIVATIVE_NAMES
+from ident.model.quasi_steady import StaticCoefficients
+from ident.physics.turbulence import TurbulenceSpec
 from simulators import simulate_release  # noqa: E402
 from simulators.decks import BLUFF_DECK, BLUFF_DECK_STATIC, bluff_deck_model  # noqa: E402
 
@@ -185,7 +191,7 @@ def one_run(args):
     elif method == "E2RFC raw":
         model = identify_raw(releases, section)
     else:
-        from ident import fd_method
+        from ident.identification import fd_method
 
         model = fd_method.identify(releases, section)
     elapsed = time.perf_counter() - start
@@ -376,11 +382,11 @@ def main():
                         help="tunnel rows: the first seed (more seeds in another run)")
     parser.add_argument("--turbulent-a3", choices=("fitted-or-zero", "fitted", "choose", "e2rfc"),
                         default="fitted-or-zero",
-                        help="A3 in E2RFC's turbulence branch (ident.e2rfc.TURBULENT_A3)")
+                        help="A3 in E2RFC's turbulence branch (e2rfc.TURBULENT_A3)")
     parser.add_argument("--turbulent-motion", choices=("filter", "smoother", "smoother-sg"),
                         default=_turbulent_fit.MOTION,
                         help="how the turbulence branch estimates its regressors' motion "
-                             "(ident._turbulent_fit.MOTION)")
+                             "(ident.identification._turbulent_fit.MOTION)")
     args = parser.parse_args()
     if args.part == "timing":
         timing_part(args.repeats)

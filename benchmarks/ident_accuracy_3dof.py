@@ -30,8 +30,9 @@ from concurrent.futures import ProcessPoolExecutor  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from ident import Release, e2rfc  # noqa: E402
-from ident import flutter as fl  # noqa: E402
+from ident import Release
+from ident.identification import e2rfc
+from ident.model import flutter as fl
 from simulators.decks import BLUFF_DECK_3DOF, bluff_deck_3dof_model  # noqa: E402
 from simulators.tunnel import simulate_release  # noqa: E402
 

@@ -36,14 +36,19 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
+#: Where a checkout keeps E2RFC (in ident's subpackages, or flat as before them).
+E2RFC_PATHS = ("identification/e2rfc.py", "e2rfc.py")
 
 #: Run inside each checkout: build the releases from the arrays, time identify, print JSON.
 _TIMER = r"""
 import json, os, sys, time
 os.environ["OPENBLAS_NUM_THREADS"] = "1"
 import numpy as np
-from ident import SectionModel, e2rfc
-from ident.release import Release
+from ident import Release, SectionModel
+try:  # ident in subpackages (the facade names identify)
+    from ident import identify
+except ImportError:  # a checkout from before
+    from ident.e2rfc import identify
 data = np.load(sys.argv[1])
 section = SectionModel(**json.loads(sys.argv[2]))
 releases = [Release(t=data[f"t{i}"], h=data[f"h{i}"], alpha=data[f"alpha{i}"],
@@ -51,11 +56,11 @@ releases = [Release(t=data[f"t{i}"], h=data[f"h{i}"], alpha=data[f"alpha{i}"],
             for i in range(data["U"].size)]
 out = {}
 for label, kwargs in (("chosen", {}), ("given", {"n_lags": 2, "with_A3": True})):
-    e2rfc.identify(releases, section, **kwargs)  # warm-up
+    identify(releases, section, **kwargs)  # warm-up
     times = []
     for _ in range(int(sys.argv[3])):
         start = time.process_time()
-        e2rfc.identify(releases, section, **kwargs)
+        identify(releases, section, **kwargs)
         times.append(time.process_time() - start)
     out[label] = times
 print(json.dumps(out))
@@ -72,7 +77,7 @@ def write_releases(path: Path) -> None:
     import ident_accuracy as accuracy
 
     from ident import SectionModel
-    from ident import flutter as fl
+    from ident.model import flutter as fl
 
     section = SectionModel(**SECTION)
     U_F = fl.analyze(section, accuracy.TRUTH).speed
@@ -105,8 +110,8 @@ def main() -> None:
     args = parser.parse_args()
     trees = [ROOT, *(t.resolve() for t in args.tree)]
     for tree in trees[1:]:
-        if not (tree / "ident" / "e2rfc.py").is_file():
-            parser.error(f"--tree {tree}: not a windrig checkout (no ident/e2rfc.py)")
+        if not any((tree / "ident" / p).is_file() for p in E2RFC_PATHS):
+            parser.error(f"--tree {tree}: not a windrig checkout (no ident/.../e2rfc.py)")
     if args.rounds < 1 or args.repeats < 1:
         parser.error("--rounds and --repeats must be at least 1")
     times: dict[Path, dict[str, list[float]]] = {t: {"chosen": [], "given": []} for t in trees}

@@ -32,7 +32,8 @@ from daq.instruments.abb_acs580.settings import AbbAcs580Settings
 from daq.instruments.modbus_plc.driver import ModbusPlc
 from daq.instruments.modbus_plc.settings import ModbusPlcSettings
 from daq.transports.modbus import ModbusBus  # noqa: E402
-from ident import SectionModel, TapLayout, flat_plate  # noqa: E402
+from ident import SectionModel, TapLayout
+from ident.model import flat_plate
 from simulators.devices.abb_acs580 import SimAbbAcs580  # noqa: E402
 from simulators.devices.modbus_plc import SimModbusPlc  # noqa: E402
 from simulators.virtual_tunnel import VirtualTunnel  # noqa: E402

@@ -24,8 +24,8 @@ import numpy as np
 from daq.config import parse_rig_config
 from daq.offline.reprocess import reprocess
 from daq.recording.synthetic import write_release_run
-from ident import flat_plate, flutter
-from ident.release import Release
+from ident.model import flat_plate, flutter
+from ident.records.release import Release
 from simulators.campaigns import HOLDS, SECTION
 from simulators.tunnel import simulate_release
 

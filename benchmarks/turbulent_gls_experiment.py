@@ -53,9 +53,10 @@ from scipy.stats import t as student_t  # noqa: E402
 sys.path.insert(0, os.path.dirname(__file__))
 import ident_accuracy as ia  # noqa: E402
 
-from ident import Release, e2rfc  # noqa: E402
-from ident import flutter as fl  # noqa: E402
-from ident.rfc import RationalFunctionModel  # noqa: E402
+from ident import Release
+from ident.identification import e2rfc
+from ident.model import flutter as fl
+from ident.model.rfc import RationalFunctionModel
 from simulators import simulate_release  # noqa: E402
 
 CAUSAL = os.environ.get("PEM_CAUSAL", "0") == "1"

@@ -40,8 +40,8 @@ import numpy.typing as npt
 
 from daq.errors import ConfigError
 from daq.validation import check_keys, number
-from ident.air import CO2_MOLE_FRACTION, R_DRY_AIR, moist_air_density
-from ident.taps import TapLayout
+from ident.physics.air import CO2_MOLE_FRACTION, R_DRY_AIR, moist_air_density
+from ident.physics.taps import TapLayout
 
 __all__ = ["AirCalibration", "CHANNELS_PER_MODULE", "Calibration", "LaserCalibration",
            "PitotCalibration", "TAP_KEYS", "TapWiring", "parse_calibration"]
@@ -146,7 +146,7 @@ class AirCalibration:
     """How the air density is computed from the barometer's pressure and temperature.
 
     ``relative_humidity`` None: dry air, ``p / (R_d T)`` (the default, as before). A fraction:
-    moist air by CIPM-2007 (:func:`ident.air.moist_air_density`) at that fixed humidity.
+    moist air by CIPM-2007 (:func:`ident.physics.air.moist_air_density`) at that fixed humidity.
     ``from_barometer``: moist air at the humidity each barometer reading carries (a
     PTU300-class instrument's ``RH=`` field); a reading without one has no density (NaN: the
     run keeps the last density, as for any failed barometer reading).

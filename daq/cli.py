@@ -434,7 +434,7 @@ def _is_usage(exc: BaseException) -> bool:
     identified, a full disk: exit 1).
     """
     from daq.errors import ConfigError, NotARunFileError
-    from ident.io import FileFormatError
+    from ident.records.run_file import FileFormatError
 
     return isinstance(exc, (UsageError, ConfigError, FileFormatError, NotARunFileError,
                             FileNotFoundError,

@@ -28,12 +28,13 @@ from daq.errors import ConfigError
 from daq.instruments import registry
 from daq.tubing_config import parse_tubing, split_tubing
 from daq.validation import check_keys, number
-from ident.flat_plate import jones_model
-from ident.rfc import RationalFunctionModel
-from ident.section import SectionModel
-from ident.taps import TapLayout
-from ident.tubing import TubingGroup
-from ident.turbulence import StaticCoefficients, TurbulenceSpec
+from ident.model.flat_plate import jones_model
+from ident.model.quasi_steady import StaticCoefficients
+from ident.model.rfc import RationalFunctionModel
+from ident.model.section import SectionModel
+from ident.physics.taps import TapLayout
+from ident.physics.tubing import TubingGroup
+from ident.physics.turbulence import TurbulenceSpec
 
 __all__ = [
     "InstrumentConfig",

@@ -13,7 +13,7 @@ Not responsible for: the releases themselves (the engine's commands) or fitting 
 
 from __future__ import annotations
 
-from ident.section import SectionModel
+from ident.model.section import SectionModel
 
 __all__ = ["HOLD_S", "MIN_DECAY_PERIODS", "default_decay_s"]
 

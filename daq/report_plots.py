@@ -20,7 +20,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import numpy.typing as npt
 
-from ident.flutter import FlutterResult
+from ident.model.flutter import FlutterResult
 
 __all__ = ["DerivativeCurves", "ModeCurves", "flutter_derivative_grid", "flutter_diagram"]
 

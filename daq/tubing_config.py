@@ -2,7 +2,7 @@
 
 Each table gives a group of taps (``taps = "all"`` or a list of 0-based tap indices in the
 layout's order; default ``"all"``) and the tubing between them and the scanner, either as a
-tube (Bergh and Tijdeman's model, :class:`ident.tubing.Tube`)::
+tube (Bergh and Tijdeman's model, :class:`ident.physics.tubing.Tube`)::
 
     [[taps.tubing]]
     taps = "all"
@@ -29,7 +29,7 @@ from typing import Any
 
 from daq.errors import ConfigError
 from daq.validation import check_keys, number
-from ident.tubing import TableResponse, Tube, TubingGroup, tubing_set
+from ident.physics.tubing import TableResponse, Tube, TubingGroup, tubing_set
 
 __all__ = ["parse_tubing", "split_tubing", "tubing_metadata"]
 

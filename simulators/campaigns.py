@@ -15,10 +15,10 @@ laser crosstalk, a floor shaking at 6 Hz with 10 milli-g (a heave motion of abou
 decays' RMS), aerodynamic damping that grows by 40 % (heave) to 75 % (pitch) from small amplitudes
 to the release amplitude, and the tubing of 2 m tubes of 0.8 mm bore into
 50 mm^3 transducer volumes (Bergh-Tijdeman: as a second-order low-pass 16.9 Hz with damping
-0.99, :meth:`ident.effects.TubingDistortion.from_tube`; 5 % gain loss at 4 Hz, 18 ms lag).
+0.99, :meth:`ident.physics.effects.TubingDistortion.from_tube`; 5 % gain loss at 4 Hz, 18 ms lag).
 
-Not responsible for: the physics (:mod:`ident.simulate`, :mod:`simulators.tunnel`) or the
-diagnosis (:mod:`ident.discrepancy`).
+Not responsible for: the physics (:mod:`ident.simulation.decay`, :mod:`simulators.tunnel`) or the
+diagnosis (:mod:`ident.discrepancy.workflow`).
 """
 
 from __future__ import annotations
@@ -29,8 +29,9 @@ from typing import Any, cast
 
 import numpy as np
 
-from ident import flat_plate, flutter
-from ident.effects import (
+from ident.model import flat_plate, flutter
+from ident.model.section import SectionModel
+from ident.physics.effects import (
     AerodynamicNonlinearity,
     BaseVibration,
     ChannelDelay,
@@ -43,8 +44,7 @@ from ident.effects import (
     TubingDistortion,
     VortexShedding,
 )
-from ident.release import Release
-from ident.section import SectionModel
+from ident.records.release import Release
 from simulators.tunnel import simulate_release
 
 __all__ = ["FRACTIONS", "HOLDS", "REALISTIC", "SECTION", "scaled", "simulated_campaign"]

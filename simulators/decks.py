@@ -9,7 +9,7 @@ The model (in Roger's notation, ``Q(p)``, Scanlan's signs of
 ``docs/conventions.md``):
 
 - lift row: 0.7 times the exact-Theodorsen flat plate's (eight lags,
-  :func:`ident.flat_plate.theodorsen_model`): a lift slope of 0.7 x 2 pi, as decks with edge
+  :func:`ident.model.flat_plate.theodorsen_model`): a lift slope of 0.7 x 2 pi, as decks with edge
   details and barriers have;
 - moment from heave: 0.5 times the plate's;
 - moment from pitch: ``1.0 + -0.5 p - 0.02 p^2 + 0.6 p/(p + 0.5) - 0.2 p/(p + 3)``, lags of its
@@ -22,7 +22,7 @@ E2RFC fits, approximates it. On :data:`BLUFF_DECK` it flutters in the pitch bran
 2.84 Hz (K = 0.59), the same by the state-space and the frequency-domain analysis.
 
 With sway (three degrees of freedom, :func:`bluff_deck_3dof_model`): the same heave-pitch terms
-plus quasi-steady drag and sway terms (:mod:`ident.quasi_steady`) from
+plus quasi-steady drag and sway terms (:mod:`ident.model.quasi_steady`) from
 :data:`BLUFF_DECK_3DOF_STATIC`, the coefficients of a bluffer section (B/D about 2: drag 0.9 on
 the width, a drag that falls as the nose rises). On :data:`BLUFF_DECK_3DOF` (sway spring at
 2.6 Hz, below pitch) those terms raise the flutter speed by 1.9 %, to 13.87 m/s: a 2-DOF
@@ -37,11 +37,10 @@ import functools
 
 import numpy as np
 
-from ident.flat_plate import theodorsen_model
-from ident.quasi_steady import quasi_steady_model
-from ident.rfc import RationalFunctionModel
-from ident.section import SectionModel
-from ident.turbulence import StaticCoefficients
+from ident.model.flat_plate import theodorsen_model
+from ident.model.quasi_steady import StaticCoefficients, quasi_steady_model
+from ident.model.rfc import RationalFunctionModel
+from ident.model.section import SectionModel
 
 __all__ = ["BLUFF_DECK", "BLUFF_DECK_3DOF", "BLUFF_DECK_3DOF_STATIC", "BLUFF_DECK_STATIC",
            "bluff_deck_3dof_model", "bluff_deck_model"]
@@ -66,7 +65,7 @@ def bluff_deck_model() -> RationalFunctionModel:
 
     Examples
     --------
-    >>> from ident import flutter
+    >>> from ident.model import flutter
     >>> result = flutter.analyze(BLUFF_DECK, bluff_deck_model())
     >>> result.critical_mode, round(result.speed, 2)
     ('pitch', 13.61)
@@ -98,7 +97,7 @@ def bluff_deck_3dof_model() -> RationalFunctionModel:
 
     Examples
     --------
-    >>> from ident import flutter
+    >>> from ident.model import flutter
     >>> result = flutter.analyze(BLUFF_DECK_3DOF, bluff_deck_3dof_model())
     >>> result.critical_mode, round(result.speed, 2)
     ('pitch', 13.87)

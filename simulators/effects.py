@@ -1,11 +1,12 @@
-"""Named physical effects of the virtual tunnel: a re-export of :mod:`ident.effects`.
+"""Named physical effects of the virtual tunnel: a re-export of :mod:`ident.physics.effects`.
 
-The effect classes live in :mod:`ident.effects` so that the discrepancy workflow (in :mod:`ident`,
-which may not import :mod:`simulators`) can use the same physics; this module keeps the
+The effect classes live in :mod:`ident.physics.effects` so that the discrepancy workflow (in
+:mod:`ident`, which may not import :mod:`simulators`) can use the same physics; this module keeps
+the
 ``simulators.effects`` names working.
 """
 
-from ident.effects import (
+from ident.physics.effects import (
     EFFECT_NAMES,
     AerodynamicNonlinearity,
     BaseVibration,

@@ -1,6 +1,6 @@
 """Pneumatic tubing in the virtual tunnel: tap pressures as the scanner's transducers see them.
 
-The tubes (:mod:`ident.tubing`) are linear and time-invariant, and so is the map from the
+The tubes (:mod:`ident.physics.tubing`) are linear and time-invariant, and so is the map from the
 tunnel's physical channels to the tap pressures (``p = A [lift, moment, qd]``: the pressures
 that integrate to the forces plus the mean field of the dynamic pressure). So the pressure
 behind tap ``i``'s tube is ``A_i`` applied to the channels convolved with that tube's impulse
@@ -29,7 +29,7 @@ from collections.abc import Callable
 import numpy as np
 import numpy.typing as npt
 
-from ident.tubing import TableResponse, Tube, TubingSet
+from ident.physics.tubing import TableResponse, Tube, TubingSet
 
 __all__ = ["FIR_DT_S", "FIR_TAIL", "TubingFilter", "impulse_response"]
 

@@ -1,14 +1,14 @@
 """The virtual tunnel's releases: free-vibration decays of a section model in the wind, as recorded.
 
 The physics (exact matrix-exponential stepping of the linear aeroelastic system, ETD2RK for the
-structural nonlinearities, the measurement effects) lives in :mod:`ident.simulate`, shared with
-the discrepancy workflow; the effects in :mod:`ident.effects` (re-exported by
+structural nonlinearities, the measurement effects) lives in :mod:`ident.simulation.decay`, shared
+with the discrepancy workflow; the effects in :mod:`ident.physics.effects` (re-exported by
 :mod:`simulators.effects`).
 This module adds what the instruments add: the held, static stretch before the release and
 Gaussian measurement noise, and returns the record as a :class:`SimulatedRelease`. In turbulent
-flow (``static`` and ``turbulence``, :mod:`ident.turbulence`) the buffeting forces act on the held
-model (which does not move; the forces fluctuate) and drive it after the release, which then
-decays into a random response.
+flow (``static`` and ``turbulence``, :mod:`ident.physics.turbulence`) the buffeting forces act on
+the held model (which does not move; the forces fluctuate) and drive it after the release, which
+then decays into a random response.
 
 This module knows physics only; the simulated instruments sample it through their own wire
 protocols.
@@ -24,14 +24,15 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ident import _validate as v
-from ident.effects import Effect
-from ident.rfc import RationalFunctionModel
-from ident.section import SectionModel
-from ident.simulate import CHANNELS, CHANNELS_3DOF, channels, simulate_decay
-from ident.taps import TapLayout
-from ident.tubing import TubingSet, distort
-from ident.turbulence import GustField, StaticCoefficients, TurbulenceSpec
+from ident.model.quasi_steady import StaticCoefficients
+from ident.model.rfc import RationalFunctionModel
+from ident.model.section import SectionModel
+from ident.numerics import validate as v
+from ident.physics.effects import Effect
+from ident.physics.taps import TapLayout
+from ident.physics.tubing import TubingSet, distort
+from ident.physics.turbulence import GustField, TurbulenceSpec
+from ident.simulation.decay import CHANNELS, CHANNELS_3DOF, channels, simulate_decay
 
 __all__ = ["CHANNELS", "SimulatedRelease", "simulate_release"]
 
@@ -93,10 +94,10 @@ class SimulatedRelease:
                   tubing: TubingSet | None = None) -> FloatArray:
         """Tap pressures (Pa), shape (n, n_taps), that integrate exactly to ``lift`` and ``moment``.
 
-        See :meth:`ident.taps.TapLayout.pressures_for`; ``mean`` is a steady distribution, Pa.
-        With sway, they integrate to the ``drag`` too when the outline has faces across the wind
-        (:attr:`~ident.taps.TapLayout.carries_drag`; a plate's taps cannot carry it).
-        With ``tubing``, the pressures behind the tubes (:func:`ident.tubing.distort`, the
+        See :meth:`ident.physics.taps.TapLayout.pressures_for`; ``mean`` is a steady distribution,
+        Pa. With sway, they integrate to the ``drag`` too when the outline has faces across the wind
+        (:attr:`~ident.physics.taps.TapLayout.carries_drag`; a plate's taps cannot carry it).
+        With ``tubing``, the pressures behind the tubes (:func:`ident.physics.tubing.distort`, the
         record taken as steady before its first sample: simulate with ``pre_s`` for a hold).
         """
         drag = self.drag if self.drag is not None and taps.carries_drag else None
@@ -147,7 +148,7 @@ def simulate_release(
         ``noise`` is not zero or ``turbulence`` is a spec, so that every simulation is
         reproducible.
     effects : iterable of Effect, optional
-        Extra physics (:mod:`ident.effects`); at most one of each kind.
+        Extra physics (:mod:`ident.physics.effects`); at most one of each kind.
     oversample : int, optional
         Integrator steps per output sample for nonlinear effects (>= 1); raised automatically when
         a stiff effect (smoothed friction) needs a smaller step.
@@ -155,7 +156,7 @@ def simulate_release(
         Seconds of the held, static model recorded before the release (t < 0), >= 0.
     static, turbulence, span : optional
         Wind load: static coefficients (mean load), turbulence (spec or gust field) and the
-        section model's span, m; see :func:`ident.simulate.simulate_decay`.
+        section model's span, m; see :func:`ident.simulation.decay.simulate_decay`.
     p0 : float, optional
         Sway held before the release, m (a section with sway: three degrees of freedom).
 
@@ -165,7 +166,8 @@ def simulate_release(
 
     Examples
     --------
-    >>> from ident import SectionModel, flat_plate
+    >>> from ident import SectionModel
+    >>> from ident.model import flat_plate
     >>> s = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
     >>> r = simulate_release(s, flat_plate.jones_model(), 5.0, 0.0, 0.02, duration=10.0, fs=200.0)
     >>> r.t.shape, float(r.alpha[0])

@@ -18,19 +18,19 @@ mean dynamic pressure.
 Three degrees of freedom (a section with a sway spring, ``fp``, and a 3x3 model): the tunnel
 serves the sway ``p`` (m, downwind) and the drag (N/m, downwind) too (:meth:`VirtualTunnel.sample`,
 :meth:`VirtualTunnel.decay_truth`), and the tap pressures integrate to the drag as well when the
-taps' outline carries it (:attr:`ident.taps.TapLayout.carries_drag`: faces across the wind; a
-plate's taps cannot, and then the drag is in no pressure, as on a real rig).
+taps' outline carries it (:attr:`ident.physics.taps.TapLayout.carries_drag`: faces across the wind;
+a plate's taps cannot, and then the drag is in no pressure, as on a real rig).
 
-Turbulent flow (optional: static coefficients, a :class:`~ident.turbulence.TurbulenceSpec`, the
-model's span and a seed): one periodic field of effective gusts along the distance the air
-travels, ``x`` (:class:`~ident.turbulence.GustField`, ``2**20`` points every 1 cm, so ~10.5 km,
-17 min at 10 m/s before it repeats), is generated from the seed at construction. The tunnel
+Turbulent flow (optional: static coefficients, a :class:`~ident.physics.turbulence.TurbulenceSpec`,
+the model's span and a seed): one periodic field of effective gusts along the distance the air
+travels, ``x`` (:class:`~ident.physics.turbulence.GustField`, ``2**20`` points every 1 cm, so ~10.5
+km, 17 min at 10 m/s before it repeats), is generated from the seed at construction. The tunnel
 tracks ``x(t)``, advancing at the wind speed of the moment (continuous when the fan changes), and
 the buffeting forces follow it whenever the wind blows: on the held model (which does not move;
 the taps see the fluctuating pressures) and during a decay, which is driven by the same field
 from the release on. After the computed decay (``decay_duration_s``) the model does not freeze:
 the response is continued on demand from the full final state under the same field, in chunks
-of the same length (:meth:`ident.simulate.SimulatedDecay.continued`), the latest
+of the same length (:meth:`ident.simulation.decay.SimulatedDecay.continued`), the latest
 ``CONTINUATION_CHUNKS_KEPT`` of which are kept (instruments sample the recent past; an older
 time takes the value at the start of the oldest chunk kept). :meth:`VirtualTunnel.decay_truth`
 covers the computed decay only. Smooth flow keeps the previous behaviour (the model rests at its
@@ -53,13 +53,14 @@ import numpy as np
 import numpy.typing as npt
 from scipy.interpolate import CubicSpline
 
-from ident.air import R_DRY_AIR
-from ident.rfc import RationalFunctionModel
-from ident.section import SectionModel
-from ident.simulate import SimulatedDecay, simulate_decay
-from ident.taps import TapLayout
-from ident.tubing import TubingSet
-from ident.turbulence import GustField, StaticCoefficients, TurbulenceSpec, WindLoad
+from ident.model.quasi_steady import StaticCoefficients
+from ident.model.rfc import RationalFunctionModel
+from ident.model.section import SectionModel
+from ident.physics.air import R_DRY_AIR
+from ident.physics.taps import TapLayout
+from ident.physics.tubing import TubingSet
+from ident.physics.turbulence import GustField, TurbulenceSpec, WindLoad
+from ident.simulation.decay import SimulatedDecay, simulate_decay
 from simulators.clock import Clock, MonotonicClock
 from simulators.effects import Effect
 from simulators.tubing import TubingFilter

@@ -26,7 +26,8 @@ import pytest
 
 from daq.config import load_rig_config
 from daq.recording.synthetic import write_release_run
-from ident import Release, SectionModel, flat_plate
+from ident import Release, SectionModel
+from ident.model import flat_plate
 from simulators import simulate_release
 
 ROOT = Path(__file__).resolve().parents[1]

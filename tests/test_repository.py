@@ -123,7 +123,7 @@ def test_every_repository_path_mentioned_exists():
 
 
 def test_the_docs_name_every_simulated_fault_and_named_effect():
-    from ident.effects import EFFECT_NAMES
+    from ident.physics.effects import EFFECT_NAMES
     from simulators.devices import abb_acs580, modbus_plc, scanivalve_mps4264, vaisala_ptb330
 
     wire = (DOCS / "wire_formats.md").read_text(encoding="utf-8")

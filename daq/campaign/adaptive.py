@@ -6,17 +6,18 @@ the highest speed a campaign may set given what it has learnt so far.
 
 The prediction (c-optimal design: the criterion is the variance of one function of the
 parameters, the flutter speed ``U_F(theta)``): E2RFC's parameters ``theta`` (the ``A`` entries and
-``log d``) have the covariance ``C`` of :class:`ident.e2rfc.E2RFCDiagnostics`, and ``U_F`` the
-gradient ``g = dU_F/dtheta`` (:func:`ident.flutter.speed_sensitivity`), so that
-``var(U_F) = g^T C g`` (how :mod:`ident.e2rfc` computes its noise part). ``n`` more releases at
-a candidate speed ``U_c`` add the information ``n J_c^T J_c``, where ``J_c`` is the weighted
-Jacobian of E2RFC's force residuals for the release the identified model predicts there: its
-decay simulated from the campaign's hold position (:func:`ident.simulate.simulate_decay`), the
-regressors ``q, (B/U) q', (B/U)^2 q'', x_l`` of ``docs/conventions.md`` computed from it, each
-force row weighted by ``qd B^2 / sigma`` (the force noise ``sigma``, N/m and N m/m, measured on
-the recorded releases and taken as independent of U: the scanner's). The same construction for
-the recorded releases gives ``I_0 = sum_r J_r^T J_r``; its prediction of today's variance is
-scaled to the identified one (``kappa``), so only ratios of information matter::
+``log d``) have the covariance ``C`` of :class:`ident.identification.e2rfc.E2RFCDiagnostics`, and
+``U_F`` the gradient ``g = dU_F/dtheta`` (:func:`ident.model.flutter.speed_sensitivity`), so that
+``var(U_F) = g^T C g`` (how :mod:`ident.identification.e2rfc` computes its noise part). ``n`` more
+releases at a candidate speed ``U_c`` add the information ``n J_c^T J_c``, where ``J_c`` is the
+weighted Jacobian of E2RFC's force residuals for the release the identified model predicts there:
+its decay simulated from the campaign's hold position
+(:func:`ident.simulation.decay.simulate_decay`), the regressors ``q, (B/U) q', (B/U)^2 q'', x_l`` of
+``docs/conventions.md`` computed from it, each force row weighted by ``qd B^2 / sigma`` (the force
+noise ``sigma``, N/m and N m/m, measured on the recorded releases and taken as independent of U: the
+scanner's). The same construction for the recorded releases gives ``I_0 = sum_r J_r^T J_r``; its
+prediction of today's variance is scaled to the identified one (``kappa``), so only ratios of
+information matter::
 
     var_new(U_c) = kappa g^T (I_0 + n J_c^T J_c)^+ g,  kappa = sigma_param^2 / (g^T I_0^+ g)
 
@@ -25,8 +26,8 @@ fit's noise: it shrinks with information as the statistical part does (seen on t
 0.37, 0.11, 0.06, 0.02 m/s over four repeats of the top speed) and is scaled by the same ratio.
 The structure part (the spread of the structures the data cannot tell apart) and the
 extrapolation part (how far the flutter speed moves when the top speed's releases are left
-out, :mod:`ident.e2rfc`) are carried into the prediction unchanged: more releases at the top
-speed leave the reduced fit as it is (a campaign whose prediction let them shrink the
+out, :mod:`ident.identification.e2rfc`) are carried into the prediction unchanged: more releases at
+the top speed leave the reduced fit as it is (a campaign whose prediction let them shrink the
 extrapolation part repeated its top speed four times, each time expecting the std to halve,
 and stayed at 3.4 %), and releases below the top speed may move the reduced fit, but by how
 much and which way the data cannot tell beforehand, so no gain is counted on. Only a
@@ -42,8 +43,8 @@ when no candidate below the bound is predicted to reduce those parts (statistica
 one-lag-more, extrapolation) by :data:`MIN_GAIN`, unless the best is predicted to meet the
 campaign's target (a campaign at 1.002 % once stopped there, its best candidate predicting
 0.97 %: a gain of 2.5 % was all it lacked). The part below a decaying release (turbulent
-flow, :mod:`ident.e2rfc`) is carried too: it is a bias the releases share. The structure part,
-carried in the predicted
+flow, :mod:`ident.identification.e2rfc`) is carried too: it is a bias the releases share. The
+structure part, carried in the predicted
 total, does not stop a campaign by itself: no gain is promised for it, but new data may tell
 the structures apart (on the plate a third speed took it from 0.24 to 0.006 m/s; on the deck
 one took the std to 44 %, a structure without flutter below the search limit).
@@ -66,7 +67,7 @@ Safety: :func:`safety_bound` is ``fraction * (U_F - 3 std)`` of the current esti
 without one: the first speeds are the plan's); the runner also applies the rig's limits.
 
 Not responsible for: recording (:mod:`daq.campaign.runner`) or the identification itself
-(:mod:`ident.e2rfc`).
+(:mod:`ident.identification.e2rfc`).
 """
 
 from __future__ import annotations
@@ -80,18 +81,18 @@ import numpy as np
 import numpy.typing as npt
 from scipy.signal import lfilter
 
-from ident import flutter
-from ident.campaign import CampaignAnalysis
-from ident.e2rfc import (
+from ident.identification.campaign import CampaignAnalysis
+from ident.identification.e2rfc import (
     DISTINCT_U_RTOL,
     FlutterUncertainty,
     IdentifiedModel,
     distinct_wind_speeds,
 )
-from ident.modal import noise_std
-from ident.release import Release
-from ident.section import SectionModel
-from ident.simulate import simulate_decay
+from ident.identification.modal import noise_std
+from ident.model import flutter
+from ident.model.section import SectionModel
+from ident.records.release import Release
+from ident.simulation.decay import simulate_decay
 
 __all__ = ["MIN_GAIN", "MIN_SPEEDS", "TIE_RTOL", "Choice", "choose_next", "predicted_std",
            "safety_bound"]
@@ -170,7 +171,7 @@ def safety_bound(analysis: CampaignAnalysis | None, fraction: float, held: float
 
 def _gradient(model: IdentifiedModel, section: SectionModel, result: flutter.FlutterResult
               ) -> FloatArray:
-    """``dU_F/dtheta`` in the covariance's parameter order (as :mod:`ident.e2rfc` builds it)."""
+    """``dU_F/dtheta`` in the covariance's parameter order (as E2RFC builds it)."""
     assert result.speed is not None and result.frequency is not None
     dU_dA, dU_dd = flutter.speed_sensitivity(section, model, result.speed, result.frequency)
     index = model.diagnostics.parameter_index
@@ -288,7 +289,7 @@ def _carried(u: FlutterUncertainty) -> float:
     """Return the parts carried unchanged into every prediction, m/s.
 
     The structure spread and the distance below a decaying release (a bias of the fit in
-    turbulence that more releases at the same speeds share, :mod:`ident.e2rfc`).
+    turbulence that more releases at the same speeds share, :mod:`ident.identification.e2rfc`).
     """
     return math.sqrt(u.structure**2 + u.below_decay**2)
 

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ident.errors import IdentError
-from ident.io import RunFile, read_run
+from ident.records.run_file import RunFile, read_run
 
 __all__ = ["RecordedSpeed", "interrupted_name", "read_back", "run_file_name"]
 

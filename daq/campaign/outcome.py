@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from daq.campaign.adaptive import Choice
-from ident.campaign import CampaignAnalysis
+from ident.identification.campaign import CampaignAnalysis
 
 __all__ = ["CampaignOutcome", "SpeedStep"]
 

@@ -136,8 +136,8 @@ class CampaignPlan:
         Extra wait between releases, s.
     hold_s : float
         Time the model is held in the wind between arming and releasing, s (default
-        :data:`daq.procedure.HOLD_S`). ``ident.io`` reads the hold from 0.25 s after the arm
-        event to 0.05 s before the release; E2RFC's turbulence branch needs 10 s of it.
+        :data:`daq.procedure.HOLD_S`). ``ident.records.run_file`` reads the hold from 0.25 s after
+        the arm event to 0.05 s before the release; E2RFC's turbulence branch needs 10 s of it.
     calz_start, calz_end : bool
     adaptive : AdaptiveSettings or None
     source : str

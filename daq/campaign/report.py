@@ -25,9 +25,9 @@ import numpy as np
 
 from daq.campaign.runner import CampaignOutcome
 from daq.report_plots import DerivativeCurves, ModeCurves, flutter_derivative_grid, flutter_diagram
-from ident import flutter
-from ident.rfc import RationalFunctionModel
-from ident.section import SectionModel
+from ident.model import flutter
+from ident.model.rfc import RationalFunctionModel
+from ident.model.section import SectionModel
 
 __all__ = ["read_previous", "report_dict", "write_report"]
 

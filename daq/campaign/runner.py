@@ -75,12 +75,12 @@ from daq.instruments.build import build_driver
 from daq.procedure import default_decay_s
 from daq.recording.devices import CLOCK_SETTLE_S
 from daq.recording.session import RecordingSession
-from ident.campaign import CampaignAnalysis, analyze_campaign
-from ident.e2rfc import distinct_wind_speeds
 from ident.errors import IdentError
-from ident.io import RunFile, campaign_section, read_run
-from ident.modal import fit_release_modes
-from ident.release import Release
+from ident.identification.campaign import CampaignAnalysis, analyze_campaign
+from ident.identification.e2rfc import distinct_wind_speeds
+from ident.identification.modal import fit_release_modes
+from ident.records.release import Release
+from ident.records.run_file import RunFile, campaign_section, read_run
 
 __all__ = ["CHECK_FAILED", "CampaignOutcome", "SpeedStep", "run_plan"]
 
@@ -183,7 +183,7 @@ def _truth_speed(config: RigConfig) -> float | None:
     # The truth exists only for a simulated rig; imported here so that a real campaign never
     # loads the simulators.
     from daq.sim.campaign import simulated_truth
-    from ident import flutter
+    from ident.model import flutter
 
     section, model = simulated_truth(config)
     speed = flutter.analyze(section, model).speed

@@ -11,7 +11,7 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-from ident.taps import TapLayout
+from ident.physics.taps import TapLayout
 
 __all__ = ["amplitude_spectrum", "perimeter_positions", "pressure_coefficients"]
 

@@ -4,12 +4,12 @@ Responsibility: :class:`LiveIdentifier`, polled from the GUI timer, watches the 
 source (``source.decays()``: release instants and, once the model is armed again, the end of each
 decay) and, as soon as a decay is complete, cuts its rows out of the source's buffer, checks them
 (gaps, length, wind) and has a worker process fit its two modes
-(:func:`ident.modal.fit_release_modes`: frequency and damping ratio of the heave- and
+(:func:`ident.identification.modal.fit_release_modes`: frequency and damping ratio of the heave- and
 pitch-dominated modes). Once usable releases exist at two or more wind speeds, the worker identifies
 the rational-function model from all of them together (:func:`identify_releases`, which is
-:func:`ident.campaign.analyze_campaign`: E2RFC, the flutter speed with its standard deviation and
-warnings, the model's flutter derivatives, and the indirect method's table of flutter derivatives
-from the same decays to plot against), again whenever a release is added.
+:func:`ident.identification.campaign.analyze_campaign`: E2RFC, the flutter speed with its standard
+deviation and warnings, the model's flutter derivatives, and the indirect method's table of flutter
+derivatives from the same decays to plot against), again whenever a release is added.
 
 A section with sway (three degrees of freedom): the decays carry ``p`` and ``drag`` too (the
 releases E2RFC identifies in 3x3); the table's modes are still the heave and pitch ones, fitted
@@ -39,12 +39,12 @@ import numpy as np
 import numpy.typing as npt
 
 from daq.procedure import default_decay_s
-from ident import e2rfc
-from ident.campaign import CampaignAnalysis, analyze_campaign
 from ident.errors import IdentError
-from ident.modal import ReleaseModes, fit_release_modes
-from ident.release import Release
-from ident.section import SectionModel
+from ident.identification import e2rfc
+from ident.identification.campaign import CampaignAnalysis, analyze_campaign
+from ident.identification.modal import ReleaseModes, fit_release_modes
+from ident.model.section import SectionModel
+from ident.records.release import Release
 
 __all__ = ["DECAY_COLUMNS", "MIN_DECAY_S", "STILL_AIR_U", "SWAY_COLUMNS", "DecaySource",
            "LiveIdentifier", "ReleaseRow", "identify_releases"]
@@ -114,7 +114,7 @@ class ReleaseRow:
 
 
 def identify_releases(releases: Sequence[Release], section: SectionModel) -> CampaignAnalysis:
-    """Analyse the session's usable releases: :func:`ident.campaign.analyze_campaign`.
+    """Analyse the session's usable releases (``analyze_campaign``).
 
     Raises
     ------

@@ -21,7 +21,7 @@ import pyqtgraph as pg
 from PySide6 import QtCore, QtWidgets
 
 from daq.console.live_ident import LiveIdentifier, ReleaseRow
-from ident.conventions import FLUTTER_DERIVATIVE_NAMES
+from ident.model.conventions import FLUTTER_DERIVATIVE_NAMES
 
 __all__ = ["RELEASE_COLUMNS", "DerivativesPanel", "ReleasesPanel"]
 

@@ -103,7 +103,7 @@ def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: 
     aero_path : Path, optional
         RFC model (.json) or flutter-derivative table (.csv); required unless only converting.
     convention : str
-        Signs of a table (:data:`ident.fd_table.CONVENTIONS`).
+        Signs of a table (:data:`ident.tables.fd_table.CONVENTIONS`).
     u_max : float, optional
         Top of the state-space search, m/s.
     json_path, out : Path, optional
@@ -219,7 +219,7 @@ def _read_bridge(path: Path, mode_tables: list[Path] | None) -> Any:
 def _read_aero(path: Path, bridge: Any, convention: str) -> Any:
     from ident.bridge.aero import aero_from_model, aero_from_table
     from ident.errors import IdentError
-    from ident.fd_table import FlutterDerivativeTable
+    from ident.tables.fd_table import FlutterDerivativeTable
 
     suffix = path.suffix.lower()
     if suffix == ".json":

@@ -2,13 +2,13 @@
 
 Responsibility: :func:`derivative_rows` and :func:`format_derivative_table` give the flutter
 derivatives of a rational-function model (``H1*..A4*``, or with sway all 18 ``H1*..H6*,
-A1*..A6*, P1*..P6*`` in the order of :func:`ident.conventions.derivative_names`, Scanlan's
+A1*..A6*, P1*..P6*`` in the order of :func:`ident.model.conventions.derivative_names`, Scanlan's
 signs of ``docs/conventions.md``) at a few reduced frequencies spanning what the releases
 measured, one line per derivative; ``windrig identify`` prints it for a run of three degrees of
 freedom. :func:`check_model_dof` refuses a model with fewer degrees of freedom than its
 section, such as an identification that ignored the sway.
 
-Not responsible for: identifying the model (:mod:`ident.e2rfc`) or the command line
+Not responsible for: identifying the model (:mod:`ident.identification.e2rfc`) or the command line
 (:mod:`daq.offline.flutter_commands`).
 """
 
@@ -19,10 +19,10 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ident.conventions import derivative_names
 from ident.errors import IdentError
-from ident.rfc import RationalFunctionModel
-from ident.section import SectionModel
+from ident.model.conventions import derivative_names
+from ident.model.rfc import RationalFunctionModel
+from ident.model.section import SectionModel
 
 __all__ = ["TABLE_POINTS", "check_model_dof", "derivative_rows", "format_derivative_table"]
 
@@ -60,7 +60,7 @@ def format_derivative_table(model: RationalFunctionModel, K_span: npt.ArrayLike)
 
     Examples
     --------
-    >>> from ident.flat_plate import jones_model
+    >>> from ident.model.flat_plate import jones_model
     >>> lines = format_derivative_table(jones_model(), [0.5, 1.0])
     >>> len(lines), lines[2].split()[0]
     (10, 'H1*')

@@ -1,8 +1,9 @@
 """``windrig diagnose``: the discrepancy workflow on recorded run files, with its plots.
 
-Responsibility: read the releases of one campaign's run files (:func:`ident.io.read_run`, one
-section model), run :func:`ident.discrepancy.diagnose` (E2RFC baseline), print its report and
-write three plots (matplotlib, Agg) into the output directory:
+Responsibility: read the releases of one campaign's run files
+(:func:`ident.records.run_file.read_run`, one section model), run
+:func:`ident.discrepancy.workflow.diagnose` (E2RFC baseline), print its report and write three plots
+(matplotlib, Agg) into the output directory:
 
 - ``diagnose_decays.png``: h and alpha of one release per wind speed, measured against the
   baseline's and the refitted model's simulations;
@@ -14,7 +15,8 @@ write three plots (matplotlib, Agg) into the output directory:
   systematic residual left, its averaged spectrum (the line found marked) and measured minus
   simulated of one release per wind speed.
 
-Not responsible for: the numerics (:mod:`ident.discrepancy`) or reading files (:mod:`ident.io`).
+Not responsible for: the numerics (:mod:`ident.discrepancy.workflow`) or reading files
+(:mod:`ident.records.run_file`).
 """
 
 from __future__ import annotations
@@ -28,9 +30,9 @@ from typing import Any
 
 import numpy as np
 
-from ident.discrepancy import backbone, diagnose
+from ident.discrepancy.workflow import backbone, diagnose
 from ident.errors import IdentError
-from ident.io import campaign_section, read_run
+from ident.records.run_file import campaign_section, read_run
 
 __all__ = ["run_diagnose"]
 

@@ -1,14 +1,14 @@
 """``windrig identify`` and ``windrig flutter``: E2RFC on run files, flutter of a section.
 
 ``windrig identify FILES`` reads recorded runs, identifies the rational-function model of their
-releases (E2RFC with its uncertainty, :func:`ident.campaign.analyze_campaign`) and prints the
-flutter speed; for runs of three degrees of freedom also the 18 flutter derivatives over the
-releases' reduced frequencies (:mod:`daq.offline.derivative_table`; a model that left out the
+releases (E2RFC with its uncertainty, :func:`ident.identification.campaign.analyze_campaign`) and
+prints the flutter speed; for runs of three degrees of freedom also the 18 flutter derivatives over
+the releases' reduced frequencies (:mod:`daq.offline.derivative_table`; a model that left out the
 sway is refused). ``windrig flutter --section S.json (--model M.json | --table T.csv)`` analyses a
 section of two or three degrees of freedom with a model (``windrig identify --json`` output or
 ``{"A": ..., "d": ...}``) or a flutter-derivative table (``docs/flutter_derivative_tables.md``):
 the state-space analysis (a table is first fitted with rational functions,
-:func:`ident.roger_table.fit_table`) and the frequency-domain one as its check.
+:func:`ident.tables.roger_table.fit_table`) and the frequency-domain one as its check.
 
 Every mistake in what the user gave (a file that cannot be read, a section or model that is not
 valid, a 2-DOF model for a section with sway) is a :class:`~daq.errors.UsageError` naming the file.
@@ -50,9 +50,9 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
         derivative_rows,
         format_derivative_table,
     )
-    from ident.campaign import analyze_campaign
     from ident.errors import IdentError
-    from ident.io import campaign_section, read_run, tubing_note
+    from ident.identification.campaign import analyze_campaign
+    from ident.records.run_file import campaign_section, read_run, tubing_note
 
     runs = [read_run(p, tubing_correction=tubing_correction) for p in files]
     section = campaign_section(runs)
@@ -127,18 +127,18 @@ def run_flutter(section_path: Path, *, model_path: Path | None = None,
     Parameters
     ----------
     section_path : Path
-        JSON of :class:`ident.section.SectionModel` fields (with ``fp``: three degrees of
+        JSON of :class:`ident.model.section.SectionModel` fields (with ``fp``: three degrees of
         freedom).
     model_path, table_path : Path
         Exactly one: a rational-function model (JSON) or a flutter-derivative table (CSV).
     convention : str
-        Sign convention of the table (:data:`ident.fd_table.CONVENTIONS`).
+        Sign convention of the table (:data:`ident.tables.fd_table.CONVENTIONS`).
     u_max : float, optional
         Upper wind speed of the state-space search, m/s.
     json_path : Path, optional
         Write the result (DESIGN's keys), the section and the model used here.
     """
-    from ident import flutter
+    from ident.model import flutter
 
     if u_max is not None and not u_max > 0:
         raise UsageError(f"--u-max {u_max:g}: must be > 0 m/s")
@@ -223,10 +223,10 @@ def _read_model(path: Path, n_dof: int, section_path: Path) -> Any:
 def _table_model(path: Path, convention: str, section: Any,
                  out: dict[str, Any]) -> tuple[Any, Any]:
     """Read a table, fit it, and return the model and the table's frequency-domain result."""
-    from ident import flutter
     from ident.errors import IdentError
-    from ident.fd_table import FlutterDerivativeTable
-    from ident.roger_table import fit_table
+    from ident.model import flutter
+    from ident.tables.fd_table import FlutterDerivativeTable
+    from ident.tables.roger_table import fit_table
 
     try:
         table = FlutterDerivativeTable.from_csv(path, convention=convention)

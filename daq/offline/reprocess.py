@@ -15,7 +15,7 @@ again only files that changed; the campaigns, which the settings do change, are 
 The cluster: a ``LocalCluster`` of ``workers`` single-threaded processes by default; with
 ``scheduler`` an existing one (``tcp://host:8786``) is used instead, and nothing else changes.
 
-Not responsible for: the numerics (:mod:`ident`), reading files (:mod:`ident.io`).
+Not responsible for: the numerics (:mod:`ident`), reading files (:mod:`ident.records.run_file`).
 """
 
 from __future__ import annotations
@@ -38,13 +38,13 @@ import numpy as np
 from tqdm import tqdm
 
 from daq.offline.report import ReprocessSummary, write_outputs
-from ident.campaign import analyze_campaign
-from ident.discrepancy import diagnose
+from ident.discrepancy.workflow import diagnose
 from ident.errors import IdentError
-from ident.io import read_run
-from ident.modal import fit_release_modes
-from ident.release import Release
-from ident.section import SectionModel
+from ident.identification.campaign import analyze_campaign
+from ident.identification.modal import fit_release_modes
+from ident.model.section import SectionModel
+from ident.records.release import Release
+from ident.records.run_file import read_run
 
 __all__ = ["ReprocessSettings", "expand_paths", "load_reprocess_config",
            "process_campaign", "process_file", "reprocess"]
@@ -234,7 +234,8 @@ def process_campaign(name: str, files: list[dict[str, Any]],
     -------
     dict
         ``files``, ``n_releases``, ``wind_speeds``, and ``model`` (dict), ``structure``,
-        ``flutter_speed``, ``flutter_std`` (all parts: :class:`ident.e2rfc.FlutterUncertainty`),
+        ``flutter_speed``, ``flutter_std`` (all parts:
+        :class:`ident.identification.e2rfc.FlutterUncertainty`),
         ``flutter_std_parts``, ``warnings``, ``flutter_frequency``, ``flutter_structures`` (the
         flutter speed of every structure within one standard error of the best, by label, None
         for no flutter), ``effect`` and the gaps (with ``diagnose``: ``effects``, the named

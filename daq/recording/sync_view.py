@@ -8,7 +8,7 @@ pressures (the rig's tap layout without its dead taps), the wind speed from the 
 the tunnel calibration with the air density in use. A column the rig has no device for is NaN.
 A rig with three degrees of freedom (``[section] fp``) adds the sway ``p`` from its sway laser
 (``axis = "sway"``) and the drag from the taps' pressures (NaN when the taps' outline has no
-faces across the wind, :attr:`ident.taps.TapLayout.carries_drag`); a 2-DOF rig has neither.
+faces across the wind, :attr:`ident.physics.taps.TapLayout.carries_drag`); a 2-DOF rig has neither.
 The calibrations are the rig config's (:class:`daq.calibration.Calibration`).
 
 Not responsible for: the conversions' numerics (:mod:`daq.sync.conversions`), resampling

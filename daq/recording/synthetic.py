@@ -1,7 +1,7 @@
 """Run files written from releases: the file readers' test and benchmark data.
 
-Responsibility: :func:`write_release_run` writes :class:`~ident.release.Release` objects (e.g.
-simulated ones) back to back into a run file with the acquisition's own recorder
+Responsibility: :func:`write_release_run` writes :class:`~ident.records.release.Release` objects
+(e.g. simulated ones) back to back into a run file with the acquisition's own recorder
 (:class:`~daq.recording.recorder.RunRecorder`), for the tests and benchmarks of the file
 readers (``windrig identify``, ``diagnose``, ``reprocess``, the console's replay).
 

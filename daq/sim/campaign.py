@@ -8,15 +8,16 @@ the true flutter speed it sets the fan so that the wind is ``f U_F``, waits for 
 arms, holds and releases the model ``releases_per_speed`` times, recording each free decay for
 ``decay_s`` seconds, one HDF5 run file per wind speed (``campaign_U<speed>.h5``), switched under the
 running engine as ``windrig campaign`` does. It then reads the files back
-(:func:`ident.io.read_run`: each release ends where the model is armed again), identifies the
-rational-function model from all releases (:func:`ident.e2rfc.identify`), computes the identified
-flutter speed with its standard deviation and compares it with the truth. Plots (matplotlib, Agg)
-are written next to the files.
+(:func:`ident.records.run_file.read_run`: each release ends where the model is armed again),
+identifies the rational-function model from all releases
+(:func:`ident.identification.e2rfc.identify`), computes the identified flutter speed with its
+standard deviation and compares it with the truth. Plots (matplotlib, Agg) are written next to the
+files.
 
 Three degrees of freedom (a rig config with ``[section] fp`` and a sway laser): the same
 campaign, the releases carrying the sway and the drag; the decays plot shows p too. Until
-:func:`ident.e2rfc.identify` identifies 3x3 models, the campaign stops after reading the files
-back: ``identification_error`` says why, and the plots show the decays and the truth.
+:func:`ident.identification.e2rfc.identify` identifies 3x3 models, the campaign stops after reading
+the files back: ``identification_error`` says why, and the plots show the decays and the truth.
 
 Not responsible for: the drivers, the engine or the file (:mod:`daq.recording`), the numerics
 (:mod:`ident`), or the decay length (:mod:`daq.procedure`). Real rigs are not driven here: the truth
@@ -41,13 +42,14 @@ from daq.recording.recorder import refuse_existing_run_file
 from daq.recording.session import RecordingSession
 from daq.report_plots import DerivativeCurves, ModeCurves, flutter_derivative_grid, flutter_diagram
 from daq.sim.rig_process import start_rig_process
-from ident import e2rfc, flutter
-from ident.campaign import CampaignAnalysis, analyze_campaign
 from ident.errors import IdentError
-from ident.io import campaign_section, read_run
-from ident.release import Release
-from ident.rfc import RationalFunctionModel
-from ident.section import SectionModel
+from ident.identification import e2rfc
+from ident.identification.campaign import CampaignAnalysis, analyze_campaign
+from ident.model import flutter
+from ident.model.rfc import RationalFunctionModel
+from ident.model.section import SectionModel
+from ident.records.release import Release
+from ident.records.run_file import campaign_section, read_run
 from simulators.virtual_tunnel import AirState
 
 __all__ = ["CampaignResult", "run_campaign", "simulated_truth"]
@@ -88,7 +90,7 @@ class CampaignResult:
     releases : list of Release
         The releases identified, in the order of the model's diagnostics.
     analysis : CampaignAnalysis or None
-        The whole campaign analysis (:func:`ident.campaign.analyze_campaign`).
+        The whole campaign analysis (:func:`ident.identification.campaign.analyze_campaign`).
     identification_error : str or None
         Why a 3-DOF campaign was not identified (None: it was, or the rig is 2-DOF).
     """
@@ -173,8 +175,9 @@ def run_campaign(config: RigConfig, out_dir: str | Path, *,
     progress : bool
         Show progress bars while recording.
     n_lags, with_A3 : optional
-        Model structure passed to :func:`ident.e2rfc.identify` (None: chosen by held-out error;
-        with two short releases the choice can fall on too few lags, see the HIL test).
+        Model structure passed to :func:`ident.identification.e2rfc.identify` (None: chosen by
+        held-out error; with two short releases the choice can fall on too few lags, see the HIL
+        test).
 
     Returns
     -------

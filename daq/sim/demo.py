@@ -30,7 +30,7 @@ import numpy as np
 
 from daq.config import SHIPPED_CONFIGS, load_rig_config
 from daq.sim.campaign import run_campaign
-from ident import flat_plate, flutter
+from ident.model import flat_plate, flutter
 from simulators.virtual_tunnel import AirState
 
 #: The embedded default rig, shipped inside the package (``daq/rig_configs``).

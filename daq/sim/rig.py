@@ -30,7 +30,7 @@ import numpy as np
 
 from daq.config import InstrumentConfig, RigConfig
 from daq.errors import ConfigError
-from ident.tubing import Air, tubing_set
+from ident.physics.tubing import Air, tubing_set
 from simulators.clock import Clock, DeviceClock
 from simulators.devices.abb_acs580 import SimAbbAcs580
 from simulators.devices.microepsilon_ild1420 import SimMicroEpsilonIld1420

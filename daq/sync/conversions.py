@@ -26,8 +26,8 @@ import numpy as np
 import numpy.typing as npt
 
 from daq.instruments.vaisala_ptb330.decoder import PRESSURE_RANGE_PA, TEMPERATURE_RANGE_K
-from ident.air import R_DRY_AIR
-from ident.taps import TapLayout
+from ident.physics.air import R_DRY_AIR
+from ident.physics.taps import TapLayout
 
 __all__ = [
     "HeavePitch",
@@ -165,7 +165,7 @@ def sway_from_laser(distance_m: Any, standoff_m: float, z_m: float, alpha: Any) 
 
 
 def forces_from_pressures(pressures: Any, taps: TapLayout) -> tuple[FloatArray, FloatArray]:
-    """Lift and moment per unit span from tap pressures (:meth:`ident.taps.TapLayout.integrate`).
+    """Lift and moment per unit span from tap pressures (``TapLayout.integrate``).
 
     Parameters
     ----------
@@ -250,7 +250,7 @@ def air_density(pressure_pa: Any, temperature_k: Any) -> FloatArray:
 
     Humidity is neglected (moist air is lighter: rho is overestimated by ~0.4 % at 20 degC and
     50 %RH; see :func:`daq.instruments.vaisala_ptb330.decoder.reading_from_line`); a rig config's
-    ``[air]`` table makes the run writer use :func:`ident.air.moist_air_density` instead.
+    ``[air]`` table makes the run writer use :func:`ident.physics.air.moist_air_density` instead.
 
     Parameters
     ----------

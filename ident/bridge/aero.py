@@ -4,17 +4,17 @@ A bridge analysis needs the section's self-excited forces twice: as a rational-f
 for the state space (:func:`ident.bridge.flutter.analyze`) and as flutter-derivative functions
 for the frequency-domain check (:func:`ident.bridge.flutter.frequency_domain`). From an RFC model
 (``windrig identify --json``) both are the model's; from a flutter-derivative table the state
-space gets its Roger fit (:func:`ident.roger_table.fit_table`, weighted so that each force's
+space gets its Roger fit (:func:`ident.tables.roger_table.fit_table`, weighted so that each force's
 relative error counts alike at every tabulated K, which it reports) and the frequency domain the
 table itself (monotone interpolation, only within its K range).
 
 **Sway.** When the bridge's modes move the deck sideways (``p``) and the aerodynamics are of
 heave and pitch only (2 DOF), the drag and sway terms are taken quasi-steady from the bridge's
-static coefficients (:func:`ident.quasi_steady.quasi_steady_model`) if it has them; otherwise
+static coefficients (:func:`ident.model.quasi_steady.quasi_steady_model`) if it has them; otherwise
 the deck's sway feels no air, and a note says so.
 
-Not responsible for: reading the model or table files (:mod:`ident.fd_table`, the command line),
-the fit itself (:mod:`ident.roger_table`).
+Not responsible for: reading the model or table files (:mod:`ident.tables.fd_table`, the command
+line), the fit itself (:mod:`ident.tables.roger_table`).
 """
 
 from __future__ import annotations
@@ -27,11 +27,11 @@ import numpy as np
 import numpy.typing as npt
 
 from ident.bridge.model import BridgeModel
-from ident.conventions import FLUTTER_DERIVATIVE_NAMES
-from ident.fd_table import FlutterDerivativeTable
-from ident.quasi_steady import quasi_steady_derivatives, quasi_steady_model
-from ident.rfc import RationalFunctionModel
-from ident.roger_table import TableFit, fit_table
+from ident.model.conventions import FLUTTER_DERIVATIVE_NAMES
+from ident.model.quasi_steady import quasi_steady_derivatives, quasi_steady_model
+from ident.model.rfc import RationalFunctionModel
+from ident.tables.fd_table import FlutterDerivativeTable
+from ident.tables.roger_table import TableFit, fit_table
 
 __all__ = ["BridgeAero", "aero_from_model", "aero_from_table"]
 
@@ -85,7 +85,7 @@ def _with_sway(bridge: BridgeModel, model: RationalFunctionModel,
                      "coefficients: the deck's sway (p) feels no air")
         return model, fd
     notes.append(f"{source} has heave and pitch only: drag and sway terms quasi-steady from the "
-                 "bridge's static coefficients (ident.quasi_steady)")
+                 "bridge's static coefficients (ident.model.quasi_steady)")
 
     def derivatives(K: Any) -> dict[str, FloatArray]:
         planar = fd(K)
@@ -117,7 +117,8 @@ def aero_from_table(bridge: BridgeModel, table: FlutterDerivativeTable,
     source : str
         Name for messages.
     n_lags : int, optional
-        Lags of the fit; default chosen by held-out rows (:func:`ident.roger_table.fit_table`).
+        Lags of the fit; default chosen by held-out rows
+        (:func:`ident.tables.roger_table.fit_table`).
 
     Raises
     ------

@@ -4,8 +4,8 @@ Strip theory on the still-air modes (shared DESIGN, "Full-bridge flutter and buf
 ``docs/conventions.md``: h and L down, alpha and M nose-up, p and D downwind, gust ``w`` up).
 
 **Gust forces per unit span.** At a deck node, the quasi-steady buffeting forces of
-:func:`ident.turbulence.buffeting_gain` (derived there from the relative wind; the same
-linearisation as the self-excited quasi-steady terms of :mod:`ident.quasi_steady`)::
+:func:`ident.physics.turbulence.buffeting_gain` (derived there from the relative wind; the same
+linearisation as the self-excited quasi-steady terms of :mod:`ident.model.quasi_steady`)::
 
     L_b = qd B   [2 C_L u/U + (dC_L - C_D) w/U]
     M_b = qd B^2 [2 C_M u/U + dC_M w/U]
@@ -66,11 +66,12 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ident import _validate as v
-from ident._threads import single_threaded_blas
 from ident.bridge.model import BridgeModel
 from ident.bridge.statespace import BridgeStateSpace
-from ident.turbulence import StaticCoefficients, TurbulenceSpec, buffeting_gain
+from ident.model.quasi_steady import StaticCoefficients
+from ident.numerics import validate as v
+from ident.numerics.threads import single_threaded_blas
+from ident.physics.turbulence import TurbulenceSpec, buffeting_gain
 
 __all__ = [
     "BuffetingResponse",
@@ -97,11 +98,11 @@ def gust_gain(static: StaticCoefficients) -> FloatArray:
     """Non-dimensional gains ``g`` with ``[L_b B, M_b, D_b B] = (qd B^2 / U) g [u, w]``.
 
     Shape (3, 2): rows L, M, D; columns u (downwind), w (upward). Windrig's signs (see the
-    module docstring); the same matrix as :func:`ident.turbulence.buffeting_gain` without the
-    factor ``qd B^2 / U``.
+    module docstring); the same matrix as :func:`ident.physics.turbulence.buffeting_gain` without
+    the factor ``qd B^2 / U``.
     """
-    # One linearisation for section and bridge: ident.turbulence's gain at U = 1 m/s, B = 1 m,
-    # rho = 2 kg/m^3, where its factor qd B^2 / U is 1.
+    # One linearisation for section and bridge: ident.physics.turbulence's gain at U = 1 m/s, B = 1
+    # m, rho = 2 kg/m^3, where its factor qd B^2 / U is 1.
     return buffeting_gain(static, 1.0, 1.0, 2.0)
 
 
@@ -355,8 +356,8 @@ def frequency_domain(ss: BridgeStateSpace, spec: TurbulenceSpec, U: float, *,
 
     Notes
     -----
-    BLAS runs single-threaded here (:mod:`ident._threads`): the many small matrix products per
-    frequency ran 10 to 40 times slower with OpenBLAS's threads on the shared two-core host.
+    BLAS runs single-threaded here (:mod:`ident.numerics.threads`): the many small matrix products
+    per frequency ran 10 to 40 times slower with OpenBLAS's threads on the shared two-core host.
     """
     U = v.positive("U", U)
     bridge = ss.bridge

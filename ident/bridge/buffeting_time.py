@@ -47,13 +47,13 @@ import numpy as np
 import numpy.typing as npt
 from scipy.linalg import expm
 
-from ident import _validate as v
-from ident._threads import single_threaded_blas
 from ident.bridge.buffeting import BuffetingResponse, modal_gust_projection, physical_shapes
 from ident.bridge.model import BridgeModel
 from ident.bridge.statespace import BridgeStateSpace
 from ident.bridge.wind import coherence
-from ident.turbulence import TurbulenceSpec
+from ident.numerics import validate as v
+from ident.numerics.threads import single_threaded_blas
+from ident.physics.turbulence import TurbulenceSpec
 
 __all__ = ["modal_force_history", "simulate", "time_step"]
 

@@ -19,8 +19,8 @@ with ``Q_modal`` the section's ``Q(iK)`` (from the derivatives) projected on the
 scanned from high to low (wind rising); each branch is followed from its still-air mode; flutter
 is where a branch's root becomes real (zero damping), refined by Brent's method on K.
 
-Both run with single-threaded BLAS (:mod:`ident._threads`): the matrices are small enough that
-a thread pool costs more than it saves (eigenvalues of 200 states: 22 ms on one thread, 155 ms
+Both run with single-threaded BLAS (:mod:`ident.numerics.threads`): the matrices are small enough
+that a thread pool costs more than it saves (eigenvalues of 200 states: 22 ms on one thread, 155 ms
 on two of the shared two-core reference machine).
 
 Not responsible for: the bridge's data (:mod:`ident.bridge.model`), the state matrix
@@ -38,12 +38,12 @@ import numpy as np
 import numpy.typing as npt
 from scipy.optimize import brentq, linear_sum_assignment
 
-from ident import _validate as v
-from ident._threads import single_threaded_blas
 from ident.bridge.model import BridgeModel
 from ident.bridge.statespace import BridgeStateSpace
-from ident.conventions import Q_from_flutter_derivatives
-from ident.rfc import RationalFunctionModel
+from ident.model.conventions import Q_from_flutter_derivatives
+from ident.model.rfc import RationalFunctionModel
+from ident.numerics import validate as v
+from ident.numerics.threads import single_threaded_blas
 
 __all__ = ["BridgeFlutterResult", "analyze", "default_U_max", "frequency_domain"]
 
@@ -237,7 +237,7 @@ def analyze(bridge: BridgeModel, model: RationalFunctionModel, U_max: float | No
     Two uniform modes (heave, pitch) on a 1 m deck are the 2-DOF section (here the flat plate
     with Jones's function):
 
-    >>> from ident import flat_plate
+    >>> from ident.model import flat_plate
     >>> bridge = BridgeModel.from_dict({"B": 0.3, "rho": 1.225, "nodes_x": [0.0, 1.0],
     ...     "modes": [{"frequency": 2.0, "damping": 0.005, "generalised_mass": 3.0,
     ...                "h": [1.0, 1.0]},
@@ -358,7 +358,7 @@ def frequency_domain(bridge: BridgeModel, flutter_derivatives: FlutterDerivative
     bridge : BridgeModel
     flutter_derivatives : callable
         ``f(K) -> dict`` of the 8 (heave, pitch) or 18 derivatives at an array of K (e.g.
-        :meth:`RationalFunctionModel.flutter_derivatives`, :func:`ident.flat_plate.
+        :meth:`RationalFunctionModel.flutter_derivatives`, :func:`ident.model.flat_plate.
         flutter_derivatives`, a table's interpolator).
     K_range : (float, float), optional
         Reduced frequencies scanned, low and high. Default: from the lowest mode at ``U_max``

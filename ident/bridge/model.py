@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ident.turbulence import StaticCoefficients
+from ident.model.quasi_steady import StaticCoefficients
 
 __all__ = ["BridgeModel", "Mode", "SHAPE_NAMES"]
 

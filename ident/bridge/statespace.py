@@ -30,9 +30,9 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ident import _validate as v
 from ident.bridge.model import BridgeModel
-from ident.rfc import RationalFunctionModel
+from ident.model.rfc import RationalFunctionModel
+from ident.numerics import validate as v
 
 __all__ = ["BridgeStateSpace", "system_matrix"]
 
@@ -55,7 +55,7 @@ class BridgeStateSpace:
     One uniform heave mode on a 1 m deck, no air (rho small, U = 0): the still-air frequency.
 
     >>> import numpy as np
-    >>> from ident import flat_plate
+    >>> from ident.model import flat_plate
     >>> bridge = BridgeModel.from_dict({"B": 1.0, "rho": 1.2, "nodes_x": [0.0, 1.0],
     ...     "modes": [{"frequency": 2.0, "damping": 0.0, "generalised_mass": 1e9,
     ...                "h": [1.0, 1.0]}]})

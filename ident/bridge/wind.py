@@ -13,7 +13,8 @@ oncoming turbulence at deck level, as non-dimensional intensities and length sca
 
 The spectra (von Karman), the admittance (Davenport's ``chi(x) = 2 (x - 1 + e^-x) / x^2``,
 ``x = c f B / U``, on the force amplitude) and the quasi-steady gains are those of
-:mod:`ident.turbulence` (one implementation for the section and the bridge; its docstring and
+:mod:`ident.physics.turbulence` (one implementation for the section and the bridge; its docstring
+and
 ``docs/conventions.md`` state the forms). This module adds what a bridge needs beyond a section:
 the coherence of the gusts at two deck nodes ``dx`` apart, ``coh(f) = exp(-C f |dx| / U)``.
 
@@ -31,7 +32,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ident.turbulence import ADMITTANCES, TurbulenceSpec
+from ident.physics.turbulence import ADMITTANCES, TurbulenceSpec
 
 __all__ = ["WIND_KEYS", "coherence", "read_wind", "wind_from_dict"]
 
@@ -78,7 +79,7 @@ def coherence(f: Any, dx: Any, U: float, C: float) -> npt.NDArray[np.float64]:
 
 
 def wind_from_dict(data: dict[str, Any], *, source: str = "wind") -> TurbulenceSpec:
-    """Build a :class:`~ident.turbulence.TurbulenceSpec` from the keys of a WIND.toml.
+    """Build a :class:`~ident.physics.turbulence.TurbulenceSpec` from the keys of a WIND.toml.
 
     Parameters
     ----------

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from daq.cli import main
-from ident import flat_plate
+from ident.model import flat_plate
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "rig_configs" / "bridges"
 BRIDGE = EXAMPLES / "example_bridge.json"

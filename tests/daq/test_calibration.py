@@ -16,7 +16,7 @@ from daq.config import parse_rig_config
 from daq.errors import ConfigError
 from daq.recording.devices import ScannerRawRows
 from daq.recording.sync_view import polled_conditions, tap_columns
-from ident.air import moist_air_density
+from ident.physics.air import moist_air_density
 
 CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
 BASE = (CONFIGS / "sim_flat_plate.toml").read_text()

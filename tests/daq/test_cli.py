@@ -10,7 +10,8 @@ import json
 import pytest
 
 from daq.cli import main
-from ident import SectionModel, flat_plate, flutter
+from ident import SectionModel
+from ident.model import flat_plate, flutter
 
 
 def test_flutter_command_reads_json_section_and_model(tmp_path, capsys):
@@ -37,8 +38,7 @@ def test_flutter_command_refuses_an_unknown_section_key(tmp_path, capsys):
 
 def test_flutter_command_in_three_degrees_of_freedom(tmp_path, capsys):
     """A section with sway and a 3-DOF model: the library's speed; the JSON has 3x3 A."""
-    from ident.quasi_steady import quasi_steady_model
-    from ident.turbulence import StaticCoefficients
+    from ident.model.quasi_steady import StaticCoefficients, quasi_steady_model
 
     section = SectionModel(B=0.4, m=8.0, I=0.12, fh=1.5, fa=3.5, zeta_h=0.003, zeta_a=0.003,
                            fp=1.1, zeta_p=0.004)
@@ -172,7 +172,7 @@ def test_identify_reads_run_files_and_prints_the_flutter_speed(tmp_path, capsys)
 
 def test_identify_names_a_bad_file(tmp_path, capsys):
     """A file that is not a run file is reported by name (its exception with --debug)."""
-    from ident.io import FileFormatError
+    from ident.records.run_file import FileFormatError
 
     junk = tmp_path / "junk.h5"
     junk.write_text("junk")

@@ -16,8 +16,9 @@ import pytest
 from daq.cli import main
 from daq.config import load_rig_config
 from daq.recording.synthetic import write_release_run
-from ident import Release, SectionModel, flat_plate
-from ident import flutter as fl
+from ident import Release, SectionModel
+from ident.model import flat_plate
+from ident.model import flutter as fl
 from simulators import simulate_release
 
 CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"

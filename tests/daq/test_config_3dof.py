@@ -14,7 +14,7 @@ import pytest
 from daq.config import SHIPPED_CONFIGS, is_sway_laser, load_rig_config, parse_rig_config
 from daq.errors import ConfigError
 from daq.instruments.microepsilon_ild1420.settings import Ild1420Settings
-from ident import flutter as fl
+from ident.model import flutter as fl
 from simulators.decks import BLUFF_DECK_3DOF, bluff_deck_3dof_model
 
 SHIPPED = SHIPPED_CONFIGS / "sim_bluff_deck_3dof.toml"
@@ -38,8 +38,8 @@ def test_the_shipped_3dof_config_is_the_simulated_bluff_deck():
     truth = bluff_deck_3dof_model()
     model = rig.aerodynamic_model()
     # The config stores the model's numbers; the model's Theodorsen lags come from a fit
-    # (ident.flat_plate.theodorsen_model) whose optimum moves by ~1e-6 with the host's BLAS (3e-6
-    # measured on a fresh host): equal to 1e-5, and the same flutter speed to 1e-8.
+    # (ident.model.flat_plate.theodorsen_model) whose optimum moves by ~1e-6 with the host's BLAS
+    # (3e-6 measured on a fresh host): equal to 1e-5, and the same flutter speed to 1e-8.
     np.testing.assert_allclose(model.A, truth.A, rtol=1e-5, atol=1e-12)
     np.testing.assert_allclose(model.d, truth.d, rtol=1e-5, atol=0)
     assert model.A.shape == truth.A.shape and np.array_equal(model.A == 0, truth.A == 0)

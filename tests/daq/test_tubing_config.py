@@ -10,7 +10,7 @@ import pytest
 from daq.config import load_rig_config, parse_rig_config
 from daq.errors import ConfigError
 from daq.tubing_config import tubing_metadata
-from ident.tubing import TableResponse, Tube
+from ident.physics.tubing import TableResponse, Tube
 
 #: A minimal simulated rig (tests/daq/minimal_rig.toml, shared with the other config tests).
 BASE = (Path(__file__).parent / "minimal_rig.toml").read_text(encoding="utf-8")

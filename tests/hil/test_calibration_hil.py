@@ -29,7 +29,7 @@ import numpy as np
 from daq.config import parse_rig_config
 from daq.recording.info import format_info, run_info
 from daq.sim.recording import record_simulated_run
-from ident.air import moist_air_density
+from ident.physics.air import moist_air_density
 
 CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
 FAN_RPM = 900.0  # 9 m/s on this rig: lift and moment well above the scanner's noise

@@ -21,7 +21,7 @@ import pytest
 
 from daq.cli import main
 from daq.config import SHIPPED_CONFIGS
-from ident.io import read_run
+from ident.records.run_file import read_run
 
 pytestmark = pytest.mark.slow
 

@@ -17,7 +17,7 @@ import pytest
 
 from daq.cli import main
 from daq.sim.demo import DEFAULT_CONFIG
-from ident.io import read_run
+from ident.records.run_file import read_run
 
 
 def test_demo_campaign_identifies_the_flutter_speed_within_3_percent(tmp_path, capsys):

@@ -24,7 +24,8 @@ from daq.instruments.microepsilon_ild1420.driver import MicroEpsilonIld1420
 from daq.instruments.microepsilon_ild1420.settings import Ild1420Settings
 from daq.instruments.reading import Gap, Reading
 from daq.transports.byte_transport import open_transport
-from ident import SectionModel, TapLayout, flat_plate
+from ident import SectionModel, TapLayout
+from ident.model import flat_plate
 from simulators.clock import DeviceClock, MonotonicClock
 from simulators.devices.microepsilon_ild1420 import FATES, SimIld1420Truth, SimMicroEpsilonIld1420
 from simulators.virtual_tunnel import VirtualTunnel

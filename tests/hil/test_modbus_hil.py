@@ -23,7 +23,8 @@ from daq.instruments.abb_acs580.settings import AbbAcs580Settings
 from daq.instruments.modbus_plc.driver import ModbusPlc
 from daq.instruments.modbus_plc.settings import ModbusPlcSettings
 from daq.transports.modbus import ModbusBus
-from ident import SectionModel, TapLayout, flat_plate
+from ident import SectionModel, TapLayout
+from ident.model import flat_plate
 from simulators.devices.abb_acs580 import SimAbbAcs580
 from simulators.devices.modbus_plc import SimModbusPlc
 from simulators.virtual_tunnel import VirtualTunnel

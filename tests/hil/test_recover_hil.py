@@ -50,7 +50,7 @@ from daq.console.replay import ReplaySource
 from daq.recording.layout import STREAM_TABLES, SYNC_COLUMNS
 from daq.recording.recorder import RunRecorder
 from daq.recording.recover import RECOVERED_EVENT, needs_recovery
-from ident.io import read_run
+from ident.records.run_file import read_run
 
 REPO = Path(__file__).resolve().parents[2]
 CONFIG = REPO / "rig_configs" / "sim_flat_plate.toml"

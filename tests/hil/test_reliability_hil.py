@@ -58,7 +58,7 @@ from daq.recording.layout import SYNC_COLUMNS
 from daq.recording.recorder import RunRecorder
 from daq.recording.writer import RunWriter
 from daq.sim.recording import record_simulated_run
-from ident.io import read_run
+from ident.records.run_file import read_run
 
 REPO = Path(__file__).resolve().parents[2]
 CONFIG = REPO / "rig_configs" / "sim_flat_plate.toml"

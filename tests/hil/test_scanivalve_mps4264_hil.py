@@ -23,7 +23,8 @@ from daq.instruments.scanivalve_mps4264.blocks import STATUS_MISSING, STATUS_OK,
 from daq.instruments.scanivalve_mps4264.driver import ScanivalveMps4264
 from daq.instruments.scanivalve_mps4264.settings import Mps4264Settings
 from daq.transports.byte_transport import open_transport
-from ident import SectionModel, TapLayout, flat_plate
+from ident import SectionModel, TapLayout
+from ident.model import flat_plate
 from simulators.clock import DeviceClock
 from simulators.devices.scanivalve_mps4264 import SimScanivalveMps4264
 from simulators.virtual_tunnel import VirtualTunnel

@@ -149,7 +149,8 @@ def test_a_turbulent_virtual_tunnel_buffets_the_held_model_as_the_taps_see_it():
     integrated to the scanner's Nyquist rate. 2 s of 1 m of gust field at 8 m/s hold about 50
     correlation lengths (0.3 m), so the sample std scatters by ~10 %; 35 % is 3.5 of that.
     """
-    from ident.turbulence import StaticCoefficients, TurbulenceSpec
+    from ident.model.quasi_steady import StaticCoefficients
+    from ident.physics.turbulence import TurbulenceSpec
 
     text = (CONFIGS / "sim_flat_plate.toml").read_text()
     lift, U, config = _held_lift(text + TURBULENCE)

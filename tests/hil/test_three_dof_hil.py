@@ -5,7 +5,7 @@ bluff deck on its sway spring: two lasers for heave and pitch, a sway laser down
 (one scanner module) on a rectangle whose end faces carry the drag. One run (a fan ramp, one
 release) is recorded per module and checked against the virtual tunnel's truth: ``p`` and
 ``drag`` are in ``/entry/sync`` (the 2-DOF columns as ever), the releases table has ``p0``,
-and :func:`ident.io.read_run` gives 3-DOF releases.
+and :func:`ident.records.run_file.read_run` gives 3-DOF releases.
 
 Tolerances, and why: the sway laser reads p with the laser's own errors (noise 2.5e-5 of its
 50 mm range, 1.25 um; 16-bit words, 0.8 um) plus the clock maps' timing error (the sway's peak
@@ -37,7 +37,7 @@ from daq.config import parse_rig_config
 from daq.recording.run import record_run
 from daq.sim.rig_process import start_rig_process
 from daq.sim.sync_check import ClockTruthTracker, check_run
-from ident.io import read_run
+from ident.records.run_file import read_run
 
 CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
 FAN_RPM = 900.0  # 9 m/s on this rig (flutter at 13.87 m/s)

@@ -16,7 +16,7 @@ import numpy as np
 from daq.config import parse_rig_config
 from daq.instruments.build import build_driver
 from daq.sim.rig import start_simulated_rig
-from ident.tubing import Air, distort, tubing_set
+from ident.physics.tubing import Air, distort, tubing_set
 
 CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
 TUBES = '[[taps.tubing]]\ntaps = [0, 1, 2, 3]\nlength = 1.5\ndiameter = 1.0e-3\nvolume = 300e-9\n\n'
@@ -27,8 +27,8 @@ def test_the_simulated_rig_puts_the_configs_tubes_between_taps_and_scanner():
 
     The reference: the tunnel's own lift, moment and dynamic pressure (``sample``) made into
     tap pressures (the pressures that integrate to the forces, plus the mean field of the
-    tunnel's default pressure coefficients), through ``ident.tubing.distort``. Tolerance 1e-3
-    of the pressures' range, past the release's step (tests/simulators/test_tubing.py).
+    tunnel's default pressure coefficients), through ``ident.physics.tubing.distort``. Tolerance
+    1e-3 of the pressures' range, past the release's step (tests/simulators/test_tubing.py).
     """
     text = (CONFIGS / "sim_flat_plate.toml").read_text().replace("[limits]", TUBES + "[limits]")
     text = text.replace("temperature_c = 20.0", "temperature_c = 20.0\ntubing = true")

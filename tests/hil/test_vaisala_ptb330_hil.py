@@ -18,7 +18,8 @@ from daq.instruments.vaisala_ptb330.decoder import Ptb330Line, Ptb330LineDecoder
 from daq.instruments.vaisala_ptb330.driver import SERIAL_DEFAULTS, VaisalaPtb330
 from daq.instruments.vaisala_ptb330.settings import Ptb330Settings
 from daq.transports.byte_transport import open_transport
-from ident import SectionModel, TapLayout, flat_plate
+from ident import SectionModel, TapLayout
+from ident.model import flat_plate
 from simulators.devices.vaisala_ptb330 import SimVaisalaPtb330
 from simulators.virtual_tunnel import AirState, VirtualTunnel
 

@@ -1,11 +1,11 @@
-"""Moist-air density (CIPM-2007, ident.air) against published values."""
+"""Moist-air density (CIPM-2007, ident.physics.air) against published values."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from ident.air import moist_air_density, saturation_vapour_pressure
+from ident.physics.air import moist_air_density, saturation_vapour_pressure
 
 
 @pytest.mark.parametrize(("t_c", "p_kpa"), [(10.0, 1.2282), (20.0, 2.3393), (30.0, 4.2470)])

@@ -1,4 +1,4 @@
-"""ident.campaign.analyze_campaign: one object with everything a campaign's front ends show."""
+"""analyze_campaign: one object with everything a campaign's front ends show."""
 
 from __future__ import annotations
 
@@ -7,10 +7,12 @@ import json
 import numpy as np
 import pytest
 
-from ident import Release, SectionModel, e2rfc, flat_plate
-from ident import flutter as fl
-from ident.campaign import analyze_campaign
+from ident import Release, SectionModel
 from ident.errors import IdentError, RankDeficiencyError
+from ident.identification import e2rfc
+from ident.identification.campaign import analyze_campaign
+from ident.model import flat_plate
+from ident.model import flutter as fl
 from simulators import simulate_release
 
 SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)

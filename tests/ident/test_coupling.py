@@ -1,4 +1,4 @@
-"""Heave-pitch coupling at zero wind that the model lacks (``ident.coupling``).
+"""Heave-pitch coupling at zero wind that the model lacks (``ident.discrepancy.coupling``).
 
 Simulated campaigns of the flat-plate rig (:mod:`simulators.campaigns`: three wind speeds, two
 7.5 s releases each, 2 % noise, seeded) against the true aerodynamic model (R.T. Jones's), so
@@ -11,8 +11,8 @@ import math
 
 import pytest
 
-from ident import flat_plate
-from ident.coupling import COUPLING_FLOOR, coupling_verdict, zero_wind_coupling
+from ident.discrepancy.coupling import COUPLING_FLOOR, coupling_verdict, zero_wind_coupling
+from ident.model import flat_plate
 from simulators.campaigns import REALISTIC, SECTION, simulated_campaign
 
 

@@ -19,8 +19,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from ident.discrepancy import CHANNELS, NONE_RATIO, backbone, diagnose, gap
-from ident.effects import EFFECT_NAMES, BaseVibration, TubingDistortion
+from ident.discrepancy.workflow import CHANNELS, NONE_RATIO, backbone, diagnose, gap
+from ident.physics.effects import EFFECT_NAMES, BaseVibration, TubingDistortion
 from simulators.campaigns import _STRENGTHS, REALISTIC, SECTION, scaled, simulated_campaign
 
 DEPTH = 0.03  # m, the flat plate's (the vortex effect's depth)
@@ -203,9 +203,9 @@ def test_a_floor_vibration_is_named_with_its_frequency_and_the_taps_do_not_see_i
 
 def test_a_bergh_tijdeman_tube_is_named_as_its_second_order_equivalent():
     # The forces of a clean campaign through a real tube (2.5 m of 0.8 mm into 50 mm^3, by
-    # ident.tubing's FFT filter, not the effect's own second-order model): the diagnosis names
-    # tubing_distortion with the low-pass that matches the tube below 10 Hz.
-    from ident.tubing import Air, Tube, TubingGroup, distort, tubing_set
+    # ident.physics.tubing's FFT filter, not the effect's own second-order model): the diagnosis
+    # names tubing_distortion with the low-pass that matches the tube below 10 Hz.
+    from ident.physics.tubing import Air, Tube, TubingGroup, distort, tubing_set
 
     tube = Tube(length=2.5, diameter=0.8e-3, volume=50e-9)
     tubes = tubing_set([TubingGroup(taps=None, model=tube)], 2, Air())

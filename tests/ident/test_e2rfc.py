@@ -8,18 +8,11 @@ import math
 import numpy as np
 import pytest
 
-from ident import (
-    RankDeficiencyError,
-    RationalFunctionModel,
-    Release,
-    SectionModel,
-    e2rfc,
-    flat_plate,
-    flutter,
-    roger_fit,
-)
-from ident._e2rfc_problem import MAX_CONDITION
-from ident._selection import structure_label, within_one_se
+from ident import RankDeficiencyError, RationalFunctionModel, Release, SectionModel, roger_fit
+from ident.identification import e2rfc
+from ident.identification._e2rfc_problem import MAX_CONDITION
+from ident.model import flat_plate, flutter
+from ident.numerics.selection import structure_label, within_one_se
 from simulators import simulate_release
 
 SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
@@ -259,7 +252,7 @@ def test_one_lag_more_counts_only_where_the_data_allow_it(finer_kind, rejected, 
 
 def test_the_rejection_of_one_lag_more_is_the_candidates_held_out_error():
     """``finer_rejected`` scores the refit as the structure search scores its candidates."""
-    from ident._e2rfc_problem import Problem
+    from ident.identification._e2rfc_problem import Problem
 
     model = e2rfc.identify(releases(JONES, noise=0.02, seed=2), SECTION)
     diag = model.diagnostics
@@ -297,8 +290,8 @@ def test_the_lag_roots_of_an_ill_determined_alternative_are_converged_on_all_the
     further step predicts a relative cost decrease below 1e-8 (converged: 3e-11; after the one
     step: 3.5e-4).
     """
-    from ident._e2rfc_problem import Problem
-    from ident._regressors import prepare
+    from ident.identification._e2rfc_problem import Problem
+    from ident.identification._regressors import prepare
 
     section = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
     U_flutter = flutter.analyze(section, JONES).speed

@@ -14,13 +14,14 @@ import math
 import numpy as np
 import pytest
 
-from ident import Release, e2rfc, flat_plate
-from ident import flutter as fl
+from ident import Release
 from ident.errors import RankDeficiencyError
-from ident.quasi_steady import quasi_steady_model
-from ident.rfc import RationalFunctionModel
-from ident.section import SectionModel
-from ident.turbulence import StaticCoefficients
+from ident.identification import e2rfc
+from ident.model import flat_plate
+from ident.model import flutter as fl
+from ident.model.quasi_steady import StaticCoefficients, quasi_steady_model
+from ident.model.rfc import RationalFunctionModel
+from ident.model.section import SectionModel
 from simulators.decks import BLUFF_DECK_3DOF, bluff_deck_3dof_model
 from simulators.tunnel import simulate_release
 

@@ -14,10 +14,13 @@ import math
 
 import pytest
 
-from ident import Release, SectionModel, e2rfc, flat_plate
-from ident import flutter as fl
-from ident.e2rfc import FlutterUncertainty
-from ident.turbulence import StaticCoefficients, TurbulenceSpec
+from ident import Release, SectionModel
+from ident.identification import e2rfc
+from ident.identification.e2rfc import FlutterUncertainty
+from ident.model import flat_plate
+from ident.model import flutter as fl
+from ident.model.quasi_steady import StaticCoefficients
+from ident.physics.turbulence import TurbulenceSpec
 from simulators import simulate_release
 
 PLATE = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)

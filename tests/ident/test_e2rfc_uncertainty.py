@@ -15,10 +15,13 @@ import math
 import numpy as np
 import pytest
 
-from ident import Release, SectionModel, e2rfc, flat_plate
-from ident import flutter as fl
-from ident.e2rfc import RANDOM_RESPONSE_LIMIT, FlutterUncertainty
-from ident.turbulence import StaticCoefficients, TurbulenceSpec
+from ident import Release, SectionModel
+from ident.identification import e2rfc
+from ident.identification.e2rfc import RANDOM_RESPONSE_LIMIT, FlutterUncertainty
+from ident.model import flat_plate
+from ident.model import flutter as fl
+from ident.model.quasi_steady import StaticCoefficients
+from ident.physics.turbulence import TurbulenceSpec
 from simulators import simulate_release
 from simulators.decks import BLUFF_DECK, bluff_deck_model
 

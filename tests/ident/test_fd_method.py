@@ -1,4 +1,4 @@
-"""The flutter-derivative route (ident.fd_method): its accuracy, its known biases and its refusals.
+"""The flutter-derivative route (fd_method): its accuracy, its known biases and its refusals.
 
 The truth is the flat plate with Jones's approximation (an exact Roger model), simulated noise-free
 by the virtual tunnel at 10 wind speeds from 0.3 to 0.9 of the flutter speed. The classical method
@@ -21,13 +21,12 @@ from ident import (
     RationalFunctionModel,
     Release,
     SectionModel,
-    fd_method,
-    flat_plate,
-    flutter,
 )
-from ident.conventions import FLUTTER_DERIVATIVE_NAMES
-from ident.roger import _fit_entries
-from ident.roger_table import RogerProblem
+from ident.identification import fd_method
+from ident.model import flat_plate, flutter
+from ident.model.conventions import FLUTTER_DERIVATIVE_NAMES
+from ident.model.roger import fit_entries
+from ident.tables.roger_table import RogerProblem
 from simulators import simulate_release
 
 SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
@@ -325,7 +324,7 @@ def test_entrywise_fit_and_lag_search_recover_an_exact_roger_model():
     """Columns known at different K (as in a measured table): Jones's lags and RFCs come back."""
     K_h = np.linspace(0.35, 1.1, 10)
     K, Q = exact_table_entries(K_h, 1.9 * K_h, JONES)
-    fitted = _fit_entries(K, Q, np.array(flat_plate.JONES_LAGS), True)
+    fitted = fit_entries(K, Q, np.array(flat_plate.JONES_LAGS), True)
     # Linear least squares on exact data with a well-conditioned design: round-off.
     np.testing.assert_allclose(fitted.A, JONES.A, atol=1e-9 * np.abs(JONES.A).max())
     problem = RogerProblem(K, Q)

@@ -8,14 +8,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ident import flat_plate
-from ident import flutter as fl
-from ident.conventions import FLUTTER_DERIVATIVE_NAMES_3DOF, Q_from_flutter_derivatives
-from ident.fd_table import FlutterDerivativeTable
-from ident.quasi_steady import quasi_steady_model
-from ident.roger_table import fit_table
-from ident.section import SectionModel
-from ident.turbulence import StaticCoefficients
+from ident.model import flat_plate
+from ident.model import flutter as fl
+from ident.model.conventions import FLUTTER_DERIVATIVE_NAMES_3DOF, Q_from_flutter_derivatives
+from ident.model.quasi_steady import StaticCoefficients, quasi_steady_model
+from ident.model.section import SectionModel
+from ident.tables.fd_table import FlutterDerivativeTable
+from ident.tables.roger_table import fit_table
 from simulators.decks import BLUFF_DECK, bluff_deck_model
 
 SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 from scipy.special import jv, yv
 
-from ident import SectionModel, conventions, flat_plate, flutter
+from ident import SectionModel
+from ident.model import conventions, flat_plate, flutter
 
 PI = np.pi
 

@@ -14,7 +14,8 @@ import math
 import numpy as np
 import pytest
 
-from ident import AeroelasticSystem, RationalFunctionModel, SectionModel, flat_plate, flutter
+from ident import AeroelasticSystem, RationalFunctionModel, SectionModel
+from ident.model import flat_plate, flutter
 
 PI = math.pi
 

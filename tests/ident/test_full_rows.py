@@ -1,9 +1,10 @@
 """E2RFC's every-sample algebra from Gram matrices, against the formed residual and Jacobian.
 
-``ident._full_rows`` computes the Gauss-Newton step and the final coefficients from one Gram
-matrix per release; ``ident._stacked`` forms the 10^4-row residual and Golub-Pereyra Jacobian of
-the same problem. Both must agree: that is the independent check. The lag columns' real product
-(``RegressorView._real_design``) is checked against the complex product it replaces.
+``ident.identification._full_rows`` computes the Gauss-Newton step and the final coefficients from
+one Gram matrix per release; ``ident.identification._stacked`` forms the 10^4-row residual and
+Golub-Pereyra Jacobian of the same problem. Both must agree: that is the independent check. The lag
+columns' real product (``RegressorView._real_design``) is checked against the complex product it
+replaces.
 """
 
 from __future__ import annotations
@@ -13,10 +14,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-from ident import Release, SectionModel, flat_plate, flutter
-from ident._e2rfc_problem import Problem
-from ident._regressors import RegressorView, prepare
-from ident.modal import _exponentials
+from ident import Release, SectionModel
+from ident.identification._e2rfc_problem import Problem
+from ident.identification._regressors import RegressorView, prepare
+from ident.identification.modal import _exponentials
+from ident.model import flat_plate, flutter
 from simulators import simulate_release
 
 SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)

@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 from daq.recording.recorder import RunRecorder
-from ident import SectionModel, flat_plate
-from ident.io import FileFormatError, read_run
+from ident import SectionModel
+from ident.model import flat_plate
+from ident.records.run_file import FileFormatError, read_run
 from simulators import simulate_release
 
 CONFIG = """[rig]

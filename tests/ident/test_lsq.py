@@ -1,4 +1,4 @@
-"""The identification's small bounded Levenberg-Marquardt solver (ident._lsq)."""
+"""The identification's small bounded Levenberg-Marquardt solver (ident.numerics.lsq)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from ident._lsq import bounded_lm
+from ident.numerics.lsq import bounded_lm
 
 
 def rosenbrock(x: np.ndarray) -> np.ndarray:

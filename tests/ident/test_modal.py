@@ -5,8 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ident import AeroelasticSystem, SectionModel, flat_plate, flutter
-from ident.modal import fit_modes, name_modes, noise_std
+from ident import AeroelasticSystem, SectionModel
+from ident.identification.modal import fit_modes, noise_std
+from ident.model import flat_plate, flutter
+from ident.model.conventions import name_modes
 from simulators import simulate_release
 
 SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
@@ -83,7 +85,7 @@ def test_refinement_starts_inside_the_bounds_whatever_the_start_values():
     Regression: a default simulated campaign crashed with "Initial guess is outside of provided
     bounds" on one noisy release at 0.8 U_F.
     """
-    from ident import modal
+    from ident.identification import modal
 
     rel = simulate_release(SECTION, MODEL, 0.6 * U_F, 0.004, 0.02, duration=10.0, fs=500.0,
                            noise=0.02, rng=4)
@@ -115,13 +117,13 @@ def test_modes_are_named_by_their_kinetic_energy_share_not_their_amplitude():
 
 
 def test_fast_pole_search_finds_scipys_poles_on_a_decay():
-    """The fast search (ident._lsq) and scipy's reach the same poles on a decay in noise.
+    """The fast search (ident.numerics.lsq) and scipy's reach the same poles on a decay in noise.
 
     fit_modes takes the fast search where it fits down to the noise; the two search paths
     differ, the optimum must not: 1e-7 relative is far below the poles' standard deviation at
     2 % noise (about 1e-4 of the frequency).
     """
-    from ident import modal
+    from ident.identification import modal
 
     rel = simulate_release(SECTION, MODEL, 0.6 * U_F, 0.004, 0.02, duration=10.0, fs=500.0,
                            noise=0.02, rng=4)

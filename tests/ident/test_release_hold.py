@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 
 from daq.recording.recorder import RunRecorder
-from ident import Release, SectionModel, flat_plate
+from ident import Release, SectionModel
 from ident.errors import NonUniformSamplingError
-from ident.io import HOLD_GUARD_S, HOLD_SETTLE_S, read_run
-from ident.release import ReleaseHold
+from ident.model import flat_plate
+from ident.records.release import ReleaseHold
+from ident.records.run_file import HOLD_GUARD_S, HOLD_SETTLE_S, read_run
 from simulators import simulate_release
 
 CONFIG = """[rig]
@@ -31,8 +32,8 @@ PRE_S = 3.0
 #: Where the first release's arm event lies, s before its release.
 ARM_BEFORE_S = 2.5
 #: The wind dips (U 10 % of the release's) over these times before the first release, s: longer
-#: than the running median that judges the wind (ident.io.HOLD_U_WINDOW_S, 0.5 s), which a
-#: single noisy Pitot row must not cut the hold at.
+#: than the running median that judges the wind (ident.records.run_file.HOLD_U_WINDOW_S, 0.5 s),
+#: which a single noisy Pitot row must not cut the hold at.
 DIP = (-2.0, -1.4)
 
 

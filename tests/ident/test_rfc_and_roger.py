@@ -13,10 +13,9 @@ from ident import (
     RankDeficiencyError,
     RationalFunctionModel,
     SectionModel,
-    conventions,
-    flat_plate,
     roger_fit,
 )
+from ident.model import conventions, flat_plate
 
 EPS = np.finfo(float).eps
 

@@ -1,15 +1,16 @@
-"""ident.simulate: the exact linear decay, the ETD2RK order, the measurement effects."""
+"""ident.simulation.decay: the exact linear decay, the ETD2RK order, the measurement effects."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-import ident.effects
+import ident.physics.effects
 import simulators.effects
-from ident import AeroelasticSystem, Release, SectionModel, flat_plate, flutter
-from ident.effects import ChannelDelay, CubicStiffness, SensorCrosstalk, VortexShedding
-from ident.simulate import CHANNELS, simulate_decay
+from ident import AeroelasticSystem, Release, SectionModel
+from ident.model import flat_plate, flutter
+from ident.physics.effects import ChannelDelay, CubicStiffness, SensorCrosstalk, VortexShedding
+from ident.simulation.decay import CHANNELS, simulate_decay
 from simulators import simulate_release
 
 SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
@@ -144,10 +145,10 @@ def test_a_decay_feeds_the_release_processing_directly():
 
 
 def test_the_effects_are_one_set_of_classes():
-    """simulators.effects re-exports ident.effects: one class per effect, one registry."""
-    assert simulators.effects.EFFECT_NAMES is ident.effects.EFFECT_NAMES
+    """simulators.effects re-exports ident.physics.effects: one class per effect, one registry."""
+    assert simulators.effects.EFFECT_NAMES is ident.physics.effects.EFFECT_NAMES
     for name in simulators.effects.__all__:
-        assert getattr(simulators.effects, name) is getattr(ident.effects, name)
+        assert getattr(simulators.effects, name) is getattr(ident.physics.effects, name)
 
 
 @pytest.mark.parametrize(

@@ -1,4 +1,4 @@
-"""ident.simulate in turbulent flow: random response, recorded forces, mean load, seeds."""
+"""ident.simulation.decay in turbulent flow: random response, recorded forces, mean load, seeds."""
 
 from __future__ import annotations
 
@@ -8,10 +8,12 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from ident import AeroelasticSystem, RationalFunctionModel, SectionModel, flat_plate, flutter
-from ident.effects import ChannelDelay, CubicStiffness
-from ident.simulate import simulate_decay
-from ident.turbulence import GustField, StaticCoefficients, TurbulenceSpec, buffeting_forces
+from ident import AeroelasticSystem, RationalFunctionModel, SectionModel
+from ident.model import flat_plate, flutter
+from ident.model.quasi_steady import StaticCoefficients
+from ident.physics.effects import ChannelDelay, CubicStiffness
+from ident.physics.turbulence import GustField, TurbulenceSpec, buffeting_forces
+from ident.simulation.decay import simulate_decay
 from simulators import simulate_release
 
 SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.01, zeta_a=0.01)
@@ -53,7 +55,7 @@ def test_random_response_variance_matches_the_frequency_domain():
     Z = (s.stiffness_matrix() - w**2 * s.mass_matrix() + 1j * w * s.damping_matrix()
          - qd * s.B**2 * MODEL.Q(1j * 2 * np.pi * f * s.B / U))
     H = np.linalg.inv(Z)
-    from ident.turbulence import buffeting_force_spectrum
+    from ident.physics.turbulence import buffeting_force_spectrum
 
     S_F = buffeting_force_spectrum(SPEC, PLATE, f, U=U, B=s.B, span=SPAN, rho=s.rho)[:, :2, :2]
     S_q = np.einsum("kij,kjl,kml->kim", H, S_F, H.conj()).real
@@ -69,7 +71,7 @@ def test_random_response_variance_matches_the_frequency_domain():
 def test_recorded_forces_are_self_excited_plus_the_generated_buffeting():
     """Without self-excited forces, the recorded forces are exactly the generator's series.
 
-    The same seed through ident.turbulence.buffeting_forces on the same grid (dx = U / fs)
+    The same seed through ident.physics.turbulence.buffeting_forces on the same grid (dx = U / fs)
     gives the same gusts; the mean load of the static coefficients is added.
     """
     static = StaticCoefficients(C_D=0.3, C_L=0.1, C_M=0.02, dC_D=0.4, dC_L=-5.0, dC_M=1.2)

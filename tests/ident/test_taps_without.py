@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ident.taps import TapLayout
+from ident.physics.taps import TapLayout
 
 RECT = TapLayout.rectangle(0.3, 0.01, 28)  # taps 0-27 upper face, 28-55 lower, 56-61 the ends
 

@@ -1,11 +1,11 @@
-"""ident._threads.single_threaded_blas: one BLAS thread inside, nested calls set it once."""
+"""ident.numerics.threads.single_threaded_blas: one BLAS thread inside, nested calls set it once."""
 
 from __future__ import annotations
 
 import numpy as np  # noqa: F401  (loads the BLAS library the tests look at)
 from threadpoolctl import threadpool_info, threadpool_limits
 
-from ident._threads import single_threaded_blas
+from ident.numerics.threads import single_threaded_blas
 
 
 def _blas_threads() -> list[int]:

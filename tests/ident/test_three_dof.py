@@ -15,21 +15,24 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from ident import flat_plate
-from ident import flutter as fl
-from ident.conventions import (
+from ident.model import flat_plate
+from ident.model import flutter as fl
+from ident.model.conventions import (
     FLUTTER_DERIVATIVE_NAMES_3DOF,
     Q_from_flutter_derivatives,
     flutter_derivatives_from_Q,
 )
-from ident.quasi_steady import quasi_steady_derivatives, quasi_steady_model
-from ident.release import Release
-from ident.rfc import RationalFunctionModel
-from ident.section import SectionModel
-from ident.simulate import simulate_decay
-from ident.statespace import AeroelasticSystem
-from ident.taps import TapLayout
-from ident.turbulence import StaticCoefficients
+from ident.model.quasi_steady import (
+    StaticCoefficients,
+    quasi_steady_derivatives,
+    quasi_steady_model,
+)
+from ident.model.rfc import RationalFunctionModel
+from ident.model.section import SectionModel
+from ident.model.statespace import AeroelasticSystem
+from ident.physics.taps import TapLayout
+from ident.records.release import Release
+from ident.simulation.decay import simulate_decay
 from simulators.tunnel import simulate_release
 
 PLANAR = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)

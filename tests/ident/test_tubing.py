@@ -11,10 +11,10 @@ import math
 import numpy as np
 import pytest
 
-from ident import e2rfc, flat_plate, flutter
-from ident.release import Release
-from ident.taps import TapLayout
-from ident.tubing import (
+from ident.identification import e2rfc
+from ident.model import flat_plate, flutter
+from ident.physics.taps import TapLayout
+from ident.physics.tubing import (
     TAPER_START,
     Air,
     TableResponse,
@@ -26,6 +26,7 @@ from ident.tubing import (
     from_description,
     tubing_set,
 )
+from ident.records.release import Release
 
 AIR = Air()
 

@@ -1,4 +1,4 @@
-"""ident.turbulence: spectra, admittance, coherence, buffeting signs and the seeded generator."""
+"""Turbulence: spectra, admittance, coherence, buffeting signs and the seeded generator."""
 
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from scipy import integrate, signal
 
-from ident.turbulence import (
+from ident.model.quasi_steady import StaticCoefficients
+from ident.physics.turbulence import (
     GustField,
-    StaticCoefficients,
     TurbulenceSpec,
     buffeting_force_spectrum,
     buffeting_forces,

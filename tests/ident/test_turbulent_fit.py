@@ -12,11 +12,14 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from ident import Release, SectionModel, e2rfc, flat_plate
-from ident import flutter as fl
-from ident._turbulent_fit import MIN_HOLD_S, ar_fit
-from ident.release import ReleaseHold
-from ident.turbulence import StaticCoefficients, TurbulenceSpec
+from ident import Release, SectionModel
+from ident.identification import e2rfc
+from ident.identification._turbulent_fit import MIN_HOLD_S, ar_fit
+from ident.model import flat_plate
+from ident.model import flutter as fl
+from ident.model.quasi_steady import StaticCoefficients
+from ident.physics.turbulence import TurbulenceSpec
+from ident.records.release import ReleaseHold
 from simulators import simulate_release
 from simulators.decks import BLUFF_DECK, BLUFF_DECK_STATIC, bluff_deck_model
 
@@ -180,7 +183,7 @@ def test_the_smoother_follows_the_true_velocity_closer_than_the_filter(monkeypat
     from scipy.interpolate import CubicSpline
     from scipy.signal import sosfiltfilt
 
-    from ident import _turbulent_fit
+    from ident.identification import _turbulent_fit
 
     model = flat_plate.jones_model()
     U_F = fl.analyze(PLATE, model).speed

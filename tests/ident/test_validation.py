@@ -6,14 +6,8 @@ import warnings
 import numpy as np
 import pytest
 
-from ident import (
-    AeroelasticSystem,
-    RationalFunctionModel,
-    SectionModel,
-    conventions,
-    flat_plate,
-    flutter,
-)
+from ident import AeroelasticSystem, RationalFunctionModel, SectionModel
+from ident.model import conventions, flat_plate, flutter
 
 GOOD = {"B": 0.3, "m": 3.0, "I": 0.03, "fh": 2.0, "fa": 4.0, "zeta_h": 0.005, "zeta_a": 0.005}
 

@@ -11,7 +11,8 @@ import pytest
 from scipy.linalg import eigh, expm
 from scipy.signal import find_peaks
 
-from ident import AeroelasticSystem, RationalFunctionModel, SectionModel, flat_plate, flutter
+from ident import AeroelasticSystem, RationalFunctionModel, SectionModel
+from ident.model import flat_plate, flutter
 from simulators import EFFECT_NAMES, simulate_release
 from simulators.effects import (
     AerodynamicNonlinearity,
@@ -308,8 +309,8 @@ def test_aerodynamic_nonlinearity_damps_large_amplitudes_more_and_the_taps_see_i
 
 
 def test_tubing_distortion_filters_the_forces_as_its_frequency_response_says():
-    """The time-domain tube matches ident.tubing's FFT filter with the same response."""
-    from ident.tubing import Air, TableResponse, Tube, TubingGroup, distort, tubing_set
+    """The time-domain tube matches ident.physics.tubing's FFT filter with the same response."""
+    from ident.physics.tubing import Air, TableResponse, Tube, TubingGroup, distort, tubing_set
 
     model = flat_plate.jones_model()
     U = 0.65 * flutter.analyze(SECTION, model).speed
@@ -343,7 +344,7 @@ def test_tubing_distortion_filters_the_forces_as_its_frequency_response_says():
 
 def test_tubing_distortion_continues_across_records():
     """A continued record goes on from the tubes' state: the same as one long record."""
-    from ident.simulate import simulate_decay
+    from ident.simulation.decay import simulate_decay
 
     model = flat_plate.jones_model()
     U = 0.65 * flutter.analyze(SECTION, model).speed

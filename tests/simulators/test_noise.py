@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ident import SectionModel, TapLayout, flat_plate
+from ident import SectionModel, TapLayout
+from ident.model import flat_plate
 from simulators.clock import DeviceClock, ManualClock
 from simulators.devices.microepsilon_ild1420 import SimMicroEpsilonIld1420
 from simulators.noise import KeyedNoise, sample_keys

@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ident import SectionModel, TapLayout, flat_plate
-from ident.tubing import Air, Tube, TubingGroup, distort, tubing_set
+from ident import SectionModel, TapLayout
+from ident.model import flat_plate
+from ident.physics.tubing import Air, Tube, TubingGroup, distort, tubing_set
 from simulators.clock import ManualClock
 from simulators.tubing import FIR_DT_S, impulse_response
 from simulators.virtual_tunnel import AirState, VirtualTunnel
@@ -39,7 +40,7 @@ def test_tubed_tap_pressures_are_the_tubes_distortion_of_the_true_ones():
     """Through a release: the streamed pressures equal the offline FFT distortion (ident).
 
     Taps 0..9 on the tube, the rest none. Two identical tunnels on one manual clock, one
-    with tubes, released together; its pressures against ``ident.tubing.distort`` of the
+    with tubes, released together; its pressures against ``ident.physics.tubing.distort`` of the
     other's on a 2 kHz grid. Tolerance 1e-3 of the dynamic pressures' range: both are the
     same convolution, discretised differently (the FIR cut at a 1e-5 tail and rolled off
     above 250 Hz, the FFT on the padded record).

@@ -7,7 +7,8 @@ import pytest
 from scipy.linalg import expm
 from scipy.signal import find_peaks
 
-from ident import AeroelasticSystem, RationalFunctionModel, SectionModel, flat_plate, flutter
+from ident import AeroelasticSystem, RationalFunctionModel, SectionModel
+from ident.model import flat_plate, flutter
 from simulators import simulate_release
 
 SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.01, zeta_a=0.008)

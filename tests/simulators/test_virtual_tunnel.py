@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ident import AeroelasticSystem, SectionModel, TapLayout, flat_plate
+from ident import AeroelasticSystem, SectionModel, TapLayout
+from ident.model import flat_plate
 from simulators.clock import DeviceClock, ManualClock
 from simulators.tunnel import simulate_release
 from simulators.virtual_tunnel import AirState, VirtualTunnel
@@ -126,7 +127,8 @@ def test_device_clock_maps_both_ways():
 
 
 def turbulent_tunnel(clock, seed=3, **kwargs):
-    from ident.turbulence import StaticCoefficients, TurbulenceSpec
+    from ident.model.quasi_steady import StaticCoefficients
+    from ident.physics.turbulence import TurbulenceSpec
 
     spec = TurbulenceSpec(Iu=0.1, Iw=0.08, Lux=0.6, Lwx=0.25, Cuy=10.0, Cwy=8.0)
     return VirtualTunnel(SECTION, flat_plate.jones_model(), TAPS, wind_per_rpm=0.01,

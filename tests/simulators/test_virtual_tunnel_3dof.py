@@ -12,7 +12,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ident import AeroelasticSystem, TapLayout, flat_plate
+from ident import AeroelasticSystem, TapLayout
+from ident.model import flat_plate
 from simulators.clock import ManualClock
 from simulators.decks import BLUFF_DECK_3DOF, bluff_deck_3dof_model
 from simulators.tunnel import simulate_release

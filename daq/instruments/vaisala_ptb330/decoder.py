@@ -4,7 +4,7 @@ Responsibility: :func:`parse_line` and :class:`Ptb330LineDecoder` turn the barom
 lines (``P=  1013.250 hPa    T= 21.34 'C``, any spacing) into :class:`Ptb330Line` values, with the
 pressure unit read from every line and converted (:data:`PRESSURE_UNITS_PA`) and a malformed
 line kept as :class:`Ptb330BadLine`; :func:`reading_from_line` derives the air density into a
-:class:`BarometerReading` (the ideal gas law with :data:`ident.air.R_DRY_AIR`), with the
+:class:`BarometerReading` (the ideal gas law with :data:`ident.physics.air.R_DRY_AIR`), with the
 plausible ranges (:data:`PRESSURE_RANGE_PA`, :data:`TEMPERATURE_RANGE_K`).
 
 Not responsible for: polling the instrument or recovering its line
@@ -20,7 +20,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from daq.errors import ProtocolError
-from ident.air import R_DRY_AIR
+from ident.physics.air import R_DRY_AIR
 
 __all__ = ["MAX_LINE_BYTES", "PRESSURE_RANGE_PA", "PRESSURE_UNITS_PA", "TEMPERATURE_RANGE_K",
            "BarometerReading", "Ptb330BadLine", "Ptb330Line", "Ptb330LineDecoder", "parse_line",

@@ -16,7 +16,7 @@ import pytest
 
 from daq.campaign.adaptive import choose_next, predicted_std, safety_bound
 from daq.campaign.monitor import DecayMonitor
-from ident.campaign import analyze_campaign
+from ident.identification.campaign import analyze_campaign
 from simulators.campaigns import SECTION, simulated_campaign
 
 

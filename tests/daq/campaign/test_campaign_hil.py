@@ -162,12 +162,12 @@ def test_a_growing_decay_is_caught_and_the_campaign_stops(tmp_path):
 def test_the_plans_hold_is_recorded_and_read_back_as_each_releases_hold(tmp_path):
     """``hold_s``: the model held that long in the wind before each release, in the file.
 
-    ``ident.io`` reads a release's hold from 0.25 s after its arm event to 0.05 s before the
-    release (E2RFC's turbulence branch takes its noise model from it and needs 10 s): a plan's
-    11 s hold gives about 10.7 s (the default 0.5 s about 0.2 s). A single noisy Pitot row (at
-    5 m/s they scatter by more than 10 %) must not cut the hold short.
+    ``ident.records.run_file`` reads a release's hold from 0.25 s after its arm event to 0.05 s
+    before the release (E2RFC's turbulence branch takes its noise model from it and needs 10 s): a
+    plan's 11 s hold gives about 10.7 s (the default 0.5 s about 0.2 s). A single noisy Pitot row
+    (at 5 m/s they scatter by more than 10 %) must not cut the hold short.
     """
-    from ident.io import read_run
+    from ident.records.run_file import read_run
 
     config = parse_rig_config(RIG_TEXT + FAST_FAN, "rig.toml")
     plan = _fixed([5.0, 7.0], decay_s=3.0).replace("settle_s = 0.5", "settle_s = 0.5\nhold_s = 11")

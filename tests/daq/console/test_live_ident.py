@@ -18,10 +18,10 @@ import pytest
 
 from daq.console.live_ident import DECAY_COLUMNS, MIN_DECAY_S, LiveIdentifier
 from daq.console.ring_buffer import RingBuffer
-from ident import flat_plate, flutter
-from ident._selection import structure_label
-from ident.modal import fit_release_modes
-from ident.section import SectionModel
+from ident.identification.modal import fit_release_modes
+from ident.model import flat_plate, flutter
+from ident.model.section import SectionModel
+from ident.numerics.selection import structure_label
 from simulators import simulate_release
 
 RATE = 500.0
@@ -124,7 +124,7 @@ def test_each_release_gets_its_modes_and_two_wind_speeds_give_the_flutter_speed(
         assert modal.zeta_h == pytest.approx(truth["zeta_h"], abs=3e-3)
         assert modal.zeta_a == pytest.approx(truth["zeta_a"], abs=3e-3)
         assert row.length_s == pytest.approx(DECAY_S, abs=2.0 / RATE)
-    fit = ident.campaign
+    fit = ident.identification.campaign
     assert fit is not None and fit.n_releases == 4 and len(fit.wind_speeds) == 2
     # Two wind speeds, four 7.5 s decays, 1 % noise: the demo's campaigns land within 1 %;
     # 3 % is the acceptance level for the flutter speed.
@@ -169,7 +169,7 @@ def test_a_decay_is_cut_only_when_it_is_complete(pool):
     settle(ident, session)
     assert ident.rows[1].length_s == pytest.approx(4.0, abs=2.0 / RATE)
     assert "two or more wind speeds (have: 6.00 m/s)" in ident.campaign_status
-    assert ident.campaign is None
+    assert ident.identification.campaign is None
 
 
 def test_releases_that_cannot_be_used_say_why(pool):

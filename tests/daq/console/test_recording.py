@@ -3,7 +3,7 @@
 A live simulated rig (``sim_flat_plate.toml`` with a fast fan ramp, as ``test_console_live.py``)
 is recorded from the control panel's recording row while the operator arms and releases the model;
 the file is then read back with h5py (the docs/file_format.md layout) and with
-:func:`ident.io.read_run`.
+:func:`ident.records.run_file.read_run`.
 A second rig checks the refusals (each shown by the panel), a disk that fills up during a
 recording (the recording stops with its error, the live view goes on) and closing the console
 while recording (the file is complete).
@@ -26,7 +26,7 @@ from daq.console.controls import ControlPanel
 from daq.console.live_source import LiveSource
 from daq.console.window import ConsoleWindow
 from daq.errors import RecordingError
-from ident.io import read_run
+from ident.records.run_file import read_run
 
 # The shared run-file helper beside this file: importable as a top-level module.
 sys.path.insert(0, str(Path(__file__).resolve().parent))

@@ -5,7 +5,8 @@ runs them: :class:`~daq.console.process_source.ProcessLiveSource`), releases
 triggered from the window's control panel at two wind speeds; each appears in the releases table
 with its modes, then the E2RFC model and the flutter speed. Replay: a run file with releases at
 two wind speeds; the table and the model equal what the same numerics give on the file as
-:func:`ident.io.read_run` reads it (the window's fits run in its default worker process).
+:func:`ident.records.run_file.read_run` reads it (the window's fits run in its default worker
+process).
 """
 
 from __future__ import annotations
@@ -26,9 +27,9 @@ from daq.console.process_source import ProcessLiveSource
 from daq.console.replay import ReplaySource
 from daq.console.window import ConsoleWindow
 from daq.recording.synthetic import write_release_run
-from ident import flat_plate, flutter
-from ident.io import campaign_section, read_run
-from ident.modal import fit_release_modes
+from ident.identification.modal import fit_release_modes
+from ident.model import flat_plate, flutter
+from ident.records.run_file import campaign_section, read_run
 from simulators import simulate_release
 
 CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
@@ -196,7 +197,7 @@ def test_replay_shows_the_releases_and_model_that_the_file_gives(qtbot, releases
         clock.now += 1.0  # play one second, as the timer would in real time
         window.tick()
     deadline = time.monotonic() + 30.0
-    while ident.busy or ident.campaign is None:
+    while ident.busy or ident.identification.campaign is None:
         assert time.monotonic() < deadline, ident.campaign_status
         qtbot.wait(50)
         window.tick()
@@ -204,7 +205,7 @@ def test_replay_shows_the_releases_and_model_that_the_file_gives(qtbot, releases
     section = campaign_section([run])
     assert [row.status for row in ident.rows] == ["ok"] * len(REPLAY_SPEEDS)
     for row, release in zip(ident.rows, run.releases, strict=True):
-        # The same rows as h5py reads through ident.io: the same fit, to rounding.
+        # The same rows as h5py reads through ident.records.run_file: the same fit, to rounding.
         expected = fit_release_modes(release.t, release.h, release.alpha, section)
         assert row.modal is not None
         for name in ("f_h", "zeta_h", "f_a", "zeta_a"):
@@ -213,7 +214,7 @@ def test_replay_shows_the_releases_and_model_that_the_file_gives(qtbot, releases
         assert row.U == pytest.approx(release.U, rel=1e-12)
         assert window.releases_panel.cell(row.number - 1, "f_h (Hz)") == f"{expected.f_h:.3f}"
     expected_fit = identify_releases(run.releases, section)
-    fit = ident.campaign
+    fit = ident.identification.campaign
     assert fit.flutter_speed == pytest.approx(expected_fit.flutter_speed, rel=1e-6)
     assert window.flutter_label.text().startswith(f"U_F = {fit.flutter_speed:.2f}")
     # The range over the structures within one SE is shown when there are several, not else.

@@ -31,7 +31,7 @@ from daq.instruments.vaisala_ptb330.driver import FORM_STRING, SERIAL_DEFAULTS, 
 from daq.instruments.vaisala_ptb330.settings import Ptb330Settings
 from daq.transports.byte_transport import SerialTransport, open_transport
 from daq.transports.scripted import ScriptedTransport, expected_exchange
-from ident.air import R_DRY_AIR
+from ident.physics.air import R_DRY_AIR
 
 FORM_CMD = b"FORM " + FORM_STRING.encode() + b"\r"
 LINE = b"P=  1013.250 hPa    T= 21.34 'C \r\n"  # what FORM_STRING gives (widths [unverified])

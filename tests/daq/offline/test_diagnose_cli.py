@@ -16,7 +16,7 @@ import pytest
 from daq.cli import main
 from daq.config import parse_rig_config
 from daq.recording.synthetic import write_release_run
-from ident.effects import EFFECT_NAMES
+from ident.physics.effects import EFFECT_NAMES
 from simulators.campaigns import REALISTIC, simulated_campaign
 
 CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"

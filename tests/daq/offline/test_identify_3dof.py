@@ -4,7 +4,7 @@ The table printed is checked against the definition of the derivatives (docs/con
 "Three degrees of freedom"): ``Q(iK) = K^2 [[H4* + i H1*, H3* + i H2*, H6* + i H5*], [A4* + i
 A1*, ...], [P6* + i P5*, P3* + i P2*, P4* + i P1*]]``, read off the model's ``Q`` directly. The
 run files are written by the acquisition's recorder from simulated 3-DOF releases of the bluff
-deck (:mod:`simulators.decks`) and read back by :mod:`ident.io` as 3-DOF releases.
+deck (:mod:`simulators.decks`) and read back by :mod:`ident.records.run_file` as 3-DOF releases.
 """
 
 from __future__ import annotations
@@ -25,11 +25,11 @@ from daq.offline.derivative_table import (
     format_derivative_table,
 )
 from daq.recording.synthetic import write_release_run
-from ident import flutter
-from ident.conventions import derivative_names
 from ident.errors import IdentError
-from ident.flat_plate import jones_model
-from ident.io import read_run
+from ident.model import flutter
+from ident.model.conventions import derivative_names
+from ident.model.flat_plate import jones_model
+from ident.records.run_file import read_run
 from simulators.decks import BLUFF_DECK_3DOF, bluff_deck_3dof_model
 from simulators.tunnel import simulate_release
 

@@ -3,7 +3,8 @@
 ``python _reader_fuzz_child.py BASE.h5 WORKDIR TIMEOUT_S``
     For each JSON line on stdin, a list of mutations (``["set", offset, byte]``,
     ``["truncate", offset]``, ``["zero", offset, length]``), write BASE.h5 so mutated to WORKDIR,
-    run the run-file readers on it (``ident.io.read_run``, ``daq.recording.info.run_info``,
+    run the run-file readers on it (``ident.records.run_file.read_run``,
+    ``daq.recording.info.run_info``,
     ``daq.recording.recover.recover_run`` on a copy) and print one JSON line: per reader
     ``"ok"`` or ``"<module>.<class>: <message>"``. Each reader call has TIMEOUT_S: past it,
     :mod:`faulthandler` prints the stack and ends the process (exit status 1), which the parent
@@ -23,7 +24,7 @@ from typing import Any
 
 from daq.recording.info import run_info
 from daq.recording.recover import recover_run
-from ident.io import read_run
+from ident.records.run_file import read_run
 
 
 def mutate(data: bytes, mutations: list[list[int | str]]) -> bytes:

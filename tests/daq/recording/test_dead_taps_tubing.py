@@ -1,4 +1,4 @@
-"""Dead taps and the tubing correction: ident.io leaves dead taps out of it, as the forces do."""
+"""Dead taps and the tubing correction: the reader leaves dead taps out of it, as the forces do."""
 
 from __future__ import annotations
 
@@ -10,10 +10,10 @@ import numpy as np
 
 from daq.config import parse_rig_config
 from daq.recording.synthetic import write_release_run
-from ident import flat_plate, flutter
-from ident.air import R_DRY_AIR
-from ident.io import TUBING_TEMPERATURE_K, read_run
-from ident.tubing import Air, distort, tubing_set
+from ident.model import flat_plate, flutter
+from ident.physics.air import R_DRY_AIR
+from ident.physics.tubing import Air, distort, tubing_set
+from ident.records.run_file import TUBING_TEMPERATURE_K, read_run
 from simulators.campaigns import SECTION
 from simulators.tunnel import simulate_release
 

@@ -12,8 +12,9 @@ from daq.cli import main
 from daq.config import load_rig_config
 from daq.recording.info import run_info
 from daq.recording.synthetic import write_release_run
-from ident import Release, SectionModel, flat_plate
-from ident import flutter as fl
+from ident import Release, SectionModel
+from ident.model import flat_plate
+from ident.model import flutter as fl
 from simulators import simulate_release
 
 CONFIG = Path(__file__).resolve().parents[3] / "rig_configs" / "sim_flat_plate.toml"

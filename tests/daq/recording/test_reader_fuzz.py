@@ -4,7 +4,7 @@ Hypothesis damages a real run file (bytes set, the file truncated, blocks zeroed
 process (``_reader_fuzz_child.py``) runs ``read_run`` (what ``identify``, ``diagnose`` and
 ``reprocess`` read through), ``run_info`` (``windrig info``) and ``recover_run`` (``windrig
 recover``) on it, each under a watchdog. Allowed: a result, or the readers' own errors
-(:class:`~ident.io.FileFormatError`, :class:`~daq.errors.NotARunFileError`,
+(:class:`~ident.records.run_file.FileFormatError`, :class:`~daq.errors.NotARunFileError`,
 :class:`~daq.errors.RecoveryError`, all of which the command line prints as one ``error:``
 line). A crash of the child or a call past the watchdog fails the example.
 
@@ -36,14 +36,15 @@ from hypothesis import strategies as st
 
 from daq.config import load_rig_config
 from daq.recording.synthetic import write_release_run
-from ident import Release, SectionModel, flat_plate
+from ident import Release, SectionModel
+from ident.model import flat_plate
 from simulators import simulate_release
 
 CHILD = Path(__file__).with_name("_reader_fuzz_child.py")
 CONFIG = Path(__file__).resolve().parents[3] / "rig_configs" / "sim_flat_plate.toml"
 #: Longest a reader may take on one damaged file, s (they take milliseconds).
 WATCHDOG_S = 5.0
-ALLOWED = ("ok", "ident.io.FileFormatError:", "daq.errors.NotARunFileError:",
+ALLOWED = ("ok", "ident.records.run_file.FileFormatError:", "daq.errors.NotARunFileError:",
            "daq.errors.RecoveryError:")
 
 mutations = st.lists(st.one_of(

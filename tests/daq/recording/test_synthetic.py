@@ -13,7 +13,7 @@ import pytest
 
 from daq.config import load_rig_config
 from daq.recording.synthetic import write_release_run
-from ident import flat_plate
+from ident.model import flat_plate
 from simulators import simulate_release
 
 CONFIG = Path(__file__).resolve().parents[3] / "rig_configs" / "sim_flat_plate.toml"

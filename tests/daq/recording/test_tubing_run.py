@@ -13,10 +13,10 @@ import pytest
 from daq.cli import main
 from daq.config import RigConfig, load_rig_config, parse_rig_config
 from daq.recording.synthetic import write_release_run
-from ident import flat_plate, flutter
-from ident.air import R_DRY_AIR
-from ident.io import TUBING_TEMPERATURE_K, read_run
-from ident.tubing import Air, Tube, distort, tubing_set
+from ident.model import flat_plate, flutter
+from ident.physics.air import R_DRY_AIR
+from ident.physics.tubing import Air, Tube, distort, tubing_set
+from ident.records.run_file import TUBING_TEMPERATURE_K, read_run
 from simulators.campaigns import FRACTIONS, HOLDS, SECTION
 from simulators.tunnel import simulate_release
 

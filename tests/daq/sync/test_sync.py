@@ -37,7 +37,7 @@ from daq.sync.conversions import (
 )
 from daq.sync.counters import CounterStep, CounterUnwrapper, find_gaps, unwrap_counter
 from daq.sync.resample import Resampler, StreamSpec, SyncBlock, resample
-from ident.taps import TapLayout
+from ident.physics.taps import TapLayout
 from simulators.clock import DeviceClock
 
 FloatArray = npt.NDArray[np.float64]

@@ -9,16 +9,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ident import flat_plate
-from ident import flutter as section_flutter
 from ident.bridge import flutter as bf
 from ident.bridge.aero import aero_from_model, aero_from_table
 from ident.bridge.model import BridgeModel
 from ident.bridge.statespace import BridgeStateSpace, system_matrix
-from ident.fd_table import FlutterDerivativeTable
-from ident.rfc import RationalFunctionModel
-from ident.section import SectionModel
-from ident.statespace import AeroelasticSystem
+from ident.model import flat_plate
+from ident.model import flutter as section_flutter
+from ident.model.rfc import RationalFunctionModel
+from ident.model.section import SectionModel
+from ident.model.statespace import AeroelasticSystem
+from ident.tables.fd_table import FlutterDerivativeTable
 from simulators.decks import BLUFF_DECK, bluff_deck_model
 
 EXAMPLES = Path(__file__).resolve().parents[3] / "rig_configs" / "bridges"
@@ -214,7 +214,7 @@ def test_the_lag_states_are_modal_the_input_matrix_is_the_inverse_effective_mass
     """A constant generalised force gives the static deflection K_eff^-1 F (lags settle)."""
     bridge = _example()
     model = flat_plate.jones_model().with_sway(
-        __import__("ident.quasi_steady", fromlist=["x"]).quasi_steady_model(bridge.static))
+        __import__("ident.model.quasi_steady", fromlist=["x"]).quasi_steady_model(bridge.static))
     ss = BridgeStateSpace(bridge, model)
     U = 30.0
     S, E = ss.matrix(U), ss.input_matrix()
@@ -238,7 +238,7 @@ def test_a_table_of_18_derivatives_gives_what_the_completed_model_gives():
     terms, to 1e-5. The frequency domain interpolates the table's rows (monotone cubic between
     reduced velocities 1.6 apart): 0.1 % (measured 0.025 %).
     """
-    from ident.quasi_steady import quasi_steady_model
+    from ident.model.quasi_steady import quasi_steady_model
 
     bridge = _example()
     model_3dof = flat_plate.jones_model().with_sway(quasi_steady_model(bridge.static))

@@ -15,14 +15,14 @@ import math
 import numpy as np
 import pytest
 
-from ident import flat_plate
 from ident.bridge import buffeting as bf
 from ident.bridge import buffeting_time as bt
 from ident.bridge.model import BridgeModel
 from ident.bridge.statespace import BridgeStateSpace
 from ident.bridge.wind import wind_from_dict
-from ident.quasi_steady import quasi_steady_model
-from ident.turbulence import StaticCoefficients, buffeting_gain, joint_acceptance, von_karman_w
+from ident.model import flat_plate
+from ident.model.quasi_steady import StaticCoefficients, quasi_steady_model
+from ident.physics.turbulence import buffeting_gain, joint_acceptance, von_karman_w
 
 B, M_H, I_A = 31.0, 22740.0, 2.47e6
 IABSE = {45.0: (1.3404, 0.4792), 30.0: (0.778, 0.2027)}
@@ -116,7 +116,7 @@ def test_stated_uncertainty_is_the_scatter_of_short_records(iabse: BridgeStateSp
 
 
 def test_gust_gain_is_the_section_linearisation() -> None:
-    """The bridge's gains are ident.turbulence's (one linearisation for section and bridge)."""
+    """The bridge's gains are the section's (one linearisation for section and bridge)."""
     static = StaticCoefficients(C_D=0.8, C_L=-0.2, C_M=0.05, dC_D=0.3, dC_L=-4.0, dC_M=1.2)
     U, rho = 20.0, 1.2
     assert np.allclose(0.5 * rho * U**2 * B**2 / U * bf.gust_gain(static),
@@ -138,8 +138,8 @@ def test_span_wise_coherence_gives_the_joint_acceptance() -> None:
     """A uniform mode over a span s: S_F = (qd B dC_L / U)^2 s^2 J^2(C f s / U) S_w.
 
     J^2 = 2 (a - 1 + e^-a) / a^2 is the closed form of the double integral of the coherence
-    (ident.turbulence.joint_acceptance). The trapezoid rule over nodes dx apart misses the kink
-    of exp(-c |x1 - x2|) on the diagonal: relative error (c dx)^2 / 12 to leading order, the
+    (ident.physics.turbulence.joint_acceptance). The trapezoid rule over nodes dx apart misses the
+    kink of exp(-c |x1 - x2|) on the diagonal: relative error (c dx)^2 / 12 to leading order, the
     tolerance (with 10 % margin).
     """
     span, U = 400.0, 30.0
@@ -236,13 +236,13 @@ def test_above_flutter_and_without_static_coefficients_are_refused(
 def test_uniform_bridge_equals_the_section_analysis(iabse: BridgeStateSpace) -> None:
     """The IABSE bridge against the section per unit span, by ident's section-level code.
 
-    The section route: SectionModel's matrices, ident.turbulence.buffeting_force_spectrum of
+    The section route: SectionModel's matrices, ident.physics.turbulence.buffeting_force_spectrum of
     the span-averaged forces (span 1 m, full coherence: J = 1) and Q(iK) of the same model; the
     response ``S_q = H S_F H^H`` on the same grid. Equal to rounding (1e-9): a uniform deck of
     unit length is the section per unit span.
     """
-    from ident.section import SectionModel
-    from ident.turbulence import buffeting_force_spectrum
+    from ident.model.section import SectionModel
+    from ident.physics.turbulence import buffeting_force_spectrum
 
     section = SectionModel(B=B, m=M_H, I=I_A, fh=0.100, fa=0.278, zeta_h=0.003, zeta_a=0.003,
                            rho=1.22)
@@ -275,7 +275,7 @@ def test_short_records_of_a_lightly_damped_mode_scatter_as_stated():
 
     from ident.bridge.aero import aero_from_table
     from ident.bridge.wind import read_wind
-    from ident.fd_table import FlutterDerivativeTable
+    from ident.tables.fd_table import FlutterDerivativeTable
 
     folder = Path(__file__).resolve().parents[3] / "rig_configs" / "bridges"
     bridge = BridgeModel.from_json(folder / "example_bridge.json")

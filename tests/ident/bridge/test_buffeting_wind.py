@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from ident.bridge.wind import coherence, read_wind
-from ident.turbulence import davenport_function
+from ident.physics.turbulence import davenport_function
 
 GOOD = """Iu = 0.10
 Iw = 0.05

@@ -1,0 +1,13 @@
+"""Identification from releases: E2RFC, modal fits, the indirect route and a campaign's analysis.
+
+- :mod:`~ident.identification.e2rfc`: ``identify``, E2RFC from releases at a few wind speeds;
+- :mod:`~ident.identification.results`: what it returns (``IdentifiedModel``, diagnostics);
+- :mod:`~ident.identification.uncertainty`: the flutter speed's uncertainty and its parts;
+- :mod:`~ident.identification.modal`: modal identification of free decays;
+- :mod:`~ident.identification.fd_method`: the indirect route (flutter derivatives, Roger fit);
+- :mod:`~ident.identification.campaign`: one campaign's analysis for the front ends.
+
+E2RFC's private machinery: ``_regressors`` (per-release regressors), ``_e2rfc_problem`` (the
+stacked problem and its structure search), ``_stacked`` and ``_full_rows`` (its residuals,
+Jacobians and Gram matrices), ``_turbulent_fit`` (the turbulence branch).
+"""

@@ -1,0 +1,5 @@
+"""Flutter-derivative tables: the field's exchange format, and Roger models fitted to them.
+
+- :mod:`~ident.tables.fd_table`: ``FlutterDerivativeTable`` (CSV in and out, 2 and 3 DOF);
+- :mod:`~ident.tables.roger_table`: a table's Roger fit with its structure chosen by evidence.
+"""

@@ -1,0 +1,310 @@
+"""Roger fit of a flutter-derivative table with its structure chosen by evidence.
+
+A table of ``Q(iK)`` samples (from :class:`ident.tables.fd_table.FlutterDerivativeTable`, 2 or 3
+degrees of freedom, or from the decay route of :mod:`ident.identification.fd_method`, whose columns
+are known at different K) is fitted with Roger's rational function: for fixed lag roots each entry
+is a linear least-squares problem (:func:`ident.model.roger.roger_fit`); the shared lag roots are
+searched by variable projection over ``log d``, and the structure (0 to 3 lags, with or without the
+added-mass matrix ``A3``) is chosen by held-out error, leaving out one table row at a time, with
+the one-standard-error rule (:mod:`ident.numerics.selection`).
+
+**Weighting.** An unweighted fit of ``Q`` is ruled by the high reduced frequencies, where
+``Q ~ K^2`` is large, and may miss the low ones, where a deck flutters, by tens of percent; a
+flutter speed can move by several percent. :func:`fit_table` therefore weighs, by default
+(``weighting="relative"``), every row of ``Q`` at every tabulated K by the inverse of that force
+row's largest entry there: each force's relative error counts alike at every reduced velocity.
+``weighting="entry_rms"`` scales each entry by its RMS over the table (the decay route's choice,
+where each column is known at its own K and noise, not the K^2 growth, dominates).
+
+Not responsible for: reading tables (:mod:`ident.tables.fd_table`), flutter derivatives from decays
+(:mod:`ident.identification.fd_method`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from scipy.optimize import least_squares
+
+from ident.errors import RankDeficiencyError
+from ident.model.rfc import RationalFunctionModel
+from ident.model.roger import fit_entries, roger_basis
+from ident.numerics.selection import Candidate, select_one_se
+from ident.tables.fd_table import FlutterDerivativeTable
+
+__all__ = ["RogerProblem", "TableFit", "WEIGHTINGS", "fit_table", "select_structure"]
+
+FloatArray = npt.NDArray[np.float64]
+ComplexArray = npt.NDArray[np.complex128]
+
+#: Weightings :func:`fit_table` offers (see the module docstring).
+WEIGHTINGS: tuple[str, ...] = ("relative", "entry_rms")
+
+
+class RogerProblem:
+    """Roger fit of ``Q`` samples, each column at its own K, for any structure.
+
+    Parameters
+    ----------
+    K : ndarray, shape (n, k, k)
+        Reduced frequency of each sample; the entries of one column share theirs (k = 2 or 3).
+    Q : ndarray, shape (n, k, k), complex
+        ``Q(iK)`` samples.
+    weights : ndarray, shape (n, k, k), optional
+        Weight of each sample's residual (its inverse scale). Default: each entry scaled by the
+        inverse of its RMS over the table, so that the shared lag roots and the held-out score
+        weigh the entries alike whatever their size; the scale does not change an entry's own
+        linear solution, only how the entries share the lag roots.
+    max_condition : float
+        Largest condition number of an entry's column-scaled design accepted as determined.
+    row_name : str
+        What a row of the table is, for messages (e.g. ``"wind speeds"``).
+    """
+
+    def __init__(self, K: FloatArray, Q: ComplexArray, weights: FloatArray | None = None,
+                 max_condition: float = 1e4, row_name: str = "rows") -> None:
+        self.row_name = row_name
+        self.K = K
+        self.Q = Q
+        if weights is None:
+            scale = np.sqrt(np.mean(np.abs(Q) ** 2, axis=0))
+            weights = np.broadcast_to(1.0 / np.where(scale > 0.0, scale, 1.0), Q.shape)
+        self.weights = np.asarray(weights, dtype=float)
+        self.n_rows = K.shape[0]
+        self.n_dof = Q.shape[-1]
+        self.max_condition = max_condition
+
+    def fit(self, d: FloatArray, with_A3: bool, rows: Any = slice(None), *,
+            check_rank: bool = True) -> RationalFunctionModel:
+        """Return the coefficients for fixed lag roots, fitted on some rows of the table."""
+        return fit_entries(self.K[rows], self.Q[rows], d, with_A3, self.weights[rows] ** 2,
+                            check_rank=check_rank)
+
+    def residual(self, model: RationalFunctionModel, rows: Any = slice(None)) -> ComplexArray:
+        """Return the weighted residual ``w (Q_model - Q)``, shape (n_rows, k, k), complex."""
+        K = self.K[rows]
+        Q_model = np.empty(K.shape, dtype=complex)
+        for j in range(self.n_dof):  # the entries of a column share their K
+            Q_model[:, :, j] = model.Q(1j * K[:, 0, j])[:, :, j]
+        return np.asarray((Q_model - self.Q[rows]) * self.weights[rows], dtype=complex)
+
+    def relative_residual(self, model: RationalFunctionModel) -> FloatArray:
+        """Return the RMS weighted residual per entry, shape (k, k)."""
+        return np.asarray(np.sqrt(np.mean(np.abs(self.residual(model)) ** 2, axis=0)),
+                          dtype=float)
+
+    def condition(self, d: FloatArray, with_A3: bool) -> float:
+        """Return the largest condition number of an entry's column-scaled real design."""
+        keep = [0, 1] + ([2] if with_A3 else []) + list(range(3, 3 + d.size))
+        worst = 0.0
+        for j in range(self.n_dof):
+            basis = roger_basis(self.K[:, 0, j], d, with_A3)[:, keep]
+            design = np.vstack([basis.real, basis.imag])
+            norms = np.linalg.norm(design, axis=0)
+            if np.any(norms == 0.0):
+                return math.inf
+            worst = max(worst, float(np.linalg.cond(design / norms)))
+        return worst
+
+    def starts(self, n_lags: int, previous: FloatArray | None) -> list[FloatArray]:
+        """Return start values of the lag-root search for ``n_lags`` lags.
+
+        Three evenly spread sets over (and a little beyond) the reduced frequencies the table
+        covers; with the roots found for one lag fewer, also those plus one new root at three
+        places (nested starts, which usually converge fastest).
+        """
+        if n_lags == 0:
+            return []
+        K_lo, K_hi = float(self.K.min()), float(self.K.max())
+        spread = np.geomspace(K_lo / 3.0, 3.0 * K_hi, n_lags + 2)[1:-1]
+        out = [spread, spread * 0.3, spread * 3.0]
+        if previous is not None and previous.size == n_lags - 1:
+            new_roots = np.geomspace(K_lo / 3.0, 3.0 * K_hi, 3)
+            out += [np.sort(np.append(previous, r)) for r in new_roots]
+        return out
+
+    def search(self, n_lags: int, with_A3: bool, starts: list[FloatArray]) -> FloatArray:
+        """Return the lag roots by variable projection over ``log d`` (coefficients inside)."""
+        if n_lags == 0:
+            return np.zeros(0)
+        K_lo, K_hi = float(self.K.min()), float(self.K.max())
+        lo, hi = math.log(K_lo / 20.0), math.log(20.0 * K_hi)
+
+        def residual(theta: FloatArray) -> FloatArray:
+            model = self.fit(np.exp(theta), with_A3, check_rank=False)
+            r = self.residual(model)
+            return np.concatenate([r.real.ravel(), r.imag.ravel()])
+
+        best = None
+        for start in starts:
+            theta0 = np.clip(np.log(start), lo + 1e-6, hi - 1e-6)
+            sol = least_squares(residual, theta0, bounds=(lo, hi), xtol=1e-10, ftol=1e-12,
+                                max_nfev=60 * (n_lags + 1))
+            if best is None or sol.cost < best.cost:
+                best = sol
+        assert best is not None
+        return np.sort(np.exp(best.x))
+
+    def candidate(self, n_lags: int, with_A3: bool,
+                  starts: list[FloatArray]) -> tuple[Candidate, FloatArray | None]:
+        """Search the lag roots of one structure and score it by leave-one-row-out error."""
+        per_entry = 2 + int(with_A3) + n_lags
+        n_params = self.n_dof**2 * per_entry + n_lags
+
+        def skipped(note: str, d: tuple[float, ...] = ()) -> tuple[Candidate, None]:
+            return Candidate(n_lags, with_A3, d, math.inf, math.inf, n_params, note), None
+
+        # Each row gives every entry one complex (two real) equations.
+        if 2 * (self.n_rows - 1) < per_entry or 2 * self.n_dof**2 * self.n_rows < n_params:
+            return skipped(f"too few {self.row_name} ({self.n_rows}) for {per_entry} "
+                           "coefficients per entry with one held out")
+        d = self.search(n_lags, with_A3, starts)
+        roots = tuple(float(x) for x in d)
+        if n_lags and np.min(np.diff(np.concatenate([[0.0], d]))) <= 1e-6 * d.max():
+            return skipped("lag roots merged: fewer lags describe the table", roots)
+        cond = self.condition(d, with_A3)
+        if cond > self.max_condition:
+            return skipped(f"ill-conditioned (condition number {cond:.2g})", roots)
+        try:
+            errors = self._cross_validate(d, with_A3)
+        except RankDeficiencyError as err:
+            return skipped(f"rank deficient: {err}", roots)
+        return Candidate(n_lags, with_A3, roots, float(errors.mean()),
+                         float(errors.std(ddof=1) / math.sqrt(errors.size)), n_params), d
+
+    def _cross_validate(self, d: FloatArray, with_A3: bool) -> FloatArray:
+        """Return the mean squared weighted error of each held-out row (lag roots fixed)."""
+        errors = np.empty(self.n_rows)
+        for k in range(self.n_rows):
+            train = np.delete(np.arange(self.n_rows), k)
+            model = self.fit(d, with_A3, train)
+            errors[k] = float(np.mean(np.abs(self.residual(model, [k])) ** 2))
+        return errors
+
+
+def select_structure(problem: RogerProblem, n_lags: int | None = None,
+                     with_A3: bool | None = None
+                     ) -> tuple[RationalFunctionModel, Candidate, str, tuple[Candidate, ...]]:
+    """Fit every structure asked for and choose one by held-out error (one-standard-error rule).
+
+    Parameters
+    ----------
+    problem : RogerProblem
+    n_lags : int, optional
+        0 to 3; None tries all.
+    with_A3 : bool, optional
+        None tries both.
+
+    Returns
+    -------
+    model, chosen, reason, candidates
+        The chosen structure's fit on every row, its candidate, why it was chosen, and every
+        candidate tried.
+
+    Raises
+    ------
+    RankDeficiencyError
+        When no structure is determined by the table (each one's reason is listed).
+    """
+    lags = range(4) if n_lags is None else [n_lags]
+    a3_options = (True, False) if with_A3 is None else (with_A3,)
+    candidates: list[Candidate] = []
+    previous: FloatArray | None = None  # lag roots of the best structure with one lag fewer
+    for m in lags:
+        starts = problem.starts(m, previous)
+        found: list[tuple[Candidate, FloatArray]] = []
+        for a3 in a3_options:
+            candidate, d_found = problem.candidate(m, a3, starts)
+            candidates.append(candidate)
+            if d_found is not None:
+                found.append((candidate, d_found))
+                starts = [d_found, *starts]  # the other A3 option also tries these roots
+        previous = min(found, key=lambda f: f[0].cv_error)[1] if found else None
+    usable = [c for c in candidates if not c.note]
+    if not usable:
+        notes = "; ".join(f"n_lags={c.n_lags}, A3={c.with_A3}: {c.note}" for c in candidates)
+        raise RankDeficiencyError(
+            f"no Roger structure is determined by this flutter-derivative table ({notes})")
+    chosen, reason = select_one_se(usable, given=n_lags is not None and with_A3 is not None)
+    model = problem.fit(np.array(chosen.d), chosen.with_A3)
+    return model, chosen, reason, tuple(candidates)
+
+
+@dataclass(frozen=True, eq=False)
+class TableFit:
+    """A table's Roger fit and how well it holds at every tabulated reduced frequency.
+
+    Attributes
+    ----------
+    model : RationalFunctionModel
+        The fitted model (2 or 3 degrees of freedom, as the table).
+    reason : str
+        Why its structure was chosen.
+    candidates : tuple of Candidate
+        Every structure tried, with its held-out error.
+    relative_error : ndarray, shape (n,)
+        At each table row (increasing K), the largest error of a force row of ``Q`` relative to
+        that row's largest entry there: what the weighting keeps small.
+    """
+
+    model: RationalFunctionModel
+    reason: str
+    candidates: tuple[Candidate, ...]
+    relative_error: FloatArray
+
+    def summary(self) -> str:
+        """One line: the structure and the worst relative error over the table."""
+        worst = int(np.argmax(self.relative_error))
+        return (f"Roger fit with {self.model.n_lags} lag(s) ({self.reason}); largest relative "
+                f"error {100 * self.relative_error[worst]:.2g} % at row {worst + 1}")
+
+
+def fit_table(table: FlutterDerivativeTable, *, n_lags: int | None = None,
+              with_A3: bool | None = None, weighting: str = "relative") -> TableFit:
+    """Fit Roger's rational function to a flutter-derivative table, structure by evidence.
+
+    Parameters
+    ----------
+    table : FlutterDerivativeTable
+        Two or three degrees of freedom.
+    n_lags : int, optional
+        0 to 3; None chooses by leave-one-row-out error.
+    with_A3 : bool, optional
+        Fit the added-mass matrix; None chooses.
+    weighting : str
+        One of :data:`WEIGHTINGS` (module docstring).
+
+    Returns
+    -------
+    TableFit
+
+    Raises
+    ------
+    ValueError
+        On an unknown weighting or ``n_lags`` outside 0..3.
+    RankDeficiencyError
+        When the table has too few rows for any structure.
+    """
+    if weighting not in WEIGHTINGS:
+        raise ValueError(f"unknown weighting {weighting!r}; allowed: {', '.join(WEIGHTINGS)}")
+    if n_lags is not None and (isinstance(n_lags, bool) or n_lags not in (0, 1, 2, 3)):
+        raise ValueError(f"n_lags must be an integer in 0..3 or None, got {n_lags!r}")
+    Q = table.Q()
+    K = np.broadcast_to(table.K[:, None, None], Q.shape)
+    relative = _row_weights(Q)
+    weights = relative if weighting == "relative" else None
+    problem = RogerProblem(K, Q, weights)
+    model, _, reason, candidates = select_structure(problem, n_lags, with_A3)
+    error = np.abs(model.Q(1j * table.K) - Q) * relative
+    return TableFit(model, reason, candidates, error.max(axis=(1, 2)))
+
+
+def _row_weights(Q: ComplexArray) -> FloatArray:
+    """Return the inverse of each force row's largest entry at each K, shape of ``Q``."""
+    largest = np.abs(Q).max(axis=2, keepdims=True)
+    floor = 1e-12 * float(np.abs(Q).max() or 1.0)
+    return np.broadcast_to(1.0 / np.maximum(largest, floor), Q.shape).copy()
