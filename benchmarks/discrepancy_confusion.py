@@ -39,8 +39,8 @@ from simulators.campaigns import _STRENGTHS, REALISTIC, SECTION, scaled, simulat
 
 DEPTH = 0.03  # m, the flat plate's depth (the vortex effect's)
 
-#: Pairs that occur together on one rig (tests/ident/test_discrepancy.py has eight of them);
-#: the last four with the effects added by issue 20 (an aerodynamic nonlinearity, tubing).
+#: Pairs that occur together on one rig (tests/ident/discrepancy/test_discrepancy.py has eight
+#: of them); the last four with the effects added by issue 20 (an aerodynamic nonlinearity, tubing).
 PAIRS = [
     ("coulomb_friction", "channel_delay"),
     ("quadratic_damping", "sensor_crosstalk"),
@@ -58,7 +58,7 @@ PAIRS = [
 ]
 
 #: Effects outside the library, applied to a clean campaign's releases: a laser whose zero
-#: drifts by 0.05 mm/s (tests/ident/test_discrepancy.py has the same).
+#: drifts by 0.05 mm/s (tests/ident/discrepancy/test_discrepancy.py has the same).
 OUTSIDE: dict[str, Callable[[Release], Release]] = {
     "laser_drift_0.05mm/s": lambda r: dataclasses.replace(r, h=r.h + 5e-5 * r.t,
                                                           meta=dict(r.meta)),

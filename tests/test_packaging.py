@@ -26,9 +26,11 @@ import pytest
 
 from daq.config import load_rig_config
 from daq.recording.synthetic import write_release_run
-from ident import Release, SectionModel
+from ident import Release
 from ident.model import flat_plate
 from simulators import simulate_release
+
+from support.sections import FLAT_PLATE
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "daq" / "rig_configs"
@@ -99,7 +101,7 @@ def run_without(modules: list[str], argv: list[str], cwd: Path) -> subprocess.Co
 @pytest.fixture
 def run_file(tmp_path: Path) -> Path:
     """Return a run file of one simulated release (something to replay and reprocess)."""
-    section = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+    section = FLAT_PLATE
     release = Release.from_simulation(simulate_release(
         section, flat_plate.jones_model(), 5.0, 0.004, 0.02, duration=3.0, fs=250.0))
     path = tmp_path / "run.h5"

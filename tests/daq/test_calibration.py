@@ -6,7 +6,6 @@ Parsed, applied, and every bad value a ConfigError naming its key.
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,8 +17,9 @@ from daq.recording.devices import ScannerRawRows
 from daq.recording.sync_view import polled_conditions, tap_columns
 from ident.physics.air import moist_air_density
 
-CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
-BASE = (CONFIGS / "sim_flat_plate.toml").read_text()
+from support.configs import CONFIGS, SIM_FLAT_PLATE
+
+BASE = SIM_FLAT_PLATE.read_text()
 TAPS_LINE = "taps_per_face = 28          # 2 x 28 on the faces + 2 x 3 on the edges = 62 taps\n"
 N_TAPS = 62
 

@@ -13,6 +13,10 @@ from daq.cli import main
 from ident import SectionModel
 from ident.model import flat_plate, flutter
 
+from support.configs import SIM_FLAT_PLATE
+from support.run_files import write_run
+from support.sections import FLAT_PLATE
+
 
 def test_flutter_command_reads_json_section_and_model(tmp_path, capsys):
     """`windrig flutter` gives the same speed as the library call."""
@@ -135,9 +139,7 @@ def test_unknown_subcommand_exits_with_usage(capsys):
 
 def test_simulate_prints_a_loopback_url_for_every_instrument(capsys):
     """`windrig simulate` starts the rig's simulators and lists where to connect."""
-    from pathlib import Path
-
-    config = Path(__file__).resolve().parents[2] / "rig_configs" / "sim_flat_plate.toml"
+    config = SIM_FLAT_PLATE
     assert main(["simulate", "--config", str(config), "--duration", "0.2"]) == 0
     out = capsys.readouterr().out
     for name in ("scanner", "laser_front", "laser_rear", "laser_check", "fan", "plc",
@@ -149,12 +151,6 @@ def test_simulate_prints_a_loopback_url_for_every_instrument(capsys):
 
 def test_identify_reads_run_files_and_prints_the_flutter_speed(tmp_path, capsys):
     """`windrig identify` on recorded files gives the flutter speed of the simulated truth."""
-    import sys
-    from pathlib import Path
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "ident"))
-    from test_io import write_run  # the recorder-written files of the reader's tests
-
     files = []
     for i in range(2):  # two files, two wind speeds each: the campaign spans files
         files.append(tmp_path / f"run{i}.h5")
@@ -164,8 +160,7 @@ def test_identify_reads_run_files_and_prints_the_flutter_speed(tmp_path, capsys)
     out = capsys.readouterr().out
     assert "4 release(s) from 2 file(s)" in out
     result = json.loads(out_json.read_text())
-    truth = flutter.analyze(SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005,
-                                         zeta_a=0.005), flat_plate.jones_model())
+    truth = flutter.analyze(FLAT_PLATE, flat_plate.jones_model())
     # Noise-free records (4 s at 200 Hz): E2RFC is exact up to solver tolerances.
     assert result["flutter_speed"] == pytest.approx(truth.speed, rel=1e-4)
 

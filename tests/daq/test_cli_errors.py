@@ -21,8 +21,9 @@ from ident.model import flat_plate
 from ident.model import flutter as fl
 from simulators import simulate_release
 
-CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
-SIM_CONFIG = CONFIGS / "sim_flat_plate.toml"
+from support.configs import SIM_FLAT_PLATE
+
+SIM_CONFIG = SIM_FLAT_PLATE
 SECTION = {"B": 0.3, "m": 3.0, "I": 0.03, "fh": 2.0, "fa": 4.0, "zeta_h": 0.005,
            "zeta_a": 0.005}
 

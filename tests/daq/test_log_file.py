@@ -10,14 +10,15 @@ from __future__ import annotations
 import logging
 import re
 from datetime import datetime
-from pathlib import Path
 
 import pytest
 
 from daq.cli import main
 from daq.log_file import close_log_file, open_log_file
 
-CONFIG = Path(__file__).resolve().parents[2] / "rig_configs" / "sim_flat_plate.toml"
+from support.configs import SIM_FLAT_PLATE
+
+CONFIG = SIM_FLAT_PLATE
 LINE = re.compile(r"^(\S+) (DEBUG|INFO|WARNING|ERROR)\s+(\S+) \[([^\]]+)\] (.*)$")
 
 

@@ -12,7 +12,6 @@ tunnel's 6.0 (0.1 %). Tolerances below are ~5x the worst measured.
 from __future__ import annotations
 
 import time
-from pathlib import Path
 from typing import Any
 
 import h5py
@@ -21,14 +20,15 @@ import numpy as np
 from daq.config import parse_rig_config
 from daq.sim.recording import record_simulated_run
 
-CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
+from support.configs import FAST_FAN, SIM_FLAT_PLATE
+
 FAN_RPM = 600.0  # 6 m/s on this rig
 
 
 def test_record_run_writes_a_release_matching_the_tunnel_truth(tmp_path):
     # A fast fan ramp (a simulator option) keeps the test short.
-    text = (CONFIGS / "sim_flat_plate.toml").read_text() + \
-        "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n"
+    text = SIM_FLAT_PLATE.read_text() + \
+        FAST_FAN
     config = parse_rig_config(text, "sim_flat_plate.toml")
     seen: dict[str, Any] = {}
 
@@ -122,7 +122,7 @@ def test_cli_acquire_simulated_prints_the_summary(tmp_path, capsys):
     from daq.cli import main
 
     out = tmp_path / "cli.h5"
-    code = main(["acquire", "--config", str(CONFIGS / "sim_flat_plate.toml"), "--simulate",
+    code = main(["acquire", "--config", str(SIM_FLAT_PLATE), "--simulate",
                  "--duration", "1.5", "--out", str(out), "--notes", "cli test"])
     text = capsys.readouterr().out
     assert code == 0, text

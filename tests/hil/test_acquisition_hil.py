@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import time
 from collections import defaultdict
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -21,7 +20,8 @@ from daq.acquisition.records import Event, StreamBlock
 from daq.config import parse_rig_config
 from daq.sim.rig import start_simulated_rig
 
-CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
+from support.configs import FAST_FAN, SIM_FLAT_PLATE
+
 LASERS = ("laser_front", "laser_rear", "laser_check")
 
 
@@ -45,8 +45,8 @@ class Collector:
 
 def test_engine_streams_the_whole_simulated_rig_and_records_a_release():
     # A fast fan ramp (a simulator option) keeps the test short.
-    text = (CONFIGS / "sim_flat_plate.toml").read_text() + \
-        "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n"
+    text = SIM_FLAT_PLATE.read_text() + \
+        FAST_FAN
     config = parse_rig_config(text, "sim_flat_plate.toml")
     sink = Collector()
     with start_simulated_rig(config) as rig:

@@ -11,8 +11,8 @@ Measured (this machine, 3 runs of 3.5 s at 9 m/s, scanner noise 0.1 Pa per tap):
 moment of the 60 live taps against all 62 taps integrated from the same recorded pressures
 differ by 0.42-0.49 % and 0.21-0.24 % of the decay's rms lift and moment, sample by sample
 (tolerance 1 %; the difference is the dead taps' noise: without noise the redistribution
-is exact to 0.06 % for this pressure field, tests/ident/test_taps_without.py); lift and moment
-against the tunnel's truth: correlation 0.9997-0.9998; U 9.017-9.020 m/s against 9.000
+is exact to 0.06 % for this pressure field, tests/ident/physics/test_taps_without.py); lift and
+moment against the tunnel's truth: correlation 0.9997-0.9998; U 9.017-9.020 m/s against 9.000
 (tolerance 1 %: the humid density is 0.4 % below the simulated dry air, so U is 0.2 % high;
 without the Pitot calibration U would be 2.4 % low).
 """
@@ -20,7 +20,6 @@ without the Pitot calibration U would be 2.4 % low).
 from __future__ import annotations
 
 import time
-from pathlib import Path
 from typing import Any
 
 import h5py
@@ -31,7 +30,8 @@ from daq.recording.info import format_info, run_info
 from daq.sim.recording import record_simulated_run
 from ident.physics.air import moist_air_density
 
-CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
+from support.configs import SIM_FLAT_PLATE
+
 FAN_RPM = 900.0  # 9 m/s on this rig: lift and moment well above the scanner's noise
 DEAD = [10, 45]  # an interior tap of the upper face and one of the lower face
 MAX_LAG_S = 0.05  # the wiring check's lag search, s (in-process simulators, see below)
@@ -39,7 +39,7 @@ MAX_LAG_S = 0.05  # the wiring check's lag search, s (in-process simulators, see
 
 def calibrated_config_text() -> str:
     """Return the flat-plate rig: two scanner modules, taps wired out of order, calibrations."""
-    text = (CONFIGS / "sim_flat_plate.toml").read_text()
+    text = SIM_FLAT_PLATE.read_text()
     text = text.replace("modules = 1\n", "modules = 2\n")
     # Tap i on module i % 2, channel 40 - i // 2: alternating modules, descending channels.
     wiring = ", ".join(f"[{i % 2}, {40 - i // 2}]" for i in range(62))

@@ -36,7 +36,8 @@ from daq.sim.rig_process import start_rig_process
 from daq.sim.sync_check import ClockTruthTracker, check_run
 from daq.sync.conversions import wind_speed
 
-CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
+from support.configs import FAST_FAN, SIM_FLAT_PLATE
+
 RATE_HZ = 500.0  # the scanner's frame rate in sim_flat_plate.toml
 PERIOD_S = 1.0 / RATE_HZ
 #: Noise of a 0.5 s mean of one channel is 0.063 Pa (module docstring): 8 sigma.
@@ -44,7 +45,7 @@ ZERO_TOL_PA = 0.5
 
 
 def config(extra: str = "") -> RigConfig:
-    text = (CONFIGS / "sim_flat_plate.toml").read_text() + extra
+    text = SIM_FLAT_PLATE.read_text() + extra
     return parse_rig_config(text, "sim_flat_plate.toml")
 
 
@@ -248,7 +249,6 @@ def frames_after(sink: Collector, t_ns: int) -> int:
     return sum(int(np.count_nonzero(b.host_time_ns > t_ns)) for b in sink.scanner_blocks())
 
 
-FAST_FAN = "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n"
 
 
 @pytest.mark.parametrize("engine", [FAST_FAN], indirect=True)

@@ -24,7 +24,9 @@ from daq.instruments.build import build_driver
 from daq.sim.live_config import write_live_config
 from daq.sim.rig import start_simulated_rig
 
-CONFIG = Path(__file__).resolve().parents[2] / "rig_configs" / "sim_flat_plate.toml"
+from support.configs import SIM_FLAT_PLATE
+
+CONFIG = SIM_FLAT_PLATE
 DEVICES = ("scanner", "laser_front", "laser_rear", "laser_check", "fan", "plc", "barometer")
 
 

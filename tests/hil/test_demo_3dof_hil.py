@@ -23,13 +23,15 @@ from daq.cli import main
 from daq.config import SHIPPED_CONFIGS
 from ident.records.run_file import read_run
 
+from support.configs import FAST_FAN
+
 pytestmark = pytest.mark.slow
 
 
 def test_the_3dof_demo_identifies_a_3x3_model_and_the_flutter_speed(tmp_path, capsys):
     config = tmp_path / "sim_bluff_deck_3dof_fast_fan.toml"
     config.write_text((SHIPPED_CONFIGS / "sim_bluff_deck_3dof.toml").read_text()
-                      + "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n")
+                      + FAST_FAN)
     out = tmp_path / "demo3"
     code = main(["demo", "--out", str(out), "--config", str(config)])
     printed = capsys.readouterr().out

@@ -19,11 +19,13 @@ from daq.cli import main
 from daq.sim.demo import DEFAULT_CONFIG
 from ident.records.run_file import read_run
 
+from support.configs import FAST_FAN
+
 
 def test_demo_campaign_identifies_the_flutter_speed_within_3_percent(tmp_path, capsys):
     config = tmp_path / "sim_flat_plate_fast_fan.toml"
     config.write_text(DEFAULT_CONFIG.read_text()
-                      + "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n")
+                      + FAST_FAN)
     out = tmp_path / "demo"
     assert main(["demo", "--out", str(out), "--config", str(config)]) == 0
     printed = capsys.readouterr().out

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import re
 import threading
-from pathlib import Path
 
 import h5py
 import pytest
@@ -17,7 +16,9 @@ from daq.config import load_rig_config
 from daq.recording.run import record_run
 from daq.sim.rig import start_simulated_rig
 
-CONFIG = Path(__file__).resolve().parents[2] / "rig_configs" / "sim_flat_plate.toml"
+from support.configs import SIM_FLAT_PLATE
+
+CONFIG = SIM_FLAT_PLATE
 #: One line of RUN.events.log: UTC time, run time (s), kind, device, text.
 LINE = re.compile(r"^(\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}Z) +(-?\d+\.\d{3}) (\S+) +(\S+) +(.*)$")
 

@@ -24,13 +24,14 @@ from daq.instruments.microepsilon_ild1420.driver import MicroEpsilonIld1420
 from daq.instruments.microepsilon_ild1420.settings import Ild1420Settings
 from daq.instruments.reading import Gap, Reading
 from daq.transports.byte_transport import open_transport
-from ident import SectionModel, TapLayout
+from ident import TapLayout
 from ident.model import flat_plate
 from simulators.clock import DeviceClock, MonotonicClock
 from simulators.devices.microepsilon_ild1420 import FATES, SimIld1420Truth, SimMicroEpsilonIld1420
 from simulators.virtual_tunnel import VirtualTunnel
 
-SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+from support.sections import FLAT_PLATE
+
 TAPS = TapLayout.rectangle(0.3, 0.01, 16)
 # Held at h = 4 mm, alpha = 0.02 rad: with MR = 50 mm, standoff 25 mm and x = +-0.1 m the reading
 # stays within 25 +- 6 mm, well inside the range.
@@ -39,7 +40,7 @@ GEOMETRY = {"range_mm": 50, "x": 0.1, "standoff_mm": 25.0}
 
 @pytest.fixture
 def tunnel() -> VirtualTunnel:
-    return VirtualTunnel(SECTION, flat_plate.jones_model(), TAPS, wind_per_rpm=0.01,
+    return VirtualTunnel(FLAT_PLATE, flat_plate.jones_model(), TAPS, wind_per_rpm=0.01,
                          hold=(0.004, 0.02), clock=MonotonicClock(), decay_duration_s=12.0)
 
 

@@ -23,13 +23,13 @@ from daq.instruments.abb_acs580.settings import AbbAcs580Settings
 from daq.instruments.modbus_plc.driver import ModbusPlc
 from daq.instruments.modbus_plc.settings import ModbusPlcSettings
 from daq.transports.modbus import ModbusBus
-from ident import SectionModel, TapLayout
+from ident import TapLayout
 from ident.model import flat_plate
 from simulators.devices.abb_acs580 import SimAbbAcs580
 from simulators.devices.modbus_plc import SimModbusPlc
 from simulators.virtual_tunnel import VirtualTunnel
 
-SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+from support.sections import FLAT_PLATE
 
 # The rig-config tables the drivers validate; the simulators get the same numbers as plain ints.
 FAN_TABLE = {
@@ -51,7 +51,7 @@ PLC_TABLE = {
 
 @pytest.fixture
 def tunnel() -> VirtualTunnel:
-    return VirtualTunnel(SECTION, flat_plate.jones_model(), TapLayout.rectangle(0.3, 0.01, 16),
+    return VirtualTunnel(FLAT_PLATE, flat_plate.jones_model(), TapLayout.rectangle(0.3, 0.01, 16),
                          wind_per_rpm=0.01, decay_duration_s=2.0)
 
 

@@ -29,8 +29,9 @@ import numpy as np
 import pytest
 import xarray as xr
 
-REPO = Path(__file__).resolve().parents[2]
-CONFIG = REPO / "rig_configs" / "sim_flat_plate.toml"
+from support.configs import REPO, SIM_FLAT_PLATE
+
+CONFIG = SIM_FLAT_PLATE
 
 pytestmark = pytest.mark.slow
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import threading
 import time
-from pathlib import Path
 
 import h5py
 import pytest
@@ -23,28 +22,12 @@ from daq.recording.session import RecordingSession
 from daq.sim.rig_process import start_rig_process
 from daq.sim.sync_check import ClockTruthTracker, check_run
 
-CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
+from support.configs import DRIFTING_CLOCKS, SIM_FLAT_PLATE
+
 #: The single-file test's bounds (test_sync_alignment_hil.py, smooth flow): mean
 #: misalignment between devices, and its largest spread right after a refit.
 TARGET_S = 0.2e-3
 MAX_SPREAD_S = 1e-3
-#: Same clocks as the single-file test: 20 ms off the host's and 50 ppm fast or slow.
-CLOCKS = """
-[simulation.devices.fan]
-ramp_rpm_per_s = 4000.0
-[simulation.devices.scanner]
-clock_offset_s = 0.02
-clock_drift_ppm = 50.0
-[simulation.devices.laser_front]
-clock_offset_s = -0.02
-clock_drift_ppm = -50.0
-[simulation.devices.laser_rear]
-clock_offset_s = 0.02
-clock_drift_ppm = -50.0
-[simulation.devices.laser_check]
-clock_offset_s = -0.02
-clock_drift_ppm = 50.0
-"""
 
 
 def _release(acq, decay_s: float = 3.0) -> None:
@@ -56,7 +39,7 @@ def _release(acq, decay_s: float = 3.0) -> None:
 
 
 def test_a_later_file_is_aligned_from_its_start(tmp_path):
-    config = parse_rig_config((CONFIGS / "sim_flat_plate.toml").read_text() + CLOCKS,
+    config = parse_rig_config(SIM_FLAT_PLATE.read_text() + DRIFTING_CLOCKS,
                               "sim_flat_plate.toml")
     tracker = ClockTruthTracker(settle_s=0.0)  # counted from the second file's time 0
     first, second = tmp_path / "speed01.h5", tmp_path / "speed02.h5"

@@ -52,8 +52,9 @@ from daq.recording.recorder import RunRecorder
 from daq.recording.recover import RECOVERED_EVENT, needs_recovery
 from ident.records.run_file import read_run
 
-REPO = Path(__file__).resolve().parents[2]
-CONFIG = REPO / "rig_configs" / "sim_flat_plate.toml"
+from support.configs import REPO, SIM_FLAT_PLATE
+
+CONFIG = SIM_FLAT_PLATE
 SYNC_RATE_HZ = 500.0
 #: The most data a SIGKILL may lose (issue 17): kill time minus the last row kept, s.
 MAX_LOSS_S = 1.0

@@ -60,8 +60,9 @@ from daq.recording.writer import RunWriter
 from daq.sim.recording import record_simulated_run
 from ident.records.run_file import read_run
 
-REPO = Path(__file__).resolve().parents[2]
-CONFIG = REPO / "rig_configs" / "sim_flat_plate.toml"
+from support.configs import REPO, SIM_FLAT_PLATE
+
+CONFIG = SIM_FLAT_PLATE
 
 #: The recorder flushes at least this often (its default, used by ``windrig acquire``), s.
 FLUSH_INTERVAL_S = float(inspect.signature(RunRecorder).parameters["flush_interval_s"].default)

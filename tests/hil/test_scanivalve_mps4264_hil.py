@@ -23,19 +23,20 @@ from daq.instruments.scanivalve_mps4264.blocks import STATUS_MISSING, STATUS_OK,
 from daq.instruments.scanivalve_mps4264.driver import ScanivalveMps4264
 from daq.instruments.scanivalve_mps4264.settings import Mps4264Settings
 from daq.transports.byte_transport import open_transport
-from ident import SectionModel, TapLayout
+from ident import TapLayout
 from ident.model import flat_plate
 from simulators.clock import DeviceClock
 from simulators.devices.scanivalve_mps4264 import SimScanivalveMps4264
 from simulators.virtual_tunnel import VirtualTunnel
 
-SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+from support.sections import FLAT_PLATE
+
 EPOCH = 1_767_225_600  # the simulator's PTP seconds at true time 0 (its default)
 
 
 def make_tunnel(taps_per_face: int = 16) -> VirtualTunnel:
     taps = TapLayout.rectangle(0.3, 0.03, taps_per_face)
-    return VirtualTunnel(SECTION, flat_plate.jones_model(), taps, wind_per_rpm=0.01,
+    return VirtualTunnel(FLAT_PLATE, flat_plate.jones_model(), taps, wind_per_rpm=0.01,
                          decay_duration_s=10.0)
 
 

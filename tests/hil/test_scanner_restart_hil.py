@@ -47,14 +47,15 @@ from daq.recording.writer import RunWriter
 from daq.sim.rig_process import start_rig_process
 from daq.sim.sync_check import ClockTruthTracker
 
-CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
+from support.configs import SIM_FLAT_PLATE
+
 RATE_HZ = 500.0  # the scanner's frame rate in sim_flat_plate.toml (and of the sync view)
 PERIOD_S = 1.0 / RATE_HZ
 NO_PTP = "\n[simulation.devices.scanner]\nptp = false\n"
 
 
 def config(extra: str = "") -> RigConfig:
-    return parse_rig_config((CONFIGS / "sim_flat_plate.toml").read_text() + extra,
+    return parse_rig_config(SIM_FLAT_PLATE.read_text() + extra,
                             "sim_flat_plate.toml")
 
 

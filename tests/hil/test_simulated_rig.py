@@ -6,7 +6,6 @@ Drivers are built from the rig config and all of them see one consistent virtual
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,14 +15,14 @@ from daq.errors import ConfigError, SafetyError
 from daq.instruments.build import build_driver
 from daq.sim.rig import start_simulated_rig
 
-CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
+from support.configs import CONFIGS, FAST_FAN, SIM_FLAT_PLATE
 
 
 @pytest.mark.parametrize("name", ["sim_flat_plate.toml", "sim_streamlined_deck.toml"])
 def test_every_driver_reaches_its_simulator_and_the_physics_is_shared(name):
     """Fan -> wind at the Pitot; PLC release -> lasers see the decay; barometer -> tunnel air."""
     # A fast fan ramp (a simulator option) keeps the test short.
-    text = (CONFIGS / name).read_text() + "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n"
+    text = (CONFIGS / name).read_text() + FAST_FAN
     config = parse_rig_config(text, name)
     with start_simulated_rig(config) as rig:
         assert all(url.startswith(("tcp://127.0.0.1", "socket://127.0.0.1",
@@ -83,7 +82,7 @@ def test_every_driver_reaches_its_simulator_and_the_physics_is_shared(name):
 
 def test_auto_urls_need_the_simulators():
     """A simulated rig's "auto" URL cannot be opened without starting the simulators."""
-    config = load_rig_config(CONFIGS / "sim_flat_plate.toml")
+    config = load_rig_config(SIM_FLAT_PLATE)
     with pytest.raises(ConfigError, match="url = 'auto'"):
         build_driver(config.instrument("barometer"), config.limits)
 
@@ -152,7 +151,7 @@ def test_a_turbulent_virtual_tunnel_buffets_the_held_model_as_the_taps_see_it():
     from ident.model.quasi_steady import StaticCoefficients
     from ident.physics.turbulence import TurbulenceSpec
 
-    text = (CONFIGS / "sim_flat_plate.toml").read_text()
+    text = SIM_FLAT_PLATE.read_text()
     lift, U, config = _held_lift(text + TURBULENCE)
     spec = TurbulenceSpec(Iu=0.0, Iw=0.05, Lux=1.0, Lwx=0.3, Cuy=10.0, Cwy=8.0)
     static = StaticCoefficients(C_D=0.02, C_L=0.0, C_M=0.0, dC_D=0.0, dC_L=-6.283, dC_M=1.571)
@@ -163,5 +162,5 @@ def test_a_turbulent_virtual_tunnel_buffets_the_held_model_as_the_taps_see_it():
     gain = qd * config.section.B * (static.dC_L - static.C_D) / U
     expected = abs(gain) * np.sqrt(np.trapezoid(G_w, f))
     assert np.std(lift) == pytest.approx(expected, rel=0.35)
-    smooth, _, _ = _held_lift(text + "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n")
+    smooth, _, _ = _held_lift(text + FAST_FAN)
     assert np.std(smooth) < 0.2 * expected  # frame noise only

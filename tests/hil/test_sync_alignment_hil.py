@@ -11,7 +11,6 @@ instrument has.
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import h5py
 import numpy as np
@@ -23,7 +22,8 @@ from daq.recording.run import record_run
 from daq.sim.rig_process import start_rig_process
 from daq.sim.sync_check import ClockTruthTracker, check_run
 
-CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
+from support.configs import DRIFTING_CLOCKS, SIM_FLAT_PLATE
+
 TARGET_S = 0.2e-3
 #: Length of the recorded run, s. The online clock maps settle over a file's first
 #: CLOCK_SETTLE_S = 6 s (the README's known limitation: 0.3-0.9 ms common error at 2-6 s on a
@@ -31,24 +31,6 @@ TARGET_S = 0.2e-3
 #: the figures are over the run after it (14 s; a real run is 30-120 s).
 RUN_S = 20.0
 
-# Scanner and lasers on clocks 20 ms off the host's and 50 ppm fast or slow: between the
-# scanner and laser_front 40 ms and 100 ppm to undo.
-CLOCKS = """
-[simulation.devices.fan]
-ramp_rpm_per_s = 4000.0
-[simulation.devices.scanner]
-clock_offset_s = 0.02
-clock_drift_ppm = 50.0
-[simulation.devices.laser_front]
-clock_offset_s = -0.02
-clock_drift_ppm = -50.0
-[simulation.devices.laser_rear]
-clock_offset_s = 0.02
-clock_drift_ppm = -50.0
-[simulation.devices.laser_check]
-clock_offset_s = -0.02
-clock_drift_ppm = 50.0
-"""
 
 
 def actions(acq, rig=None):
@@ -89,7 +71,7 @@ seed = 1
 
 @pytest.mark.parametrize("flow", ["smooth", "turbulent"])
 def test_sync_view_is_aligned_to_the_truth(tmp_path, flow):
-    text = (CONFIGS / "sim_flat_plate.toml").read_text() + CLOCKS
+    text = SIM_FLAT_PLATE.read_text() + DRIFTING_CLOCKS
     config = parse_rig_config(text + (TURBULENCE if flow == "turbulent" else ""),
                               "sim_flat_plate.toml")
     path = tmp_path / "aligned.h5"
@@ -148,7 +130,7 @@ def test_sync_view_is_aligned_to_the_truth(tmp_path, flow):
 
 
 def test_rig_process_reports_errors_of_its_child():
-    config = parse_rig_config((CONFIGS / "sim_flat_plate.toml").read_text() + CLOCKS,
+    config = parse_rig_config(SIM_FLAT_PLATE.read_text() + DRIFTING_CLOCKS,
                               "sim_flat_plate.toml")
     with start_rig_process(config) as rig:
         assert sorted(rig.clocked_devices()) == ["laser_check", "laser_front", "laser_rear",

@@ -39,7 +39,8 @@ from daq.sim.rig_process import start_rig_process
 from daq.sim.sync_check import ClockTruthTracker, check_run
 from ident.records.run_file import read_run
 
-CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
+from support.configs import CONFIGS, FAST_FAN
+
 FAN_RPM = 900.0  # 9 m/s on this rig (flutter at 13.87 m/s)
 HOLD_P = 0.004  # m, [simulation] hold_p of the shipped config
 
@@ -53,7 +54,7 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     interpreter lock, 14-36 ms on a loaded host.
     """
     text = (CONFIGS / "sim_bluff_deck_3dof.toml").read_text() + \
-        "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n"
+        FAST_FAN
     config = parse_rig_config(text, "sim_bluff_deck_3dof.toml")
     seen: dict[str, Any] = {}
 

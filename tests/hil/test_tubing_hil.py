@@ -9,7 +9,6 @@ cent from run to run, more than the tubing correction's 0.5 %.
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -18,7 +17,8 @@ from daq.instruments.build import build_driver
 from daq.sim.rig import start_simulated_rig
 from ident.physics.tubing import Air, distort, tubing_set
 
-CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
+from support.configs import FAST_FAN, SIM_FLAT_PLATE
+
 TUBES = '[[taps.tubing]]\ntaps = [0, 1, 2, 3]\nlength = 1.5\ndiameter = 1.0e-3\nvolume = 300e-9\n\n'
 
 
@@ -30,9 +30,9 @@ def test_the_simulated_rig_puts_the_configs_tubes_between_taps_and_scanner():
     tunnel's default pressure coefficients), through ``ident.physics.tubing.distort``. Tolerance
     1e-3 of the pressures' range, past the release's step (tests/simulators/test_tubing.py).
     """
-    text = (CONFIGS / "sim_flat_plate.toml").read_text().replace("[limits]", TUBES + "[limits]")
+    text = SIM_FLAT_PLATE.read_text().replace("[limits]", TUBES + "[limits]")
     text = text.replace("temperature_c = 20.0", "temperature_c = 20.0\ntubing = true")
-    config = parse_rig_config(text + "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n")
+    config = parse_rig_config(text + FAST_FAN)
     taps = config.taps
     with start_simulated_rig(config) as rig:
         tunnel = rig.tunnel

@@ -18,19 +18,20 @@ from daq.instruments.vaisala_ptb330.decoder import Ptb330Line, Ptb330LineDecoder
 from daq.instruments.vaisala_ptb330.driver import SERIAL_DEFAULTS, VaisalaPtb330
 from daq.instruments.vaisala_ptb330.settings import Ptb330Settings
 from daq.transports.byte_transport import open_transport
-from ident import SectionModel, TapLayout
+from ident import TapLayout
 from ident.model import flat_plate
 from simulators.devices.vaisala_ptb330 import SimVaisalaPtb330
 from simulators.virtual_tunnel import AirState, VirtualTunnel
 
-SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+from support.sections import FLAT_PLATE
+
 TAPS = TapLayout.rectangle(0.3, 0.01, 16)
 TRANSPORTS = ["socket", "pty"]
 
 
 def tunnel():
     air = AirState(pressure_pa=98_500.0, temperature_k=296.4)
-    return VirtualTunnel(SECTION, flat_plate.jones_model(), TAPS, wind_per_rpm=0.01, air=air)
+    return VirtualTunnel(FLAT_PLATE, flat_plate.jones_model(), TAPS, wind_per_rpm=0.01, air=air)
 
 
 def connect(url, **settings):

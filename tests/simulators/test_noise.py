@@ -5,14 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ident import SectionModel, TapLayout
+from ident import TapLayout
 from ident.model import flat_plate
 from simulators.clock import DeviceClock, ManualClock
 from simulators.devices.microepsilon_ild1420 import SimMicroEpsilonIld1420
 from simulators.noise import KeyedNoise, sample_keys
 from simulators.virtual_tunnel import VirtualTunnel
 
-SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+from support.sections import FLAT_PLATE
+
 TAPS = TapLayout.rectangle(0.3, 0.01, 16)
 
 
@@ -55,7 +56,7 @@ def test_keys_count_the_samples_from_the_last_release_on_the_device_clock():
 
 def _laser(seed: int) -> tuple[SimMicroEpsilonIld1420, VirtualTunnel, ManualClock]:
     clock = ManualClock()
-    tunnel = VirtualTunnel(SECTION, flat_plate.jones_model(), TAPS, wind_per_rpm=0.01,
+    tunnel = VirtualTunnel(FLAT_PLATE, flat_plate.jones_model(), TAPS, wind_per_rpm=0.01,
                            clock=clock, decay_duration_s=3.0)
     tunnel.set_fan_speed(600.0)
     laser = SimMicroEpsilonIld1420(tunnel, range_mm=50, rate_hz=4000.0, x=0.1,

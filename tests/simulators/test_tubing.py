@@ -5,21 +5,22 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ident import SectionModel, TapLayout
+from ident import TapLayout
 from ident.model import flat_plate
 from ident.physics.tubing import Air, Tube, TubingGroup, distort, tubing_set
 from simulators.clock import ManualClock
 from simulators.tubing import FIR_DT_S, impulse_response
 from simulators.virtual_tunnel import AirState, VirtualTunnel
 
-SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+from support.sections import FLAT_PLATE
+
 TAPS = TapLayout.rectangle(0.3, 0.01, 16)
 TUBE = Tube(length=1.0, diameter=1e-3, volume=300e-9)
 AIR = AirState()
 
 
 def _tunnel(clock, tubing=None):
-    return VirtualTunnel(SECTION, flat_plate.jones_model(), TAPS, wind_per_rpm=0.01,
+    return VirtualTunnel(FLAT_PLATE, flat_plate.jones_model(), TAPS, wind_per_rpm=0.01,
                          hold=(0.004, 0.02), clock=clock, decay_duration_s=6.0, air=AIR,
                          tubing=tubing)
 

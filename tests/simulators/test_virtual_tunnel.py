@@ -5,18 +5,19 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ident import AeroelasticSystem, SectionModel, TapLayout
+from ident import AeroelasticSystem, TapLayout
 from ident.model import flat_plate
 from simulators.clock import DeviceClock, ManualClock
 from simulators.tunnel import simulate_release
 from simulators.virtual_tunnel import AirState, VirtualTunnel
 
-SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+from support.sections import FLAT_PLATE
+
 TAPS = TapLayout.rectangle(0.3, 0.01, 16)
 
 
 def tunnel(clock):
-    return VirtualTunnel(SECTION, flat_plate.jones_model(), TAPS, wind_per_rpm=0.01,
+    return VirtualTunnel(FLAT_PLATE, flat_plate.jones_model(), TAPS, wind_per_rpm=0.01,
                          hold=(0.004, 0.02), clock=clock, decay_duration_s=10.0)
 
 
@@ -113,7 +114,7 @@ def test_static_force_of_the_held_model():
     values = vt.sample(np.array([0.0]))
     system = AeroelasticSystem(vt.section, flat_plate.jones_model(), 6.0)
     expected = system.forces(system.initial_state(0.004, 0.02), np.zeros(2))
-    assert values["lift"][0] == pytest.approx(expected[0] / SECTION.B, rel=1e-12)
+    assert values["lift"][0] == pytest.approx(expected[0] / FLAT_PLATE.B, rel=1e-12)
     assert values["moment"][0] == pytest.approx(expected[1], rel=1e-12)
 
 
@@ -131,7 +132,7 @@ def turbulent_tunnel(clock, seed=3, **kwargs):
     from ident.physics.turbulence import TurbulenceSpec
 
     spec = TurbulenceSpec(Iu=0.1, Iw=0.08, Lux=0.6, Lwx=0.25, Cuy=10.0, Cwy=8.0)
-    return VirtualTunnel(SECTION, flat_plate.jones_model(), TAPS, wind_per_rpm=0.01,
+    return VirtualTunnel(FLAT_PLATE, flat_plate.jones_model(), TAPS, wind_per_rpm=0.01,
                          hold=(0.004, 0.02), clock=clock, decay_duration_s=4.0,
                          static=StaticCoefficients.flat_plate(), turbulence=spec, span=1.0,
                          seed=seed, **kwargs)
@@ -189,5 +190,5 @@ def test_turbulence_keeps_the_model_moving_after_the_computed_decay():
     np.testing.assert_array_equal(vt2.sample(t0_2 + np.linspace(8.0, 18.0, 5001))["alpha"],
                                   late["alpha"])
     with pytest.raises(ValueError, match="needs static"):
-        VirtualTunnel(SECTION, flat_plate.jones_model(), TAPS, wind_per_rpm=0.01,
+        VirtualTunnel(FLAT_PLATE, flat_plate.jones_model(), TAPS, wind_per_rpm=0.01,
                       turbulence=vt._gusts.spec, span=1.0, seed=1)

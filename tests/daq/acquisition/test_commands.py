@@ -26,7 +26,8 @@ from daq.instruments.modbus_plc.driver import ReleaseTiming
 from daq.instruments.reading import PollSequence, Reading
 from daq.recording.writer import RunWriter
 
-CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
+from support.configs import SIM_FLAT_PLATE
+
 LIMIT_RPM = 1500.0
 
 
@@ -95,7 +96,7 @@ class FakePlc:
 
 @pytest.fixture
 def config():
-    return parse_rig_config((CONFIGS / "sim_flat_plate.toml").read_text(), "sim_flat_plate.toml")
+    return parse_rig_config(SIM_FLAT_PLATE.read_text(), "sim_flat_plate.toml")
 
 
 def recorded_events(path: Path) -> list[tuple[float, str, str]]:

@@ -24,8 +24,9 @@ from daq.campaign.runner import run_plan
 from daq.cli import main
 from daq.config import parse_rig_config
 
-REPO = Path(__file__).resolve().parents[3]
-RIG_TEXT = (REPO / "rig_configs" / "sim_flat_plate.toml").read_text()
+from support.configs import REPO, SIM_FLAT_PLATE
+
+RIG_TEXT = SIM_FLAT_PLATE.read_text()
 FAST_FAN = "\n[simulation.devices.fan]\nramp_rpm_per_s = 1000.0\n"
 #: The flat plate with a softer pitch spring (fa = 3 Hz): it flutters at 7.84 m/s, and the
 #: rig's limits allow 14 m/s, so a plan can ask for speeds beyond flutter.

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 
 from daq.campaign.plan import load_plan, parse_plan
@@ -11,8 +9,9 @@ from daq.cli import main
 from daq.config import load_rig_config
 from daq.errors import ConfigError
 
-REPO = Path(__file__).resolve().parents[3]
-RIG = REPO / "rig_configs" / "sim_flat_plate.toml"
+from support.configs import REPO, SIM_FLAT_PLATE
+
+RIG = SIM_FLAT_PLATE
 
 FIXED = """
 [campaign]

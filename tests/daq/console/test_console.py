@@ -28,22 +28,14 @@ from daq.console.window import ConsoleWindow, peak_decimate
 from daq.errors import ReplayError
 from daq.recording.recorder import RunRecorder
 
-CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
+from support.clocks import ManualClock
+from support.configs import SIM_FLAT_PLATE
+
 RATE_HZ = 100.0
 DURATION_S = 30.0
 F_H = 2.0      # heave frequency, Hz
 F_A = 3.3      # pitch frequency, Hz
 RHO = 1.18     # kg/m^3
-
-
-class FakeClock:
-    """A monotonic clock the test sets by hand, s."""
-
-    def __init__(self) -> None:
-        self.now = 100.0
-
-    def __call__(self) -> float:
-        return self.now
 
 
 def wind(t: np.ndarray) -> np.ndarray:
@@ -52,7 +44,7 @@ def wind(t: np.ndarray) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def run_file(tmp_path_factory) -> Path:
-    config = parse_rig_config((CONFIGS / "sim_flat_plate.toml").read_text(),
+    config = parse_rig_config(SIM_FLAT_PLATE.read_text(),
                               "sim_flat_plate.toml")
     n_taps = config.taps.n_taps
     path = tmp_path_factory.mktemp("console") / "run.h5"
@@ -99,7 +91,7 @@ def make_window(qtbot):
 @pytest.fixture
 def played(qtbot, run_file, make_window):
     """Return a window over a replay on a fake clock: 25 s of the run played, one redraw."""
-    clock = FakeClock()
+    clock = ManualClock()
     source = ReplaySource(run_file, speed=1.0, window_s=20.0, clock=clock)
     source.open()
     window = make_window(source, window_s=20.0, frame_ms=10_000_000)  # redraw by hand only
@@ -114,7 +106,7 @@ def played(qtbot, run_file, make_window):
 def test_replay_plays_at_its_speed_with_ring_buffer_snapshots(run_file, monkeypatch):
     # The ring keeps the window, or MIN_HISTORY_S (a whole decay) if that is longer.
     monkeypatch.setattr(replay, "MIN_HISTORY_S", 2.0)
-    clock = FakeClock()
+    clock = ManualClock()
     with ReplaySource(run_file, speed=4.0, window_s=5.0, clock=clock) as source:
         assert source.info.rate_hz == pytest.approx(RATE_HZ)
         assert source.info.duration_s == pytest.approx(DURATION_S - 1 / RATE_HZ)

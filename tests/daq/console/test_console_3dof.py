@@ -21,19 +21,12 @@ from daq.console.source import SWAY_SCALARS, sync_columns
 from daq.console.window import ConsoleWindow
 from daq.recording.recorder import RunRecorder
 
+from support.clocks import ManualClock
+from support.configs import FAST_FAN
+
 RATE_HZ = 100.0
 DURATION_S = 30.0
 F_P = 2.6  # sway frequency, Hz
-
-
-class FakeClock:
-    """A monotonic clock the test sets by hand, s."""
-
-    def __init__(self) -> None:
-        self.now = 100.0
-
-    def __call__(self) -> float:
-        return self.now
 
 
 def _write(path: Path, name: str) -> Path:
@@ -59,7 +52,7 @@ def _write(path: Path, name: str) -> Path:
 
 
 def _played(qtbot, path: Path) -> ConsoleWindow:
-    clock = FakeClock()
+    clock = ManualClock()
     source = ReplaySource(path, speed=1.0, window_s=20.0, clock=clock)
     source.open()
     window = ConsoleWindow(source, window_s=20.0, frame_ms=10_000_000)  # redraw by hand
@@ -104,7 +97,7 @@ def test_the_live_console_of_the_simulated_3dof_rig_draws_p_from_the_sway_laser(
     that within the laser's noise (1.25 um) and its 16-bit words (0.8 um).
     """
     text = (SHIPPED_CONFIGS / "sim_bluff_deck_3dof.toml").read_text()
-    config = parse_rig_config(text + "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n",
+    config = parse_rig_config(text + FAST_FAN,
                               "sim_bluff_deck_3dof.toml + fast fan")
     source = LiveSource(config, simulate=True, window_s=10.0, fan_rpm=300.0)
     source.open()

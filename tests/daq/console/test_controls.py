@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import math
 import time
-from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
 
@@ -24,12 +23,7 @@ from daq.console.controls import ControlPanel
 from daq.console.process_source import ProcessLiveSource
 from daq.console.window import ConsoleWindow
 
-CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
-FAST_FAN = "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n"
-
-
-def live_config_text() -> str:
-    return (CONFIGS / "sim_flat_plate.toml").read_text() + FAST_FAN
+from support.configs import live_config_text
 
 
 def _events(source: ProcessLiveSource, kind: str) -> list[Any]:

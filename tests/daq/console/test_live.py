@@ -14,7 +14,6 @@ import struct
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
 
@@ -23,12 +22,7 @@ from daq.console.live_source import LiveSource
 from daq.console.source import DeviceHealth, HealthSource
 from daq.console.window import HEALTH_COLUMNS, ConsoleWindow
 
-CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
-FAST_FAN = "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n"
-
-
-def live_config_text() -> str:
-    return (CONFIGS / "sim_flat_plate.toml").read_text() + FAST_FAN
+from support.configs import SIM_FLAT_PLATE, live_config_text
 
 
 def test_live_window_traces_move_and_every_device_reports_health(qtbot):
@@ -105,10 +99,10 @@ def test_cli_screenshot_of_a_live_simulated_run(tmp_path):
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--config", str(CONFIGS / "sim_flat_plate.toml")], "url = 'auto'"),
-    (["--config", str(CONFIGS / "sim_flat_plate.toml"), "--simulate", "--replay", "x.h5"],
+    (["--config", str(SIM_FLAT_PLATE)], "url = 'auto'"),
+    (["--config", str(SIM_FLAT_PLATE), "--simulate", "--replay", "x.h5"],
      "exclude each other"),
-    (["--config", str(CONFIGS / "sim_flat_plate.toml"), "--simulate", "--fan-rpm", "5000"],
+    (["--config", str(SIM_FLAT_PLATE), "--simulate", "--fan-rpm", "5000"],
      "max_fan_rpm"),
     (["--config", "missing.toml", "--simulate"], "cannot read rig config"),
 ], ids=["auto-urls-without-simulate", "replay-and-live", "fan-above-limit", "missing-config"])

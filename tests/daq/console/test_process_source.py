@@ -39,12 +39,13 @@ from daq.errors import (
 # The shared-ring test's child imports its target by module name: a top-level one.
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _ring_child import BLOCK, ROWS, append_rows  # noqa: E402
-from _run_files import sync_rows  # noqa: E402
 
-CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
-FAST_FAN = "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n"
+from support.configs import FAST_FAN, SIM_FLAT_PLATE  # noqa: E402
+from support.run_files import sync_rows  # noqa: E402
+
+
 def live_config():
-    return parse_rig_config((CONFIGS / "sim_flat_plate.toml").read_text() + FAST_FAN,
+    return parse_rig_config(SIM_FLAT_PLATE.read_text() + FAST_FAN,
                             "sim_flat_plate.toml + fast fan")
 
 

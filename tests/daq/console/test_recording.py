@@ -12,9 +12,7 @@ while recording (the file is complete).
 from __future__ import annotations
 
 import re
-import sys
 import threading
-from pathlib import Path
 from typing import Any
 
 import h5py
@@ -28,19 +26,12 @@ from daq.console.window import ConsoleWindow
 from daq.errors import RecordingError
 from ident.records.run_file import read_run
 
-# The shared run-file helper beside this file: importable as a top-level module.
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _run_files import sync_rows  # noqa: E402
+from support.configs import SIM_FLAT_PLATE, live_config_text
+from support.run_files import sync_rows
 
-CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
-FAST_FAN = "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n"
 #: Sync rows are placed at exactly t_k = k / rate (computed from k, never accumulated): the
 #: grid holds to float64 rounding of values of a few seconds.
 GRID_TOL_S = 1e-9
-
-
-def live_config_text() -> str:
-    return (CONFIGS / "sim_flat_plate.toml").read_text() + FAST_FAN
 
 
 def live_config() -> RigConfig:
@@ -297,7 +288,7 @@ def test_recording_refusals_a_full_disk_and_closing_while_recording(qtbot, tmp_p
 
 @pytest.mark.parametrize("extra, message", [
     (["--replay", "x.h5", "--record-dir", "."], "not --replay"),
-    (["--config", str(CONFIGS / "sim_flat_plate.toml"), "--simulate", "--record-dir",
+    (["--config", str(SIM_FLAT_PLATE), "--simulate", "--record-dir",
       "no_such_dir_here"], "no such directory"),
 ], ids=["with-replay", "missing-dir"])
 def test_bad_record_dir_gives_one_line_and_exit_code_2(extra, message, capsys):

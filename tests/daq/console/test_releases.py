@@ -32,14 +32,15 @@ from ident.model import flat_plate, flutter
 from ident.records.run_file import campaign_section, read_run
 from simulators import simulate_release
 
-CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
-FAST_FAN = "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n"
+from support.clocks import ManualClock
+from support.configs import FAST_FAN, SIM_FLAT_PLATE
+
 #: Decays of the live test, s: long enough for a modal fit (>= 2 s), short for the test's sake.
 LIVE_DECAY_S = 4.0
 
 
 def flat_plate_config() -> Any:
-    return parse_rig_config((CONFIGS / "sim_flat_plate.toml").read_text() + FAST_FAN,
+    return parse_rig_config(SIM_FLAT_PLATE.read_text() + FAST_FAN,
                             "sim_flat_plate.toml + fast fan")
 
 
@@ -145,7 +146,7 @@ def test_auto_release_runs_a_session_through_the_panel(qtbot):
 ])
 def test_auto_release_is_refused_unless_simulated_and_within_limits(capsys, args, message):
     try:
-        code = main(["gui", "--config", str(CONFIGS / "sim_flat_plate.toml"), *args])
+        code = main(["gui", "--config", str(SIM_FLAT_PLATE), *args])
     except SystemExit as exc:  # argparse's own refusal of a malformed value
         code = exc.code
     assert code == 2
@@ -172,20 +173,10 @@ def releases_file(tmp_path_factory) -> Path:
     return path
 
 
-class FakeClock:
-    """A monotonic clock the test sets by hand, s."""
-
-    def __init__(self) -> None:
-        self.now = 100.0
-
-    def __call__(self) -> float:
-        return self.now
-
-
 def test_replay_shows_the_releases_and_model_that_the_file_gives(qtbot, releases_file):
     run = read_run(releases_file)
     assert len(run.releases) == len(REPLAY_SPEEDS)
-    clock = FakeClock()
+    clock = ManualClock()
     source = ReplaySource(releases_file, speed=1.0, window_s=10.0, clock=clock)
     source.open()
     window = ConsoleWindow(source, window_s=10.0, frame_ms=10_000_000)  # ticks by hand

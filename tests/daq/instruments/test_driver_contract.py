@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import inspect
 from collections.abc import Iterator
-from pathlib import Path
 from unittest.mock import MagicMock
 
 import numpy as np
@@ -23,8 +22,9 @@ from daq.instruments.build import build_driver
 from daq.instruments.reading import Reading, describe_mismatches
 from daq.sim.rig import SimulatedRig, start_simulated_rig
 
-CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
-CONFIG = load_rig_config(CONFIGS / "sim_flat_plate.toml")
+from support.configs import CONFIGS, SIM_FLAT_PLATE
+
+CONFIG = load_rig_config(SIM_FLAT_PLATE)
 INSTRUMENTS = {inst.driver: inst for inst in CONFIG.instruments}
 
 

@@ -19,12 +19,12 @@ from daq.recording.synthetic import write_release_run
 from ident.physics.effects import EFFECT_NAMES
 from simulators.campaigns import REALISTIC, simulated_campaign
 
-CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
+from support.configs import SIM_FLAT_PLATE
 
 
 @pytest.fixture(scope="module")
 def delayed_run(tmp_path_factory) -> Path:
-    config = parse_rig_config((CONFIGS / "sim_flat_plate.toml").read_text(),
+    config = parse_rig_config(SIM_FLAT_PLATE.read_text(),
                               "sim_flat_plate.toml")
     releases = simulated_campaign(REALISTIC["channel_delay"], seed=7)
     path = tmp_path_factory.mktemp("diagnose") / "run.h5"
@@ -62,7 +62,7 @@ def test_a_file_that_is_not_a_run_is_refused_in_one_line(tmp_path, capsys):
 
 def test_diagnose_locates_a_residual_it_cannot_explain(tmp_path, capsys):
     # A laser zero drifting 0.05 mm/s on a clean campaign: outside the library.
-    config = parse_rig_config((CONFIGS / "sim_flat_plate.toml").read_text(),
+    config = parse_rig_config(SIM_FLAT_PLATE.read_text(),
                               "sim_flat_plate.toml")
     releases = [dataclasses.replace(r, h=r.h + 5e-5 * r.t, meta=dict(r.meta))
                 for r in simulated_campaign(None, seed=12, duration=5.0)]

@@ -23,12 +23,12 @@ from daq.offline.reprocess import ReprocessSettings, expand_paths, process_file,
 from daq.recording.synthetic import write_release_run
 from simulators.campaigns import FRACTIONS, simulated_campaign
 
-CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
+from support.configs import SIM_FLAT_PLATE
 
 
 def write_run(path: Path, releases: list) -> None:
     """Write releases into a run file of the flat-plate rig."""
-    config = parse_rig_config((CONFIGS / "sim_flat_plate.toml").read_text(),
+    config = parse_rig_config(SIM_FLAT_PLATE.read_text(),
                               "sim_flat_plate.toml")
     write_release_run(path, config, releases)
 

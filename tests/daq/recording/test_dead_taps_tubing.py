@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
 import h5py
 import numpy as np
@@ -17,7 +16,9 @@ from ident.records.run_file import TUBING_TEMPERATURE_K, read_run
 from simulators.campaigns import SECTION
 from simulators.tunnel import simulate_release
 
-SIM_CONFIG = Path(__file__).resolve().parents[3] / "rig_configs" / "sim_flat_plate.toml"
+from support.configs import SIM_FLAT_PLATE
+
+SIM_CONFIG = SIM_FLAT_PLATE
 TAPS_LINE = "taps_per_face = 28          # 2 x 28 on the faces + 2 x 3 on the edges = 62 taps\n"
 TUBES = """
 [[taps.tubing]]

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,17 +11,20 @@ from daq.cli import main
 from daq.config import load_rig_config
 from daq.recording.info import run_info
 from daq.recording.synthetic import write_release_run
-from ident import Release, SectionModel
+from ident import Release
 from ident.model import flat_plate
 from ident.model import flutter as fl
 from simulators import simulate_release
 
-CONFIG = Path(__file__).resolve().parents[3] / "rig_configs" / "sim_flat_plate.toml"
+from support.configs import SIM_FLAT_PLATE
+from support.sections import FLAT_PLATE
+
+CONFIG = SIM_FLAT_PLATE
 
 
 def test_info_lists_the_releases_section_and_state(tmp_path, capsys):
     config = load_rig_config(CONFIG)
-    section = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+    section = FLAT_PLATE
     U_F = fl.analyze(section, flat_plate.jones_model()).speed
     releases = [Release.from_simulation(simulate_release(
         section, flat_plate.jones_model(), f * U_F, h0, 0.02, duration=4.0, fs=250.0))

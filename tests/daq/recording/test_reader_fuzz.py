@@ -36,12 +36,15 @@ from hypothesis import strategies as st
 
 from daq.config import load_rig_config
 from daq.recording.synthetic import write_release_run
-from ident import Release, SectionModel
+from ident import Release
 from ident.model import flat_plate
 from simulators import simulate_release
 
+from support.configs import SIM_FLAT_PLATE
+from support.sections import FLAT_PLATE
+
 CHILD = Path(__file__).with_name("_reader_fuzz_child.py")
-CONFIG = Path(__file__).resolve().parents[3] / "rig_configs" / "sim_flat_plate.toml"
+CONFIG = SIM_FLAT_PLATE
 #: Longest a reader may take on one damaged file, s (they take milliseconds).
 WATCHDOG_S = 5.0
 ALLOWED = ("ok", "ident.records.run_file.FileFormatError:", "daq.errors.NotARunFileError:",
@@ -95,7 +98,7 @@ class Child:
 @pytest.fixture(scope="module")
 def child(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Child]:
     work = tmp_path_factory.mktemp("fuzz")
-    section = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+    section = FLAT_PLATE
     releases = [Release.from_simulation(simulate_release(
         section, flat_plate.jones_model(), 5.0, 0.004, 0.02, duration=3.0, fs=250.0))]
     base = work / "base.h5"

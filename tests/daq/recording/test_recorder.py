@@ -46,9 +46,10 @@ from daq.errors import DaqError, InsufficientSpaceError, RecorderStateError, Sto
 from daq.recording.layout import CLOCK_MODEL, EVENT_DTYPE, GAP_DTYPE, RELEASE_DTYPE, read_sync
 from daq.recording.recorder import RunRecorder
 
-REPO = Path(__file__).resolve().parents[3]
+from support.configs import SIM_FLAT_PLATE
+
 CHILD = Path(__file__).with_name("_recorder_child.py")
-CONFIG_TEXT = (REPO / "rig_configs" / "sim_flat_plate.toml").read_text(encoding="utf-8") + \
+CONFIG_TEXT = SIM_FLAT_PLATE.read_text(encoding="utf-8") + \
     "\n# verbatim check: ünïcode, trailing spaces   \n"
 TAPS = ["t00", "t01", "t02", "t03"]
 

@@ -24,7 +24,8 @@ from daq.recording.layout import (
 )
 from daq.recording.recorder import RunRecorder
 
-REPO = Path(__file__).resolve().parents[3]
+from support.configs import REPO
+
 TEXT = (REPO / "rig_configs" / "sim_bluff_deck_3dof.toml").read_text(encoding="utf-8")
 TAPS = ["t00", "t01"]
 

@@ -5,8 +5,6 @@ The run-file writer must put each release where its row says.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import h5py
 import numpy as np
 import pytest
@@ -16,7 +14,9 @@ from daq.recording.synthetic import write_release_run
 from ident.model import flat_plate
 from simulators import simulate_release
 
-CONFIG = Path(__file__).resolve().parents[3] / "rig_configs" / "sim_flat_plate.toml"
+from support.configs import SIM_FLAT_PLATE
+
+CONFIG = SIM_FLAT_PLATE
 
 
 def test_releases_with_and_without_a_held_start_land_where_their_rows_say(tmp_path):

@@ -20,8 +20,10 @@ from ident.records.run_file import TUBING_TEMPERATURE_K, read_run
 from simulators.campaigns import FRACTIONS, HOLDS, SECTION
 from simulators.tunnel import simulate_release
 
-SIM_CONFIG = Path(__file__).resolve().parents[3] / "rig_configs" / "sim_flat_plate.toml"
-#: Every tap on 1.5 m of 1 mm bore into 300 mm^3 (tests/ident/test_tubing.py: 3.9 % off).
+from support.configs import SIM_FLAT_PLATE
+
+SIM_CONFIG = SIM_FLAT_PLATE
+#: Every tap on 1.5 m of 1 mm bore into 300 mm^3 (tests/ident/physics/test_tubing.py: 3.9 % off).
 TUBES = """
 [[taps.tubing]]
 taps = "all"

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import h5py
 import numpy as np
@@ -14,7 +13,8 @@ from daq.config import parse_rig_config
 from daq.instruments.reading import Gap
 from daq.recording.writer import DEFAULT_RHO, RunWriter
 
-CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
+from support.configs import SIM_FLAT_PLATE
+
 T0_NS = 10_000_000_000
 LASERS = {"laser_front": -0.1, "laser_rear": 0.1, "laser_check": 0.0}  # x, m (config)
 STANDOFF = 0.025
@@ -40,7 +40,7 @@ def ns(t: np.ndarray) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def config():
-    return parse_rig_config((CONFIGS / "sim_flat_plate.toml").read_text(), "sim_flat_plate.toml")
+    return parse_rig_config(SIM_FLAT_PLATE.read_text(), "sim_flat_plate.toml")
 
 
 def start_doc() -> dict:
@@ -291,7 +291,7 @@ def test_cli_acquire_refuses_auto_urls_without_simulate(tmp_path, capsys):
     from daq.cli import main
 
     out = tmp_path / "never.h5"
-    code = main(["acquire", "--config", str(CONFIGS / "sim_flat_plate.toml"), "--duration", "1",
+    code = main(["acquire", "--config", str(SIM_FLAT_PLATE), "--duration", "1",
                  "--out", str(out)])
     assert code == 2 and not out.exists()
     assert "url = 'auto'" in capsys.readouterr().err

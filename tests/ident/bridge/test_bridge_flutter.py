@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,7 +20,8 @@ from ident.model.statespace import AeroelasticSystem
 from ident.tables.fd_table import FlutterDerivativeTable
 from simulators.decks import BLUFF_DECK, bluff_deck_model
 
-EXAMPLES = Path(__file__).resolve().parents[3] / "rig_configs" / "bridges"
+from support.configs import BRIDGES
+from support.sections import FLAT_PLATE
 
 
 def _uniform_bridge(section: SectionModel, length: float = 1.0, nodes: int = 2,
@@ -37,7 +37,7 @@ def _uniform_bridge(section: SectionModel, length: float = 1.0, nodes: int = 2,
 
 
 @pytest.mark.parametrize(("section", "model"), [
-    (SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005),
+    (FLAT_PLATE,
      flat_plate.jones_model()),
     (BLUFF_DECK, bluff_deck_model()),
 ], ids=["flat plate", "bluff deck"])
@@ -140,7 +140,7 @@ def test_iabse_step_1_1a_flutter_speed():
 
 
 def _example() -> BridgeModel:
-    return BridgeModel.from_json(EXAMPLES / "example_bridge.json")
+    return BridgeModel.from_json(BRIDGES / "example_bridge.json")
 
 
 def test_state_space_equals_frequency_domain_on_the_example_bridge_with_a_model():
@@ -151,7 +151,7 @@ def test_state_space_equals_frequency_domain_on_the_example_bridge_with_a_model(
     """
     bridge = _example()
     model = RationalFunctionModel.from_dict(
-        json.loads((EXAMPLES / "example_deck_model.json").read_text()))
+        json.loads((BRIDGES / "example_deck_model.json").read_text()))
     aero = aero_from_model(bridge, model, source="model.json")
     assert aero.model.n_dof == 3 and "quasi-steady" in aero.notes[0]
     ss = bf.analyze(bridge, aero.model)
@@ -183,7 +183,7 @@ def test_state_space_equals_frequency_domain_on_the_example_bridge_with_a_bluff_
     0.5 % (measured 64.62 and 64.67 m/s, 0.08 %).
     """
     bridge = _example()
-    table = FlutterDerivativeTable.from_csv(EXAMPLES / "example_deck_table.csv")
+    table = FlutterDerivativeTable.from_csv(BRIDGES / "example_deck_table.csv")
     aero = aero_from_table(bridge, table, source="table.csv")
     assert aero.table_fit is not None
     assert aero.table_fit.relative_error.shape == table.K.shape

@@ -12,7 +12,8 @@ import pytest
 from ident.bridge.mode_tables import bridge_from_mode_tables, read_mode_table
 from ident.bridge.model import BridgeModel
 
-EXAMPLES = Path(__file__).resolve().parents[3] / "rig_configs" / "bridges"
+from support.configs import BRIDGES
+
 MODE_ORDER = ("L1S", "V1A", "V1S", "V2S", "T1S", "T1A")
 
 GOOD = {"name": "t", "B": 20.0, "rho": 1.2, "nodes_x": [0.0, 10.0, 30.0],
@@ -124,7 +125,7 @@ def test_integrals_of_mode_shape_products_by_the_trapezoid_rule():
 
 
 def test_to_dict_round_trip_and_labels():
-    bridge = BridgeModel.from_json(EXAMPLES / "example_bridge.json")
+    bridge = BridgeModel.from_json(BRIDGES / "example_bridge.json")
     again = BridgeModel.from_dict(json.loads(json.dumps(bridge.to_dict())))
     assert again.to_dict() == bridge.to_dict()
     assert bridge.mode_kinds() == ["lateral", "vertical", "vertical", "vertical", "torsional",
@@ -134,10 +135,10 @@ def test_to_dict_round_trip_and_labels():
 
 def test_mode_tables_give_the_example_bridge():
     """The shipped mode tables (one CSV per mode) plus the deck data are the example bridge."""
-    template = json.loads((EXAMPLES / "example_deck.json").read_text())
-    paths = [EXAMPLES / "example_modes" / f"{name}.csv" for name in MODE_ORDER]
+    template = json.loads((BRIDGES / "example_deck.json").read_text())
+    paths = [BRIDGES / "example_modes" / f"{name}.csv" for name in MODE_ORDER]
     built = bridge_from_mode_tables(template, paths)
-    assert built.to_dict() == BridgeModel.from_json(EXAMPLES / "example_bridge.json").to_dict()
+    assert built.to_dict() == BridgeModel.from_json(BRIDGES / "example_bridge.json").to_dict()
 
 
 def test_a_pitch_in_degrees_is_named_so_and_converted(tmp_path: Path):

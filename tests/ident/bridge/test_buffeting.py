@@ -24,6 +24,8 @@ from ident.model import flat_plate
 from ident.model.quasi_steady import StaticCoefficients, quasi_steady_model
 from ident.physics.turbulence import buffeting_gain, joint_acceptance, von_karman_w
 
+from support.configs import BRIDGES
+
 B, M_H, I_A = 31.0, 22740.0, 2.47e6
 IABSE = {45.0: (1.3404, 0.4792), 30.0: (0.778, 0.2027)}
 
@@ -271,13 +273,11 @@ def test_short_records_of_a_lightly_damped_mode_scatter_as_stated():
     standard errors of 1 (stated std / 4), and the seeds' scatter is within 0.6-1.5 times the
     stated std (the sample std of 16 is itself uncertain by about 18 %; measured 1.06 times).
     """
-    from pathlib import Path
-
     from ident.bridge.aero import aero_from_table
     from ident.bridge.wind import read_wind
     from ident.tables.fd_table import FlutterDerivativeTable
 
-    folder = Path(__file__).resolve().parents[3] / "rig_configs" / "bridges"
+    folder = BRIDGES
     bridge = BridgeModel.from_json(folder / "example_bridge.json")
     table = FlutterDerivativeTable.from_csv(folder / "example_deck_table.csv")
     ss = BridgeStateSpace(bridge, aero_from_table(bridge, table).model)

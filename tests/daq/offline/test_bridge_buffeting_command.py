@@ -11,9 +11,10 @@ import pytest
 from daq.cli import main
 from ident.model import flat_plate
 
-EXAMPLES = Path(__file__).resolve().parents[2] / "rig_configs" / "bridges"
-BRIDGE = EXAMPLES / "example_bridge.json"
-WIND = EXAMPLES / "example_wind.toml"
+from support.configs import BRIDGES
+
+BRIDGE = BRIDGES / "example_bridge.json"
+WIND = BRIDGES / "example_wind.toml"
 
 
 @pytest.fixture

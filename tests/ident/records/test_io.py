@@ -6,56 +6,10 @@ import h5py
 import numpy as np
 import pytest
 
-from daq.recording.recorder import RunRecorder
-from ident import SectionModel
-from ident.model import flat_plate
 from ident.records.run_file import FileFormatError, read_run
-from simulators import simulate_release
 
-CONFIG = """[rig]
-name = "test"
-[section]
-B = 0.3
-m = 3.0
-I = 0.03
-fh = 2.0
-fa = 4.0
-zeta_h = 0.005
-zeta_a = 0.005
-depth = 0.01
-"""
-SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
-
-
-def write_run(path, *, gap=False, gap_row=300):
-    """Write a run file with two releases through the real recorder.
-
-    ``gap``: the second release's h is NaN at ``gap_row`` of its rows (0.5 s of hold at 200 Hz
-    first: row 300 is 1.0 s after the release).
-    """
-    recorder = RunRecorder(path, config_text=CONFIG, rig_name="test", min_free_bytes=0)
-    recorder.open()
-    recorder.add_sync(["p0", "p1"])
-    recorder.start()
-    sims, t0, row = [], 0.0, 0
-    for U in (5.0, 8.0):
-        sim = simulate_release(SECTION, flat_plate.jones_model(), U, 0.004, 0.02, duration=4.0,
-                               fs=200.0, pre_s=0.5)
-        n = sim.t.size
-        columns = {"h": sim.h.copy(), "alpha": sim.alpha, "lift": sim.lift, "moment": sim.moment,
-                   "U": np.full(n, U), "rho": np.full(n, SECTION.rho),
-                   "pressure": np.zeros((n, 2), dtype=np.float32)}
-        if gap and U == 8.0:
-            columns["h"][gap_row] = np.nan
-        recorder.append_sync(t0 + 0.5 + sim.t, **columns)
-        after = int(np.flatnonzero(sim.t >= 0)[0])
-        recorder.add_release(release_time=t0 + 0.5, start_index=row + after, stop_index=row + n,
-                             U=U, h0=0.004, alpha0=0.02)
-        sims.append(sim)
-        t0 += 0.5 + 4.0
-        row += n
-    recorder.close()
-    return sims
+from support.run_files import write_run
+from support.sections import FLAT_PLATE
 
 
 def test_releases_and_section_round_trip(tmp_path):
@@ -65,7 +19,7 @@ def test_releases_and_section_round_trip(tmp_path):
     run = read_run(path)
     assert run.rig_name == "test" and len(run.releases) == 2
     assert run.depth == 0.01  # [section] depth of the stored config, m
-    assert run.section.B == 0.3 and run.section.rho == pytest.approx(SECTION.rho)
+    assert run.section.B == 0.3 and run.section.rho == pytest.approx(FLAT_PLATE.rho)
     for release, sim in zip(run.releases, sims, strict=True):
         after = sim.t >= 0
         np.testing.assert_allclose(release.t, sim.t[after], atol=1e-9)

@@ -20,7 +20,6 @@ from ident import (
     RankDeficiencyError,
     RationalFunctionModel,
     Release,
-    SectionModel,
 )
 from ident.identification import fd_method
 from ident.model import flat_plate, flutter
@@ -29,15 +28,16 @@ from ident.model.roger import fit_entries
 from ident.tables.roger_table import RogerProblem
 from simulators import simulate_release
 
-SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+from support.sections import FLAT_PLATE
+
 JONES = flat_plate.jones_model()
-U_F = flutter.analyze(SECTION, JONES).speed
+U_F = flutter.analyze(FLAT_PLATE, JONES).speed
 FRACTIONS = np.linspace(0.3, 0.9, 10)
 
 
 def simulate(U, h0=0.004, alpha0=0.02, **kwargs):
     """Simulate a 20 s release at 500 Hz of the flat-plate section at wind speed U (m/s)."""
-    return simulate_release(SECTION, JONES, U, h0, alpha0, duration=20.0, fs=500.0, **kwargs)
+    return simulate_release(FLAT_PLATE, JONES, U, h0, alpha0, duration=20.0, fs=500.0, **kwargs)
 
 
 def release(U, **kwargs):
@@ -51,7 +51,7 @@ def releases():
 
 @pytest.fixture(scope="module")
 def table(releases):
-    return fd_method.flutter_derivatives(releases, SECTION)
+    return fd_method.flutter_derivatives(releases, FLAT_PLATE)
 
 
 def true_derivatives(table):
@@ -70,15 +70,15 @@ def classical_reading_of_exact_modes(U):
     real equations for the eight entries of dK and dC. Returns ``qd B^2 Q = dK + i omega dC``,
     column 0 at the heave mode's omega, column 1 at the pitch mode's, and (K_h, K_a).
     """
-    lam, vectors = np.linalg.eig(AeroelasticSystem(SECTION, JONES, U).matrix())
+    lam, vectors = np.linalg.eig(AeroelasticSystem(FLAT_PLATE, JONES, U).matrix())
     osc = np.flatnonzero(lam.imag > 1e-9)
     lam, phi = lam[osc], vectors[:2, osc].T
-    share = np.abs(phi.T) ** 2 * np.diag(SECTION.mass_matrix())[:, None]
+    share = np.abs(phi.T) ** 2 * np.diag(FLAT_PLATE.mass_matrix())[:, None]
     rows, cols = linear_sum_assignment(-share / share.sum(axis=0))
     order = [int(c) for _, c in sorted(zip(rows, cols, strict=True))]
     lam, phi = lam[order], phi[order]
-    B = SECTION.B
-    qd_B2 = 0.5 * SECTION.rho * U**2 * B**2
+    B = FLAT_PLATE.B
+    qd_B2 = 0.5 * FLAT_PLATE.rho * U**2 * B**2
     M, rhs = [], []
     for lam_k, phi_k in zip(lam, phi, strict=True):
         force = qd_B2 * JONES.Q(lam_k * B / U) @ phi_k
@@ -178,9 +178,9 @@ def test_flutter_speed_of_the_fd_route_is_within_three_percent(releases, table):
     Measured: +2.2 % with the structure chosen by held-out error (2 lags and A3); +1.9 % to +2.3 %
     for the other structures with 1 to 3 lags that fit the table well (1 lag without A3: +10 %;
     no lag: -10 %). The biased H1 and A2 (more damping near flutter, previous test) push it up.
-    E2RFC is exact on noise-free releases at two speeds (tests/ident/test_e2rfc.py).
+    E2RFC is exact on noise-free releases at two speeds (tests/ident/identification/test_e2rfc.py).
     """
-    model = fd_method.identify(releases, SECTION)
+    model = fd_method.identify(releases, FLAT_PLATE)
     assert isinstance(model, RationalFunctionModel)
     assert model.table.U.size == len(releases)
     np.testing.assert_array_equal(model.table.derivatives["A2"], table.derivatives["A2"])
@@ -189,7 +189,7 @@ def test_flutter_speed_of_the_fd_route_is_within_three_percent(releases, table):
         (m, a3) for m in range(4) for a3 in (True, False)
     }
     assert model.n_lags >= 1  # quasi-steady forces cannot follow the lags: 10 % off, rejected
-    result = flutter.analyze(SECTION, model)
+    result = flutter.analyze(FLAT_PLATE, model)
     assert result.speed == pytest.approx(U_F, rel=0.03)
     assert result.critical_mode == "pitch"
 
@@ -210,15 +210,15 @@ def test_still_air_decays_give_the_same_result_but_for_the_still_air_added_mass(
     """
     still = [simulate(0.0), simulate(0.0, h0=-0.003, alpha0=0.01)]
     with_still = fd_method.flutter_derivatives(
-        releases, SECTION, still_air=[(r.t, r.h, r.alpha) for r in still]
+        releases, FLAT_PLATE, still_air=[(r.t, r.h, r.alpha) for r in still]
     )
-    B, rho, U = SECTION.B, SECTION.rho, table.U
+    B, rho, U = FLAT_PLATE.B, FLAT_PLATE.rho, table.U
     Ma = 0.5 * rho * B**4 * np.array([math.pi / 2, math.pi / 64])
-    Meff = np.diag(SECTION.mass_matrix()) + Ma
-    w0 = np.sqrt(np.diag(SECTION.stiffness_matrix()) / Meff)
+    Meff = np.diag(FLAT_PLATE.mass_matrix()) + Ma
+    w0 = np.sqrt(np.diag(FLAT_PLATE.stiffness_matrix()) / Meff)
     w_h, w_a = table.K_h * U / B, table.K_a * U / B
     qd = 0.5 * rho * U**2
-    Cs = np.diag(SECTION.damping_matrix())
+    Cs = np.diag(FLAT_PLATE.damping_matrix())
     shift = dict.fromkeys(FLUTTER_DERIVATIVE_NAMES, 0.0 * U)
     shift["H4"] = -math.pi / 2 * (w0[0] / w_h) ** 2
     shift["A3"] = -math.pi / 64 * (w0[1] / w_a) ** 2
@@ -231,7 +231,8 @@ def test_still_air_decays_give_the_same_result_but_for_the_still_air_added_mass(
             atol=1e-7 * np.abs(table.derivatives[name]).max(), err_msg=name,
         )
     speeds = [
-        flutter.analyze(SECTION, fd_method.identify(releases, SECTION, 2, True, still_air=s)).speed
+        flutter.analyze(FLAT_PLATE,
+                        fd_method.identify(releases, FLAT_PLATE, 2, True, still_air=s)).speed
         for s in (None, [(r.t, r.h, r.alpha) for r in still])
     ]
     assert speeds[1] == pytest.approx(speeds[0], rel=0.01)  # 0.4 % measured
@@ -239,15 +240,15 @@ def test_still_air_decays_give_the_same_result_but_for_the_still_air_added_mass(
 
 def test_bad_still_air_decays_are_refused(releases):
     with pytest.raises(TypeError, match=r"still_air\[0\] must be a \(t, h, alpha\) triple"):
-        fd_method.flutter_derivatives(releases[:1], SECTION, still_air=[np.zeros(10)])
+        fd_method.flutter_derivatives(releases[:1], FLAT_PLATE, still_air=[np.zeros(10)])
     t = np.arange(100) / 100.0
     with pytest.raises(ValueError, match="equal lengths"):
-        fd_method.flutter_derivatives(releases[:1], SECTION, still_air=[(t, t, t[:-1])])
+        fd_method.flutter_derivatives(releases[:1], FLAT_PLATE, still_air=[(t, t, t[:-1])])
     with pytest.raises(ValueError, match="empty"):
-        fd_method.flutter_derivatives(releases[:1], SECTION, still_air=[])
+        fd_method.flutter_derivatives(releases[:1], FLAT_PLATE, still_air=[])
     jittered = t + np.where(np.arange(100) == 50, 1e-4, 0.0)
     with pytest.raises(NonUniformSamplingError, match="not uniformly sampled"):
-        fd_method.flutter_derivatives(releases[:1], SECTION, still_air=[(jittered, t, t)])
+        fd_method.flutter_derivatives(releases[:1], FLAT_PLATE, still_air=[(jittered, t, t)])
 
 
 # --------------------------------------------------------------------------------------------------
@@ -258,21 +259,21 @@ def test_fewer_than_three_wind_speeds_are_refused(releases):
     """Two speeds (one of them twice, within 2 %) cannot make a Roger table: an error."""
     twice = release(releases[0].U * 1.01, h0=-0.003)
     with pytest.raises(RankDeficiencyError, match="releases at 2 wind speed"):
-        fd_method.identify([releases[0], twice, releases[5]], SECTION)
+        fd_method.identify([releases[0], twice, releases[5]], FLAT_PLATE)
     with pytest.raises(RankDeficiencyError, match="no releases given"):
-        fd_method.identify([], SECTION)
+        fd_method.identify([], FLAT_PLATE)
 
 
 def test_bad_arguments_are_refused(releases):
     with pytest.raises(TypeError, match="ident.Release"):
-        fd_method.identify([releases[0], "release.h5"], SECTION)
+        fd_method.identify([releases[0], "release.h5"], FLAT_PLATE)
     with pytest.raises(ValueError, match="n_lags must be an integer in 0..3"):
-        fd_method.identify(releases, SECTION, n_lags=5)
+        fd_method.identify(releases, FLAT_PLATE, n_lags=5)
 
 
 def test_structures_the_table_cannot_determine_are_skipped_with_a_note(releases):
     """Three speeds give each entry 6 real equations: 3 lags with A3 is skipped, not fitted."""
-    model = fd_method.identify(releases[::4], SECTION)  # 0.3, 0.57, 0.83 U_F
+    model = fd_method.identify(releases[::4], FLAT_PLATE)  # 0.3, 0.57, 0.83 U_F
     notes = {(c.n_lags, c.with_A3): c.note for c in model.diagnostics.candidates}
     assert "too few wind speeds" in notes[(3, True)]
     assert notes[(0, True)] == ""
@@ -291,11 +292,11 @@ def test_repeated_releases_at_one_speed_are_averaged_and_their_spread_reported(r
             release(U, h0=-0.003, alpha0=0.015, noise=0.02, rng=2)]
     near = release(1.01 * releases[6].U)  # 1 % faster: the same row as releases[6]
     data = [releases[6], releases[0], *pair, near]
-    table = fd_method.flutter_derivatives(data, SECTION)
+    table = fd_method.flutter_derivatives(data, FLAT_PLATE)
     np.testing.assert_array_equal(table.n_releases, [1, 2, 2])
     assert table.U[2] == pytest.approx(1.005 * releases[6].U, rel=1e-12)
     assert [len(fits) for fits in table.modal_fits] == [1, 2, 2]
-    alone = [fd_method.flutter_derivatives([r], SECTION) for r in pair]
+    alone = [fd_method.flutter_derivatives([r], FLAT_PLATE) for r in pair]
     for name in FLUTTER_DERIVATIVE_NAMES:
         values = np.array([a.derivatives[name][0] for a in alone])
         # Mean and std of two numbers: round-off only.

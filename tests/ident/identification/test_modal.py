@@ -5,28 +5,29 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ident import AeroelasticSystem, SectionModel
+from ident import AeroelasticSystem
 from ident.identification.modal import fit_modes, noise_std
 from ident.model import flat_plate, flutter
 from ident.model.conventions import name_modes
 from simulators import simulate_release
 
-SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+from support.sections import FLAT_PLATE
+
 MODEL = flat_plate.jones_model()
-U_F = flutter.analyze(SECTION, MODEL).speed
+U_F = flutter.analyze(FLAT_PLATE, MODEL).speed
 
 
 def q_of(rel):
-    return np.column_stack([rel.h / SECTION.B, rel.alpha])
+    return np.column_stack([rel.h / FLAT_PLATE.B, rel.alpha])
 
 
 @pytest.mark.parametrize("fraction", [0.4, 0.8])
 def test_noise_free_fit_is_exact(fraction):
     """Without noise the fit reproduces the decay to round-off and finds the true poles."""
     U = fraction * U_F
-    rel = simulate_release(SECTION, MODEL, U, 0.004, 0.02, duration=20.0, fs=500.0)
+    rel = simulate_release(FLAT_PLATE, MODEL, U, 0.004, 0.02, duration=20.0, fs=500.0)
     fit = fit_modes(rel.t, q_of(rel))
-    lam = AeroelasticSystem(SECTION, MODEL, U).eigenvalues()
+    lam = AeroelasticSystem(FLAT_PLATE, MODEL, U).eigenvalues()
     true_modes = np.sort_complex(lam[lam.imag > 0])
     # The decay is exactly a sum of these exponentials: only round-off separates them.
     np.testing.assert_allclose(fit.modes, true_modes, rtol=1e-8)
@@ -43,16 +44,16 @@ def test_noise_free_fit_is_exact(fraction):
 def test_noisy_fit_denoises_and_keeps_frequency_and_damping():
     """At 5 % noise frequencies are within 0.05 %, damping within 2 %, the signal within 0.3 %."""
     U = 0.6 * U_F
-    rel = simulate_release(SECTION, MODEL, U, 0.004, 0.02, duration=20.0, fs=500.0,
+    rel = simulate_release(FLAT_PLATE, MODEL, U, 0.004, 0.02, duration=20.0, fs=500.0,
                            noise=0.05, rng=11)
     fit = fit_modes(rel.t, q_of(rel))
-    lam = AeroelasticSystem(SECTION, MODEL, U).eigenvalues()
+    lam = AeroelasticSystem(FLAT_PLATE, MODEL, U).eigenvalues()
     true_modes = np.sort_complex(lam[lam.imag > 0])
     # 10 000 samples at 5 % noise: Cramer-Rao-like spreads are ~1e-4 in frequency and ~1 % in
     # damping; the bounds leave a factor of ~3.
     np.testing.assert_allclose(fit.frequencies, true_modes.imag / (2 * np.pi), rtol=5e-4)
     np.testing.assert_allclose(fit.damping, -true_modes.real / np.abs(true_modes), rtol=0.02)
-    clean = np.column_stack([rel.clean["h"] / SECTION.B, rel.clean["alpha"]])
+    clean = np.column_stack([rel.clean["h"] / FLAT_PLATE.B, rel.clean["alpha"]])
     error = np.sqrt(np.mean((fit.evaluate(rel.t) - clean) ** 2, axis=0))
     assert np.all(error < 0.003 * np.sqrt(np.mean(clean**2, axis=0)))  # 20x below the noise
     noise = np.sqrt(np.mean((q_of(rel) - clean) ** 2, axis=0))
@@ -61,7 +62,7 @@ def test_noisy_fit_denoises_and_keeps_frequency_and_damping():
 
 def test_lag_state_solves_its_differential_equation():
     """X' = q' - mu x with x(0) = 0, checked by finite differences of the closed form."""
-    rel = simulate_release(SECTION, MODEL, 0.6 * U_F, 0.004, 0.02, duration=5.0, fs=1000.0)
+    rel = simulate_release(FLAT_PLATE, MODEL, 0.6 * U_F, 0.004, 0.02, duration=5.0, fs=1000.0)
     fit = fit_modes(rel.t, q_of(rel))
     mu = 7.0
     x = fit.lag_state(rel.t, mu)
@@ -87,7 +88,7 @@ def test_refinement_starts_inside_the_bounds_whatever_the_start_values():
     """
     from ident.identification import modal
 
-    rel = simulate_release(SECTION, MODEL, 0.6 * U_F, 0.004, 0.02, duration=10.0, fs=500.0,
+    rel = simulate_release(FLAT_PLATE, MODEL, 0.6 * U_F, 0.004, 0.02, duration=10.0, fs=500.0,
                            noise=0.02, rng=4)
     t, q = rel.t, q_of(rel)
     block = 6
@@ -125,7 +126,7 @@ def test_fast_pole_search_finds_scipys_poles_on_a_decay():
     """
     from ident.identification import modal
 
-    rel = simulate_release(SECTION, MODEL, 0.6 * U_F, 0.004, 0.02, duration=10.0, fs=500.0,
+    rel = simulate_release(FLAT_PLATE, MODEL, 0.6 * U_F, 0.004, 0.02, duration=10.0, fs=500.0,
                            noise=0.02, rng=4)
     t, q = rel.t, q_of(rel)
     block = 6

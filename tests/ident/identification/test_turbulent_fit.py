@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from ident import Release, SectionModel
+from ident import Release
 from ident.identification import e2rfc
 from ident.identification._turbulent_fit import MIN_HOLD_S, ar_fit
 from ident.model import flat_plate
@@ -23,7 +23,8 @@ from ident.records.release import ReleaseHold
 from simulators import simulate_release
 from simulators.decks import BLUFF_DECK, BLUFF_DECK_STATIC, bluff_deck_model
 
-PLATE = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+from support.sections import FLAT_PLATE
+
 HOLDS = ((0.004, 0.02), (-0.003, 0.012))
 #: The smooth-flow campaign's flutter speed (seed 0, no holds) identified by main at 235df92,
 #: before the branch existed, m/s (repr of the float).
@@ -36,7 +37,8 @@ def campaign(*, seed, Iw, hold_s, deck="plate"):
     ``deck``: ``"plate"`` (Jones's aerodynamics, a flat plate's static coefficients) or
     ``"bluff"`` (:mod:`simulators.decks`' bluff deck, outside Roger's form).
     """
-    section, model, static = ((PLATE, flat_plate.jones_model(), StaticCoefficients.flat_plate())
+    section, model, static = ((FLAT_PLATE, flat_plate.jones_model(),
+                               StaticCoefficients.flat_plate())
                               if deck == "plate" else
                               (BLUFF_DECK, bluff_deck_model(), BLUFF_DECK_STATIC))
     U_F = fl.analyze(section, model).speed
@@ -67,14 +69,14 @@ def test_the_branch_finds_the_flutter_speed_in_1_percent_turbulence(turbulent_re
     below), and its interval says nothing (a median std of 146 %). Truth: the frequency-domain
     flutter analysis of the simulated (Jones) model, independent of the identification.
     """
-    U_F = fl.analyze(PLATE, flat_plate.jones_model()).speed
-    model = e2rfc.identify(turbulent_releases, PLATE)
+    U_F = fl.analyze(FLAT_PLATE, flat_plate.jones_model()).speed
+    model = e2rfc.identify(turbulent_releases, FLAT_PLATE)
     diagnostics = model.diagnostics
     assert diagnostics.turbulent
     assert diagnostics.estimator == e2rfc.ESTIMATOR_TURBULENT
     assert diagnostics.n_lags in (1, 2)
     assert len(diagnostics.jackknife) == len(turbulent_releases)
-    u = model.uncertainty(PLATE)
+    u = model.uncertainty(FLAT_PLATE)
     assert u.speed is not None
     error = abs(u.speed / U_F - 1.0)
     assert error < 0.08
@@ -86,7 +88,7 @@ def test_the_branch_finds_the_flutter_speed_in_1_percent_turbulence(turbulent_re
     needed = u.releases_needed(max(u.systematic * 1.1, 0.5 * u.total))
     assert needed is None or needed >= len(turbulent_releases)
     before = e2rfc.identify([dataclasses.replace(r, hold=None) for r in turbulent_releases],
-                            PLATE).uncertainty(PLATE)
+                            FLAT_PLATE).uncertainty(FLAT_PLATE)
     before_error = np.inf if before.speed is None else abs(before.speed / U_F - 1.0)
     assert before_error > error
 
@@ -105,7 +107,7 @@ def test_the_branch_holds_on_every_turbulent_row_of_the_benchmark(deck, Iw):
     bluff Iw 1 % -8.4, +25.0, -0.6 %; bluff Iw 3 % +2.7, -12.5, -11.1 %. Truth: the state-space
     flutter analysis of the simulated model, independent of the identification.
     """
-    section, model = ((PLATE, flat_plate.jones_model()) if deck == "plate"
+    section, model = ((FLAT_PLATE, flat_plate.jones_model()) if deck == "plate"
                       else (BLUFF_DECK, bluff_deck_model()))
     U_F = fl.analyze(section, model).speed
     errors, stds, covered = [], [], 0
@@ -132,7 +134,7 @@ def test_short_holds_leave_todays_estimator_with_a_warning(turbulent_releases):
         cut = ReleaseHold(t=h.t[keep], h=h.h[keep], alpha=h.alpha[keep], lift=h.lift[keep],
                           moment=h.moment[keep])
         short.append(dataclasses.replace(r, hold=cut))
-    model = e2rfc.identify(short, PLATE)
+    model = e2rfc.identify(short, FLAT_PLATE)
     assert model.diagnostics.estimator == e2rfc.ESTIMATOR_E2RFC
     assert any(f">= {MIN_HOLD_S:g} s before each release" in w
                for w in model.diagnostics.warnings)
@@ -144,11 +146,11 @@ def test_smooth_flow_identification_is_unchanged():
     And a hold changes nothing in smooth flow: the same releases with and without their holds
     give the identical model.
     """
-    u = e2rfc.identify(campaign(seed=0, Iw=0.0, hold_s=0.0), PLATE).uncertainty(PLATE)
+    u = e2rfc.identify(campaign(seed=0, Iw=0.0, hold_s=0.0), FLAT_PLATE).uncertainty(FLAT_PLATE)
     assert u.speed == pytest.approx(SMOOTH_BEFORE, rel=1e-12, abs=0.0)
     held = campaign(seed=1, Iw=0.0, hold_s=MIN_HOLD_S)
-    with_hold = e2rfc.identify(held, PLATE)
-    without = e2rfc.identify([dataclasses.replace(r, hold=None) for r in held], PLATE)
+    with_hold = e2rfc.identify(held, FLAT_PLATE)
+    without = e2rfc.identify([dataclasses.replace(r, hold=None) for r in held], FLAT_PLATE)
     assert with_hold.diagnostics.estimator == e2rfc.ESTIMATOR_E2RFC
     np.testing.assert_array_equal(with_hold.A, without.A)
     np.testing.assert_array_equal(with_hold.d, without.d)
@@ -186,18 +188,18 @@ def test_the_smoother_follows_the_true_velocity_closer_than_the_filter(monkeypat
     from ident.identification import _turbulent_fit
 
     model = flat_plate.jones_model()
-    U_F = fl.analyze(PLATE, model).speed
+    U_F = fl.analyze(FLAT_PLATE, model).speed
     sim = simulate_release(
-        PLATE, model, 0.6 * U_F, 0.004, 0.02, duration=20.0, fs=500.0, noise=0.02,
+        FLAT_PLATE, model, 0.6 * U_F, 0.004, 0.02, duration=20.0, fs=500.0, noise=0.02,
         rng=(5, 1, 0, 10), static=StaticCoefficients.flat_plate(), span=1.0, pre_s=MIN_HOLD_S,
         turbulence=TurbulenceSpec(Iu=0.0, Iw=0.01, Lux=1.0, Lwx=0.3, Cuy=10.0, Cwy=8.0))
     release = Release.from_simulation(sim)
     after = sim.t >= 0.0
-    truth = np.column_stack([sim.clean["h"][after] / PLATE.B, sim.clean["alpha"][after]])
+    truth = np.column_stack([sim.clean["h"][after] / FLAT_PLATE.B, sim.clean["alpha"][after]])
     errors = {}
     for motion in ("filter", "smoother"):
         monkeypatch.setattr(_turbulent_fit, "MOTION", motion)
-        signals = _turbulent_fit._Signals(release, PLATE)
+        signals = _turbulent_fit._Signals(release, FLAT_PLATE)
         velocity = sosfiltfilt(signals.sos, CubicSpline(release.t, truth)(release.t, 1), axis=0)
         core = slice(signals.rows.start, signals.rows.stop)
         errors[motion] = (np.sqrt(np.mean((signals.qdot[core] - velocity[core]) ** 2, axis=0))

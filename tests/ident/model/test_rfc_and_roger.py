@@ -17,6 +17,8 @@ from ident import (
 )
 from ident.model import conventions, flat_plate
 
+from support.sections import FLAT_PLATE
+
 EPS = np.finfo(float).eps
 
 
@@ -100,7 +102,7 @@ def test_rfc_model_json_round_trip(model):
 @pytest.mark.parametrize(
     "section",
     [
-        SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005),
+        FLAT_PLATE,
         SectionModel(
             B=0.45, m=7.3, I=0.3, fh=1.37, fa=3.1, zeta_h=0.0, zeta_a=0.01, rho=1.1, S=-0.2
         ),

@@ -7,13 +7,14 @@ import pytest
 
 import ident.physics.effects
 import simulators.effects
-from ident import AeroelasticSystem, Release, SectionModel
+from ident import AeroelasticSystem, Release
 from ident.model import flat_plate, flutter
 from ident.physics.effects import ChannelDelay, CubicStiffness, SensorCrosstalk, VortexShedding
 from ident.simulation.decay import CHANNELS, simulate_decay
 from simulators import simulate_release
 
-SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+from support.sections import FLAT_PLATE
+
 MODEL = flat_plate.jones_model()
 
 
@@ -26,10 +27,10 @@ def test_linear_decay_is_a_sum_of_the_system_eigenmodes():
     by 1e-5 (absolute) raises it to ~1e-5 and ~1e-4 over these 20 and 37 cycles (bound 1e-6): the
     simulated frequencies and damping agree with the eigenvalues to better than that.
     """
-    U = 0.6 * flutter.analyze(SECTION, MODEL).speed
+    U = 0.6 * flutter.analyze(FLAT_PLATE, MODEL).speed
     fs = 200.0
-    decay = simulate_decay(SECTION, MODEL, U, 0.004, 0.02, n=2000, fs=fs)
-    lam = AeroelasticSystem(SECTION, MODEL, U).eigenvalues()
+    decay = simulate_decay(FLAT_PLATE, MODEL, U, 0.004, 0.02, n=2000, fs=fs)
+    lam = AeroelasticSystem(FLAT_PLATE, MODEL, U).eigenvalues()
     y = np.column_stack([decay.h / 0.004, decay.alpha / 0.02])
 
     def residual(poles: np.ndarray) -> float:
@@ -67,7 +68,7 @@ def test_etd2rk_is_second_order_in_the_substep():
     """
     fs, n = 100.0, 300
     effects = [CubicStiffness(k3_h=2.5e6, k3_a=50.0)]
-    args = (SECTION, MODEL, 5.0, 0.005, 0.03)
+    args = (FLAT_PLATE, MODEL, 5.0, 0.005, 0.03)
     ref = simulate_decay(*args, n=n, fs=fs, effects=effects, oversample=128)
     errors = []
     for oversample in (2, 4, 8):
@@ -83,8 +84,8 @@ def test_channel_delay_shifts_the_forces_by_the_delay():
     """A delay of k samples moves lift and moment k samples later; before that, the held force."""
     fs, k = 500.0, 3
     U = 7.0
-    plain = simulate_decay(SECTION, MODEL, U, 0.004, 0.015, n=1000, fs=fs)
-    delayed = simulate_decay(SECTION, MODEL, U, 0.004, 0.015, n=1000, fs=fs,
+    plain = simulate_decay(FLAT_PLATE, MODEL, U, 0.004, 0.015, n=1000, fs=fs)
+    delayed = simulate_decay(FLAT_PLATE, MODEL, U, 0.004, 0.015, n=1000, fs=fs,
                              effects=[ChannelDelay(k / fs)])
     for name in ("h", "alpha"):
         np.testing.assert_array_equal(delayed.measured[name], plain.measured[name])
@@ -94,20 +95,20 @@ def test_channel_delay_shifts_the_forces_by_the_delay():
         # The spline passes through its knots: exact to round-off at whole-sample delays.
         np.testing.assert_allclose(x[k:], getattr(plain, name)[:-k], rtol=1e-12,
                                    atol=1e-12 * np.abs(x).max())
-    system = AeroelasticSystem(SECTION, MODEL, U)
+    system = AeroelasticSystem(FLAT_PLATE, MODEL, U)
     static = system.forces(system.initial_state(0.004, 0.015), np.zeros(2))
-    np.testing.assert_allclose(delayed.lift[:k], static[0] / SECTION.B, rtol=1e-12)
+    np.testing.assert_allclose(delayed.lift[:k], static[0] / FLAT_PLATE.B, rtol=1e-12)
     np.testing.assert_allclose(delayed.moment[:k], static[1], rtol=1e-12)
     clean, measured = delayed.held(np.array([-0.2, -0.1]))
     assert np.all(clean["h"] == 0.004) and np.all(clean["alpha"] == 0.015)
-    np.testing.assert_allclose(measured["lift"], static[0] / SECTION.B, rtol=1e-12)
+    np.testing.assert_allclose(measured["lift"], static[0] / FLAT_PLATE.B, rtol=1e-12)
 
 
 def test_sensor_crosstalk_mixes_the_displacements_as_documented():
     """h_meas = h + h_from_alpha alpha, alpha_meas = alpha + alpha_from_h h; physics unchanged."""
     effect = SensorCrosstalk(h_from_alpha=0.01, alpha_from_h=0.2)
-    plain = simulate_decay(SECTION, MODEL, 6.0, 0.004, 0.02, n=600, fs=200.0)
-    mixed = simulate_decay(SECTION, MODEL, 6.0, 0.004, 0.02, n=600, fs=200.0, effects=[effect])
+    plain = simulate_decay(FLAT_PLATE, MODEL, 6.0, 0.004, 0.02, n=600, fs=200.0)
+    mixed = simulate_decay(FLAT_PLATE, MODEL, 6.0, 0.004, 0.02, n=600, fs=200.0, effects=[effect])
     for name in CHANNELS:
         np.testing.assert_array_equal(mixed.clean[name], plain.clean[name])
     np.testing.assert_array_equal(mixed.h, plain.h + 0.01 * plain.alpha)
@@ -122,7 +123,7 @@ def test_sensor_crosstalk_mixes_the_displacements_as_documented():
 def test_release_simulation_is_the_decay_plus_hold_and_noise():
     """simulators.tunnel.simulate_release wraps simulate_decay: same numbers where they overlap."""
     effects = [VortexShedding(cl=0.05, cm=0.01), ChannelDelay(0.004), CubicStiffness(k3_a=50.0)]
-    args = (SECTION, MODEL, 6.0, 0.003, 0.02)
+    args = (FLAT_PLATE, MODEL, 6.0, 0.003, 0.02)
     decay = simulate_decay(*args, n=400, fs=200.0, effects=effects)
     rel = simulate_release(*args, duration=2.0, fs=200.0, effects=effects, pre_s=0.25)
     after = rel.t >= 0
@@ -138,9 +139,9 @@ def test_release_simulation_is_the_decay_plus_hold_and_noise():
 
 def test_a_decay_feeds_the_release_processing_directly():
     """Release.from_simulation takes a SimulatedDecay (t, channels, U, rho), as for the tunnel's."""
-    decay = simulate_decay(SECTION, MODEL, 6.0, 0.003, 0.02, n=400, fs=200.0)
+    decay = simulate_decay(FLAT_PLATE, MODEL, 6.0, 0.003, 0.02, n=400, fs=200.0)
     release = Release.from_simulation(decay)
-    assert release.U == 6.0 and release.rho == SECTION.rho
+    assert release.U == 6.0 and release.rho == FLAT_PLATE.rho
     np.testing.assert_array_equal(release.alpha, decay.alpha)
 
 
@@ -165,11 +166,11 @@ def test_bad_input_is_refused(kwargs, error, match):
     """Bad sample counts, rates, step counts and effects raise, naming the problem."""
     args = {"n": 100, "fs": 100.0} | kwargs
     with pytest.raises(error, match=match):
-        simulate_decay(SECTION, MODEL, 5.0, 0.0, 0.01, **args)
+        simulate_decay(FLAT_PLATE, MODEL, 5.0, 0.0, 0.01, **args)
 
 
 def test_held_times_must_be_before_the_release():
     """held() is for t < 0 only: the model moves from t = 0 on."""
-    decay = simulate_decay(SECTION, MODEL, 5.0, 0.0, 0.01, n=100, fs=100.0)
+    decay = simulate_decay(FLAT_PLATE, MODEL, 5.0, 0.0, 0.01, n=100, fs=100.0)
     with pytest.raises(ValueError, match="t < 0"):
         decay.held(np.array([-0.1, 0.0]))

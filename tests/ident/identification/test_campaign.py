@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from ident import Release, SectionModel
+from ident import Release
 from ident.errors import IdentError, RankDeficiencyError
 from ident.identification import e2rfc
 from ident.identification.campaign import analyze_campaign
@@ -15,22 +15,23 @@ from ident.model import flat_plate
 from ident.model import flutter as fl
 from simulators import simulate_release
 
-SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+from support.sections import FLAT_PLATE
+
 MODEL = flat_plate.jones_model()
-U_F = fl.analyze(SECTION, MODEL).speed
+U_F = fl.analyze(FLAT_PLATE, MODEL).speed
 
 
 def releases(fractions=(0.5, 0.65, 0.8)):
     return [Release.from_simulation(simulate_release(
-        SECTION, MODEL, f * U_F, 0.004, 0.02, duration=8.0, fs=500.0, noise=0.02, rng=i))
+        FLAT_PLATE, MODEL, f * U_F, 0.004, 0.02, duration=8.0, fs=500.0, noise=0.02, rng=i))
         for i, f in enumerate(fractions)]
 
 
 def test_the_analysis_holds_what_identify_and_the_flutter_analysis_give():
     data = releases()
-    analysis = analyze_campaign(data, SECTION)
-    model = e2rfc.identify(data, SECTION)
-    result, std = model.flutter(SECTION)
+    analysis = analyze_campaign(data, FLAT_PLATE)
+    model = e2rfc.identify(data, FLAT_PLATE)
+    result, std = model.flutter(FLAT_PLATE)
     # The same chain: the same numbers (identify is deterministic).
     assert analysis.flutter_speed == pytest.approx(result.speed, rel=1e-12)
     assert analysis.flutter_std == pytest.approx(std, rel=1e-9)
@@ -55,7 +56,7 @@ def test_the_analysis_holds_what_identify_and_the_flutter_analysis_give():
 
 def test_two_wind_speeds_are_enough_and_the_table_is_optional():
     """E2RFC needs two wind speeds; the indirect method's table is skipped when not asked for."""
-    analysis = analyze_campaign(releases((0.5, 0.8)), SECTION, table=False)
+    analysis = analyze_campaign(releases((0.5, 0.8)), FLAT_PLATE, table=False)
     assert analysis.table is None and analysis.table_error is None
     assert analysis.flutter_speed == pytest.approx(U_F, rel=0.01)
     assert len(analysis.wind_speeds) == 2
@@ -63,7 +64,7 @@ def test_two_wind_speeds_are_enough_and_the_table_is_optional():
 
 def test_one_wind_speed_is_refused():
     with pytest.raises(RankDeficiencyError):
-        analyze_campaign(releases((0.6, 0.6)), SECTION)
+        analyze_campaign(releases((0.6, 0.6)), FLAT_PLATE)
 
 
 def test_a_model_without_still_air_modes_is_an_identification_error_not_a_crash(monkeypatch):
@@ -74,10 +75,10 @@ def test_a_model_without_still_air_modes_is_an_identification_error_not_a_crash(
     not chosen one on any data seen so far.
     """
     data = releases()
-    real = e2rfc.identify(data, SECTION, n_lags=1, with_A3=True)
+    real = e2rfc.identify(data, FLAT_PLATE, n_lags=1, with_A3=True)
     A = real.A.copy()
     A[2] = 1e3 * np.eye(2)
     wild = e2rfc.IdentifiedModel(A, real.d, real.diagnostics)
     monkeypatch.setattr(e2rfc, "identify", lambda *args, **kwargs: wild)
     with pytest.raises(IdentError, match=r"n_lags=1, A3=fitted.*oscillatory still-air modes"):
-        analyze_campaign(data, SECTION)
+        analyze_campaign(data, FLAT_PLATE)

@@ -17,6 +17,8 @@ import pytest
 from ident import AeroelasticSystem, RationalFunctionModel, SectionModel
 from ident.model import flat_plate, flutter
 
+from support.sections import FLAT_PLATE
+
 PI = math.pi
 
 # Physically plausible bridge section models (B 0.2-0.6 m, m 2-20 kg/m, radius of gyration
@@ -24,7 +26,7 @@ PI = math.pi
 # damping, air density and static unbalance.
 SECTIONS = {
     # B = 0.3 m, r = 0.33 B, fa/fh = 2, light (m / (rho B^2) = 27).
-    "light_B0.3": SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005),
+    "light_B0.3": FLAT_PLATE,
     # Narrow, fa/fh = 2.4, r = 0.3 B, higher damping.
     "narrow_B0.2": SectionModel(
         B=0.2, m=2.5, I=2.5 * (0.3 * 0.2) ** 2, fh=2.5, fa=6.0, zeta_h=0.01, zeta_a=0.008

@@ -14,25 +14,26 @@ import dataclasses
 import numpy as np
 import pytest
 
-from ident import Release, SectionModel
+from ident import Release
 from ident.identification._e2rfc_problem import Problem
 from ident.identification._regressors import RegressorView, prepare
 from ident.identification.modal import _exponentials
 from ident.model import flat_plate, flutter
 from simulators import simulate_release
 
-SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+from support.sections import FLAT_PLATE
+
 JONES = flat_plate.jones_model()
 
 
 @pytest.fixture(scope="module")
 def problem() -> Problem:
     """Three releases of 10 s at 250 Hz with 2 % noise (seeded)."""
-    U_F = flutter.analyze(SECTION, JONES).speed
+    U_F = flutter.analyze(FLAT_PLATE, JONES).speed
     data = [Release.from_simulation(simulate_release(
-        SECTION, JONES, f * U_F, 0.004, 0.02, duration=10.0, fs=250.0, noise=0.02,
+        FLAT_PLATE, JONES, f * U_F, 0.004, 0.02, duration=10.0, fs=250.0, noise=0.02,
         rng=(7, i))) for i, f in enumerate((0.4, 0.6, 0.8))]
-    return Problem([prepare(r, SECTION) for r in data])
+    return Problem([prepare(r, FLAT_PLATE) for r in data])
 
 
 # Well-posed lag roots (near the truth's 0.09 and 0.6, or one lag), and three spread roots.

@@ -12,12 +12,12 @@ from ident.model import flat_plate
 from ident.model import flutter as fl
 from ident.model.conventions import FLUTTER_DERIVATIVE_NAMES_3DOF, Q_from_flutter_derivatives
 from ident.model.quasi_steady import StaticCoefficients, quasi_steady_model
-from ident.model.section import SectionModel
 from ident.tables.fd_table import FlutterDerivativeTable
 from ident.tables.roger_table import fit_table
 from simulators.decks import BLUFF_DECK, bluff_deck_model
 
-SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+from support.sections import FLAT_PLATE
+
 BLUFF = StaticCoefficients(C_D=0.9, C_L=-0.15, C_M=0.02, dC_D=-0.4, dC_L=-4.5, dC_M=1.1)
 MODEL_3DOF = flat_plate.jones_model().with_sway(quasi_steady_model(BLUFF))
 
@@ -121,8 +121,8 @@ def test_flutter_from_a_tabulated_theodorsen_plate_matches_the_exact_function():
     """
     K = np.geomspace(0.1, 3.0, 60)
     table = FlutterDerivativeTable(K, flat_plate.flutter_derivatives(K))
-    exact = fl.frequency_domain(SECTION, flat_plate.flutter_derivatives, (0.1, 3.0))
-    tabulated = fl.frequency_domain(SECTION, table.interpolator(), (0.1, 3.0))
+    exact = fl.frequency_domain(FLAT_PLATE, flat_plate.flutter_derivatives, (0.1, 3.0))
+    tabulated = fl.frequency_domain(FLAT_PLATE, table.interpolator(), (0.1, 3.0))
     assert exact.speed is not None and tabulated.speed is not None
     assert tabulated.speed == pytest.approx(exact.speed, rel=1e-4)
 
@@ -137,7 +137,7 @@ def test_a_3dof_roger_table_is_fitted_back_exactly():
     fit = fit_table(FlutterDerivativeTable.from_model(MODEL_3DOF, K), n_lags=2, with_A3=True)
     np.testing.assert_allclose(fit.model.d, flat_plate.JONES_LAGS, rtol=1e-5)
     assert fit.relative_error.max() < 1e-6
-    section = SECTION.replace(fp=1.5, zeta_p=0.005)
+    section = FLAT_PLATE.replace(fp=1.5, zeta_p=0.005)
     truth = fl.analyze(section, MODEL_3DOF)
     assert fl.analyze(section, fit.model).speed == pytest.approx(truth.speed, rel=1e-6)
 

@@ -2,16 +2,16 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 
 from daq.config import parse_rig_config
 from daq.errors import ConfigError
 from daq.sim.live_config import live_config_text, write_live_config
 
-CONFIG = Path(__file__).resolve().parents[2] / "rig_configs" / "sim_flat_plate.toml"
-EXTRA = "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n"
+from support.configs import FAST_FAN, SIM_FLAT_PLATE
+
+CONFIG = SIM_FLAT_PLATE
+EXTRA = FAST_FAN
 URLS = {"scanner": "tcp://127.0.0.1:4001", "laser_front": "serial:///dev/pts/7",
         "laser_rear": "socket://127.0.0.1:4003", "laser_check": "socket://127.0.0.1:4004",
         "fan": "modbus+tcp://127.0.0.1:4005?unit=1", "plc": "modbus+tcp://127.0.0.1:4006?unit=1",

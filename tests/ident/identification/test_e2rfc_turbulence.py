@@ -14,7 +14,7 @@ import math
 
 import pytest
 
-from ident import Release, SectionModel
+from ident import Release
 from ident.identification import e2rfc
 from ident.identification.e2rfc import FlutterUncertainty
 from ident.model import flat_plate
@@ -23,19 +23,20 @@ from ident.model.quasi_steady import StaticCoefficients
 from ident.physics.turbulence import TurbulenceSpec
 from simulators import simulate_release
 
-PLATE = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+from support.sections import FLAT_PLATE
+
 HOLDS = ((0.004, 0.02), (-0.003, 0.012))
 
 
 def campaign(model, *, seed, Iw):
     """Return the benchmark's plate campaign in vertical gusts of intensity ``Iw`` (0: smooth)."""
-    U_F = fl.analyze(PLATE, model).speed
+    U_F = fl.analyze(FLAT_PLATE, model).speed
     wind = {}
     if Iw:
         wind = {"static": StaticCoefficients.flat_plate(), "span": 1.0,
                 "turbulence": TurbulenceSpec(Iu=0.0, Iw=Iw, Lux=1.0, Lwx=0.3, Cuy=10.0, Cwy=8.0)}
     return [Release.from_simulation(simulate_release(
-        PLATE, model, f * U_F, h0, a0, duration=20.0, fs=500.0, noise=0.02,
+        FLAT_PLATE, model, f * U_F, h0, a0, duration=20.0, fs=500.0, noise=0.02,
         rng=(seed, i, j, int(1000 * Iw)), **wind))
         for i, f in enumerate((0.4, 0.6, 0.8)) for j, (h0, a0) in enumerate(HOLDS)]
 
@@ -50,13 +51,13 @@ def test_a_model_fluttering_below_a_decaying_release_is_widened_to_reach_it(seed
     85 %; with it 100 %).
     """
     model = flat_plate.jones_model()
-    U_F = fl.analyze(PLATE, model).speed
-    identified = e2rfc.identify(campaign(model, seed=seed, Iw=0.03), PLATE)
+    U_F = fl.analyze(FLAT_PLATE, model).speed
+    identified = e2rfc.identify(campaign(model, seed=seed, Iw=0.03), FLAT_PLATE)
     diagnostics = identified.diagnostics
     assert diagnostics.turbulent
     stable = diagnostics.decayed_at
     assert stable is not None and stable < U_F
-    u = identified.uncertainty(PLATE)
+    u = identified.uncertainty(FLAT_PLATE)
     assert u.speed is not None and u.speed < stable  # the bias this part exists for
     assert u.below_decay == pytest.approx(stable - u.speed)
     assert any("contradicts the data" in w for w in u.warnings)
@@ -68,7 +69,7 @@ def test_smooth_flow_estimates_lie_above_every_decaying_release():
     """Smooth flow: the estimate is above 0.8 U_F, so this part is zero (nothing changes)."""
     model = flat_plate.jones_model()
     releases = [r for i, r in enumerate(campaign(model, seed=0, Iw=0.0)) if i % 2 == 0]
-    u = e2rfc.identify(releases, PLATE).uncertainty(PLATE)
+    u = e2rfc.identify(releases, FLAT_PLATE).uncertainty(FLAT_PLATE)
     assert u.below_decay == 0.0
     assert not any("contradicts" in w for w in u.warnings)
 

@@ -15,7 +15,7 @@ import math
 import numpy as np
 import pytest
 
-from ident import Release, SectionModel
+from ident import Release
 from ident.identification import e2rfc
 from ident.identification.e2rfc import RANDOM_RESPONSE_LIMIT, FlutterUncertainty
 from ident.model import flat_plate
@@ -25,7 +25,8 @@ from ident.physics.turbulence import TurbulenceSpec
 from simulators import simulate_release
 from simulators.decks import BLUFF_DECK, bluff_deck_model
 
-PLATE = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+from support.sections import FLAT_PLATE
+
 HOLDS = ((0.004, 0.02), (-0.003, 0.012))
 
 
@@ -52,18 +53,18 @@ def test_releases_in_turbulence_are_flagged_and_their_interval_holds_the_truth()
     random response as noise, benchmarks/flutter_crb.py).
     """
     model = flat_plate.jones_model()
-    U_F = fl.analyze(PLATE, model).speed
+    U_F = fl.analyze(FLAT_PLATE, model).speed
     covered, errors = 0, []
     for seed in range(5):
         identified = e2rfc.identify(
-            campaign(PLATE, model, seed=seed, Iw=0.01, static=StaticCoefficients.flat_plate(),
-                     duration=20.0), PLATE)
+            campaign(FLAT_PLATE, model, seed=seed, Iw=0.01, static=StaticCoefficients.flat_plate(),
+                     duration=20.0), FLAT_PLATE)
         diagnostics = identified.diagnostics
         assert diagnostics.turbulent
         assert np.median(diagnostics.random_response) > RANDOM_RESPONSE_LIMIT
         assert len(diagnostics.jackknife) == 6
         assert any("random response" in w for w in diagnostics.warnings)
-        u = identified.uncertainty(PLATE)
+        u = identified.uncertainty(FLAT_PLATE)
         if u.speed is None:  # no flutter below the searched speeds: a miss, not a crash
             errors.append(math.inf)
             continue
@@ -77,12 +78,12 @@ def test_releases_in_turbulence_are_flagged_and_their_interval_holds_the_truth()
 def test_smooth_flow_releases_are_not_taken_for_turbulence():
     """2 % white noise only: no random response, no jackknife, a tight interval on the truth."""
     model = flat_plate.jones_model()
-    U_F = fl.analyze(PLATE, model).speed
-    identified = e2rfc.identify(campaign(PLATE, model, seed=1), PLATE)
+    U_F = fl.analyze(FLAT_PLATE, model).speed
+    identified = e2rfc.identify(campaign(FLAT_PLATE, model, seed=1), FLAT_PLATE)
     diagnostics = identified.diagnostics
     assert not diagnostics.turbulent and diagnostics.jackknife == ()
     assert np.all(diagnostics.random_response < 2.0)  # ~1: the residual is the white noise
-    u = identified.uncertainty(PLATE)
+    u = identified.uncertainty(FLAT_PLATE)
     assert u.turbulence == 0.0
     assert abs(u.speed - U_F) <= 2 * u.total
     assert u.total < 0.002 * U_F  # 2 % noise, 72 s of data: a few hundredths of a per cent
@@ -93,9 +94,10 @@ def test_the_exact_theodorsen_plate_is_identified_within_half_a_percent_and_cove
 
     Truth: the frequency-domain analysis with the exact flutter derivatives.
     """
-    truth = fl.frequency_domain(PLATE, flat_plate.flutter_derivatives).speed
-    identified = e2rfc.identify(campaign(PLATE, flat_plate.theodorsen_model(), seed=2), PLATE)
-    u = identified.uncertainty(PLATE)
+    truth = fl.frequency_domain(FLAT_PLATE, flat_plate.flutter_derivatives).speed
+    identified = e2rfc.identify(campaign(FLAT_PLATE, flat_plate.theodorsen_model(), seed=2),
+                                FLAT_PLATE)
+    u = identified.uncertainty(FLAT_PLATE)
     assert abs(u.speed / truth - 1) < 0.005
     assert abs(u.speed - truth) <= 2 * u.total
 

@@ -35,7 +35,9 @@ from ident.records.release import Release
 from ident.simulation.decay import simulate_decay
 from simulators.tunnel import simulate_release
 
-PLANAR = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+from support.sections import FLAT_PLATE
+
+PLANAR = FLAT_PLATE  # the 2-DOF section that SWAY adds a sway mode to
 SWAY = PLANAR.replace(fp=1.3, zeta_p=0.004)
 #: A bluff deck's static coefficients at its mean angle (lift down positive, per radian).
 BLUFF = StaticCoefficients(C_D=0.9, C_L=-0.15, C_M=0.02, dC_D=-0.4, dC_L=-4.5, dC_M=1.1)

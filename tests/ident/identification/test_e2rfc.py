@@ -8,16 +8,17 @@ import math
 import numpy as np
 import pytest
 
-from ident import RankDeficiencyError, RationalFunctionModel, Release, SectionModel, roger_fit
+from ident import RankDeficiencyError, RationalFunctionModel, Release, roger_fit
 from ident.identification import e2rfc
 from ident.identification._e2rfc_problem import MAX_CONDITION
 from ident.model import flat_plate, flutter
 from ident.numerics.selection import structure_label, within_one_se
 from simulators import simulate_release
 
-SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+from support.sections import FLAT_PLATE
+
 JONES = flat_plate.jones_model()
-U_F = flutter.analyze(SECTION, JONES).speed
+U_F = flutter.analyze(FLAT_PLATE, JONES).speed
 
 
 def releases(model, fractions=(0.4, 0.6, 0.8), *, U_ref=U_F, noise=0.0, seed=0, duration=20.0,
@@ -25,7 +26,7 @@ def releases(model, fractions=(0.4, 0.6, 0.8), *, U_ref=U_F, noise=0.0, seed=0, 
     """Releases of the section from (4 mm, 0.02 rad) at fractions of a reference speed."""
     return [
         Release.from_simulation(simulate_release(
-            SECTION, model, f * U_ref, 0.004, 0.02, duration=duration, fs=fs, noise=noise,
+            FLAT_PLATE, model, f * U_ref, 0.004, 0.02, duration=duration, fs=fs, noise=noise,
             rng=seed * 101 + i))
         for i, f in enumerate(fractions)
     ]
@@ -33,14 +34,14 @@ def releases(model, fractions=(0.4, 0.6, 0.8), *, U_ref=U_F, noise=0.0, seed=0, 
 
 def test_noise_free_releases_give_the_exact_rfcs():
     """Without noise, two wind speeds recover Jones's lags and coefficients to round-off level."""
-    model = e2rfc.identify(releases(JONES, (0.5, 0.8), duration=10.0, fs=250.0), SECTION,
+    model = e2rfc.identify(releases(JONES, (0.5, 0.8), duration=10.0, fs=250.0), FLAT_PLATE,
                            n_lags=2, with_A3=True)
     assert isinstance(model, RationalFunctionModel)
     # The regressors are exact closed forms of an exactly fitted decay; what is left is the
     # nonlinear solver's tolerance (1e-10 in log d) amplified by the conditioning (~50).
     np.testing.assert_allclose(model.d, JONES.d, rtol=1e-6)
     np.testing.assert_allclose(model.A, JONES.A, atol=1e-5 * np.abs(JONES.A).max())
-    assert flutter.analyze(SECTION, model).speed == pytest.approx(U_F, rel=1e-7)
+    assert flutter.analyze(FLAT_PLATE, model).speed == pytest.approx(U_F, rel=1e-7)
 
 
 @pytest.mark.parametrize("seed", [0, 1])
@@ -49,8 +50,8 @@ def test_two_percent_noise_gives_the_flutter_speed_within_one_and_a_half_percent
 
     Wind speeds 0.4, 0.6 and 0.8 U_F, 20 s at 500 Hz, noise on all four channels.
     """
-    model = e2rfc.identify(releases(JONES, noise=0.02, seed=seed), SECTION)
-    result, std = model.flutter(SECTION)
+    model = e2rfc.identify(releases(JONES, noise=0.02, seed=seed), FLAT_PLATE)
+    result, std = model.flutter(FLAT_PLATE)
     assert result.speed == pytest.approx(U_F, rel=0.015)
     assert model.diagnostics.n_lags == 2 and model.diagnostics.with_A3  # the true structure
     assert std is not None and 0.0 < std < 0.01 * U_F
@@ -62,8 +63,8 @@ def test_selection_prefers_the_simplest_adequate_structure():
     """A one-lag truth without added mass is identified as one lag without A3."""
     K = np.linspace(0.2, 3.0, 40)
     one_lag = roger_fit(K, flat_plate.flutter_derivatives(K), [0.25], with_A3=False)
-    U_ref = flutter.analyze(SECTION, one_lag).speed
-    model = e2rfc.identify(releases(one_lag, U_ref=U_ref, noise=0.02, seed=3), SECTION)
+    U_ref = flutter.analyze(FLAT_PLATE, one_lag).speed
+    model = e2rfc.identify(releases(one_lag, U_ref=U_ref, noise=0.02, seed=3), FLAT_PLATE)
     diagnostics = model.diagnostics
     assert (diagnostics.n_lags, diagnostics.with_A3) == (1, False)
     assert model.d[0] == pytest.approx(0.25, rel=0.02)  # ~0.3 % observed; 2 % is 6 sigma-ish
@@ -83,7 +84,7 @@ def test_a_record_starting_after_the_release_is_handled():
         keep = rel.t >= 0.05
         late.append(Release(t=rel.t[keep], h=rel.h[keep], alpha=rel.alpha[keep],
                             lift=rel.lift[keep], moment=rel.moment[keep], U=rel.U))
-    model = e2rfc.identify(late, SECTION, n_lags=2, with_A3=True)
+    model = e2rfc.identify(late, FLAT_PLATE, n_lags=2, with_A3=True)
     # The modal fit extrapolates exactly back to t = 0 on noise-free data.
     np.testing.assert_allclose(model.d, JONES.d, rtol=1e-5)
 
@@ -97,10 +98,10 @@ def test_short_releases_are_identified(duration):
     rows). Noise-free, the model is exact (round-off); at 2 % noise within 1 %, about five
     times the flutter-speed std measured on these records (0.15-0.18 %).
     """
-    exact = e2rfc.identify(releases(JONES, duration=duration, seed=1), SECTION)
-    assert exact.flutter(SECTION)[0].speed == pytest.approx(U_F, rel=1e-9)
-    noisy = e2rfc.identify(releases(JONES, duration=duration, noise=0.02, seed=1), SECTION)
-    result, std = noisy.flutter(SECTION)
+    exact = e2rfc.identify(releases(JONES, duration=duration, seed=1), FLAT_PLATE)
+    assert exact.flutter(FLAT_PLATE)[0].speed == pytest.approx(U_F, rel=1e-9)
+    noisy = e2rfc.identify(releases(JONES, duration=duration, noise=0.02, seed=1), FLAT_PLATE)
+    result, std = noisy.flutter(FLAT_PLATE)
     assert result.speed == pytest.approx(U_F, rel=0.01)
     assert std is not None and 0.0 < std < 0.01 * U_F
 
@@ -109,24 +110,24 @@ def test_one_wind_speed_is_refused_with_a_clear_message():
     """Several releases at one wind speed are rank deficient: an error, never numbers."""
     same_speed = releases(JONES, (0.6, 0.605), duration=10.0, fs=250.0)  # within 2 %
     with pytest.raises(RankDeficiencyError, match="two or more wind speeds"):
-        e2rfc.identify(same_speed, SECTION)
+        e2rfc.identify(same_speed, FLAT_PLATE)
     with pytest.raises(RankDeficiencyError, match="no releases given"):
-        e2rfc.identify([], SECTION)
+        e2rfc.identify([], FLAT_PLATE)
 
 
 def test_bad_arguments_are_refused():
     """Non-Release inputs are a TypeError; an impossible lag count a ValueError."""
     good = releases(JONES, (0.5, 0.8), duration=10.0, fs=250.0)
     with pytest.raises(TypeError, match="ident.Release"):
-        e2rfc.identify([good[0], "release.h5"], SECTION)
+        e2rfc.identify([good[0], "release.h5"], FLAT_PLATE)
     with pytest.raises(ValueError, match="n_lags must be an integer in 0..3"):
-        e2rfc.identify(good, SECTION, n_lags=5)
+        e2rfc.identify(good, FLAT_PLATE, n_lags=5)
 
 
 def test_diagnostics_are_complete_and_consistent():
     """Covariance, parameter index, modal fits and wind speeds describe the same fit."""
     data = releases(JONES, noise=0.02, seed=5, duration=12.0)
-    model = e2rfc.identify(data, SECTION, n_lags=2, with_A3=True)
+    model = e2rfc.identify(data, FLAT_PLATE, n_lags=2, with_A3=True)
     diagnostics = model.diagnostics
     n_coef = len(diagnostics.parameter_index)
     assert n_coef == 2 * 2 * (3 + 2)  # two force rows x (A1, A2, A3, A4, A5) x two columns
@@ -148,17 +149,17 @@ def test_the_structures_the_data_cannot_tell_apart_are_fitted_and_their_spread_r
     structure).
     """
     data = releases(JONES, (0.46, 0.59, 0.72), noise=0.02, seed=1, duration=4.0)
-    model = e2rfc.identify(data, SECTION)
+    model = e2rfc.identify(data, FLAT_PLATE)
     diagnostics = model.diagnostics
     usable = [c for c in diagnostics.candidates if not c.note]
     plausible = {c.label for c in within_one_se(usable)}
     assert len(plausible) >= 2  # the case this test is about
-    spread = model.structure_spread(SECTION)
+    spread = model.structure_spread(FLAT_PLATE)
     chosen = structure_label(diagnostics.n_lags, diagnostics.with_A3)
     assert spread.labels[0] == chosen and set(spread.labels) == plausible
     assert len(spread.labels) == len(diagnostics.alternatives) + 1
-    result, std = model.flutter(SECTION)
-    uncertainty = model.uncertainty(SECTION)
+    result, std = model.flutter(FLAT_PLATE)
+    uncertainty = model.uncertainty(FLAT_PLATE)
     # The spread reports each structure's own (parametric) deviation; the model's flutter()
     # deviation is the total, which holds the structures' spread too.
     assert (spread.speeds[0], spread.stds[0]) == (result.speed, uncertainty.parametric)
@@ -181,9 +182,9 @@ def test_the_structures_the_data_cannot_tell_apart_are_fitted_and_their_spread_r
 
 def test_a_structure_given_by_the_caller_has_no_alternatives():
     data = releases(JONES, (0.5, 0.8), duration=6.0, fs=250.0)
-    model = e2rfc.identify(data, SECTION, n_lags=2, with_A3=True)
+    model = e2rfc.identify(data, FLAT_PLATE, n_lags=2, with_A3=True)
     assert model.diagnostics.alternatives == ()
-    spread = model.structure_spread(SECTION)
+    spread = model.structure_spread(FLAT_PLATE)
     assert spread.labels == ("n_lags=2, A3=fitted",)
     assert spread.low == spread.high == pytest.approx(U_F, rel=1e-6)
     assert spread.summary() == "one structure within one SE"
@@ -196,18 +197,18 @@ def test_an_alternative_without_still_air_modes_widens_the_spread_instead_of_fai
     then count it as "no flutter below U_max", as the refits do, rather than raising.
     """
     data = releases(JONES, (0.5, 0.8), duration=6.0, fs=250.0)
-    model = e2rfc.identify(data, SECTION, n_lags=2, with_A3=True)
+    model = e2rfc.identify(data, FLAT_PLATE, n_lags=2, with_A3=True)
     A = model.A.copy()
     A[2] = 1e3 * np.eye(2)  # A3 1000 times the plate's: the heave and pitch inertia overturned
     wild = e2rfc.IdentifiedModel(A, model.d, model.diagnostics)
     with pytest.raises(flutter.StillAirModesError, match="oscillatory still-air modes"):
-        flutter.analyze(SECTION, wild)
+        flutter.analyze(FLAT_PLATE, wild)
     with_wild = e2rfc.IdentifiedModel(model.A, model.d, dataclasses.replace(
         model.diagnostics, alternatives=(wild,)))
-    spread = with_wild.structure_spread(SECTION)
+    spread = with_wild.structure_spread(FLAT_PLATE)
     assert spread.speeds[0] == pytest.approx(U_F, rel=1e-6) and spread.speeds[1] is None
     assert spread.high == np.inf
-    uncertainty = with_wild.uncertainty(SECTION)
+    uncertainty = with_wild.uncertainty(FLAT_PLATE)
     # The wild one counted at U_max: the structure term is the spread of (U_F, U_max).
     assert uncertainty.structure == pytest.approx(
         float(np.std([U_F, spread.U_max], ddof=1)), rel=1e-3)
@@ -228,18 +229,18 @@ def test_one_lag_more_counts_only_where_the_data_allow_it(finer_kind, rejected, 
     refit counts only when the held-out error does not reject it, and never below the highest
     wind speed where a release decayed on both modes (the data bound the flutter speed there).
     """
-    model = e2rfc.identify(releases(JONES, noise=0.02, seed=2), SECTION)
+    model = e2rfc.identify(releases(JONES, noise=0.02, seed=2), FLAT_PLATE)
     diag = model.diagnostics
     stable = diag.decayed_at
     assert stable == pytest.approx(0.8 * U_F)
     finer = {"none": RationalFunctionModel(np.zeros_like(JONES.A), JONES.d),
              "low": RationalFunctionModel(10.0 * JONES.A, JONES.d),
              "in range": RationalFunctionModel(1.05 * JONES.A, JONES.d)}[finer_kind]
-    finer_speed = flutter.analyze(SECTION, finer).speed
+    finer_speed = flutter.analyze(FLAT_PLATE, finer).speed
     injected = e2rfc.IdentifiedModel(model.A, model.d, dataclasses.replace(
         diag, _refits={**diag._refits, "finer": finer, "finer_rejected": rejected}))
-    u = injected.uncertainty(SECTION)
-    move = {"zero": 0.0, "to U_max": flutter.analyze(SECTION, model).U_max - u.speed,
+    u = injected.uncertainty(FLAT_PLATE)
+    move = {"zero": 0.0, "to U_max": flutter.analyze(FLAT_PLATE, model).U_max - u.speed,
             "to stable": u.speed - stable,
             "its move": abs((finer_speed or math.nan) - u.speed)}[expected]
     # The refit's speed comes from a coarser grid (REFIT_GRID points) than the chosen model's.
@@ -254,7 +255,7 @@ def test_the_rejection_of_one_lag_more_is_the_candidates_held_out_error():
     """``finer_rejected`` scores the refit as the structure search scores its candidates."""
     from ident.identification._e2rfc_problem import Problem
 
-    model = e2rfc.identify(releases(JONES, noise=0.02, seed=2), SECTION)
+    model = e2rfc.identify(releases(JONES, noise=0.02, seed=2), FLAT_PLATE)
     diag = model.diagnostics
     problem = Problem(list(diag._prepared))
     for c in diag.candidates:
@@ -293,7 +294,7 @@ def test_the_lag_roots_of_an_ill_determined_alternative_are_converged_on_all_the
     from ident.identification._e2rfc_problem import Problem
     from ident.identification._regressors import prepare
 
-    section = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+    section = FLAT_PLATE
     U_flutter = flutter.analyze(section, JONES).speed
     data = [Release.from_simulation(simulate_release(
         section, JONES, f * U_flutter, 0.004, 0.02, duration=20.0, fs=500.0, noise=0.05,

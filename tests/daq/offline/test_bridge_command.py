@@ -10,9 +10,10 @@ import pytest
 from daq.cli import main
 from ident.model import flat_plate
 
-EXAMPLES = Path(__file__).resolve().parents[2] / "rig_configs" / "bridges"
-BRIDGE = EXAMPLES / "example_bridge.json"
-MODES = [EXAMPLES / "example_modes" / f"{n}.csv" for n in ("L1S", "V1A", "V1S", "V2S", "T1S",
+from support.configs import BRIDGES
+
+BRIDGE = BRIDGES / "example_bridge.json"
+MODES = [BRIDGES / "example_modes" / f"{n}.csv" for n in ("L1S", "V1A", "V1S", "V2S", "T1S",
                                                             "T1A")]
 
 
@@ -44,7 +45,7 @@ def test_the_example_bridge_with_the_identified_model_format(tmp_path: Path, cap
 
 def test_the_example_bridge_with_a_bluff_table_reports_the_fit_at_every_row(tmp_path, capsys):
     out = tmp_path / "result.json"
-    assert main(["bridge", str(BRIDGE), "--aero", str(EXAMPLES / "example_deck_table.csv"),
+    assert main(["bridge", str(BRIDGE), "--aero", str(BRIDGES / "example_deck_table.csv"),
                  "--json", str(out), "--u-max", "100"]) == 0
     assert "largest relative error 0.14 % at row 19" in capsys.readouterr().out
     result = json.loads(out.read_text())
@@ -57,7 +58,7 @@ def test_the_example_bridge_with_a_bluff_table_reports_the_fit_at_every_row(tmp_
 
 def test_mode_tables_make_the_bridge_file(tmp_path: Path):
     written = tmp_path / "bridge.json"
-    assert main(["bridge", str(EXAMPLES / "example_deck.json"), "--modes",
+    assert main(["bridge", str(BRIDGES / "example_deck.json"), "--modes",
                  *map(str, MODES), "--write-bridge", str(written)]) == 0
     from ident.bridge.model import BridgeModel
 
@@ -108,7 +109,7 @@ CASES = [
 def test_bad_input_is_one_error_line(files, capsys, argv, message):
     def fill(text: str) -> str:
         return text.replace("{d}", str(files)).replace("{b}", str(BRIDGE)).replace(
-            "{e}", str(EXAMPLES))
+            "{e}", str(BRIDGES))
 
     code = main(["bridge", *map(fill, argv)])
     err = capsys.readouterr().err
@@ -129,7 +130,7 @@ def test_flutter_outside_a_tables_range_is_flagged_as_extrapolation(tmp_path, ca
 
     The frequency domain, which never leaves the table, finds no flutter within it.
     """
-    lines = (EXAMPLES / "example_deck_table.csv").read_text().splitlines()
+    lines = (BRIDGES / "example_deck_table.csv").read_text().splitlines()
     rows = [line for line in lines[2:] if float(line.split(",")[0]) > 0.75]
     narrow = tmp_path / "narrow.csv"
     narrow.write_text("\n".join(lines[1:2] + rows) + "\n")

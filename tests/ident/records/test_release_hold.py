@@ -8,12 +8,14 @@ import numpy as np
 import pytest
 
 from daq.recording.recorder import RunRecorder
-from ident import Release, SectionModel
+from ident import Release
 from ident.errors import NonUniformSamplingError
 from ident.model import flat_plate
 from ident.records.release import ReleaseHold
 from ident.records.run_file import HOLD_GUARD_S, HOLD_SETTLE_S, read_run
 from simulators import simulate_release
+
+from support.sections import FLAT_PLATE
 
 CONFIG = """[rig]
 name = "test"
@@ -26,7 +28,6 @@ fa = 4.0
 zeta_h = 0.005
 zeta_a = 0.005
 """
-SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
 FS = 200.0
 PRE_S = 3.0
 #: Where the first release's arm event lies, s before its release.
@@ -49,7 +50,7 @@ def write_run(path):
     recorder.start()
     sims, t0, row = [], 0.0, 0
     for k, U in enumerate((5.0, 8.0)):
-        sim = simulate_release(SECTION, flat_plate.jones_model(), U, 0.004, 0.02, duration=4.0,
+        sim = simulate_release(FLAT_PLATE, flat_plate.jones_model(), U, 0.004, 0.02, duration=4.0,
                                fs=FS, noise=0.02, rng=k, pre_s=PRE_S)
         n = sim.t.size
         wind = np.full(n, U)
@@ -57,7 +58,7 @@ def write_run(path):
             wind[(sim.t >= DIP[0] - 1e-9) & (sim.t < DIP[1] - 1e-9)] = 0.1 * U
             recorder.add_event(t0 + PRE_S - ARM_BEFORE_S, "arm", "engine: model armed")
         columns = {"h": sim.h, "alpha": sim.alpha, "lift": sim.lift, "moment": sim.moment,
-                   "U": wind, "rho": np.full(n, SECTION.rho),
+                   "U": wind, "rho": np.full(n, FLAT_PLATE.rho),
                    "pressure": np.zeros((n, 2), dtype=np.float32)}
         recorder.append_sync(t0 + PRE_S + sim.t, **columns)
         after = int(np.flatnonzero(sim.t >= 0)[0])
@@ -109,13 +110,13 @@ def test_the_settle_after_arming_is_left_out(tmp_path):
 
 def test_a_simulated_release_carries_the_samples_before_it():
     """Release.from_simulation: the samples at t < 0 of simulate_release(pre_s=...) are the hold."""
-    sim = simulate_release(SECTION, flat_plate.jones_model(), 5.0, 0.004, 0.02, duration=4.0,
+    sim = simulate_release(FLAT_PLATE, flat_plate.jones_model(), 5.0, 0.004, 0.02, duration=4.0,
                            fs=FS, pre_s=1.0)
     release = Release.from_simulation(sim)
     assert release.hold is not None and release.hold.t.size == int(FS * 1.0)
     np.testing.assert_array_equal(release.hold.moment, sim.moment[sim.t < 0])
     assert release.hold.duration == pytest.approx(1.0)
-    plain = simulate_release(SECTION, flat_plate.jones_model(), 5.0, 0.004, 0.02,
+    plain = simulate_release(FLAT_PLATE, flat_plate.jones_model(), 5.0, 0.004, 0.02,
                              duration=4.0, fs=FS)
     assert Release.from_simulation(plain).hold is None
 

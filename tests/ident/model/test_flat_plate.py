@@ -15,6 +15,8 @@ from scipy.special import jv, yv
 from ident import SectionModel
 from ident.model import conventions, flat_plate, flutter
 
+from support.sections import FLAT_PLATE
+
 PI = np.pi
 
 
@@ -220,7 +222,7 @@ def test_the_eight_lag_fit_stands_for_the_exact_plate():
     assert np.max(np.abs(C_fit - theodorsen_from_bessel(K / 2.0))) < 1e-4
     assert np.max(np.abs(jones_from_formula(p) - theodorsen_from_bessel(K / 2.0))) > 5e-3
     for section in (
-        SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005),
+        FLAT_PLATE,
         SectionModel(B=0.45, m=8.0, I=0.16, fh=1.2, fa=3.6, zeta_h=0.003, zeta_a=0.003),
     ):
         exact = flutter.frequency_domain(section, flat_plate.flutter_derivatives)

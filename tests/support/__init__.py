@@ -1,0 +1,19 @@
+"""What many test modules share, written once (not a test package: nothing here is collected).
+
+The suite's ``pythonpath`` (pyproject.toml, ``[tool.pytest.ini_options]``) puts ``tests/`` on
+``sys.path``, so a test module imports ``from support.sections import FLAT_PLATE``. A test that
+needs other values keeps its own literal: only identical values are shared.
+
+Modules
+-------
+sections
+    The flat-plate section model that most identification and simulator tests fly.
+configs
+    Where the rig configs are, the default simulated rig's config, and the TOML snippets that
+    tests append to it (the fast fan, clocks that drift).
+clocks
+    A monotonic clock that a test sets by hand.
+realtime
+    Which test modules stream in real time: the rule behind the ``realtime`` marker, as the
+    suite's own check (``tests/test_suite_split.py``) applies it.
+"""
