@@ -6,6 +6,7 @@
 # Debian libraries the Qt binding needs to start offscreen. Re-runs skip what is already done.
 #
 #   make test            run the test suite (pytest; extra arguments in PYTEST_ARGS="...")
+#   make test-fast       run its pure part alone (no socket, thread, process or real clock)
 #   make demo            run a whole simulated campaign, results in demo_output/
 #   make lint            ruff check (ruff is installed into .venv for this target only)
 #   make typecheck       mypy (likewise installed for this target only)
@@ -28,26 +29,31 @@ MYPY_VERSION := 2.4.1
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 
 # Tests and the demo never open a window, and never need a display.
-test demo screenshot: export QT_QPA_PLATFORM := offscreen
-test demo screenshot: export MPLBACKEND := Agg
+test test-fast demo screenshot: export QT_QPA_PLATFORM := offscreen
+test test-fast demo screenshot: export MPLBACKEND := Agg
 
-.PHONY: test demo screenshot lint typecheck setup qt-libs clean
+.PHONY: test test-fast demo screenshot lint typecheck setup qt-libs clean
 
-# The pure computations (ident, simulators and the clock fits: no device, no real clock, no
-# socket) run on two workers; everything that streams in real time (drivers, the simulated rig,
-# recorder, campaigns, console) and the Dask clusters of the offline tests (each would want the
-# dashboard's port) run after them on their own, so that their timing is never measured against
-# a CPU busy with another test. (Exit code 5, nothing collected, is a PYTEST_ARGS filter's doing.)
-PARALLEL_TESTS := tests/ident tests/simulators tests/daq/sync ident simulators
+# The suite is split by the `realtime` marker (pyproject.toml), not by folder. The pure part
+# (computations, parsers, files, scripted byte exchanges, the doctests of daq, ident and
+# simulators) runs on two workers. The real-time part (sockets, the simulated rig, threads with
+# deadlines, real clocks, Qt event loops with timers, and Dask clusters, which each want the
+# dashboard's port) runs after it on its own, so that its timing is never measured against a
+# CPU busy with another test. tests/test_suite_split.py fails on a real-time test module left
+# unmarked. (Exit code 5, nothing collected, is a PYTEST_ARGS filter's doing.)
+PURE_TESTS := $(PY) -m pytest -q -p no:cacheprovider -n 2 -m "not realtime"
+REALTIME_TESTS := $(PY) -m pytest -q -p no:cacheprovider -m realtime
 
 # Both parts always run; the target fails if either did.
 test: setup
 	@status=0; \
-	$(PY) -m pytest -q -p no:cacheprovider -n 2 $(PARALLEL_TESTS) $(PYTEST_ARGS) \
-	  || [ $$? -eq 5 ] || status=1; \
-	$(PY) -m pytest -q -p no:cacheprovider $(addprefix --ignore=,$(PARALLEL_TESTS)) \
-	  $(PYTEST_ARGS) || [ $$? -eq 5 ] || status=1; \
+	$(PURE_TESTS) $(PYTEST_ARGS) || [ $$? -eq 5 ] || status=1; \
+	$(REALTIME_TESTS) $(PYTEST_ARGS) || [ $$? -eq 5 ] || status=1; \
 	exit $$status
+
+# The pure part alone: a few minutes, for the edit-test loop of numerical work.
+test-fast: setup
+	@$(PURE_TESTS) $(PYTEST_ARGS) || [ $$? -eq 5 ]
 
 demo: setup
 	$(VENV)/bin/windrig demo --out demo_output

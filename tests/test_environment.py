@@ -6,8 +6,11 @@ from importlib.metadata import entry_points
 
 import numpy as np
 import pyqtgraph as pg
+import pytest
 from PySide6.QtWidgets import QApplication
 from pytestqt.qtbot import QtBot
+
+pytestmark = pytest.mark.realtime
 
 
 def test_pyqtgraph_plots_offscreen(qapp: QApplication, qtbot: QtBot) -> None:

@@ -32,6 +32,8 @@ from simulators import simulate_release
 
 from support.sections import FLAT_PLATE
 
+pytestmark = pytest.mark.realtime
+
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "daq" / "rig_configs"
 

@@ -16,11 +16,14 @@ from typing import Any
 
 import h5py
 import numpy as np
+import pytest
 
 from daq.config import parse_rig_config
 from daq.sim.recording import record_simulated_run
 
 from support.configs import FAST_FAN, SIM_FLAT_PLATE
+
+pytestmark = pytest.mark.realtime
 
 FAN_RPM = 600.0  # 6 m/s on this rig
 

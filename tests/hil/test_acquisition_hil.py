@@ -13,6 +13,7 @@ from collections import defaultdict
 from typing import Any
 
 import numpy as np
+import pytest
 
 from daq.acquisition.drivers import drivers_from_config
 from daq.acquisition.engine import Acquisition
@@ -21,6 +22,8 @@ from daq.config import parse_rig_config
 from daq.sim.rig import start_simulated_rig
 
 from support.configs import FAST_FAN, SIM_FLAT_PLATE
+
+pytestmark = pytest.mark.realtime
 
 LASERS = ("laser_front", "laser_rear", "laser_check")
 

@@ -24,6 +24,7 @@ from typing import Any
 
 import h5py
 import numpy as np
+import pytest
 
 from daq.config import parse_rig_config
 from daq.recording.info import format_info, run_info
@@ -31,6 +32,8 @@ from daq.sim.recording import record_simulated_run
 from ident.physics.air import moist_air_density
 
 from support.configs import SIM_FLAT_PLATE
+
+pytestmark = pytest.mark.realtime
 
 FAN_RPM = 900.0  # 9 m/s on this rig: lift and moment well above the scanner's noise
 DEAD = [10, 45]  # an interior tap of the upper face and one of the lower face

@@ -38,6 +38,8 @@ from daq.sync.conversions import wind_speed
 
 from support.configs import FAST_FAN, SIM_FLAT_PLATE
 
+pytestmark = pytest.mark.realtime
+
 RATE_HZ = 500.0  # the scanner's frame rate in sim_flat_plate.toml
 PERIOD_S = 1.0 / RATE_HZ
 #: Noise of a 0.5 s mean of one channel is 0.063 Pa (module docstring): 8 sigma.

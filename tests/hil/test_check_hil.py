@@ -26,6 +26,8 @@ from daq.sim.rig import start_simulated_rig
 
 from support.configs import SIM_FLAT_PLATE
 
+pytestmark = pytest.mark.realtime
+
 CONFIG = SIM_FLAT_PLATE
 DEVICES = ("scanner", "laser_front", "laser_rear", "laser_check", "fan", "plc", "barometer")
 

@@ -25,7 +25,7 @@ from ident.records.run_file import read_run
 
 from support.configs import FAST_FAN
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
 
 def test_the_3dof_demo_identifies_a_3x3_model_and_the_flutter_speed(tmp_path, capsys):

@@ -21,6 +21,8 @@ from ident.records.run_file import read_run
 
 from support.configs import FAST_FAN
 
+pytestmark = pytest.mark.realtime
+
 
 def test_demo_campaign_identifies_the_flutter_speed_within_3_percent(tmp_path, capsys):
     config = tmp_path / "sim_flat_plate_fast_fan.toml"

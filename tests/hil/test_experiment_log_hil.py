@@ -18,6 +18,8 @@ from daq.sim.rig import start_simulated_rig
 
 from support.configs import SIM_FLAT_PLATE
 
+pytestmark = pytest.mark.realtime
+
 CONFIG = SIM_FLAT_PLATE
 #: One line of RUN.events.log: UTC time, run time (s), kind, device, text.
 LINE = re.compile(r"^(\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}Z) +(-?\d+\.\d{3}) (\S+) +(\S+) +(.*)$")

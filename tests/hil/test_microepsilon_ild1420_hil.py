@@ -32,6 +32,8 @@ from simulators.virtual_tunnel import VirtualTunnel
 
 from support.sections import FLAT_PLATE
 
+pytestmark = pytest.mark.realtime
+
 TAPS = TapLayout.rectangle(0.3, 0.01, 16)
 # Held at h = 4 mm, alpha = 0.02 rad: with MR = 50 mm, standoff 25 mm and x = +-0.1 m the reading
 # stays within 25 +- 6 mm, well inside the range.

@@ -31,6 +31,8 @@ from simulators.virtual_tunnel import VirtualTunnel
 
 from support.sections import FLAT_PLATE
 
+pytestmark = pytest.mark.realtime
+
 # The rig-config tables the drivers validate; the simulators get the same numbers as plain ints.
 FAN_TABLE = {
     "max_rpm": 1500.0,

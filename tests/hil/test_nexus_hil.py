@@ -33,7 +33,7 @@ from support.configs import REPO, SIM_FLAT_PLATE
 
 CONFIG = SIM_FLAT_PLATE
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
 
 @pytest.fixture(scope="module")

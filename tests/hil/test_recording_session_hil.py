@@ -24,6 +24,8 @@ from daq.sim.sync_check import ClockTruthTracker, check_run
 
 from support.configs import DRIFTING_CLOCKS, SIM_FLAT_PLATE
 
+pytestmark = pytest.mark.realtime
+
 #: The single-file test's bounds (test_sync_alignment_hil.py, smooth flow): mean
 #: misalignment between devices, and its largest spread right after a refit.
 TARGET_S = 0.2e-3

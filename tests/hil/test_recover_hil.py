@@ -64,7 +64,7 @@ FLUSH_INTERVAL_S = float(inspect.signature(RunRecorder).parameters["flush_interv
 #: and just before it (the most a crash can lose), s.
 KILL_PHASES_S = (0.0, 0.5 * FLUSH_INTERVAL_S, FLUSH_INTERVAL_S - 0.05)
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
 
 @contextmanager

@@ -62,6 +62,8 @@ from ident.records.run_file import read_run
 
 from support.configs import REPO, SIM_FLAT_PLATE
 
+pytestmark = pytest.mark.realtime
+
 CONFIG = SIM_FLAT_PLATE
 
 #: The recorder flushes at least this often (its default, used by ``windrig acquire``), s.

@@ -31,6 +31,8 @@ from simulators.virtual_tunnel import VirtualTunnel
 
 from support.sections import FLAT_PLATE
 
+pytestmark = pytest.mark.realtime
+
 EPOCH = 1_767_225_600  # the simulator's PTP seconds at true time 0 (its default)
 
 

@@ -49,6 +49,8 @@ from daq.sim.sync_check import ClockTruthTracker
 
 from support.configs import SIM_FLAT_PLATE
 
+pytestmark = pytest.mark.realtime
+
 RATE_HZ = 500.0  # the scanner's frame rate in sim_flat_plate.toml (and of the sync view)
 PERIOD_S = 1.0 / RATE_HZ
 NO_PTP = "\n[simulation.devices.scanner]\nptp = false\n"

@@ -17,6 +17,8 @@ from daq.sim.rig import start_simulated_rig
 
 from support.configs import CONFIGS, FAST_FAN, SIM_FLAT_PLATE
 
+pytestmark = pytest.mark.realtime
+
 
 @pytest.mark.parametrize("name", ["sim_flat_plate.toml", "sim_streamlined_deck.toml"])
 def test_every_driver_reaches_its_simulator_and_the_physics_is_shared(name):

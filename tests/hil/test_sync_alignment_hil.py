@@ -24,6 +24,8 @@ from daq.sim.sync_check import ClockTruthTracker, check_run
 
 from support.configs import DRIFTING_CLOCKS, SIM_FLAT_PLATE
 
+pytestmark = pytest.mark.realtime
+
 TARGET_S = 0.2e-3
 #: Length of the recorded run, s. The online clock maps settle over a file's first
 #: CLOCK_SETTLE_S = 6 s (the README's known limitation: 0.3-0.9 ms common error at 2-6 s on a

@@ -41,6 +41,8 @@ from ident.records.run_file import read_run
 
 from support.configs import CONFIGS, FAST_FAN
 
+pytestmark = pytest.mark.realtime
+
 FAN_RPM = 900.0  # 9 m/s on this rig (flutter at 13.87 m/s)
 HOLD_P = 0.004  # m, [simulation] hold_p of the shipped config
 

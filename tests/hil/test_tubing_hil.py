@@ -11,6 +11,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
+import pytest
 
 from daq.config import parse_rig_config
 from daq.instruments.build import build_driver
@@ -18,6 +19,8 @@ from daq.sim.rig import start_simulated_rig
 from ident.physics.tubing import Air, distort, tubing_set
 
 from support.configs import FAST_FAN, SIM_FLAT_PLATE
+
+pytestmark = pytest.mark.realtime
 
 TUBES = '[[taps.tubing]]\ntaps = [0, 1, 2, 3]\nlength = 1.5\ndiameter = 1.0e-3\nvolume = 300e-9\n\n'
 

@@ -25,6 +25,8 @@ from simulators.virtual_tunnel import AirState, VirtualTunnel
 
 from support.sections import FLAT_PLATE
 
+pytestmark = pytest.mark.realtime
+
 TAPS = TapLayout.rectangle(0.3, 0.01, 16)
 TRANSPORTS = ["socket", "pty"]
 

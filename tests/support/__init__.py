@@ -13,7 +13,6 @@ configs
     tests append to it (the fast fan, clocks that drift).
 clocks
     A monotonic clock that a test sets by hand.
-realtime
-    Which test modules stream in real time: the rule behind the ``realtime`` marker, as the
-    suite's own check (``tests/test_suite_split.py``) applies it.
+run_files
+    Run files written through the real recorder, and read as a live reader would.
 """

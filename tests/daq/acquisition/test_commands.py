@@ -28,6 +28,8 @@ from daq.recording.writer import RunWriter
 
 from support.configs import SIM_FLAT_PLATE
 
+pytestmark = pytest.mark.realtime
+
 LIMIT_RPM = 1500.0
 
 

@@ -33,6 +33,8 @@ from daq.instruments.scanivalve_mps4264.blocks import STATUS_OK, ScanBlock
 from daq.instruments.scanivalve_mps4264.driver import ScanivalveMps4264
 from daq.instruments.scanivalve_mps4264.settings import Mps4264Settings
 
+pytestmark = pytest.mark.realtime
+
 
 # ------------------------------------------------------------------------------------------------
 # Test doubles of device I/O

@@ -31,6 +31,8 @@ from daq.recording.recorder import RunRecorder
 from support.clocks import ManualClock
 from support.configs import SIM_FLAT_PLATE
 
+pytestmark = pytest.mark.realtime
+
 RATE_HZ = 100.0
 DURATION_S = 30.0
 F_H = 2.0      # heave frequency, Hz

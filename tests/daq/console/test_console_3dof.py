@@ -24,6 +24,8 @@ from daq.recording.recorder import RunRecorder
 from support.clocks import ManualClock
 from support.configs import FAST_FAN
 
+pytestmark = pytest.mark.realtime
+
 RATE_HZ = 100.0
 DURATION_S = 30.0
 F_P = 2.6  # sway frequency, Hz

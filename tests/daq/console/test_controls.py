@@ -17,6 +17,7 @@ from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
+import pytest
 
 from daq.config import parse_rig_config
 from daq.console.controls import ControlPanel
@@ -24,6 +25,8 @@ from daq.console.process_source import ProcessLiveSource
 from daq.console.window import ConsoleWindow
 
 from support.configs import live_config_text
+
+pytestmark = pytest.mark.realtime
 
 
 def _events(source: ProcessLiveSource, kind: str) -> list[Any]:

@@ -24,6 +24,8 @@ from daq.console.window import HEALTH_COLUMNS, ConsoleWindow
 
 from support.configs import SIM_FLAT_PLATE, live_config_text
 
+pytestmark = pytest.mark.realtime
+
 
 def test_live_window_traces_move_and_every_device_reports_health(qtbot):
     config = parse_rig_config(live_config_text(), "sim_flat_plate.toml + fast fan")

@@ -24,6 +24,8 @@ from ident.model.section import SectionModel
 from ident.numerics.selection import structure_label
 from simulators import simulate_release
 
+pytestmark = pytest.mark.realtime
+
 RATE = 500.0
 SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005,
                        rho=1.2)

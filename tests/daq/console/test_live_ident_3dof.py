@@ -20,6 +20,8 @@ from ident.model import flutter
 from simulators import simulate_release
 from simulators.decks import BLUFF_DECK_3DOF, bluff_deck_3dof_model
 
+pytestmark = pytest.mark.realtime
+
 RATE = 200.0
 SECTION = BLUFF_DECK_3DOF.replace(rho=1.2)
 TRUTH = bluff_deck_3dof_model()

@@ -43,6 +43,8 @@ from _ring_child import BLOCK, ROWS, append_rows  # noqa: E402
 from support.configs import FAST_FAN, SIM_FLAT_PLATE  # noqa: E402
 from support.run_files import sync_rows  # noqa: E402
 
+pytestmark = pytest.mark.realtime
+
 
 def live_config():
     return parse_rig_config(SIM_FLAT_PLATE.read_text() + FAST_FAN,

@@ -29,6 +29,8 @@ from ident.records.run_file import read_run
 from support.configs import SIM_FLAT_PLATE, live_config_text
 from support.run_files import sync_rows
 
+pytestmark = pytest.mark.realtime
+
 #: Sync rows are placed at exactly t_k = k / rate (computed from k, never accumulated): the
 #: grid holds to float64 rounding of values of a few seconds.
 GRID_TOL_S = 1e-9

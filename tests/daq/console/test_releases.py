@@ -35,6 +35,8 @@ from simulators import simulate_release
 from support.clocks import ManualClock
 from support.configs import FAST_FAN, SIM_FLAT_PLATE
 
+pytestmark = pytest.mark.realtime
+
 #: Decays of the live test, s: long enough for a modal fit (>= 2 s), short for the test's sake.
 LIVE_DECAY_S = 4.0
 

@@ -24,6 +24,8 @@ from daq.sim.rig import SimulatedRig, start_simulated_rig
 
 from support.configs import CONFIGS, SIM_FLAT_PLATE
 
+pytestmark = pytest.mark.realtime
+
 CONFIG = load_rig_config(SIM_FLAT_PLATE)
 INSTRUMENTS = {inst.driver: inst for inst in CONFIG.instruments}
 

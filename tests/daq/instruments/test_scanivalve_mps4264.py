@@ -40,6 +40,8 @@ from daq.instruments.scanivalve_mps4264.frames import Mps4264Decoder
 from daq.instruments.scanivalve_mps4264.settings import Mps4264Settings
 from daq.transports.scripted import ScriptedTransport, expected_exchange
 
+pytestmark = pytest.mark.realtime
+
 PA_PER_PSI = 6894.75977  # mps-protocol.h units table, PA factor
 TABLE = {"modules": 1, "rate_hz": 500.0, "byte_order": "big", "pitot_channel": 63}
 

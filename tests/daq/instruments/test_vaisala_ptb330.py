@@ -33,6 +33,8 @@ from daq.transports.byte_transport import SerialTransport, open_transport
 from daq.transports.scripted import ScriptedTransport, expected_exchange
 from ident.physics.air import R_DRY_AIR
 
+pytestmark = pytest.mark.realtime
+
 FORM_CMD = b"FORM " + FORM_STRING.encode() + b"\r"
 LINE = b"P=  1013.250 hPa    T= 21.34 'C \r\n"  # what FORM_STRING gives (widths [unverified])
 OPEN_PLAIN = [(b"S\r", b""), (FORM_CMD, b"OK\r\n"), (b"SEND\r", LINE)]

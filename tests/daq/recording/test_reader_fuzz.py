@@ -43,6 +43,8 @@ from simulators import simulate_release
 from support.configs import SIM_FLAT_PLATE
 from support.sections import FLAT_PLATE
 
+pytestmark = pytest.mark.realtime
+
 CHILD = Path(__file__).with_name("_reader_fuzz_child.py")
 CONFIG = SIM_FLAT_PLATE
 #: Longest a reader may take on one damaged file, s (they take milliseconds).

@@ -48,6 +48,8 @@ from daq.recording.recorder import RunRecorder
 
 from support.configs import SIM_FLAT_PLATE
 
+pytestmark = pytest.mark.realtime
+
 CHILD = Path(__file__).with_name("_recorder_child.py")
 CONFIG_TEXT = SIM_FLAT_PLATE.read_text(encoding="utf-8") + \
     "\n# verbatim check: ünïcode, trailing spaces   \n"

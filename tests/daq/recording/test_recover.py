@@ -31,6 +31,8 @@ from daq.recording.recover import (
 )
 from daq.recording.synthetic import write_release_run
 
+pytestmark = pytest.mark.realtime
+
 CHILD = Path(__file__).with_name("_crash_child.py")
 _spec = importlib.util.spec_from_file_location("_crash_child", CHILD)
 assert _spec is not None and _spec.loader is not None

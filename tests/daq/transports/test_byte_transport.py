@@ -10,6 +10,8 @@ import pytest
 from daq.errors import ConfigError, TransportError, TransportTimeout
 from daq.transports.byte_transport import SerialTransport, TcpTransport, open_transport
 
+pytestmark = pytest.mark.realtime
+
 
 def test_loop_url_round_trip_and_timeout():
     """Pyserial's loop:// echoes bytes; an empty read times out with a specific error."""

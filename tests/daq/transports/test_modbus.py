@@ -23,6 +23,8 @@ from daq.errors import (
 from daq.transports.modbus import ModbusBus, RegisterBus, from_int16, parse_modbus_url, to_int16
 from daq.transports.scripted import ScriptedBus
 
+pytestmark = pytest.mark.realtime
+
 
 # -- URLs ----------------------------------------------------------------------------------------
 def test_tcp_and_rtu_urls():
