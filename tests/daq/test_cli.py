@@ -137,6 +137,7 @@ def test_unknown_subcommand_exits_with_usage(capsys):
     assert "invalid choice" in capsys.readouterr().err
 
 
+@pytest.mark.realtime  # starts the simulated instruments on loopback sockets
 def test_simulate_prints_a_loopback_url_for_every_instrument(capsys):
     """`windrig simulate` starts the rig's simulators and lists where to connect."""
     config = SIM_FLAT_PLATE

@@ -23,6 +23,7 @@ LINE = re.compile(r"^(\S+) (DEBUG|INFO|WARNING|ERROR)\s+(\S+) \[([^\]]+)\] (.*)$
 
 
 @pytest.mark.slow
+@pytest.mark.realtime  # a simulated acquisition: the rig in a process of its own
 def test_an_acquisition_writes_its_log(tmp_path, capsys):
     log = tmp_path / "run.log"
     argv = ["acquire", "--config", str(CONFIG), "--simulate", "--duration", "1.5", "--out",

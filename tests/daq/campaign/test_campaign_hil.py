@@ -35,7 +35,7 @@ SOFT_RIG_TEXT = (RIG_TEXT.replace("fa = 4.0         # Hz", "fa = 3.0         # H
                  .replace("max_fan_rpm = 1300.0", "max_fan_rpm = 1450.0"))
 SOFT_TRUTH = 7.838
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
 
 def _fixed(speeds: list[float], releases: int = 1, decay_s: float = 4.0) -> str:

@@ -25,6 +25,8 @@ from simulators.campaigns import FRACTIONS, simulated_campaign
 
 from support.configs import SIM_FLAT_PLATE
 
+pytestmark = pytest.mark.realtime
+
 
 def write_run(path: Path, releases: list) -> None:
     """Write releases into a run file of the flat-plate rig."""
