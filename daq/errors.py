@@ -4,7 +4,7 @@ One error channel: every failure of a device, a transport, a configuration, a re
 console's acquisition surfaces as one of these, each also a builtin (``ValueError``,
 ``ConnectionError``, ``TimeoutError``, ``OSError``, ``RuntimeError``) so that generic callers can
 catch it too. Messages name the device, the key or the bytes. No other module of daq defines an
-exception class (``tests/daq/test_architecture.py`` checks it).
+exception class (``tests/test_architecture.py`` checks it).
 
 The tree::
 
