@@ -229,7 +229,7 @@ def _is_private(part: str) -> bool:
 
 
 def subpackage_of(module: str) -> str:
-    """Return the package's first level a module belongs to (``ident.model.rfc`` -> ``ident.model``)."""
+    """Return the first level of a package a module lies in (``ident.model``, say)."""
     return ".".join(module.split(".")[:2])
 
 
