@@ -40,7 +40,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("daq.transports",),
     ("daq.instruments",),
     ("daq.config", "daq.tubing_config", "daq.calibration", "daq.procedure",
-     "daq.instruments.build"),
+     "daq.instruments.build", "daq.testing"),
     ("daq.sync",),
     ("daq.acquisition",),
     ("daq.recording",),
