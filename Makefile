@@ -21,6 +21,9 @@ VENV := .venv
 PY := $(VENV)/bin/python
 PIP := $(PY) -m pip
 STAMP := $(VENV)/.installed
+# The example driver plugin (examples/windrig-dsa3217), installed as a distribution of its own.
+PLUGIN := examples/windrig-dsa3217
+PLUGIN_STAMP := $(VENV)/.plugin-installed
 RUFF_VERSION := 0.17.5
 MYPY_VERSION := 2.4.1
 
@@ -87,8 +90,6 @@ $(STAMP): pyproject.toml Makefile $(wildcard daq/__init__.py ident/__init__.py s
 
 # The example driver plugin, a distribution of its own (examples/windrig-dsa3217): installed
 # beside windrig so that its entry points are found and `make test` runs its tests too.
-PLUGIN := examples/windrig-dsa3217
-PLUGIN_STAMP := $(VENV)/.plugin-installed
 $(PLUGIN_STAMP): $(PLUGIN)/pyproject.toml $(STAMP)
 	$(PIP) install -q --progress-bar off --no-deps -e $(PLUGIN)
 	@touch $@

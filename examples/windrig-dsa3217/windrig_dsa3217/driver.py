@@ -209,7 +209,7 @@ class Dsa3217:
         """Mean pressure per channel over the last 0.5 s of frames read, Pa, and their number."""
         if not self._recent:
             return np.zeros(0), 0
-        rows = np.concatenate(list(self._recent))[-self._recent.maxlen:]  # type: ignore[misc]
+        rows = np.concatenate(list(self._recent))[-max(1, round(0.5 * self.rate_hz)):]
         return rows.mean(axis=0), int(rows.shape[0])
 
     def _reading(self, packets: np.ndarray, host_ns: int) -> Reading:

@@ -1,4 +1,4 @@
-"""The ``[scanner]`` table of a rig config for a DSA3217: validated into :class:`Dsa3217Settings`."""
+"""The ``[scanner]`` table of a rig config for a DSA3217, validated: :class:`Dsa3217Settings`."""
 
 from __future__ import annotations
 

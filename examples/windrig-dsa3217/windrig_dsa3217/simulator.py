@@ -72,7 +72,8 @@ class SimDsa3217:
 
     def true_time_of(self, device_time: Any) -> Any:
         """Return the true time (s, tunnel clock) of frames stamped ``device_time`` (s)."""
-        return self.clock.true_time(np.asarray(device_time, dtype=np.float64))
+        t = np.asarray(device_time, dtype=np.float64)
+        return (t - self.clock.offset_s) / (1.0 + 1e-6 * self.clock.drift_ppm)
 
     # -- serving -----------------------------------------------------------------------------
     def _serve(self) -> None:

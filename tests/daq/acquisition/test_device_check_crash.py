@@ -61,7 +61,7 @@ class CrashingBarometer:
 
 @pytest.fixture
 def crashing(tmp_path: Path) -> Iterator[dict[str, Path]]:
-    """A rig config per crash, each with one crashing barometer registered in code."""
+    """Yield a rig config per crash, each with one crashing barometer registered in code."""
     configs = {}
     for case, (error, _) in CRASHES.items():
         name = f"crashing_barometer_{case}"

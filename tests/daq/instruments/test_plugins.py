@@ -35,7 +35,7 @@ DRIVER = DriverEntry(name={name!r}, role="barometer", factory=VaisalaPtb330,
 
 def install(root: Path, dist: str, module: str, source: str, entries: dict[str, str],
             monkeypatch: pytest.MonkeyPatch) -> None:
-    """Install distribution ``dist`` (module ``module``, ``entries``: name -> object) on sys.path."""
+    """Install ``dist`` (module ``module``, ``entries``: name -> object) on sys.path."""
     root.mkdir(parents=True, exist_ok=True)
     (root / f"{module}.py").write_text(textwrap.dedent(source))
     info = root / f"{dist.replace('-', '_')}-1.2.dist-info"
