@@ -95,6 +95,9 @@ def test_a_calz_zeroes_the_offsets_and_the_stream_goes_on(rig):
         driver.start()
         before = np.concatenate([driver.read(timeout_s=2.0).channels["pressure"]
                                  for _ in range(5)])
+        mean, frames = driver.recent_pressure_mean()  # what an engine's CALZ records
+        assert 0 < frames <= 125 and mean.shape == (16,)  # at most 0.5 s at 250 Hz
+        np.testing.assert_allclose(mean, before[-frames:].mean(axis=0), rtol=1e-12)
         driver.stop()
         driver.drain(0.2)
         assert driver.calz(wind_speed_now=0.0, timeout_s=5.0) > 0
