@@ -34,7 +34,7 @@ DRIVER = DriverEntry(name={name!r}, role="barometer", factory=VaisalaPtb330,
 
 
 def install(root: Path, dist: str, module: str, source: str, entries: dict[str, str],
-            monkeypatch: pytest.MonkeyPatch) -> None:
+            monkeypatch: pytest.MonkeyPatch, group: str = "windrig.drivers") -> None:
     """Install ``dist`` (module ``module``, ``entries``: name -> object) on sys.path."""
     root.mkdir(parents=True, exist_ok=True)
     (root / f"{module}.py").write_text(textwrap.dedent(source))
@@ -42,7 +42,7 @@ def install(root: Path, dist: str, module: str, source: str, entries: dict[str, 
     info.mkdir()
     (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {dist}\nVersion: 1.2\n")
     lines = "".join(f"{name} = {value}\n" for name, value in entries.items())
-    (info / "entry_points.txt").write_text(f"[windrig.drivers]\n{lines}")
+    (info / "entry_points.txt").write_text(f"[{group}]\n{lines}")
     monkeypatch.syspath_prepend(str(root))
     monkeypatch.delitem(sys.modules, module, raising=False)
 
@@ -151,3 +151,24 @@ def test_a_driver_registered_in_code_may_not_shadow_an_installed_one():
     entry = registry.driver_entry("vaisala_ptb330")
     with pytest.raises(RuntimeError, match="installed already"):
         registry.register(entry)
+
+
+def test_the_built_in_simulators_are_entry_points_too():
+    from daq.sim.devices import simulator_entry
+
+    for name in BUILT_IN:
+        assert simulator_entry(name, "test").name == name
+
+
+def test_a_broken_simulator_plugin_is_one_error_naming_its_distribution(tmp_path, monkeypatch):
+    from daq.sim.devices import simulator_entry
+
+    install(tmp_path, "lab-sim", "lab_sim_plugin", "SIMULATOR = object()\n",
+            {"lab_sim": "lab_sim_plugin:SIMULATOR"}, monkeypatch, group="windrig.simulators")
+    with pytest.raises(PluginError) as info:
+        simulator_entry("lab_sim", "rig.toml")
+    assert str(info.value) == (
+        "simulator plugin 'lab_sim' is not the daq.sim.devices.SimulatorEntry of that driver "
+        "(distribution lab-sim 1.2, entry point lab_sim = lab_sim_plugin:SIMULATOR)")
+    with pytest.raises(ConfigError, match="rig.toml: no simulator for driver 'nobody'"):
+        simulator_entry("nobody", "rig.toml")
