@@ -44,7 +44,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("daq.sync",),
     ("daq.acquisition",),
     ("daq.recording",),
-    ("daq.sim", "daq.offline", "daq.campaign", "daq.report_plots", "simulators"),
+    ("daq.sim", "daq.offline", "daq.campaign", "simulators"),
     ("daq.console", "daq.cli"),
 )
 
