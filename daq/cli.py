@@ -242,7 +242,7 @@ def _acquire(args: argparse.Namespace) -> int:
     if not args.simulate:
         refuse_auto_urls(config, args.config)
     from daq.errors import DeviceCheckError, StorageError
-    from daq.recording.recorder import failed_writes
+    from daq.recording.swmr_file import failed_writes
 
     try:
         options = {"operator_notes": args.notes, "progress": sys.stderr.isatty(),

@@ -53,11 +53,11 @@ DAQ_LAYERS: tuple[tuple[str, ...], ...] = (
     ("daq.transports",),
     ("daq.instruments",),
     ("daq.config", "daq.tubing_config", "daq.calibration", "daq.procedure",
-     "daq.instruments.build"),
+     "daq.instruments.build", "daq.testing"),
     ("daq.sync",),
     ("daq.acquisition",),
     ("daq.recording",),
-    ("daq.sim", "daq.offline", "daq.campaign", "daq.report_plots", "simulators"),
+    ("daq.sim", "daq.offline", "daq.campaign", "simulators"),
     ("daq.console", "daq.cli"),
 )
 #: ident's layers, bottom first.

@@ -37,10 +37,15 @@ import numpy as np
 
 from daq.acquisition.engine import Acquisition
 from daq.config import RigConfig
+from daq.offline.report_plots import (
+    DerivativeCurves,
+    ModeCurves,
+    flutter_derivative_grid,
+    flutter_diagram,
+)
 from daq.procedure import HOLD_S, default_decay_s
-from daq.recording.recorder import refuse_existing_run_file
 from daq.recording.session import RecordingSession
-from daq.report_plots import DerivativeCurves, ModeCurves, flutter_derivative_grid, flutter_diagram
+from daq.recording.swmr_file import refuse_existing_run_file
 from daq.sim.rig_process import start_rig_process
 from ident.errors import IdentError
 from ident.identification import e2rfc, results

@@ -24,7 +24,7 @@ from daq.errors import ConfigError, PluginError
 from simulators.devices.abb_acs580 import SimAbbAcs580
 from simulators.devices.microepsilon_ild1420 import SimMicroEpsilonIld1420
 from simulators.devices.modbus_plc import SimModbusPlc
-from simulators.devices.scanivalve_mps4264 import SimScanivalveMps4264
+from simulators.devices.scanivalve_mps4264.scanner import SimScanivalveMps4264
 from simulators.devices.vaisala_ptb330 import SimVaisalaPtb330
 from simulators.virtual_tunnel import VirtualTunnel
 

@@ -26,7 +26,7 @@ from daq.transports.byte_transport import open_transport
 from ident import SectionModel, TapLayout
 from ident.model import flat_plate
 from simulators.clock import DeviceClock
-from simulators.devices.scanivalve_mps4264 import SimScanivalveMps4264
+from simulators.devices.scanivalve_mps4264.scanner import SimScanivalveMps4264
 from simulators.virtual_tunnel import VirtualTunnel
 
 SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
