@@ -22,6 +22,9 @@ VENV := .venv
 PY := $(VENV)/bin/python
 PIP := $(PY) -m pip
 STAMP := $(VENV)/.installed
+# The example driver plugin (examples/windrig-dsa3217), installed as a distribution of its own.
+PLUGIN := examples/windrig-dsa3217
+PLUGIN_STAMP := $(VENV)/.plugin-installed
 RUFF_VERSION := 0.17.5
 MYPY_VERSION := 2.4.1
 
@@ -64,7 +67,7 @@ screenshot: setup
 	    --auto-release 550,700,850 --screenshot docs/console_screenshot.png --after 31 \
 	    --size 1600 1000
 
-setup: $(STAMP) qt-libs
+setup: $(STAMP) $(PLUGIN_STAMP) qt-libs
 
 # Quiet when nothing is missing; installs the Debian packages (apt-get) when something is.
 qt-libs: $(STAMP)
@@ -89,6 +92,12 @@ $(PY):
 # install maps the packages that exist at install time).
 $(STAMP): pyproject.toml Makefile $(wildcard daq/__init__.py ident/__init__.py simulators/__init__.py) | $(PY)
 	$(PIP) install -q --progress-bar off -e '.[test,dask,gui]'
+	@touch $@
+
+# The example driver plugin, a distribution of its own (examples/windrig-dsa3217): installed
+# beside windrig so that its entry points are found and `make test` runs its tests too.
+$(PLUGIN_STAMP): $(PLUGIN)/pyproject.toml $(STAMP)
+	$(PIP) install -q --progress-bar off --no-deps -e $(PLUGIN)
 	@touch $@
 
 lint: $(VENV)/.ruff-$(RUFF_VERSION)

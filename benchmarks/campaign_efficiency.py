@@ -69,8 +69,8 @@ from daq.campaign.adaptive import MIN_SPEEDS
 from daq.campaign.plan import parse_plan
 from daq.campaign.runner import CampaignOutcome, run_plan
 from daq.config import RigConfig, parse_rig_config
-from ident.identification.e2rfc import distinct_wind_speeds
 from ident.identification.fd_method import identify as fd_identify
+from ident.identification.results import distinct_wind_speeds
 from ident.model import flutter
 from ident.records.run_file import campaign_section, read_run
 

@@ -101,7 +101,7 @@ from daq.instruments.scanivalve_mps4264.settings import Mps4264Settings  # noqa:
 from daq.recording.writer import RunWriter  # noqa: E402
 from simulators.clock import DeviceClock, ManualClock  # noqa: E402
 from simulators.devices.microepsilon_ild1420 import SimMicroEpsilonIld1420  # noqa: E402
-from simulators.devices.scanivalve_mps4264 import _words_legacy  # noqa: E402
+from simulators.devices.scanivalve_mps4264.packets import words_legacy  # noqa: E402
 from simulators.virtual_tunnel import VirtualTunnel  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -338,11 +338,11 @@ def make_templates(config: RigConfig, rng: np.random.Generator) -> Templates:
     packets = []
     for k in range(MODULES):
         temps = (21.0 + rng.normal(0.0, 0.02, (n, 8))).astype(np.float32)
-        words = _words_legacy(frames, t_ns, temps,
-                              np.ascontiguousarray(p[:, 64 * k:64 * (k + 1)], np.float32),
-                              serial=4264001 + k, rate_hz=SCAN_RATE_HZ,
-                              unit_index=PA_UNIT_INDEX, conversion=PA_CONVERSION,
-                              start_ns=PTP_EPOCH_S * 10**9, ext_rel_ns=np.full(n, -1, np.int64))
+        words = words_legacy(frames, t_ns, temps,
+                             np.ascontiguousarray(p[:, 64 * k:64 * (k + 1)], np.float32),
+                             serial=4264001 + k, rate_hz=SCAN_RATE_HZ,
+                             unit_index=PA_UNIT_INDEX, conversion=PA_CONVERSION,
+                             start_ns=PTP_EPOCH_S * 10**9, ext_rel_ns=np.full(n, -1, np.int64))
         packets.append(words.astype(order + "u4").view(np.uint8).reshape(n, PACKET_BYTES))
     m = round(TEMPLATE_S * LASER_RATE_HZ)
     t_l = np.arange(m) / LASER_RATE_HZ

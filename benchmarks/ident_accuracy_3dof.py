@@ -31,7 +31,7 @@ from concurrent.futures import ProcessPoolExecutor  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ident import Release
-from ident.identification import e2rfc
+from ident.identification import e2rfc, results
 from ident.model import flutter as fl
 from simulators.decks import BLUFF_DECK_3DOF, bluff_deck_3dof_model  # noqa: E402
 from simulators.tunnel import simulate_release  # noqa: E402
@@ -66,7 +66,7 @@ def one_case(args: tuple[float, int]) -> dict[str, float]:
             "fd_wide": _fd_coverage(model, truth, wide), "time": elapsed}
 
 
-def _fd_coverage(model: e2rfc.IdentifiedModel, truth: object, K: np.ndarray) -> float:
+def _fd_coverage(model: results.IdentifiedModel, truth: object, K: np.ndarray) -> float:
     """Fraction of the 18 derivatives' values at ``K`` within 2 reported std of the truth."""
     found, true = model.flutter_derivatives(K), truth.flutter_derivatives(K)  # type: ignore[attr-defined]
     sd = model.flutter_derivative_std(K)

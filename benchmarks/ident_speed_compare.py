@@ -111,7 +111,7 @@ def main() -> None:
     trees = [ROOT, *(t.resolve() for t in args.tree)]
     for tree in trees[1:]:
         if not any((tree / "ident" / p).is_file() for p in E2RFC_PATHS):
-            parser.error(f"--tree {tree}: not a windrig checkout (no ident/.../e2rfc.py)")
+            parser.error(f"--tree {tree}: not a windrig checkout (no e2rfc.py in ident)")
     if args.rounds < 1 or args.repeats < 1:
         parser.error("--rounds and --repeats must be at least 1")
     times: dict[Path, dict[str, list[float]]] = {t: {"chosen": [], "given": []} for t in trees}

@@ -39,19 +39,18 @@ import numpy as np
 import numpy.typing as npt
 
 from daq.errors import ConfigError
+from daq.instruments import registry
 from daq.validation import check_keys, number
 from ident.physics.air import CO2_MOLE_FRACTION, R_DRY_AIR, moist_air_density
 from ident.physics.taps import TapLayout
 
-__all__ = ["AirCalibration", "CHANNELS_PER_MODULE", "Calibration", "LaserCalibration",
+__all__ = ["AirCalibration", "Calibration", "LaserCalibration",
            "PitotCalibration", "TAP_KEYS", "TapWiring", "parse_calibration"]
 
 FloatArray = npt.NDArray[np.float64]
 
 #: Keys of ``[taps]`` read here (the rest describe the geometry, :meth:`TapLayout.from_table`).
 TAP_KEYS = frozenset({"channels", "dead", "source", "date"})
-#: Pressure channels per scanner module.
-CHANNELS_PER_MODULE = 64
 
 
 @dataclass(frozen=True)
@@ -61,13 +60,17 @@ class TapWiring:
     Attributes
     ----------
     channels : tuple of int
-        Global scanner channel (``64 * module + channel``) of each tap, in the layout's order.
+        Global scanner channel (``channels_per_module * module + channel``) of each tap, in
+        the layout's order.
     dead : tuple of int
         Taps left out of the forces (their pressures are still recorded), ascending.
     configured : bool
         ``[taps] channels`` was given (else the default ``0 .. n_taps - 1``).
     source, date : str
         Provenance of the wiring (``""`` if not given).
+    channels_per_module : int
+        Pressure channels per module of the rig's scanner, as its driver describes itself
+        (0: the rig has no scanner).
     """
 
     channels: tuple[int, ...] = ()
@@ -75,6 +78,7 @@ class TapWiring:
     configured: bool = False
     source: str = ""
     date: str = ""
+    channels_per_module: int = 0
 
     def live_index(self, n_taps: int) -> npt.NDArray[np.intp]:
         """Return the indices of the live taps, ascending."""
@@ -209,11 +213,12 @@ class Calibration:
         (``"yes"``, or ``"no"``: the default, which changes nothing).
         """
         channels = np.asarray(self.tap_channels(n_taps), dtype=np.int64)
+        per_module = self.taps.channels_per_module or max(int(channels.max(initial=0)) + 1, 1)
         live = np.ones(n_taps, dtype=bool)
         live[list(self.taps.dead)] = False
         out: dict[str, tuple[dict[str, Any], dict[str, str]]] = {
-            "taps": ({"scanner_module": channels // CHANNELS_PER_MODULE,
-                      "scanner_channel": channels % CHANNELS_PER_MODULE,
+            "taps": ({"scanner_module": channels // per_module,
+                      "scanner_channel": channels % per_module,
                       "dead": np.asarray(self.taps.dead, dtype=np.int64), "live": live},
                      _attrs(self.taps.source, self.taps.date,
                             self.taps.configured or bool(self.taps.dead))),
@@ -331,10 +336,12 @@ def _tap_wiring(table: Mapping[str, Any], where: str, taps: TapLayout,
     scanners = [inst for inst in instruments if inst.role == "scanner"]
     src, date = _provenance(table, where)
     channels: tuple[int, ...] = ()
+    # How wide the scanner is comes from its driver's describe(), never from a constant.
+    per_module, modules = ((0, 0) if not scanners else registry.scanner_layout(
+        scanners[0].driver, scanners[0].settings, f"{where[:where.rfind('[')]}[scanner]"))
     if "channels" in table:
         if not scanners:
             raise ConfigError(f"{where} channels: the rig has no [scanner] to wire taps to")
-        modules = int(scanners[0].settings["modules"])
         pitot = int(scanners[0].settings["pitot_channel"])
         pairs = _int_list(table["channels"], "channels", where)
         if len(pairs) != n:
@@ -346,28 +353,28 @@ def _tap_wiring(table: Mapping[str, Any], where: str, taps: TapLayout,
                 raise ConfigError(f"{where} channels: entry {i} must be [module, channel] "
                                   f"(two integers), got {pair!r}")
             module, channel = pair
-            if not (0 <= module < modules and 0 <= channel < CHANNELS_PER_MODULE):
+            if not (0 <= module < modules and 0 <= channel < per_module):
                 raise ConfigError(f"{where} channels: tap {i} = [{module}, {channel}] is outside "
                                   f"the scanner: module in [0, {modules - 1}] ([scanner] "
                                   f"modules = {modules}), channel in [0, "
-                                  f"{CHANNELS_PER_MODULE - 1}]")
-            out.append(CHANNELS_PER_MODULE * module + channel)
+                                  f"{per_module - 1}]")
+            out.append(per_module * module + channel)
         seen: dict[int, int] = {}
         for i, ch in enumerate(out):
             if ch == pitot:
                 raise ConfigError(f"{where} channels: tap {i} is on the Pitot's channel "
                                   f"([scanner] pitot_channel = {pitot}, module "
-                                  f"{pitot // CHANNELS_PER_MODULE} channel "
-                                  f"{pitot % CHANNELS_PER_MODULE})")
+                                  f"{pitot // per_module} channel "
+                                  f"{pitot % per_module})")
             if ch in seen:
                 raise ConfigError(f"{where} channels: taps {seen[ch]} and {i} share module "
-                                  f"{ch // CHANNELS_PER_MODULE} channel "
-                                  f"{ch % CHANNELS_PER_MODULE}; each channel holds one tap")
+                                  f"{ch // per_module} channel "
+                                  f"{ch % per_module}; each channel holds one tap")
             seen[ch] = i
         channels = tuple(out)
     else:
-        for inst in scanners:  # the default wiring: taps on 0 .. n-1, the Pitot above them
-            total = CHANNELS_PER_MODULE * int(inst.settings["modules"])
+        for inst in scanners[:1]:  # the default wiring: taps on 0 .. n-1, the Pitot above them
+            total = per_module * modules
             pitot = int(inst.settings["pitot_channel"])
             if n + 1 > total:
                 raise ConfigError(f"{where[:where.rfind('[')]}[scanner] modules: {n} taps plus "
@@ -391,7 +398,7 @@ def _tap_wiring(table: Mapping[str, Any], where: str, taps: TapLayout,
         except ValueError as exc:
             raise ConfigError(f"{where} dead = {items!r}: {exc}") from exc
     return TapWiring(channels=channels, dead=dead, configured="channels" in table,
-                     source=src, date=date)
+                     source=src, date=date, channels_per_module=per_module)
 
 
 def _pitot(table: Mapping[str, Any], where: str,

@@ -133,6 +133,11 @@ def _build_parser() -> argparse.ArgumentParser:
     p_check.add_argument("--json", type=Path, metavar="OUT.json", help="also write the results")
     p_check.add_argument("--timeout", type=float, default=2.0, help="per device, s (default 2)")
 
+    p_drv = sub.add_parser(
+        "drivers", help="list the instrument drivers: built in and from installed plugins, "
+                        "with their role and distribution")
+    p_drv.add_argument("--json", action="store_true", help="print the list as JSON")
+
     p_acq = sub.add_parser(
         "acquire",
         help="record a run (all instruments of a rig config) to an HDF5 file; prints a summary",
@@ -237,7 +242,7 @@ def _acquire(args: argparse.Namespace) -> int:
     if not args.simulate:
         refuse_auto_urls(config, args.config)
     from daq.errors import DeviceCheckError, StorageError
-    from daq.recording.recorder import failed_writes
+    from daq.recording.swmr_file import failed_writes
 
     try:
         options = {"operator_notes": args.notes, "progress": sys.stderr.isatty(),
@@ -371,6 +376,28 @@ def _recover(args: argparse.Namespace) -> int:
     return 0
 
 
+def _drivers(args: argparse.Namespace) -> int:
+    """``windrig drivers``: every driver with its role and distribution; 1 if one is broken."""
+    import json
+
+    from daq.instruments.registry import GROUP, available_drivers
+
+    drivers = available_drivers()
+    broken = [d for d in drivers if d.error]
+    if args.json:
+        print(json.dumps({"group": GROUP, "drivers": [d.to_dict() for d in drivers],
+                          "warnings": [d.error for d in broken]}, indent=2))
+    else:
+        rows = [("driver", "role", "distribution", "entry point")]
+        rows += [(d.name, d.role or "-", d.distribution, d.entry_point or "-") for d in drivers]
+        widths = [max(len(row[i]) for row in rows) for i in range(4)]
+        for row in rows:
+            print("  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)).rstrip())
+        for d in broken:
+            print(f"error: {d.error}", file=sys.stderr)
+    return 1 if broken else 0
+
+
 def _info(args: argparse.Namespace) -> int:
     from daq.recording.info import format_info, run_info
 
@@ -483,7 +510,7 @@ def _dispatch(args: argparse.Namespace) -> int:
         from daq.sim.commands import run_check
 
         return run_check(args.config, simulate=args.simulate, json_path=args.json,
-                         timeout_s=args.timeout)
+                         timeout_s=args.timeout, debug=args.debug)
     if args.command == "identify":
         from daq.offline.flutter_commands import run_identify
 
@@ -499,6 +526,8 @@ def _dispatch(args: argparse.Namespace) -> int:
         return _logged(args, _acquire)
     if args.command == "gui":
         return _gui(args)
+    if args.command == "drivers":
+        return _drivers(args)
     if args.command == "recover":
         return _recover(args)
     if args.command == "info":

@@ -26,6 +26,7 @@ from typing import Any
 from daq.calibration import TAP_KEYS, Calibration, parse_calibration
 from daq.errors import ConfigError
 from daq.instruments import registry
+from daq.instruments.entry import ROLES as ENTRY_ROLES
 from daq.tubing_config import parse_tubing, split_tubing
 from daq.validation import check_keys, number
 from ident.model.flat_plate import jones_model
@@ -48,8 +49,8 @@ __all__ = [
     "shipped_config",
 ]
 
-#: Instrument roles a rig may have (docs/wire_formats.md, "Transports and URLs").
-ROLES = ("scanner", "lasers", "fan", "plc", "barometer")
+#: Instrument roles a rig may have (docs/drivers.md: what each role's driver delivers).
+ROLES = ENTRY_ROLES
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,7 @@ One error channel: every failure of a device, a transport, a configuration, a re
 console's acquisition surfaces as one of these, each also a builtin (``ValueError``,
 ``ConnectionError``, ``TimeoutError``, ``OSError``, ``RuntimeError``) so that generic callers can
 catch it too. Messages name the device, the key or the bytes. No other module of daq defines an
-exception class (``tests/daq/test_architecture.py`` checks it).
+exception class (``tests/test_architecture.py`` checks it).
 
 The tree::
 
@@ -27,7 +27,8 @@ The tree::
     ├── RingStalledError(RuntimeError)   the shared ring's lock not released in time
     ├── AcquisitionProcessError(RuntimeError)  the console's acquisition process is gone
     ├── RemoteError(RuntimeError)        an error of that process that could not be sent as is
-    └── DeviceCheckError(RuntimeError)   the check before a run found devices wrong (all named)
+    ├── DeviceCheckError(RuntimeError)   the check before a run found devices wrong (all named)
+    └── PluginError(RuntimeError)        an installed driver plugin that cannot be used (named)
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ __all__ = [
     "ConfigError",
     "DaqError",
     "DeviceCheckError",
+    "PluginError",
     "DeviceError",
     "InsufficientSpaceError",
     "ModbusDeviceError",
@@ -184,4 +186,13 @@ class DeviceCheckError(DaqError, RuntimeError):
     """The device check before a run (``windrig check``) found devices wrong.
 
     Its message names every failing device with its reason, one per line.
+    """
+
+
+class PluginError(DaqError, RuntimeError):
+    """An installed driver plugin (entry point of ``windrig.drivers``) that cannot be used.
+
+    It does not import, its object is not a ``DriverEntry``, it names another driver, or two
+    distributions contribute the same driver name. The message names the distribution and the
+    entry point, in one line.
     """

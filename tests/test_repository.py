@@ -124,7 +124,8 @@ def test_every_repository_path_mentioned_exists():
 
 def test_the_docs_name_every_simulated_fault_and_named_effect():
     from ident.physics.effects import EFFECT_NAMES
-    from simulators.devices import abb_acs580, modbus_plc, scanivalve_mps4264, vaisala_ptb330
+    from simulators.devices import abb_acs580, modbus_plc, vaisala_ptb330
+    from simulators.devices.scanivalve_mps4264 import scanner as scanivalve_mps4264
 
     wire = (DOCS / "wire_formats.md").read_text(encoding="utf-8")
     faults = wire[wire.index("## Faults the simulators inject"):]

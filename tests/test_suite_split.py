@@ -5,7 +5,8 @@ their own (Makefile). A real-time test left unmarked would run beside another te
 deadlines only while the machine happens to be idle; a flaky CI run would be the first sign. Which
 modules are real-time was measured once (per test: a socket connected or bound, a thread or
 process started, a sleep); this module keeps it so by reading every test module's source
-(``ast``) and requiring the mark of each module that shows a sign of streaming in real time:
+(``ast``; tests/ and the example plugin's tests, the test folders of ``testpaths``) and
+requiring the mark of each module that shows a sign of streaming in real time:
 
 - it imports the simulated rig (``daq.sim``), the simulated instruments (``simulators.devices``),
   the console's live sources, the acquisition engine, or ``socket``, ``subprocess``,
@@ -29,8 +30,7 @@ from pathlib import Path
 
 import pytest
 
-TESTS = Path(__file__).resolve().parent
-REPO = TESTS.parent
+from support.configs import REPO
 
 #: Imports (a module or any submodule of it) that stream in real time.
 REALTIME_IMPORTS = (
@@ -52,6 +52,8 @@ PURE_DESPITE = {
     # The run writer fed synthetic documents; record_simulated_run only refuses an existing
     # file, before it would start the simulated rig.
     "tests/daq/recording/test_writer.py": "record_simulated_run refuses before the rig starts",
+    # The simulators' entry points are looked up (daq.sim.devices), none is started.
+    "tests/daq/instruments/test_plugins.py": "looks up simulator entry points, starts none",
 }
 
 
@@ -97,11 +99,12 @@ def is_marked_realtime(source: str) -> bool:
     return False
 
 
-def unmarked_realtime_modules(root: Path) -> list[str]:
-    """Return each test module below ``root`` that shows a sign of real time but is not marked."""
+def unmarked_realtime_modules(root: Path, folders: tuple[str, ...] = ("tests",)) -> list[str]:
+    """Return each test module in ``folders`` of ``root`` that shows real time but is unmarked."""
     problems = []
-    for path in sorted(root.rglob("test_*.py")):
-        name = path.relative_to(root.parent).as_posix()
+    paths = sorted(path for folder in folders for path in root.glob(f"{folder}/**/test_*.py"))
+    for path in paths:
+        name = path.relative_to(root).as_posix()
         source = path.read_text(encoding="utf-8")
         signs = realtime_signs(source)
         if signs and name not in PURE_DESPITE and not is_marked_realtime(source):
@@ -110,7 +113,13 @@ def unmarked_realtime_modules(root: Path) -> list[str]:
 
 
 def test_every_real_time_test_module_is_marked_realtime():
-    problems = unmarked_realtime_modules(TESTS)
+    """Every test folder of ``testpaths`` counts: tests/ and the example plugin's tests."""
+    options = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["pytest"][
+        "ini_options"]
+    folders = tuple(path for path in options["testpaths"]
+                    if path == "tests" or path.endswith("/tests"))
+    assert "tests" in folders
+    problems = unmarked_realtime_modules(REPO, folders)
     assert not problems, (
         "test modules that stream in real time but are not marked "
         "(add `pytestmark = pytest.mark.realtime`, or list a pure one in PURE_DESPITE):\n"
@@ -143,18 +152,18 @@ def test_the_signs_are_found_and_only_they(source, signs):
 
 def test_a_real_time_module_without_the_mark_fails_the_check(tmp_path):
     """The check itself can fail: a socket test unmarked, then marked, then marked in a list."""
-    tests = tmp_path / "tests"
-    tests.mkdir()
-    module = tests / "test_new.py"
+    suite = tmp_path / "suite"
+    suite.mkdir()
+    module = suite / "test_new.py"
     module.write_text("import socket\n\ndef test_x():\n    socket.socket().close()\n")
-    assert unmarked_realtime_modules(tests) == ["tests/test_new.py: imports socket"]
+    assert unmarked_realtime_modules(tmp_path, ("suite",)) == ["suite/test_new.py: imports socket"]
     module.write_text("import socket\n\nimport pytest\n\npytestmark = pytest.mark.realtime\n")
-    assert unmarked_realtime_modules(tests) == []
+    assert unmarked_realtime_modules(tmp_path, ("suite",)) == []
     module.write_text("import socket\n\nimport pytest\n\n"
                       "pytestmark = [pytest.mark.slow, pytest.mark.realtime]\n")
-    assert unmarked_realtime_modules(tests) == []
+    assert unmarked_realtime_modules(tmp_path, ("suite",)) == []
     module.write_text("import socket\n\nimport pytest\n\npytestmark = pytest.mark.slow\n")
-    assert unmarked_realtime_modules(tests) == ["tests/test_new.py: imports socket"]
+    assert unmarked_realtime_modules(tmp_path, ("suite",)) == ["suite/test_new.py: imports socket"]
 
 
 def test_the_marker_is_registered_and_make_test_splits_by_it():

@@ -34,6 +34,7 @@ for a recording), or deciding what to do about a failure (the callers).
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import threading
 import time
@@ -45,13 +46,14 @@ import numpy as np
 
 from daq.acquisition.drivers import ROLE_KINDS
 from daq.config import InstrumentConfig, RigConfig
-from daq.errors import DaqError, DeviceCheckError
-from daq.instruments.abb_acs580.profile import DriveStatus
+from daq.errors import DeviceCheckError
 from daq.instruments.build import build_driver
 from daq.instruments.reading import Reading
 
 __all__ = ["CheckLimits", "CheckResult", "check_rig", "failure_lines", "format_table",
            "require_devices_ok"]
+
+log = logging.getLogger(__name__)
 
 #: Frame times above this are on an absolute (PTP) base, s (2001-09-09; the scanner driver's own
 #: rule for its ``time_base``).
@@ -297,8 +299,8 @@ class _DeviceCheck:
         if driver is not None:
             try:
                 driver.close()
-            except (DaqError, OSError):  # the check has failed already; closing is best effort
-                pass
+            except Exception:  # the check has failed already; closing is best effort
+                log.debug("closing %s after its timeout failed", self.inst.name, exc_info=True)
 
     def result(self) -> CheckResult:
         with self._lock:
@@ -312,30 +314,41 @@ class _DeviceCheck:
 
     # -- the device's thread ---------------------------------------------------------------------
     def _run(self) -> None:
+        # Every exception of a device's check fails that device, whatever its type: a driver
+        # (a plugin's above all) may raise anything, and a check that let an AttributeError
+        # escape its thread used to print a traceback and then count the device as OK. The
+        # exception is not swallowed: it becomes the device's problem (type and message, one
+        # line), and its traceback goes to the log at DEBUG (``windrig --debug check``).
         found = self.found
         try:
             self.driver = build_driver(self.inst, self.config.limits)
-        except (DaqError, ValueError, OSError) as exc:
-            found.problems.append(f"cannot build the driver: {_why(exc)}")
+        except Exception as exc:
+            self._failed("cannot build the driver", exc)
             return self._done()
         try:
             try:
                 self.driver.open()
-            except (DaqError, OSError) as exc:
+            except Exception as exc:
                 if self._abandoned is None:  # else: closed under it, "no answer" says why
-                    found.problems.append(f"unreachable: {_why(exc)}")
+                    self._failed("unreachable", exc)
                 return self._done()
             found.reachable = True
             INSPECT[self.kind](self, self.driver, found)
-        except (DaqError, OSError, ValueError) as exc:
+        except Exception as exc:
             if self._abandoned is None:
-                found.problems.append(f"{type(exc).__name__}: {_why(exc)}")
+                self._failed("check failed", exc)
         finally:
             try:
                 self.driver.close()
-            except (DaqError, OSError) as exc:
-                found.notes.append(f"closing failed: {_why(exc)}")
+            except Exception as exc:  # the readings are in; a failed close is worth a note
+                log.debug("closing %s failed", self.inst.name, exc_info=True)
+                found.notes.append(f"closing failed: {_failure(exc)}")
             self._done()
+
+    def _failed(self, what: str, exc: Exception) -> None:
+        """Record ``exc`` as this device's problem (one line), its traceback in the log."""
+        log.debug("device check of %s: %s", self.inst.name, what, exc_info=exc)
+        self.found.problems.append(f"{what}: {_failure(exc)}")
 
     def _done(self) -> None:
         with self._lock:
@@ -504,9 +517,11 @@ def _barometer(check: _DeviceCheck, driver: Any, found: _Findings) -> None:
 
 def _fan(check: _DeviceCheck, driver: Any, found: _Findings) -> None:
     readings = check.polls(driver.read)
-    word = int(readings[-1].channels["status_word"][0])
     speed = float(readings[-1].channels["speed"][0])
-    status = DriveStatus.decode(word)
+    # The drive's own status (the fan role's ``status()``, docs/drivers.md): what its bits
+    # mean is the driver's business (an ABB drive's differ from a PROFIdrive one's).
+    status = driver.status()
+    word = int(status.word)
     found.readings = (f"{speed:.0f} rpm, SW {word:#06x} "
                       f"({', '.join(status.active()) or 'no bits'})")
     if status.tripped:
@@ -540,6 +555,16 @@ def _why(exc: BaseException) -> str:
     """One line for an exception: its message, or its type when it has none."""
     text = " ".join(str(exc).split())
     return text or type(exc).__name__
+
+
+def _failure(exc: BaseException) -> str:
+    """One line naming an exception's type and its message: ``KeyError: 'pressure'``.
+
+    The type is said for every exception: a ``KeyError``'s message alone is a bare key, and an
+    unexpected type (``AttributeError`` from a driver) is itself the news.
+    """
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
 def _span(seconds: float) -> str:

@@ -35,9 +35,10 @@ SETTLE_POLLS = 3
 def reached_tolerance_rpm(target_rpm: float) -> float:
     """Return how close the actual speed must come to ``target_rpm``: 1 % of it, at least 5 rpm.
 
-    The drive regulates its speed to a fraction of a percent; 5 rpm is the resolution of
-    the reference (20000 counts over the drive's maximum speed, 1500 rpm: 0.075 rpm) with room
-    for the actual value's noise.
+    A drive regulates its speed to a fraction of a percent; 5 rpm lies well above the
+    resolution of a fieldbus speed reference (an ABB drive's 20000 counts, or PROFIdrive's
+    0x4000, over a maximum of 1500 rpm: 0.075 or 0.09 rpm) with room for the actual value's
+    noise. The speeds are the fan driver's, in rpm (docs/drivers.md); its scaling is its own.
     """
     return max(0.01 * abs(target_rpm), 5.0)
 

@@ -6,7 +6,7 @@ the highest speed a campaign may set given what it has learnt so far.
 
 The prediction (c-optimal design: the criterion is the variance of one function of the
 parameters, the flutter speed ``U_F(theta)``): E2RFC's parameters ``theta`` (the ``A`` entries and
-``log d``) have the covariance ``C`` of :class:`ident.identification.e2rfc.E2RFCDiagnostics`, and
+``log d``) have the covariance ``C`` of :class:`ident.identification.results.E2RFCDiagnostics`, and
 ``U_F`` the gradient ``g = dU_F/dtheta`` (:func:`ident.model.flutter.speed_sensitivity`), so that
 ``var(U_F) = g^T C g`` (how :mod:`ident.identification.e2rfc` computes its noise part). ``n`` more
 releases at a candidate speed ``U_c`` add the information ``n J_c^T J_c``, where ``J_c`` is the
@@ -82,13 +82,9 @@ import numpy.typing as npt
 from scipy.signal import lfilter
 
 from ident.identification.campaign import CampaignAnalysis
-from ident.identification.e2rfc import (
-    DISTINCT_U_RTOL,
-    FlutterUncertainty,
-    IdentifiedModel,
-    distinct_wind_speeds,
-)
 from ident.identification.modal import noise_std
+from ident.identification.results import DISTINCT_U_RTOL, IdentifiedModel, distinct_wind_speeds
+from ident.identification.uncertainty import FlutterUncertainty
 from ident.model import flutter
 from ident.model.section import SectionModel
 from ident.records.release import Release

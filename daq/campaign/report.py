@@ -24,7 +24,12 @@ from typing import Any
 import numpy as np
 
 from daq.campaign.runner import CampaignOutcome
-from daq.report_plots import DerivativeCurves, ModeCurves, flutter_derivative_grid, flutter_diagram
+from daq.offline.report_plots import (
+    DerivativeCurves,
+    ModeCurves,
+    flutter_derivative_grid,
+    flutter_diagram,
+)
 from ident.model import flutter
 from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel

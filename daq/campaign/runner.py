@@ -77,8 +77,8 @@ from daq.recording.devices import CLOCK_SETTLE_S
 from daq.recording.session import RecordingSession
 from ident.errors import IdentError
 from ident.identification.campaign import CampaignAnalysis, analyze_campaign
-from ident.identification.e2rfc import distinct_wind_speeds
 from ident.identification.modal import fit_release_modes
+from ident.identification.results import distinct_wind_speeds
 from ident.records.release import Release
 from ident.records.run_file import RunFile, campaign_section, read_run
 

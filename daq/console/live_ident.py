@@ -40,7 +40,7 @@ import numpy.typing as npt
 
 from daq.procedure import default_decay_s
 from ident.errors import IdentError
-from ident.identification import e2rfc
+from ident.identification import results
 from ident.identification.campaign import CampaignAnalysis, analyze_campaign
 from ident.identification.modal import ReleaseModes, fit_release_modes
 from ident.model.section import SectionModel
@@ -310,7 +310,7 @@ class LiveIdentifier:
         if self._campaign_job is not None or self._modal_jobs:
             return  # one at a time, and only with every decay fitted
         usable = [row for row in self.rows if row.usable]
-        speeds = e2rfc.distinct_wind_speeds([row.U for row in usable])
+        speeds = results.distinct_wind_speeds([row.U for row in usable])
         if len(speeds) < 2:
             have = ", ".join(f"{u:.2f}" for u in speeds) or "none"
             self.campaign_status = (f"E2RFC needs releases at two or more wind speeds "

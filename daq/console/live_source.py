@@ -6,9 +6,9 @@ instruments of a config), runs the acquisition engine over its drivers and feeds
 :class:`~daq.console.ring_buffer.RingBuffer` with the rows of the synchronised view. The sync view
 is the recording's own: a :class:`~daq.recording.writer.RunWriter` runs as the engine's
 subscriber, writing into a :class:`~daq.console.ring_recorder.RingRecorder` instead of an HDF5
-file (both are a
-:class:`~daq.recording.recorder.Recorder`), so the live view and a recorded file hold the same rows
-by construction. The GUI thread polls :meth:`LiveSource.snapshot` (the ring's copy) and
+file (both are a :class:`~daq.recording.recorder_protocol.Recorder`), so the live view and a
+recorded file hold the same rows by construction. The GUI thread polls
+:meth:`LiveSource.snapshot` (the ring's copy) and
 :meth:`LiveSource.health` (built from :meth:`Acquisition.stats` and what the subscriber kept under a
 lock); nothing is pushed to the GUI from the acquisition threads (docs/architecture.md, "Design
 rules").

@@ -1,8 +1,8 @@
 """What the live view's run writer writes into: the console's ring buffer, no file.
 
-Responsibility: :class:`RingRecorder`, a :class:`~daq.recording.recorder.Recorder` as a run file
-is: the live source runs the recording's own :class:`~daq.recording.writer.RunWriter` into it,
-so that the live view and a recorded file hold the same sync rows by construction. The sync
+Responsibility: :class:`RingRecorder`, a :class:`~daq.recording.recorder_protocol.Recorder` as a
+run file is: the live source runs the recording's own :class:`~daq.recording.writer.RunWriter`
+into it, so that the live view and a recorded file hold the same sync rows by construction. The sync
 rows go to the ring; of the raw streams only the last fan speed and the PLC's last ARM state
 are kept (the console shows them); everything else is dropped.
 
@@ -27,7 +27,8 @@ __all__ = ["RingRecorder"]
 class RingRecorder:
     """What :class:`~daq.recording.writer.RunWriter` writes into, for a live view: no file.
 
-    A :class:`~daq.recording.recorder.Recorder`, as :class:`~daq.recording.recorder.RunRecorder` is.
+    A :class:`~daq.recording.recorder_protocol.Recorder`, as
+    :class:`~daq.recording.recorder.RunRecorder` is.
     The sync rows go to ``ring`` (columns of :func:`daq.console.source.sync_columns`); of the raw
     streams only the last fan speed is kept (``fan_rpm``); everything else is dropped. Called on the
     engine's dispatcher thread; the ring is thread-safe, and ``fan_rpm`` is one float (atomic).

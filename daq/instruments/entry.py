@@ -2,8 +2,8 @@
 
 Responsibility: the record each driver module exports as its ``DRIVER`` constant (its name in
 rig configs, the role it fills, how to build it and how to validate its settings, the line
-settings its transport needs). Kept apart from :mod:`daq.instruments.registry`, which imports
-every driver, so that a driver module never imports the registry.
+settings its transport needs), and the roles a driver can fill. Kept apart from
+:mod:`daq.instruments.registry` so that a driver module (a plugin's too) imports only this.
 """
 
 from __future__ import annotations
@@ -12,7 +12,11 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ["DriverEntry"]
+__all__ = ["ROLES", "DriverEntry"]
+
+#: The roles an instrument fills in a rig config (one table each, ``[[lasers]]`` an array);
+#: docs/drivers.md writes down what each role's driver must deliver.
+ROLES = ("scanner", "lasers", "fan", "plc", "barometer")
 
 
 @dataclass(frozen=True)

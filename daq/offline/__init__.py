@@ -12,5 +12,7 @@
 - :mod:`~daq.offline.bridge_commands`: ``windrig bridge``: multimode flutter (and buffeting) of
   a full bridge from its modes and the section's model or table (:mod:`ident.bridge`);
 - :mod:`~daq.offline.buffeting_plots`: its buffeting plots (RMS along the span, response
-  spectra) and RMS table.
+  spectra) and RMS table;
+- :mod:`~daq.offline.report_plots`: the flutter-derivative grid and flutter diagram that every
+  campaign page draws (``windrig reprocess``'s report, ``windrig campaign``'s, the demo's).
 """

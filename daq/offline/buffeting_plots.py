@@ -10,7 +10,7 @@
   rms_h_m, rms_alpha_rad, rms_p_m``).
 
 Matplotlib is imported inside the function after choosing the ``Agg`` backend, as in
-:mod:`daq.report_plots`: a headless host can write the plots.
+:mod:`daq.offline.report_plots`: a headless host can write the plots.
 
 Not responsible for: the numerics (:mod:`ident.bridge.buffeting`,
 :mod:`ident.bridge.buffeting_time`).

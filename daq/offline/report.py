@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from daq.report_plots import DerivativeCurves, flutter_derivative_grid
+from daq.offline.report_plots import DerivativeCurves, flutter_derivative_grid
 
 __all__ = ["ReprocessSummary", "write_outputs"]
 

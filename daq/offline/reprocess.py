@@ -235,7 +235,7 @@ def process_campaign(name: str, files: list[dict[str, Any]],
     dict
         ``files``, ``n_releases``, ``wind_speeds``, and ``model`` (dict), ``structure``,
         ``flutter_speed``, ``flutter_std`` (all parts:
-        :class:`ident.identification.e2rfc.FlutterUncertainty`),
+        :class:`ident.identification.uncertainty.FlutterUncertainty`),
         ``flutter_std_parts``, ``warnings``, ``flutter_frequency``, ``flutter_structures`` (the
         flutter speed of every structure within one standard error of the best, by label, None
         for no flutter), ``effect`` and the gaps (with ``diagnose``: ``effects``, the named

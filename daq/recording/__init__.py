@@ -2,7 +2,13 @@
 
 - :mod:`~daq.recording.layout`: the file's layout (groups, row types, units, fill values,
   chunking) and :func:`read_sync`;
-- :mod:`~daq.recording.recorder`: :class:`RunRecorder`, one file's life cycle under SWMR;
+- :mod:`~daq.recording.recorder`: :class:`RunRecorder`, the writer of one run file;
+- :mod:`~daq.recording.recorder_protocol`: :class:`Recorder`, what the run writer writes into (a
+  run file, or the console's ring);
+- :mod:`~daq.recording.swmr_file`: the file's life cycle under SWMR, its flushes and failures
+  (:func:`failed_writes`, :func:`refuse_existing_run_file`);
+- :mod:`~daq.recording.raw_streams`: a device's raw stream, its blocks checked and appended;
+- :mod:`~daq.recording.sync_rows`: the synchronised view's rows checked and appended;
 - :mod:`~daq.recording.writer`: :class:`RunWriter`, the engine subscriber that maps clocks,
   resamples and writes the raw streams, the sync view, releases and events;
 - :mod:`~daq.recording.devices`: what the writer keeps per device (clock map, triggers, restarts);

@@ -28,7 +28,7 @@ import numpy.typing as npt
 
 from daq.acquisition.records import StreamBlock
 from daq.config import RigConfig
-from daq.recording.recorder import Recorder
+from daq.recording.recorder_protocol import Recorder
 from daq.sync.clock_map import ClockMap, trigger_times_from_flags, trigger_times_from_latch
 from daq.sync.continuous_time import ContinuousTimeline
 

@@ -2,7 +2,8 @@
 
 Responsibility: the contract of a windrig run file in code (``docs/file_format.md`` describes it
 for readers): the compound row types of ``/entry/releases``, ``/entry/events`` and a stream's
-``gaps`` (:data:`RELEASE_DTYPE`, :data:`EVENT_DTYPE`, :data:`GAP_DTYPE`), the columns of
+``gaps`` (:data:`RELEASE_DTYPE`, :data:`EVENT_DTYPE`, :data:`GAP_DTYPE`) and their rows
+(:func:`release_table_row`, :func:`event_table_row`), the columns of
 ``/entry/sync`` with their units (:data:`SYNC_COLUMNS`), the clock model stated in its
 attributes (:data:`CLOCK_MODEL`), the fill value an unwritten row reads as (:func:`fill_value`),
 how datasets are chunked and compressed (:func:`create_column`), the fixed groups of a new file
@@ -10,8 +11,8 @@ how datasets are chunked and compressed (:func:`create_column`), the fixed group
 and :func:`read_sync`, which reads the synchronised view back from a closed, live or crashed
 file.
 
-Not responsible for: the writer's life cycle, SWMR, flushing and its failures
-(:mod:`daq.recording.recorder`).
+Not responsible for: the writer (:mod:`daq.recording.recorder`), or the file's life cycle, SWMR,
+flushing and its failures (:mod:`daq.recording.swmr_file`).
 
 File layout
 -----------
@@ -58,6 +59,7 @@ dataset for the same SWMR reason (attributes cannot grow in SWMR mode).
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 from collections.abc import Callable, Mapping, Sequence
@@ -70,15 +72,14 @@ import numpy as np
 import numpy.typing as npt
 
 __all__ = ["CLOCK_MODEL", "EVENT_DTYPE", "EVENT_KIND_BYTES", "EVENT_TEXT_BYTES", "EXTRA_DTYPES",
-           "EXTRA_UNITS", "GAP_DTYPE", "GAP_FILL", "GZIP_LEVEL", "MAX_CHUNK_BYTES",
-           "NAME_PATTERN", "PER_DEVICE_SEPARATOR", "RELEASE_DTYPE", "RELEASE_DTYPE_SWAY",
-           "RELEASE_UNITS", "STREAM_TABLES", "SWAY_COLUMNS", "SYNC_COLUMNS", "VALUE_DTYPES",
-           "append_rows",
-           "attach_dimension_scales", "check_name", "create_column", "create_stream",
-           "create_sync", "event_row", "fill_value", "metadata_name_part", "now_iso",
-           "open_run_file", "per_device_attr", "per_device_attrs", "read_sync",
-           "storable_metadata", "str_array", "validate_metadata", "windrig_version",
-           "write_metadata", "write_skeleton"]
+           "EXTRA_UNITS", "GAP_DTYPE", "GAP_FILL", "GZIP_LEVEL", "MAX_CHUNK_BYTES", "NAME_PATTERN",
+           "PER_DEVICE_SEPARATOR", "RELEASE_DTYPE", "RELEASE_DTYPE_SWAY", "RELEASE_UNITS",
+           "STREAM_TABLES", "SWAY_COLUMNS", "SYNC_COLUMNS", "VALUE_DTYPES", "append_rows",
+           "attach_dimension_scales", "check_name", "column_of", "create_column", "create_stream",
+           "create_sync", "event_row", "event_table_row", "fill_value", "integer_column",
+           "metadata_name_part", "now_iso", "open_run_file", "per_device_attr", "per_device_attrs",
+           "read_sync", "release_table_row", "storable_metadata", "str_array", "validate_metadata",
+           "windrig_version", "write_metadata", "write_skeleton"]
 
 #: Row of ``/entry/instrument/<device>/gaps``.
 GAP_DTYPE = np.dtype([("after_counter", "<i8"), ("length", "<i8")])
@@ -250,6 +251,60 @@ def append_rows(ds: h5py.Dataset, start: int, rows: npt.NDArray[Any]) -> None:
     """Grow ``ds`` along its first axis and write ``rows`` from row ``start``."""
     ds.resize(start + rows.shape[0], axis=0)
     ds[start:start + rows.shape[0]] = rows
+
+
+def integer_column(values: npt.ArrayLike, what: str) -> npt.NDArray[np.int64]:
+    """Return ``values`` as a 1-D int64 column; raise unless 1-D integers (``what``: its name)."""
+    array = np.asarray(values)
+    if array.ndim != 1:
+        raise ValueError(f"{what} must be 1-D, got shape {array.shape}")
+    if array.size and not np.issubdtype(array.dtype, np.integer):
+        raise TypeError(f"{what} must be integers, got dtype {array.dtype}")
+    return array.astype(np.int64, copy=False)
+
+
+def column_of(values: npt.ArrayLike, n: int | None, dtype: Any, what: str) -> npt.NDArray[Any]:
+    """Return ``values`` as a 1-D column of ``dtype``; raise unless ``n`` rows (None: any)."""
+    array = np.asarray(values, dtype=dtype)
+    if array.ndim != 1 or (n is not None and array.shape[0] != n):
+        expected = "(n,)" if n is None else f"({n},)"
+        raise ValueError(f"{what} has shape {array.shape}, expected {expected}")
+    return array
+
+
+def release_table_row(release_time: float, start_index: int, stop_index: int, U: float,
+                      h0: float, alpha0: float, p0: float | None, *,
+                      sway: bool) -> npt.NDArray[Any]:
+    """Return a row of ``/entry/releases``: :data:`RELEASE_DTYPE`, or :data:`RELEASE_DTYPE_SWAY`.
+
+    The arguments are :meth:`daq.recording.recorder.RunRecorder.add_release`'s (checked there);
+    with ``sway``, a ``p0`` of None is stored as NaN.
+    """
+    fields = (float(release_time), int(start_index), int(stop_index), float(U), float(h0),
+              float(alpha0))
+    if sway:
+        return np.array([(*fields, math.nan if p0 is None else float(p0))],
+                        dtype=RELEASE_DTYPE_SWAY)
+    return np.array([fields], dtype=RELEASE_DTYPE)
+
+
+def event_table_row(time: float, kind: str, text: str) -> npt.NDArray[Any]:
+    """Return a row of ``/entry/events`` (:data:`EVENT_DTYPE`): time (s), kind and text.
+
+    Raises
+    ------
+    ValueError
+        ``kind`` is empty or longer than :data:`EVENT_KIND_BYTES` UTF-8 bytes, or ``text``
+        longer than :data:`EVENT_TEXT_BYTES` (fixed-length fields).
+    """
+    kind_b = kind.encode("utf-8")
+    text_b = text.encode("utf-8")
+    if not kind_b or len(kind_b) > EVENT_KIND_BYTES:
+        raise ValueError(f"event kind {kind!r} must be 1..{EVENT_KIND_BYTES} UTF-8 bytes")
+    if len(text_b) > EVENT_TEXT_BYTES:
+        raise ValueError(f"event text is {len(text_b)} UTF-8 bytes, at most "
+                         f"{EVENT_TEXT_BYTES} fit (starts {text[:40]!r})")
+    return np.array([(float(time), kind_b, text_b)], dtype=EVENT_DTYPE)
 
 
 def validate_metadata(name: str, value: Any) -> None:

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from daq.acquisition.records import StreamBlock
-from daq.recording.recorder import Recorder
+from daq.recording.recorder_protocol import Recorder
 
 __all__ = ["RawBatches"]
 

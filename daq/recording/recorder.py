@@ -1,11 +1,14 @@
 """HDF5 writer of one run: raw device streams, the synchronised view, releases and events.
 
-Responsible for: writing one run file in the layout of :mod:`daq.recording.layout` (a contract that
-tests, ``ident`` and outside readers such as silx rely on); appending blocks in place to chunked,
-resizable datasets; switching the file to SWMR mode so that a live reader (the GUI, h5py in another
-process, silx) can follow the run; flushing every ``flush_interval_s`` so that a crash of the
-process loses at most that much (a power cut too, with ``fsync=True``); and failing *at once*, with
-a specific error, when the file cannot be created or the disk is (nearly) full.
+Responsibility: :class:`RunRecorder`, which writes one run file in the layout of
+:mod:`daq.recording.layout` (a contract that tests, ``ident`` and outside readers such as silx
+rely on), appending blocks in place to chunked, resizable datasets. Its parts: the file's life
+cycle under SWMR, its flushes and failures (:class:`~daq.recording.swmr_file.SwmrFile`: a live
+reader can follow the run, a crash of the process loses at most ``flush_interval_s``, a file
+that cannot be created or a (nearly) full disk fails *at once*, with a specific error); each
+device's raw stream (:class:`~daq.recording.raw_streams.RawStream`); the synchronised view
+(:class:`~daq.recording.sync_rows.SyncRows`); the releases and events tables, the metadata and
+the calibrations, here.
 
 Not responsible for: acquisition, clock fitting, resampling or integrating pressures (the
 acquisition engine computes every number written here), nor for threads: a :class:`RunRecorder`
@@ -33,181 +36,41 @@ by :meth:`close` (which reopens the file without SWMR). A crash loses them (not 
 fits can be redone from the raw streams, which keep every host and device time stamp).
 
 The file's layout (groups, datasets, their types and fill values) is
-:mod:`daq.recording.layout`'s, described for readers in ``docs/file_format.md``.
-
-A live reader opens with ``h5py.File(path, "r", libver="latest", swmr=True)`` and calls
-``dataset.refresh()`` before reading a shape. The datasets of one group are resized one after the
-other, so a live reader should read the shortest length over the datasets it combines
-(:func:`daq.recording.layout.read_sync` does). A file left behind by a crash keeps HDF5's "open for
-SWMR write" flag: it opens read-only with ``swmr=True`` (as :func:`daq.recording.layout.read_sync`
-does); a plain ``h5py.File(path)`` refuses it until ``h5clear -s`` clears the flag.
-
-Longer than 600 lines: :class:`RunRecorder` is one object, the life cycle of one HDF5 file
-under SWMR (open, declare, start, append, flush, close) together with its failure paths (a full
-disk, a failed write, an abandoned file), which all hold the same open file and dataset handles;
-most of its length is the numpydoc of its public methods, which state the SWMR rules where they
-apply. What does not need that state is elsewhere: the layout in :mod:`daq.recording.layout`,
-the errors in :mod:`daq.errors`, the writer that feeds it in :mod:`daq.recording.writer`.
+:mod:`daq.recording.layout`'s, described for readers in ``docs/file_format.md``; how a live
+reader follows the file, and opens one left by a crash: :mod:`daq.recording.swmr_file`.
 """
 
 from __future__ import annotations
 
-import errno
 import math
 import os
-import re
-import shutil
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from contextlib import AbstractContextManager, contextmanager
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import h5py
 import numpy as np
 import numpy.typing as npt
 
-from daq.errors import InsufficientSpaceError, RecorderStateError, StorageError
+from daq.errors import RecorderStateError
 from daq.recording.layout import (
-    EVENT_DTYPE,
-    EVENT_KIND_BYTES,
-    EVENT_TEXT_BYTES,
-    EXTRA_DTYPES,
-    GAP_DTYPE,
-    RELEASE_DTYPE,
-    RELEASE_DTYPE_SWAY,
-    VALUE_DTYPES,
     append_rows,
     check_name,
     create_column,
-    create_stream,
-    create_sync,
+    event_table_row,
     now_iso,
-    per_device_attr,
+    release_table_row,
     validate_metadata,
     write_metadata,
     write_skeleton,
 )
+from daq.recording.raw_streams import RawStream
+from daq.recording.swmr_file import SwmrFile
+from daq.recording.sync_rows import SyncRows, clock_attrs
 
-__all__ = [
-    "Recorder",
-    "RunRecorder",
-    "failed_writes",
-    "refuse_existing_run_file",
-]
-
-
-def refuse_existing_run_file(path: Path, hint: str = "") -> None:
-    """Raise :class:`StorageError` (``EEXIST``) if ``path`` exists: a recorded run is kept.
-
-    Parameters
-    ----------
-    path : Path
-        The run file about to be created.
-    hint : str
-        Appended to the message (how the caller would replace it, if it can).
-    """
-    if path.exists():
-        raise StorageError(errno.EEXIST, f"run file {path} already exists; refusing to "
-                           f"overwrite a recorded run{hint}", str(path))
-
-
-def _disk_free(directory: Path) -> int:
-    return shutil.disk_usage(directory).free
-
-
-class _Stream:
-    """Open datasets and row count of one device's raw stream."""
-
-    def __init__(self, datasets: dict[str, h5py.Dataset], n_channels: int, dtype: np.dtype[Any],
-                 extra: dict[str, np.dtype[Any]]) -> None:
-        # Held open on purpose: closing a dataset flushes and drops its chunk cache, so opening
-        # it again per block (group["value"]) re-reads and re-compresses its partial chunk each
-        # time and leaves the old copy as dead space (measured: a 3x larger file, 5x slower).
-        self.datasets = datasets
-        self.n_channels = n_channels
-        self.dtype = dtype
-        self.extra = extra
-        self.rows = 0
-        self.gaps = 0
-
-
-class Recorder(Protocol):
-    """What :class:`~daq.recording.writer.RunWriter` writes a run into.
-
-    :class:`RunRecorder` (a run file) and :class:`daq.console.ring_recorder.RingRecorder` (the live
-    console's ring buffer, no file) implement it; the methods and their meaning are
-    :class:`RunRecorder`'s.
-    """
-
-    @property
-    def state(self) -> str:
-        """Measure the phase: ``"new"``, ``"declaring"``, ``"recording"`` or ``"closed"``."""
-        ...
-
-    def open(self) -> None:
-        """Start declaring streams."""
-        ...
-
-    def start(self, t0_host_ns: int | None = None) -> None:
-        """Start taking rows (time 0 at ``t0_host_ns``)."""
-        ...
-
-    def close(self) -> None:
-        """Finish."""
-        ...
-
-    def batch(self) -> AbstractContextManager[None]:
-        """Group appends (raw rows and the sync rows made from them) for one flush."""
-        ...
-
-    def add_stream(self, device: str, channels: Sequence[str], units: Any, rate_hz: float,
-                   value_dtype: Any = "float32", *,
-                   extra: Mapping[str, Any] | None = None) -> None:
-        """Declare a device's raw stream."""
-        ...
-
-    def add_sync(self, tap_names: Sequence[str]) -> None:
-        """Declare the synchronised view."""
-        ...
-
-    def append_raw(self, device: str, host_time_ns: Any, device_time: Any, counter: Any,
-                   values: Any, *, extra: Mapping[str, Any] | None = None) -> None:
-        """Append a device's raw samples."""
-        ...
-
-    def append_sync(self, time: Any, *, h: Any, alpha: Any, lift: Any, moment: Any,
-                    pressure: Any, U: Any, rho: Any, p: Any = None, drag: Any = None) -> None:
-        """Append rows of the synchronised view (``p``, ``drag``: a 3-DOF rig's)."""
-        ...
-
-    def add_gap(self, device: str, after_counter: int, length: int) -> None:
-        """Mark a gap in a device's stream."""
-        ...
-
-    def add_event(self, time: float, kind: str, text: str = "") -> None:
-        """Add an operator or system event."""
-        ...
-
-    def add_release(self, *, release_time: float, start_index: int, stop_index: int, U: float,
-                    h0: float, alpha0: float, p0: float | None = None) -> Any:
-        """Add a free decay to the releases table (``p0``: a 3-DOF rig's)."""
-        ...
-
-    def set_sync_attrs(self, *, clock_offset_s: Mapping[str, float] | None = None,
-                       clock_drift_ppm: Mapping[str, float] | None = None,
-                       residual_misalignment_s: float | None = None) -> None:
-        """Store the clock fits with the synchronised view."""
-        ...
-
-    def add_metadata(self, name: str, value: Any) -> None:
-        """Store a metadata entry."""
-        ...
-
-    def add_calibrations(self, records: Mapping[str, tuple[Mapping[str, Any],
-                                                           Mapping[str, str]]]) -> None:
-        """Store the calibrations the run applies (before start)."""
-        ...
+__all__ = ["RunRecorder"]
 
 
 class RunRecorder:
@@ -305,37 +168,33 @@ class RunRecorder:
         self.reserve_bytes = reserve_bytes
         self.overwrite = bool(overwrite)
         self.fsync = bool(fsync)
-        self._disk_free = disk_free if disk_free is not None else _disk_free
-        self._clock = clock if clock is not None else time.monotonic
-        self._state = "new"  # new -> declaring -> recording -> closed; failed after an I/O error
-        self._file: h5py.File | None = None
-        self._streams: dict[str, _Stream] = {}
-        self._sync: h5py.Group | None = None
-        self._sync_ds: dict[str, h5py.Dataset] = {}
+        self._file = SwmrFile(
+            self.path, flush_interval_s=self.flush_interval_s, min_free_bytes=min_free_bytes,
+            reserve_bytes=reserve_bytes, overwrite=self.overwrite, fsync=self.fsync,
+            disk_free=disk_free, clock=clock, release_handles=self._release_handles)
+        self._streams: dict[str, RawStream] = {}
+        self._sync: SyncRows | None = None
         self._releases_ds: h5py.Dataset | None = None
         self._events_ds: h5py.Dataset | None = None
-        self._sync_rows = 0
-        self._n_taps = 0
         self._releases = 0
         self._events = 0
         #: Told every event row appended, ``event_sink(time, kind, text)`` (the run's text log,
         #: :class:`~daq.recording.experiment_log.ExperimentLog`); None: no one.
         self.event_sink: Callable[[float, str, str], None] | None = None
         self._metadata_names: set[str] = set()
-        self._deferred_attrs: dict[str, Any] = {}
-        self._deferred_metadata: dict[str, Any] = {}
-        self._last_flush = 0.0
-        self._batch_depth = 0  # > 0 inside batch(): the appends leave the flush to its end
-        #: Flushes done so far (periodic and explicit).
-        self.flushes = 0
 
     # --------------------------------------------------------------------------------------------
-    # Life cycle
+    # Life cycle (the file's: daq.recording.swmr_file)
     # --------------------------------------------------------------------------------------------
     @property
     def state(self) -> str:
         """Measure the phase: ``"new"``, ``"declaring"``, ``"recording"`` or ``"closed"``."""
-        return self._state
+        return self._file.state
+
+    @property
+    def flushes(self) -> int:
+        """Count the flushes done so far (periodic and explicit)."""
+        return self._file.flushes
 
     def open(self) -> None:
         """Create the file and its fixed groups; streams may then be declared.
@@ -350,33 +209,8 @@ class RunRecorder:
         RecorderStateError
             The recorder was already opened.
         """
-        self._require("open", "new")
-        directory = self.path.parent
-        if not directory.is_dir():
-            code, why = ((errno.ENOTDIR, "is not a directory") if directory.exists()
-                         else (errno.ENOENT, "does not exist"))
-            raise StorageError(code, f"cannot create run file {self.path}: {directory} {why}",
-                               str(self.path))
-        if not self.overwrite:
-            refuse_existing_run_file(self.path, " (pass overwrite=True to replace it)")
-        free = self._free_bytes(directory)
-        if free < self.min_free_bytes:
-            raise InsufficientSpaceError(
-                errno.ENOSPC, f"cannot record to {self.path}: only {free / 2**20:.1f} MiB free on "
-                f"its file system, the minimum is {self.min_free_bytes / 2**20:.1f} MiB "
-                "(free space or choose another disk)", str(self.path))
-        try:
-            # v110 is the oldest format with SWMR: readable by HDF5 >= 1.10 (MATLAB, silx, ...).
-            self._file = h5py.File(self.path, "w" if self.overwrite else "w-",
-                                   libver=("v110", "latest"))
-            self._write_skeleton(self._file)
-            self._file.flush()  # write the superblock now: a full disk fails here, not later
-        except OSError as exc:
-            self._abandon()
-            code = exc.errno if exc.errno is not None else errno.EIO
-            raise StorageError(code, f"cannot create run file {self.path}: {os.strerror(code)}",
-                               str(self.path)) from exc
-        self._state = "declaring"
+        self._file.require("open", "new")
+        self._file.create(self._write_skeleton)
 
     def start(self, t0_host_ns: int | None = None) -> None:
         """End the declarations and switch the file to SWMR mode: appending may begin.
@@ -387,19 +221,15 @@ class RunRecorder:
             Host ``time.monotonic_ns()`` of the run start, ns: time 0 of ``/entry/sync/time``,
             releases and events. Default: now.
         """
-        self._require("start", "declaring")
+        self._file.require("start", "declaring")
         if self._sync is None:
             raise RecorderStateError("declare the synchronised view (add_sync) before start(); "
                                      "no dataset can be created once the file is in SWMR mode")
-        assert self._file is not None
+        assert self._file.h5 is not None
         t0 = time.monotonic_ns() if t0_host_ns is None else int(t0_host_ns)
-        self._sync.attrs["t0_host_ns"] = np.int64(t0)
-        self._file["entry"].attrs["start_time"] = now_iso()
-        with self._io("start SWMR mode"):
-            self._file.swmr_mode = True
-            self._file.flush()
-        self._last_flush = self._clock()
-        self._state = "recording"
+        self._sync.group.attrs["t0_host_ns"] = np.int64(t0)
+        self._file.h5["entry"].attrs["start_time"] = now_iso()
+        self._file.start_swmr()
 
     def flush(self) -> None:
         """Write everything appended so far to the file (and ``fsync`` it if configured).
@@ -412,24 +242,7 @@ class RunRecorder:
         StorageError
             The write failed (e.g. ENOSPC): the recorder is failed; only :meth:`close` remains.
         """
-        if self._state not in ("declaring", "recording"):
-            return
-        assert self._file is not None
-        with self._io("flush"):
-            self._file.flush()
-            if self.fsync:
-                os.fsync(self._file.id.get_vfd_handle())
-        self._last_flush = self._clock()
-        self.flushes += 1
-        if self._state == "recording" and self.reserve_bytes > 0:
-            free = self._free_bytes(self.path.parent)
-            if free < self.reserve_bytes:
-                self.close()
-                raise InsufficientSpaceError(
-                    errno.ENOSPC, f"stopped recording to {self.path}: only {free / 2**20:.1f} "
-                    f"MiB left on its file system, below the reserve of "
-                    f"{self.reserve_bytes / 2**20:.1f} MiB; the file is closed and complete up "
-                    "to now", str(self.path))
+        self._file.flush()
 
     def flush_if_due(self) -> bool:
         """Flush if the last flush is ``flush_interval_s`` old; return whether it flushed.
@@ -437,11 +250,7 @@ class RunRecorder:
         The append methods call this; an idle writer thread (e.g. on a queue ``get`` timeout)
         calls it too, so that the last blocks reach the file within ``flush_interval_s``.
         """
-        if self._state == "recording" and self._batch_depth == 0 and \
-                self._clock() - self._last_flush >= self.flush_interval_s:
-            self.flush()
-            return True
-        return False
+        return self._file.flush_if_due()
 
     @contextmanager
     def batch(self) -> Iterator[None]:
@@ -450,54 +259,20 @@ class RunRecorder:
         Else raw rows and the sync rows made from them could be split by a flush, and the sync
         rows would wait a whole interval more for the file (lost in a crash).
         """
-        self._batch_depth += 1
-        try:
+        with self._file.batch():
             yield
-        finally:
-            self._batch_depth -= 1
-        if self._batch_depth == 0:
-            self.flush_if_due()
 
     def close(self) -> None:
         """Flush and close the file, then write what was deferred; idempotent.
 
         After this the file is a normal HDF5 file (the SWMR flag is cleared), unless a write had
         failed: then the file is left as it is (readable with SWMR up to its last flush) and its
-        HDF5 objects are kept, never freed (see :func:`failed_writes`).
+        HDF5 objects are kept, never freed (see :func:`daq.recording.swmr_file.failed_writes`).
         """
-        if self._state in ("new", "closed"):
-            self._state = "closed"
-            return
-        assert self._file is not None
-        file, self._file = self._file, None
-        failed = self._state == "failed"
-        self._state = "closed"
-        if failed:
-            # A write failed (the StorageError raised then said why). Closing, or merely freeing,
-            # the HDF5 objects of such a file fails again in their finalisers, which print
-            # tracebacks ("Exception ignored in ... __dealloc__"), and HDF5 crashes the process
-            # at exit whatever is done here: keep them, for the life of the process.
-            _abandoned.append([file, *self._handles()])
-            self._drop_handles()
-            return
-        self._drop_handles()
-        with self._io("close"):
-            try:
-                file.flush()
-            finally:
-                file.close()
-            if self._deferred_attrs or self._deferred_metadata:
-                # SWMR forbids new attributes and objects: write them now, without SWMR.
-                with h5py.File(self.path, "r+", libver=("v110", "latest")) as again:
-                    for name, value in self._deferred_attrs.items():
-                        again["entry/sync"].attrs[name] = value
-                    for name, value in self._deferred_metadata.items():
-                        write_metadata(again["entry/metadata"], name, value)
-        self._deferred_attrs.clear()
-        self._deferred_metadata.clear()
+        self._file.close()
 
     def __enter__(self) -> RunRecorder:
-        if self._state == "new":
+        if self.state == "new":
             self.open()
         return self
 
@@ -529,39 +304,14 @@ class RunRecorder:
             Further per-sample 1-D columns (e.g. ``{"trigger_time": "float64",
             "error_code": "int32"}``), stored next to ``value`` and given to :meth:`append_raw`.
         """
-        self._require("add_stream", "declaring")
+        self._file.require("add_stream", "declaring")
         check_name(device, "device")
         if device in self._streams:
             raise ValueError(f"stream {device!r} is already declared")
-        channels = list(channels)
-        if not channels or not all(isinstance(c, str) and c for c in channels):
-            raise ValueError(f"{device}: channels must be a non-empty list of names, "
-                             f"got {channels!r}")
-        if len(set(channels)) != len(channels):
-            raise ValueError(f"{device}: channel names repeat: {channels!r}")
-        unit_list = [units] * len(channels) if isinstance(units, str) else list(units)
-        if len(unit_list) != len(channels) or not all(isinstance(u, str) for u in unit_list):
-            raise ValueError(f"{device}: units must be one str or one per channel "
-                             f"({len(channels)}), got {units!r}")
-        if isinstance(rate_hz, bool) or not isinstance(rate_hz, (int, float)) \
-                or not 0 < rate_hz < math.inf:
-            raise ValueError(f"{device}: rate_hz = {rate_hz!r} must be a number > 0 Hz")
-        dtype = np.dtype(value_dtype)
-        if dtype not in VALUE_DTYPES:
-            raise ValueError(f"{device}: value_dtype = {value_dtype!r}; allowed: float32, float64")
-        extra_types: dict[str, np.dtype[Any]] = {}
-        for name, kind in (extra or {}).items():
-            check_name(name, f"{device}: extra column")
-            if name in ("host_time_ns", "device_time", "counter", "value", "gaps"):
-                raise ValueError(f"{device}: extra column {name!r} clashes with a standard one")
-            extra_types[name] = np.dtype(kind)
-            if extra_types[name] not in EXTRA_DTYPES:
-                raise ValueError(f"{device}: extra column {name!r} has dtype {kind!r}; allowed: "
-                                 f"{[str(t) for t in EXTRA_DTYPES]}")
-        assert self._file is not None
-        ds = create_stream(self._file["entry/instrument"], device, channels, unit_list, rate_hz,
-                           dtype, extra_types, make_column=self._column)
-        self._streams[device] = _Stream(ds, len(channels), dtype, extra_types)
+        assert self._file.h5 is not None
+        self._streams[device] = RawStream.declare(
+            self._file.h5["entry/instrument"], device, channels, units, rate_hz, value_dtype,
+            extra, make_column=self._column)
 
     def add_sync(self, tap_names: Sequence[str], *,
                  pressure_dtype: str | np.dtype[Any] = "float32") -> None:
@@ -574,20 +324,12 @@ class RunRecorder:
         pressure_dtype : {"float32", "float64"}
             Storage type of ``pressure`` (float32: 7 digits, far below the scanner's noise).
         """
-        self._require("add_sync", "declaring")
+        self._file.require("add_sync", "declaring")
         if self._sync is not None:
             raise ValueError("the synchronised view is already declared")
-        taps = list(tap_names)
-        if not all(isinstance(t, str) for t in taps) or len(set(taps)) != len(taps):
-            raise ValueError(f"tap_names must be unique str, got {taps!r}")
-        p_dtype = np.dtype(pressure_dtype)
-        if p_dtype not in VALUE_DTYPES:
-            raise ValueError(f"pressure_dtype = {pressure_dtype!r}; allowed: float32, float64")
-        assert self._file is not None
-        sync, self._sync_ds = create_sync(self._file["entry"], taps, p_dtype,
-                                          make_column=self._column, sway=self.sway)
-        self._sync = sync
-        self._n_taps = len(taps)
+        assert self._file.h5 is not None
+        self._sync = SyncRows.declare(self._file.h5["entry"], tap_names, pressure_dtype,
+                                      make_column=self._column, sway=self.sway)
 
     def set_sync_attrs(self, *, clock_offset_s: Mapping[str, float] | None = None,
                        clock_drift_ppm: Mapping[str, float] | None = None,
@@ -611,25 +353,17 @@ class RunRecorder:
         residual_misalignment_s : float, optional
             Misalignment left between the streams after the fit, s.
         """
-        self._require("set_sync_attrs", "declaring", "recording")
+        self._file.require("set_sync_attrs", "declaring", "recording")
         if self._sync is None:
             raise RecorderStateError("set_sync_attrs() needs the synchronised view: call "
                                      "add_sync() first")
-        attrs: dict[str, float] = {}
-        for label, mapping in (("clock_offset_s", clock_offset_s),
-                               ("clock_drift_ppm", clock_drift_ppm)):
-            for device, value in (mapping or {}).items():
-                if device not in self._streams:
-                    raise ValueError(f"{label}: no stream {device!r} declared; have "
-                                     f"{sorted(self._streams)}")
-                attrs[per_device_attr(label, device)] = _finite(value, f"{label} of {device}")
-        if residual_misalignment_s is not None:
-            attrs["residual_misalignment_s"] = _finite(residual_misalignment_s,
-                                                     "residual_misalignment_s")
-        if self._state == "declaring":
-            self._sync.attrs.update(attrs)
+        attrs = clock_attrs(self._streams, clock_offset_s=clock_offset_s,
+                            clock_drift_ppm=clock_drift_ppm,
+                            residual_misalignment_s=residual_misalignment_s)
+        if self.state == "declaring":
+            self._sync.group.attrs.update(attrs)
         else:
-            self._deferred_attrs.update(attrs)
+            self._file.defer_attrs("entry/sync", attrs)
 
     def add_metadata(self, name: str, value: Any) -> None:
         """Store a calibration or result under ``/entry/metadata/<name>``.
@@ -642,17 +376,17 @@ class RunRecorder:
             Numbers, strings and arrays become datasets; a mapping becomes a group (NXcollection)
             holding its items, recursively. After :meth:`start` it is written at :meth:`close`.
         """
-        self._require("add_metadata", "declaring", "recording")
+        self._file.require("add_metadata", "declaring", "recording")
         check_name(name, "metadata name")
         if name in self._metadata_names:
             raise ValueError(f"metadata {name!r} was already added")
         validate_metadata(name, value)
         self._metadata_names.add(name)
-        if self._state == "declaring":
-            assert self._file is not None
-            write_metadata(self._file["entry/metadata"], name, value)
+        if self.state == "declaring":
+            assert self._file.h5 is not None
+            write_metadata(self._file.h5["entry/metadata"], name, value)
         else:
-            self._deferred_metadata[name] = value
+            self._file.defer_metadata(name, value)
 
     def add_calibrations(self, records: Mapping[str, tuple[Mapping[str, Any],
                                                            Mapping[str, str]]]) -> None:
@@ -674,13 +408,13 @@ class RunRecorder:
             Group attributes: ``source``, ``date`` (ISO 8601) and ``configured``
             (docs/file_format.md, "Calibrations").
         """
-        self._require("add_calibration", "declaring")
+        self._file.require("add_calibration", "declaring")
         check_name(name, "calibration name")
-        assert self._file is not None
-        entry = self._file["entry"]
+        assert self._file.h5 is not None
+        entry = self._file.h5["entry"]
         if "calibration" in entry and name in entry["calibration"]:
             raise ValueError(f"calibration {name!r} was already added")
-        with self._io(f"writing calibration {name!r}"):
+        with self._file.io(f"writing calibration {name!r}"):
             parent = entry.require_group("calibration")
             parent.attrs["NX_class"] = "NXcollection"
             write_metadata(parent, name, dict(values))
@@ -713,39 +447,13 @@ class RunRecorder:
         extra : mapping of str to array_like (n,), optional
             Exactly the extra columns declared with the stream.
         """
-        self._require("append_raw", "recording")
+        self._file.require("append_raw", "recording")
         stream = self._stream(device)
-        t_host = _integers(host_time_ns, f"{device} host_time_ns")
-        n = t_host.shape[0]
-        t_dev = (np.full(n, np.nan) if device_time is None
-                 else _column_of(device_time, n, np.float64, f"{device} device_time"))
-        count = _integers(counter, f"{device} counter")
-        if count.shape != (n,):
-            raise ValueError(f"{device}: counter has {count.shape[0]} rows, host_time_ns {n}")
-        block = np.asarray(values, dtype=stream.dtype)
-        if block.ndim == 1 and stream.n_channels == 1:
-            block = block[:, None]
-        if block.shape != (n, stream.n_channels):
-            raise ValueError(f"{device}: values have shape {block.shape}, expected "
-                             f"({n}, {stream.n_channels}) (rows, channels)")
-        given = dict(extra or {})
-        if set(given) != set(stream.extra):
-            raise ValueError(f"{device}: extra columns {sorted(given)} differ from the declared "
-                             f"{sorted(stream.extra)}")
-        columns = {name: _column_of(given[name], n, kind, f"{device} {name}")
-                   for name, kind in stream.extra.items()}
-        if n == 0:
+        rows = stream.check_block(host_time_ns, device_time, counter, values, extra)
+        if rows is None:
             return
-        start = stream.rows
-        with self._io(f"append to {device}"):
-            ds = stream.datasets
-            append_rows(ds["value"], start, block)
-            for name, array in columns.items():
-                append_rows(ds[name], start, array)
-            append_rows(ds["device_time"], start, t_dev)
-            append_rows(ds["host_time_ns"], start, t_host)
-            append_rows(ds["counter"], start, count)
-        stream.rows = start + n
+        with self._file.io(f"append to {device}"):
+            stream.append(rows)
         self.flush_if_due()
 
     def add_gap(self, device: str, after_counter: int, length: int) -> None:
@@ -760,14 +468,11 @@ class RunRecorder:
         length : int
             Number of missing samples (>= 1), or -1 when unknown (a device restart).
         """
-        self._require("add_gap", "recording")
+        self._file.require("add_gap", "recording")
         stream = self._stream(device)
-        if not (length == -1 or length >= 1):
-            raise ValueError(f"{device}: gap length = {length!r} must be >= 1, or -1 (unknown)")
-        row = np.array([(int(after_counter), int(length))], dtype=GAP_DTYPE)
-        with self._io(f"add a gap to {device}"):
-            append_rows(stream.datasets["gaps"], stream.gaps, row)
-        stream.gaps += 1
+        row = stream.check_gap(after_counter, length)
+        with self._file.io(f"add a gap to {device}"):
+            stream.append_gap(row)
         self.flush_if_due()
 
     def append_sync(self, time: npt.ArrayLike, *, h: npt.ArrayLike, alpha: npt.ArrayLike,
@@ -792,30 +497,14 @@ class RunRecorder:
             Sway (m, positive downwind) and drag (N/m, positive downwind): required by a
             ``sway`` recorder, refused by a 2-DOF one.
         """
-        self._require("append_sync", "recording")
-        if (p is not None or drag is not None) != self.sway or (p is None) != (drag is None):
-            raise ValueError("p and drag go together, and exactly into a 3-DOF run (sway="
-                             f"{self.sway}); got p {'given' if p is not None else 'None'}, "
-                             f"drag {'given' if drag is not None else 'None'}")
-        t = _column_of(time, None, np.float64, "sync time")
-        n = t.shape[0]
-        cols = {"h": h, "alpha": alpha, "lift": lift, "moment": moment, "U": U, "rho": rho}
-        if p is not None and drag is not None:  # a sway recorder's (checked above)
-            cols.update(p=p, drag=drag)
-        arrays = {name: _column_of(v, n, np.float64, f"sync {name}") for name, v in cols.items()}
-        p = np.asarray(pressure, dtype=self._sync_ds["pressure"].dtype)
-        if p.shape != (n, self._n_taps):
-            raise ValueError(f"sync pressure has shape {p.shape}, expected ({n}, {self._n_taps}) "
-                             "(rows, taps)")
-        if n == 0:
+        self._file.require("append_sync", "recording")
+        assert self._sync is not None  # start() requires it
+        rows = self._sync.check_block(time, h=h, alpha=alpha, lift=lift, moment=moment,
+                                      pressure=pressure, U=U, rho=rho, p=p, drag=drag)
+        if rows is None:
             return
-        start = self._sync_rows
-        with self._io("append to sync"):
-            append_rows(self._sync_ds["pressure"], start, p)
-            for name, array in arrays.items():
-                append_rows(self._sync_ds[name], start, array)
-            append_rows(self._sync_ds["time"], start, t)
-        self._sync_rows = start + n
+        with self._file.io("append to sync"):
+            self._sync.append(rows)
         self.flush_if_due()
 
     def add_release(self, *, release_time: float, start_index: int, stop_index: int, U: float,
@@ -836,21 +525,16 @@ class RunRecorder:
             Sway held before the release, m: a ``sway`` recorder's (NaN when not given); refused
             by a 2-DOF one.
         """
-        self._require("add_release", "recording")
+        self._file.require("add_release", "recording")
         if not 0 <= int(start_index) <= int(stop_index):
             raise ValueError(f"release rows start_index = {start_index}, stop_index = "
                              f"{stop_index}: need 0 <= start_index <= stop_index")
         if p0 is not None and not self.sway:
             raise ValueError("p0 goes into a 3-DOF run's releases only (RunRecorder(sway=True))")
-        fields = (float(release_time), int(start_index), int(stop_index), float(U), float(h0),
-                  float(alpha0))
-        if self.sway:
-            row = np.array([(*fields, math.nan if p0 is None else float(p0))],
-                           dtype=RELEASE_DTYPE_SWAY)
-        else:
-            row = np.array([fields], dtype=RELEASE_DTYPE)
+        row = release_table_row(release_time, start_index, stop_index, U, h0, alpha0, p0,
+                                sway=self.sway)
         assert self._releases_ds is not None
-        with self._io("add a release"):
+        with self._file.io("add a release"):
             append_rows(self._releases_ds, self._releases, row)
         self._releases += 1
         self.flush_if_due()
@@ -868,17 +552,10 @@ class RunRecorder:
         text : str
             Free text, at most 1024 UTF-8 bytes.
         """
-        self._require("add_event", "declaring", "recording")
-        kind_b = kind.encode("utf-8")
-        text_b = text.encode("utf-8")
-        if not kind_b or len(kind_b) > EVENT_KIND_BYTES:
-            raise ValueError(f"event kind {kind!r} must be 1..{EVENT_KIND_BYTES} UTF-8 bytes")
-        if len(text_b) > EVENT_TEXT_BYTES:
-            raise ValueError(f"event text is {len(text_b)} UTF-8 bytes, at most "
-                             f"{EVENT_TEXT_BYTES} fit (starts {text[:40]!r})")
-        row = np.array([(float(time), kind_b, text_b)], dtype=EVENT_DTYPE)
+        self._file.require("add_event", "declaring", "recording")
+        row = event_table_row(time, kind, text)
         assert self._events_ds is not None
-        with self._io("add an event"):
+        with self._file.io("add an event"):
             append_rows(self._events_ds, self._events, row)
         self._events += 1
         if self.event_sink is not None:
@@ -888,27 +565,12 @@ class RunRecorder:
     # --------------------------------------------------------------------------------------------
     # Internals
     # --------------------------------------------------------------------------------------------
-    def _require(self, what: str, *states: str) -> None:
-        if self._state not in states:
-            order = "open() -> add_stream()/add_sync() -> start() -> append -> close()"
-            raise RecorderStateError(f"{what}() is not allowed while the recorder is "
-                                     f"{self._state!r} (allowed: {', '.join(states)}); "
-                                     f"call order: {order}")
-
-    def _stream(self, device: str) -> _Stream:
+    def _stream(self, device: str) -> RawStream:
         try:
             return self._streams[device]
         except KeyError:
             raise ValueError(f"no stream {device!r} declared; have "
                              f"{sorted(self._streams)}") from None
-
-    def _free_bytes(self, directory: Path) -> int:
-        try:
-            return int(self._disk_free(directory))
-        except OSError as exc:
-            code = exc.errno if exc.errno is not None else errno.EIO
-            raise StorageError(code, f"cannot check free space for {self.path}: {exc}",
-                               str(self.path)) from exc
 
     def _write_skeleton(self, f: h5py.File) -> None:
         self._releases_ds, self._events_ds = write_skeleton(
@@ -921,96 +583,15 @@ class RunRecorder:
         return create_column(group, name, dtype, chunk_rows=self.chunk_rows,
                              compression=self.compression, **options)
 
-    @contextmanager
-    def _io(self, what: str) -> Iterator[None]:
-        """Turn an HDF5 failure into a :class:`StorageError` and mark the recorder failed.
-
-        h5py reports a failed write (ENOSPC, EIO) as ``RuntimeError`` from a flush and as
-        ``OSError`` elsewhere; the errno is only in HDF5's message ("errno = 28").
-        """
-        try:
-            yield
-        except StorageError:
-            raise
-        except (OSError, RuntimeError) as exc:
-            global _failed_writes
-            _failed_writes += 1
-            if self._state != "closed":
-                self._state = "failed"
-            code = getattr(exc, "errno", None)
-            if code is None:
-                found = re.search(r"errno = (\d+)", str(exc))
-                code = int(found.group(1)) if found else errno.EIO
-            raise StorageError(code, f"run file {self.path}: cannot {what}: "
-                               f"{os.strerror(code)}; the recording stopped, the file holds the "
-                               "data up to the last flush", str(self.path)) from exc
-
-    def _handles(self) -> list[Any]:
-        """Return the open HDF5 objects of the file (datasets and groups)."""
-        return [*(ds for stream in self._streams.values() for ds in stream.datasets.values()),
-                *self._sync_ds.values(), self._sync, self._releases_ds, self._events_ds]
-
-    def _drop_handles(self) -> None:
+    def _release_handles(self) -> list[Any]:
+        """Return the open HDF5 objects of the file (datasets and groups) and forget them."""
+        sync = self._sync
+        handles = [*(ds for stream in self._streams.values() for ds in stream.datasets.values()),
+                   *(sync.datasets.values() if sync is not None else ()),
+                   sync.group if sync is not None else None, self._releases_ds, self._events_ds]
         for stream in self._streams.values():
             stream.datasets.clear()
-        self._sync_ds.clear()
+        if sync is not None:
+            sync.datasets.clear()
         self._releases_ds = self._events_ds = None
-
-    def _abandon(self) -> None:
-        """Close and delete a half-created file (its creation failed)."""
-        self._drop_handles()
-        if self._file is not None:
-            try:
-                self._file.close()
-            except OSError:  # closing a half-created file: the create error is what matters
-                pass
-            self._file = None
-        if self.path.is_file():  # never unlink a device such as /dev/full
-            self.path.unlink(missing_ok=True)
-
-
-# ------------------------------------------------------------------------------------------------
-# Helpers
-# ------------------------------------------------------------------------------------------------
-
-
-_failed_writes = 0
-#: HDF5 objects of the files whose write failed, never freed (:meth:`RunRecorder.close`).
-_abandoned: list[list[Any]] = []
-
-
-def failed_writes() -> int:
-    """Count the run-file writes that failed in this process (each raised a StorageError).
-
-    After one, h5py 3.16 / HDF5 2.0 crash the process (SIGSEGV) when it exits, whatever is
-    closed first (h5py issue 914, a bug of the HDF5 library): a command line that has reported
-    the error should then leave with ``os._exit`` (after flushing its output). The failed file's
-    HDF5 objects are never freed for the same reason (:meth:`RunRecorder.close`).
-    """
-    return _failed_writes
-
-
-def _integers(values: npt.ArrayLike, what: str) -> npt.NDArray[np.int64]:
-    array = np.asarray(values)
-    if array.ndim != 1:
-        raise ValueError(f"{what} must be 1-D, got shape {array.shape}")
-    if array.size and not np.issubdtype(array.dtype, np.integer):
-        raise TypeError(f"{what} must be integers, got dtype {array.dtype}")
-    return array.astype(np.int64, copy=False)
-
-
-def _column_of(values: npt.ArrayLike, n: int | None, dtype: Any, what: str) -> npt.NDArray[Any]:
-    array = np.asarray(values, dtype=dtype)
-    if array.ndim != 1 or (n is not None and array.shape[0] != n):
-        expected = "(n,)" if n is None else f"({n},)"
-        raise ValueError(f"{what} has shape {array.shape}, expected {expected}")
-    return array
-
-
-def _finite(value: Any, what: str) -> float:
-    x = float(value)
-    if not math.isfinite(x):
-        raise ValueError(f"{what} = {value!r} must be finite")
-    return x
-
-
+        return handles

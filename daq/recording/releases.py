@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from daq.recording.recorder import Recorder
+from daq.recording.recorder_protocol import Recorder
 
 __all__ = ["HOLD_WINDOW_S", "ReleaseRows"]
 

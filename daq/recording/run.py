@@ -39,7 +39,8 @@ from daq.recording.experiment_log import (
     refuse_logging_to,
 )
 from daq.recording.layout import metadata_name_part
-from daq.recording.recorder import RunRecorder, refuse_existing_run_file
+from daq.recording.recorder import RunRecorder
+from daq.recording.swmr_file import refuse_existing_run_file
 from daq.recording.writer import RunWriter
 
 __all__ = ["open_run_file", "record_run", "recording_bar"]

@@ -28,6 +28,11 @@ Threads: the writer runs on the engine's dispatcher thread only (one thread touc
 readers never wait for it (the engine's per-device queues are between them). A failure inside
 the writer is kept in :attr:`RunWriter.error` (the engine logs and counts it), the recorder is
 closed, and later docs are ignored; :func:`daq.recording.run.record_run` raises it at the end.
+
+Longer than 600 lines: :class:`RunWriter` is one subscriber whose start, blocks, clock restarts,
+events and stop all work on the same per-run state (the devices' clock maps, the resampler, the
+rows written); what needs none of it is in its helpers (:mod:`daq.recording.devices`,
+:mod:`daq.recording.releases`, :mod:`daq.recording.raw_batches`, :mod:`daq.recording.sync_view`).
 """
 
 from __future__ import annotations
@@ -55,7 +60,8 @@ from daq.recording.devices import (
 )
 from daq.recording.layout import event_row, metadata_name_part, storable_metadata
 from daq.recording.raw_batches import RawBatches
-from daq.recording.recorder import Recorder, RunRecorder
+from daq.recording.recorder import RunRecorder
+from daq.recording.recorder_protocol import Recorder
 from daq.recording.releases import ReleaseRows
 from daq.recording.sync_view import physical_columns, polled_conditions, tap_columns
 from daq.sync.resample import Resampler, StreamSpec, SyncBlock

@@ -37,13 +37,18 @@ import numpy as np
 
 from daq.acquisition.engine import Acquisition
 from daq.config import RigConfig
+from daq.offline.report_plots import (
+    DerivativeCurves,
+    ModeCurves,
+    flutter_derivative_grid,
+    flutter_diagram,
+)
 from daq.procedure import HOLD_S, default_decay_s
-from daq.recording.recorder import refuse_existing_run_file
 from daq.recording.session import RecordingSession
-from daq.report_plots import DerivativeCurves, ModeCurves, flutter_derivative_grid, flutter_diagram
+from daq.recording.swmr_file import refuse_existing_run_file
 from daq.sim.rig_process import start_rig_process
 from ident.errors import IdentError
-from ident.identification import e2rfc
+from ident.identification import e2rfc, results
 from ident.identification.campaign import CampaignAnalysis, analyze_campaign
 from ident.model import flutter
 from ident.model.rfc import RationalFunctionModel
@@ -107,7 +112,7 @@ class CampaignResult:
     plots: dict[str, Path] = field(default_factory=dict)
     model: RationalFunctionModel | None = field(default=None, repr=False)
     releases: list[Release] = field(default_factory=list, repr=False)
-    structures: e2rfc.StructureSpread | None = None
+    structures: results.StructureSpread | None = None
     analysis: CampaignAnalysis | None = field(default=None, repr=False)
     identification_error: str | None = None
 

@@ -14,6 +14,7 @@ simulators (:mod:`daq.sim.rig`).
 from __future__ import annotations
 
 import json
+import logging
 import sys
 import time
 from contextlib import ExitStack
@@ -29,7 +30,7 @@ __all__ = ["refuse_auto_urls", "run_check", "run_simulate"]
 
 
 def run_check(config_path: Path, *, simulate: bool = False, json_path: Path | None = None,
-              timeout_s: float = 2.0) -> int:
+              timeout_s: float = 2.0, debug: bool = False) -> int:
     """Check every device of a rig; print the table; return 0 when all pass, else 1.
 
     Parameters
@@ -42,7 +43,26 @@ def run_check(config_path: Path, *, simulate: bool = False, json_path: Path | No
         Also write every device's result to this JSON file.
     timeout_s : float
         Longest check of one device, s.
+    debug : bool
+        Also print the traceback of every exception a device's check raised (``--debug``;
+        without it each is one line of the table's failures).
     """
+    if debug:
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("%(name)s: %(message)s"))
+        check_log = logging.getLogger("daq.acquisition.device_check")
+        check_log.addHandler(handler)
+        check_log.setLevel(logging.DEBUG)
+    try:
+        return _run_check(config_path, simulate, json_path, timeout_s)
+    finally:
+        if debug:
+            check_log.removeHandler(handler)
+            check_log.setLevel(logging.NOTSET)
+
+
+def _run_check(config_path: Path, simulate: bool, json_path: Path | None,
+               timeout_s: float) -> int:
     if not (timeout_s > 0.5):
         raise UsageError(f"--timeout {timeout_s:g}: must be > 0.5 s (each device is read for "
                          "0.5 s)")

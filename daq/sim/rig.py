@@ -3,8 +3,9 @@
 Builds the virtual tunnel from the config's section, taps, tunnel calibration and ``[simulation]``
 truth, starts one simulator per configured instrument (loopback only), and returns the URLs to
 point drivers at, together with a copy of the rig config whose ``"auto"`` URLs are filled in.
-Responsible for translating config tables into simulator arguments; the simulators themselves
-live in :mod:`simulators.devices` and know nothing of rig configs.
+Responsible for translating config tables into simulator arguments; each driver's simulator is
+found by its driver name (:mod:`daq.sim.devices`, the ``windrig.simulators`` entry points: a
+plugin may contribute its own), and the simulators themselves know nothing of rig configs.
 
 The rig config's calibrations (:mod:`daq.calibration`) are built into the simulated sensors as
 their errors, so that the calibrations undo them: the scanner puts each tap on its wired channel
@@ -23,20 +24,16 @@ import dataclasses
 import inspect
 import logging
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
 from daq.config import InstrumentConfig, RigConfig
 from daq.errors import ConfigError
+from daq.sim.devices import simulator_entry
 from ident.physics.tubing import Air, tubing_set
 from simulators.clock import Clock, DeviceClock
-from simulators.devices.abb_acs580 import SimAbbAcs580
-from simulators.devices.microepsilon_ild1420 import SimMicroEpsilonIld1420
-from simulators.devices.modbus_plc import SimModbusPlc
-from simulators.devices.scanivalve_mps4264 import SimScanivalveMps4264
-from simulators.devices.vaisala_ptb330 import SimVaisalaPtb330
 from simulators.virtual_tunnel import AirState, VirtualTunnel
 
 __all__ = ["SimulatedRig", "start_simulated_rig"]
@@ -44,50 +41,6 @@ __all__ = ["SimulatedRig", "start_simulated_rig"]
 log = logging.getLogger(__name__)
 
 _COMMON_KEYS = {"clock_offset_s", "clock_drift_ppm", "seed"}
-
-
-def _scanner(tunnel: VirtualTunnel, s: Mapping[str, Any], **kw: Any) -> SimScanivalveMps4264:
-    return SimScanivalveMps4264(tunnel, modules=int(s["modules"]), rate_hz=float(s["rate_hz"]),
-                                byte_order=str(s.get("byte_order", "big")),
-                                pitot_channel=int(s["pitot_channel"]), **kw)
-
-
-def _laser(tunnel: VirtualTunnel, s: Mapping[str, Any], **kw: Any) -> SimMicroEpsilonIld1420:
-    keys = ("range_mm", "rate_hz", "x", "standoff_mm", "baudrate", "output", "axis", "z")
-    return SimMicroEpsilonIld1420(tunnel, **{k: s[k] for k in keys if k in s}, **kw)
-
-
-def _fan(tunnel: VirtualTunnel, s: Mapping[str, Any], **kw: Any) -> SimAbbAcs580:
-    extra: dict[str, Any] = (
-        {"ramp_rpm_per_s": float(s["ramp_rpm_per_s"])} if "ramp_rpm_per_s" in s else {}
-    )
-    registers = s["registers"]
-    return SimAbbAcs580(tunnel, control_word=int(registers["control_word"]),
-                        reference_1=int(registers["reference_1"]),
-                        status_word=int(registers["status_word"]),
-                        actual_1=int(registers["actual_1"]), max_rpm=float(s["max_rpm"]),
-                        **extra, **kw)
-
-
-def _plc(tunnel: VirtualTunnel, s: Mapping[str, Any], **kw: Any) -> SimModbusPlc:
-    coils, inputs, registers = s["coils"], s["discrete_inputs"], s["holding_registers"]
-    return SimModbusPlc(tunnel, release=int(coils["release"]), arm=int(coils["arm"]),
-                        trigger=int(coils["trigger"]), released=int(inputs["released"]),
-                        trigger_count=int(registers["trigger_count"]), **kw)
-
-
-def _barometer(tunnel: VirtualTunnel, s: Mapping[str, Any], **kw: Any) -> SimVaisalaPtb330:
-    return SimVaisalaPtb330(tunnel, **kw)
-
-
-#: Simulator factory for each driver name: (tunnel, instrument settings, **sim options).
-SIMULATORS: dict[str, tuple[Callable[..., Any], Callable[..., Any]]] = {
-    "scanivalve_mps4264": (_scanner, SimScanivalveMps4264),
-    "microepsilon_ild1420": (_laser, SimMicroEpsilonIld1420),
-    "abb_acs580": (_fan, SimAbbAcs580),
-    "modbus_plc": (_plc, SimModbusPlc),
-    "vaisala_ptb330": (_barometer, SimVaisalaPtb330),
-}
 
 
 @dataclasses.dataclass
@@ -174,9 +127,8 @@ def start_simulated_rig(
             start = simulator.start
             url = start(serial) if "transport" in inspect.signature(start).parameters else start()
             rig.urls[inst.name] = url
-            settings = dict(inst.settings)
-            if inst.driver == "scanivalve_mps4264":
-                settings["data_port"] = simulator.data_port  # both ports are ephemeral here
+            settings = dict(simulator_entry(inst.driver, config.source).settings(
+                inst.settings, simulator))
             resolved.append(dataclasses.replace(inst, url=url, settings=settings))
     except BaseException:
         rig.close()
@@ -201,11 +153,10 @@ def _sensor_errors(config: RigConfig, inst: InstrumentConfig) -> dict[str, Any]:
 
 def _build(inst: InstrumentConfig, tunnel: VirtualTunnel, options: Mapping[str, Any],
            index: int, source: str, errors: Mapping[str, Any]) -> Any:
-    if inst.driver not in SIMULATORS:
-        raise ConfigError(f"{source}: no simulator for driver {inst.driver!r}")
-    factory, cls = SIMULATORS[inst.driver]
+    entry = simulator_entry(inst.driver, source)
+    factory = entry.factory
     where = f"{source} [simulation.devices.{inst.name}]"
-    accepted = set(inspect.signature(cls).parameters) - {"tunnel"}
+    accepted = entry.accepted_options()
     unknown = sorted(set(options) - _COMMON_KEYS - accepted)
     if unknown:
         raise ConfigError(f"{where}: unknown key(s) {unknown}; allowed: "

@@ -403,17 +403,6 @@ def structural_problem(signals: Sequence[DecaySignals], section: SectionModel,
                              t=[sig.t for sig in signals])
 
 
-def fit_structural(signals: Sequence[DecaySignals], section: SectionModel,
-                   spec: CandidateSpec) -> LinearFit:
-    """Fit one structural candidate to the structural residuals of all decays.
-
-    Both equations (heave, pitch) are whitened by the baseline residual's RMS of each, so
-    that neither dominates by its units.
-    """
-    problem = structural_problem(signals, section, (spec,))
-    return fit_linear(problem.y, problem.X[spec.name], problem.chunks)
-
-
 @dataclass(frozen=True)
 class VortexFit:
     """The vortex candidate: a line at ``k U`` Hz in the forces, a phase per release.

@@ -280,14 +280,14 @@ class Problem:
     def _full_rows(self, with_A3: bool) -> FullRows:
         """Return every sample's Gram-matrix form for a structure family (built once)."""
         if with_A3 not in self._full_rows_cache:
-            self._full_rows_cache[with_A3] = FullRows(self, with_A3)
+            self._full_rows_cache[with_A3] = FullRows(self.prepared, self.weights, with_A3)
         return self._full_rows_cache[with_A3]
 
     def _stacked(self, with_A3: bool, which: str) -> Stacked:
         """Return the stacked problem of a structure family on a view (built once, reused)."""
         key = (with_A3, which)
         if key not in self._stacked_cache:
-            self._stacked_cache[key] = Stacked(self, with_A3, which)
+            self._stacked_cache[key] = Stacked(self.prepared, self.weights, with_A3, which)
         return self._stacked_cache[key]
 
     # -- structures ----------------------------------------------------------------------------

@@ -13,15 +13,13 @@ no sum cancels more than the signal-to-noise ratio of the forces.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Sequence
 
 import numpy as np
 import numpy.typing as npt
 
+from ident.identification._regressors import PreparedRelease
 from ident.numerics.normal_equations import ScaledSolver, SplitDesign
-
-if TYPE_CHECKING:
-    from ident.identification._e2rfc_problem import Problem
 
 __all__ = ["FullRows"]
 
@@ -38,17 +36,20 @@ class FullRows:
 
     Parameters
     ----------
-    problem : Problem
-        The releases (their ``"full"`` views) and the force channels' weights.
+    prepared : sequence of PreparedRelease
+        The releases (their ``"full"`` views).
+    weights : ndarray, shape (n_releases, n)
+        Each release's force-channel weights (one over the channel's noise level).
     with_A3 : bool
         Whether the added-mass columns ``(B/U)^2 q''`` are in the design.
     """
 
-    def __init__(self, problem: Problem, with_A3: bool) -> None:
-        self.n = n = problem.n
-        self.views = [p.view("full") for p in problem.prepared]
-        self.w2 = problem.weights**2  # (n_releases, n)
-        self.weights = problem.weights
+    def __init__(self, prepared: Sequence[PreparedRelease], weights: FloatArray,
+                 with_A3: bool) -> None:
+        self.n = n = weights.shape[1]
+        self.views = [p.view("full") for p in prepared]
+        self.w2 = weights**2  # (n_releases, n)
+        self.weights = weights
         self.fixed = [_demeaned(v.fixed if with_A3 else v.fixed[:, :2 * n]) for v in self.views]
         self.force = [_demeaned(v.force) for v in self.views]
         self.k_f = self.fixed[0].shape[1]

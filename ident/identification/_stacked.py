@@ -7,15 +7,14 @@ module evaluates that residual and its exact Jacobian on one view of the release
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
+from ident.identification._regressors import PreparedRelease
 from ident.numerics.normal_equations import ScaledSolver, SplitDesign
-
-if TYPE_CHECKING:
-    from ident.identification._e2rfc_problem import Problem
 
 __all__ = ["Stacked"]
 
@@ -36,18 +35,19 @@ class Stacked:
     every lag at once: a few matrix products instead of a residual evaluation per lag.
     """
 
-    def __init__(self, problem: Problem, with_A3: bool, which: str) -> None:
-        self.views = [p.view(which) for p in problem.prepared]
+    def __init__(self, prepared: Sequence[PreparedRelease], weights: FloatArray, with_A3: bool,
+                 which: str) -> None:
+        self.views = [p.view(which) for p in prepared]
         sizes = np.array([v.t.size for v in self.views])
         self.starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
         self.sizes = sizes
         self.release = np.repeat(np.arange(sizes.size), sizes)
-        self.n = n = problem.n
+        self.n = n = weights.shape[1]
         # (n_releases, N): row r averages release r's rows (for _demeaned).
         self._averaging = np.zeros((sizes.size, int(sizes.sum())))
         for r, (start, size) in enumerate(zip(self.starts, sizes, strict=True)):
             self._averaging[r, start:start + size] = 1.0 / size
-        self.w = problem.weights[self.release]  # (N, n)
+        self.w = weights[self.release]  # (N, n)
         self.w2 = self.w**2
         fixed = np.vstack([v.fixed if with_A3 else v.fixed[:, :2 * n] for v in self.views])
         y = np.vstack([v.force for v in self.views])

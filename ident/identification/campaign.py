@@ -4,11 +4,12 @@ Responsibility: :func:`analyze_campaign` runs the identification chain on the re
 campaign (one section model, releases at two or more wind speeds) and returns one
 :class:`CampaignAnalysis`: each release's modal fit (frequency and damping of the heave- and
 pitch-dominated modes), the E2RFC model, its flutter analysis, the flutter speed with its
-standard deviation and the parts of it (:class:`ident.identification.e2rfc.FlutterUncertainty`), the
-flutter speeds of the structures the data cannot tell apart, the model's flutter derivatives over
-the covered reduced frequencies and, when the releases allow it, the indirect method's table from
-the same decays. The command line, the operator console, the demo and the reprocessing job format
-this one object; none of them rebuilds the chain.
+standard deviation and the parts of it
+(:class:`ident.identification.uncertainty.FlutterUncertainty`), the flutter speeds of the structures
+the data cannot tell apart, the model's flutter derivatives over the covered reduced frequencies
+and, when the releases allow it, the indirect method's table from the same decays. The command line,
+the operator console, the demo and the reprocessing job format this one object; none of them
+rebuilds the chain.
 
 Not responsible for: reading files (:mod:`ident.records.run_file`), plots, or choosing which
 releases form a campaign.
@@ -24,7 +25,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ident.errors import IdentError
-from ident.identification import e2rfc, fd_method
+from ident.identification import e2rfc, fd_method, results, uncertainty
 from ident.identification.modal import ReleaseModes, release_modes
 from ident.model import flutter as _flutter
 from ident.model.conventions import FLUTTER_DERIVATIVE_NAMES
@@ -76,10 +77,10 @@ class CampaignAnalysis:
     wind_speeds: tuple[float, ...]
     release_speeds: tuple[float, ...]
     modes: tuple[ReleaseModes, ...]
-    model: e2rfc.IdentifiedModel = field(repr=False)
+    model: results.IdentifiedModel = field(repr=False)
     flutter: _flutter.FlutterResult = field(repr=False)
-    uncertainty: e2rfc.FlutterUncertainty
-    structures: e2rfc.StructureSpread
+    uncertainty: uncertainty.FlutterUncertainty
+    structures: results.StructureSpread
     K: FloatArray = field(repr=False)
     derivatives: dict[str, FloatArray] = field(repr=False)
     table: fd_method.DecayDerivativeTable | None = field(default=None, repr=False)
@@ -205,7 +206,7 @@ def analyze_campaign(
             table_error = f"{type(exc).__name__}: {exc}"
     return CampaignAnalysis(
         section=section, n_releases=len(releases),
-        wind_speeds=tuple(e2rfc.distinct_wind_speeds([r.U for r in releases])),
+        wind_speeds=tuple(results.distinct_wind_speeds([r.U for r in releases])),
         release_speeds=tuple(float(r.U) for r in releases),
         modes=tuple(release_modes(fit, section) for fit in model.diagnostics.modal_fits),
         model=model, flutter=flutter, uncertainty=uncertainty,

@@ -572,14 +572,6 @@ def _refine(
     return sol.x, float(np.sum(sol.fun**2))
 
 
-def _varpro_step(
-    tb: FloatArray, yb: FloatArray, block: int, dt: float, n_modes: int, theta: FloatArray
-) -> tuple[FloatArray, FloatArray]:
-    """Residual (flattened channel by channel) and its Kaufman Jacobian at pole parameters."""
-    resid, parts = _varpro_residual(tb, yb, block, dt, n_modes, theta)
-    return resid, _varpro_jacobian(tb, yb, block, dt, n_modes, theta, parts)
-
-
 def _varpro_residual(
     tb: FloatArray, yb: FloatArray, block: int, dt: float, n_modes: int, theta: FloatArray
 ) -> tuple[FloatArray, tuple[ComplexArray, ComplexArray, FloatArray, FloatArray]]:

@@ -30,10 +30,11 @@ the release starts from ``(h0, alpha0, p0)`` and the record adds the sway ``p`` 
 the drag (N/m, downwind) to the four channels (:func:`channels`). The structural nonlinearities
 and the sensor crosstalk act on heave and pitch only; a channel delay delays every force.
 
-Longer than 600 lines: the decay record (:class:`SimulatedDecay`, with its hold and its
-continuation), the plant that steps it (exact, ETD2RK and first-order-hold integrators sharing
-one augmented state matrix) and the measurement effects belong together: they share the
-augmented state layout, and split apart each would need the others' private indices.
+The plant that steps a decay (exact, ETD2RK and first-order-hold integrators sharing one
+augmented state matrix) is :mod:`ident.simulation.plant`; the measurement chain (the channels
+from the states, then delay, crosstalk and tubing) is :mod:`ident.simulation.measurement`. This
+module holds the record (:class:`SimulatedDecay`, with its hold and its continuation) and the
+entry point :func:`simulate_decay`.
 
 This is the noise-free physics shared by the virtual tunnel
 (:func:`simulators.tunnel.simulate_release` adds measurement noise and the held stretch before the
@@ -53,7 +54,6 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 from scipy.interpolate import CubicSpline
-from scipy.linalg import expm
 
 from ident.model.quasi_steady import StaticCoefficients
 from ident.model.rfc import RationalFunctionModel
@@ -61,15 +61,12 @@ from ident.model.section import SectionModel
 from ident.model.statespace import AeroelasticSystem
 from ident.numerics import validate as v
 from ident.physics.effects import (
-    BaseVibration,
-    ChannelDelay,
     Effect,
-    SensorCrosstalk,
     StaticUnbalance,
-    TubingDistortion,
-    VortexShedding,
 )
 from ident.physics.turbulence import GustField, TurbulenceSpec, WindLoad
+from ident.simulation.measurement import clean_channels, generalised_forces, measure
+from ident.simulation.plant import Plant, integrate
 
 __all__ = ["CHANNELS", "CHANNELS_3DOF", "SimulatedDecay", "channels", "simulate_decay"]
 
@@ -85,8 +82,6 @@ def channels(n_dof: int) -> tuple[str, ...]:
 
 #: Samples of a record that the force spline of its continuation runs through.
 _SPLINE_LEAD = 16
-#: Samples stepped at once by the free linear integrator (powers of the step matrix).
-LINEAR_BLOCK = 256
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -148,7 +143,7 @@ class SimulatedDecay:
     static: StaticCoefficients | None = field(default=None, repr=False)
     gusts: GustField | None = field(default=None, repr=False)
     wind_load: FloatArray | None = field(default=None, repr=False)
-    _plant: _Plant | None = field(default=None, repr=False)
+    _plant: Plant | None = field(default=None, repr=False)
     _static_force: FloatArray | None = field(default=None, repr=False)
     _delay_spline: Any = field(default=None, repr=False)
     _wind: WindLoad | None = field(default=None, repr=False)
@@ -215,7 +210,7 @@ class SimulatedDecay:
         }
         if self.n_dof == 3:
             clean.update(p=np.full(t_arr.size, self.p0), drag=force[:, 2] / B)
-        measured, _ = _measure(clean, t_arr, self.effects, self._before, self._delay_spline,
+        measured, _ = measure(clean, t_arr, self.effects, self._before, self._delay_spline,
                                0.0, B)
         return clean, measured
 
@@ -242,10 +237,10 @@ class SimulatedDecay:
             raise ValueError(f"n must be an integer >= 1, got {n!r}")
         assert self._plant is not None and self._z_end is not None
         t_start = float(self.t[-1])
-        z, qdd, wind = _integrate(self._plant, self._wind, self._z_end, t_start, int(n) + 1,
+        z, qdd, wind = integrate(self._plant, self._wind, self._z_end, t_start, int(n) + 1,
                                   1.0 / self.fs, self._substeps)
         t = t_start + np.arange(int(n) + 1) / self.fs
-        clean, _ = _clean_channels(self._plant, z, qdd, t, wind, (), self.section.B)
+        clean, _ = clean_channels(self._plant, z, qdd, t, wind, (), self.section.B)
         B = self.section.B
         spline = None
         if self._delay_spline is not None:
@@ -253,8 +248,8 @@ class SimulatedDecay:
             # the seam is inside it (a cubic spline's end condition fades by 0.27 per knot).
             lead = slice(max(0, self.t.size - 1 - _SPLINE_LEAD), self.t.size - 1)
             t_spline = np.concatenate([self.t[lead], t])
-            forces = _generalised_forces(clean, B)
-            lead_forces = _generalised_forces({k: v[lead] for k, v in self.clean.items()}, B)
+            forces = generalised_forces(clean, B)
+            lead_forces = generalised_forces({k: v[lead] for k, v in self.clean.items()}, B)
             spline = CubicSpline(t_spline, np.vstack([lead_forces, forces]), axis=0)
             t_start = float(t_spline[0])
         previous = self._delay_spline
@@ -265,7 +260,7 @@ class SimulatedDecay:
 
         keep = slice(1, None)
         clean = {name: values[keep] for name, values in clean.items()}
-        measured, tube_end = _measure(clean, t[keep], self.effects, before, spline, t_start, B,
+        measured, tube_end = measure(clean, t[keep], self.effects, before, spline, t_start, B,
                                       self._tube_end)
         return dataclasses.replace(
             self, t=t[keep], h=measured["h"], alpha=measured["alpha"], lift=measured["lift"],
@@ -357,7 +352,8 @@ def simulate_decay(
 
     In turbulence the same seed gives the same record:
 
-    >>> from ident.physics.turbulence import StaticCoefficients, TurbulenceSpec
+    >>> from ident.model.quasi_steady import StaticCoefficients
+    >>> from ident.physics.turbulence import TurbulenceSpec
     >>> spec = TurbulenceSpec(Iu=0.1, Iw=0.05, Lux=0.5, Lwx=0.2, Cuy=10.0, Cwy=8.0)
     >>> runs = [simulate_decay(s, flat_plate.jones_model(), 5.0, 0.0, 0.0, n=400, fs=200.0,
     ...                        static=StaticCoefficients.flat_plate(), turbulence=spec,
@@ -386,7 +382,7 @@ def simulate_decay(
     z0 = system.initial_state(h0, alpha0, p0)  # validates h0, alpha0, p0
     dt = 1.0 / fs
 
-    plant = _Plant(system, effects)
+    plant = Plant(system, effects)
     substeps = plant.substeps(dt, oversample)
     wind, held_from = _wind_load(section, U, static, turbulence, span, rng,
                                  (n - 1) * substeps + 1, dt / substeps, pre_s)
@@ -398,8 +394,8 @@ def simulate_decay(
             z, qdd = plant.integrate_linear(z0, n, dt)
         wind_out = None
     else:
-        z, qdd, wind_out = _integrate(plant, wind, plant.initial(z0), 0.0, n, dt, substeps)
-    clean, spline = _clean_channels(plant, z, qdd, t, wind_out, effects, section.B)
+        z, qdd, wind_out = integrate(plant, wind, plant.initial(z0), 0.0, n, dt, substeps)
+    clean, spline = clean_channels(plant, z, qdd, t, wind_out, effects, section.B)
     static_force = plant.static_force(z0)
 
     def before(ts: FloatArray) -> FloatArray:
@@ -409,7 +405,7 @@ def simulate_decay(
             force = force + wind.force(ts)[:, : plant.k]
         return np.asarray(force, dtype=float)
 
-    measured, tube_end = _measure(clean, t, effects, before, spline, 0.0, section.B)
+    measured, tube_end = measure(clean, t, effects, before, spline, 0.0, section.B)
     return SimulatedDecay(
         t=t,
         **measured,
@@ -493,370 +489,4 @@ def _check_effects(effects: Iterable[Effect]) -> tuple[Effect, ...]:
     repeated = sorted({name for name in names if names.count(name) > 1})
     if repeated:
         raise ValueError(f"each effect may appear once; repeated: {repeated}")
-    return out
-
-
-class _Plant:
-    """The linear system, optionally augmented with harmonic oscillators, plus nonlinear terms.
-
-    A harmonic forcing ``sin(w t)``, ``cos(w t)`` (vortex shedding, a base vibration) is
-    generated by two extra states of a harmonic oscillator, so that a harmonically forced
-    linear system is still advanced by an exact matrix exponential.
-    """
-
-    def __init__(self, system: AeroelasticSystem, effects: tuple[Effect, ...]) -> None:
-        self.system = system
-        self.B = system.section.B
-        self.k = system.n_dof
-        self.qdd_rows = slice(self.k, 2 * self.k)  # the rows of q'' in the state matrix
-        self.nonlinear_effects = [e for e in effects if e.nonlinear]
-        self.nonlinear = bool(self.nonlinear_effects)
-        # Split once: the integrators call these at every substep of a nonlinear decay.
-        self._structural = [e for e in self.nonlinear_effects if not e.aerodynamic]
-        self._aerodynamic = [e for e in self.nonlinear_effects if e.aerodynamic] \
-            if system.U > 0.0 else []
-        self.M_inv = np.linalg.inv(system.effective_mass())
-        vortex = [e for e in effects if isinstance(e, VortexShedding)]
-        self.vortex = vortex[0] if vortex and system.U > 0.0 else None
-        base = [e for e in effects if isinstance(e, BaseVibration)]
-        # Harmonic sources: (angular frequency, gain [L B, M(, D B)] per [sin, cos], seen by the
-        # taps). Both act on heave and pitch only: a sway row of zeros with three DOF.
-        self.sources: list[tuple[float, FloatArray, bool]] = []
-        if self.vortex is not None:
-            self.sources.append((2.0 * math.pi * self.vortex.frequency(system.U),
-                                 self._padded(self._vortex_gain()), True))
-        if base and base[0].accel > 0.0:
-            self.sources.append((2.0 * math.pi * base[0].frequency_hz,
-                                 self._padded(base[0].gain(system.section)), False))
-        n = system.n_states
-        A = system.matrix()
-        if self.sources:
-            k = len(self.sources)
-            A_aug = np.zeros((n + 2 * k, n + 2 * k))
-            A_aug[:n, :n] = A
-            for j, (w, gain, _) in enumerate(self.sources):
-                i = n + 2 * j
-                A_aug[i, i + 1] = w  # s' = w c
-                A_aug[i + 1, i] = -w  # c' = -w s
-                A_aug[self.qdd_rows, i : i + 2] = self.M_inv @ gain
-            A = A_aug
-        self.A = A
-        self.n_struct = n
-
-    def _padded(self, heave_pitch: FloatArray) -> FloatArray:
-        """Return a force gain on ``[L B, M]`` with zero rows for the other coordinates."""
-        out = np.zeros((self.k,) + heave_pitch.shape[1:])
-        out[:2] = heave_pitch
-        return out
-
-    def _vortex_gain(self) -> FloatArray:
-        """Generalised vortex force per oscillator state ``[s, c]``: ``[L B, M] = G [s, c]``."""
-        assert self.vortex is not None
-        s = self.system.section
-        qd_B2 = 0.5 * s.rho * self.system.U**2 * s.B**2
-        vx = self.vortex
-        return qd_B2 * np.array(
-            [[vx.cl, 0.0], [vx.cm * math.cos(vx.phase), vx.cm * math.sin(vx.phase)]]
-        )
-
-    def initial(self, z0: FloatArray) -> FloatArray:
-        if not self.sources:
-            return z0
-        return np.concatenate([z0, [0.0, 1.0] * len(self.sources)])  # sin(0) = 0, cos(0) = 1
-
-    def vortex_force(self, t: FloatArray) -> FloatArray:
-        """Generalised harmonic force the taps see at times ``t`` (any sign), shape (len(t), k).
-
-        Vortex shedding acts through the air, so the pressures measure it; a base vibration
-        shakes the supports and is not in the measured forces.
-        """
-        out = np.zeros((t.size, self.k))
-        for w, gain, seen in self.sources:
-            if seen:
-                out += np.column_stack([np.sin(w * t), np.cos(w * t)]) @ gain.T
-        return out
-
-    def static_force(self, z0: FloatArray) -> FloatArray:
-        """Self-excited generalised force on the held model (no motion, lag states at zero)."""
-        return np.asarray(self.system.forces(z0, np.zeros(self.k)), dtype=float)
-
-    def nonlinear_acceleration(self, z: FloatArray) -> FloatArray:
-        """``q''`` contribution of the structural nonlinearities at state ``z``."""
-        return np.asarray(self.M_inv[:, :2] @ self.nonlinear_force(z), dtype=float)
-
-    def nonlinear_force(self, z: FloatArray) -> FloatArray:
-        """Generalised force ``[F_h B, M]`` of the nonlinearities at one state ``z``, N m/m."""
-        q, qd = z[0:2], z[self.k : self.k + 2]  # nonlinearities act on heave and pitch
-        force = np.zeros(2)
-        for effect in self._structural:
-            force += effect.structural_force(q, qd, self.B)
-        for effect in self._aerodynamic:
-            force += effect.aerodynamic_force(q, qd, self.B, self.system.U,
-                                              self.system.section.rho)
-        return force
-
-    def aerodynamic_force(self, z: FloatArray) -> FloatArray:
-        """Nonlinear aerodynamic force ``[L B, M]`` at states ``z`` (rows), shape (..., 2).
-
-        It acts through the air: the taps measure it (:meth:`forces` adds it to the record).
-        """
-        out = np.zeros(z.shape[:-1] + (2,))
-        for effect in self._aerodynamic:
-            out += effect.aerodynamic_force(z[..., 0:2], z[..., self.k : self.k + 2],
-                                            self.B, self.system.U, self.system.section.rho)
-        return out
-
-    def integrate_linear(self, z0: FloatArray, n: int, dt: float) -> tuple[FloatArray, FloatArray]:
-        """Step the free linear system exactly: ``z[k] = expm(A dt)^k z[0]``.
-
-        The powers are applied a block of ``LINEAR_BLOCK`` samples at a time (``z[s + j] =
-        phi^j z[s]``), so a minute at 1 kHz costs a few hundred small matrix products instead of
-        60 000 Python-level steps (0.3 s, which delayed the virtual tunnel's release).
-        """
-        phi = expm(self.A * dt)
-        size = self.A.shape[0]
-        block = min(LINEAR_BLOCK, n)
-        powers = np.empty((block, size, size))
-        powers[0] = np.eye(size)
-        for j in range(1, block):
-            powers[j] = phi @ powers[j - 1]
-        step = phi @ powers[-1]  # phi^block: from one block's start to the next
-        z = np.empty((n, size))
-        start = self.initial(z0)
-        for s in range(0, n, block):
-            m = min(block, n - s)
-            z[s : s + m] = powers[:m] @ start
-            start = step @ start
-        qdd = z @ self.A[self.qdd_rows, :].T
-        return z, qdd
-
-    def substeps(self, dt: float, oversample: int) -> int:
-        """Integrator steps per output sample: 1 when linear, else at least ``oversample``."""
-        if not self.nonlinear:
-            return 1
-        rate = max(e.stiffness_rate(self.system.effective_mass(), self.B)
-                   for e in self.nonlinear_effects)
-        # Keep the explicit treatment of the nonlinear term well inside its stability limit.
-        return max(oversample, math.ceil(2.0 * rate * dt))
-
-    def van_loan(self, h: float) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """``e^{Ah}``, ``int_0^h e^{As} ds`` and ``int_0^h e^{A(h-s)} s ds / h`` on the q'' inputs.
-
-        Van Loan: ``expm([[A, I, 0], [0, 0, I], [0, 0, 0]] h)`` holds the three matrices of the
-        ETD2RK step (Cox and Matthews 2002), which are also those of the first-order hold.
-        """
-        n_aug = self.A.shape[0]
-        big = np.zeros((3 * n_aug, 3 * n_aug))
-        big[:n_aug, :n_aug] = self.A
-        big[:n_aug, n_aug : 2 * n_aug] = np.eye(n_aug)
-        big[n_aug : 2 * n_aug, 2 * n_aug :] = np.eye(n_aug)
-        blocks = expm(big * h)
-        phi = blocks[:n_aug, :n_aug]
-        gamma1 = blocks[:n_aug, n_aug : 2 * n_aug][:, self.qdd_rows]  # only q'' gets the force
-        gamma2 = blocks[:n_aug, 2 * n_aug :][:, self.qdd_rows] / h
-        return phi, gamma1, gamma2
-
-    def integrate_nonlinear(
-        self, z0: FloatArray, n: int, dt: float, oversample: int
-    ) -> tuple[FloatArray, FloatArray]:
-        substeps = self.substeps(dt, oversample)
-        h = dt / substeps
-        n_aug = self.A.shape[0]
-        phi, gamma1, gamma2 = self.van_loan(h)
-        # The nonlinear force enters through M^-1 on heave and pitch only: folded in once, so
-        # that each of the ~60 000 substeps of a 7.5 s decay does two small products less.
-        g1, g2 = gamma1 @ self.M_inv[:, :2], gamma2 @ self.M_inv[:, :2]
-        force = self.nonlinear_force
-        z = np.empty((n, n_aug))
-        u = self.initial(z0)
-        z[0] = u
-        for k in range(1, n):
-            for _ in range(substeps):
-                f_u = force(u)
-                a = phi @ u + g1 @ f_u
-                u = a + g2 @ (force(a) - f_u)
-            z[k] = u
-        qdd = (z @ self.A[self.qdd_rows, :].T
-               + np.array([self.nonlinear_acceleration(zk) for zk in z]))
-        return z, qdd
-
-    def integrate_forced(
-        self, z_start: FloatArray, n: int, dt: float, substeps: int, accel: FloatArray
-    ) -> tuple[FloatArray, FloatArray]:
-        """Advance from the augmented state ``z_start`` under an external force.
-
-        ``accel`` is ``M_eff^-1`` times the external generalised force on the integrator's grid,
-        shape ``((n - 1) substeps + 1, k)``, held piecewise linear between its points (first-order
-        hold, exact for the linear part). Returns the states and the accelerations ``q''`` at the
-        ``n`` output samples.
-        """
-        h = dt / substeps
-        phi, gamma1, gamma2 = self.van_loan(h)
-        z = np.empty((n, self.A.shape[0]))
-        u = z_start.copy()
-        z[0] = u
-        if not self.nonlinear:  # substeps == 1: the input terms are known in advance
-            drive = accel[:-1] @ (gamma1 - gamma2).T + accel[1:] @ gamma2.T
-            for k in range(1, n):
-                u = phi @ u + drive[k - 1]
-                z[k] = u
-            return z, z @ self.A[self.qdd_rows, :].T + accel
-        i = 0
-        for k in range(1, n):
-            for _ in range(substeps):
-                n_u = self.nonlinear_acceleration(u) + accel[i]
-                a = phi @ u + gamma1 @ n_u
-                u = a + gamma2 @ (self.nonlinear_acceleration(a) + accel[i + 1] - n_u)
-                i += 1
-            z[k] = u
-        nonlinear = np.array([self.nonlinear_acceleration(zk) for zk in z])
-        return z, z @ self.A[self.qdd_rows, :].T + nonlinear + accel[::substeps]
-
-    def forces(self, z: FloatArray, qdd: FloatArray, t: FloatArray) -> FloatArray:
-        """Generalised aerodynamic forces ``[L B, M(, D B)]`` recorded at the output samples."""
-        aero = self.system.forces(z[:, : self.n_struct], qdd)
-        aero[:, :2] += self.aerodynamic_force(z)
-        return np.asarray(aero + self.vortex_force(t), dtype=float)
-
-
-def _integrate(
-    plant: _Plant, wind: WindLoad | None, z_start: FloatArray, t_start: float, n: int,
-    dt: float, substeps: int,
-) -> tuple[FloatArray, FloatArray, FloatArray | None]:
-    """States, accelerations and wind load ``[L B, M(, D B)]`` at ``n`` samples from ``t_start``."""
-    t_grid = t_start + np.arange((n - 1) * substeps + 1) * (dt / substeps)
-    # A continuation of a record without wind load is driven by a zero force.
-    k = plant.k
-    force = np.zeros((t_grid.size, k)) if wind is None else wind.force(t_grid)[:, :k]
-    z, qdd = plant.integrate_forced(z_start, n, dt, substeps, force @ plant.M_inv.T)
-    return z, qdd, None if wind is None else np.asarray(force[::substeps], dtype=float)
-
-
-def _clean_channels(
-    plant: _Plant, z: FloatArray, qdd: FloatArray, t: FloatArray, wind: FloatArray | None,
-    effects: tuple[Effect, ...], B: float,
-) -> tuple[dict[str, FloatArray], Any]:
-    """Return the physical channels, and the spline of the forces a channel delay needs."""
-    forces = plant.forces(z, qdd, t)
-    if wind is not None:
-        forces = forces + wind
-    clean = {
-        "h": z[:, 0] * B,
-        "alpha": z[:, 1].copy(),
-        "lift": forces[:, 0] / B,
-        "moment": forces[:, 1],
-    }
-    if plant.k == 3:
-        clean.update(p=z[:, 2] * B, drag=forces[:, 2] / B)
-    spline = None
-    if any(isinstance(e, ChannelDelay) and e.delay_s > 0.0 for e in effects):
-        # Smooth after the release; the release itself is a kink (the added-mass force jumps),
-        # so the spline only spans t >= 0 and earlier times take the held value.
-        spline = CubicSpline(t, _generalised_forces(clean, B), axis=0)
-    return clean, spline
-
-
-def _generalised_forces(clean: dict[str, FloatArray], B: float) -> FloatArray:
-    """Return ``[L B, M(, D B)]`` of a record's channels, shape (n, n_dof)."""
-    columns = [clean["lift"] * B, clean["moment"]] + (
-        [clean["drag"] * B] if "drag" in clean else [])
-    return np.column_stack(columns)
-
-
-def _measure(
-    clean: dict[str, FloatArray],
-    t: FloatArray,
-    effects: tuple[Effect, ...],
-    before: Callable[[FloatArray], FloatArray] | None,
-    spline: Any,
-    t_start: float,
-    B: float,
-    tube_start: tuple[FloatArray, FloatArray] | None = None,
-) -> tuple[dict[str, FloatArray], tuple[FloatArray, FloatArray] | None]:
-    """Apply the measurement effects (delay, crosstalk, tubing) to the clean channels at ``t``.
-
-    ``spline`` interpolates the clean generalised forces ``[L B, M(, D B)]`` from ``t_start`` on; a
-    delayed sample whose source time is earlier takes ``before(t_src)`` (the held force before a
-    release, the previous record for a continuation). The tubing filters the (delayed) forces
-    last; it starts from ``tube_start`` (the previous record's end state and last input) or,
-    without it, at rest at the force just before ``t[0]`` (a held model's force is steady).
-    Returns the channels and the tubes' end state.
-    """
-    out, tube_end = _delay_and_crosstalk(clean, t, effects, before, spline, t_start, B), None
-    for effect in effects:
-        if isinstance(effect, TubingDistortion) and t.size:
-            forces = _generalised_forces(out, B)
-            if tube_start is None:
-                delay = sum(e.delay_s for e in effects if isinstance(e, ChannelDelay))
-                if before is not None:
-                    u0 = before(np.array([t[0] - delay - 1e-9]))[0]
-                else:
-                    u0 = forces[0]
-                x0 = np.column_stack([u0, np.zeros(u0.size)])
-                filtered, tube_end = _tube(effect, t, forces, x0, None)
-            else:
-                filtered, tube_end = _tube(effect, t, forces, tube_start[0],
-                                           (t_start, tube_start[1]))
-            out["lift"], out["moment"] = filtered[:, 0] / B, filtered[:, 1]
-            if "drag" in out:
-                out["drag"] = filtered[:, 2] / B
-    return out, tube_end
-
-
-def _tube(effect: TubingDistortion, t: FloatArray, u: FloatArray, x0: FloatArray,
-          previous: tuple[float, FloatArray] | None) -> tuple[FloatArray,
-                                                               tuple[FloatArray, FloatArray]]:
-    """Filter the columns of ``u`` (at times ``t``) by the tube from states ``x0`` (rows).
-
-    The input is piecewise linear between samples (first-order hold: exact for it); with
-    ``previous`` = (time, input) the first interval starts from the previous record's last
-    input and its output is dropped. Returns the output and (end states, last input).
-    """
-    from scipy.signal import lsim
-
-    A, b = effect.state_space()
-    system = (A, b[:, None], np.array([[1.0, 0.0]]), np.zeros((1, 1)))
-    times, inputs = t, u
-    if previous is not None:
-        times = np.concatenate([[previous[0]], t])
-        inputs = np.vstack([previous[1][None, :], u])
-    out = np.empty_like(inputs)
-    end = np.empty((u.shape[1], 2))
-    for j in range(u.shape[1]):
-        if times.size == 1:
-            out[:, j], end[j] = x0[j, 0], x0[j]
-            continue
-        _, y, x = lsim(system, inputs[:, j], times - times[0], X0=x0[j], interp=True)
-        out[:, j], end[j] = y, x[-1]
-    if previous is not None:
-        out = out[1:]
-    return np.asarray(out, dtype=float), (end, np.asarray(inputs[-1], dtype=float))
-
-
-def _delay_and_crosstalk(
-    clean: dict[str, FloatArray],
-    t: FloatArray,
-    effects: tuple[Effect, ...],
-    before: Callable[[FloatArray], FloatArray] | None,
-    spline: Any,
-    t_start: float,
-    B: float,
-) -> dict[str, FloatArray]:
-    """Apply a channel delay and sensor crosstalk (see :func:`_measure`)."""
-    out = {name: values.copy() for name, values in clean.items()}
-    for effect in effects:
-        if isinstance(effect, ChannelDelay) and effect.delay_s > 0.0:
-            assert before is not None
-            t_src = t - effect.delay_s
-            delayed = np.where(
-                (t_src >= t_start)[:, None],
-                spline(np.clip(t_src, t_start, None)),
-                before(t_src),
-            )
-            out["lift"], out["moment"] = delayed[:, 0] / B, delayed[:, 1]
-            if "drag" in out:
-                out["drag"] = delayed[:, 2] / B
-        elif isinstance(effect, SensorCrosstalk):
-            out["h"] = clean["h"] + effect.h_from_alpha * clean["alpha"]
-            out["alpha"] = clean["alpha"] + effect.alpha_from_h * clean["h"]
     return out

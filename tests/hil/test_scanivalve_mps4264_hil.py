@@ -26,7 +26,7 @@ from daq.transports.byte_transport import open_transport
 from ident import TapLayout
 from ident.model import flat_plate
 from simulators.clock import DeviceClock
-from simulators.devices.scanivalve_mps4264 import SimScanivalveMps4264
+from simulators.devices.scanivalve_mps4264.scanner import SimScanivalveMps4264
 from simulators.virtual_tunnel import VirtualTunnel
 
 from support.sections import FLAT_PLATE

@@ -1,10 +1,13 @@
-"""Contract tests over every registered driver (pymeasure's test_all_instruments pattern).
+"""Contract tests over every built-in driver, with the driver author's kit (:mod:`daq.testing`).
 
-Construction does no I/O, unknown keywords are refused, every described channel has units,
-property docstrings follow the Measure/Control rule, and (the reading contract,
-:mod:`daq.instruments.reading`) what ``read()`` returns against the simulated instruments over
-their real transports (TCP, serial-over-socket, Modbus TCP) is a ``Reading`` whose channels are
-exactly those of ``describe()``, with the described dtypes and shapes.
+The kit's checks, as a plugin's tests run them: construction does no I/O, unknown keywords are
+refused, the role's methods and channels (units, dtypes, ranks) are there
+(:func:`~daq.testing.contract.construction_problems`), and what ``read()`` returns against the
+simulated instruments over their real transports (TCP, serial-over-socket, Modbus TCP) is a
+``Reading`` as described, with every counter jump a reported gap
+(:func:`~daq.testing.contract.reading_problems`, :func:`~daq.testing.contract.sequence_problems`).
+Here besides: property docstrings follow the Measure/Control rule (pymeasure's
+test_all_instruments pattern).
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ from daq.instruments import registry
 from daq.instruments.build import build_driver
 from daq.instruments.reading import Reading, describe_mismatches
 from daq.sim.rig import SimulatedRig, start_simulated_rig
+from daq.testing.contract import construction_problems, reading_problems, sequence_problems
 
 from support.configs import CONFIGS, SIM_FLAT_PLATE
 
@@ -61,6 +65,14 @@ def test_unknown_keyword_is_refused(driver):
     extra = {"limit_rpm": 100.0} if entry.role == "fan" else {}
     with pytest.raises(TypeError):
         cls(MagicMock(), settings, no_such_option=1, **extra)
+
+
+@pytest.mark.parametrize("driver", sorted(INSTRUMENTS))
+def test_the_kit_finds_no_breach_of_the_role_contract(driver):
+    """The kit's construction checks: no I/O, TypeError, role methods and channels."""
+    entry = registry.driver_entry(driver)
+    extra = {"limit_rpm": CONFIG.limits.max_fan_rpm} if entry.role == "fan" else {}
+    assert construction_problems(entry, INSTRUMENTS[driver].settings, **extra) == []
 
 
 @pytest.mark.parametrize("driver", sorted(INSTRUMENTS))
@@ -119,11 +131,12 @@ def read_twice(rig: SimulatedRig, driver_name: str) -> tuple[dict, Reading, Read
 def test_read_returns_a_reading_that_matches_describe(rig, driver):
     """Both readings: described channels only, each (n, *shape) of its dtype; counters go on."""
     described, first, second = read_twice(rig, driver)
+    role = registry.driver_entry(driver).role
     for reading in (first, second):
         assert isinstance(reading, Reading) and len(reading) >= 1
         assert describe_mismatches(described, reading) == [], (driver, reading.channels.keys())
-        assert np.all(np.diff(reading.counter) >= 1)
-        assert np.all(np.diff(reading.host_time_ns) >= 0)
+        assert reading_problems(described, reading, role) == []  # counters, times, gaps
+    assert sequence_problems([first, second]) == []
     # The second reading continues the first: its counter after the first's, no rows missing
     # on an undisturbed simulator, its rows arrived later.
     assert int(second.counter[0]) == int(first.counter[-1]) + 1 and second.gaps == ()

@@ -31,6 +31,8 @@ from daq.recording.recover import (
 )
 from daq.recording.synthetic import write_release_run
 
+from support.configs import SIM_FLAT_PLATE
+
 pytestmark = pytest.mark.realtime
 
 CHILD = Path(__file__).with_name("_crash_child.py")
@@ -163,5 +165,4 @@ def test_a_damaged_superblock_is_not_rewritten(tmp_path):
 def _config():
     from daq.config import load_rig_config
 
-    return load_rig_config(Path(__file__).resolve().parents[3] / "rig_configs"
-                           / "sim_flat_plate.toml")
+    return load_rig_config(SIM_FLAT_PLATE)

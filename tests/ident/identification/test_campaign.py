@@ -9,7 +9,7 @@ import pytest
 
 from ident import Release
 from ident.errors import IdentError, RankDeficiencyError
-from ident.identification import e2rfc
+from ident.identification import e2rfc, results
 from ident.identification.campaign import analyze_campaign
 from ident.model import flat_plate
 from ident.model import flutter as fl
@@ -78,7 +78,7 @@ def test_a_model_without_still_air_modes_is_an_identification_error_not_a_crash(
     real = e2rfc.identify(data, FLAT_PLATE, n_lags=1, with_A3=True)
     A = real.A.copy()
     A[2] = 1e3 * np.eye(2)
-    wild = e2rfc.IdentifiedModel(A, real.d, real.diagnostics)
+    wild = results.IdentifiedModel(A, real.d, real.diagnostics)
     monkeypatch.setattr(e2rfc, "identify", lambda *args, **kwargs: wild)
     with pytest.raises(IdentError, match=r"n_lags=1, A3=fitted.*oscillatory still-air modes"):
         analyze_campaign(data, FLAT_PLATE)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from ident import RankDeficiencyError, RationalFunctionModel, Release, roger_fit
-from ident.identification import e2rfc
+from ident.identification import e2rfc, results
 from ident.identification._e2rfc_problem import MAX_CONDITION
 from ident.model import flat_plate, flutter
 from ident.numerics.selection import structure_label, within_one_se
@@ -200,10 +200,10 @@ def test_an_alternative_without_still_air_modes_widens_the_spread_instead_of_fai
     model = e2rfc.identify(data, FLAT_PLATE, n_lags=2, with_A3=True)
     A = model.A.copy()
     A[2] = 1e3 * np.eye(2)  # A3 1000 times the plate's: the heave and pitch inertia overturned
-    wild = e2rfc.IdentifiedModel(A, model.d, model.diagnostics)
+    wild = results.IdentifiedModel(A, model.d, model.diagnostics)
     with pytest.raises(flutter.StillAirModesError, match="oscillatory still-air modes"):
         flutter.analyze(FLAT_PLATE, wild)
-    with_wild = e2rfc.IdentifiedModel(model.A, model.d, dataclasses.replace(
+    with_wild = results.IdentifiedModel(model.A, model.d, dataclasses.replace(
         model.diagnostics, alternatives=(wild,)))
     spread = with_wild.structure_spread(FLAT_PLATE)
     assert spread.speeds[0] == pytest.approx(U_F, rel=1e-6) and spread.speeds[1] is None
@@ -237,7 +237,7 @@ def test_one_lag_more_counts_only_where_the_data_allow_it(finer_kind, rejected, 
              "low": RationalFunctionModel(10.0 * JONES.A, JONES.d),
              "in range": RationalFunctionModel(1.05 * JONES.A, JONES.d)}[finer_kind]
     finer_speed = flutter.analyze(FLAT_PLATE, finer).speed
-    injected = e2rfc.IdentifiedModel(model.A, model.d, dataclasses.replace(
+    injected = results.IdentifiedModel(model.A, model.d, dataclasses.replace(
         diag, _refits={**diag._refits, "finer": finer, "finer_rejected": rejected}))
     u = injected.uncertainty(FLAT_PLATE)
     move = {"zero": 0.0, "to U_max": flutter.analyze(FLAT_PLATE, model).U_max - u.speed,
@@ -271,12 +271,12 @@ def test_the_rejection_of_one_lag_more_is_the_candidates_held_out_error():
 
 def test_a_structure_without_flutter_leaves_the_spread_open_above():
     """No flutter below U_max for one structure: the high end is infinite, and said so."""
-    spread = e2rfc.StructureSpread(("n_lags=1, A3=zero", "n_lags=2, A3=zero"), (12.0, None),
+    spread = results.StructureSpread(("n_lags=1, A3=zero", "n_lags=2, A3=zero"), (12.0, None),
                                    (0.1, None), 40.0)
     assert (spread.low, spread.high) == (12.0, np.inf)
     assert spread.summary() == ("12.00 m/s to no flutter below 40 m/s over 2 structures within "
                                 "one SE")
-    none = e2rfc.StructureSpread(("a", "b"), (None, None), (None, None), 40.0)
+    none = results.StructureSpread(("a", "b"), (None, None), (None, None), 40.0)
     assert (none.low, none.high) == (None, None)
     assert none.summary() == "no flutter below 40 m/s over 2 structures within one SE"
 

@@ -17,7 +17,8 @@ import pytest
 
 from ident import Release
 from ident.identification import e2rfc
-from ident.identification.e2rfc import RANDOM_RESPONSE_LIMIT, FlutterUncertainty
+from ident.identification.results import RANDOM_RESPONSE_LIMIT
+from ident.identification.uncertainty import FlutterUncertainty
 from ident.model import flat_plate
 from ident.model import flutter as fl
 from ident.model.quasi_steady import StaticCoefficients

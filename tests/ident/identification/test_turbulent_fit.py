@@ -13,7 +13,7 @@ import pytest
 from scipy.signal import lfilter
 
 from ident import Release
-from ident.identification import e2rfc
+from ident.identification import e2rfc, results
 from ident.identification._turbulent_fit import MIN_HOLD_S, ar_fit
 from ident.model import flat_plate
 from ident.model import flutter as fl
@@ -135,7 +135,7 @@ def test_short_holds_leave_todays_estimator_with_a_warning(turbulent_releases):
                           moment=h.moment[keep])
         short.append(dataclasses.replace(r, hold=cut))
     model = e2rfc.identify(short, FLAT_PLATE)
-    assert model.diagnostics.estimator == e2rfc.ESTIMATOR_E2RFC
+    assert model.diagnostics.estimator == results.ESTIMATOR_E2RFC
     assert any(f">= {MIN_HOLD_S:g} s before each release" in w
                for w in model.diagnostics.warnings)
 
@@ -151,7 +151,7 @@ def test_smooth_flow_identification_is_unchanged():
     held = campaign(seed=1, Iw=0.0, hold_s=MIN_HOLD_S)
     with_hold = e2rfc.identify(held, FLAT_PLATE)
     without = e2rfc.identify([dataclasses.replace(r, hold=None) for r in held], FLAT_PLATE)
-    assert with_hold.diagnostics.estimator == e2rfc.ESTIMATOR_E2RFC
+    assert with_hold.diagnostics.estimator == results.ESTIMATOR_E2RFC
     np.testing.assert_array_equal(with_hold.A, without.A)
     np.testing.assert_array_equal(with_hold.d, without.d)
 

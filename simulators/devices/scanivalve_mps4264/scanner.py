@@ -1,16 +1,21 @@
-"""Simulated Scanivalve MPS4264-class pressure scanner: ASCII command and binary TCP servers.
+"""Simulated Scanivalve MPS4264-class pressure scanner: the device, its commands and its frames.
 
-Responsibility: speak the scanner's wire protocol on 127.0.0.1 (``docs/wire_formats.md``, "Pressure
-scanner") from the virtual tunnel's pressures: a TCP command server answering ASCII commands, and
-one TCP binary data server per 64-channel module (module ``k`` on port ``data_port + k``, our
-[design] for several modules, since the 0x6D packet carries no module field); frames at the
-commanded rate on the device's own clock (offset, drift), with seeded noise, sensor zero offsets and
-their CALZ, the external-trigger time of the tunnel's trigger line, both byte orders, a bounded
-frame buffer that drops frames when the client stalls, and fault injection. It keeps truth counters
-(frames produced, sent, dropped with the reason) so tests can prove that no frame was lost that the
-simulator did not drop. Not responsible for: UDP/FTP outputs, ASCII/CSV/LabVIEW scan formats, RAW
-packets, or anything of the driver (this module imports nothing from ``daq``: the packets are
-encoded here from the manual facts, independently of the driver's decoder).
+Responsibility: :class:`SimScanivalveMps4264`, the scanner as one state machine over one device
+state, speaking the wire protocol on 127.0.0.1 (``docs/wire_formats.md``, "Pressure scanner")
+from the virtual tunnel's pressures: the ASCII commands and their replies
+(:meth:`~SimScanivalveMps4264.handle_command`), frames at the commanded rate on the device's own
+clock (offset, drift), with seeded noise, sensor zero offsets and their CALZ, the
+external-trigger time of the tunnel's trigger line, both byte orders, a bounded frame buffer per
+module that drops frames when the client stalls, and fault injection. Its parts: the packets
+(:mod:`~simulators.devices.scanivalve_mps4264.packets`), the TCP servers, a command server and
+one binary data server per 64-channel module (module ``k`` on port ``data_port + k``, our
+[design] for several modules, since the 0x6D packet carries no module field:
+:mod:`~simulators.devices.scanivalve_mps4264.servers`), and the truth counters (frames produced,
+sent, dropped with the reason: :mod:`~simulators.devices.scanivalve_mps4264.truth`) by which
+tests prove that no frame was lost that the simulator did not drop. Not responsible for:
+UDP/FTP outputs, ASCII/CSV/LabVIEW scan formats, RAW packets, or anything of the driver (this
+package imports nothing from ``daq``: the packets are encoded from the manual facts,
+independently of the driver's decoder).
 
 Commands (CR, LF or CR LF terminated, case-insensitive; replies end with CR LF [unverified]):
 ``STATUS`` -> ``STATUS: READY|SCAN|CALZ``; ``SCAN``; ``STOP``; ``CALZ`` (status ``CALZ`` for
@@ -28,23 +33,15 @@ the scan start), ``ptp_lock`` (a step of the frame time), drift (the :class:`Dev
 CALZ with the wind on (no injection needed: the zero then holds the wind's pressures, an offset
 error on every tap), ``invalid_command``, and ``tcp_reset`` (the data connections are reset with
 an RST mid-scan and the scan restarts with the counter from 1).
-
-Longer than 600 lines: the instrument's whole command set (ASCII commands and their
-replies, settings, calibration, the binary frame stream and its faults) is one state machine
-over one device state; split, each part would reach into the others' state.
 """
 
 from __future__ import annotations
 
 import math
-import select
 import socket
-import struct
 import threading
 import time
-from collections import deque
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
 from types import TracebackType
 from typing import Any
 
@@ -52,127 +49,31 @@ import numpy as np
 import numpy.typing as npt
 
 from simulators.clock import DeviceClock
+from simulators.devices.scanivalve_mps4264.packets import (
+    CHANNELS,
+    NS,
+    PSI_PA,
+    TEMPS,
+    UNITS,
+    words_eu,
+    words_legacy,
+)
+from simulators.devices.scanivalve_mps4264.servers import (
+    DataPort,
+    QueuedFrame,
+    bind_consecutive,
+    serve_commands,
+)
+from simulators.devices.scanivalve_mps4264.truth import FrameRuns, SimTruth
 from simulators.noise import KeyedNoise, key_from
 from simulators.virtual_tunnel import VirtualTunnel
 
-__all__ = ["FAULTS", "FrameRuns", "SimScanivalveMps4264", "SimTruth"]
+__all__ = ["FAULTS", "SimScanivalveMps4264"]
 
 #: Faults :meth:`SimScanivalveMps4264.inject` accepts.
 FAULTS = ("drop_frames", "tcp_reset", "ptp_absent", "ptp_lock", "invalid_command")
 
-_CHANNELS = 64  # pressure channels per module (mps-protocol.h)
-_TEMPS = 8  # temperature channels per module
-_PSI_PA = 6894.75977  # Pa per psi: the PA factor of the units table (mps-protocol.h)
-#: SET UNITS name -> (Appendix A unit index, conversion factor from psi).
-_UNITS = {"PSI": (0, 1.0), "KPA": (14, _PSI_PA / 1000.0), "PA": (23, _PSI_PA)}
-_TYPE_EU64, _SIZE_EU64 = 0x6D, 304
-_TYPE_LEGACY, _SIZE_LEGACY = 0x0A, 348
-_NS = 1_000_000_000
 _MAX_BATCH = 2000  # frames produced per generator step at most (catch-up after a stall)
-_SEND_BATCH = 256  # frames handed to one send() loop at most
-
-
-def _words_eu(frame: npt.NDArray[np.int64], t_ns: npt.NDArray[np.int64],
-              temps: npt.NDArray[np.float32], press: npt.NDArray[np.float32]
-              ) -> npt.NDArray[np.uint32]:
-    """MPS-4264 EU packet (type 0x6D, 304 bytes) as 76 words per row (mps-protocol.h)."""
-    words = np.empty((frame.size, _SIZE_EU64 // 4), np.uint32)
-    words[:, 0] = _TYPE_EU64
-    words[:, 1] = frame % (1 << 32)
-    words[:, 2] = t_ns // _NS
-    words[:, 3] = t_ns % _NS
-    words[:, 4:12] = temps.view(np.uint32)
-    words[:, 12:76] = press.view(np.uint32)
-    return words
-
-
-def _words_legacy(frame: npt.NDArray[np.int64], t_ns: npt.NDArray[np.int64],
-                  temps: npt.NDArray[np.float32], press: npt.NDArray[np.float32], *,
-                  serial: int, rate_hz: float, unit_index: int, conversion: float,
-                  start_ns: int, ext_rel_ns: npt.NDArray[np.int64]) -> npt.NDArray[np.uint32]:
-    """Legacy 64-channel packet (type 0x0A, 348 bytes) as 87 words per row (mps-protocol.h).
-
-    ``ext_rel_ns`` < 0 means no external trigger yet: every trigger field is 0.
-    """
-    n = frame.size
-    words = np.zeros((n, _SIZE_LEGACY // 4), np.uint32)
-    words[:, 0] = _TYPE_LEGACY
-    words[:, 1] = _SIZE_LEGACY
-    words[:, 2] = frame % (1 << 32)
-    words[:, 3] = np.uint32(serial)
-    words[:, 4] = np.float32(rate_hz).view(np.uint32)
-    words[:, 5] = 0  # valve_status 0 = Px (the MPS4264 has no calibration valve)
-    words[:, 6] = unit_index
-    words[:, 7] = np.float32(conversion).view(np.uint32)
-    words[:, 8] = start_ns // _NS
-    words[:, 9] = start_ns % _NS
-    has = ext_rel_ns >= 0
-    rel = np.where(has, ext_rel_ns, 0)
-    words[:, 10] = (rel // 1000) % (1 << 32)  # ext_trigger_time_us
-    words[:, 11:19] = temps.view(np.uint32)
-    words[:, 19:83] = press.view(np.uint32)
-    words[:, 83] = t_ns // _NS
-    words[:, 84] = t_ns % _NS
-    words[:, 85] = rel // _NS
-    words[:, 86] = rel % _NS
-    return words
-
-
-class FrameRuns:
-    """Frame counters kept as runs ``[scan id, first, last]``: constant memory while gapless."""
-
-    def __init__(self) -> None:
-        self.runs: list[list[int]] = []
-
-    def add(self, scan_id: int, counter: int) -> None:
-        """Record one frame."""
-        if self.runs and self.runs[-1][0] == scan_id and self.runs[-1][2] + 1 == counter:
-            self.runs[-1][2] = counter
-        else:
-            self.runs.append([scan_id, counter, counter])
-
-    def counters(self, scan_id: int) -> npt.NDArray[np.int64]:
-        """Counters recorded for ``scan_id``, in the order recorded."""
-        parts = [np.arange(first, last + 1) for s, first, last in self.runs if s == scan_id]
-        return np.concatenate(parts).astype(np.int64) if parts else np.zeros(0, np.int64)
-
-    def __len__(self) -> int:
-        return sum(last - first + 1 for _, first, last in self.runs)
-
-
-@dataclass
-class SimTruth:
-    """What the simulator did, per module: frames produced, sent and dropped.
-
-    A scan id starts at 1 with the first ``SCAN`` and increases at every ``SCAN`` and at every
-    restart after a ``tcp_reset``. ``produced`` and ``sent`` (bytes handed to the client's
-    connection) are :class:`FrameRuns`; ``dropped`` holds ``(scan id, counter, reason)`` with
-    reasons ``"fault"`` (``drop_frames``), ``"overrun"`` (buffer full), ``"reset"`` (lost in a
-    TCP reset) and ``"superseded"`` (unsent at the next ``SCAN``). ``calz_wind_speeds`` lists
-    the wind speed (m/s) at every CALZ.
-    """
-
-    produced: list[FrameRuns] = field(default_factory=list)
-    sent: list[FrameRuns] = field(default_factory=list)
-    dropped: list[list[tuple[int, int, str]]] = field(default_factory=list)
-    calz_wind_speeds: list[float] = field(default_factory=list)
-
-    def sent_counters(self, module: int, scan_id: int) -> npt.NDArray[np.int64]:
-        """Counters of the frames of ``scan_id`` whose bytes went to a client, in order."""
-        return self.sent[module].counters(scan_id)
-
-    def dropped_counters(self, module: int, scan_id: int,
-                         reason: str | None = None) -> npt.NDArray[np.int64]:
-        """Counters of the frames of ``scan_id`` dropped (for ``reason``, or any), sorted."""
-        return np.array(sorted(c for s, c, r in self.dropped[module]
-                               if s == scan_id and (reason is None or r == reason)), np.int64)
-
-
-@dataclass
-class _Entry:
-    scan_id: int
-    counter: int
-    data: bytes
 
 
 class SimScanivalveMps4264:
@@ -241,16 +142,16 @@ class SimScanivalveMps4264:
         if not (isinstance(modules, int) and 1 <= modules <= 8):
             raise ValueError(f"modules must be an integer in [1, 8], got {modules!r}")
         n_taps = tunnel.taps.n_taps
-        if n_taps > _CHANNELS * modules:
+        if n_taps > CHANNELS * modules:
             raise ValueError(f"{n_taps} taps do not fit in {modules} module(s) of 64 channels")
         channels = list(range(n_taps)) if tap_channels is None else [int(c) for c in tap_channels]
-        if tap_channels is None and not n_taps <= pitot_channel < _CHANNELS * modules:
-            raise ValueError(f"pitot_channel must be in [{n_taps}, {_CHANNELS * modules - 1}] "
+        if tap_channels is None and not n_taps <= pitot_channel < CHANNELS * modules:
+            raise ValueError(f"pitot_channel must be in [{n_taps}, {CHANNELS * modules - 1}] "
                              f"(after the {n_taps} taps), got {pitot_channel!r}")
         if len(channels) != n_taps or len(set(channels) | {pitot_channel}) != n_taps + 1 or \
-                not all(0 <= c < _CHANNELS * modules for c in [*channels, pitot_channel]):
+                not all(0 <= c < CHANNELS * modules for c in [*channels, pitot_channel]):
             raise ValueError(f"tap_channels must be {n_taps} distinct channels in "
-                             f"[0, {_CHANNELS * modules - 1}] besides pitot_channel = "
+                             f"[0, {CHANNELS * modules - 1}] besides pitot_channel = "
                              f"{pitot_channel}, got {tap_channels!r}")
         self.tap_channels = np.asarray(channels, dtype=np.intp)
         self.pitot_error = tuple(pitot_error)
@@ -274,11 +175,11 @@ class SimScanivalveMps4264:
         self.serial_number = int(serial_number)
         self.clock = clock if clock is not None else DeviceClock()
         self._rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
-        n_ch = _CHANNELS * modules
+        n_ch = CHANNELS * modules
         self._sensor_offset = self._rng.normal(0.0, sensor_offset_pa, n_ch)
         # Pressure and temperature noise keyed to the release and the frame (simulators.noise):
         # a seed gives the same noise on every decay whatever the timing of the release.
-        self._noise = KeyedNoise(key_from(self._rng), n_ch + _TEMPS * modules, 512)
+        self._noise = KeyedNoise(key_from(self._rng), n_ch + TEMPS * modules, 512)
         self._calz_offset = np.zeros(n_ch)
         self.truth = SimTruth(produced=[FrameRuns() for _ in range(modules)],
                               sent=[FrameRuns() for _ in range(modules)],
@@ -304,11 +205,9 @@ class SimScanivalveMps4264:
         self._reset_at: int | None = None
         self._invalid_pending = 0
         # Data paths.
-        self._buffers: list[deque[_Entry]] = [deque() for _ in range(modules)]
-        self._reset_request = [False] * modules
-        self._flush_request = [False] * modules
-        self._wake = [threading.Event() for _ in range(modules)]
         self._stop = threading.Event()
+        self._ports = [DataPort(self._lock, self._stop, self.truth.sent[k], self.truth.dropped[k],
+                                send_buffer_bytes) for k in range(modules)]
         self._threads: list[threading.Thread] = []
         self._cmd_listener: socket.socket | None = None
         self._data_listeners: list[socket.socket] = []
@@ -354,12 +253,14 @@ class SimScanivalveMps4264:
             raise RuntimeError("the simulator is already started")
         self._stop.clear()
         self._cmd_listener = socket.create_server(("127.0.0.1", 0))
-        self._data_listeners = self._bind_consecutive(self.modules)
+        self._data_listeners = bind_consecutive(self.modules)
         targets: list[tuple[str, Any, tuple[Any, ...]]] = [
-            ("mps4264-cmd", self._serve_commands, ()),
+            ("mps4264-cmd", serve_commands, (self._cmd_listener, self._stop,
+                                             self.handle_command)),
             ("mps4264-gen", self._generate, ()),
         ]
-        targets += [(f"mps4264-data{k}", self._serve_data, (k,)) for k in range(self.modules)]
+        targets += [(f"mps4264-data{k}", self._ports[k].serve, (self._data_listeners[k],))
+                    for k in range(self.modules)]
         for name, target, args in targets:
             thread = threading.Thread(target=target, args=args, name=name, daemon=True)
             thread.start()
@@ -370,8 +271,8 @@ class SimScanivalveMps4264:
     def stop(self) -> None:
         """Stop every thread and close every socket; idempotent."""
         self._stop.set()
-        for event in self._wake:
-            event.set()
+        for port in self._ports:
+            port.wake.set()
         for thread in self._threads:
             thread.join(timeout=5.0)
         self._threads = []
@@ -388,23 +289,6 @@ class SimScanivalveMps4264:
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  tb: TracebackType | None) -> None:
         self.stop()
-
-    @staticmethod
-    def _bind_consecutive(n: int) -> list[socket.socket]:
-        """Bind ``n`` consecutive free ports of 127.0.0.1 (the OS picks the first)."""
-        for _ in range(50):
-            first = socket.create_server(("127.0.0.1", 0))
-            port = first.getsockname()[1]
-            socks = [first]
-            try:
-                for k in range(1, n):
-                    socks.append(socket.create_server(("127.0.0.1", port + k)))
-            except OSError:
-                for sock in socks:
-                    sock.close()
-                continue
-            return socks
-        raise OSError(f"no {n} consecutive free ports on 127.0.0.1")
 
     # -- faults ----------------------------------------------------------------------------------
     def inject(self, fault: str, **params: Any) -> None:
@@ -466,53 +350,9 @@ class SimScanivalveMps4264:
         return (t_dev - self.clock.offset_s) / (1.0 + 1e-6 * self.clock.drift_ppm)
 
     def _ptp_start_ns(self) -> int:
-        return self.ptp_epoch_s * _NS + round(self._t0_dev * 1e9)
+        return self.ptp_epoch_s * NS + round(self._t0_dev * 1e9)
 
     # -- commands --------------------------------------------------------------------------------
-    def _serve_commands(self) -> None:
-        listener = self._cmd_listener
-        assert listener is not None
-        clients: dict[socket.socket, bytearray] = {}
-        try:
-            while not self._stop.is_set():
-                readable, _, _ = select.select([listener, *clients], [], [], 0.05)
-                for sock in readable:
-                    if sock is listener:
-                        conn, _ = listener.accept()
-                        clients[conn] = bytearray()
-                        continue
-                    try:
-                        data = sock.recv(4096)
-                    except OSError:
-                        data = b""
-                    if not data:
-                        del clients[sock]
-                        sock.close()
-                        continue
-                    buf = clients[sock]
-                    buf += data
-                    replies = bytearray()
-                    while True:
-                        cut = min((i for i in (buf.find(b"\r"), buf.find(b"\n")) if i >= 0),
-                                  default=-1)
-                        if cut < 0:
-                            break
-                        line = bytes(buf[:cut]).decode("ascii", errors="replace")
-                        del buf[:cut + 1]
-                        replies += self.handle_command(line)
-                    if len(buf) > 4096:  # a line that never ends: answer it and forget it
-                        replies += self.handle_command(bytes(buf[:64]).decode("ascii", "replace"))
-                        buf.clear()
-                    if replies:
-                        try:
-                            sock.sendall(replies)
-                        except OSError:
-                            del clients[sock]
-                            sock.close()
-        finally:
-            for sock in clients:
-                sock.close()
-
     def handle_command(self, line: str) -> bytes:
         """Execute one command line; return the reply bytes (possibly empty)."""
         text = " ".join(line.split())
@@ -575,7 +415,7 @@ class SimScanivalveMps4264:
                 return False
             self._packet = "legacy" if code == 0x40 else "eu"
             return True
-        if name == "UNITS" and len(values) == 1 and values[0] in _UNITS:
+        if name == "UNITS" and len(values) == 1 and values[0] in UNITS:
             self._units = values[0]
             return True
         return False
@@ -601,20 +441,15 @@ class SimScanivalveMps4264:
         self._step_ns = 0
         self._reset_at = None
         for k in range(self.modules):
-            self._discard(k, "superseded")
-            self._flush_request[k] = True
+            self._ports[k].discard("superseded")
+            self._ports[k].flush_request = True
         self._state = "SCAN"
-
-    def _discard(self, module: int, reason: str) -> None:
-        buffer = self._buffers[module]
-        self.truth.dropped[module].extend((e.scan_id, e.counter, reason) for e in buffer)
-        buffer.clear()
 
     # -- frames ----------------------------------------------------------------------------------
     def _truth_pressures(self, t_true: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """Noise-free pressures of every channel at true times ``t_true``, Pa."""
         taps, qd = self.tunnel.pressures(t_true)
-        p = np.zeros((t_true.size, _CHANNELS * self.modules))
+        p = np.zeros((t_true.size, CHANNELS * self.modules))
         p[:, self.tap_channels] = taps
         p[:, self.pitot_channel] = self._pitot_reading(qd)
         return p
@@ -655,15 +490,15 @@ class SimScanivalveMps4264:
     def _produce(self, counters: npt.NDArray[np.int64]) -> None:
         n = counters.size
         scale = 1.0 + 1e-6 * self.clock.drift_ppm
-        elapsed_ns = ((counters - 1) * _NS / self._rate_hz).round().astype(np.int64)
+        elapsed_ns = ((counters - 1) * NS / self._rate_hz).round().astype(np.int64)
         t_dev = self._t0_dev + elapsed_ns.astype(np.float64) * 1e-9
         t_true = ((t_dev - self.clock.offset_s) / scale).astype(np.float64)
         p = self._truth_pressures(t_true) + self._sensor_offset - self._calz_offset
         normals = self._noise.sampled(self.tunnel.release_times(), t_true, t_dev, self.clock,
                                       self._rate_hz)
         p += self.noise_pa * normals[:, :p.shape[1]]
-        index, conversion = _UNITS[self._units]
-        p_units = (p * (conversion / _PSI_PA)).astype(np.float32)
+        index, conversion = UNITS[self._units]
+        p_units = (p * (conversion / PSI_PA)).astype(np.float32)
         temps = (self.tunnel.air.temperature_k - 273.15
                  + self.temperature_noise_c * normals[:, p.shape[1]:]).astype(np.float32)
         t_ns = self._base_ns + self._step_ns + elapsed_ns
@@ -675,20 +510,20 @@ class SimScanivalveMps4264:
             ext = np.where(last >= 0, np.round(rel[np.maximum(last, 0)]).astype(np.int64), -1)
         order = ">u4" if self.byte_order == "big" else "<u4"
         for k in range(self.modules):
-            chans = slice(_CHANNELS * k, _CHANNELS * (k + 1))
-            tk = np.ascontiguousarray(temps[:, _TEMPS * k:_TEMPS * (k + 1)])
+            chans = slice(CHANNELS * k, CHANNELS * (k + 1))
+            tk = np.ascontiguousarray(temps[:, TEMPS * k:TEMPS * (k + 1)])
             pk = np.ascontiguousarray(p_units[:, chans])
             if self._packet == "eu":
-                words = _words_eu(counters, t_ns, tk, pk)
+                words = words_eu(counters, t_ns, tk, pk)
             else:
-                words = _words_legacy(
+                words = words_legacy(
                     counters, t_ns, tk, pk, serial=self.serial_number + k, rate_hz=self._rate_hz,
                     unit_index=index, conversion=conversion,
                     start_ns=self._base_ns + self._step_ns, ext_rel_ns=ext)
             data = words.astype(order).tobytes()
             size = words.shape[1] * 4
             drop = self._drop_mask(counters, k)
-            buffer = self._buffers[k]
+            buffer = self._ports[k].buffer
             for i, counter in enumerate(counters.tolist()):
                 self.truth.produced[k].add(self._scan_id, counter)
                 if drop[i]:
@@ -696,8 +531,9 @@ class SimScanivalveMps4264:
                 elif len(buffer) >= self.buffer_frames:
                     self.truth.dropped[k].append((self._scan_id, counter, "overrun"))
                 else:
-                    buffer.append(_Entry(self._scan_id, counter, data[i * size:(i + 1) * size]))
-            self._wake[k].set()
+                    buffer.append(QueuedFrame(self._scan_id, counter,
+                                              data[i * size:(i + 1) * size]))
+            self._ports[k].wake.set()
 
     def _drop_mask(self, counters: npt.NDArray[np.int64], module: int) -> npt.NDArray[np.bool_]:
         drop = np.zeros(counters.size, bool)
@@ -712,9 +548,9 @@ class SimScanivalveMps4264:
     def _tcp_reset(self) -> None:
         """Fault: reset the data connections (RST) and restart the scan with the counter at 1."""
         for k in range(self.modules):
-            self._discard(k, "reset")
-            self._reset_request[k] = True
-            self._wake[k].set()
+            self._ports[k].discard("reset")
+            self._ports[k].reset_request = True
+            self._ports[k].wake.set()
         self._drop = {}
         self._scan_id += 1
         self._next_counter = 1
@@ -723,106 +559,3 @@ class SimScanivalveMps4264:
         self._base_ns = self._ptp_start_ns() if self._ptp else 0
         self._step_ns = 0
         self._reset_at = None
-
-    # -- data servers ----------------------------------------------------------------------------
-    def _serve_data(self, k: int) -> None:
-        listener = self._data_listeners[k]
-        listener.setblocking(False)
-        client: socket.socket | None = None
-        inflight: list[_Entry] = []
-        payload = b""
-        ends: list[int] = []
-        sent = done = 0
-
-        def requeue(reason: str | None) -> None:
-            """Frames of ``inflight`` not fully sent: back to the buffer, or dropped."""
-            rest = inflight[done:]
-            if reason is None:
-                self._buffers[k].extendleft(reversed(rest))
-            else:
-                self.truth.dropped[k].extend((e.scan_id, e.counter, reason) for e in rest)
-
-        try:
-            while not self._stop.is_set():
-                conn = self._accept(listener)
-                with self._lock:
-                    if conn is not None:
-                        if client is not None:
-                            client.close()
-                            requeue(None)
-                            inflight = []
-                        client = conn
-                    if self._reset_request[k]:
-                        self._reset_request[k] = False
-                        requeue("reset")
-                        inflight = []
-                        if client is not None:
-                            client.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER,
-                                              struct.pack("ii", 1, 0))
-                            client.close()  # an RST: the peer's next read fails
-                            client = None
-                    if self._flush_request[k]:
-                        self._flush_request[k] = False
-                        requeue("superseded")
-                        inflight = []
-                    if client is not None and not inflight:
-                        buffer = self._buffers[k]
-                        inflight = [buffer.popleft() for _ in range(min(len(buffer),
-                                                                         _SEND_BATCH))]
-                        payload = b"".join(e.data for e in inflight)
-                        ends = np.cumsum([len(e.data) for e in inflight]).tolist()
-                        sent = done = 0
-                if client is None or not inflight:
-                    if client is not None and self._peer_closed(client):
-                        client.close()
-                        client = None
-                    self._wake[k].wait(0.005)
-                    self._wake[k].clear()
-                    continue
-                try:
-                    sent += client.send(payload[sent:])
-                except BlockingIOError:
-                    select.select([], [client], [], 0.01)
-                    continue
-                except OSError:  # the client went away: keep its unsent frames for the next
-                    with self._lock:
-                        requeue(None)
-                    inflight = []
-                    client.close()
-                    client = None
-                    continue
-                with self._lock:
-                    while done < len(inflight) and ends[done] <= sent:
-                        self.truth.sent[k].add(inflight[done].scan_id, inflight[done].counter)
-                        done += 1
-                    if done == len(inflight):
-                        inflight = []
-        finally:
-            if client is not None:
-                client.close()
-
-    def _accept(self, listener: socket.socket) -> socket.socket | None:
-        """Return the newest pending data connection, or None (older pending ones are closed)."""
-        newest = None
-        while True:
-            try:
-                conn, _ = listener.accept()
-            except (BlockingIOError, InterruptedError):
-                return newest
-            if newest is not None:
-                newest.close()
-            conn.setblocking(False)
-            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            if self.send_buffer_bytes is not None:
-                conn.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, self.send_buffer_bytes)
-            newest = conn
-
-    @staticmethod
-    def _peer_closed(sock: socket.socket) -> bool:
-        try:
-            data = sock.recv(4096)
-        except (BlockingIOError, InterruptedError):
-            return False
-        except OSError:
-            return True
-        return not data
