@@ -33,6 +33,10 @@ class DriverEntry:
         Line settings the device needs (e.g. 7E1 at 9600 baud), passed to
         :func:`daq.transports.byte_transport.open_transport`; a ``serial://`` URL's query
         overrides them.
+    link : callable or None
+        For a driver that reaches its device through a vendor library rather than bytes or
+        registers (NI-DAQmx): ``link(url)`` returns what the factory takes instead of a
+        transport (parsed from the URL, no I/O). None: a byte transport or a Modbus bus.
     """
 
     name: str
@@ -40,3 +44,4 @@ class DriverEntry:
     factory: Callable[..., Any]
     validate: Callable[[Mapping[str, Any], str], Any]
     transport_defaults: Mapping[str, Any] = field(default_factory=dict)
+    link: Callable[[str], Any] | None = None

@@ -2,7 +2,8 @@
 
 Each driver module exports its :class:`~daq.instruments.entry.DriverEntry` as ``DRIVER`` (its
 class, its settings validator and the role it can fill); this module imports the five driver
-modules windrig ships, statically, and collects their entries. The rig config asks the registry
+modules windrig ships, statically, and collects their entries (the NI-DAQmx module exports two,
+``LASER_DRIVER`` and ``ANALOG_DRIVER``). The rig config asks the registry
 to validate an instrument table (:func:`validate_settings`), and
 :func:`daq.instruments.build.build_driver` asks it for the factory. No ``eval`` and no import of
 arbitrary strings: the drivers are the imports below, and :func:`register` adds an entry built
@@ -19,6 +20,7 @@ from daq.instruments.abb_acs580 import driver as abb_acs580
 from daq.instruments.entry import DriverEntry
 from daq.instruments.microepsilon_ild1420 import driver as microepsilon_ild1420
 from daq.instruments.modbus_plc import driver as modbus_plc
+from daq.instruments.ni_daqmx import driver as ni_daqmx
 from daq.instruments.scanivalve_mps4264 import driver as scanivalve_mps4264
 from daq.instruments.vaisala_ptb330 import driver as vaisala_ptb330
 
@@ -29,6 +31,9 @@ _SHIPPED = (vaisala_ptb330, abb_acs580, modbus_plc, scanivalve_mps4264, microeps
 DRIVER_MODULES: tuple[str, ...] = tuple(module.__name__ for module in _SHIPPED)
 
 _REGISTRY: dict[str, DriverEntry] = {module.DRIVER.name: module.DRIVER for module in _SHIPPED}
+# The NI-DAQmx module has two entries (lasers and scaled analog inputs); it imports nidaqmx only
+# when one of its drivers is built (an optional extra).
+_REGISTRY.update({entry.name: entry for entry in (ni_daqmx.LASER_DRIVER, ni_daqmx.ANALOG_DRIVER)})
 
 
 def register(entry: DriverEntry) -> None:
