@@ -247,14 +247,14 @@ class SimNiDaqmx:
         if op == "start":
             self._start_task(request, task, conn)
             return {"ok": True}, b""
-        if not task:
-            raise _Refused(_INVALID, "the task is not running")
-        if op == "stop":
+        if op == "stop":  # stopping a task that is not running is not an error (as DAQmx)
             with self._lock:
                 if self._ai_owner is conn:
                     self._ai, self._ai_owner = None, None
             task.clear()
             return {"ok": True}, b""
+        if not task:
+            raise _Refused(_INVALID, "the task is not running")
         total = self._total(task)
         if op == "total":
             return {"ok": True, "total": total}, b""

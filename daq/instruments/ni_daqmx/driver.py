@@ -84,6 +84,11 @@ class _NiInstrument:
         return self._group.reconnects
 
     @property
+    def task_group(self) -> TaskGroup:
+        """Measure the task this instrument shares (its faults' counts, its reconnect policy)."""
+        return self._group
+
+    @property
     def url(self) -> str:
         """Measure the task's URL."""
         return self.address.url

@@ -166,7 +166,10 @@ class TaskGroup:
             if not self._queues:
                 self.rate_hz = float(rate_hz)
                 self.buffer = self.address.buffer_samples(self.rate_hz)
-                self._start_tasks()
+                try:
+                    self._start_tasks()
+                except self.api.errors.DaqError as exc:
+                    raise _as_daq_error(self.address.url, exc) from exc
                 self._next, self._base, self._epoch, self._previous = 0, 0, 0, None
                 self._gaps = []
                 self._last_host_ns = time.monotonic_ns()
@@ -346,7 +349,7 @@ class TaskGroup:
         if code in DEVICE_LOST_CODES:
             self._reconnect(exc)
             return
-        raise DeviceError(f"{self.address.url}: NI-DAQmx error {code}: {_first_line(exc)}") from exc
+        raise _as_daq_error(self.address.url, exc) from exc
 
     def _reconnect(self, cause: Any) -> None:
         url = self.address.url
@@ -382,6 +385,13 @@ class TaskGroup:
         self._queues.clear()
         raise TransportError(f"{url}: the NI-DAQmx device did not come back after "
                              f"{self.reconnect_attempts} attempts") from last
+
+
+def _as_daq_error(url: str, exc: Any) -> DeviceError | TransportError:
+    """Return an NI-DAQmx error as daq's: a device not accessible, or the device's error."""
+    code = int(exc.error_code)
+    text = f"{url}: NI-DAQmx error {code}: {_first_line(exc)}"
+    return TransportError(text) if code in DEVICE_LOST_CODES else DeviceError(text)
 
 
 def _read_anywhere(task: Any, c: Any) -> None:
