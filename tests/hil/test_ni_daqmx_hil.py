@@ -91,17 +91,18 @@ def test_nidaq_lasers_record_a_release_matching_the_tunnel(tmp_path):
     assert np.isfinite(U).any()  # the scanner's Pitot, as on the serial-laser rig
 
 
-def test_an_analog_pitot_gives_the_wind_speed_of_a_rig_without_a_scanner(tmp_path):
-    text = without(NIDAQ, "[scanner]", "[[lasers]]").replace("ai0:2?", "ai0:3?")
-    text += '''
+NO_SCANNER = without(NIDAQ, "[scanner]", "[[lasers]]").replace("ai0:2?", "ai0:3?") + '''
 [[analog]]
 name = "pitot_daq"
 driver = "ni_daqmx_analog"
 url = "nidaqmx://Dev1/ai0:3?trigger=port0/line0&min=-10&max=10&terminal=diff"
 rate_hz = 2000.0
 channels = [{ name = "pitot", channel = "ai3", gain = 10.0, offset = 0.0, units = "Pa" }]
-''' + FAST_FAN
-    config = parse_rig_config(text, "no_scanner.toml")
+'''
+
+
+def test_an_analog_pitot_gives_the_wind_speed_of_a_rig_without_a_scanner(tmp_path):
+    config = parse_rig_config(NO_SCANNER + FAST_FAN, "no_scanner.toml")
     seen: dict[str, Any] = {}
     path = tmp_path / "run.h5"
     summary = record_simulated_run(config, path, duration_s=3.0, actions=scripted(seen),
@@ -126,6 +127,16 @@ def test_check_passes_the_simulated_nidaq_rig(capsys):
                  "--simulate"]) == 0
     out = capsys.readouterr().out
     assert "7 of 7 device(s) OK" in out and "2000.0 Hz (of 2000)" in out
+
+
+def test_check_inspects_an_analog_pitot(tmp_path, capsys):
+    path = tmp_path / "no_scanner.toml"
+    path.write_text(NO_SCANNER)
+    assert main(["check", "--config", str(path), "--simulate"]) == 0
+    out = capsys.readouterr().out
+    (row,) = [line for line in out.splitlines() if line.startswith("pitot_daq")]
+    # Wind off: the transducer reads ~0 Pa (noise 3 mPa), at the task's rate.
+    assert "2000.0 Hz (of 2000)" in row and "pitot " in row and row.rstrip().endswith("OK")
 
 
 def nidaq_only(tmp_path: Path) -> Path:

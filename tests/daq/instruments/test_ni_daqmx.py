@@ -77,6 +77,17 @@ def joined(readings: list[Reading], name: str) -> np.ndarray:
     return np.concatenate([r.channels[name] for r in readings])
 
 
+def test_construction_does_no_io_and_refuses_unknown_options():
+    # Port 9: nothing listens there; building (the API loaded, the task group joined) must
+    # not connect, only open() does.
+    d = laser("nidaqmx://Dev1/ai0?standin=127.0.0.1:9")
+    assert not d.is_open and d.describe()["distance"]["units"] == "m"
+    with pytest.raises(TransportError):
+        d.open()
+    with pytest.raises(TypeError):
+        NiDaqmxLaser(d.address, d.settings, no_such_option=1)  # type: ignore[call-arg]
+
+
 def test_continuous_reads_count_samples_on_the_sample_clock(tunnel):
     sim, standin = start_daq(tunnel)
     try:
