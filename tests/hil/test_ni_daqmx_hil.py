@@ -172,3 +172,38 @@ def test_check_without_the_runtime_names_it_in_one_line(tmp_path, capsys):
     assert len(failures) == 3
     assert all("the NI-DAQmx runtime (its C library) is not" in line and
                "python -m nidaqmx installdriver" in line for line in failures)
+
+
+def test_overflow_and_a_lost_device_are_gap_rows_in_the_run_file(tmp_path):
+    # A 0.5 s host buffer (1000 samples at 2 kHz), so that a 1.2 s stall overflows it.
+    text = NIDAQ.replace("terminal=diff", "terminal=diff&buffer_s=0.5")
+    config = parse_rig_config(text, "sim_flat_plate_nidaq.toml")
+
+    def actions(acq: Any, rig: Any) -> None:
+        daq = rig.simulators["laser_front"]  # one simulated DAQ for the three lasers
+        time.sleep(1.0)
+        daq.inject("stall", duration_s=1.2)
+        time.sleep(2.0)
+        daq.inject("device_lost", downtime_s=0.3)
+
+    path = tmp_path / "faults.h5"
+    summary = record_simulated_run(config, path, duration_s=5.5, actions=actions,
+                                   progress=False)
+    assert summary["errors"] == []
+    with h5py.File(path, "r") as f:
+        raw = f["entry/instrument/laser_front"]
+        gaps = raw["gaps"][:]
+        counter = raw["counter"][:]
+        epochs = np.unique(raw["device_time"][:] < 0.5)  # the new task's clock from 0
+        kinds = [k.decode() for k in f["entry/events"]["kind"]]
+        h = f["entry/sync/h"][:]
+    # Two gap rows: the overwritten samples, counted (the counter's hole, >= 0.7 s of them),
+    # then the lost device's restart (-1: unknown, the clock started again).
+    assert [int(g["length"]) == -1 for g in gaps] == [False, True], gaps
+    after, length = int(gaps[0]["after_counter"]), int(gaps[0]["length"])
+    k = int(np.searchsorted(counter, after))
+    assert counter[k] == after and counter[k + 1] == after + length + 1
+    assert length >= 0.7 * RATE
+    assert "clock_restart" in kinds and epochs.size == 2
+    # The sync view goes on after both faults.
+    assert np.isfinite(h[-200:]).all()

@@ -16,8 +16,8 @@ Faults, as the other drivers report theirs:
   length is counted on the sample index (exact);
 - a device that can no longer be accessed (-201003, e.g. a USB DAQ unplugged): the tasks are
   recreated with a bounded backoff; the sample clock starts again at 0 (the device time goes
-  back, which the run writer takes as a clock restart) and the missing rows are a ``restart``
-  gap estimated from the host time; a device that does not come back is a
+  back: a ``restart`` gap of unknown length, which the run writer takes as a clock restart),
+  and the counter runs on by the rows missed, estimated from the host time; a device that does not come back is a
   :class:`~daq.errors.TransportError`;
 - any other NI-DAQmx error is a :class:`~daq.errors.DeviceError` naming its code.
 
@@ -210,9 +210,14 @@ class TaskGroup:
             return chunks
 
     def _bound_queues(self) -> None:
-        """Drop the oldest rows of an instrument that stopped reading (an ``overflow`` gap)."""
+        """Drop the oldest rows of an instrument that stopped reading (an ``overflow`` gap).
+
+        The bound is four host buffers: an instrument whose reader waits for the lock while
+        another reads a buffer's worth after a stall must not lose rows; one that stopped
+        reading must not keep the others' rows forever.
+        """
         for queue in self._queues.values():
-            while sum(len(c) for c in queue) > self.buffer and len(queue) > 1:
+            while sum(len(c) for c in queue) > 4 * self.buffer and len(queue) > 1:
                 dropped = queue.pop(0)
                 head = queue[0]
                 queue[0] = Chunk(head.volts, head.triggered, head.index, head.counter,
@@ -369,12 +374,13 @@ class TaskGroup:
                             self.reconnect_attempts, _first_line(exc))
                 continue
             assert self.rate_hz is not None
-            # The sample clock starts again at 0; the rows missed meanwhile are estimated from
-            # the host time (a restart gap: their length is not counted).
+            # The sample clock starts again at 0: a restart gap of unknown length (-1), which
+            # tells the run writer to map the new clock afresh. The counter runs on by the
+            # rows missed meanwhile, estimated from the host time.
             missing = max(0, round((time.monotonic_ns() - self._last_host_ns) * 1e-9
                                    * self.rate_hz))
             last_counter = self._base + self._next - 1
-            self._gaps.append(Gap(last_counter, missing, "restart"))
+            self._gaps.append(Gap(last_counter, -1, "restart"))
             self._base = last_counter + 1 + missing
             self._next, self._previous = 0, None
             self._epoch += 1

@@ -92,9 +92,7 @@ def test_continuous_reads_count_samples_on_the_sample_clock(tunnel):
     sim, standin = start_daq(tunnel)
     try:
         with laser(f"nidaqmx://Dev1/ai0:1?standin={standin}") as d:
-            started = time.monotonic()
-            readings = read_for(d, 1.0)
-            elapsed = time.monotonic() - started
+            readings = read_for(d, 1.5)
             described = d.describe()
     finally:
         sim.stop()
@@ -105,9 +103,12 @@ def test_continuous_reads_count_samples_on_the_sample_clock(tunnel):
     assert np.array_equal(counter, np.arange(counter[0], counter[0] + counter.size))
     assert np.array_equal(device_time, counter / RATE)
     assert not any(r.gaps for r in readings)
-    # Samples over host time: the 2 kHz clock, within the reads' arrival jitter (the last
-    # read ends up to one 20 ms block after the window: 4 %; the first starts with a backlog).
-    assert counter.size / elapsed == pytest.approx(RATE, rel=0.05)
+    # The sample clock against the host's: device time advanced over the arrival times of the
+    # first and last reads, within their jitter (a 20 ms block at each end of 1.5 s: 3 %; a
+    # loaded host delays a read by tens of ms more: 10 %).
+    host_ns = np.concatenate([r.host_time_ns for r in readings])
+    span = (host_ns[-1] - host_ns[0]) * 1e-9
+    assert (device_time[-1] - device_time[0]) / span == pytest.approx(1.0, rel=0.10)
     # ~20 ms blocks (40 samples), not one read per sample.
     assert np.median([len(r) for r in readings]) >= 30
 
@@ -209,15 +210,19 @@ def test_lost_device_is_recreated_with_a_restart_gap(tunnel):
     finally:
         sim.stop()
     gaps = [g for r in after for g in r.gaps]
-    assert [g.kind for g in gaps] == ["restart"]
+    # The new task's clock restarted: a restart of unknown length, as the writer expects.
+    assert [(g.kind, g.length) for g in gaps] == [("restart", -1)]
     counter = np.concatenate([r.counter for r in before + after])
     assert np.all(np.diff(counter) >= 1)  # the counter runs on across the new task
+    jump = int(np.max(np.diff(counter))) - 1
     epoch = joined(after, "epoch")
     t_dev = np.concatenate([r.device_time for r in after])
     first_new = int(np.argmax(epoch == 1))
     assert epoch[-1] == 1 and t_dev[first_new] < 0.3  # the new task's clock starts again at 0
-    # Estimated from the host time: the 0.25 s downtime and the backoff (0.1 + 0.2 s), < 1 s.
-    assert 0.25 * RATE <= gaps[0].length <= 1.0 * RATE
+    # The counter's jump, estimated from the host time: the 0.25 s downtime and the backoff
+    # (0.1 + 0.2 s), under 1 s.
+    assert gaps[0].after_counter == counter[np.argmax(np.diff(counter))]
+    assert 0.25 * RATE <= jump <= 1.0 * RATE
     assert sim.tasks_started == 2
 
 
