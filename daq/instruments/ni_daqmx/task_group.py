@@ -17,8 +17,8 @@ Faults, as the other drivers report theirs:
 - a device that can no longer be accessed (-201003, e.g. a USB DAQ unplugged): the tasks are
   recreated with a bounded backoff; the sample clock starts again at 0 (the device time goes
   back: a ``restart`` gap of unknown length, which the run writer takes as a clock restart),
-  and the counter runs on by the rows missed, estimated from the host time; a device that does not come back is a
-  :class:`~daq.errors.TransportError`;
+  and the counter runs on by the rows missed, estimated from the host time; a device that
+  does not come back is a :class:`~daq.errors.TransportError`;
 - any other NI-DAQmx error is a :class:`~daq.errors.DeviceError` naming its code.
 
 Not responsible for: scaling voltages (the drivers), the URL
