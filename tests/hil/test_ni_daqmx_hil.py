@@ -101,7 +101,7 @@ channels = [{ name = "pitot", channel = "ai3", gain = 10.0, offset = 0.0, units 
 '''
 
 
-def test_an_analog_pitot_gives_the_wind_speed_of_a_rig_without_a_scanner(tmp_path):
+def test_an_analog_pitot_gives_the_wind_speed_of_a_rig_without_a_scanner(tmp_path, capsys):
     config = parse_rig_config(NO_SCANNER + FAST_FAN, "no_scanner.toml")
     seen: dict[str, Any] = {}
     path = tmp_path / "run.h5"
@@ -120,6 +120,12 @@ def test_an_analog_pitot_gives_the_wind_speed_of_a_rig_without_a_scanner(tmp_pat
     # U from the transducer's dynamic pressure within 1 % (noise 3 mPa on ~22 Pa).
     assert np.nanmedian(U[late]) == pytest.approx(wind, rel=0.01)
     assert np.nanmax(q) == pytest.approx(0.5 * 1.204 * wind**2, rel=0.02)
+    # windrig info names the analog device's driver from the stored config.
+    capsys.readouterr()
+    assert main(["info", str(path)]) == 0
+    (row,) = [line for line in capsys.readouterr().out.splitlines()
+              if line.startswith("pitot_daq")]
+    assert row.split()[1] == "ni_daqmx_analog"
 
 
 def test_check_passes_the_simulated_nidaq_rig(capsys):

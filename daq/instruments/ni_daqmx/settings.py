@@ -213,9 +213,9 @@ class NiAnalogSettings:
         """Validate an ``[[analog]]`` table of the ``ni_daqmx_analog`` driver."""
         check_keys(table, where, {"rate_hz", "channels"})
         tables = table["channels"]
-        if not isinstance(tables, list) or not tables:
-            raise ConfigError(f"{where} channels must be a non-empty array of tables "
-                              "([[analog.channels]])")
+        if not isinstance(tables, list) or not 1 <= len(tables) <= 31:
+            raise ConfigError(f"{where} channels must be an array of 1 to 31 tables "
+                              "([[analog.channels]]; error_code has a bit per channel)")
         channels: list[NiAnalogChannel] = []
         for i, sub in enumerate(tables):
             at = f"{where} channels #{i}"
