@@ -15,6 +15,7 @@ The tree::
     ├── ProtocolError                    bytes that do not follow the device's protocol
     ├── DeviceError                      the device reported an error
     │   └── ModbusDeviceError            ... as a Modbus exception response (code, function)
+    ├── DriverUnavailableError(RuntimeError)  a driver's vendor library or runtime is missing
     ├── SafetyError(ValueError)          a command refused by a safety limit or interlock
     ├── SyncError(ValueError)            a synchronisation step with no answer yet
     ├── CalzError(RuntimeError)          a CALZ during a run failed after the scan stopped
@@ -41,6 +42,7 @@ __all__ = [
     "DeviceCheckError",
     "PluginError",
     "DeviceError",
+    "DriverUnavailableError",
     "InsufficientSpaceError",
     "ModbusDeviceError",
     "NotARunFileError",
@@ -102,6 +104,14 @@ class ModbusDeviceError(DeviceError):
         super().__init__(message)
         self.code = code
         self.function_code = function_code
+
+
+class DriverUnavailableError(DaqError, RuntimeError):
+    """A driver's vendor library or runtime is not installed (the message names what to install).
+
+    E.g. the NI-DAQmx driver without the ``nidaqmx`` package, or with the package but without
+    the NI-DAQmx C library it loads.
+    """
 
 
 class SafetyError(DaqError, ValueError):

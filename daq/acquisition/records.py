@@ -37,7 +37,7 @@ __all__ = [
 ]
 
 #: Kinds of device the engine knows how to read.
-KINDS = ("scanner", "laser", "barometer", "fan", "plc")
+KINDS = ("scanner", "laser", "barometer", "fan", "plc", "analog")
 #: Event kinds the engine itself emits; :meth:`~daq.acquisition.engine.Acquisition.mark` refuses
 #: them.
 SYSTEM_EVENT_KINDS = frozenset({"fault", "recovered", "overflow", "release", "release_failed",

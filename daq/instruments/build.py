@@ -2,9 +2,10 @@
 
 The one place that turns an :class:`~daq.config.InstrumentConfig` into a driver object (not yet
 opened: drivers do no I/O until ``open()``). Modbus URLs get a
-:class:`~daq.transports.modbus.ModbusBus`; everything else a byte transport with the driver's line
-defaults (a ``serial://`` query overrides them). The fan drive always receives the rig's fan-speed
-limit.
+:class:`~daq.transports.modbus.ModbusBus`; a driver whose entry has a ``link`` (a vendor
+library's device, e.g. ``nidaqmx://``) gets what that builds from the URL; everything else a
+byte transport with the driver's line defaults (a ``serial://`` query overrides them). The fan
+drive always receives the rig's fan-speed limit.
 """
 
 from __future__ import annotations
@@ -35,7 +36,9 @@ def build_driver(inst: InstrumentConfig, limits: Limits) -> Any:
     entry = registry.driver_entry(inst.driver)
     settings = entry.validate(inst.settings, f"instrument {inst.name!r}")
     link: Any
-    if inst.url.startswith("modbus+"):
+    if entry.link is not None:
+        link = entry.link(inst.url)
+    elif inst.url.startswith("modbus+"):
         link = ModbusBus(inst.url)
     else:
         link = open_transport(inst.url, **dict(entry.transport_defaults))

@@ -16,7 +16,7 @@ __all__ = ["ROLES", "DriverEntry"]
 
 #: The roles an instrument fills in a rig config (one table each, ``[[lasers]]`` an array);
 #: docs/drivers.md writes down what each role's driver must deliver.
-ROLES = ("scanner", "lasers", "fan", "plc", "barometer")
+ROLES = ("scanner", "lasers", "fan", "plc", "barometer", "analog")
 
 
 @dataclass(frozen=True)
@@ -37,6 +37,10 @@ class DriverEntry:
         Line settings the device needs (e.g. 7E1 at 9600 baud), passed to
         :func:`daq.transports.byte_transport.open_transport`; a ``serial://`` URL's query
         overrides them.
+    link : callable or None
+        For a driver that reaches its device through a vendor library rather than bytes or
+        registers (NI-DAQmx): ``link(url)`` returns what the factory takes instead of a
+        transport (parsed from the URL, no I/O). None: a byte transport or a Modbus bus.
     """
 
     name: str
@@ -44,3 +48,4 @@ class DriverEntry:
     factory: Callable[..., Any]
     validate: Callable[[Mapping[str, Any], str], Any]
     transport_defaults: Mapping[str, Any] = field(default_factory=dict)
+    link: Callable[[str], Any] | None = None

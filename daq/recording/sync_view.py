@@ -69,8 +69,8 @@ def physical_columns(sb: SyncBlock, lasers: Sequence[InstrumentConfig], config: 
     Parameters
     ----------
     sb : SyncBlock
-        Rows on the sync time base: ``laser.<name>`` distances (m), ``pressure`` (n, taps) and
-        ``pitot`` (Pa) when the rig has a scanner.
+        Rows on the sync time base: ``laser.<name>`` distances (m), ``pressure`` (n, taps)
+        when the rig has a scanner, ``pitot`` (Pa) from the scanner or an analog transducer.
     lasers : sequence of InstrumentConfig
         The lasers whose streams ``sb`` holds, in order: the vertical ones (none, or two or
         more; the first three are used) and a 3-DOF rig's sway laser.
@@ -97,6 +97,7 @@ def physical_columns(sb: SyncBlock, lasers: Sequence[InstrumentConfig], config: 
             d, x, s = d[:, :3], x[:3], s[:3]
         hp = heave_pitch_from_lasers(d, x, s)
         h, alpha = hp.h, hp.alpha
+    rho = np.full(n, rho_now)
     if "pressure" in sb.values:
         pressure = sb.values["pressure"]
         if cal.taps.dead:
@@ -104,11 +105,12 @@ def physical_columns(sb: SyncBlock, lasers: Sequence[InstrumentConfig], config: 
             lift, moment = forces_from_pressures(pressure[:, live], live_taps)
         else:
             lift, moment = forces_from_pressures(pressure, taps)
-        rho = np.full(n, rho_now)
-        U = wind_speed(cal.pitot.dynamic_pressure(sb.values["pitot"], fan_rpm), rho).speed
     else:
         pressure = np.full((n, taps.n_taps), np.nan)
-        lift, moment, U, rho = nan, nan, nan, np.full(n, rho_now)
+        lift, moment = nan, nan
+    # The scanner's Pitot, or (a rig without a scanner) an analog Pitot transducer's.
+    U = (wind_speed(cal.pitot.dynamic_pressure(sb.values["pitot"], fan_rpm), rho).speed
+         if "pitot" in sb.values else nan)
     p = drag = None
     if config.section.n_dof == 3:
         p, drag = _sway_columns(sb, sway_lasers, config, alpha, pressure)

@@ -145,6 +145,14 @@ def start_rig_process(config: RigConfig, *, start_timeout_s: float = 30.0) -> Ri
         conn.close()
         raise
     live_config, origin = payload
+    if any(inst.url.startswith("nidaqmx://") for inst in live_config.instruments):
+        # The drivers in this process read the child's simulated DAQ through the stand-in of
+        # the nidaqmx API: a client library (the simulated device stays in the child), loaded
+        # only for a rig that has one.
+        from daq.instruments.ni_daqmx.runtime import register_standin
+        from simulators.nidaqmx_standin import standin_api
+
+        register_standin(standin_api)
     return RigProcess(process, conn, live_config, origin)
 
 
