@@ -80,6 +80,14 @@ def _build_parser() -> argparse.ArgumentParser:
     p_id.add_argument("--n-lags", type=int, default=None, choices=(0, 1, 2, 3),
                       help="number of lag terms (default: chosen by held-out error)")
     p_id.add_argument("--no-tubing-correction", action="store_true", help="uncorrected forces")
+    p_id.add_argument("--detect-releases", action="store_true",
+                      help="find the releases in the lasers' signals (files without release "
+                           "rows: releases by hand, imported files)")
+    p_id.add_argument("--route", choices=("auto", "e2rfc", "displacement"), default="auto",
+                      help="E2RFC (forces and displacements) or the displacement-only route "
+                           "(flutter derivatives from decays at many wind speeds, then a Roger "
+                           "fit; prints its caveats); auto (default): E2RFC when every file "
+                           "holds forces")
 
     p_diag = sub.add_parser(
         "diagnose",
@@ -513,7 +521,8 @@ def _dispatch(args: argparse.Namespace) -> int:
         from daq.offline.flutter_commands import run_identify
 
         return run_identify(args.files, json_path=args.json, n_lags=args.n_lags,
-                            tubing_correction=not args.no_tubing_correction)
+                            tubing_correction=not args.no_tubing_correction, route=args.route,
+                            detect_releases=args.detect_releases)
     if args.command == "reprocess":
         return _reprocess(args)
     if args.command == "diagnose":
