@@ -1,5 +1,7 @@
-"""``windrig identify`` without PLC release rows or without taps: --detect-releases and the
-displacement-only route.
+"""``windrig identify`` without release rows or without taps: the two routes around a PLC.
+
+``--detect-releases`` finds the releases in the lasers' signals; the displacement-only route
+identifies a file without forces.
 
 Run files are written by the acquisition's own recorder (:mod:`daq.recording.synthetic`) from
 simulated releases of the flat-plate rig (``rig_configs/sim_flat_plate.toml``), each with 1 s
@@ -46,7 +48,7 @@ def _releases(speeds, holds, *, forces: bool = True, duration: float = 6.0):
 
 @pytest.fixture(scope="module")
 def two_speeds(tmp_path_factory):
-    """The same four releases (6 and 8 m/s) with release rows and without any."""
+    """Write the same four releases (6 and 8 m/s) with release rows and without any."""
     where = tmp_path_factory.mktemp("detect")
     releases = _releases((6.0, 8.0), ((0.008, 0.04), (0.006, 0.03)))
     with_rows, without = where / "rows.h5", where / "no_rows.h5"
@@ -93,7 +95,7 @@ def test_a_file_without_release_rows_has_nothing_to_identify_without_the_option(
 
 @pytest.fixture(scope="module")
 def no_taps(tmp_path_factory):
-    """Five speeds, one release each, no forces: a rig without taps."""
+    """Write five speeds, one release each, no forces: a rig without taps."""
     path = tmp_path_factory.mktemp("no_taps") / "no_taps.h5"
     write_release_run(path, CONFIG, _releases((4.0, 5.0, 6.0, 7.0, 8.0), ((0.008, 0.04),),
                                               forces=False, duration=8.0))
