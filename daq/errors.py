@@ -27,7 +27,8 @@ The tree::
     ├── RingStalledError(RuntimeError)   the shared ring's lock not released in time
     ├── AcquisitionProcessError(RuntimeError)  the console's acquisition process is gone
     ├── RemoteError(RuntimeError)        an error of that process that could not be sent as is
-    └── DeviceCheckError(RuntimeError)   the check before a run found devices wrong (all named)
+    ├── DeviceCheckError(RuntimeError)   the check before a run found devices wrong (all named)
+    └── OperatorError(RuntimeError)      an operator's answer a step waits for cannot come
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ __all__ = [
     "InsufficientSpaceError",
     "ModbusDeviceError",
     "NotARunFileError",
+    "OperatorError",
     "ProtocolError",
     "RecorderError",
     "RecorderStateError",
@@ -185,3 +187,7 @@ class DeviceCheckError(DaqError, RuntimeError):
 
     Its message names every failing device with its reason, one per line.
     """
+
+
+class OperatorError(DaqError, RuntimeError):
+    """An operator's answer a step waits for cannot come (a prompt's input ended)."""
