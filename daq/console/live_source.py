@@ -485,6 +485,15 @@ class LiveSource(RingSource):
                 self._decays[-1] = (self._decays[-1][0], t)
 
     @property
+    def simulated_rig(self) -> Any:
+        """The simulated rig's process (:class:`~daq.sim.rig_process.RigProcess`), or None.
+
+        Its truth and, on a rig without a PLC, the hand that lets the model go
+        (``hand_release``): what a test or a scripted operator needs of the simulation.
+        """
+        return self._rig
+
+    @property
     def plc_armed(self) -> tuple[int, bool] | None:
         """The PLC's ARM coil as last read: (host ``monotonic_ns``, armed); None before."""
         return None if self._recorder is None else self._recorder.plc_armed

@@ -72,8 +72,8 @@ DRIVER_COMMANDS: dict[str, dict[str, str]] = {
     "plc": {"disarm": "disarm"},
 }
 #: The engine methods an operator command may call in the child.
-ENGINE_COMMANDS = ("arm", "disarm", "release", "calz", "mark", "set_fan_speed", "start_fan",
-                   "stop_fan")
+ENGINE_COMMANDS = ("arm", "disarm", "release", "manual_release", "manual_hold", "calz", "mark",
+                   "set_fan_speed", "start_fan", "stop_fan")
 #: How long the child may take to start the rig, the drivers and the engine, s.
 START_TIMEOUT_S = 60.0
 #: How long a command waits for its answer, s, unless it says otherwise (a CALZ takes its own
@@ -272,6 +272,14 @@ class _RemoteAcquisition:
     def release(self, plc: str | None = None) -> Any:
         """Release the model (the engine's ``release``); return its event."""
         return self._source.call("engine", "release", plc)
+
+    def manual_release(self, text: str = "") -> Any:
+        """Say the model was let go by hand (the engine's ``manual_release``); its event."""
+        return self._source.call("engine", "manual_release", text)
+
+    def manual_hold(self, text: str = "") -> Any:
+        """Say the model is held by hand again (the engine's ``manual_hold``); its event."""
+        return self._source.call("engine", "manual_hold", text)
 
     def calz(self, device: str | None = None, *, wind_speed_now: float,
              timeout_s: float = 30.0) -> Any:
