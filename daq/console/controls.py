@@ -10,7 +10,8 @@ actions they refuse, with their reason as the tooltip and in the status line (e.
 ``start_fan``, ``stop_fan``, ``arm``, ``release``, ``manual_release``, ``manual_hold``, ``calz``,
 ``mark``), so each is recorded as an event of the run. A rig without a PLC is released by hand:
 the operator lets the model go, then clicks "released" (the instant is found in the lasers'
-signals before the click), and clicks "held" once it is caught and held still again. Actions that can block (fan start, arm, release, CALZ) run one at a time on a
+signals before the click), and clicks "held" once it is caught and held still again. Actions
+that can block (fan start, arm, release, CALZ) run one at a time on a
 plain worker thread; the result comes back to the GUI thread through a Qt signal and any error
 (``SafetyError``, ``DeviceError``, ...) is shown in the status line. Stopping the fan is one
 register write and runs at once on the GUI thread (a stop must never queue behind a running

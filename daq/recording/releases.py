@@ -154,9 +154,10 @@ class ReleaseRows:
         t, h, alpha = t[rows], self._recent_column(1)[rows], self._recent_column(2)[rows]
         last = self._releases[-1].time if self._releases else -math.inf
         if kind == "manual_hold":
-            start = None if t.size < 30 else still_start_before(t, h, alpha, before=t_key,
-                                                                  after=last)
-            t_end = t_key if start is None else start - 0.5 * STILL_WINDOW_S
+            # A key pressed with the catch: its hold is still from half a window after it.
+            start = None if t.size < 30 else still_start_before(
+                t, h, alpha, before=t_key + STILL_WINDOW_S, after=last)
+            t_end = t_key if start is None else min(start - 0.5 * STILL_WINDOW_S, t_key)
             if self.caught(t_end) is not None and hook is not None:
                 hook("caught", t_end)
             return

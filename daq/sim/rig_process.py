@@ -199,7 +199,8 @@ def _serve(conn: Any, config_text: str, source: str) -> None:
                 elif request[0] == "tunnel" and request[1] == "release":
                     answer = origin + rig.tunnel.release()
                 elif request[0] == "tunnel" and request[1] == "arm":
-                    answer = rig.tunnel.arm()
+                    rig.tunnel.arm()
+                    answer = None
                 elif request[0] == "clocked_devices":
                     answer = [n for n, s in rig.simulators.items() if hasattr(s, "true_time_of")]
                 else:

@@ -145,7 +145,7 @@ def _channels(t: object, channels: tuple[object, ...]) -> tuple[FloatArray, Floa
     X = np.column_stack([np.asarray(c, dtype=float) for c in channels])
     if tt.ndim != 1 or X.shape[0] != tt.size:
         raise ValueError(f"t and the channels must be 1-D and equally long, got {tt.shape} "
-                         f"and {[np.shape(c) for c in channels]}")
+                         f"and {[np.asarray(c).shape for c in channels]}")
     if tt.size < 3 * MIN_HOLD_ROWS:
         raise ReleaseNotFoundError(f"{tt.size} rows are too few to find a release in")
     return tt, X
@@ -374,7 +374,7 @@ def _fine_onset(t: FloatArray, X: FloatArray, noise: FloatArray, a: int, b: int,
     def fit(t0: float) -> tuple[float, FloatArray]:
         tau = np.clip(tw - t0, 0.0, None)
         A = np.column_stack([np.ones_like(tw)] + [tau**k for k in ONSET_POWERS])
-        coef, *_ = np.linalg.lstsq(A, Xw, rcond=None)
+        coef = np.asarray(np.linalg.lstsq(A, Xw, rcond=None)[0], dtype=np.float64)
         return float(np.sum((Xw - A @ coef) ** 2)), coef
 
     def chi2(t0: float) -> float:
