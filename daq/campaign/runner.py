@@ -333,7 +333,8 @@ def _loop(session: _Session, outcome: CampaignOutcome) -> None:
     rig_limit = min(config.limits.max_wind_speed, config.limits.max_fan_rpm * config.wind_per_rpm)
     decay_s = plan.decay_s if plan.decay_s is not None else default_decay_s(config.section)
 
-    for found in read_back(session.out, say):
+    for found in read_back(session.out, say,
+                           displacements_only=plan.identification == "displacement"):
         why = "listed in the plan" if found.index <= len(listed) else "read back"
         outcome.steps.append(SpeedStep(found.index, found.U, found.paths[0], found.releases,
                                        f"{why} (resumed)", paths=found.paths, resumed=True))

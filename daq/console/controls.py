@@ -306,13 +306,24 @@ class ControlPanel(QtWidgets.QGroupBox):
         """
         acq = self._acq("hand_release")
         if acq is not None:
-            self._submit("hand_release", acq.manual_release)
+            self._submit("hand_release", lambda: self._by_hand("release", acq.manual_release))
 
     def hand_hold(self) -> None:
         """Say the model is caught and held by hand again: the engine's ``manual_hold``."""
         acq = self._acq("hand_hold")
         if acq is not None:
-            self._submit("hand_hold", acq.manual_hold)
+            self._submit("hand_hold", lambda: self._by_hand("hold", acq.manual_hold))
+
+    def _by_hand(self, what: str, say_so: Callable[[], Any]) -> Any:
+        """Say what the operator's hand did; on a simulated rig its simulated hand does it first.
+
+        The simulated hand (``source.simulated_hand``) acts only on a simulated rig (``windrig
+        gui --simulate``); on a real rig it does nothing, and a replay has none.
+        """
+        hand = getattr(self._source, "simulated_hand", None)
+        if callable(hand):
+            hand(what)
+        return say_so()
 
     def calz(self) -> None:
         """Zero the scanner (CALZ) with the fan stopped and settled and the wind off."""

@@ -178,6 +178,8 @@ class _Server:
                                       f"(a {kind}: {tuple(allowed)})")
             # Through the engine, named by its kind ("fan" or "plc"): recorded as an event.
             return getattr(acq, allowed[method])(*rest, **{kind: device}, **kwargs)
+        if name == "simulated_hand":  # a simulated rig's operator: releases by hand
+            return live.simulated_hand(*args)
         if name == "start_recording":
             return live.start_recording(*args, **kwargs)
         if name == "stop_recording":
@@ -606,6 +608,10 @@ class ProcessLiveSource(RingSource):
     def events(self, kind: str | None = None) -> list[Any]:
         """Return the engine's latest events, oldest first (asks the child)."""
         return list(self.call("events", kind))
+
+    def simulated_hand(self, what: str) -> None:
+        """Let the simulated model go or hold it by hand (see ``LiveSource.simulated_hand``)."""
+        self.call("simulated_hand", what)
 
     # -- recording -------------------------------------------------------------------------------
     @property

@@ -97,6 +97,7 @@ class ReleaseRows:
         self._sway = False
         self._releases: list[_Release] = []
         self._sync_rows = 0
+        self._end = 0  # the index after the newest sync row taken
         self.written = 0
 
     def released(self, t: float) -> float:
@@ -128,6 +129,7 @@ class ReleaseRows:
         ``p``: the sway (m) of a 3-DOF rig, whose rows then get ``p0``.
         """
         self._sway = p is not None
+        self._end = base + t.size
         self._recent.append((t, h, alpha) if p is None else (t, h, alpha, p))
         while len(self._recent) > 1 and self._recent[1][0][0] < t[-1] - RECENT_S:
             self._recent.popleft()
@@ -149,9 +151,10 @@ class ReleaseRows:
 
     def _manual(self, rec: Recorder, kind: str, t_key: float, hook: Hook | None) -> None:
         """Find the instant an operator's key speaks of in the recent rows; act on it."""
-        t = self._recent_column(0)
+        t = self._recent_column(0) if self._recent else np.zeros(0)
         rows = t >= t_key - MANUAL_LOOKBACK_S
-        t, h, alpha = t[rows], self._recent_column(1)[rows], self._recent_column(2)[rows]
+        t, h, alpha = (t[rows], self._recent_column(1)[rows],
+                       self._recent_column(2)[rows]) if t.size else (t, t, t)
         last = self._releases[-1].time if self._releases else -math.inf
         if kind == "manual_hold":
             # A key pressed with the catch: its hold is still from half a window after it.
@@ -162,6 +165,8 @@ class ReleaseRows:
                 hook("caught", t_end)
             return
         try:
+            if t.size == 0:
+                raise ReleaseNotFoundError("no sync rows (no lasers' h and alpha) to find it in")
             onset = locate_release(t, h, alpha, before=t_key, f_max=self.f_max)
             if onset.time <= last:
                 raise ReleaseNotFoundError(f"the last release found before it ({onset.time:.3f}"
@@ -172,6 +177,10 @@ class ReleaseRows:
                                             f"at {t_key:.3f} s: {exc}", None, {}))
             return
         self.released(onset.time)
+        # Its rows are among the recent ones already (a PLC release's come later).
+        found = self._releases[-1]
+        found.start_index = self._row_at(self._end, onset.time)
+        found.h0, found.alpha0, found.p0 = self._held(onset.time)
         text = "release found in the lasers' signals" + (
             "" if onset.reliable else " (a weak onset: the instant may be off by several std)")
         rec.add_event(onset.time, *event_row(
@@ -211,6 +220,8 @@ class ReleaseRows:
     def finish(self, rec: Recorder, sync_rows: int) -> None:
         """Write every release not written yet (the run ends after ``sync_rows`` rows)."""
         self._sync_rows = sync_rows
+        while self._operator:  # keys just before the end: looked at with the rows there are
+            self._manual(rec, *self._operator.pop(0))
         self._write_finished(rec, final=True)
 
     def _write_finished(self, rec: Recorder, *, final: bool) -> None:

@@ -381,6 +381,8 @@ def _fine_onset(t: FloatArray, X: FloatArray, noise: FloatArray, a: int, b: int,
         return fit(t0)[0]
 
     grid = np.arange(lo_t, hi_t + 0.05 * dt, 0.1 * dt)
+    if grid.size < 3:
+        raise ReleaseNotFoundError("the departure comes too soon after the hold's start")
     values = np.array([chi2(t0) for t0 in grid])
     k = int(np.argmin(values))
     bounds = (grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)])

@@ -2,10 +2,10 @@
 
 The simulated flat plate without its ``[plc]``, acquired in the test's process
 (:class:`~daq.console.live_source.LiveSource`, its instruments in a process of their own). The
-test is the operator: it lets the model go through the virtual tunnel
-(``RigProcess.hand_release``), clicks "released" 0.4 s later, catches the model and clicks
-"held". The run writer finds the release in the lasers' signals and the releases table shows
-it with its modes, as a PLC release.
+test clicks "released" and, 4 s later, "held"; on a simulated rig each click first moves the
+simulated operator's hand through the virtual tunnel (``LiveSource.simulated_hand``). The run
+writer finds the release in the lasers' signals and the releases table shows it with its
+modes, as a PLC release.
 """
 
 from __future__ import annotations
@@ -46,24 +46,22 @@ def test_released_and_held_by_hand_from_the_console(qtbot):
         window.tick()
         assert b["hand_release"].isEnabled() and b["hand_hold"].isEnabled()
         time.sleep(1.0)  # held still in the wind
-        rig = source.simulated_rig
-        truth = rig.hand_release()  # the operator's hand: host monotonic time, s
-        time.sleep(0.4)
+        # The simulated rig's hand lets the model go as the button is clicked (a person's
+        # click comes after their hand; the writer looks for the release before the click).
         b["hand_release"].click()
         qtbot.waitUntil(lambda: panel.busy is None, timeout=5_000)
-        keys = source.events("manual_release")
-        assert len(keys) == 1 and keys[0].host_time_ns * 1e-9 > truth
         qtbot.waitUntil(lambda: len(source.decays()) == 1, timeout=5_000)  # found
-        qtbot.wait(int((DECAY_S - 0.4) * 1000))
-        held_at = time.monotonic()
-        rig.hand_hold()
-        time.sleep(0.3)
-        b["hand_hold"].click()
+        qtbot.wait(int(DECAY_S * 1000))
+        b["hand_hold"].click()  # the hand catches it, then the click is recorded
+        qtbot.waitUntil(lambda: panel.busy is None, timeout=5_000)
         qtbot.waitUntil(lambda: source.decays()[0][1] is not None, timeout=5_000)
         release, caught = source.decays()[0]
-        # Ends at the catch (the still hold before the click, less 0.05 s), not at the click
-        # 0.3 s later: the decay as long as the hand let it run, to a sync window or two.
-        assert caught - release == pytest.approx(held_at - truth, abs=0.15)
+        keys = [source.events(kind) for kind in ("manual_release", "manual_hold")]
+        assert [len(k) for k in keys] == [1, 1]
+        # The decay runs from the hand's release to its catch (the clicks a few ms after
+        # each), to a sync window or two.
+        clicks_s = (keys[1][0].host_time_ns - keys[0][0].host_time_ns) * 1e-9
+        assert caught - release == pytest.approx(clicks_s, abs=0.15)
         qtbot.waitUntil(lambda: table.table.rowCount() == 1 and table.cell(0, "status") == "ok",
                         timeout=20_000)
         U = float(table.cell(0, "U (m/s)"))
