@@ -71,6 +71,13 @@ class OperatorKeys:
                                         name="windrig-operator-keys")
         self._thread.start()
 
+    def join(self, timeout_s: float | None = None) -> bool:
+        """Wait for the stream to end (or the engine to stop); True once the reading ended."""
+        if self._thread is None:
+            return True
+        self._thread.join(timeout_s)
+        return not self._thread.is_alive()
+
     def _run(self, acq: Any) -> None:
         while True:
             line = self.stream.readline()

@@ -17,7 +17,7 @@ release row starts there, and a ``"release_detected"`` event records it with its
 key's lag (or ``"release_not_detected"`` says why not: no row then). The operator's
 ``"manual_hold"`` (model caught and held again) ends the decay, like an arm, at the start of
 the still hold before that key (:func:`ident.records.release_onset.still_start_before`), less
-half the stillness window: the catch.
+:data:`ident.records.release_onset.CATCH_GUARD_S` (the catch, a step, kept out of the decay).
 
 Not responsible for: the sync rows themselves (:class:`daq.recording.writer.RunWriter`) or the
 file (:mod:`daq.recording.recorder`). A run without sync rows (no lasers, no scanner) still gets
@@ -38,6 +38,7 @@ import numpy.typing as npt
 from daq.recording.layout import event_row
 from daq.recording.recorder import Recorder
 from ident.records.release_onset import (
+    CATCH_GUARD_S,
     STILL_WINDOW_S,
     ReleaseNotFoundError,
     locate_release,
@@ -160,7 +161,7 @@ class ReleaseRows:
             # A key pressed with the catch: its hold is still from half a window after it.
             start = None if t.size < 30 else still_start_before(
                 t, h, alpha, before=t_key + STILL_WINDOW_S, after=last)
-            t_end = t_key if start is None else min(start - 0.5 * STILL_WINDOW_S, t_key)
+            t_end = t_key if start is None else min(start - CATCH_GUARD_S, t_key)
             if self.caught(t_end) is not None and hook is not None:
                 hook("caught", t_end)
             return

@@ -57,8 +57,8 @@ from scipy.optimize import minimize_scalar
 
 from ident.errors import InsufficientDataError
 
-__all__ = ["DetectedRelease", "ReleaseNotFoundError", "ReleaseOnset", "find_releases",
-           "locate_release", "noise_levels", "still_rows", "still_start_before"]
+__all__ = ["CATCH_GUARD_S", "DetectedRelease", "ReleaseNotFoundError", "ReleaseOnset",
+           "find_releases", "locate_release", "noise_levels", "still_rows", "still_start_before"]
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
@@ -80,6 +80,13 @@ ONSET_POWERS = (2, 3, 4)
 MIN_SNR = 150.0
 #: Held stretch fitted before the search window, s.
 HOLD_FIT_S = 0.25
+#: A decay caught (held again) ends this long before its hold's first still row: half the
+#: stillness window (the window is still only once the catch is out of it), and 20 ms more,
+#: since the catch is a step that a sync row averaging the lasers over its period, and the
+#: window's edge moving by a row or two with the noise, would otherwise keep in the decay's
+#: last rows (seen on the simulated rig: the last one or two rows of each decay halfway to
+#: the hold, a 5-8 mm jump that E2RFC read as aerodynamics).
+CATCH_GUARD_S = 0.5 * STILL_WINDOW_S + 0.02
 #: Fewest rows of a hold: a shorter still stretch gives no held level.
 MIN_HOLD_ROWS = 10
 
@@ -299,8 +306,8 @@ def find_releases(t: object, h: object, alpha: object, *, f_min: float, f_max: f
     A release is a hold (a still stretch of at least ``min_hold_s``) followed by motion that
     lasts at least ``min_periods`` periods of the slower mode (``f_min``) and moves away from
     the held level: a model pulled into its hold moves for less than that, a model that
-    settled after a decay is not displaced. Its decay ends at the next hold (less half the
-    stillness window: the catch) or at the record's end.
+    settled after a decay is not displaced. Its decay ends :data:`CATCH_GUARD_S` before the
+    next hold (the catch) or at the record's end.
 
     Parameters
     ----------
@@ -324,13 +331,12 @@ def find_releases(t: object, h: object, alpha: object, *, f_min: float, f_max: f
     noise = noise_levels(tt, h, alpha)
     still = still_rows(tt, h, alpha, noise=noise)
     holds = _holds(tt, still, min_hold_s)
-    half = 0.5 * STILL_WINDOW_S
     found: list[DetectedRelease] = []
     for k, (a, b) in enumerate(holds):
         if b >= tt.size:
             break
         end_row = holds[k + 1][0] if k + 1 < len(holds) else tt.size
-        end = float(tt[end_row - 1]) - (half if end_row < tt.size else 0.0)
+        end = float(tt[end_row]) - CATCH_GUARD_S if end_row < tt.size else float(tt[-1])
         if end - tt[b] < min_periods / f_min:
             continue  # a short move: the model pulled into a hold, not a decay
         held = np.nanmedian(X[a:b], axis=0)
