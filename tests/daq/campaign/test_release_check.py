@@ -113,3 +113,16 @@ def test_the_command_refuses_in_one_line_before_anything_starts(tmp_path, capsys
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error: ") and message in err[0]
     assert not out.exists()
+
+
+def test_a_prompt_without_an_operator_is_an_error_naming_it(monkeypatch, capsys):
+    import io
+
+    from daq.campaign.releasing import ask_on_terminal
+    from daq.errors import OperatorError
+
+    monkeypatch.setattr("sys.stdin", io.StringIO("\n"))
+    ask_on_terminal("  >>> let the model go")  # Enter: returns
+    assert capsys.readouterr().out == "  >>> let the model go\n"
+    with pytest.raises(OperatorError, match="no operator: standard input ended at the prompt"):
+        ask_on_terminal("  >>> let the model go")  # the input has ended
