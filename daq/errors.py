@@ -29,7 +29,8 @@ The tree::
     ├── AcquisitionProcessError(RuntimeError)  the console's acquisition process is gone
     ├── RemoteError(RuntimeError)        an error of that process that could not be sent as is
     ├── DeviceCheckError(RuntimeError)   the check before a run found devices wrong (all named)
-    └── PluginError(RuntimeError)        an installed driver plugin that cannot be used (named)
+    ├── PluginError(RuntimeError)        an installed driver plugin that cannot be used (named)
+    └── OperatorError(RuntimeError)      an operator's answer a step waits for cannot come
 """
 
 from __future__ import annotations
@@ -46,6 +47,7 @@ __all__ = [
     "InsufficientSpaceError",
     "ModbusDeviceError",
     "NotARunFileError",
+    "OperatorError",
     "ProtocolError",
     "RecorderError",
     "RecorderStateError",
@@ -206,3 +208,7 @@ class PluginError(DaqError, RuntimeError):
     distributions contribute the same driver name. The message names the distribution and the
     entry point, in one line.
     """
+
+
+class OperatorError(DaqError, RuntimeError):
+    """An operator's answer a step waits for cannot come (a prompt's input ended)."""

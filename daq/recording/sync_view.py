@@ -80,7 +80,8 @@ def physical_columns(sb: SyncBlock, lasers: Sequence[InstrumentConfig], config: 
     rho_now : float
         The air density in use, kg/m^3.
     fan_rpm : float
-        The fan speed now, rpm (a Pitot factor tabulated on it; NaN: unknown).
+        The fan speed now, rpm (a Pitot factor tabulated on it; without a scanner, the wind
+        speed: times wind_per_rpm; NaN: unknown).
     """
     taps, cal = config.taps, config.calibration
     n = len(sb)
@@ -108,9 +109,13 @@ def physical_columns(sb: SyncBlock, lasers: Sequence[InstrumentConfig], config: 
     else:
         pressure = np.full((n, taps.n_taps), np.nan)
         lift, moment = nan, nan
-    # The scanner's Pitot, or (a rig without a scanner) an analog Pitot transducer's.
-    U = (wind_speed(cal.pitot.dynamic_pressure(sb.values["pitot"], fan_rpm), rho).speed
-         if "pitot" in sb.values else nan)
+    if "pitot" in sb.values:
+        # The scanner's Pitot, or (a rig without a scanner) an analog Pitot transducer's.
+        U = wind_speed(cal.pitot.dynamic_pressure(sb.values["pitot"], fan_rpm), rho).speed
+    else:
+        # No Pitot at all (a rig without taps): the wind is the fan's actual speed times the
+        # tunnel's calibration, [tunnel] wind_per_rpm (NaN until the drive reports one).
+        U = np.full(n, fan_rpm * config.wind_per_rpm if math.isfinite(fan_rpm) else np.nan)
     p = drag = None
     if config.section.n_dof == 3:
         p, drag = _sway_columns(sb, sway_lasers, config, alpha, pressure)

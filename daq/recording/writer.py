@@ -161,7 +161,7 @@ class RunWriter:
         self._rho = DEFAULT_RHO
         self._rho_measured = False
         self._sync_rows = 0
-        self._release_rows = ReleaseRows()
+        self._release_rows = ReleaseRows(f_max=max(config.section.fh, config.section.fa))
         self._calz_count: dict[str, int] = {}
         self._trigger_events: deque[tuple[float, float]] = deque(maxlen=64)  # (t, +-s) pulses
         self._view_pieces: dict[str, list[tuple[FloatArray, FloatArray]]] = {}
@@ -512,8 +512,7 @@ class RunWriter:
         rec = self.recorder
         assert rec is not None
         t = float(self._time(event.host_time_ns))
-        # The event's numbers go into its text; arrays (a CALZ's offsets per channel) do not
-        # fit there and go to /entry/metadata instead (below).
+        # The event's numbers go into its text; arrays (a CALZ's offsets) go to /entry/metadata.
         rec.add_event(t, *event_row(event.kind, event.text, event.device, event.data))
         if event.kind == "calz":
             self._calz_record(event, t)
@@ -523,12 +522,13 @@ class RunWriter:
             if self.release_hook is not None:
                 self.release_hook("release", t_release)
         elif event.kind == "arm":
-            # Arming again catches the model: the free decay of the last release ends before
-            # the arm command (less one sync period: a sync row averages the lasers over
-            # +- half a period, which must not reach into the caught model).
+            # Arming catches the model: the decay ends a sync period before the arm (a sync
+            # row averages the lasers over +- half a period: not into the caught model).
             t_end = self._release_rows.caught(t - 1.0 / self.sync_rate_hz)
             if t_end is not None and self.release_hook is not None:
                 self.release_hook("caught", t_end)
+        elif event.kind in ("manual_release", "manual_hold"):  # found in the lasers' rows
+            self._release_rows.operator(event.kind, t, self.release_hook)
         elif event.kind == "trigger":
             # Its host time is known to half the command's round trip: an anchor if that is short.
             round_trip = float(event.data.get("round_trip_s", 0.0))
