@@ -43,7 +43,9 @@ REQUIRED_METHODS: Mapping[str, tuple[str, ...]] = {
 }
 
 
-#: Default poll period of the polled kinds, s (the barometer uses its own poll_interval_s).
+#: Default poll period of the polled kinds, s (a driver's own ``settings.poll_interval_s``
+#: takes precedence; :func:`daq.instruments.build.build_driver` refuses a polled driver that
+#: would hide it).
 POLL_S: Mapping[str, float] = {"barometer": 1.0, "fan": 0.1, "plc": 0.1}
 
 
@@ -157,8 +159,8 @@ def make_adapter(kind: str, driver: Any, *, poll_interval_s: float | None,
     """Return the adapter of a driver of ``kind`` (a polled one every ``poll_interval_s``).
 
     ``poll_interval_s`` None: the driver's own ``settings.poll_interval_s`` where it has one
-    (the barometer), else :data:`POLL_S`. ``read_timeout_s``: the timeout of one streaming
-    read, s.
+    (the barometer's, or any polled driver's), else :data:`POLL_S`. ``read_timeout_s``: the
+    timeout of one streaming read, s.
     """
     if kind == "scanner":
         return ScannerAdapter(driver, read_timeout_s)

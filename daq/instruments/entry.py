@@ -28,15 +28,19 @@ class DriverEntry:
     name : str
         The ``driver`` value in rig configs.
     role : str
-        The instrument role it fills (``scanner``, ``lasers``, ``fan``, ``plc``, ``barometer``).
+        The instrument role it fills, one of :data:`ROLES` (``scanner``, ``lasers``, ``fan``,
+        ``plc``, ``barometer``, ``analog``).
     factory : callable
-        Builds the driver from ``(transport_or_bus, settings)``.
+        Builds the driver from ``(transport_or_bus, settings)`` (a fan's also gets
+        ``limit_rpm``); a polled driver keeps ``settings`` as its ``settings`` attribute.
     validate : callable
-        ``validate(settings, where)`` returning the settings object or raising ConfigError.
+        ``validate(table, where)``: the instrument's raw table into the settings object, or a
+        ConfigError whose message starts with ``where`` (``"<config path> [barometer]"``).
     transport_defaults : mapping
         Line settings the device needs (e.g. 7E1 at 9600 baud), passed to
         :func:`daq.transports.byte_transport.open_transport`; a ``serial://`` URL's query
-        overrides them.
+        overrides them. Keys: those of
+        :data:`daq.transports.byte_transport.LINE_SETTINGS`, any other a ConfigError.
     link : callable or None
         For a driver that reaches its device through a vendor library rather than bytes or
         registers (NI-DAQmx): ``link(url)`` returns what the factory takes instead of a

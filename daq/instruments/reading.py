@@ -6,7 +6,7 @@ one :class:`Gap` type of every stream (drivers, the engine's dropped blocks, cou
 in :mod:`daq.sync.counters`), :class:`PollSequence` (the poll numbers and gaps of the polled
 drivers) and :func:`describe_mismatches` (a ``describe()`` checked against a reading).
 
-The contract, for the five drivers alike:
+The contract, for every driver alike:
 
 - ``read()`` returns a :class:`Reading` of ``n >= 1`` rows (a polled driver: ``n = 1``);
 - ``describe()`` returns ``{channel: {"units", "dtype", "shape"}}`` with exactly the keys of
