@@ -17,8 +17,10 @@ import json
 import math
 import os
 import sys
+import threading
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 from daq.errors import UsageError
 
@@ -78,6 +80,14 @@ def _build_parser() -> argparse.ArgumentParser:
     p_id.add_argument("--n-lags", type=int, default=None, choices=(0, 1, 2, 3),
                       help="number of lag terms (default: chosen by held-out error)")
     p_id.add_argument("--no-tubing-correction", action="store_true", help="uncorrected forces")
+    p_id.add_argument("--detect-releases", action="store_true",
+                      help="find the releases in the lasers' signals (files without release "
+                           "rows: releases by hand, imported files)")
+    p_id.add_argument("--route", choices=("auto", "e2rfc", "displacement"), default="auto",
+                      help="E2RFC (forces and displacements) or the displacement-only route "
+                           "(flutter derivatives from decays at many wind speeds, then a Roger "
+                           "fit; prints its caveats); auto (default): E2RFC when every file "
+                           "holds forces")
 
     p_diag = sub.add_parser(
         "diagnose",
@@ -155,6 +165,10 @@ def _build_parser() -> argparse.ArgumentParser:
                                                                "ERROR"),
                        help="lowest level written to --log-file (default INFO)")
     p_acq.add_argument("--skip-check", action="store_true", help="no device check first")
+    p_acq.add_argument("--manual-releases", action="store_true",
+                       help="releases by hand, said with keys on the terminal (Enter: "
+                            "released, h: held again, q: stop); the release instant is found "
+                            "in the lasers' signals. The default on a rig without a PLC")
 
     p_rec = sub.add_parser(
         "recover",
@@ -244,14 +258,33 @@ def _acquire(args: argparse.Namespace) -> int:
     from daq.errors import DeviceCheckError, StorageError
     from daq.recording.swmr_file import failed_writes
 
+    keys = None
+    if args.manual_releases or not config.by_role("plc"):
+        from daq.acquisition.operator_keys import KEYS_HELP, OperatorKeys
+
+        def say(line: str) -> None:
+            print(line, file=sys.stderr, flush=True)
+
+        say(KEYS_HELP + ("" if config.by_role("plc") else " (the rig has no PLC)"))
+        keys = OperatorKeys(sys.stdin, say=say, until=threading.Event())
     try:
-        options = {"operator_notes": args.notes, "progress": sys.stderr.isatty(),
-                   "check": not args.skip_check}
+        options: dict[str, Any] = {"operator_notes": args.notes, "check": not args.skip_check,
+                                   "progress": sys.stderr.isatty() and keys is None,
+                                   "until": None if keys is None else keys.until}
         if args.simulate:  # the instruments in a process of their own, as real ones are
+            def simulated_keys(acq: Any, rig: Any) -> None:
+                assert keys is not None
+                # The simulated operator lets the model go (and holds it) through the tunnel.
+                keys.hand = lambda what: rig.hand_release() if what == "release" else \
+                    rig.hand_hold()
+                keys.start(acq)
+
             summary = record_simulated_run(config, args.out, duration_s=args.duration,
-                                           own_process=True, **options)
+                                           own_process=True, **options,
+                                           actions=None if keys is None else simulated_keys)
         else:
-            summary = record_run(config, args.out, duration_s=args.duration, **options)
+            summary = record_run(config, args.out, duration_s=args.duration, **options,
+                                 actions=None if keys is None else keys.start)
     except DeviceCheckError as exc:  # every failing device on a line of its own
         print("\n".join(f"error: {line}" for line in str(exc).splitlines())
               + "\nnothing recorded (--skip-check records anyway)", file=sys.stderr)
@@ -515,7 +548,8 @@ def _dispatch(args: argparse.Namespace) -> int:
         from daq.offline.flutter_commands import run_identify
 
         return run_identify(args.files, json_path=args.json, n_lags=args.n_lags,
-                            tubing_correction=not args.no_tubing_correction)
+                            tubing_correction=not args.no_tubing_correction, route=args.route,
+                            detect_releases=args.detect_releases)
     if args.command == "reprocess":
         return _reprocess(args)
     if args.command == "diagnose":

@@ -51,6 +51,8 @@ __all__ = [
 
 #: Instrument roles a rig may have (docs/drivers.md: what each role's driver delivers).
 ROLES = ENTRY_ROLES
+#: Roles a rig may have several of: arrays of tables (``[[lasers]]``, ``[[analog]]``).
+MULTIPLE = ("lasers", "analog")
 
 
 @dataclass(frozen=True)
@@ -172,7 +174,7 @@ class RigConfig:
         return RationalFunctionModel.from_dict(dict(self.simulation.rfc))
 
     def by_role(self, role: str) -> list[InstrumentConfig]:
-        """Return every instrument of a role (``lasers`` may have several)."""
+        """Return every instrument of a role (``lasers`` and ``analog`` may have several)."""
         return [inst for inst in self.instruments if inst.role == role]
 
     @property
@@ -320,11 +322,12 @@ def _instruments(data: Mapping[str, Any], source: str) -> tuple[InstrumentConfig
     for role in ROLES:
         if role not in data:
             continue
-        tables = data[role] if role == "lasers" else [data[role]]
-        if role == "lasers" and not isinstance(tables, list):
-            raise ConfigError(f"{source}: lasers must be an array of tables ([[lasers]])")
+        tables = data[role] if role in MULTIPLE else [data[role]]
+        if role in MULTIPLE and not isinstance(tables, list):
+            raise ConfigError(f"{source}: {role} must be an array of tables ([[{role}]])")
         for index, table in enumerate(tables):
-            where = f"{source} [{role}]" if role != "lasers" else f"{source} [[lasers]] #{index}"
+            where = (f"{source} [{role}]" if role not in MULTIPLE
+                     else f"{source} [[{role}]] #{index}")
             if not isinstance(table, Mapping):
                 raise ConfigError(f"{where} must be a table")
             for key in ("driver", "url"):

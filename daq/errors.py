@@ -15,6 +15,7 @@ The tree::
     ├── ProtocolError                    bytes that do not follow the device's protocol
     ├── DeviceError                      the device reported an error
     │   └── ModbusDeviceError            ... as a Modbus exception response (code, function)
+    ├── DriverUnavailableError(RuntimeError)  a driver's vendor library or runtime is missing
     ├── SafetyError(ValueError)          a command refused by a safety limit or interlock
     ├── SyncError(ValueError)            a synchronisation step with no answer yet
     ├── CalzError(RuntimeError)          a CALZ during a run failed after the scan stopped
@@ -28,7 +29,8 @@ The tree::
     ├── AcquisitionProcessError(RuntimeError)  the console's acquisition process is gone
     ├── RemoteError(RuntimeError)        an error of that process that could not be sent as is
     ├── DeviceCheckError(RuntimeError)   the check before a run found devices wrong (all named)
-    └── PluginError(RuntimeError)        an installed driver plugin that cannot be used (named)
+    ├── PluginError(RuntimeError)        an installed driver plugin that cannot be used (named)
+    └── OperatorError(RuntimeError)      an operator's answer a step waits for cannot come
 """
 
 from __future__ import annotations
@@ -41,9 +43,11 @@ __all__ = [
     "DeviceCheckError",
     "PluginError",
     "DeviceError",
+    "DriverUnavailableError",
     "InsufficientSpaceError",
     "ModbusDeviceError",
     "NotARunFileError",
+    "OperatorError",
     "ProtocolError",
     "RecorderError",
     "RecorderStateError",
@@ -102,6 +106,14 @@ class ModbusDeviceError(DeviceError):
         super().__init__(message)
         self.code = code
         self.function_code = function_code
+
+
+class DriverUnavailableError(DaqError, RuntimeError):
+    """A driver's vendor library or runtime is not installed (the message names what to install).
+
+    E.g. the NI-DAQmx driver without the ``nidaqmx`` package, or with the package but without
+    the NI-DAQmx C library it loads.
+    """
 
 
 class SafetyError(DaqError, ValueError):
@@ -196,3 +208,7 @@ class PluginError(DaqError, RuntimeError):
     distributions contribute the same driver name. The message names the distribution and the
     entry point, in one line.
     """
+
+
+class OperatorError(DaqError, RuntimeError):
+    """An operator's answer a step waits for cannot come (a prompt's input ended)."""

@@ -12,6 +12,7 @@ __all__ = [
     "InsufficientDataError",
     "NonUniformSamplingError",
     "RankDeficiencyError",
+    "ReleaseNotFoundError",
 ]
 
 
@@ -29,3 +30,7 @@ class NonUniformSamplingError(IdentError, ValueError):
 
 class RankDeficiencyError(InsufficientDataError):
     """A least-squares problem is rank deficient: the data cannot determine the unknowns."""
+
+
+class ReleaseNotFoundError(InsufficientDataError):
+    """No release (a hold, then a free decay from rest) in the displacements given."""

@@ -4,8 +4,10 @@
 named physical effects that can be added to them; :mod:`simulators.virtual_tunnel` is the one
 tunnel that every simulated instrument of :mod:`simulators.devices` samples in real time (with
 :mod:`simulators.clock` for their clocks and :mod:`simulators.noise` for noise keyed to the
-release and the sample). This package may import :mod:`ident` (for the aerodynamic model) but
-never :mod:`daq`.
+release and the sample). :mod:`simulators.nidaqmx_standin` stands in for the parts of NI's
+``nidaqmx`` API that windrig's NI-DAQmx driver uses, reading the simulated DAQ device
+:mod:`simulators.devices.ni_daqmx`. This package may import :mod:`ident` (for the aerodynamic
+model) but never :mod:`daq`.
 """
 
 from simulators import effects, tunnel

@@ -52,7 +52,8 @@ def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_the_wheel_ships_the_rig_configs_and_makes_qt_and_dask_extras(wheel, tmp_path):
     shipped = sorted(CONFIGS.glob("*.toml"))
     assert [p.name for p in shipped] == ["example_real_rig.toml", "sim_bluff_deck_3dof.toml",
-                                      "sim_flat_plate.toml", "sim_streamlined_deck.toml"]
+                                      "sim_flat_plate.toml", "sim_flat_plate_nidaq.toml",
+                                      "sim_streamlined_deck.toml"]
     assert (ROOT / "rig_configs").resolve() == CONFIGS.resolve()  # the repository's link
     with zipfile.ZipFile(wheel) as z:
         for path in shipped:
@@ -67,7 +68,9 @@ def test_the_wheel_ships_the_rig_configs_and_makes_qt_and_dask_extras(wheel, tmp
     requires = meta.get_all("Requires-Dist") or []
     core = [r for r in requires if "extra ==" not in r]
     assert not any(r.startswith(("PySide6", "pyqtgraph", "dask")) for r in core), core
-    assert {"gui", "dask", "test"} <= set(meta.get_all("Provides-Extra") or [])
+    assert {"gui", "dask", "nidaqmx", "test"} <= set(meta.get_all("Provides-Extra") or [])
+    assert any(r.startswith("nidaqmx") and 'extra == "nidaqmx"' in r for r in requires)
+    assert not any(r.startswith("nidaqmx") for r in core), core
     assert any(r.startswith("PySide6-Essentials") and 'extra == "gui"' in r for r in requires)
     assert any(r.startswith("dask[distributed]") and 'extra == "dask"' in r for r in requires)
 

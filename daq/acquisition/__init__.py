@@ -13,7 +13,9 @@
 - :mod:`~daq.acquisition.fan_watch`: the fan's actual speed against its set-point
   (``fan_reached`` events);
 - :mod:`~daq.acquisition.device_check`: ``windrig check``: every device contacted, read and
-  judged before a test.
+  judged before a test;
+- :mod:`~daq.acquisition.operator_keys`: the operator's keys on the terminal during a recording
+  (releases by hand: ``manual_release``, ``manual_hold``; ``q`` ends the run).
 
 Nothing here touches h5py or Qt, and nothing knows a simulator.
 """

@@ -6,8 +6,8 @@ Responsibility: run a driver's life cycle and call its ``read()``, which returns
 with the read timeout), :class:`ScannerAdapter` (a streaming one that also starts the scan at
 the beginning, stops it at the end, and asks the driver to recover), :class:`PolledAdapter`
 (``read()`` on absolute deadlines, for the barometer, the fan drive and the PLC).
-:func:`make_adapter` picks one; :data:`REQUIRED_METHODS` lists what each kind of driver must
-have.
+:func:`make_adapter` picks one (an ``analog`` device streams as a laser does);
+:data:`REQUIRED_METHODS` lists what each kind of driver must have.
 
 Not responsible for: the reader thread, its queue, faults and recovery timing
 (:mod:`daq.acquisition.reader`), the device protocols, or a scanner's restarts (the scanner
@@ -36,13 +36,16 @@ REQUIRED_METHODS: Mapping[str, tuple[str, ...]] = {
     "scanner": ("open", "close", "start", "stop", "recover", "read", "drain", "note_pause",
                 "recent_pressure_mean"),
     "laser": ("open", "close", "read"),
+    "analog": ("open", "close", "read"),
     "barometer": ("open", "close", "read"),
     "fan": ("open", "close", "read"),
     "plc": ("open", "close", "read"),
 }
 
 
-#: Default poll period of the polled kinds, s (the barometer uses its own poll_interval_s).
+#: Default poll period of the polled kinds, s (a driver's own ``settings.poll_interval_s``
+#: takes precedence; :func:`daq.instruments.build.build_driver` refuses a polled driver that
+#: would hide it).
 POLL_S: Mapping[str, float] = {"barometer": 1.0, "fan": 0.1, "plc": 0.1}
 
 
@@ -156,12 +159,12 @@ def make_adapter(kind: str, driver: Any, *, poll_interval_s: float | None,
     """Return the adapter of a driver of ``kind`` (a polled one every ``poll_interval_s``).
 
     ``poll_interval_s`` None: the driver's own ``settings.poll_interval_s`` where it has one
-    (the barometer), else :data:`POLL_S`. ``read_timeout_s``: the timeout of one streaming
-    read, s.
+    (the barometer's, or any polled driver's), else :data:`POLL_S`. ``read_timeout_s``: the
+    timeout of one streaming read, s.
     """
     if kind == "scanner":
         return ScannerAdapter(driver, read_timeout_s)
-    if kind == "laser":
+    if kind in ("laser", "analog"):
         return StreamingAdapter(driver, read_timeout_s)
     if poll_interval_s is None:
         own = getattr(getattr(driver, "settings", None), "poll_interval_s", None)

@@ -27,8 +27,8 @@ from typing import Any
 from daq.acquisition.records import SYSTEM_EVENT_KINDS, Event
 from daq.errors import DaqError
 
-__all__ = ["arm", "disarm", "marker", "release", "set_fan_speed", "start_fan", "stop_fan",
-           "trigger"]
+__all__ = ["arm", "disarm", "manual_hold", "manual_release", "marker", "release",
+           "set_fan_speed", "start_fan", "stop_fan", "trigger"]
 
 PostEvent = Callable[[Event], None]
 
@@ -88,6 +88,31 @@ def release(name: str, driver: Any, post_event: PostEvent) -> Event:
                   data={"requested_ns": requested, "command_ns": command,
                         "confirmed_ns": confirmed, "delay_s": (confirmed - command) * 1e-9,
                         "round_trip_s": round_trip * 1e-9})
+    post_event(event)
+    return event
+
+
+def manual_release(post_event: PostEvent, text: str = "") -> Event:
+    """Record the operator's word that the model was let go by hand; post ``"manual_release"``.
+
+    The event's time is the key press (or button), some time *after* the release: the release
+    instant itself is found in the lasers' signals by the run writer
+    (:mod:`daq.recording.releases`, :func:`ident.records.release_onset.locate_release`).
+    """
+    event = Event(kind="manual_release", host_time_ns=time.monotonic_ns(),
+                  text=text or "operator: model released by hand")
+    post_event(event)
+    return event
+
+
+def manual_hold(post_event: PostEvent, text: str = "") -> Event:
+    """Record the operator's word that the model is caught and held; post ``"manual_hold"``.
+
+    Like an ``"arm"``, it ends the free decay of the last release: at the start of the still
+    hold before the key press, found in the lasers' signals by the run writer.
+    """
+    event = Event(kind="manual_hold", host_time_ns=time.monotonic_ns(),
+                  text=text or "operator: model caught and held by hand")
     post_event(event)
     return event
 

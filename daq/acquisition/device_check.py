@@ -19,7 +19,9 @@ The plausibility rules (:class:`CheckLimits`, every threshold with its reason):
 - barometer: pressure and temperature of a laboratory (the PTB330's range is 500 to 1100 hPa);
 - fan drive: in remote (fieldbus) control, not tripped, stopped;
 - PLC: its inputs readable and consistent (armed with RELEASED set means the armature left an
-  energised magnet).
+  energised magnet);
+- analog inputs (a Pitot transducer, a balance): valid readings (inside the input range and
+  the channels' ``valid_volts``), rate as configured.
 
 A device's clock is reported as its time base and its rate against the host's: device time
 advanced over host time during the window (a stuck clock, or one in the wrong unit, is off by
@@ -29,6 +31,9 @@ clock's offset from the trigger anchors, whatever it is).
 
 Not responsible for: starting simulators (the command line passes a simulated rig's URLs in, as
 for a recording), or deciding what to do about a failure (the callers).
+
+Longer than 600 lines: one device's check is one flow (open, identify, read, judge, close) and
+the judges of the six roles write into its findings; apart, they would share its private state.
 """
 
 from __future__ import annotations
@@ -546,9 +551,34 @@ def _plc(check: _DeviceCheck, driver: Any, found: _Findings) -> None:
                               "(limit switch, or model not caught)")
 
 
+def _analog(check: _DeviceCheck, driver: Any, found: _Findings) -> None:
+    info = driver.info()
+    found.identity = ", ".join(f"{key.lower()} {info[key]}" for key in ("Name", "Version")
+                               if key in info)
+    readings = check.stream(lambda t: driver.read(timeout_s=t))
+    _clocked(check, readings, float(check.inst.settings["rate_hz"]), found)
+    if not readings:
+        return
+    described = driver.describe()
+    names = [k for k in described if k not in ("error_code", "epoch", "triggered")]
+    codes = np.concatenate([r.channels["error_code"] for r in readings])
+    parts = []
+    for j, name in enumerate(names):
+        values = np.concatenate([r.channels[name] for r in readings])
+        valid = ((codes >> j) & 1) == 0
+        fraction = float(valid.mean())
+        mean = float(np.mean(values[valid])) if valid.any() else float("nan")
+        parts.append(f"{name} {mean:.4g} {described[name]['units']}")
+        if fraction < check.limits.laser_valid_fraction:
+            found.problems.append(f"{name}: only {fraction:.1%} of the readings valid (the "
+                                  "input at its range's limit or outside valid_volts)")
+    found.readings = ", ".join(parts)
+
+
 #: The inspection of each kind of device, after its driver opened.
 INSPECT: Mapping[str, Callable[[_DeviceCheck, Any, _Findings], None]] = {
-    "scanner": _scanner, "laser": _laser, "barometer": _barometer, "fan": _fan, "plc": _plc}
+    "scanner": _scanner, "laser": _laser, "barometer": _barometer, "fan": _fan, "plc": _plc,
+    "analog": _analog}
 
 
 def _why(exc: BaseException) -> str:

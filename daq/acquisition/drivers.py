@@ -2,7 +2,8 @@
 
 Responsibility: build (not open) every configured instrument's driver
 (:func:`daq.instruments.build.build_driver`) and pair it with the engine's kind of device
-(:data:`ROLE_KINDS`: the rig config's roles are plural where a rig has several, ``lasers``),
+(:data:`ROLE_KINDS`: the rig config's roles are plural where a rig has several, ``lasers``;
+``analog``: scaled analog inputs such as a Pitot transducer or a balance, clocked streams),
 ready for :class:`~daq.acquisition.engine.Acquisition`.
 
 Not responsible for: the URLs (a simulated rig's are filled in by :mod:`daq.sim.rig` before this
@@ -21,7 +22,8 @@ __all__ = ["ROLE_KINDS", "drivers_from_config"]
 
 #: Rig-config role -> engine kind.
 ROLE_KINDS: Mapping[str, str] = {"scanner": "scanner", "lasers": "laser",
-                                 "barometer": "barometer", "fan": "fan", "plc": "plc"}
+                                 "barometer": "barometer", "fan": "fan", "plc": "plc",
+                                 "analog": "analog"}
 
 
 def drivers_from_config(config: RigConfig) -> dict[str, tuple[str, Any]]:

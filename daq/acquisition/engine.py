@@ -31,6 +31,10 @@ Design choices:
   ``threading.Event`` (polled readers wait on it; streaming reads use a short timeout), joins the
   readers within ``join_timeout_s``, closes the drivers (which also unblocks a reader stuck in a
   read), then lets the dispatcher drain what is queued and deliver ``"stop"``.
+
+Longer than 600 lines: the engine is one class whose operator commands (PLC, manual releases,
+fan, CALZ, markers) are thin methods that must live on it, each with its contract documented;
+their work is in :mod:`daq.acquisition.commands` and :mod:`daq.acquisition.calz`.
 """
 
 from __future__ import annotations
@@ -386,6 +390,23 @@ class Acquisition:
         with self._counts_lock:
             self._releases.append(event)
         return event
+
+    def manual_release(self, text: str = "") -> Event:
+        """Record that the operator let the model go by hand: a ``"manual_release"`` event.
+
+        The run writer finds the release instant before it in the lasers' signals. Raises
+        RuntimeError when the engine is not running (the release must be recorded).
+        """
+        self._require_running("manual_release()")
+        event = commands.manual_release(self._post_event, text)
+        with self._counts_lock:
+            self._releases.append(event)
+        return event
+
+    def manual_hold(self, text: str = "") -> Event:
+        """Record that the operator caught and holds the model: a ``"manual_hold"`` event."""
+        self._require_running("manual_hold()")
+        return commands.manual_hold(self._post_event, text)
 
     def arm(self, plc: str | None = None) -> Event:
         """Arm the PLC (magnet on, one release permitted) and record an ``"arm"`` event.

@@ -139,8 +139,8 @@ class DeviceReader:
     doorbell : threading.Event
         Set after every enqueued block (wakes the dispatcher).
     poll_interval_s : float, optional
-        Poll period of a polled kind, s (default: the barometer's own ``poll_interval_s``, else
-        1 s; 0.1 s for the fan and the PLC).
+        Poll period of a polled kind, s (default: the driver's own
+        ``settings.poll_interval_s``, else 1 s for the barometer, 0.1 s for the fan and the PLC).
     read_timeout_s : float
         Timeout of one streaming ``read``, s: bounds how long a stop waits for a reader.
     stall_s : float

@@ -37,13 +37,14 @@ __all__ = [
 ]
 
 #: Kinds of device the engine knows how to read.
-KINDS = ("scanner", "laser", "barometer", "fan", "plc")
+KINDS = ("scanner", "laser", "barometer", "fan", "plc", "analog")
 #: Event kinds the engine itself emits; :meth:`~daq.acquisition.engine.Acquisition.mark` refuses
 #: them.
 SYSTEM_EVENT_KINDS = frozenset({"fault", "recovered", "overflow", "release", "release_failed",
                                 "arm", "arm_failed", "disarm", "disarm_failed", "trigger",
                                 "calz", "calz_failed", "fan_speed", "fan_start", "fan_stop",
-                                "fan_failed", "fan_reached"})
+                                "fan_failed", "fan_reached", "manual_release", "manual_hold",
+                                "release_detected", "release_not_detected"})
 
 IntArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]

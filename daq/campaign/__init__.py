@@ -18,6 +18,8 @@ The map of its modules (one job each):
 - ``files``     the run files' names (one per speed or one per release) and reading back an
                 earlier session's files, grouped by speed (resume).
 - ``wind``      the drive's ramp rate, and waiting for a steady wind at a set-point.
+- ``releasing`` holding and releasing the model: the PLC, or the operator's hand (prompted on
+                the terminal between releases; the instant found in the lasers' signals).
 - ``runner``    the loop: device check, fan, settle, arm/release per speed into run files,
                 progress lines, modal fits and the flutter speed +- std after each speed;
                 stops safely (growth, bound, Ctrl-C: model caught, fan down, file finished);

@@ -45,6 +45,7 @@ def run_command(plan_path: Path, config_path: Path, out: Path, *, simulate: bool
             raise UsageError(f"{config_path}: instrument(s) {auto} have url = 'auto' (a "
                              "simulated rig): pass --simulate, or give their real URLs")
     plan.check_against(config)
+    plan.check_rig(config)  # it can release and identify: one line, before anything moves
     if out.exists() and not out.is_dir():
         raise UsageError(f"--out {out}: exists and is not a directory")
     truth = None

@@ -85,11 +85,13 @@ class RecordedSpeed:
         return sum(len(run.releases) for run in self.runs)
 
 
-def read_back(out: Path, say: Callable[[str], None]) -> list[RecordedSpeed]:
+def read_back(out: Path, say: Callable[[str], None], *,
+              displacements_only: bool = False) -> list[RecordedSpeed]:
     """Read the run files of earlier sessions in ``out``, grouped by speed in campaign order.
 
     A file that cannot be read (not a run file, no usable release) is reported through ``say``
-    and left out of the fit; it stays on disk.
+    and left out of the fit; it stays on disk. ``displacements_only``: read h and alpha alone,
+    as the displacement-only route does (a rig without taps).
     """
     speeds: dict[tuple[int, str], RecordedSpeed] = {}
     for path in sorted(out.glob("speed[0-9][0-9]_U*.h5")):
@@ -100,7 +102,8 @@ def read_back(out: Path, say: Callable[[str], None]) -> list[RecordedSpeed]:
         speed = speeds.setdefault(key, RecordedSpeed(key[0], float(key[1])))
         speed.paths.append(path)
         try:
-            speed.runs.append(read_run(path, cut_at_gaps=True))  # as when recorded
+            speed.runs.append(read_run(path, cut_at_gaps=True,  # as when recorded
+                                       displacements_only=displacements_only))
         except (IdentError, ValueError, OSError) as exc:
             say(f"resume: {path.name} is not usable ({exc}); left out")
     return [speeds[key] for key in sorted(speeds)]

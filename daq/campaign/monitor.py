@@ -115,13 +115,13 @@ class DecayMonitor:
         if name == "event":
             kind = getattr(doc, "kind", "")
             with self._lock:
-                if kind == "release":
+                if kind in ("release", "manual_release"):  # a manual one: from the key on
                     self._release_ns = int(doc.host_time_ns)
                     self._tracks = {}
                     self.growing.clear()
                     self.settled.clear()
                     self.releases += 1
-                elif kind == "arm":
+                elif kind in ("arm", "manual_hold"):
                     self._release_ns = None  # caught: what follows is no decay
         elif name == "block" and getattr(doc, "kind", "") == "laser":
             with self._lock:

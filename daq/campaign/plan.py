@@ -22,6 +22,14 @@ The plan (units SI; the example plans are ``rig_configs/plans/*.toml``)::
     calz_start = true           # zero the scanner wind-off before the first speed
     calz_end = true             # ... and once more wind-off after the fan is down
     files = "per_speed"         # one run file per speed; "per_release": one per release
+    release = "auto"            # "plc": the PLC's magnet; "manual": by hand, the operator
+                                # prompted on the terminal between releases (the instant
+                                # found in the lasers' signals); "auto": the PLC if the rig
+                                # has one, else by hand
+    identification = "e2rfc"    # "e2rfc" (the taps' forces); "displacement": the
+                                # displacement-only route, for a rig without taps (fixed
+                                # mode, 3 or more speeds; `windrig identify` after the
+                                # campaign, with its caveats)
 
     [speeds]
     wind_speeds = [5.0, 7.0]    # m/s; or fan_rpm = [500, 700] (set-points, rpm), not both
@@ -39,6 +47,11 @@ The plan (units SI; the example plans are ``rig_configs/plans/*.toml``)::
 
 In adaptive mode the listed speeds are the first ones (two at least: E2RFC needs two wind
 speeds before it says anything); the next are chosen by :mod:`daq.campaign.adaptive`.
+
+Before the fan turns (:meth:`CampaignPlan.check_rig`, with the speeds' check): the rig must be
+able to release (a PLC, or releases by hand, which need lasers) and to identify (a pressure
+scanner for E2RFC, or the displacement-only route named); anything else is refused in one
+line.
 
 Not supported: a hold displacement per release. The release PLC of these rigs switches a
 magnet on and off; the hold position is set by the rig's mechanics (on a simulated rig by
@@ -69,6 +82,12 @@ MODES = ("fixed", "adaptive")
 FILE_MODES = ("per_speed", "per_release")
 #: When a release's recording ends: after decay_s, or once the decay has settled (or decay_s).
 DECAY_ENDS = ("fixed", "settled")
+#: How the model is released: the PLC, by hand, or whichever the rig allows (PLC first).
+RELEASES = ("auto", "plc", "manual")
+#: How the campaign's releases are identified.
+IDENTIFICATIONS = ("e2rfc", "displacement")
+#: Fewest wind speeds the displacement-only route identifies from (its known weakness).
+DISPLACEMENT_MIN_SPEEDS = 3
 MAX_RELEASES_PER_SPEED = 20
 MAX_SPEEDS = 50
 
@@ -148,6 +167,10 @@ class CampaignPlan:
         ``"fixed"`` (every release recorded for ``decay_s``) or ``"settled"`` (a release's
         recording ends once its decay has settled,
         :attr:`daq.campaign.monitor.DecayMonitor.settled`; ``decay_s`` the longest).
+    release : str
+        ``"auto"``, ``"plc"`` or ``"manual"`` (:meth:`release_method` resolves ``"auto"``).
+    identification : str
+        ``"e2rfc"`` or ``"displacement"`` (the displacement-only route).
     """
 
     mode: str
@@ -165,6 +188,45 @@ class CampaignPlan:
     files: str = "per_speed"
     decay_end: str = "fixed"
     hold_s: float = HOLD_S
+    release: str = "auto"
+    identification: str = "e2rfc"
+
+    def release_method(self, config: RigConfig) -> str:
+        """Return how this plan releases on ``config``: ``"plc"`` or ``"manual"``."""
+        if self.release != "auto":
+            return self.release
+        return "plc" if config.by_role("plc") else "manual"
+
+    def check_rig(self, config: RigConfig) -> None:
+        """Raise ConfigError unless the rig can release and identify as this plan says.
+
+        Checked before the fan turns (with :meth:`check_against`): a campaign that cannot
+        release, or whose releases cannot be identified, must not blow the wind first.
+        """
+        where = f"{self.source} [campaign]"
+        method = self.release_method(config)
+        if method == "plc" and not config.by_role("plc"):
+            raise ConfigError(f'{where} release = "plc": {config.source} has no [plc]; release '
+                              'by hand instead (release = "manual": the operator is prompted '
+                              "between releases)")
+        if not config.by_role("lasers"):
+            raise ConfigError(f"{where}: {config.source} has no lasers: no release can be seen "
+                              "or identified (h and alpha come from them)")
+        if self.identification == "e2rfc" and not config.by_role("scanner"):
+            raise ConfigError(
+                f"{where}: {config.source} has no pressure scanner, so no forces: E2RFC cannot "
+                'identify its releases; name the displacement-only route (identification = '
+                f'"displacement": fixed mode, {DISPLACEMENT_MIN_SPEEDS} or more speeds)')
+        if self.identification == "displacement":
+            if self.mode != "fixed":
+                raise ConfigError(f'{where} identification = "displacement" needs mode = '
+                                  '"fixed": the adaptive choice of speeds is E2RFC\'s')
+            speeds = {round(U, 6) for U in self.listed_speeds(config.wind_per_rpm)}
+            if len(speeds) < DISPLACEMENT_MIN_SPEEDS:
+                raise ConfigError(
+                    f'{self.source} [speeds]: identification = "displacement" needs '
+                    f"{DISPLACEMENT_MIN_SPEEDS} or more distinct speeds (in practice many), "
+                    f"got {len(speeds)}")
 
     def listed_speeds(self, wind_per_rpm: float) -> list[float]:
         """Return the listed speeds as wind speeds, m/s (fan set-points times the calibration)."""
@@ -254,7 +316,8 @@ def parse_plan(text: str, source: str = "<string>") -> CampaignPlan:
     c = data["campaign"]
     check_keys(c, where, {"mode"}, {"releases_per_speed", "decay_s", "settle_s",
                                     "steady_tolerance", "pause_s", "calz_start", "calz_end",
-                                    "files", "decay_end", "hold_s"})
+                                    "files", "decay_end", "hold_s", "release",
+                                    "identification"})
     mode = c["mode"]
     if mode not in MODES:
         raise ConfigError(f"{where} mode = {mode!r}; allowed: {', '.join(MODES)}")
@@ -273,6 +336,13 @@ def parse_plan(text: str, source: str = "<string>") -> CampaignPlan:
     if decay_end not in DECAY_ENDS:
         raise ConfigError(f"{where} decay_end = {decay_end!r}; allowed: "
                           f"{', '.join(DECAY_ENDS)}")
+    release = c.get("release", "auto")
+    if release not in RELEASES:
+        raise ConfigError(f"{where} release = {release!r}; allowed: {', '.join(RELEASES)}")
+    identification = c.get("identification", "e2rfc")
+    if identification not in IDENTIFICATIONS:
+        raise ConfigError(f"{where} identification = {identification!r}; allowed: "
+                          f"{', '.join(IDENTIFICATIONS)}")
 
     where = f"{source} [speeds]"
     s = data["speeds"]
@@ -317,7 +387,7 @@ def parse_plan(text: str, source: str = "<string>") -> CampaignPlan:
                         decay_s=decay_s, settle_s=settle_s, steady_tolerance=steady,
                         pause_s=pause_s, calz_start=calz_start, calz_end=calz_end,
                         adaptive=adaptive, source=source, files=files, decay_end=decay_end,
-                        hold_s=hold_s)
+                        hold_s=hold_s, release=release, identification=identification)
 
 
 def load_plan(path: str | Path) -> CampaignPlan:

@@ -43,6 +43,15 @@ the first start to the final stop.
 Resumable: run files already in the output directory are read back and count as recorded
 speeds (a fixed plan goes on with the next listed speed; an adaptive one decides from them).
 
+Releases by hand (a rig without a PLC, or ``release = "manual"``): the same loop, with the
+operator prompted before each hold and release (:mod:`daq.campaign.releasing`). With the
+displacement-only route (``identification = "displacement"``) the files are read back for h and
+alpha alone and nothing is identified between speeds: the route needs all of them.
+
+Longer than 600 lines: the loop, its per-speed and per-file steps and the session's state are
+one sequence whose safety order (catch, stop the fan, wait it down) is easier to check in one
+place; the choices it delegates (speeds, files, releasing, monitoring) live in their modules.
+
 Not responsible for: parsing the plan (:mod:`daq.campaign.plan`), choosing speeds
 (:mod:`daq.campaign.adaptive`), the report (:mod:`daq.campaign.report`), or starting a
 simulated rig's instruments (:mod:`daq.sim.rig_process`, started here only with
@@ -68,6 +77,7 @@ from daq.campaign.files import interrupted_name, read_back, run_file_name
 from daq.campaign.monitor import DecayMonitor
 from daq.campaign.outcome import CampaignOutcome, SpeedStep
 from daq.campaign.plan import CampaignPlan
+from daq.campaign.releasing import ManualReleases, PlcReleases, releaser
 from daq.campaign.wind import STEADY_TIMEOUT_S, ramp_rate, wait_steady
 from daq.config import RigConfig
 from daq.errors import DeviceCheckError, DeviceError
@@ -123,6 +133,8 @@ class _Session:
         section = config.section
         #: Follows every decay of the session (its releases count across the files).
         self.monitor = DecayMonitor(1.0 / min(section.fh, section.fa))
+        #: How the model is held and released (set by run_plan: the PLC or a hand).
+        self.releases: PlcReleases | ManualReleases = PlcReleases()
         self._recording: RecordingSession | None = None
         self._stack = contextlib.ExitStack()
 
@@ -193,7 +205,8 @@ def _truth_speed(config: RigConfig) -> float | None:
 def run_plan(plan: CampaignPlan, config: RigConfig, out_dir: str | Path, *,
              simulate: bool = False, say: Callable[[str], None] = print,
              previous: dict[str, Any] | None = None,
-             outcome: CampaignOutcome | None = None, check: bool = True) -> CampaignOutcome:
+             outcome: CampaignOutcome | None = None, check: bool = True,
+             ask: Callable[[str], Any] | None = None) -> CampaignOutcome:
     """Run a campaign plan on a rig (see the module docstring).
 
     Parameters
@@ -216,6 +229,9 @@ def run_plan(plan: CampaignPlan, config: RigConfig, out_dir: str | Path, *,
     check : bool
         Check every device first (:func:`~daq.acquisition.device_check.require_devices_ok`,
         as ``windrig check``), before the fan or the release moves.
+    ask : callable, optional
+        Releases by hand: ``ask(prompt)`` returns once the operator confirms (default: Enter
+        on the terminal, :func:`daq.campaign.releasing.ask_on_terminal`).
 
     Raises
     ------
@@ -229,6 +245,7 @@ def run_plan(plan: CampaignPlan, config: RigConfig, out_dir: str | Path, *,
     """
     started = time.monotonic()
     plan.check_against(config)
+    plan.check_rig(config)  # it can release and identify: before anything moves
     out = Path(out_dir)
     outcome = CampaignOutcome() if outcome is None else outcome
     if previous:
@@ -255,6 +272,9 @@ def run_plan(plan: CampaignPlan, config: RigConfig, out_dir: str | Path, *,
                 + "".join(f"\n  note: {note}" for note in notes))
         out.mkdir(parents=True, exist_ok=True)  # after the check: a failed one leaves nothing
         session = _Session(plan, live, out, say)
+        session.releases = releaser(plan.release_method(live), rig=rig, ask=ask, say=say)
+        if session.releases.manual:
+            say("releases by hand: the operator is prompted before each hold and release")
         restore = _on_sigint(session.abort)
         try:
             try:
@@ -313,7 +333,8 @@ def _loop(session: _Session, outcome: CampaignOutcome) -> None:
     rig_limit = min(config.limits.max_wind_speed, config.limits.max_fan_rpm * config.wind_per_rpm)
     decay_s = plan.decay_s if plan.decay_s is not None else default_decay_s(config.section)
 
-    for found in read_back(session.out, say):
+    for found in read_back(session.out, say,
+                           displacements_only=plan.identification == "displacement"):
         why = "listed in the plan" if found.index <= len(listed) else "read back"
         outcome.steps.append(SpeedStep(found.index, found.U, found.paths[0], found.releases,
                                        f"{why} (resumed)", paths=found.paths, resumed=True))
@@ -321,8 +342,9 @@ def _loop(session: _Session, outcome: CampaignOutcome) -> None:
         outcome.resumed += 1
     if outcome.resumed:
         say(f"resume: {outcome.resumed} speed(s) read back from {session.out}")
-        outcome.analysis = _analysis(session.runs)
-        _say_estimate(say, outcome.analysis)
+        if plan.identification == "e2rfc":
+            outcome.analysis = _analysis(session.runs)
+            _say_estimate(say, outcome.analysis)
 
     while True:
         k = len(outcome.steps)  # speeds recorded so far
@@ -426,6 +448,7 @@ def _record_speed(session: _Session, outcome: CampaignOutcome, index: int, U: fl
     for path, releases in batches:
         status = _record_file(session, outcome, path, rpm, releases, n, decay_s,
                               f"campaign speed {index}: {why}")
+        displacement = plan.identification == "displacement"
         paths.append(path)
         if status == "interrupted":
             for kept in paths:
@@ -434,7 +457,7 @@ def _record_speed(session: _Session, outcome: CampaignOutcome, index: int, U: fl
             say(f"interrupted: {', '.join(interrupted_name(p).name for p in paths)} kept, the "
                 "speed is repeated on resume")
             return None
-        run = _read_recorded(path, say)
+        run = _read_recorded(path, say, displacement)
         if run is not None:
             runs.append(run)
             # The modal fit of each release as soon as its file is closed (per release: live).
@@ -455,12 +478,17 @@ def _record_speed(session: _Session, outcome: CampaignOutcome, index: int, U: fl
     return step
 
 
-def _read_recorded(path: Path, say: Callable[[str], None]) -> RunFile | None:
-    """Read a file just recorded back for identification (None, said, when it cannot be)."""
+def _read_recorded(path: Path, say: Callable[[str], None],
+                   displacement: bool = False) -> RunFile | None:
+    """Read a file just recorded back for identification (None, said, when it cannot be).
+
+    ``displacement``: for the displacement-only route, h and alpha alone (a rig without taps
+    records no forces, which are otherwise a gap from the release on).
+    """
     try:
         # A gap (a device fault, frames lost on a busy host) ends a release early, or leaves
         # it out when too little remains: the campaign goes on with the rest, and says so.
-        run = read_run(path, cut_at_gaps=True)
+        run = read_run(path, cut_at_gaps=True, displacements_only=displacement)
     except (IdentError, ValueError, OSError) as exc:
         say(f"  {path.name}: cannot be identified ({exc}); left out of the fit")
         return None
@@ -519,14 +547,15 @@ def _record_file(session: _Session, outcome: CampaignOutcome, path: Path, rpm: f
         if wait(recording.clock_wait_s() - plan.hold_s) or session.abort.is_set():
             return
         say(f"  wind steady at {fan.speed() * config.wind_per_rpm:.2f} m/s")
+        by = session.releases  # the PLC, or the operator's hand (daq.campaign.releasing)
         for i in releases:
-            acq.arm()
-            if wait(plan.hold_s):
+            by.hold(acq)
+            if wait(max(plan.hold_s, by.min_hold_s)):
                 return
             seen = monitor.releases
-            acq.release()
+            by.release(acq)
             if wait(decay_s, seen if plan.decay_end == "settled" else None):
-                acq.arm()  # catch the model first, then take the wind away
+                by.catch(acq)  # catch the model first, then take the wind away
                 acq.stop_fan()
                 if not monitor.growing.is_set():
                     return  # Ctrl-C: caught and stopped, the runner waits the fan down
@@ -542,7 +571,7 @@ def _record_file(session: _Session, outcome: CampaignOutcome, path: Path, rpm: f
                    f"over {amp.windows} periods"))
             if plan.pause_s and wait(plan.pause_s) and session.abort.is_set():
                 return
-        acq.arm()  # hold the model: the next decay is not recorded as part of this one
+        by.hold(acq)  # hold the model: the next decay is not recorded as part of this one
         done.set()
 
     def actions(acq: Acquisition) -> None:
@@ -550,7 +579,7 @@ def _record_file(session: _Session, outcome: CampaignOutcome, path: Path, rpm: f
             body(acq)
         finally:
             if session.abort.is_set() and acq.running:
-                acq.arm()  # Ctrl-C: the model is held before the run ends
+                session.releases.interrupted(acq)  # Ctrl-C: the model held before the end
                 acq.stop_fan()
 
     recording = session.recording()
@@ -562,6 +591,10 @@ def _record_file(session: _Session, outcome: CampaignOutcome, path: Path, rpm: f
 
 
 def _update(session: _Session, outcome: CampaignOutcome, step: SpeedStep) -> None:
+    if session.plan.identification == "displacement":  # from all speeds, after the campaign
+        session.say(f"displacement-only route: identify after the campaign (`windrig identify "
+                    f"{session.out}/*.h5 --route displacement`, which states its caveats)")
+        return
     started = time.monotonic()
     try:
         try:

@@ -7,8 +7,11 @@ Responsibility: one :class:`ControlPanel` widget over a live source (``source.ac
 (:class:`~daq.console.interlocks.Interlocks`, pure and Qt-free) what it sees, and disables the
 actions they refuse, with their reason as the tooltip and in the status line (e.g.
 ``"release: arm first"``). Every action is one of the engine's commands (``set_fan_speed``,
-``start_fan``, ``stop_fan``, ``arm``, ``release``, ``calz``, ``mark``), so each is recorded as an
-event of the run. Actions that can block (fan start, arm, release, CALZ) run one at a time on a
+``start_fan``, ``stop_fan``, ``arm``, ``release``, ``manual_release``, ``manual_hold``, ``calz``,
+``mark``), so each is recorded as an event of the run. A rig without a PLC is released by hand:
+the operator lets the model go, then clicks "released" (the instant is found in the lasers'
+signals before the click), and clicks "held" once it is caught and held still again. Actions
+that can block (fan start, arm, release, CALZ) run one at a time on a
 plain worker thread; the result comes back to the GUI thread through a Qt signal and any error
 (``SafetyError``, ``DeviceError``, ...) is shown in the status line. Stopping the fan is one
 register write and runs at once on the GUI thread (a stop must never queue behind a running
@@ -152,6 +155,8 @@ class ControlPanel(QtWidgets.QGroupBox):
                                 ("fan_stop", "stop fan", self.stop_fan),
                                 ("arm", "arm", self.arm),
                                 ("release", "release", self.release),
+                                ("hand_release", "released", self.hand_release),
+                                ("hand_hold", "held", self.hand_hold),
                                 ("calz", "CALZ", self.calz)):
             button = QtWidgets.QPushButton(text)
             button.clicked.connect(slot)
@@ -292,6 +297,33 @@ class ControlPanel(QtWidgets.QGroupBox):
             self._set_message("release: cancelled")
             return
         self._submit("release", lambda: acq.release(self._plc_name))
+
+    def hand_release(self) -> None:
+        """Say the model was let go by hand (no PLC): the engine's ``manual_release``.
+
+        The release instant is found in the lasers' signals before the click by the run
+        writer (:mod:`daq.recording.releases`); the releases table gets it from there.
+        """
+        acq = self._acq("hand_release")
+        if acq is not None:
+            self._submit("hand_release", lambda: self._by_hand("release", acq.manual_release))
+
+    def hand_hold(self) -> None:
+        """Say the model is caught and held by hand again: the engine's ``manual_hold``."""
+        acq = self._acq("hand_hold")
+        if acq is not None:
+            self._submit("hand_hold", lambda: self._by_hand("hold", acq.manual_hold))
+
+    def _by_hand(self, what: str, say_so: Callable[[], Any]) -> Any:
+        """Say what the operator's hand did; on a simulated rig its simulated hand does it first.
+
+        The simulated hand (``source.simulated_hand``) acts only on a simulated rig (``windrig
+        gui --simulate``); on a real rig it does nothing, and a replay has none.
+        """
+        hand = getattr(self._source, "simulated_hand", None)
+        if callable(hand):
+            hand(what)
+        return say_so()
 
     def calz(self) -> None:
         """Zero the scanner (CALZ) with the fan stopped and settled and the wind off."""

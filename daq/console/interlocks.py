@@ -10,6 +10,8 @@ arm first"``). The rules:
 - one blocking action at a time (fan, arm, release, CALZ wait for the one in progress);
 - the fan's actions need a fan, arm and release a PLC, CALZ a scanner;
 - release only when armed (and the ARM state read), arm only when not armed;
+- a release by hand (the operator's word: the instant is found in the lasers' signals) and a
+  hold by hand need no PLC, but not while a PLC's magnet holds the model;
 - CALZ only with the fan stopped (measured at or below :data:`FAN_STOPPED_RPM` and no start
   commanded) for :data:`CALZ_SETTLE_S`, and the measured wind (a median over
   :data:`CALZ_WIND_WINDOW_S`) below :data:`CALZ_MAX_WIND`;
@@ -47,6 +49,7 @@ FAN_STOPPED_RPM = 1.0
 
 #: The control panel's actions, as the reasons name them.
 LABELS = {"fan_apply": "fan", "fan_stop": "fan", "arm": "arm", "release": "release",
+          "hand_release": "released by hand", "hand_hold": "held by hand",
           "calz": "CALZ", "mark": "mark", "record": "record", "stop_record": "stop recording"}
 #: Every action the interlocks rule on.
 ACTIONS = tuple(LABELS)
@@ -151,6 +154,8 @@ class Interlocks:
             refuse(("release",), "arm first")
         else:
             refuse(("arm",), "already armed")
+            # The magnet holds the model: no hand can let it go (release through the PLC).
+            refuse(("hand_release",), "the PLC's magnet holds the model (disarm, or release)")
         self._check_fan_for_calz(state, now_s, refuse)
         if "calz" not in reasons:  # measured only now: measuring reads the buffer
             wind = state.wind_m_s() if callable(state.wind_m_s) else float(state.wind_m_s)

@@ -485,6 +485,29 @@ class LiveSource(RingSource):
                 self._decays[-1] = (self._decays[-1][0], t)
 
     @property
+    def simulated_rig(self) -> Any:
+        """The simulated rig's process (:class:`~daq.sim.rig_process.RigProcess`), or None.
+
+        Its truth and, on a rig without a PLC, the hand that lets the model go
+        (``hand_release``): what a test or a scripted operator needs of the simulation.
+        """
+        return self._rig
+
+    def simulated_hand(self, what: str) -> None:
+        """On a simulated rig, let the model go (``"release"``) or hold it (``"hold"``) by hand.
+
+        What the console's "released" and "held" buttons do first on a simulated rig, where no
+        person's hand reaches the virtual tunnel; nothing on a real rig.
+        """
+        if what not in ("release", "hold"):
+            raise ValueError(f"simulated_hand({what!r}): release or hold")
+        if self.simulate and self._rig is not None:
+            if what == "release":
+                self._rig.hand_release()
+            else:
+                self._rig.hand_hold()
+
+    @property
     def plc_armed(self) -> tuple[int, bool] | None:
         """The PLC's ARM coil as last read: (host ``monotonic_ns``, armed); None before."""
         return None if self._recorder is None else self._recorder.plc_armed

@@ -72,8 +72,8 @@ DRIVER_COMMANDS: dict[str, dict[str, str]] = {
     "plc": {"disarm": "disarm"},
 }
 #: The engine methods an operator command may call in the child.
-ENGINE_COMMANDS = ("arm", "disarm", "release", "calz", "mark", "set_fan_speed", "start_fan",
-                   "stop_fan")
+ENGINE_COMMANDS = ("arm", "disarm", "release", "manual_release", "manual_hold", "calz", "mark",
+                   "set_fan_speed", "start_fan", "stop_fan")
 #: How long the child may take to start the rig, the drivers and the engine, s.
 START_TIMEOUT_S = 60.0
 #: How long a command waits for its answer, s, unless it says otherwise (a CALZ takes its own
@@ -178,6 +178,8 @@ class _Server:
                                       f"(a {kind}: {tuple(allowed)})")
             # Through the engine, named by its kind ("fan" or "plc"): recorded as an event.
             return getattr(acq, allowed[method])(*rest, **{kind: device}, **kwargs)
+        if name == "simulated_hand":  # a simulated rig's operator: releases by hand
+            return live.simulated_hand(*args)
         if name == "start_recording":
             return live.start_recording(*args, **kwargs)
         if name == "stop_recording":
@@ -272,6 +274,14 @@ class _RemoteAcquisition:
     def release(self, plc: str | None = None) -> Any:
         """Release the model (the engine's ``release``); return its event."""
         return self._source.call("engine", "release", plc)
+
+    def manual_release(self, text: str = "") -> Any:
+        """Say the model was let go by hand (the engine's ``manual_release``); its event."""
+        return self._source.call("engine", "manual_release", text)
+
+    def manual_hold(self, text: str = "") -> Any:
+        """Say the model is held by hand again (the engine's ``manual_hold``); its event."""
+        return self._source.call("engine", "manual_hold", text)
 
     def calz(self, device: str | None = None, *, wind_speed_now: float,
              timeout_s: float = 30.0) -> Any:
@@ -598,6 +608,10 @@ class ProcessLiveSource(RingSource):
     def events(self, kind: str | None = None) -> list[Any]:
         """Return the engine's latest events, oldest first (asks the child)."""
         return list(self.call("events", kind))
+
+    def simulated_hand(self, what: str) -> None:
+        """Let the simulated model go or hold it by hand (see ``LiveSource.simulated_hand``)."""
+        self.call("simulated_hand", what)
 
     # -- recording -------------------------------------------------------------------------------
     @property

@@ -16,7 +16,7 @@ __all__ = ["ROLES", "DriverEntry"]
 
 #: The roles an instrument fills in a rig config (one table each, ``[[lasers]]`` an array);
 #: docs/drivers.md writes down what each role's driver must deliver.
-ROLES = ("scanner", "lasers", "fan", "plc", "barometer")
+ROLES = ("scanner", "lasers", "fan", "plc", "barometer", "analog")
 
 
 @dataclass(frozen=True)
@@ -28,15 +28,23 @@ class DriverEntry:
     name : str
         The ``driver`` value in rig configs.
     role : str
-        The instrument role it fills (``scanner``, ``lasers``, ``fan``, ``plc``, ``barometer``).
+        The instrument role it fills, one of :data:`ROLES` (``scanner``, ``lasers``, ``fan``,
+        ``plc``, ``barometer``, ``analog``).
     factory : callable
-        Builds the driver from ``(transport_or_bus, settings)``.
+        Builds the driver from ``(transport_or_bus, settings)`` (a fan's also gets
+        ``limit_rpm``); a polled driver keeps ``settings`` as its ``settings`` attribute.
     validate : callable
-        ``validate(settings, where)`` returning the settings object or raising ConfigError.
+        ``validate(table, where)``: the instrument's raw table into the settings object, or a
+        ConfigError whose message starts with ``where`` (``"<config path> [barometer]"``).
     transport_defaults : mapping
         Line settings the device needs (e.g. 7E1 at 9600 baud), passed to
         :func:`daq.transports.byte_transport.open_transport`; a ``serial://`` URL's query
-        overrides them.
+        overrides them. Keys: those of
+        :data:`daq.transports.byte_transport.LINE_SETTINGS`, any other a ConfigError.
+    link : callable or None
+        For a driver that reaches its device through a vendor library rather than bytes or
+        registers (NI-DAQmx): ``link(url)`` returns what the factory takes instead of a
+        transport (parsed from the URL, no I/O). None: a byte transport or a Modbus bus.
     """
 
     name: str
@@ -44,3 +52,4 @@ class DriverEntry:
     factory: Callable[..., Any]
     validate: Callable[[Mapping[str, Any], str], Any]
     transport_defaults: Mapping[str, Any] = field(default_factory=dict)
+    link: Callable[[str], Any] | None = None

@@ -6,7 +6,7 @@ one :class:`Gap` type of every stream (drivers, the engine's dropped blocks, cou
 in :mod:`daq.sync.counters`), :class:`PollSequence` (the poll numbers and gaps of the polled
 drivers) and :func:`describe_mismatches` (a ``describe()`` checked against a reading).
 
-The contract, for the five drivers alike:
+The contract, for every driver alike:
 
 - ``read()`` returns a :class:`Reading` of ``n >= 1`` rows (a polled driver: ``n = 1``);
 - ``describe()`` returns ``{channel: {"units", "dtype", "shape"}}`` with exactly the keys of
@@ -104,13 +104,17 @@ class Reading:
 class PollSequence:
     """Poll numbers of a polled driver and the gaps their jumps leave.
 
-    Every poll takes the next number when it starts (:meth:`next`), so a poll that fails leaves
-    a hole; the next reading delivered (:meth:`reading`) carries it as a gap.
+    Every poll takes the next number when it starts (:meth:`next`), numbers counting from 1, so
+    a poll that fails leaves a hole; the next reading delivered (:meth:`reading`) carries it as
+    a gap. That holds for the very first polls too: the sequence starts as if poll 0 had been
+    delivered, so a first reading numbered 3 carries ``Gap(0, 2)`` (polls 1 and 2 failed) and
+    no row is lost without a trace.
     """
 
     def __init__(self) -> None:
         self.count = 0
-        self._delivered: int | None = None
+        # Poll 0 stands for the start: a failed first poll is a gap like any other.
+        self._delivered = 0
 
     def next(self) -> int:
         """Take the number of a poll that starts now."""
@@ -136,7 +140,7 @@ class PollSequence:
             Facts of this poll that are not rows.
         """
         gaps: tuple[Gap, ...] = ()
-        if self._delivered is not None and number != self._delivered + 1:
+        if number != self._delivered + 1:
             gaps = (Gap(self._delivered, number - self._delivered - 1),)
         self._delivered = number
         stamp = time.monotonic_ns() if host_time_ns is None else int(host_time_ns)

@@ -2,7 +2,7 @@
 
 Every driver, built in or from another distribution, is found the same way: as an entry point
 of the group :data:`GROUP` (``windrig.drivers``) whose name is the driver's name and whose
-object is its :class:`~daq.instruments.entry.DriverEntry`. windrig's own five drivers are
+object is its :class:`~daq.instruments.entry.DriverEntry`. windrig's own seven drivers are
 entry points of the ``windrig`` distribution (``pyproject.toml``), so this module imports no
 driver package: a driver is imported lazily, by name, when a rig config asks for it, and a
 driver that is never named is never imported. :func:`register` adds an entry built in code

@@ -4,8 +4,11 @@
   E2RFC on a Dask cluster, with a cache;
 - :mod:`~daq.offline.report`: its tables, plots and HTML report;
 - :mod:`~daq.offline.diagnosis`: ``windrig diagnose``: the discrepancy workflow with its plots;
-- :mod:`~daq.offline.flutter_commands`: ``windrig identify`` (E2RFC on run files) and
-  ``windrig flutter`` (a section with a model or a flutter-derivative table);
+- :mod:`~daq.offline.flutter_commands`: ``windrig identify`` (E2RFC on run files; releases
+  found in the signals with ``--detect-releases``) and ``windrig flutter`` (a section with a
+  model or a flutter-derivative table);
+- :mod:`~daq.offline.displacement_route`: ``windrig identify`` on files without forces (a rig
+  without taps): the displacement-only route, with its caveats as warnings;
 - :mod:`~daq.offline.derivative_table`: an identified model's flutter derivatives (all 18 with
   sway) as ``windrig identify`` prints them, and the check that it has the section's degrees
   of freedom.

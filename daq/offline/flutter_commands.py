@@ -31,7 +31,8 @@ __all__ = ["run_flutter", "run_identify"]
 
 
 def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
-                 n_lags: int | None = None, tubing_correction: bool = True) -> int:
+                 n_lags: int | None = None, tubing_correction: bool = True,
+                 route: str = "auto", detect_releases: bool = False) -> int:
     """Identify the releases of run files and print the model and flutter speed; return 0.
 
     Parameters
@@ -44,6 +45,12 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
         Number of lag terms (default: chosen by held-out error).
     tubing_correction : bool
         Correct the forces for the taps' pneumatic tubing recorded in the files.
+    route : {"auto", "e2rfc", "displacement"}
+        E2RFC (forces and displacements), or the displacement-only route
+        (:mod:`daq.offline.displacement_route`); ``"auto"``: E2RFC when every file holds
+        forces, else the displacement-only route.
+    detect_releases : bool
+        Find the releases in the lasers' signals (files without release rows).
     """
     from daq.offline.derivative_table import (
         check_model_dof,
@@ -52,10 +59,27 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
     )
     from ident.errors import IdentError
     from ident.identification.campaign import analyze_campaign
-    from ident.records.run_file import campaign_section, read_run, tubing_note
+    from ident.records.run_file import campaign_section, forces_recorded, read_run, tubing_note
 
-    runs = [read_run(p, tubing_correction=tubing_correction) for p in files]
+    if route not in ("auto", "e2rfc", "displacement"):
+        raise UsageError(f"--route {route!r}: one of auto, e2rfc, displacement")
+    without = [p for p in files if not forces_recorded(p)]
+    if route == "e2rfc" and without:
+        raise UsageError(f"{without[0]}: holds no forces (a rig without taps): E2RFC needs "
+                         "them; identify it by the displacement-only route (--route "
+                         "displacement)")
+    displacement = route == "displacement" or bool(without)
+    runs = [read_run(p, tubing_correction=tubing_correction, detect_releases=detect_releases,
+                     displacements_only=displacement) for p in files]
+    notes = _detections(runs) if detect_releases else []
     section = campaign_section(runs)
+    if displacement:
+        from daq.offline.displacement_route import run_displacement_route
+
+        why = ("asked for" if route == "displacement" else
+               f"{len(without)} of {len(files)} file(s) hold no forces, e.g. {without[0]}")
+        return run_displacement_route(runs, files, section, why=why, json_path=json_path,
+                                      n_lags=n_lags, extra_warnings=notes)
     releases = [r for run in runs for r in run.releases]
     print(f"{len(releases)} release(s) from {len(runs)} file(s); wind speeds "
           f"{sorted({round(r.U, 2) for r in releases})} m/s{tubing_note(runs)}")
@@ -94,7 +118,7 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
         print(f"  also within one SE: {label}: " + (
             f"no flutter below {spread.U_max:.3g} m/s" if speed is None or speed_std is None
             else f"flutter speed {speed:.3f} +/- {speed_std:.3f} m/s"))
-    for warning in analysis.warnings:
+    for warning in [*notes, *analysis.warnings]:
         print(f"warning: {warning}")
     if json_path is not None:
         summary = analysis.to_dict()
@@ -110,13 +134,30 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
             "flutter_speed_structures": summary["flutter_structures"],
             "flutter_frequency": result.frequency,
             "critical_mode": result.critical_mode,
-            "warnings": summary["warnings"],
+            "warnings": [*notes, *summary["warnings"]],
             **({} if section.n_dof == 2 else {"flutter_derivatives": {
                 name: values.tolist() for name, values in
                 (("K", K_table), *derivative_values.items())}}),
         }, indent=2))
         print(f"wrote {json_path}")
     return 0
+
+
+def _detections(runs: Sequence[Any]) -> list[str]:
+    """Print the releases found in each file's signals; return warnings (weak onsets, none)."""
+    warnings = []
+    for run in runs:
+        print(f"{run.path}: {len(run.detected)} release(s) found in the lasers' signals"
+              + "".join(f"\n  at {o.time:.4f} s (std {1e3 * o.std:.2f} ms, snr {o.snr:.0f})"
+                        for o in run.detected))
+        if not run.detected:
+            warnings.append(f"{run.path}: no release found in its signals (a hold of at least "
+                            "0.3 s still, then a free decay of 3 periods or more)")
+        weak = [o for o in run.detected if not o.reliable]
+        if weak:
+            warnings.append(f"{run.path}: {len(weak)} release(s) with a weak onset (snr below "
+                            "150): their instants may be off by several std")
+    return warnings
 
 
 def run_flutter(section_path: Path, *, model_path: Path | None = None,

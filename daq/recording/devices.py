@@ -31,6 +31,7 @@ from daq.config import RigConfig
 from daq.recording.recorder_protocol import Recorder
 from daq.sync.clock_map import ClockMap, trigger_times_from_flags, trigger_times_from_latch
 from daq.sync.continuous_time import ContinuousTimeline
+from daq.sync.resample import StreamSpec
 
 __all__ = [
     "CLOCK_SETTLE_S",
@@ -47,6 +48,7 @@ __all__ = [
     "laser_raw_rows",
     "new_clock_map",
     "take_rows",
+    "view_streams",
 ]
 
 FloatArray = npt.NDArray[np.float64]
@@ -93,7 +95,8 @@ def declare_device(rec: Recorder, config: RigConfig, name: str, kind: str,
     The raw stream's layout is the file format's (docs/file_format.md), per role: so this is
     where the writer asks what kind of device it records. A laser records ``distance`` (m)
     with its ``error_code`` and ``triggered`` flags, a scanner its taps and Pitot (Pa, float32)
-    with the trigger time, a polled device the scalar channels its ``describe()`` names.
+    with the trigger time, an analog device (clocked) and a polled device the scalar channels
+    their ``describe()`` names.
 
     Parameters
     ----------
@@ -113,6 +116,16 @@ def declare_device(rec: Recorder, config: RigConfig, name: str, kind: str,
                        extra={"error_code": "int32", "triggered": "bool"})
         return DeviceState(name, kind, ["distance"], rate, new_clock_map(),
                            ContinuousTimeline(1.0 / rate), raw_rows=laser_raw_rows)
+    if kind == "analog":
+        # Scaled analog inputs (a Pitot transducer, a balance): a clocked stream of scalar
+        # channels, with their flags, mapped onto the host clock as a laser's.
+        rate = float(config.instrument(name).settings["rate_hz"])
+        pairs = [(k, str(v.get("units", "") or "1")) for k, v in describe.items()
+                 if tuple(v.get("shape", ())) == ()]
+        channels = [k for k, _ in pairs]
+        rec.add_stream(name, channels, [u for _, u in pairs], rate, "float64")
+        return DeviceState(name, kind, channels, rate, new_clock_map(),
+                           ContinuousTimeline(1.0 / rate), raw_rows=TableRawRows(tuple(channels)))
     if kind == "scanner":
         rate = float(config.instrument(name).settings["rate_hz"])
         n_taps = config.taps.n_taps
@@ -130,6 +143,31 @@ def declare_device(rec: Recorder, config: RigConfig, name: str, kind: str,
     rate = POLLED_RATE_HZ.get(kind, 1.0)
     rec.add_stream(name, channels, [u for _, u in pairs], rate, "float64")
     return DeviceState(name, kind, channels, rate, raw_rows=TableRawRows(tuple(channels)))
+
+
+def view_streams(dev: DeviceState, describe: Mapping[str, Any], scanner: str | None,
+                 n_taps: int, *, laser: bool, taken: Sequence[StreamSpec] = ()
+                 ) -> list[StreamSpec]:
+    """Return a device's streams in the sync view, and set its ``view`` (None: not in it).
+
+    A configured laser gives ``laser.<name>`` (its distance, boxcar-averaged), the rig's
+    scanner ``pressure`` (taps) and ``pitot``; on a rig without a scanner, the first ``analog``
+    device with a ``pitot`` channel (Pa, a Pitot transducer) gives ``pitot``, hence U.
+    ``taken``: the streams other devices gave already.
+    """
+    period = 1.0 / dev.rate_hz
+    if dev.kind == "laser" and laser:
+        dev.view = f"laser.{dev.name}"
+        return [StreamSpec(dev.view, period, "boxcar")]
+    if dev.kind == "scanner" and dev.name == scanner:
+        dev.view = "pressure"
+        return [StreamSpec("pressure", period, "linear", n_taps),
+                StreamSpec("pitot", period, "linear")]
+    if (dev.kind == "analog" and scanner is None and "pitot" in describe
+            and all(s.name != "pitot" for s in taken)):
+        dev.view = "pitot"
+        return [StreamSpec("pitot", period, "linear")]
+    return []
 
 
 def take_rows(block: StreamBlock, lo: int, hi: int) -> StreamBlock:

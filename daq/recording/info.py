@@ -117,9 +117,10 @@ def _config_tables(text: str) -> tuple[dict[str, Any], dict[str, dict[str, Any]]
     for role in ("scanner", "fan", "plc", "barometer"):
         if isinstance(config.get(role), dict):
             devices[str(config[role].get("name", role))] = config[role]
-    for table in config.get("lasers", []):
-        if isinstance(table, dict) and "name" in table:
-            devices[str(table["name"])] = table
+    for role in ("lasers", "analog"):  # the roles a rig may have several of
+        for table in config.get(role, []):
+            if isinstance(table, dict) and "name" in table:
+                devices[str(table["name"])] = table
     return section, devices
 
 

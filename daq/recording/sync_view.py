@@ -69,8 +69,8 @@ def physical_columns(sb: SyncBlock, lasers: Sequence[InstrumentConfig], config: 
     Parameters
     ----------
     sb : SyncBlock
-        Rows on the sync time base: ``laser.<name>`` distances (m), ``pressure`` (n, taps) and
-        ``pitot`` (Pa) when the rig has a scanner.
+        Rows on the sync time base: ``laser.<name>`` distances (m), ``pressure`` (n, taps)
+        when the rig has a scanner, ``pitot`` (Pa) from the scanner or an analog transducer.
     lasers : sequence of InstrumentConfig
         The lasers whose streams ``sb`` holds, in order: the vertical ones (none, or two or
         more; the first three are used) and a 3-DOF rig's sway laser.
@@ -80,7 +80,8 @@ def physical_columns(sb: SyncBlock, lasers: Sequence[InstrumentConfig], config: 
     rho_now : float
         The air density in use, kg/m^3.
     fan_rpm : float
-        The fan speed now, rpm (a Pitot factor tabulated on it; NaN: unknown).
+        The fan speed now, rpm (a Pitot factor tabulated on it; without a scanner, the wind
+        speed: times wind_per_rpm; NaN: unknown).
     """
     taps, cal = config.taps, config.calibration
     n = len(sb)
@@ -97,6 +98,7 @@ def physical_columns(sb: SyncBlock, lasers: Sequence[InstrumentConfig], config: 
             d, x, s = d[:, :3], x[:3], s[:3]
         hp = heave_pitch_from_lasers(d, x, s)
         h, alpha = hp.h, hp.alpha
+    rho = np.full(n, rho_now)
     if "pressure" in sb.values:
         pressure = sb.values["pressure"]
         if cal.taps.dead:
@@ -104,11 +106,16 @@ def physical_columns(sb: SyncBlock, lasers: Sequence[InstrumentConfig], config: 
             lift, moment = forces_from_pressures(pressure[:, live], live_taps)
         else:
             lift, moment = forces_from_pressures(pressure, taps)
-        rho = np.full(n, rho_now)
-        U = wind_speed(cal.pitot.dynamic_pressure(sb.values["pitot"], fan_rpm), rho).speed
     else:
         pressure = np.full((n, taps.n_taps), np.nan)
-        lift, moment, U, rho = nan, nan, nan, np.full(n, rho_now)
+        lift, moment = nan, nan
+    if "pitot" in sb.values:
+        # The scanner's Pitot, or (a rig without a scanner) an analog Pitot transducer's.
+        U = wind_speed(cal.pitot.dynamic_pressure(sb.values["pitot"], fan_rpm), rho).speed
+    else:
+        # No Pitot at all (a rig without taps): the wind is the fan's actual speed times the
+        # tunnel's calibration, [tunnel] wind_per_rpm (NaN until the drive reports one).
+        U = np.full(n, fan_rpm * config.wind_per_rpm if math.isfinite(fan_rpm) else np.nan)
     p = drag = None
     if config.section.n_dof == 3:
         p, drag = _sway_columns(sb, sway_lasers, config, alpha, pressure)

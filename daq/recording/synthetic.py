@@ -23,7 +23,8 @@ __all__ = ["write_release_run"]
 
 
 def write_release_run(path: str | Path, config: Any, releases: Sequence[Any],
-                      pressures: Sequence[Any] | None = None) -> None:
+                      pressures: Sequence[Any] | None = None, *,
+                      release_rows: bool = True) -> None:
     """Write releases back to back into a run file, with the acquisition's own recorder.
 
     Parameters
@@ -45,6 +46,10 @@ def write_release_run(path: str | Path, config: Any, releases: Sequence[Any],
         config's tubing (``[[taps.tubing]]``) is recorded as ``/entry/metadata/tubing``, as the
         run writer does; these pressures are taken as measured behind it. The config's
         calibrations (dead taps, ...) are recorded under ``/entry/calibration`` too.
+    release_rows : bool
+        Write ``/entry/releases`` rows (default). False: the samples only, as a file of
+        releases made by hand without the operator's keys (``windrig identify
+        --detect-releases`` finds them).
     """
     sway = config.section.n_dof == 3
     rec = RunRecorder(path, config_text=config.text, rig_name=config.name, min_free_bytes=0,
@@ -68,11 +73,12 @@ def write_release_run(path: str | Path, config: Any, releases: Sequence[Any],
                                   else np.asarray(pressures[index], dtype=np.float32)),
                         U=np.full(n, r.U),
                         rho=np.full(n, rho), **({"p": r.p, "drag": r.drag} if sway else {}))
-        rec.add_release(release_time=float(t[first]), start_index=rows + first,
-                        stop_index=rows + n, U=r.U,
-                        h0=float(getattr(r, "h0", r.h[first])),
-                        alpha0=float(getattr(r, "alpha0", r.alpha[first])),
-                        **({"p0": float(getattr(r, "p0", r.p[first]))} if sway else {}))
+        if release_rows:
+            rec.add_release(release_time=float(t[first]), start_index=rows + first,
+                            stop_index=rows + n, U=r.U,
+                            h0=float(getattr(r, "h0", r.h[first])),
+                            alpha0=float(getattr(r, "alpha0", r.alpha[first])),
+                            **({"p0": float(getattr(r, "p0", r.p[first]))} if sway else {}))
         rows += n
         t0 = float(t[-1]) + float(r.t[1] - r.t[0])
     rec.close()

@@ -23,6 +23,7 @@ their map. The final clock fit in ``/entry/sync`` attrs then describes the last 
 Not responsible for: reading devices or threads (the engine), the numerics of clocks, resampling
 and conversions (:mod:`daq.sync`), the file (:mod:`daq.recording.recorder`), running a rig into
 a file (:mod:`daq.recording.run`), or any simulator. A 3-DOF rig's p, drag, p0: see the layout.
+An ``analog`` device is a clocked raw stream; without a scanner, its ``pitot`` (Pa) gives U.
 
 Threads: the writer runs on the engine's dispatcher thread only (one thread touches h5py); the
 readers never wait for it (the engine's per-device queues are between them). A failure inside
@@ -57,6 +58,7 @@ from daq.recording.devices import (
     declare_device,
     new_clock_map,
     take_rows,
+    view_streams,
 )
 from daq.recording.layout import event_row, metadata_name_part, storable_metadata
 from daq.recording.raw_batches import RawBatches
@@ -159,7 +161,7 @@ class RunWriter:
         self._rho = DEFAULT_RHO
         self._rho_measured = False
         self._sync_rows = 0
-        self._release_rows = ReleaseRows()
+        self._release_rows = ReleaseRows(f_max=max(config.section.fh, config.section.fa))
         self._calz_count: dict[str, int] = {}
         self._trigger_events: deque[tuple[float, float]] = deque(maxlen=64)  # (t, +-s) pulses
         self._view_pieces: dict[str, list[tuple[FloatArray, FloatArray]]] = {}
@@ -219,15 +221,11 @@ class RunWriter:
         for name, info in doc["devices"].items():
             kind = str(info["kind"])
             dev = declare_device(rec, self.config, name, kind, info.get("describe", {}) or {})
-            # The sync view's streams: its lasers (h, alpha; p) and its scanner (taps, Pitot).
-            if kind == "laser" and name in self._lasers:
+            # The sync view's streams: lasers (h, alpha; p), scanner (taps, Pitot), analog Pitot.
+            streams += view_streams(dev, info.get("describe") or {}, self._scanner_name,
+                                    n_taps, laser=name in self._lasers, taken=streams)
+            if dev.view is not None and dev.view.startswith("laser."):
                 self._laser_order.append(name)
-                dev.view = f"laser.{name}"
-                streams.append(StreamSpec(dev.view, 1.0 / dev.rate_hz, "boxcar"))
-            elif kind == "scanner" and name == self._scanner_name:
-                dev.view = "pressure"
-                streams.append(StreamSpec("pressure", 1.0 / dev.rate_hz, "linear", n_taps))
-                streams.append(StreamSpec("pitot", 1.0 / dev.rate_hz, "linear"))
             self._devices[name] = dev
         if sum(not is_sway_laser(self._lasers[n]) for n in self._laser_order) < 2:
             self._laser_order = []  # h and alpha need two lasers: no laser stream in the view
@@ -432,6 +430,8 @@ class RunWriter:
         if dev.view == "pressure":
             self._to_view("pressure", t, rows(block.values["pressure"])[:, self._tap_columns])
             self._to_view("pitot", t, rows(block.values["pitot"]))
+        elif dev.view == "pitot":  # an analog Pitot transducer (NaN where its reading is invalid)
+            self._to_view("pitot", t, rows(block.values["pitot"]))
         elif dev.view is not None:
             d = rows(block.values["distance"])
             if "error_code" in block.values:
@@ -474,7 +474,7 @@ class RunWriter:
         if dev.view == "pressure":
             self._to_view("pressure", at, np.full((1, self._n_taps), np.nan))
             self._to_view("pitot", at, np.full(1, np.nan))
-        elif dev.view is not None:
+        elif dev.view is not None:  # a laser's stream, or an analog Pitot's
             self._to_view(dev.view, at, np.full(1, np.nan))
 
     # -- sync view -----------------------------------------------------------------------------
@@ -512,8 +512,7 @@ class RunWriter:
         rec = self.recorder
         assert rec is not None
         t = float(self._time(event.host_time_ns))
-        # The event's numbers go into its text; arrays (a CALZ's offsets per channel) do not
-        # fit there and go to /entry/metadata instead (below).
+        # The event's numbers go into its text; arrays (a CALZ's offsets) go to /entry/metadata.
         rec.add_event(t, *event_row(event.kind, event.text, event.device, event.data))
         if event.kind == "calz":
             self._calz_record(event, t)
@@ -523,12 +522,13 @@ class RunWriter:
             if self.release_hook is not None:
                 self.release_hook("release", t_release)
         elif event.kind == "arm":
-            # Arming again catches the model: the free decay of the last release ends before
-            # the arm command (less one sync period: a sync row averages the lasers over
-            # +- half a period, which must not reach into the caught model).
+            # Arming catches the model: the decay ends a sync period before the arm (a sync
+            # row averages the lasers over +- half a period: not into the caught model).
             t_end = self._release_rows.caught(t - 1.0 / self.sync_rate_hz)
             if t_end is not None and self.release_hook is not None:
                 self.release_hook("caught", t_end)
+        elif event.kind in ("manual_release", "manual_hold"):  # found in the lasers' rows
+            self._release_rows.operator(event.kind, t, self.release_hook)
         elif event.kind == "trigger":
             # Its host time is known to half the command's round trip: an anchor if that is short.
             round_trip = float(event.data.get("round_trip_s", 0.0))

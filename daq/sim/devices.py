@@ -28,11 +28,15 @@ from simulators.devices.scanivalve_mps4264.scanner import SimScanivalveMps4264
 from simulators.devices.vaisala_ptb330 import SimVaisalaPtb330
 from simulators.virtual_tunnel import VirtualTunnel
 
-__all__ = ["ABB_ACS580", "GROUP", "MICROEPSILON_ILD1420", "MODBUS_PLC", "SCANIVALVE_MPS4264",
-           "VAISALA_PTB330", "SimulatorEntry", "simulator_entry"]
+__all__ = ["ABB_ACS580", "GROUP", "MICROEPSILON_ILD1420", "MODBUS_PLC", "PASSED_OPTIONS",
+           "SCANIVALVE_MPS4264", "VAISALA_PTB330", "SimulatorEntry", "simulator_entry"]
 
 #: The entry-point group through which distributions contribute simulators.
 GROUP = "windrig.simulators"
+
+#: The keyword options windrig passes a simulator factory itself: ``clock`` and ``rng``
+#: always, the sensor errors a rig's calibration undoes where it has them.
+PASSED_OPTIONS = ("clock", "rng", "tap_channels", "pitot_error", "reading_error")
 
 
 def _no_settings(settings: Mapping[str, Any], simulator: Any) -> Mapping[str, Any]:
@@ -69,8 +73,13 @@ class SimulatorEntry:
     settings: Callable[[Mapping[str, Any], Any], Mapping[str, Any]] = _no_settings
 
     def accepted_options(self) -> set[str]:
-        """Return the option names the simulator takes (its keyword parameters)."""
-        return set(inspect.signature(self.options).parameters) - {"tunnel"}
+        """Return the option names a rig config may give the simulator (its keyword parameters).
+
+        Less those windrig always passes itself (:data:`PASSED_OPTIONS`): a ``seed`` or
+        ``clock_offset_s`` in the config sets them; the same name in the config would
+        otherwise be accepted and then silently replaced.
+        """
+        return set(inspect.signature(self.options).parameters) - {"tunnel", *PASSED_OPTIONS}
 
 
 def simulator_entry(driver: str, where: str) -> SimulatorEntry:

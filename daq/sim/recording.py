@@ -16,6 +16,7 @@ Not responsible for: recording (:mod:`daq.recording`), the simulators (:mod:`sim
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -36,7 +37,8 @@ def record_simulated_run(config: RigConfig, out_path: str | Path, *, duration_s:
                          progress: bool = True, operator_notes: str = "", calz: bool = True,
                          writer_options: Mapping[str, Any] | None = None,
                          sync_pulse_interval_s: float | None = SYNC_PULSE_INTERVAL_S,
-                         check: bool = False, own_process: bool = False) -> dict[str, Any]:
+                         check: bool = False, own_process: bool = False,
+                         until: threading.Event | None = None) -> dict[str, Any]:
     """Record a simulated rig for ``duration_s`` into one run file; return the summary.
 
     Parameters
@@ -60,6 +62,8 @@ def record_simulated_run(config: RigConfig, out_path: str | Path, *, duration_s:
     check : bool
         Check every simulated device first, through its real transport, as
         :func:`~daq.recording.run.record_run` does.
+    until : threading.Event, optional
+        End the run early when it is set (as :func:`~daq.recording.run.record_run`).
     own_process : bool
         Serve the simulators from a process of their own (:mod:`daq.sim.rig_process`), as
         ``windrig acquire --simulate`` does: in this process they share the recorder's
@@ -91,7 +95,7 @@ def record_simulated_run(config: RigConfig, out_path: str | Path, *, duration_s:
             actions=None if actions is None else (lambda acq: actions(acq, rig)),
             progress=progress, operator_notes=operator_notes, calz=calz,
             writer_options=options, sync_pulse_interval_s=sync_pulse_interval_s,
-            recorder=recorder, check=check)
+            recorder=recorder, check=check, until=until)
         tracker = options["clock_truth"]
         if own_process and "file" in summary and tracker is not None:
             # Asked of the child while it still runs (the in-process truth outlives the rig).

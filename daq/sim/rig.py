@@ -12,6 +12,14 @@ their errors, so that the calibrations undo them: the scanner puts each tap on i
 (``[taps] channels``), the Pitot reads the inverse of ``[tunnel.pitot]``, and each laser with a
 ``[lasers.calibration]`` reads along its tilted beam with the inverse gain and offset.
 
+Instruments read through NI-DAQmx (``nidaqmx://`` URLs) share one simulated DAQ device per
+device name (:class:`simulators.devices.ni_daqmx.SimNiDaqmx`), each of its analog inputs wired to
+what the instrument on it measures (a laser's distance through the inverse of its scale, a
+Pitot's dynamic pressure); their URLs keep the task's channels and get the simulated device's
+``standin=127.0.0.1:PORT``, read through the stand-in of the nidaqmx API, which this module
+registers (:func:`daq.instruments.ni_daqmx.runtime.register_standin`). Their simulation
+settings are the first instrument's table of each device.
+
 Per-instrument simulation settings come from ``[simulation.devices.<name>]``: ``clock_offset_s``,
 ``clock_drift_ppm`` and ``seed`` (with the instrument's place in the config: equal seeds give
 different instruments different noise) for every device, and any further keyword the device's
@@ -31,9 +39,19 @@ import numpy as np
 
 from daq.config import InstrumentConfig, RigConfig
 from daq.errors import ConfigError
+from daq.instruments.ni_daqmx.address import TaskAddress
+from daq.instruments.ni_daqmx.runtime import register_standin
+from daq.instruments.ni_daqmx.settings import (
+    UNITS,
+    LinearScale,
+    NiAnalogSettings,
+    NiLaserSettings,
+)
 from daq.sim.devices import simulator_entry
 from ident.physics.tubing import Air, tubing_set
 from simulators.clock import Clock, DeviceClock
+from simulators.devices.ni_daqmx import SimNiDaqmx
+from simulators.nidaqmx_standin import standin_api
 from simulators.virtual_tunnel import AirState, VirtualTunnel
 
 __all__ = ["SimulatedRig", "start_simulated_rig"]
@@ -41,6 +59,13 @@ __all__ = ["SimulatedRig", "start_simulated_rig"]
 log = logging.getLogger(__name__)
 
 _COMMON_KEYS = {"clock_offset_s", "clock_drift_ppm", "seed"}
+
+# The simulated rig's NI devices are read through the stand-in of the nidaqmx API (this process
+# and any that imports the simulated rig, e.g. the parent of a rig in its own process).
+register_standin(standin_api)
+
+#: Drivers whose instruments are inputs of a simulated NI DAQ device (not simulators of their own).
+NI_DRIVERS = ("ni_daqmx_laser", "ni_daqmx_analog")
 
 
 @dataclasses.dataclass
@@ -120,7 +145,17 @@ def start_simulated_rig(
     rig = SimulatedRig(config=config, tunnel=tunnel, simulators={}, urls={})
     resolved: list[InstrumentConfig] = []
     try:
+        daqs = _start_ni_devices(config, tunnel)
+        for inst in config.instruments:  # first: rig.close() stops them whatever fails next
+            if inst.driver in NI_DRIVERS:
+                rig.simulators[inst.name] = daqs[TaskAddress.parse(inst.url).device][0]
         for index, inst in enumerate(config.instruments):
+            if inst.driver in NI_DRIVERS:
+                standin = daqs[TaskAddress.parse(inst.url).device][1]
+                url = f"{inst.url}{'&' if '?' in inst.url else '?'}standin={standin}"
+                rig.urls[inst.name] = url
+                resolved.append(dataclasses.replace(inst, url=url))
+                continue
             simulator = _build(inst, tunnel, sim.devices.get(inst.name, {}), index, config.source,
                                _sensor_errors(config, inst))
             rig.simulators[inst.name] = simulator
@@ -135,6 +170,69 @@ def start_simulated_rig(
         raise
     rig.config = dataclasses.replace(config, instruments=tuple(resolved))
     return rig
+
+
+def _ni_source(inst: InstrumentConfig, source: str) -> dict[str, dict[str, Any]]:
+    """Return what an NI instrument's inputs carry: analog input -> the simulator's source."""
+    def inverse(scale: LinearScale, key: str) -> dict[str, Any]:
+        # The simulated sensor's output is the inverse of the config's scale (in its unit).
+        return {"gain": scale.gain, "offset": scale.offset, key: UNITS[scale.units][1]}
+
+    where = f"{source} [{inst.role}] {inst.name!r}"
+    if inst.driver == "ni_daqmx_laser":
+        s = NiLaserSettings.from_table(inst.settings, where)
+        return {s.channel: {"kind": "laser", "x": s.x, "z": s.z, "axis": s.axis,
+                            "standoff_mm": s.standoff_mm, **inverse(s.scale, "unit_m")}}
+    a = NiAnalogSettings.from_table(inst.settings, where)
+    out: dict[str, dict[str, Any]] = {}
+    for c in a.channels:
+        if c.name == "pitot":
+            out[c.channel] = {"kind": "pitot", **inverse(c.scale, "unit_pa")}
+        else:  # a balance or another transducer: the simulated tunnel gives it nothing, 0 V
+            out[c.channel] = {"kind": "constant", "volts": 0.0}
+    return out
+
+
+def _start_ni_devices(config: RigConfig, tunnel: VirtualTunnel,
+                      ) -> dict[str, tuple[SimNiDaqmx, str]]:
+    """Start one simulated DAQ device per NI device name; return device -> (simulator, address)."""
+    sim = config.simulation
+    assert sim is not None
+    wiring: dict[str, dict[str, dict[str, Any]]] = {}
+    options: dict[str, Mapping[str, Any]] = {}
+    for inst in config.instruments:
+        if inst.driver not in NI_DRIVERS:
+            continue
+        device = TaskAddress.parse(inst.url).device
+        sources = _ni_source(inst, config.source)
+        taken = sorted(set(sources) & set(wiring.get(device, {})))
+        if taken:
+            raise ConfigError(f"{config.source}: {device} input(s) {taken} wired to two "
+                              f"instruments (the second is {inst.name!r})")
+        wiring.setdefault(device, {}).update(sources)
+        options.setdefault(device, sim.devices.get(inst.name, {}))
+    started: dict[str, tuple[SimNiDaqmx, str]] = {}
+    try:
+        for index, (device, channels) in enumerate(wiring.items()):
+            opts = dict(options[device])
+            where = f"{config.source} [simulation.devices] ({device})"
+            unknown = sorted(set(opts) - _COMMON_KEYS - {"noise_v", "pulse_width_s"})
+            if unknown:
+                raise ConfigError(f"{where}: unknown key(s) {unknown}; allowed: "
+                                  f"{sorted(_COMMON_KEYS | {'noise_v', 'pulse_width_s'})}")
+            clock = DeviceClock(offset_s=float(opts.pop("clock_offset_s", 0.0)),
+                                drift_ppm=float(opts.pop("clock_drift_ppm", 0.0)))
+            seed = opts.pop("seed", None)
+            rng = np.random.default_rng([int(seed), 100 + index]) if seed is not None else \
+                100 + index
+            daq = SimNiDaqmx(tunnel, device=device, channels=channels, clock=clock, rng=rng,
+                             **opts)
+            started[device] = (daq, daq.start())
+    except BaseException:
+        for daq, _ in started.values():
+            daq.stop()
+        raise
+    return started
 
 
 def _sensor_errors(config: RigConfig, inst: InstrumentConfig) -> dict[str, Any]:

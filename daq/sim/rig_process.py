@@ -4,8 +4,9 @@ Responsibility: :func:`start_rig_process` runs :func:`daq.sim.rig.start_simulate
 a child process (``spawn``) and returns a :class:`RigProcess` holding the rig config with the
 simulators' loopback URLs filled in; on request it answers questions about the truth (the true
 time of a device timestamp, the tunnel's decays), so that a recording made by the parent can be
-checked against it; it injects the simulators' faults (a scanner's TCP reset, ...) and reads
-their state (a scanner's zero error).
+checked against it; it injects the simulators' faults (a scanner's TCP reset, ...), reads
+their state (a scanner's zero error) and, for a rig without a PLC, lets the model go and holds
+it again by hand (:meth:`RigProcess.hand_release`).
 
 Why a process: in one process the simulators, the drivers and the recorder share one
 interpreter lock. Every simulated device then waits for the others' Python code, which
@@ -68,6 +69,21 @@ class RigProcess:
         """Return an attribute of simulator ``name`` (its truth: a scanner's zero error, ...)."""
         self._conn.send(("attribute", name, attribute))
         return self._reply()
+
+    def hand_release(self) -> float:
+        """Let the model go through the virtual tunnel directly, as an operator's hand does.
+
+        For a rig without a (simulated) PLC: nothing on the wire says so; the recording finds
+        the release in the lasers' signals. Returns the true release time on the host's
+        ``time.monotonic`` clock, s.
+        """
+        self._conn.send(("tunnel", "release"))
+        return float(self._reply())
+
+    def hand_hold(self) -> None:
+        """Catch the model and hold it at its hold position (the tunnel's magnet, by hand)."""
+        self._conn.send(("tunnel", "arm"))
+        self._reply()
 
     def clocked_devices(self) -> list[str]:
         """Return the devices whose timestamps have a truth (scanner, lasers)."""
@@ -145,6 +161,14 @@ def start_rig_process(config: RigConfig, *, start_timeout_s: float = 30.0) -> Ri
         conn.close()
         raise
     live_config, origin = payload
+    if any(inst.url.startswith("nidaqmx://") for inst in live_config.instruments):
+        # The drivers in this process read the child's simulated DAQ through the stand-in of
+        # the nidaqmx API: a client library (the simulated device stays in the child), loaded
+        # only for a rig that has one.
+        from daq.instruments.ni_daqmx.runtime import register_standin
+        from simulators.nidaqmx_standin import standin_api
+
+        register_standin(standin_api)
     return RigProcess(process, conn, live_config, origin)
 
 
@@ -180,6 +204,11 @@ def _serve(conn: Any, config_text: str, source: str) -> None:
                     answer = rig.simulators[request[1]].inject(request[2], **request[3])
                 elif request[0] == "attribute":
                     answer = getattr(rig.simulators[request[1]], request[2])
+                elif request[0] == "tunnel" and request[1] == "release":
+                    answer = origin + rig.tunnel.release()
+                elif request[0] == "tunnel" and request[1] == "arm":
+                    rig.tunnel.arm()
+                    answer = None
                 elif request[0] == "clocked_devices":
                     answer = [n for n, s in rig.simulators.items() if hasattr(s, "true_time_of")]
                 else:

@@ -7,8 +7,10 @@ on them and a report can print them:
 
 - :func:`entry_problems`: the registry entry (role, callables, its name);
 - :func:`construction_problems`: construction does no I/O (a transport whose every use fails
-  the check), a misspelt keyword is a ``TypeError``, the role's methods exist, ``describe()``
-  has the role's channels with their units, dtypes and ranks, and every channel has units;
+  the check), a misspelt keyword is a ``TypeError``, the role's methods exist, a polled
+  driver keeps its validated settings as ``settings`` (where the engine reads its poll
+  period), ``describe()`` has the role's channels with their units, dtypes and ranks, and
+  every channel has units;
 - :func:`reading_problems`: one reading against ``describe()`` and the role (shapes, dtypes,
   host times, counters, device times for the clocked roles, gaps inside the reading);
 - :func:`sequence_problems`: consecutive readings: counters go on, and every jump of the
@@ -31,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from daq.errors import TransportTimeout
+from daq.instruments.build import POLLED_ROLES, poll_settings_problem
 from daq.instruments.entry import ROLES, DriverEntry
 from daq.instruments.reading import Reading, describe_mismatches
 from daq.transports.byte_transport import TransportBase
@@ -86,10 +89,16 @@ ROLE_CHANNELS: Mapping[str, Mapping[str, ChannelRule]] = {
         "temperature": ChannelRule("K", "float64"),
         "density": ChannelRule("kg/m^3", "float64"),
     },
+    # Besides these, one float64 channel per configured input, named and in SI units as the
+    # rig config says (an input named ``pitot`` in Pa gives the wind speed without a scanner).
+    "analog": {
+        "error_code": ChannelRule("1", "int32"),  # bit j set: input j invalid (its value NaN)
+        "triggered": ChannelRule("1", "bool"),
+    },
 }
 
 #: The roles whose readings carry the device's own clock (``device_time``).
-CLOCKED_ROLES = ("scanner", "lasers")
+CLOCKED_ROLES = ("scanner", "lasers", "analog")
 
 #: The methods and attributes each role's users call (the engine, the device check, the
 #: console, the campaigns, CALZ): docs/drivers.md says who calls each and when.
@@ -102,6 +111,7 @@ ROLE_METHODS: Mapping[str, tuple[str, ...]] = {
             "wait_for_speed", "status", "max_rpm"),
     "plc": ("open", "close", "describe", "read", "arm", "disarm", "release", "trigger_pulse"),
     "barometer": ("open", "close", "describe", "read"),
+    "analog": ("open", "close", "describe", "read", "info"),
 }
 
 
@@ -165,14 +175,17 @@ def construction_problems(entry: DriverEntry, settings: Mapping[str, Any], *,
 
     Checks that the settings validate, that construction touches no transport, that an
     unknown keyword is a ``TypeError``, that the role's methods exist (:data:`ROLE_METHODS`),
-    and that ``describe()`` holds the role's channels (:data:`ROLE_CHANNELS`) with units.
+    that a polled driver's ``settings`` attribute is the object ``validate`` returned (the
+    engine reads ``settings.poll_interval_s`` there), and that ``describe()`` holds the role's
+    channels (:data:`ROLE_CHANNELS`) with units.
 
     Parameters
     ----------
     entry : DriverEntry
         The driver's entry.
     settings : mapping
-        An instrument table of a rig config.
+        An instrument table of a rig config, as TOML gives it (without ``driver``, ``url`` and
+        ``name``): the raw mapping, which the entry's ``validate`` turns into settings.
     link : object, optional
         What to build it on (default: a byte transport that records any use; a Modbus driver
         passes a :class:`~daq.transports.scripted.ScriptedBus` with an empty script).
@@ -195,6 +208,12 @@ def construction_problems(entry: DriverEntry, settings: Mapping[str, Any], *,
     missing = [m for m in ROLE_METHODS[entry.role] if not hasattr(driver, m)]
     if missing:
         out.append(f"missing the {entry.role} role's methods {missing}")
+    if entry.role in POLLED_ROLES and getattr(driver, "settings", None) is not validated:
+        out.append(poll_settings_problem(entry.role, driver, validated) or (
+            f"a polled ({entry.role}) driver keeps the object validate() returned as its "
+            "`settings` attribute (the engine reads settings.poll_interval_s there); "
+            f"{type(driver).__name__}.settings is "
+            f"{type(getattr(driver, 'settings', None)).__name__}"))
     out += describe_problems(driver.describe(), entry.role)
     return out
 
@@ -312,9 +331,12 @@ def check_driver(entry: DriverEntry, settings: Mapping[str, Any], link: Any, *, 
     entry : DriverEntry
         The driver's entry.
     settings : mapping
-        An instrument table of a rig config, for the device behind ``link``.
+        An instrument table of a rig config, for the device behind ``link``, as TOML gives it
+        (the raw mapping, not the validated settings object).
     link : Transport or RegisterBus
-        A transport (or bus) to a running simulator or to the device, not yet open.
+        A transport (or bus) to a running simulator or to the device, not yet open: e.g.
+        ``open_transport(url, **entry.transport_defaults)``
+        (:func:`daq.transports.byte_transport.open_transport`).
     n : int
         Readings to take (consecutive ones are checked against each other).
     timeout_s : float

@@ -30,7 +30,11 @@ import serial
 
 from daq.errors import ConfigError, TransportError, TransportTimeout
 
-__all__ = ["SerialTransport", "TcpTransport", "Transport", "open_transport", "parse_serial_url"]
+__all__ = ["LINE_SETTINGS", "SerialTransport", "TcpTransport", "Transport", "open_transport",
+           "parse_serial_url"]
+
+#: The line settings a driver's ``transport_defaults`` and a ``serial://`` query may set.
+LINE_SETTINGS = ("baudrate", "bytesize", "parity", "stopbits", "xonxoff")
 
 _PARITY = {"N": serial.PARITY_NONE, "E": serial.PARITY_EVEN, "O": serial.PARITY_ODD}
 #: Read timeout the port keeps; reads loop on it up to their own deadline (granularity, s).
@@ -307,9 +311,15 @@ def open_transport(url: str, **defaults: object) -> SerialTransport | TcpTranspo
     """Create (not open) the transport for ``url``.
 
     Query parameters of a ``serial://`` URL override ``defaults`` (baudrate, bytesize, parity,
-    stopbits, xonxoff); unknown ones are a :class:`ConfigError`. Line settings mean nothing to
-    ``socket://`` and ``tcp://`` streams and are ignored there.
+    stopbits, xonxoff); an unknown key, in either, is a :class:`ConfigError` (whatever the
+    scheme: a misspelt driver default must not pass unnoticed on the simulator's
+    ``socket://`` and fail only on the real port). Line settings mean nothing to ``socket://``
+    and ``tcp://`` streams and are ignored there.
     """
+    unknown = sorted(set(defaults) - set(LINE_SETTINGS))
+    if unknown:
+        raise ConfigError(f"{url}: unknown line setting(s) {unknown} in the driver's "
+                          f"transport_defaults; allowed: {list(LINE_SETTINGS)}")
     parts = urlsplit(url)
     if parts.scheme in ("tcp", "socket"):
         # socket:// is a serial byte stream carried over TCP. pyserial's own handler reports at

@@ -1,5 +1,7 @@
 """What was measured, as identification sees it: releases, and the run files they come from.
 
 - :mod:`~ident.records.release`: one free-vibration release (``Release``), validated;
-- :mod:`~ident.records.run_file`: the one thin module through which ident reads run files.
+- :mod:`~ident.records.run_file`: the one thin module through which ident reads run files;
+- :mod:`~ident.records.release_onset`: the release instant found in the displacements alone
+  (a release by hand, a file without release events).
 """

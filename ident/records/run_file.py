@@ -19,6 +19,13 @@ one); ``tubing_correction=False`` reads them as measured. Dead taps
 (``/entry/calibration/taps/dead``) are left out of the correction as they are out of the forces.
 The drag of a 3-DOF file is read as measured (the correction covers lift and moment).
 
+Releases without a PLC (since issue 35): a file whose releases were made by hand and said with
+the operator's keys has them in ``/entry/releases`` like any other (found in the lasers' signals
+as it was recorded); a file without any release rows can have them found now
+(``read_run(detect_releases=True)``, :func:`ident.records.release_onset.find_releases`). A
+rig without taps records no forces: ``read_run(displacements_only=True)`` reads its releases
+for the displacement-only route, and :func:`forces_recorded` tells such a file.
+
 Three degrees of freedom: a file of a rig with a sway spring (``[section] fp``) has ``p`` and
 ``drag`` in ``/entry/sync``; its section is 3-DOF (``fp``, ``zeta_p``, ``m_p``) and each release
 carries them (``Release(p=, drag=)``). A 2-DOF file reads exactly as before.
@@ -53,9 +60,10 @@ from ident.physics.air import R_DRY_AIR
 from ident.physics.taps import TapLayout
 from ident.physics.tubing import Air, TubingSet, force_correction, from_description
 from ident.records.release import Release, ReleaseHold
+from ident.records.release_onset import ReleaseOnset, find_releases
 
 __all__ = ["FileFormatError", "HOLD_GUARD_S", "HOLD_SETTLE_S", "HOLD_U_RTOL", "RunFile",
-           "TUBING_LEAD_S", "campaign_section", "read_run", "tubing_note"]
+           "TUBING_LEAD_S", "campaign_section", "forces_recorded", "read_run", "tubing_note"]
 
 _SECTION_FIELDS = ("B", "m", "I", "fh", "fa", "zeta_h", "zeta_a", "S", "fp", "zeta_p", "m_p")
 #: Columns of ``/entry/sync`` a 3-DOF file has (docs/file_format.md).
@@ -110,6 +118,10 @@ class RunFile:
     cuts : tuple of str
         With ``read_run(cut_at_gaps=True)``: one sentence per release cut short before a gap
         or left out for one (empty otherwise).
+    has_forces : bool
+        Whether ``/entry/sync`` holds any lift and moment (a rig without taps has none).
+    detected : tuple of ReleaseOnset
+        With ``read_run(detect_releases=True)``: the onset of each release found, in order.
     """
 
     path: str
@@ -120,6 +132,8 @@ class RunFile:
     tubing: TubingSet | None = None
     tubing_corrected: bool = False
     cuts: tuple[str, ...] = ()
+    has_forces: bool = True
+    detected: tuple[ReleaseOnset, ...] = ()
 
 
 #: With ``cut_at_gaps``, a release cut before a gap is kept when at least this many periods of
@@ -128,7 +142,8 @@ MIN_CUT_PERIODS = 3.0
 
 
 def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True,
-             cut_at_gaps: bool = False) -> RunFile:
+             cut_at_gaps: bool = False, detect_releases: bool = False,
+             displacements_only: bool = False) -> RunFile:
     """Read the section and the releases of a run file.
 
     Parameters
@@ -143,6 +158,17 @@ def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True,
         ends before its first gap, or is left out when less than :data:`MIN_CUT_PERIODS`
         periods of the slower mode remain; :attr:`RunFile.cuts` says which and why (a
         campaign goes on with what its files hold). Nothing is filled either way.
+    detect_releases : bool
+        The file has no release rows (releases by hand without the operator's keys, a file
+        imported from elsewhere): find them in ``h`` and ``alpha``
+        (:func:`ident.records.release_onset.find_releases`; :attr:`RunFile.detected` holds
+        each onset with its std). A file with release rows is refused: its rows say where
+        its releases are.
+    displacements_only : bool
+        Read ``h`` and ``alpha`` alone, for the displacement-only route
+        (:mod:`ident.identification.fd_method`, which never reads forces): each release's
+        lift and moment are zeros, marked ``meta["forces"] = False``, and their gaps (a rig
+        without taps has no forces at all) do not count.
 
     Returns
     -------
@@ -198,7 +224,8 @@ def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True,
                 events = f["entry/events"][()]
                 if events.size:
                     kinds = np.array([_text(k) for k in events["kind"]])
-                    arms = np.sort(np.asarray(events["time"], dtype=float)[kinds == "arm"])
+                    arms = np.sort(np.asarray(events["time"], dtype=float)[
+                        np.isin(kinds, ("arm", "manual_hold"))])  # a catch by hand too
         except KeyError as exc:
             raise FileFormatError(f"{path}: has no {part}: not a windrig run file (or an "
                                   "incomplete one)") from exc
@@ -213,6 +240,18 @@ def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True,
     if section.n_dof == 2:  # releases of a 2-DOF section have no sway, whatever the file holds
         for name in _SWAY_COLUMNS:
             sync.pop(name, None)
+    has_forces = bool(np.isfinite(sync["lift"]).any() and np.isfinite(sync["moment"]).any())
+    if displacements_only:
+        for name in ("lift", "moment") + (_SWAY_COLUMNS[1:] if "drag" in sync else ()):
+            sync[name] = np.zeros_like(sync["time"])  # never read by the route that asked
+    detected: tuple[ReleaseOnset, ...] = ()
+    if detect_releases:
+        if table.size:
+            raise FileFormatError(f"{path}: has {table.size} release row(s) in /entry/releases;"
+                                  " releases are detected only in a file without any")
+        table, detected = _detected_table(sync, section, table.dtype)
+        # Each detected hold starts where the model was first still (as an arm would).
+        arms = np.array([onset.hold_start - HOLD_SETTLE_S for onset in detected])
     holds = _hold_rows(sync, table, arms)
     tubing = None
     if tubing_meta is not None:
@@ -238,10 +277,39 @@ def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True,
             cuts.append(f"release {i} cut before a gap {gap_s:.2f} s after its release")
             row = row.copy()
             row["stop_index"] = stop
-        releases.append(_release(sync, row, path, i, holds[i]))
+        release = _release(sync, row, path, i, holds[i])
+        if displacements_only:
+            release.meta["forces"] = False
+        releases.append(release)
     return RunFile(path=path, section=section, releases=tuple(releases), rig_name=rig_name,
                    depth=depth, tubing=tubing,
-                   tubing_corrected=tubing is not None and tubing_correction, cuts=tuple(cuts))
+                   tubing_corrected=tubing is not None and tubing_correction, cuts=tuple(cuts),
+                   has_forces=has_forces, detected=detected)
+
+
+def _detected_table(sync: dict[str, np.ndarray], section: SectionModel,
+                    dtype: np.dtype[Any]) -> tuple[np.ndarray, tuple[ReleaseOnset, ...]]:
+    """Return ``/entry/releases`` rows of the releases found in h and alpha, and their onsets.
+
+    A row as the recorder writes it: the onset, the first sync row at or after it, the row
+    after the decay's end, the median wind speed over the decay, the held ``h0``, ``alpha0``
+    (``p0`` NaN: not detected).
+    """
+    time = sync["time"]
+    found = find_releases(time, sync["h"], sync["alpha"], f_min=min(section.fh, section.fa),
+                          f_max=max(section.fh, section.fa))
+    rows = np.zeros(len(found), dtype=dtype)
+    for k, release in enumerate(found):
+        start = int(np.searchsorted(time, release.onset.time, side="left"))
+        stop = int(np.searchsorted(time, release.end, side="right"))
+        U = sync["U"][start:stop]
+        U = U[np.isfinite(U)]
+        values = {"release_time": release.onset.time, "start_index": start,
+                  "stop_index": stop, "U": float(np.median(U)) if U.size else np.nan,
+                  "h0": release.onset.held[0], "alpha0": release.onset.held[1], "p0": np.nan}
+        for name in dtype.names or ():
+            rows[name][k] = values[name]
+    return rows, tuple(release.onset for release in found)
 
 
 def _release_channels(sync: dict[str, np.ndarray]) -> tuple[str, ...]:
@@ -408,6 +476,22 @@ def _open(path: str) -> h5py.File:
         if "already open for write" not in str(exc):
             raise
     return h5py.File(path, "r", libver="latest", swmr=True)
+
+
+def forces_recorded(path: str | os.PathLike[str]) -> bool:
+    """Tell whether a run file's ``/entry/sync`` holds any lift and moment (taps recorded).
+
+    A rig without taps (or without a scanner) records its forces as NaN throughout. A file
+    that cannot be read answers True: :func:`read_run` then says what is wrong with it.
+    """
+    path = os.fspath(path)
+    try:
+        with _open(path) as f:
+            return all(bool(np.isfinite(np.asarray(f[f"entry/sync/{name}"][()],
+                                                   dtype=float)).any())
+                       for name in ("lift", "moment"))
+    except (OSError, KeyError, RuntimeError, ValueError):  # read_run names the problem
+        return True
 
 
 def campaign_section(runs: Sequence[RunFile]) -> SectionModel:

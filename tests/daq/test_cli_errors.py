@@ -110,7 +110,7 @@ CASES = [
     (["acquire", "--config", "sim_nothing", "--simulate", "--duration", "1", "--out",
       "{d}/r.h5"], 2,
      "shipped configs, by name: example_real_rig, sim_bluff_deck_3dof, sim_flat_plate, "
-     "sim_streamlined_deck"),
+     "sim_flat_plate_nidaq, sim_streamlined_deck"),
     (["recover", "{d}/text.txt"], 2, "text.txt: not an HDF5 file"),
     (["recover", "{d}/empty.h5"], 2, "empty.h5: has no /entry/sync: not a windrig run file"),
     (["recover", "{d}"], 2, "a directory, not a run file"),

@@ -29,7 +29,18 @@ def settled(state: ConsoleState = READY) -> tuple[Interlocks, dict[str, str]]:
 
 def test_a_ready_rig_allows_everything_but_arming_again_and_stopping_a_recording():
     _, reasons = settled()
-    assert reasons == {"arm": "arm: already armed", "stop_record": "stop recording: not recording"}
+    assert reasons == {"arm": "arm: already armed", "stop_record": "stop recording: not recording",
+                       # the magnet holds the model: no hand can let it go
+                       "hand_release": "released by hand: the PLC's magnet holds the model "
+                                       "(disarm, or release)"}
+
+
+def test_releases_by_hand_need_no_plc():
+    _, reasons = settled(replace(READY, has_plc=False, armed=None))
+    assert "hand_release" not in reasons and "hand_hold" not in reasons
+    assert reasons["release"] == "release: no PLC in this rig"
+    _, reasons = settled(replace(READY, armed=False))  # a PLC, its magnet off: a hand may
+    assert "hand_release" not in reasons
 
 
 def test_nothing_while_the_acquisition_does_not_run():

@@ -172,3 +172,20 @@ def test_a_broken_simulator_plugin_is_one_error_naming_its_distribution(tmp_path
         "(distribution lab-sim 1.2, entry point lab_sim = lab_sim_plugin:SIMULATOR)")
     with pytest.raises(ConfigError, match="rig.toml: no simulator for driver 'nobody'"):
         simulator_entry("nobody", "rig.toml")
+
+
+@pytest.mark.parametrize("key", ["rng", "clock"])
+def test_a_simulator_option_windrig_passes_itself_is_refused_in_the_config(tmp_path, key):
+    """`rng = 3` in [simulation.devices.barometer] would be replaced without a word: refused."""
+    from daq.config import load_rig_config
+    from daq.sim.devices import VAISALA_PTB330
+    from daq.sim.rig import start_simulated_rig
+
+    assert {"clock", "rng"}.isdisjoint(VAISALA_PTB330.accepted_options())
+    assert "noise_pa" in VAISALA_PTB330.accepted_options()
+    source = Path(__file__).resolve().parents[3] / "rig_configs" / "sim_flat_plate.toml"
+    config = tmp_path / "rig.toml"
+    config.write_text(source.read_text() + f"\n[simulation.devices.barometer]\n{key} = 3\n")
+    with pytest.raises(ConfigError, match=rf"\[simulation.devices.barometer\]: unknown key\(s\) "
+                       rf"\['{key}'\]"):
+        start_simulated_rig(load_rig_config(config))

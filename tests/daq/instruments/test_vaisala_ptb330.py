@@ -19,6 +19,7 @@ from hypothesis import strategies as st
 
 from daq.errors import ConfigError, ProtocolError, TransportError, TransportTimeout
 from daq.instruments import registry
+from daq.instruments.reading import Gap
 from daq.instruments.vaisala_ptb330.decoder import (
     BarometerReading,
     Ptb330BadLine,
@@ -358,6 +359,17 @@ def test_no_reply_raises_transport_timeout_after_bounded_attempts():
             # two backoffs of 0.05 and 0.1 s; the scripted transport times out at once
             assert time.monotonic() - start < 1.0
     assert drv.stats["timeouts"] == 3
+
+
+def test_a_failed_first_poll_is_a_gap_before_the_first_reading():
+    """Poll 1 fails: reading 2 carries Gap(0, 1), so the lost row is not invisible."""
+    with expected_exchange(OPEN_PLAIN + [(b"SEND\r", b"")] * 3 + [(b"SEND\r", LINE)]) as t:
+        with driver(t) as drv:
+            with pytest.raises(TransportTimeout):
+                drv.read()
+            reading = drv.read()
+    assert reading.counter.tolist() == [2]
+    assert reading.gaps == (Gap(after_counter=0, length=1),)
 
 
 def test_unit_change_mid_run_is_converted_and_an_unknown_unit_is_refused():

@@ -2,7 +2,7 @@
 
 The drivers are the PTB330 barometer driver against its simulator over a real loopback
 transport, and subclasses of it that break one rule each: a missing channel, a wrong dtype, a
-gap not reported.
+gap not reported, settings kept where the engine does not look for the poll period.
 """
 
 from __future__ import annotations
@@ -13,8 +13,10 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from daq.config import load_rig_config
+from daq.config import InstrumentConfig, load_rig_config
+from daq.errors import ConfigError, PluginError
 from daq.instruments import registry
+from daq.instruments.build import build_driver
 from daq.instruments.reading import Reading
 from daq.instruments.vaisala_ptb330.driver import VaisalaPtb330
 from daq.sim.rig import start_simulated_rig
@@ -61,6 +63,14 @@ class SilentGap(VaisalaPtb330):
     def read(self):
         r = super().read()
         return dataclasses.replace(r, counter=r.counter * 2, gaps=())
+
+
+class SettingsElsewhere(VaisalaPtb330):
+    """Keeps its validated settings as ``config``: the engine would not see poll_interval_s."""
+
+    def __init__(self, transport, settings):
+        super().__init__(transport, settings)
+        self.config = self.__dict__.pop("settings")
 
 
 @pytest.fixture(scope="module")
@@ -114,3 +124,34 @@ def test_hardware_tests_skip_without_a_device_url(pytester):
     result = pytester.runpytest("-p", "no:cacheprovider", "--windrig-device-url",
                                 "tcp://127.0.0.1:23")
     result.assert_outcomes(passed=1)
+
+
+def test_a_polled_driver_without_its_settings_attribute_is_caught_by_the_kit():
+    problems = construction_problems(entry_of(SettingsElsewhere), {"poll_interval_s": 5.0})
+    assert len(problems) == 1
+    assert "poll_interval_s = 5.0" in problems[0] and "`self.settings`" in problems[0]
+    assert construction_problems(ENTRY, {"poll_interval_s": 5.0}) == []
+
+
+def test_building_a_polled_driver_without_its_settings_attribute_is_refused():
+    """Not polled every 1 s without a word: build_driver says which driver and why."""
+    entry = dataclasses.replace(entry_of(SettingsElsewhere), name="test_settings_elsewhere")
+    registry.register(entry)
+    try:
+        inst = InstrumentConfig(role="barometer", name="barometer",
+                                driver="test_settings_elsewhere", url="socket://127.0.0.1:9",
+                                settings={"poll_interval_s": 5.0})
+        with pytest.raises(PluginError, match=r"driver 'test_settings_elsewhere' of instrument "
+                           r"'barometer': its settings set poll_interval_s = 5\.0"):
+            build_driver(inst, load_rig_config(CONFIG).limits)
+        ok = dataclasses.replace(inst, driver="vaisala_ptb330")
+        assert build_driver(ok, load_rig_config(CONFIG).limits).settings.poll_interval_s == 5.0
+    finally:
+        registry.unregister("test_settings_elsewhere")
+
+
+def test_a_misspelt_transport_default_is_a_config_error_on_every_scheme():
+    """Refused on the simulator's socket:// too, not only on the real serial port."""
+    for url in ("socket://127.0.0.1:9", "serial:///dev/ttyUSB0"):
+        with pytest.raises(ConfigError, match=r"unknown line setting\(s\) \['baud'\]"):
+            open_transport(url, baud=9600)
