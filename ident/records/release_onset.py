@@ -26,9 +26,9 @@ change point of that model:
    chi-square's curvature (``Delta chi^2 = 1``), scaled up by the reduced chi-square where the
    fit is worse than the noise.
 
-Accuracy (``tests/ident/test_release_onset.py``; measured on synthetic decays of the flat-plate
-rig, fh = 2 Hz, fa = 4 Hz, 30 seeds per case, white noise added): held at 8 mm and 0.04 rad,
-sampled at 500 Hz, the error is 0.04 ms rms (0.08 ms at most) with 1 um and 5e-6 rad of
+Accuracy (``tests/ident/records/test_release_onset.py``; measured on synthetic decays of the
+flat-plate rig, fh = 2 Hz, fa = 4 Hz, 30 seeds per case, white noise added): held at 8 mm and
+0.04 rad, sampled at 500 Hz, the error is 0.04 ms rms (0.08 ms at most) with 1 um and 5e-6 rad of
 noise (about the simulated lasers' in the sync view), 0.1 ms rms (0.4 ms at most) with 5 um
 and 2.5e-5 rad, 0.4-0.7 ms rms (1.5 ms at most) with 30 um and 1.5e-4 rad, at 0, 6 and
 9 m/s; at 200 Hz 1.0 ms rms (1.8 ms at most) at the highest noise. The stated std covers it

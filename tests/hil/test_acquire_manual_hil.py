@@ -16,24 +16,24 @@ import re
 import sys
 import threading
 import time
-from pathlib import Path
 
 import h5py
 import pytest
 
 from daq.cli import main
 
-pytestmark = pytest.mark.slow
+from support.configs import FAST_FAN, SIM_FLAT_PLATE
 
-CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
+pytestmark = [pytest.mark.slow, pytest.mark.realtime]
+
 
 
 def test_acquire_records_a_release_by_hand_from_the_terminal(tmp_path, monkeypatch, capsys):
     text, n = re.subn(r"\n\[plc\]\n(?:[^\[\n].*\n|\n)*", "\n",
-                      (CONFIGS / "sim_flat_plate.toml").read_text())
+                      SIM_FLAT_PLATE.read_text())
     assert n == 1
     rig = tmp_path / "no_plc.toml"
-    rig.write_text(text + "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n")
+    rig.write_text(text + FAST_FAN)
     read_fd, write_fd = os.pipe()
     stdin = io.TextIOWrapper(io.FileIO(read_fd, "r"))
     monkeypatch.setattr(sys, "stdin", stdin)

@@ -35,10 +35,10 @@ from daq.sim.recording import record_simulated_run
 from ident.identification.campaign import analyze_campaign
 from ident.records.run_file import campaign_section, read_run
 
-pytestmark = pytest.mark.slow
+from support.configs import FAST_FAN, SIM_FLAT_PLATE
 
-CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
-FAST_FAN = "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n"
+pytestmark = [pytest.mark.slow, pytest.mark.realtime]
+
 #: The demo's speeds (0.5, 0.65 and 0.8 of the flutter speed, 5.92, 7.70 and 9.48 m/s): with
 #: two speeds of short decays the flutter speed is an extrapolation whose structure, and std,
 #: changed from run to run (PLC path 12.29 +- 0.62, then 11.85 +- 0.10 m/s).
@@ -50,7 +50,7 @@ TOLERANCE_S = 5e-3
 
 
 def _rig(with_plc: bool) -> Any:
-    text = (CONFIGS / "sim_flat_plate.toml").read_text() + FAST_FAN
+    text = SIM_FLAT_PLATE.read_text() + FAST_FAN
     if not with_plc:
         text, n = re.subn(r"\n\[plc\]\n(?:[^\[\n].*\n|\n)*", "\n", text)
         assert n == 1

@@ -22,11 +22,13 @@ from daq.instruments.ni_daqmx import runtime
 from daq.sim.recording import record_simulated_run
 from simulators.nidaqmx_standin import standin_api
 
-CONFIGS = Path(__file__).resolve().parents[2] / "rig_configs"
+from support.configs import CONFIGS, FAST_FAN
+
+pytestmark = pytest.mark.realtime
+
 NIDAQ = (CONFIGS / "sim_flat_plate_nidaq.toml").read_text()
 FAN_RPM = 600.0  # 6 m/s on this rig
 RATE = 2000.0
-FAST_FAN = "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n"
 
 
 def without(text: str, start: str, stop: str) -> str:

@@ -12,9 +12,13 @@ import io
 import threading
 from typing import Any
 
+import pytest
+
 from daq.acquisition.engine import Acquisition
 from daq.acquisition.operator_keys import KEYS_HELP, OperatorKeys
 from daq.instruments.reading import PollSequence, Reading
+
+pytestmark = pytest.mark.realtime
 
 
 class Barometer:

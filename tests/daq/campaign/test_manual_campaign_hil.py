@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import json
 import re
-from pathlib import Path
 
 import h5py
 import pytest
@@ -25,9 +24,10 @@ from daq.cli import main
 from daq.config import parse_rig_config
 from daq.offline.displacement_route import CAVEATS
 
-pytestmark = pytest.mark.slow
+from support.configs import SIM_FLAT_PLATE
 
-REPO = Path(__file__).resolve().parents[3]
+pytestmark = [pytest.mark.slow, pytest.mark.realtime]
+
 FAST_FAN = "\n[simulation.devices.fan]\nramp_rpm_per_s = 1000.0\n"
 
 
@@ -39,7 +39,7 @@ def _without(text: str, table: str) -> str:
 
 def test_a_campaign_without_plc_or_taps_releases_by_hand_and_keeps_every_release(tmp_path,
                                                                                    capsys):
-    rig = _without(_without((REPO / "rig_configs" / "sim_flat_plate.toml").read_text(),
+    rig = _without(_without(SIM_FLAT_PLATE.read_text(),
                             "plc"), "scanner") + FAST_FAN
     config = parse_rig_config(rig, "rig.toml")
     plan = parse_plan("""

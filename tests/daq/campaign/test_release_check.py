@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import re
 import time
-from pathlib import Path
 
 import pytest
 
@@ -20,8 +19,9 @@ from daq.cli import main
 from daq.config import parse_rig_config
 from daq.errors import ConfigError
 
-REPO = Path(__file__).resolve().parents[3]
-RIG_TEXT = (REPO / "rig_configs" / "sim_flat_plate.toml").read_text()
+from support.configs import SIM_FLAT_PLATE
+
+RIG_TEXT = SIM_FLAT_PLATE.read_text()
 
 
 def _without(table: str, text: str = RIG_TEXT) -> str:

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import re
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,14 +21,16 @@ from daq.console.live_source import LiveSource
 from daq.console.window import ConsoleWindow
 from ident.model import flat_plate, flutter
 
-CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
-FAST_FAN = "\n[simulation.devices.fan]\nramp_rpm_per_s = 4000.0\n"
+from support.configs import FAST_FAN, SIM_FLAT_PLATE
+
+pytestmark = pytest.mark.realtime
+
 DECAY_S = 4.0
 
 
 def test_released_and_held_by_hand_from_the_console(qtbot):
     text, n = re.subn(r"\n\[plc\]\n(?:[^\[\n].*\n|\n)*", "\n",
-                      (CONFIGS / "sim_flat_plate.toml").read_text())
+                      SIM_FLAT_PLATE.read_text())
     assert n == 1
     config = parse_rig_config(text + FAST_FAN, "no_plc.toml")
     source = LiveSource(config, simulate=True, window_s=10.0, fan_rpm=600.0)

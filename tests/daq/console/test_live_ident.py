@@ -126,7 +126,7 @@ def test_each_release_gets_its_modes_and_two_wind_speeds_give_the_flutter_speed(
         assert modal.zeta_h == pytest.approx(truth["zeta_h"], abs=3e-3)
         assert modal.zeta_a == pytest.approx(truth["zeta_a"], abs=3e-3)
         assert row.length_s == pytest.approx(DECAY_S, abs=2.0 / RATE)
-    fit = ident.identification.campaign
+    fit = ident.campaign
     assert fit is not None and fit.n_releases == 4 and len(fit.wind_speeds) == 2
     # Two wind speeds, four 7.5 s decays, 1 % noise: the demo's campaigns land within 1 %;
     # 3 % is the acceptance level for the flutter speed.
@@ -171,7 +171,7 @@ def test_a_decay_is_cut_only_when_it_is_complete(pool):
     settle(ident, session)
     assert ident.rows[1].length_s == pytest.approx(4.0, abs=2.0 / RATE)
     assert "two or more wind speeds (have: 6.00 m/s)" in ident.campaign_status
-    assert ident.identification.campaign is None
+    assert ident.campaign is None
 
 
 def test_releases_that_cannot_be_used_say_why(pool):

@@ -65,7 +65,7 @@ def test_3dof_releases_are_identified_in_3x3(tmp_path):
             session.release(U, seed)
         deadline = time.monotonic() + 120.0
         ident.update(session)
-        while ident.busy or ident.identification.campaign is None:
+        while ident.busy or ident.campaign is None:
             assert time.monotonic() < deadline, ident.campaign_status
             time.sleep(0.05)
             ident.update(session)
@@ -81,7 +81,7 @@ def test_3dof_releases_are_identified_in_3x3(tmp_path):
             "pitch")]))
         # measured within 8.4e-5 (a 2-mode fit of h and alpha; the sway mode is weak in them)
         assert modal.f_a == pytest.approx(f_a, rel=1e-3)
-    fit = ident.identification.campaign
+    fit = ident.campaign
     assert fit is not None and fit.model.n_dof == 3
     # Five decays at three speeds, 1 % noise: the 1 % on the flutter speed (measured
     # 13.929 against 13.947 m/s, -0.13 %, std 0.013 m/s).

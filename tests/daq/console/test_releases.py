@@ -190,7 +190,7 @@ def test_replay_shows_the_releases_and_model_that_the_file_gives(qtbot, releases
         clock.now += 1.0  # play one second, as the timer would in real time
         window.tick()
     deadline = time.monotonic() + 30.0
-    while ident.busy or ident.identification.campaign is None:
+    while ident.busy or ident.campaign is None:
         assert time.monotonic() < deadline, ident.campaign_status
         qtbot.wait(50)
         window.tick()
@@ -207,7 +207,7 @@ def test_replay_shows_the_releases_and_model_that_the_file_gives(qtbot, releases
         assert row.U == pytest.approx(release.U, rel=1e-12)
         assert window.releases_panel.cell(row.number - 1, "f_h (Hz)") == f"{expected.f_h:.3f}"
     expected_fit = identify_releases(run.releases, section)
-    fit = ident.identification.campaign
+    fit = ident.campaign
     assert fit.flutter_speed == pytest.approx(expected_fit.flutter_speed, rel=1e-6)
     assert window.flutter_label.text().startswith(f"U_F = {fit.flutter_speed:.2f}")
     # The range over the structures within one SE is shown when there are several, not else.

@@ -13,7 +13,6 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -30,8 +29,11 @@ from simulators.devices.ni_daqmx import SimNiDaqmx
 from simulators.nidaqmx_standin import standin_api
 from simulators.virtual_tunnel import VirtualTunnel
 
-CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
-CONFIG = load_rig_config(CONFIGS / "sim_flat_plate.toml")
+from support.configs import SIM_FLAT_PLATE
+
+pytestmark = pytest.mark.realtime
+
+CONFIG = load_rig_config(SIM_FLAT_PLATE)
 RATE = 2000.0
 HOLD = (0.008, 0.04)  # m, rad: the tunnel's held model
 LASER = {"kind": "laser", "x": -0.1, "standoff_mm": 25.0, "gain": 5.0, "offset": 0.0,

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -12,7 +10,8 @@ from daq.errors import ConfigError
 from daq.instruments.ni_daqmx.address import TaskAddress
 from daq.instruments.ni_daqmx.settings import LinearScale
 
-CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
+from support.configs import CONFIGS
+
 NIDAQ = (CONFIGS / "sim_flat_plate_nidaq.toml").read_text()
 SCALE = 'scale = { gain = 5.0, offset = 0.0, units = "mm", valid_volts = [-0.1, 10.0] }'
 

@@ -18,6 +18,8 @@ from daq.cli import main
 from daq.errors import ConfigError, PluginError
 from daq.instruments import registry
 
+from support.configs import SIM_FLAT_PLATE
+
 TESTS = Path(__file__).resolve().parents[1]
 BUILT_IN = {"scanivalve_mps4264": "scanner", "microepsilon_ild1420": "lasers",
             "abb_acs580": "fan", "modbus_plc": "plc", "vaisala_ptb330": "barometer"}
@@ -183,7 +185,7 @@ def test_a_simulator_option_windrig_passes_itself_is_refused_in_the_config(tmp_p
 
     assert {"clock", "rng"}.isdisjoint(VAISALA_PTB330.accepted_options())
     assert "noise_pa" in VAISALA_PTB330.accepted_options()
-    source = Path(__file__).resolve().parents[3] / "rig_configs" / "sim_flat_plate.toml"
+    source = SIM_FLAT_PLATE
     config = tmp_path / "rig.toml"
     config.write_text(source.read_text() + f"\n[simulation.devices.barometer]\n{key} = 3\n")
     with pytest.raises(ConfigError, match=rf"\[simulation.devices.barometer\]: unknown key\(s\) "

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import json
 import types
-from pathlib import Path
 
 import h5py
 import numpy as np
@@ -26,8 +25,9 @@ from daq.recording.synthetic import write_release_run
 from ident.model import flat_plate, flutter
 from simulators.tunnel import simulate_release
 
-CONFIGS = Path(__file__).resolve().parents[3] / "rig_configs"
-CONFIG = parse_rig_config((CONFIGS / "sim_flat_plate.toml").read_text(), "sim_flat_plate.toml")
+from support.configs import SIM_FLAT_PLATE
+
+CONFIG = parse_rig_config(SIM_FLAT_PLATE.read_text(), "sim_flat_plate.toml")
 TRUTH = flat_plate.jones_model()
 NOISE = {"h": 0.002, "alpha": 0.002, "lift": 0.01, "moment": 0.01}
 

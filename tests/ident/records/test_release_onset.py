@@ -14,7 +14,6 @@ import pytest
 
 from ident.errors import ReleaseNotFoundError
 from ident.model import flat_plate
-from ident.model.section import SectionModel
 from ident.records.release_onset import (
     MIN_SNR,
     find_releases,
@@ -23,13 +22,14 @@ from ident.records.release_onset import (
 )
 from simulators.tunnel import simulate_release
 
-SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+from support.sections import FLAT_PLATE
+
 MODEL = flat_plate.jones_model()
 FS = 500.0
 
 
 def _decay(U: float, h0: float, alpha0: float, duration: float = 3.0, pre_s: float = 2.0):
-    return simulate_release(SECTION, MODEL, U, h0, alpha0, duration=duration, fs=FS, pre_s=pre_s)
+    return simulate_release(FLAT_PLATE, MODEL, U, h0, alpha0, duration=duration, fs=FS, pre_s=pre_s)
 
 
 @pytest.mark.parametrize(("noise", "tolerance_s"), [((5e-6, 2.5e-5), 1e-3),
@@ -43,7 +43,7 @@ def test_onset_found_within_tolerance_and_its_std(noise, tolerance_s, U):
         t = sim.t + shift
         h = sim.h + noise[0] * rng.standard_normal(t.size)
         alpha = sim.alpha + noise[1] * rng.standard_normal(t.size)
-        onset = locate_release(t, h, alpha, before=shift + 0.4, f_max=SECTION.fa)
+        onset = locate_release(t, h, alpha, before=shift + 0.4, f_max=FLAT_PLATE.fa)
         error = onset.time - shift
         assert abs(error) < tolerance_s, (seed, error)
         assert abs(error) < 4.0 * onset.std, (seed, error, onset.std)
@@ -59,20 +59,20 @@ def test_a_weak_onset_is_flagged():
     rng = np.random.default_rng(3)
     onset = locate_release(sim.t, sim.h + 3e-5 * rng.standard_normal(sim.t.size),
                            sim.alpha + 1.5e-4 * rng.standard_normal(sim.t.size),
-                           before=0.4, f_max=SECTION.fa)
+                           before=0.4, f_max=FLAT_PLATE.fa)
     assert not onset.reliable and onset.snr < MIN_SNR
 
 
 def test_no_hold_before_the_key_is_an_error():
     sim = _decay(6.0, 0.008, 0.04, pre_s=0.1)  # 0.1 s held: shorter than a hold
     with pytest.raises(ReleaseNotFoundError, match="no still hold"):
-        locate_release(sim.t, sim.h, sim.alpha, before=0.5, f_max=SECTION.fa)
+        locate_release(sim.t, sim.h, sim.alpha, before=0.5, f_max=FLAT_PLATE.fa)
     sim = _decay(6.0, 0.008, 0.04)
     rng = np.random.default_rng(0)
     h = sim.h + 1e-6 * rng.standard_normal(sim.t.size)
     with pytest.raises(ReleaseNotFoundError):  # the key before the release: nothing yet
         locate_release(sim.t[sim.t < 0], h[sim.t < 0], sim.alpha[sim.t < 0], before=-0.5,
-                       f_max=SECTION.fa)
+                       f_max=FLAT_PLATE.fa)
 
 
 def _record(seed: int = 0):
@@ -95,7 +95,7 @@ def _record(seed: int = 0):
 
 def test_every_release_of_a_record_is_found_and_the_pull_is_not():
     t, h, alpha, truth, caught = _record()
-    found = find_releases(t, h, alpha, f_min=SECTION.fh, f_max=SECTION.fa)
+    found = find_releases(t, h, alpha, f_min=FLAT_PLATE.fh, f_max=FLAT_PLATE.fa)
     assert [round(r.onset.time, 3) for r in found] == pytest.approx(truth, abs=1e-3)
     # The first decay ends before the catch (the next hold), the last at the record's end.
     assert caught - 0.1 <= found[0].end < caught
@@ -109,7 +109,7 @@ def test_a_record_without_releases_has_none():
     t = np.arange(int(5 * FS)) / FS
     assert find_releases(t, 0.004 + 2e-6 * rng.standard_normal(t.size),
                          0.02 + 1e-5 * rng.standard_normal(t.size),
-                         f_min=SECTION.fh, f_max=SECTION.fa) == []
+                         f_min=FLAT_PLATE.fh, f_max=FLAT_PLATE.fa) == []
 
 
 def test_the_hold_after_a_catch_is_found_before_the_key():
