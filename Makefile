@@ -54,7 +54,7 @@ test: setup
 	$(REALTIME_TESTS) $(PYTEST_ARGS) || [ $$? -eq 5 ] || status=1; \
 	exit $$status
 
-# The pure part alone: a few minutes, for the edit-test loop of numerical work.
+# The pure part alone, for the edit-test loop of numerical work (no socket, rig or real clock).
 test-fast: setup
 	@$(PURE_TESTS) $(PYTEST_ARGS) || [ $$? -eq 5 ]
 
