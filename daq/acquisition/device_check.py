@@ -51,7 +51,7 @@ import numpy as np
 
 from daq.acquisition.drivers import ROLE_KINDS
 from daq.config import InstrumentConfig, RigConfig
-from daq.errors import DeviceCheckError
+from daq.errors import DaqError, DeviceCheckError
 from daq.instruments.build import build_driver
 from daq.instruments.reading import Reading
 
@@ -588,12 +588,16 @@ def _why(exc: BaseException) -> str:
 
 
 def _failure(exc: BaseException) -> str:
-    """One line naming an exception's type and its message: ``KeyError: 'pressure'``.
+    """One line for an exception: ``KeyError: 'pressure'``, or a windrig error's own message.
 
-    The type is said for every exception: a ``KeyError``'s message alone is a bare key, and an
-    unexpected type (``AttributeError`` from a driver) is itself the news.
+    The type is said for every exception that is not windrig's own: a ``KeyError``'s message
+    alone is a bare key, and an unexpected type (``AttributeError`` from a driver) is itself the
+    news. A :class:`~daq.errors.DaqError` carries a message written for the operator (it names
+    the device and what to do); its type would only be noise.
     """
     text = " ".join(str(exc).split())
+    if isinstance(exc, DaqError) and text:
+        return text
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 

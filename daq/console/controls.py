@@ -10,7 +10,8 @@ actions they refuse, with their reason as the tooltip and in the status line (e.
 ``start_fan``, ``stop_fan``, ``arm``, ``release``, ``manual_release``, ``manual_hold``, ``calz``,
 ``mark``), so each is recorded as an event of the run. A rig without a PLC is released by hand:
 the operator lets the model go, then clicks "released" (the instant is found in the lasers'
-signals before the click), and clicks "held" once it is caught and held still again. Actions
+signals before the click), and clicks "held" once it is caught and held still again (a rig with
+a PLC shows its arm and release buttons, one without shows these two instead). Actions
 that can block (fan start, arm, release, CALZ) run one at a time on a
 plain worker thread; the result comes back to the GUI thread through a Qt signal and any error
 (``SafetyError``, ``DeviceError``, ...) is shown in the status line. Stopping the fan is one
@@ -162,6 +163,13 @@ class ControlPanel(QtWidgets.QGroupBox):
             button.clicked.connect(slot)
             self.buttons[key] = button
             layout.addWidget(button)
+        # Only the release buttons the rig can use are shown (a PLC's, or the hand's): all
+        # four would widen the console past 800 px.
+        by_plc = self._plc_name is not None
+        for key in ("arm", "release"):
+            self.buttons[key].setVisible(by_plc)
+        for key in ("hand_release", "hand_hold"):
+            self.buttons[key].setVisible(not by_plc)
         self.note_edit = QtWidgets.QLineEdit()
         self.note_edit.setPlaceholderText("event note")
         self.note_edit.returnPressed.connect(self._on_mark)
