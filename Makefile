@@ -45,7 +45,7 @@ test test-fast demo screenshot: export MPLBACKEND := Agg
 # CPU busy with another test. tests/test_suite_split.py fails on a real-time test module left
 # unmarked. (Exit code 5, nothing collected, is a PYTEST_ARGS filter's doing.)
 PURE_TESTS := $(PY) -m pytest -q -p no:cacheprovider -n 2 -m "not realtime"
-REALTIME_TESTS := $(PY) -m pytest -q -p no:cacheprovider -m realtime
+REALTIME_TESTS := $(PY) -m pytest -q -p no:cacheprovider --durations=15 -m realtime
 
 # Both parts always run; the target fails if either did.
 test: setup
