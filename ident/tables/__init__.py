@@ -1,5 +1,8 @@
 """Flutter-derivative tables: the field's exchange format, and Roger models fitted to them.
 
 - :mod:`~ident.tables.fd_table`: ``FlutterDerivativeTable`` (CSV in and out, 2 and 3 DOF);
-- :mod:`~ident.tables.roger_table`: a table's Roger fit with its structure chosen by evidence.
+- :mod:`~ident.tables.roger_table`: a table's Roger fit with its structure chosen by evidence;
+- :mod:`~ident.tables.table_checks`: a table's warnings (sign typos and outliers, shifted damping
+  derivatives, signs against the inter-relations, sparse rows, missing columns, noise, a flutter
+  K outside the table).
 """
