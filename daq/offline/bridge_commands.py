@@ -133,6 +133,7 @@ def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: 
           f"rho = {bridge.rho:g} kg/m^3")
     for note in bridge.notes():
         print(f"note: {note}")
+    _print_inputs_checked(bridge)
     if write_bridge is not None:
         write_bridge.write_text(json.dumps(bridge.to_dict(), indent=1), encoding="utf-8")
         print(f"wrote {write_bridge}")
@@ -185,6 +186,7 @@ def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: 
     if aero.table is not None and aero.table_fit is not None:
         summary.update({"table_convention": convention, "table_K": aero.table.K.tolist(),
                         "table_fit_relative_error": aero.table_fit.relative_error.tolist()})
+    _record_inputs_checked(summary, bridge)
     if buffeting is not None:
         summary.update(_buffeting(bridge, aero.model, buffeting, spec, time_domain, out))
     if out is not None:
@@ -207,13 +209,27 @@ def _read_bridge(path: Path, mode_tables: list[Path] | None) -> Any:
             raise UsageError(f"{path}: expected a JSON object of the deck data (B, rho, name, "
                              "static)")
         try:
-            return bridge_from_mode_tables(template, mode_tables)
+            return bridge_from_mode_tables(template, mode_tables, source=str(path))
         except ValueError as exc:
             raise UsageError(f"{path} with --modes: {exc}") from exc
     except UsageError:
         raise
     except ValueError as exc:
         raise UsageError(str(exc)) from exc
+
+
+def _print_inputs_checked(bridge: Any) -> None:
+    """Print every default the bridge file left to take, and every implausible input."""
+    for line in bridge.defaults:
+        print(f"default: {line}")
+    for line in bridge.warnings:
+        print(f"warning: {line}")
+
+
+def _record_inputs_checked(summary: dict[str, Any], bridge: Any) -> None:
+    """Record the bridge's defaults (``defaults``) and warnings (added to ``warnings``)."""
+    summary["defaults"] = list(bridge.defaults)
+    summary.setdefault("warnings", []).extend(bridge.warnings)
 
 
 def _read_aero(path: Path, bridge: Any, convention: str) -> Any:

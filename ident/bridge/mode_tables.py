@@ -3,8 +3,8 @@
 A mode table is a CSV file (``docs/bridge.md``)::
 
     # frequency = 0.1046        (Hz, still air; required)
-    # damping = 0.003           (ratio; required)
-    # generalised_mass = 9.1e6  (kg per unit modal coordinate squared; default 1)
+    # damping = 0.003           (ratio; default 0.003, recorded as a default)
+    # generalised_mass = 9.1e6  (kg per unit modal coordinate squared; default 1, recorded)
     # name = V1S                (optional label)
     x,h,alpha,p
     0.0,0.0,0.0,0.0
@@ -17,7 +17,8 @@ downwind); a component not given is zero. A pitch exported in degrees is named `
 converted: a unit is read from the file, never guessed. Every table of one bridge must have the
 same deck nodes ``x``. :func:`bridge_from_mode_tables` adds the deck data (``B``, ``rho``,
 ``static``, ``name``: a template, the bridge model file without ``nodes_x`` and ``modes``) and
-returns the validated :class:`~ident.bridge.model.BridgeModel`.
+returns the validated :class:`~ident.bridge.model.BridgeModel`, whose ``defaults`` and
+``warnings`` name each mode by its table's file.
 
 Not responsible for: the bridge model's validation (:mod:`ident.bridge.model`).
 """
@@ -48,8 +49,8 @@ def read_mode_table(path: str | os.PathLike[str]) -> tuple[npt.NDArray[np.float6
     Raises
     ------
     ValueError
-        One line naming the file (and line) and what is wrong: a missing ``frequency`` or
-        ``damping``, an unknown key or column, a value that is not a number, a row of the wrong
+        One line naming the file (and line) and what is wrong: a missing ``frequency``, an
+        unknown key or column, a value that is not a number, a row of the wrong
         length, no rows.
     """
     source = os.fspath(path)
@@ -82,9 +83,8 @@ def read_mode_table(path: str | os.PathLike[str]) -> tuple[npt.NDArray[np.float6
         raise ValueError(f"{source}: not a text (UTF-8) CSV file: {exc.reason}") from None
     if header is None or not rows:
         raise ValueError(f"{source}: no table (a header x,h,alpha,p and one row per deck node)")
-    for key in ("frequency", "damping"):
-        if key not in meta:
-            raise ValueError(f"{source}: no '# {key} = ...' line above the header")
+    if "frequency" not in meta:
+        raise ValueError(f"{source}: no '# frequency = ...' line above the header")
     data = np.array(rows)
     columns = dict(zip(header, data.T, strict=True))
     entry: dict[str, Any] = {}
@@ -139,7 +139,8 @@ def _float(source: str, number: int | None, text: str, key: str | None = None) -
 
 
 def bridge_from_mode_tables(template: Mapping[str, Any],
-                            paths: Sequence[str | os.PathLike[str]]) -> BridgeModel:
+                            paths: Sequence[str | os.PathLike[str]],
+                            source: str = "") -> BridgeModel:
     """Build a bridge from a template (``B``, ``rho``, ``name``, ``static``) and mode tables.
 
     Parameters
@@ -148,6 +149,8 @@ def bridge_from_mode_tables(template: Mapping[str, Any],
         The bridge model file's keys except ``nodes_x`` and ``modes``.
     paths : sequence of path-like
         One mode table per mode, in the order of the modes.
+    source : str
+        The template's file, named in a default taken for the deck data (``rho``).
 
     Raises
     ------
@@ -173,4 +176,5 @@ def bridge_from_mode_tables(template: Mapping[str, Any],
                              "(every mode table must list the same nodes)")
         modes.append(entry)
     assert x0 is not None
-    return BridgeModel.from_dict({**template, "nodes_x": x0.tolist(), "modes": modes})
+    return BridgeModel.from_dict({**template, "nodes_x": x0.tolist(), "modes": modes},
+                                 source=source, mode_sources=[os.fspath(p) for p in paths])

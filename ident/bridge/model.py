@@ -25,6 +25,18 @@ the leading 2x2 block only: the deck's sway then feels no air.
 The modes are the whole structure's (cables and towers carry mass), so their deck-only products
 need not be orthogonal; :meth:`BridgeModel.notes` mentions it, nothing refuses it.
 
+**Inputs checked.** A value the file leaves out and that has a default (``rho``, a mode's
+``damping`` or ``generalised_mass``) is taken and recorded in :attr:`BridgeModel.defaults`, one
+line naming the file, the mode, the key and the value taken, for the command to print and write.
+Implausible inputs are recorded in :attr:`BridgeModel.warnings`: a mode's equivalent deck mass
+per metre, ``M / int (h^2 + (alpha B/2)^2 + p^2) dx``, more than :data:`MASS_SPREAD` times from
+the median of the other modes' (the example bridge's six modes lie within a factor 2.2 of each
+other: 10 281 kg/m in torsion, I / (B/2)^2, to 22 740 kg/m), or below :data:`LIGHTEST_DECK`
+kg/m (lighter than any deck: shapes normalised to a unit modal mass with the mass left at its
+default). A mode that does not move
+the deck at all is an error: the wind cannot act on it, and a table's zero column or a shape
+in the wrong file is the likely cause.
+
 Not responsible for: the equations of motion in the wind (:mod:`ident.bridge.statespace`),
 flutter (:mod:`ident.bridge.flutter`).
 """
@@ -44,7 +56,8 @@ import numpy.typing as npt
 
 from ident.model.quasi_steady import StaticCoefficients
 
-__all__ = ["BridgeModel", "Mode", "SHAPE_NAMES"]
+__all__ = ["DEFAULT_DAMPING", "DEFAULT_RHO", "LIGHTEST_DECK", "MASS_SPREAD", "BridgeModel", "Mode",
+           "SHAPE_NAMES"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -55,6 +68,19 @@ _TOP_KEYS = {"name", "B", "rho", "nodes_x", "modes", "static"}
 _MODE_KEYS = {"frequency", "damping", "generalised_mass", *SHAPE_NAMES, "name"}
 #: Air densities accepted, kg/m^3: anything outside is a unit mistake (g/m^3, kg/l).
 _RHO_RANGE = (0.5, 2.0)
+#: Air density taken when the file gives none, kg/m^3 (ISA sea level).
+DEFAULT_RHO = 1.225
+#: Damping ratio taken when a mode gives none: a welded steel deck's structural logarithmic
+#: decrement 0.02 (EN 1991-1-4, Table F.2) is 0.0032; the lower round value errs on the safe
+#: side for flutter and buffeting.
+DEFAULT_DAMPING = 0.003
+#: Generalised mass taken when a mode gives none, kg (shapes normalised to a unit modal mass).
+DEFAULT_MASS = 1.0
+#: A mode's equivalent deck mass per metre this many times from the others' median is flagged.
+MASS_SPREAD = 100.0
+#: An equivalent deck mass per metre below this, kg/m, is lighter than any deck (a 1:300
+#: aeroelastic model of a 20 t/m deck weighs 0.2 kg/m).
+LIGHTEST_DECK = 0.1
 
 
 @dataclass(frozen=True, eq=False)
@@ -109,6 +135,13 @@ class BridgeModel:
         The section's static coefficients and slopes (windrig's signs), if given.
     given : frozenset of str
         The top-level keys the source gave (to tell a default from a given value).
+    defaults : tuple of str
+        Every default taken for a value the source left out, one line each naming the file,
+        the mode, the key and the value (``"bridge.json: modes[2] (V1S): no damping: taken as
+        0.003"``).
+    warnings : tuple of str
+        Implausible inputs, one line each naming the file, the mode, the key and the value
+        (a generalised mass orders of magnitude from the other modes').
 
     Examples
     --------
@@ -132,6 +165,8 @@ follows 1
     modes: tuple[Mode, ...]
     static: StaticCoefficients | None = None
     given: frozenset[str] = field(default_factory=frozenset)
+    defaults: tuple[str, ...] = ()
+    warnings: tuple[str, ...] = ()
 
     # -- sizes and structural matrices ---------------------------------------------------------
 
@@ -261,14 +296,12 @@ follows 1
                 for r, (mode, kind) in enumerate(zip(self.modes, self.mode_kinds(), strict=True))]
 
     def notes(self) -> list[str]:
-        """Remarks on the input that are not errors (for the user to read, not to fix)."""
+        """Remarks on the input that are not errors (for the user to read, not to fix).
+
+        The defaults taken and the implausible inputs are :attr:`defaults` and
+        :attr:`warnings`.
+        """
         out: list[str] = []
-        if "rho" not in self.given:
-            out.append(f"no air density rho given: using {self.rho} kg/m^3")
-        silent = [r + 1 for r, m in enumerate(self.modes)
-                  if not (np.any(m.h) or np.any(m.alpha) or np.any(m.p))]
-        if silent:
-            out.append(f"mode(s) {silent} do not move the deck: the wind does not act on them")
         if self.n_modes > 1:
             # Deck-only products of whole-structure modes are not orthogonal in general; report
             # the largest normalised product for information only.
@@ -324,14 +357,27 @@ follows 1
             raise ValueError(f"{source}: not valid JSON ({exc.msg}, line {exc.lineno} column "
                              f"{exc.colno})") from None
         try:
-            bridge = cls.from_dict(data, default_name=os.path.splitext(os.path.basename(source))[0])
+            bridge = cls.from_dict(data, default_name=os.path.splitext(os.path.basename(source))[0],
+                                   source=source)
         except ValueError as exc:
             raise ValueError(f"{source}: {exc}") from None
         return bridge
 
     @classmethod
-    def from_dict(cls, data: Any, *, default_name: str = "bridge") -> BridgeModel:
-        """Build and validate a bridge from the JSON object of DESIGN.
+    def from_dict(cls, data: Any, *, default_name: str = "bridge", source: str = "",
+                  mode_sources: list[str] | None = None) -> BridgeModel:
+        """Build and validate a bridge from the bridge model file's JSON object.
+
+        Parameters
+        ----------
+        data : mapping
+            The JSON object.
+        default_name : str
+            The name if ``data`` has none.
+        source : str
+            The file ``data`` came from, named in :attr:`defaults` and :attr:`warnings`.
+        mode_sources : list of str, optional
+            The file each mode came from (mode tables), named instead of ``modes[r]``.
 
         Raises
         ------
@@ -339,7 +385,8 @@ follows 1
             One message per problem, naming the key (``modes[2].alpha``): a missing or unknown
             key, a value that is not a number, a size that does not match ``nodes_x``, nodes
             that do not increase, a unit that cannot be right (``rho`` outside 0.5 to 2 kg/m^3,
-            a damping ratio of 1 or more), a drag coefficient below zero.
+            a damping ratio of 1 or more), a drag coefficient below zero, a mode that does not
+            move the deck.
         """
         if not isinstance(data, Mapping):
             raise ValueError("expected a JSON object with B, nodes_x and modes (DESIGN's bridge "
@@ -356,7 +403,12 @@ follows 1
         B = _number("B", data["B"])
         if not 0.0 < B <= 200.0:
             raise ValueError(f"B = {B:g}: the deck width in m must be > 0 and at most 200")
-        rho = _number("rho", data.get("rho", 1.225))
+        where = f"{source}: " if source else ""
+        defaults: list[str] = []
+        if "rho" not in data:
+            defaults.append(f"{where}no air density rho: taken as {DEFAULT_RHO} kg/m^3 (ISA sea "
+                            "level)")
+        rho = _number("rho", data.get("rho", DEFAULT_RHO))
         if not _RHO_RANGE[0] <= rho <= _RHO_RANGE[1]:
             raise ValueError(f"rho = {rho:g}: the air density in kg/m^3 must be in "
                              f"{_RHO_RANGE[0]} to {_RHO_RANGE[1]}")
@@ -371,13 +423,20 @@ follows 1
         modes_data = data["modes"]
         if not isinstance(modes_data, list) or not modes_data:
             raise ValueError("modes must be a non-empty list of mode objects")
-        modes = tuple(_mode(f"modes[{r}]", entry, x.size) for r, entry in enumerate(modes_data))
+        if mode_sources is not None and len(mode_sources) != len(modes_data):
+            raise ValueError(f"{len(mode_sources)} mode sources for {len(modes_data)} modes")
+        labels = [mode_sources[r] if mode_sources is not None else f"{where}modes[{r}]"
+                  for r in range(len(modes_data))]
+        modes = tuple(_mode(f"modes[{r}]" if mode_sources is None else mode_sources[r], entry,
+                            x.size, labels[r], defaults)
+                      for r, entry in enumerate(modes_data))
+        warnings = _mass_warnings(modes, labels, B, x, defaults)
         static = None
         if data.get("static") is not None:
             static = _static(data["static"])
         x.flags.writeable = False
         return cls(name=name, B=B, rho=rho, nodes_x=x, modes=modes, static=static,
-                   given=frozenset(data))
+                   given=frozenset(data), defaults=tuple(defaults), warnings=tuple(warnings))
 
 
 def _number(key: str, value: Any) -> float:
@@ -395,14 +454,19 @@ def _vector(key: str, value: Any) -> FloatArray:
     return np.array([_number(f"{key}[{i}]", item) for i, item in enumerate(value)], dtype=float)
 
 
-def _mode(key: str, entry: Any, n_nodes: int) -> Mode:
+def _mode(key: str, entry: Any, n_nodes: int, label: str, defaults: list[str]) -> Mode:
+    """Validate one mode; append a line to ``defaults`` for each default taken.
+
+    ``key`` prefixes errors (``modes[2]``, or a mode table's file); ``label`` names the mode in
+    the defaults (with the bridge file).
+    """
     if not isinstance(entry, Mapping):
         raise ValueError(f"{key} must be an object with frequency, damping and h/alpha/p")
     unknown = sorted(set(entry) - _MODE_KEYS)
     if unknown:
         raise ValueError(f"{key}: unknown key(s) {unknown}; allowed: "
                          f"{', '.join(sorted(_MODE_KEYS))}")
-    missing = [k for k in ("frequency", "damping") if k not in entry]
+    missing = [k for k in ("frequency",) if k not in entry]
     if missing:
         raise ValueError(f"{key}: missing key(s) {missing}")
     if not any(k in entry for k in SHAPE_NAMES):
@@ -411,12 +475,20 @@ def _mode(key: str, entry: Any, n_nodes: int) -> Mode:
     frequency = _number(f"{key}.frequency", entry["frequency"])
     if frequency <= 0.0:
         raise ValueError(f"{key}.frequency = {frequency:g}: must be > 0 Hz")
-    damping = _number(f"{key}.damping", entry["damping"])
+    named = entry.get("name")
+    label = f"{label} ({named})" if isinstance(named, str) and named else label
+    if "damping" not in entry:
+        defaults.append(f"{label}: no damping: taken as {DEFAULT_DAMPING} (ratio; a welded steel "
+                        "deck's)")
+    damping = _number(f"{key}.damping", entry.get("damping", DEFAULT_DAMPING))
     if not 0.0 <= damping < 1.0:
         hint = (f" (a percentage? {damping:g} % is {damping / 100:g})" if damping >= 1.0 else "")
         raise ValueError(f"{key}.damping = {damping:g}: the damping ratio must be in [0, 1)"
                          f"{hint}")
-    mass = _number(f"{key}.generalised_mass", entry.get("generalised_mass", 1.0))
+    if "generalised_mass" not in entry:
+        defaults.append(f"{label}: no generalised_mass: taken as {DEFAULT_MASS:g} kg (shapes "
+                        "normalised to a unit modal mass)")
+    mass = _number(f"{key}.generalised_mass", entry.get("generalised_mass", DEFAULT_MASS))
     if mass <= 0.0:
         raise ValueError(f"{key}.generalised_mass = {mass:g}: must be > 0 kg")
     shapes = {}
@@ -430,11 +502,55 @@ def _mode(key: str, entry: Any, n_nodes: int) -> Mode:
             vec = np.zeros(n_nodes)
         vec.flags.writeable = False
         shapes[name] = vec
-    label = entry.get("name", "")
-    if not isinstance(label, str):
-        raise ValueError(f"{key}.name must be a string, got {label!r}")
-    return Mode(frequency=frequency, damping=damping, generalised_mass=mass, name=label,
+    name = entry.get("name", "")
+    if not isinstance(name, str):
+        raise ValueError(f"{key}.name must be a string, got {name!r}")
+    if not any(np.any(vec) for vec in shapes.values()):
+        raise ValueError(f"{key}{f' ({name})' if name else ''}: no deck motion: h, alpha and p "
+                         "are zero at every deck node, so the wind cannot act on this mode "
+                         "(remove it, or check its shape columns)")
+    return Mode(frequency=frequency, damping=damping, generalised_mass=mass, name=name,
                 **shapes)
+
+
+def _mass_warnings(modes: tuple[Mode, ...], labels: list[str], B: float, x: FloatArray,
+                   defaults: list[str]) -> list[str]:
+    """Generalised masses that cannot belong with their shapes or with the other modes'.
+
+    The equivalent deck mass per metre ``M / int (h^2 + (alpha B/2)^2 + p^2) dx`` (kg/m) puts
+    every mode on one scale whatever its normalisation; a mode's that is :data:`MASS_SPREAD`
+    times from the median of the others' (or lighter than :data:`LIGHTEST_DECK`) is named with
+    its generalised mass. A tower's or a cable's mode with little deck motion is heavy per deck
+    metre for a reason: the warning says so.
+    """
+    w = np.zeros(x.size)
+    w[:-1] += np.diff(x) / 2.0
+    w[1:] += np.diff(x) / 2.0
+    per_metre = np.array([m.generalised_mass / float(w @ (m.h**2 + (m.alpha * B / 2.0) ** 2
+                                                          + m.p**2)) for m in modes])
+    out = []
+    for r, mode in enumerate(modes):
+        label = f"{labels[r]} ({mode.name})" if mode.name else labels[r]
+        default = (" (the default: give the mode's generalised_mass)"
+                   if any(d.startswith(f"{label}: no generalised_mass") for d in defaults)
+                   else "")
+        if per_metre[r] < LIGHTEST_DECK:
+            out.append(f"{label}: generalised_mass = {mode.generalised_mass:g} kg{default} gives "
+                       f"an equivalent deck mass of {per_metre[r]:.3g} kg/m, lighter than any "
+                       f"deck ({LIGHTEST_DECK:g} kg/m): the mass and the shapes in different "
+                       "normalisations?")
+            continue
+        if len(modes) < 2:
+            continue
+        others = float(np.median(np.delete(per_metre, r)))
+        ratio = per_metre[r] / others
+        if ratio > MASS_SPREAD or ratio < 1.0 / MASS_SPREAD:
+            out.append(f"{label}: generalised_mass = {mode.generalised_mass:g} kg{default} gives "
+                       f"an equivalent deck mass of {per_metre[r]:.3g} kg/m, {ratio:.3g} times "
+                       f"the median of the other modes' ({others:.3g} kg/m): a mass in other "
+                       "units or normalisation, or a mode with little deck motion (a tower's or "
+                       "a cable's)?")
+    return out
 
 
 def _static(value: Any) -> StaticCoefficients:

@@ -189,9 +189,9 @@ def check_flutter_range(table: FlutterDerivativeTable, K: float | None, what: st
     --------
     >>> zero = {n: [0.0] * 3 for n in ("H1", "H2", "H3", "H4", "A1", "A2", "A3", "A4")}
     >>> t = FlutterDerivativeTable([0.8, 1.6, 3.2], zero)
-    >>> check_flutter_range(t, 0.45)[0]
-    'flutter at K = 0.45 (Ur = 13.96) lies outside the table (K 0.8 to 3.2, Ur 1.963 to 7.854): the \
-table stops short of it, the result rests on an extrapolation'
+    >>> print(check_flutter_range(t, 0.45)[0])
+    flutter at K = 0.45 (Ur = 13.96) lies outside the table (K 0.8 to 3.2, Ur 1.963 to 7.854):
+    the table stops short of it, the result rests on an extrapolation
     """
     if K is None:
         return []

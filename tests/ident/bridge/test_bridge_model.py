@@ -91,7 +91,8 @@ def test_notes_are_remarks_not_errors():
     data["modes"][1].update(h=[0.0, 0.8, 0.0], alpha=[0.0, 0.005, 0.01])
     bridge = BridgeModel.from_dict(data)
     notes = " | ".join(bridge.notes())
-    assert "no air density rho given: using 1.225 kg/m^3" in notes
+    assert "rho" not in notes  # a default, recorded as such (below)
+    assert bridge.defaults[0] == "no air density rho: taken as 1.225 kg/m^3 (ISA sea level)"
     assert "deck-only shapes of modes 1 and 2 are not orthogonal" in notes
     assert "dC_L = 5 > 0" in notes
     assert BridgeModel.from_dict(GOOD).notes() == []

@@ -1,0 +1,140 @@
+"""The bridge's inputs checked: every default taken is recorded, implausible modes are named.
+
+Each awkward bridge is the shipped example bridge (six modes, 800 m span; equivalent deck masses
+10 281 to 22 740 kg/m) or its mode tables with one thing changed.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from daq.cli import main
+from ident.bridge.mode_tables import bridge_from_mode_tables
+from ident.bridge.model import BridgeModel
+from ident.model import flat_plate
+
+from support.configs import BRIDGES
+
+BRIDGE = BRIDGES / "example_bridge.json"
+MODE_ORDER = ("L1S", "V1A", "V1S", "V2S", "T1S", "T1A")
+
+
+def _example_with(tmp_path: Path, change) -> Path:
+    """Write the example bridge file with ``change(data)`` applied to tmp_path."""
+    data = json.loads(BRIDGE.read_text())
+    change(data)
+    path = tmp_path / "bridge.json"
+    path.write_text(json.dumps(data))
+    return path
+
+
+def test_the_example_bridge_takes_no_default_and_raises_no_warning():
+    bridge = BridgeModel.from_json(BRIDGE)
+    assert bridge.defaults == () and bridge.warnings == ()
+
+
+def test_a_mode_without_generalised_mass_is_recorded_and_flagged(tmp_path: Path):
+    """The issue's case: V1S's mass left out defaults to 1 kg beside masses of ~1e7 to 1e9."""
+    path = _example_with(tmp_path, lambda d: d["modes"][2].pop("generalised_mass"))
+    bridge = BridgeModel.from_json(path)
+    assert bridge.modes[2].generalised_mass == 1.0
+    assert bridge.defaults == (f"{path}: modes[2] (V1S): no generalised_mass: taken as 1 kg "
+                               "(shapes normalised to a unit modal mass)",)
+    assert len(bridge.warnings) == 1
+    warning = bridge.warnings[0]
+    # 1 kg over int h^2 dx = 400 m (a half sine of unit amplitude over 800 m).
+    assert warning.startswith(f"{path}: modes[2] (V1S): generalised_mass = 1 kg (the default: "
+                              "give the mode's generalised_mass) gives an equivalent deck mass "
+                              "of 0.0025 kg/m, lighter than any deck")
+
+
+def test_a_mode_table_without_generalised_mass_is_named_by_its_file(tmp_path: Path):
+    folder = tmp_path / "modes"
+    shutil.copytree(BRIDGES / "example_modes", folder)
+    table = folder / "V1S.csv"
+    table.write_text("".join(line for line in table.read_text().splitlines(keepends=True)
+                             if not line.startswith("# generalised_mass")))
+    template = BRIDGES / "example_deck.json"
+    bridge = bridge_from_mode_tables(json.loads(template.read_text()),
+                                     [folder / f"{n}.csv" for n in MODE_ORDER],
+                                     source=str(template))
+    assert bridge.defaults == (f"{table} (V1S): no generalised_mass: taken as 1 kg (shapes "
+                               "normalised to a unit modal mass)",)
+    assert len(bridge.warnings) == 1 and bridge.warnings[0].startswith(
+        f"{table} (V1S): generalised_mass = 1 kg (the default")
+
+
+def test_a_generalised_mass_a_thousand_times_too_large_is_named(tmp_path: Path):
+    """T1A's mass x 1e3 (tonnes read as kg): only T1A flagged, 1e3 times the others' median."""
+    def heavier(data):
+        data["modes"][5]["generalised_mass"] *= 1e3
+
+    path = _example_with(tmp_path, heavier)
+    bridge = BridgeModel.from_json(path)
+    assert bridge.defaults == ()
+    assert bridge.warnings == (
+        f"{path}: modes[5] (T1A): generalised_mass = 9.88e+11 kg gives an equivalent deck mass "
+        "of 1.03e+07 kg/m, 452 times the median of the other modes' (2.27e+04 kg/m): a mass in "
+        "other units or normalisation, or a mode with little deck motion (a tower's or a "
+        "cable's)?",)
+
+
+def test_a_mode_with_no_deck_motion_is_an_error_naming_file_and_mode(tmp_path: Path):
+    def still(data):
+        data["modes"][4]["alpha"] = [0.0] * len(data["nodes_x"])
+
+    path = _example_with(tmp_path, still)
+    with pytest.raises(ValueError, match=rf"^{path}: modes\[4\] \(T1S\): no deck motion: h, "
+                                         r"alpha and p are zero at every deck node"):
+        BridgeModel.from_json(path)
+    folder = tmp_path / "modes"
+    shutil.copytree(BRIDGES / "example_modes", folder)
+    table = folder / "T1S.csv"
+    lines = table.read_text().splitlines()
+    header = lines.index("x,alpha")
+    table.write_text("\n".join(lines[:header + 1] + [line.split(",")[0] + ",0.0"
+                                                     for line in lines[header + 1:]]) + "\n")
+    with pytest.raises(ValueError, match=rf"^{table} \(T1S\): no deck motion"):
+        bridge_from_mode_tables({"B": 31.0, "rho": 1.22}, [folder / f"{n}.csv" for n in MODE_ORDER])
+
+
+def test_missing_damping_and_rho_are_taken_and_recorded(tmp_path: Path):
+    def bare(data):
+        del data["rho"]
+        del data["modes"][0]["damping"]
+
+    path = _example_with(tmp_path, bare)
+    bridge = BridgeModel.from_json(path)
+    assert bridge.rho == 1.225 and bridge.modes[0].damping == 0.003
+    assert bridge.defaults == (
+        f"{path}: no air density rho: taken as 1.225 kg/m^3 (ISA sea level)",
+        f"{path}: modes[0] (L1S): no damping: taken as 0.003 (ratio; a welded steel deck's)")
+    assert bridge.warnings == ()
+
+
+def test_windrig_bridge_prints_and_records_the_defaults_and_warnings(tmp_path: Path, capsys):
+    """Through the command line: printed, and in the JSON under defaults and warnings."""
+    def careless(data):
+        del data["rho"]
+        data["modes"][2].pop("generalised_mass")
+
+    path = _example_with(tmp_path, careless)
+    model = tmp_path / "plate.json"
+    model.write_text(json.dumps(flat_plate.jones_model().to_dict()))
+    out = tmp_path / "result.json"
+    assert main(["bridge", str(path), "--aero", str(model), "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert f"default: {path}: no air density rho: taken as 1.225 kg/m^3" in text
+    assert f"default: {path}: modes[2] (V1S): no generalised_mass: taken as 1 kg" in text
+    assert f"warning: {path}: modes[2] (V1S): generalised_mass = 1 kg (the default" in text
+    result = json.loads(out.read_text())
+    assert result["defaults"] == [
+        f"{path}: no air density rho: taken as 1.225 kg/m^3 (ISA sea level)",
+        f"{path}: modes[2] (V1S): no generalised_mass: taken as 1 kg (shapes normalised to a "
+        "unit modal mass)"]
+    assert len(result["warnings"]) == 1
+    assert result["warnings"][0].startswith(f"{path}: modes[2] (V1S): generalised_mass = 1 kg")
