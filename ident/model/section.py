@@ -6,6 +6,10 @@ coordinates", "Three degrees of freedom"). A 2-DOF section's matrices are the le
 of the 3-DOF ones: sway adds a row and a column and changes nothing else. It knows nothing of
 aerodynamics; :mod:`ident.model.statespace` couples it with a
 :class:`~ident.model.rfc.RationalFunctionModel`.
+
+:func:`section_defaults` names the defaults a section file leaves to be taken (``rho``, ``S``,
+and with sway ``zeta_p`` and ``m_p``), so that a command prints and records them: a default is
+never silent.
 """
 
 from __future__ import annotations
@@ -19,7 +23,7 @@ import numpy.typing as npt
 
 from ident.numerics import validate as v
 
-__all__ = ["SectionModel"]
+__all__ = ["SectionModel", "section_defaults"]
 
 
 @dataclass(frozen=True)
@@ -199,3 +203,50 @@ class SectionModel:
         if unknown:
             raise TypeError(f"unknown SectionModel field(s): {sorted(unknown)}")
         return cls(**data)
+
+
+def section_defaults(data: dict[str, Any], source: str = "") -> list[str]:
+    """Return one line per default a section's fields leave :class:`SectionModel` to take.
+
+    Parameters
+    ----------
+    data : dict
+        The fields given (a section file's JSON object), as :meth:`SectionModel.from_dict`
+        takes them; only which keys are present is read (and ``m`` for ``m_p``'s default).
+    source : str, optional
+        The file, named at the start of each line.
+
+    Returns
+    -------
+    list of str
+        ``rho`` (1.225 kg/m^3), ``S`` (0) and, for a section with sway (``fp``), ``zeta_p``
+        (0) and ``m_p`` (``m``), each with the value taken; the structural damping of heave
+        and pitch has no default (a section without it is an error).
+
+    Examples
+    --------
+    >>> for line in section_defaults({"B": 0.3, "m": 3.0, "I": 0.03, "fh": 2.0, "fa": 4.0,
+    ...                               "zeta_h": 0.005, "zeta_a": 0.005, "fp": 1.0}, "deck.json"):
+    ...     print(line)
+    deck.json: no air density rho: taken as 1.225 kg/m^3 (ISA sea level)
+    deck.json: no static unbalance S: taken as 0 kg m/m (the centre of mass on the elastic axis)
+    deck.json: no zeta_p: taken as 0 (no structural damping in sway)
+    deck.json: no m_p: taken as m = 3 kg/m (the sway carriage adds no mass)
+    """
+    where = f"{source}: " if source else ""
+    out = []
+    if data.get("rho") is None:
+        out.append(f"{where}no air density rho: taken as {SectionModel.rho} kg/m^3 (ISA sea "
+                   "level)")
+    if data.get("S") is None:
+        out.append(f"{where}no static unbalance S: taken as 0 kg m/m (the centre of mass on the "
+                   "elastic axis)")
+    if data.get("fp") is not None:
+        if data.get("zeta_p") is None:
+            out.append(f"{where}no zeta_p: taken as 0 (no structural damping in sway)")
+        if data.get("m_p") is None:
+            m = data.get("m")
+            mass = f"{m:g}" if isinstance(m, (int, float)) else repr(m)
+            out.append(f"{where}no m_p: taken as m = {mass} kg/m (the sway carriage adds no "
+                       "mass)")
+    return out
