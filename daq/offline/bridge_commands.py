@@ -143,6 +143,7 @@ def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: 
         raise UsageError("--aero is required: the section's RFC model (.json) or "
                          "flutter-derivative table (.csv)")
     aero = _read_aero(aero_path, bridge, convention)
+    table_warnings = _check_table(aero, aero_path)
     for note in aero.notes:
         print(f"note: {note}")
 
@@ -186,7 +187,7 @@ def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: 
     if aero.table is not None and aero.table_fit is not None:
         summary.update({"table_convention": convention, "table_K": aero.table.K.tolist(),
                         "table_fit_relative_error": aero.table_fit.relative_error.tolist()})
-    _record_inputs_checked(summary, bridge)
+    _record_inputs_checked(summary, bridge, table_warnings)
     if buffeting is not None:
         summary.update(_buffeting(bridge, aero.model, buffeting, spec, time_domain, out))
     if out is not None:
@@ -226,10 +227,23 @@ def _print_inputs_checked(bridge: Any) -> None:
         print(f"warning: {line}")
 
 
-def _record_inputs_checked(summary: dict[str, Any], bridge: Any) -> None:
-    """Record the bridge's defaults (``defaults``) and warnings (added to ``warnings``)."""
+def _check_table(aero: Any, path: Path) -> list[str]:
+    """Print and return a table's warnings (:func:`ident.tables.table_checks.check_table`)."""
+    from ident.tables.table_checks import check_table
+
+    if aero.table is None:
+        return []
+    found = check_table(aero.table, path)
+    for line in found:
+        print(f"warning: {line}")
+    return found
+
+
+def _record_inputs_checked(summary: dict[str, Any], bridge: Any,
+                           table_warnings: list[str]) -> None:
+    """Record the bridge's defaults (``defaults``) and its and the table's ``warnings``."""
     summary["defaults"] = list(bridge.defaults)
-    summary.setdefault("warnings", []).extend(bridge.warnings)
+    summary.setdefault("warnings", []).extend([*bridge.warnings, *table_warnings])
 
 
 def _read_aero(path: Path, bridge: Any, convention: str) -> Any:

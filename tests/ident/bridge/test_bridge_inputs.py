@@ -138,3 +138,23 @@ def test_windrig_bridge_prints_and_records_the_defaults_and_warnings(tmp_path: P
         "unit modal mass)"]
     assert len(result["warnings"]) == 1
     assert result["warnings"][0].startswith(f"{path}: modes[2] (V1S): generalised_mass = 1 kg")
+
+
+def test_windrig_bridge_warns_of_a_shifted_table_column(tmp_path: Path, capsys):
+    """The issue's A2* + 0.15 at every row of the example table: named in print and JSON."""
+    lines = (BRIDGES / "example_deck_table.csv").read_text().splitlines()
+    header = lines.index("K,H1,H2,H3,H4,A1,A2,A3,A4")
+    shifted = lines[:header + 1]
+    for line in lines[header + 1:]:
+        cells = line.split(",")
+        cells[6] = repr(float(cells[6]) + 0.15)
+        shifted.append(",".join(cells))
+    table = tmp_path / "shifted.csv"
+    table.write_text("\n".join(shifted) + "\n")
+    out = tmp_path / "result.json"
+    assert main(["bridge", str(BRIDGE), "--aero", str(table), "--json", str(out),
+                 "--u-max", "100"]) == 0
+    assert f"warning: {table}: A2* tends to +0.194, not to zero" in capsys.readouterr().out
+    result = json.loads(out.read_text())
+    assert result["defaults"] == []
+    assert [w.split(", not")[0] for w in result["warnings"]] == [f"{table}: A2* tends to +0.194"]
