@@ -23,7 +23,7 @@ The checks, and why each can be trusted:
   derivatives H1*, A2*, P1* are aerodynamic damping; as the reduced velocity goes to zero (K
   large) the air is still relative to the motion and gives none, and a rational (Roger) model
   has ``K X* -> constant``, i.e. ``X* ~ a / K``. The table's rows at its largest K (from a
-  third of the largest, which must reach K = 1) are fitted with ``X* = a / K + b / K^2 + s``
+  third of the largest, which must reach K = 2, Ur = 3.1) are fitted with ``X* = a / K + b / K^2 + s``
   (the ``b`` term takes up the approach; on the flat plate and the shipped deck it leaves
   ``|s|`` below 0.15 of the decaying part); an ``s`` above a quarter of the decaying part, and
   four standard errors clear of zero, is a column shifted by a constant.
@@ -100,9 +100,11 @@ _REL_EDGE = 1.0
 # Where a column crosses zero, a residual is compared with this part of its largest magnitude.
 _FLOOR = 0.1
 # Damping that does not vanish: rows used (K from K_max / _TOP_SPAN), the smallest K_max that
-# reaches towards still air (Ur = 2 pi / K <= 6.3), and the share of the column that is a shift.
+# reaches towards still air (Ur = 2 pi / K <= 3.1: a bluff deck's table that stops at K = 1.26,
+# Ur = 5, is still in its transition there, A2* changing sign among the last rows), and the
+# share of the column that is a shift.
 _TOP_SPAN = 3.0
-_TOP_K = 1.0
+_TOP_K = 2.0
 _SHIFT_SHARE = 0.25
 _DAMPING = ("H1", "A2", "P1")
 # Inter-relations used at the level of signs: (column, other column) with X ~ K Y.

@@ -21,6 +21,7 @@ from ident.tables.table_checks import (
     check_flutter_range,
     check_table,
 )
+from simulators.decks import bluff_deck_3dof_model
 
 from support.configs import BRIDGES
 
@@ -57,6 +58,17 @@ def test_clean_tables_are_not_flagged(n: int):
     assert check_table(_plate(n)) == []
     assert check_table(_plate(n, (0.1, 1.5))) == []
     assert check_table(_plate(n, (0.2, 6.0))) == []
+
+
+@pytest.mark.parametrize("K", [(0.3, 3.14, 19), (0.1, 5.0, 60), (0.021, 1.26, 151)])
+def test_a_clean_three_dof_bluff_deck_table_is_not_flagged(K):
+    """The simulated bluff deck's 18 derivatives: nothing flagged.
+
+    The last range is that of a published 3-DOF table (151 rows, K 0.021 to 1.26), where A2*
+    still changes sign among the last rows.
+    """
+    table = FlutterDerivativeTable.from_model(bluff_deck_3dof_model(), np.geomspace(*K))
+    assert table.n_dof == 3 and check_table(table) == []
 
 
 @pytest.mark.parametrize("level", [0.01, 0.02])
