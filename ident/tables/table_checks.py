@@ -23,10 +23,10 @@ The checks, and why each can be trusted:
   derivatives H1*, A2*, P1* are aerodynamic damping; as the reduced velocity goes to zero (K
   large) the air is still relative to the motion and gives none, and a rational (Roger) model
   has ``K X* -> constant``, i.e. ``X* ~ a / K``. The table's rows at its largest K (from a
-  third of the largest, which must reach K = 2, Ur = 3.1) are fitted with ``X* = a / K + b / K^2 + s``
-  (the ``b`` term takes up the approach; on the flat plate and the shipped deck it leaves
-  ``|s|`` below 0.15 of the decaying part); an ``s`` above a quarter of the decaying part, and
-  four standard errors clear of zero, is a column shifted by a constant.
+  third of the largest, which must reach K = 2, Ur = 3.1) are fitted with
+  ``X* = a / K + b / K^2 + s`` (the ``b`` term takes up the approach; on the flat plate and the
+  shipped deck it leaves ``|s|`` below 0.15 of the decaying part); an ``s`` above a quarter of
+  the decaying part, and four standard errors clear of zero, is a column shifted by a constant.
 - **Signs against the inter-relations** of Scanlan, Jones and Singh (1997), checked on the exact
   flat plate (:func:`ident.model.flat_plate.flutter_derivatives`, K = B omega / U, B the full
   width) before use: ``H1* ~ K H3*`` (within 10 % over K 0.2 to 3.2) and ``A1* ~ K A3*`` (ratio
