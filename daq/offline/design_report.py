@@ -242,7 +242,7 @@ def write_bridge_report(out: Path, result: Any, summary: Mapping[str, Any],
     if buffeting:
         lines += ["", "## Buffeting", "", "Largest RMS along the deck (frequency domain):", "",
                   "| U (m/s) | heave h (m) | pitch alpha (rad) | sway p (m) |", "|---|---|---|---|"]
-        for entry in buffeting.get("frequency_domain", []):
+        for entry in buffeting:
             lines.append(f"| {entry['U']:g} | {max(entry['rms_h']):.4g} | "
                          f"{max(entry['rms_alpha']):.4g} | {max(entry['rms_p']):.4g} |")
     lines += ["", "## Warnings", ""] + _warning_lines(summary.get("warnings", []))

@@ -90,6 +90,9 @@ class BridgeFlutterResult:
         ``"state-space"`` or ``"frequency-domain"``.
     divergence_speed : float or None
         Lowest U at which the aeroelastic stiffness loses positive definiteness (state space).
+    unstable_at_start : bool
+        The frequency domain only: a branch already grows at the highest K scanned (the lowest
+        wind speed); ``speed`` is that branch's wind speed there, flutter lies at or below it.
     """
 
     speed: float | None
@@ -104,6 +107,7 @@ class BridgeFlutterResult:
     mode_labels: tuple[str, ...] = field(repr=False)
     method: str = "state-space"
     divergence_speed: float | None = None
+    unstable_at_start: bool = False
 
     @property
     def found(self) -> bool:
@@ -402,6 +406,10 @@ def frequency_domain(bridge: BridgeModel, flutter_derivatives: FlutterDerivative
         branches[i, rows] = omega_i[cols]
 
     candidates: list[tuple[float, float, int, float]] = []
+    # A branch already growing at the highest K: the scan starts inside flutter (no crossing
+    # would be seen); its wind speed there bounds flutter from above.
+    at_start = [(bridge.B * branches[0, j].real / K[0], branches[0, j].real / (2 * math.pi), j,
+                 float(K[0])) for j in range(n) if branches[0, j].imag <= 0.0]
     for j in range(n):
         growth = branches[:, j].imag
         for i in (int(x) for x in np.flatnonzero((growth[:-1] > 0.0) & (growth[1:] <= 0.0))):
@@ -424,8 +432,9 @@ def frequency_domain(bridge: BridgeModel, flutter_derivatives: FlutterDerivative
     speed = frequency = K_flutter = None
     critical = None
     participation = None
-    if candidates:
-        speed, frequency, critical, K_flutter = min(candidates)
+    starts_unstable = bool(at_start) and (not candidates or min(at_start) < min(candidates))
+    if at_start or candidates:
+        speed, frequency, critical, K_flutter = min(at_start + candidates)
         omega_all, vec = _frequency_roots(bridge, flutter_derivatives, K_flutter, vectors=True)
         assert vec is not None
         k = int(np.argmin(np.abs(omega_all.real - 2 * math.pi * frequency)
@@ -436,5 +445,5 @@ def frequency_domain(bridge: BridgeModel, flutter_derivatives: FlutterDerivative
         reduced_frequency=K_flutter, critical_mode=critical, participation=participation,
         U_max=float(U_grid.max()), U=U_grid, frequencies=branches.real / (2 * math.pi),
         damping=branches.imag / np.abs(branches), mode_labels=tuple(bridge.mode_labels()),
-        method="frequency-domain",
+        method="frequency-domain", unstable_at_start=starts_unstable,
     )

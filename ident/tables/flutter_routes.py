@@ -234,6 +234,8 @@ def compare_routes(state_space: Any, frequency_domain: Any, *, source: str,
     result, mode = route_of.get(basis, (None, None))
     speed = None if result is None else result.speed
     K_F = None if result is None else result.reduced_frequency
+    if K_F is not None and K_range is not None and not _in_range(K_F, K_range):
+        reason += "; an extrapolation of the fit beyond the table, not a measured result"
 
     error_at = None
     if fit is not None and K_F is not None and K_range is not None and _in_range(K_F, K_range):
