@@ -72,14 +72,15 @@ def bridge_flutter_routes(bridge: BridgeModel, aero: BridgeAero,
     if (fit is not None and aero.K_range is not None and _below_range(ss, aero.K_range[1])
             and not fd.unstable_at_start):
         first = ss
-        for candidate, alternative in fit.alternatives():
+        for candidate, alternative, error in fit.alternatives():
             trial_aero = with_model(bridge, aero, alternative)
             trial = bridge_flutter.analyze(bridge, trial_aero.model, U_max=U_max)
             if not _below_range(trial, aero.K_range[1]):
                 notes.append(f"the fit chosen first ({fit.model.n_lags} lag(s)) flutters at "
                              f"{first.speed:.4g} m/s with K = {first.reduced_frequency:.3g}, "
                              "below the table's range, which the table does not show: the "
-                             f"state space uses the next structure, {candidate.label}")
+                             f"state space uses the next structure, {candidate.label} (largest error "
+                             f"{100 * error:.2g} % of a force)")
                 ss, aero = trial, trial_aero
                 break
     comparison = compare_routes(

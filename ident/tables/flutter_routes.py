@@ -16,8 +16,8 @@ where flutter lives, and the fit says nothing beyond the table's reduced frequen
   fit there; the frequency domain cannot look there at all); a frequency domain already unstable
   at the table's lowest reduced velocity: the table itself puts flutter at or below that speed;
 - divergence is the ``K = 0`` limit of the model's static stiffness, always an extrapolation from
-  the table's lowest K: its basis is stated, and for a section checked against the table's own
-  lowest row (:func:`table_divergence_speed`).
+  the table's lowest K: a warning says so, its basis is stated, and for a section it is checked
+  against the table's own lowest row (:func:`table_divergence_speed`).
 
 :func:`section_flutter` runs both routes for a section from a model or a table; with a table,
 a fit whose state space flutters below the table's range while the table does not is replaced by
@@ -255,6 +255,9 @@ def compare_routes(state_space: Any, frequency_domain: Any, *, source: str,
         divergence_basis = ("the model's static stiffness (K = 0, its A1), extrapolated beyond "
                             "the reduced frequencies it was identified at")
     if divergence is not None:
+        if K_range is not None:
+            warnings.append(f"divergence at {divergence:.4g} m/s lies outside the table's K "
+                            f"range: {divergence_basis}")
         if divergence_table_edge is not None and abs(
                 divergence / divergence_table_edge - 1.0) > _DIVERGENCE_TOLERANCE:
             warnings.append(f"divergence: {divergence:.4g} m/s from the fit at K = 0, "
@@ -359,14 +362,15 @@ def section_flutter(section: SectionModel, *, model: RationalFunctionModel | Non
     ss = flutter.analyze(section, model_used, U_top)
     if _below_range(ss, K_range) and not fd.unstable_at_start:
         first = ss
-        for candidate, alternative in fit.alternatives():
+        for candidate, alternative, error in fit.alternatives():
             trial_model = alternative if n == 3 else alternative.planar()
             trial = flutter.analyze(section, trial_model, U_top)
             if not _below_range(trial, K_range):
                 notes.append(f"the fit chosen first ({fit.model.n_lags} lag(s)) flutters at "
                              f"{first.speed:.4g} m/s with K = {first.reduced_frequency:.3g}, "
                              "below the table's range, which the table does not show: the "
-                             f"state space uses the next structure, {candidate.label}")
+                             f"state space uses the next structure, {candidate.label} (largest error "
+                             f"{100 * error:.2g} % of a force)")
                 ss, model_used = trial, trial_model
                 break
     if ss.speed is None and fd.speed is None:

@@ -288,20 +288,23 @@ class TableFit:
     accuracy: float = ACCURACY
     weighting: str = "relative"
 
-    def alternatives(self) -> Iterator[tuple[Candidate, RationalFunctionModel]]:
-        """Yield the other scored structures and their fits, simplest first.
+    def alternatives(self) -> Iterator[tuple[Candidate, RationalFunctionModel, float]]:
+        """Yield the other scored structures, their fits and largest errors, most accurate first.
 
         For a caller whose check the chosen fit fails (a flutter below the table's range that
-        the table does not show): the next structures the evidence allows.
+        the table does not show): the next structures the evidence allows, the one that
+        follows the table best first. The error is a fraction of a force's size.
         """
         Q = self.table.Q()
         K = np.broadcast_to(self.table.K[:, None, None], Q.shape)
         problem = RogerProblem(K, Q, _row_weights(Q) if self.weighting == "relative" else None)
-        for candidate in sorted((c for c in self.candidates if not c.note),
-                                key=lambda c: (c.n_params, c.cv_error)):
+        found = []
+        for candidate in (c for c in self.candidates if not c.note):
             if candidate.n_lags == self.model.n_lags and np.allclose(candidate.d, self.model.d):
                 continue
-            yield candidate, problem.fit(np.array(candidate.d), candidate.with_A3)
+            model = problem.fit(np.array(candidate.d), candidate.with_A3)
+            found.append((candidate, model, _worst_error(Q, model.Q(1j * self.table.K))))
+        yield from sorted(found, key=lambda item: (item[2], item[0].n_params))
 
     @property
     def worst(self) -> tuple[str, int, float]:
