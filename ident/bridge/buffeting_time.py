@@ -237,5 +237,6 @@ def simulate(ss: BridgeStateSpace, spec: TurbulenceSpec, U: float, duration: flo
     rms = np.sqrt(np.maximum(np.einsum("kai,ij,kaj->ka", phys, cov, phys), 0.0))
     response = BuffetingResponse(U=U, x=np.array(ss.bridge.nodes_x), rms_h=rms[:, 0],
                                  rms_alpha=rms[:, 1],
-                                 rms_p=rms[:, 2], method="time", duration=n * step)
+                                 rms_p=rms[:, 2], method="time", duration=n * step,
+                                 rms_modal=np.sqrt(np.maximum(np.diag(cov), 0.0)))
     return response, history
