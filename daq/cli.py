@@ -66,8 +66,10 @@ def _build_parser() -> argparse.ArgumentParser:
     p_flutter.add_argument("--u-max", type=float, default=None,
                            help="upper wind speed of the search, m/s (default: K down to 0.2)")
     p_flutter.add_argument("--json", type=Path, default=None,
-                           help="write the flutter speed and frequency (state space and "
-                                "frequency domain), the section and the model to this file")
+                           help="write the result (both routes, the one it rests on, units, "
+                                "warnings), the section and the model to this file")
+    p_flutter.add_argument("--out", type=Path, default=None,
+                           help="folder of the design report (report.md with its plots)")
     from daq.offline import bridge_commands  # light: imports numerics only when it runs
 
     bridge_commands.add_parser(sub)
@@ -524,7 +526,8 @@ def _dispatch(args: argparse.Namespace) -> int:
         from daq.offline.flutter_commands import run_flutter
 
         return run_flutter(args.section, model_path=args.model, table_path=args.table,
-                           convention=args.convention, u_max=args.u_max, json_path=args.json)
+                           convention=args.convention, u_max=args.u_max, json_path=args.json,
+                           out=args.out)
     if args.command == "bridge":
         from daq.offline.bridge_commands import run as run_bridge
 

@@ -113,7 +113,7 @@ def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: 
     buffeting, wind, time_domain : optional
         Buffeting speeds (m/s), the wind file, the time-domain record length (s).
     """
-    from ident.bridge import flutter as bridge_flutter
+    from ident.bridge.routes import bridge_flutter_routes
 
     if u_max is not None and not u_max > 0:
         raise UsageError(f"--u-max {u_max:g}: must be > 0 m/s")
@@ -147,51 +147,53 @@ def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: 
     for note in aero.notes:
         print(f"note: {note}")
 
-    result = bridge_flutter.analyze(bridge, aero.model, U_max=u_max)
-    check = bridge_flutter.frequency_domain(bridge, aero.flutter_derivatives, aero.K_range,
-                                            U_max=result.U_max)
-    print(result.summary())
-    source = "the table" if aero.table is not None else "the model"
-    if check.speed is not None:
-        text = f"frequency domain (flutter derivatives of {source}): U_F = {check.speed:.4g} m/s"
-        if result.speed is not None:
-            text += f" ({100 * (check.speed / result.speed - 1):+.2f} % of the state space)"
-        print(text)
-    else:
-        print(f"frequency domain: {check.summary()}")
+    routes = bridge_flutter_routes(bridge, aero, U_max=u_max)
+    result, check, comparison = routes.state_space, routes.frequency_domain, routes.comparison
+    aero = routes.aero
+    print(f"state space: {result.summary()}")
+    print(f"frequency domain ({'the table' if aero.table is not None else 'the model'}'s "
+          f"flutter derivatives): {check.summary()}")
+    print(f"result: {comparison.summary()}")
     for label, share in result.participating():
         print(f"  {label}: {100 * share:.1f} % of the flutter mode's strain energy")
-    K_F = result.reduced_frequency
-    if aero.K_range is not None and K_F is not None and not (
-            aero.K_range[0] <= K_F <= aero.K_range[1]):
-        print(f"warning: flutter at K = {K_F:.3g}, outside the table's K {aero.K_range[0]:.3g} "
-              f"to {aero.K_range[1]:.3g}: the Roger fit is extrapolated there")
+    if comparison.divergence_speed is not None:
+        print(f"divergence: {comparison.divergence_speed:.4g} m/s ({comparison.divergence_basis})")
+    warnings = [*aero.notes, *comparison.warnings]
+    for warning in comparison.warnings:
+        print(f"warning: {warning}")
 
     summary: dict[str, Any] = {
-        "flutter_speed": result.speed, "flutter_frequency": result.frequency,
-        "flutter_speed_frequency_domain": check.speed,
-        "flutter_frequency_frequency_domain": check.frequency,
-        "reduced_frequency": result.reduced_frequency,
-        "critical_mode": None if result.critical_mode is None
-        else result.mode_labels[result.critical_mode],
+        **comparison.to_dict(),
         "participation": [{"mode": label, "share": share}
                           for label, share in result.participating()],
-        "divergence_speed": result.divergence_speed, "U_max": result.U_max,
+        "U_max": result.U_max,
         "bridge": {"file": str(bridge_path), "name": bridge.name, "B": bridge.B,
                    "rho": bridge.rho, "n_modes": bridge.n_modes, "n_nodes": bridge.n_nodes},
         "aero": str(aero_path), "model": aero.model.to_dict(),
         "modes": {"labels": list(result.mode_labels), "U": result.U.tolist(),
                   "frequencies": result.frequencies.tolist(),
                   "damping": result.damping.tolist()},
+        "warnings": warnings,
     }
     if aero.table is not None and aero.table_fit is not None:
+        fit = aero.table_fit
         summary.update({"table_convention": convention, "table_K": aero.table.K.tolist(),
-                        "table_fit_relative_error": aero.table_fit.relative_error.tolist()})
+                        "table_fit_relative_error": fit.relative_error.tolist(),
+                        "table_fit_derivative_error": {name: error.tolist() for name, error
+                                                       in fit.derivative_error.items()},
+                        "table_fit_accuracy": fit.accuracy, "table_fit_structure": fit.reason})
     _record_inputs_checked(summary, bridge, table_warnings)
     if buffeting is not None:
         summary.update(_buffeting(bridge, aero.model, buffeting, spec, time_domain, out))
     if out is not None:
+        from daq.offline.design_report import write_bridge_report
+
         _write_curves(out, result, check)
+        inputs = [bridge_path, *(mode_tables or []), aero_path,
+                  *([wind] if wind is not None else [])]
+        report = write_bridge_report(out, result, summary, inputs, table_fit=aero.table_fit,
+                                     model=aero.model)
+        print(f"wrote {report}")
     if json_path is not None:
         json_path.write_text(json.dumps(summary, indent=2), encoding="utf-8")
         print(f"wrote {json_path}")

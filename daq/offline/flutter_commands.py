@@ -162,8 +162,12 @@ def _detections(runs: Sequence[Any]) -> list[str]:
 
 def run_flutter(section_path: Path, *, model_path: Path | None = None,
                 table_path: Path | None = None, convention: str = "scanlan",
-                u_max: float | None = None, json_path: Path | None = None) -> int:
+                u_max: float | None = None, json_path: Path | None = None,
+                out: Path | None = None) -> int:
     """Analyse the flutter of a section with a model or a table; print it; return 0.
+
+    Both routes run (:func:`ident.tables.flutter_routes.section_flutter`); the result is the one
+    they support, with every caveat as a ``warning:`` line and in the JSON's ``warnings``.
 
     Parameters
     ----------
@@ -177,42 +181,53 @@ def run_flutter(section_path: Path, *, model_path: Path | None = None,
     u_max : float, optional
         Upper wind speed of the state-space search, m/s.
     json_path : Path, optional
-        Write the result (DESIGN's keys), the section and the model used here.
+        Write the result (DESIGN's keys, units, warnings), the section and the model used here.
+    out : Path, optional
+        Folder of the design report (``report.md`` and its plots, :mod:`daq.offline.design_report`).
     """
-    from ident.model import flutter
+    from ident.tables.flutter_routes import section_flutter
 
     if u_max is not None and not u_max > 0:
         raise UsageError(f"--u-max {u_max:g}: must be > 0 m/s")
-    section = _read_section(section_path)
-    out: dict[str, Any] = {}
+    section, defaults = _read_section(section_path)
+    out_keys: dict[str, Any] = {}
+    warnings: list[str] = []
     if table_path is not None:
-        model, check = _table_model(table_path, convention, section, out)
+        table, fit = _table_fit(table_path, convention, section, out_keys, warnings)
+        routes = section_flutter(section, table=table, fit=fit, U_max=u_max)
     else:
         assert model_path is not None
-        model = _read_model(model_path, section.n_dof, section_path)
-        check = flutter.frequency_domain(section, model.flutter_derivatives)
-    result = flutter.analyze(section, model, U_max=u_max)
-    print(result.summary())
-    if check.speed is not None:
-        source = "the table" if table_path is not None else "the model"
-        print(f"frequency domain (flutter derivatives of {source}): U_F = {check.speed:.3f} m/s")
-    elif table_path is not None:
-        print(f"frequency domain: no flutter within the table's reduced frequencies "
-              f"({check.summary()})")
+        routes = section_flutter(section, model=_read_model(model_path, section.n_dof,
+                                                             section_path), U_max=u_max)
+    comparison = routes.comparison
+    print(f"state space: {routes.state_space.summary()}")
+    print(f"frequency domain ({'the table' if table_path else 'the model'}'s flutter "
+          f"derivatives): {routes.frequency_domain.summary()}")
+    print(f"result: {comparison.summary()}")
+    if comparison.divergence_speed is not None:
+        print(f"divergence: {comparison.divergence_speed:.4g} m/s ({comparison.divergence_basis})")
+    warnings += list(comparison.warnings)
+    for warning in warnings:
+        print(f"warning: {warning}")
+    summary = {**comparison.to_dict(), "critical_mode": comparison.critical_mode,
+               "U_max": routes.state_space.U_max, "n_dof": section.n_dof,
+               "section": section.to_dict(), "section_file": str(section_path),
+               "defaults": defaults, "model": routes.model.to_dict(), **out_keys,
+               "warnings": warnings}
+    if out is not None:
+        from daq.offline.design_report import write_section_report
+
+        inputs = [section_path, *(p for p in (model_path, table_path) if p is not None)]
+        path = write_section_report(out, routes, summary, inputs)
+        print(f"wrote {path}")
     if json_path is not None:
-        json_path.write_text(json.dumps({
-            "flutter_speed": result.speed, "flutter_frequency": result.frequency,
-            "critical_mode": result.critical_mode,
-            "flutter_speed_frequency_domain": check.speed,
-            "flutter_frequency_frequency_domain": check.frequency,
-            "U_max": result.U_max, "n_dof": section.n_dof, "section": section.to_dict(),
-            "model": model.to_dict(), **out,
-        }, indent=2))
+        json_path.write_text(json.dumps(summary, indent=2))
         print(f"wrote {json_path}")
     return 0
 
 
-def _read_section(path: Path) -> Any:
+def _read_section(path: Path) -> tuple[Any, list[str]]:
+    """Read a section file; print and return the defaults it took (what the file left out)."""
     from ident import SectionModel
 
     data = read_json(path, "section")
@@ -222,9 +237,11 @@ def _read_section(path: Path) -> Any:
         section = SectionModel.from_dict(data)
     except (TypeError, ValueError) as exc:
         raise UsageError(f"{path}: {exc}") from exc
-    if "rho" not in data:
-        print(f"note: {path} gives no air density rho: using {section.rho} kg/m^3")
-    return section
+    defaults = [f"{path}: no {key}: using {value!r}" for key, value in section.to_dict().items()
+                if key not in data and value is not None]
+    for default in defaults:
+        print(f"note: {default}")
+    return section, defaults
 
 
 def read_model(path: Path) -> Any:
@@ -261,11 +278,10 @@ def _read_model(path: Path, n_dof: int, section_path: Path) -> Any:
     return model
 
 
-def _table_model(path: Path, convention: str, section: Any,
-                 out: dict[str, Any]) -> tuple[Any, Any]:
-    """Read a table, fit it, and return the model and the table's frequency-domain result."""
+def _table_fit(path: Path, convention: str, section: Any, out: dict[str, Any],
+               warnings: list[str]) -> tuple[Any, Any]:
+    """Read, check and fit a table; record its range, fit errors and checks in ``out``."""
     from ident.errors import IdentError
-    from ident.model import flutter
     from ident.tables.fd_table import FlutterDerivativeTable
     from ident.tables.roger_table import fit_table
 
@@ -281,20 +297,29 @@ def _table_model(path: Path, convention: str, section: Any,
     if table.K.size < 4:
         raise UsageError(f"{path}: {table.K.size} row(s); a flutter analysis from a table "
                          "needs at least 4 reduced frequencies")
+    warnings += table_warnings(table, path)
     try:
         fit = fit_table(table)
     except IdentError as exc:
         raise UsageError(f"{path}: {exc}") from exc
     print(f"{path}: {table.K.size} rows, K {table.K[0]:.3g} to {table.K[-1]:.3g}; "
           f"{fit.summary()}")
-    model = fit.model if section.n_dof == 3 else fit.model.planar()
-    interpolate = table.interpolator()
-    check = flutter.frequency_domain(section, interpolate,
-                                     (float(table.K[0]), float(table.K[-1])))
     out.update({"table": str(path), "table_convention": convention,
-                "table_filled": list(table.filled),
-                "table_fit_relative_error": fit.relative_error.tolist()})
-    return model, check
+                "table_filled": list(table.filled), "table_K": table.K.tolist(),
+                "table_fit_relative_error": fit.relative_error.tolist(),
+                "table_fit_derivative_error": {name: error.tolist() for name, error
+                                               in fit.derivative_error.items()},
+                "table_fit_accuracy": fit.accuracy, "table_fit_structure": fit.reason})
+    return table, fit
+
+
+def table_warnings(table: Any, path: Path) -> list[str]:
+    """Return the plausibility warnings of a table (:mod:`ident.tables.table_checks`)."""
+    try:
+        from ident.tables.table_checks import check_table
+    except ImportError:  # the checks land with their own change
+        return []
+    return list(check_table(table, path=str(path)))
 
 
 def read_json(path: Path, what: str) -> object:

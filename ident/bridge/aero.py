@@ -19,6 +19,7 @@ line), the fit itself (:mod:`ident.tables.roger_table`).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -33,7 +34,7 @@ from ident.model.rfc import RationalFunctionModel
 from ident.tables.fd_table import FlutterDerivativeTable
 from ident.tables.roger_table import TableFit, fit_table
 
-__all__ = ["BridgeAero", "aero_from_model", "aero_from_table"]
+__all__ = ["BridgeAero", "aero_from_model", "aero_from_table", "with_model"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -138,3 +139,13 @@ def aero_from_table(bridge: BridgeModel, table: FlutterDerivativeTable,
     return BridgeAero(model=full, flutter_derivatives=fd,
                       K_range=(float(table.K[0]), float(table.K[-1])), source=source,
                       table_fit=fit, table=table, notes=notes)
+
+
+def with_model(bridge: BridgeModel, aero: BridgeAero, model: RationalFunctionModel) -> BridgeAero:
+    """Return ``aero`` with another state-space model of the same table (e.g. a next structure).
+
+    The frequency-domain functions (the table itself) stay; the sway terms are completed as
+    :func:`aero_from_table` does.
+    """
+    full, _ = _with_sway(bridge, model, aero.flutter_derivatives, aero.source, [])
+    return dataclasses.replace(aero, model=full)

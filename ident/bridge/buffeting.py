@@ -282,6 +282,15 @@ class BuffetingResponse:
         ``0.5 sqrt(T_c / T)`` (:meth:`rms_relative_std`).
     duration : float
         Time domain only: length of the record the RMS come from, s (0 for the frequency domain).
+    rms_modal : ndarray, shape (n_modes,)
+        RMS of each modal (generalised) coordinate, in the unit its mode's shapes are scaled by
+        (the square roots of the modal covariance's diagonal): the response mode by mode, which
+        no node's h, alpha or p shows alone where modes share a node.
+    modal_spectra : ndarray, shape (nf, n_modes)
+        Frequency domain only: each modal coordinate's one-sided auto-spectrum (unit^2/Hz).
+    modal_correlation_time : ndarray, shape (n_modes,)
+        Frequency domain only: ``T_c`` (s) of each modal coordinate
+        (:meth:`rms_modal_relative_std`).
     """
 
     U: float
@@ -296,6 +305,9 @@ class BuffetingResponse:
     spectra: dict[str, FloatArray] = field(default_factory=dict)
     correlation_time: dict[str, FloatArray] = field(default_factory=dict)
     duration: float = 0.0
+    rms_modal: FloatArray = field(default_factory=lambda: np.zeros(0))
+    modal_spectra: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
+    modal_correlation_time: FloatArray = field(default_factory=lambda: np.zeros(0))
 
     def rms_relative_std(self, duration: float) -> dict[str, FloatArray]:
         """Relative standard deviation of an RMS estimated from a record of ``duration`` s.
@@ -314,6 +326,16 @@ class BuffetingResponse:
         """
         T = v.positive("duration", duration)
         return {k: 0.5 * np.sqrt(tc / T) for k, tc in self.correlation_time.items()}
+
+    def rms_modal_relative_std(self, duration: float) -> FloatArray:
+        """Relative standard deviation of each modal RMS from a record of ``duration`` s.
+
+        The same estimate as :meth:`rms_relative_std`, ``0.5 sqrt(T_c / T)``, with each modal
+        coordinate's correlation time (:attr:`modal_correlation_time`); shape (n_modes,), NaN
+        for a mode the wind does not move.
+        """
+        T = v.positive("duration", duration)
+        return np.asarray(0.5 * np.sqrt(self.modal_correlation_time / T), dtype=float)
 
     def to_dict(self) -> dict[str, Any]:
         """Return ``{"U", "x", "rms_h", "rms_alpha", "rms_p"}`` as DESIGN's JSON (m/s, m, rad)."""
@@ -379,6 +401,7 @@ def frequency_domain(ss: BridgeStateSpace, spec: TurbulenceSpec, U: float, *,
     sel_rows = np.ascontiguousarray(phys[nodes].reshape(-1, n))  # (s 3, n): node-major rows
     cov = np.zeros((n, n))
     spectra = np.zeros((f_arr.size, 3, nodes.size))
+    modal_spectra = np.zeros((f_arr.size, n))
     weights = _trapezoid_weights(f_arr)
     chunk = max(1, _CHUNK_BYTES // (16 * n * max(n, bridge.n_nodes)))
     for start in range(0, f_arr.size, chunk):
@@ -390,7 +413,9 @@ def frequency_domain(ss: BridgeStateSpace, spec: TurbulenceSpec, U: float, *,
         Hr, Hi = np.ascontiguousarray(H.real), np.ascontiguousarray(H.imag)
         HrT = np.ascontiguousarray(np.swapaxes(Hr, -1, -2))
         HiT = np.ascontiguousarray(np.swapaxes(Hi, -1, -2))
-        cov += np.tensordot(weights[sl], (Hr @ S_F) @ HrT + (Hi @ S_F) @ HiT, axes=1)
+        S_xi = (Hr @ S_F) @ HrT + (Hi @ S_F) @ HiT  # modal response spectra, (m, n, n)
+        cov += np.tensordot(weights[sl], S_xi, axes=1)
+        modal_spectra[sl] = np.diagonal(S_xi, axis1=-2, axis2=-1)
         # Response at the chosen nodes per unit modal force, (m, 3 s, n), and its spectrum.
         Rr, Ri = sel_rows @ Hr, sel_rows @ Hi
         spectra[sl] = np.sum((Rr @ S_F) * Rr + (Ri @ S_F) * Ri, axis=-1).reshape(
@@ -399,14 +424,19 @@ def frequency_domain(ss: BridgeStateSpace, spec: TurbulenceSpec, U: float, *,
     rms = np.sqrt(np.maximum(variance, 0.0))
     total = np.einsum("f,fas->as", weights, spectra)
     square = np.einsum("f,fas->as", weights, spectra**2)
+    modal_total = weights @ modal_spectra
+    modal_square = weights @ modal_spectra**2
     with np.errstate(invalid="ignore", divide="ignore"):
         t_c = np.where(total > 0.0, square / total**2, np.nan)
+        t_c_modal = np.where(modal_total > 0.0, modal_square / modal_total**2, np.nan)
     names = ("h", "alpha", "p")
     return BuffetingResponse(
         U=U, x=np.array(bridge.nodes_x), rms_h=rms[:, 0], rms_alpha=rms[:, 1], rms_p=rms[:, 2],
         method="frequency", f=f_arr, spectrum_nodes=nodes,
         spectra={name: spectra[:, a, :] for a, name in enumerate(names)},
-        correlation_time={name: t_c[a] for a, name in enumerate(names)})
+        correlation_time={name: t_c[a] for a, name in enumerate(names)},
+        rms_modal=np.sqrt(np.maximum(np.diag(cov), 0.0)), modal_spectra=modal_spectra,
+        modal_correlation_time=t_c_modal)
 
 
 def physical_shapes(bridge: BridgeModel) -> FloatArray:

@@ -23,12 +23,13 @@ its bins, which must resolve the peak; a shorter record is the start of that per
 **The response.** The modal buffeting forces drive the modal state space of
 :class:`~ident.bridge.statespace.BridgeStateSpace` (structure, self-excited forces with their
 lag states, and its input matrix for external generalised forces), discretised exactly for a
-force linear between samples (first-order hold, one matrix
-exponential). The field is periodic, so the simulation first runs through its last part (a
-warm-up of ``7 / sigma_min`` s, ``sigma_min`` the slowest decay rate of the in-wind poles, at most
-what the record leaves of the period) and then the record: the transient of the start from
-rest has decayed to
-``e^-7 < 0.1 %`` when the record begins.
+force linear between samples (first-order hold, one matrix exponential). Straight lines between
+the samples filter the force by ``sinc^2(f dt)``, so the field's Fourier coefficients are first
+divided by it: the force between samples then has the spectrum the samples were drawn with. The
+field is periodic, so the simulation first runs through its last part (a warm-up of
+``7 / sigma_min`` s, ``sigma_min`` the slowest decay rate of the in-wind poles, at most what the
+record leaves of the period) and then the record: the transient of the start from rest has
+decayed to ``e^-7 < 0.1 %`` when the record begins.
 
 **Statistical uncertainty.** A record of length T estimates each RMS with relative standard
 deviation ``0.5 sqrt(T_c / T)``, ``T_c = int S^2 df / (int S df)^2`` from the frequency-domain
@@ -144,6 +145,25 @@ def modal_force_history(bridge: BridgeModel, spec: TurbulenceSpec, U: float, *, 
     return np.asarray(np.fft.irfft(np.sqrt(2.0) * scale * F_hat, n=n, axis=0), dtype=float)
 
 
+def _hold_compensated(forces: FloatArray) -> FloatArray:
+    """Return samples whose straight-line interpolation has the samples' own spectrum.
+
+    ``forces`` is one period of ``n`` samples ``dt`` apart, shape (n, n_modes). The
+    first-order hold joins the samples by straight lines, which filters a component at f
+    by ``sinc^2(f dt)`` (the Fourier transform of the triangle); dividing each Fourier
+    coefficient of the periodic field by it restores the spectrum the samples were drawn with
+    (the images it leaves lie near ``1 / dt`` and above, far above every mode). Without it a
+    mode at 20 steps per period (:func:`time_step`) loses ~0.8 % of its RMS (``(pi f dt)^2 /
+    3``), one at 8 steps per period ~4 % (the IABSE deck's torsion at dt = 0.45 s: 4.0 %
+    measured over 4 seeded records).
+    """
+    n = forces.shape[0]
+    # f dt at the field's frequencies f = j / (n dt): the step itself drops out.
+    f_dt = np.arange(n // 2 + 1) / n
+    spectrum = np.fft.rfft(forces, axis=0) / (np.sinc(f_dt) ** 2)[:, None]
+    return np.asarray(np.fft.irfft(spectrum, n=n, axis=0), dtype=float)
+
+
 def _discretise(A: FloatArray, B_in: FloatArray,
                 dt: float) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Exact first-order-hold discretisation: ``z+ = Phi z + G0 u_k + G1 u_{k+1}``."""
@@ -204,7 +224,8 @@ def simulate(ss: BridgeStateSpace, spec: TurbulenceSpec, U: float, duration: flo
     # resonance (half-power width sigma / pi Hz) with FIELD_BINS_PER_WIDTH bins; a record
     # shorter than that is the start of one period (module docstring).
     n_field = max(n, 2 * int(np.ceil(FIELD_BINS_PER_WIDTH * np.pi / sigma_min / step / 2.0)))
-    forces = modal_force_history(ss.bridge, spec, U, n=n_field, dt=step, rng=rng)
+    forces = _hold_compensated(
+        modal_force_history(ss.bridge, spec, U, n=n_field, dt=step, rng=rng))
     Phi, G0, G1 = _discretise(A, B_in, step)
     n_warm = int(np.ceil(7.0 / sigma_min / step))
     n_warm = min(n_warm, n_field - n if n_field > n else n)
@@ -237,5 +258,6 @@ def simulate(ss: BridgeStateSpace, spec: TurbulenceSpec, U: float, duration: flo
     rms = np.sqrt(np.maximum(np.einsum("kai,ij,kaj->ka", phys, cov, phys), 0.0))
     response = BuffetingResponse(U=U, x=np.array(ss.bridge.nodes_x), rms_h=rms[:, 0],
                                  rms_alpha=rms[:, 1],
-                                 rms_p=rms[:, 2], method="time", duration=n * step)
+                                 rms_p=rms[:, 2], method="time", duration=n * step,
+                                 rms_modal=np.sqrt(np.maximum(np.diag(cov), 0.0)))
     return response, history

@@ -6,8 +6,9 @@ oscillatory eigenvalue, is evaluated on a grid of wind speeds from still air; th
 interval where it turns positive brackets the flutter speed, which Brent's method then finds to
 machine precision (a root of ``g``: no iteration on a reduced frequency). The same grid gives
 every mode's in-wind frequency and damping against U (each branch followed from its still-air
-mode to the nearest eigenvalue). The flutter mode's eigenvector tells the participating modes:
-the share of each mode in its strain energy ``M_r omega_r^2 |eta_r|^2``.
+mode to the nearest eigenvalue); :func:`in_wind_modes` gives them at any wind speeds asked
+for. The flutter mode's eigenvector tells the participating modes: the share of each mode in
+its strain energy ``M_r omega_r^2 |eta_r|^2``.
 
 **Frequency domain** (:func:`frequency_domain`), the classical multimode analysis from flutter
 derivatives (Jain, Jones and Scanlan 1996): at a reduced frequency K, harmonic motion
@@ -45,7 +46,9 @@ from ident.model.rfc import RationalFunctionModel
 from ident.numerics import validate as v
 from ident.numerics.threads import single_threaded_blas
 
-__all__ = ["BridgeFlutterResult", "analyze", "default_U_max", "frequency_domain"]
+__all__ = [
+    "BridgeFlutterResult", "analyze", "default_U_max", "frequency_domain", "in_wind_modes",
+]
 
 FloatArray = npt.NDArray[np.float64]
 ComplexArray = npt.NDArray[np.complex128]
@@ -90,6 +93,9 @@ class BridgeFlutterResult:
         ``"state-space"`` or ``"frequency-domain"``.
     divergence_speed : float or None
         Lowest U at which the aeroelastic stiffness loses positive definiteness (state space).
+    unstable_at_start : bool
+        The frequency domain only: a branch already grows at the highest K scanned (the lowest
+        wind speed); ``speed`` is that branch's wind speed there, flutter lies at or below it.
     """
 
     speed: float | None
@@ -104,6 +110,7 @@ class BridgeFlutterResult:
     mode_labels: tuple[str, ...] = field(repr=False)
     method: str = "state-space"
     divergence_speed: float | None = None
+    unstable_at_start: bool = False
 
     @property
     def found(self) -> bool:
@@ -402,6 +409,10 @@ def frequency_domain(bridge: BridgeModel, flutter_derivatives: FlutterDerivative
         branches[i, rows] = omega_i[cols]
 
     candidates: list[tuple[float, float, int, float]] = []
+    # A branch already growing at the highest K: the scan starts inside flutter (no crossing
+    # would be seen); its wind speed there bounds flutter from above.
+    at_start = [(bridge.B * branches[0, j].real / K[0], branches[0, j].real / (2 * math.pi), j,
+                 float(K[0])) for j in range(n) if branches[0, j].imag <= 0.0]
     for j in range(n):
         growth = branches[:, j].imag
         for i in (int(x) for x in np.flatnonzero((growth[:-1] > 0.0) & (growth[1:] <= 0.0))):
@@ -424,8 +435,9 @@ def frequency_domain(bridge: BridgeModel, flutter_derivatives: FlutterDerivative
     speed = frequency = K_flutter = None
     critical = None
     participation = None
-    if candidates:
-        speed, frequency, critical, K_flutter = min(candidates)
+    starts_unstable = bool(at_start) and (not candidates or min(at_start) < min(candidates))
+    if at_start or candidates:
+        speed, frequency, critical, K_flutter = min(at_start + candidates)
         omega_all, vec = _frequency_roots(bridge, flutter_derivatives, K_flutter, vectors=True)
         assert vec is not None
         k = int(np.argmin(np.abs(omega_all.real - 2 * math.pi * frequency)
@@ -436,5 +448,71 @@ def frequency_domain(bridge: BridgeModel, flutter_derivatives: FlutterDerivative
         reduced_frequency=K_flutter, critical_mode=critical, participation=participation,
         U_max=float(U_grid.max()), U=U_grid, frequencies=branches.real / (2 * math.pi),
         damping=branches.imag / np.abs(branches), mode_labels=tuple(bridge.mode_labels()),
-        method="frequency-domain",
+        method="frequency-domain", unstable_at_start=starts_unstable,
     )
+
+
+@single_threaded_blas
+def in_wind_modes(bridge: BridgeModel, model: RationalFunctionModel, U: Any, *,
+                  max_step: float | None = None) -> tuple[FloatArray, FloatArray]:
+    """In-wind frequency and damping ratio of each still-air mode's branch at wind speeds ``U``.
+
+    The modal frequency and damping of each branch at U, from the eigenvalues of the state
+    matrix ``S(U)`` (:class:`~ident.bridge.statespace.BridgeStateSpace`): each branch starts at
+    its still-air mode (the eigenvalue with the largest share of that mode's strain energy) and
+    is followed up in wind speed, in steps of at most ``max_step``, to the nearest eigenvalue
+    (one-to-one, extrapolated linearly as in :func:`analyze`), so that branches that come close
+    are not swapped.
+
+    Parameters
+    ----------
+    bridge : BridgeModel
+    model : RationalFunctionModel
+        The deck section's self-excited forces.
+    U : array_like, shape (n,)
+        Wind speeds, m/s, >= 0 (any order).
+    max_step : float, optional
+        Largest step of the continuation, m/s; default 1/200 of :func:`default_U_max` (about
+        1.1 m/s for a deck of B = 31 m with a torsional mode of 0.28 Hz).
+
+    Returns
+    -------
+    frequencies : ndarray, shape (n, n_modes)
+        Damped in-wind frequency ``Im(lambda) / 2 pi`` of each mode's branch, Hz.
+    damping : ndarray, shape (n, n_modes)
+        Its damping ratio ``-Re(lambda) / |lambda|`` (negative: the branch grows).
+
+    Examples
+    --------
+    Without wind each branch is its mode (the flat plate's added mass lowers the frequency):
+
+    >>> from ident.model import flat_plate
+    >>> bridge = BridgeModel.from_dict({"B": 0.3, "rho": 1.225, "nodes_x": [0.0, 1.0],
+    ...     "modes": [{"frequency": 2.0, "damping": 0.005, "generalised_mass": 3.0,
+    ...                "h": [1.0, 1.0]},
+    ...               {"frequency": 4.0, "damping": 0.005, "generalised_mass": 0.03,
+    ...                "alpha": [1.0, 1.0]}]})
+    >>> f, zeta = in_wind_modes(bridge, flat_plate.jones_model(), [0.0, 5.0])
+    >>> bool(f[0, 0] < 2.0 and zeta[1, 0] > zeta[0, 0])  # heave damped by the wind
+    True
+    """
+    U_arr = np.atleast_1d(np.asarray(U, dtype=float))
+    if U_arr.ndim != 1 or U_arr.size == 0 or not np.all(np.isfinite(U_arr)) or np.any(U_arr < 0):
+        raise ValueError(f"U must be a non-empty 1-D array of finite wind speeds >= 0 m/s, "
+                         f"got {U!r}")
+    step = (default_U_max(bridge) / 200.0 if max_step is None
+            else v.positive("max_step", max_step))
+    ss = BridgeStateSpace(bridge, model)
+    top = float(U_arr.max())
+    grid = np.unique(np.concatenate([np.linspace(0.0, top, int(math.ceil(top / step)) + 1),
+                                     U_arr]))
+    branches = np.empty((grid.size, bridge.n_modes), dtype=complex)
+    branches[0] = _still_air_branches(bridge, ss)
+    for i in range(1, grid.size):
+        guess = branches[i - 1] if i == 1 else (
+            branches[i - 1] + (branches[i - 1] - branches[i - 2])
+            * (grid[i] - grid[i - 1]) / (grid[i - 1] - grid[i - 2]))
+        branches[i] = _follow(guess, ss.eigenvalues(float(grid[i])))
+    at = branches[np.searchsorted(grid, U_arr)]
+    return (np.asarray(at.imag / (2.0 * math.pi), dtype=float),
+            np.asarray(-at.real / np.abs(at), dtype=float))

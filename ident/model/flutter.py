@@ -71,6 +71,10 @@ class FlutterResult:
         ``"state-space"`` or ``"frequency-domain"``.
     reduced_frequency : float or None
         Reduced frequency at flutter ``K_F = B omega_F / U_F`` (None without flutter).
+    unstable_at_start : bool
+        The frequency domain only: a branch is already unstable at the highest K searched (the
+        lowest wind speed): ``speed`` is then that branch's wind speed there, and flutter lies
+        at or below it, outside the range searched.
     """
 
     speed: float | None
@@ -84,6 +88,7 @@ class FlutterResult:
     divergence_speed: float | None = None
     method: str = "state-space"
     reduced_frequency: float | None = None
+    unstable_at_start: bool = False
 
     @property
     def found(self) -> bool:
@@ -94,6 +99,9 @@ class FlutterResult:
         """One plain-language line for operators and logs."""
         if self.speed is None:
             text = f"no flutter below U_max = {self.U_max:.3g} m/s ({self.method})"
+        elif self.unstable_at_start:
+            text = (f"unstable from the start of the search: flutter at or below U = "
+                    f"{self.speed:.4g} m/s, {self.critical_mode} branch ({self.method})")
         else:
             text = (
                 f"flutter at U = {self.speed:.4g} m/s, f = {self.frequency:.4g} Hz, "
@@ -359,7 +367,14 @@ def frequency_domain(
     order = _frequency_domain_names(section, branches[0])
     branches = branches[:, order]
 
-    candidates: list[tuple[float, float, str]] = []
+    candidates: list[tuple[float, float, str, bool]] = []
+    # A branch already growing at the highest K (lowest wind speed): the search starts inside
+    # flutter, and no crossing would ever be seen. Its speed there bounds flutter from above.
+    at_start = [j for j in range(n) if branches[0, j].imag <= 0.0]
+    for j in at_start:
+        omega_0 = branches[0, j]
+        candidates.append((section.B * omega_0.real / K[0], omega_0.real / (2 * math.pi),
+                           MODE_NAMES[j], True))
     for j in range(n):
         growth = branches[:, j].imag
         flips = np.flatnonzero((growth[:-1] > 0.0) & (growth[1:] <= 0.0))
@@ -373,13 +388,14 @@ def frequency_domain(
             omega_f = roots(K_f)
             omega_f = omega_f[np.argmin(np.abs(omega_f - branches[i, j]))]
             U_f = section.B * omega_f.real / K_f
-            candidates.append((U_f, omega_f.real / (2 * math.pi), MODE_NAMES[j]))
+            candidates.append((U_f, omega_f.real / (2 * math.pi), MODE_NAMES[j], False))
     U_grid = section.B * branches.real / K[:, None]
     U_max = float(U_grid.max())
     speed = frequency = None
     critical = None
+    starts_unstable = False
     if candidates:
-        speed, frequency, critical = min(candidates)
+        speed, frequency, critical, starts_unstable = min(candidates)
     return FlutterResult(
         speed=speed,
         frequency=frequency,
@@ -391,6 +407,7 @@ def frequency_domain(
         mode_names=MODE_NAMES[:n],
         method="frequency-domain",
         reduced_frequency=_reduced_frequency(section, speed, frequency),
+        unstable_at_start=starts_unstable,
     )
 
 

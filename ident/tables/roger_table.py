@@ -8,6 +8,14 @@ searched by variable projection over ``log d``, and the structure (0 to 3 lags, 
 added-mass matrix ``A3``) is chosen by held-out error, leaving out one table row at a time, with
 the one-standard-error rule (:mod:`ident.numerics.selection`).
 
+**Accuracy where flutter lives.** Held-out error alone may choose few lags for a noisy or
+irregular table and leave one force tens of percent off at some K, enough to move a flutter
+speed anywhere. :func:`fit_table` therefore also requires every force's flutter derivatives
+within :data:`ACCURACY` (2 %) of that force's size at every tabulated K: when the held-out choice
+misses it, the structures up to :data:`MAX_LAGS` lags are tried and the simplest that reaches it
+is used; when none does, the held-out choice stays and :attr:`TableFit.meets_accuracy` is False
+(the commands then warn, and rest on the frequency-domain route).
+
 **Weighting.** An unweighted fit of ``Q`` is ruled by the high reduced frequencies, where
 ``Q ~ K^2`` is large, and may miss the low ones, where a deck flutters, by tens of percent; a
 flutter speed can move by several percent. :func:`fit_table` therefore weighs, by default
@@ -23,6 +31,7 @@ Not responsible for: reading tables (:mod:`ident.tables.fd_table`), flutter deri
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -31,18 +40,28 @@ import numpy.typing as npt
 from scipy.optimize import least_squares
 
 from ident.errors import RankDeficiencyError
+from ident.model.conventions import Q_from_flutter_derivatives, derivative_layout
 from ident.model.rfc import RationalFunctionModel
 from ident.model.roger import fit_entries, roger_basis
 from ident.numerics.selection import Candidate, select_one_se
 from ident.tables.fd_table import FlutterDerivativeTable
 
-__all__ = ["RogerProblem", "TableFit", "WEIGHTINGS", "fit_table", "select_structure"]
+__all__ = ["ACCURACY", "MAX_LAGS", "RogerProblem", "TableFit", "WEIGHTINGS", "fit_table",
+           "select_structure"]
 
 FloatArray = npt.NDArray[np.float64]
 ComplexArray = npt.NDArray[np.complex128]
 
 #: Weightings :func:`fit_table` offers (see the module docstring).
 WEIGHTINGS: tuple[str, ...] = ("relative", "entry_rms")
+
+#: Largest error of a flutter derivative, relative to its force's size at that K, a table fit
+#: must reach to be used without a caveat. A flutter speed moves by about as much as the
+#: damping derivatives near the flutter K do: 2 % keeps the routes within a percent or so.
+ACCURACY = 0.02
+
+#: Most lags :func:`fit_table` tries when the held-out choice misses :data:`ACCURACY`.
+MAX_LAGS = 6
 
 
 class RogerProblem:
@@ -187,7 +206,7 @@ class RogerProblem:
 
 
 def select_structure(problem: RogerProblem, n_lags: int | None = None,
-                     with_A3: bool | None = None
+                     with_A3: bool | None = None, *, max_lags: int = 3
                      ) -> tuple[RationalFunctionModel, Candidate, str, tuple[Candidate, ...]]:
     """Fit every structure asked for and choose one by held-out error (one-standard-error rule).
 
@@ -195,9 +214,11 @@ def select_structure(problem: RogerProblem, n_lags: int | None = None,
     ----------
     problem : RogerProblem
     n_lags : int, optional
-        0 to 3; None tries all.
+        0 to ``max_lags``; None tries all.
     with_A3 : bool, optional
         None tries both.
+    max_lags : int
+        Most lags tried when ``n_lags`` is None.
 
     Returns
     -------
@@ -210,7 +231,7 @@ def select_structure(problem: RogerProblem, n_lags: int | None = None,
     RankDeficiencyError
         When no structure is determined by the table (each one's reason is listed).
     """
-    lags = range(4) if n_lags is None else [n_lags]
+    lags = range(max_lags + 1) if n_lags is None else [n_lags]
     a3_options = (True, False) if with_A3 is None else (with_A3,)
     candidates: list[Candidate] = []
     previous: FloatArray | None = None  # lag roots of the best structure with one lag fewer
@@ -249,22 +270,79 @@ class TableFit:
     relative_error : ndarray, shape (n,)
         At each table row (increasing K), the largest error of a force row of ``Q`` relative to
         that row's largest entry there: what the weighting keeps small.
+    derivative_error : mapping of str to ndarray, shape (n,)
+        Each flutter derivative's error at each table row, relative to its force's size there
+        (the largest modulus of that force's entries of ``Q/K^2``): a dimensionless fraction.
+    table : FlutterDerivativeTable
+        The table fitted.
+    accuracy : float
+        The error the fit had to reach (:data:`ACCURACY`).
     """
 
     model: RationalFunctionModel
     reason: str
     candidates: tuple[Candidate, ...]
     relative_error: FloatArray
+    derivative_error: dict[str, FloatArray]
+    table: FlutterDerivativeTable
+    accuracy: float = ACCURACY
+    weighting: str = "relative"
+
+    def alternatives(self) -> Iterator[tuple[Candidate, RationalFunctionModel, float]]:
+        """Yield the other scored structures, their fits and largest errors, most accurate first.
+
+        For a caller whose check the chosen fit fails (a flutter below the table's range that
+        the table does not show): the next structures the evidence allows, the one that
+        follows the table best first. The error is a fraction of a force's size.
+        """
+        Q = self.table.Q()
+        K = np.broadcast_to(self.table.K[:, None, None], Q.shape)
+        problem = RogerProblem(K, Q, _row_weights(Q) if self.weighting == "relative" else None)
+        found = []
+        for candidate in (c for c in self.candidates if not c.note):
+            if candidate.n_lags == self.model.n_lags and np.allclose(candidate.d, self.model.d):
+                continue
+            model = problem.fit(np.array(candidate.d), candidate.with_A3)
+            found.append((candidate, model, _worst_error(Q, model.Q(1j * self.table.K))))
+        yield from sorted(found, key=lambda item: (item[2], item[0].n_params))
+
+    @property
+    def worst(self) -> tuple[str, int, float]:
+        """The derivative, row (0-based) and relative error of the largest error."""
+        name = max(self.derivative_error, key=lambda n: float(self.derivative_error[n].max()))
+        row = int(np.argmax(self.derivative_error[name]))
+        return name, row, float(self.derivative_error[name][row])
+
+    @property
+    def meets_accuracy(self) -> bool:
+        """Whether every derivative is within :attr:`accuracy` of its force at every row."""
+        return self.worst[2] <= self.accuracy
+
+    def error_at(self, K: float) -> dict[str, float]:
+        """Each derivative's error at reduced frequency ``K`` (table interpolated), a fraction.
+
+        Raises
+        ------
+        ValueError
+            When ``K`` lies outside the table's range (the table says nothing there).
+        """
+        table_values = self.table.interpolator()(np.array([K]))
+        Q_table = Q_from_flutter_derivatives(np.array([K]), table_values)
+        return {name: float(error[0]) for name, error in
+                _derivative_errors(Q_table, self.model.Q(np.array([1j * K]))).items()}
 
     def summary(self) -> str:
-        """One line: the structure and the worst relative error over the table."""
-        worst = int(np.argmax(self.relative_error))
-        return (f"Roger fit with {self.model.n_lags} lag(s) ({self.reason}); largest relative "
-                f"error {100 * self.relative_error[worst]:.2g} % at row {worst + 1}")
+        """One line: the structure, the largest error and whether it meets the accuracy."""
+        name, row, error = self.worst
+        verdict = ("within" if error <= self.accuracy else "MISSES")
+        return (f"Roger fit with {self.model.n_lags} lag(s) ({self.reason}); largest error "
+                f"{100 * error:.2g} % of its force ({name}* at K = {self.table.K[row]:.4g}): "
+                f"{verdict} the {100 * self.accuracy:g} % a flutter analysis needs")
 
 
 def fit_table(table: FlutterDerivativeTable, *, n_lags: int | None = None,
-              with_A3: bool | None = None, weighting: str = "relative") -> TableFit:
+              with_A3: bool | None = None, weighting: str = "relative",
+              accuracy: float = ACCURACY) -> TableFit:
     """Fit Roger's rational function to a flutter-derivative table, structure by evidence.
 
     Parameters
@@ -272,11 +350,14 @@ def fit_table(table: FlutterDerivativeTable, *, n_lags: int | None = None,
     table : FlutterDerivativeTable
         Two or three degrees of freedom.
     n_lags : int, optional
-        0 to 3; None chooses by leave-one-row-out error.
+        0 to :data:`MAX_LAGS`; None chooses by leave-one-row-out error and accuracy (module
+        docstring).
     with_A3 : bool, optional
         Fit the added-mass matrix; None chooses.
     weighting : str
         One of :data:`WEIGHTINGS` (module docstring).
+    accuracy : float
+        Largest error of a derivative relative to its force the fit must reach (> 0).
 
     Returns
     -------
@@ -285,22 +366,99 @@ def fit_table(table: FlutterDerivativeTable, *, n_lags: int | None = None,
     Raises
     ------
     ValueError
-        On an unknown weighting or ``n_lags`` outside 0..3.
+        On an unknown weighting, ``n_lags`` outside 0..MAX_LAGS or an accuracy <= 0.
     RankDeficiencyError
         When the table has too few rows for any structure.
     """
     if weighting not in WEIGHTINGS:
         raise ValueError(f"unknown weighting {weighting!r}; allowed: {', '.join(WEIGHTINGS)}")
-    if n_lags is not None and (isinstance(n_lags, bool) or n_lags not in (0, 1, 2, 3)):
-        raise ValueError(f"n_lags must be an integer in 0..3 or None, got {n_lags!r}")
+    if n_lags is not None and (isinstance(n_lags, bool) or n_lags not in range(MAX_LAGS + 1)):
+        raise ValueError(f"n_lags must be an integer in 0..{MAX_LAGS} or None, got {n_lags!r}")
+    if not (math.isfinite(accuracy) and accuracy > 0.0):
+        raise ValueError(f"accuracy must be > 0, got {accuracy!r}")
     Q = table.Q()
     K = np.broadcast_to(table.K[:, None, None], Q.shape)
     relative = _row_weights(Q)
     weights = relative if weighting == "relative" else None
     problem = RogerProblem(K, Q, weights)
-    model, _, reason, candidates = select_structure(problem, n_lags, with_A3)
-    error = np.abs(model.Q(1j * table.K) - Q) * relative
-    return TableFit(model, reason, candidates, error.max(axis=(1, 2)))
+    model, chosen, reason, candidates = select_structure(problem, n_lags, with_A3)
+    if n_lags is None:
+        model, reason, candidates = _reach_accuracy(problem, Q, model, chosen, reason,
+                                                    candidates, with_A3, accuracy)
+    Q_model = model.Q(1j * table.K)
+    error = np.abs(Q_model - Q) * relative
+    return TableFit(model, reason, candidates, error.max(axis=(1, 2)),
+                    _derivative_errors(Q, Q_model), table, accuracy, weighting)
+
+
+def _worst_error(Q: ComplexArray, Q_model: ComplexArray) -> float:
+    return max(float(e.max()) for e in _derivative_errors(Q, Q_model).values())
+
+
+def _reach_accuracy(problem: RogerProblem, Q: ComplexArray, model: RationalFunctionModel,
+                    chosen: Candidate, reason: str, candidates: tuple[Candidate, ...],
+                    with_A3: bool | None, accuracy: float
+                    ) -> tuple[RationalFunctionModel, str, tuple[Candidate, ...]]:
+    """Return the simplest structure that reaches ``accuracy``, or the held-out choice.
+
+    The held-out choice is kept when it reaches the accuracy. Otherwise the scored candidates
+    are taken in order of parameters, then structures of more lags (up to :data:`MAX_LAGS`)
+    are searched from the best roots found with one lag fewer. When none reaches it, the
+    held-out choice stays (the reason says so).
+    """
+    K = problem.K[:, 0, 0]
+
+    def worst(m: RationalFunctionModel) -> float:
+        return _worst_error(Q, m.Q(1j * K))
+
+    chosen_error = worst(model)
+    if chosen_error <= accuracy:
+        return model, reason, candidates
+    tried = list(candidates)
+    scored = sorted((c for c in tried if not c.note), key=lambda c: c.n_params)
+    best: tuple[float, RationalFunctionModel, Candidate] = (chosen_error, model, chosen)
+    for candidate in scored:
+        trial = problem.fit(np.array(candidate.d), candidate.with_A3)
+        error = worst(trial)
+        if error < best[0]:
+            best = (error, trial, candidate)
+        if error <= accuracy:
+            break
+    previous = np.array(best[2].d)
+    n_lags = max(c.n_lags for c in tried)
+    while best[0] > accuracy and n_lags < MAX_LAGS:
+        n_lags += 1
+        starts = problem.starts(n_lags, previous if previous.size == n_lags - 1 else None)
+        for a3 in (True, False) if with_A3 is None else (with_A3,):
+            candidate, d = problem.candidate(n_lags, a3, starts)
+            tried.append(candidate)
+            if d is None:
+                continue
+            trial = problem.fit(d, a3)
+            error = worst(trial)
+            if error < best[0]:
+                best = (error, trial, candidate)
+                previous = d
+    error, model_best, candidate = best
+    if error > accuracy:  # more lags would chase the table's scatter, not its shape
+        return model, (f"{reason}; no structure up to {MAX_LAGS} lags reaches "
+                       f"{100 * accuracy:g} % of each force (best {100 * error:.2g} %, "
+                       f"{candidate.label})"), tuple(tried)
+    return model_best, (f"{candidate.label}: the simplest that reaches {100 * accuracy:g} % of "
+                        f"each force ({100 * error:.2g} %; the held-out choice, {chosen.label}, "
+                        f"{100 * chosen_error:.2g} %)"), tuple(tried)
+
+
+def _derivative_errors(Q: ComplexArray, Q_model: ComplexArray) -> dict[str, FloatArray]:
+    """Each derivative's error relative to its force's size, at each row: name -> (n,)."""
+    size = np.abs(Q).max(axis=2)  # (n, k): each force's largest entry at each K
+    size = np.maximum(size, 1e-12 * float(size.max() or 1.0))
+    delta = Q_model - Q
+    out = {}
+    for name, (i, j, part) in derivative_layout(Q.shape[-1]).items():
+        diff = delta[:, i, j].real if part == "real" else delta[:, i, j].imag
+        out[name] = np.asarray(np.abs(diff) / size[:, i], dtype=float)
+    return out
 
 
 def _row_weights(Q: ComplexArray) -> FloatArray:

@@ -15,4 +15,7 @@ clocks
     A monotonic clock that a test sets by hand.
 run_files
     Run files written through the real recorder, and read as a live reader would.
+iabse
+    The IABSE superstructure benchmark's step 1.1a (a flat-plate section) as a bridge, and its
+    wind.
 """

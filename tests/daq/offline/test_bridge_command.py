@@ -47,13 +47,21 @@ def test_the_example_bridge_with_a_bluff_table_reports_the_fit_at_every_row(tmp_
     out = tmp_path / "result.json"
     assert main(["bridge", str(BRIDGE), "--aero", str(BRIDGES / "example_deck_table.csv"),
                  "--json", str(out), "--u-max", "100"]) == 0
-    assert "largest relative error 0.14 % at row 19" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "largest error 0.13 % of its force (A3* at K = 1.571): within the 2 %" in printed
     result = json.loads(out.read_text())
     assert len(result["table_fit_relative_error"]) == len(result["table_K"]) == 19
     assert max(result["table_fit_relative_error"]) < 0.005
+    assert max(max(e) for e in result["table_fit_derivative_error"].values()) < 0.02
     assert result["U_max"] == 100.0
-    assert result["flutter_speed"] == pytest.approx(result["flutter_speed_frequency_domain"],
-                                                    rel=0.005)
+    # The routes agree within their 0.5 %: the state space stands, nothing to warn about.
+    assert result["flutter_speed_frequency_domain"] == pytest.approx(
+        result["flutter_speed_state_space"], rel=0.005)
+    assert result["basis"] == "state-space"
+    assert result["flutter_speed"] == result["flutter_speed_state_space"]
+    assert result["table_K_range"] == [result["table_K"][0], result["table_K"][-1]]
+    assert result["units"]["flutter_speed"] == "m/s"
+    assert "extrapolated" in result["divergence_basis"]
 
 
 def test_mode_tables_make_the_bridge_file(tmp_path: Path):
@@ -134,7 +142,14 @@ def test_flutter_outside_a_tables_range_is_flagged_as_extrapolation(tmp_path, ca
     rows = [line for line in lines[2:] if float(line.split(",")[0]) > 0.75]
     narrow = tmp_path / "narrow.csv"
     narrow.write_text("\n".join(lines[1:2] + rows) + "\n")
-    assert main(["bridge", str(BRIDGE), "--aero", str(narrow)]) == 0
+    result = tmp_path / "result.json"
+    assert main(["bridge", str(BRIDGE), "--aero", str(narrow), "--json", str(result)]) == 0
     out = capsys.readouterr().out
-    assert "warning: flutter at K = 0.63, outside the table's K 0.785 to 3.14" in out
-    assert "frequency domain: no flutter below" in out
+    assert ("warning: state space: flutter at 64.77 m/s with K = 0.63, outside the table's K "
+            "0.785 to 3.14 (above the table's wind speeds)") in out, out
+    assert "an extrapolation of the fit beyond the table, not a measured result" in out
+    assert "frequency domain (the table's flutter derivatives): no flutter below" in out
+    assert "warning: the frequency domain finds no flutter within the table's K" in out
+    summary = json.loads(result.read_text())
+    assert summary["basis"] == "state-space" and summary["flutter_speed_frequency_domain"] is None
+    assert len(summary["warnings"]) >= 2

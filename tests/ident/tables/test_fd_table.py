@@ -161,5 +161,7 @@ def test_table_fit_refuses_unknown_options():
     table = FlutterDerivativeTable.from_model(flat_plate.jones_model(), np.geomspace(0.2, 2, 8))
     with pytest.raises(ValueError, match="unknown weighting 'plain'; allowed: relative"):
         fit_table(table, weighting="plain")
-    with pytest.raises(ValueError, match="n_lags must be an integer in 0..3"):
-        fit_table(table, n_lags=5)
+    with pytest.raises(ValueError, match="n_lags must be an integer in 0..6"):
+        fit_table(table, n_lags=7)
+    with pytest.raises(ValueError, match="accuracy must be > 0"):
+        fit_table(table, accuracy=0.0)

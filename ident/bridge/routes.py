@@ -1,0 +1,91 @@
+"""A bridge's flutter by both routes, compared: the result a designer can sign, with its caveats.
+
+The bridge's state space (:func:`ident.bridge.flutter.analyze`, the section's rational-function
+model) and its frequency domain (:func:`ident.bridge.flutter.frequency_domain`, the section's
+flutter derivatives: a table itself, or the model's) are compared as a section's are
+(:func:`ident.tables.flutter_routes.compare_routes`): the 0.5 % agreement, the table's K range,
+the basis of the divergence. With a table, a fit whose state space flutters below the table's
+range while the table does not is replaced by the next structure the evidence allows (a warning
+says so), as for a section.
+
+Not responsible for: the numerics of either route (:mod:`ident.bridge.flutter`), the section's
+aerodynamics (:mod:`ident.bridge.aero`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+from ident.bridge import flutter as bridge_flutter
+from ident.bridge.aero import BridgeAero, with_model
+from ident.bridge.model import BridgeModel
+from ident.tables.flutter_routes import RouteComparison, compare_routes
+
+__all__ = ["BridgeFlutter", "bridge_flutter_routes"]
+
+
+@dataclass(frozen=True, eq=False)
+class BridgeFlutter:
+    """Both routes for a bridge and their comparison.
+
+    Attributes
+    ----------
+    comparison : RouteComparison
+    state_space, frequency_domain : BridgeFlutterResult
+    aero : BridgeAero
+        The aerodynamics the state space used (a table's fit, perhaps the next structure).
+    """
+
+    comparison: RouteComparison
+    state_space: bridge_flutter.BridgeFlutterResult
+    frequency_domain: bridge_flutter.BridgeFlutterResult
+    aero: BridgeAero
+
+
+def _label(result: bridge_flutter.BridgeFlutterResult) -> str | None:
+    return None if result.critical_mode is None else result.mode_labels[result.critical_mode]
+
+
+def _below_range(result: bridge_flutter.BridgeFlutterResult, K_high: float) -> bool:
+    return (result.speed is not None and result.reduced_frequency is not None
+            and result.reduced_frequency > K_high * (1 + 1e-9))
+
+
+def bridge_flutter_routes(bridge: BridgeModel, aero: BridgeAero,
+                          U_max: float | None = None) -> BridgeFlutter:
+    """Flutter of a bridge by both routes, compared (module docstring).
+
+    Parameters
+    ----------
+    bridge : BridgeModel
+    aero : BridgeAero
+        The section's aerodynamics (:func:`ident.bridge.aero.aero_from_model` or
+        :func:`~ident.bridge.aero.aero_from_table`).
+    U_max : float, optional
+        Top of the state-space search, m/s (default :func:`ident.bridge.flutter.default_U_max`).
+    """
+    ss = bridge_flutter.analyze(bridge, aero.model, U_max=U_max)
+    fd = bridge_flutter.frequency_domain(bridge, aero.flutter_derivatives, aero.K_range,
+                                         U_max=ss.U_max)
+    notes: list[str] = []
+    fit = aero.table_fit
+    if (fit is not None and aero.K_range is not None and _below_range(ss, aero.K_range[1])
+            and not fd.unstable_at_start):
+        first = ss
+        for candidate, alternative, error in fit.alternatives():
+            trial_aero = with_model(bridge, aero, alternative)
+            trial = bridge_flutter.analyze(bridge, trial_aero.model, U_max=U_max)
+            if not _below_range(trial, aero.K_range[1]):
+                notes.append(f"the fit chosen first ({fit.model.n_lags} lag(s)) flutters at "
+                             f"{first.speed:.4g} m/s with K = {first.reduced_frequency:.3g}, "
+                             "below the table's range, which the table does not show: the "
+                             f"state space uses the next structure, {candidate.label} (largest error "
+                             f"{100 * error:.2g} % of a force)")
+                ss, aero = trial, trial_aero
+                break
+    comparison = compare_routes(
+        ss, fd, source="table" if fit is not None else "model", K_range=aero.K_range, fit=fit,
+        state_space_mode=_label(ss), frequency_domain_mode=_label(fd), notes=tuple(notes))
+    if fit is not None and aero.model is not fit.model:
+        comparison = replace(comparison, fit_error_at_flutter=None)
+    return BridgeFlutter(comparison, ss, fd, aero)
