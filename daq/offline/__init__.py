@@ -14,6 +14,8 @@
   of freedom.
 - :mod:`~daq.offline.bridge_commands`: ``windrig bridge``: multimode flutter (and buffeting) of
   a full bridge from its modes and the section's model or table (:mod:`ident.bridge`);
+- :mod:`~daq.offline.design_report`: the one-page design report of ``windrig flutter --out``
+  and ``windrig bridge --out`` (inputs and their hashes, both routes, warnings, plots);
 - :mod:`~daq.offline.buffeting_plots`: its buffeting plots (RMS along the span, response
   spectra) and RMS table;
 - :mod:`~daq.offline.report_plots`: the flutter-derivative grid and flutter diagram that every

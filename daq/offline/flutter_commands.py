@@ -229,6 +229,7 @@ def run_flutter(section_path: Path, *, model_path: Path | None = None,
 def _read_section(path: Path) -> tuple[Any, list[str]]:
     """Read a section file; print and return the defaults it took (what the file left out)."""
     from ident import SectionModel
+    from ident.model.section import section_defaults
 
     data = read_json(path, "section")
     if not isinstance(data, dict):
@@ -237,8 +238,7 @@ def _read_section(path: Path) -> tuple[Any, list[str]]:
         section = SectionModel.from_dict(data)
     except (TypeError, ValueError) as exc:
         raise UsageError(f"{path}: {exc}") from exc
-    defaults = [f"{path}: no {key}: using {value!r}" for key, value in section.to_dict().items()
-                if key not in data and value is not None]
+    defaults = section_defaults(data, source=str(path))
     for default in defaults:
         print(f"note: {default}")
     return section, defaults
@@ -284,6 +284,7 @@ def _table_fit(path: Path, convention: str, section: Any, out: dict[str, Any],
     from ident.errors import IdentError
     from ident.tables.fd_table import FlutterDerivativeTable
     from ident.tables.roger_table import fit_table
+    from ident.tables.table_checks import check_table
 
     try:
         table = FlutterDerivativeTable.from_csv(path, convention=convention)
@@ -297,7 +298,7 @@ def _table_fit(path: Path, convention: str, section: Any, out: dict[str, Any],
     if table.K.size < 4:
         raise UsageError(f"{path}: {table.K.size} row(s); a flutter analysis from a table "
                          "needs at least 4 reduced frequencies")
-    warnings += table_warnings(table, path)
+    warnings += check_table(table, path=str(path))
     try:
         fit = fit_table(table)
     except IdentError as exc:
@@ -311,15 +312,6 @@ def _table_fit(path: Path, convention: str, section: Any, out: dict[str, Any],
                                                in fit.derivative_error.items()},
                 "table_fit_accuracy": fit.accuracy, "table_fit_structure": fit.reason})
     return table, fit
-
-
-def table_warnings(table: Any, path: Path) -> list[str]:
-    """Return the plausibility warnings of a table (:mod:`ident.tables.table_checks`)."""
-    try:
-        from ident.tables.table_checks import check_table
-    except ImportError:  # the checks land with their own change
-        return []
-    return list(check_table(table, path=str(path)))
 
 
 def read_json(path: Path, what: str) -> object:

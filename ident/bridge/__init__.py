@@ -12,6 +12,8 @@ flutter and buffeting"):
 - :mod:`~ident.bridge.flutter`: multimode flutter without iteration (state space), the
   multimode frequency-domain check from flutter derivatives, and every mode's in-wind frequency
   and damping against U;
+- :mod:`~ident.bridge.routes`: the bridge's flutter by both routes, compared as a section's are
+  (:mod:`ident.tables.flutter_routes`);
 - :mod:`~ident.bridge.aero`: the section aerodynamics for a bridge: an RFC model or a
   Roger-fitted flutter-derivative table (with its relative error at every tabulated K);
 - :mod:`~ident.bridge.mode_tables`: plain CSV tables of mode shapes (one per mode, as exported

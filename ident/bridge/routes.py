@@ -79,8 +79,8 @@ def bridge_flutter_routes(bridge: BridgeModel, aero: BridgeAero,
                 notes.append(f"the fit chosen first ({fit.model.n_lags} lag(s)) flutters at "
                              f"{first.speed:.4g} m/s with K = {first.reduced_frequency:.3g}, "
                              "below the table's range, which the table does not show: the "
-                             f"state space uses the next structure, {candidate.label} (largest error "
-                             f"{100 * error:.2g} % of a force)")
+                             f"state space uses the next structure, {candidate.label} "
+                             f"(largest error {100 * error:.2g} % of a force)")
                 ss, aero = trial, trial_aero
                 break
     comparison = compare_routes(

@@ -369,8 +369,8 @@ def section_flutter(section: SectionModel, *, model: RationalFunctionModel | Non
                 notes.append(f"the fit chosen first ({fit.model.n_lags} lag(s)) flutters at "
                              f"{first.speed:.4g} m/s with K = {first.reduced_frequency:.3g}, "
                              "below the table's range, which the table does not show: the "
-                             f"state space uses the next structure, {candidate.label} (largest error "
-                             f"{100 * error:.2g} % of a force)")
+                             f"state space uses the next structure, {candidate.label} "
+                             f"(largest error {100 * error:.2g} % of a force)")
                 ss, model_used = trial, trial_model
                 break
     if ss.speed is None and fd.speed is None:
