@@ -164,6 +164,8 @@ def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: 
 
     summary: dict[str, Any] = {
         **comparison.to_dict(),
+        "critical_mode": None if result.critical_mode is None
+        else result.mode_labels[result.critical_mode],
         "participation": [{"mode": label, "share": share}
                           for label, share in result.participating()],
         "U_max": result.U_max,
