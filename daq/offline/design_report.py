@@ -90,7 +90,9 @@ def _warning_lines(warnings: Sequence[str]) -> list[str]:
 
 
 def _input_lines(inputs: Sequence[Path], defaults: Sequence[str]) -> list[str]:
-    lines = ["| file | SHA-256 |", "|---|---|"]
+    from importlib.metadata import version
+
+    lines = [f"Computed by windrig {version('windrig')}.", "", "| file | SHA-256 |", "|---|---|"]
     lines += [f"| `{path}` | `{digest}` |" for path, digest in file_hashes(inputs)]
     if defaults:
         lines += ["", "Defaults taken for what the inputs left out:", ""]
@@ -247,6 +249,10 @@ def write_bridge_report(out: Path, result: Any, summary: Mapping[str, Any],
         for entry in buffeting:
             lines.append(f"| {entry['U']:g} | {max(entry['rms_h']):.4g} | "
                          f"{max(entry['rms_alpha']):.4g} | {max(entry['rms_p']):.4g} |")
+        for png, what in (("buffeting_rms.png", "RMS along the deck"),
+                          ("buffeting_spectra.png", "response spectra")):
+            if (out / png).exists():
+                lines += ["", f"![{what}]({png})"]
     lines += ["", "## Warnings", ""] + _warning_lines(summary.get("warnings", []))
     if table_fit is not None and model is not None:
         derivative_plot(out / "derivatives.png", table_fit.table, model,
