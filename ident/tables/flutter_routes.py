@@ -13,7 +13,9 @@ where flutter lives, and the fit says nothing beyond the table's reduced frequen
   result rests on the route that uses the input itself (the frequency domain for a table, the
   state space for a model);
 - flutter outside the table's reduced frequencies: a warning (the state space extrapolates the
-  fit there; the frequency domain cannot look there at all); a frequency domain already unstable
+  fit there; the frequency domain cannot look there at all), and when nothing else is found no
+  result (basis ``"none"``: the extrapolation is named, never the headline); a frequency domain
+  already unstable
   at the table's lowest reduced velocity: the table itself puts flutter at or below that speed;
 - divergence is the ``K = 0`` limit of the model's static stiffness, always an extrapolation from
   the table's lowest K: a warning says so, its basis is stated, and for a section it is checked
@@ -251,10 +253,16 @@ def compare_routes(state_space: Any, frequency_domain: Any, *, source: str,
         basis, reason = "none", (f"neither route below {ss.U_max:.4g} m/s"
                                  + (f" or within {K_text}" if K_text else ""))
     result, mode = route_of.get(basis, (None, None))
+    if (result is not None and K_range is not None and result.reduced_frequency is not None
+            and not _in_range(result.reduced_frequency, K_range)
+            and not getattr(result, "unstable_at_start", False)):
+        # Only the fit, extrapolated beyond the table, flutters: no result a table supports.
+        basis, reason = "none", (f"the only flutter found ({result.speed:.4g} m/s, K = "
+                                 f"{result.reduced_frequency:.3g}) lies outside {K_text}: an "
+                                 "extrapolation of the fit, not a result")
+        result, mode = None, None
     speed = None if result is None else result.speed
     K_F = None if result is None else result.reduced_frequency
-    if K_F is not None and K_range is not None and not _in_range(K_F, K_range):
-        reason += "; an extrapolation of the fit beyond the table, not a measured result"
 
     error_at = None
     if fit is not None and K_F is not None and K_range is not None and _in_range(K_F, K_range):

@@ -147,10 +147,11 @@ def test_flutter_outside_a_tables_range_is_flagged_as_extrapolation(tmp_path, ca
     out = capsys.readouterr().out
     assert ("warning: state space: flutter at 64.77 m/s with K = 0.63, outside the table's K "
             "0.785 to 3.14 (above the table's wind speeds)") in out, out
-    assert "an extrapolation of the fit beyond the table, not a measured result" in out
+    assert "an extrapolation of the fit, not a result" in out
     assert "frequency domain (the table's flutter derivatives): no flutter below" in out
     assert "warning: the frequency domain finds no flutter within the table's K" in out
     summary = json.loads(result.read_text())
-    assert summary["result"]["basis"] == "state-space"
+    assert summary["result"]["basis"] == "none" and summary["result"]["flutter_speed"] is None
+    assert summary["flutter_speed"] == pytest.approx(64.77, abs=0.01)  # the state space's
     assert summary["flutter_speed_frequency_domain"] is None
     assert len(summary["warnings"]) >= 2
