@@ -44,7 +44,7 @@ test test-fast demo screenshot: export MPLBACKEND := Agg
 # dashboard's port) runs after it on its own, so that its timing is never measured against a
 # CPU busy with another test. tests/test_suite_split.py fails on a real-time test module left
 # unmarked. (Exit code 5, nothing collected, is a PYTEST_ARGS filter's doing.)
-PURE_TESTS := $(PY) -m pytest -q -p no:cacheprovider -n 2 -m "not realtime"
+PURE_TESTS := $(PY) -m pytest -q -p no:cacheprovider --durations=15 -n 2 -m "not realtime"
 REALTIME_TESTS := $(PY) -m pytest -q -p no:cacheprovider --durations=15 -m realtime
 
 # Both parts always run; the target fails if either did.
