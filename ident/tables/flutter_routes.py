@@ -261,6 +261,8 @@ def compare_routes(state_space: Any, frequency_domain: Any, *, source: str,
                                  f"{result.reduced_frequency:.3g}) lies outside {K_text}: an "
                                  "extrapolation of the fit, not a result")
         result, mode = None, None
+    if result is not None and getattr(result, "unstable_at_start", False):
+        reason += "; an upper bound: unstable from the first reduced frequency searched"
     speed = None if result is None else result.speed
     K_F = None if result is None else result.reduced_frequency
 
