@@ -20,7 +20,9 @@ float64 where it has not), the releases, the events, the calibrations and the un
 - ``tdms``: one segment through npTDMS: the groups ``sync`` (a channel per column, one per tap
   for ``pressure``: ``pressure tap000``), ``releases``, ``events`` and ``calibration <name>``
   (numbers as channels, text as group properties); each channel's ``unit_string`` (the
-  property LabVIEW shows as the unit) holds its units.
+  property LabVIEW shows as the unit) holds its units, and the sync view's channels of a
+  uniform time base carry LabVIEW's waveform properties (``wf_start_offset``,
+  ``wf_increment``, s).
 
 MATLAB 5 files hold at most 2 GiB per variable: a larger sync view is refused with a pointer
 to netCDF. Not responsible for: reading the run file (:mod:`daq.exchange.export_contents`).
@@ -225,8 +227,10 @@ def write_tdms(contents: RunContents, out: Path) -> list[Path]:
     objects: list[Any] = [RootObject({"source": str(contents.source), **contents.attrs,
                                       "rig_config": contents.config_text}),
                           GroupObject("sync", {"taps": ",".join(contents.taps)})]
+    waveform = _waveform(contents.columns[0].values)
     for c in contents.columns:
-        unit = {"unit_string": c.units, "long_name": c.long_name}
+        unit = {"unit_string": c.units, "long_name": c.long_name,
+                **(waveform if c.name != "time" else {})}
         if c.values.ndim == 2:
             objects += [ChannelObject("sync", f"{c.name} {tap}", c.values[:, i], unit)
                         for i, tap in enumerate(contents.taps)]
@@ -249,6 +253,23 @@ def write_tdms(contents: RunContents, out: Path) -> list[Path]:
     with TdmsWriter(out) as writer:
         writer.write_segment(objects)
     return [out]
+
+
+def _waveform(time: npt.NDArray[Any]) -> dict[str, Any]:
+    """Return LabVIEW's waveform properties of a uniform time base (none for another).
+
+    With ``wf_start_offset`` (s) and ``wf_increment`` (s) LabVIEW and DIAdem read a channel as
+    a waveform against time; the ``time`` channel stays, for every other reader.
+    """
+    steps = np.diff(time)
+    if time.size < 2 or not np.isfinite(steps).all():
+        return {}
+    step = float(np.median(steps))
+    # Uniform to 1 ppm of a step: the sync view's rows are k / rate, rounded to float64.
+    if step <= 0 or np.max(np.abs(steps - step)) > 1e-6 * step:
+        return {}
+    return {"wf_start_offset": float(time[0]), "wf_increment": step,
+            "wf_samples": int(time.size)}
 
 
 #: The writer of each format (the formats of ``windrig export``).

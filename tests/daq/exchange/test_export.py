@@ -13,6 +13,7 @@ float32 pressures widen exactly), and so must the releases, the events and the c
 from __future__ import annotations
 
 import csv
+import sys
 from pathlib import Path
 
 import h5py
@@ -204,6 +205,11 @@ def test_tdms_reads_back_exactly_with_nptdms(run, tmp_path, capsys):
         else:
             np.testing.assert_array_equal(sync[name][:], values)
             assert sync[name].properties["unit_string"] == units
+    # A waveform for LabVIEW: 200 Hz from 0 s (the rows are k / 200, exactly uniform).
+    assert sync["h"].properties["wf_increment"] == pytest.approx(1 / 200, rel=1e-12)
+    assert sync["h"].properties["wf_start_offset"] == 0.0
+    np.testing.assert_allclose(sync["h"].time_track(), truth["columns"]["time"][0], rtol=0,
+                               atol=1e-12)  # s: float64 rounding of k * increment
     for field in truth["releases"].dtype.names:
         np.testing.assert_array_equal(f["releases"][field][:], truth["releases"][field])
     events = f["events"]
@@ -268,3 +274,11 @@ def test_an_output_name_that_does_not_fit_the_format_warns(run, tmp_path, capsys
     err = capsys.readouterr().err
     assert err.startswith(f"warning: {out}: a mat file is usually named *.mat")
     assert scipy.io.loadmat(out)["run"] is not None  # written as asked: a MATLAB file
+
+
+def test_a_missing_optional_library_names_the_extra(run, tmp_path, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "nptdms", None)  # as if the exchange extra were missing
+    assert main(["export", str(run[0]), "--to", "tdms", "--out", str(tmp_path / "r.tdms")]) == 1
+    assert capsys.readouterr().err == ("error: this command needs nptdms, which is not "
+                                       "installed: pip install 'windrig[exchange]'\n")
+    assert not (tmp_path / "r.tdms").exists()
