@@ -282,3 +282,28 @@ def test_a_missing_optional_library_names_the_extra(run, tmp_path, capsys, monke
     assert capsys.readouterr().err == ("error: this command needs nptdms, which is not "
                                        "installed: pip install 'windrig[exchange]'\n")
     assert not (tmp_path / "r.tdms").exists()
+
+
+def test_a_3dof_run_exports_its_sway_and_drag(tmp_path, capsys):
+    path = tmp_path / "sway.h5"
+    rng = np.random.default_rng(21)
+    n = 50
+    rec = RunRecorder(path, config_text=CONFIG + "fp = 1.5\n", rig_name="sway",
+                      min_free_bytes=0, reserve_bytes=0, sway=True)
+    rec.open()
+    rec.add_sync(TAPS)
+    rec.start()
+    columns = {name: rng.normal(size=n) for name in
+               ("h", "alpha", "lift", "moment", "U", "rho", "p", "drag")}
+    rec.append_sync(np.arange(n) / 100.0, **columns, pressure=np.zeros((n, 3), np.float32))
+    rec.add_release(release_time=0.1, start_index=10, stop_index=50, U=4.0, h0=0.0, alpha0=0.0,
+                    p0=0.00123456789)
+    rec.close()
+    assert main(["export", str(path), "--to", "netcdf"]) == 0
+    capsys.readouterr()
+    with xr.open_dataset(tmp_path / "sway.nc", engine="h5netcdf") as ds:
+        np.testing.assert_array_equal(ds["p"].values, columns["p"])
+        np.testing.assert_array_equal(ds["drag"].values, columns["drag"])
+        assert ds["p"].attrs["units"] == "m" and ds["drag"].attrs["units"] == "N/m"
+    with xr.open_dataset(tmp_path / "sway.nc", engine="h5netcdf", group="releases") as ds:
+        assert ds["p0"].values.tolist() == [0.00123456789] and ds["p0"].attrs["units"] == "m"
