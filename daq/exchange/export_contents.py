@@ -192,6 +192,14 @@ def _sync_columns(sync: h5py.Group, path: Path,
         if ds.id.get_create_plist().get_layout() == h5py.h5d.CHUNKED:
             ds.refresh()  # a file being written grows; rows not in every column are left out
     n = min(ds.shape[0] for ds in datasets.values())
+    # Rows sized but never written (a crash: docs/file_format.md, fill values) read as NaN
+    # times at the end; they are no data, and windrig info does not count them either.
+    finite = np.flatnonzero(np.isfinite(datasets["time"][:n]))
+    written = int(finite[-1]) + 1 if finite.size else 0
+    if written < n:
+        warnings.append(f"{path}: the last {n - written} row(s) of /entry/sync were sized but "
+                        "never written (a crash?): not exported")
+        n = written
     others = sorted(set(sync) - set(datasets) - {"tap"})
     if others:
         warnings.append(f"{path}: /entry/sync/{', '.join(others)} not exported (not a column "

@@ -307,3 +307,19 @@ def test_a_3dof_run_exports_its_sway_and_drag(tmp_path, capsys):
         assert ds["p"].attrs["units"] == "m" and ds["drag"].attrs["units"] == "N/m"
     with xr.open_dataset(tmp_path / "sway.nc", engine="h5netcdf", group="releases") as ds:
         assert ds["p0"].values.tolist() == [0.00123456789] and ds["p0"].attrs["units"] == "m"
+
+
+def test_rows_a_crash_sized_but_never_wrote_are_left_out_with_a_warning(run, tmp_path, capsys):
+    path = tmp_path / "crashed.h5"
+    path.write_bytes(run[0].read_bytes())
+    with h5py.File(path, "a") as f:  # what a crash leaves: sizes ahead of the data (fill NaN)
+        for ds in f["entry/sync"].values():
+            if ds.maxshape[0] is None:
+                ds.resize(ds.shape[0] + 7, axis=0)
+                ds[-7:] = np.nan
+    assert main(["export", str(path), "--to", "csv"]) == 0
+    err = capsys.readouterr().err
+    assert err == (f"warning: {path}: the last 7 row(s) of /entry/sync were sized but never "
+                   "written (a crash?): not exported\n")
+    matrix = np.loadtxt(tmp_path / "crashed_csv" / "sync.csv", delimiter=",", skiprows=1)
+    np.testing.assert_array_equal(matrix[:, 0], run[1]["columns"]["time"][0])
