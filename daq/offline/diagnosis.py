@@ -100,6 +100,10 @@ def _as_json(report: Any, files: Sequence[Path]) -> dict[str, Any]:
         "evidence": [{"effect": ev.effect, "parameters": ev.parameters, "std": ev.std,
                       "cv_ratio": ev.cv_ratio, "cv_ratio_se": ev.cv_ratio_se,
                       "verdict": ev.verdict} for ev in report.evidence],
+        "units": {"gap_before": "1 (RMS gap of each channel over its RMS, averaged)",
+                  "gap_after": "1 (as gap_before)", "parameters": "per effect: see units"},
+        # What the named effects leave unexplained is what a reader must know first.
+        "warnings": [f.text() for f in report.unexplained],
     }
 
 

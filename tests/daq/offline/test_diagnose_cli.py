@@ -42,6 +42,7 @@ def test_diagnose_names_the_delay_and_writes_report_and_plots(delayed_run, tmp_p
     assert data["effect"] == "channel_delay"
     assert [e["effect"] for e in data["effects"]] == ["channel_delay"]
     assert data["effects"][0]["gap_after"] == data["gap_after"] and data["explained"] is True
+    assert data["warnings"] == []  # explained: nothing left to warn about
     # 10 ms hidden; the fit recovers it within 20 % (the tolerance; ~1 % in practice).
     assert data["parameters"]["delay_s"] == pytest.approx(0.010, rel=0.2)
     assert data["gap_after"] <= 0.5 * data["gap_before"]
@@ -75,5 +76,6 @@ def test_diagnose_locates_a_residual_it_cannot_explain(tmp_path, capsys):
     data = json.loads(report.read_text())
     assert data["effects"] == [] and data["explained"] is False
     assert len(data["unexplained"]) == 1 and data["unexplained"][0].startswith("h: ")
+    assert data["warnings"] == data["unexplained"]
     png = out / "diagnose_residual.png"
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
