@@ -73,6 +73,9 @@ def _build_parser() -> argparse.ArgumentParser:
     from daq.offline import bridge_commands  # light: imports numerics only when it runs
 
     bridge_commands.add_parser(sub)
+    from daq.exchange import import_command  # light: imports the readers only when it runs
+
+    import_command.add_parser(sub)
     p_id = sub.add_parser(
         "identify", help="E2RFC on the releases of recorded run files; prints the flutter speed"
     )
@@ -486,7 +489,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 #: Optional dependencies and the extra that installs each.
 _EXTRAS = {"dask": "dask", "distributed": "dask", "PySide6": "gui", "pyqtgraph": "gui",
-           "shiboken6": "gui"}
+           "shiboken6": "gui", "nptdms": "exchange"}
 
 
 def _is_usage(exc: BaseException) -> bool:
@@ -569,6 +572,10 @@ def _dispatch(args: argparse.Namespace) -> int:
         return _recover(args)
     if args.command == "info":
         return _info(args)
+    if args.command == "import":
+        from daq.exchange.import_command import run as run_import
+
+        return run_import(args)
     raise AssertionError(f"unhandled command {args.command!r}")  # argparse rejects unknown ones
 
 

@@ -57,7 +57,7 @@ DAQ_LAYERS: tuple[tuple[str, ...], ...] = (
     ("daq.sync",),
     ("daq.acquisition",),
     ("daq.recording",),
-    ("daq.sim", "daq.offline", "daq.campaign", "simulators"),
+    ("daq.sim", "daq.offline", "daq.campaign", "daq.exchange", "simulators"),
     ("daq.console", "daq.cli"),
 )
 #: ident's layers, bottom first.

@@ -1,0 +1,345 @@
+"""A lab's test through its import map into a normal windrig run file.
+
+Responsibility: :func:`import_sources` reads each source (:mod:`daq.exchange.sources`), and
+for each test in it (a file, or a TDMS group) :func:`table_releases` applies the map
+(:mod:`daq.exchange.import_map`): the time base, every channel converted to SI and to windrig's
+signs (h and lift downward, alpha and moment nose-up), the wind speed (a value, a channel's
+mean over each decay, or a Pitot's ``sqrt(2 q / rho)``), the release instants (listed, a
+trigger channel's edge interpolated between samples, or found in h and alpha by
+:func:`ident.records.release_onset.find_releases`) and the stretch kept around each (``hold``
+before, up to the next hold or ``length`` after). The releases are written by the
+acquisition's own recorder (:func:`daq.recording.synthetic.write_release_run`), so that
+``windrig identify``, ``diagnose``, ``reprocess`` and ``info`` read the result as any run file;
+``/entry/metadata/import`` records where it came from: the source file's name and SHA-256,
+the test (TDMS group), the format and the map's text, verbatim.
+
+A release row starts at the first sample at or after the release instant (the recorder's
+rows are samples): at most one sampling interval late (2 ms at 500 Hz; a release instant
+30 ms late moves the flutter speed by about 1 %, so one sample is well inside the method's
+accuracy).
+
+Not responsible for: reading files (:mod:`daq.exchange.sources`), checking the map
+(:mod:`daq.exchange.import_map`), or the command line (:mod:`daq.exchange.import_command`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from daq.config import RigConfig, load_rig_config
+from daq.errors import UsageError
+from daq.exchange.import_map import (
+    QUANTITIES,
+    UNITS,
+    ChannelSpec,
+    ImportMap,
+    Value,
+    parse_import_map,
+    parse_number,
+)
+from daq.exchange.sources import SourceTable, read_source, source_format
+from daq.recording.synthetic import write_release_run
+from ident.records.release_onset import find_releases
+
+__all__ = ["ImportedRelease", "ImportedRun", "import_sources", "table_releases"]
+
+FloatArray = npt.NDArray[np.float64]
+
+#: A time column's steps may deviate from their mean by this fraction and still be taken as
+#: one sampling rate: text files round times (0.002 written as 0.002000 or 2.0E-3 and summed
+#: LabVIEW timestamps drift by far less than 0.1 % of a step); anything more is a real change
+#: of rate or a gap, which the run file's one time base cannot hold.
+TIME_STEP_RTOL = 1e-3
+#: Shortest decay kept after a release, in periods of the slower structural mode: below three
+#: periods a modal fit has too little to go on (as ``find_releases``'s own ``min_periods``).
+MIN_PERIODS = 3.0
+#: A wind-speed channel that varies by more than this fraction over a decay is named in a
+#: warning: E2RFC takes one U per release.
+U_VARIATION = 0.05
+
+
+@dataclass(frozen=True, eq=False)
+class ImportedRelease:
+    """One release of an imported test, in SI and windrig's signs (what the writer takes).
+
+    ``t`` is s from the release instant (negative over the hold); ``lift``/``moment`` are NaN
+    when the map gives no forces (the displacement-only route).
+    """
+
+    t: FloatArray
+    h: FloatArray
+    alpha: FloatArray
+    lift: FloatArray
+    moment: FloatArray
+    U: float
+    rho: float
+    p: FloatArray | None = None
+    drag: FloatArray | None = None
+    instant: float = 0.0  # the release instant, s on the source's own time base
+
+
+@dataclass(frozen=True)
+class ImportedRun:
+    """One run file written: its source test, releases (instant s, U m/s) and warnings."""
+
+    source: str
+    path: Path
+    release_times: tuple[float, ...]
+    speeds: tuple[float, ...]
+    warnings: tuple[str, ...] = field(default_factory=tuple)
+
+
+def _number(value: Value, table: SourceTable) -> float:
+    if value.number is not None:
+        return value.number
+    if value.per_source is not None:
+        for key in (table.name, table.path.name, table.path.stem):
+            if key in value.per_source:
+                return value.per_source[key]
+        raise UsageError(f"{value.where}: no value for source {table.name!r}; given for "
+                         f"{sorted(value.per_source)}")
+    assert value.prop is not None
+    raw = table.property(value.prop, value.of, value.where)
+    return parse_number(raw, f"{table.name}: property {value.prop!r} ({value.where})")
+
+
+def _convert(spec: ChannelSpec, table: SourceTable, span: float | None) -> FloatArray:
+    """Return a channel in SI and windrig's signs: ``sign * factor * (scale * raw + offset)``."""
+    raw = table.column(spec.column, spec.where)
+    if spec.unit == "V":
+        assert spec.scale is not None
+        raw = _number(spec.scale, table) * raw + (
+            _number(spec.offset, table) if spec.offset is not None else 0.0)
+    factor = UNITS[QUANTITIES[spec.quantity][0]][spec.si_unit]
+    if spec.total:
+        if span is None:
+            raise UsageError(f"{spec.where} is a total ({spec.si_unit}): give span (m, the "
+                             "model's length) in the map or [section] span in the rig config, "
+                             "to make it per unit span")
+        factor /= span
+    return np.asarray(spec.sign * factor * raw, dtype=np.float64)
+
+
+def _time_base(imap: ImportMap, table: SourceTable, n: int) -> FloatArray:
+    spec = imap.time
+    if spec.rate is not None:
+        return np.arange(n) / _number(spec.rate, table)
+    if spec.waveform:
+        column = imap.channels["h"].column
+        if column not in table.increments:
+            raise UsageError(f"{table.name}: channel {column!r} has no wf_increment property "
+                             f"([time] waveform = true); give [time] rate or column instead")
+        return np.arange(n) * table.increments[column]
+    assert spec.column is not None
+    t = table.column(spec.column, f"{imap.path} [time] column") * UNITS["time"][spec.unit]
+    steps = np.diff(t)
+    dt = float(np.mean(steps)) if steps.size else 0.0
+    if not dt > 0 or np.any(steps <= 0):
+        raise UsageError(f"{table.name}: time column {spec.column!r} does not increase")
+    worst = float(np.max(np.abs(steps - dt)))
+    if worst > TIME_STEP_RTOL * dt:
+        where = int(np.argmax(np.abs(steps - dt)))
+        raise UsageError(f"{table.name}: time column {spec.column!r} is not uniformly sampled "
+                         f"(step {steps[where]:.6g} s at row {where + 1} against a mean "
+                         f"{dt:.6g} s); a run file holds one sampling rate")
+    return float(t[0]) + np.arange(n) * dt  # the rounding of a text file's times removed
+
+
+def _crossings(t: FloatArray, x: FloatArray, threshold: float, edge: str) -> list[float]:
+    """Return when a trigger channel crosses ``threshold`` on ``edge``, interpolated linearly."""
+    above = x > threshold
+    rows = np.flatnonzero(above[:-1] & ~above[1:] if edge == "falling" else ~above[:-1] & above[1:])
+    return [float(t[i] + (threshold - x[i]) / (x[i + 1] - x[i]) * (t[i + 1] - t[i]))
+            for i in rows]
+
+
+def _release_times(imap: ImportMap, table: SourceTable, t: FloatArray, h: FloatArray,
+                   alpha: FloatArray, config: RigConfig,
+                   warnings: list[str]) -> list[float]:
+    spec = imap.releases
+    if spec.times is not None:
+        outside = [x for x in spec.times if not t[0] <= x <= t[-1]]
+        if outside:
+            raise UsageError(f"{table.name}: release time(s) {outside} s ([releases] times) "
+                             f"outside the record, {t[0]:.6g} to {t[-1]:.6g} s")
+        return list(spec.times)
+    if spec.column is not None:
+        x = table.column(spec.column, f"{imap.path} [releases] column")
+        threshold = (_number(spec.threshold, table) if spec.threshold is not None
+                     else 0.5 * (float(np.nanmin(x)) + float(np.nanmax(x))))
+        times = _crossings(t, x, threshold, spec.edge)
+        if not times:
+            raise UsageError(f"{table.name}: trigger channel {spec.column!r} never crosses "
+                             f"{threshold:.6g} ({spec.edge}); no release found")
+        return times
+    section = config.section
+    found = find_releases(t, h, alpha, f_min=min(section.fh, section.fa),
+                          f_max=max(section.fh, section.fa))
+    if not found:
+        raise UsageError(f"{table.name}: no release found in h and alpha ([releases] detect): "
+                         "a release needs a still hold before it; list the times instead")
+    for r in found:
+        if not r.onset.reliable:
+            warnings.append(f"{table.name}: the release at {r.onset.time:.4f} s is weakly "
+                            f"marked (snr {r.onset.snr:.0f}): its instant may be off by "
+                            "several ms; list it in [releases] times if known")
+    return [r.onset.time for r in found]
+
+
+def table_releases(imap: ImportMap, table: SourceTable, config: RigConfig
+                   ) -> tuple[list[ImportedRelease], list[str]]:
+    """Apply the map to one test: its releases in SI, and the warnings.
+
+    Raises
+    ------
+    UsageError
+        A column, property or value is missing or wrong, or a release's hold or decay does not
+        fit in the record (the message names the source and the map's key).
+    """
+    warnings: list[str] = []
+    sway = config.section.n_dof == 3
+    if sway != ("p" in imap.channels and "drag" in imap.channels):
+        raise UsageError(f"{imap.path} [channels]: the rig config's section has "
+                         f"{config.section.n_dof} degrees of freedom: "
+                         + ("map p and drag too" if sway else "p and drag need [section] fp"))
+    span = (_number(imap.span, table) if imap.span is not None
+            else getattr(getattr(config, "calibration", None), "span", None))
+    data = {name: _convert(spec, table, span) for name, spec in imap.channels.items()}
+    lengths = {imap.channels[k].column: v.size for k, v in data.items()}
+    if len(set(lengths.values())) != 1:
+        raise UsageError(f"{table.name}: the mapped channels differ in length: {lengths}")
+    n = next(iter(lengths.values()))
+    t = _time_base(imap, table, n)
+    wind = imap.wind
+    rho = (np.full(n, _number(wind.rho, table)) if wind.rho is not None
+           else _convert(wind.rho_channel, table, None))  # type: ignore[arg-type]
+    if wind.U is not None:
+        U = np.full(n, _number(wind.U, table))
+    elif wind.U_channel is not None:
+        U = _convert(wind.U_channel, table, None)
+    else:
+        q = _convert(wind.pitot, table, None)  # type: ignore[arg-type]
+        U = np.sqrt(np.clip(2.0 * q / rho, 0.0, None))  # a Pitot's noise below zero is still air
+    times = _release_times(imap, table, t, data["h"], data["alpha"], config, warnings)
+    dt = float(t[1] - t[0])
+    slow = 1.0 / min(config.section.fh, config.section.fa)
+    hold = imap.releases.hold
+    releases = []
+    for k, tr in enumerate(times):
+        start = tr - hold
+        if start < t[0] - 0.5 * dt:
+            raise UsageError(f"{table.name}: the release at {tr:.6g} s has less than hold = "
+                             f"{hold:g} s before it in the record (it starts at {t[0]:.6g} s)")
+        end = float(t[-1]) + 0.5 * dt
+        if k + 1 < len(times):
+            end = min(end, times[k + 1] - hold)
+        if imap.releases.length is not None:
+            end = min(end, tr + imap.releases.length)
+        if end - tr < MIN_PERIODS * slow:
+            raise UsageError(f"{table.name}: the release at {tr:.6g} s has {end - tr:.3g} s of "
+                             f"decay, under {MIN_PERIODS:g} periods of the slower mode "
+                             f"({MIN_PERIODS * slow:.3g} s)")
+        rows = slice(int(np.searchsorted(t, start - 0.5 * dt)), int(np.searchsorted(t, end)))
+        decay = slice(int(np.searchsorted(t, tr)), rows.stop)
+        u = U[decay]
+        mean_u = float(np.nanmean(u))
+        if mean_u > 0 and float(np.nanmax(u) - np.nanmin(u)) > U_VARIATION * mean_u:
+            warnings.append(f"{table.name}: the wind speed varies by more than "
+                            f"{U_VARIATION:.0%} over the release at {tr:.4g} s "
+                            f"({np.nanmin(u):.3g}-{np.nanmax(u):.3g} m/s); its mean is used")
+        nan = np.full(rows.stop - rows.start, math.nan)
+        releases.append(ImportedRelease(
+            t=t[rows] - tr, h=data["h"][rows], alpha=data["alpha"][rows],
+            lift=data["lift"][rows] if "lift" in data else nan,
+            moment=data["moment"][rows] if "moment" in data else nan,
+            U=mean_u, rho=float(np.nanmean(rho[decay])),
+            p=data["p"][rows] if sway else None, drag=data["drag"][rows] if sway else None,
+            instant=tr))
+    return releases, warnings
+
+
+def _out_name(table: SourceTable) -> str:
+    stem = table.path.stem
+    if ":" in table.name:  # a TDMS group: one file per test
+        group = re.sub(r"[^A-Za-z0-9_.-]+", "_", table.name.split(":", 1)[1]).strip("_")
+        stem = f"{stem}_{group}"
+    return f"{stem}.h5"
+
+
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _rig_config(imap: ImportMap) -> RigConfig:
+    """Load the map's config: a path relative to the map, else as given, else a shipped name."""
+    beside = imap.path.parent / imap.config
+    return load_rig_config(beside if beside.is_file() else imap.config)
+
+
+def import_sources(sources: Sequence[str | Path], map_path: str | Path, out_dir: str | Path
+                   ) -> list[ImportedRun]:
+    """Import lab files into run files, one per test.
+
+    Parameters
+    ----------
+    sources : sequence of str or Path
+        CSV, MATLAB (v5, v7.3) or TDMS files.
+    map_path : str or Path
+        The import map (``docs/importing.md``).
+    out_dir : str or Path
+        Where the run files go (created if missing); an existing file is never overwritten.
+
+    Returns
+    -------
+    list of ImportedRun
+        One per run file written, in the order of the sources.
+
+    Raises
+    ------
+    UsageError
+        A source, the map or the config is wrong (naming the file, channel or key), or a run
+        file would overwrite one that exists. Nothing is written unless every source imports.
+    """
+    imap = parse_import_map(map_path)
+    config = _rig_config(imap)
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out {out}: not a directory")
+    planned: list[tuple[SourceTable, Path, list[ImportedRelease], list[str], str]] = []
+    for source in sources:
+        path = Path(source)
+        fmt = source_format(path, imap.format)
+        for table in read_source(path, fmt, imap.groups):
+            releases, warnings = table_releases(imap, table, config)
+            target = out / _out_name(table)
+            if target.exists() or any(p[1] == target for p in planned):
+                raise UsageError(f"{target}: exists (or two sources make it); remove it or "
+                                 "choose another --out")
+            planned.append((table, target, releases, warnings, fmt))
+    out.mkdir(parents=True, exist_ok=True)
+    done = []
+    for table, target, releases, warnings, fmt in planned:
+        provenance: dict[str, Any] = {
+            "source": table.path.name, "sha256": _sha256(table.path), "format": fmt,
+            "test": table.name.split(":", 1)[1] if ":" in table.name else "",
+            "map_file": imap.path.name, "map": imap.text,
+        }
+        write_release_run(target, config, releases, metadata={"import": provenance})
+        done.append(ImportedRun(source=table.name, path=target,
+                                release_times=tuple(r.instant for r in releases),
+                                speeds=tuple(r.U for r in releases),
+                                warnings=tuple(warnings)))
+    return done
