@@ -98,7 +98,12 @@ class ImportedRun:
     warnings: tuple[str, ...] = field(default_factory=tuple)
 
 
-def _number(value: Value, table: SourceTable) -> float:
+def _number(value: Value, table: SourceTable, of: str | None = None) -> float:
+    """Return a map's number: given, given for this source, or read from a property.
+
+    A property is looked up on the column the map names (``of``), else on ``of`` given here
+    (a channel's own scale), then on the table (TDMS: group, then file).
+    """
     if value.number is not None:
         return value.number
     if value.per_source is not None:
@@ -108,7 +113,7 @@ def _number(value: Value, table: SourceTable) -> float:
         raise UsageError(f"{value.where}: no value for source {table.name!r}; given for "
                          f"{sorted(value.per_source)}")
     assert value.prop is not None
-    raw = table.property(value.prop, value.of, value.where)
+    raw = table.property(value.prop, value.of or of, value.where)
     return parse_number(raw, f"{table.name}: property {value.prop!r} ({value.where})")
 
 
@@ -117,8 +122,8 @@ def _convert(spec: ChannelSpec, table: SourceTable, span: float | None) -> Float
     raw = table.column(spec.column, spec.where)
     if spec.unit == "V":
         assert spec.scale is not None
-        raw = _number(spec.scale, table) * raw + (
-            _number(spec.offset, table) if spec.offset is not None else 0.0)
+        raw = _number(spec.scale, table, spec.column) * raw + (
+            _number(spec.offset, table, spec.column) if spec.offset is not None else 0.0)
     factor = UNITS[QUANTITIES[spec.quantity][0]][spec.si_unit]
     if spec.total:
         if span is None:
@@ -236,7 +241,7 @@ def table_releases(imap: ImportMap, table: SourceTable, config: RigConfig
     releases = []
     for k, tr in enumerate(times):
         start = tr - hold
-        if start < t[0] - 0.5 * dt:
+        if start < t[0] - dt:  # an instant between samples may put the hold half a step out
             raise UsageError(f"{table.name}: the release at {tr:.6g} s has less than hold = "
                              f"{hold:g} s before it in the record (it starts at {t[0]:.6g} s)")
         end = float(t[-1]) + 0.5 * dt
@@ -248,7 +253,10 @@ def table_releases(imap: ImportMap, table: SourceTable, config: RigConfig
             raise UsageError(f"{table.name}: the release at {tr:.6g} s has {end - tr:.3g} s of "
                              f"decay, under {MIN_PERIODS:g} periods of the slower mode "
                              f"({MIN_PERIODS * slow:.3g} s)")
-        rows = slice(int(np.searchsorted(t, start - 0.5 * dt)), int(np.searchsorted(t, end)))
+        # The first sample at or after each bound (1e-6 of a step for the float arithmetic of
+        # the bounds): a decay ends where the next release's hold starts, no sample in both.
+        rows = slice(int(np.searchsorted(t, start - 1e-6 * dt)),
+                     int(np.searchsorted(t, end - 1e-6 * dt)))
         decay = slice(int(np.searchsorted(t, tr)), rows.stop)
         u = U[decay]
         mean_u = float(np.nanmean(u))
