@@ -35,9 +35,15 @@ groups = ["Test_*"]
 waveform = true
 [channels]
 h = { column = "Laser_H", unit = "mm", sign = "up" }
-alpha = { column = "Pitch", unit = "V", scale = { property = "Sensitivity" }, offset = { property = "Offset" }, scaled_unit = "deg", sign = "nose_up" }
 lift = { column = "Lift", unit = "N", sign = "up" }
 moment = { column = "Moment", unit = "N m", sign = "nose_up" }
+[channels.alpha]
+column = "Pitch"
+unit = "V"
+scale = { property = "Sensitivity" }
+offset = { property = "Offset" }
+scaled_unit = "deg"
+sign = "nose_up"
 [wind]
 U = { property = "WindSpeed" }
 rho = { property = "AirDensity" }
