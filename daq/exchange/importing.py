@@ -6,17 +6,25 @@ for each test in it (a file, or a TDMS group) :func:`table_releases` applies the
 signs (h and lift downward, alpha and moment nose-up), the wind speed (a value, a channel's
 mean over each decay, or a Pitot's ``sqrt(2 q / rho)``), the release instants (listed, a
 trigger channel's edge interpolated between samples, or found in h and alpha by
-:func:`ident.records.release_onset.find_releases`) and the stretch kept around each (``hold``
-before, up to the next hold or ``length`` after). The releases are written by the
-acquisition's own recorder (:func:`daq.recording.synthetic.write_release_run`), so that
-``windrig identify``, ``diagnose``, ``reprocess`` and ``info`` read the result as any run file;
+:func:`ident.records.release_onset.find_releases`) and the stretch kept around each: ``hold``
+before it, and after it the decay up to the catch (the model still again, found by
+:func:`ident.records.release_onset.still_start_before`, less its ``CATCH_GUARD_S``), the next
+release's hold, or ``length``, whichever comes first. A catch is a step (the model pulled back
+to its hold) that E2RFC would read as aerodynamics: measured on the test campaign, one sample
+of it left in a decay moved the flutter speed by -0.5 % and raised its std fivefold, 0.5 s of it
+by -10 %. A kept hold that reaches back into the catch is named in a warning.
+
+The releases are written by the acquisition's own recorder
+(:func:`daq.recording.synthetic.write_release_run`), so that ``windrig identify``,
+``diagnose``, ``reprocess`` and ``info`` read the result as any run file;
 ``/entry/metadata/import`` records where it came from: the source file's name and SHA-256,
 the test (TDMS group), the format and the map's text, verbatim.
 
-A release row starts at the first sample at or after the release instant (the recorder's
-rows are samples): at most one sampling interval late (2 ms at 500 Hz; a release instant
-30 ms late moves the flutter speed by about 1 %, so one sample is well inside the method's
-accuracy).
+A release row starts at the sample nearest the release instant (the recorder's rows are
+samples): at most half a sampling interval off (1 ms at 500 Hz; a release instant 30 ms late
+moves the flutter speed by about 1 %). A trigger's edge interpolated halfway between two
+samples goes to the later, the first free one. Measured: a decay cut one sample (2 ms) after
+its instant made E2RFC's modal fit overflow on one of six releases, hence the nearest.
 
 Not responsible for: reading files (:mod:`daq.exchange.sources`), checking the map
 (:mod:`daq.exchange.import_map`), or the command line (:mod:`daq.exchange.import_command`).
@@ -48,7 +56,7 @@ from daq.exchange.import_map import (
 )
 from daq.exchange.sources import SourceTable, read_source, source_format
 from daq.recording.synthetic import write_release_run
-from ident.records.release_onset import find_releases
+from ident.records.release_onset import CATCH_GUARD_S, find_releases, still_start_before
 
 __all__ = ["ImportedRelease", "ImportedRun", "import_sources", "table_releases"]
 
@@ -239,6 +247,7 @@ def table_releases(imap: ImportMap, table: SourceTable, config: RigConfig
     slow = 1.0 / min(config.section.fh, config.section.fa)
     hold = imap.releases.hold
     releases = []
+    previous_hold: float | None = None
     for k, tr in enumerate(times):
         start = tr - hold
         if start < t[0] - dt:  # an instant between samples may put the hold half a step out
@@ -247,6 +256,16 @@ def table_releases(imap: ImportMap, table: SourceTable, config: RigConfig
         end = float(t[-1]) + 0.5 * dt
         if k + 1 < len(times):
             end = min(end, times[k + 1] - hold)
+        caught = still_start_before(t, data["h"], data["alpha"], after=tr,
+                                    before=times[k + 1] if k + 1 < len(times) else float(t[-1]))
+        if caught is not None:  # the model held still again: the catch ended the decay
+            end = min(end, caught - CATCH_GUARD_S)
+        # A still stretch is found up to half the stillness window late after a step (the
+        # catch): CATCH_GUARD_S is that margin, as for the decay's end.
+        if k > 0 and previous_hold is not None and previous_hold - CATCH_GUARD_S > start:
+            warnings.append(f"{table.name}: the model is still only from {previous_hold:.4g} s "
+                            f"before the release at {tr:.4g} s; hold = {hold:g} s keeps "
+                            f"{previous_hold - start:.3g} s of the catch before it")
         if imap.releases.length is not None:
             end = min(end, tr + imap.releases.length)
         if end - tr < MIN_PERIODS * slow:
@@ -257,16 +276,20 @@ def table_releases(imap: ImportMap, table: SourceTable, config: RigConfig
         # the bounds): a decay ends where the next release's hold starts, no sample in both.
         rows = slice(int(np.searchsorted(t, start - 1e-6 * dt)),
                      int(np.searchsorted(t, end - 1e-6 * dt)))
-        decay = slice(int(np.searchsorted(t, tr)), rows.stop)
+        # The release row: the sample nearest the instant (a tie, as a trigger's edge halfway
+        # between its samples, goes to the later, the first free sample).
+        first = int(np.searchsorted(t, tr - 0.5 * dt + 1e-6 * dt))
+        decay = slice(first, rows.stop)
         u = U[decay]
         mean_u = float(np.nanmean(u))
         if mean_u > 0 and float(np.nanmax(u) - np.nanmin(u)) > U_VARIATION * mean_u:
             warnings.append(f"{table.name}: the wind speed varies by more than "
                             f"{U_VARIATION:.0%} over the release at {tr:.4g} s "
                             f"({np.nanmin(u):.3g}-{np.nanmax(u):.3g} m/s); its mean is used")
+        previous_hold = caught
         nan = np.full(rows.stop - rows.start, math.nan)
         releases.append(ImportedRelease(
-            t=t[rows] - tr, h=data["h"][rows], alpha=data["alpha"][rows],
+            t=t[rows] - t[first], h=data["h"][rows], alpha=data["alpha"][rows],
             lift=data["lift"][rows] if "lift" in data else nan,
             moment=data["moment"][rows] if "moment" in data else nan,
             U=mean_u, rho=float(np.nanmean(rho[decay])),

@@ -88,3 +88,33 @@ def lab_record(k: int) -> LabRecord:
     return LabRecord(t=t, **{c: np.concatenate([getattr(p, c) for p in parts])
                              for c in ("h", "alpha", "lift", "moment")},
                      magnet=magnet, U=U, rho=SECTION.rho, releases=releases)
+
+
+def imported_deviation(path: object, record: LabRecord) -> dict[str, float]:
+    """Return how far an imported run file's decays lie from the record, per channel.
+
+    Each release row of the file (read by h5py) is matched to the record's sample at its
+    release instant; its rows up to ``stop_index`` are compared with the record's from there.
+
+    Returns
+    -------
+    dict
+        Channel (``h``, ``alpha``, ``lift``, ``moment``) -> the largest absolute difference
+        over every decay, as a fraction of the channel's peak in the record.
+    """
+    import h5py  # only the tests that read run files back need it
+
+    out = dict.fromkeys(("h", "alpha", "lift", "moment"), 0.0)
+    with h5py.File(path, "r") as f:
+        sync = f["entry/sync"]
+        rows = f["entry/releases"][:]
+        for name in out:
+            x = sync[name][:]
+            want = getattr(record, name)
+            for row, instant in zip(rows, record.releases, strict=True):
+                first = int(round(instant * FS))
+                n = int(row["stop_index"] - row["start_index"])
+                got = x[row["start_index"]:row["stop_index"]]
+                worst = float(np.max(np.abs(got - want[first:first + n])))
+                out[name] = max(out[name], worst / float(np.max(np.abs(want))))
+    return out

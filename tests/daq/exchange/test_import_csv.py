@@ -18,7 +18,7 @@ import pytest
 
 from daq.cli import main
 
-from support.lab_data import SPEEDS, TRUTH_SPEED, lab_record
+from support.lab_data import SPEEDS, TRUTH_SPEED, imported_deviation, lab_record
 
 SPAN = 0.9  # m
 
@@ -78,16 +78,14 @@ def test_the_csv_arrives_in_si_and_windrig_signs(imported):
         assert provenance["sha256"][()].decode() == hashlib.sha256(
             sources[0].read_bytes()).hexdigest()
         assert provenance["map"][()].decode() == MAP
-        # Two releases, each starting at its instant (a sample: the record's own) and holding
-        # 1 s before it: the sync view holds exactly the record, nothing cut.
-        assert rows["release_time"] - rows["release_time"][0] == pytest.approx([0.0, 8.5])
-        h, alpha = sync["h"][:], sync["alpha"][:]
-        lift, moment, U = sync["lift"][:], sync["moment"][:], sync["U"][:]
+        # Two releases, each starting at its instant (a sample: the record's own) with 1 s
+        # of hold before it; the first decay ends before the catch (the model pulled back to
+        # its hold at 8.5 s, found still from 8.55 s, less the 0.07 s guard: 8.48 s), so the
+        # second release lies at 8.48 + 1 s in the file.
+        assert rows["release_time"] == pytest.approx([1.0, 9.48], abs=1e-9)
+        U = sync["U"][:]
     # The CSV holds 9 significant digits: relative 1e-8 of each channel's peak is the rounding.
-    assert h == pytest.approx(r.h, abs=1e-8 * np.abs(r.h).max())
-    assert alpha == pytest.approx(r.alpha, abs=1e-8 * np.abs(r.alpha).max())
-    assert lift == pytest.approx(r.lift, abs=1e-8 * np.abs(r.lift).max())
-    assert moment == pytest.approx(r.moment, abs=1e-8 * np.abs(r.moment).max())
+    assert max(imported_deviation(where / "runs" / "lab_0.h5", r).values()) < 1e-8
     assert U == pytest.approx(SPEEDS[0], rel=1e-8)
     report = json.loads((where / "import.json").read_text())
     assert report["warnings"] == []
