@@ -145,13 +145,13 @@ def _convert(spec: ChannelSpec, table: SourceTable, span: float | None) -> Float
 def _time_base(imap: ImportMap, table: SourceTable, n: int) -> FloatArray:
     spec = imap.time
     if spec.rate is not None:
-        return np.arange(n) / _number(spec.rate, table)
+        return np.arange(n, dtype=np.float64) / _number(spec.rate, table)
     if spec.waveform:
         column = imap.channels["h"].column
         if column not in table.increments:
             raise UsageError(f"{table.name}: channel {column!r} has no wf_increment property "
                              f"([time] waveform = true); give [time] rate or column instead")
-        return np.arange(n) * table.increments[column]
+        return np.arange(n, dtype=np.float64) * table.increments[column]
     assert spec.column is not None
     t = table.column(spec.column, f"{imap.path} [time] column") * UNITS["time"][spec.unit]
     steps = np.diff(t)
@@ -164,7 +164,7 @@ def _time_base(imap: ImportMap, table: SourceTable, n: int) -> FloatArray:
         raise UsageError(f"{table.name}: time column {spec.column!r} is not uniformly sampled "
                          f"(step {steps[where]:.6g} s at row {where + 1} against a mean "
                          f"{dt:.6g} s); a run file holds one sampling rate")
-    return float(t[0]) + np.arange(n) * dt  # the rounding of a text file's times removed
+    return float(t[0]) + np.arange(n, dtype=np.float64) * dt  # a text file's rounding removed
 
 
 def _crossings(t: FloatArray, x: FloatArray, threshold: float, edge: str) -> list[float]:
