@@ -3,9 +3,10 @@
 Responsibility: :func:`parse_import_map` reads and checks a map into a frozen
 :class:`ImportMap`: the source format, the rig config (the section and its taps), the model's
 span (for forces given as totals), the time base, one entry per channel (the quantity, its
-column, unit, linear scale from volts and sign), the wind (a value, a property, a channel or a
-Pitot's dynamic pressure), the air density, the release instants (a list, a trigger channel's
-edge, or found in the displacements) and the hold kept before each. A number the map leaves to
+column, unit, linear scale from volts and sign), the pressure taps' columns, the wind (a
+value, a property, a channel or a Pitot's dynamic pressure), the air density, the release
+instants (a list, a trigger channel's edge, or found in the displacements) and the hold kept
+before each. A number the map leaves to
 the source (``{ property = "Name" }``: a TDMS property, which LabVIEW may write as a string
 with a decimal comma, or a scalar of a MATLAB file) is a :class:`Value`, read per source by
 :mod:`daq.exchange.importing` (:func:`parse_number` reads the strings). Every mistake is one
@@ -33,7 +34,7 @@ from typing import Any
 from daq.errors import UsageError
 
 __all__ = ["FORMATS", "QUANTITIES", "UNITS", "ChannelSpec", "ImportMap", "ReleaseSpec",
-           "TimeSpec", "Value", "WindSpec", "parse_import_map", "parse_number"]
+           "TapsSpec", "TimeSpec", "Value", "WindSpec", "parse_import_map", "parse_number"]
 
 #: Source formats, by the map's ``format`` or the file's extension.
 FORMATS = {"csv": "csv", "txt": "csv", "mat": "mat", "tdms": "tdms"}
@@ -210,6 +211,27 @@ class ReleaseSpec:
 
 
 @dataclass(frozen=True)
+class TapsSpec:
+    """The pressure taps' columns, in the rig config's tap order, and their unit.
+
+    Attributes
+    ----------
+    columns : tuple of str or None
+        The columns, listed.
+    prefix : str or None
+        Or every column whose name is the prefix and a number, in the order of the numbers
+        (``P1, P2, ..., P62``).
+    unit : str
+        A unit of pressure (:data:`UNITS`).
+    """
+
+    columns: tuple[str, ...] | None = None
+    prefix: str | None = None
+    unit: str = "Pa"
+    where: str = ""
+
+
+@dataclass(frozen=True)
 class ImportMap:
     """A parsed import map (see the module docstring and ``docs/importing.md``)."""
 
@@ -223,6 +245,7 @@ class ImportMap:
     channels: dict[str, ChannelSpec] = field(default_factory=dict)
     wind: WindSpec = field(default_factory=WindSpec)
     releases: ReleaseSpec = field(default_factory=ReleaseSpec)
+    taps: TapsSpec | None = None
 
 
 def _keys(table: Any, where: str, required: set[str], optional: set[str]) -> None:
@@ -372,6 +395,23 @@ def _releases(raw: Any, where: str) -> ReleaseSpec:
     return ReleaseSpec(detect=True, hold=spec.hold, length=spec.length)
 
 
+def _taps(raw: Any, where: str) -> TapsSpec:
+    if not isinstance(raw, Mapping) or ("columns" in raw) == ("prefix" in raw):
+        raise UsageError(f"{where}: give exactly one of columns (a list, in the rig config's "
+                         "tap order) or prefix (columns named prefix1, prefix2, ...)")
+    _keys(raw, where, {"unit"}, {"columns", "prefix"})
+    unit = _text(raw, "unit", where)
+    if unit not in UNITS["pressure"]:
+        raise UsageError(f"{where} unit = {unit!r}; allowed: {sorted(UNITS['pressure'])}")
+    if "prefix" in raw:
+        return TapsSpec(prefix=_text(raw, "prefix", where), unit=unit, where=where)
+    columns = raw["columns"]
+    if not isinstance(columns, list) or not columns or not all(
+            isinstance(c, str) and c for c in columns):
+        raise UsageError(f"{where} columns must be a non-empty list of column names")
+    return TapsSpec(columns=tuple(columns), unit=unit, where=where)
+
+
 def parse_import_map(path: str | Path) -> ImportMap:
     """Read and check an import map.
 
@@ -401,7 +441,7 @@ def parse_import_map(path: str | Path) -> ImportMap:
         raise UsageError(f"{path}: not valid TOML: {exc}") from exc
     where = str(path)
     _keys(data, where, {"config", "time", "channels", "wind", "releases"},
-          {"format", "span", "groups"})
+          {"format", "span", "groups", "taps"})
     fmt = data.get("format")
     if fmt is not None and fmt not in set(FORMATS.values()):
         raise UsageError(f"{where} format = {fmt!r}; allowed: {sorted(set(FORMATS.values()))}")
@@ -413,11 +453,12 @@ def parse_import_map(path: str | Path) -> ImportMap:
     channels = {name: _channel(name, spec, f"{where} [channels] {name}")
                 for name, spec in channels_raw.items()}
     if ("lift" in channels) != ("moment" in channels):
-        raise UsageError(f"{where} [channels]: give both lift and moment (E2RFC) or neither "
-                         "(the displacement-only route)")
+        raise UsageError(f"{where} [channels]: give both lift and moment (E2RFC), or neither "
+                         "(integrated from [taps], or the displacement-only route)")
     span = _value(data["span"], f"{where} span (m)", positive=True) if "span" in data else None
     return ImportMap(path=path, text=text, config=_text(data, "config", where), format=fmt,
                      span=span, groups=tuple(groups),
                      time=_time(data["time"], f"{where} [time]"), channels=channels,
                      wind=_wind(data["wind"], f"{where} [wind]"),
-                     releases=_releases(data["releases"], f"{where} [releases]"))
+                     releases=_releases(data["releases"], f"{where} [releases]"),
+                     taps=_taps(data["taps"], f"{where} [taps]") if "taps" in data else None)

@@ -50,12 +50,15 @@ from daq.exchange.import_map import (
     UNITS,
     ChannelSpec,
     ImportMap,
+    TapsSpec,
     Value,
+    WindSpec,
     parse_import_map,
     parse_number,
 )
 from daq.exchange.sources import SourceTable, read_source, source_format
 from daq.recording.synthetic import write_release_run
+from daq.sync.conversions import wind_speed
 from ident.records.release_onset import CATCH_GUARD_S, find_releases, still_start_before
 
 __all__ = ["ImportedRelease", "ImportedRun", "import_sources", "table_releases"]
@@ -93,6 +96,7 @@ class ImportedRelease:
     p: FloatArray | None = None
     drag: FloatArray | None = None
     instant: float = 0.0  # the release instant, s on the source's own time base
+    pressure: FloatArray | None = None  # Pa, (n, n_taps), when the map gives [taps]
 
 
 @dataclass(frozen=True)
@@ -140,6 +144,42 @@ def _convert(spec: ChannelSpec, table: SourceTable, span: float | None) -> Float
                              "to make it per unit span")
         factor /= span
     return np.asarray(spec.sign * factor * raw, dtype=np.float64)
+
+
+def _tap_pressures(spec: TapsSpec, table: SourceTable, config: RigConfig) -> FloatArray:
+    """Return the taps' pressures, Pa, shape (n, n_taps), in the rig config's tap order."""
+    if spec.columns is not None:
+        names = list(spec.columns)
+    else:
+        pattern = re.compile(re.escape(spec.prefix or "") + r"(\d+)$")
+        numbered = sorted((int(m.group(1)), c) for c in table.columns
+                          if (m := pattern.match(c)) is not None)
+        names = [c for _, c in numbered]
+    n_taps = config.taps.n_taps
+    if len(names) != n_taps:
+        raise UsageError(f"{table.name}: {len(names)} tap column(s) ({spec.where}) but the rig "
+                         f"config has {n_taps} taps")
+    factor = UNITS["pressure"][spec.unit]
+    return np.column_stack([table.column(c, spec.where) for c in names]) * factor
+
+
+def _speed(U: FloatArray | None, q: FloatArray | None, rho: FloatArray, rows: slice,
+           wind: WindSpec, table: SourceTable) -> float:
+    """Return the wind speed over some rows, m/s: the channel's mean, or from the Pitot's.
+
+    A Pitot's speed is taken from its mean dynamic pressure, where the noise averages out
+    (:func:`daq.sync.conversions.wind_speed`, whose zero tolerance refuses a mean far below
+    zero: swapped lines, or a zero taken with the wind on).
+    """
+    if U is not None:
+        return float(np.nanmean(U[rows]))
+    assert q is not None and wind.pitot is not None
+    w = wind_speed(float(np.nanmean(q[rows])), float(np.nanmean(rho[rows])))
+    if bool(w.rejected):
+        raise UsageError(f"{table.name}: the Pitot column {wind.pitot.column!r} reads "
+                         f"{np.nanmean(q[rows]):.3g} Pa on average: below zero, not noise "
+                         "(swapped lines, or its zero taken with the wind on?)")
+    return float(w.speed)
 
 
 def _time_base(imap: ImportMap, table: SourceTable, n: int) -> FloatArray:
@@ -232,16 +272,24 @@ def table_releases(imap: ImportMap, table: SourceTable, config: RigConfig
         raise UsageError(f"{table.name}: the mapped channels differ in length: {lengths}")
     n = next(iter(lengths.values()))
     t = _time_base(imap, table, n)
+    pressures = None
+    if imap.taps is not None:
+        pressures = _tap_pressures(imap.taps, table, config)
+        if pressures.shape[0] != n:
+            raise UsageError(f"{table.name}: the taps' columns ({pressures.shape[0]} rows) and "
+                             f"the channels ({n} rows) differ in length")
+        if "lift" not in data:  # per unit span, windrig's signs (ident.physics.taps)
+            data["lift"], data["moment"] = config.taps.integrate(pressures)
     wind = imap.wind
     rho = (np.full(n, _number(wind.rho, table)) if wind.rho is not None
            else _convert(wind.rho_channel, table, None))  # type: ignore[arg-type]
+    q = U = None
     if wind.U is not None:
         U = np.full(n, _number(wind.U, table))
     elif wind.U_channel is not None:
         U = _convert(wind.U_channel, table, None)
     else:
         q = _convert(wind.pitot, table, None)  # type: ignore[arg-type]
-        U = np.sqrt(np.clip(2.0 * q / rho, 0.0, None))  # a Pitot's noise below zero is still air
     times = _release_times(imap, table, t, data["h"], data["alpha"], config, warnings)
     dt = float(t[1] - t[0])
     slow = 1.0 / min(config.section.fh, config.section.fa)
@@ -280,12 +328,14 @@ def table_releases(imap: ImportMap, table: SourceTable, config: RigConfig
         # between its samples, goes to the later, the first free sample).
         first = int(np.searchsorted(t, tr - 0.5 * dt + 1e-6 * dt))
         decay = slice(first, rows.stop)
-        u = U[decay]
-        mean_u = float(np.nanmean(u))
-        if mean_u > 0 and float(np.nanmax(u) - np.nanmin(u)) > U_VARIATION * mean_u:
-            warnings.append(f"{table.name}: the wind speed varies by more than "
-                            f"{U_VARIATION:.0%} over the release at {tr:.4g} s "
-                            f"({np.nanmin(u):.3g}-{np.nanmax(u):.3g} m/s); its mean is used")
+        halves = (slice(first, (first + rows.stop) // 2), slice((first + rows.stop) // 2,
+                                                                 rows.stop))
+        speeds = [_speed(U, q, rho, part, wind, table) for part in (decay, *halves)]
+        mean_u = speeds[0]
+        if mean_u > 0 and abs(speeds[2] - speeds[1]) > U_VARIATION * mean_u:
+            warnings.append(f"{table.name}: the wind speed drifts from {speeds[1]:.3g} to "
+                            f"{speeds[2]:.3g} m/s (the decay's halves) over the release at "
+                            f"{tr:.4g} s, more than {U_VARIATION:.0%}; their mean is used")
         previous_hold = caught
         nan = np.full(rows.stop - rows.start, math.nan)
         releases.append(ImportedRelease(
@@ -294,7 +344,7 @@ def table_releases(imap: ImportMap, table: SourceTable, config: RigConfig
             moment=data["moment"][rows] if "moment" in data else nan,
             U=mean_u, rho=float(np.nanmean(rho[decay])),
             p=data["p"][rows] if sway else None, drag=data["drag"][rows] if sway else None,
-            instant=tr))
+            instant=tr, pressure=pressures[rows] if pressures is not None else None))
     return releases, warnings
 
 
@@ -368,7 +418,9 @@ def import_sources(sources: Sequence[str | Path], map_path: str | Path, out_dir:
             "test": table.name.split(":", 1)[1] if ":" in table.name else "",
             "map_file": imap.path.name, "map": imap.text,
         }
-        write_release_run(target, config, releases, metadata={"import": provenance})
+        pressures = ([r.pressure for r in releases]
+                     if all(r.pressure is not None for r in releases) else None)
+        write_release_run(target, config, releases, pressures, metadata={"import": provenance})
         done.append(ImportedRun(source=table.name, path=target,
                                 release_times=tuple(r.instant for r in releases),
                                 speeds=tuple(r.U for r in releases),
