@@ -119,6 +119,9 @@ def read_source(path: Path, fmt: str, groups: tuple[str, ...] = ()) -> list[Sour
     """
     if not path.is_file():
         raise UsageError(f"{path}: no such source file")
+    if groups and fmt != "tdms":
+        raise UsageError(f"{path}: the map's groups = {list(groups)} are TDMS groups; this "
+                         f"source is {fmt}")
     if fmt == "csv":
         return [_read_csv(path)]
     if fmt == "mat":

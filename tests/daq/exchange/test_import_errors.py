@@ -80,6 +80,8 @@ def run_import(tmp_path, map_text: str, *sources, capsys):
      ["[releases]", "exactly one of"]),
     (('config = "sim_flat_plate"', 'config = "no_such_rig"'), ["no_such_rig"]),
     (("[time]", "[tyme]"), ["unknown key(s) ['tyme']"]),
+    (('config = "sim_flat_plate"', 'config = "sim_flat_plate"\ngroups = ["Test_*"]'),
+     ["data.csv", "TDMS groups", "csv"]),
     (("[wind]", "wind = ["), ["not valid TOML"]),
 ])
 def test_a_mistake_in_the_map_is_one_error_line_naming_it(tmp_path, capsys, edit, names):

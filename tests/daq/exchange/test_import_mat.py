@@ -128,3 +128,15 @@ def test_the_imported_mat_identifies_to_the_truth(imported, capsys):
     # within 2 % and within three of its own standard deviations.
     assert abs(error) < 0.02
     assert abs(result["flutter_speed"] - TRUTH_SPEED) < 3 * result["flutter_speed_std"]
+
+
+@pytest.mark.parametrize("imported", ["v5"], indirect=True)  # v7.3's are the same samples
+def test_diagnose_reads_the_imported_files_and_finds_no_effect(imported, capsys):
+    _, where = imported
+    out = where / "diagnosis.json"
+    assert main(["diagnose", *map(str, sorted((where / "runs").glob("*.h5"))),
+                 "--out", str(where / "diagnosis"), "--json", str(out)]) == 0
+    capsys.readouterr()
+    # The simulated campaign has no named effect (linear Roger aerodynamics, a linear
+    # structure): the discrepancy workflow must choose none.
+    assert json.loads(out.read_text())["effect"] is None
