@@ -264,8 +264,7 @@ def table_releases(imap: ImportMap, table: SourceTable, config: RigConfig
         raise UsageError(f"{imap.path} [channels]: the rig config's section has "
                          f"{config.section.n_dof} degrees of freedom: "
                          + ("map p and drag too" if sway else "p and drag need [section] fp"))
-    span = (_number(imap.span, table) if imap.span is not None
-            else getattr(getattr(config, "calibration", None), "span", None))
+    span = _number(imap.span, table) if imap.span is not None else config.calibration.span
     data = {name: _convert(spec, table, span) for name, spec in imap.channels.items()}
     lengths = {imap.channels[k].column: v.size for k, v in data.items()}
     if len(set(lengths.values())) != 1:
