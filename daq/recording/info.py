@@ -147,7 +147,9 @@ def run_info(path: str | os.PathLike[str]) -> dict[str, Any]:
         (counts per kind and every event but the trigger pulses: time s, kind, text), ``calz``
         (each CALZ record's scalars), ``calibrations`` (per ``/entry/calibration`` group:
         ``source``, ``date``, ``configured`` and its ``values``) and ``recovery`` (what
-        ``windrig recover`` did, or None). NaN is None.
+        ``windrig recover`` did, or None), ``imported`` (where ``windrig import`` read it
+        from: ``source``, ``sha256``, ``test``, ``format``, ``map_file``, ``map``; or None).
+        NaN is None.
 
     Raises
     ------
@@ -250,6 +252,9 @@ def _describe(path: Path, f: h5py.File) -> dict[str, Any]:
         "calz": calz,
         "calibrations": calibrations,
         "recovery": recovery,
+        # `windrig import`'s provenance (daq.exchange.importing): source, sha256, test, format,
+        # map_file and the map's text; None for a recorded run.
+        "imported": _plain(metadata["import"]) if "import" in metadata else None,
     })
 
 
@@ -285,6 +290,9 @@ def format_info(info: dict[str, Any]) -> str:
                                        if info["operator_notes"] else ""),
         f"recorded   {info['start_time'] or info['created']} by windrig "
         f"{info['windrig_version']}",
+        *([f"imported   from {imp['source']}" + (f" group {imp['test']}" if imp["test"] else "")
+           + f" (SHA-256 {imp['sha256'][:16]}...) by the map {imp['map_file']}"]
+          if (imp := info.get("imported")) else []),
         "section    " + (", ".join(f"{k} = {v}" for k, v in info["section"].items()) or "none"),
         f"sync view  {sync['rows']} rows"
         + (f" at {sync['rate_hz']:.6g} Hz, {sync['duration_s']:.3f} s" if sync["rate_hz"] else "")

@@ -137,7 +137,14 @@ def test_the_imported_tdms_identifies_to_the_truth(imported, capsys):
     assert abs(result["flutter_speed"] - TRUTH_SPEED) < 3 * result["flutter_speed_std"]
 
 
-def test_info_reads_the_imported_file(imported, capsys):
-    where, _ = imported
+def test_info_says_where_the_imported_file_came_from(imported, capsys):
+    where, source = imported
     assert main(["info", str(where / "runs" / "campaign_Test_1.h5")]) == 0
-    assert "release" in capsys.readouterr().out
+    lines = capsys.readouterr().out.splitlines()
+    sha = hashlib.sha256(source.read_bytes()).hexdigest()
+    assert (f"imported   from campaign.tdms group Test_1 (SHA-256 {sha[:16]}...) by the map "
+            "map.toml") in lines
+    assert "releases   2" in lines
+    assert main(["info", str(where / "runs" / "campaign_Test_1.h5"), "--json"]) == 0
+    imported_from = json.loads(capsys.readouterr().out)["imported"]
+    assert imported_from["sha256"] == sha and imported_from["map"] == MAP
