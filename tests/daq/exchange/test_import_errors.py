@@ -19,7 +19,7 @@ from daq.cli import main
 from daq.errors import UsageError
 from daq.exchange.import_map import parse_number
 
-from support.lab_data import FS, lab_record
+from support.lab_data import FS, MAGNET_ON, lab_record
 
 MAP = """\
 config = "sim_flat_plate"
@@ -49,7 +49,8 @@ def write_csv(path, *, rows: slice = slice(0, 4250), U_ramp: float = 0.0,
         t[100] += 0.5 / FS  # a logger that missed its clock: half a step late
     U = r.U * (1.0 + U_ramp * (t - t[0]) / (t[-1] - t[0]))
     cols = {"t": t, "h": r.h[rows], "alpha": r.alpha[rows], "lift": r.lift[rows],
-            "moment": r.moment[rows], "U": U}
+            "moment": r.moment[rows], "U": U, "magnet": r.magnet[rows],
+            "line": MAGNET_ON - r.magnet[rows]}
     path.write_text(",".join(cols) + "\n" + "\n".join(
         ",".join(repr(float(x)) for x in row) for row in np.column_stack(list(cols.values()))))
 
@@ -129,6 +130,30 @@ def test_a_wind_speed_that_drifts_over_a_decay_is_a_warning(tmp_path, capsys):
     # halves 6.28 and 6.80 m/s, 8 % apart.
     assert len(warnings) == 1 and "the wind speed drifts from 6.28 to 6.8 m/s" in warnings[0]
     assert "more than 5%" in warnings[0]
+
+
+@pytest.mark.parametrize("trigger", ['column = "magnet"', 'column = "line"\nedge = "rising"',
+                                     'column = "magnet"\nthreshold = "4,5"'])
+def test_a_trigger_channel_marks_the_release_on_its_edge(tmp_path, capsys, trigger):
+    write_csv(tmp_path / "data.csv")
+    code, err = run_import(tmp_path, MAP.replace("times = [1.0]", trigger),
+                           tmp_path / "data.csv", capsys=capsys)
+    assert code == 0, err
+    found = json.loads((tmp_path / "import.json").read_text())["files"][0]["release_times_s"]
+    # The magnet drops from 5 V at its last held sample to 0 V at the first free one (1.0 s):
+    # the edge, interpolated, lies between them, where the threshold puts it (2.5 V by
+    # default: halfway; 4.5 V: a tenth of the step after the held sample).
+    fraction = 0.1 if "4,5" in trigger else 0.5
+    assert found == pytest.approx([1.0 - (1.0 - fraction) / FS], abs=1e-9)
+
+
+def test_a_trigger_that_never_crosses_its_threshold_is_named(tmp_path, capsys):
+    write_csv(tmp_path / "data.csv")
+    code, err = run_import(tmp_path, MAP.replace("times = [1.0]",
+                                                 'column = "magnet"\nthreshold = 7.5'),
+                           tmp_path / "data.csv", capsys=capsys)
+    assert code == 2 and len(err) == 1
+    assert "data.csv: trigger channel 'magnet' never crosses 7.5 (falling)" in err[0]
 
 
 def _tdms(path, props: dict) -> None:
