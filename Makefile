@@ -35,7 +35,7 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 test test-fast demo screenshot: export QT_QPA_PLATFORM := offscreen
 test test-fast demo screenshot: export MPLBACKEND := Agg
 
-.PHONY: test test-fast demo screenshot lint typecheck setup qt-libs clean
+.PHONY: test test-fast demo report-example screenshot lint typecheck setup qt-libs clean
 
 # The suite is split by the `realtime` marker (pyproject.toml), not by folder. The pure part
 # (computations, parsers, files, scripted byte exchanges, the doctests of daq, ident and
@@ -44,7 +44,7 @@ test test-fast demo screenshot: export MPLBACKEND := Agg
 # dashboard's port) runs after it on its own, so that its timing is never measured against a
 # CPU busy with another test. tests/test_suite_split.py fails on a real-time test module left
 # unmarked. (Exit code 5, nothing collected, is a PYTEST_ARGS filter's doing.)
-PURE_TESTS := $(PY) -m pytest -q -p no:cacheprovider -n 2 -m "not realtime"
+PURE_TESTS := $(PY) -m pytest -q -p no:cacheprovider --durations=15 -n 2 -m "not realtime"
 REALTIME_TESTS := $(PY) -m pytest -q -p no:cacheprovider --durations=15 -m realtime
 
 # Both parts always run; the target fails if either did.
@@ -60,6 +60,14 @@ test-fast: setup
 
 demo: setup
 	$(VENV)/bin/windrig demo --out demo_output
+
+# The example design report in docs (docs/examples/bridge_report): the example bridge, its
+# deck's table, buffeting at 30 and 45 m/s.
+report-example: setup
+	rm -rf docs/examples/bridge_report
+	$(VENV)/bin/windrig bridge daq/rig_configs/bridges/example_bridge.json \
+	    --aero daq/rig_configs/bridges/example_deck_table.csv --buffeting 30,45 \
+	    --wind daq/rig_configs/bridges/example_wind.toml --out docs/examples/bridge_report
 
 # The README's picture of the live console (a simulated session, three automatic releases).
 screenshot: setup

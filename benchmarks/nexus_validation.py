@@ -28,11 +28,15 @@ layout                         punx                       nxcheck
 =============================  =========================  ==========================
 before issue 17                16 ERROR, 146 WARN, 1 NOTE  0 errors, 8 warnings
 raw streams NXlog (tried)      0 ERROR, 0 WARN, 1 NOTE     0 errors, 73 warnings
-now (raw streams NXdata)       0 ERROR, 0 WARN, 1 NOTE     0 errors, 8 warnings
+raw streams NXdata             0 ERROR, 0 WARN, 1 NOTE     0 errors, 8 warnings
+calibrations NXcollection      0 ERROR, 14 WARN, 1 NOTE    0 errors, 8 warnings
+calibrations NXparameters      0 ERROR, 0 WARN, 1 NOTE     0 errors, 8 warnings
 =============================  =========================  ==========================
 
 The ERRORs were the dots in per-device attribute names (``clock_offset_s.scanner``), the WARNs
-every member of an ``NXcollection`` (punx does not validate them). The NOTE is the field name
+every member of an ``NXcollection`` (punx does not validate them): the metadata's before issue
+17, the calibrations' (issue 18, ``/entry/calibration``, 4 groups and 10 fields) before issue
+37; both are ``NXparameters`` now. The NOTE is the field name
 ``U``, which only NeXus's relaxed name pattern allows. nxcheck's 8 warnings are windrig's own
 attributes of ``/`` (``created``, ``windrig_version``) and ``/entry`` (``rig_name``,
 ``operator_notes``, ``start_time``) and its fields ``config``, ``releases`` and ``events``:

@@ -188,6 +188,16 @@ def _build_parser() -> argparse.ArgumentParser:
     p_info.add_argument("file", type=Path, help="a windrig HDF5 run file")
     p_info.add_argument("--json", action="store_true", help="print JSON instead of text")
 
+    p_exp = sub.add_parser(
+        "export", help="a run file's sync view, releases, events and calibrations, with units, "
+                       "as CSV, MATLAB (.mat v5), netCDF-4 or TDMS")
+    p_exp.add_argument("file", type=Path, help="a windrig HDF5 run file")
+    p_exp.add_argument("--to", required=True, choices=("csv", "mat", "netcdf", "tdms"),
+                       help="the format")
+    p_exp.add_argument("--out", type=Path, default=None,
+                       help="file (csv: folder) to create; never overwritten (default: beside "
+                            "the run: RUN_csv/, RUN.mat, RUN.nc, RUN.tdms)")
+
     p_camp = sub.add_parser(
         "campaign", help="a headless test campaign from a plan: fixed or adaptive wind speeds, "
                          "safe stop short of flutter, resumable; report in --out")
@@ -489,7 +499,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 #: Optional dependencies and the extra that installs each.
 _EXTRAS = {"dask": "dask", "distributed": "dask", "PySide6": "gui", "pyqtgraph": "gui",
-           "shiboken6": "gui", "nptdms": "exchange"}
+           "shiboken6": "gui", "nptdms": "exchange", "xarray": "exchange",
+           "h5netcdf": "exchange"}
 
 
 def _is_usage(exc: BaseException) -> bool:
@@ -576,6 +587,10 @@ def _dispatch(args: argparse.Namespace) -> int:
         from daq.exchange.import_command import run as run_import
 
         return run_import(args)
+    if args.command == "export":
+        from daq.exchange.export_run import run_export
+
+        return run_export(args.file, args.to, args.out)
     raise AssertionError(f"unhandled command {args.command!r}")  # argparse rejects unknown ones
 
 

@@ -14,7 +14,8 @@ own layer and the layers below):
 
 1. :mod:`ident.errors` and :mod:`ident.numerics`: exceptions, input checks, small solvers;
 2. :mod:`ident.model`: the section, the conventions, Roger's form, the flutter analysis;
-3. :mod:`ident.tables`: flutter-derivative tables and their Roger fits;
+3. :mod:`ident.tables`: flutter-derivative tables, their Roger fits and checks, a section's
+   flutter by both routes compared (:func:`section_flutter`);
 4. :mod:`ident.physics`: air, turbulence, pressure taps, tubing, the named effects;
 5. :mod:`ident.simulation`: simulated decays (the plant and the measurement chain);
 6. :mod:`ident.records`: releases and the run files they are read from;
@@ -38,9 +39,12 @@ from ident.model.section import SectionModel
 from ident.model.statespace import AeroelasticSystem
 from ident.physics.taps import TapLayout
 from ident.records.release import Release
+from ident.tables.fd_table import FlutterDerivativeTable
+from ident.tables.flutter_routes import section_flutter
 
 __all__ = [
     "AeroelasticSystem",
+    "FlutterDerivativeTable",
     "IdentError",
     "InsufficientDataError",
     "NonUniformSamplingError",
@@ -51,4 +55,5 @@ __all__ = [
     "TapLayout",
     "identify",
     "roger_fit",
+    "section_flutter",
 ]

@@ -11,6 +11,7 @@
 - :mod:`~daq.console.qt_guard`: a guard against a PySide6 reference-count bug;
 - :mod:`~daq.console.source`: the data-source contract the window reads;
 - :mod:`~daq.console.replay`: a run file played back in time;
+- :mod:`~daq.console.replay_config`: the rig config a replay draws with (a file without taps);
 - :mod:`~daq.console.live_source`: a rig acquired now, synchronised into a ring;
 - :mod:`~daq.console.ring_recorder`: the live view's run writer target (the ring, no file);
 - :mod:`~daq.console.process_source`: the live source in a process of its own;

@@ -24,10 +24,10 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from daq.config import parse_rig_config
+from daq.console.replay_config import replay_config
 from daq.console.ring_buffer import RingBuffer
 from daq.console.source import SWAY_SCALARS, SYNC_SCALARS, RingSource, SourceInfo, sync_columns
-from daq.errors import ConfigError, ReplayError
+from daq.errors import ReplayError
 from daq.recording.layout import open_run_file
 
 __all__ = ["MIN_HISTORY_S", "ReplaySource"]
@@ -75,6 +75,8 @@ class ReplaySource(RingSource):
         self._started_at: float | None = None
         self._error: str | None = None
         self._decays: list[tuple[float, float | None]] = []  # the file's releases table
+        self._note: str | None = None  # what the file lacks that replay does without
+        self._n_taps = 0  # the width of the NaN pressures of a file without any
 
     # -- life cycle ------------------------------------------------------------------------------
     def open(self) -> None:
@@ -83,8 +85,9 @@ class ReplaySource(RingSource):
         Raises
         ------
         ReplayError
-            The file is missing, is not HDF5, is truncated, lacks ``/entry/sync`` or
-            ``/entry/config``, or its config is invalid or does not match the pressure width.
+            The file is missing, is not HDF5, is truncated, lacks a scalar column of
+            ``/entry/sync`` or ``/entry/config``, or its config is invalid (a file without
+            pressures needs only its ``[section]``) or does not match the pressure width.
         """
         if self._file is not None:
             return
@@ -104,23 +107,37 @@ class ReplaySource(RingSource):
             raise
 
     def _check_layout(self, f: h5py.File, where: str) -> None:
+        # What replay needs (docs/file_format.md, "What each command needs"): the sync view's
+        # scalar columns and a [section]; the pressures and a whole rig config are optional.
         try:
+            if "entry/sync" not in f:
+                raise ReplayError(f"{where}: not a windrig run file: has no /entry/sync")
             sync = f["entry/sync"]
-            self._ds = {name: sync[name] for name in (*SYNC_SCALARS, "pressure")}
+            missing = [name for name in SYNC_SCALARS if name not in sync]
+            if missing:
+                raise ReplayError(f"{where}: has no /entry/sync/{', '.join(missing)}: replay "
+                                  f"needs {', '.join(SYNC_SCALARS)} (docs/file_format.md)")
+            if "entry/config" not in f:
+                raise ReplayError(f"{where}: has no /entry/config: replay needs the stored "
+                                  "rig config, or at least its [section] (docs/file_format.md)")
+            self._ds = {name: sync[name] for name in (*SYNC_SCALARS, "pressure") if name in sync}
             if all(name in sync for name in SWAY_SCALARS):  # a 3-DOF rig's run
                 self._ds.update({name: sync[name] for name in SWAY_SCALARS})
             raw = f["entry/config"][()]
-        except KeyError as exc:
+        except KeyError as exc:  # an object that vanished or a broken link: a damaged file
             raise ReplayError(f"{where}: not a windrig run file: missing "
                               f"{exc.args[0] if exc.args else exc}") from exc
         except OSError as exc:
             raise ReplayError(f"{where}: unreadable (truncated?): {exc}") from exc
         text = raw.decode("utf-8") if isinstance(raw, bytes) else str(raw)
-        try:
-            config = parse_rig_config(text, f"{where}:/entry/config")
-        except ConfigError as exc:
-            raise ReplayError(f"{where}: the stored rig config is invalid: {exc}") from exc
-        width = self._ds["pressure"].shape[1] if self._ds["pressure"].ndim == 2 else -1
+        config, self._note = replay_config(text, f"{where}:/entry/config",
+                                           has_pressure="pressure" in self._ds,
+                                           name=self.path.stem)
+        if "pressure" not in self._ds:
+            self._n_taps = config.taps.n_taps  # drawn as NaN: the file has no pressures
+        pressure = self._ds.get("pressure")
+        width = (config.taps.n_taps if pressure is None
+                 else pressure.shape[1] if pressure.ndim == 2 else -1)
         if width != config.taps.n_taps:
             raise ReplayError(f"{where}: /entry/sync/pressure has {width} columns, the stored "
                               f"config {config.taps.n_taps} taps")
@@ -190,6 +207,8 @@ class ReplaySource(RingSource):
             if stop <= start:
                 return 0
             block = {name: ds[start:stop] for name, ds in self._ds.items()}
+            if "pressure" not in block:
+                block["pressure"] = np.full((stop - start, self._n_taps), np.nan, np.float32)
         except OSError as exc:
             self._error = f"{self.path}: read failed (truncated?): {exc}"
             self.close()
@@ -227,7 +246,8 @@ class ReplaySource(RingSource):
         pos = min(self.position_s, float(self._time[-1])) - t0
         state = "end of file" if self.finished else "playing"
         return (f"replay {self._info.label}: {pos:.1f} / {self._info.duration_s or 0.0:.1f} s, "
-                f"speed {self.speed:g}x, {self.total_rows} rows, {state}")
+                f"speed {self.speed:g}x, {self.total_rows} rows, {state}"
+                + (f" ({self._note})" if self._note else ""))
 
     # -- internals -------------------------------------------------------------------------------
     def _refresh(self) -> None:

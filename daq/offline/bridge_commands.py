@@ -164,6 +164,8 @@ def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: 
 
     summary: dict[str, Any] = {
         **comparison.to_dict(),
+        "critical_mode": None if result.critical_mode is None
+        else result.mode_labels[result.critical_mode],
         "participation": [{"mode": label, "share": share}
                           for label, share in result.participating()],
         "U_max": result.U_max,
@@ -188,7 +190,7 @@ def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: 
     if out is not None:
         from daq.offline.design_report import write_bridge_report
 
-        _write_curves(out, result, check)
+        _write_curves(out, result, check, aero.K_range, bridge.B)
         inputs = [bridge_path, *(mode_tables or []), aero_path,
                   *([wind] if wind is not None else [])]
         report = write_bridge_report(out, result, summary, inputs, table_fit=aero.table_fit,
@@ -271,9 +273,16 @@ def _read_aero(path: Path, bridge: Any, convention: str) -> Any:
                      "table (.csv)")
 
 
-def _write_curves(out: Path, result: Any, check: Any) -> None:
-    """Write the in-wind frequency and damping of every mode against U: CSV and PNG."""
+def _write_curves(out: Path, result: Any, check: Any,
+                  K_range: tuple[float, float] | None = None, B: float = 1.0) -> None:
+    """Write the in-wind frequency and damping of every mode against U: CSV and PNG.
+
+    With a table's ``K_range`` (and the deck width ``B``, m) a branch is drawn solid only while
+    its reduced frequency lies within the table (faded beyond: the fit extrapolated), and the
+    axis ends where the last branch leaves the table.
+    """
     import matplotlib
+    import numpy as np
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -289,10 +298,20 @@ def _write_curves(out: Path, result: Any, check: Any) -> None:
                              *(f"{x:.6g}" for x in result.damping[i])])
     fig, (ax_f, ax_z) = plt.subplots(2, 1, figsize=(9, 7), sharex=True)
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    inside = np.ones(result.frequencies.shape, dtype=bool)
+    if K_range is not None:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            K = 2 * np.pi * result.frequencies * B / result.U[:, None]
+        inside = (K >= K_range[0]) & (K <= K_range[1])
     for j, label in enumerate(result.mode_labels):
         color = colors[j % len(colors)]
-        ax_f.plot(result.U, result.frequencies[:, j], "-", color=color, label=label)
-        ax_z.plot(result.U, result.damping[:, j], "-", color=color)
+        f_in = np.where(inside[:, j], result.frequencies[:, j], np.nan)
+        z_in = np.where(inside[:, j], result.damping[:, j], np.nan)
+        ax_f.plot(result.U, f_in, "-", color=color, label=label)
+        ax_z.plot(result.U, z_in, "-", color=color)
+        if K_range is not None:
+            ax_f.plot(result.U, result.frequencies[:, j], "-", color=color, alpha=0.2, lw=0.8)
+            ax_z.plot(result.U, result.damping[:, j], "-", color=color, alpha=0.2, lw=0.8)
         keep = check.U[:, j] <= result.U_max
         ax_f.plot(check.U[keep, j], check.frequencies[keep, j], ":", color=color)
         ax_z.plot(check.U[keep, j], check.damping[keep, j], ":", color=color)
@@ -301,12 +320,16 @@ def _write_curves(out: Path, result: Any, check: Any) -> None:
             ax.axvline(result.speed, color="grey", lw=0.8)
     ax_z.axhline(0.0, color="k", lw=0.6)
     ax_z.set_ylim(-0.05, max(0.1, float(min(1.0, result.damping.max()))))
-    ax_z.set_xlim(0.0, result.U_max)
+    top = result.U_max
+    if K_range is not None and inside.any():
+        top = min(top, 1.05 * float(result.U[np.flatnonzero(inside.any(axis=1))[-1]]))
+    ax_z.set_xlim(0.0, top)
     ax_f.set_ylabel("frequency (Hz)")
     ax_z.set_ylabel("damping ratio")
     ax_z.set_xlabel("U (m/s)")
     ax_f.legend(fontsize=7, ncol=2)
-    ax_f.set_title("in-wind modes: state space (solid), frequency domain (dotted)")
+    ax_f.set_title("in-wind modes: state space (solid), frequency domain (dotted)"
+                   + ("; faded: outside the table's K" if K_range is not None else ""))
     fig.tight_layout()
     plot = out / "bridge_modes.png"
     fig.savefig(plot, dpi=100)

@@ -53,18 +53,20 @@ def _result_lines(summary: Mapping[str, Any]) -> list[str]:
     """Return the result table: both routes, the basis, the flutter K, divergence (Markdown)."""
     K_range = summary.get("table_K_range")
     difference = summary.get("route_difference")
+    result = summary.get("result", {})
     rows = [
-        ("flutter speed (the result)", _number(summary.get("flutter_speed"), "m/s")),
-        ("rests on", f"{summary.get('basis')}: {summary.get('basis_reason')}"),
-        ("state-space route", _number(summary.get("flutter_speed_state_space"), "m/s")),
+        ("flutter speed (the result)", _number(result.get("flutter_speed"), "m/s")),
+        ("rests on", f"{result.get('basis')}: {result.get('basis_reason')}"),
+        ("state-space route", _number(summary.get("flutter_speed"), "m/s")),
         ("frequency-domain route", _number(summary.get("flutter_speed_frequency_domain"),
                                            "m/s")),
         ("difference (frequency domain / state space - 1)",
          "none" if difference is None else f"{100 * difference:+.2f} % (tolerance "
                                            f"{100 * summary.get('route_tolerance', 0.0):g} %)"),
-        ("flutter frequency", _number(summary.get("flutter_frequency"), "Hz")),
-        ("flutter reduced frequency K = B omega / U", _number(summary.get("reduced_frequency"))),
-        ("critical branch or mode", str(summary.get("critical_mode"))),
+        ("flutter frequency (the result)", _number(result.get("flutter_frequency"), "Hz")),
+        ("flutter reduced frequency K = B omega / U",
+         _number(result.get("reduced_frequency"))),
+        ("critical branch or mode", str(result.get("critical_mode"))),
         ("table's K range", "no table" if not K_range else
          f"{K_range[0]:.4g} to {K_range[1]:.4g} (reduced velocity U/(fB) "
          f"{2 * math.pi / K_range[1]:.3g} to {2 * math.pi / K_range[0]:.3g})"),
@@ -88,7 +90,9 @@ def _warning_lines(warnings: Sequence[str]) -> list[str]:
 
 
 def _input_lines(inputs: Sequence[Path], defaults: Sequence[str]) -> list[str]:
-    lines = ["| file | SHA-256 |", "|---|---|"]
+    from importlib.metadata import version
+
+    lines = [f"Computed by windrig {version('windrig')}.", "", "| file | SHA-256 |", "|---|---|"]
     lines += [f"| `{path}` | `{digest}` |" for path, digest in file_hashes(inputs)]
     if defaults:
         lines += ["", "Defaults taken for what the inputs left out:", ""]
@@ -245,17 +249,21 @@ def write_bridge_report(out: Path, result: Any, summary: Mapping[str, Any],
         for entry in buffeting:
             lines.append(f"| {entry['U']:g} | {max(entry['rms_h']):.4g} | "
                          f"{max(entry['rms_alpha']):.4g} | {max(entry['rms_p']):.4g} |")
+        for png, what in (("buffeting_rms.png", "RMS along the deck"),
+                          ("buffeting_spectra.png", "response spectra")):
+            if (out / png).exists():
+                lines += ["", f"![{what}]({png})"]
     lines += ["", "## Warnings", ""] + _warning_lines(summary.get("warnings", []))
     if table_fit is not None and model is not None:
         derivative_plot(out / "derivatives.png", table_fit.table, model,
-                        summary.get("reduced_frequency"))
+                        summary.get("result", {}).get("reduced_frequency"))
         lines += ["", "## Table and fit", "", f"{table_fit.summary()}.", "",
                   "![flutter derivatives, table and fit](derivatives.png)"]
     K_range = summary.get("table_K_range")
     mode_plot(out / "modes.png", result.U, result.frequencies, result.damping,
               result.mode_labels, B=float(bridge["B"]),
               K_range=None if not K_range else (K_range[0], K_range[1]),
-              speeds={"state space": summary.get("flutter_speed_state_space"),
+              speeds={"state space": summary.get("flutter_speed"),
                       "frequency domain": summary.get("flutter_speed_frequency_domain")})
     lines += ["", "## Frequency and damping against wind speed", "",
               "![frequency and damping of every mode against U](modes.png)", "", "## Units", ""]

@@ -209,7 +209,7 @@ def run_flutter(section_path: Path, *, model_path: Path | None = None,
     warnings += list(comparison.warnings)
     for warning in warnings:
         print(f"warning: {warning}")
-    summary = {**comparison.to_dict(), "critical_mode": comparison.critical_mode,
+    summary = {**comparison.to_dict(), "critical_mode": routes.state_space.critical_mode,
                "U_max": routes.state_space.U_max, "n_dof": section.n_dof,
                "section": section.to_dict(), "section_file": str(section_path),
                "defaults": defaults, "model": routes.model.to_dict(), **out_keys,

@@ -147,16 +147,18 @@ def run_info(path: str | os.PathLike[str]) -> dict[str, Any]:
         (counts per kind and every event but the trigger pulses: time s, kind, text), ``calz``
         (each CALZ record's scalars), ``calibrations`` (per ``/entry/calibration`` group:
         ``source``, ``date``, ``configured`` and its ``values``) and ``recovery`` (what
-        ``windrig recover`` did, or None), ``imported`` (where ``windrig import`` read it
-        from: ``source``, ``sha256``, ``test``, ``format``, ``map_file``, ``map``; or None).
-        NaN is None.
+        ``windrig recover`` did, or None), ``missing`` (the optional parts the file lacks:
+        ``/entry/config``, ``/entry/instrument``, ``/entry/releases``, ``/entry/events``) and
+        ``imported`` (where ``windrig import`` read it from: ``source``, ``sha256``, ``test``,
+        ``format``, ``map_file``, ``map``; or None). NaN is None.
 
     Raises
     ------
     FileNotFoundError
         If there is no such file.
     NotARunFileError
-        If it is a directory, not HDF5, not a windrig run file, or unreadable (truncated).
+        If it is a directory, not HDF5, has no ``/entry/sync/time`` (not a windrig run file),
+        or is unreadable (truncated).
     """
     path = Path(path)
     if not path.exists():
@@ -170,9 +172,12 @@ def run_info(path: str | os.PathLike[str]) -> dict[str, Any]:
         raise NotARunFileError(f"{path}: HDF5 cannot open it (truncated?): {exc}") from exc
     with handle as f:
         try:
-            for part in ("entry/sync", "entry/instrument", "entry/config"):
+            # The smallest run file (docs/file_format.md) has the sync view and no raw streams:
+            # info describes whatever else a file has, and says what it lacks.
+            for part in ("entry/sync", "entry/sync/time"):
                 if part not in f:
-                    raise NotARunFileError(f"{path}: has no /{part}: not a windrig run file")
+                    raise NotARunFileError(f"{path}: has no /{part}: not a windrig run file "
+                                           "(docs/file_format.md, the smallest run file)")
             return _describe(path, f)
         except NotARunFileError:
             raise
@@ -185,7 +190,8 @@ def run_info(path: str | os.PathLike[str]) -> dict[str, Any]:
 
 def _describe(path: Path, f: h5py.File) -> dict[str, Any]:
     entry, sync = f["entry"], f["entry/sync"]
-    section, device_config = _config_tables(_text(entry["config"][()]))
+    section, device_config = _config_tables(_text(entry["config"][()]) if "config" in entry
+                                            else "")
     columns = [sync[name] for name in (*SYNC_COLUMNS, *SWAY_COLUMNS) if name in sync]
     for ds in columns:
         ds.refresh()
@@ -202,7 +208,8 @@ def _describe(path: Path, f: h5py.File) -> dict[str, Any]:
     clock = {"offset_s": per_device_attrs(sync.attrs, "clock_offset_s"),
              "drift_ppm": per_device_attrs(sync.attrs, "clock_drift_ppm")}
     devices = {name: _device(name, group, t0_ns, clock, device_config)
-               for name, group in entry["instrument"].items() if isinstance(group, h5py.Group)}
+               for name, group in (entry["instrument"].items() if "instrument" in entry else ())
+               if isinstance(group, h5py.Group)}
     releases = []
     if "releases" in entry:
         entry["releases"].refresh()
@@ -252,6 +259,8 @@ def _describe(path: Path, f: h5py.File) -> dict[str, Any]:
         "calz": calz,
         "calibrations": calibrations,
         "recovery": recovery,
+        "missing": [f"/entry/{part}" for part in ("config", "instrument", "releases", "events")
+                    if part not in entry],
         # `windrig import`'s provenance (daq.exchange.importing): source, sha256, test, format,
         # map_file and the map's text; None for a recorded run.
         "imported": _plain(metadata["import"]) if "import" in metadata else None,
@@ -286,14 +295,16 @@ def format_info(info: dict[str, Any]) -> str:
     sync = info["sync"]
     lines = [
         f"{info['file']}: {info['size_bytes'] / 1e6:.1f} MB, {state}",
-        f"rig        {info['rig']}" + (f"  ({info['operator_notes']})"
+        f"rig        {info['rig'] or '?'}" + (f"  ({info['operator_notes']})"
                                        if info["operator_notes"] else ""),
-        f"recorded   {info['start_time'] or info['created']} by windrig "
-        f"{info['windrig_version']}",
+        f"recorded   {info['start_time'] or info['created'] or '?'} by windrig "
+        f"{info['windrig_version'] or '?'}",
         *([f"imported   from {imp['source']}" + (f" group {imp['test']}" if imp["test"] else "")
            + f" (SHA-256 {imp['sha256'][:16]}...) by the map {imp['map_file']}"]
           if (imp := info.get("imported")) else []),
         "section    " + (", ".join(f"{k} = {v}" for k, v in info["section"].items()) or "none"),
+        *([f"missing    {', '.join(info['missing'])} (not needed by every command: "
+           "docs/file_format.md, the smallest run file)"] if info.get("missing") else []),
         f"sync view  {sync['rows']} rows"
         + (f" at {sync['rate_hz']:.6g} Hz, {sync['duration_s']:.3f} s" if sync["rate_hz"] else "")
         + (f", h finite in {sync['h_finite']:.1%}" if sync["h_finite"] is not None else "")
@@ -301,7 +312,8 @@ def format_info(info: dict[str, Any]) -> str:
            "recover)" if sync["unwritten_rows"] else ""),
         "",
         f"{'device':<14} {'driver':<22} {'rate Hz':>8} {'samples':>9} {'gaps':>5} "
-        f"{'missing':>8} {'restarts':>8}  clock fit",
+        f"{'missing':>8} {'restarts':>8}  clock fit" if info["devices"]
+        else "devices    none (no raw streams: a file written from the sync view alone)",
     ]
     for name, d in info["devices"].items():
         fit = d["clock_fit"]
@@ -313,7 +325,7 @@ def format_info(info: dict[str, Any]) -> str:
     if info["residual_misalignment_s"] is not None:
         lines.append(f"residual misalignment of the clock fits "
                      f"{info['residual_misalignment_s'] * 1e3:.3f} ms")
-    elif info["state"] != "closed":
+    elif info["state"] != "closed" and info["devices"]:
         lines.append("no clock fits: they are written when the file is closed, and the crash "
                      "lost them (the raw streams keep every time stamp)")
     lines += ["", f"releases   {len(info['releases'])}"]

@@ -41,7 +41,8 @@ File layout
                            U f8 (m/s), h0 f8 (m), alpha0 f8 (rad), a 3-DOF rig's p0 f8 (m);
                            attrs field_names, units
     /entry/events          (e,) compound: time f8 (s), kind S32, text S1024 (UTF-8 bytes)
-    /entry/metadata        NXcollection: calibrations, CALZ results (``RunRecorder.add_metadata``)
+    /entry/metadata        NXparameters: CALZ results, the run's summary (``add_metadata``)
+    /entry/calibration     NXparameters: one NXparameters group per calibration applied
 
 Rows that never reached the file read as fill values no real row has: NaN in float columns and
 fields, -1 in signed integer ones (``host_time_ns``, ``counter``, indices, ``error_code``), and a

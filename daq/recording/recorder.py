@@ -373,7 +373,7 @@ class RunRecorder:
         name : str
             Name (letters, digits, ``_``), e.g. ``"calz_scanner"``; each name once.
         value : scalar, str, array_like or mapping
-            Numbers, strings and arrays become datasets; a mapping becomes a group (NXcollection)
+            Numbers, strings and arrays become datasets; a mapping becomes a group (NXparameters)
             holding its items, recursively. After :meth:`start` it is written at :meth:`close`.
         """
         self._file.require("add_metadata", "declaring", "recording")
@@ -416,12 +416,13 @@ class RunRecorder:
             raise ValueError(f"calibration {name!r} was already added")
         with self._file.io(f"writing calibration {name!r}"):
             parent = entry.require_group("calibration")
-            parent.attrs["NX_class"] = "NXcollection"
-            write_metadata(parent, name, dict(values))
-            group = parent[name]
-            group.attrs["NX_class"] = "NXcollection"
+            # NXparameters, not NXcollection: punx validates no member of an NXcollection and
+            # warns on each one (14 WARN on a simulated run); files of issue 18 to 37 have
+            # NXcollection here and read the same (readers go by name, not by class).
+            parent.attrs["NX_class"] = "NXparameters"
+            write_metadata(parent, name, dict(values))  # the group: NXparameters too
             for key, text in attrs.items():
-                group.attrs[key] = str(text)
+                parent[name].attrs[key] = str(text)
 
     # --------------------------------------------------------------------------------------------
     # Appending (after start)

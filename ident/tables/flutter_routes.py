@@ -13,7 +13,9 @@ where flutter lives, and the fit says nothing beyond the table's reduced frequen
   result rests on the route that uses the input itself (the frequency domain for a table, the
   state space for a model);
 - flutter outside the table's reduced frequencies: a warning (the state space extrapolates the
-  fit there; the frequency domain cannot look there at all); a frequency domain already unstable
+  fit there; the frequency domain cannot look there at all), and when nothing else is found no
+  result (basis ``"none"``: the extrapolation is named, never the headline); a frequency domain
+  already unstable
   at the table's lowest reduced velocity: the table itself puts flutter at or below that speed;
 - divergence is the ``K = 0`` limit of the model's static stiffness, always an extrapolation from
   the table's lowest K: a warning says so, its basis is stated, and for a section it is checked
@@ -58,7 +60,9 @@ _DIVERGENCE_TOLERANCE = 0.15
 UNITS: dict[str, str] = {
     "flutter_speed": "m/s", "flutter_frequency": "Hz",
     "reduced_frequency": "1 (K = B omega / U, B the deck width)",
-    "flutter_speed_state_space": "m/s", "flutter_speed_frequency_domain": "m/s",
+    "flutter_speed_frequency_domain": "m/s", "flutter_frequency_frequency_domain": "Hz",
+    "result.flutter_speed": "m/s", "result.flutter_frequency": "Hz",
+    "result.reduced_frequency": "1",
     "route_difference": "1 (frequency domain / state space - 1)",
     "table_K_range": "1 (K = B omega / U)", "divergence_speed": "m/s",
     "divergence_speed_table_edge": "m/s",
@@ -84,6 +88,10 @@ class RouteComparison:
         Why the result rests on that route.
     state_space_speed, frequency_domain_speed : float or None
         Each route's flutter speed, m/s.
+    state_space_frequency, frequency_domain_frequency : float or None
+        Each route's flutter frequency, Hz.
+    state_space_reduced_frequency : float or None
+        The state space's ``K_F``.
     difference : float or None
         ``frequency_domain_speed / state_space_speed - 1`` when both found flutter.
     source : str
@@ -110,6 +118,9 @@ class RouteComparison:
     basis_reason: str
     state_space_speed: float | None
     frequency_domain_speed: float | None
+    state_space_frequency: float | None
+    frequency_domain_frequency: float | None
+    state_space_reduced_frequency: float | None
     difference: float | None
     source: str
     K_range: tuple[float, float] | None
@@ -120,14 +131,24 @@ class RouteComparison:
     warnings: tuple[str, ...] = field(default=())
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready: the result, both routes, the table's range, divergence, units, warnings."""
+        """JSON-ready: both routes, the result and its basis, the table's range, divergence.
+
+        ``flutter_speed``, ``flutter_frequency`` and ``reduced_frequency`` are the state space's
+        (the run file and command contract); ``flutter_speed_frequency_domain`` and
+        ``flutter_frequency_frequency_domain`` the frequency domain's; ``result`` the one a
+        report rests on, with its ``basis`` and why. ``units`` and ``warnings`` as always.
+        """
         return {
-            "flutter_speed": self.speed, "flutter_frequency": self.frequency,
-            "reduced_frequency": self.reduced_frequency, "critical_mode": self.critical_mode,
-            "basis": self.basis, "basis_reason": self.basis_reason,
-            "flutter_speed_state_space": self.state_space_speed,
+            "flutter_speed": self.state_space_speed,
+            "flutter_frequency": self.state_space_frequency,
+            "reduced_frequency": self.state_space_reduced_frequency,
             "flutter_speed_frequency_domain": self.frequency_domain_speed,
+            "flutter_frequency_frequency_domain": self.frequency_domain_frequency,
             "route_difference": self.difference, "route_tolerance": ROUTE_TOLERANCE,
+            "result": {"flutter_speed": self.speed, "flutter_frequency": self.frequency,
+                       "reduced_frequency": self.reduced_frequency,
+                       "critical_mode": self.critical_mode, "basis": self.basis,
+                       "basis_reason": self.basis_reason},
             "aerodynamics": self.source,
             "table_K_range": None if self.K_range is None else list(self.K_range),
             "divergence_speed": self.divergence_speed,
@@ -232,10 +253,18 @@ def compare_routes(state_space: Any, frequency_domain: Any, *, source: str,
         basis, reason = "none", (f"neither route below {ss.U_max:.4g} m/s"
                                  + (f" or within {K_text}" if K_text else ""))
     result, mode = route_of.get(basis, (None, None))
+    if (result is not None and K_range is not None and result.reduced_frequency is not None
+            and not _in_range(result.reduced_frequency, K_range)
+            and not getattr(result, "unstable_at_start", False)):
+        # Only the fit, extrapolated beyond the table, flutters: no result a table supports.
+        basis, reason = "none", (f"the only flutter found ({result.speed:.4g} m/s, K = "
+                                 f"{result.reduced_frequency:.3g}) lies outside {K_text}: an "
+                                 "extrapolation of the fit, not a result")
+        result, mode = None, None
+    if result is not None and getattr(result, "unstable_at_start", False):
+        reason += "; an upper bound: unstable from the first reduced frequency searched"
     speed = None if result is None else result.speed
     K_F = None if result is None else result.reduced_frequency
-    if K_F is not None and K_range is not None and not _in_range(K_F, K_range):
-        reason += "; an extrapolation of the fit beyond the table, not a measured result"
 
     error_at = None
     if fit is not None and K_F is not None and K_range is not None and _in_range(K_F, K_range):
@@ -269,7 +298,9 @@ def compare_routes(state_space: Any, frequency_domain: Any, *, source: str,
     return RouteComparison(
         speed=speed, frequency=None if result is None else result.frequency,
         reduced_frequency=K_F, critical_mode=mode, basis=basis, basis_reason=reason,
-        state_space_speed=ss.speed, frequency_domain_speed=fd.speed, difference=difference,
+        state_space_speed=ss.speed, frequency_domain_speed=fd.speed,
+        state_space_frequency=ss.frequency, frequency_domain_frequency=fd.frequency,
+        state_space_reduced_frequency=ss.reduced_frequency, difference=difference,
         source=source, K_range=K_range, divergence_speed=divergence,
         divergence_basis=divergence_basis, divergence_speed_table_edge=divergence_table_edge,
         fit_error_at_flutter=error_at, warnings=tuple(warnings))

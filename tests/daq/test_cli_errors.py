@@ -172,8 +172,10 @@ def test_flutter_reads_what_identify_writes_and_says_which_density_it_assumed(tm
     assert main(["flutter", "--section", str(tmp_path / "section.json"), "--model",
                  str(tmp_path / "id.json"), "--json", str(tmp_path / "flutter.json")]) == 0
     out = capsys.readouterr().out
-    assert "gives no air density rho: using 1.225 kg/m^3" in out
+    assert "section.json: no air density rho: taken as 1.225 kg/m^3" in out
     result = json.loads((tmp_path / "flutter.json").read_text())
+    assert result["defaults"][0].endswith("no air density rho: taken as 1.225 kg/m^3 (ISA sea "
+                                          "level)")
     # The run files' air (1.2 kg/m^3) against the note's 1.225: the speeds differ by the
     # square root of the density ratio, about 1 %; the model is the one identify wrote.
     assert result["model"] == identified["model"]

@@ -2,7 +2,9 @@
 
 ``write_run`` writes a small run file (two simulated releases of the flat plate) with
 ``daq.recording.recorder.RunRecorder``: the reader's tests (``tests/ident/records/test_io.py``)
-and ``windrig identify``'s (``tests/daq/test_cli.py``) read the same files. ``sync_rows``
+and ``windrig identify``'s (``tests/daq/test_cli.py``) read the same files.
+``write_smallest_run`` writes the smallest run file of docs/file_format.md with h5py alone,
+as a program other than windrig would. ``sync_rows``
 counts what a SWMR reader sees of a file still being written (the console's recording tests).
 """
 
@@ -72,3 +74,42 @@ def sync_rows(path: Path) -> int:
             return int(f["entry/sync/time"].shape[0])
     except (OSError, KeyError):  # not yet in SWMR mode, or the datasets not created yet
         return 0
+
+
+#: The stored config of the smallest run file: a [section] and nothing else.
+SMALLEST_CONFIG = CONFIG.replace('[rig]\nname = "test"\n', "")
+
+
+def write_smallest_run(path: Path, *, omit: tuple[str, ...] = ()) -> list:
+    """Write the smallest run file of docs/file_format.md with h5py alone; return the releases.
+
+    Two simulated flat-plate releases (5 and 8 m/s, 4 s at 200 Hz after 0.5 s of hold each):
+    ``/entry/config`` (a ``[section]`` only), the seven columns of ``/entry/sync`` and
+    ``/entry/releases``; no attributes, no raw streams, no events. ``omit``: paths under
+    ``/entry`` (``"sync/lift"``, ``"releases"``, ...) to leave out.
+    """
+    columns: dict[str, list[np.ndarray]] = {name: [] for name in
+                                            ("time", "h", "alpha", "lift", "moment", "U", "rho")}
+    rows, sims, t0, row = [], [], 0.0, 0
+    for U in (5.0, 8.0):
+        sim = simulate_release(FLAT_PLATE, flat_plate.jones_model(), U, 0.004, 0.02, duration=4.0,
+                               fs=200.0, pre_s=0.5)
+        n = sim.t.size
+        for name, values in (("time", t0 + 0.5 + sim.t), ("h", sim.h), ("alpha", sim.alpha),
+                             ("lift", sim.lift), ("moment", sim.moment), ("U", np.full(n, U)),
+                             ("rho", np.full(n, FLAT_PLATE.rho))):
+            columns[name].append(values)
+        after = int(np.flatnonzero(sim.t >= 0)[0])
+        rows.append((t0 + 0.5, row + after, row + n, U, 0.004, 0.02))
+        sims.append(sim)
+        t0, row = t0 + 4.5, row + n
+    parts = {"config": SMALLEST_CONFIG,
+             **{f"sync/{name}": np.concatenate(v) for name, v in columns.items()},
+             "releases": np.array(rows, dtype=[("release_time", "<f8"), ("start_index", "<i8"),
+                                               ("stop_index", "<i8"), ("U", "<f8"),
+                                               ("h0", "<f8"), ("alpha0", "<f8")])}
+    with h5py.File(path, "w") as f:
+        for part, value in parts.items():
+            if part not in omit:
+                f[f"entry/{part}"] = value
+    return sims

@@ -56,9 +56,9 @@ def test_the_example_bridge_with_a_bluff_table_reports_the_fit_at_every_row(tmp_
     assert result["U_max"] == 100.0
     # The routes agree within their 0.5 %: the state space stands, nothing to warn about.
     assert result["flutter_speed_frequency_domain"] == pytest.approx(
-        result["flutter_speed_state_space"], rel=0.005)
-    assert result["basis"] == "state-space"
-    assert result["flutter_speed"] == result["flutter_speed_state_space"]
+        result["flutter_speed"], rel=0.005)
+    assert result["result"]["basis"] == "state-space"
+    assert result["result"]["flutter_speed"] == result["flutter_speed"]
     assert result["table_K_range"] == [result["table_K"][0], result["table_K"][-1]]
     assert result["units"]["flutter_speed"] == "m/s"
     assert "extrapolated" in result["divergence_basis"]
@@ -147,9 +147,11 @@ def test_flutter_outside_a_tables_range_is_flagged_as_extrapolation(tmp_path, ca
     out = capsys.readouterr().out
     assert ("warning: state space: flutter at 64.77 m/s with K = 0.63, outside the table's K "
             "0.785 to 3.14 (above the table's wind speeds)") in out, out
-    assert "an extrapolation of the fit beyond the table, not a measured result" in out
+    assert "an extrapolation of the fit, not a result" in out
     assert "frequency domain (the table's flutter derivatives): no flutter below" in out
     assert "warning: the frequency domain finds no flutter within the table's K" in out
     summary = json.loads(result.read_text())
-    assert summary["basis"] == "state-space" and summary["flutter_speed_frequency_domain"] is None
+    assert summary["result"]["basis"] == "none" and summary["result"]["flutter_speed"] is None
+    assert summary["flutter_speed"] == pytest.approx(64.77, abs=0.01)  # the state space's
+    assert summary["flutter_speed_frequency_domain"] is None
     assert len(summary["warnings"]) >= 2

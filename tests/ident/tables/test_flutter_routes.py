@@ -172,3 +172,16 @@ def test_disagreeing_routes_of_a_model_rest_on_the_state_space():
     assert any("disagree by +2.00 %" in w for w in c.warnings)
     with pytest.raises(ValueError, match="source must be"):
         compare_routes(ss, fd, source="csv")
+
+
+def test_a_table_unstable_at_its_lowest_reduced_velocity_says_so():
+    """A2* + 0.6 at every row: the pitch branch grows already at the table's highest K.
+
+    The frequency domain used to skip such a branch (no crossing seen); now its speed at the
+    table's edge is the result, as an upper bound, and the warning says the table shows it.
+    """
+    c = section_flutter(FLAT_PLATE, table=_variant(A2=EXAMPLE.values["A2"] + 0.6)).comparison
+    assert c.basis == "frequency-domain" and "an upper bound" in c.basis_reason
+    assert c.reduced_frequency == pytest.approx(EXAMPLE.K[-1])
+    assert any("already unstable at the highest K" in w and "the table itself says so" in w
+               for w in c.warnings)
