@@ -73,6 +73,9 @@ def _build_parser() -> argparse.ArgumentParser:
     from daq.offline import bridge_commands  # light: imports numerics only when it runs
 
     bridge_commands.add_parser(sub)
+    from daq.exchange import import_command  # light: imports the readers only when it runs
+
+    import_command.add_parser(sub)
     p_id = sub.add_parser(
         "identify", help="E2RFC on the releases of recorded run files; prints the flutter speed"
     )
@@ -580,6 +583,10 @@ def _dispatch(args: argparse.Namespace) -> int:
         return _recover(args)
     if args.command == "info":
         return _info(args)
+    if args.command == "import":
+        from daq.exchange.import_command import run as run_import
+
+        return run_import(args)
     if args.command == "export":
         from daq.exchange.export_run import run_export
 

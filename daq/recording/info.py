@@ -148,8 +148,9 @@ def run_info(path: str | os.PathLike[str]) -> dict[str, Any]:
         (each CALZ record's scalars), ``calibrations`` (per ``/entry/calibration`` group:
         ``source``, ``date``, ``configured`` and its ``values``) and ``recovery`` (what
         ``windrig recover`` did, or None), ``missing`` (the optional parts the file lacks:
-        ``/entry/config``, ``/entry/instrument``, ``/entry/releases``, ``/entry/events``). NaN
-        is None.
+        ``/entry/config``, ``/entry/instrument``, ``/entry/releases``, ``/entry/events``) and
+        ``imported`` (where ``windrig import`` read it from: ``source``, ``sha256``, ``test``,
+        ``format``, ``map_file``, ``map``; or None). NaN is None.
 
     Raises
     ------
@@ -260,6 +261,9 @@ def _describe(path: Path, f: h5py.File) -> dict[str, Any]:
         "recovery": recovery,
         "missing": [f"/entry/{part}" for part in ("config", "instrument", "releases", "events")
                     if part not in entry],
+        # `windrig import`'s provenance (daq.exchange.importing): source, sha256, test, format,
+        # map_file and the map's text; None for a recorded run.
+        "imported": _plain(metadata["import"]) if "import" in metadata else None,
     })
 
 
@@ -295,6 +299,9 @@ def format_info(info: dict[str, Any]) -> str:
                                        if info["operator_notes"] else ""),
         f"recorded   {info['start_time'] or info['created'] or '?'} by windrig "
         f"{info['windrig_version'] or '?'}",
+        *([f"imported   from {imp['source']}" + (f" group {imp['test']}" if imp["test"] else "")
+           + f" (SHA-256 {imp['sha256'][:16]}...) by the map {imp['map_file']}"]
+          if (imp := info.get("imported")) else []),
         "section    " + (", ".join(f"{k} = {v}" for k, v in info["section"].items()) or "none"),
         *([f"missing    {', '.join(info['missing'])} (not needed by every command: "
            "docs/file_format.md, the smallest run file)"] if info.get("missing") else []),

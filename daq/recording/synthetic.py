@@ -3,14 +3,15 @@
 Responsibility: :func:`write_release_run` writes :class:`~ident.records.release.Release` objects
 (e.g. simulated ones) back to back into a run file with the acquisition's own recorder
 (:class:`~daq.recording.recorder.RunRecorder`), for the tests and benchmarks of the file
-readers (``windrig identify``, ``diagnose``, ``reprocess``, the console's replay).
+readers (``windrig identify``, ``diagnose``, ``reprocess``, the console's replay), and for
+``windrig import`` (:mod:`daq.exchange.importing`), whose lab files become run files this way.
 
 Not responsible for: recording a rig (:mod:`daq.recording.run`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +25,8 @@ __all__ = ["write_release_run"]
 
 def write_release_run(path: str | Path, config: Any, releases: Sequence[Any],
                       pressures: Sequence[Any] | None = None, *,
-                      release_rows: bool = True) -> None:
+                      release_rows: bool = True,
+                      metadata: Mapping[str, Any] | None = None) -> None:
     """Write releases back to back into a run file, with the acquisition's own recorder.
 
     Parameters
@@ -50,6 +52,9 @@ def write_release_run(path: str | Path, config: Any, releases: Sequence[Any],
         Write ``/entry/releases`` rows (default). False: the samples only, as a file of
         releases made by hand without the operator's keys (``windrig identify
         --detect-releases`` finds them).
+    metadata : mapping, optional
+        Stored under ``/entry/metadata/<name>`` (:meth:`RunRecorder.add_metadata`), e.g. where
+        an imported file came from (``daq.exchange.importing``).
     """
     sway = config.section.n_dof == 3
     rec = RunRecorder(path, config_text=config.text, rig_name=config.name, min_free_bytes=0,
@@ -58,6 +63,8 @@ def write_release_run(path: str | Path, config: Any, releases: Sequence[Any],
     n_taps = config.taps.n_taps
     if getattr(config, "tubing", ()):
         rec.add_metadata("tubing", tubing_metadata(config.tubing, n_taps))
+    for name, value in (metadata or {}).items():
+        rec.add_metadata(name, value)
     rec.add_sync([f"tap{i:03d}" for i in range(n_taps)])
     if hasattr(config, "calibration"):  # /entry/calibration, as the run writer records it
         rec.add_calibrations(config.calibration.records(n_taps))
