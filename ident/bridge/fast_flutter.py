@@ -83,6 +83,9 @@ CERTIFY_OFFSET = 1e-4
 #: Newton's convergence: the correction relative to the eigenvalue (and the vector's norm 1).
 _NEWTON_RTOL = 1e-12
 _NEWTON_MAX = 8
+#: Along a branch a looser convergence is enough: each point is only the next one's start, and
+#: the flutter point is solved to ``_NEWTON_RTOL`` on its own.
+_CONTINUATION_RTOL = 1e-8
 #: Cosine between consecutive eigenvectors below which a step is taken to have swapped branches.
 _SAME_BRANCH_COS = 0.9
 
@@ -113,32 +116,37 @@ class ModalRationalProblem:
         #: ``d_l / B``, 1/m: the lag pole of lag l is ``-U d_l / B``.
         self.a = ss.lag_roots / B
 
-    def T(self, lam: complex, U: float, idx: npt.NDArray[np.intp] | None = None) -> ComplexArray:
-        """``T(lambda, U)`` (or its rows and columns ``idx``), N per unit modal coordinate."""
-        sub = _sub(idx)
-        out = (sub(self.M_eff) * lam**2 + sub(self.Cs) * lam + sub(self.Ks)
-               - U**2 * sub(self.A1) - U * lam * sub(self.A2)).astype(complex)
+    def T(self, lam: complex, U: float) -> ComplexArray:
+        """``T(lambda, U)``, N per unit modal coordinate."""
+        out = (lam**2 * self.M_eff + lam * self.Cs + self.Ks
+               - U**2 * self.A1 - U * lam * self.A2).astype(complex)
         for a, A in zip(self.a, self.lags, strict=True):
             # U^2 lambda / (lambda + a U) = qd B^2 p / (p + d) / (rho/2 B^2): finite at U = 0.
-            out -= U**2 * lam / (lam + a * U) * sub(A)
+            out -= U**2 * lam / (lam + a * U) * A
         return out
 
-    def dT_dlam(self, lam: complex, U: float,
-                idx: npt.NDArray[np.intp] | None = None) -> ComplexArray:
+    def dT_dlam(self, lam: complex, U: float) -> ComplexArray:
         """``dT / d lambda``, N s per unit modal coordinate."""
-        sub = _sub(idx)
-        out = (2.0 * lam * sub(self.M_eff) + sub(self.Cs) - U * sub(self.A2)).astype(complex)
+        out = (2.0 * lam * self.M_eff + self.Cs - U * self.A2).astype(complex)
         for a, A in zip(self.a, self.lags, strict=True):
-            out -= U**2 * a * U / (lam + a * U) ** 2 * sub(A)
+            out -= U**2 * a * U / (lam + a * U) ** 2 * A
         return out
 
-    def dT_dU(self, lam: complex, U: float, idx: npt.NDArray[np.intp] | None = None
-              ) -> ComplexArray:
+    def dT_dU(self, lam: complex, U: float) -> ComplexArray:
         """``dT / dU``, N s/m per unit modal coordinate."""
-        sub = _sub(idx)
-        out = (-2.0 * U * sub(self.A1) - lam * sub(self.A2)).astype(complex)
+        out = (-2.0 * U * self.A1 - lam * self.A2).astype(complex)
         for a, A in zip(self.a, self.lags, strict=True):
-            out -= U * lam * (2.0 * lam + a * U) / (lam + a * U) ** 2 * sub(A)
+            out -= U * lam * (2.0 * lam + a * U) / (lam + a * U) ** 2 * A
+        return out
+
+    def restricted(self, idx: npt.NDArray[np.intp]) -> ModalRationalProblem:
+        """The problem on the modes ``idx`` only (their rows and columns of every matrix)."""
+        out = object.__new__(ModalRationalProblem)
+        grid = np.ix_(idx, idx)
+        out.state_space, out.n, out.a = self.state_space, int(idx.size), self.a
+        out.Ms, out.Cs, out.Ks = self.Ms[grid], self.Cs[grid], self.Ks[grid]
+        out.A1, out.A2, out.M_eff = self.A1[grid], self.A2[grid], self.M_eff[grid]
+        out.lags = [A[grid] for A in self.lags]
         return out
 
     def neighbourhoods(self, U_max: float, tol: float) -> list[npt.NDArray[np.intp]]:
@@ -162,12 +170,6 @@ class ModalRationalProblem:
         return out
 
 
-def _sub(idx: npt.NDArray[np.intp] | None):  # type: ignore[no-untyped-def]
-    if idx is None:
-        return lambda X: X
-    return lambda X: X[np.ix_(idx, idx)]
-
-
 @dataclass
 class _Point:
     U: float
@@ -176,15 +178,15 @@ class _Point:
 
 
 def _newton(problem: ModalRationalProblem, lam: complex, vec: ComplexArray, U: float,
-            c: ComplexArray, idx: npt.NDArray[np.intp] | None) -> tuple[complex, ComplexArray,
-                                                                         int] | None:
+            c: ComplexArray, rtol: float = _NEWTON_RTOL
+            ) -> tuple[complex, ComplexArray, int] | None:
     """Newton on ``T v = 0, c^H v = 1`` at fixed U; ``(lambda, v, iterations)`` or None."""
     n = vec.size
     for it in range(1, _NEWTON_MAX + 1):
         J = np.zeros((n + 1, n + 1), dtype=complex)
-        T = problem.T(lam, U, idx)
+        T = problem.T(lam, U)
         J[:n, :n] = T
-        J[:n, n] = problem.dT_dlam(lam, U, idx) @ vec
+        J[:n, n] = problem.dT_dlam(lam, U) @ vec
         J[n, :n] = c.conj()
         rhs = -np.concatenate([T @ vec, [c.conj() @ vec - 1.0]])
         try:
@@ -195,27 +197,26 @@ def _newton(problem: ModalRationalProblem, lam: complex, vec: ComplexArray, U: f
         lam = lam + step[n]
         if not np.all(np.isfinite(step)):
             return None
-        if abs(step[n]) <= _NEWTON_RTOL * abs(lam) and np.linalg.norm(step[:n]) <= (
-                _NEWTON_RTOL * 10 * np.linalg.norm(vec)):
+        if abs(step[n]) <= rtol * abs(lam) and np.linalg.norm(step[:n]) <= (
+                rtol * 10 * np.linalg.norm(vec)):
             return lam, vec, it
     return None
 
 
-def _tangent(problem: ModalRationalProblem, p: _Point, idx: npt.NDArray[np.intp] | None
-             ) -> tuple[complex, ComplexArray]:
+def _tangent(problem: ModalRationalProblem, p: _Point) -> tuple[complex, ComplexArray]:
     """``(d lambda / dU, dv / dU)`` along the branch at ``p`` (normalisation kept)."""
     n = p.vec.size
     J = np.zeros((n + 1, n + 1), dtype=complex)
-    J[:n, :n] = problem.T(p.lam, p.U, idx)
-    J[:n, n] = problem.dT_dlam(p.lam, p.U, idx) @ p.vec
+    J[:n, :n] = problem.T(p.lam, p.U)
+    J[:n, n] = problem.dT_dlam(p.lam, p.U) @ p.vec
     J[n, :n] = p.vec.conj() / np.vdot(p.vec, p.vec)
-    rhs = np.concatenate([-problem.dT_dU(p.lam, p.U, idx) @ p.vec, [0.0]])
+    rhs = np.concatenate([-problem.dT_dU(p.lam, p.U) @ p.vec, [0.0]])
     d = np.linalg.solve(J, rhs)
     return complex(d[n]), d[:n]
 
 
-def _follow(problem: ModalRationalProblem, start: _Point, idx: npt.NDArray[np.intp],
-            U_stop: float, drop_damping: float) -> tuple[list[_Point], bool]:
+def _follow(problem: ModalRationalProblem, start: _Point, U_stop: float,
+            drop_damping: float) -> tuple[list[_Point], bool]:
     """Follow a branch up to ``U_stop`` (or its crossing); ``(points, dropped)``.
 
     Stops at the first point with a positive real part (the crossing lies between the last two
@@ -226,18 +227,19 @@ def _follow(problem: ModalRationalProblem, start: _Point, idx: npt.NDArray[np.in
     h_min = U_stop * 1e-7
     while points[-1].U < U_stop:
         p = points[-1]
-        dlam, dvec = _tangent(problem, p, idx)
+        dlam, dvec = _tangent(problem, p)
         h = min(h, U_stop - p.U, U_stop / 8.0)
         while True:
             U_new = p.U + h
             c = p.vec / np.vdot(p.vec, p.vec)
-            found = _newton(problem, p.lam + h * dlam, p.vec + h * dvec, U_new, c, idx)
+            found = _newton(problem, p.lam + h * dlam, p.vec + h * dvec, U_new, c,
+                            _CONTINUATION_RTOL)
             if found is not None:
                 lam, vec, its = found
                 cos = abs(np.vdot(p.vec, vec)) / (np.linalg.norm(p.vec) * np.linalg.norm(vec))
                 # The corrector should stay near the predictor, else it may have jumped.
-                near = abs(lam - (p.lam + h * dlam)) <= 0.05 * abs(h * dlam) + 1e-9 * abs(lam)
-                if cos >= _SAME_BRANCH_COS and (near or its <= 2) and lam.imag > 0.0:
+                near = abs(lam - (p.lam + h * dlam)) <= 0.2 * abs(h * dlam) + 1e-6 * abs(lam)
+                if cos >= _SAME_BRANCH_COS and near and lam.imag > 0.0:
                     break
             h /= 2.0
             if h < h_min:
@@ -246,7 +248,7 @@ def _follow(problem: ModalRationalProblem, start: _Point, idx: npt.NDArray[np.in
                     f"followed beyond U = {p.U:.6g} m/s (a step of {h_min:.3g} m/s failed): "
                     "use ident.bridge.flutter.analyze (the dense sweep)")
         points.append(_Point(U_new, complex(lam), vec / np.linalg.norm(vec)))
-        if its <= 2:
+        if its <= 3:
             h *= 1.6
         if lam.real > _GROWTH_RTOL * abs(lam):
             return points, False
@@ -286,27 +288,29 @@ def _flutter_point(problem: ModalRationalProblem, U0: float, lam0: complex,
         "ident.bridge.flutter.analyze (the dense sweep)")
 
 
-def _still_air(problem: ModalRationalProblem, bridge: BridgeModel
-               ) -> tuple[ComplexArray, ComplexArray]:
-    """Each mode's still-air eigenpair ``(lambda_r, v_r)`` (columns), one per mode."""
-    w2, vecs = sla.eig(problem.Ks, problem.M_eff)
+def _still_air(local: ModalRationalProblem, bridge: BridgeModel, idx: npt.NDArray[np.intp]
+               ) -> _Point:
+    """The still-air eigenpair of mode ``idx[0]`` in its neighbourhood ``idx``.
+
+    The undamped problem ``Ks v = omega^2 M_eff v`` of the neighbourhood, its eigenvectors
+    given to the modes by their largest shares of strain energy (one-to-one), then Newton with
+    the damping from the one that is mode ``idx[0]``'s.
+    """
+    w2, vecs = sla.eig(local.Ks, local.M_eff)
     w2 = np.asarray(w2)
     if np.any(~np.isfinite(w2)) or np.any(w2.real <= 0.0):
-        raise ValueError("the still-air problem has a non-oscillatory mode: the aerodynamic "
-                         "added mass dominates the structure")
-    shares = np.array([_strain_energy_shares(bridge, vecs[:, k]) for k in range(problem.n)])
-    rows, cols = linear_sum_assignment(-shares.T)  # mode -> eigenpair, largest share
-    lam = np.empty(problem.n, dtype=complex)
-    out = np.empty((problem.n, problem.n), dtype=complex)
-    for r, k in zip(rows, cols, strict=True):
-        vec = vecs[:, k] / np.linalg.norm(vecs[:, k])
-        found = _newton(problem, 1j * math.sqrt(w2[k].real), vec.astype(complex), 0.0,
-                        vec.astype(complex), None)
-        if found is None:
-            raise FlutterCertificationError(f"the still-air eigenpair of mode {r} did not "
-                                            "converge")
-        lam[r], out[:, r] = found[0], found[1] / np.linalg.norm(found[1])
-    return lam, out
+        raise ValueError(f"the still-air problem of mode {idx[0]} has a non-oscillatory "
+                         "eigenvalue: the aerodynamic added mass dominates the structure")
+    stiffness = np.diag(local.Ks)
+    energy = stiffness[:, None] * np.abs(vecs) ** 2  # (mode, eigenvector)
+    rows, cols = linear_sum_assignment(-(energy / energy.sum(axis=0)))
+    k = int(cols[list(rows).index(0)])
+    vec = (vecs[:, k] / np.linalg.norm(vecs[:, k])).astype(complex)
+    found = _newton(local, 1j * math.sqrt(w2[k].real), vec, 0.0, vec)
+    if found is None:
+        raise FlutterCertificationError(f"the still-air eigenpair of mode {idx[0]} did not "
+                                        "converge")
+    return _Point(0.0, complex(found[0]), found[1] / np.linalg.norm(found[1]))
 
 
 @single_threaded_blas
@@ -357,28 +361,24 @@ def analyze(bridge: BridgeModel, model: RationalFunctionModel, U_max: float | No
     coupling_tol = v.positive("coupling_tol", coupling_tol)
     problem = ModalRationalProblem(bridge, model)
     n = problem.n
-    lam0, vec0 = _still_air(problem, bridge)
+    hoods = problem.neighbourhoods(U_max, coupling_tol)
+    locals_ = [problem.restricted(idx) for idx in hoods]
+    starts = [_still_air(locals_[r], bridge, hoods[r]) for r in range(n)]
     if follow is None:
-        followed = [r for r in range(n) if -lam0[r].real / abs(lam0[r]) < screen_damping]
+        followed = [r for r in range(n)
+                    if -starts[r].lam.real / abs(starts[r].lam) < screen_damping]
     else:
         followed = sorted({int(r) for r in follow})
         if not followed or followed[0] < 0 or followed[-1] >= n:
             raise ValueError(f"follow must name modes 0..{n - 1}, got {list(follow)!r}")
-    hoods = problem.neighbourhoods(U_max, coupling_tol)
     paths: dict[int, list[_Point]] = {}
     best: tuple[float, float, ComplexArray, int] | None = None
     # The lowest modes first: flutter usually starts there, and a found flutter speed caps
     # how far the other branches are followed.
-    for r in sorted(followed, key=lambda j: abs(lam0[j])):
+    for r in sorted(followed, key=lambda j: abs(starts[j].lam)):
         idx = hoods[r]
-        start_vec = vec0[idx, r] / np.linalg.norm(vec0[idx, r])
-        start = _newton(problem, lam0[r], start_vec, 0.0, start_vec, idx)
-        if start is None:
-            raise FlutterCertificationError(f"mode {r}'s still-air eigenpair did not converge "
-                                            "in its coupling neighbourhood")
         U_stop = U_max if best is None else best[0]
-        points, _ = _follow(problem, _Point(0.0, start[0], start[1]), idx, U_stop,
-                            drop_damping)
+        points, _ = _follow(locals_[r], starts[r], U_stop, drop_damping)
         paths[r] = points
         last = points[-1]
         if last.lam.real > _GROWTH_RTOL * abs(last.lam):
