@@ -140,7 +140,7 @@ class ModalRationalProblem:
         return out
 
     def restricted(self, idx: npt.NDArray[np.intp]) -> ModalRationalProblem:
-        """The problem on the modes ``idx`` only (their rows and columns of every matrix)."""
+        """Return the problem on the modes ``idx`` only (their rows and columns of each matrix)."""
         out = object.__new__(ModalRationalProblem)
         grid = np.ix_(idx, idx)
         out.state_space, out.n, out.a = self.state_space, int(idx.size), self.a
@@ -288,9 +288,8 @@ def _flutter_point(problem: ModalRationalProblem, U0: float, lam0: complex,
         "ident.bridge.flutter.analyze (the dense sweep)")
 
 
-def _still_air(local: ModalRationalProblem, bridge: BridgeModel, idx: npt.NDArray[np.intp]
-               ) -> _Point:
-    """The still-air eigenpair of mode ``idx[0]`` in its neighbourhood ``idx``.
+def _still_air(local: ModalRationalProblem, idx: npt.NDArray[np.intp]) -> _Point:
+    """Return the still-air eigenpair of mode ``idx[0]`` in its neighbourhood ``idx``.
 
     The undamped problem ``Ks v = omega^2 M_eff v`` of the neighbourhood, its eigenvectors
     given to the modes by their largest shares of strain energy (one-to-one), then Newton with
@@ -363,7 +362,7 @@ def analyze(bridge: BridgeModel, model: RationalFunctionModel, U_max: float | No
     n = problem.n
     hoods = problem.neighbourhoods(U_max, coupling_tol)
     locals_ = [problem.restricted(idx) for idx in hoods]
-    starts = [_still_air(locals_[r], bridge, hoods[r]) for r in range(n)]
+    starts = [_still_air(locals_[r], hoods[r]) for r in range(n)]
     if follow is None:
         followed = [r for r in range(n)
                     if -starts[r].lam.real / abs(starts[r].lam) < screen_damping]

@@ -33,7 +33,7 @@ M_H, M_A = 22740.0 * SPAN / 2, 2.47e6 * SPAN / 2
 
 
 def _deck(modes: list[tuple[str, float, str, int, float]]) -> BridgeModel:
-    """A 600 m deck (B = 31 m) with sine modes ``(name, Hz, "h"|"alpha", half-waves, mass)``."""
+    """Return a 600 m deck (B = 31 m), sine modes ``(name, Hz, "h"|"alpha", half-waves, mass)``."""
     x = np.linspace(0.0, SPAN, 61)
     return BridgeModel.from_dict({
         "B": 31.0, "rho": 1.22, "nodes_x": x.tolist(),
