@@ -353,6 +353,20 @@ def analyze(bridge: BridgeModel, model: RationalFunctionModel, U_max: float | No
     ident.errors.FlutterCertificationError
         The dense check disagrees (an eigenvalue other than the followed pair grows), or a
         branch could not be followed.
+
+    Examples
+    --------
+    Two uniform modes (heave, pitch) on a 1 m deck, the flat plate: the dense sweep's 11.75 m/s.
+
+    >>> from ident.model import flat_plate
+    >>> bridge = BridgeModel.from_dict({"B": 0.3, "rho": 1.225, "nodes_x": [0.0, 1.0],
+    ...     "modes": [{"frequency": 2.0, "damping": 0.005, "generalised_mass": 3.0,
+    ...                "h": [1.0, 1.0]},
+    ...               {"frequency": 4.0, "damping": 0.005, "generalised_mass": 0.03,
+    ...                "alpha": [1.0, 1.0]}]})
+    >>> result = analyze(bridge, flat_plate.jones_model())
+    >>> round(result.speed, 2), result.certification.split(";")[0]
+    (11.75, 'fast route: 2 of 2 branches followed')
     """
     U_max = default_U_max(bridge) if U_max is None else v.positive("U_max", U_max)
     screen_damping = v.positive("screen_damping", screen_damping)
