@@ -385,13 +385,15 @@ def analyze(bridge: BridgeModel, model: RationalFunctionModel, U_max: float | No
         if not followed or followed[0] < 0 or followed[-1] >= n:
             raise ValueError(f"follow must name modes 0..{n - 1}, got {list(follow)!r}")
     paths: dict[int, list[_Point]] = {}
+    dropped = 0
     best: tuple[float, float, ComplexArray, int] | None = None
     # The lowest modes first: flutter usually starts there, and a found flutter speed caps
     # how far the other branches are followed.
     for r in sorted(followed, key=lambda j: abs(starts[j].lam)):
         idx = hoods[r]
         U_stop = U_max if best is None else best[0]
-        points, _ = _follow(locals_[r], starts[r], U_stop, drop_damping)
+        points, was_dropped = _follow(locals_[r], starts[r], U_stop, drop_damping)
+        dropped += was_dropped
         paths[r] = points
         last = points[-1]
         if last.lam.real > _GROWTH_RTOL * abs(last.lam):
@@ -406,7 +408,7 @@ def analyze(bridge: BridgeModel, model: RationalFunctionModel, U_max: float | No
             if best is None or U_f < best[0]:
                 best = (U_f, omega_f, vec_f, r)
     result = _result(bridge, problem, paths, best, U_max)
-    return replace(result, certification=certify(problem, result, followed,
+    return replace(result, certification=certify(problem, result, followed, dropped=dropped,
                                                  max_states=certify_max_states))
 
 
@@ -440,7 +442,7 @@ def _result(bridge: BridgeModel, problem: ModalRationalProblem, paths: dict[int,
 
 
 def certify(problem: ModalRationalProblem, result: BridgeFlutterResult,
-            followed: Sequence[int], *, max_states: int = 600) -> str:
+            followed: Sequence[int], *, dropped: int = 0, max_states: int = 600) -> str:
     """Check ``result`` with dense eigenvalue solves; return what was certified.
 
     Parameters
@@ -450,6 +452,8 @@ def certify(problem: ModalRationalProblem, result: BridgeFlutterResult,
         The fast route's answer.
     followed : sequence of int
         The modes whose branches were followed (for the message).
+    dropped : int
+        How many of them were dropped once damped (for the message).
     max_states : int
         Above this many states no dense solve is made (it would cost more than the route).
 
@@ -459,7 +463,8 @@ def certify(problem: ModalRationalProblem, result: BridgeFlutterResult,
         An eigenvalue other than the followed pair grows (module docstring).
     """
     ss = problem.state_space
-    route = f"fast route: {len(followed)} of {problem.n} branches followed"
+    route = (f"fast route: {len(followed)} of {problem.n} branches followed; {dropped} "
+             "dropped once damped")
     if ss.n_states > max_states:
         return f"{route}; not certified ({ss.n_states} states, above the dense limit)"
     floor = _floor(ss.bridge)

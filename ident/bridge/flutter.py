@@ -155,9 +155,14 @@ class BridgeFlutterResult:
             "participation": [{"mode": label, "share": share}
                               for label, share in self.participating()],
             "divergence_speed": self.divergence_speed, "U_max": self.U_max,
-            "mode_labels": list(self.mode_labels), "U": self.U.tolist(),
-            "frequencies": self.frequencies.tolist(), "damping": self.damping.tolist(),
+            "mode_labels": list(self.mode_labels), "U": _json_curve(self.U),
+            "frequencies": _json_curve(self.frequencies), "damping": _json_curve(self.damping),
         }
+
+
+def _json_curve(values: FloatArray) -> list[Any]:
+    """Nested lists for JSON, ``null`` where a curve has no value (NaN is no JSON)."""
+    return np.where(np.isnan(values), None, values).tolist()  # type: ignore[no-any-return]
 
 
 def default_U_max(bridge: BridgeModel) -> float:
