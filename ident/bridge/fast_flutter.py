@@ -49,6 +49,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -71,7 +72,7 @@ from ident.model.rfc import RationalFunctionModel
 from ident.numerics import validate as v
 from ident.numerics.threads import single_threaded_blas
 
-__all__ = ["ModalRationalProblem", "analyze", "certify"]
+__all__ = ["ModalRationalProblem", "RationalProblem", "analyze", "certify"]
 
 FloatArray = npt.NDArray[np.float64]
 ComplexArray = npt.NDArray[np.complex128]
@@ -90,6 +91,25 @@ _CONTINUATION_RTOL = 1e-8
 _SAME_BRANCH_COS = 0.9
 
 
+class RationalProblem(Protocol):
+    """What the continuation needs: ``T(lambda, s)`` of ``n`` modes and its derivatives.
+
+    ``s`` is the parameter followed upwards: the wind speed U here, the reciprocal reduced
+    frequency 1/K in :mod:`ident.bridge.fast_flutter_fd`.
+    """
+
+    n: int
+    #: How messages name the parameter (``"U"``, ``"1/K"``) and the dense route to fall back on.
+    parameter: str
+    dense_route: str
+
+    def T(self, lam: complex, U: float) -> ComplexArray: ...  # noqa: D102
+
+    def dT_dlam(self, lam: complex, U: float) -> ComplexArray: ...  # noqa: D102
+
+    def dT_dU(self, lam: complex, U: float) -> ComplexArray: ...  # noqa: D102
+
+
 class ModalRationalProblem:
     """``T(lambda, U)`` of a bridge in the wind and its derivatives (module docstring).
 
@@ -99,6 +119,9 @@ class ModalRationalProblem:
     model : RationalFunctionModel
         The deck section's self-excited forces (2 or 3 degrees of freedom).
     """
+
+    parameter = "U"
+    dense_route = "ident.bridge.flutter.analyze"
 
     def __init__(self, bridge: BridgeModel, model: RationalFunctionModel) -> None:
         ss = BridgeStateSpace(bridge, model)
@@ -177,7 +200,7 @@ class _Point:
     vec: ComplexArray  # in the neighbourhood, c^H vec = 1 with c the previous vector
 
 
-def _newton(problem: ModalRationalProblem, lam: complex, vec: ComplexArray, U: float,
+def _newton(problem: RationalProblem, lam: complex, vec: ComplexArray, U: float,
             c: ComplexArray, rtol: float = _NEWTON_RTOL
             ) -> tuple[complex, ComplexArray, int] | None:
     """Newton on ``T v = 0, c^H v = 1`` at fixed U; ``(lambda, v, iterations)`` or None."""
@@ -203,7 +226,7 @@ def _newton(problem: ModalRationalProblem, lam: complex, vec: ComplexArray, U: f
     return None
 
 
-def _tangent(problem: ModalRationalProblem, p: _Point) -> tuple[complex, ComplexArray]:
+def _tangent(problem: RationalProblem, p: _Point) -> tuple[complex, ComplexArray]:
     """``(d lambda / dU, dv / dU)`` along the branch at ``p`` (normalisation kept)."""
     n = p.vec.size
     J = np.zeros((n + 1, n + 1), dtype=complex)
@@ -215,7 +238,7 @@ def _tangent(problem: ModalRationalProblem, p: _Point) -> tuple[complex, Complex
     return complex(d[n]), d[:n]
 
 
-def _follow(problem: ModalRationalProblem, start: _Point, U_stop: float,
+def _follow(problem: RationalProblem, start: _Point, U_stop: float,
             drop_damping: float) -> tuple[list[_Point], bool]:
     """Follow a branch up to ``U_stop`` (or its crossing); ``(points, dropped)``.
 
@@ -245,8 +268,8 @@ def _follow(problem: ModalRationalProblem, start: _Point, U_stop: float,
             if h < h_min:
                 raise FlutterCertificationError(
                     f"the branch from {start.lam.imag / (2 * math.pi):.6g} Hz could not be "
-                    f"followed beyond U = {p.U:.6g} m/s (a step of {h_min:.3g} m/s failed): "
-                    "use ident.bridge.flutter.analyze (the dense sweep)")
+                    f"followed beyond {problem.parameter} = {p.U:.6g} (a step of "
+                    f"{h_min:.3g} failed): use {problem.dense_route} (the dense sweep)")
         points.append(_Point(U_new, complex(lam), vec / np.linalg.norm(vec)))
         if its <= 3:
             h *= 1.6
@@ -259,7 +282,7 @@ def _follow(problem: ModalRationalProblem, start: _Point, U_stop: float,
     return points, False
 
 
-def _flutter_point(problem: ModalRationalProblem, U0: float, lam0: complex,
+def _flutter_point(problem: RationalProblem, U0: float, lam0: complex,
                    vec0: ComplexArray) -> tuple[float, float, ComplexArray]:
     """Newton on ``T(i omega, U) v = 0, c^H v = 1`` (whole T); ``(U, omega, v)``."""
     n = problem.n
@@ -284,8 +307,8 @@ def _flutter_point(problem: ModalRationalProblem, U0: float, lam0: complex,
         if abs(step[2 * n + 1]) <= 1e-13 * abs(U) and abs(step[2 * n]) <= 1e-13 * abs(omega):
             return float(U), float(omega), vec
     raise FlutterCertificationError(
-        f"Newton on the flutter point did not converge from U = {U0:.6g} m/s: use "
-        "ident.bridge.flutter.analyze (the dense sweep)")
+        f"Newton on the flutter point did not converge from {problem.parameter} = {U0:.6g}: "
+        f"use {problem.dense_route} (the dense sweep)")
 
 
 def _still_air(local: ModalRationalProblem, idx: npt.NDArray[np.intp]) -> _Point:

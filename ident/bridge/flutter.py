@@ -162,7 +162,9 @@ class BridgeFlutterResult:
 
 def _json_curve(values: FloatArray) -> list[Any]:
     """Nested lists for JSON, ``null`` where a curve has no value (NaN is no JSON)."""
-    return np.where(np.isnan(values), None, values).tolist()  # type: ignore[no-any-return]
+    out = np.asarray(values, dtype=float).astype(object)
+    out[np.isnan(values)] = None
+    return list(out.tolist())
 
 
 def default_U_max(bridge: BridgeModel) -> float:
