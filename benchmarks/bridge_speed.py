@@ -24,9 +24,11 @@ Newton) beside the dense state-space sweep on the same model, with the relative 
 their flutter speeds; ``--dense-max`` is the most modes the dense sweep is run for (it grows as
 ``n^3`` per wind speed: 200 modes took 21 s to 42 s here). The fast route's time includes its
 certification where the state space has at most 600 states (150 modes with two lags).
+``--fast --fd`` prints the frequency-domain routes alike (:func:`ident.bridge.fast_flutter_fd.
+frequency_domain` beside :func:`ident.bridge.flutter.frequency_domain`, ``2 n`` states).
 
 Run: ``.venv/bin/python benchmarks/bridge_speed.py [--modes 12,50,200] [--nodes 100,1000]
-[--buffeting-U 40] [--record 600] [--no-buffeting] [--fast [--dense-max 200]]``.
+[--buffeting-U 40] [--record 600] [--no-buffeting] [--fast [--dense-max 200] [--fd]]``.
 """
 
 from __future__ import annotations
@@ -36,7 +38,7 @@ import time
 
 import numpy as np
 
-from ident.bridge import fast_flutter
+from ident.bridge import fast_flutter, fast_flutter_fd
 from ident.bridge import flutter as bf
 from ident.bridge.aero import aero_from_model
 from ident.bridge.model import BridgeModel
@@ -85,9 +87,11 @@ def main() -> None:
                         help="the fast flutter route beside the dense sweep (flutter only)")
     parser.add_argument("--dense-max", type=int, default=200,
                         help="most modes the dense sweep runs for with --fast")
+    parser.add_argument("--fd", action="store_true",
+                        help="with --fast: the frequency-domain routes, not the state space")
     args = parser.parse_args()
     if args.fast:
-        fast_rows(args.modes, args.nodes, args.dense_max)
+        fast_rows(args.modes, args.nodes, args.dense_max, args.fd)
         return
     print("| modes | nodes | states | SS time (s) | SS U_F (m/s) | FD time (s) | FD U_F (m/s) "
           "| FD - SS |")
@@ -112,17 +116,21 @@ def main() -> None:
         buffeting_rows(args.modes, args.nodes, args.buffeting_U, args.record)
 
 
-def fast_rows(modes: list[int], nodes: list[int], dense_max: int) -> None:
-    """Print the fast route beside the dense sweep (module docstring)."""
+def fast_rows(modes: list[int], nodes: list[int], dense_max: int, fd: bool = False) -> None:
+    """Print the fast route beside the dense sweep (module docstring); ``fd``: both FD."""
     print("| modes | nodes | states | fast time (s) | fast U_F (m/s) | branches followed "
           "| certified | dense time (s) | dense U_F (m/s) | fast / dense - 1 |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     for n_modes in modes:
         for n_nodes in nodes:
             bridge = sine_bridge(n_modes, n_nodes)
-            model = aero_from_model(bridge, flat_plate.jones_model()).model
+            aero = aero_from_model(bridge, flat_plate.jones_model())
+            model = aero.model
+            U_max = bf.default_U_max(bridge)
             t0 = time.perf_counter()
-            fast = fast_flutter.analyze(bridge, model)
+            fast = (fast_flutter_fd.frequency_domain(bridge, aero.flutter_derivatives,
+                                                     U_max=U_max) if fd
+                    else fast_flutter.analyze(bridge, model))
             t1 = time.perf_counter()
             note = fast.certification or ""
             followed = note.split(": ", 1)[1].split(" branches")[0] if ": " in note else "-"
@@ -130,12 +138,14 @@ def fast_rows(modes: list[int], nodes: list[int], dense_max: int) -> None:
             dense_time = dense_speed = diff = "-"
             if n_modes <= dense_max:
                 t2 = time.perf_counter()
-                dense = bf.analyze(bridge, model)
+                dense = (bf.frequency_domain(bridge, aero.flutter_derivatives, U_max=U_max)
+                         if fd else bf.analyze(bridge, model))
                 dense_time = f"{time.perf_counter() - t2:.2f}"
                 dense_speed = f"{dense.speed or float('nan'):.6f}"
                 if dense.speed is not None and fast.speed is not None:
                     diff = f"{fast.speed / dense.speed - 1:+.1e}"
-            print(f"| {n_modes} | {n_nodes} | {n_modes * (2 + model.n_lags)} | {t1 - t0:.2f} | "
+            states = 2 * n_modes if fd else n_modes * (2 + model.n_lags)
+            print(f"| {n_modes} | {n_nodes} | {states} | {t1 - t0:.2f} | "
                   f"{fast.speed or float('nan'):.6f} | {followed} | {certified} | {dense_time} | "
                   f"{dense_speed} | {diff} |", flush=True)
 

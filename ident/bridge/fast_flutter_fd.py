@@ -16,13 +16,14 @@ central difference (step 1e-6 s): the flutter derivatives are a table's monotone
 interpolation or a model's closed form, so only the Jacobian is approximate and Newton still
 converges to the exact root of the same ``T`` as the dense scan.
 
-**Certification** (up to ``certify_max_states`` = ``2 n`` states): the dense roots at
-``K_F (1 + 1e-4)`` (a little less wind) must not grow, and at ``K_F (1 - 1e-4)`` exactly the
-followed root must. A growing root at the higher K whose own wind speed ``B Re(omega) / K``
-lies below ``U_F`` means a skipped branch fluttered first:
-:class:`ident.errors.FlutterCertificationError`. A growing root whose wind speed lies above
-``U_F`` may have crossed anywhere below it (branches share K, not U): the result then says
-"not certified" and why.
+**Certification** (up to ``certify_max_states`` = ``2 n`` states): at ``K_F (1 - 1e-4)``
+exactly the followed root must grow among those near ``U_F``. At ``K_F (1 + 1e-4)`` (a little
+less wind) a growing root whose own wind speed ``B Re(omega) / K`` lies below ``U_F`` means a
+skipped branch fluttered first: :class:`ident.errors.FlutterCertificationError`. Branches
+share K, not U: a root that grows there at a wind speed above ``U_F`` (a higher mode, past
+its own flutter) is checked by a few more dense solves at the K where its frequency means
+``U_F`` (a fixed point): growing there (at ``U_F``) is the same error, stable passes; one
+whose wind speed does not settle at ``U_F`` leaves the result "not certified" (and says why).
 
 Not responsible for: the dense scan (:mod:`ident.bridge.flutter`), the continuation itself
 (:mod:`ident.bridge.fast_flutter`).
@@ -68,6 +69,9 @@ ComplexArray = npt.NDArray[np.complex128]
 #: relative, s^2 M''' h^2) and the round-off (~1e-16 / 1e-6) are both far below what Newton's
 #: Jacobian needs.
 _DIFF_STEP = 1e-6
+#: Dense solves that bring a higher branch's wind speed to U_F in the certification: its
+#: frequency changes by a few per cent between the two K, so each step gains that factor.
+_FIXED_POINT_STEPS = 4
 
 
 class FrequencyDomainProblem:
@@ -109,7 +113,7 @@ class FrequencyDomainProblem:
         return FrequencyDomainProblem(bridge, self._fd, self.s_range, idx)
 
     def M(self, s: float) -> ComplexArray:
-        """The effective mass ``Ms + rho/2 B^4 Q_modal(i/s) s^2``, kg."""
+        """Return the effective mass ``Ms + rho/2 B^4 Q_modal(i/s) s^2``, kg."""
         if s not in self._cache:
             K = 1.0 / s
             Q = Q_from_flutter_derivatives(np.array([K]), self._fd(np.array([K])))[0]
@@ -253,11 +257,14 @@ def frequency_domain(bridge: BridgeModel, flutter_derivatives: FlutterDerivative
         if last.lam.real > 0.0:
             before = points[-2]
             t = -before.lam.real / (last.lam.real - before.lam.real)
+            # The neighbourhood's flutter point first, then the whole T's (as the state space).
+            s_loc, omega_loc, vec_loc = _flutter_point(
+                locals_[r], before.U + t * (last.U - before.U),
+                before.lam + t * (last.lam - before.lam),
+                before.vec + t * (last.vec - before.vec))
             full = np.zeros(n, dtype=complex)
-            full[hoods[r]] = before.vec + t * (last.vec - before.vec)
-            s_f, omega_f, vec_f = _flutter_point(
-                problem, before.U + t * (last.U - before.U),
-                before.lam + t * (last.lam - before.lam), full)
+            full[hoods[r]] = vec_loc
+            s_f, omega_f, vec_f = _flutter_point(problem, s_loc, 1j * omega_loc, full)
             candidates.append((bridge.B * omega_f * s_f, omega_f, s_f, vec_f, r, False))
     result = _result(bridge, paths, candidates, s1)
     note = (f"fast route: {len(followed)} of {n} branches followed; {dropped} dropped once "
@@ -312,11 +319,34 @@ def _certify(bridge: BridgeModel, fd: FlutterDerivativeFunction, result: BridgeF
             f"{K_hi:.6g} the dense roots already grow at "
             f"{', '.join(f'{u:.6g} m/s' for u in U_grow)}: a branch the screening skipped "
             "fluttered first (follow more branches, or use the dense scan)")
-    if grow.size:
-        return (f"not certified: at K = {K_hi:.6g} roots grow at wind speeds above U_F "
-                f"({', '.join(f'{u:.6g} m/s' for u in U_grow)}); they may have crossed below it")
+    unsure = []
+    for root in grow:
+        # A root growing at K_hi whose wind speed there is above U_F: the same branch at the K
+        # where its frequency means U_F shows whether it grew by then. Its frequency changes
+        # with K: a few fixed-point steps (dense solves) put its wind speed at U_F.
+        near, K_j = root, bridge.B * root.real / U_F
+        for _ in range(_FIXED_POINT_STEPS):
+            K_j = bridge.B * near.real / U_F
+            at = _frequency_roots(bridge, fd, K_j)[0]
+            near = at[np.argmin(np.abs(at - near))]
+        U_near = bridge.B * near.real / K_j
+        if near.imag < 0.0 and U_near < U_F * (1.0 + CERTIFY_OFFSET):
+            raise FlutterCertificationError(
+                f"fast route gives flutter at {U_F:.6g} m/s, but the branch at "
+                f"{near.real / (2 * math.pi):.6g} Hz already grows at {U_near:.6g} m/s (K = "
+                f"{K_j:.6g}): a branch the screening skipped fluttered first")
+        if near.imag < 0.0:
+            unsure.append(f"{near.real / (2 * math.pi):.6g} Hz")
+    if unsure:
+        return (f"not certified: the wind speed of the growing branches at "
+                f"{', '.join(unsure)} did not settle at U_F")
+    checked = (f", {grow.size} branch(es) growing at higher wind speeds checked stable at "
+               "U_F") if grow.size else ""
     omega = _frequency_roots(bridge, fd, K_lo)[0]
-    grow = omega[omega.imag < 0.0]
+    # Only the roots near U_F count (higher modes past their own flutter grow at this K at
+    # higher wind speeds; checked above); the followed one sits at U_F (1 + 1e-4).
+    grow = omega[(omega.imag < 0.0)
+                 & (bridge.B * omega.real / K_lo <= U_F * (1.0 + 10.0 * CERTIFY_OFFSET))]
     target = 2.0 * math.pi * result.frequency
     if grow.size != 1 or abs(grow[0].real - target) > 1e-3 * target:
         raise FlutterCertificationError(
@@ -324,5 +354,5 @@ def _certify(bridge: BridgeModel, fd: FlutterDerivativeFunction, result: BridgeF
             f"K = {K_lo:.6g} the dense roots grow at "
             f"{', '.join(f'{x.real / (2 * math.pi):.6g} Hz' for x in grow) or 'no frequency'}"
             ": not exactly the followed root")
-    return (f"certified by dense roots ({2 * bridge.n_modes} states): none grows at K = "
-            f"{K_hi:.6g}, only the followed one at K = {K_lo:.6g}")
+    return (f"certified by dense roots ({2 * bridge.n_modes} states): none grows below U_F "
+            f"at K = {K_hi:.6g}{checked}, only the followed one at K = {K_lo:.6g}")

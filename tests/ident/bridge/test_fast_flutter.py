@@ -142,6 +142,7 @@ def test_a_3dof_bridge_with_sway_modes_and_the_example_deck_table():
         BRIDGES / "example_deck_table.csv"))
     assert aero.model.n_dof == 3 and any(np.any(mode.p) for mode in bridge.modes)
     dense, fast = _same_flutter(bridge, aero.model)
+    assert fast.critical_mode is not None
     assert fast.mode_labels[fast.critical_mode].startswith("T1S")
 
 
