@@ -16,8 +16,8 @@ central difference (step 1e-6 s): the flutter derivatives are a table's monotone
 interpolation or a model's closed form, so only the Jacobian is approximate and Newton still
 converges to the exact root of the same ``T`` as the dense scan.
 
-**Certification** (up to ``certify_max_states`` = ``2 n`` states, default 200): at ``K_F (1 - 1e-4)``
-exactly the followed root must grow among those near ``U_F``. At ``K_F (1 + 1e-4)`` (a little
+**Certification** (up to ``certify_max_states`` = ``2 n`` states, default 200): at
+``K_F (1 - 1e-4)`` exactly the followed root must grow among those near ``U_F``. At ``K_F (1 + 1e-4)`` (a little
 less wind) a growing root whose own wind speed ``B Re(omega) / K`` lies below ``U_F`` means a
 skipped branch fluttered first: :class:`ident.errors.FlutterCertificationError`. Branches
 share K, not U: a root that grows there at a wind speed above ``U_F`` (a higher mode, past
