@@ -17,13 +17,14 @@ interpolation or a model's closed form, so only the Jacobian is approximate and 
 converges to the exact root of the same ``T`` as the dense scan.
 
 **Certification** (up to ``certify_max_states`` = ``2 n`` states, default 200): at
-``K_F (1 - 1e-4)`` exactly the followed root must grow among those near ``U_F``. At ``K_F (1 + 1e-4)`` (a little
-less wind) a growing root whose own wind speed ``B Re(omega) / K`` lies below ``U_F`` means a
-skipped branch fluttered first: :class:`ident.errors.FlutterCertificationError`. Branches
-share K, not U: a root that grows there at a wind speed above ``U_F`` (a higher mode, past
-its own flutter) is checked by a few more dense solves at the K where its frequency means
-``U_F`` (a fixed point): growing there (at ``U_F``) is the same error, stable passes; one
-whose wind speed does not settle at ``U_F`` leaves the result "not certified" (and says why).
+``K_F (1 - 1e-4)`` exactly the followed root must grow among those near ``U_F``. At
+``K_F (1 + 1e-4)`` (a little less wind) a growing root whose own wind speed
+``B Re(omega) / K`` lies below ``U_F`` means a skipped branch fluttered first:
+:class:`ident.errors.FlutterCertificationError`. Branches share K, not U: a root that grows
+there at a wind speed above ``U_F`` (a higher mode, past its own flutter) is checked by a
+dense solve at the K where its frequency means ``U_F``, repeated (a fixed point) while it
+grows there: growing at ``U_F`` is the same error, stable passes; one whose wind speed does
+not settle at ``U_F`` leaves the result "not certified" (and says why).
 
 Not responsible for: the dense scan (:mod:`ident.bridge.flutter`), the continuation itself
 (:mod:`ident.bridge.fast_flutter`).
