@@ -8,6 +8,7 @@ cause. This follows python-control's ``ControlDimension(ValueError)`` pattern.
 from __future__ import annotations
 
 __all__ = [
+    "FlutterCertificationError",
     "IdentError",
     "InsufficientDataError",
     "NonUniformSamplingError",
@@ -34,3 +35,7 @@ class RankDeficiencyError(InsufficientDataError):
 
 class ReleaseNotFoundError(InsufficientDataError):
     """No release (a hold, then a free decay from rest) in the displacements given."""
+
+
+class FlutterCertificationError(IdentError, RuntimeError):
+    """A fast flutter analysis disagrees with its dense check, or could not follow a branch."""

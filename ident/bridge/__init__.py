@@ -12,6 +12,11 @@ flutter and buffeting"):
 - :mod:`~ident.bridge.flutter`: multimode flutter without iteration (state space), the
   multimode frequency-domain check from flutter derivatives, and every mode's in-wind frequency
   and damping against U;
+- :mod:`~ident.bridge.fast_flutter`: many-mode flutter without a dense sweep: the lag states
+  eliminated exactly (an ``n x n`` rational eigenproblem), the branches that can flutter
+  followed in U, the flutter point solved by Newton and certified by two dense solves;
+- :mod:`~ident.bridge.fast_flutter_fd`: the frequency-domain check the same way (its quadratic
+  problem followed in 1/K);
 - :mod:`~ident.bridge.routes`: the bridge's flutter by both routes, compared as a section's are
   (:mod:`ident.tables.flutter_routes`);
 - :mod:`~ident.bridge.aero`: the section aerodynamics for a bridge: an RFC model or a

@@ -96,6 +96,9 @@ class BridgeFlutterResult:
     unstable_at_start : bool
         The frequency domain only: a branch already grows at the highest K scanned (the lowest
         wind speed); ``speed`` is that branch's wind speed there, flutter lies at or below it.
+    certification : str or None
+        The fast route only (:mod:`ident.bridge.fast_flutter`): which branches were followed
+        and what the dense check certified (or why none was made).
     """
 
     speed: float | None
@@ -111,6 +114,7 @@ class BridgeFlutterResult:
     method: str = "state-space"
     divergence_speed: float | None = None
     unstable_at_start: bool = False
+    certification: str | None = None
 
     @property
     def found(self) -> bool:
@@ -141,8 +145,9 @@ class BridgeFlutterResult:
         return text
 
     def to_dict(self) -> dict[str, Any]:
-        """Return a JSON-ready dict (curves included)."""
-        return {
+        """Return a JSON-ready dict (curves included; ``certification`` from the fast route)."""
+        extra = {} if self.certification is None else {"certification": self.certification}
+        return extra | {
             "method": self.method, "flutter_speed": self.speed,
             "flutter_frequency": self.frequency, "reduced_frequency": self.reduced_frequency,
             "critical_mode": None if self.critical_mode is None
@@ -150,9 +155,16 @@ class BridgeFlutterResult:
             "participation": [{"mode": label, "share": share}
                               for label, share in self.participating()],
             "divergence_speed": self.divergence_speed, "U_max": self.U_max,
-            "mode_labels": list(self.mode_labels), "U": self.U.tolist(),
-            "frequencies": self.frequencies.tolist(), "damping": self.damping.tolist(),
+            "mode_labels": list(self.mode_labels), "U": _json_curve(self.U),
+            "frequencies": _json_curve(self.frequencies), "damping": _json_curve(self.damping),
         }
+
+
+def _json_curve(values: FloatArray) -> list[Any]:
+    """Nested lists for JSON, ``null`` where a curve has no value (NaN is no JSON)."""
+    out = np.asarray(values, dtype=float).astype(object)
+    out[np.isnan(values)] = None
+    return list(out.tolist())
 
 
 def default_U_max(bridge: BridgeModel) -> float:
