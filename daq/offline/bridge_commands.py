@@ -53,6 +53,10 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--u-max", type=float, default=None,
                    help="top wind speed of the flutter search, m/s (default: the lowest "
                         "torsional mode at a reduced frequency of 0.2)")
+    p.add_argument("--method", choices=("auto", "dense", "fast"), default="auto",
+                   help="how both flutter routes are solved: every branch on a grid (dense), "
+                        "the branches that can flutter followed (fast), or fast above 40 modes "
+                        "(auto, the default)")
     p.add_argument("--json", type=Path, default=None,
                    help="write the flutter speeds, frequency, participating modes, mode curves "
                         "(and buffeting RMS) to this file")
@@ -86,14 +90,16 @@ def run(args: argparse.Namespace) -> int:
     return run_bridge(args.bridge, aero_path=args.aero, convention=args.convention,
                       u_max=args.u_max, json_path=args.json, out=args.out,
                       mode_tables=args.modes, write_bridge=args.write_bridge,
-                      buffeting=args.buffeting, wind=args.wind, time_domain=args.time_domain)
+                      buffeting=args.buffeting, wind=args.wind, time_domain=args.time_domain,
+                      method=args.method)
 
 
 def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: str = "scanlan",
                u_max: float | None = None, json_path: Path | None = None,
                out: Path | None = None, mode_tables: list[Path] | None = None,
                write_bridge: Path | None = None, buffeting: tuple[float, ...] | None = None,
-               wind: Path | None = None, time_domain: float | None = None) -> int:
+               wind: Path | None = None, time_domain: float | None = None,
+               method: str = "auto") -> int:
     """Analyse a bridge's multimode flutter (see the module docstring); return 0.
 
     Parameters
@@ -112,6 +118,8 @@ def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: 
         Mode tables to build the bridge from, and where to write it.
     buffeting, wind, time_domain : optional
         Buffeting speeds (m/s), the wind file, the time-domain record length (s).
+    method : str
+        How the flutter routes are solved (:data:`ident.bridge.routes.METHODS`).
     """
     from ident.bridge.routes import bridge_flutter_routes
 
@@ -147,7 +155,7 @@ def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: 
     for note in aero.notes:
         print(f"note: {note}")
 
-    routes = bridge_flutter_routes(bridge, aero, U_max=u_max)
+    routes = bridge_flutter_routes(bridge, aero, U_max=u_max, method=method)
     result, check, comparison = routes.state_space, routes.frequency_domain, routes.comparison
     aero = routes.aero
     print(f"state space: {result.summary()}")

@@ -16,12 +16,20 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+from ident.bridge import fast_flutter, fast_flutter_fd
 from ident.bridge import flutter as bridge_flutter
 from ident.bridge.aero import BridgeAero, with_model
 from ident.bridge.model import BridgeModel
 from ident.tables.flutter_routes import RouteComparison, compare_routes
 
-__all__ = ["BridgeFlutter", "bridge_flutter_routes"]
+__all__ = ["BridgeFlutter", "FAST_ABOVE_MODES", "METHODS", "bridge_flutter_routes"]
+
+#: How each route is solved: ``"dense"`` (every branch on a U or K grid, a dense eigenproblem
+#: each), ``"fast"`` (followed branches, :mod:`ident.bridge.fast_flutter`), ``"auto"``.
+METHODS = ("auto", "dense", "fast")
+#: ``"auto"`` takes the fast routes above this many modes (the dense sweep's cost grows as the
+#: cube of the states; at 50 modes it is about a second, at 200 a minute).
+FAST_ABOVE_MODES = 40
 
 
 @dataclass(frozen=True, eq=False)
@@ -52,7 +60,7 @@ def _below_range(result: bridge_flutter.BridgeFlutterResult, K_high: float) -> b
 
 
 def bridge_flutter_routes(bridge: BridgeModel, aero: BridgeAero,
-                          U_max: float | None = None) -> BridgeFlutter:
+                          U_max: float | None = None, method: str = "auto") -> BridgeFlutter:
     """Flutter of a bridge by both routes, compared (module docstring).
 
     Parameters
@@ -63,18 +71,27 @@ def bridge_flutter_routes(bridge: BridgeModel, aero: BridgeAero,
         :func:`~ident.bridge.aero.aero_from_table`).
     U_max : float, optional
         Top of the state-space search, m/s (default :func:`ident.bridge.flutter.default_U_max`).
+    method : str
+        One of :data:`METHODS`: how both routes are solved.
     """
-    ss = bridge_flutter.analyze(bridge, aero.model, U_max=U_max)
-    fd = bridge_flutter.frequency_domain(bridge, aero.flutter_derivatives, aero.K_range,
-                                         U_max=ss.U_max)
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    fast = method == "fast" or (method == "auto" and bridge.n_modes > FAST_ABOVE_MODES)
+    analyze = fast_flutter.analyze if fast else bridge_flutter.analyze
+    ss = analyze(bridge, aero.model, U_max=U_max)
+    check = fast_flutter_fd.frequency_domain if fast else bridge_flutter.frequency_domain
+    fd = check(bridge, aero.flutter_derivatives, aero.K_range, U_max=ss.U_max)
     notes: list[str] = []
+    for route in (ss, fd):
+        if route.certification is not None and "not certified" in route.certification:
+            notes.append(f"{route.method}: {route.certification}")
     fit = aero.table_fit
     if (fit is not None and aero.K_range is not None and _below_range(ss, aero.K_range[1])
             and not fd.unstable_at_start):
         first = ss
         for candidate, alternative, error in fit.alternatives():
             trial_aero = with_model(bridge, aero, alternative)
-            trial = bridge_flutter.analyze(bridge, trial_aero.model, U_max=U_max)
+            trial = analyze(bridge, trial_aero.model, U_max=U_max)
             if not _below_range(trial, aero.K_range[1]):
                 notes.append(f"the fit chosen first ({fit.model.n_lags} lag(s)) flutters at "
                              f"{first.speed:.4g} m/s with K = {first.reduced_frequency:.3g}, "

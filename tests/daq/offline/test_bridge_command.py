@@ -155,3 +155,22 @@ def test_flutter_outside_a_tables_range_is_flagged_as_extrapolation(tmp_path, ca
     assert summary["flutter_speed"] == pytest.approx(64.77, abs=0.01)  # the state space's
     assert summary["flutter_speed_frequency_domain"] is None
     assert len(summary["warnings"]) >= 2
+
+
+def test_the_fast_method_gives_the_dense_answer(tmp_path):
+    """--method fast (followed branches) against --method dense on the example bridge and table.
+
+    Tolerance 1e-9 relative: both solve the same equations to 1e-12 (Brent on the dense grid,
+    Newton on the followed branch); the divergence the same search on a coarser grid (1e-6).
+    """
+    results = {}
+    for method in ("dense", "fast"):
+        out = tmp_path / f"{method}.json"
+        assert main(["bridge", str(BRIDGE), "--aero", str(BRIDGES / "example_deck_table.csv"),
+                     "--method", method, "--json", str(out)]) == 0
+        results[method] = json.loads(out.read_text())
+    dense, fast = results["dense"], results["fast"]
+    for key in ("flutter_speed", "flutter_speed_frequency_domain"):
+        assert fast[key] == pytest.approx(dense[key], rel=1e-9)
+    assert fast["divergence_speed"] == pytest.approx(dense["divergence_speed"], rel=1e-6)
+    assert fast["result"]["basis"] == dense["result"]["basis"] == "state-space"
