@@ -29,6 +29,7 @@ from ident.errors import (
     IdentError,
     InsufficientDataError,
     NonUniformSamplingError,
+    PlausibilityError,
     RankDeficiencyError,
 )
 from ident.identification.e2rfc import identify
@@ -44,6 +45,7 @@ __all__ = [
     "IdentError",
     "InsufficientDataError",
     "NonUniformSamplingError",
+    "PlausibilityError",
     "RankDeficiencyError",
     "RationalFunctionModel",
     "Release",

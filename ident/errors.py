@@ -11,6 +11,7 @@ __all__ = [
     "IdentError",
     "InsufficientDataError",
     "NonUniformSamplingError",
+    "PlausibilityError",
     "RankDeficiencyError",
     "ReleaseNotFoundError",
 ]
@@ -34,3 +35,11 @@ class RankDeficiencyError(InsufficientDataError):
 
 class ReleaseNotFoundError(InsufficientDataError):
     """No release (a hold, then a free decay from rest) in the displacements given."""
+
+
+class PlausibilityError(IdentError, ValueError):
+    """Data no section model could have produced: a conversion mistake (a unit, a sign).
+
+    Raised where an answer from the data would be meaningless (a pitch in degrees, a lift of
+    the wrong sign); the message names the likely mistake. See :mod:`ident.records.plausibility`.
+    """
