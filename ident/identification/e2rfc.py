@@ -44,6 +44,12 @@ error the structure part.
 ``diagnostics.estimator`` says which estimator ran. Without such holds today's estimator runs,
 with a warning that says what turbulence needs. In smooth flow nothing changes.
 
+Guards (:mod:`ident.records.plausibility`): before the fit each release's amplitudes and
+force magnitudes are checked against the section's size (a pitch in degrees, a heave in
+millimetres are refused); after it the model is checked against the decays it came from (a lift
+of the wrong sign is refused; forces off by a factor, a release instant off from where the decay
+starts from rest are warnings in ``diagnostics.warnings``).
+
 What it returns is :mod:`ident.identification.results` (:class:`IdentifiedModel` and its
 diagnostics); the flutter speed's uncertainty and its parts are
 :mod:`ident.identification.uncertainty`.
@@ -388,7 +394,7 @@ def _guarded(model: IdentifiedModel, prepared: list[PreparedRelease], section: S
             scale = [max(math.sqrt(2) * float(np.std(q[:, j])), 1e-300) * 2 * math.pi * f
                      for j, f in enumerate(frequencies)]
             warnings += plausibility.check_start(release, section, partial(
-                fit.evaluate, derivative=1), scale)
+                fit.evaluate, derivative=1), scale, _random_response(fit))
             if fit.modes.size >= section.n_dof:
                 speeds.append(p.U)
                 measured.append(fit.modes)
