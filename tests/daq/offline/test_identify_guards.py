@@ -38,7 +38,7 @@ def sims():
 
 
 def _converted(sims, **scale):
-    """The releases with channels multiplied as a wrong conversion would (h, alpha, ...)."""
+    """Return the releases with channels multiplied as a wrong conversion would."""
     return [types.SimpleNamespace(t=s.t, U=s.U, rho=s.rho,
                                   **{c: scale.get(c, 1.0) * getattr(s, c)
                                      for c in ("h", "alpha", "lift", "moment")})
