@@ -93,6 +93,11 @@ def _build_parser() -> argparse.ArgumentParser:
                            "(flutter derivatives from decays at many wind speeds, then a Roger "
                            "fit; prints its caveats); auto (default): E2RFC when every file "
                            "holds forces")
+    p_id.add_argument("--table", type=Path, default=None,
+                      help="write the flutter-derivative table (CSV: K, H1..A4, then each "
+                           "derivative's std H1_std..) to this file")
+    p_id.add_argument("--reduced-velocities", default=None, metavar="START:STOP:STEP",
+                      help="rows of --table, U/(f B) (default: the releases' span)")
 
     p_diag = sub.add_parser(
         "diagnose",
@@ -566,7 +571,8 @@ def _dispatch(args: argparse.Namespace) -> int:
 
         return run_identify(args.files, json_path=args.json, n_lags=args.n_lags,
                             tubing_correction=not args.no_tubing_correction, route=args.route,
-                            detect_releases=args.detect_releases)
+                            detect_releases=args.detect_releases, table_path=args.table,
+                            reduced_velocities=args.reduced_velocities)
     if args.command == "reprocess":
         return _reprocess(args)
     if args.command == "diagnose":

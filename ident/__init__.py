@@ -30,6 +30,7 @@ from ident.errors import (
     IdentError,
     InsufficientDataError,
     NonUniformSamplingError,
+    PlausibilityError,
     RankDeficiencyError,
 )
 from ident.identification.e2rfc import identify
@@ -48,6 +49,7 @@ __all__ = [
     "IdentError",
     "InsufficientDataError",
     "NonUniformSamplingError",
+    "PlausibilityError",
     "RankDeficiencyError",
     "RationalFunctionModel",
     "Release",

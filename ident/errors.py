@@ -12,6 +12,7 @@ __all__ = [
     "IdentError",
     "InsufficientDataError",
     "NonUniformSamplingError",
+    "PlausibilityError",
     "RankDeficiencyError",
     "ReleaseNotFoundError",
 ]
@@ -39,3 +40,11 @@ class ReleaseNotFoundError(InsufficientDataError):
 
 class FlutterCertificationError(IdentError, RuntimeError):
     """A fast flutter analysis disagrees with its dense check, or could not follow a branch."""
+
+
+class PlausibilityError(IdentError, ValueError):
+    """Data no section model could have produced: a conversion mistake (a unit, a sign).
+
+    Raised where an answer from the data would be meaningless (a pitch in degrees, a lift of
+    the wrong sign); the message names the likely mistake. See :mod:`ident.records.plausibility`.
+    """

@@ -121,6 +121,7 @@ def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: 
     method : str
         How the flutter routes are solved (:data:`ident.bridge.routes.METHODS`).
     """
+    from daq.offline.derivative_table import table_std_report
     from ident.bridge.routes import bridge_flutter_routes
 
     if u_max is not None and not u_max > 0:
@@ -192,6 +193,10 @@ def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: 
                         "table_fit_derivative_error": {name: error.tolist() for name, error
                                                        in fit.derivative_error.items()},
                         "table_fit_accuracy": fit.accuracy, "table_fit_structure": fit.reason})
+        std_line, std_keys = table_std_report(aero.table)
+        if std_line is not None:
+            print(f"note: {std_line}")
+        summary.update(std_keys)
     _record_inputs_checked(summary, bridge, table_warnings)
     if buffeting is not None:
         summary.update(_buffeting(bridge, aero.model, buffeting, spec, time_domain, out))

@@ -4,7 +4,8 @@
 releases (E2RFC with its uncertainty, :func:`ident.identification.campaign.analyze_campaign`) and
 prints the flutter speed; for runs of three degrees of freedom also the 18 flutter derivatives over
 the releases' reduced frequencies (:mod:`daq.offline.derivative_table`; a model that left out the
-sway is refused). ``windrig flutter --section S.json (--model M.json | --table T.csv)`` analyses a
+sway is refused); ``--table OUT.csv`` writes the flutter-derivative table with each derivative's
+standard deviation. ``windrig flutter --section S.json (--model M.json | --table T.csv)`` analyses a
 section of two or three degrees of freedom with a model (``windrig identify --json`` output or
 ``{"A": ..., "d": ...}``) or a flutter-derivative table (``docs/flutter_derivative_tables.md``):
 the state-space analysis (a table is first fitted with rational functions,
@@ -32,7 +33,8 @@ __all__ = ["run_flutter", "run_identify"]
 
 def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
                  n_lags: int | None = None, tubing_correction: bool = True,
-                 route: str = "auto", detect_releases: bool = False) -> int:
+                 route: str = "auto", detect_releases: bool = False,
+                 table_path: Path | None = None, reduced_velocities: str | None = None) -> int:
     """Identify the releases of run files and print the model and flutter speed; return 0.
 
     Parameters
@@ -51,11 +53,19 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
         forces, else the displacement-only route.
     detect_releases : bool
         Find the releases in the lasers' signals (files without release rows).
+    table_path : Path, optional
+        Write the flutter-derivative table with each derivative's std here (CSV,
+        :func:`daq.offline.derivative_table.write_derivative_table`; E2RFC only).
+    reduced_velocities : str, optional
+        ``START:STOP:STEP`` of the table's reduced velocities ``U / (f B)``; default: the
+        releases' span.
     """
     from daq.offline.derivative_table import (
         check_model_dof,
         derivative_rows,
         format_derivative_table,
+        parse_reduced_velocities,
+        write_derivative_table,
     )
     from ident.errors import IdentError
     from ident.identification.campaign import analyze_campaign
@@ -63,12 +73,18 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
 
     if route not in ("auto", "e2rfc", "displacement"):
         raise UsageError(f"--route {route!r}: one of auto, e2rfc, displacement")
+    if reduced_velocities is not None and table_path is None:
+        raise UsageError("--reduced-velocities sets the rows of --table OUT.csv: give --table")
+    Ur = None if reduced_velocities is None else parse_reduced_velocities(reduced_velocities)
     without = [p for p in files if not forces_recorded(p)]
     if route == "e2rfc" and without:
         raise UsageError(f"{without[0]}: holds no forces (a rig without taps): E2RFC needs "
                          "them; identify it by the displacement-only route (--route "
                          "displacement)")
     displacement = route == "displacement" or bool(without)
+    if displacement and table_path is not None:
+        raise UsageError("--table: the displacement-only route has no parameter covariance to "
+                         "give the derivatives' std; the table needs E2RFC (files with forces)")
     runs = [read_run(p, tubing_correction=tubing_correction, detect_releases=detect_releases,
                      displacements_only=displacement) for p in files]
     notes = _detections(runs) if detect_releases else []
@@ -118,6 +134,9 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
         print(f"  also within one SE: {label}: " + (
             f"no flutter below {spread.U_max:.3g} m/s" if speed is None or speed_std is None
             else f"flutter speed {speed:.3f} +/- {speed_std:.3f} m/s"))
+    if table_path is not None:
+        notes += write_derivative_table(model, table_path, analysis.K, Ur)
+        print(f"wrote {table_path} (flutter derivatives and their std, Scanlan's signs)")
     for warning in [*notes, *analysis.warnings]:
         print(f"warning: {warning}")
     if json_path is not None:
@@ -135,6 +154,7 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
             "flutter_frequency": result.frequency,
             "critical_mode": result.critical_mode,
             "warnings": [*notes, *summary["warnings"]],
+            **({} if table_path is None else {"table": str(table_path)}),
             **({} if section.n_dof == 2 else {"flutter_derivatives": {
                 name: values.tolist() for name, values in
                 (("K", K_table), *derivative_values.items())}}),
@@ -281,6 +301,7 @@ def _read_model(path: Path, n_dof: int, section_path: Path) -> Any:
 def _table_fit(path: Path, convention: str, section: Any, out: dict[str, Any],
                warnings: list[str]) -> tuple[Any, Any]:
     """Read, check and fit a table; record its range, fit errors and checks in ``out``."""
+    from daq.offline.derivative_table import table_std_report
     from ident.errors import IdentError
     from ident.tables.fd_table import FlutterDerivativeTable
     from ident.tables.roger_table import fit_table
@@ -305,6 +326,10 @@ def _table_fit(path: Path, convention: str, section: Any, out: dict[str, Any],
         raise UsageError(f"{path}: {exc}") from exc
     print(f"{path}: {table.K.size} rows, K {table.K[0]:.3g} to {table.K[-1]:.3g}; "
           f"{fit.summary()}")
+    std_line, std_keys = table_std_report(table)
+    if std_line is not None:
+        print(f"note: {std_line}")
+    out.update(std_keys)
     out.update({"table": str(path), "table_convention": convention,
                 "table_filled": list(table.filled), "table_K": table.K.tolist(),
                 "table_fit_relative_error": fit.relative_error.tolist(),

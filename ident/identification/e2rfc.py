@@ -44,6 +44,12 @@ error the structure part.
 ``diagnostics.estimator`` says which estimator ran. Without such holds today's estimator runs,
 with a warning that says what turbulence needs. In smooth flow nothing changes.
 
+Guards (:mod:`ident.records.plausibility`): before the fit each release's amplitudes and
+force magnitudes are checked against the section's size (a pitch in degrees, a heave in
+millimetres are refused); after it the model is checked against the decays it came from (a lift
+of the wrong sign is refused; forces off by a factor, a release instant off from where the decay
+starts from rest are warnings in ``diagnostics.warnings``).
+
 What it returns is :mod:`ident.identification.results` (:class:`IdentifiedModel` and its
 diagnostics); the flutter speed's uncertainty and its parts are
 :mod:`ident.identification.uncertainty`.
@@ -54,6 +60,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
 import numpy.typing as npt
@@ -79,6 +86,7 @@ from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel
 from ident.numerics.selection import Candidate, select_one_se, within_one_se
 from ident.numerics.threads import single_threaded_blas
+from ident.records import plausibility
 from ident.records.release import Release
 
 __all__ = ["ESTIMATOR_TURBULENT", "TURBULENT_A3", "identify", "reduced_frequency_span"]
@@ -169,10 +177,18 @@ def identify(
     _check_degrees_of_freedom(releases, section)
     if n_lags is not None and (not isinstance(n_lags, int) or not 0 <= n_lags <= 3):
         raise ValueError(f"n_lags must be an integer in 0..3 or None, got {n_lags!r}")
+    guards = [w for r in releases for w in plausibility.check_release(r, section)]
     prepared = [prepare(r, section) for r in releases]
     if section.n_dof == 3:
         _check_modes_excited(prepared, section)
     model = _identify_prepared(prepared, section, n_lags, with_A3)
+    return _guarded(_turbulence_branch(model, releases, section, n_lags, with_A3),
+                    prepared, section, guards)
+
+
+def _turbulence_branch(model: IdentifiedModel, releases: list[Release], section: SectionModel,
+                       n_lags: int | None, with_A3: bool | None) -> IdentifiedModel:
+    """Return E2RFC's model, or in turbulence the refined-IV branch's (or a note on holds)."""
     if not model.diagnostics.turbulent:
         return model
     if not _turbulent_fit.holds_suffice(releases):
@@ -352,6 +368,43 @@ class _Context:
             K_range=K_ranges(prepared, self.section), warnings=tuple(warnings),
             _prepared=tuple(prepared), _section=self.section, _lag_roots=fit.d)
         return IdentifiedModel(fit.A, fit.d, diagnostics)
+
+
+def _guarded(model: IdentifiedModel, prepared: list[PreparedRelease], section: SectionModel,
+             guards: list[str]) -> IdentifiedModel:
+    """Add the plausibility guards' warnings (:mod:`ident.records.plausibility`) to a model's.
+
+    The releases' own (``guards``, from before the fit) come first, then the release instants
+    and the model against the measured decays. In turbulence the decays are a random response
+    whose modal fits neither start from rest nor give the modes' damping to the precision
+    these checks need: only the releases' own checks run there.
+
+    Raises
+    ------
+    PlausibilityError
+        The model says the lift's sign is flipped.
+    """
+    warnings = list(guards)
+    if not model.diagnostics.turbulent:
+        speeds, measured, heave = [], [], []
+        for p in prepared:
+            fit, release = p.fit, p.release
+            frequencies = [section.fh, section.fa, section.fp or 0.0][:section.n_dof]
+            q = release.coordinates(section.B)
+            scale = [max(math.sqrt(2) * float(np.std(q[:, j])), 1e-300) * 2 * math.pi * f
+                     for j, f in enumerate(frequencies)]
+            warnings += plausibility.check_start(release, section, partial(
+                fit.evaluate, derivative=1), scale, _random_response(fit))
+            if fit.modes.size >= section.n_dof:
+                speeds.append(p.U)
+                measured.append(fit.modes)
+                heave.append(name_modes(fit.mode_shapes(), section.mass_matrix())[0])
+        if len(speeds) >= 2:
+            warnings += plausibility.check_model(section, model, speeds, measured, heave)
+    if not warnings:
+        return model
+    diagnostics = replace(model.diagnostics, warnings=(*warnings, *model.diagnostics.warnings))
+    return IdentifiedModel(model.A, model.d, diagnostics)
 
 
 def _with_reason(found: _turbulent_fit.TurbulentResult, why: str

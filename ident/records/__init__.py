@@ -3,5 +3,8 @@
 - :mod:`~ident.records.release`: one free-vibration release (``Release``), validated;
 - :mod:`~ident.records.run_file`: the one thin module through which ident reads run files;
 - :mod:`~ident.records.release_onset`: the release instant found in the displacements alone
-  (a release by hand, a file without release events).
+  (a release by hand, a file without release events);
+- :mod:`~ident.records.plausibility`: guards against unit and sign mistakes (a pitch in
+  degrees, forces over the span, a lift of the wrong sign, a late release instant), run by
+  E2RFC.
 """

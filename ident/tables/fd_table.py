@@ -6,7 +6,10 @@ freedom"). On disk it is a CSV file (``docs/flutter_derivative_tables.md``): a
 header, one row per reduced velocity, the first column ``K`` (``B omega / U``) or ``Ur``
 (``U / (f B) = 2 pi / K``), then any of ``H1..H6, A1..A6, P1..P6`` in windrig's signs; a
 derivative the file does not have is zero, and the table says which ones it filled
-(:attr:`FlutterDerivativeTable.filled`).
+(:attr:`FlutterDerivativeTable.filled`). A derivative may carry its standard deviation
+(:attr:`FlutterDerivativeTable.std`), in a column named after it with ``_std`` (``H1_std``):
+``windrig identify --table`` writes them from the identified model's uncertainty, and reading a
+table keeps them (its flutter analysis uses the values; the std is reported alongside).
 
 Sources with other signs are converted on reading by a named ``convention``, never guessed:
 
@@ -27,7 +30,7 @@ import csv
 import math
 import os
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -41,7 +44,7 @@ from ident.model.conventions import (
     derivative_names,
 )
 
-__all__ = ["CONVENTIONS", "FlutterDerivativeTable"]
+__all__ = ["CONVENTIONS", "STD_SUFFIX", "FlutterDerivativeTable"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -49,6 +52,9 @@ FloatArray = npt.NDArray[np.float64]
 CONVENTIONS: tuple[str, ...] = ("scanlan", "z_up")
 #: Derivatives whose sign flips between windrig's signs and h, L positive upward.
 _Z_UP_FLIPS = frozenset({"H2", "H3", "H5", "H6", "A1", "A4", "P5", "P6"})
+#: Suffix of a derivative's standard-deviation column (``H1_std``); a std keeps its sign under
+#: every convention.
+STD_SUFFIX = "_std"
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,18 +72,22 @@ class FlutterDerivativeTable:
         Derivatives that the source did not give and that were set to zero.
     source : str, optional
         Where the table came from (a file name), for messages.
+    std : mapping of str to array_like, optional
+        Standard deviation of some or all of the derivatives (same names, each of shape (n),
+        finite and >= 0, non-dimensional); a derivative without one has no stated uncertainty.
 
     Raises
     ------
     ValueError
         On a K that is not > 0 or repeats, a missing or unknown derivative, a wrong length, or a
-        value that is not finite; the message names the derivative or the K.
+        value (or std) that is not finite (a std < 0); the message names the derivative or the K.
     """
 
     K: FloatArray
     values: Mapping[str, FloatArray]
     filled: tuple[str, ...] = ()
     source: str = ""
+    std: Mapping[str, FloatArray] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         where = f"{self.source}: " if self.source else ""
@@ -109,10 +119,12 @@ class FlutterDerivativeTable:
                 raise ValueError(f"{where}{name} is not finite at K = {bad:g}")
             values[name] = column[order]
             values[name].flags.writeable = False
+        std = _checked_std(self.std, names, K, order, where)
         K = K[order]
         K.flags.writeable = False
         object.__setattr__(self, "K", K)
         object.__setattr__(self, "values", values)
+        object.__setattr__(self, "std", std)
         object.__setattr__(self, "filled", tuple(self.filled))
 
     @property
@@ -130,10 +142,17 @@ class FlutterDerivativeTable:
         return Q_from_flutter_derivatives(self.K, dict(self.values))
 
     @classmethod
-    def from_model(cls, model: Any, K: Any, source: str = "") -> FlutterDerivativeTable:
-        """Tabulate a model's derivatives (anything with ``flutter_derivatives(K)``) at ``K``."""
+    def from_model(cls, model: Any, K: Any, source: str = "", *,
+                   with_std: bool = False) -> FlutterDerivativeTable:
+        """Tabulate a model's derivatives (anything with ``flutter_derivatives(K)``) at ``K``.
+
+        ``with_std`` also tabulates their standard deviations from the model's
+        ``flutter_derivative_std(K)`` (an identified model's:
+        :meth:`ident.identification.results.IdentifiedModel.flutter_derivative_std`).
+        """
         K_arr = np.asarray(K, dtype=float)
-        return cls(K_arr, model.flutter_derivatives(K_arr), source=source)
+        std = model.flutter_derivative_std(K_arr) if with_std else {}
+        return cls(K_arr, model.flutter_derivatives(K_arr), source=source, std=std)
 
     def interpolator(self) -> Callable[[Any], dict[str, FloatArray]]:
         """Return ``f(K) -> derivatives`` between the table's rows (monotone cubic, PCHIP).
@@ -159,13 +178,18 @@ class FlutterDerivativeTable:
         return derivatives
 
     def to_csv(self, path: str | os.PathLike[str]) -> None:
-        """Write the table as CSV: ``K`` then every derivative, windrig's signs, 17 digits."""
+        """Write the table as CSV: ``K``, every derivative, then each std there is (``H1_std``).
+
+        Windrig's signs, 17 significant digits (a round trip is exact).
+        """
         names = derivative_names(self.n_dof)
+        with_std = [n for n in names if n in self.std]
         with open(path, "w", newline="", encoding="utf-8") as handle:
             writer = csv.writer(handle)
-            writer.writerow(["K", *names])
+            writer.writerow(["K", *names, *(f"{n}{STD_SUFFIX}" for n in with_std)])
             for i, K in enumerate(self.K):
-                writer.writerow([repr(float(K)), *(repr(float(self.values[n][i])) for n in names)])
+                writer.writerow([repr(float(K)), *(repr(float(self.values[n][i])) for n in names),
+                                 *(repr(float(self.std[n][i])) for n in with_std)])
 
     @classmethod
     def from_csv(cls, path: str | os.PathLike[str], *, convention: str = "scanlan",
@@ -177,7 +201,8 @@ class FlutterDerivativeTable:
         path : path-like
             The CSV file: a header row, then one row per reduced frequency. Blank lines and
             lines starting with ``#`` are skipped. Header names are case-insensitive and may
-            carry Scanlan's star (``H1*``).
+            carry Scanlan's star (``H1*``). A column ``<name>_std`` (``H1_std``, ``H1*_std``)
+            is the std of that derivative, which the file must also give.
         convention : str
             One of :data:`CONVENTIONS`: the signs the file's derivatives are written in.
         n_dof : int, optional
@@ -195,12 +220,12 @@ class FlutterDerivativeTable:
             raise ValueError(f"{source}: unknown convention {convention!r}; allowed: "
                              f"{', '.join(CONVENTIONS)}")
         header, rows = _read_rows(source)
-        columns = [name.strip().upper().rstrip("*") for name in header]
+        columns = [_column_name(name) for name in header]
         if not columns or columns[0] not in ("K", "UR"):
             raise ValueError(f"{source}: the first column must be K or Ur, got "
                              f"{header[0] if header else 'nothing'!r}")
         unknown = [h for h, c in zip(header[1:], columns[1:], strict=True)
-                   if c not in FLUTTER_DERIVATIVE_NAMES_3DOF]
+                   if c.removesuffix(STD_SUFFIX.upper()) not in FLUTTER_DERIVATIVE_NAMES_3DOF]
         if unknown:
             raise ValueError(f"{source}: unknown column(s) {unknown}; allowed: K or Ur, then "
                              f"{', '.join(FLUTTER_DERIVATIVE_NAMES_3DOF)}")
@@ -215,7 +240,14 @@ class FlutterDerivativeTable:
             if np.any(first <= 0.0):
                 raise ValueError(f"{source}: every Ur must be > 0")
             first = 2.0 * math.pi / first
-        given = dict(zip(columns[1:], data[:, 1:].T, strict=True))
+        read = dict(zip(columns[1:], data[:, 1:].T, strict=True))
+        suffix = STD_SUFFIX.upper()
+        given = {c: v for c, v in read.items() if not c.endswith(suffix)}
+        std = {c.removesuffix(suffix): v for c, v in read.items() if c.endswith(suffix)}
+        orphans = sorted(set(std) - set(given))
+        if orphans:
+            raise ValueError(f"{source}: std column(s) {[n + STD_SUFFIX for n in orphans]} "
+                             "without their derivative's column")
         if n_dof is None:
             n_dof = 3 if set(given) - set(FLUTTER_DERIVATIVE_NAMES) else 2
         names = derivative_names(n_dof)
@@ -227,7 +259,38 @@ class FlutterDerivativeTable:
             given = {n: -v if n in _Z_UP_FLIPS else v for n, v in given.items()}
         filled = tuple(n for n in names if n not in given)
         values = {n: given.get(n, np.zeros_like(first)) for n in names}
-        return cls(first, values, filled=filled, source=source)
+        return cls(first, values, filled=filled, source=source, std=std)
+
+
+def _column_name(header: str) -> str:
+    """Return a header's canonical name: upper case, without Scanlan's star (``h1*_std``)."""
+    name = header.strip().upper()
+    suffix = STD_SUFFIX.upper()
+    if name.endswith(suffix):
+        return name.removesuffix(suffix).rstrip("*") + suffix
+    return name.rstrip("*")
+
+
+def _checked_std(std: Mapping[str, Any], names: tuple[str, ...] | list[str], K: FloatArray,
+                 order: npt.NDArray[np.intp], where: str) -> dict[str, FloatArray]:
+    """Return a table's std columns checked (known names, lengths, finite, >= 0) and sorted."""
+    unknown = sorted(set(std) - set(names))
+    if unknown:
+        raise ValueError(f"{where}std of unknown flutter derivative(s) {unknown}")
+    out: dict[str, FloatArray] = {}
+    for name in names:
+        if name not in std:
+            continue
+        column = np.asarray(std[name], dtype=float)
+        if column.shape != K.shape:
+            raise ValueError(f"{where}{name}{STD_SUFFIX} has {column.size} values for {K.size} K")
+        bad = ~np.isfinite(column) | (column < 0.0)
+        if np.any(bad):
+            raise ValueError(f"{where}{name}{STD_SUFFIX} is not a finite value >= 0 at K = "
+                             f"{float(K[bad][0]):g}")
+        out[name] = column[order]
+        out[name].flags.writeable = False
+    return out
 
 
 def _read_rows(source: str) -> tuple[list[str], list[list[float]]]:

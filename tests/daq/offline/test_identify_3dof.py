@@ -29,7 +29,9 @@ from ident.errors import IdentError
 from ident.model import flutter
 from ident.model.conventions import derivative_names
 from ident.model.flat_plate import jones_model
+from ident.model.rfc import RationalFunctionModel
 from ident.records.run_file import read_run
+from ident.tables.fd_table import FlutterDerivativeTable
 from simulators.decks import BLUFF_DECK_3DOF, bluff_deck_3dof_model
 from simulators.tunnel import simulate_release
 
@@ -112,3 +114,21 @@ def test_identify_prints_the_18_derivatives_and_the_flutter_speed(run_files, tmp
     table = data["flutter_derivatives"]
     assert list(table) == ["K", *derivative_names(3)] and len(table["K"]) == TABLE_POINTS
     assert np.asarray(data["model"]["A"]).shape[1:] == (3, 3)
+
+
+def test_identify_table_holds_the_18_derivatives_and_their_std(run_files, tmp_path):
+    """``--table``: 18 derivatives then 18 std columns, the JSON model's values, read back 3-DOF."""
+    table, out = tmp_path / "table.csv", tmp_path / "model.json"
+    assert main(["identify", *map(str, run_files), "--table", str(table), "--json",
+                 str(out)]) == 0
+    names = list(derivative_names(3))
+    header = table.read_text().splitlines()[0].split(",")
+    assert header == ["K", *names, *(f"{n}_std" for n in names)]
+    back = FlutterDerivativeTable.from_csv(table)
+    assert back.n_dof == 3 and list(back.std) == names
+    model = RationalFunctionModel.from_dict(json.loads(out.read_text())["model"])
+    expected = model.flutter_derivatives(back.K)
+    for name in names:
+        # Both written with every digit: equal to round-off.
+        np.testing.assert_allclose(back.values[name], expected[name], rtol=1e-12, atol=1e-12)
+        assert np.all(back.std[name] > 0.0)
