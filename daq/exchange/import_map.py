@@ -199,6 +199,10 @@ class ReleaseSpec:
     length : float or None
         Seconds of decay kept after each release (None: up to the next release's hold, or the
         end of the source).
+    ends : tuple of float or None
+        With ``times``: where each decay ends, s on the source's time base (its first sample
+        not kept), instead of where the model is found still again: a run file exported by
+        windrig keeps its decays row for row.
     """
 
     times: tuple[float, ...] | None = None
@@ -208,6 +212,7 @@ class ReleaseSpec:
     detect: bool = False
     hold: float = 0.0
     length: float | None = None
+    ends: tuple[float, ...] | None = None
 
 
 @dataclass(frozen=True)
@@ -366,7 +371,8 @@ def _releases(raw: Any, where: str) -> ReleaseSpec:
         raise UsageError(f"{where}: give exactly one of times (a list, s), column (a trigger "
                          "channel) or detect = true (found in h and alpha)")
     _keys(raw, where, {modes[0], "hold"},
-          {"length"} | ({"threshold", "edge"} if modes[0] == "column" else set()))
+          {"length"} | ({"threshold", "edge"} if modes[0] == "column" else set())
+          | ({"ends"} if modes[0] == "times" else set()))
     hold = parse_number(raw["hold"], f"{where} hold")
     if hold < 0:
         raise UsageError(f"{where} hold = {hold!r} s must be >= 0")
@@ -381,7 +387,17 @@ def _releases(raw: Any, where: str) -> ReleaseSpec:
         values = tuple(parse_number(t, f"{where} times[{i}]") for i, t in enumerate(times))
         if any(b <= a for a, b in zip(values, values[1:], strict=False)):
             raise UsageError(f"{where} times must increase, got {list(values)}")
-        return ReleaseSpec(times=values, hold=hold, length=length)
+        ends = None
+        if "ends" in raw:
+            if not isinstance(raw["ends"], list) or len(raw["ends"]) != len(values):
+                raise UsageError(f"{where} ends must be a list of {len(values)} seconds, one "
+                                 "per release time")
+            ends = tuple(parse_number(e, f"{where} ends[{i}]") for i, e in enumerate(raw["ends"]))
+            late = [i for i, (tr, e) in enumerate(zip(values, ends, strict=True)) if e <= tr]
+            if late:
+                raise UsageError(f"{where} ends[{late[0]}] = {ends[late[0]]!r} s is not after "
+                                 f"its release time {values[late[0]]!r} s")
+        return ReleaseSpec(times=values, hold=hold, length=length, ends=ends)
     if modes[0] == "column":
         edge = raw.get("edge", "falling")
         if edge not in ("falling", "rising"):

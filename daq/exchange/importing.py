@@ -303,9 +303,13 @@ def table_releases(imap: ImportMap, table: SourceTable, config: RigConfig
         end = float(t[-1]) + 0.5 * dt
         if k + 1 < len(times):
             end = min(end, times[k + 1] - hold)
-        caught = still_start_before(t, data["h"], data["alpha"], after=tr,
-                                    before=times[k + 1] if k + 1 < len(times) else float(t[-1]))
-        if caught is not None:  # the model held still again: the catch ended the decay
+        ends = imap.releases.ends
+        caught = None if ends is not None else still_start_before(
+            t, data["h"], data["alpha"], after=tr,
+            before=times[k + 1] if k + 1 < len(times) else float(t[-1]))
+        if ends is not None:  # given: the decay is kept row for row, no catch searched
+            end = min(end, ends[k])
+        elif caught is not None:  # the model held still again: the catch ended the decay
             end = min(end, caught - CATCH_GUARD_S)
         # A still stretch is found up to half the stillness window late after a step (the
         # catch): CATCH_GUARD_S is that margin, as for the decay's end.

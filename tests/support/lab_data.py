@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+from scipy.io import savemat
 
 from daq.config import parse_rig_config
 from ident.model import flat_plate, flutter
@@ -118,3 +119,37 @@ def imported_deviation(path: object, record: LabRecord) -> dict[str, float]:
                 worst = float(np.max(np.abs(got - want[first:first + n])))
                 out[name] = max(out[name], worst / float(np.max(np.abs(want))))
     return out
+
+
+#: The map of the MATLAB v5 records :func:`write_mat_v5` writes (listed release instants).
+MAP_V5 = """\
+config = "sim_flat_plate"
+[time]
+column = "test.time"
+unit = "s"
+[channels]
+h = { column = "test.h_mm", unit = "mm", sign = "down" }
+alpha = { column = "test.alpha", unit = "rad", sign = "nose_up" }
+lift = { column = "test.lift", unit = "N/m", sign = "down" }
+moment = { column = "test.moment", unit = "N m/m", sign = "nose_up" }
+[wind]
+U = { property = "U" }
+rho = { property = "rho" }
+[releases]
+times = [1.0, 9.5]
+hold = 1.0
+"""
+
+
+def mat_fields(k: int) -> dict[str, np.ndarray]:
+    """Return record k as a MATLAB user keeps it: time in s, heave in mm, the rest SI."""
+    r = lab_record(k)
+    return {"time": r.t, "h_mm": r.h * 1e3, "alpha": r.alpha, "lift": r.lift,
+            "moment": r.moment}
+
+
+def write_mat_v5(path, k: int) -> None:
+    """Write record k as MATLAB v5 (column vectors in a struct, scalars beside)."""
+    r = lab_record(k)
+    savemat(path, {"test": {name: x[:, None] for name, x in mat_fields(k).items()},
+                   "U": r.U, "rho": r.rho, "operator": "lab"}, format="5")

@@ -84,6 +84,9 @@ def run_import(tmp_path, map_text: str, *sources, capsys):
     (('config = "sim_flat_plate"', 'config = "sim_flat_plate"\ngroups = ["Test_*"]'),
      ["data.csv", "TDMS groups", "csv"]),
     (("[wind]", "wind = ["), ["not valid TOML"]),
+    (("times = [1.0]", "times = [1.0]\nends = [2.0, 3.0]"),
+     ["[releases] ends", "list of 1 seconds"]),
+    (("times = [1.0]", "times = [1.0]\nends = [0.5]"), ["[releases] ends[0] = 0.5", "not after"]),
 ])
 def test_a_mistake_in_the_map_is_one_error_line_naming_it(tmp_path, capsys, edit, names):
     write_csv(tmp_path / "data.csv")

@@ -15,29 +15,19 @@ import json
 import h5py
 import numpy as np
 import pytest
-from scipy.io import savemat
 
 from daq.cli import main
 
-from support.lab_data import SPEEDS, TRUTH_SPEED, imported_deviation, lab_record
+from support.lab_data import (
+    MAP_V5,
+    SPEEDS,
+    TRUTH_SPEED,
+    imported_deviation,
+    lab_record,
+    mat_fields,
+    write_mat_v5,
+)
 
-MAP_V5 = """\
-config = "sim_flat_plate"
-[time]
-column = "test.time"
-unit = "s"
-[channels]
-h = { column = "test.h_mm", unit = "mm", sign = "down" }
-alpha = { column = "test.alpha", unit = "rad", sign = "nose_up" }
-lift = { column = "test.lift", unit = "N/m", sign = "down" }
-moment = { column = "test.moment", unit = "N m/m", sign = "nose_up" }
-[wind]
-U = { property = "U" }
-rho = { property = "rho" }
-[releases]
-times = [1.0, 9.5]
-hold = 1.0
-"""
 #: The same map, the releases found in the signals.
 MAP_V73 = MAP_V5.replace("times = [1.0, 9.5]", "detect = true")
 
@@ -46,26 +36,13 @@ MAT73_HEADER = (b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Sun Nov 29
                 b"HDF5 schema 1.00 .")
 
 
-def _fields(k: int) -> dict[str, np.ndarray]:
-    r = lab_record(k)
-    return {"time": r.t, "h_mm": r.h * 1e3, "alpha": r.alpha, "lift": r.lift,
-            "moment": r.moment}
-
-
-def write_mat_v5(path, k: int) -> None:
-    """Write record k as MATLAB v5 (column vectors in a struct, scalars beside)."""
-    r = lab_record(k)
-    savemat(path, {"test": {name: x[:, None] for name, x in _fields(k).items()},
-                   "U": r.U, "rho": r.rho, "operator": "lab"}, format="5")
-
-
 def write_mat_v73(path, k: int) -> None:
     """Write record k as MATLAB v7.3 does: HDF5, arrays transposed, classes as attributes."""
     r = lab_record(k)
     with h5py.File(path, "w", userblock_size=512) as f:
         test = f.create_group("test")
         test.attrs["MATLAB_class"] = np.bytes_("struct")
-        for name, x in _fields(k).items():  # an n x 1 column is stored 1 x n
+        for name, x in mat_fields(k).items():  # an n x 1 column is stored 1 x n
             test.create_dataset(name, data=x[None, :]).attrs["MATLAB_class"] = np.bytes_("double")
         for name, x in (("U", r.U), ("rho", r.rho)):
             f.create_dataset(name, data=np.array([[x]])).attrs["MATLAB_class"] = \
