@@ -73,9 +73,13 @@ def _build_parser() -> argparse.ArgumentParser:
     from daq.offline import bridge_commands  # light: imports numerics only when it runs
 
     bridge_commands.add_parser(sub)
-    from daq.exchange import import_command  # light: imports the readers only when it runs
+    from daq.exchange import (  # light: import the readers and writers only when they run
+        export_command,
+        import_command,
+    )
 
     import_command.add_parser(sub)
+    export_command.add_parser(sub)
     p_id = sub.add_parser(
         "identify", help="E2RFC on the releases of recorded run files; prints the flutter speed"
     )
@@ -192,16 +196,6 @@ def _build_parser() -> argparse.ArgumentParser:
              "releases, events, CALZ, and whether it was closed, crashed or recovered")
     p_info.add_argument("file", type=Path, help="a windrig HDF5 run file")
     p_info.add_argument("--json", action="store_true", help="print JSON instead of text")
-
-    p_exp = sub.add_parser(
-        "export", help="a run file's sync view, releases, events and calibrations, with units, "
-                       "as CSV, MATLAB (.mat v5), netCDF-4 or TDMS")
-    p_exp.add_argument("file", type=Path, help="a windrig HDF5 run file")
-    p_exp.add_argument("--to", required=True, choices=("csv", "mat", "netcdf", "tdms"),
-                       help="the format")
-    p_exp.add_argument("--out", type=Path, default=None,
-                       help="file (csv: folder) to create; never overwritten (default: beside "
-                            "the run: RUN_csv/, RUN.mat, RUN.nc, RUN.tdms)")
 
     p_camp = sub.add_parser(
         "campaign", help="a headless test campaign from a plan: fixed or adaptive wind speeds, "
@@ -594,9 +588,9 @@ def _dispatch(args: argparse.Namespace) -> int:
 
         return run_import(args)
     if args.command == "export":
-        from daq.exchange.export_run import run_export
+        from daq.exchange.export_command import run as run_export
 
-        return run_export(args.file, args.to, args.out)
+        return run_export(args)
     raise AssertionError(f"unhandled command {args.command!r}")  # argparse rejects unknown ones
 
 

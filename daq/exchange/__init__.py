@@ -18,6 +18,8 @@ import_command
 export_contents
     What a run file holds for other programs (the synchronised view, the releases, the events,
     the calibrations, with their units), read once.
+export_command
+    ``windrig export``'s parser (light: the writers load only when it runs).
 export_run
     ``windrig export``: the command (its checks, the writer chosen, what it says).
 export_writers
