@@ -20,6 +20,7 @@ their last row or two held the catch's step and E2RFC gave 12.28-12.36 +- 0.55 m
 
 from __future__ import annotations
 
+import math
 import re
 import threading
 import time
@@ -139,4 +140,10 @@ def test_releases_by_hand_without_a_plc_are_found_within_5_ms_and_identified_as_
     U_plc, std_plc = _identify(plc)
     print(f"found {1e3 * errors} ms; U_F {U_manual:.3f} +- {std_manual:.3f} m/s by hand, "
           f"{U_plc:.3f} +- {std_plc:.3f} m/s by PLC")
-    assert abs(U_manual - U_plc) <= std_plc, (U_manual, std_manual, U_plc, std_plc)
+    # Two estimates from two recordings (their own noise): their difference has the std
+    # sqrt(std_manual^2 + std_plc^2). One PLC std (the bound before) failed by chance about
+    # one run in three (CI: 11.962 +- 0.064 by hand, 11.837 +- 0.114 by PLC); three of the
+    # difference's std fail about one run in 400, and still catch a release by hand that
+    # biased the answer by more than a few tenths of a m/s.
+    both = math.hypot(std_manual, std_plc)
+    assert abs(U_manual - U_plc) <= 3.0 * both, (U_manual, std_manual, U_plc, std_plc)
