@@ -15,12 +15,14 @@ aerodynamics (:mod:`ident.bridge.aero`).
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any
 
 from ident.bridge import fast_flutter, fast_flutter_fd
 from ident.bridge import flutter as bridge_flutter
 from ident.bridge.aero import BridgeAero, with_model
 from ident.bridge.model import BridgeModel
-from ident.tables.flutter_routes import RouteComparison, compare_routes
+from ident.model.rfc import RationalFunctionModel
+from ident.tables.flutter_routes import RouteComparison, compare_routes, next_structure_if_below
 
 __all__ = ["BridgeFlutter", "FAST_ABOVE_MODES", "METHODS", "bridge_flutter_routes"]
 
@@ -54,11 +56,6 @@ def _label(result: bridge_flutter.BridgeFlutterResult) -> str | None:
     return None if result.critical_mode is None else result.mode_labels[result.critical_mode]
 
 
-def _below_range(result: bridge_flutter.BridgeFlutterResult, K_high: float) -> bool:
-    return (result.speed is not None and result.reduced_frequency is not None
-            and result.reduced_frequency > K_high * (1 + 1e-9))
-
-
 def bridge_flutter_routes(bridge: BridgeModel, aero: BridgeAero,
                           U_max: float | None = None, method: str = "auto") -> BridgeFlutter:
     """Flutter of a bridge by both routes, compared (module docstring).
@@ -86,20 +83,15 @@ def bridge_flutter_routes(bridge: BridgeModel, aero: BridgeAero,
         if route.certification is not None and "not certified" in route.certification:
             notes.append(f"{route.method}: {route.certification}")
     fit = aero.table_fit
-    if (fit is not None and aero.K_range is not None and _below_range(ss, aero.K_range[1])
-            and not fd.unstable_at_start):
-        first = ss
-        for candidate, alternative, error in fit.alternatives():
+    if fit is not None and aero.K_range is not None:
+        def with_alternative(alternative: RationalFunctionModel) -> tuple[Any, BridgeAero]:
             trial_aero = with_model(bridge, aero, alternative)
-            trial = analyze(bridge, trial_aero.model, U_max=U_max)
-            if not _below_range(trial, aero.K_range[1]):
-                notes.append(f"the fit chosen first ({fit.model.n_lags} lag(s)) flutters at "
-                             f"{first.speed:.4g} m/s with K = {first.reduced_frequency:.3g}, "
-                             "below the table's range, which the table does not show: the "
-                             f"state space uses the next structure, {candidate.label} "
-                             f"(largest error {100 * error:.2g} % of a force)")
-                ss, aero = trial, trial_aero
-                break
+            return analyze(bridge, trial_aero.model, U_max=U_max), trial_aero
+
+        replaced = next_structure_if_below(ss, fd, fit, aero.K_range[1], with_alternative)
+        if replaced is not None:
+            ss, aero, note = replaced
+            notes.append(note)
     comparison = compare_routes(
         ss, fd, source="table" if fit is not None else "model", K_range=aero.K_range, fit=fit,
         state_space_mode=_label(ss), frequency_domain_mode=_label(fd), notes=tuple(notes))

@@ -33,6 +33,7 @@ Not responsible for: the routes' numerics (:mod:`ident.model.flutter`), the fit
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -45,8 +46,9 @@ from ident.model.section import SectionModel
 from ident.tables.fd_table import FlutterDerivativeTable
 from ident.tables.roger_table import TableFit, fit_table
 
-__all__ = ["ROUTE_TOLERANCE", "RouteComparison", "SectionFlutter", "UNITS", "compare_routes",
-           "section_flutter", "table_U_max", "table_divergence_speed"]
+__all__ = ["ROUTE_TOLERANCE", "RouteComparison", "SectionFlutter", "UNITS", "below_table",
+           "compare_routes", "next_structure_if_below", "section_flutter", "table_U_max",
+           "table_divergence_speed"]
 
 #: Largest relative difference between the routes' flutter speeds taken as agreement.
 ROUTE_TOLERANCE = 0.005
@@ -391,19 +393,15 @@ def section_flutter(section: SectionModel, *, model: RationalFunctionModel | Non
     fd = flutter.frequency_domain(section, table.interpolator(), K_range)
     model_used = fit.model if n == 3 else fit.model.planar()
     ss = flutter.analyze(section, model_used, U_top)
-    if _below_range(ss, K_range) and not fd.unstable_at_start:
-        first = ss
-        for candidate, alternative, error in fit.alternatives():
-            trial_model = alternative if n == 3 else alternative.planar()
-            trial = flutter.analyze(section, trial_model, U_top)
-            if not _below_range(trial, K_range):
-                notes.append(f"the fit chosen first ({fit.model.n_lags} lag(s)) flutters at "
-                             f"{first.speed:.4g} m/s with K = {first.reduced_frequency:.3g}, "
-                             "below the table's range, which the table does not show: the "
-                             f"state space uses the next structure, {candidate.label} "
-                             f"(largest error {100 * error:.2g} % of a force)")
-                ss, model_used = trial, trial_model
-                break
+    def with_alternative(alternative: RationalFunctionModel
+                         ) -> tuple[flutter.FlutterResult, RationalFunctionModel]:
+        used = alternative if n == 3 else alternative.planar()
+        return flutter.analyze(section, used, U_top), used
+
+    replaced = next_structure_if_below(ss, fd, fit, K_range[1], with_alternative)
+    if replaced is not None:
+        ss, model_used, note = replaced
+        notes.append(note)
     if ss.speed is None and fd.speed is None:
         beyond = flutter.analyze(section, model_used,
                                  max(flutter.default_U_max(section), 2.0 * U_top))
@@ -422,6 +420,44 @@ def section_flutter(section: SectionModel, *, model: RationalFunctionModel | Non
     return SectionFlutter(comparison, ss, fd, model_used, fit)
 
 
-def _below_range(result: flutter.FlutterResult, K_range: tuple[float, float]) -> bool:
+def below_table(result: Any, K_high: float) -> bool:
+    """Tell whether a state-space result flutters below the table's wind speeds (K > K_high)."""
     return (result.speed is not None and result.reduced_frequency is not None
-            and result.reduced_frequency > K_range[1] * (1 + 1e-9))
+            and result.reduced_frequency > K_high * (1 + 1e-9))
+
+
+def next_structure_if_below(first: Any, frequency_domain: Any, fit: TableFit, K_high: float,
+                            analyze: Callable[[RationalFunctionModel], tuple[Any, Any]]
+                            ) -> tuple[Any, Any, str] | None:
+    """Replace a fit whose state space flutters below the table's range, when the table does not.
+
+    Parameters
+    ----------
+    first : flutter result
+        The state space of the fit chosen first (a section's or a bridge's).
+    frequency_domain : flutter result
+        The table's own route (its ``unstable_at_start`` says the table shows such flutter).
+    fit : TableFit
+    K_high : float
+        The table's highest reduced frequency.
+    analyze : callable
+        ``analyze(model) -> (result, used)``: the state space of another structure's model and
+        what the caller keeps with it (the model as used, or the bridge's aerodynamics).
+
+    Returns
+    -------
+    (result, used, note) or None
+        The first alternative (most accurate first) that does not flutter below the range,
+        and the warning that says so; None when nothing was replaced.
+    """
+    if not below_table(first, K_high) or frequency_domain.unstable_at_start:
+        return None
+    for candidate, alternative, error in fit.alternatives():
+        result, used = analyze(alternative)
+        if not below_table(result, K_high):
+            return result, used, (
+                f"the fit chosen first ({fit.model.n_lags} lag(s)) flutters at "
+                f"{first.speed:.4g} m/s with K = {first.reduced_frequency:.3g}, below the "
+                "table's range, which the table does not show: the state space uses the next "
+                f"structure, {candidate.label} (largest error {100 * error:.2g} % of a force)")
+    return None
