@@ -1,7 +1,9 @@
 """The split of the suite into a pure and a real-time part stays honest.
 
-``make test`` runs the tests not marked ``realtime`` on two workers, then the ``realtime`` ones on
-their own (Makefile). A real-time test left unmarked would run beside another test and meet its
+``make test`` runs the tests not marked ``realtime`` on two workers at the lowest CPU priority
+(nice 19), beside the ``realtime`` ones in one process at normal priority (Makefile): the pure part
+only fills the cycles the real-time part leaves idle. A real-time test left unmarked would run
+beside another test at full priority, or be starved at nice 19, and meet its
 deadlines only while the machine happens to be idle; a flaky CI run would be the first sign. Which
 modules are real-time was measured once (per test: a socket connected or bound, a thread or
 process started, a sleep); this module keeps it so by reading every test module's source
@@ -180,5 +182,8 @@ def test_the_marker_is_registered_and_make_test_splits_by_it():
     assert not re.search(r"\s-n\s", realtime.group(1))  # the real-time part runs alone
     test_recipe = makefile.split("\ntest: ", 1)[1].split("\n\n", 1)[0]
     assert "$(PURE_TESTS)" in test_recipe and "$(REALTIME_TESTS)" in test_recipe
+    # Beside the real-time part, the pure part yields every core a deadline wants.
+    assert "nice -n 19 $(PURE_TESTS)" in test_recipe
+    assert re.search(r"^\t\$\(REALTIME_TESTS\)", test_recipe, re.M)  # at normal priority
     fast_recipe = makefile.split("\ntest-fast: ", 1)[1].split("\n\n", 1)[0]
     assert "$(PURE_TESTS)" in fast_recipe and "$(REALTIME_TESTS)" not in fast_recipe
