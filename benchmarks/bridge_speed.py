@@ -50,13 +50,19 @@ B, M, I, SPAN = 31.0, 22740.0, 2.47e6, 1200.0
 STATIC = {"C_D": 0.08, "C_L": -0.1, "C_M": 0.02, "dC_D": 0.0, "dC_L": -5.0, "dC_M": 1.2}
 
 
-def sine_bridge(n_modes: int, n_nodes: int) -> BridgeModel:
-    """Return the benchmark's deck with ``n_modes`` sine modes on ``n_nodes`` nodes."""
+def sine_bridge(n_modes: int, n_nodes: int, coupled: bool = False) -> BridgeModel:
+    """Return the benchmark's deck with ``n_modes`` sine modes on ``n_nodes`` nodes.
+
+    ``coupled``: every shape tapered by ``1 + 0.3 x / L`` (no longer orthogonal to the other
+    wave numbers) and every mode given 5 % of its shape in the two other coordinates, so that
+    the aerodynamic forces couple each mode to most others, as in a finite-element model of an
+    unsymmetric deck (the plain sines couple each branch to about three modes).
+    """
     x = np.linspace(0.0, SPAN, n_nodes)
     modes = []
     for r in range(n_modes):
         kind, k = r % 3, r // 3 + 1
-        shape = np.sin(k * np.pi * x / SPAN)
+        shape = np.sin(k * np.pi * x / SPAN) * ((1.0 + 0.3 * x / SPAN) if coupled else 1.0)
         if kind == 0:
             modes.append({"name": f"V{k}", "frequency": 0.085 + 0.03 * (k - 1),
                           "damping": 0.005, "generalised_mass": M * SPAN / 2,
@@ -70,6 +76,14 @@ def sine_bridge(n_modes: int, n_nodes: int) -> BridgeModel:
                           "damping": 0.005,
                           "generalised_mass": (M + I * 0.002**2) * SPAN / 2,
                           "p": shape.tolist(), "alpha": (0.002 * shape).tolist()})
+    if coupled:
+        for mode in modes:
+            # The mode's own shape as a length (a torsional one times B).
+            main = (np.asarray(mode["h"]) if "h" in mode else np.asarray(mode["p"])
+                    if "p" in mode else B * np.asarray(mode["alpha"]))
+            for key in ("h", "alpha", "p"):
+                if key not in mode:
+                    mode[key] = (0.05 * main / (B if key == "alpha" else 1.0)).tolist()
     return BridgeModel.from_dict({"name": f"{n_modes} sine modes", "B": B, "rho": 1.22,
                                   "nodes_x": x.tolist(), "modes": modes, "static": STATIC})
 
@@ -91,9 +105,12 @@ def main() -> None:
                         help="most modes the dense sweep runs for with --fast")
     parser.add_argument("--fd", action="store_true",
                         help="with --fast: the frequency-domain routes, not the state space")
+    parser.add_argument("--coupled", action="store_true",
+                        help="with --fast: tapered shapes in all three coordinates "
+                             "(sine_bridge's coupled deck)")
     args = parser.parse_args()
     if args.fast:
-        fast_rows(args.modes, args.nodes, args.dense_max, args.fd)
+        fast_rows(args.modes, args.nodes, args.dense_max, args.fd, args.coupled)
         return
     print("| modes | nodes | states | SS time (s) | SS U_F (m/s) | FD time (s) | FD U_F (m/s) "
           "| FD - SS |")
@@ -118,7 +135,8 @@ def main() -> None:
         buffeting_rows(args.modes, args.nodes, args.buffeting_U, args.record)
 
 
-def fast_rows(modes: list[int], nodes: list[int], dense_max: int, fd: bool = False) -> None:
+def fast_rows(modes: list[int], nodes: list[int], dense_max: int, fd: bool = False,
+              coupled: bool = False) -> None:
     """Print the fast route beside the dense sweep (module docstring); ``fd``: both FD."""
     print("| modes | nodes | states | fast time (s) | fast CPU (s) | fast U_F (m/s) "
           "| branches followed | certified | dense time (s) | dense U_F (m/s) "
@@ -126,7 +144,7 @@ def fast_rows(modes: list[int], nodes: list[int], dense_max: int, fd: bool = Fal
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for n_modes in modes:
         for n_nodes in nodes:
-            bridge = sine_bridge(n_modes, n_nodes)
+            bridge = sine_bridge(n_modes, n_nodes, coupled)
             aero = aero_from_model(bridge, flat_plate.jones_model())
             model = aero.model
             U_max = bf.default_U_max(bridge)
