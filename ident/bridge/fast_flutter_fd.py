@@ -9,7 +9,8 @@ with ``lambda = i omega`` (growth: ``Re lambda > 0``, i.e. ``Im omega < 0``) and
 ``U = B omega / K``. Here the same problem is followed, branch by branch, in the parameter
 ``s = 1/K`` (which rises with the wind) exactly as :mod:`ident.bridge.fast_flutter` follows
 the state space in U: the same screening (still-air damping ratio below 5 %, a branch dropped
-once its damping passes 30 % and still rises), the same coupling neighbourhoods, the same
+once its damping passes 30 % and still rises), the same coupling neighbourhoods (a branch near
+zero damping without a crossing followed again among all the modes), the same
 predictor-corrector and the same Newton on the flutter point ``T(i omega, s) v = 0`` (whole
 ``T``), whose wind speed is ``U_F = B omega_F s_F``. The derivative of ``M`` in ``s`` is a
 central difference (step 1e-6 s): the flutter derivatives are a table's monotone cubic
@@ -58,6 +59,7 @@ from ident.bridge.fast_flutter import (
     _follow,
     _newton,
     _Point,
+    near_miss,
 )
 from ident.bridge.flutter import (
     BridgeFlutterResult,
@@ -150,14 +152,17 @@ class FrequencyDomainProblem:
         """Return the problem on the modes ``idx`` (indices of the whole bridge)."""
         return FrequencyDomainProblem(bridge, self._fd, self.s_range, idx, tabulated)
 
+    def Q(self, s: float) -> ComplexArray:
+        """Return the section's ``Q(i/s)`` (d x d), from the spline when there is one."""
+        if self._tabulated is not None:
+            return self._tabulated(s)
+        K = np.array([1.0 / s])
+        return np.asarray(Q_from_flutter_derivatives(K, self._fd(K))[0], dtype=complex)
+
     def M(self, s: float) -> ComplexArray:
         """Return the effective mass ``Ms + rho/2 B^4 Q_modal(i/s) s^2``, kg."""
         if s not in self._cache:
-            if self._tabulated is not None:
-                Q = self._tabulated(s)
-            else:
-                K = np.array([1.0 / s])
-                Q = Q_from_flutter_derivatives(K, self._fd(K))[0]
+            Q = self.Q(s)
             d = Q.shape[-1]
             Qm = np.einsum("ij,ijrs->rs", Q, self._G[:d, :d])
             if len(self._cache) > 64:  # a continuation revisits only its last few s
@@ -180,19 +185,25 @@ class FrequencyDomainProblem:
         return np.asarray(lam**2 * (self.M(b) - self.M(a)) / (b - a), dtype=complex)
 
 
-def _neighbourhoods(problem: FrequencyDomainProblem, s_max: float,
+def _neighbourhoods(problem: FrequencyDomainProblem, s_at: FloatArray,
                     tol: float) -> list[npt.NDArray[np.intp]]:
     """Each mode's coupling neighbourhood, as in :mod:`ident.bridge.fast_flutter`.
 
-    The aerodynamic mass at the largest ``s`` and the mode's still-air frequency, relative to
-    the stiffnesses.
+    Mode r's aerodynamic mass row and column at ``s_at[r]`` (where its still-air frequency
+    meets the top wind speed; a common ``s`` would put a high mode at many times that wind),
+    times its still-air frequency squared, relative to the stiffnesses.
     """
-    omega2 = np.diag(problem.Ks) / np.diag(problem.Ms)
-    aero = np.abs(problem.M(s_max) - problem.Ms)
-    scale = np.sqrt(np.outer(np.diag(problem.Ks), np.diag(problem.Ks)))
+    omega2 = np.diag(problem.Ks).real / np.diag(problem.Ms).real
+    stiffness = np.diag(problem.Ks).real
     out = []
     for r in range(problem.n):
-        x = omega2[r] * (aero[r] + aero[:, r]) / scale[r]
+        s = float(s_at[r])
+        Q = problem.Q(s)
+        d = Q.shape[-1]
+        G = problem._G[:d, :d]
+        row = np.abs(np.einsum("ab,abj->j", Q, G[:, :, r, :]))
+        col = np.abs(np.einsum("ab,abj->j", Q, G[:, :, :, r]))
+        x = omega2[r] * problem._c * s**2 * (row + col) / np.sqrt(stiffness[r] * stiffness)
         near = np.flatnonzero(x >= tol)
         out.append(np.concatenate([[r], near[near != r]]).astype(np.intp))
     return out
@@ -226,7 +237,7 @@ def _start(local: FrequencyDomainProblem, s0: float) -> _Point:
 def frequency_domain(bridge: BridgeModel, flutter_derivatives: FlutterDerivativeFunction,
                      K_range: tuple[float, float] | None = None, *,
                      U_max: float | None = None, screen_damping: float = 0.05,
-                     drop_damping: float = 0.3, coupling_tol: float = 1e-6,
+                     drop_damping: float = 0.3, coupling_tol: float = 1e-4,
                      certify_max_states: int = 200, follow: Sequence[int] | None = None
                      ) -> BridgeFlutterResult:
     """Frequency-domain flutter from followed branches (the dense scan's answer, module doc).
@@ -259,9 +270,10 @@ def frequency_domain(bridge: BridgeModel, flutter_derivatives: FlutterDerivative
         The dense check finds a skipped branch growing below the flutter speed, or a branch
         could not be followed.
     """
+    omega = 2.0 * math.pi * bridge.frequencies
+    top = math.inf
     if K_range is None:
         top = default_U_max(bridge) if U_max is None else v.positive("U_max", U_max)
-        omega = 2.0 * math.pi * bridge.frequencies
         K_range = (float(omega.min() * bridge.B / top),
                    float(omega.max() * bridge.B / (0.05 * top)))
     K_lo, K_hi = (v.positive("K_range", k) for k in K_range)
@@ -270,8 +282,12 @@ def frequency_domain(bridge: BridgeModel, flutter_derivatives: FlutterDerivative
     s0, s1 = 1.0 / K_hi, 1.0 / K_lo
     problem = FrequencyDomainProblem(bridge, flutter_derivatives, (s0, s1))
     n = problem.n
-    hoods = _neighbourhoods(problem, s1, v.positive("coupling_tol", coupling_tol))
     tabulated = _TabulatedQ(flutter_derivatives, (s0, s1))
+    # Each mode's s where its still-air frequency meets the top wind speed (all of the range
+    # when a K range was given instead).
+    s_at = np.clip(top / (bridge.B * omega), s0, s1)
+    hoods = _neighbourhoods(problem.restricted(problem.idx, bridge, tabulated), s_at,
+                            v.positive("coupling_tol", coupling_tol))
     locals_ = [problem.restricted(idx, bridge, tabulated) for idx in hoods]
     starts = [_start(locals_[r], s0) for r in range(n)]
     if follow is None:
@@ -284,18 +300,31 @@ def frequency_domain(bridge: BridgeModel, flutter_derivatives: FlutterDerivative
     paths: dict[int, list[_Point]] = {}
     candidates: list[tuple[float, float, float, ComplexArray, int, bool]] = []
     local_points: list[tuple[float, float, float, ComplexArray, int]] = []
-    dropped = 0
-    for r in followed:
-        start = starts[r]
+    dropped = refollowed = 0
+    drop_damping = v.positive("drop_damping", drop_damping)
+
+    def past(point: _Point) -> bool:
+        # Beyond the top wind speed, or the lowest crossing found so far: nothing lower there.
+        lowest = min((c[0] for c in local_points), default=math.inf)
+        return bridge.B * point.lam.imag * point.U > min(top, lowest * (1.0 + _REFINE_MARGIN))
+
+    # The lowest modes first, as in the state space: an early crossing caps the others.
+    for r in sorted(followed, key=lambda j: abs(starts[j].lam)):
+        start, idx, local = starts[r], hoods[r], locals_[r]
         if start.lam.real > 0.0:  # growing at the highest K: flutter lies at or below
             full = np.zeros(n, dtype=complex)
-            full[hoods[r]] = start.vec
+            full[idx] = start.vec
             candidates.append((bridge.B * start.lam.imag * s0, start.lam.imag, s0, full, r,
                                True))
             paths[r] = [start]
             continue
-        points, was_dropped = _follow(locals_[r], start, s1,
-                                      v.positive("drop_damping", drop_damping))
+        points, was_dropped = _follow(local, start, s1, drop_damping, past)
+        if points[-1].lam.real <= 0.0 and idx.size < n and near_miss(points):
+            # Close to zero damping in a neighbourhood: again among all the modes, r first.
+            idx = np.concatenate([[r], np.delete(np.arange(n), r)]).astype(np.intp)
+            local = problem.restricted(idx, bridge, tabulated)
+            points, was_dropped = _follow(local, _start(local, s0), s1, drop_damping, past)
+            refollowed += 1
         dropped += was_dropped
         paths[r] = points
         last = points[-1]
@@ -304,11 +333,11 @@ def frequency_domain(bridge: BridgeModel, flutter_derivatives: FlutterDerivative
             t = -before.lam.real / (last.lam.real - before.lam.real)
             # The neighbourhood's flutter point first, then the whole T's (as the state space).
             s_loc, omega_loc, vec_loc = _flutter_point(
-                locals_[r], before.U + t * (last.U - before.U),
+                local, before.U + t * (last.U - before.U),
                 before.lam + t * (last.lam - before.lam),
                 before.vec + t * (last.vec - before.vec))
             full = np.zeros(n, dtype=complex)
-            full[hoods[r]] = vec_loc
+            full[idx] = vec_loc
             local_points.append((bridge.B * omega_loc * s_loc, s_loc, omega_loc, full, r))
     # The whole T's flutter point (n x n Newton with the function itself) only for the branches
     # that can be the lowest: beyond its neighbourhood a branch couples below coupling_tol, so
@@ -322,6 +351,8 @@ def frequency_domain(bridge: BridgeModel, flutter_derivatives: FlutterDerivative
     result = _result(bridge, paths, candidates, s1)
     note = (f"fast route: {len(followed)} of {n} branches followed; {dropped} dropped once "
             "damped; ")
+    if refollowed:
+        note += f"{refollowed} followed again among all modes (near zero damping); "
     return replace(result, certification=note + _certify(
         bridge, flutter_derivatives, result, max_states=certify_max_states))
 

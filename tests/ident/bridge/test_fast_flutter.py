@@ -34,12 +34,13 @@ SPAN = 600.0
 M_H, M_A = 22740.0 * SPAN / 2, 2.47e6 * SPAN / 2
 
 
-def _deck(modes: list[tuple[str, float, str, int, float]]) -> BridgeModel:
+def _deck(modes: list[tuple[str, float, str, int, float]], damping: float = 0.005
+          ) -> BridgeModel:
     """Return a 600 m deck (B = 31 m), sine modes ``(name, Hz, "h"|"alpha", half-waves, mass)``."""
     x = np.linspace(0.0, SPAN, 61)
     return BridgeModel.from_dict({
         "B": 31.0, "rho": 1.22, "nodes_x": x.tolist(),
-        "modes": [{"name": name, "frequency": f, "damping": 0.005, "generalised_mass": mass,
+        "modes": [{"name": name, "frequency": f, "damping": damping, "generalised_mass": mass,
                    kind: np.sin(k * np.pi * x / SPAN).tolist()}
                   for name, f, kind, k, mass in modes]})
 
@@ -181,3 +182,26 @@ def test_above_the_dense_limit_the_result_says_it_is_not_certified():
     assert len(data["U"][0]) == 2 and data["U"][0] == [0.0, 0.0]
     with pytest.raises(ValueError, match="follow"):
         ff.analyze(bridge, flat_plate.jones_model(), follow=[5])
+
+
+def test_a_branch_near_zero_damping_in_its_neighbourhood_is_followed_among_all_modes():
+    """A branch near zero damping is followed again among all the modes.
+
+    Neighbourhoods of one mode each (a coupling_tol no coupling reaches): heave-torsion
+    flutter cannot happen in them. With 0.5 % structural damping no branch comes near zero
+    damping alone, the flutter is missed and the dense check refuses the result; with 0.05 %
+    (inside NEAR_MISS) every branch starts near zero, is followed again among all the modes,
+    and the dense sweep's flutter is found.
+    """
+    modes = [("V1", 0.2, "h", 1, M_H), ("T1", 0.22, "alpha", 1, M_A)]
+    model = flat_plate.jones_model()
+    assert 0.0005 < ff.NEAR_MISS < 0.005
+    with pytest.raises(FlutterCertificationError):
+        ff.analyze(_deck(modes), model, coupling_tol=1e9)
+    bridge = _deck(modes, damping=0.0005)
+    dense = bf.analyze(bridge, model)
+    fast = ff.analyze(bridge, model, coupling_tol=1e9)
+    assert dense.speed is not None and fast.speed == pytest.approx(dense.speed, rel=REL)
+    assert fast.certification is not None
+    assert "2 followed again among all modes" in fast.certification
+    assert "certified by dense" in fast.certification

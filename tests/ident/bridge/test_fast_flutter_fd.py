@@ -27,12 +27,13 @@ M_H, M_A = 22740.0 * SPAN / 2, 2.47e6 * SPAN / 2
 PLATE = flat_plate.jones_model().flutter_derivatives
 
 
-def _deck(modes: list[tuple[str, float, str, list[float], float]]) -> BridgeModel:
+def _deck(modes: list[tuple[str, float, str, list[float], float]], damping: float = 0.005
+          ) -> BridgeModel:
     """Return a 600 m deck (B = 31 m) of modes ``(name, Hz, kind, sine amplitudes, mass)``."""
     x = np.linspace(0.0, SPAN, 61)
     return BridgeModel.from_dict({
         "B": 31.0, "rho": 1.22, "nodes_x": x.tolist(),
-        "modes": [{"name": name, "frequency": f, "damping": 0.005, "generalised_mass": mass,
+        "modes": [{"name": name, "frequency": f, "damping": damping, "generalised_mass": mass,
                    kind: np.sum([a * np.sin((k + 1) * np.pi * x / SPAN)
                                  for k, a in enumerate(amps)], axis=0).tolist()}
                   for name, f, kind, amps, mass in modes]})
@@ -87,3 +88,25 @@ def test_the_certification_catches_a_branch_the_screening_skipped():
         fdf.frequency_domain(bridge, PLATE, follow=[0, 2, 3])
     small = fdf.frequency_domain(bridge, PLATE, certify_max_states=4)
     assert small.certification is not None and "not certified" in small.certification
+
+
+def test_a_branch_near_zero_damping_in_its_neighbourhood_is_followed_among_all_modes():
+    """A branch near zero damping is followed again among all the modes.
+
+    As the state space's test: one-mode neighbourhoods miss the coupled flutter (found
+    nowhere, and not certified: no dense scan was run) unless the branches start inside
+    NEAR_MISS and are followed again. The K range starts at K = 50 (under 1 m/s), where the
+    branches still have their structural damping.
+    """
+    modes = [("V1", 0.2, "h", [1.0], M_H), ("T1", 0.22, "alpha", [1.0], M_A)]
+    K_range = (0.05, 50.0)
+    missed = fdf.frequency_domain(_deck(modes), PLATE, K_range, coupling_tol=1e9)
+    assert missed.speed is None and missed.certification is not None
+    assert "not certified: no flutter found" in missed.certification
+    bridge = _deck(modes, damping=0.0005)
+    dense = bf.frequency_domain(bridge, PLATE, K_range)
+    fast = fdf.frequency_domain(bridge, PLATE, K_range, coupling_tol=1e9)
+    assert dense.speed is not None and fast.speed == pytest.approx(dense.speed, rel=REL)
+    assert fast.certification is not None
+    assert "followed again among all modes" in fast.certification
+    assert "certified by dense roots" in fast.certification
