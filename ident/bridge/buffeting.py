@@ -509,17 +509,31 @@ def _eigen_route(ss: BridgeStateSpace, spec: TurbulenceSpec, U: float, lam: Comp
     if eigen_mismatch(ss, spec, U, lam, vec, f) > _EIGEN_TOLERANCE:
         return None
     P = modal_gust_projection(bridge)
-    S_u, S_w = spec.gust_spectra(f, U)
     chi2 = spec.admittance_squared(f, U, bridge.B)
     scale = (0.5 * bridge.rho * U**2 * bridge.B**2 / U) ** 2
-    loads = []
-    for c, (S_c, C) in enumerate(((S_u, spec.Cuy), (S_w, spec.Cwy))):
-        if not np.any(P[c]) or not np.any(S_c):
-            continue  # no gain (e.g. u on a flat plate) or no turbulence of this kind
-        basis = eigen_route.load_basis(
-            lambda decay, P_c=P[c]: _coherent_quadratic(P_c, bridge.nodes_x, decay),
-            C / U, f, constant=(C == 0.0 or bridge.n_nodes == 1))
-        loads.append((scale * S_c * chi2, basis))
+    decays = (spec.Cuy / U, spec.Cwy / U)  # the coherence's decay per Hz, s/m
+    S_fine = spec.gust_spectra(f, U)
+    active = [c for c in (0, 1) if np.any(P[c]) and np.any(S_fine[c])]  # gain and turbulence
+    x = bridge.nodes_x
+    loads: list[tuple[FloatArray, eigen_route.LoadBasis]] = []
+    if bridge.n_nodes == 1 or all(decays[c] == 0.0 for c in active):
+        # Fully coherent: each gust's load matrix is constant, one exact coefficient each.
+        for c in active:
+            Q = _coherent_quadratic(P[c], x, np.zeros(1))[0]
+            loads.append((scale * chi2 * S_fine[c], eigen_route.constant_basis(Q, f.size)))
+    elif active:
+        def matrix(f_coarse: FloatArray) -> FloatArray:
+            # M = sum_c (s_c / s) Q_c: the admittance and the factor cancel in the ratio.
+            S = spec.gust_spectra(f_coarse, U)
+            total = sum(S[c] for c in active)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                ratios = [np.where(total > 0.0, S[c] / total, 0.0) for c in active]
+            return np.asarray(sum(r[:, None, None] * _coherent_quadratic(P[c], x,
+                                                                          decays[c] * f_coarse)
+                                  for r, c in zip(ratios, active, strict=True)))
+
+        s_total = scale * chi2 * sum(S_fine[c] for c in active)
+        loads.append((np.asarray(s_total, dtype=float), eigen_route.load_basis(matrix, f)))
     n = bridge.n_modes
     rows = None if sel_rows is None else np.concatenate([np.eye(n), sel_rows])
     out = eigen_route.eigen_response(ss, U, lam, vec, f, weights, loads, rows)

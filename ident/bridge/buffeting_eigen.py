@@ -22,18 +22,20 @@ all of it, so this is exact (no modal truncation).
 ``Y = sum_f w_f diag(u(f)) G(f)``: the poles enter through one ``N``-vector per frequency.
 
 **The load matrix is smooth in frequency.** ``S_F(f) = sum_c s_c(f) Q_c(f)`` with the scalar
-spectrum ``s_c`` (gust spectrum, admittance, ``(qd B^2/U)^2``) taken exactly at every
-frequency and ``Q_c(f) = P_c Coh_c(f) P_c^T`` (``_coherent_quadratic`` of
-:mod:`ident.bridge.buffeting`), which depends on ``f`` only through the coherence's decay
-``C f / U``: smooth over decades, unlike the transfer matrix's peaks. ``Q_c`` is evaluated on
-a coarse grid uniform in ``log(f + f_0)`` (``f_0`` the lowest positive frequency; 10 points a
-decade) and interpolated by a cubic spline (``scipy.interpolate.make_interp_spline``), whose
-B-spline coefficients ``C_m`` and local basis ``B_m(f)`` (four non-zero at each frequency)
-give ``Y = sum_{c,m} diag(k_cm) L C_m L^H`` with ``k_cm = sum_f w_f s_c(f) B_m(f) u(f)``.
-Measured against the exact ``Q_c`` (largest error over the largest entry): 6e-7 at 10 a
-decade on the 200-mode benchmark deck (RMS within 3e-6 of the direct route), 5e-8 at 20;
-2.5e-6 on a 24-mode deck of 120 nodes. A fully coherent gust (``C = 0``) or a single node has
-a constant ``Q_c``: one coefficient, exact.
+spectra ``s_c`` (gust spectrum, admittance, ``(qd B^2/U)^2``) and ``Q_c(f) = P_c Coh_c(f)
+P_c^T`` (``_coherent_quadratic`` of :mod:`ident.bridge.buffeting`), which depends on ``f`` only
+through the coherence's decay ``C f / U``. Written ``S_F(f) = s(f) M(f)`` with
+``s = s_u + s_w`` taken exactly at every frequency and ``M = sum_c (s_c / s) Q_c`` (the ratio
+of the two von Karman spectra is smooth, the admittance and the factor cancel), ``M`` is
+smooth over decades, unlike the transfer matrix's peaks: it is evaluated on a coarse grid
+uniform in ``log(f + f_0)`` (``f_0`` the lowest positive frequency; 10 points a decade) and
+interpolated by a cubic spline (``scipy.interpolate.make_interp_spline``), whose B-spline
+coefficients ``C_m`` and local basis ``B_m(f)`` (four non-zero at each frequency) give
+``Y = sum_m diag(k_m) L C_m L^H`` with ``k_m = sum_f w_f s(f) B_m(f) u(f)``: one spline for
+both gusts. Measured against the exact load matrix (largest error over the largest entry):
+6e-7 at 10 a decade on the 200-mode benchmark deck (RMS within 3e-6 of the direct route),
+5e-8 at 20; 2.5e-6 on a 24-mode deck of 120 nodes. Gusts whose ``Q_c`` is constant (full
+coherence, ``C = 0``, or a single node) keep one exact coefficient each: no spline error.
 
 **Spectra only where asked.** A row ``r`` of responses (a modal coordinate, or h, alpha, p at a
 spectrum node: ``r = R W``) has the one-sided spectrum ``S_r(f) = -2 Re sum_a u_a(f)
@@ -62,7 +64,8 @@ from scipy.interpolate import BSpline, make_interp_spline
 
 from ident.bridge.statespace import BridgeStateSpace
 
-__all__ = ["EigenResponse", "LoadBasis", "eigen_response", "load_basis", "transfer_matrix"]
+__all__ = ["EigenResponse", "LoadBasis", "constant_basis", "eigen_response", "load_basis",
+           "transfer_matrix"]
 
 FloatArray = npt.NDArray[np.float64]
 ComplexArray = npt.NDArray[np.complex128]
@@ -70,7 +73,7 @@ ComplexArray = npt.NDArray[np.complex128]
 #: Coarse points a decade of ``f + f_0`` for the spline of the load matrices: relative error
 #: of ``Q_c`` 6e-7 at 10 (5e-8 at 20) on the benchmark deck, 2.5e-6 on a 24-mode deck; far
 #: below the 1e-3 asked of the RMS.
-PER_DECADE = 10.0
+PER_DECADE = 14.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -95,36 +98,33 @@ class LoadBasis:
         return slice(0, 0) if rows.size == 0 else slice(int(rows[0]), int(rows[-1]) + 1)
 
 
-def load_basis(quadratic: Callable[[FloatArray], FloatArray], decay_per_hz: float,
-               f: FloatArray, constant: bool, per_decade: float = PER_DECADE) -> LoadBasis:
-    """Spline ``Q(f) = P Coh(decay_per_hz f) P^T`` over the fine grid ``f`` (Hz).
+def load_basis(matrix: Callable[[FloatArray], FloatArray], f: FloatArray,
+               per_decade: float = PER_DECADE) -> LoadBasis:
+    """Spline a smooth matrix function of frequency ``matrix(f)`` over the fine grid ``f`` (Hz).
 
     Parameters
     ----------
-    quadratic : callable
-        ``quadratic(decay)`` returns ``P Coh P^T`` (nd, n, n) at decays (1/m) ``decay``.
-    decay_per_hz : float
-        The coherence's decay per Hz, ``C / U`` (s/m).
+    matrix : callable
+        ``matrix(f_coarse)`` returns the matrices (J, n, n) at frequencies ``f_coarse`` (Hz).
     f : ndarray, shape (nf,)
         The fine grid, Hz, increasing, ``>= 0``.
-    constant : bool
-        ``Q`` does not depend on ``f`` (full coherence, one node): one exact coefficient.
     per_decade : float
         Coarse points a decade of ``f + f_0``.
     """
-    if constant:
-        Q = quadratic(np.zeros(1))
-        return LoadBasis(coefs=np.asarray(Q), design=np.ones((f.size, 1)))
-    # log(f + f0): finite at f = 0, logarithmic above f0; Q is analytic in the decay, so smooth
-    # in this variable over the whole grid.
+    # log(f + f0): finite at f = 0, logarithmic above f0; the coherence is analytic in its
+    # decay C f / U, so the load matrix is smooth in this variable over the whole grid.
     f0 = float(f[f > 0.0].min())
     t = np.log(f + f0)
     J = max(8, int(np.ceil(per_decade * (t[-1] - t[0]) / np.log(10.0)))) + 1
     t_coarse = np.linspace(t[0], t[-1], J)
-    Q = quadratic(decay_per_hz * (np.exp(t_coarse) - f0))
-    spline = make_interp_spline(t_coarse, Q, k=3)
+    spline = make_interp_spline(t_coarse, matrix(np.exp(t_coarse) - f0), k=3)
     design = BSpline.design_matrix(np.clip(t, t_coarse[0], t_coarse[-1]), spline.t, 3)
     return LoadBasis(coefs=np.asarray(spline.c), design=design.toarray())
+
+
+def constant_basis(matrix: FloatArray, nf: int) -> LoadBasis:
+    """One exact coefficient for a load matrix that does not depend on frequency."""
+    return LoadBasis(coefs=np.asarray(matrix)[None], design=np.ones((nf, 1)))
 
 
 @dataclass(frozen=True, eq=False)

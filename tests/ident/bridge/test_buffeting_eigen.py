@@ -154,8 +154,8 @@ def test_spline_of_the_load_matrix_is_within_its_stated_error() -> None:
     f = bf.frequency_grid(ss, 40.0)
     P = bf.modal_gust_projection(ss.bridge)[1]
     x = ss.bridge.nodes_x
-    basis = be.load_basis(lambda decay: bf._coherent_quadratic(P, x, decay), 8.0 / 40.0, f,
-                          constant=False)
+    basis = be.load_basis(lambda f_coarse: bf._coherent_quadratic(P, x, 8.0 / 40.0 * f_coarse),
+                          f)
     assert basis.coefs.shape[0] < 100 and np.allclose(basis.design.sum(axis=1), 1.0)
     picks = np.linspace(0, f.size - 1, 40).astype(int)
     exact = bf._coherent_quadratic(P, x, 8.0 / 40.0 * f[picks])
