@@ -532,11 +532,11 @@ def _eigen_route(ss: BridgeStateSpace, spec: TurbulenceSpec, U: float, lam: Comp
                                                                           decays[c] * f_coarse)
                                   for r, c in zip(ratios, active, strict=True)))
 
-        s_total = scale * chi2 * sum(S_fine[c] for c in active)
-        loads.append((np.asarray(s_total, dtype=float), eigen_route.load_basis(matrix, f)))
+        s_total = np.asarray(scale * chi2 * sum(S_fine[c] for c in active), dtype=float)
+        loads.append((s_total, eigen_route.load_basis(matrix, f)))
     n = bridge.n_modes
     rows = None if sel_rows is None else np.concatenate([np.eye(n), sel_rows])
-    out = eigen_route.eigen_response(ss, U, lam, vec, f, weights, loads, rows)
+    out = eigen_route.eigen_response(ss, lam, vec, f, weights, loads, rows)
     if out.spectra is None:
         return out.cov, None, None
     return out.cov, out.spectra[:, :n], out.spectra[:, n:]

@@ -28,20 +28,22 @@ through the coherence's decay ``C f / U``. Written ``S_F(f) = s(f) M(f)`` with
 ``s = s_u + s_w`` taken exactly at every frequency and ``M = sum_c (s_c / s) Q_c`` (the ratio
 of the two von Karman spectra is smooth, the admittance and the factor cancel), ``M`` is
 smooth over decades, unlike the transfer matrix's peaks: it is evaluated on a coarse grid
-uniform in ``log(f + f_0)`` (``f_0`` the lowest positive frequency; 10 points a decade) and
+uniform in ``log(f + f_0)`` (``f_0`` the lowest positive frequency; 8 points a decade) and
 interpolated by a cubic spline (``scipy.interpolate.make_interp_spline``), whose B-spline
 coefficients ``C_m`` and local basis ``B_m(f)`` (four non-zero at each frequency) give
 ``Y = sum_m diag(k_m) L C_m L^H`` with ``k_m = sum_f w_f s(f) B_m(f) u(f)``: one spline for
-both gusts. Measured against the exact load matrix (largest error over the largest entry):
-6e-7 at 10 a decade on the 200-mode benchmark deck (RMS within 3e-6 of the direct route),
-5e-8 at 20; 2.5e-6 on a 24-mode deck of 120 nodes. Gusts whose ``Q_c`` is constant (full
+both gusts. Measured: the spline of one gust's ``Q_c`` against the exact one (largest error
+over the largest entry) on a 24-mode deck of 120 nodes: 7.6e-6 at 8 points a decade, 9e-7 at
+14; the RMS of the 200-mode benchmark deck (1000 nodes, both gusts) within 1e-5 of the
+direct route at 8 (modal RMS 2.2e-5), 1.2e-6 at 14. Gusts whose ``Q_c`` is constant (full
 coherence, ``C = 0``, or a single node) keep one exact coefficient each: no spline error.
 
-**Spectra only where asked.** A row ``r`` of responses (a modal coordinate, or h, alpha, p at a
-spectrum node: ``r = R W``) has the one-sided spectrum ``S_r(f) = -2 Re sum_a u_a(f)
+**Spectra only where asked.** A row ``r`` of responses (a modal coordinate, or h, alpha, p at
+a spectrum node: ``r = R W``) has the one-sided spectrum ``S_r(f) = -2 Re sum_a u_a(f)
 E[a, r](f)``, ``E(f) = W_r^T o ((G(f) / (lambda_a + conj(lambda_b))) W_r^H)``, interpolated as
-``Q_c``: per coefficient an ``N x N`` product, per frequency an ``N``-vector product. The
-spectra are most of this route's time; ``spectra=False`` skips them.
+``M``: per coefficient two ``N x N`` products, per frequency an ``N``-vector product. They are
+most of this route's time (the reason for the spline's 8 points a decade, :data:`PER_DECADE`);
+``spectra=False`` skips them.
 
 **A certificate.** The eigen decomposition of a non-normal state matrix can be ill conditioned
 (clusters of lag eigenvalues: the condition number of ``V`` is 2e11 on the 200-mode benchmark
@@ -70,10 +72,13 @@ __all__ = ["EigenResponse", "LoadBasis", "constant_basis", "eigen_response", "lo
 FloatArray = npt.NDArray[np.float64]
 ComplexArray = npt.NDArray[np.complex128]
 
-#: Coarse points a decade of ``f + f_0`` for the spline of the load matrices: relative error
-#: of ``Q_c`` 6e-7 at 10 (5e-8 at 20) on the benchmark deck, 2.5e-6 on a 24-mode deck; far
-#: below the 1e-3 asked of the RMS.
-PER_DECADE = 14.0
+#: Coarse points a decade of ``f + f_0`` for the spline of the load matrix. The spectra cost
+#: in proportion (two ``N x N`` products per coefficient), the RMS error falls as its fourth
+#: power. Measured on the 200-mode benchmark deck against the direct route, at 8 a decade: RMS
+#: within 1e-5 (modal RMS 2.2e-5), node spectra within 6e-5 of their peak, modal spectra
+#: 2.6e-4, correlation times 6e-5 (at 14 a decade: RMS 1.2e-6, modal spectra 2.5e-5, and
+#: the spectra 1.7 times as long to compute).
+PER_DECADE = 8.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -148,29 +153,27 @@ def _pole_factor(f: FloatArray, lam: ComplexArray) -> ComplexArray:
     return np.asarray(1.0 / (2j * np.pi * f[:, None] - lam[None, :]), dtype=complex)
 
 
-def eigen_response(ss: BridgeStateSpace, U: float, lam: ComplexArray, vec: ComplexArray,
+def eigen_response(ss: BridgeStateSpace, lam: ComplexArray, vec: ComplexArray,
                    f: FloatArray, weights: FloatArray,
-                   loads: list[tuple[FloatArray, LoadBasis]],
-                   rows: FloatArray | None) -> EigenResponse:
+                   loads: list[tuple[FloatArray, LoadBasis]], rows: FloatArray | None = None
+                   ) -> EigenResponse:
     """Integrated modal covariance (and spectra of ``rows``) by the eigen route.
 
     Parameters
     ----------
     ss : BridgeStateSpace
         The modal state space (its input matrix ``E``).
-    U : float
-        Mean wind speed, m/s (only to document; ``lam``, ``vec`` are ``ss.eig(U)``).
     lam, vec : ndarray
         Eigenvalues (1/s) and right eigenvectors (columns) of ``ss.matrix(U)``, all stable.
     f, weights : ndarray, shape (nf,)
         Frequencies (Hz) and their trapezoid weights (Hz).
     loads : list of (ndarray, LoadBasis)
-        Per gust component: its scalar spectrum ``s_c(f)`` at ``f`` (modal force^2 per Hz per
-        unit ``Q``) and the spline of its ``Q_c``.
+        ``S_F(f) = sum s(f) M(f)`` over the list: each scalar spectrum ``s`` at ``f`` (modal
+        force^2 per Hz per unit ``M``) and the spline of its matrix ``M``.
     rows : ndarray, shape (R, n_modes), optional
-        Responses per unit modal coordinate whose spectra to return.
+        Responses per unit modal coordinate whose spectra to return (with the same spline as
+        the covariance, so that they integrate to it to rounding).
     """
-    del U  # the eigen decomposition already holds it
     n = ss.n_modes
     W = vec[:n]  # (n, N): modal coordinates of the eigenvectors
     L = np.linalg.solve(vec, ss.input_matrix())  # (N, n)
@@ -178,30 +181,35 @@ def eigen_response(ss: BridgeStateSpace, U: float, lam: ComplexArray, vec: Compl
     N = lam.size
     # 1 / (lambda_a + conj(lambda_b)): not zero, all Re lambda < 0 (checked by the caller).
     pair_inv = 1.0 / (lam[:, None] + np.conj(lam)[None, :])
+
+    def l_times(coef: FloatArray) -> ComplexArray:
+        LC_stacked = L_stacked @ coef
+        return np.asarray(LC_stacked[:N] + 1j * LC_stacked[N:])  # L C_m, (N, n)
+
     T = np.zeros((N, n), dtype=complex)
-    W_rows = None if rows is None else rows @ W  # (R, N)
-    spectra = None if rows is None else np.zeros((f.size, rows.shape[0]))
     for s_c, basis in loads:
         ws = weights * s_c
         for m in range(basis.coefs.shape[0]):
             sl = basis.support(m)
-            if sl.stop == sl.start:
-                continue
-            u = _pole_factor(f[sl], lam)  # (rows of the support, N)
-            k = (ws[sl] * basis.design[sl, m]) @ u  # (N,)
-            LC_stacked = L_stacked @ basis.coefs[m]
-            LC = LC_stacked[:N] + 1j * LC_stacked[N:]  # L C_m, (N, n)
-            T += k[:, None] * LC
-            if W_rows is None or spectra is None:
-                continue
-            # E = W_r^T o ((G / (lambda_a + conj lambda_b)) W_r^H), G = L C_m L^H.
-            G = (LC @ L.conj().T) * pair_inv
-            E = W_rows.T * (G @ W_rows.conj().T)  # (N, R)
-            spectra[sl] += -2.0 * ((s_c[sl] * basis.design[sl, m])[:, None]
-                                   * (u @ E)).real
+            k = (ws[sl] * basis.design[sl, m]) @ _pole_factor(f[sl], lam)  # (N,)
+            T += k[:, None] * l_times(basis.coefs[m])
     Y = T @ L.conj().T
     X = -(Y + Y.conj().T) * pair_inv
     cov = np.asarray(((W @ X) @ W.conj().T).real, dtype=float)
+    if rows is None:
+        return EigenResponse(cov=0.5 * (cov + cov.T), spectra=None)
+    W_rows = rows @ W  # (R, N)
+    W_rows_H = np.ascontiguousarray(W_rows.conj().T)
+    L_H = np.ascontiguousarray(L.conj().T)
+    spectra = np.zeros((f.size, rows.shape[0]))
+    for s_c, basis in loads:
+        for m in range(basis.coefs.shape[0]):
+            sl = basis.support(m)
+            # E = W_r^T o ((G / (lambda_a + conj lambda_b)) W_r^H), G = L C_m L^H.
+            G = (l_times(basis.coefs[m]) @ L_H) * pair_inv
+            E = W_rows.T * (G @ W_rows_H)  # (N, R)
+            spectra[sl] += -2.0 * ((s_c[sl] * basis.design[sl, m])[:, None]
+                                   * (_pole_factor(f[sl], lam) @ E)).real
     return EigenResponse(cov=0.5 * (cov + cov.T), spectra=spectra)
 
 

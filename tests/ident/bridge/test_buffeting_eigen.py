@@ -4,12 +4,11 @@ The module under test: ident.bridge.buffeting_eigen, through ident.bridge.buffet
 
 The direct route (``route="direct"``) inverts the impedance and forms the exact modal force
 matrix at every frequency; the eigen route (the default) takes one eigen decomposition of the
-modal state space and splines the load matrices in frequency. On the same grid their trapezoid
-sums differ only by the spline's error: measured up to 2.5e-6 relative on the load matrices at
-the default 10 points a decade, 3e-6 on the RMS of the 200-mode benchmark deck. The tolerances
-below (1e-5 on RMS, 1e-4 on spectra against their peak) leave a margin of 3 to 10 over what
-is measured here; where the load matrix does not depend on frequency (full coherence) the
-routes are equal to rounding.
+modal state space and splines the load matrix in frequency. On the same grid their trapezoid
+sums differ only by the spline's error: measured 7.6e-6 relative on a load matrix at the
+default 8 points a decade, 1e-5 on the RMS of the 200-mode benchmark deck (2.2e-5 on its
+modal RMS). The tolerances below leave a margin of 4 to 8 over what is measured; where the
+load matrix does not depend on frequency (full coherence) the routes are equal to rounding.
 """
 
 from __future__ import annotations
@@ -28,11 +27,14 @@ from ident.physics.turbulence import TurbulenceSpec
 
 from support.iabse import IABSE_WIND, iabse_state_space
 
-#: RMS (and modal RMS) of the two routes, relative: the spline's error (3e-6 measured) x 3.
-RMS_TOLERANCE = 1e-5
-#: Spectra, relative to each spectrum's peak: measured up to 2.4e-5 (modal spectra of the
+#: RMS (and modal RMS) of the two routes, relative: the spline's error (2.2e-5 measured on the
+#: 200-mode deck's modal RMS) x 4.5.
+RMS_TOLERANCE = 1e-4
+#: Spectra, relative to each spectrum's peak: measured up to 2.6e-4 (modal spectra of the
 #: 200-mode deck), x 4.
-SPECTRUM_TOLERANCE = 1e-4
+SPECTRUM_TOLERANCE = 1e-3
+#: Correlation times of the modal spectra, relative: measured up to 6.4e-5, x 8.
+CORRELATION_TOLERANCE = 5e-4
 
 WIND = wind_from_dict({"Iu": 0.12, "Iw": 0.07, "Lux": 120.0, "Lwx": 30.0, "Cuy": 10.0,
                        "Cwy": 8.0, "admittance": {"kind": "davenport", "decay": 7.0}})
@@ -94,7 +96,8 @@ def _sine_deck(n_modes: int, n_nodes: int) -> BridgeStateSpace:
 
 def _assert_routes_agree(ss: BridgeStateSpace, spec: TurbulenceSpec, U: float,
                          rms_tol: float = RMS_TOLERANCE,
-                         spectrum_tol: float = SPECTRUM_TOLERANCE) -> None:
+                         spectrum_tol: float = SPECTRUM_TOLERANCE,
+                         correlation_tol: float = CORRELATION_TOLERANCE) -> None:
     fast = bf.frequency_domain(ss, spec, U)
     direct = bf.frequency_domain(ss, spec, U, route="direct")
     assert fast.route == "eigen" and direct.route == "direct"
@@ -111,7 +114,7 @@ def _assert_routes_agree(ss: BridgeStateSpace, spec: TurbulenceSpec, U: float,
     assert np.all(np.abs(fast.modal_spectra - direct.modal_spectra).max(axis=0)
                   <= spectrum_tol * peak)
     assert fast.modal_correlation_time == pytest.approx(direct.modal_correlation_time,
-                                                        rel=10 * spectrum_tol)
+                                                        rel=correlation_tol)
 
 
 def test_three_dof_deck_with_lags_both_routes_agree() -> None:
@@ -131,7 +134,8 @@ def test_full_coherence_routes_are_equal_to_rounding() -> None:
     """
     ss = iabse_state_space()
     assert IABSE_WIND.Cwy == 0.0
-    _assert_routes_agree(ss, IABSE_WIND, 45.0, rms_tol=1e-9, spectrum_tol=1e-9)
+    _assert_routes_agree(ss, IABSE_WIND, 45.0, rms_tol=1e-9, spectrum_tol=1e-9,
+                         correlation_tol=1e-9)
 
 
 def test_rms_without_spectra_is_the_same() -> None:
@@ -145,10 +149,10 @@ def test_rms_without_spectra_is_the_same() -> None:
 
 
 def test_spline_of_the_load_matrix_is_within_its_stated_error() -> None:
-    """The coherent load matrix splined at 10 a decade against the exact one: 1e-5 relative.
+    """The coherent load matrix splined at 8 a decade against the exact one: 3e-5 relative.
 
-    Measured 2.5e-6 here (the largest error against the largest entry, 40 frequencies), 6e-7
-    on the 200-mode deck; the bound is 4 times the larger.
+    Measured 7.6e-6 here (the largest error against the largest entry, 40 frequencies; 9e-7
+    at 14 a decade); the bound is 4 times that.
     """
     ss = _sine_deck(24, 120)
     f = bf.frequency_grid(ss, 40.0)
@@ -160,7 +164,7 @@ def test_spline_of_the_load_matrix_is_within_its_stated_error() -> None:
     picks = np.linspace(0, f.size - 1, 40).astype(int)
     exact = bf._coherent_quadratic(P, x, 8.0 / 40.0 * f[picks])
     splined = np.einsum("fm,mij->fij", basis.design[picks], basis.coefs)
-    assert np.abs(splined - exact).max() <= 1e-5 * np.abs(exact).max()
+    assert np.abs(splined - exact).max() <= 3e-5 * np.abs(exact).max()
 
 
 def test_certificate_catches_a_wrong_decomposition() -> None:
