@@ -23,10 +23,11 @@ multi-point field at every node, then the state space; ``--record 0`` skips it),
 largest RMS heave of each and their difference against the stated relative standard deviation
 of the record's RMS. ``--no-flutter`` prints the buffeting table only.
 
-Measured on the shared two-core host (load average 3 to 9 from the other users), 200 modes
-at 1000 nodes, 5514 frequencies: the direct route 107 s (before this route existed; 54 % in the
-coherent load matrices, 22 % in the inverses, 17 % in the products), the eigen route 17 s with
-spectra and 5 s without; RMS within 3e-6 of the direct route.
+Measured on the shared two-core host (load average 5 to 7 from the other users), 200 modes
+at 1000 nodes, 5514 frequencies: the direct route 102 s (profiled before the eigen route
+existed: 107 s, 54 % in the coherent load matrices, 22 % in the inverses, 17 % in the
+products), the eigen route 10.7 s with spectra (9.6 times faster) and 1.9 s without; RMS within
+9.9e-6 of the direct route.
 
 With ``--fast`` the flutter table is the fast route (:func:`ident.bridge.fast_flutter.analyze`:
 the modal rational eigenproblem, screened branches followed in U, the flutter point solved by

@@ -46,6 +46,14 @@ frequency grid is a logarithmic base grid plus points packed around every in-win
 state-space model (``f_d + gamma tan(theta)``, theta uniform, ``gamma`` the pole's half-power
 half-width in Hz), so that lightly damped peaks are integrated accurately without a huge grid.
 
+**Two routes to the same sums.** ``route="direct"`` evaluates the lines above at every
+frequency of the grid (the reference: 107 s for 200 modes at 1000 nodes). The default
+``route="eigen"`` (:mod:`ident.bridge.buffeting_eigen`) forms no matrix per frequency: ``H``
+from one eigen decomposition of the state space, the products of poles in partial fractions,
+the load matrix splined in frequency; on the same grid its RMS are within 1e-5 of the direct
+route's (10.7 s, 1.9 s without spectra, on the same deck and host), and it is checked
+against a direct inverse at the sharpest peaks before it is used.
+
 Not responsible for: the time-domain simulation (:mod:`ident.bridge.buffeting_time`), reading
 the wind file (:mod:`ident.bridge.wind`), plots (:mod:`daq.offline.bridge_plots`).
 
