@@ -27,6 +27,8 @@ flutter and buffeting"):
   span-wise coherence, admittance) and the coherence of the gusts between deck nodes;
 - :mod:`~ident.bridge.buffeting`: buffeting in turbulent wind in the frequency domain (modal gust
   forces with coherence and admittance, response spectra and RMS along the deck);
+- :mod:`~ident.bridge.buffeting_eigen`: its fast route: one eigen decomposition of the modal
+  state space, pole products in partial fractions, the load matrices splined in frequency;
 - :mod:`~ident.bridge.buffeting_time`: buffeting in the time domain (a simulated multi-point
   turbulence field through the modal state space).
 """
