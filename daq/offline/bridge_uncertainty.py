@@ -6,8 +6,8 @@ table's std columns give a Monte Carlo over the table (:mod:`ident.bridge.uncert
 each works and why). The samples run serially, or on Dask (:func:`daq.offline.cluster.dask_client`:
 ``--workers N`` a local cluster, ``--scheduler ADDRESS`` an existing one, as ``windrig
 reprocess``). Without either option the rule is :func:`executor_rule`: serial when the samples
-would take less than :data:`SERIAL_BELOW_S` on one core (measured: the nominal analysis's time
-times the samples), a local cluster of every core otherwise (starting one costs a few seconds).
+would take less than :data:`SERIAL_BELOW_S` on one core (one sample timed on the client, times
+the samples), a local cluster of every core otherwise (starting one costs a few seconds).
 
 The samples are drawn on the client from ``--seed`` before any task runs, and each task is
 :func:`ident.bridge.uncertainty.flutter_speeds` (or its table form) of the bridge model and a
@@ -46,8 +46,13 @@ __all__ = ["DEFAULT_SAMPLES", "PLOT_NAME", "SERIAL_BELOW_S", "UncertaintyInput",
 DEFAULT_SAMPLES = 1000
 #: Estimated serial time (s) below which no cluster is started by default.
 SERIAL_BELOW_S = 30.0
-#: Tasks per worker: enough for the load to balance when some samples take longer.
+#: Tasks per worker at least: enough for the load to balance when some samples take longer.
 TASKS_PER_WORKER = 4
+#: Work per task at most, s (estimated): the last tasks leave a worker idle for about this long
+#: while another finishes, so it is kept small against the whole (1000 samples of the example
+#: bridge in chunks of 125 left 10 s tails out of 80 s on two workers; a task's own overhead
+#: is a few milliseconds).
+TASK_SECONDS = 2.0
 #: The histogram written into ``--out``.
 PLOT_NAME = "bridge_flutter_uncertainty.png"
 #: The identify JSON's parts of the section's std (``flutter_speed_std_parts``) that are not
@@ -128,10 +133,13 @@ def executor_rule(n_samples: int, seconds_each: float, workers: int | None,
 
 def _run_tasks(task: Callable[..., list[Any]], bridge: Any, items: Sequence[Any],
                args: tuple[Any, ...], serial: bool, workers: int | None,
-               scheduler: str | None, timings: dict[str, float]) -> list[Any]:
+               scheduler: str | None, timings: dict[str, float],
+               seconds_each: float) -> list[Any]:
     """Run ``task(bridge, chunk, *args)`` over chunks of ``items``; outcomes in their order.
 
-    ``timings`` receives ``cluster_start``: the seconds until the client is connected.
+    Chunks of at most :data:`TASK_SECONDS` of estimated work (``seconds_each`` per item), and
+    at least :data:`TASKS_PER_WORKER` per worker. ``timings`` receives ``cluster_start``: the
+    seconds until the client is connected.
     """
     from tqdm import tqdm
 
@@ -146,7 +154,8 @@ def _run_tasks(task: Callable[..., list[Any]], bridge: Any, items: Sequence[Any]
     with dask_client(workers, scheduler) as client:
         timings["cluster_start"] = time.perf_counter() - started
         slots = max(1, sum(client.nthreads().values()))
-        size = max(1, math.ceil(len(items) / (TASKS_PER_WORKER * slots)))
+        size = max(1, min(math.ceil(len(items) / (TASKS_PER_WORKER * slots)),
+                          math.floor(TASK_SECONDS / max(seconds_each, 1e-9))))
         chunks = [list(items[i:i + size]) for i in range(0, len(items), size)]
         # The bridge once to every worker, not with every chunk.
         remote = client.scatter(bridge, broadcast=True)
@@ -186,7 +195,6 @@ def run_uncertainty(bridge: Any, aero: Any, source: UncertaintyInput, *, U_max: 
     started = time.perf_counter()
     if source.covariance is not None:
         delta = bu.delta_method(bridge, source.model, source.covariance, U_max=U_max)
-        seconds_each = time.perf_counter() - started
         if delta is None:
             return _no_flutter(U_max)
         items: Sequence[Any] = bu.sample_models(bridge, source.model, source.covariance,
@@ -205,7 +213,6 @@ def run_uncertainty(bridge: Any, aero: Any, source: UncertaintyInput, *, U_max: 
         from ident.bridge.fast_flutter import analyze
 
         nominal = analyze(bridge, aero.model, U_max=U_max)
-        seconds_each = time.perf_counter() - started
         if nominal.speed is None:
             return _no_flutter(U_max)
         delta, speed, top = None, nominal.speed, U_max
@@ -220,15 +227,19 @@ def run_uncertainty(bridge: Any, aero: Any, source: UncertaintyInput, *, U_max: 
                   f"A3 {'fitted' if with_A3 else 'zero'}: the structure search's most frequent "
                   f"choice on {bu.STRUCTURE_PROBES} samples) and through the fast flutter "
                   "route; no delta method for a table")
-        # A table sample also fits: measured on the example deck, a fit costs about as much
-        # as a small bridge's analysis.
-        seconds_each *= 2.0
+    # One sample on the client, timed (and discarded): the rule's and the chunks' estimate.
+    # The nominal analysis is no measure: it pays the first call's costs (0.75 s against
+    # 0.06 s a sample on the example bridge).
+    t_one = time.perf_counter()
+    task(bridge, list(items[:1]), *args)
+    seconds_each = time.perf_counter() - t_one
     serial, why = executor_rule(samples, seconds_each, workers, scheduler)
     executor = "serial" if serial else describe(workers, scheduler)
     print(f"uncertainty ({kind}): {samples} samples, {executor} ({why})")
     t_mc = time.perf_counter()
     timings: dict[str, float] = {}
-    outcomes = _run_tasks(task, bridge, items, args, serial, workers, scheduler, timings)
+    outcomes = _run_tasks(task, bridge, items, args, serial, workers, scheduler, timings,
+                          seconds_each)
     mc_time = time.perf_counter() - t_mc
     result = bu.summarise(kind, speed, delta, outcomes, top, seed)
     entry = result.to_dict()
