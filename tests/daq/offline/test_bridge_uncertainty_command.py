@@ -65,6 +65,10 @@ def test_an_identified_model_gives_both_stds_the_histogram_and_the_json(identify
     with Image.open(plots / PLOT_NAME) as image:
         assert image.format == "PNG" and image.size == (700, 450)
     assert u["plot"] == str(plots / PLOT_NAME)
+    report = (plots / "report.md").read_text()
+    assert "## Uncertainty (the section's, carried to the bridge)" in report
+    assert f"![flutter speed of the samples]({PLOT_NAME})" in report
+    assert f"+- {u['delta_std']:.3g} m/s" in report
 
 
 def test_a_table_with_std_columns_gives_a_monte_carlo_without_delta(tmp_path, capsys):
