@@ -79,9 +79,29 @@ class ModelCovariance:
 
     @classmethod
     def of(cls, model: IdentifiedModel) -> ModelCovariance:
-        """Return an E2RFC model's covariance (its diagnostics' ``covariance``)."""
+        """Return an E2RFC model's covariance (its diagnostics', :meth:`from_estimate`)."""
         diagnostics = model.diagnostics
-        return cls(tuple(diagnostics.parameter_index), model.n_lags, diagnostics.covariance)
+        return cls.from_estimate(tuple(diagnostics.parameter_index), model.n_lags,
+                                 diagnostics.covariance)
+
+    @classmethod
+    def from_estimate(cls, parameter_index: tuple[tuple[int, int, int], ...], n_lags: int,
+                      matrix: FloatArray) -> ModelCovariance:
+        """Return an estimated covariance symmetrised, its negative eigenvalues set to zero.
+
+        E2RFC's covariance is a pseudo-inverse of ``J^T J`` (positive semi-definite), which
+        round-off leaves slightly asymmetric and, for an ill-conditioned fit, with eigenvalues
+        of about ``-eps cond``; what a file carries must pass :meth:`from_dict`'s checks, which
+        stay strict for a matrix a user gives.
+        """
+        matrix = np.asarray(matrix, dtype=float)
+        matrix = 0.5 * (matrix + matrix.T)
+        if matrix.size and np.all(np.isfinite(matrix)):
+            values, vectors = np.linalg.eigh(matrix)
+            if values.min() < 0.0:
+                matrix = (vectors * np.clip(values, 0.0, None)) @ vectors.T
+                matrix = 0.5 * (matrix + matrix.T)
+        return cls(parameter_index, n_lags, matrix)
 
     @property
     def size(self) -> int:

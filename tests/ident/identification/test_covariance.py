@@ -69,3 +69,27 @@ def test_the_models_drawn_have_the_covariance_about_the_model():
     assert all(np.array_equal(m.A[1:], MODEL.A[1:]) and np.array_equal(m.A[0, 1], MODEL.A[0, 1])
                for m in models[:50])
     assert all(np.all(m.d > 0) for m in models)  # log d normal: d stays positive
+
+
+def test_an_estimates_round_off_is_cleaned_not_refused():
+    """A pseudo-inverse's round-off (asymmetry, a tiny negative eigenvalue) passes.
+
+    :meth:`ModelCovariance.from_estimate` (what ``windrig identify --json`` writes through
+    ``of``) symmetrises and sets negative eigenvalues to zero; the checks of the constructor
+    and of :meth:`from_dict` stay strict for a matrix a user gives. A singular covariance
+    (rank 3) whose zero eigenvalue came out at -1e-6 of the largest, and 1e-7 asymmetric:
+    refused as given, cleaned to within 2e-6 of the largest entry, and read back.
+    """
+    root = np.array([[0.02, 0.0, 0.0], [0.01, 0.03, 0.0], [0.0, 0.005, 0.05], [0.0, 0.0, 0.02]])
+    good = root @ root.T  # 4 x 4 of rank 3
+    values, vectors = np.linalg.eigh(good)
+    scale = float(np.abs(good).max())
+    values[0] = -1e-6 * scale
+    noisy = (vectors * values) @ vectors.T
+    noisy[0, 1] += 1e-7 * scale
+    with pytest.raises(ValueError):
+        ModelCovariance(INDEX, 2, noisy)
+    cleaned = ModelCovariance.from_estimate(INDEX, 2, noisy)
+    back = ModelCovariance.from_dict(json.loads(json.dumps(cleaned.to_dict())))
+    assert np.linalg.eigvalsh(back.matrix).min() >= -1e-12 * scale
+    np.testing.assert_allclose(back.matrix, good, atol=2e-6 * scale)
