@@ -228,8 +228,8 @@ def run_uncertainty(bridge: Any, aero: Any, source: UncertaintyInput, *, U_max: 
                   f"choice on {bu.STRUCTURE_PROBES} samples) and through the fast flutter "
                   "route; no delta method for a table")
     # One sample on the client, timed (and discarded): the rule's and the chunks' estimate.
-    # The nominal analysis is no measure: it pays the first call's costs (0.75 s against
-    # 0.06 s a sample on the example bridge).
+    # The nominal analysis is no measure: it pays the first call's costs (0.75 s in one
+    # benchmark run on the example bridge, where a sample takes 0.06 to 0.1 s).
     t_one = time.perf_counter()
     task(bridge, list(items[:1]), *args)
     seconds_each = time.perf_counter() - t_one
