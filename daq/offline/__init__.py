@@ -14,6 +14,10 @@
   of freedom.
 - :mod:`~daq.offline.bridge_commands`: ``windrig bridge``: multimode flutter (and buffeting) of
   a full bridge from its modes and the section's model or table (:mod:`ident.bridge`);
+- :mod:`~daq.offline.bridge_uncertainty`: ``windrig bridge --uncertainty``: the section's
+  uncertainty at the bridge, serially or on Dask, its JSON entry and histogram;
+- :mod:`~daq.offline.cluster`: the Dask client of ``reprocess`` and ``bridge --uncertainty``
+  (a local cluster, or ``--scheduler ADDRESS``);
 - :mod:`~daq.offline.design_report`: the one-page design report of ``windrig flutter --out``
   and ``windrig bridge --out`` (inputs and their hashes, both routes, warnings, plots);
 - :mod:`~daq.offline.buffeting_plots`: its buffeting plots (RMS along the span, response

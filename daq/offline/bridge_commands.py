@@ -15,7 +15,9 @@ mode against U as a table and a plot (``--out``).
 file. ``--buffeting U1,U2 --wind WIND.toml [--time-domain SECONDS]`` adds the buffeting response
 (:mod:`ident.bridge.buffeting`, :mod:`ident.bridge.buffeting_time`): RMS along the deck in the
 JSON and, with ``--out``, plots of it and of the response spectra
-(:mod:`daq.offline.buffeting_plots`).
+(:mod:`daq.offline.buffeting_plots`). ``--uncertainty [--samples N] [--seed S] [--workers N |
+--scheduler ADDRESS]`` carries the section's uncertainty (an identify JSON's covariance, a
+table's std columns) to the flutter speed (:mod:`daq.offline.bridge_uncertainty`).
 
 Every mistake in what the user gave is a :class:`~daq.errors.UsageError` naming the file or
 option.
@@ -72,6 +74,21 @@ def add_parser(sub: Any) -> None:
                    help="WIND.toml: Iu, Iw, Lux, Lwx, Cuy, Cwy, admittance")
     p.add_argument("--time-domain", type=float, default=None, metavar="SECONDS",
                    help="also simulate the buffeting in time over this record length, s")
+    p.add_argument("--uncertainty", action="store_true",
+                   help="carry the section's uncertainty to the flutter speed: delta method and "
+                        "Monte Carlo from an identify JSON's model_covariance, Monte Carlo from "
+                        "a table's std columns (docs/bridge.md)")
+    p.add_argument("--samples", type=int, default=None,
+                   help="Monte Carlo samples with --uncertainty (default 1000)")
+    p.add_argument("--seed", type=int, default=None,
+                   help="seed the samples are drawn from (default 0)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, default=None,
+                       help="with --uncertainty: a local Dask cluster of this many worker "
+                            "processes (default: serial below ~30 s of samples, else every core)")
+    where.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                       help="with --uncertainty: an existing Dask scheduler, e.g. "
+                            "tcp://10.0.0.5:8786")
 
 
 def _speed_list(text: str) -> tuple[float, ...]:
@@ -91,7 +108,8 @@ def run(args: argparse.Namespace) -> int:
                       u_max=args.u_max, json_path=args.json, out=args.out,
                       mode_tables=args.modes, write_bridge=args.write_bridge,
                       buffeting=args.buffeting, wind=args.wind, time_domain=args.time_domain,
-                      method=args.method)
+                      method=args.method, uncertainty=args.uncertainty, samples=args.samples,
+                      seed=args.seed, workers=args.workers, scheduler=args.scheduler)
 
 
 def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: str = "scanlan",
@@ -99,7 +117,9 @@ def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: 
                out: Path | None = None, mode_tables: list[Path] | None = None,
                write_bridge: Path | None = None, buffeting: tuple[float, ...] | None = None,
                wind: Path | None = None, time_domain: float | None = None,
-               method: str = "auto") -> int:
+               method: str = "auto", uncertainty: bool = False, samples: int | None = None,
+               seed: int | None = None, workers: int | None = None,
+               scheduler: str | None = None) -> int:
     """Analyse a bridge's multimode flutter (see the module docstring); return 0.
 
     Parameters
@@ -120,6 +140,11 @@ def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: 
         Buffeting speeds (m/s), the wind file, the time-domain record length (s).
     method : str
         How the flutter routes are solved (:data:`ident.bridge.routes.METHODS`).
+    uncertainty : bool
+        Carry the section's uncertainty to the flutter speed
+        (:mod:`daq.offline.bridge_uncertainty`).
+    samples, seed, workers, scheduler : optional
+        Its Monte Carlo samples and seed, and where they run.
     """
     from daq.offline.derivative_table import table_std_report
     from ident.bridge.routes import bridge_flutter_routes
@@ -135,6 +160,7 @@ def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: 
     if time_domain is not None and (buffeting is None or not time_domain > 0):
         raise UsageError(f"--time-domain {time_domain:g}: needs --buffeting and a record "
                          "length > 0 s")
+    _check_uncertainty_options(uncertainty, samples, seed, workers, scheduler)
     bridge = _read_bridge(bridge_path, mode_tables)
     spec = _read_wind(wind) if buffeting is not None and wind is not None else None
     print(f"{bridge_path}: {bridge.name}: {bridge.n_modes} modes, {bridge.n_nodes} deck nodes "
@@ -152,6 +178,11 @@ def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: 
         raise UsageError("--aero is required: the section's RFC model (.json) or "
                          "flutter-derivative table (.csv)")
     aero = _read_aero(aero_path, bridge, convention)
+    source = None
+    if uncertainty:
+        from daq.offline.bridge_uncertainty import read_uncertainty_input
+
+        source = read_uncertainty_input(aero_path, aero)
     table_warnings = _check_table(aero, aero_path)
     for note in aero.notes:
         print(f"note: {note}")
@@ -198,6 +229,14 @@ def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: 
             print(f"note: {std_line}")
         summary.update(std_keys)
     _record_inputs_checked(summary, bridge, table_warnings)
+    if source is not None:
+        from daq.offline.bridge_uncertainty import DEFAULT_SAMPLES, run_uncertainty
+
+        summary["uncertainty"] = run_uncertainty(
+            bridge, aero, source, U_max=result.U_max, out=out, workers=workers,
+            scheduler=scheduler, samples=DEFAULT_SAMPLES if samples is None else samples,
+            seed=0 if seed is None else seed)
+        summary["warnings"].extend(summary["uncertainty"]["warnings"])
     if buffeting is not None:
         summary.update(_buffeting(bridge, aero.model, buffeting, spec, time_domain, out))
     if out is not None:
@@ -213,6 +252,25 @@ def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: 
         json_path.write_text(json.dumps(summary, indent=2), encoding="utf-8")
         print(f"wrote {json_path}")
     return 0
+
+
+def _check_uncertainty_options(uncertainty: bool, samples: int | None, seed: int | None,
+                               workers: int | None, scheduler: str | None) -> None:
+    """Refuse the Monte Carlo's options without ``--uncertainty``, and impossible values."""
+    if not uncertainty:
+        given = [name for name, value in (("--samples", samples), ("--seed", seed),
+                                          ("--workers", workers), ("--scheduler", scheduler))
+                 if value is not None]
+        if given:
+            raise UsageError(f"{', '.join(given)}: only with --uncertainty (the Monte Carlo's "
+                             "options)")
+        return
+    if samples is not None and samples < 2:
+        raise UsageError(f"--samples {samples}: must be >= 2 (a std needs two samples)")
+    if workers is not None and workers < 1:
+        raise UsageError(f"--workers {workers}: must be >= 1")
+    if seed is not None and seed < 0:
+        raise UsageError(f"--seed {seed}: must be >= 0")
 
 
 def _read_bridge(path: Path, mode_tables: list[Path] | None) -> Any:

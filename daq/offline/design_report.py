@@ -242,6 +242,7 @@ def write_bridge_report(out: Path, result: Any, summary: Mapping[str, Any],
     if participation:
         lines += ["", "Modes in the flutter motion (share of its strain energy):", ""]
         lines += [f"- {p['mode']}: {100 * p['share']:.1f} %" for p in participation]
+    lines += _uncertainty_lines(summary.get("uncertainty"))
     buffeting = summary.get("buffeting")
     if buffeting:
         lines += ["", "## Buffeting", "", "Largest RMS along the deck (frequency domain):", "",
@@ -271,3 +272,25 @@ def write_bridge_report(out: Path, result: Any, summary: Mapping[str, Any],
     path = out / "report.md"
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return path
+
+
+def _uncertainty_lines(u: Mapping[str, Any] | None) -> list[str]:
+    """Return the bridge's ``uncertainty`` entry (``--uncertainty``) as report lines."""
+    if not u or u.get("flutter_speed") is None:
+        return []
+    lines = ["", "## Uncertainty (the section's, carried to the bridge)", "",
+             f"{u['method']}.", ""]
+    if u.get("delta_std") is not None:
+        lines.append(f"- delta method: {u['flutter_speed']:.4f} +- {u['delta_std']:.3g} m/s")
+    mc = u.get("monte_carlo") or {}
+    if mc.get("std") is not None:
+        q = mc["quantiles"]
+        lines.append(f"- Monte Carlo, {mc['fluttering']} of {mc['n']} samples: mean "
+                     f"{mc['mean']:.4f} m/s, std {mc['std']:.3g} m/s, 95 % within "
+                     f"{q['0.025']:.4f} to {q['0.975']:.4f} m/s")
+    if u.get("total_std") is not None:
+        lines.append(f"- with the section's other std parts (scaled, not propagated): std "
+                     f"{u['total_std']:.3g} m/s")
+    if u.get("plot"):
+        lines += ["", f"![flutter speed of the samples]({Path(u['plot']).name})"]
+    return lines

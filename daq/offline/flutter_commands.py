@@ -69,6 +69,7 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
     )
     from ident.errors import IdentError
     from ident.identification.campaign import analyze_campaign
+    from ident.identification.covariance import ModelCovariance
     from ident.records.run_file import campaign_section, forces_recorded, read_run, tubing_note
 
     if route not in ("auto", "e2rfc", "displacement"):
@@ -145,6 +146,8 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
         json_path.write_text(json.dumps({
             "files": [str(p) for p in files],
             "model": summary["model"],
+            # For later analyses of the model (`windrig bridge --uncertainty`).
+            "model_covariance": ModelCovariance.of(model).to_dict(),
             "structure": summary["reason"],
             "release_residuals": diagnostics.release_residuals.tolist(),
             "flutter_speed": result.speed,

@@ -12,7 +12,8 @@ on. Finished files are cached in ``OUT/cache`` under a key of their path, size a
 modification time (the per-file work does not depend on the settings), so a second run reads
 again only files that changed; the campaigns, which the settings do change, are always redone.
 
-The cluster: a ``LocalCluster`` of ``workers`` single-threaded processes by default; with
+The cluster (:func:`daq.offline.cluster.dask_client`, shared with ``windrig bridge
+--uncertainty``): a ``LocalCluster`` of ``workers`` single-threaded processes by default; with
 ``scheduler`` an existing one (``tcp://host:8786``) is used instead, and nothing else changes.
 
 Not responsible for: the numerics (:mod:`ident`), reading files (:mod:`ident.records.run_file`).
@@ -37,6 +38,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from daq.offline.cluster import dask_client
 from daq.offline.report import ReprocessSummary, write_outputs
 from ident.discrepancy.workflow import diagnose
 from ident.errors import IdentError
@@ -346,7 +348,7 @@ def reprocess(paths: Sequence[str | os.PathLike[str]], out: str | os.PathLike[st
     ReprocessSummary
     """
     # dask is an optional dependency (the ``dask`` extra): only this command needs it.
-    from dask.distributed import Client, LocalCluster, as_completed
+    from dask.distributed import as_completed
 
     settings = settings or ReprocessSettings()
     out_dir = Path(out)
@@ -373,16 +375,8 @@ def reprocess(paths: Sequence[str | os.PathLike[str]], out: str | os.PathLike[st
             todo.append(path)
 
     t_cluster = time.monotonic()
-    cluster = None
-    if scheduler is None:
-        n = workers if workers is not None else (os.cpu_count() or 1)
-        # Loopback only, no dashboard: a laptop run opens no port to the network.
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                               host="127.0.0.1", dashboard_address=None,
-                               scheduler_kwargs={"dashboard": False})
-    client = Client(scheduler if scheduler is not None else cluster)
-    summary.timings["cluster start"] = time.monotonic() - t_cluster
-    try:
+    with dask_client(workers, scheduler) as client:
+        summary.timings["cluster start"] = time.monotonic() - t_cluster
         futures = client.map(process_file, todo, pure=False)
         bar = tqdm(total=len(files), initial=len(files) - len(todo), unit="file",
                    disable=not progress, desc="files")
@@ -420,10 +414,6 @@ def reprocess(paths: Sequence[str | os.PathLike[str]], out: str | os.PathLike[st
                                           "files": [f["path"] for f in groups[key]],
                                           "error": f"{type(exc).__name__}: {exc}"})
         summary.timings["campaigns"] = time.monotonic() - t1
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
 
     t2 = time.monotonic()
     summary.outputs = write_outputs(out_dir, results, summary)

@@ -19,6 +19,9 @@ flutter and buffeting"):
   problem followed in 1/K);
 - :mod:`~ident.bridge.routes`: the bridge's flutter by both routes, compared as a section's are
   (:mod:`ident.tables.flutter_routes`);
+- :mod:`~ident.bridge.uncertainty`: the section's uncertainty carried to the flutter speed
+  (delta method from the flutter point's null vectors; Monte Carlo over a model's covariance
+  or a table's std columns, as picklable tasks);
 - :mod:`~ident.bridge.aero`: the section aerodynamics for a bridge: an RFC model or a
   Roger-fitted flutter-derivative table (with its relative error at every tabulated K);
 - :mod:`~ident.bridge.mode_tables`: plain CSV tables of mode shapes (one per mode, as exported

@@ -3,6 +3,8 @@
 - :mod:`~ident.identification.e2rfc`: ``identify``, E2RFC from releases at a few wind speeds;
 - :mod:`~ident.identification.results`: what it returns (``IdentifiedModel``, diagnostics);
 - :mod:`~ident.identification.uncertainty`: the flutter speed's uncertainty and its parts;
+- :mod:`~ident.identification.covariance`: the parameter covariance as ``windrig identify
+  --json`` writes it, and models sampled from it;
 - :mod:`~ident.identification.modal`: modal identification of free decays;
 - :mod:`~ident.identification.fd_method`: the indirect route (flutter derivatives, Roger fit);
 - :mod:`~ident.identification.campaign`: one campaign's analysis for the front ends.

@@ -15,6 +15,9 @@ clocks
     A monotonic clock that a test sets by hand.
 run_files
     Run files written through the real recorder, and read as a live reader would.
+identified
+    A seeded E2RFC identification of the flat plate as ``windrig identify --json`` writes it
+    (model, parameter covariance, std parts), for the bridge's uncertainty.
 iabse
     The IABSE superstructure benchmark's step 1.1a (a flat-plate section) as a bridge, and its
     wind.

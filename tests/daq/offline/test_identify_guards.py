@@ -76,3 +76,24 @@ def test_rightly_converted_files_carry_no_guard_warning(sims, tmp_path):
     warnings = json.loads(out.read_text())["warnings"]
     guards = ("looks like", "the forces are", "release instant", "does not predict")
     assert not [w for w in warnings if any(g in w for g in guards)]
+
+
+def test_the_json_carries_the_parameter_covariance_of_its_model(sims, tmp_path):
+    """``model_covariance``: read back by its own reader, it fits the written model.
+
+    The bridge's uncertainty (`windrig bridge --uncertainty`) reads it; here it must be the
+    model's shape, symmetric, and its lag-root variances positive (both lags were fitted).
+    """
+    from ident.identification.covariance import ModelCovariance
+    from ident.model.rfc import RationalFunctionModel
+
+    run, out = tmp_path / "right.h5", tmp_path / "right.json"
+    write_release_run(run, CONFIG, _converted(sims))
+    assert main(["identify", str(run), "--json", str(out)]) == 0
+    data = json.loads(out.read_text())
+    model = RationalFunctionModel.from_dict(data["model"])
+    covariance = ModelCovariance.from_dict(data["model_covariance"])
+    covariance.check_model(model)
+    assert covariance.size == len(data["model_covariance"]["parameters"])
+    assert covariance.n_lags == model.n_lags
+    assert np.all(np.diag(covariance.matrix)[-model.n_lags:] > 0.0)

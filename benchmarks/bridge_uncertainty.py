@@ -1,0 +1,128 @@
+"""The section's uncertainty at the bridge: delta method against 1000 Monte Carlo samples.
+
+The example bridge (``rig_configs/bridges/example_bridge.json``, six modes) with the flat plate
+identified by E2RFC from six seeded simulated releases (0.4, 0.6 and 0.8 of its flutter speed,
+two holds each, 6 s at 500 Hz, 20 % measurement noise, two lags with ``A3``: the same
+identification as the tests' ``support.identified``), written as ``windrig identify --json``
+writes it. Printed: the delta-method std, the Monte Carlo std of 1000 samples (the std of that
+std is ``1 / sqrt(2 * 999)``, 2.2 %), their ratio, and the time of the 1000 samples serially
+(the fast route in this process), on a local Dask cluster of one worker and of two
+(``windrig bridge --uncertainty --workers N``, end to end; the cluster's start-up apart; in
+the order 1, 2, 2, 1 so that a drift of a shared host's load cancels in the means), with the
+speed-up of two workers over one.
+
+Run: ``.venv/bin/python benchmarks/bridge_uncertainty.py [--samples N]`` (about 8 minutes on
+two idle cores).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import tempfile
+import time
+from pathlib import Path
+
+from daq.cli import main
+from ident import Release
+from ident.bridge import uncertainty as bu
+from ident.bridge.flutter import default_U_max
+from ident.bridge.model import BridgeModel
+from ident.identification import e2rfc
+from ident.identification.covariance import ModelCovariance
+from ident.model import flat_plate
+from ident.model import flutter as fl
+from ident.model.section import SectionModel
+from simulators import simulate_release
+
+BRIDGE = Path(__file__).resolve().parents[1] / "rig_configs" / "bridges" / "example_bridge.json"
+SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+HOLDS = ((0.004, 0.02), (-0.003, 0.012))
+
+
+def identify_json() -> dict:
+    """Return the seeded identification as ``windrig identify --json`` holds it (its parts)."""
+    truth = flat_plate.jones_model()
+    U_F = fl.analyze(SECTION, truth).speed
+    releases = [Release.from_simulation(simulate_release(
+        SECTION, truth, f * U_F, h0, a0, duration=6.0, fs=500.0, noise=0.2, rng=(40, i, j)))
+        for i, f in enumerate((0.4, 0.6, 0.8)) for j, (h0, a0) in enumerate(HOLDS)]
+    model = e2rfc.identify(releases, SECTION, n_lags=2, with_A3=True)
+    u = model.uncertainty(SECTION)
+    return {"model": model.to_dict(), "model_covariance": ModelCovariance.of(model).to_dict(),
+            "flutter_speed": u.speed, "flutter_speed_std_parts": {
+                "noise": u.parametric, "structure": u.structure,
+                "extrapolation": u.extrapolation, "one_lag_more": u.refinement,
+                "release_scatter": u.turbulence, "below_decaying_release": u.below_decay},
+            "warnings": list(u.warnings)}
+
+
+def main_benchmark(samples: int) -> None:
+    """Run the comparison and print its table."""
+    data = identify_json()
+    bridge = BridgeModel.from_json(BRIDGE)
+    from ident.model.rfc import RationalFunctionModel
+
+    model = RationalFunctionModel.from_dict(data["model"])
+    cov = ModelCovariance.from_dict(data["model_covariance"])
+    t0 = time.perf_counter()
+    delta = bu.delta_method(bridge, model, cov)
+    t_delta = time.perf_counter() - t0
+    assert delta is not None
+    models = bu.sample_models(bridge, model, cov, samples, seed=0)
+    t0 = time.perf_counter()
+    outcomes = bu.flutter_speeds(bridge, models, bu.search_top(default_U_max(bridge), delta))
+    t_serial = time.perf_counter() - t0
+    result = bu.summarise("model covariance", delta.speed, delta, outcomes, 0.0, 0)
+    mc = result.mc_std
+    assert mc is not None
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        aero = Path(tmp) / "identified.json"
+        aero.write_text(json.dumps(data))
+        # 1, 2, 2, 1 workers: a drift of the shared host's load over the runs cancels in the
+        # mean of each.
+        for run, workers in enumerate((1, 2, 2, 1)):
+            out = Path(tmp) / f"run{run}_w{workers}.json"
+            code = main(["bridge", str(BRIDGE), "--aero", str(aero), "--uncertainty",
+                         "--samples", str(samples), "--workers", str(workers), "--json",
+                         str(out)])
+            assert code == 0
+            u = json.loads(out.read_text())["uncertainty"]
+            wall = u["wall_time_s"]
+            rows.append((workers, wall["monte_carlo"], wall["cluster_start"],
+                         wall["monte_carlo"] - wall["cluster_start"], u["monte_carlo"]["std"]))
+    print()
+    print(f"example bridge, identified flat plate; {samples} samples; host load average "
+          f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+    print(f"section: U_F = {data['flutter_speed']:.4f} m/s, noise std "
+          f"{data['flutter_speed_std_parts']['noise']:.4g} m/s")
+    print(f"bridge:  U_F = {delta.speed:.4f} m/s (delta method in {t_delta:.3g} s)")
+    print()
+    print("| delta std (m/s) | MC std (m/s) | delta / MC | MC std's own std |")
+    print("|---|---|---|---|")
+    print(f"| {delta.std:.4f} | {mc:.4f} | {delta.std / mc:.3f} | "
+          f"{100 / math.sqrt(2 * (samples - 1)):.1f} % |")
+    print()
+    print("| run | wall (s) | cluster start (s) | samples (s) | MC std (m/s) |")
+    print("|---|---|---|---|---|")
+    print(f"| serial (this process) | {t_serial:.1f} | - | {t_serial:.1f} | {mc:.4f} |")
+    for workers, total, start, work, std in rows:
+        print(f"| local cluster, {workers} worker{'s' if workers > 1 else ''} | {total:.1f} | "
+              f"{start:.1f} | {work:.1f} | {std:.4f} |")
+    one = [r for r in rows if r[0] == 1]
+    two = [r for r in rows if r[0] == 2]
+    work = [sum(r[3] for r in runs) / len(runs) for runs in (one, two)]
+    total = [sum(r[1] for r in runs) / len(runs) for runs in (one, two)]
+    print()
+    print(f"2 workers against 1 (means of two runs each, in the order 1, 2, 2, 1): "
+          f"{work[0] / work[1]:.2f}x on the samples, {total[0] / total[1]:.2f}x with the "
+          "cluster's start")
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--samples", type=int, default=1000)
+    main_benchmark(parser.parse_args().samples)
