@@ -431,31 +431,34 @@ class SimMicroEpsilonIld1420:
         ready = select.select(readable, [], [], timeout)[0] if readable else []
         if not readable:
             self._stop.wait(timeout)
-        for item in ready:
-            if item is self._listener:
-                self._accept()
-            elif item is self._client:
-                try:
-                    data = self._client.recv(4096)
-                except (BlockingIOError, InterruptedError):
-                    data = None
-                except OSError:
-                    data = b""
-                if data == b"":
-                    self._drop_client("peer closed")
-                elif data:
-                    self._take_command_bytes(data)
-            else:
-                try:
-                    data = os.read(item, 4096)
-                except (BlockingIOError, InterruptedError):
-                    data = b""
-                except OSError as exc:  # EIO: no slave open (we keep one, so rare)
-                    if exc.errno != errno.EIO:
-                        raise
-                    data = b""
-                if data:
-                    self._take_command_bytes(data)
+        # The client first, then a new connection: when a client closes and the next one
+        # connects within one wait, both are ready, and accepting first would replace (and
+        # close) the socket whose EOF is still to be read.
+        client = self._client
+        if client is not None and client in ready:
+            try:
+                data = client.recv(4096)
+            except (BlockingIOError, InterruptedError):
+                data = None
+            except OSError:
+                data = b""
+            if data == b"":
+                self._drop_client("peer closed")
+            elif data:
+                self._take_command_bytes(data)
+        if self._listener is not None and self._listener in ready:
+            self._accept()
+        if self._master_fd is not None and self._master_fd in ready:
+            try:
+                data = os.read(self._master_fd, 4096)
+            except (BlockingIOError, InterruptedError):
+                data = b""
+            except OSError as exc:  # EIO: no slave open (we keep one, so rare)
+                if exc.errno != errno.EIO:
+                    raise
+                data = b""
+            if data:
+                self._take_command_bytes(data)
 
     def _accept(self) -> None:
         assert self._listener is not None

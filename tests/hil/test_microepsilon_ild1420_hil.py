@@ -11,6 +11,7 @@ clock drift test reads 3 s.
 from __future__ import annotations
 
 import logging
+import socket
 import time
 from collections.abc import Iterator
 from typing import Any
@@ -365,3 +366,35 @@ def test_output_none_stops_the_stream_and_the_gap_is_counted(make_sim):
         block = driver.read(1.0)
     off = int(np.count_nonzero(sim.truth().fate == FATES.index("output_off")))
     assert off >= 0.1 * 4000 * 0.8 and block.gaps == (Gap(int(last), off),)
+
+
+def test_a_client_that_closes_as_the_next_connects_is_replaced_cleanly(make_sim):
+    """The old client's EOF and the next connection in one wait of the simulator.
+
+    `windrig check` closes the sensor and `windrig acquire` opens it again at once: both
+    sockets are then ready in the simulator's one select. It used to accept the new one first,
+    which closed the old socket, then read the old one as a pty (a TypeError that ended the
+    simulator's thread: the next command had no reply at all). The simulator's thread is held
+    (its lock, taken after each wait) while the old client closes and the new one connects, so
+    that both are ready in its next wait.
+    """
+    sim = make_sim()
+    url = sim.start("socket")
+    first = connect(url, sim)
+    first.read(timeout_s=1.0)
+    with sim._lock:  # the thread waits here after its current select
+        first.close()
+        host, port = url.removeprefix("socket://").split(":")
+        raw = socket.create_connection((host, int(port)), timeout=2.0)
+        raw.sendall(b"MASTERMV NONE\r\n")
+    raw.settimeout(2.0)
+    reply = b""
+    deadline = time.monotonic() + 2.0
+    while b"->" not in reply and time.monotonic() < deadline:
+        try:
+            reply += raw.recv(4096)
+        except TimeoutError:
+            break
+    raw.close()
+    assert b"MASTERMV NONE\r\n" in reply and b"->" in reply, reply[-200:]
+    assert sim._thread is not None and sim._thread.is_alive()
