@@ -14,7 +14,7 @@ aerodynamics (:mod:`ident.bridge.aero`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 from ident.bridge import fast_flutter, fast_flutter_fd
@@ -83,6 +83,7 @@ def bridge_flutter_routes(bridge: BridgeModel, aero: BridgeAero,
         if route.certification is not None and "not certified" in route.certification:
             notes.append(f"{route.method}: {route.certification}")
     fit = aero.table_fit
+    fit_model = None if fit is None else fit.model
     if fit is not None and aero.K_range is not None:
         def with_alternative(alternative: RationalFunctionModel) -> tuple[Any, BridgeAero]:
             trial_aero = with_model(bridge, aero, alternative)
@@ -90,11 +91,10 @@ def bridge_flutter_routes(bridge: BridgeModel, aero: BridgeAero,
 
         replaced = next_structure_if_below(ss, fd, fit, aero.K_range[1], with_alternative)
         if replaced is not None:
-            ss, aero, note = replaced
+            ss, aero, note, fit_model = replaced
             notes.append(note)
     comparison = compare_routes(
         ss, fd, source="table" if fit is not None else "model", K_range=aero.K_range, fit=fit,
-        state_space_mode=_label(ss), frequency_domain_mode=_label(fd), notes=tuple(notes))
-    if fit is not None and aero.model is not fit.model:
-        comparison = replace(comparison, fit_error_at_flutter=None)
+        fit_model=fit_model, state_space_mode=_label(ss), frequency_domain_mode=_label(fd),
+        notes=tuple(notes))
     return BridgeFlutter(comparison, ss, fd, aero)

@@ -175,6 +175,7 @@ def _in_range(K: float, K_range: tuple[float, float]) -> bool:
 
 def compare_routes(state_space: Any, frequency_domain: Any, *, source: str,
                    K_range: tuple[float, float] | None = None, fit: TableFit | None = None,
+                   fit_model: RationalFunctionModel | None = None,
                    state_space_mode: str | None = None, frequency_domain_mode: str | None = None,
                    divergence_table_edge: float | None = None,
                    notes: tuple[str, ...] = ()) -> RouteComparison:
@@ -191,7 +192,10 @@ def compare_routes(state_space: Any, frequency_domain: Any, *, source: str,
     K_range : (float, float), optional
         The table's lowest and highest reduced frequency.
     fit : TableFit, optional
-        The table's Roger fit the state space used.
+        The table's Roger fit.
+    fit_model : RationalFunctionModel, optional
+        The fit of the table the state space used, when not ``fit``'s chosen one (one of its
+        alternatives): the error at the flutter point is this model's.
     state_space_mode, frequency_domain_mode : str, optional
         Names of the critical branches (default: the results' ``critical_mode``).
     divergence_table_edge : float, optional
@@ -270,7 +274,7 @@ def compare_routes(state_space: Any, frequency_domain: Any, *, source: str,
 
     error_at = None
     if fit is not None and K_F is not None and K_range is not None and _in_range(K_F, K_range):
-        error_at = fit.error_at(K_F)
+        error_at = fit.error_at(K_F, fit_model)
         name = max(error_at, key=lambda n: error_at[n])
         if error_at[name] > fit.accuracy:
             warnings.append(f"the Roger fit's error at the flutter K = {K_F:.3g}: {name}* "
@@ -393,6 +397,8 @@ def section_flutter(section: SectionModel, *, model: RationalFunctionModel | Non
     fd = flutter.frequency_domain(section, table.interpolator(), K_range)
     model_used = fit.model if n == 3 else fit.model.planar()
     ss = flutter.analyze(section, model_used, U_top)
+    fit_model = fit.model
+
     def with_alternative(alternative: RationalFunctionModel
                          ) -> tuple[flutter.FlutterResult, RationalFunctionModel]:
         used = alternative if n == 3 else alternative.planar()
@@ -400,7 +406,7 @@ def section_flutter(section: SectionModel, *, model: RationalFunctionModel | Non
 
     replaced = next_structure_if_below(ss, fd, fit, K_range[1], with_alternative)
     if replaced is not None:
-        ss, model_used, note = replaced
+        ss, model_used, note, fit_model = replaced
         notes.append(note)
     if ss.speed is None and fd.speed is None:
         beyond = flutter.analyze(section, model_used,
@@ -415,6 +421,7 @@ def section_flutter(section: SectionModel, *, model: RationalFunctionModel | Non
             notes.append(f"no flutter within the table, which ends at K = {K_range[0]:.3g}: "
                          f"flutter above {U_top:.4g} m/s is not excluded")
     comparison = compare_routes(ss, fd, source="table", K_range=K_range, fit=fit,
+                                fit_model=fit_model,
                                 divergence_table_edge=table_divergence_speed(section, table),
                                 notes=tuple(notes))
     return SectionFlutter(comparison, ss, fd, model_used, fit)
@@ -428,7 +435,7 @@ def below_table(result: Any, K_high: float) -> bool:
 
 def next_structure_if_below(first: Any, frequency_domain: Any, fit: TableFit, K_high: float,
                             analyze: Callable[[RationalFunctionModel], tuple[Any, Any]]
-                            ) -> tuple[Any, Any, str] | None:
+                            ) -> tuple[Any, Any, str, RationalFunctionModel] | None:
     """Replace a fit whose state space flutters below the table's range, when the table does not.
 
     Parameters
@@ -446,9 +453,10 @@ def next_structure_if_below(first: Any, frequency_domain: Any, fit: TableFit, K_
 
     Returns
     -------
-    (result, used, note) or None
+    (result, used, note, model) or None
         The first alternative (most accurate first) that does not flutter below the range,
-        and the warning that says so; None when nothing was replaced.
+        the warning that says so, and the alternative fit itself (for its error at the
+        flutter point); None when nothing was replaced.
     """
     if not below_table(first, K_high) or frequency_domain.unstable_at_start:
         return None
@@ -459,5 +467,6 @@ def next_structure_if_below(first: Any, frequency_domain: Any, fit: TableFit, K_
                 f"the fit chosen first ({fit.model.n_lags} lag(s)) flutters at "
                 f"{first.speed:.4g} m/s with K = {first.reduced_frequency:.3g}, below the "
                 "table's range, which the table does not show: the state space uses the next "
-                f"structure, {candidate.label} (largest error {100 * error:.2g} % of a force)")
+                f"structure, {candidate.label} (largest error {100 * error:.2g} % of a force)"
+            ), alternative
     return None

@@ -318,8 +318,12 @@ class TableFit:
         """Whether every derivative is within :attr:`accuracy` of its force at every row."""
         return self.worst[2] <= self.accuracy
 
-    def error_at(self, K: float) -> dict[str, float]:
+    def error_at(self, K: float, model: RationalFunctionModel | None = None
+                 ) -> dict[str, float]:
         """Each derivative's error at reduced frequency ``K`` (table interpolated), a fraction.
+
+        ``model``: another fit of the same table (one of :meth:`alternatives`) instead of the
+        chosen one.
 
         Raises
         ------
@@ -329,7 +333,8 @@ class TableFit:
         table_values = self.table.interpolator()(np.array([K]))
         Q_table = Q_from_flutter_derivatives(np.array([K]), table_values)
         return {name: float(error[0]) for name, error in
-                _derivative_errors(Q_table, self.model.Q(np.array([1j * K]))).items()}
+                _derivative_errors(Q_table, (self.model if model is None else model).Q(
+                    np.array([1j * K]))).items()}
 
     def summary(self) -> str:
         """One line: the structure, the largest error and whether it meets the accuracy."""

@@ -74,6 +74,11 @@ def test_a_shifted_damping_derivative_is_not_flutter_at_walking_pace():
     assert "below the table's range, which the table does not show" in text
     assert "the two routes disagree" in text and "rests on the frequency domain" in text
     assert routes.state_space.speed is not None and routes.state_space.speed > 5.0
+    # The fit's error at the flutter point is that of the structure the state space used.
+    fit = routes.fit
+    assert fit is not None and routes.model is not fit.model and c.reduced_frequency is not None
+    assert c.fit_error_at_flutter == fit.error_at(c.reduced_frequency, routes.model)
+    assert c.fit_error_at_flutter != fit.error_at(c.reduced_frequency)
 
 
 def test_a_sign_typo_at_one_row_is_named_by_the_fit():
