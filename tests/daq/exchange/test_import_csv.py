@@ -18,7 +18,7 @@ import pytest
 
 from daq.cli import main
 
-from support.lab_data import SPEEDS, TRUTH_SPEED, imported_deviation, lab_record
+from support.lab_data import SPEEDS, assert_identifies_to_truth, imported_deviation, lab_record
 
 SPAN = 0.9  # m
 
@@ -93,17 +93,6 @@ def test_the_csv_arrives_in_si_and_windrig_signs(imported):
         pytest.approx([u, u], rel=1e-8) for u in SPEEDS]
 
 
-def test_the_imported_csv_identifies_to_the_truth(imported, capsys):
+def test_the_imported_csv_identifies_to_the_truth(imported):
     where, _ = imported
-    out = where / "identified.json"
-    files = sorted((where / "runs").glob("*.h5"))
-    assert main(["identify", *map(str, files), "--json", str(out)]) == 0
-    capsys.readouterr()
-    result = json.loads(out.read_text())
-    error = result["flutter_speed"] / TRUTH_SPEED - 1.0
-    print(f"csv: {result['flutter_speed']:.3f} +- {result['flutter_speed_std']:.3f} m/s, "
-          f"truth {TRUTH_SPEED:.3f} m/s, error {error:+.2%}")
-    # E2RFC's accuracy on this campaign (README: the demo's -0.42 to +0.50 %, std 0.6-0.9 %):
-    # within 2 % and within three of its own standard deviations.
-    assert abs(error) < 0.02
-    assert abs(result["flutter_speed"] - TRUTH_SPEED) < 3 * result["flutter_speed_std"]
+    assert_identifies_to_truth(where / "runs", "csv")

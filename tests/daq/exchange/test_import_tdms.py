@@ -21,7 +21,7 @@ from nptdms import ChannelObject, GroupObject, RootObject, TdmsWriter
 
 from daq.cli import main
 
-from support.lab_data import FS, SPEEDS, TRUTH_SPEED, imported_deviation, lab_record
+from support.lab_data import FS, SPEEDS, assert_identifies_to_truth, imported_deviation, lab_record
 
 SPAN = 0.9  # m
 LASER_MM_PER_V = 5.0  # the heave laser's DAQmx scale
@@ -121,20 +121,9 @@ def test_one_run_file_per_group_in_si_and_windrig_signs(imported):
     assert report["warnings"] == []
 
 
-def test_the_imported_tdms_identifies_to_the_truth(imported, capsys):
+def test_the_imported_tdms_identifies_to_the_truth(imported):
     where, _ = imported
-    out = where / "identified.json"
-    files = sorted((where / "runs").glob("*.h5"))
-    assert main(["identify", *map(str, files), "--json", str(out)]) == 0
-    capsys.readouterr()
-    result = json.loads(out.read_text())
-    error = result["flutter_speed"] / TRUTH_SPEED - 1.0
-    print(f"tdms: {result['flutter_speed']:.3f} +- {result['flutter_speed_std']:.3f} m/s, "
-          f"truth {TRUTH_SPEED:.3f} m/s, error {error:+.2%}")
-    # E2RFC's accuracy on this campaign (README: the demo's -0.42 to +0.50 %, std 0.6-0.9 %):
-    # within 2 % and within three of its own standard deviations.
-    assert abs(error) < 0.02
-    assert abs(result["flutter_speed"] - TRUTH_SPEED) < 3 * result["flutter_speed_std"]
+    assert_identifies_to_truth(where / "runs", "tdms")
 
 
 def test_info_says_where_the_imported_file_came_from(imported, capsys):
