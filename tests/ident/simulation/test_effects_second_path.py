@@ -1,0 +1,327 @@
+"""Every named effect simulated by a second, independent path, and two checked against closed forms.
+
+The library simulates a release by an exact matrix exponential (linear physics) or ETD2RK
+(nonlinear effects) in :mod:`ident.simulation.plant`, with the measurement chain of
+:mod:`ident.simulation.measurement`; the virtual tunnel and the discrepancy workflow both use it.
+Here each of the ten named effects is written again from its documented equations (the effect's
+docstring and docs/conventions.md, "Named effects", "In the time domain"), without calling any
+method of the effect or of the library's state space: the equations of motion
+
+    (Ms - rho/2 B^4 A3) q'' = -Cs q' - Ks q + rho/2 [U^2 B^2 A1 q + U B^3 A2 q'
+                              + U^2 B^2 sum_l A_{l+3} x_l] + f_effect(q, q', t),
+    x_l' = q' - (U/B) d_l x_l,
+
+assembled here and integrated by ``scipy.integrate.solve_ivp`` (DOP853, rtol 1e-9), the
+measured forces ``rho/2 [... + B^4 A3 q'']`` evaluated on its dense output, then the
+measurement effects (a delay on that dense output, crosstalk, the tube's transfer function by
+``scipy.signal.lsim``) applied to the result. The flat plate of the tests with Jones's
+aerodynamics, released from (4 mm, 0.02 rad) at 0 and 0.6 of its flutter speed, each effect at
+the realistic strength of :data:`simulators.campaigns.REALISTIC` and three times it.
+
+Tolerances (relative to each channel's RMS over the 3 s record), from what each path's
+integration error is, measured:
+
+- the reference itself: on the effect-free release, which the library steps exactly (the
+  matrix exponential, round-off ~1e-14), the two differ by 9e-12 to 4.5e-9: that is
+  DOP853's error at rtol 1e-9 over 12 cycles. Linear effects (static unbalance, vortex
+  shedding, base vibration, delay, crosstalk) are exact in the library too: bound 1e-7, 20
+  times the reference's error;
+- nonlinear effects: ETD2RK on 8 substeps per sample (h = 1/4000 s) has a global error of the
+  order of (omega h)^2 = 4e-5 at the pitch frequency, times the nonlinear force's share;
+  measured 2e-7 to 5.5e-6 for the smooth ones and up to 4.9e-5 for three times the friction
+  (its smoothed sign has a slope of 300 1/s): bound 2e-4. That the remainder is the
+  library's step error, and not different physics, is shown by halving the step
+  (:func:`test_the_remaining_difference_is_the_library_step_error`);
+- the tubing: the library filters the sampled forces held linear between samples (first-order
+  hold at 500 Hz), which lowers a harmonic's gain by (omega dt)^2 / 12: 5.3e-5 at 2 Hz and
+  2.1e-4 at 4 Hz; the reference filters the forces at 8 times the rate (64 times less).
+  Measured 1.2e-4 to 2.1e-4 (the force channel with the most pitch); at 1000 Hz the
+  library's gap falls to a quarter (5.1e-5), as a first-order hold's does: the reference is
+  the right one, and the library's bias is 0.4 % of the tube's own 5 % gain loss at 4 Hz.
+  Bound 4e-4, twice the pitch frequency's figure.
+
+Each comparison also checks that the effect changed the record by far more than its bound (the
+test could fail), except where the effect is by its definition absent (wind-borne effects at
+zero wind: there the library must equal the effect-free release).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import pytest
+from scipy import signal
+from scipy.integrate import solve_ivp
+
+from ident.model import flat_plate, flutter
+from ident.model.section import SectionModel
+from ident.physics.effects import EFFECT_NAMES, CoulombFriction, CubicStiffness
+from ident.simulation.decay import CHANNELS, simulate_decay
+from simulators.campaigns import REALISTIC, scaled
+
+from support.sections import FLAT_PLATE
+
+FloatArray = npt.NDArray[np.float64]
+
+MODEL = flat_plate.jones_model()
+FS = 500.0  # Hz, the sync view's rate
+N = 1500  # 3 s
+H0, ALPHA0 = 0.004, 0.02  # m, rad: the campaigns' first hold
+REFINE = 8  # the reference filters the tube's input at 8 times the output rate
+#: Effects carried by the wind: absent (by definition) at zero wind.
+WIND_BORNE = ("vortex_shedding", "aerodynamic_nonlinearity")
+#: Linear effects, exact in the library (matrix exponential): bound from the reference's error.
+EXACT_TOL = 1e-7
+#: Nonlinear effects (ETD2RK, h = 1/4000 s): bound from the measured step error (module doc).
+ETD2RK_TOL = 2e-4
+#: The tube through a first-order hold at 500 Hz: 2 (omega_a dt)^2 / 12 (module doc).
+TUBE_TOL = 4e-4
+
+
+@functools.lru_cache(maxsize=1)
+def flutter_speed() -> float:
+    """Return the flat plate's flutter speed with Jones's aerodynamics, m/s."""
+    speed = flutter.analyze(FLAT_PLATE, MODEL).speed
+    assert speed is not None
+    return float(speed)
+
+
+def reference(section: SectionModel, U: float, h0: float, alpha0: float, name: str | None,
+              effect: Any, t: FloatArray) -> dict[str, FloatArray]:
+    """Simulate a release by the second path: the documented equations, solve_ivp, scipy.signal.
+
+    ``name`` is the effect's name (None: no effect); only its parameters are read from
+    ``effect``. Returns the measured channels ``h`` (m), ``alpha`` (rad), ``lift`` (N/m) and
+    ``moment`` (N m/m) at ``t`` (s from the release).
+    """
+    B, rho, m, inertia = section.B, section.rho, section.m, section.I
+    S = effect.S if name == "static_unbalance" else 0.0
+    wh, wa = 2.0 * math.pi * section.fh, 2.0 * math.pi * section.fa
+    mass = np.array([[m * B * B, S * B], [S * B, inertia]])
+    damping = np.diag([2.0 * m * section.zeta_h * wh * B * B, 2.0 * inertia * section.zeta_a * wa])
+    stiffness = np.diag([m * wh * wh * B * B, inertia * wa * wa])
+    A, lags = np.asarray(MODEL.A), np.asarray(MODEL.d)
+    n_lags = lags.size
+    qdyn = 0.5 * rho * U * U
+    added_mass = 0.5 * rho * B**4 * A[2]
+    m_inv = np.linalg.inv(mass - added_mass)
+    # The linear air force without the added mass, as a gain on the state [q, q', x_1, x_2].
+    air = np.hstack([qdyn * B * B * A[0], 0.5 * rho * U * B**3 * A[1]]
+                    + [qdyn * B * B * A[3 + j] for j in range(n_lags)])
+    structure = np.zeros_like(air)
+    structure[:, :4] = np.hstack([-stiffness, -damping])
+    n_states = 4 + 2 * n_lags
+    linear = np.zeros((n_states, n_states))  # the state matrix, assembled here
+    linear[0:2, 2:4] = np.eye(2)
+    linear[2:4] = m_inv @ (air + structure)
+    for j in range(n_lags):
+        rows = slice(4 + 2 * j, 6 + 2 * j)
+        linear[rows, 2:4] = np.eye(2)
+        linear[rows, rows] = -(U / B) * lags[j] * np.eye(2)
+
+    def extra_air(q: FloatArray, qd: FloatArray, time: float | FloatArray) -> FloatArray:
+        """Wind-borne effect forces [L B, M] (rows: time), N m/m: seen by the taps."""
+        out = np.zeros((np.size(time), 2))
+        if name == "vortex_shedding" and U > 0.0:  # L = qd B cl sin, M = qd B^2 cm sin(+phase)
+            w = 2.0 * math.pi * effect.strouhal * U / effect.depth
+            out[:, 0] = qdyn * B * B * effect.cl * np.sin(w * time)
+            out[:, 1] = qdyn * B * B * effect.cm * np.sin(w * time + effect.phase)
+        elif name == "aerodynamic_nonlinearity":  # qd B^2 (B/U) e (q/q_ref)^2 q'
+            scale = 0.5 * rho * U * B**3
+            out[:, 0] = scale * effect.e_h * (q[0] / effect.q_ref) ** 2 * qd[0]
+            out[:, 1] = scale * effect.e_a * (q[1] / effect.q_ref) ** 2 * qd[1]
+        return out
+
+    def extra_structure(q: FloatArray, qd: FloatArray, time: float) -> FloatArray:
+        """Structural effect forces [F_h B, M], N m/m: not seen by the taps."""
+        h, a, h_dot, a_dot = q[0] * B, q[1], qd[0] * B, qd[1]
+        if name == "coulomb_friction":  # F tanh(v / v_smooth) against the velocity
+            return np.array([-effect.force_h * math.tanh(h_dot / effect.v_smooth_h) * B,
+                             -effect.moment_a * math.tanh(a_dot / effect.v_smooth_a)])
+        if name == "quadratic_damping":  # -c2 |v| v
+            return np.array([-effect.c2_h * abs(h_dot) * h_dot * B,
+                             -effect.c2_a * abs(a_dot) * a_dot])
+        if name == "cubic_stiffness":  # -k3 x^3
+            return np.array([-effect.k3_h * h**3 * B, -effect.k3_a * a**3])
+        if name == "base_vibration":  # -a(t) [m B, S], a = accel sin(2 pi f t + phase)
+            accel = effect.accel * math.sin(2.0 * math.pi * effect.frequency_hz * time
+                                            + effect.phase)
+            return -accel * np.array([m * B, S])
+        return np.zeros(2)
+
+    def rhs(time: float, y: FloatArray) -> FloatArray:
+        force = extra_structure(y[0:2], y[2:4], time) + extra_air(y[0:2], y[2:4], time)[0]
+        dy = linear @ y
+        dy[2:4] += m_inv @ force
+        return dy
+
+    y0 = np.zeros(n_states)
+    y0[0], y0[1] = h0 / B, alpha0
+    sol = solve_ivp(rhs, (0.0, float(t[-1])), y0, method="DOP853", rtol=1e-9, atol=1e-13,
+                    dense_output=True)
+    assert sol.success, sol.message
+
+    def forces(time: FloatArray) -> FloatArray:
+        """Return the taps' force [L B, M] at ``time`` (s; before 0 the model is held)."""
+        y = sol.sol(np.clip(time, 0.0, None))
+        held = time < 0.0
+        y[:, held] = y0[:, None]  # held still: displaced, at rest, lag states at zero
+        q, qd = y[0:2], y[2:4]
+        structural = np.array([extra_structure(y[0:2, k], y[2:4, k], time[k])
+                               for k in range(time.size)])
+        qdd = (linear[2:4] @ y).T + structural @ m_inv.T + extra_air(q, qd, time) @ m_inv.T
+        qdd[held] = 0.0
+        return np.asarray((air @ y).T + qdd @ added_mass.T + extra_air(q, qd, time), dtype=float)
+
+    y = sol.sol(t)
+    h, alpha = y[0] * B, y[1].copy()
+    f = forces(t - (effect.delay_s if name == "channel_delay" else 0.0))
+    if name == "sensor_crosstalk":
+        h, alpha = h + effect.h_from_alpha * alpha, alpha + effect.alpha_from_h * h
+    if name == "tubing_distortion":  # H = w^2 / (s^2 + 2 damping w s + w^2), from rest (held)
+        w = 2.0 * math.pi * effect.frequency_hz
+        tube = signal.TransferFunction([w * w], [1.0, 2.0 * effect.damping * w, w * w])
+        fine = np.arange((t.size - 1) * REFINE + 1) / (FS * REFINE)
+        held = forces(np.array([-1.0 / FS]))[0]  # the tube sat at the held force: unit DC gain
+        f_fine = forces(fine) - held
+        f = np.column_stack([signal.lsim(tube, f_fine[:, j], fine)[1][::REFINE]
+                             for j in range(2)]) + held
+    return {"h": h, "alpha": alpha, "lift": f[:, 0] / B, "moment": f[:, 1]}
+
+
+def rms_difference(a: dict[str, FloatArray], b: dict[str, FloatArray]) -> dict[str, float]:
+    """``rms(a - b) / rms(b)`` for each channel."""
+    return {c: float(np.sqrt(np.mean((a[c] - b[c]) ** 2) / np.mean(b[c] ** 2)))
+            for c in CHANNELS}
+
+
+def library(section: SectionModel, U: float, effects: list[Any], oversample: int = 8,
+            h0: float = H0, alpha0: float = ALPHA0) -> dict[str, FloatArray]:
+    """Return the measured channels of the library's simulation (``simulate_decay``)."""
+    decay = simulate_decay(section, MODEL, U, h0, alpha0, n=N, fs=FS, effects=effects,
+                           oversample=oversample)
+    return decay.measured
+
+
+@functools.lru_cache(maxsize=2)
+def effect_free_reference(fraction: float) -> dict[str, FloatArray]:
+    """Return the second path's release without effects at ``fraction`` of the flutter speed."""
+    return reference(FLAT_PLATE, fraction * flutter_speed(), H0, ALPHA0, None, None,
+                     np.arange(N) / FS)
+
+
+@pytest.mark.parametrize("fraction", [0.0, 0.6])
+def test_the_effect_free_release_agrees_to_the_references_accuracy(fraction):
+    """Without effects the library is exact: what is left is DOP853's error (module doc)."""
+    gap = rms_difference(library(FLAT_PLATE, fraction * flutter_speed(), []),
+                         effect_free_reference(fraction))
+    assert max(gap.values()) < 1e-8, gap  # measured 4.5e-9 (alpha at zero wind)
+
+
+def test_every_named_effect_is_covered():
+    """The parametrisation below covers exactly the library's named effects."""
+    assert set(REALISTIC) == set(EFFECT_NAMES)
+
+
+@pytest.mark.parametrize("fraction", [0.0, 0.6])
+@pytest.mark.parametrize("factor", [1.0, 3.0])
+@pytest.mark.parametrize("name", sorted(EFFECT_NAMES))
+def test_the_library_agrees_with_the_second_path(name, factor, fraction):
+    """Each effect, realistic and three times as strong, at zero wind and at 0.6 U_F."""
+    effect = scaled(name, factor)
+    U = fraction * flutter_speed()
+    t = np.arange(N) / FS
+    ours = library(FLAT_PLATE, U, [effect])
+    theirs = reference(FLAT_PLATE, U, H0, ALPHA0, name, effect, t)
+    tol = (TUBE_TOL if name == "tubing_distortion"
+           else ETD2RK_TOL if effect.nonlinear else EXACT_TOL)
+    gap = rms_difference(ours, theirs)
+    assert max(gap.values()) < tol, gap
+    size = rms_difference(theirs, effect_free_reference(fraction))
+    if fraction == 0.0 and name in WIND_BORNE:  # no wind, no such force: nothing may change
+        assert max(rms_difference(ours, effect_free_reference(0.0)).values()) < 1e-8
+    else:  # the effect moved the record far beyond the bound: the comparison could fail
+        assert max(size.values()) > 30.0 * tol, size
+
+
+def test_the_remaining_difference_is_the_library_step_error():
+    """Twice the substeps divide the library's gap to the reference by 4: ETD2RK's own order.
+
+    Three times the realistic friction at 0.6 U_F (a gap of 2.7e-5): if the two paths
+    simulated different physics, a finer step would leave the gap where it is. Measured: 2.7e-5,
+    6.2e-6 and 1.4e-6 at 8, 16 and 32 substeps (ratios 4.3); bound 3 to 5 (second order,
+    with the reference's 1e-9 far below).
+    """
+    effect = scaled("coulomb_friction", 3.0)
+    U = 0.6 * flutter_speed()
+    theirs = reference(FLAT_PLATE, U, H0, ALPHA0, "coulomb_friction", effect, np.arange(N) / FS)
+    gaps = [max(rms_difference(library(FLAT_PLATE, U, [effect], oversample=k), theirs).values())
+            for k in (8, 16)]
+    assert 3.0 < gaps[0] / gaps[1] < 5.0, gaps
+
+
+def test_cubic_pitch_stiffness_follows_the_harmonic_balance_backbone():
+    """The pitch frequency at each amplitude is the backbone's ``sqrt((k + 3/4 k3 a^2) / I_eff)``.
+
+    Three times the realistic cubic spring (0.15 of the linear stiffness at the release
+    amplitude), pitch alone in still air (no coupling: the plate's added mass is diagonal,
+    ``I_eff = I + rho/2 B^4 pi/64``, docs/conventions.md's Q22). Each cycle's frequency from
+    its interpolated zero crossings, its amplitude the mean of its two peaks. First-order
+    harmonic balance is off by ``(3/256) (k3 a^2/k)^2`` = 3e-4 of the frequency (too high:
+    Lindstedt's second-order term is -21/256, the backbone's -18/256), the damping (0.5 %) by
+    1e-5: 0.5 % of the shift from the linear frequency (5.2 % at the release). Measured: the
+    eleven cycles' shifts (5.2 to 2.7 %) are 0.2 to 0.4 % below the backbone's; bound 1.5 %.
+    """
+    section = FLAT_PLATE
+    effect = scaled("cubic_stiffness", 3.0)
+    assert isinstance(effect, CubicStiffness)
+    alpha = library(section, 0.0, [effect], h0=0.0)["alpha"]
+    t = np.arange(N) / FS
+    up = np.flatnonzero((alpha[:-1] < 0.0) & (alpha[1:] >= 0.0))
+    crossings = t[up] - alpha[up] / (alpha[up + 1] - alpha[up]) / FS  # linear interpolation
+    k = section.I * section.omega_a**2
+    inertia = section.I + 0.5 * section.rho * section.B**4 * math.pi / 64.0
+    f0 = math.sqrt(k / inertia) / (2.0 * math.pi)
+    shifts = []
+    for start, stop, t0, t1 in zip(up[:-1], up[1:], crossings[:-1], crossings[1:], strict=True):
+        cycle = alpha[start:stop + 1]
+        a = 0.5 * (cycle.max() - cycle.min())
+        predicted = math.sqrt((k + 0.75 * effect.k3_a * a * a) / inertia) / (2.0 * math.pi)
+        measured = 1.0 / (t1 - t0)
+        shifts.append((measured - f0, predicted - f0))
+    assert len(shifts) >= 10
+    measured_shift, predicted_shift = np.array(shifts).T
+    assert predicted_shift.min() > 0.02 * f0  # a shift far above the tolerance below
+    np.testing.assert_allclose(measured_shift, predicted_shift, rtol=0.015)
+
+
+def test_coulomb_friction_takes_4F_over_k_per_cycle():
+    """Undamped heave with dry friction loses ``2 F / k`` of amplitude every half cycle.
+
+    The realistic friction (0.03 N/m) on the heave spring alone (structural damping removed,
+    still air, pitch not released): each turning point is ``2 F / k`` = 0.127 mm nearer the rest
+    position than the last, whatever the amplitude, where viscous damping would lose a share
+    of it. The smoothing band (1e-4 m/s against 0.05 m/s) and the peaks' parabolic
+    interpolation across the force's jump are each below 0.1 % of the step. Measured: the
+    eleven drops agree with ``2 F / k`` to 6e-5; bound 0.2 %.
+    """
+    section = FLAT_PLATE.replace(zeta_h=0.0, zeta_a=0.0)
+    effect = REALISTIC["coulomb_friction"]
+    assert isinstance(effect, CoulombFriction)
+    h = library(section, 0.0, [effect], alpha0=0.0)["h"]
+    inner = np.arange(1, h.size - 1)
+    turning = inner[(np.abs(h[inner]) >= np.abs(h[inner - 1]))
+                    & (np.abs(h[inner]) > np.abs(h[inner + 1]))]
+    peaks = [H0]  # the release is the first turning point
+    for i in turning:  # the parabola through three samples: its vertex
+        y0, y1, y2 = np.abs(h[i - 1 : i + 2])
+        peaks.append(y1 + 0.125 * (y2 - y0) ** 2 / (2.0 * y1 - y0 - y2))
+    drops = -np.diff(peaks)
+    step = 2.0 * effect.force_h / (section.m * section.omega_h**2)
+    assert len(drops) >= 10
+    np.testing.assert_allclose(drops, step, rtol=0.002)
+    assert peaks[-1] < 0.75 * H0  # the amplitude itself fell by a quarter: the drops are linear
