@@ -97,6 +97,10 @@ def _as_json(report: Any, files: Sequence[Path]) -> dict[str, Any]:
         "runner_up": report.runner_up,
         "whiteness_before": report.whiteness_before,
         "whiteness_after": report.whiteness_after,
+        # Candidates tried and undone by the gap rule (ident.discrepancy.gap_rule): named only
+        # if the simulated gap shrinks by the margin; each with both gaps.
+        "rejected": [{"effect": name, "gap_before": step.before, "gap_after": step.after,
+                      "required_shrink": step.required} for name, step in report.rejected],
         "evidence": [{"effect": ev.effect, "parameters": ev.parameters, "std": ev.std,
                       "cv_ratio": ev.cv_ratio, "cv_ratio_se": ev.cv_ratio_se,
                       "verdict": ev.verdict} for ev in report.evidence],

@@ -19,11 +19,13 @@ at a time, in rounds:
 3. **Gap**: the best qualifying candidate is added: all chosen effects take the joint fit's
    parameters, the measurement effects are taken out of the data, the aerodynamic model is
    identified again by E2RFC (when the data changed), every release is simulated again and the
-   gap (:func:`gap`) measured. If the gap did not shrink, the candidate is dropped for good and
-   the next qualifying one is tried. No qualifying candidate left: the selection stops.
+   gap (:func:`gap`) measured. If the gap did not shrink by the margin of
+   :mod:`ident.discrepancy.gap_rule` (``GAP_MARGIN`` of the gap white noise leaves), the step is
+   undone, the candidate dropped for good (its verdict keeps both gaps) and the next qualifying
+   one is tried. No qualifying candidate left: the selection stops.
 
-So an effect whose addition does not clearly reduce the held-out residual is never named, and
-the gap after each step is smaller than before it.
+So an effect whose addition does not clearly reduce the held-out residual *and* the simulated
+gap is never named, and the gap after each step is smaller than before it by the margin.
 
 Longer than 600 lines: the selection loop, the joint fits of the candidates it scores, the
 corrections that take the named measurement effects out of the data, and the simulation of
@@ -66,6 +68,7 @@ from ident.discrepancy._equation_error import (
     structural_problem,
 )
 from ident.discrepancy._force_fit import AerodynamicFit, fit_aerodynamic, force_problem
+from ident.discrepancy.gap_rule import GapStep, judge, noise_gap
 from ident.identification import e2rfc
 from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel
@@ -136,6 +139,10 @@ class CandidateEvidence:
         Standard error of ``cv_ratio`` over the chunks.
     verdict : str
         Why it was chosen or rejected, one line.
+    trial : GapStep or None
+        The simulated gaps without and with it, when it was tried as the next named effect
+        (:func:`ident.discrepancy.gap_rule.judge`: ``trial.accepted`` is whether it was named);
+        None when it was not tried (not clear, or another was chosen first).
     """
 
     effect: str
@@ -145,6 +152,7 @@ class CandidateEvidence:
     cv_ratio: float
     cv_ratio_se: float
     verdict: str = ""
+    trial: GapStep | None = None
 
 
 @dataclass(frozen=True)
@@ -248,6 +256,7 @@ def select(releases: Sequence[Release], section: SectionModel, baseline: Rationa
     remaining = [spec.name for spec in STRUCTURAL_CANDIDATES] + [_BASE, _VORTEX, _AERO]
     state: State = (baseline, (), tuple(before), gap(measured, before))
     rounds: list[tuple[CandidateEvidence, ...]] = []
+    noise_before = noise_gap(releases, before)
     while remaining and len(chosen) < MAX_EFFECTS:
         chunk_id, _ = chunk_ids(problem.y, problem.chunks)
         current = held_out_sse(problem.y, problem.design(_structural(chosen)), problem.chunks)
@@ -266,6 +275,7 @@ def select(releases: Sequence[Release], section: SectionModel, baseline: Rationa
         scored.sort(key=lambda item: item[1])
         against = "the baseline" if not chosen else "the model with " + " + ".join(chosen)
         verdicts: dict[str, str] = {}
+        trials: dict[str, GapStep] = {}
         accepted = None
         for name, ratio, se in scored:
             if accepted is not None:
@@ -293,13 +303,22 @@ def select(releases: Sequence[Release], section: SectionModel, baseline: Rationa
                     remaining.remove(name)
                     continue
                 trial = _apply(releases, section, baseline, trial_params, vortex, depth)
-                if trial[3] < state[3]:
+                # The one rule (ident.discrepancy.gap_rule): named only if the simulated gap
+                # shrinks by the margin; otherwise the step is undone (state stays).
+                noise = (min(noise_before, noise_gap(releases, trial[2]))
+                         if math.isfinite(trial[3]) else noise_before)
+                per_release = ([(gap([m], [b]), gap([m], [a])) for m, b, a
+                                in zip(measured, state[2], trial[2], strict=True)]
+                               if math.isfinite(trial[3]) else [])
+                step = judge(state[3], trial[3], noise, per_release)
+                trials[name] = step
+                if step.accepted:
                     accepted = (name, ratio, se, trial, trial_params, trial_problem)
                     verdicts[name] = (f"chosen in round {len(rounds) + 1}: explains the most "
-                                      f"held-out residual; gap {state[3]:.4f} -> {trial[3]:.4f}")
+                                      f"held-out residual; {step.text()}")
                 else:
-                    verdicts[name] = (f"dropped: the simulated gap would grow ({state[3]:.4f} "
-                                      f"-> {trial[3]:.4f})")
+                    verdicts[name] = ("dropped: the simulated gap did not shrink clearly "
+                                      f"({step.text()})")
                     remaining.remove(name)
         # Each candidate's parameters as scored: one pass on this round's data, jointly with
         # the effects chosen (a chosen measurement effect's columns fit what is left of it).
@@ -308,7 +327,7 @@ def select(releases: Sequence[Release], section: SectionModel, baseline: Rationa
         rounds.append(tuple(
             CandidateEvidence(effect=name, parameters=seen[name].values, std=seen[name].std,
                               units=_UNITS[name], cv_ratio=ratio, cv_ratio_se=se,
-                              verdict=verdicts[name])
+                              verdict=verdicts[name], trial=trials.get(name))
             for name, ratio, se in scored))
         if accepted is None:
             break
@@ -587,7 +606,11 @@ def _apply(releases: list[Release], section: SectionModel, baseline: RationalFun
             here = (*physics, BaseVibration(frequency_hz=params[_BASE].values["frequency_hz"],
                                             accel=float(per_release[i, 0]),
                                             phase=float(per_release[i, 1])))
-        sim = simulate_channels(r, section, model, here)
+        # A trial model can be unstable (a softening spring fitted to physics outside the
+        # library runs away): its simulation overflows to inf or NaN, its gap is not finite
+        # and the gap rule rejects it (ident.discrepancy.gap_rule), saying so.
+        with np.errstate(over="ignore", invalid="ignore"):
+            sim = simulate_channels(r, section, model, here)
         if _VORTEX in params:
             # Shedding has a phase of its own in every release: the line fitted to each is
             # added to its simulated forces (the structure's response at the shedding

@@ -15,8 +15,11 @@ aerodynamics, identified by E2RFC unless given) with the releases it came from:
    the taps measure) and scored by the
    held-out fraction of that
    residual they explain. The best is added if it is clearly supported (``NONE_RATIO``,
-   ``MIN_SIGMAS``) *and* the simulated gap shrinks; then the next one is scored jointly with
-   those chosen, and so on. Nothing clearly supported: the answer is None (no false alarms).
+   ``MIN_SIGMAS``) *and* the simulated gap shrinks by the margin of
+   :mod:`ident.discrepancy.gap_rule` (the one rule every named effect passes, in every path;
+   a step that fails it is undone and reported in :attr:`DiscrepancyReport.rejected`); then
+   the next one is scored jointly with those chosen, and so on. Nothing clearly supported:
+   the answer is None (no false alarms).
 3. **Refit and gap after each step**: the effects are added to the model (a measurement effect
    (or a named aerodynamic nonlinearity's force) is taken out of the data and the aerodynamic
    model identified again, its structure chosen again; a structural one joins the structure;
@@ -54,6 +57,7 @@ from ident.discrepancy.effect_selection import (
     select,
     simulate_channels,
 )
+from ident.discrepancy.gap_rule import GapStep
 from ident.discrepancy.residual_check import ResidualFinding, locate_residual
 from ident.identification import e2rfc
 from ident.model.rfc import RationalFunctionModel
@@ -146,6 +150,17 @@ class DiscrepancyReport:
     unexplained: tuple[ResidualFinding, ...] = ()
     zero_wind_coupling: tuple[ZeroWindCoupling, ...] = ()
 
+    @property
+    def rejected(self) -> tuple[tuple[str, GapStep], ...]:
+        """Return every candidate tried and undone, with its gaps, in the order tried.
+
+        A candidate clear on the held-out evidence is tried as the next named effect; if the
+        simulated gap did not shrink by the margin (:mod:`ident.discrepancy.gap_rule`) the
+        step is undone and it is listed here, with the gap before and the gap it left.
+        """
+        return tuple((ev.effect, ev.trial) for evidence in self.rounds for ev in evidence
+                     if ev.trial is not None and not ev.trial.accepted)
+
     def summary(self) -> str:
         """Return the report as text: the sequence, the gap, what is left, the evidence."""
         lines = []
@@ -165,6 +180,8 @@ class DiscrepancyReport:
             lines.append("explained: NO, a systematic residual is left that no named effect "
                          "explains:")
             lines.extend(f"  {f.text()}" for f in self.unexplained)
+        lines.extend(f"tried and undone: {name} ({step.text()})"
+                     for name, step in self.rejected)
         lines.append(f"runner-up: {self.runner_up}")
         lines.append("residual lag-1 autocorrelation (near 0: only white noise left): " + ", ".join(
             f"{c} {self.whiteness_before.get(c, math.nan):.2f}"

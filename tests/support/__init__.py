@@ -15,6 +15,9 @@ clocks
     A monotonic clock that a test sets by hand.
 run_files
     Run files written through the real recorder, and read as a live reader would.
+outside_library
+    Physics outside the discrepancy workflow's library (free play, a heave stop, a mass that
+    grows between releases) for its tests and benchmark.
 identified
     A seeded E2RFC identification of the flat plate as ``windrig identify --json`` writes it
     (model, parameter covariance, std parts), for the bridge's uncertainty.

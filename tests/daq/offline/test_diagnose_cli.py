@@ -46,6 +46,10 @@ def test_diagnose_names_the_delay_and_writes_report_and_plots(delayed_run, tmp_p
     # 10 ms hidden; the fit recovers it within 20 % (the tolerance; ~1 % in practice).
     assert data["parameters"]["delay_s"] == pytest.approx(0.010, rel=0.2)
     assert data["gap_after"] <= 0.5 * data["gap_before"]
+    # Steps the gap rule undid keep both gaps; none of them is named.
+    for step in data["rejected"]:
+        assert step["gap_before"] - step["gap_after"] < step["required_shrink"], step
+        assert step["effect"] not in [e["effect"] for e in data["effects"]]
     assert len(data["gap_per_release"]) == 6 and len(data["evidence"]) == len(EFFECT_NAMES)
     assert not (out / "diagnose_residual.png").exists()  # explained: no residual to locate
     for name in ("decays", "backbone", "gap"):
