@@ -92,7 +92,7 @@ _FIXED_POINT_STEPS = 4
 _TABLE_POINTS = 4096
 #: A branch whose neighbourhood flutters above the lowest whole-problem flutter speed by more
 #: than this is not solved on the whole problem (its coupling outside the neighbourhood, below
-#: ``coupling_tol`` = 1e-6 by default, moves its speed by orders of magnitude less).
+#: ``coupling_tol`` = 1e-4 by default, moves its speed by about that much at the most).
 _REFINE_MARGIN = 1e-2
 
 
