@@ -10,15 +10,19 @@ recorded in the sync view.
 
 from __future__ import annotations
 
-import json
-
 import h5py
 import numpy as np
 import pytest
 
 from daq.cli import main
 
-from support.lab_data import CONFIG, SPEEDS, TRUTH_SPEED, imported_deviation, lab_record
+from support.lab_data import (
+    CONFIG,
+    SPEEDS,
+    assert_identifies_to_truth,
+    imported_deviation,
+    lab_record,
+)
 
 MAP = """\
 config = "sim_flat_plate"
@@ -80,16 +84,5 @@ def test_the_taps_integrate_to_the_forces_and_the_pitot_gives_the_wind(imported)
     assert U == pytest.approx([SPEEDS[0]] * 2, rel=1e-3)
 
 
-def test_the_imported_taps_identify_to_the_truth(imported, capsys):
-    out = imported / "identified.json"
-    files = sorted((imported / "runs").glob("*.h5"))
-    assert main(["identify", *map(str, files), "--json", str(out)]) == 0
-    capsys.readouterr()
-    result = json.loads(out.read_text())
-    error = result["flutter_speed"] / TRUTH_SPEED - 1.0
-    print(f"taps+pitot: {result['flutter_speed']:.3f} +- {result['flutter_speed_std']:.3f} m/s, "
-          f"truth {TRUTH_SPEED:.3f} m/s, error {error:+.2%}")
-    # E2RFC's accuracy on this campaign (README: the demo's -0.42 to +0.50 %, std 0.6-0.9 %):
-    # within 2 % and within three of its own standard deviations.
-    assert abs(error) < 0.02
-    assert abs(result["flutter_speed"] - TRUTH_SPEED) < 3 * result["flutter_speed_std"]
+def test_the_imported_taps_identify_to_the_truth(imported):
+    assert_identifies_to_truth(imported / "runs", "taps+pitot")
