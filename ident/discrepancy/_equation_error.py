@@ -126,6 +126,19 @@ class DecaySignals:
         return np.asarray(sosfiltfilt(self.sos, columns, axis=0)[self.keep], dtype=float)
 
 
+def passband_gain(signals: DecaySignals, frequency_hz: float) -> float:
+    """Return the gain of the signals' zero-phase low-pass at ``frequency_hz`` (0-1).
+
+    A sine through the forward and backward pass comes out scaled by ``|H(f)|^2``, unshifted.
+    """
+    from scipy.signal import sosfreqz
+
+    assert signals.sos is not None
+    fs = 1.0 / float(np.median(np.diff(signals.t)))
+    _, h = sosfreqz(signals.sos, worN=[frequency_hz], fs=fs)
+    return float(abs(h[0]) ** 2)
+
+
 def decay_signals(release: Release, section: SectionModel) -> DecaySignals:
     """Filter and differentiate one release (see the module docstring)."""
     fs = release.fs

@@ -210,10 +210,14 @@ class VortexShedding(Effect):
     depth : float
         Section depth D, m, > 0.
     cl, cm : float
-        Amplitudes of the lift and moment coefficients (``L = qd B cl sin(...)``,
-        ``M = qd B^2 cm sin(... + phase)``), >= 0.
+        Amplitudes of the lift and moment coefficients (``L = qd B cl sin(w t + lift_phase)``,
+        ``M = qd B^2 cm sin(w t + lift_phase + phase)``, ``t`` from the start of the record),
+        >= 0.
     phase : float
         Phase of the moment relative to the lift, rad.
+    lift_phase : float
+        Phase of the lift at the start of the record, rad (the shedding does not wait for a
+        release: each release meets it at a phase of its own).
     """
 
     name: ClassVar[str] = "vortex_shedding"
@@ -222,6 +226,7 @@ class VortexShedding(Effect):
     cl: float = 0.0
     cm: float = 0.0
     phase: float = 0.0
+    lift_phase: float = 0.0
 
     def __post_init__(self) -> None:
         v.positive("strouhal", self.strouhal)
@@ -230,6 +235,7 @@ class VortexShedding(Effect):
             if v.finite(name, getattr(self, name)) < 0.0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
         v.finite("phase", self.phase)
+        v.finite("lift_phase", self.lift_phase)
 
     def frequency(self, U: float) -> float:
         """Shedding frequency at wind speed ``U``, Hz."""

@@ -88,8 +88,11 @@ class Plant:
         s = self.system.section
         qd_B2 = 0.5 * s.rho * self.system.U**2 * s.B**2
         vx = self.vortex
+        # sin(w t + p) = cos(p) sin(w t) + sin(p) cos(w t)
+        lift, moment = vx.lift_phase, vx.lift_phase + vx.phase
         return qd_B2 * np.array(
-            [[vx.cl, 0.0], [vx.cm * math.cos(vx.phase), vx.cm * math.sin(vx.phase)]]
+            [[vx.cl * math.cos(lift), vx.cl * math.sin(lift)],
+             [vx.cm * math.cos(moment), vx.cm * math.sin(moment)]]
         )
 
     def initial(self, z0: FloatArray) -> FloatArray:
