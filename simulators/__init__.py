@@ -6,7 +6,9 @@ tunnel that every simulated instrument of :mod:`simulators.devices` samples in r
 :mod:`simulators.clock` for their clocks and :mod:`simulators.noise` for noise keyed to the
 release and the sample). :mod:`simulators.nidaqmx_standin` stands in for the parts of NI's
 ``nidaqmx`` API that windrig's NI-DAQmx driver uses, reading the simulated DAQ device
-:mod:`simulators.devices.ni_daqmx`. This package may import :mod:`ident` (for the aerodynamic
+:mod:`simulators.devices.ni_daqmx`. :mod:`simulators.campaigns` simulates seeded test campaigns
+with hidden effects, :mod:`simulators.tunnel_campaigns` records them from the virtual tunnel
+with effects of random strength (the discrepancy benchmark's data). This package may import :mod:`ident` (for the aerodynamic
 model) but never :mod:`daq`.
 """
 

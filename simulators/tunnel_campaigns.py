@@ -43,8 +43,9 @@ __all__ = ["STRENGTH_RANGE", "TAPS", "random_effect", "tunnel_campaign"]
 #: :data:`simulators.campaigns.REALISTIC` (low, high). The low end is the weakest strength that
 #: doubles the linear baseline's gap over a clean campaign's (the effect's residual about as
 #: large as the noise's over the four channels: below it there is little to explain), measured
-#: by ``benchmarks/discrepancy_detectability.py`` on tunnel campaigns at 2 % noise and rounded
-#: up; the high end three times the realistic strength (a rig with that much friction, drag or
+#: by ``benchmarks/discrepancy_detectability.py`` on tunnel campaigns at 2 % noise (one seed)
+#: and rounded (quadratic damping's 0.54 down to 0.5, a little below the criterion: harder
+#: for the workflow, not easier); the high end three times the realistic strength (a rig with that much friction, drag or
 #: unbalance gets fixed before a campaign). In physical terms: friction 5-90 mN/m in heave,
 #: drag coefficients 15-90 kg/m^2 (heave), a spring 1.4-15 % stiffer at the release amplitude,
 #: delays of 0.9-30 ms, shedding lift coefficients 0.0015-0.15, a centre of mass 0.9-15 mm off

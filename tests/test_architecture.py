@@ -78,7 +78,7 @@ SIMULATORS_LAYERS: tuple[tuple[str, ...], ...] = (
      "simulators.decks"),
     ("simulators.tunnel", "simulators.campaigns"),
     ("simulators.virtual_tunnel",),
-    ("simulators.devices", "simulators.nidaqmx_standin"),
+    ("simulators.devices", "simulators.nidaqmx_standin", "simulators.tunnel_campaigns"),
 )
 
 
