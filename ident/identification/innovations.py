@@ -63,8 +63,6 @@ __all__ = ["InnovationsResult", "ReleaseModel", "ShapingFilter", "kalman_filter"
 
 FloatArray = npt.NDArray[np.float64]
 
-#: The recorded channels, in the order of the columns of ``y``.
-CHANNELS = ("h", "alpha", "lift", "moment")
 LOG_2PI = math.log(2.0 * math.pi)
 
 
@@ -204,9 +202,8 @@ class ReleaseModel:
             raise ValueError(f"noise_std must be 4 values >= 0 (h m, alpha rad, lift N/m, moment "
                              f"N m/m), got {std.tolist()}")
         object.__setattr__(self, "noise_std", std)
-        system = AeroelasticSystem(section, self.model, self.U)
-        object.__setattr__(self, "U", system.U)
-        Ac, G, C = self._continuous(system)
+        object.__setattr__(self, "U", AeroelasticSystem(section, self.model, self.U).U)
+        Ac, G, C = self.continuous_matrices()
         n = Ac.shape[0]
         # Van Loan: one exponential gives Phi and the exact integral of the noise over a sample.
         T = 1.0 / self.fs
@@ -220,8 +217,12 @@ class ReleaseModel:
         object.__setattr__(self, "C", C)
         object.__setattr__(self, "R", np.diag(std**2))
 
-    def _continuous(self, system: AeroelasticSystem) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Return ``(Ac, G, C)`` of the augmented continuous system (module docstring)."""
+    def continuous_matrices(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Return ``(Ac, G, C)`` of the continuous system ``x' = Ac x + G w``, ``y = C x + v``.
+
+        The state is ``[q, q', lag states, x_b]`` (module docstring); ``w`` unit white noise.
+        """
+        system = AeroelasticSystem(self.section, self.model, self.U)
         A_b, B_b, C_b = self.shaping.matrices()
         A, F = system.matrix(), system.force_matrix()
         nz, k, B = system.n_states, 2, self.section.B
