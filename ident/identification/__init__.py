@@ -7,6 +7,9 @@
   --json`` writes it, and models sampled from it;
 - :mod:`~ident.identification.modal`: modal identification of free decays;
 - :mod:`~ident.identification.fd_method`: the indirect route (flutter derivatives, Roger fit);
+- :mod:`~ident.identification.innovations`: a release in turbulence as a discrete state-space
+  model (buffeting through a shaping filter, sensor noise) and its exact likelihood from a
+  Kalman filter's innovations;
 - :mod:`~ident.identification.campaign`: one campaign's analysis for the front ends.
 
 E2RFC's private machinery: ``_regressors`` (per-release regressors), ``_e2rfc_problem`` (the

@@ -1,0 +1,453 @@
+"""The exact Gaussian likelihood of a release in turbulence, from a Kalman filter's innovations.
+
+A section model released in turbulent flow is a linear system driven by coloured noise: the
+self-excited forces (Roger's form, :mod:`ident.model.statespace`) close the loop, the buffeting
+generalised force ``f_b = [L_b B, M_b]`` (N m/m) drives it, and the four recorded channels see
+it through sensor noise. This module writes that as one discrete-time state-space model per wind
+speed (:class:`ReleaseModel`) and evaluates the exact log-likelihood of a record by the
+innovations of a Kalman filter (:func:`kalman_filter`, :func:`log_likelihood`). It is the
+foundation of a closed-loop maximum-likelihood estimator; it holds no optimiser.
+
+The continuous model. With ``Meff = Ms - rho/2 B^4 A3`` (structural plus added mass) and
+``Ma = rho/2 B^4 A3``, the equations of motion ``Ms q'' + Cs q' + Ks q = f_se + f_b`` with the
+self-excited force ``f_se = Kae q + Cae q' + Ma q'' + sum_l G_l x_l`` give::
+
+    z' = A z + E f_b,                 E = [0; Meff^-1; 0]          (f_b enters the q'' rows)
+    f_se = F z + Ma Meff^-1 f_b       (F = force_matrix(): its added-mass part uses A's q'' rows)
+
+so that the recorded force, self-excited plus buffeting, is::
+
+    f_se + f_b = F z + (I + Ma Meff^-1) f_b = F z + Ms Meff^-1 f_b.
+
+The buffeting force is the output of a :class:`ShapingFilter`, ``x_b' = A_b x_b + B_b w``,
+``f_b = C_b x_b`` with ``w`` unit-intensity continuous white noise (``E[w(t) w(s)^T] = I
+delta(t - s)``). The augmented state ``x = [z, x_b]`` obeys ``x' = Ac x + G w`` with
+``Ac = [[A, E C_b], [0, A_b]]`` and ``G = [0; B_b]``, and the outputs ``y = C x + v`` are
+``[h, alpha, lift, moment]`` = ``[B q_h, alpha, (F z + Ms Meff^-1 C_b x_b)_0 / B,
+(F z + Ms Meff^-1 C_b x_b)_1]`` (m, rad, N/m, N m/m) with sensor noise ``v ~ N(0, R)``,
+``R = diag(sigma^2)``.
+
+The exact discretisation at the sampling interval ``T = 1/fs``: ``Phi = expm(Ac T)`` and
+``Qd = int_0^T expm(Ac s) G G^T expm(Ac s)^T ds``, both from one matrix exponential (Van Loan
+1978): ``expm([[-Ac, G G^T], [0, Ac^T]] T) = [[., Phi^-1 Qd], [0, Phi^T]]``. No hold is implied:
+the process noise is continuous white noise, not a sampled one.
+
+Timing (measured on the shared 2-core machine under load): a 20 s record at 500 Hz with the
+Jones plate (12 states) is filtered in 0.09-0.21 s: the covariance recursion settles in 800-1000
+samples, after which the gain is held and the rest runs as one vectorised pass; the full
+recursion on every sample (``steady_tol=0``) takes 0.7-1.1 s. Building a model (one 24 x 24
+matrix exponential) takes 7 ms.
+
+References
+----------
+C. F. Van Loan, "Computing integrals involving the matrix exponential", IEEE Trans. Automatic
+Control 23(3), 1978.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import scipy.linalg
+
+from ident.model.rfc import RationalFunctionModel
+from ident.model.section import SectionModel
+from ident.model.statespace import AeroelasticSystem
+from ident.numerics import validate as v
+
+__all__ = ["InnovationsResult", "ReleaseModel", "ShapingFilter", "kalman_filter",
+           "log_likelihood"]
+
+FloatArray = npt.NDArray[np.float64]
+
+LOG_2PI = math.log(2.0 * math.pi)
+
+
+@dataclass(frozen=True, eq=False)
+class ShapingFilter:
+    """The buffeting force ``[L B, M]`` as white noise through one second-order low-pass per force.
+
+    Force ``i`` obeys ``f_i'' + 2 zeta_i w_i f_i' + w_i^2 f_i = w_i^2 (L xi)_i`` with
+    ``w_i = 2 pi f_i`` and ``xi`` unit-intensity white noise: unit gain at 0 Hz, so ``L L^T`` is
+    the two-sided spectral density of the force at low frequency, (N m/m)^2/Hz.
+
+    Parameters
+    ----------
+    frequencies : array_like, shape (2,)
+        Corner frequencies of lift and moment, Hz, > 0.
+    damping : array_like, shape (2,)
+        Damping ratios of the two low-passes, > 0 (a stationary force needs a stable filter).
+    L : array_like, shape (2, 2)
+        Lower-triangular Cholesky factor of the white noise's intensity, N m/m s^0.5. Its
+        off-diagonal entry sets the lift-moment correlation; zero is allowed (no buffeting).
+
+    Raises
+    ------
+    ValueError
+        On a non-positive or non-finite frequency or damping ratio, or an ``L`` that is not a
+        finite lower-triangular 2x2 matrix.
+    """
+
+    frequencies: Any
+    damping: Any
+    L: Any
+
+    def __post_init__(self) -> None:
+        f = v.positive_array("frequencies", self.frequencies, ndim=1)
+        z = v.positive_array("damping", self.damping, ndim=1)
+        L = v.finite_array("L", self.L, ndim=2)
+        if f.shape != (2,) or z.shape != (2,):
+            raise ValueError(f"frequencies and damping need one value per force (lift, moment), "
+                             f"got shapes {f.shape} and {z.shape}")
+        if L.shape != (2, 2) or L[0, 1] != 0.0:
+            raise ValueError(f"L must be a lower-triangular 2x2 matrix, got {L.tolist()}")
+        for name, arr in (("frequencies", f), ("damping", z), ("L", L)):
+            arr.flags.writeable = False
+            object.__setattr__(self, name, arr)
+
+    def matrices(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Return ``(A_b, B_b, C_b)``: ``x_b' = A_b x_b + B_b xi``, ``[L B, M] = C_b x_b``.
+
+        The state is ``x_b = [f_L, f_L', f_M, f_M']`` (N m/m and N m/(m s)); shapes (4, 4),
+        (4, 2), (2, 4); ``A_b`` in 1/s, ``B_b`` in N m/m s^-1.5.
+        """
+        w = 2.0 * math.pi * np.asarray(self.frequencies)
+        A_b, B0, C_b = np.zeros((4, 4)), np.zeros((4, 2)), np.zeros((2, 4))
+        for i in range(2):
+            A_b[2 * i, 2 * i + 1] = 1.0
+            A_b[2 * i + 1, 2 * i] = -w[i] ** 2
+            A_b[2 * i + 1, 2 * i + 1] = -2.0 * self.damping[i] * w[i]
+            B0[2 * i + 1, i] = w[i] ** 2
+            C_b[i, 2 * i] = 1.0
+        return A_b, B0 @ np.asarray(self.L), C_b
+
+    def stationary_covariance(self) -> FloatArray:
+        """Covariance of the state ``x_b`` in its stationary distribution, shape (4, 4).
+
+        The solution of the Lyapunov equation ``A_b P + P A_b^T + B_b B_b^T = 0``.
+        """
+        A_b, B_b, _ = self.matrices()
+        P = scipy.linalg.solve_continuous_lyapunov(A_b, -B_b @ B_b.T)
+        return np.asarray(0.5 * (P + P.T), dtype=float)
+
+    def spectrum(self, f: Any) -> npt.NDArray[np.complex128]:
+        """Two-sided cross-spectral density of ``[L B, M]`` at frequencies ``f`` (Hz).
+
+        ``S(f) = H(i 2 pi f) H(i 2 pi f)^H`` with ``H(s) = C_b (s I - A_b)^-1 B_b``; shape
+        (len(f), 2, 2), (N m/m)^2/Hz. Its integral over all f is ``C_b P C_b^T``.
+        """
+        A_b, B_b, C_b = self.matrices()
+        s = 2j * math.pi * np.atleast_1d(v.finite_array("f", f))
+        H = C_b @ np.linalg.solve(s[:, None, None] * np.eye(4) - A_b, B_b)
+        return np.asarray(H @ np.conj(np.swapaxes(H, 1, 2)), dtype=complex)
+
+
+@dataclass(frozen=True, eq=False)
+class ReleaseModel:
+    """A 2-DOF section released in turbulence, discretised exactly at ``fs``.
+
+    Parameters
+    ----------
+    section : SectionModel
+        The structure (two degrees of freedom).
+    model : RationalFunctionModel
+        The self-excited forces (a 3-DOF model acts through its heave-pitch block).
+    U : float
+        Mean wind speed, m/s, >= 0.
+    fs : float
+        Sampling rate, Hz, > 0.
+    shaping : ShapingFilter
+        The buffeting force.
+    noise_std : array_like, shape (4,)
+        Sensor-noise standard deviations of ``h`` (m), ``alpha`` (rad), ``lift`` (N/m) and
+        ``moment`` (N m/m), each >= 0 (the filter needs the innovation covariance to be
+        positive definite: zero only where the state is uncertain).
+    rho : float, optional
+        Air density, kg/m^3; replaces the section's own when given.
+
+    Attributes
+    ----------
+    Phi, Qd : ndarray, shape (n_x, n_x)
+        Transition matrix and process-noise covariance over one sample.
+    C : ndarray, shape (4, n_x)
+        Output matrix; ``R`` (4, 4): sensor-noise covariance.
+    """
+
+    section: SectionModel
+    model: RationalFunctionModel
+    U: float
+    fs: float
+    shaping: ShapingFilter
+    noise_std: Any
+    rho: float | None = None
+    Phi: FloatArray = field(init=False, repr=False)
+    Qd: FloatArray = field(init=False, repr=False)
+    C: FloatArray = field(init=False, repr=False)
+    R: FloatArray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        section = self.section
+        if self.rho is not None:
+            section = section.replace(rho=v.positive("rho", self.rho))
+        if section.n_dof != 2:
+            raise ValueError("ReleaseModel is for a section with two degrees of freedom "
+                             "(heave, pitch); this one has a lateral spring")
+        object.__setattr__(self, "section", section)
+        object.__setattr__(self, "fs", v.positive("fs", self.fs))
+        std = v.finite_array("noise_std", self.noise_std, ndim=1)
+        if std.shape != (4,) or np.any(std < 0.0):
+            raise ValueError(f"noise_std must be 4 values >= 0 (h m, alpha rad, lift N/m, moment "
+                             f"N m/m), got {std.tolist()}")
+        object.__setattr__(self, "noise_std", std)
+        object.__setattr__(self, "U", AeroelasticSystem(section, self.model, self.U).U)
+        Ac, G, C = self.continuous_matrices()
+        n = Ac.shape[0]
+        # Van Loan: one exponential gives Phi and the exact integral of the noise over a sample.
+        T = 1.0 / self.fs
+        M = np.zeros((2 * n, 2 * n))
+        M[:n, :n], M[:n, n:], M[n:, n:] = -Ac, G @ G.T, Ac.T
+        E = scipy.linalg.expm(M * T)
+        Phi = E[n:, n:].T
+        Qd = Phi @ E[:n, n:]
+        object.__setattr__(self, "Phi", Phi)
+        object.__setattr__(self, "Qd", 0.5 * (Qd + Qd.T))
+        object.__setattr__(self, "C", C)
+        object.__setattr__(self, "R", np.diag(std**2))
+
+    def continuous_matrices(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Return ``(Ac, G, C)`` of the continuous system ``x' = Ac x + G w``, ``y = C x + v``.
+
+        The state is ``[q, q', lag states, x_b]`` (module docstring); ``w`` unit white noise.
+        """
+        system = AeroelasticSystem(self.section, self.model, self.U)
+        A_b, B_b, C_b = self.shaping.matrices()
+        A, F = system.matrix(), system.force_matrix()
+        nz, k, B = system.n_states, 2, self.section.B
+        Meff_inv = np.linalg.inv(system.effective_mass())
+        Ac = np.zeros((nz + 4, nz + 4))
+        Ac[:nz, :nz] = A
+        Ac[k : 2 * k, nz:] = Meff_inv @ C_b  # the buffeting force in the q'' rows
+        Ac[nz:, nz:] = A_b
+        G = np.zeros((nz + 4, 2))
+        G[nz:] = B_b
+        # Recorded force = self-excited (its added mass sees the buffeting-driven q'') + buffeting.
+        force = np.hstack([F, self.section.mass_matrix() @ Meff_inv @ C_b])
+        C = np.zeros((4, nz + 4))
+        C[0, 0], C[1, 1] = B, 1.0
+        C[2], C[3] = force[0] / B, force[1]
+        return Ac, G, C
+
+    @property
+    def n_states(self) -> int:
+        """Number of states: the aeroelastic ones and the shaping filter's four."""
+        return int(self.Phi.shape[0])
+
+    def initial_state(self, h0: float, alpha0: float) -> FloatArray:
+        """Mean state at a release from rest at ``h0`` (m), ``alpha0`` (rad): lags and ``x_b`` 0."""
+        x0 = np.zeros(self.n_states)
+        x0[0] = v.finite("h0", h0) / self.section.B
+        x0[1] = v.finite("alpha0", alpha0)
+        return x0
+
+    def initial_covariance(self, extra: Any = None) -> FloatArray:
+        """Covariance of the state at the release, shape (n_x, n_x).
+
+        The shaping filter's states in their stationary distribution, the structure's known
+        exactly, plus ``extra`` (n_x, n_x) when given (e.g. the release position known only to
+        the sensor noise: ``(sigma_h / B)^2`` and ``sigma_alpha^2`` on the first two diagonals).
+        """
+        P0 = np.zeros((self.n_states, self.n_states))
+        P0[-4:, -4:] = self.shaping.stationary_covariance()
+        if extra is not None:
+            P0 = P0 + _covariance("extra", extra, self.n_states)
+        return P0
+
+    def sample(self, x0: Any, P0: Any, n: int, rng: np.random.Generator) -> FloatArray:
+        """Draw a record ``y`` (n, 4) from the discrete model itself, ``x(0) ~ N(x0, P0)``."""
+        x = rng.multivariate_normal(_vector("x0", x0, self.n_states),
+                                    _covariance("P0", P0, self.n_states), method="eigh")
+        w = rng.multivariate_normal(np.zeros(self.n_states), self.Qd, size=n, method="eigh")
+        y = np.empty((n, 4))
+        for k in range(n):
+            y[k] = self.C @ x
+            x = self.Phi @ x + w[k]
+        return y + rng.standard_normal((n, 4)) * self.noise_std
+
+
+@dataclass(frozen=True, eq=False)
+class InnovationsResult:
+    """What the Kalman filter gives a record.
+
+    Attributes
+    ----------
+    log_likelihood : float
+        Exact Gaussian log-likelihood of the observed samples.
+    innovations : ndarray, shape (n, 4)
+        ``e_k = y_k - C x_{k|k-1}`` in the channels' units; NaN where a sample is missing.
+    standardized : ndarray, shape (n, 4)
+        ``chol(S_k)^-1 e_k`` over the observed channels (white, unit variance if the model is
+        right: for a whiteness check); NaN where missing.
+    predictions : ndarray, shape (n, 4)
+        One-step predictions ``C x_{k|k-1}`` of every channel.
+    """
+
+    log_likelihood: float
+    innovations: FloatArray
+    standardized: FloatArray
+    predictions: FloatArray
+
+
+def kalman_filter(model: ReleaseModel, y: Any, x0: Any, P0: Any = None, *,
+                  steady_tol: float = 1e-14) -> InnovationsResult:
+    """Run the Kalman filter over a record and return its innovations and log-likelihood.
+
+    ``log L = sum_k -1/2 (m_k log 2 pi + log det S_k + e_k^T S_k^-1 e_k)`` with ``m_k`` the
+    channels observed at sample ``k``; ``S_k`` is factored by Cholesky and the covariance is
+    updated in Joseph form, so it stays symmetric positive semi-definite. The covariance does
+    not depend on the data: once its prediction changes by less than ``steady_tol`` (relative,
+    max norm) over a fully observed sample, the gain is held (the steady-state filter) until a
+    sample with a missing channel, and the record's stretch is filtered in one vectorised pass.
+
+    Parameters
+    ----------
+    model : ReleaseModel
+        The discrete model; ``y`` is on its sample grid.
+    y : array_like, shape (n, 4)
+        ``[h, alpha, lift, moment]`` (m, rad, N/m, N m/m), the first row at the release. NaN marks
+        a missing sample: that channel's update is skipped at that sample.
+    x0 : array_like, shape (n_x,)
+        Mean state at the first sample (:meth:`ReleaseModel.initial_state`).
+    P0 : array_like, shape (n_x, n_x), optional
+        Its covariance; default :meth:`ReleaseModel.initial_covariance` (the shaping filter
+        stationary, the release position exact).
+    steady_tol : float, optional
+        Relative change of the predicted covariance below which the gain is held; 0 never holds
+        it. At the default 1e-14 the log-likelihood of a 20 s record at 500 Hz moves by 1e-10 to
+        4e-10 against the full recursion (5e-8 with a burst of missing samples mid-record), of
+        about 2e5.
+
+    Returns
+    -------
+    InnovationsResult
+
+    Raises
+    ------
+    ValueError
+        On a ``y`` of the wrong shape or with infinite values, a non-finite ``x0`` or ``P0``, or an
+        innovation covariance that is not positive definite (zero sensor noise on a channel the
+        state determines exactly).
+    """
+    y_arr = np.asarray(y, dtype=float)
+    if y_arr.ndim != 2 or y_arr.shape[1] != 4 or y_arr.shape[0] < 1:
+        raise ValueError(f"y must have shape (n, 4) (h, alpha, lift, moment), got {y_arr.shape}")
+    if np.any(np.isinf(y_arr)):
+        raise ValueError("y contains infinite values (NaN marks a missing sample; inf is an error)")
+    steady_tol = v.finite("steady_tol", steady_tol)
+    n_x = model.n_states
+    x = _vector("x0", x0, n_x).copy()
+    P = model.initial_covariance() if P0 is None else _covariance("P0", P0, n_x)
+    Phi, Qd, C, R = model.Phi, model.Qd, model.C, model.R
+    observed = ~np.isnan(y_arr)
+    full_rows = observed.all(axis=1)
+    n = y_arr.shape[0]
+    innovations = np.full((n, 4), np.nan)
+    standardized = np.full((n, 4), np.nan)
+    predictions = np.empty((n, 4))
+    eye = np.eye(n_x)
+    log_l = 0.0
+    held: tuple[FloatArray, FloatArray, float] | None = None  # gain, chol(S)^-1, log det S
+    k = 0
+    while k < n:
+        if held is not None and full_rows[k]:
+            stop = k + int(np.argmin(full_rows[k:])) if not full_rows[k:].all() else n
+            x, log_l_part = _steady_stretch(model, y_arr[k:stop], x, held,
+                                            predictions[k:stop], innovations[k:stop],
+                                            standardized[k:stop])
+            log_l += log_l_part
+            k = stop
+            continue
+        predictions[k] = C @ x
+        rows = observed[k]
+        P_pred = P
+        if rows.any():
+            full = bool(full_rows[k])
+            H = C if full else C[rows]
+            R_k = R if full else R[np.ix_(rows, rows)]
+            e = y_arr[k, rows] - predictions[k, rows]
+            PHt = P @ H.T
+            try:
+                chol = np.linalg.cholesky(H @ PHt + R_k)
+            except np.linalg.LinAlgError as exc:
+                raise ValueError(
+                    f"the innovation covariance at sample {k} is not positive definite: give "
+                    "sensor noise > 0 on channels the state determines exactly") from exc
+            # Plain numpy on these 4x4 blocks: scipy's wrappers cost more than the algebra here.
+            chol_inv = np.linalg.inv(chol)
+            u = chol_inv @ e
+            log_det = 2.0 * float(np.log(np.diag(chol)).sum())
+            log_l -= 0.5 * (e.size * LOG_2PI + log_det + float(u @ u))
+            innovations[k, rows], standardized[k, rows] = e, u
+            # K = P H^T S^-1 through the factor; Joseph form keeps P symmetric and PSD.
+            K = PHt @ (chol_inv.T @ chol_inv)
+            x = x + K @ e
+            IKH = eye - K @ H
+            P = IKH @ P @ IKH.T + K @ R_k @ K.T
+        x = Phi @ x
+        P = Phi @ P @ Phi.T + Qd
+        held = None
+        if full_rows[k] and steady_tol > 0.0:
+            if np.abs(P - P_pred).max() <= steady_tol * np.abs(P).max():
+                held = (K, chol_inv, log_det)
+        k += 1
+    return InnovationsResult(log_l, innovations, standardized, predictions)
+
+
+def _steady_stretch(model: ReleaseModel, y: FloatArray, x: FloatArray,
+                    held: tuple[FloatArray, FloatArray, float], predictions: FloatArray,
+                    innovations: FloatArray, standardized: FloatArray) -> tuple[FloatArray, float]:
+    """Filter fully observed samples with a held gain; fill the output slices in place.
+
+    Returns the predicted state after the stretch and the stretch's log-likelihood.
+    """
+    K, chol_inv, log_det = held
+    Phi, C = model.Phi, model.C
+    # The one-step predictor x+ = Phi (I - K C) x + Phi K y: a loop of two small products.
+    A_cl, B_cl = Phi - Phi @ K @ C, Phi @ K
+    drive = y @ B_cl.T
+    states = np.empty((y.shape[0], x.size))
+    for i in range(y.shape[0]):
+        states[i] = x
+        x = A_cl @ x + drive[i]
+    predictions[:] = states @ C.T
+    innovations[:] = y - predictions
+    standardized[:] = innovations @ chol_inv.T
+    log_l = -0.5 * (y.shape[0] * (4 * LOG_2PI + log_det) + float(np.sum(standardized**2)))
+    return x, log_l
+
+
+def log_likelihood(model: ReleaseModel, y: Any, x0: Any, P0: Any = None) -> float:
+    """Exact Gaussian log-likelihood of a record (:func:`kalman_filter`'s, alone)."""
+    return kalman_filter(model, y, x0, P0).log_likelihood
+
+
+def _vector(name: str, value: Any, n: int) -> FloatArray:
+    """Check a state vector: finite, shape (n,)."""
+    arr = v.finite_array(name, value, ndim=1)
+    if arr.shape != (n,):
+        raise ValueError(f"{name} must have shape ({n},) (the model's states), got {arr.shape}")
+    return arr
+
+
+def _covariance(name: str, value: Any, n: int) -> FloatArray:
+    """Check a state covariance: finite, symmetric, shape (n, n)."""
+    arr = v.finite_array(name, value, ndim=2)
+    if arr.shape != (n, n):
+        raise ValueError(f"{name} must have shape ({n}, {n}) (the model's states), got "
+                         f"{arr.shape}")
+    if not np.allclose(arr, arr.T, rtol=1e-12, atol=0.0):
+        raise ValueError(f"{name} must be symmetric")
+    return arr
