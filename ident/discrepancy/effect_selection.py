@@ -300,8 +300,15 @@ def select(releases: Sequence[Release], section: SectionModel, baseline: Rationa
             else:
                 trial_params, trial_problem = _joint(releases, section, vortex, line,
                                                      [*chosen, name], depth, aero)
-                if not all(math.isfinite(x) for x in trial_params[name].values.values()):
-                    verdicts[name] = "rejected: its fitted parameters are outside their range"
+                outside = [other for other, fitted in trial_params.items()
+                           if not all(math.isfinite(x) for x in fitted.values.values())]
+                if outside:
+                    # Fitted jointly, an effect chosen before can lose its physical range too
+                    # (a tube's resonance beside a new crosstalk): the step cannot be taken.
+                    verdicts[name] = ("rejected: its fitted parameters are outside their range"
+                                      if name in outside else
+                                      f"rejected: beside it, the parameters of {outside[0]} "
+                                      "are outside their range")
                     remaining.remove(name)
                     continue
                 trial = _apply(releases, section, baseline, trial_params, vortex, depth)
