@@ -18,7 +18,8 @@ at a time, in rounds:
    exactly; and the parameters must be in range, a tube needs a resonance).
 3. **Gap**: the best qualifying candidate is added: all chosen effects take the joint fit's
    parameters, the measurement effects are taken out of the data, the aerodynamic model is
-   identified again by E2RFC (when the data changed), every release is simulated again and the
+   identified again by E2RFC (when the data changed, and beside the effects that bend the
+   decays, on the releases with their share taken out), every release is simulated again and the
    gap (:func:`gap`) measured. If the gap did not shrink by the margin of
    :mod:`ident.discrepancy.gap_rule` (``GAP_MARGIN`` of the gap white noise leaves), the step is
    undone, the candidate dropped for good (its verdict keeps both gaps) and the next qualifying
@@ -600,7 +601,8 @@ def _apply(releases: list[Release], section: SectionModel, baseline: RationalFun
     # E2RFC chooses the structure again: contaminated data can make it choose another one (a
     # shedding line cost a lag: the refit kept at the baseline's structure stayed 4x the noise
     # away from the measurements, re-chosen it is at the noise). The structural effects do not
-    # change the measured forces, hence not E2RFC's model; a base vibration does: its forced
+    # change the measured forces, but they bend the decays (E2RFC is identified again beside
+    # them below, _refit_beside); a base vibration changes the forces: its forced
     # motion near a mode biased E2RFC (the gap stayed at 2.6 times the noise with the floor's
     # parameters right within 1 %), so its line is notched out of all four channels first.
     corrected = _correct(releases, section, params, vortex, notch=True, untube=True)
@@ -651,7 +653,7 @@ def _refit_beside(releases: list[Release], section: SectionModel, model: Rationa
     linear system: friction, drag, a nonlinear spring, an unbalance or an aerodynamic
     nonlinearity bend them, and the model identified beside them is biased (friction at twice
     its realistic strength, its own parameters within 2 %: a systematic residual of 1.3-1.7
-    times the noise in every channel, gone to 0.1-0.2 of it with the true aerodynamic model).
+    times the noise in every channel, 0.07-0.17 of it with the true aerodynamic model).
     So each release's channels are corrected by the effects' share of the response, the
     difference between the current model's simulations with and without them, and E2RFC runs
     on what a linear section would have given (one pass: the residual fell to 0.16-0.28 of the
