@@ -8,8 +8,8 @@ release and the sample). :mod:`simulators.nidaqmx_standin` stands in for the par
 ``nidaqmx`` API that windrig's NI-DAQmx driver uses, reading the simulated DAQ device
 :mod:`simulators.devices.ni_daqmx`. :mod:`simulators.campaigns` simulates seeded test campaigns
 with hidden effects, :mod:`simulators.tunnel_campaigns` records them from the virtual tunnel
-with effects of random strength (the discrepancy benchmark's data). This package may import :mod:`ident` (for the aerodynamic
-model) but never :mod:`daq`.
+with effects of random strength (the discrepancy benchmark's data). This package may import
+:mod:`ident` (for the aerodynamic model) but never :mod:`daq`.
 """
 
 from simulators import effects, tunnel

@@ -45,13 +45,14 @@ __all__ = ["STRENGTH_RANGE", "TAPS", "random_effect", "tunnel_campaign"]
 #: large as the noise's over the four channels: below it there is little to explain), measured
 #: by ``benchmarks/discrepancy_detectability.py`` on tunnel campaigns at 2 % noise (one seed)
 #: and rounded (quadratic damping's 0.54 down to 0.5, a little below the criterion: harder
-#: for the workflow, not easier); the high end three times the realistic strength (a rig with that much friction, drag or
-#: unbalance gets fixed before a campaign). In physical terms: friction 5-90 mN/m in heave,
-#: drag coefficients 15-90 kg/m^2 (heave), a spring 1.4-15 % stiffer at the release amplitude,
-#: delays of 0.9-30 ms, shedding lift coefficients 0.0015-0.15, a centre of mass 0.9-15 mm off
-#: the axis, crosstalk of 0.9-9 mm of heave per rad of pitch and 0.09-0.9 rad of pitch per m of
-#: heave, a floor shaking at 0.05-0.3 m/s^2, aerodynamic damping that grows by 24-120 % in
-#: heave from small amplitudes to the release's, tubes resonating at 6-340 Hz.
+#: for the workflow, not easier); the high end three times the realistic strength (a rig
+#: with that much friction, drag or unbalance gets fixed before a campaign). In physical
+#: terms: friction 5-90 mN/m in heave, drag coefficients 15-90 kg/m^2 (heave), a spring
+#: 1.4-15 % stiffer at the release amplitude, delays of 0.9-30 ms, shedding lift coefficients
+#: 0.0015-0.15, a centre of mass 0.9-15 mm off the axis, crosstalk of 0.9-9 mm of heave per
+#: rad of pitch and 0.09-0.9 rad of pitch per m of heave, a floor shaking at 0.05-0.3 m/s^2,
+#: aerodynamic damping that grows by 24-120 % in heave from small amplitudes to the release's,
+#: tubes resonating at 6-340 Hz.
 STRENGTH_RANGE: dict[str, tuple[float, float]] = {
     "coulomb_friction": (0.16, 3.0),
     "quadratic_damping": (0.5, 3.0),
