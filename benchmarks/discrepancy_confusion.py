@@ -292,16 +292,10 @@ def _as_its_delay(effect: Effect, report: DiscrepancyReport, noise: float = 0.02
     if not isinstance(effect, TubingDistortion) or [s.name for s in report.effects] != [
             "channel_delay"]:
         return False
-    wn = 2 * math.pi * effect.frequency_hz
-
-    def response(f: float) -> complex:
-        w = 2 * math.pi * f
-        return wn**2 / (wn**2 - w**2 + 2j * effect.damping * wn * w)
-
-    modes = (SECTION.fh, SECTION.fa)
-    if max(abs(1.0 - abs(response(f))) for f in modes) >= noise:
+    gain, pitch = effect.response([SECTION.fh, SECTION.fa])
+    if max(abs(1.0 - abs(gain)), abs(1.0 - abs(pitch))) >= noise:
         return False
-    delay = -cmath.phase(response(SECTION.fa)) / (2 * math.pi * SECTION.fa)
+    delay = -cmath.phase(pitch) / (2 * math.pi * SECTION.fa)
     return abs(report.parameters["delay_s"] / delay - 1.0) <= 0.2
 
 
