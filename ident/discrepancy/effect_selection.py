@@ -39,10 +39,9 @@ Not responsible for: the report, the whiteness and location of what is left
 
 from __future__ import annotations
 
-import cmath
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
@@ -55,6 +54,14 @@ from ident.discrepancy._base_fit import (
     base_columns,
     find_line,
     modal_peaks,
+)
+from ident.discrepancy._corrections import (
+    channels,
+    refit_beside,
+    release_vortex,
+    remove_aero,
+    simulate_channels,
+    take_out,
 )
 from ident.discrepancy._equation_error import (
     LOWPASS_FACTOR,
@@ -72,10 +79,10 @@ from ident.discrepancy._equation_error import (
 )
 from ident.discrepancy._force_fit import AerodynamicFit, fit_aerodynamic, force_problem
 from ident.discrepancy.gap_rule import GapStep, judge, noise_gap
+from ident.discrepancy.residual_check import systematic_left
 from ident.identification import e2rfc
 from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel
-from ident.physics import tubing
 from ident.physics.effects import (
     AerodynamicNonlinearity,
     BaseVibration,
@@ -90,10 +97,10 @@ from ident.physics.effects import (
     VortexShedding,
 )
 from ident.records.release import Release
-from ident.simulation.decay import CHANNELS, simulate_decay
+from ident.simulation.decay import CHANNELS
 
 __all__ = ["CHANNELS", "MAX_EFFECTS", "MIN_SIGMAS", "NONE_RATIO", "CandidateEvidence",
-           "NamedEffect", "Selection", "gap", "select"]
+           "NamedEffect", "Selection", "channels", "gap", "select", "simulate_channels"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -101,10 +108,15 @@ FloatArray = npt.NDArray[np.float64]
 NONE_RATIO = 0.98
 #: ... and its improvement must exceed this many standard errors (over the chunks).
 MIN_SIGMAS = 2.0
+#: When no candidate is clear and what the model leaves is not white, one that explains at least
+#: half of the held-out residual is tried (the gap rule decides) if its improvement is
+#: ``LOOK_SIGMAS`` standard errors clear of nothing: an amplitude-dependent force (an
+#: aerodynamic nonlinearity) has its evidence in the first seconds of the fastest releases, a
+#: few chunks, so its standard error over the chunks is large (0.33 +- 0.36 beside friction).
+LOOK_RATIO = 0.5
+LOOK_SIGMAS = 1.0
 #: At most this many effects are named (more than three at once is not a diagnosis).
 MAX_EFFECTS = 4
-#: Samples at the start of a decay fitted by ``c0 + c2 t^2 + c3 t^3`` for its initial state.
-_START_SAMPLES = 20
 _VORTEX = "vortex_shedding"
 _BASE = "base_vibration"
 _AERO = "aerodynamic_nonlinearity"
@@ -112,9 +124,6 @@ _TUBING = "tubing_distortion"
 #: A candidate that contains another (a second-order tube far below its resonance is a delay)
 #: must also be clear of it, in the same round, to be chosen.
 _CONTAINS = {_TUBING: "channel_delay"}
-#: Quality factor of the notch that takes a base vibration's line out before E2RFC (a
-#: bandwidth of f / Q: 0.5 Hz at 5 Hz, narrow beside the modes' distance from it).
-_NOTCH_Q = 10.0
 _UNITS = {spec.name: dict(zip(spec.parameters, spec.units, strict=True))
           for spec in STRUCTURAL_CANDIDATES}
 _UNITS[_VORTEX] = {"strouhal": "1", "cl": "1", "cm": "1", "phase": "rad"}
@@ -175,6 +184,8 @@ class NamedEffect:
         Its held-out score in the round it was added.
     gap_after : float
         :func:`gap` of the model with this effect and those before it.
+    trial : GapStep or None
+        The gap rule's step that named it (two effects named together share one).
     """
 
     name: str
@@ -185,6 +196,7 @@ class NamedEffect:
     cv_ratio: float
     cv_ratio_se: float
     gap_after: float
+    trial: GapStep | None = None
 
 
 @dataclass(frozen=True)
@@ -248,111 +260,245 @@ def select(releases: Sequence[Release], section: SectionModel, baseline: Rationa
     depth : float
         Section depth, m (a shedding frequency is reported as ``St = k D``).
     """
-    releases = list(releases)
-    measured = [channels(r) for r in releases]
-    vortex = fit_vortex([decay_signals(r, section) for r in releases], section)
-    chosen: list[str] = []
-    added: list[tuple[str, float, float, float]] = []  # name, cv ratio, its se, gap after
-    params: Params = {}
-    line = _find_line(_problem(releases, section, params, vortex, None), releases, section)
-    problem = _problem(releases, section, params, vortex, line)
-    remaining = [spec.name for spec in STRUCTURAL_CANDIDATES] + [_BASE, _VORTEX, _AERO]
-    state: State = (baseline, (), tuple(before), gap(measured, before))
-    rounds: list[tuple[CandidateEvidence, ...]] = []
-    noise_before = noise_gap(releases, before)
-    while remaining and len(chosen) < MAX_EFFECTS:
+    search = _Search(list(releases), section, baseline, tuple(before), depth)
+    excluded: dict[str, str] = {}
+    while True:
+        selection, demoted = search.run(excluded)
+        if demoted is None:
+            return selection
+        # A richer effect named before its look-alike's rival was found (a tube that took a
+        # crosstalk's share while the delay it contains could not): search again without it.
+        excluded[demoted[0]] = demoted[1]
+
+
+_Accepted = tuple[tuple[str, ...], "State", "Params", StructuralProblem, GapStep]
+
+
+class _Search:
+    """One forward selection over fixed data (module doc); :meth:`run` does it."""
+
+    def __init__(self, releases: list[Release], section: SectionModel,
+                 baseline: RationalFunctionModel, before: tuple[dict[str, FloatArray], ...],
+                 depth: float) -> None:
+        self.releases, self.section, self.baseline = releases, section, baseline
+        self.before, self.depth = before, depth
+        self.measured = [channels(r) for r in releases]
+        self.vortex = fit_vortex([decay_signals(r, section) for r in releases], section)
+        self.line = _find_line(_problem(releases, section, {}, self.vortex, None), releases,
+                               section)
+        self.noise_before = noise_gap(releases, before)
+
+    def run(self, excluded: dict[str, str]) -> tuple[Selection, tuple[str, str] | None]:
+        """Select; return the selection, or the effect to exclude and why (module doc)."""
+        releases, section, vortex, line = self.releases, self.section, self.vortex, self.line
+        chosen: list[str] = []
+        added: list[tuple[str, float, float, GapStep]] = []  # name, cv ratio, se, its step
+        params: Params = {}
+        problem = _problem(releases, section, params, vortex, line)
+        remaining = [spec.name for spec in STRUCTURAL_CANDIDATES] + [_BASE, _VORTEX, _AERO]
+        state: State = (self.baseline, (), self.before, gap(self.measured, self.before))
+        rounds: list[tuple[CandidateEvidence, ...]] = []
+        aero = _aerodynamic(releases, section, params, vortex, self.baseline)
+        while remaining and len(chosen) < MAX_EFFECTS:
+            aero = _aerodynamic(releases, section, params, vortex, self.baseline)
+            scored = self._score(problem, chosen, remaining, aero)
+            against = "the baseline" if not chosen else "the model with " + " + ".join(chosen)
+            verdicts: dict[str, str] = {}
+            trials: dict[str, GapStep] = {}
+            accepted: _Accepted | None = None
+            undone: list[str] = []  # tried alone, undone by the gap rule (best first)
+            second_look: list[str] = []
+            for name, ratio, se in scored:
+                if accepted is not None:
+                    verdicts[name] = f"rejected: {ratio / scored[0][1]:.3g} x the best's"
+                    continue
+                if name in excluded:
+                    verdicts[name] = excluded[name]
+                    continue
+                reason = self._gate(name, ratio, se, chosen, remaining, aero)
+                if reason is None:
+                    accepted = self._try_alone(name, chosen, state, aero, verdicts, trials,
+                                               undone, len(rounds) + 1)
+                elif reason == "":
+                    verdicts[name] = ((f"best, but not clear of {against}" if not verdicts
+                                       else f"not clear of {against}")
+                                      + f" (needs <= {NONE_RATIO} and {MIN_SIGMAS:g} standard "
+                                      "errors)")
+                    if ratio <= LOOK_RATIO and 1.0 - ratio > LOOK_SIGMAS * se:
+                        second_look.append(name)
+                else:
+                    verdicts[name] = reason
+            if accepted is None and systematic_left(releases, state[2]):
+                # What is left is not white: look harder before stopping (the rule unchanged).
+                for name in second_look:
+                    accepted = self._try_alone(name, chosen, state, aero, verdicts, trials,
+                                               undone, len(rounds) + 1, second=True)
+                    if accepted is not None:
+                        break
+                if accepted is None and len(undone) >= 2 and len(chosen) + 2 <= MAX_EFFECTS:
+                    accepted = self._try_pair(undone[:2], chosen, state, aero, verdicts,
+                                              trials, len(rounds) + 1)
+            # Each candidate's parameters as scored: one pass on this round's data, jointly
+            # with the effects chosen (a chosen measurement effect's columns fit what is left).
+            seen = {name: _unpack(problem, vortex, line, [*chosen, name], self.depth, params,
+                                  aero)[name] for name, *_ in scored}
+            rounds.append(tuple(
+                CandidateEvidence(effect=name, parameters=seen[name].values, std=seen[name].std,
+                                  units=_UNITS[name], cv_ratio=ratio, cv_ratio_se=se,
+                                  verdict=verdicts[name], trial=trials.get(name))
+                for name, ratio, se in scored))
+            if accepted is None:
+                break
+            names, state, params, problem, step = accepted
+            for name in names:
+                ratio, se = next((r, e) for n, r, e in scored if n == name)
+                chosen.append(name)
+                remaining.remove(name)
+                added.append((name, ratio, se, step))
+        demoted = self._demote(chosen, excluded, aero)
+        model, physics, simulated, gap_final = state
+        effects = {e.name: e for e in _effects(params, vortex, self.depth)}
+        steps = tuple(NamedEffect(name=name, effect=effects[name],
+                                  parameters=params[name].values,
+                                  uncertainty=params[name].std, units=_UNITS[name],
+                                  cv_ratio=ratio, cv_ratio_se=se, gap_after=step.after,
+                                  trial=step)
+                      for name, ratio, se, step in added)
+        return (Selection(steps=steps, rounds=tuple(rounds), model=model, physics=physics,
+                          simulated=simulated, gap=gap_final), demoted)
+
+    def _score(self, problem: StructuralProblem, chosen: list[str], remaining: list[str],
+               aero: AerodynamicFit) -> list[tuple[str, float, float]]:
+        """Return every remaining candidate's held-out ratio and its standard error, best first."""
         chunk_id, _ = chunk_ids(problem.y, problem.chunks)
         current = held_out_sse(problem.y, problem.design(_structural(chosen)), problem.chunks)
-        aero = _aerodynamic(releases, section, params, vortex, baseline)
         scored = []
         for name in remaining:
             if name == _VORTEX:
-                scored.append((name, vortex.fit.cv_ratio, vortex.fit.cv_ratio_se))
-                continue
-            if name == _AERO:
+                scored.append((name, self.vortex.fit.cv_ratio, self.vortex.fit.cv_ratio_se))
+            elif name == _AERO:
                 scored.append((name, aero.cv_ratio, aero.cv_ratio_se))
-                continue
-            sse = held_out_sse(problem.y, problem.design(_structural([*chosen, name])),
-                               problem.chunks)
-            scored.append((name, *compare_held_out(current, sse, chunk_id)))
-        scored.sort(key=lambda item: item[1])
-        against = "the baseline" if not chosen else "the model with " + " + ".join(chosen)
-        verdicts: dict[str, str] = {}
-        trials: dict[str, GapStep] = {}
-        accepted = None
-        for name, ratio, se in scored:
-            if accepted is not None:
-                verdicts[name] = f"rejected: {ratio / accepted[1]:.3g} x the chosen's"
-            elif not _clear(ratio, se):
-                verdicts[name] = ((f"best, but not clear of {against}" if not verdicts
-                                   else f"not clear of {against}")
-                                  + f" (needs <= {NONE_RATIO} and {MIN_SIGMAS:g} standard "
-                                  "errors)")
-            elif name == _BASE and line.prominence < MIN_PROMINENCE:
-                verdicts[name] = (f"rejected: no line stands out in the heave residual (peak "
-                                  f"{line.prominence:.3g} x the median, needs "
-                                  f"{MIN_PROMINENCE:g})")
-            elif (name in _CONTAINS and _CONTAINS[name] in remaining
-                  and not _clear(*(beyond := _beyond(releases, section, vortex, line, chosen,
-                                                     _CONTAINS[name], name, depth, aero)))):
-                verdicts[name] = (f"rejected: not clear of {_CONTAINS[name]}, which it "
-                                  f"contains ({beyond[0]:.4f} +- {beyond[1]:.4f} of the "
-                                  f"held-out residual with {_CONTAINS[name]} taken out)")
             else:
-                trial_params, trial_problem = _joint(releases, section, vortex, line,
-                                                     [*chosen, name], depth, aero)
-                outside = [other for other, fitted in trial_params.items()
-                           if not all(math.isfinite(x) for x in fitted.values.values())]
-                if outside:
-                    # Fitted jointly, an effect chosen before can lose its physical range too
-                    # (a tube's resonance beside a new crosstalk): the step cannot be taken.
-                    verdicts[name] = ("rejected: its fitted parameters are outside their range"
-                                      if name in outside else
-                                      f"rejected: beside it, the parameters of {outside[0]} "
-                                      "are outside their range")
-                    remaining.remove(name)
-                    continue
-                trial = _apply(releases, section, baseline, trial_params, vortex, depth)
-                # The one rule (ident.discrepancy.gap_rule): named only if the simulated gap
-                # shrinks by the margin; otherwise the step is undone (state stays).
-                noise = (min(noise_before, noise_gap(releases, trial[2]))
-                         if math.isfinite(trial[3]) else noise_before)
-                per_release = ([(gap([m], [b]), gap([m], [a])) for m, b, a
-                                in zip(measured, state[2], trial[2], strict=True)]
-                               if math.isfinite(trial[3]) else [])
-                step = judge(state[3], trial[3], noise, per_release)
+                sse = held_out_sse(problem.y, problem.design(_structural([*chosen, name])),
+                                   problem.chunks)
+                scored.append((name, *compare_held_out(current, sse, chunk_id)))
+        return sorted(scored, key=lambda item: item[1])
+
+    def _gate(self, name: str, ratio: float, se: float, chosen: list[str],
+              remaining: list[str], aero: AerodynamicFit) -> str | None:
+        """Return why a candidate is not tried: "" when not clear, None when it is tried."""
+        if not _clear(ratio, se):
+            return ""
+        if name == _BASE and self.line.prominence < MIN_PROMINENCE:
+            return (f"rejected: no line stands out in the heave residual (peak "
+                    f"{self.line.prominence:.3g} x the median, needs {MIN_PROMINENCE:g})")
+        simpler = _CONTAINS.get(name)
+        if simpler is not None and simpler in remaining:
+            beyond = _beyond(self.releases, self.section, self.vortex, self.line, chosen,
+                             simpler, name, self.depth, aero)
+            if not _clear(*beyond):
+                return (f"rejected: not clear of {simpler}, which it contains "
+                        f"({beyond[0]:.4f} +- {beyond[1]:.4f} of the held-out residual with "
+                        f"{simpler} taken out)")
+        return None
+
+    def _trial(self, names: list[str], state: State,
+               aero: AerodynamicFit) -> tuple[GapStep, State, Params, StructuralProblem] | str:
+        """Fit ``names`` jointly, simulate, judge against ``state``; or say why it cannot be."""
+        releases = self.releases
+        params, problem = _joint(releases, self.section, self.vortex, self.line, names,
+                                 self.depth, aero)
+        outside = [other for other, fitted in params.items()
+                   if not all(math.isfinite(x) for x in fitted.values.values())]
+        if outside:
+            # Fitted jointly, an effect chosen before can lose its physical range too (a
+            # tube's resonance beside a new crosstalk): the step cannot be taken.
+            return ("rejected: its fitted parameters are outside their range"
+                    if outside[0] == names[-1] else
+                    f"rejected: beside it, the parameters of {outside[0]} are outside their "
+                    "range")
+        trial = _apply(releases, self.section, self.baseline, params, self.vortex, self.depth)
+        # The one rule (ident.discrepancy.gap_rule): named only if the simulated gap shrinks
+        # by the margin; otherwise the step is undone (state stays).
+        finite = math.isfinite(trial[3])
+        noise = min(self.noise_before, noise_gap(releases, trial[2])) if finite \
+            else self.noise_before
+        per_release = ([(gap([m], [b]), gap([m], [a])) for m, b, a
+                        in zip(self.measured, state[2], trial[2], strict=True)] if finite else [])
+        return judge(state[3], trial[3], noise, per_release), trial, params, problem
+
+    def _try_alone(self, name: str, chosen: list[str], state: State, aero: AerodynamicFit,
+                   verdicts: dict[str, str], trials: dict[str, GapStep], undone: list[str],
+                   round_no: int, second: bool = False) -> _Accepted | None:
+        """Try one candidate as the next named effect; record its verdict."""
+        result = self._trial([*chosen, name], state, aero)
+        if isinstance(result, str):
+            verdicts[name] = result
+            return None
+        step, trial, params, problem = result
+        trials[name] = step
+        why = ("not clear of the model by the held-out residual, but it explains over "
+               f"{1 - LOOK_RATIO:.0%} of it and what is left is not white"
+               if second else "explains the most held-out residual")
+        if step.accepted:
+            verdicts[name] = f"chosen in round {round_no}: {why}; {step.text()}"
+            return (name,), trial, params, problem, step
+        verdicts[name] = ((verdicts[name] + "; tried as what is left is not white: "
+                           if second else "") + "dropped: the simulated gap did not shrink "
+                          f"clearly ({step.text()})")
+        undone.append(name)
+        return None
+
+    def _try_pair(self, pair: list[str], chosen: list[str], state: State,
+                  aero: AerodynamicFit, verdicts: dict[str, str],
+                  trials: dict[str, GapStep], round_no: int) -> _Accepted | None:
+        """Try the two best undone candidates together (module doc, "Two at once")."""
+        result = self._trial([*chosen, *pair], state, aero)
+        if isinstance(result, str):
+            for name in pair:
+                verdicts[name] += f"; tried with {_other(pair, name)}: {result}"
+            return None
+        step, trial, params, problem = result
+        # Each of the two must be needed: without it (the other alone, tried above) the gap
+        # is larger by the margin.
+        alone = {name: judge(trials[_other(pair, name)].after, step.after, step.noise)
+                 for name in pair}
+        if step.accepted and all(s.accepted for s in alone.values()):
+            for name in pair:
+                verdicts[name] = (f"chosen in round {round_no} together with "
+                                  f"{_other(pair, name)} (neither alone shrank the gap by the "
+                                  f"margin; both together: {step.text()}; without it: "
+                                  f"{alone[name].text()})")
                 trials[name] = step
-                if step.accepted:
-                    accepted = (name, ratio, se, trial, trial_params, trial_problem)
-                    verdicts[name] = (f"chosen in round {len(rounds) + 1}: explains the most "
-                                      f"held-out residual; {step.text()}")
-                else:
-                    verdicts[name] = ("dropped: the simulated gap did not shrink clearly "
-                                      f"({step.text()})")
-                    remaining.remove(name)
-        # Each candidate's parameters as scored: one pass on this round's data, jointly with
-        # the effects chosen (a chosen measurement effect's columns fit what is left of it).
-        seen = {name: _unpack(problem, vortex, line, [*chosen, name], depth, params, aero)[name]
-                for name, *_ in scored}
-        rounds.append(tuple(
-            CandidateEvidence(effect=name, parameters=seen[name].values, std=seen[name].std,
-                              units=_UNITS[name], cv_ratio=ratio, cv_ratio_se=se,
-                              verdict=verdicts[name], trial=trials.get(name))
-            for name, ratio, se in scored))
-        if accepted is None:
-            break
-        name, ratio, se, state, params, problem = accepted
-        chosen.append(name)
-        remaining.remove(name)
-        added.append((name, ratio, se, state[3]))
-    model, physics, simulated, gap_final = state
-    effects = {e.name: e for e in _effects(params, vortex, depth)}
-    steps = tuple(NamedEffect(name=name, effect=effects[name], parameters=params[name].values,
-                              uncertainty=params[name].std, units=_UNITS[name], cv_ratio=ratio,
-                              cv_ratio_se=se, gap_after=g)
-                  for name, ratio, se, g in added)
-    return Selection(steps=steps, rounds=tuple(rounds), model=model, physics=physics,
-                     simulated=simulated, gap=gap_final)
+            return tuple(pair), trial, params, problem, step
+        for name in pair:
+            verdicts[name] += (f"; with {_other(pair, name)} together: {step.text()}, without "
+                               f"it: {alone[name].text()}: not named")
+        return None
+
+    def _demote(self, chosen: list[str], excluded: dict[str, str],
+                aero: AerodynamicFit) -> tuple[str, str] | None:
+        """Return a named richer effect not clear of its simpler look-alike beside the others."""
+        for richer, simpler in _CONTAINS.items():
+            others = [c for c in chosen if c != richer]
+            if richer not in chosen or simpler in chosen or richer in excluded or not others:
+                continue
+            ratio, se = _beyond(self.releases, self.section, self.vortex, self.line, others,
+                                simpler, richer, self.depth, aero)
+            if not _clear(ratio, se):
+                return richer, (f"rejected: beside {' + '.join(others)} (named after it in a "
+                                f"first pass) not clear of {simpler}, which it contains "
+                                f"({ratio:.4f} +- {se:.4f} of the held-out residual with "
+                                f"{simpler} taken out)")
+        return None
+
+
+def _values(params: Params) -> dict[str, dict[str, float]]:
+    return {name: fitted.values for name, fitted in params.items()}
+
+
+def _other(pair: list[str], name: str) -> str:
+    return pair[1] if pair[0] == name else pair[0]
 
 
 def _structural(names: Sequence[str]) -> list[str]:
@@ -379,7 +525,8 @@ def _beyond(releases: list[Release], section: SectionModel, vortex: VortexFit, l
 def _aerodynamic(releases: list[Release], section: SectionModel, params: Params,
                  vortex: VortexFit, model: RationalFunctionModel) -> AerodynamicFit:
     """Fit the aerodynamic-nonlinearity candidate on the data, measurement effects taken out."""
-    corrected = _correct(releases, section, params, vortex, notch=True, untube=True)
+    corrected = take_out(releases, section, _values(params), vortex, notch_line=True,
+                         untube_forces=True)
     signals = [decay_signals(r, section) for r in corrected]
     return fit_aerodynamic(force_problem(signals, section, model))
 
@@ -402,7 +549,8 @@ class Fitted(NamedTuple):
 
 Params = dict[str, Fitted]
 #: The named effects that act on the structure (its equation of motion), not on the air or the
-#: measurement: E2RFC is identified again beside them (:func:`_refit_beside`).
+#: measurement: E2RFC is identified again beside them
+#: (:func:`ident.discrepancy._corrections.refit_beside`).
 _STRUCTURE_NAMES = frozenset({"coulomb_friction", "quadratic_damping", "cubic_stiffness",
                               "static_unbalance"})
 #: Gauss-Newton passes of a joint fit with a measurement effect (see :func:`_joint`).
@@ -416,7 +564,7 @@ def _problem(releases: list[Release], section: SectionModel, params: Params,
     With ``line``, the base-vibration candidate's columns are added
     (:mod:`ident.discrepancy._base_fit`).
     """
-    corrected = _correct(releases, section, params, vortex)
+    corrected = take_out(releases, section, _values(params), vortex)
     signals = [decay_signals(r, section) for r in corrected]
     problem = structural_problem(signals, section)
     if line is not None:
@@ -561,35 +709,6 @@ def _effects(params: Params, vortex: VortexFit, depth: float) -> list[Effect]:
     return out
 
 
-def _correct(releases: list[Release], section: SectionModel, params: Params,
-             vortex: VortexFit, *, notch: bool = False, untube: bool = False) -> list[Release]:
-    """Take the measurement effects (and the shedding lines) out of the releases.
-
-    With ``notch``, a base vibration's line too (for E2RFC; the equation error keeps it, its
-    columns fit it there); with ``untube``, the tubing (for E2RFC and the force equation; the
-    structural equation keeps it: its columns are exact for it).
-    """
-    corrected = list(releases)
-    # In the reverse of the order they happened: the shedding line is in the recorded forces
-    # as they are; the delay is undone next.
-    if _VORTEX in params:
-        corrected = [_remove_vortex(r, section, vortex, i) for i, r in enumerate(corrected)]
-    if notch and _BASE in params:
-        corrected = [_notch(r, params[_BASE].values["frequency_hz"]) for r in corrected]
-    if untube and _TUBING in params:
-        p = params[_TUBING].values
-        corrected = [_untube(r, TubingDistortion(frequency_hz=p["frequency_hz"],
-                                                 damping=p["damping"])) for r in corrected]
-    if "channel_delay" in params:
-        delay = max(params["channel_delay"].values["delay_s"], 0.0)
-        corrected = [_advance_forces(r, delay) for r in corrected]
-    if "sensor_crosstalk" in params:
-        p = params["sensor_crosstalk"].values
-        effect = SensorCrosstalk(h_from_alpha=p["h_from_alpha"], alpha_from_h=p["alpha_from_h"])
-        corrected = [_unmix(r, effect) for r in corrected]
-    return corrected
-
-
 State = tuple[RationalFunctionModel, tuple[Effect, ...], tuple[dict[str, FloatArray], ...], float]
 
 
@@ -602,15 +721,16 @@ def _apply(releases: list[Release], section: SectionModel, baseline: RationalFun
     # shedding line cost a lag: the refit kept at the baseline's structure stayed 4x the noise
     # away from the measurements, re-chosen it is at the noise). The structural effects do not
     # change the measured forces, but they bend the decays (E2RFC is identified again beside
-    # them below, _refit_beside); a base vibration changes the forces: its forced
+    # them below, refit_beside); a base vibration changes the forces: its forced
     # motion near a mode biased E2RFC (the gap stayed at 2.6 times the noise with the floor's
     # parameters right within 1 %), so its line is notched out of all four channels first.
-    corrected = _correct(releases, section, params, vortex, notch=True, untube=True)
+    corrected = take_out(releases, section, _values(params), vortex, notch_line=True,
+                         untube_forces=True)
     measured_forces = corrected
     if _AERO in params:
         p = params[_AERO].values
         aero_effect = AerodynamicNonlinearity(e_h=p["e_h"], e_a=p["e_a"])
-        corrected = [_remove_aero(r, section, aero_effect) for r in corrected]
+        corrected = [remove_aero(r, section, aero_effect) for r in corrected]
     model: RationalFunctionModel = (e2rfc.identify(corrected, section)
                                     if changed or _AERO in params else baseline)
     physics = tuple(e for e in effects if not isinstance(e, VortexShedding | BaseVibration))
@@ -619,7 +739,7 @@ def _apply(releases: list[Release], section: SectionModel, baseline: RationalFun
     bending = tuple(e for e in physics
                     if e.name in _STRUCTURE_NAMES or isinstance(e, AerodynamicNonlinearity))
     if bending:
-        model = _refit_beside(measured_forces, section, model, bending)
+        model = refit_beside(measured_forces, section, model, bending)
     simulated = []
     for i, r in enumerate(releases):
         here = physics
@@ -635,7 +755,7 @@ def _apply(releases: list[Release], section: SectionModel, baseline: RationalFun
             # drives the simulation (its force in the forces, the structure's response to it
             # in the motion: at three times the realistic strength that response is four
             # times the noise in heave), rather than one phase for all.
-            here = (*here, _release_vortex(r, section, model, vortex, i, depth))
+            here = (*here, release_vortex(r, section, model, vortex, i, depth))
         # A trial model can be unstable (a softening spring fitted to physics outside the
         # library runs away): its simulation overflows to inf or NaN, its gap is not finite
         # and the gap rule rejects it (ident.discrepancy.gap_rule), saying so.
@@ -643,149 +763,3 @@ def _apply(releases: list[Release], section: SectionModel, baseline: RationalFun
             sim = simulate_channels(r, section, model, here)
         simulated.append(sim)
     return model, physics, tuple(simulated), gap([channels(r) for r in releases], simulated)
-
-
-def _refit_beside(releases: list[Release], section: SectionModel, model: RationalFunctionModel,
-                  effects: tuple[Effect, ...]) -> RationalFunctionModel:
-    """Identify the aerodynamic model again with the named nonlinear effects' response out.
-
-    E2RFC's regressors come from a modal fit of each decay, which assumes the decays of a
-    linear system: friction, drag, a nonlinear spring, an unbalance or an aerodynamic
-    nonlinearity bend them, and the model identified beside them is biased (friction at twice
-    its realistic strength, its own parameters within 2 %: a systematic residual of 1.3-1.7
-    times the noise in every channel, 0.07-0.17 of it with the true aerodynamic model).
-    So each release's channels are corrected by the effects' share of the response, the
-    difference between the current model's simulations with and without them, and E2RFC runs
-    on what a linear section would have given (one pass: the residual fell to 0.16-0.28 of the
-    noise; a second changed it by less than 0.1 of it). A trial whose simulation diverges
-    keeps ``model`` (the gap rule rejects it).
-    """
-    linear = []
-    for r in releases:
-        with np.errstate(over="ignore", invalid="ignore"):
-            bent = simulate_channels(r, section, model, effects)
-            straight = simulate_channels(r, section, model, ())
-        share = {c: bent[c] - straight[c] for c in CHANNELS}
-        if not all(np.all(np.isfinite(x)) for x in share.values()):
-            return model
-        linear.append(replace(r, **{c: getattr(r, c) - share[c] for c in CHANNELS},
-                              meta=dict(r.meta)))
-    return e2rfc.identify(linear, section)
-
-
-def _notch(r: Release, frequency_hz: float) -> Release:
-    """Notch a line out of all four channels (zero phase): the motion-force relation is kept."""
-    from scipy.signal import filtfilt, iirnotch
-
-    b, a = iirnotch(frequency_hz, _NOTCH_Q, fs=r.fs)
-    return replace(r, **{c: filtfilt(b, a, getattr(r, c)) for c in CHANNELS}, meta=dict(r.meta))
-
-
-def _remove_aero(r: Release, section: SectionModel, effect: AerodynamicNonlinearity) -> Release:
-    """Take a named aerodynamic nonlinearity's force (from the low-passed motion) out."""
-    sig = decay_signals(r, section)
-    assert sig.q_full is not None and sig.q1_full is not None
-    rho = section.rho if r.rho is None else r.rho
-    force = effect.aerodynamic_force(sig.q_full, sig.q1_full, section.B, r.U, rho)
-    return replace(r, lift=r.lift - force[:, 0] / section.B, moment=r.moment - force[:, 1],
-                   meta=dict(r.meta))
-
-
-def _untube(r: Release, effect: TubingDistortion) -> Release:
-    """Undo a tubing distortion of the forces (``tubing.correct``, band-limited)."""
-    f = np.arange(0.25, r.fs / 2.0 + 1.0, 0.25)
-    H = effect.response(f)
-    table = tubing.TableResponse(frequency=f, gain=np.abs(H), phase=np.unwrap(np.angle(H)),
-                                 source="tubing_distortion")
-    tubes = tubing.tubing_set([tubing.TubingGroup(taps=None, model=table)], 2)
-    forces = tubing.correct(np.column_stack([r.lift, r.moment]), r.fs, tubes)
-    return replace(r, lift=forces[:, 0], moment=forces[:, 1], meta=dict(r.meta))
-
-
-def _advance_forces(r: Release, delay_s: float) -> Release:
-    """Undo a recording delay: ``f(t) = f_recorded(t + delay)`` (the last samples held)."""
-    t = r.t
-    return replace(r, lift=np.interp(t + delay_s, t, r.lift),
-                   moment=np.interp(t + delay_s, t, r.moment), meta=dict(r.meta))
-
-
-def _unmix(r: Release, effect: SensorCrosstalk) -> Release:
-    """Undo crosstalk: solve ``[h_m, a_m] = [[1, a], [b, 1]] [h, alpha]``."""
-    mix = np.array([[1.0, effect.h_from_alpha], [effect.alpha_from_h, 1.0]])
-    h, alpha = np.linalg.solve(mix, np.vstack([r.h, r.alpha]))
-    return replace(r, h=h, alpha=alpha, meta=dict(r.meta))
-
-
-def _release_vortex(r: Release, section: SectionModel, model: RationalFunctionModel,
-                    vortex: VortexFit, index: int, depth: float) -> VortexShedding:
-    """Return one release's fitted shedding line as the effect (its own amplitudes, phases).
-
-    The line fitted to the measured forces holds, besides the shedding force, the self-excited
-    force of the structure's response to the line (its added-mass part grows with the square
-    of the frequency: a few per cent of the line, many times the noise at the realistic
-    strength). The structure moves under both, ``q = H(w) F_measured`` with ``H`` the still-air
-    structure's receptance, and the model's ``qd B^2 Q(iK) q`` is taken out to leave the
-    shedding force that drives the simulation.
-    """
-    rho = section.rho if r.rho is None else r.rho
-    qd_B2 = 0.5 * rho * r.U**2 * section.B**2
-    w = 2 * math.pi * vortex.k * r.U
-    lift_s, lift_c, moment_s, moment_c = vortex.amplitudes[index]
-    # a_s sin(w t) + a_c cos(w t) = Re[(a_c - i a_s) exp(i w t)]
-    measured = np.array([lift_c - 1j * lift_s, moment_c - 1j * moment_s])
-    planar = section.planar() if section.n_dof == 3 else section
-    receptance = np.linalg.inv(planar.stiffness_matrix() - w**2 * planar.mass_matrix()
-                               + 1j * w * planar.damping_matrix())
-    self_excited = qd_B2 * model.planar().Q(1j * w * section.B / r.U) @ (receptance @ measured)
-    lift, moment = measured - self_excited
-    # Re[c exp(i w t)] = |c| sin(w t + arg(c) + pi/2); the simulation's clock starts at the
-    # release's first sample.
-    start = w * float(r.t[0])
-    lift_phase = cmath.phase(lift) + math.pi / 2 + start
-    return VortexShedding(strouhal=vortex.k * depth, depth=depth, cl=abs(lift) / qd_B2,
-                          cm=abs(moment) / qd_B2, phase=cmath.phase(moment) - cmath.phase(lift),
-                          lift_phase=lift_phase)
-
-
-def _vortex_line(r: Release, section: SectionModel, vortex: VortexFit,
-                 index: int) -> tuple[FloatArray, FloatArray]:
-    """Return one release's fitted shedding line (own phase): lift (N/m), moment (N m/m)."""
-    w = 2 * math.pi * vortex.k * r.U
-    a = vortex.amplitudes[index]
-    sn, cs = np.sin(w * r.t), np.cos(w * r.t)
-    return (a[0] * sn + a[1] * cs) / section.B, a[2] * sn + a[3] * cs
-
-
-def _remove_vortex(r: Release, section: SectionModel, vortex: VortexFit, index: int) -> Release:
-    """Subtract the fitted shedding line from the forces."""
-    lift, moment = _vortex_line(r, section, vortex, index)
-    return replace(r, lift=r.lift - lift, moment=r.moment - moment, meta=dict(r.meta))
-
-
-def channels(r: Release) -> dict[str, FloatArray]:
-    """Return the four measured channels of a release."""
-    return {"h": r.h, "alpha": r.alpha, "lift": r.lift, "moment": r.moment}
-
-
-def _initial_state(r: Release) -> tuple[float, float]:
-    """Return the position at the release: ``c0`` of ``c0 + c2 t^2 + c3 t^3`` (from rest)."""
-    n = min(_START_SAMPLES, r.t.size)
-    t = r.t[:n] - r.t[0]
-    basis = np.column_stack([np.ones(n), t**2, t**3])
-    coef, *_ = np.linalg.lstsq(basis, np.column_stack([r.h[:n], r.alpha[:n]]), rcond=None)
-    return float(coef[0, 0]), float(coef[0, 1])
-
-
-def simulate_channels(r: Release, section: SectionModel, model: RationalFunctionModel,
-                      effects: tuple[Effect, ...]) -> dict[str, FloatArray]:
-    """Simulate one release from its own initial state, as measured (measurement effects on)."""
-    h0m, a0m = _initial_state(r)
-    h0, a0 = h0m, a0m
-    for effect in effects:
-        if isinstance(effect, SensorCrosstalk):  # the measured start is mixed: unmix it
-            mix = np.array([[1.0, effect.h_from_alpha], [effect.alpha_from_h, 1.0]])
-            h0, a0 = (float(x) for x in np.linalg.solve(mix, [h0m, a0m]))
-    rho = section.rho if r.rho is None else r.rho
-    sim = simulate_decay(section.replace(rho=rho), model, r.U, h0, a0, n=r.t.size, fs=r.fs,
-                         effects=effects)
-    return sim.measured

@@ -101,10 +101,12 @@ class GapStep:
         """Return the gaps and the margin in one phrase."""
         after = (f"{self.after:.4f}" if math.isfinite(self.after)
                  else f"{self.after} (the trial model's simulation diverged)")
-        return (f"gap {self.before:.4f} -> {after}, needs <= "
+        text = (f"gap {self.before:.4f} -> {after}, needs <= "
                 f"{self.before - self.required:.4f} (a shrink of {GAP_MARGIN:g} x the noise's "
-                f"gap {self.noise:.4f}); per release {self.release_mean:+.4f} +- "
-                f"{self.release_se:.4f}")
+                f"gap {self.noise:.4f})")
+        if math.isfinite(self.release_mean):
+            text += f"; per release {self.release_mean:+.4f} +- {self.release_se:.4f}"
+        return text
 
 
 def noise_gap(releases: Sequence[Release], *simulated: Sequence[dict[str, FloatArray]]) -> float:

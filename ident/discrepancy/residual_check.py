@@ -40,7 +40,7 @@ from ident.records.release import Release
 from ident.simulation.decay import CHANNELS
 
 __all__ = ["LINE_SHARE", "NOISE_RATIO", "SYSTEMATIC_LIMIT", "ResidualFinding",
-           "locate_residual", "systematic_levels"]
+           "locate_residual", "systematic_left", "systematic_levels"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -145,6 +145,21 @@ def systematic_levels(releases: Sequence[Release],
             continue
         out[name] = (math.sqrt(max(total - noise, 0.0) / signal), math.sqrt(noise / signal))
     return out
+
+
+def systematic_left(releases: Sequence[Release],
+                    simulated: Sequence[dict[str, FloatArray]]) -> bool:
+    """Return True when a channel has a systematic residual (as :func:`locate_residual` reports).
+
+    Parameters
+    ----------
+    releases : sequence of Release
+        The measured decays.
+    simulated : sequence of dict
+        Per release, the four channels of a model (as measured).
+    """
+    return any(_significant(systematic, noise)
+               for systematic, noise in systematic_levels(releases, simulated).values())
 
 
 def locate_residual(releases: Sequence[Release], simulated: Sequence[dict[str, FloatArray]],
