@@ -22,16 +22,24 @@ at a time, in rounds:
    decays, on the releases with their share taken out), every release is simulated again and the
    gap (:func:`gap`) measured. If the gap did not shrink by the margin of
    :mod:`ident.discrepancy.gap_rule` (``GAP_MARGIN`` of the gap white noise leaves), the step is
-   undone, the candidate dropped for good (its verdict keeps both gaps) and the next qualifying
-   one is tried. No qualifying candidate left: the selection stops.
+   undone (its verdict keeps both gaps) and the next qualifying one is tried; the undone one is
+   tried again in a later round, once the model has changed.
+4. **Looking harder** when nothing was named in a round but what is left is not white
+   (:func:`ident.discrepancy.residual_check.systematic_left`): a candidate not clear but
+   explaining over ``LOOK_RATIO`` of the held-out residual at ``LOOK_SIGMAS`` is tried; then
+   the two best candidates undone in the round are tried *together* ("Two at once"): named
+   together only if together they shrink the gap by the margin and each is needed (the gap
+   with the other alone is larger than with both by the margin). Nothing left: stop.
+5. **Second search**: a named effect that contains another (a tube) must still be clear of the
+   simpler one beside the effects named after it; if not, the selection runs again without it.
 
-So an effect whose addition does not clearly reduce the held-out residual *and* the simulated
-gap is never named, and the gap after each step is smaller than before it by the margin.
+So an effect whose addition does not clearly reduce the simulated gap is never named, and the
+gap after each step is smaller than before it by the margin.
 
-Longer than 600 lines: the selection loop, the joint fits of the candidates it scores, the
-corrections that take the named measurement effects out of the data, and the simulation of
-each trial model share one state (the fitted parameters of every named effect, the shedding
-and floor lines); split apart, every part would pass all of it back and forth.
+Longer than 600 lines: the selection loop, the joint fits of the candidates it scores and the
+simulation of each trial model share one state (the fitted parameters of every named effect,
+the shedding and floor lines); split apart, every part would pass all of it back and forth.
+The per-release corrections are in :mod:`ident.discrepancy._corrections`.
 
 Not responsible for: the report, the whiteness and location of what is left
 (:mod:`ident.discrepancy.workflow`, :mod:`ident.discrepancy.residual_check`).
