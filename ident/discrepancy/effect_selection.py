@@ -12,7 +12,9 @@ at a time, in rounds:
    (:mod:`ident.discrepancy._force_fit`), scored each round on the data with the measurement effects
    found so far taken out.
 2. **Clear?** A candidate qualifies if it leaves at most ``NONE_RATIO`` of the held-out residual
-   and its improvement is ``MIN_SIGMAS`` standard errors clear of nothing (a base vibration
+   and its improvement is ``MIN_SIGMAS`` standard errors clear of nothing, or ``LOOK_SIGMAS``
+   when what the model leaves is not white
+   (:func:`ident.discrepancy.residual_check.systematic_left`) (a base vibration
    also needs a line that stands out, :data:`ident.discrepancy._base_fit.MIN_PROMINENCE`; a
    candidate that contains another, a tube containing a delay, must be clear of that one fitted
    exactly; and the parameters must be in range, a tube needs a resonance).
@@ -23,13 +25,12 @@ at a time, in rounds:
    gap (:func:`gap`) measured. If the gap did not shrink by the margin of
    :mod:`ident.discrepancy.gap_rule` (``GAP_MARGIN`` of the gap white noise leaves), the step is
    undone (its verdict keeps both gaps) and the next qualifying one is tried; the undone one is
-   tried again in a later round, once the model has changed.
-4. **Looking harder** when nothing was named in a round but what is left is not white
-   (:func:`ident.discrepancy.residual_check.systematic_left`): a candidate not clear but
-   explaining over ``LOOK_RATIO`` of the held-out residual at ``LOOK_SIGMAS`` is tried; then
-   the two best candidates undone in the round are tried *together* ("Two at once"): named
-   together only if together they shrink the gap by the margin and each is needed (the gap
-   with the other alone is larger than with both by the margin). Nothing left: stop.
+   tried again in a later round, once the model has changed. A candidate that contains one
+   already named (a tube, a delay) is tried in its place.
+4. **Two at once** when nothing was named in a round and what is left is not white: the two
+   best candidates undone in the round are tried *together*: named together only if together
+   they shrink the gap by the margin and each is needed (the gap with the other alone is
+   larger than with both by the margin). Nothing left: stop.
 5. **Second search**: a named effect that contains another (a tube) must still be clear of the
    simpler one beside the effects named after it; if not, the selection runs again without it.
 
@@ -116,12 +117,11 @@ FloatArray = npt.NDArray[np.float64]
 NONE_RATIO = 0.98
 #: ... and its improvement must exceed this many standard errors (over the chunks).
 MIN_SIGMAS = 2.0
-#: When no candidate is clear and what the model leaves is not white, one that explains at least
-#: half of the held-out residual is tried (the gap rule decides) if its improvement is
-#: ``LOOK_SIGMAS`` standard errors clear of nothing: an amplitude-dependent force (an
-#: aerodynamic nonlinearity) has its evidence in the first seconds of the fastest releases, a
-#: few chunks, so its standard error over the chunks is large (0.33 +- 0.36 beside friction).
-LOOK_RATIO = 0.5
+#: When what the model leaves is not white, a candidate is tried (the gap rule decides) if its
+#: improvement is this many standard errors clear of nothing: an amplitude-dependent force has
+#: its evidence in the first seconds of the fastest releases, a few chunks, so its standard
+#: error over the chunks is large (an aerodynamic nonlinearity beside friction: 0.33 +- 0.36; a
+#: cubic spring beside a delay that stands for a tube: 0.73 +- 0.17).
 LOOK_SIGMAS = 1.0
 #: At most this many effects are named (more than three at once is not a diagnosis).
 MAX_EFFECTS = 4
@@ -315,7 +315,10 @@ class _Search:
             trials: dict[str, GapStep] = {}
             accepted: _Accepted | None = None
             undone: list[str] = []  # tried alone, undone by the gap rule (best first)
-            second_look: list[str] = []
+            # What is left is not white: a candidate is tried at fewer standard errors (the
+            # gap rule unchanged decides).
+            white = not systematic_left(releases, state[2])
+            sigmas = MIN_SIGMAS if white else LOOK_SIGMAS
             for name, ratio, se in scored:
                 if accepted is not None:
                     verdicts[name] = f"rejected: {ratio / scored[0][1]:.3g} x the best's"
@@ -323,29 +326,22 @@ class _Search:
                 if name in excluded:
                     verdicts[name] = excluded[name]
                     continue
-                reason = self._gate(name, ratio, se, chosen, remaining, aero)
+                reason = self._gate(name, ratio, se, chosen, remaining, aero, sigmas)
                 if reason is None:
                     accepted = self._try_alone(name, chosen, state, aero, verdicts, trials,
-                                               undone, len(rounds) + 1)
+                                               undone, len(rounds) + 1,
+                                               second=not _clear(ratio, se))
                 elif reason == "":
                     verdicts[name] = ((f"best, but not clear of {against}" if not verdicts
                                        else f"not clear of {against}")
-                                      + f" (needs <= {NONE_RATIO} and {MIN_SIGMAS:g} standard "
+                                      + f" (needs <= {NONE_RATIO} and {sigmas:g} standard "
                                       "errors)")
-                    if ratio <= LOOK_RATIO and 1.0 - ratio > LOOK_SIGMAS * se:
-                        second_look.append(name)
                 else:
                     verdicts[name] = reason
-            if accepted is None and systematic_left(releases, state[2]):
-                # What is left is not white: look harder before stopping (the rule unchanged).
-                for name in second_look:
-                    accepted = self._try_alone(name, chosen, state, aero, verdicts, trials,
-                                               undone, len(rounds) + 1, second=True)
-                    if accepted is not None:
-                        break
-                if accepted is None and len(undone) >= 2 and len(chosen) + 2 <= MAX_EFFECTS:
-                    accepted = self._try_pair(undone[:2], chosen, state, aero, verdicts,
-                                              trials, len(rounds) + 1)
+            if (accepted is None and not white and len(undone) >= 2
+                    and len(chosen) + 2 <= MAX_EFFECTS):
+                accepted = self._try_pair(undone[:2], chosen, state, aero, verdicts, trials,
+                                          len(rounds) + 1)
             # Each candidate's parameters as scored: one pass on this round's data, jointly
             # with the effects chosen (a chosen measurement effect's columns fit what is left).
             seen = {name: _unpack(problem, vortex, line, [*chosen, name], self.depth, params,
@@ -360,6 +356,10 @@ class _Search:
             names, state, params, problem, step = accepted
             for name in names:
                 ratio, se = next((r, e) for n, r, e in scored if n == name)
+                replaced = _CONTAINS.get(name)
+                if replaced in chosen:  # the richer effect takes the simpler one's place
+                    chosen.remove(replaced)
+                    added = [entry for entry in added if entry[0] != replaced]
                 chosen.append(name)
                 remaining.remove(name)
                 added.append((name, ratio, se, step))
@@ -393,9 +393,9 @@ class _Search:
         return sorted(scored, key=lambda item: item[1])
 
     def _gate(self, name: str, ratio: float, se: float, chosen: list[str],
-              remaining: list[str], aero: AerodynamicFit) -> str | None:
+              remaining: list[str], aero: AerodynamicFit, sigmas: float) -> str | None:
         """Return why a candidate is not tried: "" when not clear, None when it is tried."""
-        if not _clear(ratio, se):
+        if not _clear(ratio, se, sigmas):
             return ""
         if name == _BASE and self.line.prominence < MIN_PROMINENCE:
             return (f"rejected: no line stands out in the heave residual (peak "
@@ -438,22 +438,27 @@ class _Search:
     def _try_alone(self, name: str, chosen: list[str], state: State, aero: AerodynamicFit,
                    verdicts: dict[str, str], trials: dict[str, GapStep], undone: list[str],
                    round_no: int, second: bool = False) -> _Accepted | None:
-        """Try one candidate as the next named effect; record its verdict."""
-        result = self._trial([*chosen, name], state, aero)
+        """Try one candidate as the next named effect; record its verdict.
+
+        A candidate that contains an effect already named (a tube, a delay) is tried in its
+        place: fitted beside each other the two are degenerate.
+        """
+        result = self._trial([*_without_contained(chosen, [name]), name], state, aero)
         if isinstance(result, str):
             verdicts[name] = result
             return None
         step, trial, params, problem = result
         trials[name] = step
-        why = ("not clear of the model by the held-out residual, but it explains over "
-               f"{1 - LOOK_RATIO:.0%} of it and what is left is not white"
+        why = ("not clear of the model by the held-out residual (but at "
+               f"{LOOK_SIGMAS:g} standard error) and what is left is not white"
                if second else "explains the most held-out residual")
         if step.accepted:
-            verdicts[name] = f"chosen in round {round_no}: {why}; {step.text()}"
+            instead = (f" in place of {_CONTAINS[name]}, which it contains"
+                       if _CONTAINS.get(name) in chosen else "")
+            verdicts[name] = f"chosen in round {round_no}{instead}: {why}; {step.text()}"
             return (name,), trial, params, problem, step
-        verdicts[name] = ((verdicts[name] + "; tried as what is left is not white: "
-                           if second else "") + "dropped: the simulated gap did not shrink "
-                          f"clearly ({step.text()})")
+        verdicts[name] = ("tried as what is left is not white; " if second else "") + (
+            f"dropped: the simulated gap did not shrink clearly ({step.text()})")
         undone.append(name)
         return None
 
@@ -461,7 +466,7 @@ class _Search:
                   aero: AerodynamicFit, verdicts: dict[str, str],
                   trials: dict[str, GapStep], round_no: int) -> _Accepted | None:
         """Try the two best undone candidates together (module doc, "Two at once")."""
-        result = self._trial([*chosen, *pair], state, aero)
+        result = self._trial([*_without_contained(chosen, pair), *pair], state, aero)
         if isinstance(result, str):
             for name in pair:
                 verdicts[name] += f"; tried with {_other(pair, name)}: {result}"
@@ -505,6 +510,11 @@ def _values(params: Params) -> dict[str, dict[str, float]]:
     return {name: fitted.values for name, fitted in params.items()}
 
 
+def _without_contained(chosen: list[str], new: list[str]) -> list[str]:
+    """Return the effects chosen less those that one of ``new`` contains."""
+    return [c for c in chosen if c not in {_CONTAINS.get(n) for n in new}]
+
+
 def _other(pair: list[str], name: str) -> str:
     return pair[1] if pair[0] == name else pair[0]
 
@@ -539,8 +549,8 @@ def _aerodynamic(releases: list[Release], section: SectionModel, params: Params,
     return fit_aerodynamic(force_problem(signals, section, model))
 
 
-def _clear(ratio: float, se: float) -> bool:
-    return ratio <= NONE_RATIO and (1.0 - ratio) > MIN_SIGMAS * se
+def _clear(ratio: float, se: float, sigmas: float = MIN_SIGMAS) -> bool:
+    return ratio <= NONE_RATIO and (1.0 - ratio) > sigmas * se
 
 
 class Fitted(NamedTuple):
