@@ -188,8 +188,10 @@ def test_the_plans_hold_is_recorded_and_read_back_as_each_releases_hold(tmp_path
         release_time = next(float(row["time"]) for row in events if row["kind"] == b"release")
         arm = min(float(row["time"]) for row in events if row["kind"] == b"arm")
         # The plan's hold, as the file records it: armed 11 s before the release, plus the
-        # arm and release commands' own time (tens of ms; 0.24 s seen on a busy host).
-        assert 11.0 <= release_time - arm <= 12.0
+        # arm and release commands' own time (tens of ms; 0.24 s and once 1.45 s seen on a
+        # host running the whole suite). The upper bound catches a hold waited twice, not a
+        # slow host.
+        assert 11.0 <= release_time - arm < 2 * 11.0
         # Read back from 0.25 s after the arm to 0.05 s before the release (10.7 s), less a
         # sync row or two at each end: 10.74 s measured. Rows that a busy host's late scanner
         # blocks left without forces (NaN in /entry/sync, 0.42 s once) are not a hold's: the
@@ -198,7 +200,7 @@ def test_the_plans_hold_is_recorded_and_read_back_as_each_releases_hold(tmp_path
         lost = float(np.sum(late & window)) * float(np.median(np.diff(sync_time)))
         start = max(arm + 0.25, float(sync_time[late & window].max(initial=-np.inf)))
         assert release.hold.duration == pytest.approx(release_time - 0.05 - start, abs=0.02)
-        assert 8.0 <= release.hold.duration <= 12.0  # not the default 0.5 s, nor twice 11 s
+        assert 8.0 <= release.hold.duration < 2 * 11.0 - 0.3  # not the default 0.5 s nor 2 x 11
         assert lost < 1.0  # late rows are a moment's, not the hold's
     # The wind-on time counts the holds: two speeds of at least 11 s + 3 s.
     assert outcome.wind_on_s is not None and outcome.wind_on_s > 2 * 14.0
