@@ -37,7 +37,9 @@ their holds taken away (today's estimator), ``both`` prints the two; ``--rows tu
 a subset;
 ``--turbulent-motion filter|smoother|smoother-sg`` selects how the branch builds its regressors'
 motion (``ident.identification._turbulent_fit.MOTION``; docs/e2rfc_turbulence.md measures the
-three).
+three); ``--turbulent-estimator ml`` runs the closed-loop maximum-likelihood branch instead
+(``ident.identification.closed_loop_ml``; with and without holds). The "branch" column counts
+the identifications the turbulence branch (either) ran.
 
 Printed per row: the median and 90th percentile of |error|, the coverage of the 2-std interval
 (``IdentifiedModel.flutter``'s std: noise, structure, extrapolation, one lag more, release
@@ -306,9 +308,10 @@ def tunnel_run(args):
 
 
 def _tunnel_run(args):
-    row, seed, mode, a3, motion = args
+    row, seed, mode, a3, motion, estimator = args
     e2rfc.TURBULENT_A3 = a3  # the turbulence branch's A3 option (set in each worker)
     _turbulent_fit.MOTION = motion  # and how its regressors' motion is estimated
+    e2rfc.TURBULENT_ESTIMATOR = estimator  # and which estimator it runs
     section, make_model, _, _, truth = TUNNEL_ROWS[row]
     U_F = truth() if truth is not None else fl.analyze(section, make_model()).speed
     releases = tunnel_releases(row, seed)
@@ -318,7 +321,8 @@ def _tunnel_run(args):
     model = e2rfc.identify(releases, section)
     uncertainty = model.uncertainty(section)
     elapsed = time.perf_counter() - start
-    branch = model.diagnostics.estimator == e2rfc.ESTIMATOR_TURBULENT
+    branch = model.diagnostics.estimator in (e2rfc.ESTIMATOR_TURBULENT,
+                                             e2rfc.ESTIMATOR_CLOSED_LOOP)
     if uncertainty.speed is None:
         return row, mode, np.inf, np.nan, elapsed, branch, seed
     return (row, mode, uncertainty.speed / U_F - 1.0, uncertainty.total / U_F, elapsed, branch,
@@ -326,10 +330,10 @@ def _tunnel_run(args):
 
 
 def tunnel_part(seeds, workers, modes=("after",), which="all", a3="fitted-or-zero",
-                first_seed=0, motion="filter"):
+                first_seed=0, motion="filter", estimator="iv"):
     names = [row for row in TUNNEL_ROWS
              if which == "all" or (which == "turbulent") == (TUNNEL_ROWS[row][3] > 0)]
-    jobs = [(row, seed, mode, a3, motion) for row in names for mode in modes
+    jobs = [(row, seed, mode, a3, motion, estimator) for row in names for mode in modes
             for seed in range(first_seed, first_seed + seeds)]
     results = []
     with ProcessPoolExecutor(workers) as pool:
@@ -337,7 +341,7 @@ def tunnel_part(seeds, workers, modes=("after",), which="all", a3="fitted-or-zer
         for result in pool.map(tunnel_run, jobs):
             row, mode, err, std, elapsed, branch, seed = result
             print(f"  {row:<24} {mode:<6} seed {seed:2d} err {100 * err:+8.2f} % std "
-                  f"{100 * std:7.2f} % {elapsed:5.1f} s{' IV branch' if branch else ''}",
+                  f"{100 * std:7.2f} % {elapsed:5.1f} s{' branch' if branch else ''}",
                   flush=True)
             results.append(result)
     for mode in modes:
@@ -349,7 +353,7 @@ def _tunnel_table(results, names, seeds, mode):
           f" at 500 Hz, 2 % noise, turbulence rows with a {TUNNEL_HOLD_S:g} s hold before each "
           f"release; {seeds} seeds per row; std = IdentifiedModel.flutter's (total).\n")
     header = (f"{'case':<26}{'|err| med':>10}{'|err| p90':>10}{'2-std cover':>12}"
-              f"{'std med':>9}{'time med':>10}{'no flutter':>11}{'IV branch':>10}")
+              f"{'std med':>9}{'time med':>10}{'no flutter':>11}{'branch':>10}")
     print(header)
     print("-" * len(header))
     covered = total = 0
@@ -387,6 +391,10 @@ def main():
                         default=_turbulent_fit.MOTION,
                         help="how the turbulence branch estimates its regressors' motion "
                              "(ident.identification._turbulent_fit.MOTION)")
+    parser.add_argument("--turbulent-estimator", choices=("iv", "ml"),
+                        default=e2rfc.TURBULENT_ESTIMATOR,
+                        help="the turbulence branch's estimator (e2rfc.TURBULENT_ESTIMATOR): "
+                             "refined IV (needs holds) or closed-loop maximum likelihood")
     args = parser.parse_args()
     if args.part == "timing":
         timing_part(args.repeats)
@@ -394,7 +402,7 @@ def main():
     if args.part in ("all", "tunnel"):
         modes = ("before", "after") if args.tunnel_mode == "both" else (args.tunnel_mode,)
         tunnel_part(args.seeds, args.workers, modes, args.rows, args.turbulent_a3,
-                    args.first_seed, args.turbulent_motion)
+                    args.first_seed, args.turbulent_motion, args.turbulent_estimator)
     if args.part == "tunnel":
         return
     jobs = [(s, m, n, seed) for s in SECTIONS for m in METHODS for n in NOISES

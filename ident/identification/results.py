@@ -29,7 +29,7 @@ from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel
 from ident.numerics.selection import Candidate, structure_label
 
-__all__ = ["DISTINCT_U_RTOL", "E2RFCDiagnostics", "ESTIMATOR_E2RFC", "IdentifiedModel",
+__all__ = ["DISTINCT_U_RTOL", "Deferred", "E2RFCDiagnostics", "ESTIMATOR_E2RFC", "IdentifiedModel",
            "K_ranges", "MODE_NAMES", "RANDOM_RESPONSE_LIMIT", "StructureSpread",
            "distinct_wind_speeds"]
 
@@ -44,6 +44,19 @@ MODE_NAMES = ("heave", "pitch", "sway")
 RANDOM_RESPONSE_LIMIT = 10.0
 #: ``diagnostics.estimator`` of E2RFC's least squares (the turbulence branch names its own).
 ESTIMATOR_E2RFC = "E2RFC (modal-fit regressors, least squares)"
+
+
+class Deferred:
+    """A refit another estimator supplies, computed when the uncertainty first asks for it.
+
+    Parameters
+    ----------
+    compute : callable
+        Returns the refitted model (or None).
+    """
+
+    def __init__(self, compute: Callable[[], object]) -> None:
+        self.compute = compute
 
 
 @dataclass(frozen=True, eq=False)
@@ -165,9 +178,11 @@ class E2RFCDiagnostics:
                                                  self.with_A3, self.candidates)))
 
     def _computed(self, name: str, compute: Callable[[], object]) -> object:
-        if name not in self._refits:
-            self._refits[name] = compute()
-        return self._refits[name]
+        value = self._refits[name] if name in self._refits else compute()
+        if isinstance(value, Deferred):  # another estimator's refit, run on first use
+            value = value.compute()
+        self._refits[name] = value
+        return value
 
     def _below_top(self) -> list[PreparedRelease]:
         speeds = distinct_wind_speeds([p.U for p in self._prepared])

@@ -264,7 +264,7 @@ def flutter_uncertainty(section: SectionModel, result: _flutter.FlutterResult, p
                 f"the flutter speed is extrapolated: the {mode} branch flutters at K = "
                 f"{K_F:.3g}, below the lowest reduced frequency the releases cover on it "
                 f"({K_min:.3g}); releases closer to flutter would cover it")
-        if diag.reduced is not None and reduced_K_min > K_F:
+        if reduced_K_min > K_F and diag.reduced is not None:  # the refit only when it counts
             # How far the flutter speed moves when the coverage shrinks, scaled by the
             # ratio of the extrapolation distances (in log K).
             moved = max(refit_speed(diag.reduced), lower)
