@@ -67,6 +67,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
 import dataclasses  # noqa: E402
+import math  # noqa: E402
 import time  # noqa: E402
 from concurrent.futures import ProcessPoolExecutor  # noqa: E402
 from dataclasses import dataclass  # noqa: E402
@@ -76,7 +77,7 @@ from scipy.signal import lfilter  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
 from ident import Release, SectionModel
-from ident.identification import _turbulent_fit, e2rfc
+from ident.identification import _turbulent_fit, closed_loop_ml, e2rfc
 from ident.identification._regressors import PreparedRelease, RegressorView, prepare
 from ident.identification.modal import fit_modes
 from ident.model import flat_plate
@@ -372,11 +373,63 @@ def _tunnel_table(results, names, seeds, mode):
           f"({100 * covered / total:.0f} %)")
 
 
+#: The ablation's variants: (name, window of each release in s, holds used).
+ABLATION = (("decay only (0-5 s)", (0.0, 5.0), False),
+            ("random only (5-20 s + holds)", (5.0, math.inf), True),
+            ("both (0-20 s + holds)", None, True))
+
+
+def ablation_run(args):
+    """One closed-loop fit of a variant; its flutter speed error and Fisher std over U_F."""
+    row, seed, variant = args
+    name, window, holds = ABLATION[variant]
+    section, make_model, *_ = TUNNEL_ROWS[row]
+    U_F = fl.analyze(section, make_model()).speed
+    releases = tunnel_releases(row, seed)
+    start = e2rfc.identify([dataclasses.replace(r, hold=None) for r in releases], section)
+    try:
+        fit = closed_loop_ml.fit_closed_loop(releases, section, start, n_lags=2,
+                                             use_holds=holds, window=window)
+        found = fl.analyze(section, fit.model)
+    except ValueError as exc:
+        print(f"FAILED {row} seed {seed} {name}: {exc}", flush=True)
+        return row, name, np.inf, np.nan
+    if found.speed is None:
+        return row, name, np.inf, np.nan
+    dU_dA, dU_dd = fl.speed_sensitivity(section, fit.model, found.speed, found.frequency)
+    gradient = np.array([dU_dA[k, i, j] for k, i, j in fit.parameter_index]
+                        + list(dU_dd * fit.model.d))
+    std = math.sqrt(max(float(gradient @ fit.covariance @ gradient), 0.0))
+    return row, name, found.speed / U_F - 1.0, std / U_F
+
+
+def ablation_part(seeds, workers, rows=("plate, Jones, Iw 1 %", "bluff deck, Iw 1 %")):
+    """Closed-loop ML on the decay alone, the random response alone, and both."""
+    jobs = [(row, seed, v) for row in rows for v in range(len(ABLATION))
+            for seed in range(seeds)]
+    with ProcessPoolExecutor(workers) as pool:
+        results = list(pool.map(ablation_run, jobs))
+    print(f"\nClosed-loop ML, what each part of the record tells ({seeds} seeds; std = the "
+          "Fisher information's alone):\n")
+    header = f"{'case':<24}{'data':<30}{'|err| med':>10}{'|err| p90':>10}{'2-std':>7}{'std med':>9}"
+    print(header)
+    print("-" * len(header))
+    for row in rows:
+        for name, *_ in ABLATION:
+            got = [(e, sd) for r, n, e, sd in results if (r, n) == (row, name)]
+            err = np.abs([e for e, _ in got]) * 100
+            std = np.array([sd for _, sd in got]) * 100
+            cover = np.mean(np.isfinite(err) & (err <= 2 * std))
+            print(f"{row:<24}{name:<30}{np.median(err):>9.2f}%{np.percentile(err, 90):>9.2f}%"
+                  f"{100 * cover:>6.0f}%{np.nanmedian(std):>8.2f}%")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--part", choices=("all", "classic", "tunnel", "timing"), default="all")
+    parser.add_argument("--part", choices=("all", "classic", "tunnel", "timing", "ablation"),
+                        default="all")
     parser.add_argument("--repeats", type=int, default=9, help="timed runs of the timing table")
     parser.add_argument("--tunnel-mode", choices=("after", "before", "both"), default="after",
                         help="tunnel rows: as shipped, with the holds taken away, or both")
@@ -398,6 +451,9 @@ def main():
     args = parser.parse_args()
     if args.part == "timing":
         timing_part(args.repeats)
+        return
+    if args.part == "ablation":
+        ablation_part(args.seeds, args.workers)
         return
     if args.part in ("all", "tunnel"):
         modes = ("before", "after") if args.tunnel_mode == "both" else (args.tunnel_mode,)

@@ -235,7 +235,8 @@ class _Layout:
 @single_threaded_blas
 def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
                     start: RationalFunctionModel, *, with_A3: bool = True,
-                    n_lags: int | None = None, use_holds: bool = True) -> ClosedLoopFit:
+                    n_lags: int | None = None, use_holds: bool = True,
+                    window: tuple[float, float] | None = None) -> ClosedLoopFit:
     """Maximise the likelihood of every release (and hold) together, from ``start``.
 
     Parameters
@@ -256,6 +257,10 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
         has beyond ``n_lags`` are dropped.
     use_holds : bool, optional
         Use the holds' records.
+    window : (float, float), optional
+        Use only the samples of each release with ``t0 <= t < t1`` (s from the release): the
+        decay alone (``(0, 5)``) or the random response alone (``(10, inf)``), to measure what
+        each part tells. Default: all of them.
 
     Returns
     -------
@@ -273,7 +278,7 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
     if len(speeds) < 2:
         raise ValueError("the closed-loop estimator needs releases at two or more wind speeds")
     f_max = max(section.fh, section.fa)
-    records = _records(releases, section, speeds, f_max, use_holds)
+    records = _records(releases, section, speeds, f_max, use_holds, window)
     fs = releases[0].fs / _factor(releases[0].fs, f_max)
     start = _with_lags(start, start.n_lags if n_lags is None else n_lags)
     layout = _Layout(2, start.n_lags, with_A3, len(speeds), len(releases))
@@ -390,14 +395,20 @@ def _decimate(y: FloatArray, factor: int) -> FloatArray:
 
 
 def _records(releases: Sequence[Release], section: SectionModel, speeds: list[float],
-             f_max: float, use_holds: bool) -> list[_Record]:
-    """Decimated records of every release and (when used) hold."""
+             f_max: float, use_holds: bool, window: tuple[float, float] | None = None
+             ) -> list[_Record]:
+    """Decimated records of every release (within ``window``) and (when used) hold."""
     records = []
     for index, r in enumerate(releases):
         group = int(np.argmin([abs(r.U - u) for u in speeds]))
         rho = section.rho if r.rho is None else r.rho
         factor = _factor(r.fs, f_max)
         y = np.column_stack([r.h, r.alpha, r.lift, r.moment])
+        if window is not None:
+            y = y[(r.t >= window[0]) & (r.t < window[1])]
+            if y.shape[0] < 50 * factor:
+                raise ValueError(f"the window {window} s leaves {y.shape[0]} samples of a "
+                                 f"release; at least {50 * factor} are needed")
         records.append(_Record(_decimate(y, factor), r.U, rho, group, index, False))
         if use_holds and r.hold is not None and r.hold.t.size > 50 * factor:
             hold = np.column_stack([r.hold.h, r.hold.alpha, r.hold.lift, r.hold.moment])
