@@ -73,8 +73,13 @@ MAX_ITERATIONS = 40
 #: the step's direction.
 TOLERANCE = 5e-2
 #: The search also ends when this many consecutive iterations together gain less than
-#: :data:`TOLERANCE`.
+#: :data:`STALL_TOLERANCE` in log L: where the likelihood is not quadratic (a lag root the data
+#: barely tell, a buffeting model that is only near the truth) Fisher scoring crawls, 0.03-2
+#: per iteration over 20 iterations. Measured on four tunnel cases (plate, 1 % turbulence):
+#: stopping at 1 moves the flutter speed by 0.04-0.6 % (a tenth to a fifth of its std) and
+#: halves the time (10-11 s instead of 10-33 s).
 STALLED = 3
+STALL_TOLERANCE = 1.0
 #: Most increases (x4 each) of the damping in one iteration before the search gives up: far
 #: from the maximum the Fisher information can understate the curvature by orders of magnitude.
 DAMPING_TRIES = 30
@@ -118,8 +123,9 @@ class ClosedLoopFit:
         At the maximum.
     iterations : int
     converged : bool
-        Whether the search stopped at the maximum (a full step would gain, or the last
-        :data:`STALLED` steps gained, less than :data:`TOLERANCE` in log L).
+        Whether the search stopped at the maximum (a full step would gain less than
+        :data:`TOLERANCE` in log L, or the last :data:`STALLED` steps gained less than
+        :data:`STALL_TOLERANCE`).
     fs : float
         The decimated rate, Hz.
     whiteness : ndarray, shape (n_records, 4)
@@ -354,10 +360,9 @@ def _maximise(objective: _Objective, layout: _Layout, theta: FloatArray, current
         gains.append(current.nll - trial.nll)
         theta, current = trial_theta, trial
         lam = max(lam / 3.0, 1e-6)
-        if len(gains) >= STALLED and sum(gains[-STALLED:]) < TOLERANCE:
-            # Where the likelihood is not quadratic (a lag root the data barely tell), the
-            # Fisher-predicted gain can stay above what any step realises: the maximum is
-            # reached when log L stops moving.
+        if len(gains) >= STALLED and sum(gains[-STALLED:]) < STALL_TOLERANCE:
+            # Where the likelihood is not quadratic the Fisher-predicted gain can stay above
+            # what the steps realise: the maximum is reached when log L stops moving.
             converged = True
             break
     if F_at is not theta:
