@@ -275,14 +275,19 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
     Raises
     ------
     ValueError
-        On a 3-DOF section or releases, fewer than two wind speeds, or a start at which the
-        likelihood cannot be evaluated (no stabilising Riccati solution).
+        On a 3-DOF section or releases, fewer than two wind speeds, releases at different
+        sampling rates, or a start at which the likelihood cannot be evaluated (no stabilising
+        Riccati solution). (A :class:`Release` holds no NaN: it refuses them itself.)
     """
     if section.n_dof != 2 or any(r.n_dof != 2 for r in releases):
         raise ValueError("the closed-loop estimator is for two degrees of freedom (heave, pitch)")
     speeds = distinct_wind_speeds([r.U for r in releases])
     if len(speeds) < 2:
         raise ValueError("the closed-loop estimator needs releases at two or more wind speeds")
+    rates = sorted({r.fs for r in releases})
+    if rates[-1] > rates[0] * (1 + 1e-9):
+        raise ValueError(f"the releases are sampled at different rates ({rates[0]:g} to "
+                         f"{rates[-1]:g} Hz): resample them to one rate first")
     f_max = max(section.fh, section.fa)
     records = _records(releases, section, speeds, f_max, use_holds, window)
     fs = releases[0].fs / _factor(releases[0].fs, f_max)
@@ -393,7 +398,7 @@ def _decimate(y: FloatArray, factor: int) -> FloatArray:
     Block means of white sensor noise stay white (a low-pass filter would colour it near the
     new Nyquist frequency, which the model's white sensor noise cannot follow); on the signals
     they act as a delay of half a block, the same on every channel, and a gain within 0.3 % of
-    one below ``fs / (TARGET_FACTOR factor)``'s modes.
+    one at the still-air modes (a block is at most 1/:data:`TARGET_FACTOR` of their periods).
     """
     n = y.shape[0] // factor
     return np.asarray(y[: n * factor].reshape(n, factor, y.shape[1]).mean(axis=1), dtype=float)

@@ -161,13 +161,18 @@ def test_e2rfc_runs_the_closed_loop_branch_in_the_tunnel_s_turbulence(monkeypatc
 @pytest.mark.parametrize(("change", "match"), [
     ("one speed", "two or more wind speeds"),
     ("three dof", "two degrees of freedom"),
+    ("two rates", "different rates"),
 ])
 def test_bad_input_raises_one_clear_error(change, match):
     releases, truth, _ = own_model_releases(seed=1, duration=2.0, fs=200.0)
     section = PLATE
     if change == "one speed":
         releases = releases[:2]
-    else:
+    elif change == "three dof":
         section = PLATE.replace(fp=1.5)
+    else:
+        r = releases[0]
+        releases[0] = Release(t=r.t[::2], h=r.h[::2], alpha=r.alpha[::2], lift=r.lift[::2],
+                              moment=r.moment[::2], U=r.U)
     with pytest.raises(ValueError, match=match):
         closed_loop_ml.fit_closed_loop(releases, section, truth)
