@@ -34,6 +34,12 @@ so its inverse at the optimum is the parameters' covariance: the Cramer-Rao boun
 at hand. The steady gain costs a little of the exact filter's efficiency over the first second
 of each record (where the exact filter's covariance has not yet settled), not its consistency.
 
+Longer than 600 lines: the record layout, the likelihood with its concentrated nuisance, the
+forward-difference Fisher information and the damped search share the parameter layout and the
+predictor, and each is short; the steady-state predictor and the Riccati solution
+(:class:`_Predictor`, :func:`riccati`) are the part to move into a module of their own when the
+analytic derivatives (the way to the 10 s target) are added beside them.
+
 References
 ----------
 L. Ljung, *System Identification: Theory for the User*, 2nd ed., Prentice Hall 1999, ch. 7 and 9
