@@ -54,10 +54,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
-import scipy.linalg
 from scipy.signal import lfilter
 
-from ident.identification.innovations import ReleaseModel, ShapingFilter
+from ident.identification.innovations import ReleaseModel, ShapingFilter, discretise
 from ident.identification.results import distinct_wind_speeds
 from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel
@@ -576,21 +575,10 @@ def _hold_matrices(shaping: ShapingFilter, noise: FloatArray, B: float, fs: floa
                    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Return the held model: buffeting alone on the force channels, noise on all four."""
     A_b, B_b, C_b = shaping.matrices()
-    Phi, Qd = _discretise(A_b, B_b, 1.0 / fs)
+    Phi, Qd = discretise(A_b, B_b, 1.0 / fs)
     C = np.zeros((4, 4))
     C[2], C[3] = C_b[0] / B, C_b[1]
     return Phi, Qd, C, np.diag(noise**2)
-
-
-def _discretise(Ac: FloatArray, G: FloatArray, T: float) -> tuple[FloatArray, FloatArray]:
-    """Van Loan: the transition and the exact process-noise covariance over ``T``."""
-    n = Ac.shape[0]
-    M = np.zeros((2 * n, 2 * n))
-    M[:n, :n], M[:n, n:], M[n:, n:] = -Ac, G @ G.T, Ac.T
-    E = scipy.linalg.expm(M * T)
-    Phi = E[n:, n:].T
-    Qd = Phi @ E[:n, n:]
-    return Phi, 0.5 * (Qd + Qd.T)
 
 
 def riccati(Phi: FloatArray, C: FloatArray, Qd: FloatArray, R: FloatArray) -> FloatArray:

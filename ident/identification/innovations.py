@@ -59,8 +59,8 @@ from ident.model.section import SectionModel
 from ident.model.statespace import AeroelasticSystem
 from ident.numerics import validate as v
 
-__all__ = ["InnovationsResult", "ReleaseModel", "ShapingFilter", "kalman_filter",
-           "log_likelihood"]
+__all__ = ["InnovationsResult", "ReleaseModel", "ShapingFilter", "discretise",
+           "kalman_filter", "log_likelihood"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -205,16 +205,9 @@ class ReleaseModel:
         object.__setattr__(self, "noise_std", std)
         object.__setattr__(self, "U", AeroelasticSystem(section, self.model, self.U).U)
         Ac, G, C = self.continuous_matrices()
-        n = Ac.shape[0]
-        # Van Loan: one exponential gives Phi and the exact integral of the noise over a sample.
-        T = 1.0 / self.fs
-        M = np.zeros((2 * n, 2 * n))
-        M[:n, :n], M[:n, n:], M[n:, n:] = -Ac, G @ G.T, Ac.T
-        E = scipy.linalg.expm(M * T)
-        Phi = E[n:, n:].T
-        Qd = Phi @ E[:n, n:]
+        Phi, Qd = discretise(Ac, G, 1.0 / self.fs)
         object.__setattr__(self, "Phi", Phi)
-        object.__setattr__(self, "Qd", 0.5 * (Qd + Qd.T))
+        object.__setattr__(self, "Qd", Qd)
         object.__setattr__(self, "C", C)
         object.__setattr__(self, "R", np.diag(std**2))
 
@@ -276,6 +269,21 @@ class ReleaseModel:
             y[k] = self.C @ x
             x = self.Phi @ x + w[k]
         return y + rng.standard_normal((n, 4)) * self.noise_std
+
+
+def discretise(Ac: FloatArray, G: FloatArray, T: float) -> tuple[FloatArray, FloatArray]:
+    """Return ``(Phi, Qd)`` of ``x' = Ac x + G w`` (``w`` unit white noise) over ``T`` s.
+
+    Van Loan: one matrix exponential gives the transition ``Phi = expm(Ac T)`` and the exact
+    process-noise covariance ``Qd`` over the interval (symmetrised).
+    """
+    n = Ac.shape[0]
+    M = np.zeros((2 * n, 2 * n))
+    M[:n, :n], M[:n, n:], M[n:, n:] = -Ac, G @ G.T, Ac.T
+    E = scipy.linalg.expm(M * T)
+    Phi = E[n:, n:].T
+    Qd = Phi @ E[:n, n:]
+    return Phi, 0.5 * (Qd + Qd.T)
 
 
 @dataclass(frozen=True, eq=False)
