@@ -108,8 +108,16 @@ def _record(path: Path, *, manual: bool, with_plc: bool | None = None
 
 
 def _identify(path: Path) -> tuple[float, float]:
-    run = read_run(path)
-    assert len(run.releases) == 6
+    # A host stall of a few seconds (CI runs the pure tests beside these) can leave a marked
+    # gap in one release's scanner columns (seen once in about 20 CI runs: 4.6 s of lift in
+    # the PLC file's fifth release). The reader then cuts that release, as a campaign does;
+    # the comparison below holds with five releases (its bound uses both stds), and more than
+    # one release cut is a failure, not the host.
+    run = read_run(path, cut_at_gaps=True)
+    assert len(run.cuts) <= 1, run.cuts
+    if run.cuts:
+        print(f"{path.name}: {run.cuts[0]}")
+    assert len(run.releases) >= 5
     analysis = analyze_campaign(list(run.releases), campaign_section([run]), table=False)
     assert analysis.flutter.speed is not None
     return float(analysis.flutter.speed), float(analysis.flutter_std)

@@ -2,10 +2,10 @@
 
 Each campaign: the flat-plate rig at 0.5, 0.65 and 0.8 of its flutter speed, two 7.5 s releases
 each, 2 % noise, seeded (:mod:`simulators.campaigns`). Each of the ten effects is hidden at its
-realistic strength and at twice it (different seeds); the diagnosis must name it and nothing
-else (so the aerodynamic nonlinearity is never taken for quadratic damping, nor the tubing for
-a channel delay, nor the other way round), recover its strength parameters within 20 % and
-shrink the gap by at least half. On clean campaigns the
+realistic strength or at twice it (alternating; the benchmark runs both); the diagnosis must
+name it and nothing else (so the aerodynamic nonlinearity is never taken for quadratic damping,
+nor the tubing for a channel delay, nor the other way round), recover its strength parameters
+within 20 % and shrink the gap by at least half. On clean campaigns the
 answer must be None. Pairs of effects that occur together must both be named (forward
 selection), each within 20 %, the gap shrinking at every step. An effect outside the library
 must give ``explained = False`` and name nothing. ``benchmarks/discrepancy_confusion.py`` runs
@@ -26,8 +26,12 @@ from simulators.campaigns import _STRENGTHS, REALISTIC, SECTION, scaled, simulat
 
 DEPTH = 0.03  # m, the flat plate's (the vortex effect's depth)
 
-CASES = [(name, factor, seed) for i, name in enumerate(EFFECT_NAMES)
-         for factor, seed in ((1.0, 100 + i), (2.0, 200 + i))]
+#: Each effect at one of its two strengths, alternating down the library (realistic, twice it,
+#: realistic, ...; the seeds those cases always had): both strengths of every effect over 10
+#: seeds are the benchmark's (``discrepancy_confusion.py``), and the second strength of each
+#: here cost about 8 minutes of the CI's two workers for cases the benchmark already runs.
+CASES = [(name, 1.0, 100 + i) if i % 2 == 0 else (name, 2.0, 200 + i)
+         for i, name in enumerate(EFFECT_NAMES)]
 
 
 @pytest.mark.parametrize(("name", "factor", "seed"), CASES,
