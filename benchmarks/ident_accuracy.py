@@ -86,6 +86,7 @@ from ident.model.conventions import FLUTTER_DERIVATIVE_NAMES
 from ident.model.quasi_steady import StaticCoefficients
 from ident.physics.turbulence import TurbulenceSpec
 from simulators import simulate_release  # noqa: E402
+from simulators.campaigns import scaled  # noqa: E402
 from simulators.decks import BLUFF_DECK, BLUFF_DECK_STATIC, bluff_deck_model  # noqa: E402
 
 SECTIONS = {
@@ -277,6 +278,30 @@ TUNNEL_ROWS = {
 #: Seconds of hold recorded before each release of the turbulence rows (issue 16).
 TUNNEL_HOLD_S = 10.0
 
+#: Rows that change one thing of a turbulence row (issue 38's robustness and information
+#: rows): name -> (the row, its change). ``per_speed``: releases per wind speed (the holds
+#: alternate; the first two at each speed are the row's own); ``gusts``: fields of the
+#: turbulence spec replaced (an admittance and a larger scale give a force spectrum that the
+#: closed-loop fit's second-order shaping filter matches worse than von Karman's at 0.3 m;
+#: skewness and kurtosis give non-Gaussian gusts); ``effects``: physics the estimators do not
+#: model, at the strength of ``simulators.campaigns.REALISTIC`` (the same plate).
+VARIANT_ROWS = {
+    "plate, Iw 1 %, 8 releases": ("plate, Jones, Iw 1 %", {"per_speed": 8}),
+    "plate, Iw 1 %, Davenport, 1 m": ("plate, Jones, Iw 1 %",
+                                      {"gusts": {"Lwx": 1.0, "admittance": "davenport"}}),
+    "plate, Iw 1 %, non-Gaussian": ("plate, Jones, Iw 1 %",
+                                    {"gusts": {"skewness": 0.5, "kurtosis": 4.5}}),
+    "plate, Iw 1 %, friction": ("plate, Jones, Iw 1 %", {"effects": ("coulomb_friction",)}),
+}
+
+
+def row_spec(row):
+    """Return the row's section, model maker, static coefficients, Iw, truth and change."""
+    if row in VARIANT_ROWS:
+        base, change = VARIANT_ROWS[row]
+        return (*TUNNEL_ROWS[base], change)
+    return (*TUNNEL_ROWS[row], {})
+
 
 def tunnel_releases(row, seed, hold_s=TUNNEL_HOLD_S):
     """Simulate the row's releases; in turbulence each with a hold of ``hold_s`` before it.
@@ -285,16 +310,19 @@ def tunnel_releases(row, seed, hold_s=TUNNEL_HOLD_S):
     changes the noise draws, and in smooth flow E2RFC does not use it). ``hold_s=0`` gives the
     turbulence rows' releases as drawn before issue 16's holds.
     """
-    section, make_model, static, Iw, _ = TUNNEL_ROWS[row]
+    section, make_model, static, Iw, _, change = row_spec(row)
     model = make_model()
     U_F = fl.analyze(section, model).speed
-    wind = {} if not Iw else {"static": static, "turbulence": vertical_gusts(Iw), "span": 1.0,
+    gusts = dataclasses.replace(vertical_gusts(Iw), **change.get("gusts", {}))
+    wind = {} if not Iw else {"static": static, "turbulence": gusts, "span": 1.0,
                               "pre_s": hold_s}
+    effects = [scaled(name, 1.0) for name in change.get("effects", ())]
+    holds = [HOLDS[j % len(HOLDS)] for j in range(change.get("per_speed", len(HOLDS)))]
     return [
         Release.from_simulation(simulate_release(
             section, model, f * U_F, h0, alpha0, duration=20.0, fs=500.0, noise=0.02,
-            rng=(seed, i, j, int(1000 * Iw)), **wind))
-        for i, f in enumerate(E2RFC_SPEEDS) for j, (h0, alpha0) in enumerate(HOLDS)
+            rng=(seed, i, j, int(1000 * Iw)), effects=effects, **wind))
+        for i, f in enumerate(E2RFC_SPEEDS) for j, (h0, alpha0) in enumerate(holds)
     ]
 
 
@@ -313,7 +341,7 @@ def _tunnel_run(args):
     e2rfc.TURBULENT_A3 = a3  # the turbulence branch's A3 option (set in each worker)
     _turbulent_fit.MOTION = motion  # and how its regressors' motion is estimated
     e2rfc.TURBULENT_ESTIMATOR = estimator  # and which estimator it runs
-    section, make_model, _, _, truth = TUNNEL_ROWS[row]
+    section, make_model, _, _, truth, _ = row_spec(row)
     U_F = truth() if truth is not None else fl.analyze(section, make_model()).speed
     releases = tunnel_releases(row, seed)
     if mode == "before":  # today's estimator: the same releases without their holds
@@ -332,8 +360,9 @@ def _tunnel_run(args):
 
 def tunnel_part(seeds, workers, modes=("after",), which="all", a3="fitted-or-zero",
                 first_seed=0, motion="filter", estimator="iv"):
-    names = [row for row in TUNNEL_ROWS
-             if which == "all" or (which == "turbulent") == (TUNNEL_ROWS[row][3] > 0)]
+    names = (list(VARIANT_ROWS) if which == "variants" else
+             [row for row in TUNNEL_ROWS
+              if which == "all" or (which == "turbulent") == (TUNNEL_ROWS[row][3] > 0)])
     jobs = [(row, seed, mode, a3, motion, estimator) for row in names for mode in modes
             for seed in range(first_seed, first_seed + seeds)]
     results = []
@@ -350,7 +379,8 @@ def tunnel_part(seeds, workers, modes=("after",), which="all", a3="fitted-or-zer
 
 
 def _tunnel_table(results, names, seeds, mode):
-    print(f"\nE2RFC in a real tunnel ({mode}): 3 wind speeds (0.4/0.6/0.8 U_F) x 2 releases, 20 s"
+    print(f"\nE2RFC in a real tunnel ({mode}): 3 wind speeds (0.4/0.6/0.8 U_F) x 2 releases "
+          "(the variant rows: as named), 20 s"
           f" at 500 Hz, 2 % noise, turbulence rows with a {TUNNEL_HOLD_S:g} s hold before each "
           f"release; {seeds} seeds per row; std = IdentifiedModel.flutter's (total).\n")
     header = (f"{'case':<26}{'|err| med':>10}{'|err| p90':>10}{'2-std cover':>12}"
@@ -383,7 +413,7 @@ def ablation_run(args):
     """One closed-loop fit of a variant; its flutter speed error and Fisher std over U_F."""
     row, seed, variant = args
     name, window, holds = ABLATION[variant]
-    section, make_model, *_ = TUNNEL_ROWS[row]
+    section, make_model, *_ = row_spec(row)
     U_F = fl.analyze(section, make_model()).speed
     releases = tunnel_releases(row, seed)
     start = e2rfc.identify([dataclasses.replace(r, hold=None) for r in releases], section)
@@ -433,8 +463,10 @@ def main():
     parser.add_argument("--repeats", type=int, default=9, help="timed runs of the timing table")
     parser.add_argument("--tunnel-mode", choices=("after", "before", "both"), default="after",
                         help="tunnel rows: as shipped, with the holds taken away, or both")
-    parser.add_argument("--rows", choices=("all", "turbulent", "clean"), default="all",
-                        help="which tunnel rows to run")
+    parser.add_argument("--rows", choices=("all", "turbulent", "clean", "variants"),
+                        default="all",
+                        help="which tunnel rows to run (variants: the turbulence rows changed "
+                             "in one thing, VARIANT_ROWS)")
     parser.add_argument("--first-seed", type=int, default=0,
                         help="tunnel rows: the first seed (more seeds in another run)")
     parser.add_argument("--turbulent-a3", choices=("fitted-or-zero", "fitted", "choose", "e2rfc"),

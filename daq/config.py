@@ -420,7 +420,7 @@ def _turbulence(table: Mapping[str, Any], where: str,
                 section: Mapping[str, Any]) -> tuple[TurbulenceSpec, float, int]:
     """Read the turbulence spec, the model's span (m) and the gust field's seed."""
     check_keys(table, where, {"Iu", "Iw", "Lux", "Lwx"},
-               {"Cuy", "Cwy", "admittance", "decay", "seed", "span"})
+               {"Cuy", "Cwy", "admittance", "decay", "seed", "span", "skewness", "kurtosis"})
     admittance = table.get("admittance", "none")
     if admittance not in ("none", "davenport"):
         raise ConfigError(f"{where} admittance must be 'none' or 'davenport', got {admittance!r}")
@@ -436,6 +436,8 @@ def _turbulence(table: Mapping[str, Any], where: str,
         Cwy=number(table, "Cwy", where, lo=0.0, hi=100.0, default=8.0),
         admittance=admittance,
         decay=number(table, "decay", where, lo=0.0, hi=100.0, lo_open=True, default=7.0),
+        skewness=number(table, "skewness", where, lo=-1.0, hi=1.0, default=0.0),
+        kurtosis=number(table, "kurtosis", where, lo=3.0, hi=8.0, default=3.0),
     )
     if "span" not in table and "span" not in section:
         raise ConfigError(f"{where}: missing required key(s) ['span'] (the model's span, m; "

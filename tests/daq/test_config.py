@@ -95,6 +95,11 @@ def test_turbulence_and_static_coefficients_of_the_virtual_tunnel_are_read():
     assert (sim.turbulence.Cuy, sim.turbulence.Cwy, sim.turbulence.admittance) == (10.0, 8.0,
                                                                                      "none")
     assert sim.span == 1.0 and sim.turbulence_seed == 3
+    assert sim.turbulence.gaussian  # unless skewness or kurtosis are given
+    gusty = parse_rig_config(TURBULENT.replace("seed = 3", "seed = 3\nkurtosis = 4.5\n"
+                                               "skewness = -0.3"), "gusty.toml").simulation
+    assert gusty is not None and gusty.turbulence is not None
+    assert (gusty.turbulence.skewness, gusty.turbulence.kurtosis) == (-0.3, 4.5)
     smooth = parse_rig_config(BASE, "base.toml").simulation
     assert smooth is not None and smooth.turbulence is None and smooth.static is None
 
@@ -107,6 +112,7 @@ def test_turbulence_and_static_coefficients_of_the_virtual_tunnel_are_read():
         ("span = 1.0\n", "", r"\[simulation.turbulence\]: missing required key\(s\) \['span'\]"),
         ("seed = 3", "seed = -1", r"\[simulation.turbulence\] seed must be an integer >= 0"),
         ("seed = 3", 'admittance = "sears"', "admittance must be 'none' or 'davenport'"),
+        ("seed = 3", "kurtosis = 2.5", r"\[simulation.turbulence\] kurtosis = 2.5 is outside"),
         ("dC_M = 1.571", "dC_M = 1.571\nC_X = 1", r"\[simulation.static\]: unknown key"),
         ("[simulation.static]\nC_D = 0.02\nC_L = 0.0\nC_M = 0.0\ndC_D = 0.0\ndC_L = -6.283\n"
          "dC_M = 1.571\n", "", r"turbulence\] needs a \[simulation.static\] table"),
