@@ -102,6 +102,10 @@ def _build_parser() -> argparse.ArgumentParser:
                            "derivative's std H1_std..) to this file")
     p_id.add_argument("--reduced-velocities", default=None, metavar="START:STOP:STEP",
                       help="rows of --table, U/(f B) (default: the releases' span)")
+    p_id.add_argument("--turbulent-estimator", choices=("iv", "ml"), default=None,
+                      help="releases in turbulence: refined IV with the holds' noise model "
+                           "(default) or closed-loop maximum likelihood of every release and "
+                           "hold together (2-DOF; holds optional; slower, more accurate)")
 
     p_diag = sub.add_parser(
         "diagnose",
@@ -566,7 +570,8 @@ def _dispatch(args: argparse.Namespace) -> int:
         return run_identify(args.files, json_path=args.json, n_lags=args.n_lags,
                             tubing_correction=not args.no_tubing_correction, route=args.route,
                             detect_releases=args.detect_releases, table_path=args.table,
-                            reduced_velocities=args.reduced_velocities)
+                            reduced_velocities=args.reduced_velocities,
+                            turbulent_estimator=args.turbulent_estimator)
     if args.command == "reprocess":
         return _reprocess(args)
     if args.command == "diagnose":

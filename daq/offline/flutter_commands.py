@@ -34,7 +34,8 @@ __all__ = ["run_flutter", "run_identify"]
 def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
                  n_lags: int | None = None, tubing_correction: bool = True,
                  route: str = "auto", detect_releases: bool = False,
-                 table_path: Path | None = None, reduced_velocities: str | None = None) -> int:
+                 table_path: Path | None = None, reduced_velocities: str | None = None,
+                 turbulent_estimator: str | None = None) -> int:
     """Identify the releases of run files and print the model and flutter speed; return 0.
 
     Parameters
@@ -59,6 +60,9 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
     reduced_velocities : str, optional
         ``START:STOP:STEP`` of the table's reduced velocities ``U / (f B)``; default: the
         releases' span.
+    turbulent_estimator : {"iv", "ml"}, optional
+        The estimator of releases in turbulence (default: E2RFC's, refined IV); ``"ml"``:
+        closed-loop maximum likelihood (:mod:`ident.identification.closed_loop_ml`).
     """
     from daq.offline.derivative_table import (
         check_model_dof,
@@ -101,7 +105,8 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
     print(f"{len(releases)} release(s) from {len(runs)} file(s); wind speeds "
           f"{sorted({round(r.U, 2) for r in releases})} m/s{tubing_note(runs)}")
     try:
-        analysis = analyze_campaign(releases, section, n_lags=n_lags, table=False)
+        analysis = analyze_campaign(releases, section, n_lags=n_lags, table=False,
+                                    turbulent_estimator=turbulent_estimator)
     except ValueError as exc:
         if section.n_dof == 2 or isinstance(exc, IdentError):
             raise

@@ -156,6 +156,7 @@ class CampaignAnalysis:
 def analyze_campaign(
     releases: Sequence[Release], section: SectionModel, *, n_lags: int | None = None,
     with_A3: bool | None = None, table: bool = True, U_max: float | None = None,
+    turbulent_estimator: str | None = None,
 ) -> CampaignAnalysis:
     """Identify a campaign's releases and analyse the model (see the module docstring).
 
@@ -173,6 +174,9 @@ def analyze_campaign(
         wind speeds; a failure is recorded in ``table_error``, not raised).
     U_max : float, optional
         Upper end of the flutter search, m/s.
+    turbulent_estimator : {"iv", "ml"}, optional
+        The estimator of releases in turbulence (:func:`ident.identification.e2rfc.identify`;
+        None: its default).
 
     Returns
     -------
@@ -184,7 +188,8 @@ def analyze_campaign(
         E2RFC cannot identify a model from these releases (one wind speed, rank deficiency).
     """
     releases = list(releases)
-    model = e2rfc.identify(releases, section, n_lags=n_lags, with_A3=with_A3)
+    model = e2rfc.identify(releases, section, n_lags=n_lags, with_A3=with_A3,
+                           turbulent_estimator=turbulent_estimator)
     try:
         flutter, uncertainty = model.analysis(section, U_max)
     except _flutter.StillAirModesError as exc:

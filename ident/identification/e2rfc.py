@@ -121,6 +121,8 @@ TURBULENT_A3 = "fitted-or-zero"
 #: (medians 1.6-3 times lower than refined IV's on the benchmark's turbulence rows, 94-96 % of
 #: the 2-std intervals covering) and not yet the default: it takes 10-28 s against 3-10 s.
 TURBULENT_ESTIMATOR = "iv"
+#: The turbulence branch's estimators, by name.
+TURBULENT_ESTIMATORS = ("iv", "ml")
 #: Lags of the closed-loop branch. Measured (plate, 1 % turbulence, 6 seeds): from E2RFC's
 #: own lag count (none in turbulence) every flutter speed came out low, -3 to -13 %; with two
 #: (Jones's count) the errors fall on both sides, -7 to +1 %, within their standard deviations.
@@ -135,6 +137,7 @@ def identify(
     section: SectionModel,
     n_lags: int | None = None,
     with_A3: bool | None = None,
+    turbulent_estimator: str | None = None,
 ) -> IdentifiedModel:
     """Identify the rational-function model of the self-excited forces from releases (E2RFC).
 
@@ -148,6 +151,10 @@ def identify(
         Number of lag terms (0 to 3); None chooses by held-out error.
     with_A3 : bool, optional
         Fit the added-mass matrix A3; None chooses by held-out error.
+    turbulent_estimator : {"iv", "ml"}, optional
+        The estimator of releases in turbulence (:data:`TURBULENT_ESTIMATOR`, its default):
+        refined IV with the holds' noise model, or closed-loop maximum likelihood (two degrees
+        of freedom; a 3-DOF section runs refined IV and says so). Smooth flow ignores it.
 
     Returns
     -------
@@ -198,18 +205,28 @@ def identify(
     prepared = [prepare(r, section) for r in releases]
     if section.n_dof == 3:
         _check_modes_excited(prepared, section)
+    estimator = TURBULENT_ESTIMATOR if turbulent_estimator is None else turbulent_estimator
+    if estimator not in TURBULENT_ESTIMATORS:
+        raise ValueError(f"turbulent_estimator must be one of {TURBULENT_ESTIMATORS}, got "
+                         f"{turbulent_estimator!r}")
     model = _identify_prepared(prepared, section, n_lags, with_A3)
-    return _guarded(_turbulence_branch(model, releases, section, n_lags, with_A3),
+    return _guarded(_turbulence_branch(model, releases, section, n_lags, with_A3, estimator),
                     prepared, section, guards)
 
 
 def _turbulence_branch(model: IdentifiedModel, releases: list[Release], section: SectionModel,
-                       n_lags: int | None, with_A3: bool | None) -> IdentifiedModel:
-    """Return E2RFC's model, or in turbulence the refined-IV branch's (or a note on holds)."""
+                       n_lags: int | None, with_A3: bool | None,
+                       estimator: str) -> IdentifiedModel:
+    """Return E2RFC's model, or in turbulence the branch's (or a note on holds)."""
     if not model.diagnostics.turbulent:
         return model
-    if TURBULENT_ESTIMATOR == "ml" and section.n_dof == 2:
+    if estimator == "ml" and section.n_dof == 2:
         return _closed_loop(model, releases, section)
+    if estimator == "ml":
+        note = ("closed-loop maximum likelihood identifies 2-DOF sections only: the refined-IV "
+                "estimator ran on these 3-DOF releases")
+        model = IdentifiedModel(model.A, model.d, replace(
+            model.diagnostics, warnings=(*model.diagnostics.warnings, note)))
     if not _turbulent_fit.holds_suffice(releases):
         held = [r.hold.duration for r in releases if r.hold is not None]
         have = (f"the shortest hold here is {min(held):.3g} s" if len(held) == len(releases)

@@ -22,7 +22,7 @@ from ident.identification import closed_loop_ml, e2rfc
 from ident.identification.innovations import ReleaseModel, ShapingFilter, kalman_filter
 from ident.model import flat_plate
 from ident.model import flutter as fl
-from ident.model.quasi_steady import StaticCoefficients
+from ident.model.quasi_steady import StaticCoefficients, quasi_steady_model
 from ident.physics.turbulence import TurbulenceSpec
 from simulators import simulate_release
 
@@ -133,7 +133,7 @@ def test_recovers_the_flutter_speed_of_data_from_its_own_model():
         assert np.allclose(sf.frequencies, 4.0, rtol=0.15)
 
 
-def test_e2rfc_runs_the_closed_loop_branch_in_the_tunnel_s_turbulence(monkeypatch):
+def test_e2rfc_runs_the_closed_loop_branch_in_the_tunnel_s_turbulence():
     """The benchmark's plate campaign at 1 % turbulence (its seed-2 draws), without holds.
 
     Plain E2RFC (today's estimator without holds) is +11.1 % off here, std 135 %; the
@@ -141,7 +141,6 @@ def test_e2rfc_runs_the_closed_loop_branch_in_the_tunnel_s_turbulence(monkeypatc
     jackknife part). Bounds: within 2 std, and under 8 % (the benchmark row's 90th percentile
     without holds is 9.4 %, its median 2.7 %).
     """
-    monkeypatch.setattr(e2rfc, "TURBULENT_ESTIMATOR", "ml")
     truth = flat_plate.jones_model()
     U_F = fl.analyze(PLATE, truth).speed
     wind = {"static": StaticCoefficients.flat_plate(), "span": 1.0,
@@ -150,7 +149,7 @@ def test_e2rfc_runs_the_closed_loop_branch_in_the_tunnel_s_turbulence(monkeypatc
         PLATE, truth, f * U_F, h0, a0, duration=20.0, fs=500.0, noise=0.02,
         rng=(2, i, j, 10), **wind))
         for i, f in enumerate((0.4, 0.6, 0.8)) for j, (h0, a0) in enumerate(HOLDS)]
-    model = e2rfc.identify(releases, PLATE)
+    model = e2rfc.identify(releases, PLATE, turbulent_estimator="ml")
     assert model.diagnostics.estimator == e2rfc.ESTIMATOR_CLOSED_LOOP
     assert model.n_lags == e2rfc.CLOSED_LOOP_LAGS
     u = model.uncertainty(PLATE)
@@ -177,3 +176,27 @@ def test_bad_input_raises_one_clear_error(change, match):
                               moment=r.moment[::2], U=r.U)
     with pytest.raises(ValueError, match=match):
         closed_loop_ml.fit_closed_loop(releases, section, truth)
+
+
+def test_the_estimator_is_chosen_by_name_and_a_3dof_section_says_which_ran():
+    """A wrong estimator name is one clear error; "ml" on a 3-DOF section says what ran.
+
+    In turbulence a 3-DOF section runs refined IV (closed-loop ML is 2-DOF): its warnings say
+    so rather than the request being dropped silently.
+    """
+    releases, _, _ = own_model_releases(seed=1, duration=2.0, fs=200.0)
+    with pytest.raises(ValueError, match=r"turbulent_estimator must be one of \('iv', 'ml'\)"):
+        e2rfc.identify(releases, PLATE, turbulent_estimator="kalman")
+    sway = PLATE.replace(fp=1.3, zeta_p=0.004)
+    truth = flat_plate.jones_model().with_sway(quasi_steady_model(StaticCoefficients.flat_plate()))
+    U_F = fl.analyze(sway, truth).speed
+    wind = {"static": StaticCoefficients.flat_plate(), "span": 1.0, "pre_s": 3.0,
+            "turbulence": TurbulenceSpec(Iu=0.0, Iw=0.01, Lux=1.0, Lwx=0.3, Cuy=10.0, Cwy=8.0)}
+    releases = [Release.from_simulation(simulate_release(
+        sway, truth, f * U_F, h0, 0.02, p0=p0, duration=8.0, fs=200.0, noise=0.02,
+        rng=(1, i, j), **wind)) for i, f in enumerate((0.4, 0.6, 0.8))
+        for j, (h0, p0) in enumerate(((0.01, 0.008), (-0.008, -0.01)))]
+    model = e2rfc.identify(releases, sway, turbulent_estimator="ml")
+    assert model.diagnostics.turbulent
+    assert model.diagnostics.estimator != e2rfc.ESTIMATOR_CLOSED_LOOP
+    assert any("2-DOF sections only" in w for w in model.diagnostics.warnings)
