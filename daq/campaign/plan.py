@@ -30,6 +30,9 @@ The plan (units SI; the example plans are ``rig_configs/plans/*.toml``)::
                                 # displacement-only route, for a rig without taps (fixed
                                 # mode, 3 or more speeds; `windrig identify` after the
                                 # campaign, with its caveats)
+    turbulent_estimator = "iv"  # releases in turbulence: "iv" (refined IV, needs the holds)
+                                # or "ml" (closed-loop maximum likelihood; slower, closer to
+                                # the data's bound; 2-DOF)
 
     [speeds]
     wind_speeds = [5.0, 7.0]    # m/s; or fan_rpm = [500, 700] (set-points, rpm), not both
@@ -86,6 +89,8 @@ DECAY_ENDS = ("fixed", "settled")
 RELEASES = ("auto", "plc", "manual")
 #: How the campaign's releases are identified.
 IDENTIFICATIONS = ("e2rfc", "displacement")
+#: E2RFC's estimators of releases in turbulence (``e2rfc.TURBULENT_ESTIMATORS``).
+TURBULENT_ESTIMATORS = ("iv", "ml")
 #: Fewest wind speeds the displacement-only route identifies from (its known weakness).
 DISPLACEMENT_MIN_SPEEDS = 3
 MAX_RELEASES_PER_SPEED = 20
@@ -171,6 +176,9 @@ class CampaignPlan:
         ``"auto"``, ``"plc"`` or ``"manual"`` (:meth:`release_method` resolves ``"auto"``).
     identification : str
         ``"e2rfc"`` or ``"displacement"`` (the displacement-only route).
+    turbulent_estimator : str
+        E2RFC's estimator of releases in turbulence, ``"iv"`` or ``"ml"``
+        (:func:`ident.identification.e2rfc.identify`).
     """
 
     mode: str
@@ -190,6 +198,7 @@ class CampaignPlan:
     hold_s: float = HOLD_S
     release: str = "auto"
     identification: str = "e2rfc"
+    turbulent_estimator: str = "iv"
 
     def release_method(self, config: RigConfig) -> str:
         """Return how this plan releases on ``config``: ``"plc"`` or ``"manual"``."""
@@ -317,7 +326,7 @@ def parse_plan(text: str, source: str = "<string>") -> CampaignPlan:
     check_keys(c, where, {"mode"}, {"releases_per_speed", "decay_s", "settle_s",
                                     "steady_tolerance", "pause_s", "calz_start", "calz_end",
                                     "files", "decay_end", "hold_s", "release",
-                                    "identification"})
+                                    "identification", "turbulent_estimator"})
     mode = c["mode"]
     if mode not in MODES:
         raise ConfigError(f"{where} mode = {mode!r}; allowed: {', '.join(MODES)}")
@@ -343,6 +352,10 @@ def parse_plan(text: str, source: str = "<string>") -> CampaignPlan:
     if identification not in IDENTIFICATIONS:
         raise ConfigError(f"{where} identification = {identification!r}; allowed: "
                           f"{', '.join(IDENTIFICATIONS)}")
+    estimator = c.get("turbulent_estimator", "iv")
+    if estimator not in TURBULENT_ESTIMATORS:
+        raise ConfigError(f"{where} turbulent_estimator = {estimator!r}; allowed: "
+                          f"{', '.join(TURBULENT_ESTIMATORS)}")
 
     where = f"{source} [speeds]"
     s = data["speeds"]
@@ -387,7 +400,8 @@ def parse_plan(text: str, source: str = "<string>") -> CampaignPlan:
                         decay_s=decay_s, settle_s=settle_s, steady_tolerance=steady,
                         pause_s=pause_s, calz_start=calz_start, calz_end=calz_end,
                         adaptive=adaptive, source=source, files=files, decay_end=decay_end,
-                        hold_s=hold_s, release=release, identification=identification)
+                        hold_s=hold_s, release=release, identification=identification,
+                        turbulent_estimator=estimator)
 
 
 def load_plan(path: str | Path) -> CampaignPlan:

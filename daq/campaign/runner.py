@@ -184,11 +184,12 @@ class _Session:
             self.say(f"CALZ wind-off: {inst.name} zeroed")
 
 
-def _analysis(runs: list[RunFile]) -> CampaignAnalysis | None:
+def _analysis(runs: list[RunFile], plan: CampaignPlan) -> CampaignAnalysis | None:
     releases = [r for run in runs for r in run.releases]
     if len(distinct_wind_speeds([r.U for r in releases])) < 2:
         return None
-    return analyze_campaign(releases, campaign_section(runs), table=False)
+    return analyze_campaign(releases, campaign_section(runs), table=False,
+                            turbulent_estimator=plan.turbulent_estimator)
 
 
 def _truth_speed(config: RigConfig) -> float | None:
@@ -343,7 +344,7 @@ def _loop(session: _Session, outcome: CampaignOutcome) -> None:
     if outcome.resumed:
         say(f"resume: {outcome.resumed} speed(s) read back from {session.out}")
         if plan.identification == "e2rfc":
-            outcome.analysis = _analysis(session.runs)
+            outcome.analysis = _analysis(session.runs, plan)
             _say_estimate(say, outcome.analysis)
 
     while True:
@@ -598,7 +599,7 @@ def _update(session: _Session, outcome: CampaignOutcome, step: SpeedStep) -> Non
     started = time.monotonic()
     try:
         try:
-            outcome.analysis = _analysis(session.runs)
+            outcome.analysis = _analysis(session.runs, session.plan)
         finally:  # the wind blows while the analysis runs: its time counts
             session.analysis_s = time.monotonic() - started
             if session.fan_on_at is not None:

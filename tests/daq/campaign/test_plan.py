@@ -56,7 +56,9 @@ def test_defaults_and_candidates():
     assert plan.files == "per_speed"
     assert parse_plan(FIXED.replace("decay_s = 5.0", 'decay_s = 5.0\nfiles = "per_release"')
                       ).files == "per_release"
-    assert plan.decay_end == "fixed"
+    assert plan.decay_end == "fixed" and plan.turbulent_estimator == "iv"
+    assert parse_plan(FIXED.replace("decay_s = 5.0", 'decay_s = 5.0\nturbulent_estimator = "ml"')
+                      ).turbulent_estimator == "ml"
     assert plan.hold_s == 0.5  # daq.procedure.HOLD_S, the console's
     assert parse_plan(FIXED.replace("decay_s = 5.0", "decay_s = 5.0\nhold_s = 11")).hold_s == 11.0
     assert parse_plan(FIXED.replace("decay_s = 5.0", 'decay_s = 5.0\ndecay_end = "settled"')
@@ -91,6 +93,8 @@ def test_fan_set_points_become_wind_speeds():
      r"\[campaign\] decay_end = 'noise'; allowed: fixed, settled"),
     ("decay_s = 5.0", "decay_s = 5.0\nhold_s = 0.0",
      r"\[campaign\] hold_s = 0.0 is outside the allowed range \[0.1, 600.0\]"),
+    ("decay_s = 5.0", 'decay_s = 5.0\nturbulent_estimator = "kalman"',
+     r"\[campaign\] turbulent_estimator = 'kalman'; allowed: iv, ml"),
 ])
 def test_fixed_plan_errors_name_the_key(old, new, match):
     assert old in FIXED
