@@ -14,8 +14,14 @@ why the campaign stopped (a plan stops short of a speed above 0.9 (U_F - 3 std) 
 so far: in turbulence a two-speed std is often wide enough for that).
 About 4 minutes per seed (wind on 225 s).
 
+``--adaptive``: an adaptive campaign instead (issue 38), identified by closed-loop maximum
+likelihood (``turbulent_estimator = "ml"``, holds of 5 s as extra data): two releases at 0.4 and
+0.6 U_F, then :mod:`daq.campaign.adaptive` chooses each next speed (4-10.5 m/s, within the
+safety bound) and how many releases to take there (1-4, by the predicted gain per wind-on
+second), until the std is within ``--target`` of U_F (2 %) or 8 speeds.
+
 Run: ``.venv/bin/python benchmarks/turbulent_campaign.py [--seeds 1 2 3] [--iw 0.01]
-[--log FILE]``
+[--adaptive [--target 0.02]] [--log FILE]``
 """
 
 from __future__ import annotations
@@ -45,6 +51,27 @@ calz_end = false
 wind_speeds = [{speeds}]
 """
 
+ADAPTIVE_PLAN = """[campaign]
+mode = "adaptive"
+releases_per_speed = 2
+hold_s = 5.0
+decay_s = 20.0
+settle_s = 1.0
+calz_end = false
+turbulent_estimator = "ml"
+
+[speeds]
+wind_speeds = [{speeds}]
+
+[adaptive]
+target_std = {target}
+candidate_min = 4.0
+candidate_max = 10.5
+candidate_step = 0.5
+max_speeds = 8
+max_releases_per_speed = 4
+"""
+
 
 def rig_text(seed: int, iw: float) -> str:
     """Return the flat-plate rig's TOML in vertical turbulence of intensity ``iw``."""
@@ -72,6 +99,10 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
     parser.add_argument("--iw", type=float, default=0.01, help="vertical intensity (fraction)")
     parser.add_argument("--log", type=Path, help="write every campaign's progress lines here")
+    parser.add_argument("--adaptive", action="store_true",
+                        help="an adaptive campaign identified by closed-loop ML (docstring)")
+    parser.add_argument("--target", type=float, default=0.02,
+                        help="--adaptive: the target std as a fraction of U_F")
     args = parser.parse_args()
     if args.log is not None and not args.log.parent.is_dir():
         parser.error(f"--log {args.log}: folder {args.log.parent} does not exist")
@@ -81,8 +112,13 @@ def main() -> None:
                    for seed in args.seeds}
     except ConfigError as exc:
         parser.error(str(exc))
-    speeds = ", ".join(f"{f * U_F:.2f}" for f in (0.4, 0.6, 0.8))
-    plan = parse_plan(PLAN.format(speeds=speeds), "turbulent plan")
+    if args.adaptive:
+        speeds = ", ".join(f"{f * U_F:.2f}" for f in (0.4, 0.6))
+        plan = parse_plan(ADAPTIVE_PLAN.format(speeds=speeds, target=args.target),
+                          "adaptive turbulent plan")
+    else:
+        speeds = ", ".join(f"{f * U_F:.2f}" for f in (0.4, 0.6, 0.8))
+        plan = parse_plan(PLAN.format(speeds=speeds), "turbulent plan")
     rows = []
     for seed in args.seeds:
         config = configs[seed]
@@ -97,13 +133,17 @@ def main() -> None:
         err = math.nan if speed is None else 100 * (speed / truth - 1)
         cover = "-" if speed is None or std is None else (
             "yes" if abs(speed - truth) <= 2 * std else "no")
+        steps = " ".join(f"{step.U:.2f}x{step.releases}" for step in outcome.steps)
+        log.append(f"seed {seed}: speeds x releases {steps}; wind on {outcome.wind_on_s:.0f} s")
+        print(log[-1], flush=True)
         rows.append(f"{seed:>4} {n:>3} {truth:8.3f} "
                     + ("    none" if speed is None else f"{speed:8.3f}")
                     + ("      -" if std is None else f" {std:6.3f}")
                     + f" {err:+8.2f}% {cover:>5}  {estimator}; {outcome.stopped_because}")
         print(rows[-1], flush=True)
-    print(f"\nflat plate, Iw {100 * args.iw:g} %, 3 speeds x 2 releases (11 s hold, 20 s decay), "
-          "recorded on the simulated rig")
+    what = (f"adaptive to a {100 * args.target:g} % std, closed-loop ML (5 s holds, 20 s decays)"
+            if args.adaptive else "3 speeds x 2 releases (11 s hold, 20 s decay)")
+    print(f"\nflat plate, Iw {100 * args.iw:g} %, {what}, recorded on the simulated rig")
     print("seed rel  truth   U_F      std    error  2-std  estimator")
     print("\n".join(rows))
     if args.log is not None:

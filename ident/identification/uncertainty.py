@@ -264,12 +264,18 @@ def flutter_uncertainty(section: SectionModel, result: _flutter.FlutterResult, p
                 f"the flutter speed is extrapolated: the {mode} branch flutters at K = "
                 f"{K_F:.3g}, below the lowest reduced frequency the releases cover on it "
                 f"({K_min:.3g}); releases closer to flutter would cover it")
-        if reduced_K_min > K_F and diag.reduced is not None:  # the refit only when it counts
+        reduced = diag.reduced if reduced_K_min > K_F else None  # the refit only if it counts
+        if reduced is not None:
             # How far the flutter speed moves when the coverage shrinks, scaled by the
             # ratio of the extrapolation distances (in log K).
-            moved = max(refit_speed(diag.reduced), lower)
+            moved = max(refit_speed(reduced), lower)
             reach = max(math.log(K_min / K_F), 0.0) / math.log(reduced_K_min / K_F)
             extrapolation = abs(moved - speed) * min(reach, 1.0)
+        elif reduced_K_min > K_F and _speeds(diag.wind_speeds) >= 3:
+            warnings.append(
+                "the refit without the highest wind speed failed, so the std has no "
+                "extrapolation part although the flutter speed lies beyond what the lower "
+                "speeds cover: the std is too small by that part")
     refinement = 0.0
     if diag.finer is not None:
         moved = refit_speed(diag.finer)
@@ -394,3 +400,10 @@ def jackknife_std(pseudo: FloatArray) -> FloatArray:
     n = pseudo.shape[0]
     return np.asarray(np.sqrt((n - 1) / n * np.sum((pseudo - pseudo.mean(axis=0)) ** 2, axis=0)),
                       dtype=float)
+
+
+def _speeds(wind_speeds: npt.NDArray[np.float64]) -> int:
+    """Return the number of distinct wind speeds (results' rule; imported late: a cycle)."""
+    from ident.identification.results import distinct_wind_speeds
+
+    return len(distinct_wind_speeds(list(wind_speeds)))

@@ -141,3 +141,28 @@ def test_a_systematic_misfit_is_reported_as_residuals_that_are_not_white():
     assert any("not white" in w for w in identified.diagnostics.warnings)
     clean = e2rfc.identify(simulated_campaign(None, 1), SECTION)
     assert not any("not white" in w for w in clean.diagnostics.warnings)
+
+
+def test_a_failed_refit_without_the_top_speed_is_named_not_taken_for_no_extrapolation():
+    """The bluff deck above (flutter beyond the covered reduced frequencies, 3 speeds).
+
+    Its extrapolation part comes from the fit without the top speed. When another estimator's
+    refit (a :class:`~ident.identification.results.Deferred`, as the closed-loop branch
+    supplies) gives none, the part is zero, and a warning says the std is too small by it.
+    """
+    from dataclasses import replace
+
+    from ident.identification.results import Deferred, IdentifiedModel
+
+    model = bluff_deck_model()
+    identified = e2rfc.identify(campaign(BLUFF_DECK, model, seed=3, holds=HOLDS[:1],
+                                         duration=20.0), BLUFF_DECK)
+    assert identified.uncertainty(BLUFF_DECK).extrapolation > 0.0
+    diag = identified.diagnostics
+    failed = IdentifiedModel(identified.A, identified.d, replace(
+        diag, _refits={**diag._refits, "reduced": Deferred(lambda: None)}))
+    u = failed.uncertainty(BLUFF_DECK)
+    assert u.extrapolation == 0.0
+    assert any("refit without the highest wind speed failed" in w for w in u.warnings)
+    assert not any("refit without the highest" in w
+                   for w in identified.uncertainty(BLUFF_DECK).warnings)
