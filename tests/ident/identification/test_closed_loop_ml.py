@@ -25,6 +25,7 @@ from ident.model import flutter as fl
 from ident.model.quasi_steady import StaticCoefficients, quasi_steady_model
 from ident.physics.turbulence import TurbulenceSpec
 from simulators import simulate_release
+from simulators.campaigns import scaled
 
 PLATE = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
 HOLDS = ((0.004, 0.02), (-0.003, 0.012))
@@ -156,6 +157,50 @@ def test_e2rfc_runs_the_closed_loop_branch_in_the_tunnel_s_turbulence():
     assert u.turbulence == 0.0 and u.parametric > 0.0
     assert abs(u.speed - U_F) <= 2.0 * u.total
     assert abs(u.speed / U_F - 1.0) < 0.08
+
+
+#: The benchmark's variant rows (``benchmarks/ident_accuracy.py --rows variants``, 20 seeds):
+#: the plate at Iw 1 % with holds, changed in one thing. name -> (change, |error| bound, std
+#: multiple the error must lie within). Measured rows (median / p90 |error|, 2-std cover):
+#: non-Gaussian gusts (skewness 0.5, kurtosis 4.5) 2.50 / 7.01 %, 100 %; Coulomb friction at its
+#: realistic strength 2.79 / 9.08 %, 100 %; a Davenport admittance with a 1 m scale (a force
+#: spectrum the second-order filter matches worse) 5.32 / 20.9 %, 90 %, its misses within 2.5
+#: std. Seed 0 of each (not chosen: the first): -6.98 % (std 6.44 %), +1.00 % (11.4 %), -5.27 %
+#: (2.36 %). The error bounds lie between the rows' medians and their 90th percentiles; the
+#: std multiple is 2 where the row covered every seed, 3 for the Davenport row.
+VARIANTS = {
+    "non-Gaussian gusts": ({"gusts": {"skewness": 0.5, "kurtosis": 4.5}}, 0.08, 2.0),
+    "friction": ({"effects": ("coulomb_friction",)}, 0.10, 2.0),
+    "Davenport, 1 m": ({"gusts": {"Lwx": 1.0, "admittance": "davenport"}}, 0.08, 3.0),
+}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("variant", list(VARIANTS))
+def test_the_branch_holds_where_the_tunnel_is_not_its_model(variant):
+    """The closed-loop branch's error and interval where the tunnel is not its model.
+
+    Gusts that are not Gaussian, friction the model lacks, a buffeting spectrum further from
+    the shaping filter's (bounds at :data:`VARIANTS`).
+    """
+    change, bound, multiple = VARIANTS[variant]
+    truth = flat_plate.jones_model()
+    U_F = fl.analyze(PLATE, truth).speed
+    gusts = TurbulenceSpec(**{"Iu": 0.0, "Iw": 0.01, "Lux": 1.0, "Lwx": 0.3, "Cuy": 10.0,
+                              "Cwy": 8.0, **change.get("gusts", {})})
+    effects = [scaled(name, 1.0) for name in change.get("effects", ())]
+    releases = [Release.from_simulation(simulate_release(
+        PLATE, truth, f * U_F, h0, a0, duration=20.0, fs=500.0, noise=0.02,
+        rng=(0, i, j, 10), effects=effects, static=StaticCoefficients.flat_plate(), span=1.0,
+        turbulence=gusts, pre_s=10.0))
+        for i, f in enumerate((0.4, 0.6, 0.8)) for j, (h0, a0) in enumerate(HOLDS)]
+    model = e2rfc.identify(releases, PLATE, turbulent_estimator="ml")
+    assert model.diagnostics.estimator == e2rfc.ESTIMATOR_CLOSED_LOOP
+    u = model.uncertainty(PLATE)
+    assert u.speed is not None
+    assert abs(u.speed / U_F - 1.0) < bound
+    assert abs(u.speed - U_F) <= multiple * u.total
+    assert u.total < 0.25 * U_F  # not a blanket: the rows' median stds are 5.8-6.8 %
 
 
 @pytest.mark.parametrize(("change", "match"), [
