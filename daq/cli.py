@@ -8,6 +8,9 @@ without Qt, h5py, Dask or the simulators.
 ``windrig acquire --simulate`` is the one place that decides to start simulators for a
 recording: it hands the rig to :func:`daq.sim.recording.record_simulated_run`; without
 ``--simulate`` the rig's real URLs go to :func:`daq.recording.run.record_run`.
+
+Longer than 600 lines: one parser holds every subcommand's arguments and help (what ``windrig
+--help`` lists); the subcommands' work lives in their own modules.
 """
 
 from __future__ import annotations
@@ -102,10 +105,8 @@ def _build_parser() -> argparse.ArgumentParser:
                            "derivative's std H1_std..) to this file")
     p_id.add_argument("--reduced-velocities", default=None, metavar="START:STOP:STEP",
                       help="rows of --table, U/(f B) (default: the releases' span)")
-    p_id.add_argument("--turbulent-estimator", choices=("iv", "ml"), default=None,
-                      help="releases in turbulence: refined IV with the holds' noise model "
-                           "(default) or closed-loop maximum likelihood of every release and "
-                           "hold together (2-DOF; holds optional; slower, more accurate)")
+    p_id.add_argument("--turbulent-estimator", choices=("iv", "ml"),
+                      help="in turbulence: refined IV (default) or closed-loop ML (2-DOF)")
 
     p_diag = sub.add_parser(
         "diagnose",

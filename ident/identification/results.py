@@ -22,7 +22,11 @@ from ident.identification import uncertainty as unc
 from ident.identification._e2rfc_problem import Problem
 from ident.identification._regressors import PreparedRelease
 from ident.identification.modal import ModalFit
-from ident.identification.uncertainty import FlutterUncertainty
+from ident.identification.uncertainty import (
+    DISTINCT_U_RTOL,
+    FlutterUncertainty,
+    distinct_wind_speeds,
+)
 from ident.model import flutter as _flutter
 from ident.model.conventions import name_modes
 from ident.model.rfc import RationalFunctionModel
@@ -35,8 +39,6 @@ __all__ = ["DISTINCT_U_RTOL", "Deferred", "E2RFCDiagnostics", "ESTIMATOR_E2RFC",
 
 FloatArray = npt.NDArray[np.float64]
 
-#: Wind speeds closer than this (relative) count as one wind speed.
-DISTINCT_U_RTOL = 0.02
 #: Names of the still-air modes, in the order of the coordinates ``[h/B, alpha, p/B]``.
 MODE_NAMES = ("heave", "pitch", "sway")
 #: A release holds a random response (turbulence) when its modal fit's residual is more than
@@ -371,18 +373,6 @@ class IdentifiedModel(RationalFunctionModel):
             speeds.append(result.speed)
             stds.append(std)
         return StructureSpread(tuple(labels), tuple(speeds), tuple(stds), float(searched))
-
-
-def distinct_wind_speeds(speeds: Sequence[float]) -> list[float]:
-    """Return the wind speeds that count as distinct for E2RFC, increasing, m/s.
-
-    A speed within ``DISTINCT_U_RTOL`` above the last distinct one is the same wind speed.
-    """
-    out: list[float] = []
-    for u in sorted(speeds):
-        if not out or u > out[-1] * (1 + DISTINCT_U_RTOL):
-            out.append(float(u))
-    return out
 
 
 def K_ranges(prepared: list[PreparedRelease], section: SectionModel

@@ -47,6 +47,7 @@ use); :class:`~ident.identification.results.IdentifiedModel` calls them.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -59,11 +60,14 @@ from ident.model.conventions import derivative_layout, reduced_frequency
 from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel
 
-__all__ = ["EXTRAPOLATION_WARN", "REFIT_GRID", "FlutterUncertainty", "UncertaintySources",
-           "flutter_derivative_std", "flutter_uncertainty", "jackknife_std",
-           "no_flutter_warnings", "parametric"]
+__all__ = ["DISTINCT_U_RTOL", "EXTRAPOLATION_WARN", "REFIT_GRID", "FlutterUncertainty",
+           "UncertaintySources", "distinct_wind_speeds", "flutter_derivative_std",
+           "flutter_uncertainty", "jackknife_std", "no_flutter_warnings", "parametric"]
 
 FloatArray = npt.NDArray[np.float64]
+
+#: Wind speeds closer than this (relative) count as one wind speed.
+DISTINCT_U_RTOL = 0.02
 
 #: Grid of the flutter analyses of the refitted models (jackknife, extrapolation): they are
 #: close to the chosen model, so a coarser grid than a first analysis needs is enough.
@@ -271,7 +275,7 @@ def flutter_uncertainty(section: SectionModel, result: _flutter.FlutterResult, p
             moved = max(refit_speed(reduced), lower)
             reach = max(math.log(K_min / K_F), 0.0) / math.log(reduced_K_min / K_F)
             extrapolation = abs(moved - speed) * min(reach, 1.0)
-        elif reduced_K_min > K_F and _speeds(diag.wind_speeds) >= 3:
+        elif reduced_K_min > K_F and len(distinct_wind_speeds(list(diag.wind_speeds))) >= 3:
             warnings.append(
                 "the refit without the highest wind speed failed, so the std has no "
                 "extrapolation part although the flutter speed lies beyond what the lower "
@@ -402,8 +406,13 @@ def jackknife_std(pseudo: FloatArray) -> FloatArray:
                       dtype=float)
 
 
-def _speeds(wind_speeds: npt.NDArray[np.float64]) -> int:
-    """Return the number of distinct wind speeds (results' rule; imported late: a cycle)."""
-    from ident.identification.results import distinct_wind_speeds
+def distinct_wind_speeds(speeds: Sequence[float]) -> list[float]:
+    """Return the wind speeds that count as distinct for E2RFC, increasing, m/s.
 
-    return len(distinct_wind_speeds(list(wind_speeds)))
+    A speed within ``DISTINCT_U_RTOL`` above the last distinct one is the same wind speed.
+    """
+    out: list[float] = []
+    for u in sorted(speeds):
+        if not out or u > out[-1] * (1 + DISTINCT_U_RTOL):
+            out.append(float(u))
+    return out
