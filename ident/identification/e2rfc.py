@@ -119,7 +119,8 @@ TURBULENT_A3 = "fitted-or-zero"
 #: hold together, :mod:`ident.identification.closed_loop_ml`; holds optional; two degrees of
 #: freedom), started from E2RFC's estimate. ``"ml"`` is measured in docs/e2rfc_turbulence.md
 #: (medians 1.6-3 times lower than refined IV's on the benchmark's turbulence rows, 94-96 % of
-#: the 2-std intervals covering) and not yet the default: it takes 10-28 s against 3-10 s.
+#: the 2-std intervals covering) and not yet the default: it takes 10-28 s against 3-10 s, keeps
+#: a bias of about 2 % on the plate, and lost the flutter speed once on the simulated rig.
 TURBULENT_ESTIMATOR = "iv"
 #: The turbulence branch's estimators, by name.
 TURBULENT_ESTIMATORS = ("iv", "ml")
@@ -331,8 +332,8 @@ def _closed_loop(model: IdentifiedModel, releases: list[Release], section: Secti
         """Return the fit without the highest wind speed, from the full fit."""
         try:
             return closed_loop_ml.fit_closed_loop(below, section, fit.model, with_A3=True).model
-        except ValueError:  # likelihood not defined without the top speed: as with two speeds,
-            return None     # no extrapolation part (the extrapolation warning still shows)
+        except ValueError:  # likelihood not defined without the top speed: no extrapolation
+            return None     # part, which the uncertainty's warnings then say
 
     holds = sum(r.hold is not None for r in releases)
     note = (f"turbulence: coefficients by {ESTIMATOR_CLOSED_LOOP} over {len(releases)} releases "

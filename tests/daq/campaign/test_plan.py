@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import pytest
 
+from daq.campaign import plan as plan_module
 from daq.campaign.plan import load_plan, parse_plan
 from daq.cli import main
 from daq.config import load_rig_config
 from daq.errors import ConfigError
+from ident.identification import e2rfc
 
 from support.configs import REPO, SIM_FLAT_PLATE
 
@@ -57,6 +59,8 @@ def test_defaults_and_candidates():
     assert parse_plan(FIXED.replace("decay_s = 5.0", 'decay_s = 5.0\nfiles = "per_release"')
                       ).files == "per_release"
     assert plan.decay_end == "fixed" and plan.turbulent_estimator == "iv"
+    # The plan's names (kept in daq: parsing a plan imports no numerics) are E2RFC's.
+    assert plan_module.TURBULENT_ESTIMATORS == e2rfc.TURBULENT_ESTIMATORS
     assert parse_plan(FIXED.replace("decay_s = 5.0", 'decay_s = 5.0\nturbulent_estimator = "ml"')
                       ).turbulent_estimator == "ml"
     assert plan.hold_s == 0.5  # daq.procedure.HOLD_S, the console's
