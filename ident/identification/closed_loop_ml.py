@@ -105,6 +105,11 @@ STEP = 1e-6
 #: what a stable, detectable model needs).
 RICCATI_ITERATIONS = 60
 
+#: Relative singular value below which a nuisance column (an offset or an initial state) is
+#: taken as not moving the innovations: far below the columns' own conditioning (1e8 at most
+#: measured) and far above round-off.
+RANK_RTOL = 1e-11
+
 #: Innovations whose autocorrelation at a lag of 1-20 exceeds this over sqrt(n) are not white
 #: (a warning): chance alone stays below about 3.6 / sqrt(n) over 20 lags and 4 channels.
 WHITE_LIMIT = 4.0
@@ -684,7 +689,13 @@ class _Predictor:
                    - ((geometric[:, None, :] * CVw[None]).reshape(4 * n, m) @ self.drive).real)
         columns = np.hstack([offsets, initial])
         ew = (e @ W.T).reshape(4 * n)
-        nuisance = np.linalg.lstsq(columns.T @ columns, columns.T @ ew, rcond=1e-13)[0]
+        # Least squares on the columns themselves, not on their normal equations: the initial
+        # states of lightly damped modes and the offsets are nearly collinear (the columns'
+        # condition number reaches 1e8), and the normal equations' square of it lies beyond
+        # double precision, where a rank cut-off made -log L jump by about 1 between
+        # neighbouring parameter values. The cut-off left here drops only columns that are
+        # zero to round-off (a lag state whose coefficients are zero moves no output).
+        nuisance = np.linalg.lstsq(columns, ew, rcond=RANK_RTOL)[0]
         e = ((ew - columns @ nuisance).reshape(n, 4)) @ np.linalg.inv(W).T
         return e, columns, nuisance
 
