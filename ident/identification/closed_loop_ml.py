@@ -205,7 +205,8 @@ class _Layout:
         self.shaping0 = self.n_aero
         self.noise0 = self.shaping0 + N_SHAPING * n_groups
         self.size = self.noise0 + 4 * n_releases
-        #: log of the least noise std of each release's channels (:data:`NOISE_FLOOR`).
+        #: log of the least noise std of each release's channels (:data:`NOISE_FLOOR`; none
+        #: until :func:`_noise_floor` sets it from the records).
         self.noise_floor = np.full(4 * n_releases, -np.inf)
 
     def model(self, theta: FloatArray) -> RationalFunctionModel:
@@ -316,6 +317,7 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
     fs = releases[0].fs / _factor(releases[0].fs, f_max)
     start = _with_lags(start, start.n_lags if n_lags is None else n_lags)
     layout = _Layout(2, start.n_lags, with_A3, len(speeds), len(releases))
+    layout.noise_floor = _noise_floor(records, len(releases))
     objective = _Objective(records, section, layout, fs)
     theta = _initial(records, layout, start, section, fs, f_max)
     current = objective.evaluate(theta)
@@ -449,6 +451,16 @@ def _records(releases: Sequence[Release], section: SectionModel, speeds: list[fl
     return records
 
 
+def _noise_floor(records: list[_Record], n_releases: int) -> FloatArray:
+    """Return the log of each release's least channel noise std (:data:`NOISE_FLOOR`)."""
+    floor = np.empty(4 * n_releases)
+    for r in range(n_releases):
+        released = np.vstack([rec.y for rec in records if rec.release == r and not rec.held])
+        floor[4 * r: 4 * r + 4] = np.log(np.maximum(NOISE_FLOOR * np.std(released, axis=0),
+                                                    1e-300))
+    return floor
+
+
 def _initial(records: list[_Record], layout: _Layout, start: RationalFunctionModel,
              section: SectionModel, fs: float, f_max: float) -> FloatArray:
     """Return the start: ``start``'s coefficients, shaping and noise from the records."""
@@ -463,11 +475,9 @@ def _initial(records: list[_Record], layout: _Layout, start: RationalFunctionMod
         # Noise from third differences (the signals' part is small at 25 x f_max).
         d3 = np.diff(np.vstack([rec.y for rec in own if not rec.held]), n=3, axis=0)
         std = np.std(d3, axis=0) / math.sqrt(20.0)
-        released = np.vstack([rec.y for rec in own if not rec.held])
-        floor = np.log(np.maximum(NOISE_FLOOR * np.std(released, axis=0), 1e-300))
-        layout.noise_floor[4 * r: 4 * r + 4] = floor
         theta[layout.noise0 + 4 * r: layout.noise0 + 4 * r + 4] = np.maximum(np.log(
-            np.maximum(std, 1e-12 * np.maximum(np.std(y, axis=0), 1e-300))), floor)
+            np.maximum(std, 1e-12 * np.maximum(np.std(y, axis=0), 1e-300))),
+            layout.noise_floor[4 * r: 4 * r + 4])
     for g in range(n_groups):
         own = [rec for rec in records if rec.group == g]
         # The buffeting force's level and bandwidth from a hold (force alone) or else the

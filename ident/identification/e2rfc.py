@@ -130,6 +130,11 @@ TURBULENT_ESTIMATORS = ("iv", "ml")
 CLOSED_LOOP_LAGS = 2
 #: ``diagnostics.estimator`` of the closed-loop branch.
 ESTIMATOR_CLOSED_LOOP = "closed-loop maximum likelihood (turbulence branch)"
+#: How E2RFC's turbulence warning ends, and how the closed-loop branch ends it instead (its
+#: likelihood models the random response, and its std is the Fisher information's).
+_SCATTER_STD = "the flutter speed's deviation is the release-to-release scatter"
+_FISHER_STD = ("the closed-loop likelihood models the random response, and the flutter speed's "
+               "deviation is its Fisher information's")
 
 
 @single_threaded_blas
@@ -343,7 +348,8 @@ def _closed_loop(model: IdentifiedModel, releases: list[Release], section: Secti
         reason=f"{CLOSED_LOOP_LAGS} lags, A3 fitted; {note}",
         condition_number=math.nan, covariance=fit.covariance,
         parameter_index=fit.parameter_index, alternatives=(),
-        warnings=(*base.warnings, note, *fit.warnings), estimator=ESTIMATOR_CLOSED_LOOP,
+        warnings=(*(w.replace(_SCATTER_STD, _FISHER_STD) for w in base.warnings), note,
+                  *fit.warnings), estimator=ESTIMATOR_CLOSED_LOOP,
         _lag_roots=fit.model.d,
         _refits={"jackknife": (), "release_jackknife": (), "finer": None,
                  "reduced": Deferred(reduced) if len(speeds) >= 3 else None})
@@ -423,8 +429,7 @@ class _Context:
                 warnings.append(
                     f"the decays turn into a random response (turbulence: residual "
                     f"{float(np.median(random_response)):.3g} times the noise): the modal fits "
-                    "and the least-squares covariance do not hold; the flutter speed's "
-                    "deviation is the release-to-release scatter")
+                    f"and the least-squares covariance do not hold; {_SCATTER_STD}")
             elif fit.residual_inflation > WHITENESS_WARN:
                 warnings.append(
                     f"the force residuals are not white (their autocorrelation inflates the "

@@ -153,6 +153,10 @@ def test_e2rfc_runs_the_closed_loop_branch_in_the_tunnel_s_turbulence():
     model = e2rfc.identify(releases, PLATE, turbulent_estimator="ml")
     assert model.diagnostics.estimator == e2rfc.ESTIMATOR_CLOSED_LOOP
     assert model.n_lags == e2rfc.CLOSED_LOOP_LAGS
+    # E2RFC's turbulence warning says its std is the releases' scatter; here it is not.
+    warnings = model.diagnostics.warnings
+    assert not any("release-to-release scatter" in w for w in warnings)
+    assert any("random response" in w and "Fisher information" in w for w in warnings)
     u = model.uncertainty(PLATE)
     assert u.turbulence == 0.0 and u.parametric > 0.0
     assert abs(u.speed - U_F) <= 2.0 * u.total
