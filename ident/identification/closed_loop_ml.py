@@ -26,7 +26,8 @@ the innovations ``e_k`` and their covariance ``S``,
     -log L = sum_records [ n/2 (4 log 2 pi + log det S) + 1/2 sum_k e_k^T S^-1 e_k ].
 
 It maximises it by Fisher scoring with Levenberg-Marquardt damping. The derivatives of
-``e_k`` and ``S`` come by forward differences, and the Fisher information is
+``e_k`` and ``S`` come by forward differences (the Riccati solution's change from a Stein
+equation, :meth:`SteadyPredictor.perturbed`), and the Fisher information is
 
     F_ij = sum_k de_k/dth_i^T S^-1 de_k/dth_j + n/2 tr(S^-1 dS/dth_i S^-1 dS/dth_j),
 
@@ -34,11 +35,8 @@ so its inverse at the optimum is the parameters' covariance: the Cramer-Rao boun
 at hand. The steady gain costs a little of the exact filter's efficiency over the first second
 of each record (where the exact filter's covariance has not yet settled), not its consistency.
 
-Longer than 600 lines: the record layout, the likelihood with its concentrated nuisance, the
-forward-difference Fisher information and the damped search share the parameter layout and the
-predictor, and each is short; the steady-state predictor and the Riccati solution
-(:class:`_Predictor`, :func:`riccati`) are the part to move into a module of their own when the
-analytic derivatives (the way to the 10 s target) are added beside them.
+The steady-state predictor itself, the Riccati solution and the likelihood of one record are
+:mod:`ident.identification.steady_predictor`.
 
 References
 ----------
@@ -54,16 +52,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
-from scipy.signal import lfilter
 
 from ident.identification.innovations import ReleaseModel, ShapingFilter, discretise
 from ident.identification.results import distinct_wind_speeds
+from ident.identification.steady_predictor import SteadyPredictor, neg_log_likelihood
 from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel
 from ident.numerics.threads import single_threaded_blas
 from ident.records.release import Release
 
-__all__ = ["ClosedLoopFit", "MAX_ITERATIONS", "TARGET_FACTOR", "fit_closed_loop", "riccati"]
+__all__ = ["ClosedLoopFit", "MAX_ITERATIONS", "TARGET_FACTOR", "fit_closed_loop"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -73,50 +71,32 @@ FloatArray = npt.NDArray[np.float64]
 TARGET_FACTOR = 25.0
 #: Least sensor-noise std of a channel, as a fraction of the channel's std over its release
 #: (at the decimated rate). Lasers measure the motion to a few parts in 10^5 of its range, but
-#: the sync view places them against the forces only to a few tenths of a millisecond: an
-#: error of 0.2 ms is 0.5 % of the motion at 4 Hz. Without a floor the likelihood trusted the
-#: displacements as exact and fitted that misalignment: on the simulated rig's recordings
-#: (laser noise 0.005-0.03 % of the motion) a fixed plan gave -7.6 % (std 3.7 %) with holds and
-#: -91 % without them; with the laser channels made as noisy as the benchmark's, +3.5 % and
-#: -4.9 %; with this floor, +0.6 % (std 11.7 %) and -2.7 % (9.5 %). It lies below the
-#: benchmark's own noise at the decimated rate (2 % at 500 Hz, 0.9 % after block means): its
-#: rows are unchanged to the last digit.
+#: the sync view places them against the forces only to a few tenths of a millisecond (0.2 ms
+#: is 0.5 % of the motion at 4 Hz): without a floor the likelihood trusted the displacements as
+#: exact and fitted that misalignment (the simulated rig: -7.6 % with holds, -91 % without;
+#: with the floor +0.6 and -2.7 %, docs/e2rfc_turbulence.md). Below the benchmark's own noise.
 NOISE_FLOOR = 5e-3
 #: Most Fisher-scoring iterations.
 MAX_ITERATIONS = 40
-#: The search ends when a full Fisher-scoring step would gain less than this in log L: the
-#: likelihood-ratio statistic's scale is 1, so 0.05 is a third of a standard deviation along
-#: the step's direction.
+#: The search ends when a full Fisher-scoring step would gain less than this in log L (a third
+#: of a standard deviation of the likelihood-ratio statistic along the step).
 TOLERANCE = 5e-2
 #: The search also ends when this many consecutive iterations together gain less than
-#: :data:`STALL_TOLERANCE` in log L: where the likelihood is not quadratic (a lag root the data
-#: barely tell, a buffeting model that is only near the truth) Fisher scoring crawls, 0.03-2
-#: per iteration over 20 iterations. Measured on four tunnel cases (plate, 1 % turbulence):
-#: stopping at 1 moves the flutter speed by 0.04-0.6 % (a tenth to a fifth of its std) and
-#: halves the time (10-11 s instead of 10-33 s).
+#: :data:`STALL_TOLERANCE` in log L: along the few directions the data tell only to second
+#: order the likelihood is near quartic and Fisher scoring crawls (0.03-1 per iteration).
+#: Measured (plate, 1 % turbulence, seed 0): it stops at -6.46 % after 18 iterations, where
+#: 40 reach -6.67 % (log L 1.1 higher; a twelfth of the std).
 STALLED = 3
 STALL_TOLERANCE = 1.0
-#: Most increases (x4 each) of the damping in one iteration before the search gives up: far
-#: from the maximum the Fisher information can understate the curvature by orders of magnitude.
+#: Most increases (x4 each) of the damping in one iteration before the search gives up.
 DAMPING_TRIES = 30
 #: Relative forward-difference step of the derivatives.
 STEP = 1e-6
-#: Most doubling steps of the Riccati solution (each squares the horizon: 60 is far beyond
-#: what a stable, detectable model needs).
-RICCATI_ITERATIONS = 60
-
-#: Relative singular value below which a nuisance column (an offset or an initial state) is
-#: taken as not moving the innovations: far below the columns' own conditioning (1e8 at most
-#: measured) and far above round-off.
-RANK_RTOL = 1e-11
-
 #: Innovations whose autocorrelation at a lag of 1-20 exceeds this over sqrt(n) are not white
 #: (a warning): chance alone stays below about 3.6 / sqrt(n) over 20 lags and 4 channels.
 WHITE_LIMIT = 4.0
 #: Parameters of a wind speed's shaping filter (:meth:`_Layout.shaping`).
 N_SHAPING = 7
-
-LOG_2PI = math.log(2.0 * math.pi)
 
 
 @dataclass(frozen=True)
@@ -205,8 +185,7 @@ class _Layout:
         self.shaping0 = self.n_aero
         self.noise0 = self.shaping0 + N_SHAPING * n_groups
         self.size = self.noise0 + 4 * n_releases
-        #: log of the least noise std of each release's channels (:data:`NOISE_FLOOR`; none
-        #: until :func:`_noise_floor` sets it from the records).
+        #: log of each channel's least noise std (:data:`NOISE_FLOOR`; :func:`_noise_floor`).
         self.noise_floor = np.full(4 * n_releases, -np.inf)
 
     def model(self, theta: FloatArray) -> RationalFunctionModel:
@@ -529,9 +508,9 @@ class _Objective:
         Phi, Qd, C = self._dynamics[key]
         return Phi, Qd, C, np.diag(noise**2)
 
-    def predictor(self, theta: FloatArray, record: _Record) -> _Predictor:
+    def predictor(self, theta: FloatArray, record: _Record) -> SteadyPredictor:
         """Return the steady-state predictor of one record's model at ``theta`` (or raise)."""
-        return _Predictor(*self.matrices(theta, record))
+        return SteadyPredictor(*self.matrices(theta, record))
 
     def evaluate(self, theta: FloatArray) -> _Evaluation:
         """-log L with each record's offsets and initial state concentrated out."""
@@ -547,7 +526,7 @@ class _Objective:
             out.S.append(predictor.S)
             out.columns.append(columns)
             out.nuisance.append(nuisance)
-            out.nll += _nll(e, predictor.S)
+            out.nll += neg_log_likelihood(e, predictor.S)
         return out
 
     def information(self, theta: FloatArray, at: _Evaluation
@@ -604,14 +583,6 @@ class _Objective:
         return np.array(out)
 
 
-def _nll(e: FloatArray, S: FloatArray) -> float:
-    chol = np.linalg.cholesky(S)
-    u = e @ np.linalg.inv(chol).T
-    n = e.shape[0]
-    return 0.5 * (n * (4 * LOG_2PI + 2.0 * float(np.log(np.diag(chol)).sum()))
-                  + float(np.sum(u * u)))
-
-
 def _hold_matrices(shaping: ShapingFilter, noise: FloatArray, B: float, fs: float
                    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Return the held model: buffeting alone on the force channels, noise on all four."""
@@ -620,137 +591,6 @@ def _hold_matrices(shaping: ShapingFilter, noise: FloatArray, B: float, fs: floa
     C = np.zeros((4, 4))
     C[2], C[3] = C_b[0] / B, C_b[1]
     return Phi, Qd, C, np.diag(noise**2)
-
-
-def riccati(Phi: FloatArray, C: FloatArray, Qd: FloatArray, R: FloatArray) -> FloatArray:
-    """Steady predicted covariance ``P = Phi P Phi^T - Phi P C^T S^-1 C P Phi^T + Qd``.
-
-    By the structure-preserving doubling algorithm (Chu, Fan, Lin, Wang 2004): the equation is
-    ``X = A^T X (I + G X)^-1 A + H`` with ``A = Phi^T``, ``G = C^T R^-1 C``, ``H = Qd``, and the
-    doubling converges quadratically, in a few dozen 12 x 12 solves (a fifth of the cost of
-    the generalised Schur route for these sizes).
-
-    Raises
-    ------
-    ValueError
-        If the doubling does not converge (no stabilising solution: the model unstable and
-        undetectable, or a singular ``R``).
-    """
-    A, G, H = Phi.T.copy(), C.T @ np.linalg.solve(R, C), Qd.copy()
-    eye = np.eye(A.shape[0])
-    for _ in range(RICCATI_ITERATIONS):
-        W = eye + G @ H
-        WA = np.linalg.solve(W, A)
-        WG = np.linalg.solve(W, G)
-        H_next = H + A.T @ H @ WA
-        G = G + A @ WG @ A.T
-        A = A @ WA
-        if np.abs(H_next - H).max() <= 1e-13 * np.abs(H_next).max():
-            return 0.5 * (H_next + H_next.T)
-        H = H_next
-        if not np.all(np.isfinite(H)):
-            break
-    raise ValueError("the steady-state Riccati equation has no stabilising solution here")
-
-
-class _Predictor:
-    """The steady-state Kalman predictor of one record's model, in modal coordinates."""
-
-    def __init__(self, Phi: FloatArray, Qd: FloatArray, C: FloatArray, R: FloatArray,
-                 P: FloatArray | None = None) -> None:
-        self.Phi, self.Qd, self.C, self.R = Phi, Qd, C, R
-        self.P = riccati(Phi, C, Qd, R) if P is None else P
-        self.S = C @ self.P @ C.T + R
-        self.Kp = Phi @ self.P @ C.T @ np.linalg.inv(self.S)
-        self.lam, self.V = np.linalg.eig(Phi - self.Kp @ C)
-        if np.max(np.abs(self.lam)) >= 1.0:
-            raise ValueError("the predictor is unstable")
-        self.V_inv = np.linalg.inv(self.V)
-        self.drive = self.V_inv @ self.Kp
-        self.CV = C @ self.V
-        self.n_x = Phi.shape[0]
-        # The matrix is real, so its complex modes come in conjugate pairs (LAPACK returns
-        # them adjacent, with conjugate vectors): the recursion of the one with positive
-        # imaginary part, doubled, stands for both.
-        self.run = np.flatnonzero(self.lam.imag >= 0.0)
-        self.CV_run = self.CV[:, self.run] * np.where(self.lam[self.run].imag > 0.0, 2.0, 1.0)
-
-    def perturbed(self, Phi: FloatArray, Qd: FloatArray, C: FloatArray, R: FloatArray
-                  ) -> _Predictor:
-        """Return the predictor of nearby matrices, its Riccati solution to first order.
-
-        The change ``dP`` of the Riccati solution solves the Stein equation
-        ``dP = Phi_c dP Phi_c^T + M`` with ``Phi_c = Phi - Kp C`` (this predictor's, already
-        diagonalised: ``dP_ij`` is ``M_ij / (1 - lam_i conj(lam_j))`` in its modal
-        coordinates) and
-
-            M = dPhi P Phi_c^T + Phi_c P dPhi^T - Phi_c P dC^T Kp^T - Kp dC P Phi_c^T
-                + dQd + Kp dR Kp^T.
-
-        For a forward difference this is as exact as solving the Riccati equation again (its
-        error is of the second order in the step, like the difference's own), at a tenth of
-        the cost.
-        """
-        dPhi, dC = Phi - self.Phi, C - self.C
-        Pc = self.P @ (self.Phi - self.Kp @ self.C).T
-        M = (dPhi @ Pc + Pc.T @ dPhi.T - Pc.T @ dC.T @ self.Kp.T - self.Kp @ dC @ Pc
-             + (Qd - self.Qd) + self.Kp @ (R - self.R) @ self.Kp.T)
-        M_modal = self.V_inv @ M @ self.V_inv.conj().T
-        Y = M_modal / (1.0 - self.lam[:, None] * self.lam.conj()[None, :])
-        dP = (self.V @ Y @ self.V.conj().T).real
-        return _Predictor(Phi, Qd, C, R, P=self.P + 0.5 * (dP + dP.T))
-
-    def innovations(self, y: FloatArray, nuisance: FloatArray | None = None) -> FloatArray:
-        """Innovations of ``y`` (n, 4) less offsets ``nuisance[:4]``, from ``nuisance[4:]``.
-
-        ``x_{k+1} = Phi x_k + Kp e_k`` in modal coordinates ``z = V^-1 x``: one first-order
-        recursion per real mode or conjugate pair, run by scipy's lfilter in C.
-        """
-        offsets = np.zeros(4) if nuisance is None else nuisance[:4]
-        z0 = (np.zeros(self.n_x, dtype=complex) if nuisance is None
-              else self.V_inv @ nuisance[4:])
-        u = y - offsets
-        beta = u[:-1] @ self.drive[self.run].T
-        z = np.empty((y.shape[0], self.run.size), dtype=complex)
-        z[0] = z0[self.run]
-        for column, m in enumerate(self.run):
-            root = self.lam[m]
-            if root.imag == 0.0:  # a real mode: real arithmetic, half the work
-                root, drive, start = root.real, beta[:, column].real, z0[m].real
-            else:
-                drive, start = beta[:, column], z0[m]
-            z[1:, column] = lfilter([1.0], [1.0, -root], drive, zi=[root * start])[0]
-        return np.asarray(u - (z @ self.CV_run.T).real, dtype=float)
-
-    def concentrated(self, y: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Innovations with the offsets and the initial state at their GLS estimates.
-
-        Returns the innovations (n, 4), the whitened nuisance columns (4 n, 4 + n_x) and the
-        estimates ``[offsets (4), initial state (n_x)]``. The columns: a unit initial state
-        along axis j gives ``C A^k e_j = CV lam^k V^-1 e_j``; a unit offset on channel c gives
-        ``1_c - CV g_k V^-1 Kp 1_c``, ``g_k = (1 - lam^k) / (1 - lam)`` (``|lam| < 1``).
-        """
-        n = y.shape[0]
-        e = self.innovations(y)
-        W = np.linalg.inv(np.linalg.cholesky(self.S))
-        CVw = W @ self.CV
-        powers = self.lam[None, :] ** np.arange(n)[:, None]  # exact at lam = 0
-        geometric = (1.0 - powers) / (1.0 - self.lam)[None, :]
-        m = self.lam.size
-        initial = ((powers[:, None, :] * CVw[None]).reshape(4 * n, m) @ self.V_inv).real
-        offsets = (np.tile(W, (n, 1))
-                   - ((geometric[:, None, :] * CVw[None]).reshape(4 * n, m) @ self.drive).real)
-        columns = np.hstack([offsets, initial])
-        ew = (e @ W.T).reshape(4 * n)
-        # Least squares on the columns themselves, not on their normal equations: the initial
-        # states of lightly damped modes and the offsets are nearly collinear (the columns'
-        # condition number reaches 1e8), and the normal equations' square of it lies beyond
-        # double precision, where a rank cut-off made -log L jump by about 1 between
-        # neighbouring parameter values. The cut-off left here drops only columns that are
-        # zero to round-off (a lag state whose coefficients are zero moves no output).
-        nuisance = np.linalg.lstsq(columns, ew, rcond=RANK_RTOL)[0]
-        e = ((ew - columns @ nuisance).reshape(n, 4)) @ np.linalg.inv(W).T
-        return e, columns, nuisance
 
 
 def _inverse(F: FloatArray) -> FloatArray:

@@ -18,7 +18,7 @@ import pytest
 import scipy.linalg
 
 from ident import Release, SectionModel
-from ident.identification import closed_loop_ml, e2rfc
+from ident.identification import closed_loop_ml, e2rfc, steady_predictor
 from ident.identification.innovations import ReleaseModel, ShapingFilter, kalman_filter
 from ident.model import flat_plate
 from ident.model import flutter as fl
@@ -69,7 +69,7 @@ def test_doubling_solves_the_riccati_equation_as_scipy_does():
     """Relative agreement 1e-10: both are exact to round-off on this well-conditioned case."""
     U = 8.0
     m = ReleaseModel(PLATE, flat_plate.jones_model(), U, 100.0, shaping(U), NOISE)
-    ours = closed_loop_ml.riccati(m.Phi, m.C, m.Qd, m.R)
+    ours = steady_predictor.riccati(m.Phi, m.C, m.Qd, m.R)
     theirs = scipy.linalg.solve_discrete_are(m.Phi.T, m.C.T, m.Qd, m.R)
     assert np.abs(ours - theirs).max() <= 1e-10 * np.abs(theirs).max()
 
@@ -85,14 +85,14 @@ def test_the_perturbed_predictor_solves_the_perturbed_riccati_equation_to_first_
     U = 0.6 * fl.analyze(PLATE, flat_plate.jones_model()).speed
     truth = flat_plate.jones_model()
     base = ReleaseModel(PLATE, truth, U, 100.0, shaping(U), NOISE)
-    predictor = closed_loop_ml._Predictor(base.Phi, base.Qd, base.C, base.R)
+    predictor = steady_predictor.SteadyPredictor(base.Phi, base.Qd, base.C, base.R)
     A = truth.A.copy()
     A[1, 0, 1] *= 1 + 1e-4
     nearby = [ReleaseModel(PLATE, type(truth)(A, truth.d), U, 100.0, shaping(U), NOISE),
               ReleaseModel(PLATE, truth, U * (1 + 1e-4), 100.0, shaping(U), NOISE),
               ReleaseModel(PLATE, truth, U, 100.0, shaping(U), NOISE * (1 + 1e-4))]
     for m in nearby:
-        exact = closed_loop_ml.riccati(m.Phi, m.C, m.Qd, m.R)
+        exact = steady_predictor.riccati(m.Phi, m.C, m.Qd, m.R)
         first_order = predictor.perturbed(m.Phi, m.Qd, m.C, m.R).P
         change = np.abs(exact - predictor.P).max()
         assert change > 0.0
@@ -113,9 +113,9 @@ def test_steady_predictor_matches_the_exact_filter_and_its_innovations_are_white
     x0 = m.initial_state(0.004, 0.02)
     y = m.sample(x0, m.initial_covariance(), 10000, np.random.default_rng(3))
     exact = kalman_filter(m, y, x0).log_likelihood
-    predictor = closed_loop_ml._Predictor(m.Phi, m.Qd, m.C, m.R)
+    predictor = steady_predictor.SteadyPredictor(m.Phi, m.Qd, m.C, m.R)
     e, _, _ = predictor.concentrated(y)
-    steady = -closed_loop_ml._nll(e, predictor.S)
+    steady = -steady_predictor.neg_log_likelihood(e, predictor.S)
     assert 0.0 <= steady - exact <= 40.0
     u = e @ np.linalg.inv(np.linalg.cholesky(predictor.S)).T
     u -= u.mean(axis=0)

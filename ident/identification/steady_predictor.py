@@ -1,0 +1,195 @@
+"""The steady-state Kalman predictor of a linear Gaussian state-space model, and its likelihood.
+
+For ``x_{k+1} = Phi x_k + w_k``, ``y_k = C x_k + v_k`` (``w ~ N(0, Qd)``, ``v ~ N(0, R)``) the
+steady-state predictor is ``x_{k+1} = Phi x_k + Kp e_k`` with the innovations
+``e_k = y_k - C x_k``, ``Kp = Phi P C^T S^-1``, ``S = C P C^T + R`` and ``P`` the stabilising
+solution of the discrete Riccati equation (:func:`riccati`). :class:`SteadyPredictor` runs it
+in the modal coordinates of ``Phi - Kp C``, concentrates a record's constant offsets and
+initial state out by least squares, and gives the Riccati solution of a nearby model to first
+order (the Fisher information's forward differences, :mod:`ident.identification.closed_loop_ml`);
+:func:`neg_log_likelihood` is ``-log L`` of the innovations.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import numpy.typing as npt
+from scipy.signal import lfilter
+
+__all__ = ["RICCATI_ITERATIONS", "SteadyPredictor", "neg_log_likelihood", "riccati"]
+
+FloatArray = npt.NDArray[np.float64]
+
+#: Most doubling steps of the Riccati solution (each squares the horizon: 60 is far beyond
+#: what a stable, detectable model needs).
+RICCATI_ITERATIONS = 60
+
+#: Relative singular value below which a nuisance column (an offset or an initial state) is
+#: taken as not moving the innovations: far below the columns' own conditioning (1e8 at most
+#: measured) and far above round-off.
+RANK_RTOL = 1e-11
+
+LOG_2PI = math.log(2.0 * math.pi)
+
+
+def neg_log_likelihood(e: FloatArray, S: FloatArray) -> float:
+    """Return ``-log L`` of innovations ``e`` (n, m) of covariance ``S`` (m, m).
+
+    ``n/2 (m log 2 pi + log det S) + 1/2 sum_k e_k^T S^-1 e_k``.
+    """
+    chol = np.linalg.cholesky(S)
+    u = e @ np.linalg.inv(chol).T
+    n = e.shape[0]
+    return 0.5 * (n * (e.shape[1] * LOG_2PI + 2.0 * float(np.log(np.diag(chol)).sum()))
+                  + float(np.sum(u * u)))
+
+
+def riccati(Phi: FloatArray, C: FloatArray, Qd: FloatArray, R: FloatArray) -> FloatArray:
+    """Steady predicted covariance ``P = Phi P Phi^T - Phi P C^T S^-1 C P Phi^T + Qd``.
+
+    By the structure-preserving doubling algorithm (Chu, Fan, Lin, Wang 2004): the equation is
+    ``X = A^T X (I + G X)^-1 A + H`` with ``A = Phi^T``, ``G = C^T R^-1 C``, ``H = Qd``, and the
+    doubling converges quadratically, in a few dozen 12 x 12 solves (a fifth of the cost of
+    the generalised Schur route for these sizes).
+
+    Raises
+    ------
+    ValueError
+        If the doubling does not converge (no stabilising solution: the model unstable and
+        undetectable, or a singular ``R``).
+    """
+    A, G, H = Phi.T.copy(), C.T @ np.linalg.solve(R, C), Qd.copy()
+    eye = np.eye(A.shape[0])
+    for _ in range(RICCATI_ITERATIONS):
+        W = eye + G @ H
+        WA = np.linalg.solve(W, A)
+        WG = np.linalg.solve(W, G)
+        H_next = H + A.T @ H @ WA
+        G = G + A @ WG @ A.T
+        A = A @ WA
+        if np.abs(H_next - H).max() <= 1e-13 * np.abs(H_next).max():
+            return 0.5 * (H_next + H_next.T)
+        H = H_next
+        if not np.all(np.isfinite(H)):
+            break
+    raise ValueError("the steady-state Riccati equation has no stabilising solution here")
+
+
+class SteadyPredictor:
+    """The steady-state Kalman predictor of one model, in modal coordinates.
+
+    Parameters
+    ----------
+    Phi, Qd : ndarray, shape (n_x, n_x)
+        Transition matrix and process-noise covariance per sample.
+    C : ndarray, shape (n_y, n_x)
+        Output matrix.
+    R : ndarray, shape (n_y, n_y)
+        Measurement-noise covariance (positive definite).
+    P : ndarray, shape (n_x, n_x), optional
+        The Riccati solution, when known (:meth:`perturbed`); else solved by :func:`riccati`.
+
+    Raises
+    ------
+    ValueError
+        If the Riccati equation has no stabilising solution, or the predictor is unstable.
+    """
+
+    def __init__(self, Phi: FloatArray, Qd: FloatArray, C: FloatArray, R: FloatArray,
+                 P: FloatArray | None = None) -> None:
+        self.Phi, self.Qd, self.C, self.R = Phi, Qd, C, R
+        self.P = riccati(Phi, C, Qd, R) if P is None else P
+        self.S = C @ self.P @ C.T + R
+        self.Kp = Phi @ self.P @ C.T @ np.linalg.inv(self.S)
+        self.lam, self.V = np.linalg.eig(Phi - self.Kp @ C)
+        if np.max(np.abs(self.lam)) >= 1.0:
+            raise ValueError("the predictor is unstable")
+        self.V_inv = np.linalg.inv(self.V)
+        self.drive = self.V_inv @ self.Kp
+        self.CV = C @ self.V
+        self.n_x, self.n_y = Phi.shape[0], C.shape[0]
+        # The matrix is real, so its complex modes come in conjugate pairs (LAPACK returns
+        # them adjacent, with conjugate vectors): the recursion of the one with positive
+        # imaginary part, doubled, stands for both.
+        self.run = np.flatnonzero(self.lam.imag >= 0.0)
+        self.CV_run = self.CV[:, self.run] * np.where(self.lam[self.run].imag > 0.0, 2.0, 1.0)
+
+    def perturbed(self, Phi: FloatArray, Qd: FloatArray, C: FloatArray, R: FloatArray
+                  ) -> SteadyPredictor:
+        """Return the predictor of nearby matrices, its Riccati solution to first order.
+
+        The change ``dP`` of the Riccati solution solves the Stein equation
+        ``dP = Phi_c dP Phi_c^T + M`` with ``Phi_c = Phi - Kp C`` (this predictor's, already
+        diagonalised: ``dP_ij`` is ``M_ij / (1 - lam_i conj(lam_j))`` in its modal
+        coordinates) and
+
+            M = dPhi P Phi_c^T + Phi_c P dPhi^T - Phi_c P dC^T Kp^T - Kp dC P Phi_c^T
+                + dQd + Kp dR Kp^T.
+
+        For a forward difference this is as exact as solving the Riccati equation again (its
+        error is of the second order in the step, like the difference's own), at a tenth of
+        the cost.
+        """
+        dPhi, dC = Phi - self.Phi, C - self.C
+        Pc = self.P @ (self.Phi - self.Kp @ self.C).T
+        M = (dPhi @ Pc + Pc.T @ dPhi.T - Pc.T @ dC.T @ self.Kp.T - self.Kp @ dC @ Pc
+             + (Qd - self.Qd) + self.Kp @ (R - self.R) @ self.Kp.T)
+        M_modal = self.V_inv @ M @ self.V_inv.conj().T
+        Y = M_modal / (1.0 - self.lam[:, None] * self.lam.conj()[None, :])
+        dP = (self.V @ Y @ self.V.conj().T).real
+        return SteadyPredictor(Phi, Qd, C, R, P=self.P + 0.5 * (dP + dP.T))
+
+    def innovations(self, y: FloatArray, nuisance: FloatArray | None = None) -> FloatArray:
+        """Innovations of ``y`` (n, n_y) less offsets ``nuisance[:n_y]``, from ``nuisance[n_y:]``.
+
+        ``x_{k+1} = Phi x_k + Kp e_k`` in modal coordinates ``z = V^-1 x``: one first-order
+        recursion per real mode or conjugate pair, run by scipy's lfilter in C.
+        """
+        n_y = self.n_y
+        offsets = np.zeros(n_y) if nuisance is None else nuisance[:n_y]
+        z0 = (np.zeros(self.n_x, dtype=complex) if nuisance is None
+              else self.V_inv @ nuisance[n_y:])
+        u = y - offsets
+        beta = u[:-1] @ self.drive[self.run].T
+        z = np.empty((y.shape[0], self.run.size), dtype=complex)
+        z[0] = z0[self.run]
+        for column, m in enumerate(self.run):
+            root = self.lam[m]
+            if root.imag == 0.0:  # a real mode: real arithmetic, half the work
+                root, drive, start = root.real, beta[:, column].real, z0[m].real
+            else:
+                drive, start = beta[:, column], z0[m]
+            z[1:, column] = lfilter([1.0], [1.0, -root], drive, zi=[root * start])[0]
+        return np.asarray(u - (z @ self.CV_run.T).real, dtype=float)
+
+    def concentrated(self, y: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Innovations with the offsets and the initial state at their GLS estimates.
+
+        Returns the innovations (n, n_y), the whitened nuisance columns (n_y n, n_y + n_x) and
+        the estimates ``[offsets (n_y), initial state (n_x)]``. The columns: a unit initial state
+        along axis j gives ``C A^k e_j = CV lam^k V^-1 e_j``; a unit offset on channel c gives
+        ``1_c - CV g_k V^-1 Kp 1_c``, ``g_k = (1 - lam^k) / (1 - lam)`` (``|lam| < 1``).
+        """
+        n, n_y = y.shape[0], self.n_y
+        e = self.innovations(y)
+        W = np.linalg.inv(np.linalg.cholesky(self.S))
+        CVw = W @ self.CV
+        powers = self.lam[None, :] ** np.arange(n)[:, None]  # exact at lam = 0
+        geometric = (1.0 - powers) / (1.0 - self.lam)[None, :]
+        m = self.lam.size
+        initial = ((powers[:, None, :] * CVw[None]).reshape(n_y * n, m) @ self.V_inv).real
+        offsets = (np.tile(W, (n, 1))
+                   - ((geometric[:, None, :] * CVw[None]).reshape(n_y * n, m) @ self.drive).real)
+        columns = np.hstack([offsets, initial])
+        ew = (e @ W.T).reshape(n_y * n)
+        # Least squares on the columns themselves, not on their normal equations: the initial
+        # states of lightly damped modes and the offsets are nearly collinear (the columns'
+        # condition number reaches 1e8), and the normal equations' square of it lies beyond
+        # double precision, where a rank cut-off made -log L jump by about 1 between
+        # neighbouring parameter values. The cut-off left here drops only columns that are
+        # zero to round-off (a lag state whose coefficients are zero moves no output).
+        nuisance = np.linalg.lstsq(columns, ew, rcond=RANK_RTOL)[0]
+        e = ((ew - columns @ nuisance).reshape(n, n_y)) @ np.linalg.inv(W).T
+        return e, columns, nuisance
