@@ -75,6 +75,7 @@ from ident.identification._regressors import PreparedRelease, prepare
 from ident.identification.modal import ModalFit
 from ident.identification.results import (
     DISTINCT_U_RTOL,
+    GROWTH_LIMIT,
     MODE_NAMES,
     RANDOM_RESPONSE_LIMIT,
     Deferred,
@@ -350,6 +351,7 @@ def _closed_loop(model: IdentifiedModel, releases: list[Release], section: Secti
         parameter_index=fit.parameter_index, alternatives=(),
         warnings=(*(w.replace(_SCATTER_STD, _FISHER_STD) for w in base.warnings), note,
                   *fit.warnings), estimator=ESTIMATOR_CLOSED_LOOP,
+        bounded_at=_bounded_at(releases),
         _lag_roots=fit.model.d,
         _refits={"jackknife": (), "release_jackknife": (), "finer": None,
                  "reduced": Deferred(reduced) if len(speeds) >= 3 else None})
@@ -515,6 +517,25 @@ def reduced_frequency_span(releases: Sequence[Release], section: SectionModel,
     frequencies = [section.fh, section.fa] + ([] if section.fp is None else [section.fp])
     K = [section.B * 2 * math.pi * f / r.U for r in releases for f in frequencies]
     return np.linspace(0.8 * min(K), 1.2 * max(K), n)
+
+
+def _bounded_at(releases: list[Release]) -> float | None:
+    """Highest wind speed at which no release's motion grew over its record, m/s.
+
+    A displacement grew when its RMS about the record's mean over the last quarter exceeds
+    :data:`~ident.identification.results.GROWTH_LIMIT` times that over the first quarter.
+    """
+    grown: dict[float, bool] = {}
+    for r in releases:
+        quarter = r.t.size // 4
+        growing = False
+        for x in (r.h, r.alpha):
+            x = x - x.mean()
+            first, last = np.std(x[:quarter]), np.std(x[-quarter:])
+            growing |= bool(last > GROWTH_LIMIT * first)
+        grown[r.U] = grown.get(r.U, False) or growing
+    bounded = [U for U, g in grown.items() if not g]
+    return max(bounded) if bounded else None
 
 
 def _check_wind_speeds(releases: list[Release]) -> None:

@@ -33,8 +33,8 @@ from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel
 from ident.numerics.selection import Candidate, structure_label
 
-__all__ = ["DISTINCT_U_RTOL", "Deferred", "E2RFCDiagnostics", "ESTIMATOR_E2RFC", "IdentifiedModel",
-           "K_ranges", "MODE_NAMES", "RANDOM_RESPONSE_LIMIT", "StructureSpread",
+__all__ = ["DISTINCT_U_RTOL", "Deferred", "E2RFCDiagnostics", "ESTIMATOR_E2RFC", "GROWTH_LIMIT",
+           "IdentifiedModel", "K_ranges", "MODE_NAMES", "RANDOM_RESPONSE_LIMIT", "StructureSpread",
            "distinct_wind_speeds"]
 
 FloatArray = npt.NDArray[np.float64]
@@ -59,6 +59,14 @@ class Deferred:
 
     def __init__(self, compute: Callable[[], object]) -> None:
         self.compute = compute
+
+
+#: A release's motion "grew" when the RMS of a displacement over the last quarter of its record
+#: exceeds this many times that over the first quarter. A release below flutter in turbulence
+#: decays into a stationary random response (ratio about 1 or less; 5 s estimates of a lightly
+#: damped response scatter by tens of per cent); one above flutter grows without bound (1.03
+#: U_F: the pitch amplitude more than doubles within 20 s).
+GROWTH_LIMIT = 2.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -97,6 +105,10 @@ class E2RFCDiagnostics:
         Reduced frequencies ``B omega / U`` each mode covers over the releases (modal fits,
         modes named by their kinetic energy), ``{"heave": (lo, hi), "pitch": (lo, hi)}`` (and
         ``"sway"`` with three degrees of freedom).
+    bounded_at : float or None
+        The closed-loop branch's: the highest wind speed at which no release's motion grew
+        over its record (:data:`GROWTH_LIMIT`), m/s; a flutter speed lies above it, as above
+        :attr:`decayed_at`. None elsewhere.
     warnings : tuple of str
         What the checks of the data and the model found (random response, force residuals not
         white, a release far worse than the others); :meth:`IdentifiedModel.uncertainty` adds
@@ -125,6 +137,7 @@ class E2RFCDiagnostics:
     K_range: dict[str, tuple[float, float]] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
     estimator: str = ESTIMATOR_E2RFC
+    bounded_at: float | None = None
     # What the refits need, and their results once computed (on first use: they cost about
     # as much as the identification, and not every caller asks for the uncertainty).
     _prepared: tuple[PreparedRelease, ...] = field(default=(), repr=False)
@@ -143,11 +156,15 @@ class E2RFCDiagnostics:
         """Highest wind speed at which a release's modal fit decays on every mode, m/s.
 
         The flutter speed lies above it: a model that flutters below contradicts the data.
-        None when no release has all its modes (two, or three with sway) decaying.
+        None when no release has all its modes (two, or three with sway) decaying. With the
+        closed-loop branch, at least :attr:`bounded_at` (in turbulence the modal fits of a
+        random response rarely decay on every mode, while the records stay bounded).
         """
         n_dof = self.release_residuals.shape[1]
         speeds = [float(U) for U, fit in zip(self.wind_speeds, self.modal_fits, strict=True)
                   if fit.modes.size >= n_dof and bool(np.all(fit.damping > 0.0))]
+        if self.bounded_at is not None:
+            speeds.append(self.bounded_at)
         return max(speeds) if speeds else None
 
     @property

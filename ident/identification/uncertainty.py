@@ -299,8 +299,9 @@ def flutter_uncertainty(section: SectionModel, result: _flutter.FlutterResult, p
         below_decay = stable - speed
         warnings.append(
             f"the model flutters at {speed:.3g} m/s, below {stable:.3g} m/s where a release "
-            "decayed on every mode: it contradicts the data (in turbulence, the random "
-            "response biases the fit); the deviation includes the difference")
+            "decayed on every mode (or, closed-loop, no release grew): it contradicts the "
+            "data (in turbulence, the random response biases the fit); the deviation "
+            "includes the difference")
     return FlutterUncertainty(speed=speed, parametric=parametric, structure=structure,
                               extrapolation=extrapolation, refinement=refinement,
                               turbulence=turbulence,

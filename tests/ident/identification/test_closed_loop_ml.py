@@ -12,6 +12,7 @@ approximates).
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -20,6 +21,7 @@ import scipy.linalg
 from ident import Release, SectionModel
 from ident.identification import closed_loop_ml, e2rfc, steady_predictor
 from ident.identification.innovations import ReleaseModel, ShapingFilter, kalman_filter
+from ident.identification.results import IdentifiedModel
 from ident.model import flat_plate
 from ident.model import flutter as fl
 from ident.model.quasi_steady import StaticCoefficients, quasi_steady_model
@@ -186,6 +188,27 @@ def test_e2rfc_runs_the_closed_loop_branch_in_the_tunnel_s_turbulence():
     assert u.turbulence == 0.0 and u.parametric > 0.0
     assert abs(u.speed - U_F) <= 2.0 * u.total
     assert abs(u.speed / U_F - 1.0) < 0.08
+    # No release grew, so the data bound the flutter speed from below at the top speed: a
+    # fit fluttering below it (one benchmark seed of the bluff deck did, at 1 % of U_F with
+    # a Fisher std of 0.6 %) is widened to reach it and says so.
+    top = max(r.U for r in releases)
+    assert model.diagnostics.bounded_at == top and model.diagnostics.decayed_at == top
+    assert u.below_decay == 0.0
+    low = IdentifiedModel(model.A, model.d, replace(model.diagnostics, bounded_at=1.5 * u.speed))
+    widened = low.uncertainty(PLATE)
+    assert widened.below_decay == pytest.approx(0.5 * u.speed)
+    assert any("no release grew" in w for w in widened.warnings)
+
+
+def test_a_release_above_flutter_is_not_counted_as_bounded():
+    """The records' own growth: at 1.03 U_F the pitch more than doubles, at 0.9 U_F it decays."""
+    truth = flat_plate.jones_model()
+    U_F = fl.analyze(PLATE, truth).speed
+    releases = [Release.from_simulation(simulate_release(
+        PLATE, truth, f * U_F, 0.0, 0.01, duration=20.0, fs=500.0, noise=0.02, rng=(5, i)))
+        for i, f in enumerate((0.6, 0.9, 1.03))]
+    assert e2rfc._bounded_at(releases) == pytest.approx(0.9 * U_F)
+    assert e2rfc._bounded_at(releases[2:]) is None
 
 
 #: The benchmark's variant rows (``benchmarks/ident_accuracy.py --rows variants``, 20 seeds):
