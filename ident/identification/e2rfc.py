@@ -525,15 +525,13 @@ def _bounded_at(releases: list[Release]) -> float | None:
     A displacement grew when its RMS about the record's mean over the last quarter exceeds
     :data:`~ident.identification.results.GROWTH_LIMIT` times that over the first quarter.
     """
-    grown: dict[float, bool] = {}
+    speeds = distinct_wind_speeds([r.U for r in releases])
+    grown = dict.fromkeys(speeds, False)
     for r in releases:
         quarter = r.t.size // 4
-        growing = False
-        for x in (r.h, r.alpha):
-            x = x - x.mean()
-            first, last = np.std(x[:quarter]), np.std(x[-quarter:])
-            growing |= bool(last > GROWTH_LIMIT * first)
-        grown[r.U] = grown.get(r.U, False) or growing
+        U = speeds[int(np.argmin([abs(r.U - u) for u in speeds]))]
+        for x in (r.h - r.h.mean(), r.alpha - r.alpha.mean()):
+            grown[U] |= bool(np.std(x[-quarter:]) > GROWTH_LIMIT * np.std(x[:quarter]))
     bounded = [U for U, g in grown.items() if not g]
     return max(bounded) if bounded else None
 
