@@ -30,9 +30,9 @@ The plan (units SI; the example plans are ``rig_configs/plans/*.toml``)::
                                 # displacement-only route, for a rig without taps (fixed
                                 # mode, 3 or more speeds; `windrig identify` after the
                                 # campaign, with its caveats)
-    turbulent_estimator = "iv"  # releases in turbulence: "iv" (refined IV, needs the holds)
-                                # or "ml" (closed-loop maximum likelihood; slower, closer to
-                                # the data's bound; 2-DOF)
+    turbulent_estimator = "ml"  # releases in turbulence: "ml" (closed-loop maximum
+                                # likelihood; holds optional; 2-DOF, a 3-DOF section runs
+                                # "iv") or "iv" (refined IV, needs the holds)
 
     [speeds]
     wind_speeds = [5.0, 7.0]    # m/s; or fan_rpm = [500, 700] (set-points, rpm), not both
@@ -177,7 +177,7 @@ class CampaignPlan:
     identification : str
         ``"e2rfc"`` or ``"displacement"`` (the displacement-only route).
     turbulent_estimator : str
-        E2RFC's estimator of releases in turbulence, ``"iv"`` or ``"ml"``
+        E2RFC's estimator of releases in turbulence, ``"ml"`` (default) or ``"iv"``
         (:func:`ident.identification.e2rfc.identify`).
     """
 
@@ -198,7 +198,7 @@ class CampaignPlan:
     hold_s: float = HOLD_S
     release: str = "auto"
     identification: str = "e2rfc"
-    turbulent_estimator: str = "iv"
+    turbulent_estimator: str = "ml"
 
     def release_method(self, config: RigConfig) -> str:
         """Return how this plan releases on ``config``: ``"plc"`` or ``"manual"``."""
@@ -352,7 +352,7 @@ def parse_plan(text: str, source: str = "<string>") -> CampaignPlan:
     if identification not in IDENTIFICATIONS:
         raise ConfigError(f"{where} identification = {identification!r}; allowed: "
                           f"{', '.join(IDENTIFICATIONS)}")
-    estimator = c.get("turbulent_estimator", "iv")
+    estimator = c.get("turbulent_estimator", "ml")
     if estimator not in TURBULENT_ESTIMATORS:
         raise ConfigError(f"{where} turbulent_estimator = {estimator!r}; allowed: "
                           f"{', '.join(TURBULENT_ESTIMATORS)}")

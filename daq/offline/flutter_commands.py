@@ -61,8 +61,8 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
         ``START:STOP:STEP`` of the table's reduced velocities ``U / (f B)``; default: the
         releases' span.
     turbulent_estimator : {"iv", "ml"}, optional
-        The estimator of releases in turbulence (default: E2RFC's, refined IV); ``"ml"``:
-        closed-loop maximum likelihood (:mod:`ident.identification.closed_loop_ml`).
+        The estimator of releases in turbulence (default: E2RFC's, closed-loop maximum
+        likelihood, :mod:`ident.identification.closed_loop_ml`); ``"iv"``: refined IV.
     """
     from daq.offline.derivative_table import (
         check_model_dof,

@@ -32,20 +32,21 @@ every release), with the one-standard-error rule: the simplest model whose held-
 within one standard error of the best. The machinery of that problem is
 :mod:`ident.identification._e2rfc_problem`.
 
-The turbulence branch (issue 16): when the releases hold a random response and every release
-carries a hold of at least :data:`ident.identification._turbulent_fit.MIN_HOLD_S` (the model held in
-the wind before it, :class:`~ident.records.release.ReleaseHold`), the model is fitted again by
-refined instrumental variables with each hold's force as the noise model
-(:mod:`ident.identification._turbulent_fit`), its structure (one or two lags, A3 fitted) chosen by
-leave-one-release-out prediction error among the structures that do not flutter below a wind speed
-at which a release decayed (A3 zero only when every A3-fitted structure does, :data:`TURBULENT_A3`);
-those refits are the jackknife of the turbulence part, the other structures within one standard
-error the structure part.
-``diagnostics.estimator`` says which estimator ran. Without such holds today's estimator runs,
-with a warning that says what turbulence needs. In smooth flow nothing changes. With
-:data:`TURBULENT_ESTIMATOR` ``= "ml"`` the branch is instead the closed-loop maximum likelihood
-of every release and hold together (:mod:`ident.identification.closed_loop_ml`; two degrees of
-freedom, holds optional), its covariance the inverse Fisher information.
+The turbulence branch: when the releases hold a random response (turbulence), the model is
+fitted again by the estimator :data:`TURBULENT_ESTIMATOR` names. By default (``"ml"``) that is
+the closed-loop maximum likelihood of every release and hold together
+(:mod:`ident.identification.closed_loop_ml`; two degrees of freedom, holds used when present,
+never required), its covariance the inverse Fisher information. ``"iv"`` (and any 3-DOF
+section) runs refined instrumental variables instead, which needs a hold of at least
+:data:`ident.identification._turbulent_fit.MIN_HOLD_S` before every release (the model held in
+the wind, :class:`~ident.records.release.ReleaseHold`) as its noise model
+(:mod:`ident.identification._turbulent_fit`): its structure (one or two lags, A3 fitted) chosen
+by leave-one-release-out prediction error among the structures that do not flutter below a
+wind speed at which a release decayed (A3 zero only when every A3-fitted structure does,
+:data:`TURBULENT_A3`); those refits are the jackknife of the turbulence part, the other
+structures within one standard error the structure part. Without such holds the IV branch keeps
+plain E2RFC's estimate, with a warning that says what turbulence needs.
+``diagnostics.estimator`` says which estimator ran. In smooth flow nothing changes.
 
 Guards (:mod:`ident.records.plausibility`): before the fit each release's amplitudes and
 force magnitudes are checked against the section's size (a pitch in degrees, a heave in
@@ -115,14 +116,14 @@ ESTIMATOR_TURBULENT = "refined IV with the holds' noise model (turbulence branch
 #: on some bluff-deck seeds whose held-out error prefers it, A3 fitted on some plate seeds
 #: whose every A3-fitted structure contradicts the data.
 TURBULENT_A3 = "fitted-or-zero"
-#: The turbulence branch's estimator: ``"iv"`` (refined IV with the holds' noise model; needs a
-#: hold before every release) or ``"ml"`` (closed-loop maximum likelihood of every release and
-#: hold together, :mod:`ident.identification.closed_loop_ml`; holds optional; two degrees of
-#: freedom), started from E2RFC's estimate. ``"ml"`` is measured in docs/e2rfc_turbulence.md
-#: (medians 1.6-3 times lower than refined IV's on the benchmark's turbulence rows, 94-96 % of
-#: the 2-std intervals covering) and not yet the default: it takes 10-28 s against 3-10 s, keeps
-#: a bias of about 2 % on the plate, and lost the flutter speed once on the simulated rig.
-TURBULENT_ESTIMATOR = "iv"
+#: The turbulence branch's estimator: ``"ml"`` (closed-loop maximum likelihood of every release
+#: and hold together, :mod:`ident.identification.closed_loop_ml`; holds optional; two degrees of
+#: freedom) or ``"iv"`` (refined IV with the holds' noise model; needs a hold before every
+#: release), started from E2RFC's estimate. Measured in docs/e2rfc_turbulence.md on the
+#: benchmark's turbulence rows: "ml" medians 1.5-4 times lower than refined IV's with holds and
+#: 3.6-25 times lower than plain E2RFC's without them, 94 % of the 2-std intervals covering,
+#: 7-11 s per identification with its uncertainty.
+TURBULENT_ESTIMATOR = "ml"
 #: The turbulence branch's estimators, by name.
 TURBULENT_ESTIMATORS = ("iv", "ml")
 #: Lags of the closed-loop branch. Measured (plate, 1 % turbulence, 6 seeds): from E2RFC's
@@ -159,9 +160,9 @@ def identify(
     with_A3 : bool, optional
         Fit the added-mass matrix A3; None chooses by held-out error.
     turbulent_estimator : {"iv", "ml"}, optional
-        The estimator of releases in turbulence (:data:`TURBULENT_ESTIMATOR`, its default):
-        refined IV with the holds' noise model, or closed-loop maximum likelihood (two degrees
-        of freedom; a 3-DOF section runs refined IV and says so). Smooth flow ignores it.
+        The estimator of releases in turbulence (default :data:`TURBULENT_ESTIMATOR`, "ml"):
+        closed-loop maximum likelihood (two degrees of freedom; a 3-DOF section runs refined IV
+        and says so), or refined IV with the holds' noise model. Smooth flow ignores it.
 
     Returns
     -------

@@ -58,11 +58,13 @@ def test_defaults_and_candidates():
     assert plan.files == "per_speed"
     assert parse_plan(FIXED.replace("decay_s = 5.0", 'decay_s = 5.0\nfiles = "per_release"')
                       ).files == "per_release"
-    assert plan.decay_end == "fixed" and plan.turbulent_estimator == "iv"
-    # The plan's names (kept in daq: parsing a plan imports no numerics) are E2RFC's.
+    assert plan.decay_end == "fixed" and plan.turbulent_estimator == "ml"
+    # The plan's names and default (kept in daq: parsing a plan imports no numerics) are
+    # E2RFC's.
     assert plan_module.TURBULENT_ESTIMATORS == e2rfc.TURBULENT_ESTIMATORS
-    assert parse_plan(FIXED.replace("decay_s = 5.0", 'decay_s = 5.0\nturbulent_estimator = "ml"')
-                      ).turbulent_estimator == "ml"
+    assert plan.turbulent_estimator == e2rfc.TURBULENT_ESTIMATOR
+    assert parse_plan(FIXED.replace("decay_s = 5.0", 'decay_s = 5.0\nturbulent_estimator = "iv"')
+                      ).turbulent_estimator == "iv"
     assert plan.hold_s == 0.5  # daq.procedure.HOLD_S, the console's
     assert parse_plan(FIXED.replace("decay_s = 5.0", "decay_s = 5.0\nhold_s = 11")).hold_s == 11.0
     assert parse_plan(FIXED.replace("decay_s = 5.0", 'decay_s = 5.0\ndecay_end = "settled"')

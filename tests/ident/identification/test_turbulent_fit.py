@@ -1,5 +1,8 @@
 """E2RFC's turbulence branch: refined IV with the noise model of the hold before each release.
 
+(``turbulent_estimator="iv"`` throughout: the default is the closed-loop branch,
+test_closed_loop_ml.py.)
+
 Seeded cases of ``benchmarks/ident_accuracy.py --part tunnel``'s plate campaign (0.4/0.6/0.8 U_F
 x 2 holds, 20 s at 500 Hz, 2 % noise, vertical turbulence, a 10 s hold before each release).
 """
@@ -70,7 +73,7 @@ def test_the_branch_finds_the_flutter_speed_in_1_percent_turbulence(turbulent_re
     flutter analysis of the simulated (Jones) model, independent of the identification.
     """
     U_F = fl.analyze(FLAT_PLATE, flat_plate.jones_model()).speed
-    model = e2rfc.identify(turbulent_releases, FLAT_PLATE)
+    model = e2rfc.identify(turbulent_releases, FLAT_PLATE, turbulent_estimator="iv")
     diagnostics = model.diagnostics
     assert diagnostics.turbulent
     assert diagnostics.estimator == e2rfc.ESTIMATOR_TURBULENT
@@ -88,7 +91,7 @@ def test_the_branch_finds_the_flutter_speed_in_1_percent_turbulence(turbulent_re
     needed = u.releases_needed(max(u.systematic * 1.1, 0.5 * u.total))
     assert needed is None or needed >= len(turbulent_releases)
     before = e2rfc.identify([dataclasses.replace(r, hold=None) for r in turbulent_releases],
-                            FLAT_PLATE).uncertainty(FLAT_PLATE)
+                            FLAT_PLATE, turbulent_estimator="iv").uncertainty(FLAT_PLATE)
     before_error = np.inf if before.speed is None else abs(before.speed / U_F - 1.0)
     assert before_error > error
 
@@ -112,7 +115,8 @@ def test_the_branch_holds_on_every_turbulent_row_of_the_benchmark(deck, Iw):
     U_F = fl.analyze(section, model).speed
     errors, stds, covered = [], [], 0
     for seed in range(3):
-        identified = e2rfc.identify(campaign(seed=seed, Iw=Iw, hold_s=10.0, deck=deck), section)
+        identified = e2rfc.identify(campaign(seed=seed, Iw=Iw, hold_s=10.0, deck=deck), section,
+                                    turbulent_estimator="iv")
         assert identified.diagnostics.estimator == e2rfc.ESTIMATOR_TURBULENT
         u = identified.uncertainty(section)
         assert u.speed is not None
@@ -134,7 +138,7 @@ def test_short_holds_leave_todays_estimator_with_a_warning(turbulent_releases):
         cut = ReleaseHold(t=h.t[keep], h=h.h[keep], alpha=h.alpha[keep], lift=h.lift[keep],
                           moment=h.moment[keep])
         short.append(dataclasses.replace(r, hold=cut))
-    model = e2rfc.identify(short, FLAT_PLATE)
+    model = e2rfc.identify(short, FLAT_PLATE, turbulent_estimator="iv")
     assert model.diagnostics.estimator == results.ESTIMATOR_E2RFC
     assert any(f">= {MIN_HOLD_S:g} s before each release" in w
                for w in model.diagnostics.warnings)
@@ -146,11 +150,13 @@ def test_smooth_flow_identification_is_unchanged():
     And a hold changes nothing in smooth flow: the same releases with and without their holds
     give the identical model.
     """
-    u = e2rfc.identify(campaign(seed=0, Iw=0.0, hold_s=0.0), FLAT_PLATE).uncertainty(FLAT_PLATE)
+    u = e2rfc.identify(campaign(seed=0, Iw=0.0, hold_s=0.0), FLAT_PLATE,
+                       turbulent_estimator="iv").uncertainty(FLAT_PLATE)
     assert u.speed == pytest.approx(SMOOTH_BEFORE, rel=1e-12, abs=0.0)
     held = campaign(seed=1, Iw=0.0, hold_s=MIN_HOLD_S)
-    with_hold = e2rfc.identify(held, FLAT_PLATE)
-    without = e2rfc.identify([dataclasses.replace(r, hold=None) for r in held], FLAT_PLATE)
+    with_hold = e2rfc.identify(held, FLAT_PLATE, turbulent_estimator="iv")
+    without = e2rfc.identify([dataclasses.replace(r, hold=None) for r in held], FLAT_PLATE,
+                             turbulent_estimator="iv")
     assert with_hold.diagnostics.estimator == results.ESTIMATOR_E2RFC
     np.testing.assert_array_equal(with_hold.A, without.A)
     np.testing.assert_array_equal(with_hold.d, without.d)
