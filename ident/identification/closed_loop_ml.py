@@ -38,6 +38,9 @@ of each record (where the exact filter's covariance has not yet settled), not it
 The steady-state predictor itself, the Riccati solution and the likelihood of one record are
 :mod:`ident.identification.steady_predictor`.
 
+Longer than 600 lines: the record layout, the concentrated likelihood, the Fisher information
+and the damped search all work on one parameter layout and are each short.
+
 References
 ----------
 L. Ljung, *System Identification: Theory for the User*, 2nd ed., Prentice Hall 1999, ch. 7 and 9
@@ -187,6 +190,8 @@ class _Layout:
         self.size = self.noise0 + 4 * n_releases
         #: log of each channel's least noise std (:data:`NOISE_FLOOR`; :func:`_noise_floor`).
         self.noise_floor = np.full(4 * n_releases, -np.inf)
+        #: log of the least and largest lag root (``d``, reduced; :func:`_log_lag_range`).
+        self.log_lag_range = (-math.inf, math.inf)
 
     def model(self, theta: FloatArray) -> RationalFunctionModel:
         A = np.zeros((3 + self.n_lags, self.n_dof, self.n_dof))
@@ -216,17 +221,20 @@ class _Layout:
         limit[:self.n_A] = np.maximum(0.5 * np.abs(A), 0.5 * math.sqrt(float(np.mean(A**2))))
         return limit
 
-    def lower_bounds(self, theta: FloatArray) -> FloatArray:
-        """Return the lower bounds of the parameters.
+    def bounds(self, theta: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Return the lower and upper bounds of the parameters.
 
-        ``L11 / L00`` at least 1e-4 (its log), each noise at least a thousandth of its starting
-        value and at least its :data:`NOISE_FLOOR`; the rest unbounded.
+        The lag roots within :attr:`log_lag_range` (E2RFC's own: a factor 20 beyond the reduced
+        frequencies the releases cover), ``L11 / L00`` at least 1e-4 (its log), each noise at
+        least a thousandth of its starting value and at least its :data:`NOISE_FLOOR`; the
+        rest unbounded.
         """
-        lower = np.full(self.size, -np.inf)
+        lower, upper = np.full(self.size, -np.inf), np.full(self.size, np.inf)
+        lower[self.n_A:self.n_aero], upper[self.n_A:self.n_aero] = self.log_lag_range
         groups = (self.noise0 - self.shaping0) // N_SHAPING
         lower[[self.shaping0 + N_SHAPING * g + 6 for g in range(groups)]] = math.log(1e-4)
         lower[self.noise0:] = np.maximum(theta[self.noise0:] - math.log(1e3), self.noise_floor)
-        return lower
+        return lower, upper
 
     def noise(self, theta: FloatArray, release: int) -> FloatArray:
         return np.exp(theta[self.noise0 + 4 * release: self.noise0 + 4 * release + 4])
@@ -297,6 +305,7 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
     start = _with_lags(start, start.n_lags if n_lags is None else n_lags)
     layout = _Layout(2, start.n_lags, with_A3, len(speeds), len(releases))
     layout.noise_floor = _noise_floor(records, len(releases))
+    layout.log_lag_range = _log_lag_range(section, speeds)
     objective = _Objective(records, section, layout, fs)
     theta = _initial(records, layout, start, section, fs, f_max)
     current = objective.evaluate(theta)
@@ -337,17 +346,17 @@ def _maximise(objective: _Objective, layout: _Layout, theta: FloatArray, current
     whether the search converged.
     """
     limit = layout.step_limits(theta)
-    lower = layout.lower_bounds(theta)
+    lower, upper = layout.bounds(theta)
     lam, converged, iterations = 1e-3, False, 0
     gains: list[float] = []
     F_at: FloatArray | None = None  # theta at which F was computed
     for iterations in range(1, MAX_ITERATIONS + 1):  # noqa: B007 - returned
         F, g = objective.information(theta, current)
         F_at = theta
-        # Parameters held at their lower bound by a gradient that pushes them below it are
-        # left out of the step (an active set): a moment that is one gust's with the lift
-        # (L11 -> 0) would otherwise stall every step.
-        free = ~((theta <= lower + 1e-9) & (g > 0.0))
+        # Parameters held at a bound by a gradient that pushes them beyond it are left out of
+        # the step (an active set): a moment that is one gust's with the lift (L11 -> 0)
+        # would otherwise stall every step.
+        free = ~(((theta <= lower + 1e-9) & (g > 0.0)) | ((theta >= upper - 1e-9) & (g < 0.0)))
         Ff, gf = F[np.ix_(free, free)], g[free]
         scale = np.sqrt(np.maximum(np.diag(Ff), 1e-300))
         Fs, gs = Ff / np.outer(scale, scale), gf / scale
@@ -358,8 +367,8 @@ def _maximise(objective: _Objective, layout: _Layout, theta: FloatArray, current
         for _ in range(DAMPING_TRIES):
             step = np.zeros(layout.size)
             step[free] = -np.linalg.solve(Fs + lam * np.eye(gs.size), gs) / scale
-            # No parameter moves more than its limit in one step, nor below its bound.
-            trial_theta = np.maximum(theta + np.clip(step, -limit, limit), lower)
+            # No parameter moves more than its limit in one step, nor beyond its bounds.
+            trial_theta = np.clip(theta + np.clip(step, -limit, limit), lower, upper)
             trial = objective.evaluate(trial_theta)
             if trial.nll < current.nll:
                 break
@@ -428,6 +437,21 @@ def _records(releases: Sequence[Release], section: SectionModel, speeds: list[fl
             hold = np.column_stack([r.hold.h, r.hold.alpha, r.hold.lift, r.hold.moment])
             records.append(_Record(_decimate(hold, factor), r.U, rho, group, index, True))
     return records
+
+
+def _log_lag_range(section: SectionModel, speeds: list[float]) -> tuple[float, float]:
+    """Return the log of E2RFC's range of lag roots: 20 times beyond the reduced frequencies.
+
+    The still-air frequencies at the highest and lowest wind speed bound the reduced
+    frequencies ``K = 2 pi f B / U``. Far outside them a lag is a constant or a derivative term
+    that the other coefficients already hold; a fit sent there (a root of 175 where the data
+    cover 0.3-1.6, friction in 1 % turbulence) had a stiff state that made its Fisher
+    information meaningless (a flutter-speed std of 0.004 %).
+    """
+    f = [section.fh, section.fa]
+    K_lo = 2.0 * math.pi * min(f) * section.B / max(speeds)
+    K_hi = 2.0 * math.pi * max(f) * section.B / min(speeds)
+    return math.log(K_lo / 20.0), math.log(20.0 * K_hi)
 
 
 def _noise_floor(records: list[_Record], n_releases: int) -> FloatArray:
@@ -553,10 +577,10 @@ class _Objective:
                 shifted = theta.copy()
                 shifted[p] += h
                 try:
-                    predictor = base.perturbed(*self.matrices(shifted, record))
+                    predictor = self._perturbed(base, shifted, record)
                 except ValueError:  # at the edge of the stable models: a backward difference
                     h, shifted[p] = -h, theta[p] - h
-                    predictor = base.perturbed(*self.matrices(shifted, record))
+                    predictor = self._perturbed(base, shifted, record)
                 e1 = predictor.innovations(record.y, nuisance)
                 D[row] = (((e1 - e) / h) @ W.T).ravel()
                 Sw[row] = W @ ((predictor.S - S) / h) @ W.T
@@ -570,6 +594,15 @@ class _Objective:
             g[idx] += (D @ ew + 0.5 * n_k * np.einsum("iaa->i", Sw)
                        - 0.5 * np.einsum("iab,ba->i", Sw, Ew))
         return F, g
+
+    def _perturbed(self, base: SteadyPredictor, theta: FloatArray, record: _Record
+                   ) -> SteadyPredictor:
+        """Return the predictor at ``theta``, its Riccati solution from ``base``'s (1st order)."""
+        matrices = self.matrices(theta, record)
+        try:
+            return base.perturbed(*matrices)
+        except ValueError:  # the first order left the stable predictors (a lightly damped
+            return SteadyPredictor(*matrices)  # mode near the unit circle): solve exactly
 
     def whiteness(self, at: _Evaluation) -> FloatArray:
         """Largest autocorrelation of each record's standardised innovations, lags 1-20."""

@@ -132,8 +132,7 @@ TURBULENT_ESTIMATORS = ("iv", "ml")
 CLOSED_LOOP_LAGS = 2
 #: ``diagnostics.estimator`` of the closed-loop branch.
 ESTIMATOR_CLOSED_LOOP = "closed-loop maximum likelihood (turbulence branch)"
-#: How E2RFC's turbulence warning ends, and how the closed-loop branch ends it instead (its
-#: likelihood models the random response, and its std is the Fisher information's).
+#: How E2RFC's turbulence warning ends, and how the closed-loop branch's ends in its place.
 _SCATTER_STD = "the flutter speed's deviation is the release-to-release scatter"
 _FISHER_STD = ("the closed-loop likelihood models the random response, and the flutter speed's "
                "deviation is its Fisher information's")

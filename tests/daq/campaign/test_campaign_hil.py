@@ -165,9 +165,10 @@ def test_the_plans_hold_is_recorded_and_read_back_as_each_releases_hold(tmp_path
     """``hold_s``: the model held that long in the wind before each release, in the file.
 
     ``ident.records.run_file`` reads a release's hold from 0.25 s after its arm event to 0.05 s
-    before the release (E2RFC's turbulence branch takes its noise model from it and needs 10 s): a
-    plan's 11 s hold gives about 10.7 s (the default 0.5 s about 0.2 s). A single noisy Pitot row
-    (at 5 m/s they scatter by more than 10 %) must not cut the hold short.
+    before the release (the refined-IV turbulence branch takes its noise model from it and needs
+    10 s; the closed-loop one uses it as extra data): a plan's 11 s hold gives about 10.7 s
+    (the default 0.5 s about 0.2 s). A single noisy Pitot row (at 5 m/s they scatter by more
+    than 10 %) must not cut the hold short.
     """
     from ident.records.run_file import read_run
 
