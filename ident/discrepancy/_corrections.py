@@ -104,7 +104,7 @@ def refit_beside(releases: list[Release], section: SectionModel, model: Rational
             return model
         linear.append(replace(r, **{c: getattr(r, c) - share[c] for c in CHANNELS},
                               meta=dict(r.meta)))
-    return e2rfc.identify(linear, section)
+    return e2rfc.identify(linear, section, turbulent_estimator="iv")  # as workflow's baseline
 
 
 def notch(r: Release, frequency_hz: float) -> Release:

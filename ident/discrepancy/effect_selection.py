@@ -749,7 +749,7 @@ def _apply(releases: list[Release], section: SectionModel, baseline: RationalFun
         p = params[_AERO].values
         aero_effect = AerodynamicNonlinearity(e_h=p["e_h"], e_a=p["e_a"])
         corrected = [remove_aero(r, section, aero_effect) for r in corrected]
-    model: RationalFunctionModel = (e2rfc.identify(corrected, section)
+    model: RationalFunctionModel = (e2rfc.identify(corrected, section, turbulent_estimator="iv")
                                     if changed or _AERO in params else baseline)
     physics = tuple(e for e in effects if not isinstance(e, VortexShedding | BaseVibration))
     # The aerodynamic nonlinearity bends the decays too: its force is left in the forces here,

@@ -251,7 +251,10 @@ def diagnose(releases: Sequence[Release], section: SectionModel,
         if not isinstance(r, Release):
             raise TypeError(f"releases must be ident.Release objects, got {type(r).__name__}")
     if baseline is None:
-        baseline = e2rfc.identify(releases, section)
+        # Refined IV in turbulence (plain E2RFC without holds): an unnamed effect's misfit can
+        # look like a random response, which the closed-loop default would model as buffeting
+        # and so hide from the search; the effects were validated on this estimator.
+        baseline = e2rfc.identify(releases, section, turbulent_estimator="iv")
     depth = _UNIT_DEPTH if depth is None else float(depth)
     measured = [channels(r) for r in releases]
     before = [simulate_channels(r, section, baseline, ()) for r in releases]

@@ -122,7 +122,7 @@ TURBULENT_A3 = "fitted-or-zero"
 #: release), started from E2RFC's estimate. Measured in docs/e2rfc_turbulence.md on the
 #: benchmark's turbulence rows: "ml" medians 1.5-4 times lower than refined IV's with holds and
 #: 3.6-25 times lower than plain E2RFC's without them, 94 % of the 2-std intervals covering,
-#: 7-11 s per identification with its uncertainty.
+#: 7-12 s per identification with its uncertainty.
 TURBULENT_ESTIMATOR = "ml"
 #: The turbulence branch's estimators, by name.
 TURBULENT_ESTIMATORS = ("iv", "ml")
