@@ -59,6 +59,7 @@ import numpy.typing as npt
 from ident.identification.innovations import ReleaseModel, ShapingFilter, discretise
 from ident.identification.results import distinct_wind_speeds
 from ident.identification.steady_predictor import SteadyPredictor, neg_log_likelihood
+from ident.identification.uncertainty import nearest_wind_speed
 from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel
 from ident.numerics.threads import single_threaded_blas
@@ -174,6 +175,7 @@ class _Evaluation:
     S: list[FloatArray]             # their covariance (4, 4)
     columns: list[FloatArray]       # whitened nuisance columns (4 n, 4 + n_x)
     nuisance: list[FloatArray]      # offsets (4) then initial state (n_x)
+    predictors: list[SteadyPredictor]  # the base of the Fisher information's differences
 
 
 class _Layout:
@@ -423,7 +425,7 @@ def _records(releases: Sequence[Release], section: SectionModel, speeds: list[fl
     """Decimated records of every release (within ``window``) and (when used) hold."""
     records = []
     for index, r in enumerate(releases):
-        group = int(np.argmin([abs(r.U - u) for u in speeds]))
+        group = nearest_wind_speed(r.U, speeds)
         rho = section.rho if r.rho is None else r.rho
         factor = _factor(r.fs, f_max)
         y = np.column_stack([r.h, r.alpha, r.lift, r.moment])
@@ -539,17 +541,18 @@ class _Objective:
     def evaluate(self, theta: FloatArray) -> _Evaluation:
         """-log L with each record's offsets and initial state concentrated out."""
         self._dynamics.clear()
-        out = _Evaluation(0.0, [], [], [], [])
+        out = _Evaluation(0.0, [], [], [], [], [])
         for record in self.records:
             try:
                 predictor = self.predictor(theta, record)
                 e, columns, nuisance = predictor.concentrated(record.y)
             except (ValueError, np.linalg.LinAlgError):  # no stable predictor: not a maximum
-                return _Evaluation(math.inf, [], [], [], [])
+                return _Evaluation(math.inf, [], [], [], [], [])
             out.e.append(e)
             out.S.append(predictor.S)
             out.columns.append(columns)
             out.nuisance.append(nuisance)
+            out.predictors.append(predictor)
             out.nll += neg_log_likelihood(e, predictor.S)
         return out
 
@@ -566,7 +569,7 @@ class _Objective:
         self._dynamics.clear()
         for r, record in enumerate(self.records):
             e, S, nuisance = at.e[r], at.S[r], at.nuisance[r]
-            base = self.predictor(theta, record)
+            base = at.predictors[r]
             W = np.linalg.inv(np.linalg.cholesky(S))
             Q, _ = np.linalg.qr(at.columns[r])
             params = self.layout.affecting(record)

@@ -85,7 +85,7 @@ from ident.identification.results import (
     K_ranges,
     distinct_wind_speeds,
 )
-from ident.identification.uncertainty import REFIT_GRID
+from ident.identification.uncertainty import REFIT_GRID, nearest_wind_speed
 from ident.model import flutter as _flutter
 from ident.model.conventions import name_modes
 from ident.model.rfc import RationalFunctionModel
@@ -529,7 +529,7 @@ def _bounded_at(releases: list[Release]) -> float | None:
     grown = dict.fromkeys(speeds, False)
     for r in releases:
         quarter = r.t.size // 4
-        U = speeds[int(np.argmin([abs(r.U - u) for u in speeds]))]
+        U = speeds[nearest_wind_speed(r.U, speeds)]
         for x in (r.h - r.h.mean(), r.alpha - r.alpha.mean()):
             grown[U] |= bool(np.std(x[-quarter:]) > GROWTH_LIMIT * np.std(x[:quarter]))
     bounded = [U for U, g in grown.items() if not g]

@@ -62,7 +62,8 @@ from ident.model.section import SectionModel
 
 __all__ = ["DISTINCT_U_RTOL", "EXTRAPOLATION_WARN", "REFIT_GRID", "FlutterUncertainty",
            "UncertaintySources", "distinct_wind_speeds", "flutter_derivative_std",
-           "flutter_uncertainty", "jackknife_std", "no_flutter_warnings", "parametric"]
+           "flutter_uncertainty", "jackknife_std", "nearest_wind_speed", "no_flutter_warnings",
+           "parametric"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -417,3 +418,8 @@ def distinct_wind_speeds(speeds: Sequence[float]) -> list[float]:
         if not out or u > out[-1] * (1 + DISTINCT_U_RTOL):
             out.append(float(u))
     return out
+
+
+def nearest_wind_speed(U: float, speeds: Sequence[float]) -> int:
+    """Return the index of the speed in ``speeds`` (distinct ones, m/s) nearest to ``U``, m/s."""
+    return int(np.argmin([abs(U - u) for u in speeds]))
