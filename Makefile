@@ -8,6 +8,9 @@
 #   make test            run the test suite (pytest; extra arguments in PYTEST_ARGS="...")
 #   make test-fast       run its pure part alone (no socket, thread, process or real clock)
 #   make demo            run a whole simulated campaign, results in demo_output/
+#   make docs            build the documentation site into docs/_build/html (warnings are errors)
+#   make bench           run the benchmarks' quick mode, results in benchmarks/results/quick
+#   make bench-full      run them in full, results in docs/validation/results (for the site)
 #   make lint            ruff check (ruff is installed into .venv for this target only)
 #   make typecheck       mypy (likewise installed for this target only)
 #   make clean           remove .venv, demo_output and caches
@@ -35,7 +38,7 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 test test-fast demo screenshot: export QT_QPA_PLATFORM := offscreen
 test test-fast demo screenshot: export MPLBACKEND := Agg
 
-.PHONY: test test-fast demo report-example screenshot lint typecheck setup qt-libs clean
+.PHONY: test test-fast demo docs report-example screenshot lint typecheck setup qt-libs clean
 
 # The suite is split by the `realtime` marker (pyproject.toml), not by folder. The pure part
 # (computations, parsers, files, scripted byte exchanges, the doctests of daq, ident and
@@ -85,6 +88,17 @@ screenshot: setup
 
 setup: $(STAMP) $(PLUGIN_STAMP) qt-libs
 
+# The site: Sphinx over docs/ (docs/conf.py says why Sphinx), every warning an error, all of them
+# listed (--keep-going). The API reference's pages are written by docs/_apiref.py on each build.
+DOCS_STAMP := $(VENV)/.docs-installed
+docs: setup $(DOCS_STAMP)
+	$(VENV)/bin/sphinx-build -W --keep-going -q -b html docs docs/_build/html
+	@echo "the site: docs/_build/html/index.html"
+
+$(DOCS_STAMP): pyproject.toml $(STAMP)
+	$(PIP) install -q --progress-bar off -e '.[docs]'
+	@touch $@
+
 # Quiet when nothing is missing; installs the Debian packages (apt-get) when something is.
 qt-libs: $(STAMP)
 	@bash .ci/ensure_qt_libs.sh $(PY)
@@ -131,5 +145,5 @@ $(VENV)/.mypy-$(MYPY_VERSION): | $(PY)
 	@touch $@
 
 clean:
-	rm -rf $(VENV) demo_output build .pytest_cache .hypothesis .mypy_cache .ruff_cache *.egg-info
+	rm -rf $(VENV) demo_output build docs/_build docs/reference/api .pytest_cache .hypothesis .mypy_cache .ruff_cache *.egg-info
 	find . -path ./.git -prune -o -type d -name __pycache__ -prune -exec rm -rf {} +

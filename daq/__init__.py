@@ -1,6 +1,6 @@
 """windrig's rig side: transports, drivers, acquisition, synchronisation, recording, console.
 
-One subpackage per concern (``docs/architecture.md`` has the tree and the import rules):
+One subpackage per concern (``docs/reference/architecture.md`` has the tree and the import rules):
 
 - :mod:`daq.transports`: bytes and registers from URLs (serial, TCP, Modbus), scripted fakes;
 - :mod:`daq.instruments`: the driver registry, ``build_driver`` and one subpackage per device;

@@ -6,7 +6,7 @@ and what each calibration does to a reading. Every key is optional; without any,
 as it did before calibrations existed (taps on scanner channels ``0 .. n_taps - 1``, no dead tap,
 the Pitot read as the dynamic pressure, the lasers' readings as vertical distances, dry air).
 
-The keys (docs/calibration.md; each bad value is a ConfigError naming the key)::
+The keys (docs/guides/calibration.md; each bad value is a ConfigError naming the key)::
 
     [section]   span = 0.9                       model span, m (per-unit-span forces to totals)
     [taps]      channels = [[module, channel], ...]   one per tap, in the layout's tap order

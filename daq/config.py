@@ -49,7 +49,7 @@ __all__ = [
     "shipped_config",
 ]
 
-#: Instrument roles a rig may have (docs/drivers.md: what each role's driver delivers).
+#: Instrument roles a rig may have (docs/guides/drivers.md: what each role's driver delivers).
 ROLES = ENTRY_ROLES
 #: Roles a rig may have several of: arrays of tables (``[[lasers]]``, ``[[analog]]``).
 MULTIPLE = ("lasers", "analog")
@@ -139,7 +139,7 @@ class RigConfig:
     """A validated rig configuration (see the module docstring).
 
     ``calibration`` holds the optional calibrations (tap wiring and dead taps, Pitot, lasers,
-    humid air, span; :mod:`daq.calibration`, docs/calibration.md): the defaults change nothing.
+    humid air, span; :mod:`daq.calibration`, docs/guides/calibration.md): the defaults change nothing.
     """
 
     name: str

@@ -6,7 +6,7 @@ exactly; :data:`BLUFF_DECK_STATIC` its static coefficients (buffeting); :data:`B
 a section model to test it on.
 
 The model (in Roger's notation, ``Q(p)``, Scanlan's signs of
-``docs/conventions.md``):
+``docs/reference/conventions.md``):
 
 - lift row: 0.7 times the exact-Theodorsen flat plate's (eight lags,
   :func:`ident.model.flat_plate.theodorsen_model`): a lift slope of 0.7 x 2 pi, as decks with edge

@@ -3,7 +3,7 @@
 The graph is built from the source with :mod:`ast`: every ``import`` and ``from ... import``
 of a first-party module, at module level, inside functions and under ``TYPE_CHECKING`` alike
 (a function-level import is still a dependency; it only hides a cycle). The rules
-(``docs/architecture.md`` states them for readers):
+(``docs/reference/architecture.md`` states them for readers):
 
 - no import cycle among the modules of daq, ident and simulators;
 - ident imports nothing from daq or simulators; simulators imports nothing from daq;
@@ -45,7 +45,7 @@ MAX_DAQ_TOP_LEVEL_MODULES = 8
 #: Top-level packages whose ``__init__`` re-exports public names (their subpackages' do not).
 FACADES = ("ident", "simulators")
 
-#: daq's layers, bottom first (``docs/architecture.md``): a module may import from its own layer
+#: daq's layers, bottom first (``docs/reference/architecture.md``): a module may import from its own layer
 #: and from the layers below. ``daq.instruments.build`` (a configured instrument's driver) sits
 #: above the rig config, which validates instrument tables through the driver registry.
 DAQ_LAYERS: tuple[tuple[str, ...], ...] = (

@@ -8,7 +8,7 @@ fixed where it is.
   devices and style notes, or a ``shared`` folder beside the checkout). What those notes said that
   the code relies on is stated in ``docs/``, or in the docstring itself.
 - Every ``docs/<name>.md`` a file mentions exists; where the mention names a section
-  (``docs/wire_formats.md, "Fan drive"``), one of that page's headings contains the name.
+  (``docs/reference/wire_formats.md, "Fan drive"``), one of that page's headings contains the name.
 - Every file path under the top-level folders that a file mentions (a module of ``daq``, a test
   module, a rig config) exists.
 - ``docs/`` names every fault the simulators inject and every named effect.
@@ -32,7 +32,8 @@ OUTSIDE = re.compile(r"\b(?:DESIGN|DEVICES|STYLE)\.md\b|\.\./" + _SHARED + r"\b|
 
 #: ``docs/<name>.md``, optionally followed by a quoted section name (which may wrap a line).
 DOC_REFERENCE = re.compile(
-    r"\bdocs/(?P<page>[A-Za-z0-9_.-]+?\.md)\b(?:`{0,2},?(?:\s|#:?)+\"(?P<section>[^\"]{1,80})\")?"
+    r"\bdocs/(?P<page>(?:[A-Za-z0-9_-]+/)*[A-Za-z0-9_.-]+?\.md)\b"
+    r"(?:`{0,2},?(?:\s|#:?)+\"(?P<section>[^\"]{1,80})\")?"
 )
 
 #: A path under one of the repository's top-level folders, to a file of a tracked kind.
@@ -95,7 +96,8 @@ def test_no_file_refers_to_notes_outside_the_repository():
 
 
 def test_every_docs_page_and_section_mentioned_exists():
-    headings = {page.name: _headings(page) for page in DOCS.glob("*.md")}
+    headings = {page.relative_to(DOCS).as_posix(): _headings(page)
+                for page in DOCS.rglob("*.md") if "_build" not in page.parts}
     problems = []
     for name in tracked_text_files():
         text = (ROOT / name).read_text(encoding="utf-8")
@@ -127,9 +129,9 @@ def test_the_docs_name_every_simulated_fault_and_named_effect():
     from simulators.devices import abb_acs580, modbus_plc, vaisala_ptb330
     from simulators.devices.scanivalve_mps4264 import scanner as scanivalve_mps4264
 
-    wire = (DOCS / "wire_formats.md").read_text(encoding="utf-8")
+    wire = (DOCS / "reference" / "wire_formats.md").read_text(encoding="utf-8")
     faults = wire[wire.index("## Faults the simulators inject"):]
-    conventions = (DOCS / "conventions.md").read_text(encoding="utf-8")
+    conventions = (DOCS / "reference" / "conventions.md").read_text(encoding="utf-8")
     effects = conventions[conventions.index("## Named effects"):]
     missing = [f"wire_formats.md: {module.__name__} fault {fault!r}"
                for module in (abb_acs580, modbus_plc, scanivalve_mps4264, vaisala_ptb330)

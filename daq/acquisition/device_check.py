@@ -72,7 +72,7 @@ class CheckLimits:
     Attributes
     ----------
     zero_tolerance_pa : float
-        Wind off, the median |p| over the taps and the Pitot's |p| must be below this, Pa.
+        Wind off, the median ``|p|`` over the taps and the Pitot's ``|p|`` must be below this, Pa.
         50 Pa lies above the zero offsets a scanner keeps between two CALZs (tens of Pa; the
         simulated scanner's are 10 Pa rms) and below the dynamic pressure of a test wind
         (q = 50 Pa at 9 m/s).
@@ -91,7 +91,7 @@ class CheckLimits:
     temperature_range_k : (float, float)
         A laboratory's air temperature, K (-10 to 50 degC).
     fan_stopped_rpm : float
-        The fan is stopped when |actual speed| is below this, rpm.
+        The fan is stopped when ``|actual speed|`` is below this, rpm.
     """
 
     zero_tolerance_pa: float = 50.0
@@ -523,7 +523,7 @@ def _barometer(check: _DeviceCheck, driver: Any, found: _Findings) -> None:
 def _fan(check: _DeviceCheck, driver: Any, found: _Findings) -> None:
     readings = check.polls(driver.read)
     speed = float(readings[-1].channels["speed"][0])
-    # The drive's own status (the fan role's ``status()``, docs/drivers.md): what its bits
+    # The drive's own status (the fan role's ``status()``, docs/guides/drivers.md): what its bits
     # mean is the driver's business (an ABB drive's differ from a PROFIdrive one's).
     status = driver.status()
     word = int(status.word)

@@ -38,7 +38,7 @@ def reached_tolerance_rpm(target_rpm: float) -> float:
     A drive regulates its speed to a fraction of a percent; 5 rpm lies well above the
     resolution of a fieldbus speed reference (an ABB drive's 20000 counts, or PROFIdrive's
     0x4000, over a maximum of 1500 rpm: 0.075 or 0.09 rpm) with room for the actual value's
-    noise. The speeds are the fan driver's, in rpm (docs/drivers.md); its scaling is its own.
+    noise. The speeds are the fan driver's, in rpm (docs/guides/drivers.md); its scaling is its own.
     """
     return max(0.01 * abs(target_rpm), 5.0)
 

@@ -10,7 +10,7 @@ snapshot, so a live source wrapping the acquisition's ring buffer is a drop-in r
 Only the new rows are read from the file at each poll; h5py objects never leave this module.
 
 Not responsible for: drawing (:mod:`daq.console.window`), or the file's layout
-(:mod:`daq.recording.layout`, ``docs/file_format.md``).
+(:mod:`daq.recording.layout`, ``docs/reference/file_format.md``).
 """
 
 from __future__ import annotations
@@ -107,7 +107,7 @@ class ReplaySource(RingSource):
             raise
 
     def _check_layout(self, f: h5py.File, where: str) -> None:
-        # What replay needs (docs/file_format.md, "What each command needs"): the sync view's
+        # What replay needs (docs/reference/file_format.md, "What each command needs"): the sync view's
         # scalar columns and a [section]; the pressures and a whole rig config are optional.
         try:
             if "entry/sync" not in f:
@@ -116,10 +116,10 @@ class ReplaySource(RingSource):
             missing = [name for name in SYNC_SCALARS if name not in sync]
             if missing:
                 raise ReplayError(f"{where}: has no /entry/sync/{', '.join(missing)}: replay "
-                                  f"needs {', '.join(SYNC_SCALARS)} (docs/file_format.md)")
+                                  f"needs {', '.join(SYNC_SCALARS)} (docs/reference/file_format.md)")
             if "entry/config" not in f:
                 raise ReplayError(f"{where}: has no /entry/config: replay needs the stored "
-                                  "rig config, or at least its [section] (docs/file_format.md)")
+                                  "rig config, or at least its [section] (docs/reference/file_format.md)")
             self._ds = {name: sync[name] for name in (*SYNC_SCALARS, "pressure") if name in sync}
             if all(name in sync for name in SWAY_SCALARS):  # a 3-DOF rig's run
                 self._ds.update({name: sync[name] for name in SWAY_SCALARS})

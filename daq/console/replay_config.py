@@ -2,7 +2,7 @@
 
 Responsibility: :func:`replay_config` returns the stored rig config when it is a whole one
 (:func:`daq.config.parse_rig_config`). A file written from the smallest run file of
-``docs/file_format.md`` stores only a ``[section]`` and has no pressures: it is replayed with
+``docs/reference/file_format.md`` stores only a ``[section]`` and has no pressures: it is replayed with
 a config for display built around that section (its traces, spectra and releases are all
 the console draws of it), and the note returned says so in the status line. A file that has
 pressures needs its stored ``[taps]`` to place them, so its config must be whole.
@@ -57,7 +57,7 @@ def replay_config(text: str, where: str, *, has_pressure: bool,
     section = data.get("section")
     if not isinstance(section, dict):
         raise ReplayError(f"{where}: has no [section]: replay needs at least the section "
-                          "model (docs/file_format.md)")
+                          "model (docs/reference/file_format.md)")
     if has_pressure:
         raise ReplayError(f"{where}: the stored rig config is invalid ({whole_error}); the "
                           "file's pressures need its [taps] to be drawn")

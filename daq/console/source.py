@@ -1,11 +1,11 @@
 """What the operator console reads: the data-source contract shared by replay and live.
 
 Responsibility: name the columns of the synchronised view as the console sees them (the same names,
-units and row shapes as ``/entry/sync`` of a run file, docs/file_format.md), and state the
+units and row shapes as ``/entry/sync`` of a run file, docs/reference/file_format.md), and state the
 :class:`DataSource` protocol that the console's GUI timer polls. A source is *polled* from the GUI
 thread: :meth:`DataSource.poll` moves it forward, :meth:`DataSource.snapshot` hands out copies
 shaped like :meth:`daq.console.ring_buffer.RingBuffer.snapshot`. Nothing is ever pushed to the GUI
-from another thread (docs/architecture.md, "Design rules").
+from another thread (docs/reference/architecture.md, "Design rules").
 
 Implementations: :class:`daq.console.replay.ReplaySource` (a recorded run played back in time),
 :class:`daq.console.live_source.LiveSource` (a rig acquired now; its ``poll`` only reports how far

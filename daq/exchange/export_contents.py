@@ -9,12 +9,12 @@ attributes (:func:`read_contents`).
 
 A file needs only ``/entry/sync`` (with ``time``) to be exported: the releases, events,
 calibrations and config it lacks are left out, each with a warning that says so (the smallest
-run file of ``docs/file_format.md`` has no events and no calibrations). A file being written
+run file of ``docs/reference/file_format.md`` has no events and no calibrations). A file being written
 (SWMR) or left by a crash is read as far as every column of the sync view goes.
 
 Not responsible for: the formats (:mod:`daq.exchange.export_writers`), the command
 (:mod:`daq.exchange.export_run`), the run file's layout (:mod:`daq.recording.layout`,
-``docs/file_format.md``).
+``docs/reference/file_format.md``).
 """
 
 from __future__ import annotations
@@ -165,7 +165,7 @@ def read_contents(path: str | os.PathLike[str]) -> RunContents:
     with handle as f:
         if "entry/sync/time" not in f:
             raise NotARunFileError(f"{path}: has no /entry/sync/time: not a windrig run file, "
-                                   "nothing to export (docs/file_format.md: the smallest run "
+                                   "nothing to export (docs/reference/file_format.md: the smallest run "
                                    "file)")
         warnings: list[str] = []
         columns, taps = _sync_columns(f["entry/sync"], path, warnings)
@@ -192,7 +192,7 @@ def _sync_columns(sync: h5py.Group, path: Path,
         if ds.id.get_create_plist().get_layout() == h5py.h5d.CHUNKED:
             ds.refresh()  # a file being written grows; rows not in every column are left out
     n = min(ds.shape[0] for ds in datasets.values())
-    # Rows sized but never written (a crash: docs/file_format.md, fill values) read as NaN
+    # Rows sized but never written (a crash: docs/reference/file_format.md, fill values) read as NaN
     # times at the end; they are no data, and windrig info does not count them either.
     finite = np.flatnonzero(np.isfinite(datasets["time"][:n]))
     written = int(finite[-1]) + 1 if finite.size else 0
@@ -255,7 +255,7 @@ def _events(f: h5py.File, path: Path, warnings: list[str]) -> dict[str, npt.NDAr
 def _calibrations(f: h5py.File) -> dict[str, dict[str, dict[str, Any]]]:
     """Each calibration group (NXparameters, or NXcollection before issue 37): values, attrs."""
     if "entry/calibration" not in f:
-        return {}  # files before issue 18: the defaults (docs/file_format.md); not a mistake
+        return {}  # files before issue 18: the defaults (docs/reference/file_format.md); not a mistake
     out = {}
     for name, group in f["entry/calibration"].items():
         if not isinstance(group, h5py.Group):

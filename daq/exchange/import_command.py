@@ -24,7 +24,7 @@ def add_parser(sub: Any) -> None:
     """Register the ``import`` subcommand on the subparsers ``sub`` of :mod:`daq.cli`."""
     p = sub.add_parser(
         "import", help="turn a lab's CSV, MATLAB (.mat v5/v7.3) or TDMS files into run files, "
-                       "through an import map (docs/importing.md)")
+                       "through an import map (docs/guides/import_export.md)")
     p.add_argument("sources", type=Path, nargs="+", metavar="SOURCE",
                    help="CSV, .mat or .tdms files (one run file per file, or per TDMS group)")
     p.add_argument("--map", type=Path, required=True, metavar="MAP.toml",

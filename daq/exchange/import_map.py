@@ -238,7 +238,7 @@ class TapsSpec:
 
 @dataclass(frozen=True)
 class ImportMap:
-    """A parsed import map (see the module docstring and ``docs/importing.md``)."""
+    """A parsed import map (see the module docstring and ``docs/guides/import_export.md``)."""
 
     path: Path
     text: str
@@ -434,7 +434,7 @@ def parse_import_map(path: str | Path) -> ImportMap:
     Parameters
     ----------
     path : str or Path
-        The map, TOML (``docs/importing.md``).
+        The map, TOML (``docs/guides/import_export.md``).
 
     Returns
     -------

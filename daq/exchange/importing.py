@@ -382,7 +382,7 @@ def import_sources(sources: Sequence[str | Path], map_path: str | Path, out_dir:
     sources : sequence of str or Path
         CSV, MATLAB (v5, v7.3) or TDMS files.
     map_path : str or Path
-        The import map (``docs/importing.md``).
+        The import map (``docs/guides/import_export.md``).
     out_dir : str or Path
         Where the run files go (created if missing); an existing file is never overwritten.
 

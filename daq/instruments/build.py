@@ -73,4 +73,4 @@ def poll_settings_problem(role: str, driver: Any, settings: Any) -> str | None:
     return (f"its settings set poll_interval_s = {own!r} but the driver "
             f"{type(driver).__name__} has no `settings` attribute holding them (found "
             f"{seen!r} there), so the engine would poll it at its default period; a polled "
-            "driver keeps its validated settings as `self.settings` (docs/drivers.md)")
+            "driver keeps its validated settings as `self.settings` (docs/guides/drivers.md)")

@@ -15,7 +15,7 @@ from typing import Any
 __all__ = ["ROLES", "DriverEntry"]
 
 #: The roles an instrument fills in a rig config (one table each, ``[[lasers]]`` an array);
-#: docs/drivers.md writes down what each role's driver must deliver.
+#: docs/guides/drivers.md writes down what each role's driver must deliver.
 ROLES = ("scanner", "lasers", "fan", "plc", "barometer", "analog")
 
 

@@ -147,7 +147,7 @@ def scanner_layout(driver: str, settings: Mapping[str, Any], where: str) -> tupl
     """Return a configured scanner's (channels per module, modules), from its ``describe()``.
 
     A scanner driver says how wide it is (``pressure`` has the channels of every module,
-    ``module_status`` one row per module, docs/drivers.md); the rig config's tap wiring asks
+    ``module_status`` one row per module, docs/guides/drivers.md); the rig config's tap wiring asks
     it here rather than assume any count. The driver is built on a link that refuses any use
     (construction and ``describe()`` do no I/O) and thrown away.
     """
@@ -159,7 +159,7 @@ def scanner_layout(driver: str, settings: Mapping[str, Any], where: str) -> tupl
         modules = int(tuple(described["module_status"]["shape"])[0])
     except (KeyError, IndexError, TypeError) as exc:
         raise ConfigError(f"{where}: scanner driver {driver!r} does not describe 'pressure' "
-                          "and 'module_status' as vectors (docs/drivers.md)") from exc
+                          "and 'module_status' as vectors (docs/guides/drivers.md)") from exc
     if modules < 1 or channels % modules:
         raise ConfigError(f"{where}: scanner driver {driver!r} describes {channels} pressure "
                           f"channels for {modules} module(s)")

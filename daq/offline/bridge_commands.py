@@ -3,14 +3,14 @@
 ``windrig bridge BRIDGE.json --aero MODEL.json|TABLE.csv`` reads the bridge model file
 (:class:`ident.bridge.model.BridgeModel`) and the deck section's aerodynamics: a rational-function
 model (what ``windrig identify --json`` writes, or ``{"A": ..., "d": ...}``: the same reading as
-``windrig flutter --model``) or a flutter-derivative table (``docs/flutter_derivative_tables.md``),
+``windrig flutter --model``) or a flutter-derivative table (``docs/reference/flutter_derivative_tables.md``),
 Roger-fitted for the state space with its relative error at every tabulated K reported. It
 prints the state-space flutter speed, frequency and participating modes, the frequency-domain
 check, and writes the JSON of DESIGN (``--json``) and the in-wind frequency and damping of every
 mode against U as a table and a plot (``--out``).
 
 ``--modes M1.csv M2.csv ...`` builds the bridge from plain mode tables
-(:mod:`ident.bridge.mode_tables`, ``docs/bridge.md``); BRIDGE.json then holds the deck data only
+(:mod:`ident.bridge.mode_tables`, ``docs/guides/bridge.md``); BRIDGE.json then holds the deck data only
 (``B``, ``rho``, ``name``, ``static``) and ``--write-bridge OUT.json`` writes the whole bridge model
 file. ``--buffeting U1,U2 --wind WIND.toml [--time-domain SECONDS]`` adds the buffeting response
 (:mod:`ident.bridge.buffeting`, :mod:`ident.bridge.buffeting_time`): RMS along the deck in the
@@ -65,7 +65,7 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--out", type=Path, default=None,
                    help="folder for the mode curves' table (CSV) and plot (PNG)")
     p.add_argument("--modes", type=Path, nargs="+", default=None, metavar="MODE.csv",
-                   help="build the bridge from mode tables (one CSV per mode, docs/bridge.md)")
+                   help="build the bridge from mode tables (one CSV per mode, docs/guides/bridge.md)")
     p.add_argument("--write-bridge", type=Path, default=None,
                    help="with --modes: write the whole bridge model file (JSON) here")
     p.add_argument("--buffeting", type=_speed_list, default=None, metavar="U1,U2,...",
@@ -77,7 +77,7 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--uncertainty", action="store_true",
                    help="carry the section's uncertainty to the flutter speed: delta method and "
                         "Monte Carlo from an identify JSON's model_covariance, Monte Carlo from "
-                        "a table's std columns (docs/bridge.md)")
+                        "a table's std columns (docs/guides/bridge.md)")
     p.add_argument("--samples", type=int, default=None,
                    help="Monte Carlo samples with --uncertainty (default 1000)")
     p.add_argument("--seed", type=int, default=None,

@@ -3,7 +3,7 @@
 Responsibility: :func:`derivative_rows` and :func:`format_derivative_table` give the flutter
 derivatives of a rational-function model (``H1*..A4*``, or with sway all 18 ``H1*..H6*,
 A1*..A6*, P1*..P6*`` in the order of :func:`ident.model.conventions.derivative_names`, Scanlan's
-signs of ``docs/conventions.md``) at a few reduced frequencies spanning what the releases
+signs of ``docs/reference/conventions.md``) at a few reduced frequencies spanning what the releases
 measured, one line per derivative; ``windrig identify`` prints it for a run of three degrees of
 freedom. :func:`check_model_dof` refuses a model with fewer degrees of freedom than its
 section, such as an identification that ignored the sway. :func:`write_derivative_table`
@@ -78,7 +78,7 @@ def format_derivative_table(model: RationalFunctionModel, K_span: npt.ArrayLike)
     (10, 'H1*')
     """
     K, values = derivative_rows(model, K_span)
-    lines = ["flutter derivatives (Scanlan's signs, docs/conventions.md):",
+    lines = ["flutter derivatives (Scanlan's signs, docs/reference/conventions.md):",
              f"{'K':>8}" + "".join(f"{k:>11.4f}" for k in K)]
     lines[1] += "   (1/K " + ", ".join(f"{1.0 / k:.3g}" for k in K) + ")"
     lines.extend(f"{name + '*':>8}" + "".join(f"{v:>11.4g}" for v in column)

@@ -172,12 +172,12 @@ def run_info(path: str | os.PathLike[str]) -> dict[str, Any]:
         raise NotARunFileError(f"{path}: HDF5 cannot open it (truncated?): {exc}") from exc
     with handle as f:
         try:
-            # The smallest run file (docs/file_format.md) has the sync view and no raw streams:
+            # The smallest run file (docs/reference/file_format.md) has the sync view and no raw streams:
             # info describes whatever else a file has, and says what it lacks.
             for part in ("entry/sync", "entry/sync/time"):
                 if part not in f:
                     raise NotARunFileError(f"{path}: has no /{part}: not a windrig run file "
-                                           "(docs/file_format.md, the smallest run file)")
+                                           "(docs/reference/file_format.md, the smallest run file)")
             return _describe(path, f)
         except NotARunFileError:
             raise
@@ -304,7 +304,7 @@ def format_info(info: dict[str, Any]) -> str:
           if (imp := info.get("imported")) else []),
         "section    " + (", ".join(f"{k} = {v}" for k, v in info["section"].items()) or "none"),
         *([f"missing    {', '.join(info['missing'])} (not needed by every command: "
-           "docs/file_format.md, the smallest run file)"] if info.get("missing") else []),
+           "docs/reference/file_format.md, the smallest run file)"] if info.get("missing") else []),
         f"sync view  {sync['rows']} rows"
         + (f" at {sync['rate_hz']:.6g} Hz, {sync['duration_s']:.3f} s" if sync["rate_hz"] else "")
         + (f", h finite in {sync['h_finite']:.1%}" if sync["h_finite"] is not None else "")

@@ -36,7 +36,7 @@ by :meth:`close` (which reopens the file without SWMR). A crash loses them (not 
 fits can be redone from the raw streams, which keep every host and device time stamp).
 
 The file's layout (groups, datasets, their types and fill values) is
-:mod:`daq.recording.layout`'s, described for readers in ``docs/file_format.md``; how a live
+:mod:`daq.recording.layout`'s, described for readers in ``docs/reference/file_format.md``; how a live
 reader follows the file, and opens one left by a crash: :mod:`daq.recording.swmr_file`.
 """
 
@@ -74,7 +74,7 @@ __all__ = ["RunRecorder"]
 
 
 class RunRecorder:
-    """Write one run to an HDF5 file laid out as docs/file_format.md (see module docstring).
+    """Write one run to an HDF5 file laid out as docs/reference/file_format.md (see module docstring).
 
     Parameters
     ----------
@@ -406,7 +406,7 @@ class RunRecorder:
             Its values (numbers, arrays, text), one dataset each (units in their names).
         attrs : mapping of str to str
             Group attributes: ``source``, ``date`` (ISO 8601) and ``configured``
-            (docs/file_format.md, "Calibrations").
+            (docs/reference/file_format.md, "Calibrations").
         """
         self._file.require("add_calibration", "declaring")
         check_name(name, "calibration name")

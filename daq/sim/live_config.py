@@ -46,7 +46,7 @@ def live_config_text(config: RigConfig, urls: Mapping[str, str],
     data_ports : mapping of str to int, optional
         The binary data port of each scanner, by name.
     note : str
-        Comment lines put at the top (each prefixed with ``# ``).
+        Comment lines put at the top (each prefixed with ``#`` and a space).
 
     Raises
     ------

@@ -1,6 +1,6 @@
 """Unwrapping of wrapping sample counters, and the gaps and backward steps they reveal.
 
-Responsibility (the synchronised view of docs/file_format.md): pure numerical code used by the
+Responsibility (the synchronised view of docs/reference/file_format.md): pure numerical code used by the
 run writer
 
 - :class:`CounterUnwrapper` / :func:`unwrap_counter` unwrap wrapping sample counters of any

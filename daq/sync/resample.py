@@ -1,6 +1,6 @@
 r"""Resampling of host-mapped device streams onto the uniform time base of the sync view.
 
-Responsibility (the synchronised view of docs/file_format.md): pure numerical code used by the
+Responsibility (the synchronised view of docs/reference/file_format.md): pure numerical code used by the
 run writer
 
 - :class:`Resampler` / :func:`resample` put several host-mapped streams (:class:`StreamSpec`)
@@ -12,7 +12,7 @@ arrays in and takes arrays out), nor mapping device times to host times (:mod:`d
 
 Conventions: SI units; times in seconds as float64. Host times are best passed relative to the run
 start (``(host_time_ns - run_start_ns) * 1e-9``): then the sync view's ``time`` is "s from run
-start" (docs/file_format.md).
+start" (docs/reference/file_format.md).
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 A driver (windrig's own, or a plugin's in its own distribution) tests itself with these:
 
-- :mod:`~daq.testing.contract`: the written contract of each role (docs/drivers.md) as code:
+- :mod:`~daq.testing.contract`: the written contract of each role (docs/guides/drivers.md) as code:
   the channels each role must deliver (:data:`ROLE_CHANNELS`), the methods its users call
   (:data:`ROLE_METHODS`), and the checks, as plain functions that return the problems found
   (:func:`entry_problems`, :func:`construction_problems`, :func:`reading_problems`,

@@ -1,4 +1,4 @@
-"""The driver contract of each role, as checks a driver's own tests run (docs/drivers.md).
+"""The driver contract of each role, as checks a driver's own tests run (docs/guides/drivers.md).
 
 Responsibility: what windrig's engine, device check, recorder, console and campaigns rely on,
 written once as data (:data:`ROLE_CHANNELS`, :data:`ROLE_METHODS`) and checked by plain
@@ -101,7 +101,7 @@ ROLE_CHANNELS: Mapping[str, Mapping[str, ChannelRule]] = {
 CLOCKED_ROLES = ("scanner", "lasers", "analog")
 
 #: The methods and attributes each role's users call (the engine, the device check, the
-#: console, the campaigns, CALZ): docs/drivers.md says who calls each and when.
+#: console, the campaigns, CALZ): docs/guides/drivers.md says who calls each and when.
 ROLE_METHODS: Mapping[str, tuple[str, ...]] = {
     "scanner": ("open", "close", "describe", "read", "start", "stop", "recover", "drain",
                 "note_pause", "recent_pressure_mean", "scan", "status", "serial_numbers", "rate_hz",

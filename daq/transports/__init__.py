@@ -7,5 +7,5 @@
 - :mod:`~daq.transports.scripted`: scripted byte exchanges and register calls for driver tests.
 
 Drivers receive a transport or a bus; they never open a port from a name
-(``docs/wire_formats.md``, "Transports and URLs").
+(``docs/reference/wire_formats.md``, "Transports and URLs").
 """

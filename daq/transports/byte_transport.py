@@ -4,7 +4,7 @@ Responsibility: move bytes with timeouts, and turn every low-level failure into 
 :class:`~daq.errors.TransportError` (or :class:`~daq.errors.TransportTimeout`). Not responsible for
 framing or protocols (the drivers), nor for Modbus (``daq.transports.modbus``, through pymodbus).
 
-URL schemes (docs/wire_formats.md, "Transports and URLs"):
+URL schemes (docs/reference/wire_formats.md, "Transports and URLs"):
 
 - ``serial:///dev/ttyUSB0?baudrate=921600&bytesize=7&parity=E&stopbits=1&xonxoff=1``: a serial
   port (also a pty's slave end, e.g. ``serial:///dev/pts/5``);
@@ -14,7 +14,7 @@ URL schemes (docs/wire_formats.md, "Transports and URLs"):
 - ``tcp://host:port``: a plain TCP client socket (the pressure scanner).
 
 Transports are created closed; :meth:`open` does the I/O. That keeps driver construction free of
-I/O (docs/architecture.md, "Design rules").
+I/O (docs/reference/architecture.md, "Design rules").
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 Responsibility: open a Modbus client from a URL, move coils, discrete inputs and holding
 registers with explicit 16-bit conversions, and turn every failure into one of windrig's
-exceptions (docs/architecture.md, "Design rules": one error channel):
+exceptions (docs/reference/architecture.md, "Design rules": one error channel):
 
 - an exception response (``.isError()``: the device answered with a Modbus exception code) is a
   :class:`ModbusDeviceError` (a :class:`~daq.errors.DeviceError`) carrying the code and its text;
@@ -20,13 +20,13 @@ sets an absolute value), so repeating a request whose reply was lost is safe.
 Not responsible for what the registers mean (the drivers), for scheduling polls, nor for byte
 transports of non-Modbus devices (:mod:`daq.transports.byte_transport`).
 
-URL schemes (docs/wire_formats.md, "Transports and URLs"):
+URL schemes (docs/reference/wire_formats.md, "Transports and URLs"):
 
 - ``modbus+tcp://host:port?unit=1`` (port 502 when omitted);
 - ``modbus+rtu:///dev/ttyUSB0?baudrate=19200&parity=E&bytesize=8&stopbits=1&unit=1``.
 
 Addresses are the zero-based addresses of the Modbus PDU ("holding register 40002 is addressed
-as 0001 in a Modbus message", docs/wire_formats.md, "Fan drive").
+as 0001 in a Modbus message", docs/reference/wire_formats.md, "Fan drive").
 """
 
 from __future__ import annotations
@@ -308,7 +308,7 @@ class ModbusBus:
     # -- lifecycle -----------------------------------------------------------------------------
     def _make_client(self) -> _Client:
         a = self.address
-        # retries=0: retrying is this layer's job only (docs/architecture.md, "Design rules").
+        # retries=0: retrying is this layer's job only (docs/reference/architecture.md, "Design rules").
         if a.kind == "tcp":
             return ModbusTcpClient(a.host, port=a.port, timeout=self._timeout_s, retries=0,
                                    name=self.url)

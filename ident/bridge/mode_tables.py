@@ -1,6 +1,6 @@
 """Mode shapes from plain CSV tables (one per mode, as a finite-element program exports them).
 
-A mode table is a CSV file (``docs/bridge.md``)::
+A mode table is a CSV file (``docs/guides/bridge.md``)::
 
     # frequency = 0.1046        (Hz, still air; required)
     # damping = 0.003           (ratio; default 0.003, recorded as a default)

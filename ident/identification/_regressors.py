@@ -1,7 +1,7 @@
 """Per-release regressors of the E2RFC least-squares problem.
 
 For a release at wind speed U the normalised generalised force ``f~ = [L B, M(, D B)] / (qd B^2)``
-obeys (``docs/conventions.md``, "In the time domain"; n = 2 or 3 degrees of freedom)::
+obeys (``docs/reference/conventions.md``, "In the time domain"; n = 2 or 3 degrees of freedom)::
 
     f~ = A1 q + A2 (B/U) q' + A3 (B/U)^2 q'' + sum_l A_{l+3} x_l,   x_l' = q' - (U/B) d_l x_l
 

@@ -112,14 +112,14 @@ ESTIMATOR_TURBULENT = "refined IV with the holds' noise model (turbulence branch
 #: A3 in the turbulence branch: "fitted-or-zero" (fitted; zero only when every structure with
 #: A3 fitted flutters below a wind speed where a release decayed), "fitted" always, "choose"
 #: (fitted or zero by held-out error with the lag count), or "e2rfc" as E2RFC's own choice on
-#: the same releases has it. docs/e2rfc_turbulence.md measures them: A3 zero lands at -99 %
+#: the same releases has it. docs/development/e2rfc_turbulence.md measures them: A3 zero lands at -99 %
 #: on some bluff-deck seeds whose held-out error prefers it, A3 fitted on some plate seeds
 #: whose every A3-fitted structure contradicts the data.
 TURBULENT_A3 = "fitted-or-zero"
 #: The turbulence branch's estimator: ``"ml"`` (closed-loop maximum likelihood of every release
 #: and hold together, :mod:`ident.identification.closed_loop_ml`; holds optional; two degrees of
 #: freedom) or ``"iv"`` (refined IV with the holds' noise model; needs a hold before every
-#: release), started from E2RFC's estimate. Measured in docs/e2rfc_turbulence.md on the
+#: release), started from E2RFC's estimate. Measured in docs/development/e2rfc_turbulence.md on the
 #: benchmark's turbulence rows: "ml" medians 1.5-4 times lower than refined IV's with holds and
 #: 3.6-25 times lower than plain E2RFC's without them, 94 % of the 2-std intervals covering,
 #: 7-12 s per identification with its uncertainty.

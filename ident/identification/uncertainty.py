@@ -29,7 +29,7 @@ How uncertain the flutter speed is (:meth:`IdentifiedModel.uncertainty`), from t
   it. The distance to that wind speed is the least error of such an estimate; it is added to
   the systematic part, with a warning. (Fitting each release only while its decay dominates,
   and instrumental variables with instruments from the predicted deterministic decay, were
-  measured and dropped: docs/e2rfc_turbulence.md.)
+  measured and dropped: docs/development/e2rfc_turbulence.md.)
 
 The refits of the extrapolation and one-lag-more parts never count below that same bound (a
 refit fluttering below a decaying release contradicts the data: it counts as fluttering

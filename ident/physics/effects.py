@@ -5,7 +5,7 @@ through :func:`ident.simulation.decay.simulate_decay`), which adds them to the s
 and by the discrepancy workflow (:mod:`ident.discrepancy.workflow`), which tries them as candidate
 explanations of a gap between an identified model and the measured releases. Each effect is a small
 validated dataclass with its own parameters, in SI units per unit span. The names are fixed
-(``docs/conventions.md``, "Named effects").
+(``docs/reference/conventions.md``, "Named effects").
 
 Four kinds: structural nonlinearities (``coulomb_friction``, ``quadratic_damping``,
 ``cubic_stiffness``), an aerodynamic nonlinearity that the pressure taps measure
@@ -458,7 +458,7 @@ class TubingDistortion(Effect):
         return cls(frequency_hz=wn / (2.0 * math.pi), damping=0.5 * a1 * wn)
 
 
-#: The named effects (docs/conventions.md, "Named effects"), mapped to their classes.
+#: The named effects (docs/reference/conventions.md, "Named effects"), mapped to their classes.
 EFFECT_NAMES: dict[str, type[Effect]] = {
     cls.name: cls
     for cls in (

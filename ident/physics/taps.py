@@ -3,7 +3,7 @@
 A tap is a point of the outline with an outward unit normal and a tributary length. The pressure
 ``p`` (Pa, relative to the free-stream static pressure) acts on the surface as ``-p n ds`` per unit
 span. Axes: ``x`` downstream along the chord, ``z`` downward (the direction of h), origin at the
-elastic axis. Then (Scanlan's signs, ``docs/conventions.md``, "Signs and coordinates")::
+elastic axis. Then (Scanlan's signs, ``docs/reference/conventions.md``, "Signs and coordinates")::
 
     L = -sum p_i nz_i ds_i              (positive downward)
     M =  sum (x_i dFz_i - z_i dFx_i)    (positive nose-up), with dF_i = -p_i n_i ds_i

@@ -1,6 +1,6 @@
 """Turbulent flow and the buffeting forces it exerts on a bridge-deck section (pure numerics).
 
-Model (``docs/conventions.md``, "Static coefficients and buffeting"; SI units):
+Model (``docs/reference/conventions.md``, "Static coefficients and buffeting"; SI units):
 
 - Gusts ``u`` (along-wind, positive downwind) and ``w`` (vertical, **positive upward**), zero-mean,
   independent of each other, with von Karman one-sided spectra (m^2/s^2 per Hz) at mean speed

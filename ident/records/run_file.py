@@ -1,4 +1,4 @@
-"""The one thin module through which :mod:`ident` reads run files (``docs/file_format.md``).
+"""The one thin module through which :mod:`ident` reads run files (``docs/reference/file_format.md``).
 
 It reads the synchronised view ``/entry/sync``, the releases table ``/entry/releases`` and the
 section model from the rig config stored verbatim in ``/entry/config``, and returns
@@ -66,7 +66,7 @@ __all__ = ["FileFormatError", "HOLD_GUARD_S", "HOLD_SETTLE_S", "HOLD_U_RTOL", "R
            "TUBING_LEAD_S", "campaign_section", "forces_recorded", "read_run", "tubing_note"]
 
 _SECTION_FIELDS = ("B", "m", "I", "fh", "fa", "zeta_h", "zeta_a", "S", "fp", "zeta_p", "m_p")
-#: Columns of ``/entry/sync`` a 3-DOF file has (docs/file_format.md).
+#: Columns of ``/entry/sync`` a 3-DOF file has (docs/reference/file_format.md).
 _SWAY_COLUMNS = ("p", "drag")
 #: Keys of a ``[taps]`` table that describe the layout (others: tubing, channels, ...).
 _LAYOUT_KEYS = {"shape", "B", "D", "taps_per_face", "n_taps", "vertices",
@@ -81,7 +81,7 @@ TUBING_TEMPERATURE_K = 293.15
 #: shakes it for a moment.
 HOLD_SETTLE_S = 0.25
 #: Seconds before ``release_time`` left out of the hold: the PLC acknowledges the release after
-#: the magnet lets go (the same 0.05 s as ``h0``'s median, docs/file_format.md).
+#: the magnet lets go (the same 0.05 s as ``h0``'s median, docs/reference/file_format.md).
 HOLD_GUARD_S = 0.05
 #: A hold row has the wind on when its ``U``, as a running median over :data:`HOLD_U_WINDOW_S`,
 #: is within this fraction of the release's.

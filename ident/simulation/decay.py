@@ -1,7 +1,7 @@
 """Free-vibration decays of a section model in the wind, with the named physical effects.
 
 A release starts from rest at ``(h0, alpha0)`` with all aerodynamic lag states at zero
-(``docs/conventions.md``, "In the time domain") and runs freely. The linear physics (structure plus
+(``docs/reference/conventions.md``, "In the time domain") and runs freely. The linear physics (structure plus
 Roger self-excited forces, plus static unbalance and the harmonic forcing of vortex shedding and
 of a base vibration, which stay linear) is
 advanced by its exact discretisation ``z[k+1] = expm(A dt) z[k]``. Structural nonlinearities
@@ -40,7 +40,7 @@ This is the noise-free physics shared by the virtual tunnel
 (:func:`simulators.tunnel.simulate_release` adds measurement noise and the held stretch before the
 release) and by the discrepancy workflow, which simulates an identified model, with candidate
 effects (:mod:`ident.physics.effects`), for every release. Units are SI throughout
-(``docs/conventions.md``, "Units").
+(``docs/reference/conventions.md``, "Units").
 """
 
 from __future__ import annotations

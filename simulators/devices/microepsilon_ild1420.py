@@ -5,7 +5,7 @@ Responsibility: behave on the wire like an ILD1420 looking down at the section m
 measuring rate on the sensor's own :class:`~simulators.clock.DeviceClock`, add seeded noise, encode
 blocks of 3-byte values (distance, then counter, timestamp, status ... as configured) and stream
 them in real time through pyserial's ``socket://`` (a TCP server on 127.0.0.1) or a pty pair; answer
-the ASCII commands the driver uses; inject the lasers' faults (``docs/wire_formats.md``, "Faults the
+the ASCII commands the driver uses; inject the lasers' faults (``docs/reference/wire_formats.md``, "Faults the
 simulators inject"); and keep a truth record of every sample (what was measured and whether it
 reached the wire intact) so tests can prove that nothing was lost that the simulator did not drop.
 
@@ -14,7 +14,7 @@ Not responsible for: line timing (neither transport limits the byte rate; blocks
 never imports :mod:`daq`: its encoder is written here from the manual facts, independently of the
 driver's decoder).
 
-Wire facts (``docs/wire_formats.md``, "Laser displacement sensors"): values are 18-bit words sent as
+Wire facts (``docs/reference/wire_formats.md``, "Laser displacement sensors"): values are 18-bit words sent as
 ``L = 00 D5..D0``, ``M = 01 D11..D6``, ``H = 1 f D17..D12`` with ``f = 0`` for the first value of a
 block (the distance) and 1 for the others; distance ``x = (100 d / MR + 1) 65520 / 102`` (16 bits),
 with mastering ``x = (100 d / MR + 51) 65520 / 102`` (18 bits); error values 262075..262082 in the
@@ -340,7 +340,7 @@ class SimMicroEpsilonIld1420:
 
     # -- faults -------------------------------------------------------------------------------
     def inject(self, fault: str, **params: Any) -> None:
-        r"""Schedule a fault (``docs/wire_formats.md``, "Faults the simulators inject").
+        r"""Schedule a fault (``docs/reference/wire_formats.md``, "Faults the simulators inject").
 
         Faults and their parameters:
 

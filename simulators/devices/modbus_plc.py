@@ -1,9 +1,9 @@
 """Simulated release/trigger PLC (Modbus TCP coils, discrete input, register) at 127.0.0.1.
 
-Responsibility: the PLC of ``docs/wire_formats.md``, "Release and trigger PLC over Modbus", on a
+Responsibility: the PLC of ``docs/reference/wire_formats.md``, "Release and trigger PLC over Modbus", on a
 pymodbus TCP server: coils ARM, RELEASE and DAQ_TRIGGER, the discrete input RELEASED (the armature's
 limit switch) and the holding register TRIGGER_COUNT, wired to the virtual tunnel's magnet and
-trigger line; and the PLC's faults (``docs/wire_formats.md``, "Faults the simulators inject"): a
+trigger line; and the PLC's faults (``docs/reference/wire_formats.md``, "Faults the simulators inject"): a
 release that never happens (RELEASED never set: the driver must time out) and a disconnect. Not
 responsible for the driver side (``daq.instruments.modbus_plc.driver``); imports nothing from
 ``daq``.
@@ -145,7 +145,7 @@ class SimModbusPlc(ModbusSimulator):
 
     # -- faults ----------------------------------------------------------------------------------
     def inject(self, fault: str, **params: Any) -> None:
-        """Switch a fault on (``docs/wire_formats.md``, "Faults the simulators inject").
+        """Switch a fault on (``docs/reference/wire_formats.md``, "Faults the simulators inject").
 
         Parameters
         ----------

@@ -1,9 +1,9 @@
 """Simulated Vaisala PTB330-class barometer: the RS-232 ASCII protocol over socket:// or a pty.
 
 Responsibility: answer the barometer's serial commands from the manual facts
-(``docs/wire_formats.md``, "Barometer"), produce its measurement lines from the virtual tunnel's air
+(``docs/reference/wire_formats.md``, "Barometer"), produce its measurement lines from the virtual tunnel's air
 (pressure and temperature, plus the instrument's own slow drift and seeded noise), and inject the
-barometer's faults (garbled or partial line, no reply, unit change: ``docs/wire_formats.md``,
+barometer's faults (garbled or partial line, no reply, unit change: ``docs/reference/wire_formats.md``,
 "Faults the simulators inject"), keeping truth counters so tests can tell what the simulator dropped
 from what a driver lost. Not responsible for: anything the driver does (this module shares no code
 with ``daq``: it encodes the wire format with its own implementation, which the HIL tests
@@ -55,7 +55,7 @@ from simulators.virtual_tunnel import VirtualTunnel
 
 __all__ = ["FAULTS", "SimVaisalaPtb330", "TruthLine"]
 
-#: The barometer's faults (docs/wire_formats.md, "Faults the simulators inject").
+#: The barometer's faults (docs/reference/wire_formats.md, "Faults the simulators inject").
 FAULTS = ("garbled", "partial", "no_reply", "unit_change")
 _LINE_FAULTS = ("garbled", "partial", "no_reply")
 
@@ -274,7 +274,7 @@ class SimVaisalaPtb330:
 
     # -- test interface -------------------------------------------------------------------------
     def inject(self, fault: str, count: int = 1, **params: Any) -> None:
-        """Inject a fault (``docs/wire_formats.md``, "Faults the simulators inject").
+        """Inject a fault (``docs/reference/wire_formats.md``, "Faults the simulators inject").
 
         Parameters
         ----------

@@ -3,7 +3,7 @@
 The simulator encodes from the manual facts with its own code; the driver decodes with its own;
 these tests cross-check the two and prove, with the simulator's truth record, that every sample
 the simulator put on the wire intact arrives, with its value, counter, device time and trigger
-flag, and that each fault of docs/wire_formats.md, "Faults") is recovered from or raised.
+flag, and that each fault of docs/reference/wire_formats.md, "Faults") is recovered from or raised.
 Only ``test_full_rate_for_10_s_loses_no_frame`` is long (10 s, required by the issue); the
 clock drift test reads 3 s.
 """

@@ -1,7 +1,7 @@
 """Scanivalve MPS4264 driver against its simulator over real TCP connections on 127.0.0.1.
 
 One full-rate test (64 taps at 500 Hz for 10 s, the issue's requirement); every fault of the
-docs/wire_formats.md, "Faults") in a short test of its own. The simulator's truth
+docs/reference/wire_formats.md, "Faults") in a short test of its own. The simulator's truth
 counters (frames sent and dropped, with the reason) are the reference for "no frame lost that
 the simulator did not drop".
 """

@@ -1,8 +1,8 @@
 """PTB330 driver against its simulator over real transports (pyserial socket:// and a pty).
 
 The driver (daq/) and the simulator (simulators/) encode and decode the wire format with separate
-code; agreement here cross-checks both against the manual facts of docs/wire_formats.md,
-"Barometer". Faults are the barometer's of docs/wire_formats.md, "Faults": garbled/partial line,
+code; agreement here cross-checks both against the manual facts of docs/reference/wire_formats.md,
+"Barometer". Faults are the barometer's of docs/reference/wire_formats.md, "Faults": garbled/partial line,
 no reply, unit change.
 """
 

@@ -41,7 +41,7 @@ def heave_peaks(effect, *, section=UNDAMPED, h0=0.005, duration=8.0, fs=2000.0):
 
 
 def test_the_design_names_are_all_there():
-    """The effect registry holds exactly the names of docs/conventions.md."""
+    """The effect registry holds exactly the names of docs/reference/conventions.md."""
     assert set(EFFECT_NAMES) == {
         "coulomb_friction", "quadratic_damping", "cubic_stiffness", "channel_delay",
         "vortex_shedding", "static_unbalance", "sensor_crosstalk", "base_vibration",

@@ -9,7 +9,7 @@ whose stored reference is above the limit. It writes only the Control Word and R
 only the four registers of its ``registers`` table. Not responsible for Modbus transport, retries or
 error normalisation (the bus), nor for turning wind speed into fan speed.
 
-Facts implemented (docs/wire_formats.md, "Fan drive", and the ABB Drives profile tables of the
+Facts implemented (docs/reference/wire_formats.md, "Fan drive", and the ABB Drives profile tables of the
 ACS580 firmware manual "Contents of the fieldbus Control word / Status word", FDNA-01 manual p.91,
 FPBA-01 manual p.113, ACS880 manual p.635):
 
@@ -19,7 +19,7 @@ FPBA-01 manual p.113, ACS880 manual p.635):
 - SW bits 0 RDY_ON, 1 RDY_RUN, 2 RDY_REF, 3 TRIPPED (a wind tunnel's published register map names
   them; the positions come from the ABB Drives profile Status word tables cited above), 4 OFF_2_STA,
   5 OFF_3_STA, 6 SWC_ON_INHIB, 7 ALARM, 8 AT_SETPOINT, 9 REMOTE, 10 ABOVE_LIMIT;
-- Reference 1 is a signed word, 0..+/-20000 scaled to the maximum speed (docs/wire_formats.md, "Fan
+- Reference 1 is a signed word, 0..+/-20000 scaled to the maximum speed (docs/reference/wire_formats.md, "Fan
   drive");
 - Actual 1 is the speed with the same 20000 = maximum-speed scaling. [unverified] The drive manuals
   call ACT1 "selectable, e.g. speed": its source and scaling are drive parameters, so the rig must
@@ -248,7 +248,7 @@ class AbbAcs580:
         rpm : float
             Expected speed, rpm.
         tolerance_rpm : float
-            Accepted |actual - rpm|, rpm (> 0).
+            Accepted ``|actual - rpm|``, rpm (> 0).
         timeout_s : float, optional
             Time allowed, s; default: the ramp time at ``ramp_rpm_per_s`` from the current
             speed, times 1.5, plus 2 s.

@@ -8,7 +8,7 @@ values (counter, timestamp, status, exposure, intensity) into :class:`Ild1420Sam
 Not responsible for: unwrapping the counter and timestamp or marking gaps
 (:mod:`daq.instruments.microepsilon_ild1420.blocks`), or the line itself
 (:mod:`daq.instruments.microepsilon_ild1420.driver`). The wire format is described in
-``docs/wire_formats.md``.
+``docs/reference/wire_formats.md``.
 """
 
 from __future__ import annotations
@@ -116,7 +116,7 @@ class Ild1420Decoder:
     Feed it bytes in chunks of any size; it returns the samples of every complete block and keeps
     the bytes of an unfinished one. A block is ``3 x values`` bytes whose top two bits follow the
     pattern ``00 01 10`` (first value: distance, ``f = 0``) then ``00 01 11`` for each additional
-    value (docs/wire_formats.md, "Laser displacement sensors"). A byte that breaks the pattern
+    value (docs/reference/wire_formats.md, "Laser displacement sensors"). A byte that breaks the pattern
     (lost or inserted byte, a start mid-block) makes it skip forward to the next position where a
     whole block pattern starts; the skipped bytes are counted. It never raises on any input and
     always consumes what it is given.

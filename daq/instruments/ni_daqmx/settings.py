@@ -143,7 +143,7 @@ class NiLaserSettings:
     rate_hz : float
         The task's sample rate, Hz (every instrument of one task gives the same).
     x, z, standoff_mm, axis
-        Where the laser looks, as every laser of the rig config (docs/calibration.md): chord
+        Where the laser looks, as every laser of the rig config (docs/guides/calibration.md): chord
         position ``x`` (m, vertical laser), spot height ``z`` (m, sway laser), the reading at
         rest (mm) and ``vertical`` or ``sway``.
     """

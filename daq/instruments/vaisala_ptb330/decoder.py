@@ -9,7 +9,7 @@ plausible ranges (:data:`PRESSURE_RANGE_PA`, :data:`TEMPERATURE_RANGE_K`).
 
 Not responsible for: polling the instrument or recovering its line
 (:mod:`daq.instruments.vaisala_ptb330.driver`). The wire format is described in
-``docs/wire_formats.md``.
+``docs/reference/wire_formats.md``.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ __all__ = ["MAX_LINE_BYTES", "PRESSURE_RANGE_PA", "PRESSURE_UNITS_PA", "TEMPERAT
 #: Pascals per unit of every pressure unit the decoder accepts (PTB330 Table 13 lists hPa, psi,
 #: inHg, torr, bar, mbar, mmHg, kPa, Pa, mmH2O, inH2O; the water columns are refused, see the module
 #: docstring). mmHg and inHg are the conventional units (13.5951 g/cm^3, g_n), psi the pound-force
-#: per square inch; 'psia' is how the PTB200 names it (docs/wire_formats.md, "Barometer").
+#: per square inch; 'psia' is how the PTB200 names it (docs/reference/wire_formats.md, "Barometer").
 PRESSURE_UNITS_PA: Mapping[str, float] = {
     "Pa": 1.0,
     "hPa": 100.0,

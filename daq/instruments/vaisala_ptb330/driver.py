@@ -8,12 +8,12 @@ set to (:mod:`daq.instruments.vaisala_ptb330.decoder`), and turn every failure i
 (the caller builds the transport, with :data:`SERIAL_DEFAULTS` as line defaults), scheduling
 acquisition threads, or recording (the driver only returns readings).
 
-Wire format (docs/wire_formats.md, "Barometer", manual facts cited inline):
+Wire format (docs/reference/wire_formats.md, "Barometer", manual facts cited inline):
 
 - line settings 9600 baud, 7 data bits, even parity, 1 stop bit, XON/XOFF (a published PTB330
   integration); commands are ASCII terminated by a carriage return (``<cr>`` in the manuals);
 - the driver sets the output format (``FORM``) to :data:`FORM_STRING`, which makes each reply a
-  PTU300-style line (docs/wire_formats.md, "Barometer", PTU300 p.103)::
+  PTU300-style line (docs/reference/wire_formats.md, "Barometer", PTU300 p.103)::
 
       P=  1013.250 hPa    T= 21.34 'C <CR><LF>
 
@@ -23,7 +23,7 @@ Wire format (docs/wire_formats.md, "Barometer", manual facts cited inline):
   The temperature quantity of the PTB330 is ``TP1`` (barometer module 1; PTB330 Table 13);
   a PTU300 calls it ``T``: subclass and override :attr:`VaisalaPtb330.FORM_STRING`;
 - the pressure unit is read from every line (the instrument's ``UNIT`` can be changed on its display
-  or serial port at any time: the "unit change" fault of docs/wire_formats.md), and the value is
+  or serial port at any time: the "unit change" fault of docs/reference/wire_formats.md), and the value is
   converted with :data:`PRESSURE_UNITS_PA`; an unknown unit is a :class:`ProtocolError`, never a
   silently wrong number. ``mmH2O``/``inH2O`` are refused on purpose (their reference temperature is
   not stated in the line).
@@ -64,7 +64,7 @@ _DTYPES = {"pressure": "float64", "temperature": "float64", "density": "float64"
 
 logger = logging.getLogger(__name__)
 
-#: Serial line defaults (docs/wire_formats.md, "Barometer": "9600 baud, 7 data bits, even parity, 1
+#: Serial line defaults (docs/reference/wire_formats.md, "Barometer": "9600 baud, 7 data bits, even parity, 1
 #: stop bit, XON/XOFF"); the query of a ``serial://`` URL overrides them (``open_transport(url,
 #: **these)``).
 SERIAL_DEFAULTS: Mapping[str, Any] = {

@@ -1,4 +1,4 @@
-"""Driver of a Scanivalve DSA3217-class scanner: the scanner role of windrig (docs/drivers.md).
+"""Driver of a Scanivalve DSA3217-class scanner: the scanner role of windrig (docs/guides/drivers.md).
 
 One TCP connection (the unit's Telnet port, 23) carries both the ASCII commands and, once
 ``SCAN`` is sent with ``FORMAT B``, the binary packets (:mod:`windrig_dsa3217.packets`).
@@ -50,7 +50,7 @@ class Dsa3217:
         Validated settings, or a rig-config table to validate.
     """
 
-    #: No trigger input with a time stamp: ``trigger_time`` is NaN (docs/drivers.md).
+    #: No trigger input with a time stamp: ``trigger_time`` is NaN (docs/guides/drivers.md).
     trigger_input = False
 
     def __init__(self, transport: Any, settings: Dsa3217Settings | Mapping[str, Any]) -> None:

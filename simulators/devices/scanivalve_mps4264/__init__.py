@@ -1,4 +1,4 @@
-"""The simulated Scanivalve MPS4264-class pressure scanner (``docs/wire_formats.md``).
+"""The simulated Scanivalve MPS4264-class pressure scanner (``docs/reference/wire_formats.md``).
 
 - :mod:`~simulators.devices.scanivalve_mps4264.scanner`: :class:`SimScanivalveMps4264`, the
   device: its ASCII commands, CALZ, scans, frames from the virtual tunnel, and faults;

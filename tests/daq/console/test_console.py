@@ -1,7 +1,7 @@
 """The operator console on a replayed run file (pytest-qt, offscreen).
 
 The run file is written by the real recorder (:class:`daq.recording.recorder.RunRecorder`, the
-layout of docs/file_format.md) with synthetic rows whose values are known: h a 2 Hz sinusoid,
+layout of docs/reference/file_format.md) with synthetic rows whose values are known: h a 2 Hz sinusoid,
 alpha 3.3 Hz, a slowly rising wind, tap pressures of a fixed Cp distribution scaled by qd.
 """
 

@@ -2,7 +2,7 @@
 
 A live simulated rig (``sim_flat_plate.toml`` with a fast fan ramp, as ``test_console_live.py``)
 is recorded from the control panel's recording row while the operator arms and releases the model;
-the file is then read back with h5py (the docs/file_format.md layout) and with
+the file is then read back with h5py (the docs/reference/file_format.md layout) and with
 :func:`ident.records.run_file.read_run`.
 A second rig checks the refusals (each shown by the panel), a disk that fills up during a
 recording (the recording stops with its error, the live view goes on) and closing the console

@@ -1,4 +1,4 @@
-"""``gui --replay`` of the smallest run file of docs/file_format.md (offscreen Qt).
+"""``gui --replay`` of the smallest run file of docs/reference/file_format.md (offscreen Qt).
 
 Before issue 37 the replay refused it ("object 'pressure' doesn't exist"). A file with the
 sync view's scalar columns and a ``[section]`` now plays its traces, with NaN pressures and a
@@ -54,7 +54,7 @@ def test_a_missing_part_is_named(tmp_path, capsys, omit, message):
     assert main(["gui", "--replay", str(path), "--screenshot", str(tmp_path / "x.png"),
                  "--after", "0"]) == 2
     err = capsys.readouterr().err
-    assert err == f"error: {path}: {message} (docs/file_format.md)\n"
+    assert err == f"error: {path}: {message} (docs/reference/file_format.md)\n"
 
 
 def test_pressures_without_a_whole_rig_config_are_refused(tmp_path):

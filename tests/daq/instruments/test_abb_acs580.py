@@ -1,6 +1,6 @@
 """The ABB drive driver: settings, scaling, the CW sequences and SW decoding, register by register.
 
-Register words from docs/wire_formats.md, "Fan drive" (CW 0x0476 / 0x047F / 0x0000, REF1
+Register words from docs/reference/wire_formats.md, "Fan drive" (CW 0x0476 / 0x047F / 0x0000, REF1
 0..20000 = max speed) and the
 ABB Drives profile Status word table (FDNA-01 manual p.91: bit 0 RDY_ON, 1 RDY_RUN, 2 RDY_REF,
 3 TRIPPED, 4 OFF_2_STA, 5 OFF_3_STA, 6 SWC_ON_INHIB, 8 AT_SETPOINT, 9 REMOTE).

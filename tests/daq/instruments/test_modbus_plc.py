@@ -1,6 +1,6 @@
 """The PLC driver: settings, and the coil / input / register sequences of arm, release, trigger.
 
-Signals from docs/wire_formats.md, "PLC": coil RELEASE (FC05), discrete
+Signals from docs/reference/wire_formats.md, "PLC": coil RELEASE (FC05), discrete
 input RELEASED (FC02), coil DAQ_TRIGGER (FC05), holding register TRIGGER_COUNT (FC03); the ARM
 coil and the edge semantics are windrig's [design] (daq/instruments/modbus_plc/driver.py docstring).
 """

@@ -1,6 +1,6 @@
 """Flat-plate truth case: Theodorsen's function, closed-form flutter derivatives, Jones's RFCs.
 
-The closed-form flutter derivatives are those of ``docs/conventions.md``, "The analytic truth";
+The closed-form flutter derivatives are those of ``docs/reference/conventions.md``, "The analytic truth";
 R. T. Jones's rational approximation makes the plate an exact Roger model.
 
 Every expectation here is computed in the test itself, from Bessel functions (scipy.special.jv, yv,
@@ -29,13 +29,13 @@ def theodorsen_from_bessel(k):
 
 
 def jones_from_formula(p):
-    """R. T. Jones: C(p) = 1 - 0.165 p/(p + 0.091) - 0.335 p/(p + 0.6) (docs/conventions.md)."""
+    """R. T. Jones: C(p) = 1 - 0.165 p/(p + 0.091) - 0.335 p/(p + 0.6) (docs/reference/conventions.md)."""
     p = np.asarray(p, dtype=complex)
     return 1.0 - 0.165 * p / (p + 0.091) - 0.335 * p / (p + 0.6)
 
 
 def design_flutter_derivatives(K, C):
-    """Evaluate the eight flat-plate formulas of docs/conventions.md, C = F + iG."""
+    """Evaluate the eight flat-plate formulas of docs/reference/conventions.md, C = F + iG."""
     K = np.asarray(K, dtype=float)
     F, G = C.real, C.imag
     return {
@@ -51,7 +51,7 @@ def design_flutter_derivatives(K, C):
 
 
 def Q_by_hand(K, fd):
-    """Q(iK) = K^2 [[H4 + i H1, H3 + i H2], [A4 + i A1, A3 + i A2]] (docs/conventions.md)."""
+    """Q(iK) = K^2 [[H4 + i H1, H3 + i H2], [A4 + i A1, A3 + i A2]] (docs/reference/conventions.md)."""
     K = np.asarray(K, dtype=float)
     Q = np.empty(K.shape + (2, 2), dtype=complex)
     Q[:, 0, 0] = fd["H4"] + 1j * fd["H1"]
