@@ -29,7 +29,7 @@ SECONDS = 10.0
 
 
 def stream(n: int, seed: int = 0) -> bytes:
-    """Encode n blocks (docs/reference/wire_formats.md, "Laser displacement sensors"): L, M, H bytes."""
+    """Encode n blocks as L, M, H bytes (docs/reference/wire_formats.md, "Laser")."""
     rng = np.random.default_rng(seed)
     k = np.arange(n)
     ticks = 25 * k + 123456

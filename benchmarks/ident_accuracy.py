@@ -36,26 +36,26 @@ E2RFC then runs its turbulence branch (refined IV with the holds' noise model,
 their holds taken away (today's estimator), ``both`` prints the two; ``--rows turbulent|clean`` runs
 a subset;
 ``--turbulent-motion filter|smoother|smoother-sg`` selects how the branch builds its regressors'
-motion (``ident.identification._turbulent_fit.MOTION``; docs/development/e2rfc_turbulence.md measures the
-three); ``--turbulent-estimator ml`` runs the closed-loop maximum-likelihood branch instead
-(``ident.identification.closed_loop_ml``; with and without holds). The "branch" column counts
-the identifications the turbulence branch (either) ran.
+motion (``ident.identification._turbulent_fit.MOTION``; docs/development/e2rfc_turbulence.md
+measures the three); ``--turbulent-estimator ml`` runs the closed-loop maximum-likelihood branch
+instead (``ident.identification.closed_loop_ml``; with and without holds). The "branch" column
+counts the identifications the turbulence branch (either) ran.
 
 Printed per row: the median and 90th percentile of |error|, the coverage of the 2-std interval
 (``IdentifiedModel.flutter``'s std: noise, structure, extrapolation, one lag more, release
 scatter, below a decaying release), the median std, the median time of identification plus
 uncertainty, and the count of identifications without flutter below the searched speeds
 (counted as not covered); then the coverage over all rows. ``benchmarks/flutter_crb.py`` gives
-the Cramer-Rao bound of the turbulence rows; docs/development/e2rfc_turbulence.md the table before and
-after, and the estimators tried.
+the Cramer-Rao bound of the turbulence rows; docs/development/e2rfc_turbulence.md the table before
+and after, and the estimators tried.
 
 Run: ``.venv/bin/python benchmarks/ident_accuracy.py [--seeds 20] [--workers 2] [--part all]
 [--tunnel-mode after|before|both] [--rows all|turbulent|clean]``;
 ``--part timing [--repeats 9]`` prints only the timing table. BLAS is kept single-threaded in
 every process, so the times are one-core times. The timing table gives wall and CPU time
 (``time.process_time``), minimum and median over the repeats: the host is shared, and the CPU
-time is what the identification itself costs (docs/development/e2rfc_speed.md: the times before and after
-the speed work, and what it changed).
+time is what the identification itself costs (docs/development/e2rfc_speed.md: the times before and
+after the speed work, and what it changed).
 """
 
 from __future__ import annotations

@@ -20,8 +20,8 @@ model's lag roots, given (oracle). ``oracle`` mode: the true lag roots and the A
 TRUE residual, on many releases pooled, with the whitened residual's correlation with each
 regressor (the consistency condition).
 
-Result (docs/development/e2rfc_turbulence.md, "Iterated GLS"): GLS as proposed is not consistent: whitened
-q' and q'' stay correlated with the whitened innovation (0.1-0.15 and 0.2-0.3: velocity and
+Result (docs/development/e2rfc_turbulence.md, "Iterated GLS"): GLS as proposed is not consistent:
+whitened q' and q'' stay correlated with the whitened innovation (0.1-0.15 and 0.2-0.3: velocity and
 acceleration respond to the current force at once, and the narrow-band whitened regressors
 carry little variance beside the broad-band innovation), flutter speed -99 %, and -58 % with
 the true lag roots and noise model, unchanged from 6 to 144 releases. Refined IV with the

@@ -139,7 +139,8 @@ class RigConfig:
     """A validated rig configuration (see the module docstring).
 
     ``calibration`` holds the optional calibrations (tap wiring and dead taps, Pitot, lasers,
-    humid air, span; :mod:`daq.calibration`, docs/guides/calibration.md): the defaults change nothing.
+    humid air, span; :mod:`daq.calibration`, docs/guides/calibration.md): the defaults change
+    nothing.
     """
 
     name: str

@@ -93,7 +93,8 @@ def write_pages(out: Path) -> None:
     wanted = {f"{m}.rst": _page(m) for m in public_modules()}
     index = ["API reference", "=============", "",
              "One page per public module, from its docstrings (numpydoc). Units are SI unless a "
-             "docstring says otherwise; the conventions are those of :doc:`/reference/conventions`.",
+             "docstring says otherwise; the conventions are those of "
+             ":doc:`/reference/conventions`.",
              ""]
     for package in PACKAGES:
         index += [TITLES[package], "-" * len(TITLES[package]), "", ".. toctree::",
@@ -103,5 +104,5 @@ def write_pages(out: Path) -> None:
         path = out / name
         if not path.exists() or path.read_text(encoding="utf-8") != text:
             path.write_text(text, encoding="utf-8")  # unchanged pages keep their time stamps
-    for stale in set(p.name for p in out.glob("*.rst")) - set(wanted):
+    for stale in {p.name for p in out.glob("*.rst")} - set(wanted):
         (out / stale).unlink()

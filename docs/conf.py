@@ -51,4 +51,5 @@ numpydoc_class_members_toctree = False
 
 
 def setup(app):  # noqa: ANN001, ANN201 - Sphinx's hook
+    """Write the API pages before each build (:func:`_apiref.write_pages`)."""
     app.connect("builder-inited", lambda app: _apiref.write_pages(HERE / "reference" / "api"))

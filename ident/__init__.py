@@ -9,8 +9,8 @@ self-excited forces ``f = rho U^2 / 2 B^2 Q(p) q`` with Roger's rational form of
 This package imports nothing from :mod:`daq`; it reads recorded files through one thin module only
 (:mod:`ident.records.run_file`).
 
-Its subpackages form layers, bottom first (``docs/reference/architecture.md``; a module imports from its
-own layer and the layers below):
+Its subpackages form layers, bottom first (``docs/reference/architecture.md``; a module imports from
+its own layer and the layers below):
 
 1. :mod:`ident.errors` and :mod:`ident.numerics`: exceptions, input checks, small solvers;
 2. :mod:`ident.model`: the section, the conventions, Roger's form, the flutter analysis;

@@ -45,9 +45,9 @@ MAX_DAQ_TOP_LEVEL_MODULES = 8
 #: Top-level packages whose ``__init__`` re-exports public names (their subpackages' do not).
 FACADES = ("ident", "simulators")
 
-#: daq's layers, bottom first (``docs/reference/architecture.md``): a module may import from its own layer
-#: and from the layers below. ``daq.instruments.build`` (a configured instrument's driver) sits
-#: above the rig config, which validates instrument tables through the driver registry.
+#: daq's layers, bottom first (``docs/reference/architecture.md``): a module may import from its own
+#: layer and from the layers below. ``daq.instruments.build`` (a configured instrument's driver)
+#: sits above the rig config, which validates instrument tables through the driver registry.
 DAQ_LAYERS: tuple[tuple[str, ...], ...] = (
     ("daq.errors", "daq.validation", "daq.log_file", "ident"),
     ("daq.transports",),

@@ -13,11 +13,11 @@ releases at a candidate speed ``U_c`` add the information ``n J_c^T J_c``, where
 weighted Jacobian of E2RFC's force residuals for the release the identified model predicts there:
 its decay simulated from the campaign's hold position
 (:func:`ident.simulation.decay.simulate_decay`), the regressors ``q, (B/U) q', (B/U)^2 q'', x_l`` of
-``docs/reference/conventions.md`` computed from it, each force row weighted by ``qd B^2 / sigma`` (the force
-noise ``sigma``, N/m and N m/m, measured on the recorded releases and taken as independent of U: the
-scanner's). The same construction for the recorded releases gives ``I_0 = sum_r J_r^T J_r``; its
-prediction of today's variance is scaled to the identified one (``kappa``), so only ratios of
-information matter::
+``docs/reference/conventions.md`` computed from it, each force row weighted by ``qd B^2 / sigma``
+(the force noise ``sigma``, N/m and N m/m, measured on the recorded releases and taken as
+independent of U: the scanner's). The same construction for the recorded releases gives ``I_0 =
+sum_r J_r^T J_r``; its prediction of today's variance is scaled to the identified one (``kappa``),
+so only ratios of information matter::
 
     var_new(U_c) = kappa g^T (I_0 + n J_c^T J_c)^+ g,  kappa = sigma_param^2 / (g^T I_0^+ g)
 

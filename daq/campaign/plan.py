@@ -18,7 +18,8 @@ The plan (units SI; the example plans are ``rig_configs/plans/*.toml``)::
     pause_s = 0.0               # extra wait between releases, s
     hold_s = 0.5                # held in the wind between arming and releasing, s; in
                                 # turbulence 11: E2RFC's turbulence branch takes its noise
-                                # model from >= 10 s of each hold (docs/development/e2rfc_turbulence.md)
+                                # model from >= 10 s of each hold
+                                # (docs/development/e2rfc_turbulence.md)
     calz_start = true           # zero the scanner wind-off before the first speed
     calz_end = true             # ... and once more wind-off after the fan is down
     files = "per_speed"         # one run file per speed; "per_release": one per release

@@ -10,15 +10,15 @@ file (both are a :class:`~daq.recording.recorder_protocol.Recorder`), so the liv
 recorded file hold the same rows by construction. The GUI thread polls
 :meth:`LiveSource.snapshot` (the ring's copy) and
 :meth:`LiveSource.health` (built from :meth:`Acquisition.stats` and what the subscriber kept under a
-lock); nothing is pushed to the GUI from the acquisition threads (docs/reference/architecture.md, "Design
-rules").
+lock); nothing is pushed to the GUI from the acquisition threads (docs/reference/architecture.md,
+"Design rules").
 
 Recording (:meth:`LiveSource.start_recording`, :meth:`LiveSource.stop_recording`): while the
 operator records, the same subscriber also feeds a second, ordinary
 :class:`~daq.recording.writer.RunWriter` with its :class:`~daq.recording.recorder.RunRecorder`, the
-pair ``windrig acquire`` uses, so the file has the docs/reference/file_format.md layout by construction. That
-writer lives on the engine's dispatcher thread (the one thread that touches its h5py file): the GUI
-thread creates the file (every check of :meth:`RunRecorder.open
+pair ``windrig acquire`` uses, so the file has the docs/reference/file_format.md layout by
+construction. That writer lives on the engine's dispatcher thread (the one thread that touches its
+h5py file): the GUI thread creates the file (every check of :meth:`RunRecorder.open
 <daq.recording.recorder.RunRecorder.open>` runs before anything starts), then posts a request and
 waits, with a timeout, for the dispatcher to start or finish the recording at its next doc
 (:class:`~daq.recording.file_switch.FileRecording`).

@@ -107,8 +107,8 @@ class ReplaySource(RingSource):
             raise
 
     def _check_layout(self, f: h5py.File, where: str) -> None:
-        # What replay needs (docs/reference/file_format.md, "What each command needs"): the sync view's
-        # scalar columns and a [section]; the pressures and a whole rig config are optional.
+        # What replay needs (docs/reference/file_format.md, "What each command needs"): the sync
+        # view's scalar columns and a [section]; the pressures and a whole rig config are optional.
         try:
             if "entry/sync" not in f:
                 raise ReplayError(f"{where}: not a windrig run file: has no /entry/sync")
@@ -116,10 +116,12 @@ class ReplaySource(RingSource):
             missing = [name for name in SYNC_SCALARS if name not in sync]
             if missing:
                 raise ReplayError(f"{where}: has no /entry/sync/{', '.join(missing)}: replay "
-                                  f"needs {', '.join(SYNC_SCALARS)} (docs/reference/file_format.md)")
+                                  f"needs {', '.join(SYNC_SCALARS)} "
+                                  "(docs/reference/file_format.md)")
             if "entry/config" not in f:
                 raise ReplayError(f"{where}: has no /entry/config: replay needs the stored "
-                                  "rig config, or at least its [section] (docs/reference/file_format.md)")
+                                  "rig config, or at least its [section] "
+                                  "(docs/reference/file_format.md)")
             self._ds = {name: sync[name] for name in (*SYNC_SCALARS, "pressure") if name in sync}
             if all(name in sync for name in SWAY_SCALARS):  # a 3-DOF rig's run
                 self._ds.update({name: sync[name] for name in SWAY_SCALARS})

@@ -2,8 +2,8 @@
 
 Responsibility: :func:`replay_config` returns the stored rig config when it is a whole one
 (:func:`daq.config.parse_rig_config`). A file written from the smallest run file of
-``docs/reference/file_format.md`` stores only a ``[section]`` and has no pressures: it is replayed with
-a config for display built around that section (its traces, spectra and releases are all
+``docs/reference/file_format.md`` stores only a ``[section]`` and has no pressures: it is replayed
+with a config for display built around that section (its traces, spectra and releases are all
 the console draws of it), and the note returned says so in the status line. A file that has
 pressures needs its stored ``[taps]`` to place them, so its config must be whole.
 

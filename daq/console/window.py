@@ -9,8 +9,8 @@ line. Over a live source (a :class:`~daq.console.source.HealthSource`) it adds t
 device health panel (samples/s, gaps, overflows, errors, clock fit and last fault per device) with a
 red alarm line when a device has faulted or stalled, and the operator controls
 (:class:`~daq.console.controls.ControlPanel`: fan, arm/release, CALZ, markers); all are polled by
-the same timer. Data is never pushed into the window from other threads (docs/reference/architecture.md,
-"Design rules").
+the same timer. Data is never pushed into the window from other threads
+(docs/reference/architecture.md, "Design rules").
 
 Not responsible for: reading files or instruments (the sources), the numbers themselves
 (:mod:`daq.console.display`), or the command line (:mod:`daq.console.app`).

@@ -13,8 +13,8 @@ importing
     One table through its map into releases, written as a normal run file with its
     provenance (source, SHA-256, the map's text).
 import_command
-    ``windrig import SOURCE... --map MAP.toml --out DIR``; ``docs/guides/import_export.md`` is its guide,
-    with a complete map for each format.
+    ``windrig import SOURCE... --map MAP.toml --out DIR``; ``docs/guides/import_export.md`` is its
+    guide, with a complete map for each format.
 export_contents
     What a run file holds for other programs (the synchronised view, the releases, the events,
     the calibrations, with their units), read once.

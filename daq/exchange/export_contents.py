@@ -9,8 +9,8 @@ attributes (:func:`read_contents`).
 
 A file needs only ``/entry/sync`` (with ``time``) to be exported: the releases, events,
 calibrations and config it lacks are left out, each with a warning that says so (the smallest
-run file of ``docs/reference/file_format.md`` has no events and no calibrations). A file being written
-(SWMR) or left by a crash is read as far as every column of the sync view goes.
+run file of ``docs/reference/file_format.md`` has no events and no calibrations). A file being
+written (SWMR) or left by a crash is read as far as every column of the sync view goes.
 
 Not responsible for: the formats (:mod:`daq.exchange.export_writers`), the command
 (:mod:`daq.exchange.export_run`), the run file's layout (:mod:`daq.recording.layout`,
@@ -165,8 +165,8 @@ def read_contents(path: str | os.PathLike[str]) -> RunContents:
     with handle as f:
         if "entry/sync/time" not in f:
             raise NotARunFileError(f"{path}: has no /entry/sync/time: not a windrig run file, "
-                                   "nothing to export (docs/reference/file_format.md: the smallest run "
-                                   "file)")
+                                   "nothing to export (docs/reference/file_format.md: the "
+                                   "smallest run file)")
         warnings: list[str] = []
         columns, taps = _sync_columns(f["entry/sync"], path, warnings)
         releases, units = _releases(f, path, warnings)
@@ -255,7 +255,7 @@ def _events(f: h5py.File, path: Path, warnings: list[str]) -> dict[str, npt.NDAr
 def _calibrations(f: h5py.File) -> dict[str, dict[str, dict[str, Any]]]:
     """Each calibration group (NXparameters, or NXcollection before issue 37): values, attrs."""
     if "entry/calibration" not in f:
-        return {}  # files before issue 18: the defaults (docs/reference/file_format.md); not a mistake
+        return {}  # older files: the defaults (docs/reference/file_format.md); not a mistake
     out = {}
     for name, group in f["entry/calibration"].items():
         if not isinstance(group, h5py.Group):

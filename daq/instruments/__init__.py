@@ -17,5 +17,6 @@
   output, ``[[analog]]`` transducers; the optional ``nidaqmx`` package, imported lazily).
 
 Every driver's constructor does no I/O (``open()`` does), and a driver's settings class
-validates its table of the rig config. ``docs/reference/wire_formats.md`` describes what each speaks.
+validates its table of the rig config. ``docs/reference/wire_formats.md`` describes what each
+speaks.
 """

@@ -3,18 +3,18 @@
 ``windrig bridge BRIDGE.json --aero MODEL.json|TABLE.csv`` reads the bridge model file
 (:class:`ident.bridge.model.BridgeModel`) and the deck section's aerodynamics: a rational-function
 model (what ``windrig identify --json`` writes, or ``{"A": ..., "d": ...}``: the same reading as
-``windrig flutter --model``) or a flutter-derivative table (``docs/reference/flutter_derivative_tables.md``),
-Roger-fitted for the state space with its relative error at every tabulated K reported. It
-prints the state-space flutter speed, frequency and participating modes, the frequency-domain
-check, and writes the JSON of DESIGN (``--json``) and the in-wind frequency and damping of every
-mode against U as a table and a plot (``--out``).
+``windrig flutter --model``) or a flutter-derivative table
+(``docs/reference/flutter_derivative_tables.md``), Roger-fitted for the state space with its
+relative error at every tabulated K reported. It prints the state-space flutter speed, frequency and
+participating modes, the frequency-domain check, and writes the JSON of DESIGN (``--json``) and the
+in-wind frequency and damping of every mode against U as a table and a plot (``--out``).
 
 ``--modes M1.csv M2.csv ...`` builds the bridge from plain mode tables
-(:mod:`ident.bridge.mode_tables`, ``docs/guides/bridge.md``); BRIDGE.json then holds the deck data only
-(``B``, ``rho``, ``name``, ``static``) and ``--write-bridge OUT.json`` writes the whole bridge model
-file. ``--buffeting U1,U2 --wind WIND.toml [--time-domain SECONDS]`` adds the buffeting response
-(:mod:`ident.bridge.buffeting`, :mod:`ident.bridge.buffeting_time`): RMS along the deck in the
-JSON and, with ``--out``, plots of it and of the response spectra
+(:mod:`ident.bridge.mode_tables`, ``docs/guides/bridge.md``); BRIDGE.json then holds the deck data
+only (``B``, ``rho``, ``name``, ``static``) and ``--write-bridge OUT.json`` writes the whole bridge
+model file. ``--buffeting U1,U2 --wind WIND.toml [--time-domain SECONDS]`` adds the buffeting
+response (:mod:`ident.bridge.buffeting`, :mod:`ident.bridge.buffeting_time`): RMS along the deck in
+the JSON and, with ``--out``, plots of it and of the response spectra
 (:mod:`daq.offline.buffeting_plots`). ``--uncertainty [--samples N] [--seed S] [--workers N |
 --scheduler ADDRESS]`` carries the section's uncertainty (an identify JSON's covariance, a
 table's std columns) to the flutter speed (:mod:`daq.offline.bridge_uncertainty`).
@@ -65,7 +65,8 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--out", type=Path, default=None,
                    help="folder for the mode curves' table (CSV) and plot (PNG)")
     p.add_argument("--modes", type=Path, nargs="+", default=None, metavar="MODE.csv",
-                   help="build the bridge from mode tables (one CSV per mode, docs/guides/bridge.md)")
+                   help="build the bridge from mode tables (one CSV per mode, "
+                         "docs/guides/bridge.md)")
     p.add_argument("--write-bridge", type=Path, default=None,
                    help="with --modes: write the whole bridge model file (JSON) here")
     p.add_argument("--buffeting", type=_speed_list, default=None, metavar="U1,U2,...",

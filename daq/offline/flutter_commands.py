@@ -7,8 +7,9 @@ the releases' reduced frequencies (:mod:`daq.offline.derivative_table`; a model 
 sway is refused); ``--table OUT.csv`` writes the flutter-derivative table with each derivative's
 standard deviation. ``windrig flutter --section S.json (--model M.json | --table T.csv)`` analyses a
 section of two or three degrees of freedom with a model (``windrig identify --json`` output or
-``{"A": ..., "d": ...}``) or a flutter-derivative table (``docs/reference/flutter_derivative_tables.md``):
-the state-space analysis (a table is first fitted with rational functions,
+``{"A": ..., "d": ...}``) or a flutter-derivative table
+(``docs/reference/flutter_derivative_tables.md``): the state-space analysis (a table is first fitted
+with rational functions,
 :func:`ident.tables.roger_table.fit_table`) and the frequency-domain one as its check.
 
 Every mistake in what the user gave (a file that cannot be read, a section or model that is not

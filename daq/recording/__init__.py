@@ -24,6 +24,6 @@
 - :mod:`~daq.recording.recover`: ``windrig recover``, a file left open by a crash made readable;
 - :mod:`~daq.recording.info`: ``windrig info``, what a run file holds.
 
-It knows no simulator: starting simulators is :mod:`daq.sim`'s decision. ``docs/reference/file_format.md``
-is the file's contract for readers.
+It knows no simulator: starting simulators is :mod:`daq.sim`'s decision.
+``docs/reference/file_format.md`` is the file's contract for readers.
 """

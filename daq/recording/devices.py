@@ -92,8 +92,8 @@ def declare_device(rec: Recorder, config: RigConfig, name: str, kind: str,
                    describe: Mapping[str, Mapping[str, Any]]) -> DeviceState:
     """Declare a device's raw stream in the run file; return its state, clocked or not.
 
-    The raw stream's layout is the file format's (docs/reference/file_format.md), per role: so this is
-    where the writer asks what kind of device it records. A laser records ``distance`` (m)
+    The raw stream's layout is the file format's (docs/reference/file_format.md), per role: so this
+    is where the writer asks what kind of device it records. A laser records ``distance`` (m)
     with its ``error_code`` and ``triggered`` flags, a scanner its taps and Pitot (Pa, float32)
     with the trigger time, an analog device (clocked) and a polled device the scalar channels
     their ``describe()`` names.

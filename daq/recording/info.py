@@ -172,8 +172,8 @@ def run_info(path: str | os.PathLike[str]) -> dict[str, Any]:
         raise NotARunFileError(f"{path}: HDF5 cannot open it (truncated?): {exc}") from exc
     with handle as f:
         try:
-            # The smallest run file (docs/reference/file_format.md) has the sync view and no raw streams:
-            # info describes whatever else a file has, and says what it lacks.
+            # The smallest run file (docs/reference/file_format.md) has the sync view and no raw
+            # streams: info describes whatever else a file has, and says what it lacks.
             for part in ("entry/sync", "entry/sync/time"):
                 if part not in f:
                     raise NotARunFileError(f"{path}: has no /{part}: not a windrig run file "

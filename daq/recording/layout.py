@@ -1,8 +1,8 @@
 """The run file's layout: names, types, fill values and attributes every run file has.
 
-Responsibility: the contract of a windrig run file in code (``docs/reference/file_format.md`` describes it
-for readers): the compound row types of ``/entry/releases``, ``/entry/events`` and a stream's
-``gaps`` (:data:`RELEASE_DTYPE`, :data:`EVENT_DTYPE`, :data:`GAP_DTYPE`) and their rows
+Responsibility: the contract of a windrig run file in code (``docs/reference/file_format.md``
+describes it for readers): the compound row types of ``/entry/releases``, ``/entry/events`` and a
+stream's ``gaps`` (:data:`RELEASE_DTYPE`, :data:`EVENT_DTYPE`, :data:`GAP_DTYPE`) and their rows
 (:func:`release_table_row`, :func:`event_table_row`), the columns of
 ``/entry/sync`` with their units (:data:`SYNC_COLUMNS`), the clock model stated in its
 attributes (:data:`CLOCK_MODEL`), the fill value an unwritten row reads as (:func:`fill_value`),

@@ -36,8 +36,8 @@ by :meth:`close` (which reopens the file without SWMR). A crash loses them (not 
 fits can be redone from the raw streams, which keep every host and device time stamp).
 
 The file's layout (groups, datasets, their types and fill values) is
-:mod:`daq.recording.layout`'s, described for readers in ``docs/reference/file_format.md``; how a live
-reader follows the file, and opens one left by a crash: :mod:`daq.recording.swmr_file`.
+:mod:`daq.recording.layout`'s, described for readers in ``docs/reference/file_format.md``; how a
+live reader follows the file, and opens one left by a crash: :mod:`daq.recording.swmr_file`.
 """
 
 from __future__ import annotations
@@ -74,7 +74,7 @@ __all__ = ["RunRecorder"]
 
 
 class RunRecorder:
-    """Write one run to an HDF5 file laid out as docs/reference/file_format.md (see module docstring).
+    """Write one run to an HDF5 file laid out as docs/reference/file_format.md (module docstring).
 
     Parameters
     ----------

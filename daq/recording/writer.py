@@ -214,7 +214,7 @@ class RunWriter:
             rec.open()
         self.recorder = rec
         n_taps = self.config.taps.n_taps
-        if self.config.tubing:  # what an offline reader needs to undo it (docs/reference/file_format.md)
+        if self.config.tubing:  # what an offline reader needs to undo it (the file format)
             rec.add_metadata("tubing", tubing_metadata(self.config.tubing, n_taps))
         tap_names = [f"tap{i:03d}" for i in range(n_taps)]
         streams: list[StreamSpec] = []
@@ -307,10 +307,11 @@ class RunWriter:
         if dev.restart_pending:
             dev.restart_pending = False
             # Device time not after the last one mapped: the device clock restarted with the scan
-            # (relative frame times start again at 0 without PTP, docs/reference/wire_formats.md, "Pressure
-            # scanner"), and the map from the previous scan no longer applies. Absolute (PTP) frame
-            # times, and relative ones the engine continued across its own pause (Acquisition.calz),
-            # move forward: their map stays valid and is kept. (NaN: nothing mapped yet.)
+            # (relative frame times start again at 0 without PTP, docs/reference/wire_formats.md,
+            # "Pressure scanner"), and the map from the previous scan no longer applies. Absolute
+            # (PTP) frame times, and relative ones the engine continued across its own pause
+            # (Acquisition.calz), move forward: their map stays valid and is kept. (NaN: nothing
+            # mapped yet.)
             if float(t_dev[first]) <= dev.last_device_time:
                 self._restart_clock(dev, float(t_dev[first]), float(t_host[first]))
         # Each read in a block (lasers: 20 ms of reads) has its own arrival stamp: the last row

@@ -6,7 +6,8 @@ instrument: a factory ``(tunnel, settings, **options) -> simulator`` (the simula
 accepts from ``[simulation.devices.<name>]``, and the settings the driver needs once it runs
 (ephemeral ports). The five built-in entries below are the entry points of the group
 :data:`GROUP` (``windrig.simulators``) of the ``windrig`` distribution; a plugin contributes
-the simulator of its own device the same way (docs/guides/drivers.md), found by :func:`simulator_entry`.
+the simulator of its own device the same way (docs/guides/drivers.md), found by
+:func:`simulator_entry`.
 
 Not responsible for: the virtual tunnel or the sensor errors a rig config's calibrations undo
 (:mod:`daq.sim.rig`), or the simulators themselves (:mod:`simulators.devices`).

@@ -1,7 +1,7 @@
 r"""Mapping of one device clock onto the host clock, and the trigger times that anchor it.
 
-Responsibility (the synchronised view of docs/reference/file_format.md): pure numerical code used by the
-run writer
+Responsibility (the synchronised view of docs/reference/file_format.md): pure numerical code used by
+the run writer
 
 - :class:`ClockMap` maps one device clock onto the host clock, ``t_host = a + b t_device``, fitted
   robustly from every block's (device time, host arrival time) pair and from anchor events seen
@@ -16,8 +16,8 @@ PLC pulse with what each device saw of it).
 
 Conventions: SI units; times in seconds as float64. Host times are best passed relative to the run
 start (``(host_time_ns - run_start_ns) * 1e-9``): then the sync view's ``time`` is "s from run
-start" (docs/reference/file_format.md; see :mod:`daq.sync.resample`) and :attr:`ClockMap.offset_s` is the
-device time at the run start. The clock convention is that of
+start" (docs/reference/file_format.md; see :mod:`daq.sync.resample`) and :attr:`ClockMap.offset_s`
+is the device time at the run start. The clock convention is that of
 :class:`simulators.clock.DeviceClock`: ``t_device = offset_s + (1 + drift_ppm 1e-6) t_host``.
 """
 

@@ -1,7 +1,7 @@
 r"""Physical conversions of the sync view: heave and pitch, forces, wind speed, air density.
 
-Responsibility (the synchronised view of docs/reference/file_format.md): pure numerical code used by the
-run writer
+Responsibility (the synchronised view of docs/reference/file_format.md): pure numerical code used by
+the run writer
 
 - :func:`heave_pitch_from_lasers` (:class:`HeavePitch`): heave and pitch of the section from 2
   or 3 laser distances;

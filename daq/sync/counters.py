@@ -1,7 +1,7 @@
 """Unwrapping of wrapping sample counters, and the gaps and backward steps they reveal.
 
-Responsibility (the synchronised view of docs/reference/file_format.md): pure numerical code used by the
-run writer
+Responsibility (the synchronised view of docs/reference/file_format.md): pure numerical code used by
+the run writer
 
 - :class:`CounterUnwrapper` / :func:`unwrap_counter` unwrap wrapping sample counters of any
   modulus and list the gaps (:class:`~daq.instruments.reading.Gap`, the one gap type of every

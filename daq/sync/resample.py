@@ -1,7 +1,7 @@
 r"""Resampling of host-mapped device streams onto the uniform time base of the sync view.
 
-Responsibility (the synchronised view of docs/reference/file_format.md): pure numerical code used by the
-run writer
+Responsibility (the synchronised view of docs/reference/file_format.md): pure numerical code used by
+the run writer
 
 - :class:`Resampler` / :func:`resample` put several host-mapped streams (:class:`StreamSpec`)
   onto one uniform time base (the ``/entry/sync`` view, :class:`SyncBlock`), block by block,

@@ -308,7 +308,8 @@ class ModbusBus:
     # -- lifecycle -----------------------------------------------------------------------------
     def _make_client(self) -> _Client:
         a = self.address
-        # retries=0: retrying is this layer's job only (docs/reference/architecture.md, "Design rules").
+        # retries=0: retrying is this layer's job only (docs/reference/architecture.md, "Design
+        # rules").
         if a.kind == "tcp":
             return ModbusTcpClient(a.host, port=a.port, timeout=self._timeout_s, retries=0,
                                    name=self.url)

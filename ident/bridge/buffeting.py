@@ -1,7 +1,8 @@
 """Buffeting of a full bridge in the frequency domain: modal gust forces, response spectra, RMS.
 
 Strip theory on the still-air modes (shared DESIGN, "Full-bridge flutter and buffeting"; signs of
-``docs/reference/conventions.md``: h and L down, alpha and M nose-up, p and D downwind, gust ``w`` up).
+``docs/reference/conventions.md``: h and L down, alpha and M nose-up, p and D downwind, gust ``w``
+up).
 
 **Gust forces per unit span.** At a deck node, the quasi-steady buffeting forces of
 :func:`ident.physics.turbulence.buffeting_gain` (derived there from the relative wind; the same

@@ -15,8 +15,8 @@ The spectra (von Karman), the admittance (Davenport's ``chi(x) = 2 (x - 1 + e^-x
 ``x = c f B / U``, on the force amplitude) and the quasi-steady gains are those of
 :mod:`ident.physics.turbulence` (one implementation for the section and the bridge; its docstring
 and
-``docs/reference/conventions.md`` state the forms). This module adds what a bridge needs beyond a section:
-the coherence of the gusts at two deck nodes ``dx`` apart, ``coh(f) = exp(-C f |dx| / U)``.
+``docs/reference/conventions.md`` state the forms). This module adds what a bridge needs beyond a
+section: the coherence of the gusts at two deck nodes ``dx`` apart, ``coh(f) = exp(-C f |dx| / U)``.
 
 Not responsible for: the buffeting forces on the modes and the response
 (:mod:`ident.bridge.buffeting`).

@@ -1,7 +1,7 @@
 """Forward selection of the named effects that explain a gap (the discrepancy workflow's core).
 
-:func:`select` adds the named effects (``docs/reference/conventions.md``, "Named effects") to the model one
-at a time, in rounds:
+:func:`select` adds the named effects (``docs/reference/conventions.md``, "Named effects") to the
+model one at a time, in rounds:
 
 1. **Score**: every candidate not yet chosen is fitted *jointly* with the effects already chosen
    (their equation-error regressor families are all linear in the parameters,

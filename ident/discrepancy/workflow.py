@@ -8,9 +8,9 @@ aerodynamics, identified by E2RFC unless given) with the releases it came from:
    :func:`gap` is the RMS difference of h, alpha, lift and moment over all releases, each
    channel divided by its own RMS, averaged over the four channels.
 2. **Forward selection** (:mod:`ident.discrepancy.effect_selection`): the named effects
-   (``docs/reference/conventions.md``, "Named effects") are fitted to the data as physical terms with
-   their own parameters (:mod:`ident.discrepancy._equation_error`: the residual of the structural
-   equation for most, the forces' line above the motion's band for vortex shedding;
+   (``docs/reference/conventions.md``, "Named effects") are fitted to the data as physical terms
+   with their own parameters (:mod:`ident.discrepancy._equation_error`: the residual of the
+   structural equation for most, the forces' line above the motion's band for vortex shedding;
    :mod:`ident.discrepancy._force_fit`: the force equation for the aerodynamic nonlinearity, which
    the taps measure) and scored by the
    held-out fraction of that
@@ -25,7 +25,8 @@ aerodynamics, identified by E2RFC unless given) with the releases it came from:
    model identified again, its structure chosen again; a structural one joins the structure;
    vortex forcing is taken out of the forces before E2RFC and added to each release's
    simulated forces), every release is simulated again, and the gap measured the same way.
-4. **Honesty** (:mod:`ident.discrepancy.residual_check`): what is left of measured minus simulated is
+4. **Honesty** (:mod:`ident.discrepancy.residual_check`): what is left of measured minus simulated
+is
    checked for a systematic part (beyond the white measurement noise); if there is one, the
    report is not ``explained`` and says where it is (channel, frequency, amplitudes, wind
    speeds).

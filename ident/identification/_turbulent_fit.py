@@ -3,9 +3,9 @@
 In turbulent flow the measured force is the self-excited force of the whole motion (the
 release's decay plus the random response the buffeting drives) plus the buffeting force. E2RFC's
 regressors come from a modal fit of the decay, which cannot follow the random response, and its
-least squares takes the buffeting for white noise: both bias it (docs/development/e2rfc_turbulence.md).
-This module fits the same rational-function model another way, measured in
-``benchmarks/turbulent_gls_experiment.py``:
+least squares takes the buffeting for white noise: both bias it
+(docs/development/e2rfc_turbulence.md). This module fits the same rational-function model another
+way, measured in ``benchmarks/turbulent_gls_experiment.py``:
 
 - *Regressors from the measured motion*: ``q`` low-passed (zero phase) at :data:`FC_FACTOR`
   times the highest still-air frequency, ``q'`` and ``q''`` by a Savitzky-Golay filter, lag
@@ -90,8 +90,8 @@ LAG_OPTIONS = (1, 2)
 #: and differentiates them (Savitzky-Golay); ``"smoother"`` takes ``q``, ``q'`` from a Kalman
 #: (RTS) smoother of the known structure driven by the measured force (:func:`smoothed_motion`)
 #: and ``q''`` from its equation of motion; ``"smoother-sg"`` the smoother's ``q``, ``q'`` with
-#: the filter's ``q''``. Measured (docs/development/e2rfc_turbulence.md): the smoother's motion is 5-20
-#: times closer to the truth and removes most of the smooth-flow floor, but the branch in
+#: the filter's ``q''``. Measured (docs/development/e2rfc_turbulence.md): the smoother's motion is
+#: 5-20 times closer to the truth and removes most of the smooth-flow floor, but the branch in
 #: turbulence is worse with it (plate Iw 1 % median 11 % against 2.6 %), so the filter stays.
 MOTION = "filter"
 

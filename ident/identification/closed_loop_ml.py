@@ -78,7 +78,8 @@ TARGET_FACTOR = 25.0
 #: the sync view places them against the forces only to a few tenths of a millisecond (0.2 ms
 #: is 0.5 % of the motion at 4 Hz): without a floor the likelihood trusted the displacements as
 #: exact and fitted that misalignment (the simulated rig: -7.6 % with holds, -91 % without;
-#: with the floor +0.6 and -2.7 %, docs/development/e2rfc_turbulence.md). Below the benchmark's own noise.
+#: with the floor +0.6 and -2.7 %, docs/development/e2rfc_turbulence.md). Below the benchmark's own
+#: noise.
 NOISE_FLOOR = 5e-3
 #: Most Fisher-scoring iterations.
 MAX_ITERATIONS = 40

@@ -112,8 +112,8 @@ ESTIMATOR_TURBULENT = "refined IV with the holds' noise model (turbulence branch
 #: A3 in the turbulence branch: "fitted-or-zero" (fitted; zero only when every structure with
 #: A3 fitted flutters below a wind speed where a release decayed), "fitted" always, "choose"
 #: (fitted or zero by held-out error with the lag count), or "e2rfc" as E2RFC's own choice on
-#: the same releases has it. docs/development/e2rfc_turbulence.md measures them: A3 zero lands at -99 %
-#: on some bluff-deck seeds whose held-out error prefers it, A3 fitted on some plate seeds
+#: the same releases has it. docs/development/e2rfc_turbulence.md measures them: A3 zero lands at
+#: -99 % on some bluff-deck seeds whose held-out error prefers it, A3 fitted on some plate seeds
 #: whose every A3-fitted structure contradicts the data.
 TURBULENT_A3 = "fitted-or-zero"
 #: The turbulence branch's estimator: ``"ml"`` (closed-loop maximum likelihood of every release

@@ -3,14 +3,15 @@
 Scanlan's flutter derivatives and windrig's aerodynamic transfer matrix ``Q`` are two views of the
 same self-excited forces. With generalised coordinates ``q = [h/B, alpha]``, generalised forces
 ``f = [L B, M]`` and ``f = qd B^2 Q(p) q`` (``qd = rho U^2 / 2``, ``p = s B / U``), harmonic motion
-(``p = iK``) gives (``docs/reference/conventions.md``, "Reduced frequency and the self-excited forces")::
+(``p = iK``) gives (``docs/reference/conventions.md``, "Reduced frequency and the self-excited
+forces")::
 
     Q(iK) = K^2 [[H4* + i H1*, H3* + i H2*],
                  [A4* + i A1*, A3* + i A2*]]
 
 and with the lateral degree of freedom (``q = [h/B, alpha, p/B]``, ``f = [L B, M, D B]``, p and
-the drag D positive downwind; ``docs/reference/conventions.md``, "Three degrees of freedom") the 18 of
-Scanlan's later work::
+the drag D positive downwind; ``docs/reference/conventions.md``, "Three degrees of freedom") the 18
+of Scanlan's later work::
 
     Q(iK) = K^2 [[H4* + i H1*, H3* + i H2*, H6* + i H5*],
                  [A4* + i A1*, A3* + i A2*, A6* + i A5*],

@@ -3,10 +3,11 @@
 Three forms are provided: the exact flutter derivatives through Theodorsen's function (Hankel
 functions); R. T. Jones's two-lag approximation of that function, with which the flat plate is
 *exactly* a Roger rational-function model with lag roots (0.091, 0.6) and ``A3 != 0``
-(``docs/reference/conventions.md``, "The analytic truth"), the closed-form RFC truth the tests identify
-against; and an eight-lag rational fit of the exact function (:func:`theodorsen_model`, within 5e-5
-of it), with which a simulation stands for the exact plate: aerodynamics that no Roger model of two
-or three lags reproduces, the case of a real deck whose forces are not exactly rational.
+(``docs/reference/conventions.md``, "The analytic truth"), the closed-form RFC truth the tests
+identify against; and an eight-lag rational fit of the exact function (:func:`theodorsen_model`,
+within 5e-5 of it), with which a simulation stands for the exact plate: aerodynamics that no Roger
+model of two or three lags reproduces, the case of a real deck whose forces are not exactly
+rational.
 
 The closed-form coefficients below follow from the flat plate's flutter-derivative formulas
 (same section of ``docs/reference/conventions.md``) with ``p = iK`` substituted: with ``C = C(p)``,

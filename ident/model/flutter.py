@@ -1,12 +1,12 @@
 """Flutter analysis: time-domain (state-space eigenvalues against U) and frequency-domain (Scanlan).
 
-The time-domain route is windrig's primary one (``docs/reference/conventions.md``, "In the time domain"): the
-state matrix of :class:`~ident.model.statespace.AeroelasticSystem` depends explicitly on U, so the
-flutter speed is simply the lowest U at which an oscillatory eigenvalue crosses into the right half
-plane; no iteration on the reduced frequency is needed. The classical frequency-domain route
-(Scanlan and Tomko) works from flutter-derivative functions and iterates on K; it is kept as an
-independent cross-check and as the only route for flutter-derivative tables that have no
-rational-function model.
+The time-domain route is windrig's primary one (``docs/reference/conventions.md``, "In the time
+domain"): the state matrix of :class:`~ident.model.statespace.AeroelasticSystem` depends explicitly
+on U, so the flutter speed is simply the lowest U at which an oscillatory eigenvalue crosses into
+the right half plane; no iteration on the reduced frequency is needed. The classical
+frequency-domain route (Scanlan and Tomko) works from flutter-derivative functions and iterates on
+K; it is kept as an independent cross-check and as the only route for flutter-derivative tables that
+have no rational-function model.
 """
 
 from __future__ import annotations

@@ -3,8 +3,8 @@
 A flutter-derivative table of heave and pitch (a published one, or E2RFC's 2-DOF model) says
 nothing of drag, yet a deck moving in sway or heave changes the wind it sees: the drag and lift
 terms a 3-DOF analysis needs can be taken quasi-steady, from the static coefficients
-(:class:`ident.model.quasi_steady.StaticCoefficients`, signs of ``docs/reference/conventions.md``: ``C_L``
-along h, downward; ``C_D`` downwind; ``C_M`` nose-up; slopes per radian of alpha).
+(:class:`ident.model.quasi_steady.StaticCoefficients`, signs of ``docs/reference/conventions.md``:
+``C_L`` along h, downward; ``C_D`` downwind; ``C_M`` nose-up; slopes per radian of alpha).
 
 The derivation, to first order in the motion. A deck moving with ``h'`` (down) and ``p'``
 (downwind) at pitch ``alpha`` sees the relative wind ``(U - p', -h')`` (downwind, down

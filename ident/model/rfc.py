@@ -1,9 +1,10 @@
 """Roger's rational-function model of the self-excited forces (the object E2RFC identifies).
 
 ``Q(p) = A1 + A2 p + A3 p^2 + sum_l A_{l+3} p / (p + d_l)`` with real 2x2 matrices ``A_k`` (3x3
-with sway: ``docs/reference/conventions.md``, "Three degrees of freedom") and lag roots ``d_l > 0`` shared by
-all entries (``docs/reference/conventions.md``, "Reduced frequency and the self-excited forces"). The model
-is a value: it is immutable, validated on construction, and serialisable to JSON through
+with sway: ``docs/reference/conventions.md``, "Three degrees of freedom") and lag roots ``d_l > 0``
+shared by all entries (``docs/reference/conventions.md``, "Reduced frequency and the self-excited
+forces"). The model is a value: it is immutable, validated on construction, and serialisable to JSON
+through
 :meth:`to_dict`.
 """
 

@@ -1,8 +1,8 @@
 """The structural model of a spring-mounted section model: heave and pitch, and optionally sway.
 
 This module owns the structural matrices in windrig's generalised coordinates ``q = [h/B, alpha]``
-or, with the lateral spring, ``q = [h/B, alpha, p/B]`` (``docs/reference/conventions.md``, "Signs and
-coordinates", "Three degrees of freedom"). A 2-DOF section's matrices are the leading 2x2 block
+or, with the lateral spring, ``q = [h/B, alpha, p/B]`` (``docs/reference/conventions.md``, "Signs
+and coordinates", "Three degrees of freedom"). A 2-DOF section's matrices are the leading 2x2 block
 of the 3-DOF ones: sway adds a row and a column and changes nothing else. It knows nothing of
 aerodynamics; :mod:`ident.model.statespace` couples it with a
 :class:`~ident.model.rfc.RationalFunctionModel`.

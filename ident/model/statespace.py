@@ -2,9 +2,9 @@
 
 With the Roger model of the self-excited forces, the aeroelastic equations of motion become a
 linear, frequency-independent state-space model whose matrix depends explicitly on the wind speed U
-(``docs/reference/conventions.md``, "In the time domain"). The state is ``z = [q, q', x_1, ..., x_m]`` with
-``q = [h/B, alpha]`` (or ``[h/B, alpha, p/B]`` with sway: n = 3 degrees of freedom) and one
-n-vector of lag states per lag root, ``x_l' = q' - (U/B) d_l x_l``; a model released from rest
+(``docs/reference/conventions.md``, "In the time domain"). The state is ``z = [q, q', x_1, ...,
+x_m]`` with ``q = [h/B, alpha]`` (or ``[h/B, alpha, p/B]`` with sway: n = 3 degrees of freedom) and
+one n-vector of lag states per lag root, ``x_l' = q' - (U/B) d_l x_l``; a model released from rest
 has ``x_l = 0`` at the release. The self-excited generalised force is::
 
     f = [L B, M(, D B)]

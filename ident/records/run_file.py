@@ -1,4 +1,4 @@
-"""The one thin module through which :mod:`ident` reads run files (``docs/reference/file_format.md``).
+"""The one thin module through which :mod:`ident` reads run files (the file format of docs/).
 
 It reads the synchronised view ``/entry/sync``, the releases table ``/entry/releases`` and the
 section model from the rig config stored verbatim in ``/entry/config``, and returns

@@ -1,9 +1,9 @@
 """Free-vibration decays of a section model in the wind, with the named physical effects.
 
 A release starts from rest at ``(h0, alpha0)`` with all aerodynamic lag states at zero
-(``docs/reference/conventions.md``, "In the time domain") and runs freely. The linear physics (structure plus
-Roger self-excited forces, plus static unbalance and the harmonic forcing of vortex shedding and
-of a base vibration, which stay linear) is
+(``docs/reference/conventions.md``, "In the time domain") and runs freely. The linear physics
+(structure plus Roger self-excited forces, plus static unbalance and the harmonic forcing of vortex
+shedding and of a base vibration, which stay linear) is
 advanced by its exact discretisation ``z[k+1] = expm(A dt) z[k]``. Structural nonlinearities
 (friction, quadratic damping, cubic springs) are added by a second-order exponential integrator
 (ETD2RK of Cox and Matthews) on a fixed step that is a multiple of the output rate: exact for the

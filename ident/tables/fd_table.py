@@ -1,8 +1,8 @@
 """Flutter-derivative tables: the exchange format of measured and published derivatives.
 
 A table holds Scanlan's flutter derivatives at a set of reduced frequencies: the eight of heave
-and pitch, or the 18 of three degrees of freedom (``docs/reference/conventions.md``, "Three degrees of
-freedom"). On disk it is a CSV file (``docs/reference/flutter_derivative_tables.md``): a
+and pitch, or the 18 of three degrees of freedom (``docs/reference/conventions.md``, "Three degrees
+of freedom"). On disk it is a CSV file (``docs/reference/flutter_derivative_tables.md``): a
 header, one row per reduced velocity, the first column ``K`` (``B omega / U``) or ``Ur``
 (``U / (f B) = 2 pi / K``), then any of ``H1..H6, A1..A6, P1..P6`` in windrig's signs; a
 derivative the file does not have is zero, and the table says which ones it filled

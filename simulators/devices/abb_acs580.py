@@ -1,21 +1,21 @@
 """Simulated ABB ACS580 fan drive (ABB Drives profile) on a pymodbus TCP server at 127.0.0.1.
 
 Responsibility: answer Modbus requests the way an ABB-drives-profile VFD does
-(``docs/reference/wire_formats.md``, "Fan drive"): a Control Word (CW) state machine, Reference 1 scaled
-0..20000 to the maximum speed, a ramped actual speed reported in Actual 1 with the same scaling, a
-Status Word (SW) with the profile's bits, a Modbus exception for any address outside the register
-map, and the faults of ``docs/reference/wire_formats.md``, "Faults the simulators inject": a trip (TRIPPED
-bit, coast, reset on a CW bit 7 rising edge), a slow ramp, and requests that get no reply. The
-actual speed drives the virtual tunnel's fan (:meth:`VirtualTunnel.set_fan_speed`). Not responsible
-for decoding anything on the client side: the driver (``daq.instruments.abb_acs580.driver``) has its
-own, independent implementation of the same facts, and the HIL tests cross-check the two. This
-module imports nothing from ``daq``.
+(``docs/reference/wire_formats.md``, "Fan drive"): a Control Word (CW) state machine, Reference 1
+scaled 0..20000 to the maximum speed, a ramped actual speed reported in Actual 1 with the same
+scaling, a Status Word (SW) with the profile's bits, a Modbus exception for any address outside the
+register map, and the faults of ``docs/reference/wire_formats.md``, "Faults the simulators inject":
+a trip (TRIPPED bit, coast, reset on a CW bit 7 rising edge), a slow ramp, and requests that get no
+reply. The actual speed drives the virtual tunnel's fan (:meth:`VirtualTunnel.set_fan_speed`). Not
+responsible for decoding anything on the client side: the driver
+(``daq.instruments.abb_acs580.driver``) has its own, independent implementation of the same facts,
+and the HIL tests cross-check the two. This module imports nothing from ``daq``.
 
 Also home of :class:`ModbusServerThread`, the server thread both Modbus simulators use.
 
 ABB Drives profile facts used here (ACS580 firmware manual, "Contents of the fieldbus Control word"
-and "... Status word"; FDNA-01 manual p.91; ACS880 manual p.635; ``docs/reference/wire_formats.md``, "Fan
-drive"):
+and "... Status word"; FDNA-01 manual p.91; ACS880 manual p.635; ``docs/reference/wire_formats.md``,
+"Fan drive"):
 
 - CW bit 0 OFF1 (0: ramp stop), 1 OFF2 (0: coast stop), 2 OFF3 (0: emergency stop), 3 RUN
   (INHIBIT_OPERATION), 4 RAMP_OUT_ZERO, 5 RAMP_HOLD, 6 RAMP_IN_ZERO (each 0 forces its ramp
@@ -64,7 +64,8 @@ CW_RAMP_OUT_ZERO, CW_RAMP_HOLD, CW_RAMP_IN_ZERO, CW_RESET = 0x0010, 0x0020, 0x00
 SW_RDY_ON, SW_RDY_RUN, SW_RDY_REF, SW_TRIPPED = 0x0001, 0x0002, 0x0004, 0x0008
 SW_OFF_2_STA, SW_OFF_3_STA, SW_SWC_ON_INHIB, SW_ALARM = 0x0010, 0x0020, 0x0040, 0x0080
 SW_AT_SETPOINT, SW_REMOTE, SW_ABOVE_LIMIT = 0x0100, 0x0200, 0x0400
-#: Reference 1 / Actual 1 full scale: 20000 <-> maximum speed (docs/reference/wire_formats.md, "Fan drive").
+#: Reference 1 / Actual 1 full scale: 20000 <-> maximum speed (docs/reference/wire_formats.md, "Fan
+#: drive").
 FULL_SCALE = 20000
 
 SWITCH_ON_INHIBITED = "SWITCH-ON INHIBITED"

@@ -5,24 +5,25 @@ Responsibility: behave on the wire like an ILD1420 looking down at the section m
 measuring rate on the sensor's own :class:`~simulators.clock.DeviceClock`, add seeded noise, encode
 blocks of 3-byte values (distance, then counter, timestamp, status ... as configured) and stream
 them in real time through pyserial's ``socket://`` (a TCP server on 127.0.0.1) or a pty pair; answer
-the ASCII commands the driver uses; inject the lasers' faults (``docs/reference/wire_formats.md``, "Faults the
-simulators inject"); and keep a truth record of every sample (what was measured and whether it
-reached the wire intact) so tests can prove that nothing was lost that the simulator did not drop.
+the ASCII commands the driver uses; inject the lasers' faults (``docs/reference/wire_formats.md``,
+"Faults the simulators inject"); and keep a truth record of every sample (what was measured and
+whether it reached the wire intact) so tests can prove that nothing was lost that the simulator did
+not drop.
 
 Not responsible for: line timing (neither transport limits the byte rate; blocks are sent every
 ``period_s`` as they fall due), the analog output, the web interface, or decoding anything (it
 never imports :mod:`daq`: its encoder is written here from the manual facts, independently of the
 driver's decoder).
 
-Wire facts (``docs/reference/wire_formats.md``, "Laser displacement sensors"): values are 18-bit words sent as
-``L = 00 D5..D0``, ``M = 01 D11..D6``, ``H = 1 f D17..D12`` with ``f = 0`` for the first value of a
-block (the distance) and 1 for the others; distance ``x = (100 d / MR + 1) 65520 / 102`` (16 bits),
-with mastering ``x = (100 d / MR + 51) 65520 / 102`` (18 bits); error values 262075..262082 in the
-distance word; 18-bit counter; timestamp two 16-bit words in 10 us ticks (low word first
-[unverified]); status bits: 2 no peak, 5 before SMR, 6 after EMR, 15 value triggered, 16/17 LED
-([unverified] green = bit 16, red = bit 17). ASCII framing [unverified]: commands end with CR LF
-(CR or LF alone accepted); the reply is the echoed command line, reply lines ending CR LF, errors
-``Exxx text``, then the prompt ``->``; replies are sent between two blocks.
+Wire facts (``docs/reference/wire_formats.md``, "Laser displacement sensors"): values are 18-bit
+words sent as ``L = 00 D5..D0``, ``M = 01 D11..D6``, ``H = 1 f D17..D12`` with ``f = 0`` for the
+first value of a block (the distance) and 1 for the others; distance ``x = (100 d / MR + 1) 65520 /
+102`` (16 bits), with mastering ``x = (100 d / MR + 51) 65520 / 102`` (18 bits); error values
+262075..262082 in the distance word; 18-bit counter; timestamp two 16-bit words in 10 us ticks (low
+word first [unverified]); status bits: 2 no peak, 5 before SMR, 6 after EMR, 15 value triggered,
+16/17 LED ([unverified] green = bit 16, red = bit 17). ASCII framing [unverified]: commands end with
+CR LF (CR or LF alone accepted); the reply is the echoed command line, reply lines ending CR LF,
+errors ``Exxx text``, then the prompt ``->``; replies are sent between two blocks.
 
 Geometry: the laser looks down at chord position ``x`` (m, positive downstream of the elastic
 axis); with h positive down and alpha positive nose-up (Scanlan), the surface under the spot moves

@@ -1,12 +1,12 @@
 """Simulated release/trigger PLC (Modbus TCP coils, discrete input, register) at 127.0.0.1.
 
-Responsibility: the PLC of ``docs/reference/wire_formats.md``, "Release and trigger PLC over Modbus", on a
-pymodbus TCP server: coils ARM, RELEASE and DAQ_TRIGGER, the discrete input RELEASED (the armature's
-limit switch) and the holding register TRIGGER_COUNT, wired to the virtual tunnel's magnet and
-trigger line; and the PLC's faults (``docs/reference/wire_formats.md``, "Faults the simulators inject"): a
-release that never happens (RELEASED never set: the driver must time out) and a disconnect. Not
-responsible for the driver side (``daq.instruments.modbus_plc.driver``); imports nothing from
-``daq``.
+Responsibility: the PLC of ``docs/reference/wire_formats.md``, "Release and trigger PLC over
+Modbus", on a pymodbus TCP server: coils ARM, RELEASE and DAQ_TRIGGER, the discrete input RELEASED
+(the armature's limit switch) and the holding register TRIGGER_COUNT, wired to the virtual tunnel's
+magnet and trigger line; and the PLC's faults (``docs/reference/wire_formats.md``, "Faults the
+simulators inject"): a release that never happens (RELEASED never set: the driver must time out) and
+a disconnect. Not responsible for the driver side (``daq.instruments.modbus_plc.driver``); imports
+nothing from ``daq``.
 
 PLC logic ([design]: the sources name the signals, not the ladder):
 

@@ -1,14 +1,14 @@
 """Simulated Vaisala PTB330-class barometer: the RS-232 ASCII protocol over socket:// or a pty.
 
 Responsibility: answer the barometer's serial commands from the manual facts
-(``docs/reference/wire_formats.md``, "Barometer"), produce its measurement lines from the virtual tunnel's air
-(pressure and temperature, plus the instrument's own slow drift and seeded noise), and inject the
-barometer's faults (garbled or partial line, no reply, unit change: ``docs/reference/wire_formats.md``,
-"Faults the simulators inject"), keeping truth counters so tests can tell what the simulator dropped
-from what a driver lost. Not responsible for: anything the driver does (this module shares no code
-with ``daq``: it encodes the wire format with its own implementation, which the HIL tests
-cross-check against the driver's), nor the electrical line (a pty is always 8N1; ``socket://``
-carries bytes only).
+(``docs/reference/wire_formats.md``, "Barometer"), produce its measurement lines from the virtual
+tunnel's air (pressure and temperature, plus the instrument's own slow drift and seeded noise), and
+inject the barometer's faults (garbled or partial line, no reply, unit change:
+``docs/reference/wire_formats.md``, "Faults the simulators inject"), keeping truth counters so tests
+can tell what the simulator dropped from what a driver lost. Not responsible for: anything the
+driver does (this module shares no code with ``daq``: it encodes the wire format with its own
+implementation, which the HIL tests cross-check against the driver's), nor the electrical line (a
+pty is always 8N1; ``socket://`` carries bytes only).
 
 Behaviour (manual facts, with the simulator's own choices marked [sim]):
 

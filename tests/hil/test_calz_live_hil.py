@@ -174,7 +174,8 @@ def test_calz_during_a_recorded_run_rezeroes_and_leaves_a_measured_gap(tmp_path:
 
 def test_without_ptp_the_restarted_clock_is_continued_and_the_sync_view_recovers(
         tmp_path: Path) -> None:
-    # PTP absent: frame times restart at 0 with every scan (docs/reference/wire_formats.md, scanner).
+    # PTP absent: frame times restart at 0 with every scan (docs/reference/wire_formats.md,
+    # scanner).
     path = tmp_path / "run.h5"
     seen: dict[str, CalzResult] = {}
 

@@ -1,7 +1,7 @@
 """HIL: the fan-drive and PLC drivers against their simulators over Modbus TCP on 127.0.0.1.
 
-Each driver runs its own decoding against the simulator's own encoding (docs/reference/wire_formats.md),
-through
+Each driver runs its own decoding against the simulator's own encoding
+(docs/reference/wire_formats.md), through
 a real pymodbus server and client, so the two implementations cross-check each other; every
 fault of docs/reference/wire_formats.md, "Faults") is injected and the driver's reaction checked.
 """
@@ -103,7 +103,7 @@ def test_fan_spins_up_along_the_ramp_and_turns_the_tunnel_fan(fan, tunnel):
     assert tunnel.fan_rpm == pytest.approx(600.0, abs=1e-9)  # the tunnel gets the true speed
     assert tunnel.wind_speed() == pytest.approx(6.0)
     assert drive.status().at_setpoint
-    assert sim.writes_to("reference_1") == [8000]  # 600 / 1500 * 20000 (docs/reference/wire_formats.md)
+    assert sim.writes_to("reference_1") == [8000]  # 600 / 1500 * 20000 (the wire formats)
     assert sim.writes_to("control_word") == [0x0476, 0x047F]
     reading = drive.read()
     assert set(reading.channels) == set(drive.describe())

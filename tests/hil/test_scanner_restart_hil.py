@@ -1,10 +1,10 @@
 """The sync view after a scanner restart without absolute (PTP) frame times.
 
-Without PTP the MPS4264's frame times are relative to the scan start (docs/reference/wire_formats.md,
-"Pressure scanner"), so when the scan restarts (the driver's reconnect after a TCP reset of the data
-connection, the engine's recovery) the device time goes back to 0. The run writer must then
-start a fresh clock map for the scanner: the old one maps the new scan's frames as far back as
-the old scan lasted.
+Without PTP the MPS4264's frame times are relative to the scan start
+(docs/reference/wire_formats.md, "Pressure scanner"), so when the scan restarts (the driver's
+reconnect after a TCP reset of the data connection, the engine's recovery) the device time goes back
+to 0. The run writer must then start a fresh clock map for the scanner: the old one maps the new
+scan's frames as far back as the old scan lasted.
 
 1. The real driver against the simulated scanner (``rig_configs/sim_flat_plate.toml`` with
    ``ptp = false``) in its own process (:func:`~daq.sim.rig_process.start_rig_process`),

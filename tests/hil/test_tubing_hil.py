@@ -1,8 +1,8 @@
 """The simulated rig with `[simulation] tubing = true`: the taps its scanner samples are tubed.
 
 One pass of the whole recording path (scanner simulator with the tubes, real drivers, the
-recorder, `windrig identify`) is in docs/guides/tubing.md, "What the tubing does to the flutter speed";
-it is not a test, because on a loaded host that path scatters the flutter speed by a few per
+recorder, `windrig identify`) is in docs/guides/tubing.md, "What the tubing does to the flutter
+speed"; it is not a test, because on a loaded host that path scatters the flutter speed by a few per
 cent from run to run, more than the tubing correction's 0.5 %.
 """
 

@@ -2,8 +2,8 @@
 
 The driver (daq/) and the simulator (simulators/) encode and decode the wire format with separate
 code; agreement here cross-checks both against the manual facts of docs/reference/wire_formats.md,
-"Barometer". Faults are the barometer's of docs/reference/wire_formats.md, "Faults": garbled/partial line,
-no reply, unit change.
+"Barometer". Faults are the barometer's of docs/reference/wire_formats.md, "Faults": garbled or
+partial line, no reply, unit change.
 """
 
 from __future__ import annotations

@@ -3,8 +3,8 @@
 ``write_run`` writes a small run file (two simulated releases of the flat plate) with
 ``daq.recording.recorder.RunRecorder``: the reader's tests (``tests/ident/records/test_io.py``)
 and ``windrig identify``'s (``tests/daq/test_cli.py``) read the same files.
-``write_smallest_run`` writes the smallest run file of docs/reference/file_format.md with h5py alone,
-as a program other than windrig would. ``sync_rows``
+``write_smallest_run`` writes the smallest run file of docs/reference/file_format.md with h5py
+alone, as a program other than windrig would. ``sync_rows``
 counts what a SWMR reader sees of a file still being written (the console's recording tests).
 """
 
@@ -81,7 +81,7 @@ SMALLEST_CONFIG = CONFIG.replace('[rig]\nname = "test"\n', "")
 
 
 def write_smallest_run(path: Path, *, omit: tuple[str, ...] = ()) -> list:
-    """Write the smallest run file of docs/reference/file_format.md with h5py alone; return the releases.
+    """Write docs/reference/file_format.md's smallest run file with h5py alone; return the releases.
 
     Two simulated flat-plate releases (5 and 8 m/s, 4 s at 200 Hz after 0.5 s of hold each):
     ``/entry/config`` (a ``[section]`` only), the seven columns of ``/entry/sync`` and

@@ -9,9 +9,9 @@ whose stored reference is above the limit. It writes only the Control Word and R
 only the four registers of its ``registers`` table. Not responsible for Modbus transport, retries or
 error normalisation (the bus), nor for turning wind speed into fan speed.
 
-Facts implemented (docs/reference/wire_formats.md, "Fan drive", and the ABB Drives profile tables of the
-ACS580 firmware manual "Contents of the fieldbus Control word / Status word", FDNA-01 manual p.91,
-FPBA-01 manual p.113, ACS880 manual p.635):
+Facts implemented (docs/reference/wire_formats.md, "Fan drive", and the ABB Drives profile tables of
+the ACS580 firmware manual "Contents of the fieldbus Control word / Status word", FDNA-01 manual
+p.91, FPBA-01 manual p.113, ACS880 manual p.635):
 
 - CW 0x0476 = prepare / ramp stop, 0x047F = run, 0x0000 = coast (a wind tunnel's published map);
 - CW bit 7 RESET: a 0->1 edge resets an active fault and the drive proceeds to SWITCH-ON
@@ -19,7 +19,8 @@ FPBA-01 manual p.113, ACS880 manual p.635):
 - SW bits 0 RDY_ON, 1 RDY_RUN, 2 RDY_REF, 3 TRIPPED (a wind tunnel's published register map names
   them; the positions come from the ABB Drives profile Status word tables cited above), 4 OFF_2_STA,
   5 OFF_3_STA, 6 SWC_ON_INHIB, 7 ALARM, 8 AT_SETPOINT, 9 REMOTE, 10 ABOVE_LIMIT;
-- Reference 1 is a signed word, 0..+/-20000 scaled to the maximum speed (docs/reference/wire_formats.md, "Fan
+- Reference 1 is a signed word, 0..+/-20000 scaled to the maximum speed
+(docs/reference/wire_formats.md, "Fan
   drive");
 - Actual 1 is the speed with the same 20000 = maximum-speed scaling. [unverified] The drive manuals
   call ACT1 "selectable, e.g. speed": its source and scaling are drive parameters, so the rig must

@@ -3,7 +3,8 @@
 Responsibility: the Control Word values the driver writes (:data:`CW_PREPARE`, :data:`CW_RUN`,
 :data:`CW_COAST`, the :data:`CW_RESET_BIT`), the Reference 1 / Actual 1 scaling
 (:data:`FULL_SCALE` counts at the maximum speed) and the decoded Status Word
-(:class:`DriveStatus`). Pure: no I/O. The sources of each value are in ``docs/reference/wire_formats.md``.
+(:class:`DriveStatus`). Pure: no I/O. The sources of each value are in
+``docs/reference/wire_formats.md``.
 
 Not responsible for: the register addresses (:mod:`daq.instruments.abb_acs580.settings`) or the
 command sequences and safety checks (:mod:`daq.instruments.abb_acs580.driver`).
@@ -15,8 +16,8 @@ from dataclasses import dataclass
 
 __all__ = ["CW_COAST", "CW_PREPARE", "CW_RESET_BIT", "CW_RUN", "FULL_SCALE", "DriveStatus"]
 
-#: Control Word values (docs/reference/wire_formats.md, "Fan drive") and the RESET bit (ABB Drives profile CW
-#: bit 7).
+#: Control Word values (docs/reference/wire_formats.md, "Fan drive") and the RESET bit (ABB Drives
+#: profile CW bit 7).
 CW_PREPARE = 0x0476
 
 

@@ -116,10 +116,10 @@ class Ild1420Decoder:
     Feed it bytes in chunks of any size; it returns the samples of every complete block and keeps
     the bytes of an unfinished one. A block is ``3 x values`` bytes whose top two bits follow the
     pattern ``00 01 10`` (first value: distance, ``f = 0``) then ``00 01 11`` for each additional
-    value (docs/reference/wire_formats.md, "Laser displacement sensors"). A byte that breaks the pattern
-    (lost or inserted byte, a start mid-block) makes it skip forward to the next position where a
-    whole block pattern starts; the skipped bytes are counted. It never raises on any input and
-    always consumes what it is given.
+    value (docs/reference/wire_formats.md, "Laser displacement sensors"). A byte that breaks the
+    pattern (lost or inserted byte, a start mid-block) makes it skip forward to the next position
+    where a whole block pattern starts; the skipped bytes are counted. It never raises on any input
+    and always consumes what it is given.
 
     The protocol has no checksum: an inserted byte of the right class exactly in front of a
     genuine one of the same class is indistinguishable from it, and the value it lands in is wrong

@@ -16,7 +16,8 @@ converting distances into heave and pitch (the acquisition does that with the ``
 ``standoff_mm`` settings), mapping the device clock onto the host clock (the synchronisation), or
 threads and queues (the acquisition runs one reader thread per sensor).
 
-Manual facts (docs/reference/wire_formats.md, "Laser displacement sensors") and the choices made beyond them:
+Manual facts (docs/reference/wire_formats.md, "Laser displacement sensors") and the choices made
+beyond them:
 
 - 921.6 kBd 8N1 by default; one value is three bytes ``L = 00 D5..D0``, ``M = 01 D11..D6``,
   ``H = 1 f D17..D12``; ``f = 0`` for the first value of a block (the distance), 1 for the

@@ -22,7 +22,8 @@ from daq.validation import check_keys, number
 __all__ = ["AXES", "BAUDRATE_RANGE", "BITS_PER_VALUE", "DEFAULT_BAUDRATE", "DEFAULT_OUTPUT",
            "MAX_RATE_HZ", "RANGES_MM", "REQUIRED_OUTPUT", "WORDS_PER_VALUE", "Ild1420Settings"]
 
-#: Measuring ranges of the ILD1420 family, mm (docs/reference/wire_formats.md, "Laser displacement").
+#: Measuring ranges of the ILD1420 family, mm (docs/reference/wire_formats.md, "Laser
+#: displacement").
 RANGES_MM: Final = (10, 25, 50, 100, 200, 500)
 
 

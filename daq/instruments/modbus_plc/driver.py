@@ -8,15 +8,15 @@ coils and reads only those coils, that input and that register (addresses from t
 Safety: :meth:`ModbusPlc.release` releases only when the ARM coil reads set (else
 :class:`~daq.errors.SafetyError`, nothing written), and confirms the release by the RELEASED input
 within ``release_timeout_s``; a release that never comes (a fault the simulated PLC injects,
-docs/reference/wire_formats.md, "Faults") is a :class:`~daq.errors.DeviceError` naming RELEASED. It is a
-DeviceError rather than a TransportTimeout on purpose: the PLC answered every request, the armature
-did not move, and a generic transport retry must never repeat a release.
+docs/reference/wire_formats.md, "Faults") is a :class:`~daq.errors.DeviceError` naming RELEASED. It
+is a DeviceError rather than a TransportTimeout on purpose: the PLC answered every request, the
+armature did not move, and a generic transport retry must never repeat a release.
 
-PLC logic assumed ([design]: docs/reference/wire_formats.md, "PLC"; the sources name the signals only): ARM
-0->1 energises the magnet and permits one release; RELEASE 0->1 while armed de-energises it and the
-PLC clears ARM; DAQ_TRIGGER 0->1 pulses the trigger line and increments TRIGGER_COUNT (16 bits,
-wraps). The driver returns RELEASE and DAQ_TRIGGER to 0 after use, so that the next command is an
-edge.
+PLC logic assumed ([design]: docs/reference/wire_formats.md, "PLC"; the sources name the signals
+only): ARM 0->1 energises the magnet and permits one release; RELEASE 0->1 while armed de-energises
+it and the PLC clears ARM; DAQ_TRIGGER 0->1 pulses the trigger line and increments TRIGGER_COUNT (16
+bits, wraps). The driver returns RELEASE and DAQ_TRIGGER to 0 after use, so that the next command is
+an edge.
 
 Not responsible for Modbus transport, retries and error normalisation (the bus), nor for
 time-aligning the release with the other streams (it returns host timestamps for that).

@@ -12,9 +12,10 @@ the device clock onto the host clock (the synchronisation layer does that from t
 times and host arrival times returned here), threads, or recording.
 
 This module holds the driver (:class:`ScanivalveMps4264`). What needs none of its state has a
-module of its own in this package: the settings (:mod:`daq.instruments.scanivalve_mps4264.settings`), the packet layouts and the
-decoder (:mod:`.frames`), one module's data stream (:mod:`.streams`), the merging of the
-modules' frames into blocks (:mod:`.merge`) and the blocks returned (:mod:`.blocks`).
+module of its own in this package: the settings
+(:mod:`daq.instruments.scanivalve_mps4264.settings`), the packet layouts and the decoder
+(:mod:`.frames`), one module's data stream (:mod:`.streams`), the merging of the modules' frames
+into blocks (:mod:`.merge`) and the blocks returned (:mod:`.blocks`).
 
 Longer than 600 lines: the driver is one state machine. Its command connection, its scan and
 its per-module data connections share one lock, the scan state and the reconnect path (a
@@ -22,8 +23,8 @@ reconnect restarts the data connection under a running scan, ``scan()`` replaces
 a CALZ needs the scan stopped), so they stay in one class, with the description of the
 protocol below, which its methods cite.
 
-Wire protocol (docs/reference/wire_formats.md, "Pressure scanner"; [unverified] marks our choices where the
-facts stop):
+Wire protocol (docs/reference/wire_formats.md, "Pressure scanner"; [unverified] marks our choices
+where the facts stop):
 
 - Commands are ASCII lines terminated by CR LF [unverified terminator; the simulator accepts CR,
   LF or both]. ``STATUS`` answers ``STATUS: <state>`` with a state of ``READY``, ``SCAN``,
@@ -330,8 +331,8 @@ class ScanivalveMps4264:
         """Zero the sensors (``CALZ``) and wait until the scanner is ``READY`` again.
 
         The MPS4232/4264 have no calibration valve: the zero is taken with the taps exposed, so
-        it must be taken wind-off (docs/reference/wire_formats.md, "Pressure scanner"). Deciding that the
-        wind is off is the caller's job; it passes the wind speed it knows
+        it must be taken wind-off (docs/reference/wire_formats.md, "Pressure scanner"). Deciding
+        that the wind is off is the caller's job; it passes the wind speed it knows
         (:meth:`check_calz_allowed`). The scanner refuses CALZ while it scans: :meth:`stop`
         first (:meth:`daq.acquisition.engine.Acquisition.calz` does that during a run).
 

@@ -10,8 +10,8 @@ times (:mod:`daq.instruments.scanivalve_mps4264.driver`), counter unwrapping
 (:mod:`daq.instruments.scanivalve_mps4264.streams`), or merging the modules frame by frame
 (:mod:`daq.instruments.scanivalve_mps4264.merge`). Pure: no I/O, no threads, no clock.
 
-Packets (docs/reference/wire_formats.md, "Pressure scanner"; Scanivalve's mps-protocol.h; [unverified]
-marks our choices where the facts stop):
+Packets (docs/reference/wire_formats.md, "Pressure scanner"; Scanivalve's mps-protocol.h;
+[unverified] marks our choices where the facts stop):
 
 - Every field is a 4-byte word, big- or little-endian, detected per packet from the non-zero
   byte of the type word as ``mps_peek()`` does:
@@ -63,7 +63,8 @@ TEMPERATURES_PER_MODULE = 8
 _PA_FACTOR = float(np.float32(6894.75977))
 _UNIT_RAW = 27  # Appendix A: 27 RAW (counts, not pressures)
 
-#: Packet type -> size in bytes (docs/reference/wire_formats.md, "Pressure scanner", mps-protocol.h).
+#: Packet type -> size in bytes (docs/reference/wire_formats.md, "Pressure scanner",
+#: mps-protocol.h).
 PACKET_SIZES: Mapping[int, int] = {
     0x5D: 96, 0x5B: 96, 0x65: 160, 0x63: 160, 0x6D: 304, 0x69: 304, 0x0A: 348,
 }

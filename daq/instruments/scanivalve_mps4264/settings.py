@@ -68,8 +68,8 @@ class Mps4264Settings:
         ``< 64 * modules``. Taps occupy channels ``0 .. n_taps - 1`` in the rig's tap order.
     data_port : int
         TCP port of module 0's binary data server (module ``k`` on ``data_port + k``), 1..65535,
-        default 503 (docs/reference/wire_formats.md, "Pressure scanner"). A simulated scanner's ports are
-        ephemeral: the launcher fills this from the simulator's ``data_port``.
+        default 503 (docs/reference/wire_formats.md, "Pressure scanner"). A simulated scanner's
+        ports are ephemeral: the launcher fills this from the simulator's ``data_port``.
     command_timeout_s : float
         Timeout of a command's reply, and default timeout of
         :meth:`~daq.instruments.scanivalve_mps4264.driver.ScanivalveMps4264.read_block`, s, in (0,

@@ -23,10 +23,10 @@ Wire format (docs/reference/wire_formats.md, "Barometer", manual facts cited inl
   The temperature quantity of the PTB330 is ``TP1`` (barometer module 1; PTB330 Table 13);
   a PTU300 calls it ``T``: subclass and override :attr:`VaisalaPtb330.FORM_STRING`;
 - the pressure unit is read from every line (the instrument's ``UNIT`` can be changed on its display
-  or serial port at any time: the "unit change" fault of docs/reference/wire_formats.md), and the value is
-  converted with :data:`PRESSURE_UNITS_PA`; an unknown unit is a :class:`ProtocolError`, never a
-  silently wrong number. ``mmH2O``/``inH2O`` are refused on purpose (their reference temperature is
-  not stated in the line).
+  or serial port at any time: the "unit change" fault of docs/reference/wire_formats.md), and the
+  value is converted with :data:`PRESSURE_UNITS_PA`; an unknown unit is a :class:`ProtocolError`,
+  never a silently wrong number. ``mmH2O``/``inH2O`` are refused on purpose (their reference
+  temperature is not stated in the line).
 
 Temperature: ``TP1`` is the temperature of the pressure module, i.e. of the instrument, which
 equals the air temperature only once the barometer is in thermal equilibrium with the tunnel air;
@@ -64,8 +64,9 @@ _DTYPES = {"pressure": "float64", "temperature": "float64", "density": "float64"
 
 logger = logging.getLogger(__name__)
 
-#: Serial line defaults (docs/reference/wire_formats.md, "Barometer": "9600 baud, 7 data bits, even parity, 1
-#: stop bit, XON/XOFF"); the query of a ``serial://`` URL overrides them (``open_transport(url,
+#: Serial line defaults (docs/reference/wire_formats.md, "Barometer": "9600 baud, 7 data bits, even
+#: parity, 1 stop bit, XON/XOFF"); the query of a ``serial://`` URL overrides them
+#: (``open_transport(url,
 #: **these)``).
 SERIAL_DEFAULTS: Mapping[str, Any] = {
     "baudrate": 9600, "bytesize": 7, "parity": "E", "stopbits": 1, "xonxoff": True,

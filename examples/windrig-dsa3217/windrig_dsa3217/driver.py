@@ -1,4 +1,4 @@
-"""Driver of a Scanivalve DSA3217-class scanner: the scanner role of windrig (docs/guides/drivers.md).
+"""Driver of a Scanivalve DSA3217-class scanner: windrig's scanner role (docs/guides/drivers.md).
 
 One TCP connection (the unit's Telnet port, 23) carries both the ASCII commands and, once
 ``SCAN`` is sent with ``FORMAT B``, the binary packets (:mod:`windrig_dsa3217.packets`).

@@ -2,10 +2,10 @@
 
 Responsibility: the constants of an MPS4264-class module (64 pressure and 8 temperature channels,
 the units table of ``SET UNITS``) and the two packets the simulated scanner sends
-(``docs/reference/wire_formats.md``, "Pressure scanner"): :func:`words_eu`, the MPS-4264 EU packet (type
-0x6D, 304 bytes), and :func:`words_legacy`, the legacy 64-channel packet (type 0x0A, 348 bytes),
-each as rows of 32-bit words, for many frames at once (the caller picks the byte order). They are
-written from ``mps-protocol.h``, independently of the driver's decoder
+(``docs/reference/wire_formats.md``, "Pressure scanner"): :func:`words_eu`, the MPS-4264 EU packet
+(type 0x6D, 304 bytes), and :func:`words_legacy`, the legacy 64-channel packet (type 0x0A, 348
+bytes), each as rows of 32-bit words, for many frames at once (the caller picks the byte order).
+They are written from ``mps-protocol.h``, independently of the driver's decoder
 (:mod:`daq.instruments.scanivalve_mps4264`), so that a test of the one checks the other.
 
 Not responsible for: what the frames hold (:mod:`simulators.devices.scanivalve_mps4264.scanner`

@@ -1,8 +1,8 @@
 """Simulated Scanivalve MPS4264-class pressure scanner: the device, its commands and its frames.
 
 Responsibility: :class:`SimScanivalveMps4264`, the scanner as one state machine over one device
-state, speaking the wire protocol on 127.0.0.1 (``docs/reference/wire_formats.md``, "Pressure scanner")
-from the virtual tunnel's pressures: the ASCII commands and their replies
+state, speaking the wire protocol on 127.0.0.1 (``docs/reference/wire_formats.md``, "Pressure
+scanner") from the virtual tunnel's pressures: the ASCII commands and their replies
 (:meth:`~SimScanivalveMps4264.handle_command`), frames at the commanded rate on the device's own
 clock (offset, drift), with seeded noise, sensor zero offsets and their CALZ, the
 external-trigger time of the tunnel's trigger line, both byte orders, a bounded frame buffer per
@@ -117,8 +117,8 @@ class SimScanivalveMps4264:
         ``SO_SNDBUF`` of data connections (small values make a stall overrun sooner).
     ptp : bool
         PTP locked: frame times are absolute (``ptp_epoch_s`` + device clock); False: relative
-        to the scan start, from epoch 0 (``docs/reference/wire_formats.md``, "Pressure scanner", on the
-        scan start and the frame time's epoch).
+        to the scan start, from epoch 0 (``docs/reference/wire_formats.md``, "Pressure scanner", on
+        the scan start and the frame time's epoch).
     ptp_epoch_s : int
         PTP (TAI/UTC) seconds at true time 0 of the tunnel clock.
     serial_number : int

@@ -1,8 +1,8 @@
 """The operator console on a replayed run file (pytest-qt, offscreen).
 
 The run file is written by the real recorder (:class:`daq.recording.recorder.RunRecorder`, the
-layout of docs/reference/file_format.md) with synthetic rows whose values are known: h a 2 Hz sinusoid,
-alpha 3.3 Hz, a slowly rising wind, tap pressures of a fixed Cp distribution scaled by qd.
+layout of docs/reference/file_format.md) with synthetic rows whose values are known: h a 2 Hz
+sinusoid, alpha 3.3 Hz, a slowly rising wind, tap pressures of a fixed Cp distribution scaled by qd.
 """
 
 from __future__ import annotations

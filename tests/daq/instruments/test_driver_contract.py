@@ -95,7 +95,7 @@ def test_property_docstrings_follow_the_measure_control_rule(driver):
 
 
 def test_every_role_of_the_design_has_a_registered_driver():
-    """Scanner, lasers, fan, PLC and barometer: all five instruments of docs/reference/wire_formats.md."""
+    """Scanner, lasers, fan, PLC and barometer: the five of docs/reference/wire_formats.md."""
     roles = {registry.driver_entry(d).role for d in INSTRUMENTS}
     assert roles == {"scanner", "lasers", "fan", "plc", "barometer"}
 

@@ -1,7 +1,7 @@
 """ILD1420 driver: settings, the word/block decoder, unwrapping, and scripted byte exchanges.
 
-Byte sequences are written out by hand from docs/reference/wire_formats.md, "Laser displacement sensors"
-(the manual's pp. 65-66, 84, 108): a value
+Byte sequences are written out by hand from docs/reference/wire_formats.md, "Laser displacement
+sensors" (the manual's pp. 65-66, 84, 108): a value
 is three bytes L = 00 D5..D0, M = 01 D11..D6, H = 1 f D17..D12 with f = 0 for the distance (the
 first value of a block) and 1 for the additional values.
 """
@@ -27,8 +27,8 @@ from daq.transports.scripted import expected_exchange
 
 TABLE = {"range_mm": 10, "rate_hz": 4000.0, "x": 0.1, "standoff_mm": 5.0}
 
-# Block 1 (bytes from docs/reference/wire_formats.md, "Laser displacement"): distance 32760 = 0x7FF8 (0.5 MR),
-# counter 262143,
+# Block 1 (bytes from docs/reference/wire_formats.md, "Laser displacement"): distance 32760 = 0x7FF8
+# (0.5 MR), counter 262143,
 # timestamp 0x0001_0002 ticks (low word first), status bits 15 (triggered) and 16.
 BLOCK_1 = bytes.fromhex("38 7F 87  3F 7F FF  02 40 C0  01 40 C0  00 40 D8")
 # Block 2: distance word 262077 = 0x3FFBD (peak before MR), counter 0 (wrapped), timestamp

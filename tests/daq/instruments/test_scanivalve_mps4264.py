@@ -59,7 +59,7 @@ def legacy_packet(frame: int, t_s: int = 5, t_ns: int = 250_000_000, *, order: s
                   conv: float = PA_PER_PSI, start: tuple[int, int] = (1000, 500_000_000),
                   ext: tuple[int, int] = (0, 0), pressures: list[float] | None = None,
                   size: int = 348) -> bytes:
-    """Legacy packet 0x0A, 348 B (docs/reference/wire_formats.md, "Pressure scanner", field by field)."""
+    """Legacy packet 0x0A, 348 B, field by field (docs/reference/wire_formats.md, "Pressure")."""
     p = pressures if pressures is not None else [float(frame + i) for i in range(64)]
     ext_us = (ext[0] * 1_000_000 + ext[1] // 1000) % 2**32
     return struct.pack(order + "iiIifiifIII8f64fIIII", 0x0A, size, frame, serial, rate, valve,
@@ -68,7 +68,7 @@ def legacy_packet(frame: int, t_s: int = 5, t_ns: int = 250_000_000, *, order: s
 
 
 def test_test_encoder_follows_the_manual_layout():
-    """Bytes from docs/reference/wire_formats.md: type word 0x6D first, then the frame, s, ns; 304/348 B."""
+    """Bytes of docs/reference/wire_formats.md: type word 0x6D, then the frame, s, ns; 304/348 B."""
     packet = eu_packet(7, 3, 9, order=">")
     assert len(packet) == 304 and len(legacy_packet(1)) == 348
     assert packet[:16] == bytes.fromhex("0000006d 00000007 00000003 00000009")
@@ -178,8 +178,8 @@ def test_property_docstrings_follow_the_verb_rule():
 
 
 # -- commands, byte-exact ------------------------------------------------------------------------
-# Bytes from docs/reference/wire_formats.md, "Pressure scanner" (commands SET FORMAT B B, SET SIM 0x40,
-# SCAN, STOP, CALZ; the STATUS reply "STATUS: READY|SCAN|CALZ", mps-protocol.h; the INVALID
+# Bytes from docs/reference/wire_formats.md, "Pressure scanner" (commands SET FORMAT B B, SET SIM
+# 0x40, SCAN, STOP, CALZ; the STATUS reply "STATUS: READY|SCAN|CALZ", mps-protocol.h; the INVALID
 # COMMAND reply).
 OPEN = [(b"STATUS\r\n", b"STATUS: READY\r\n")]
 

@@ -1,8 +1,8 @@
 """Vaisala PTB330 driver: settings, line decoding, units, and scripted byte exchanges.
 
-Wire bytes come from docs/reference/wire_formats.md, "Barometer": ``SEND [addr]``, ``FORM``, ``OPEN``/
-``CLOSE`` (PTB330 manual p.101), the PTU300-style line ``P= 1013.2 hPa T= 31.1 'C RH= 38.3 %RH``
-(PTU300 manual p.103) and the factory line ``pressure = 1013.02 hPa`` (PTB330 manual p.101).
+Wire bytes come from docs/reference/wire_formats.md, "Barometer": ``SEND [addr]``, ``FORM``,
+``OPEN``/ ``CLOSE`` (PTB330 manual p.101), the PTU300-style line ``P= 1013.2 hPa T= 31.1 'C RH= 38.3
+%RH`` (PTU300 manual p.103) and the factory line ``pressure = 1013.02 hPa`` (PTB330 manual p.101).
 """
 
 from __future__ import annotations
@@ -83,7 +83,7 @@ def test_settings_object_validates_itself():
 
 
 def test_serial_line_defaults_are_7e1_xonxoff_and_the_url_query_overrides_them():
-    """docs/reference/wire_formats.md, "Barometer": 9600 baud, 7 data bits, even parity, 1 stop, XON/XOFF."""
+    """9600 baud, 7 data bits, even parity, 1 stop, XON/XOFF (docs/reference/wire_formats.md)."""
     t = open_transport("serial:///dev/ttyUSB3", **SERIAL_DEFAULTS)
     assert isinstance(t, SerialTransport)
     assert t._settings["baudrate"] == 9600 and t._settings["bytesize"] == 7
@@ -294,7 +294,8 @@ def test_describe_keys_equal_the_reading_channels_and_property_docstrings_follow
             assert member.__doc__.startswith(("Measure ", "Control ")), (cls, name)
 
 
-# -- driver: scripted exchanges (bytes from docs/reference/wire_formats.md, "Barometer"; PTB330 p.101) -----
+# -- driver: scripted exchanges (bytes from docs/reference/wire_formats.md, "Barometer"; PTB330
+# p.101) -----
 def test_open_sets_the_format_and_reads_are_polled_with_send():
     with expected_exchange(OPEN_PLAIN + [(b"SEND\r", LINE), (b"SEND\r", LINE)]) as t:
         with driver(t) as drv:

@@ -1,10 +1,11 @@
 """``windrig identify`` on runs of three degrees of freedom: the 18 flutter derivatives.
 
-The table printed is checked against the definition of the derivatives (docs/reference/conventions.md,
-"Three degrees of freedom"): ``Q(iK) = K^2 [[H4* + i H1*, H3* + i H2*, H6* + i H5*], [A4* + i
-A1*, ...], [P6* + i P5*, P3* + i P2*, P4* + i P1*]]``, read off the model's ``Q`` directly. The
-run files are written by the acquisition's recorder from simulated 3-DOF releases of the bluff
-deck (:mod:`simulators.decks`) and read back by :mod:`ident.records.run_file` as 3-DOF releases.
+The table printed is checked against the definition of the derivatives
+(docs/reference/conventions.md, "Three degrees of freedom"): ``Q(iK) = K^2 [[H4* + i H1*, H3* + i
+H2*, H6* + i H5*], [A4* + i A1*, ...], [P6* + i P5*, P3* + i P2*, P4* + i P1*]]``, read off the
+model's ``Q`` directly. The run files are written by the acquisition's recorder from simulated 3-DOF
+releases of the bluff deck (:mod:`simulators.decks`) and read back by :mod:`ident.records.run_file`
+as 3-DOF releases.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Tests of daq.recording.recorder: the HDF5 file of one run, as docs/reference/file_format.md describes it.
+"""Tests of daq.recording.recorder: one run's HDF5 file, as docs/reference/file_format.md has it.
 
 Measurements (2026-11, h5py 3.16.0 / HDF5 2.0.0, shared 2-core VM, local disk, page cache warm;
 a throwaway script, to be kept in benchmarks/ later): a 512-channel float32 stream at 500 Hz in

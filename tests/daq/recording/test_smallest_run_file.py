@@ -1,4 +1,4 @@
-"""The writer's contract: the smallest run file of docs/reference/file_format.md, and each command on it.
+"""The writer's contract: docs/reference/file_format.md's smallest run file, and each command on it.
 
 The file is written with h5py alone, from the page (``support.run_files.write_smallest_run``:
 ``/entry/config`` with a ``[section]``, seven columns of ``/entry/sync``, ``/entry/releases``;

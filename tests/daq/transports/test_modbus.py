@@ -77,7 +77,7 @@ def test_rtu_port_that_does_not_exist_is_a_transport_error():
 # -- 16-bit conversions --------------------------------------------------------------------------
 def test_int16_conversions_at_the_edges():
     assert [to_int16(w) for w in (0, 0x7FFF, 0x8000, 0xFFFF)] == [0, 32767, -32768, -1]
-    assert from_int16(-20000) == 0xB1E0  # REF1 full scale in reverse (docs/reference/wire_formats.md)
+    assert from_int16(-20000) == 0xB1E0  # REF1 full scale in reverse (the wire formats)
     for bad in (-1, 0x10000):
         with pytest.raises(ValueError):
             to_int16(bad)
@@ -145,7 +145,8 @@ def mbap(tid: int, pdu: str, unit: int = 1) -> bytes:
 def test_requests_and_replies_are_the_exact_modbus_tcp_frames():
     # Frames from the Modbus Application Protocol v1.1b3 (6.1 FC01, 6.2 FC02, 6.3 FC03, 6.5 FC05,
     # 6.6 FC06, 7 exception responses) inside MBAP headers (Modbus Messaging on TCP/IP v1.0b, 3.1);
-    # register values are the ABB drives profile words of docs/reference/wire_formats.md, "Fan drive".
+    # register values are the ABB drives profile words of docs/reference/wire_formats.md, "Fan
+    # drive".
     peer = ScriptedPeer([
         (mbap(1, "03 0003 0002"), mbap(1, "03 04 0237 03E8")),        # SW, ACT1
         (mbap(2, "06 0000 047F"), mbap(2, "06 0000 047F")),           # CW = run

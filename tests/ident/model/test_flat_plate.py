@@ -1,7 +1,7 @@
 """Flat-plate truth case: Theodorsen's function, closed-form flutter derivatives, Jones's RFCs.
 
-The closed-form flutter derivatives are those of ``docs/reference/conventions.md``, "The analytic truth";
-R. T. Jones's rational approximation makes the plate an exact Roger model.
+The closed-form flutter derivatives are those of ``docs/reference/conventions.md``, "The analytic
+truth"; R. T. Jones's rational approximation makes the plate an exact Roger model.
 
 Every expectation here is computed in the test itself, from Bessel functions (scipy.special.jv, yv,
 not the Hankel routine ident uses), from the eight formulas written out again below, or from
@@ -29,7 +29,7 @@ def theodorsen_from_bessel(k):
 
 
 def jones_from_formula(p):
-    """R. T. Jones: C(p) = 1 - 0.165 p/(p + 0.091) - 0.335 p/(p + 0.6) (docs/reference/conventions.md)."""
+    """R. T. Jones: C(p) = 1 - 0.165 p/(p + 0.091) - 0.335 p/(p + 0.6) (the conventions)."""
     p = np.asarray(p, dtype=complex)
     return 1.0 - 0.165 * p / (p + 0.091) - 0.335 * p / (p + 0.6)
 
@@ -51,7 +51,7 @@ def design_flutter_derivatives(K, C):
 
 
 def Q_by_hand(K, fd):
-    """Q(iK) = K^2 [[H4 + i H1, H3 + i H2], [A4 + i A1, A3 + i A2]] (docs/reference/conventions.md)."""
+    """Q(iK) = K^2 [[H4 + i H1, H3 + i H2], [A4 + i A1, A3 + i A2]] (the conventions)."""
     K = np.asarray(K, dtype=float)
     Q = np.empty(K.shape + (2, 2), dtype=complex)
     Q[:, 0, 0] = fd["H4"] + 1j * fd["H1"]

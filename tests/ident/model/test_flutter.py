@@ -4,8 +4,9 @@ Still-air eigenvalues, forces, time- vs frequency-domain flutter speeds, and the
 FlutterResult.
 
 Expectations come from closed forms (single-degree-of-freedom oscillators, flat-plate added mass,
-torsional divergence of a plate), from the force formula of docs/reference/conventions.md ("In the time
-domain") evaluated here, or from the independent frequency-domain solver (Scanlan's iteration on K).
+torsional divergence of a plate), from the force formula of docs/reference/conventions.md ("In the
+time domain") evaluated here, or from the independent frequency-domain solver (Scanlan's iteration
+on K).
 """
 
 import functools

@@ -144,7 +144,7 @@ def test_flutter_derivatives_survive_Q_round_trip(K, data):
 
 
 def test_Q_layout_is_designs():
-    """Each flutter derivative lands in the entry and part docs/reference/conventions.md assigns to it."""
+    """Each flutter derivative lands in the entry and part docs/reference/conventions.md gives."""
     K = np.array([2.0])
     for name in conventions.FLUTTER_DERIVATIVE_NAMES:
         fd = {other: np.zeros(1) for other in conventions.FLUTTER_DERIVATIVE_NAMES}

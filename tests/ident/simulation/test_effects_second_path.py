@@ -4,8 +4,8 @@ The library simulates a release by an exact matrix exponential (linear physics) 
 (nonlinear effects) in :mod:`ident.simulation.plant`, with the measurement chain of
 :mod:`ident.simulation.measurement`; the virtual tunnel and the discrepancy workflow both use it.
 Here each of the ten named effects is written again from its documented equations (the effect's
-docstring and docs/reference/conventions.md, "Named effects", "In the time domain"), without calling any
-method of the effect or of the library's state space: the equations of motion
+docstring and docs/reference/conventions.md, "Named effects", "In the time domain"), without calling
+any method of the effect or of the library's state space: the equations of motion
 
     (Ms - rho/2 B^4 A3) q'' = -Cs q' - Ks q + rho/2 [U^2 B^2 A1 q + U B^3 A2 q'
                               + U^2 B^2 sum_l A_{l+3} x_l] + f_effect(q, q', t),
@@ -314,8 +314,8 @@ def test_cubic_pitch_stiffness_follows_the_harmonic_balance_backbone():
 
     Three times the realistic cubic spring (0.15 of the linear stiffness at the release
     amplitude), pitch alone in still air (no coupling: the plate's added mass is diagonal,
-    ``I_eff = I + rho/2 B^4 pi/64``, docs/reference/conventions.md's Q22). Each cycle's frequency from
-    its interpolated zero crossings, its amplitude the mean of its two peaks. First-order
+    ``I_eff = I + rho/2 B^4 pi/64``, docs/reference/conventions.md's Q22). Each cycle's frequency
+    from its interpolated zero crossings, its amplitude the mean of its two peaks. First-order
     harmonic balance is off by ``(3/256) (k3 a^2/k)^2`` = 3e-4 of the frequency (too high:
     Lindstedt's second-order term is -21/256, the backbone's -18/256), the damping (0.5 %) by
     1e-5: 0.5 % of the shift from the linear frequency (5.2 % at the release). Measured: the
