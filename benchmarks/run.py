@@ -1,0 +1,95 @@
+"""Run every benchmark and collect its result files: ``make bench`` (quick) and full runs.
+
+``python benchmarks/run.py --mode quick|full [--out DIR] [--only NAME ...]`` runs each script of
+:data:`BENCHMARKS` as ``python benchmarks/<name>.py [--quick] --results DIR`` in turn, one at a
+time (several benchmarks measure time, and two at once would slow each other), and writes
+``DIR/index.json``: each benchmark's mode, exit status, wall time and, for a failure, its last
+lines of output. The quick mode (CI) shows that every benchmark runs and writes its files, in
+a few minutes on two cores; its figures are not the documented ones. The full mode is the
+benchmarks' own defaults, which produce the figures of the validation pages
+(``docs/validation/results``, the default ``--out`` of a full run); some take hours.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+import result_files  # noqa: E402 - beside this script
+
+#: Every benchmark, by the stem of its script, in the order they run.
+BENCHMARKS = (
+    "decode_ild1420", "decode_ptb330", "decode_scanivalve", "modbus_latency", "daq_throughput",
+    "console_frame_rate", "nexus_validation", "ident_speed_compare", "ident_accuracy",
+    "ident_accuracy_3dof", "flutter_crb", "turbulent_gls_experiment", "campaign_efficiency",
+    "turbulent_campaign", "discrepancy_detectability", "discrepancy_confusion",
+    "reprocess_scaling", "bridge_speed", "bridge_uncertainty",
+)
+#: Longest a quick run of one benchmark may take, s (a hung benchmark fails, not CI's clock).
+QUICK_TIMEOUT = 300.0
+
+
+def _run(name: str, mode: str, out: Path) -> dict[str, object]:
+    command = [sys.executable, str(HERE / f"{name}.py"), "--results", str(out)]
+    if mode == "quick":
+        command.append("--quick")
+    start = time.perf_counter()
+    try:
+        done = subprocess.run(command, capture_output=True, text=True, check=False,
+                              timeout=QUICK_TIMEOUT if mode == "quick" else None)
+    except subprocess.TimeoutExpired as exc:
+        tail = (exc.stdout or "")[-2000:] if isinstance(exc.stdout, str) else ""
+        return {"benchmark": name, "mode": mode, "status": "timed out",
+                "seconds": round(time.perf_counter() - start, 1), "output": tail}
+    seconds = round(time.perf_counter() - start, 1)
+    status = "ok" if done.returncode == 0 else f"exit {done.returncode}"
+    if status == "ok" and not (out / f"{name}.json").exists():
+        status = "no result file"
+    entry: dict[str, object] = {"benchmark": name, "mode": mode, "status": status,
+                                "seconds": seconds}
+    if status != "ok":
+        entry["output"] = (done.stdout + done.stderr)[-2000:]
+    return entry
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the benchmarks; return 0 when every one ran and wrote its files."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--mode", choices=result_files.MODES, default="quick")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="result folder (default: benchmarks/results/quick for a quick "
+                             "run, docs/validation/results for a full one)")
+    parser.add_argument("--only", nargs="+", choices=BENCHMARKS, default=None, metavar="NAME")
+    args = parser.parse_args(argv)
+    out = args.out or (HERE / "results" / "quick" if args.mode == "quick"
+                       else result_files.DOCS_RESULTS)
+    out.mkdir(parents=True, exist_ok=True)
+    index_path = out / "index.json"
+    index = json.loads(index_path.read_text()) if index_path.exists() else {}
+    failed = []
+    for name in args.only or BENCHMARKS:
+        print(f"{name} ({args.mode}) ...", flush=True)
+        entry = _run(name, args.mode, out)
+        index[name] = entry
+        index_path.write_text(json.dumps(index, indent=1, sort_keys=True) + "\n")
+        print(f"  {entry['status']} in {entry['seconds']} s", flush=True)
+        if entry["status"] != "ok":
+            failed.append(name)
+            print(str(entry.get("output", "")), file=sys.stderr)
+    if failed:
+        print(f"error: {len(failed)} benchmark(s) did not run through: {', '.join(failed)}",
+              file=sys.stderr)
+        return 1
+    print(f"all {len(args.only or BENCHMARKS)} benchmarks ran; results in {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
