@@ -9,8 +9,8 @@
 #   make test-fast       run its pure part alone (no socket, thread, process or real clock)
 #   make demo            run a whole simulated campaign, results in demo_output/
 #   make docs            build the documentation site into docs/_build/html (warnings are errors)
-#   make bench           run the benchmarks' quick mode, results in benchmarks/results/quick
-#   make bench-full      run them in full, results in docs/validation/results (for the site)
+#   make bench           run every benchmark in its quick mode (CI), results in benchmarks/results/quick
+#   make bench BENCH_MODE=full   run them in full (hours), results in docs/validation/results
 #   make lint            ruff check (ruff is installed into .venv for this target only)
 #   make typecheck       mypy (likewise installed for this target only)
 #   make clean           remove .venv, demo_output and caches
@@ -38,7 +38,7 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 test test-fast demo screenshot: export QT_QPA_PLATFORM := offscreen
 test test-fast demo screenshot: export MPLBACKEND := Agg
 
-.PHONY: test test-fast demo docs report-example screenshot lint typecheck setup qt-libs clean
+.PHONY: test test-fast demo docs bench report-example screenshot lint typecheck setup qt-libs clean
 
 # The suite is split by the `realtime` marker (pyproject.toml), not by folder. The pure part
 # (computations, parsers, files, scripted byte exchanges, the doctests of daq, ident and
@@ -94,6 +94,12 @@ DOCS_STAMP := $(VENV)/.docs-installed
 docs: setup $(DOCS_STAMP)
 	$(VENV)/bin/sphinx-build -W --keep-going -q -b html docs docs/_build/html
 	@echo "the site: docs/_build/html/index.html"
+
+# The benchmarks (benchmarks/run.py): the quick mode shows each one runs and writes its result
+# files; the full mode writes the files the validation pages include (BENCH_ARGS="--only NAME").
+BENCH_MODE ?= quick
+bench: setup
+	$(PY) benchmarks/run.py --mode $(BENCH_MODE) $(BENCH_ARGS)
 
 $(DOCS_STAMP): pyproject.toml $(STAMP)
 	$(PIP) install -q --progress-bar off -e '.[docs]'

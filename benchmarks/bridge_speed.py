@@ -44,12 +44,20 @@ Run: ``.venv/bin/python benchmarks/bridge_speed.py [--modes 12,50,200] [--nodes 
 [--buffeting-U 40] [--record 600] [--direct] [--no-buffeting | --no-flutter]
 [--fast [--dense-max 200] [--fd]]``. The buffeting case of issue 40 alone:
 ``--modes 200 --nodes 1000 --no-flutter --record 0 --direct``.
+
+``--quick`` (CI): 12 modes on 100 nodes and a record of 60 s (what is given still wins).
+``--results DIR`` also writes the tables to ``DIR/<name>.json`` and ``.md`` (:mod:`result_files`):
+``bridge_speed`` for both tables, ``bridge_speed_flutter`` (``--no-buffeting``),
+``bridge_speed_buffeting`` (``--no-flutter``), ``bridge_speed_fast`` (``--fast``), each with
+``_direct``, ``_fd`` or ``_coupled`` appended when those options are given (:func:`result_name`).
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -58,6 +66,9 @@ from ident.bridge import flutter as bf
 from ident.bridge.aero import aero_from_model
 from ident.bridge.model import BridgeModel
 from ident.model import flat_plate
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import result_files  # noqa: E402 - beside this script
 
 B, M, I, SPAN = 31.0, 22740.0, 2.47e6, 1200.0
 STATIC = {"C_D": 0.08, "C_L": -0.1, "C_M": 0.02, "dC_D": 0.0, "dC_L": -5.0, "dC_M": 1.2}
@@ -105,12 +116,30 @@ def _ints(text: str) -> list[int]:
     return [int(part) for part in text.split(",") if part.strip()]
 
 
+#: Defaults of a full run and of ``--quick`` (options not given).
+DEFAULTS = {"modes": ([12, 50, 200], [12]), "nodes": ([100, 1000], [100]),
+            "record": (600.0, 60.0)}
+
+
+def result_name(args: argparse.Namespace) -> str:
+    """Return the result file's name for the tables the options ask (module docstring)."""
+    if args.fast:
+        parts = ["fast"] + (["fd"] if args.fd else []) + (["coupled"] if args.coupled else [])
+    else:
+        parts = (["buffeting"] if args.no_flutter else ["flutter"] if args.no_buffeting
+                 else [])
+        if args.direct and not args.no_buffeting:
+            parts.append("direct")
+    return "_".join(["bridge_speed", *parts])
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--modes", type=_ints, default=[12, 50, 200])
-    parser.add_argument("--nodes", type=_ints, default=[100, 1000])
+    parser.add_argument("--modes", type=_ints, default=None, help="12,50,200 (--quick: 12)")
+    parser.add_argument("--nodes", type=_ints, default=None, help="100,1000 (--quick: 100)")
     parser.add_argument("--buffeting-U", type=float, default=40.0)
-    parser.add_argument("--record", type=float, default=600.0)
+    parser.add_argument("--record", type=float, default=None,
+                        help="s of time-domain record (600; --quick: 60; 0: none)")
     parser.add_argument("--no-buffeting", action="store_true")
     parser.add_argument("--no-flutter", action="store_true",
                         help="the buffeting table only")
@@ -125,18 +154,44 @@ def main() -> None:
     parser.add_argument("--coupled", action="store_true",
                         help="with --fast: tapered shapes in all three coordinates "
                              "(sine_bridge's coupled deck)")
+    result_files.add_arguments(parser)
     args = parser.parse_args()
+    for name, (full, quick) in DEFAULTS.items():
+        if getattr(args, name) is None:
+            setattr(args, name, quick if args.quick else full)
+    parameters = {"modes": args.modes, "nodes": args.nodes}
+    tables = []
     if args.fast:
-        fast_rows(args.modes, args.nodes, args.dense_max, args.fd, args.coupled)
-        return
-    if args.no_flutter:
-        buffeting_rows(args.modes, args.nodes, args.buffeting_U, args.record, args.direct)
-        return
+        tables.append(fast_rows(args.modes, args.nodes, args.dense_max, args.fd, args.coupled))
+        parameters.update({"dense max": args.dense_max, "frequency domain": args.fd,
+                           "coupled": args.coupled})
+    elif args.no_flutter:
+        tables.append(buffeting_rows(args.modes, args.nodes, args.buffeting_U, args.record,
+                                     args.direct))
+    else:
+        tables.append(flutter_rows(args.modes, args.nodes))
+        if not args.no_buffeting:
+            tables.append(buffeting_rows(args.modes, args.nodes, args.buffeting_U,
+                                         args.record, args.direct))
+    if not args.fast and not args.no_buffeting:
+        parameters.update({"buffeting U (m/s)": args.buffeting_U, "record (s)": args.record,
+                           "direct": args.direct})
+    result_files.write(
+        result_name(args), "Speed of the full-bridge analyses", tables, results=args.results,
+        quick=args.quick, parameters=parameters,
+        notes=["Wall times on a shared host move with its load."] + (
+            ["The fast route's CPU time is its time on one idle core (single-threaded BLAS)."]
+            if args.fast else []))
+
+
+def flutter_rows(modes: list[int], nodes: list[int]) -> result_files.Table:
+    """Print the flutter table (state space against frequency domain) and return it."""
     print("| modes | nodes | states | SS time (s) | SS U_F (m/s) | FD time (s) | FD U_F (m/s) "
           "| FD - SS |")
     print("|---|---|---|---|---|---|---|---|")
-    for n_modes in args.modes:
-        for n_nodes in args.nodes:
+    rows = []
+    for n_modes in modes:
+        for n_nodes in nodes:
             start = time.perf_counter()
             bridge = sine_bridge(n_modes, n_nodes)
             aero = aero_from_model(bridge, flat_plate.jones_model())
@@ -151,17 +206,29 @@ def main() -> None:
             print(f"| {n_modes} | {n_nodes} | {states} | {t1 - t0 + (t0 - start):.2f} | "
                   f"{ss.speed or float('nan'):.3f} | {t2 - t1:.2f} | "
                   f"{fd.speed or float('nan'):.3f} | {diff} |", flush=True)
-    if not args.no_buffeting:
-        buffeting_rows(args.modes, args.nodes, args.buffeting_U, args.record, args.direct)
+            rows.append((n_modes, n_nodes, states, t1 - start, ss.speed, t2 - t1, fd.speed,
+                         None if diff == "-" else 100 * (fd.speed / ss.speed - 1)))
+    return result_files.Table(
+        "Flutter of the sine-mode deck: the state-space analysis (120 wind speeds, its time "
+        "including the model's set-up) against the frequency-domain one (400 reduced "
+        "frequencies), wall times and flutter speeds.",
+        ("modes", "nodes", "states", "SS time (s)", "SS U_F (m/s)", "FD time (s)",
+         "FD U_F (m/s)", "FD - SS (%)"), rows,
+        formats={"SS time (s)": ".2f", "SS U_F (m/s)": ".3f", "FD time (s)": ".2f",
+                 "FD U_F (m/s)": ".3f", "FD - SS (%)": "+.3f"})
 
 
 def fast_rows(modes: list[int], nodes: list[int], dense_max: int, fd: bool = False,
-              coupled: bool = False) -> None:
-    """Print the fast route beside the dense sweep (module docstring); ``fd``: both FD."""
+              coupled: bool = False) -> result_files.Table:
+    """Print the fast route beside the dense sweep (module docstring); ``fd``: both FD.
+
+    Return the table.
+    """
     print("| modes | nodes | states | fast time (s) | fast CPU (s) | fast U_F (m/s) "
           "| branches followed | certified | dense time (s) | dense U_F (m/s) "
           "| fast / dense - 1 |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
+    rows = []
     for n_modes in modes:
         for n_nodes in nodes:
             bridge = sine_bridge(n_modes, n_nodes, coupled)
@@ -177,23 +244,43 @@ def fast_rows(modes: list[int], nodes: list[int], dense_max: int, fd: bool = Fal
             followed = note.split(": ", 1)[1].split(" branches")[0] if ": " in note else "-"
             certified = "no" if "not certified" in note else "yes"
             dense_time = dense_speed = diff = "-"
+            values = [None, None, None]  # dense time, dense speed, relative difference
             if n_modes <= dense_max:
                 t2 = time.perf_counter()
                 dense = (bf.frequency_domain(bridge, aero.flutter_derivatives, U_max=U_max)
                          if fd else bf.analyze(bridge, model))
-                dense_time = f"{time.perf_counter() - t2:.2f}"
+                values[0] = time.perf_counter() - t2
+                dense_time = f"{values[0]:.2f}"
                 dense_speed = f"{dense.speed or float('nan'):.6f}"
+                values[1] = dense.speed
                 if dense.speed is not None and fast.speed is not None:
-                    diff = f"{fast.speed / dense.speed - 1:+.1e}"
+                    values[2] = fast.speed / dense.speed - 1
+                    diff = f"{values[2]:+.1e}"
             states = 2 * n_modes if fd else n_modes * (2 + model.n_lags)
             print(f"| {n_modes} | {n_nodes} | {states} | {t1 - t0:.2f} | {c1 - c0:.2f} | "
                   f"{fast.speed or float('nan'):.6f} | {followed} | {certified} | {dense_time} | "
                   f"{dense_speed} | {diff} |", flush=True)
+            rows.append((n_modes, n_nodes, states, t1 - t0, c1 - c0, fast.speed,
+                         None if followed == "-" else followed, certified, *values))
+    routes = "frequency-domain" if fd else "state-space"
+    return result_files.Table(
+        f"The fast {routes} flutter route beside the dense one on the same "
+        f"{'coupled ' if coupled else ''}sine-mode deck (the dense one up to {dense_max} "
+        "modes): wall and CPU time, flutter speeds, the branches followed, whether the dense "
+        "check certified it, and the relative difference of the flutter speeds.",
+        ("modes", "nodes", "states", "fast time (s)", "fast CPU (s)", "fast U_F (m/s)",
+         "branches followed", "certified", "dense time (s)", "dense U_F (m/s)",
+         "fast / dense - 1"), rows,
+        formats={"fast time (s)": ".2f", "fast CPU (s)": ".2f", "fast U_F (m/s)": ".6f",
+                 "dense time (s)": ".2f", "dense U_F (m/s)": ".6f", "fast / dense - 1": "+.1e"})
 
 
 def buffeting_rows(modes: list[int], nodes: list[int], U: float, record: float,
-                   direct: bool = False) -> None:
-    """Print the buffeting table (module docstring) for every number of modes and nodes."""
+                   direct: bool = False) -> result_files.Table:
+    """Print the buffeting table (module docstring) for every number of modes and nodes.
+
+    Return the table.
+    """
     from pathlib import Path
 
     from ident.bridge import buffeting, buffeting_time
@@ -207,6 +294,7 @@ def buffeting_rows(modes: list[int], nodes: list[int], U: float, record: float,
           "| speed-up | max RMS rel. diff | TD time (s) | RMS h FD (m) | RMS h TD (m) "
           "| TD - FD | stated std |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    rows = []
     for n_modes in modes:
         for n_nodes in nodes:
             bridge = sine_bridge(n_modes, n_nodes)
@@ -217,6 +305,7 @@ def buffeting_rows(modes: list[int], nodes: list[int], U: float, record: float,
             buffeting.frequency_domain(ss, wind, U, spectra=False)
             t2 = time.perf_counter()
             direct_time = speed_up = diff = "-"
+            direct_values = [None, None, None]  # direct time, speed-up, worst difference
             if direct:
                 ref = buffeting.frequency_domain(ss, wind, U, route="direct")
                 t3 = time.perf_counter()
@@ -229,20 +318,40 @@ def buffeting_rows(modes: list[int], nodes: list[int], U: float, record: float,
                     if np.any(moving):
                         worst = max(worst, float(np.max(np.abs(a[moving] / b[moving] - 1.0))))
                 diff = f"{worst:.1e}"
+                direct_values = [t3 - t2, (t3 - t2) / (t1 - t0), worst]
             j = int(np.argmax(fd.rms_h[fd.spectrum_nodes]))
             k = int(fd.spectrum_nodes[j])
             td_cols = "- | - | -"
             td_time = "-"
+            td_values = [None, None, None, None]  # time, RMS h, difference (%), stated std (%)
             if record > 0.0:
                 t4 = time.perf_counter()
                 td, _ = buffeting_time.simulate(ss, wind, U, record, rng=0)
-                td_time = f"{time.perf_counter() - t4:.2f}"
+                td_values[0] = time.perf_counter() - t4
+                td_time = f"{td_values[0]:.2f}"
                 std = fd.rms_relative_std(td.duration)["h"][j]
                 td_cols = (f"{td.rms_h[k]:.4g} | {100 * (td.rms_h[k] / fd.rms_h[k] - 1):+.1f} % | "
                            f"{100 * std:.1f} %")
+                td_values[1:] = [td.rms_h[k], 100 * (td.rms_h[k] / fd.rms_h[k] - 1), 100 * std]
             print(f"| {n_modes} | {n_nodes} | {fd.f.size} | {direct_time} | {t1 - t0:.2f} | "
                   f"{t2 - t1:.2f} | {speed_up} | {diff} | {td_time} | {fd.rms_h[k]:.4g} | "
                   f"{td_cols} |", flush=True)
+            rows.append((n_modes, n_nodes, fd.f.size, direct_values[0], t1 - t0, t2 - t1,
+                         direct_values[1], direct_values[2], td_values[0], fd.rms_h[k],
+                         *td_values[1:]))
+    return result_files.Table(
+        f"Buffeting of the sine-mode deck at U = {U:g} m/s in the example wind: the frequency "
+        "domain by its eigen route (with spectra, and RMS only) and by the direct route, their "
+        "largest relative RMS difference, and "
+        + (f"a seeded time-domain record of {record:g} s against the frequency domain at the "
+           "node of largest RMS heave, with the stated relative std of the record's RMS."
+           if record > 0.0 else "the largest RMS heave (no time-domain record)."),
+        ("modes", "nodes", "FD frequencies", "direct (s)", "eigen (s)", "eigen RMS only (s)",
+         "speed-up", "max RMS rel. diff", "TD time (s)", "RMS h FD (m)", "RMS h TD (m)",
+         "TD - FD (%)", "stated std (%)"), rows,
+        formats={"direct (s)": ".2f", "eigen (s)": ".2f", "eigen RMS only (s)": ".2f",
+                 "speed-up": ".1f", "max RMS rel. diff": ".1e", "TD time (s)": ".2f",
+                 "TD - FD (%)": "+.1f", "stated std (%)": ".1f"})
 
 
 if __name__ == "__main__":

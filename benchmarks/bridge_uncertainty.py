@@ -12,7 +12,9 @@ the order 1, 2, 2, 1 so that a drift of a shared host's load cancels in the mean
 speed-up of two workers over one.
 
 Run: ``.venv/bin/python benchmarks/bridge_uncertainty.py [--samples N]`` (about 8 minutes on
-two idle cores).
+two idle cores). ``--quick`` (CI): 50 samples (unless ``--samples``) and the cluster runs of one
+worker and of two once each. ``--results DIR`` also writes the tables to
+``DIR/bridge_uncertainty.json`` and ``.md`` (:mod:`result_files`).
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import argparse
 import json
 import math
 import os
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -36,6 +39,9 @@ from ident.model import flat_plate
 from ident.model import flutter as fl
 from ident.model.section import SectionModel
 from simulators import simulate_release
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import result_files  # noqa: E402 - beside this script
 
 BRIDGE = Path(__file__).resolve().parents[1] / "rig_configs" / "bridges" / "example_bridge.json"
 SECTION = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
@@ -59,8 +65,12 @@ def identify_json() -> dict:
             "warnings": list(u.warnings)}
 
 
-def main_benchmark(samples: int) -> None:
-    """Run the comparison and print its table."""
+def main_benchmark(samples: int, order: tuple[int, ...] = (1, 2, 2, 1)
+                   ) -> tuple[list[result_files.Table], list[str]]:
+    """Run the comparison and print its table; return the tables and notes for the result file.
+
+    ``order``: the workers of each cluster run, in turn.
+    """
     data = identify_json()
     bridge = BridgeModel.from_json(BRIDGE)
     from ident.model.rfc import RationalFunctionModel
@@ -84,7 +94,7 @@ def main_benchmark(samples: int) -> None:
         aero.write_text(json.dumps(data))
         # 1, 2, 2, 1 workers: a drift of the shared host's load over the runs cancels in the
         # mean of each.
-        for run, workers in enumerate((1, 2, 2, 1)):
+        for run, workers in enumerate(order):
             out = Path(tmp) / f"run{run}_w{workers}.json"
             code = main(["bridge", str(BRIDGE), "--aero", str(aero), "--uncertainty",
                          "--samples", str(samples), "--workers", str(workers), "--json",
@@ -117,12 +127,65 @@ def main_benchmark(samples: int) -> None:
     work = [sum(r[3] for r in runs) / len(runs) for runs in (one, two)]
     total = [sum(r[1] for r in runs) / len(runs) for runs in (one, two)]
     print()
-    print(f"2 workers against 1 (means of two runs each, in the order 1, 2, 2, 1): "
-          f"{work[0] / work[1]:.2f}x on the samples, {total[0] / total[1]:.2f}x with the "
-          "cluster's start")
+    order_text = ", ".join(str(w) for w in order)
+    print(f"2 workers against 1 (means of {len(one)} run{'s' * (len(one) != 1)} each, in the "
+          f"order {order_text}): {work[0] / work[1]:.2f}x on the samples, "
+          f"{total[0] / total[1]:.2f}x with the cluster's start")
+    tables = [
+        result_files.Table(
+            f"The example bridge's flutter speed with the identified flat plate: the delta "
+            f"method's std against the Monte Carlo std of {samples} samples, their ratio, and "
+            "the Monte Carlo std's own relative std.",
+            ("samples", "delta std (m/s)", "MC std (m/s)", "delta / MC",
+             "MC std's own std (%)"),
+            [(samples, delta.std, mc, delta.std / mc, 100 / math.sqrt(2 * (samples - 1)))],
+            formats={"delta std (m/s)": ".4f", "MC std (m/s)": ".4f", "delta / MC": ".3f",
+                     "MC std's own std (%)": ".1f"}),
+        result_files.Table(
+            "The section's flutter speed and the std of its noise part (the identification), "
+            "the bridge's flutter speed and the delta method's time.",
+            ("section U_F (m/s)", "section noise std (m/s)", "bridge U_F (m/s)",
+             "delta method time (s)"),
+            [(data["flutter_speed"], data["flutter_speed_std_parts"]["noise"], delta.speed,
+              t_delta)],
+            formats={"section U_F (m/s)": ".4f", "bridge U_F (m/s)": ".4f",
+                     "delta method time (s)": ".3g"}),
+        result_files.Table(
+            f"The {samples} samples' time serially (in this process) and on a local Dask "
+            f"cluster (windrig bridge --uncertainty, end to end), in the order {order_text} "
+            "workers: wall time, the cluster's start, the samples' time after it, and the Monte "
+            "Carlo std each found.",
+            ("run", "wall (s)", "cluster start (s)", "samples (s)", "MC std (m/s)"),
+            [("serial (this process)", t_serial, None, t_serial, mc)]
+            + [(f"local cluster, {w} worker{'s' if w > 1 else ''}", wall, start, work_s, std)
+               for w, wall, start, work_s, std in rows],
+            formats={"wall (s)": ".1f", "cluster start (s)": ".1f", "samples (s)": ".1f",
+                     "MC std (m/s)": ".4f"}),
+        result_files.Table(
+            f"Two workers against one (means of the runs of each, in the order {order_text}).",
+            ("on the samples (x)", "with the cluster's start (x)"),
+            [(work[0] / work[1], total[0] / total[1])],
+            formats={"on the samples (x)": ".2f", "with the cluster's start (x)": ".2f"}),
+    ]
+    notes = [f"Host load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores at the "
+             "end: on a loaded host two workers gain less."]
+    return tables, notes
 
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--samples", type=int, default=1000)
-    main_benchmark(parser.parse_args().samples)
+    parser.add_argument("--samples", type=int, default=None, help="1000 (--quick: 50)")
+    result_files.add_arguments(parser)
+    args = parser.parse_args()
+    samples = args.samples if args.samples is not None else (50 if args.quick else 1000)
+    if samples < 2:
+        parser.error("--samples must be at least 2")
+    order = (1, 2) if args.quick else (1, 2, 2, 1)
+    found, notes = main_benchmark(samples, order)
+    result_files.write(
+        "bridge_uncertainty", "The section's uncertainty at the bridge: delta method and Monte "
+        "Carlo", found, results=args.results, quick=args.quick,
+        parameters={"samples": samples, "cluster runs (workers, in order)": list(order),
+                    "bridge": BRIDGE.name, "releases": "0.4/0.6/0.8 U_F x 2 holds, 6 s at "
+                    "500 Hz, 20 % noise, 2 lags with A3"},
+        notes=notes)

@@ -53,13 +53,17 @@ flutter).
 
 Run: ``.venv/bin/python benchmarks/campaign_efficiency.py [--seeds 1 2] [--rigs flat_plate deck
 bluff]`` (with ``--no-fd`` about 2-4 minutes per seed on the plate, 3-5 on each deck, on two
-cores; the FD route adds about as much again).
+cores; the FD route adds about as much again). ``--quick`` (CI): one adaptive campaign on the
+plate, seed 1, decays of 4 periods, at most 3 speeds (``--cases``, ``--decay-periods`` and
+``--max-speeds`` choose otherwise); ``--results DIR`` writes the tables
+(``benchmarks/result_files.py``).
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import sys
 import tempfile
 from pathlib import Path
 
@@ -74,6 +78,9 @@ from ident.identification.results import distinct_wind_speeds
 from ident.model import flutter
 from ident.records.run_file import campaign_section, read_run
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import result_files  # noqa: E402 - beside this script
+
 REPO = Path(__file__).resolve().parents[1]
 RIGS = {"flat_plate": REPO / "rig_configs" / "sim_flat_plate.toml",
         "deck": REPO / "rig_configs" / "sim_streamlined_deck.toml",
@@ -82,6 +89,15 @@ TARGET = 0.01
 #: Decay length, periods of the slower structural mode (daq.procedure's default: 7.5 s on the
 #: flat plate, 12.5 s on the deck).
 DECAY_PERIODS = 15.0
+#: Most speeds of an adaptive campaign.
+MAX_SPEEDS = 6
+#: The campaigns per rig and seed (``--cases``): adaptive, adaptive with n chosen, the fixed
+#: plan (with 2 and 4 releases while the target is missed), the FD route.
+CASES = ("adaptive", "adaptive-n", "fixed", "fd")
+#: Defaults: (full run, --quick) per option.
+DEFAULTS = {"seeds": ([1, 2], [1]), "rigs": (list(RIGS), ["flat_plate"]),
+            "cases": (list(CASES), ["adaptive"]), "decay_periods": (DECAY_PERIODS, 4.0),
+            "max_speeds": (MAX_SPEEDS, 3)}
 
 
 def bluff_rig_text() -> str:
@@ -181,10 +197,21 @@ def hil_check(seeds: list[int], repeats: int) -> None:
     print(f"target met and within 2 std: {within} of {len(cases)}")
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
-    parser.add_argument("--rigs", nargs="+", default=list(RIGS), choices=list(RIGS))
+    parser.add_argument("--seeds", type=int, nargs="+", default=None,
+                        help="instrument noise seeds (default 1 2; --quick: 1)")
+    parser.add_argument("--rigs", nargs="+", default=None, choices=list(RIGS),
+                        help=f"rigs (default {' '.join(RIGS)}; --quick: flat_plate)")
+    parser.add_argument("--cases", nargs="+", default=None, choices=CASES,
+                        help=f"campaigns per rig and seed (default {' '.join(CASES)}; --quick: "
+                        "adaptive)")
+    parser.add_argument("--decay-periods", type=float, default=None,
+                        help=f"decay length, periods of the slower mode (default "
+                        f"{DECAY_PERIODS:g}; --quick: {DEFAULTS['decay_periods'][1]:g})")
+    parser.add_argument("--max-speeds", type=int, default=None,
+                        help=f"most speeds of an adaptive campaign (default {MAX_SPEEDS}; "
+                        f"--quick: {DEFAULTS['max_speeds'][1]})")
     parser.add_argument("--no-fd", action="store_true", help="skip the FD route (10 speeds)")
     parser.add_argument("--log", type=Path, default=None,
                         help="write every campaign's progress lines to this file")
@@ -192,10 +219,21 @@ def main() -> None:
                         help="only the adaptive HIL test's campaign, per seed (docstring)")
     parser.add_argument("--repeats", type=int, default=2,
                         help="with --hil-check: runs of the shipped rig's default seeds")
-    args = parser.parse_args()
+    result_files.add_arguments(parser)
+    args = parser.parse_args(argv)
     if args.hil_check:
-        hil_check(args.seeds, args.repeats)
+        if args.quick or args.results is not None:
+            parser.error("--hil-check writes no result files and has no --quick")
+        hil_check(args.seeds or DEFAULTS["seeds"][0], args.repeats)
         return
+    for name, (full, quick) in DEFAULTS.items():
+        if getattr(args, name) is None:
+            value = quick if args.quick else full
+            setattr(args, name, list(value) if isinstance(value, list) else value)
+    if args.no_fd and "fd" in args.cases:
+        args.cases.remove("fd")
+    if not args.decay_periods > 0 or args.max_speeds < 2:
+        parser.error("--decay-periods must be > 0, --max-speeds >= 2")
     rows = []
     for name in args.rigs:
         for seed in args.seeds:
@@ -208,8 +246,8 @@ def main() -> None:
             assert truth is not None
             adaptive = (f"\n[adaptive]\ntarget_std = {TARGET}\nsafety_fraction = 0.9\n"
                         f"candidate_min = {0.45 * limit:.2f}\ncandidate_max = {limit:.2f}\n"
-                        f"candidate_step = {limit / 22:.2f}\nmax_speeds = 6\n")
-            decay = DECAY_PERIODS / min(config.section.fh, config.section.fa)
+                        f"candidate_step = {limit / 22:.2f}\nmax_speeds = {args.max_speeds}\n")
+            decay = args.decay_periods / min(config.section.fh, config.section.fa)
             fixed = [f * truth for f in (0.5, 0.65, 0.8)]
             first = [0.55 * limit, 0.75 * limit]
             cases = [("adaptive", plan_text("adaptive", first, decay, adaptive=adaptive,
@@ -218,18 +256,22 @@ def main() -> None:
                       plan_text("adaptive", first, decay, decay_end="settled",
                                 adaptive=adaptive + "max_releases_per_speed = 4\n")),
                      ("fixed 3-speed x1", plan_text("fixed", fixed, decay, 1))]
+            chosen = {"adaptive": "adaptive", "adaptive, n chosen": "adaptive-n",
+                      "fixed 3-speed x1": "fixed"}
             for label, text in cases:
+                if chosen[label] not in args.cases:
+                    continue
                 rows.append((name, seed, label, *run(config, text), truth))
                 print(_row(*rows[-1]), flush=True)
                 if args.log is not None:
                     args.log.write_text("\n".join(LOG) + "\n")
             for releases in (2, 4):  # more releases per speed until the target is reached
-                if first_reaching(rows[-1][3]) is not None:
+                if "fixed" not in args.cases or first_reaching(rows[-1][3]) is not None:
                     break
                 rows.append((name, seed, f"fixed 3-speed x{releases}",
                              *run(config, plan_text("fixed", fixed, decay, releases)), truth))
                 print(_row(*rows[-1]), flush=True)
-            if not args.no_fd:
+            if "fd" in args.cases:
                 # Highest first: from two low speeds the estimate is too uncertain for the
                 # safety bound to let a fixed plan climb (the bound is on the speed, not the
                 # order, so the same ten speeds are recorded either way).
@@ -245,11 +287,75 @@ def main() -> None:
           f"{'std (%)':>8} {'error (%)':>9}  stopped because")
     for row in rows:
         print(_row(*row))
-    _totals(rows)
+    totals = _totals(rows)
+    write_results(args, rows, totals)
 
 
-def _totals(rows: list[tuple]) -> None:
-    """Print the wind-on totals to 1 %: adaptive (one release per speed) against fixed.
+def write_results(args: argparse.Namespace, rows: list[tuple],
+                  totals: dict[str, float] | None) -> None:
+    """Write the result files (``--results``): the campaigns and the wind-on totals."""
+    std, err, on = "std (%)", "error (%)", "wind-on time (s)"
+    speed, true = "flutter speed (m/s)", "true flutter speed (m/s)"
+    tables = [result_files.Table(
+        f"Headless simulated campaigns: speeds and wind-on time to a flutter-speed std of "
+        f"{100 * TARGET:g} % (E2RFC rows; all speeds for the FD route), std and error there.",
+        ["rig", "seed", "campaign", "speeds", "target std (%)", "target met", on, speed, true,
+         std, err, "stopped because"], [_cells(*row) for row in rows],
+        formats={"target std (%)": ".3g", on: ".1f", speed: ".3f", true: ".3f", std: ".2f",
+                 err: "+.2f"})]
+    notes = [f"Target met: the std reached the target from {MIN_SPEEDS} distinct speeds on "
+             "(no extrapolation part before); speeds, wind-on time, flutter speed, std and "
+             "error are then those at the first such speed, else at the campaign's end. The FD "
+             "route has no std of its own.",
+             "Wind-on time is the fan's, from its first start, settling and analysis between "
+             "speeds included."]
+    if totals is not None:
+        ratio = "adaptive / fixed"
+        tables.append(result_files.Table(
+            "Wind-on time to the target: adaptive (one release per speed) against the first "
+            "fixed variant (x1, x2, x4) that reached it, per rig and seed.",
+            ["campaigns compared", "adaptive wind-on (s)", "fixed wind-on (s)", ratio,
+             "lowest ratio", "median ratio", "highest ratio"],
+            [[totals["n"], totals["adaptive_s"], totals["fixed_s"], totals["ratio"],
+              totals["min"], totals["median"], totals["max"]]],
+            formats={"adaptive wind-on (s)": ".1f", "fixed wind-on (s)": ".1f", ratio: ".2f",
+                     "lowest ratio": ".2f", "median ratio": ".2f", "highest ratio": ".2f"}))
+    elif any(label == "adaptive" for _, _, label, *_ in rows):
+        notes.append("No rig and seed had both an adaptive and a fixed campaign reach the "
+                     "target, so there is no wind-on comparison.")
+    result_files.write(
+        "campaign_efficiency", "Tunnel time of headless campaigns", tables,
+        results=args.results, quick=args.quick,
+        parameters={"rigs": args.rigs, "seeds": args.seeds, "cases": args.cases,
+                    "decay_periods": args.decay_periods, "max_speeds": args.max_speeds,
+                    "target_std": TARGET},
+        notes=notes)
+    if args.results is not None:
+        print(f"results: {args.results / 'campaign_efficiency.json'} and .md")
+
+
+def _cells(name: str, seed: int, label: str, outcome: CampaignOutcome, fd_speed: float | None,
+           truth: float) -> list[object]:
+    """Return one campaign's table row (the figures of :func:`_row`)."""
+    if label.startswith("FD"):
+        on = outcome.steps[-1].wind_on_s if outcome.steps else None
+        err = math.nan if fd_speed is None else 100 * (fd_speed / truth - 1)
+        return [name, seed, label, len(outcome.steps), math.nan, "n/a", on, fd_speed, truth,
+                math.nan, err, outcome.stopped_because]
+    reached = first_reaching(outcome)
+    if reached is None:
+        on = outcome.steps[-1].wind_on_s if outcome.steps else None
+        U = outcome.flutter_speed or math.nan
+        std = 100 * (outcome.flutter_std or math.nan) / U
+        return [name, seed, label, len(outcome.steps), 100 * TARGET, "no", on, U, truth, std,
+                100 * (U / truth - 1), outcome.stopped_because]
+    n, on_s, std_v, U = reached
+    return [name, seed, label, n, 100 * TARGET, "yes", on_s, U, truth, 100 * std_v / U,
+            100 * (U / truth - 1), outcome.stopped_because]
+
+
+def _totals(rows: list[tuple]) -> dict[str, float] | None:
+    """Print and return the wind-on totals to 1 %: adaptive (one per speed) against fixed.
 
     Per rig and seed the fixed plan counts with its first variant (x1, x2, x4) that reached
     the target, as if one had known beforehand how many releases per speed are enough.
@@ -266,12 +372,15 @@ def _totals(rows: list[tuple]) -> None:
             fixed[(name, seed)] = reached[1]
     both = sorted(set(adaptive) & set(fixed))
     if not both:
-        return
+        return None
     ratios = [adaptive[k] / fixed[k] for k in both]
     total_a, total_f = sum(adaptive[k] for k in both), sum(fixed[k] for k in both)
     print(f"\nadaptive / fixed wind-on to 1 % over {len(both)} campaigns: "
           f"{total_a:.1f} s / {total_f:.1f} s = {total_a / total_f:.2f} in all; per campaign "
           f"{min(ratios):.2f}-{max(ratios):.2f}, median {float(np.median(ratios)):.2f}")
+    return {"n": len(both), "adaptive_s": total_a, "fixed_s": total_f,
+            "ratio": total_a / total_f, "min": min(ratios), "max": max(ratios),
+            "median": float(np.median(ratios))}
 
 
 def _row(name: str, seed: int, label: str, outcome: CampaignOutcome, fd_speed: float | None,

@@ -60,6 +60,9 @@ of the run, the steady state, instead of timing it; top functions of RunWriter a
 own 20 ms batching; 1 replays it unbatched, ``min_block_s = 0``), ``--laser-block``,
 ``--out-dir``, ``--keep``.
 
+``--quick`` (CI) replays 20 s instead of 600 (``--seconds`` chooses otherwise); ``--results DIR``
+writes the tables (``benchmarks/result_files.py``).
+
 Run: ``.venv/bin/python benchmarks/daq_throughput.py [--seconds 600] [--profile] [--keep]``.
 """
 
@@ -76,6 +79,7 @@ import math  # noqa: E402
 import pstats  # noqa: E402
 import re  # noqa: E402
 import shutil  # noqa: E402
+import sys  # noqa: E402
 import tempfile  # noqa: E402
 import threading  # noqa: E402
 import time  # noqa: E402
@@ -104,6 +108,9 @@ from simulators.devices.microepsilon_ild1420 import SimMicroEpsilonIld1420  # no
 from simulators.devices.scanivalve_mps4264.packets import words_legacy  # noqa: E402
 from simulators.virtual_tunnel import VirtualTunnel  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import result_files  # noqa: E402 - beside this script
+
 ROOT = Path(__file__).resolve().parents[1]
 BASE_CONFIG = ROOT / "rig_configs" / "sim_streamlined_deck.toml"
 
@@ -112,6 +119,9 @@ N_TAPS = 64 * MODULES - 1  # every channel but the Pitot's
 PITOT = 64 * MODULES - 1
 SCAN_RATE_HZ = 500.0
 LASER_RATE_HZ = 4000.0
+#: Data seconds replayed: full run and --quick.
+SECONDS = 600.0
+QUICK_SECONDS = 20.0
 #: Seconds of realistic signal generated once and looped.
 TEMPLATE_S = 10.0
 #: Release instant inside the template, s (one release event per template loop).
@@ -861,8 +871,14 @@ def measure(args: argparse.Namespace, out_dir: Path) -> tuple[Result, dict[str, 
     return result, profilers
 
 
-def report(r: Result) -> None:
-    """Print the table, the ratio, the memory samples, sanity checks and the targets."""
+def report(r: Result) -> tuple[list[result_files.Table], list[str], list[str]]:
+    """Print the table, the ratio, the memory samples, sanity checks and the targets.
+
+    Returns
+    -------
+    list of Table, list of str, list of str
+        The same figures as tables for the result files, notes, and the targets missed.
+    """
     tm = r.timers
     per_s = r.rows_bytes / r.seconds  # uncompressed bytes appended per data second
     scan_wire = sum(d.wire_bytes for d in r.devices.values() if d.kind == "scanner")
@@ -877,15 +893,23 @@ def report(r: Result) -> None:
     ]
     clock = "cpu s" if CLOCK is time.thread_time else "wall s"
     print(f"\n{'stage':<40}{clock:>9}{'data s':>8}{'x real time':>13}{'MB/s':>8}")
+    stage_rows = []
     for label, wall, data_s, bytes_per_s in rows:
         print(f"{label:<40}{wall:>9.2f}{data_s:>8.0f}{data_s / wall:>13.1f}"
               f"{bytes_per_s * data_s / 1e6 / wall:>8.1f}")
+        stage_rows.append([label, wall, data_s, data_s / wall,
+                           bytes_per_s * data_s / 1e6 / wall])
+    notes = ["Throughput: wire bytes decoded for the decode rows, else uncompressed rows "
+             f"appended ({r.rows_bytes / 1e6:.0f} MB in all; files {r.file_bytes / 1e6:.0f} MB "
+             f"ours, {r.plain_bytes / 1e6:.0f} MB plain)."]
     print(f"MB/s: wire bytes decoded (decode rows), else uncompressed rows appended "
           f"({r.rows_bytes / 1e6:.0f} MB in all; files {r.file_bytes / 1e6:.0f} MB ours, "
           f"{r.plain_bytes / 1e6:.0f} MB plain)")
     if tm.timed_s < r.seconds:
         print(f"our stages timed over the first {tm.timed_s:g} s; the last "
               f"{r.seconds - tm.timed_s:g} s were profiled (below)")
+        notes.append(f"Our stages were timed over the first {tm.timed_s:g} s; the last "
+                     f"{r.seconds - tm.timed_s:g} s were profiled, not timed.")
     print(f"{tm.blocks} blocks; RunWriter wrote {tm.writes} batches "
           f"({r.summary.get('sync_rows', 0) / max(tm.writes, 1):.0f} sync rows each: it writes "
           "every 0.2 s of wall time), the plain append as many; replay wall time with the "
@@ -906,6 +930,11 @@ def report(r: Result) -> None:
     rss = np.array([t.rss_mib for t in tm.tenths])
     slope = float(np.polyfit(fractions, rss, 1)[0]) if rss.size > 1 else 0.0
     growth = slope * float(fractions[-1] - fractions[0])
+    per_tenth = {round(100 * t.fraction): (t.data_s / t.decode_s, t.data_s / t.writer_s)
+                 for t in tm.tenths if t.data_s > 0 and t.decode_s > 0 and t.writer_s > 0}
+    memory_rows = [[100 * t.fraction, t.rss_mib, *per_tenth.get(round(100 * t.fraction),
+                                                                  (math.nan, math.nan))]
+                   for t in tm.tenths]
     print(f"  10 % -> 100 %: samples {last - first:+.1f} MiB; least-squares trend "
           f"{growth:+.1f} MiB ({100 * growth / float(rss.mean()):+.1f} % of the mean)")
 
@@ -915,12 +944,17 @@ def report(r: Result) -> None:
           f"{s.get('samples')}")
     lasers = [name for name, dev in r.devices.items() if dev.kind == "laser"]
     truth = {"scanner": SCANNER_CLOCK, **dict(zip(lasers, LASER_CLOCKS, strict=True))}
+    clock_rows = []
     for name, fit in s.get("clock_fits", {}).items():
         print(f"  clock {name:<12} drift {fit['drift_ppm']:+8.3f} ppm (truth "
               f"{truth[name].drift_ppm:+.0f}), residual {1e6 * fit['residual_s']:.1f} us")
+        clock_rows.append([name, fit["drift_ppm"], truth[name].drift_ppm,
+                           1e6 * fit["residual_s"]])
     late = {k: v for k, v in s.get("late_samples", {}).items() if v}
     if late:
         print(f"  late samples (resampler): {late}")
+        notes.append("Late samples (resampler): "
+                      + ", ".join(f"{k} {v}" for k, v in late.items()) + ".")
 
     print("\ntargets:")
     print(f"  real-time factor >= {TARGET_RTF:g} on one core: {rtf:.1f} -> "
@@ -929,6 +963,51 @@ def report(r: Result) -> None:
           f"{verdict(ratio >= TARGET_RATIO)}")
     print(f"  memory flat (RSS trend 10 % -> 100 % <= {100 * FLAT_TOLERANCE:.0f} % of its mean): "
           f"{growth:+.1f} MiB -> {verdict(growth <= FLAT_TOLERANCE * float(rss.mean()))}")
+
+    cpu = "CPU time (s)" if CLOCK is time.thread_time else "wall time (s)"
+    mbs, real = "throughput (MB/s)", "x real time"
+    gaps = sum(s.get("gaps", {}).values())
+    tables = [
+        result_files.Table(
+            f"Recording path on one core: {MODULES}-module scanner at {SCAN_RATE_HZ:g} Hz and "
+            f"{len(lasers)} lasers at {LASER_RATE_HZ:g} Hz, per stage, against a plain h5py "
+            "append of the same datasets.",
+            ["stage", cpu, "data (s)", real, mbs], stage_rows,
+            formats={cpu: ".2f", "data (s)": ".0f", real: ".1f", mbs: ".1f"}),
+        result_files.Table(
+            "The targets: real-time factor of the pipeline, its share of the plain h5py rate, "
+            "and the resident memory's trend over the run.",
+            ["target", "threshold", "measured", "verdict"],
+            [["real-time factor on one core (x)", TARGET_RTF, rtf, verdict(rtf >= TARGET_RTF)],
+             ["share of the plain h5py rate (%)", 100 * TARGET_RATIO, 100 * ratio,
+              verdict(ratio >= TARGET_RATIO)],
+             ["RSS trend from 10 % to 100 % of the run (% of its mean, at most)",
+              100 * FLAT_TOLERANCE, 100 * growth / float(rss.mean()),
+              verdict(growth <= FLAT_TOLERANCE * float(rss.mean()))]],
+            formats={"threshold": ".0f", "measured": ".1f"}),
+        result_files.Table(
+            "Resident memory and speed per tenth of the run.",
+            ["run done (%)", "RSS (MiB)", "decode x real time", "RunWriter x real time"],
+            memory_rows, formats={"run done (%)": ".0f", "RSS (MiB)": ".0f",
+                                  "decode x real time": ".1f", "RunWriter x real time": ".1f"}),
+        result_files.Table(
+            "Checks of the written run file.",
+            ["sync rows", "expected sync rows", "releases", "gaps", "blocks",
+             "RunWriter batches", "peak RSS (MiB)"],
+            [[s.get("sync_rows"), round(r.seconds * SCAN_RATE_HZ), s.get("releases"), gaps,
+              tm.blocks, tm.writes, r.hwm]], formats={"peak RSS (MiB)": ".0f"}),
+    ]
+    if clock_rows:
+        tables.append(result_files.Table(
+            "Clock fits of the run file against the simulated device clocks.",
+            ["clock", "fitted drift (ppm)", "true drift (ppm)", "residual (us)"], clock_rows,
+            formats={"fitted drift (ppm)": "+.3f", "true drift (ppm)": "+.0f",
+                     "residual (us)": ".1f"}))
+    notes.append(f"Memory before the run {r.rss_before:.0f} MiB; least-squares RSS trend from "
+                 f"10 % to 100 % of the run {growth:+.1f} MiB.")
+    missed = [f"target missed: {row[0]} {row[2]:.1f} against {row[1]:g}"
+              for row in tables[1].rows if row[3] != verdict(True)]
+    return tables, notes, missed
 
 
 def run(args: argparse.Namespace) -> None:
@@ -941,7 +1020,19 @@ def run(args: argparse.Namespace) -> None:
     out_dir.mkdir(parents=True, exist_ok=True)
     try:
         result, profilers = measure(args, out_dir)
-        report(result)
+        tables, notes, missed = report(result)
+        clock = "thread CPU time" if args.clock == "cpu" else "wall clock (time.perf_counter)"
+        notes.append(f"Stages timed by {clock}; {pinned}.")
+        result_files.write(
+            "daq_throughput", "Recording throughput: decode, sync, HDF5", tables,
+            results=args.results, quick=args.quick,
+            parameters={"seconds": result.seconds, "scan_frames_per_read":
+                        args.scan_frames_per_read, "laser_block": args.laser_block,
+                        "seed": args.seed, "clock": args.clock, "profile": args.profile,
+                        "profile_seconds": args.profile_seconds if args.profile else None},
+            notes=notes, warnings=missed)
+        if args.results is not None:
+            print(f"results: {args.results / 'daq_throughput.json'} and .md")
         if profilers:
             tail = f"last {args.profile_seconds:g} s of the run"
             print_profile(profilers["writer"], f"where RunWriter's time goes ({tail})")
@@ -959,8 +1050,9 @@ def run(args: argparse.Namespace) -> None:
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """Parse the command line."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
-    parser.add_argument("--seconds", type=float, default=600.0,
-                        help="data seconds to replay (default 600: a 10-minute run)")
+    parser.add_argument("--seconds", type=float, default=None,
+                        help=f"data seconds to replay (default {SECONDS:g}: a 10-minute run; "
+                        f"--quick: {QUICK_SECONDS:g})")
     parser.add_argument("--out-dir", default=None,
                         help="directory of the files (default: a new temporary directory)")
     parser.add_argument("--keep", action="store_true", help="keep the HDF5 files")
@@ -978,7 +1070,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--clock", choices=("cpu", "wall"), default="cpu",
                         help="time stages by thread CPU time (default; robust on a shared host) "
                         "or by wall clock")
+    result_files.add_arguments(parser)
     args = parser.parse_args(argv)
+    if args.seconds is None:
+        args.seconds = QUICK_SECONDS if args.quick else SECONDS
     if not args.seconds > 0 or args.scan_frames_per_read < 1 or args.laser_block < 1:
         parser.error("--seconds must be > 0, --scan-frames-per-read and --laser-block >= 1")
     if args.profile and not CHUNK_S <= args.profile_seconds <= args.seconds - 10 * CHUNK_S:

@@ -33,6 +33,14 @@ Run: ``.venv/bin/python benchmarks/discrepancy_confusion.py [--seeds 10] [--pair
 [--outside-seeds 5] [--strengths random|realistic] [--source tunnel|library] [--factor 1.0]
 [--skip-singles] [--only outside]`` (about an hour on two idle cores with the defaults;
 ``--pair-seeds 0 --outside-seeds 0`` for the single-effect table only).
+
+``--quick`` (CI): one campaign each of the rows "none" and "sensor_crosstalk" (unless ``--rows``)
+and of the first case outside the library, no pairs (a pair's diagnosis alone takes as long as
+the rest; ``--pair-seeds N`` runs N campaigns of one pair, a delay and crosstalk,
+:data:`QUICK_PAIR`, as ``--only pairs`` does). Counts given explicitly win. ``--results DIR``
+also writes the tables to ``DIR/<name>.json`` and ``.md`` (:mod:`result_files`):
+``discrepancy_confusion`` for the default setup, else with the options that differ appended
+(:func:`result_name`).
 """
 
 from __future__ import annotations
@@ -65,6 +73,9 @@ from support.outside_library import (  # noqa: E402
     HeaveStop,
     growing_mass_campaign,
 )
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import result_files  # noqa: E402 - beside this script
 
 DEPTH = 0.03  # m, the flat plate's depth (the vortex effect's)
 
@@ -106,6 +117,13 @@ OUTSIDE: dict[str, Callable[[int, Callable[..., list[Release]]], list[Release]]]
 SOURCES: dict[str, Callable[..., list[Release]]] = {"tunnel": tunnel_campaign,
                                                      "library": simulated_campaign}
 
+#: What ``--quick`` runs: these single-effect rows, this pair (by its index in :data:`PAIRS`:
+#: its seeds are the full run's), the first case outside the library.
+QUICK_ROWS = ["none", "sensor_crosstalk"]
+QUICK_PAIR = 4
+#: A summary row: what was counted, the count, out of how many, the rate (%), the target.
+Summary = tuple[str, int, int, float, str]
+
 
 @dataclasses.dataclass(frozen=True)
 class Setup:
@@ -142,10 +160,35 @@ def rule_broken(report: DiscrepancyReport) -> int:
     return sum(step.trial is None or not step.trial.accepted for step in report.effects)
 
 
+def result_name(args: argparse.Namespace) -> str:
+    """Return the result file's name: ``discrepancy_confusion`` and the options that differ.
+
+    In the order: the part (``--only``, ``--skip-singles``), the strengths (and factor), the
+    source, the draw seed, the rows asked and the pairs' first seed.
+    """
+    parts = []
+    if args.only:
+        parts.append(args.only)
+    elif args.skip_singles:
+        parts.append("no_singles")
+    if args.strengths != "random":
+        parts.append(args.strengths + (f"_x{args.factor:g}" if args.factor != 1.0 else ""))
+    if args.source != "tunnel":
+        parts.append(args.source)
+    if args.draw_seed != 39:
+        parts.append(f"draw{args.draw_seed}")
+    if args.rows:
+        parts.append("rows_" + "_".join(args.rows))
+    if args.pair_first_seed:
+        parts.append(f"pairs_from{args.pair_first_seed}")
+    return "_".join(["discrepancy_confusion", *parts]).replace(".", "_")
+
+
 def main() -> None:
     """Run the campaigns and print the tables."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, default=10, help="campaigns per effect")
+    parser.add_argument("--seeds", type=int, default=None,
+                        help="campaigns per effect (10; --quick: 1)")
     parser.add_argument("--strengths", choices=("random", "realistic"), default="random",
                         help="draw strengths over each effect's range (default) or take the "
                              "realistic one times --factor")
@@ -156,9 +199,11 @@ def main() -> None:
                         help="with --strengths realistic: strength as a multiple of the "
                              "realistic one (default 1)")
     parser.add_argument("--draw-seed", type=int, default=39, help="seed of the strength draws")
-    parser.add_argument("--pair-seeds", type=int, default=5, help="campaigns per pair")
-    parser.add_argument("--outside-seeds", type=int, default=5,
-                        help="campaigns per effect outside the library")
+    parser.add_argument("--pair-seeds", type=int, default=None,
+                        help="campaigns per pair (5; --quick: none, or 1 of one pair with "
+                             "--only pairs)")
+    parser.add_argument("--outside-seeds", type=int, default=None,
+                        help="campaigns per effect outside the library (5; --quick: 1)")
     parser.add_argument("--pair-first-seed", type=int, default=0,
                         help="seed number of the first campaign of each pair (to extend a run)")
     parser.add_argument("--rows", nargs="*", choices=["none", *EFFECT_NAMES],
@@ -167,31 +212,83 @@ def main() -> None:
                         help="only the pairs and the effects outside the library")
     parser.add_argument("--only", choices=("outside", "pairs"),
                         help="run one part only: the out-of-library table or the pairs")
+    result_files.add_arguments(parser)
     args = parser.parse_args()
+    name = result_name(args)
+    quick = args.quick
+    if args.seeds is None:
+        args.seeds = 1 if quick else 10
+    if args.pair_seeds is None:
+        args.pair_seeds = (1 if args.only == "pairs" else 0) if quick else 5
+    if args.outside_seeds is None:
+        args.outside_seeds = 1 if quick else 5
     if args.seeds < 0 or args.pair_seeds < 0 or args.outside_seeds < 0:
         parser.error("--seeds, --pair-seeds and --outside-seeds must be >= 0")
     if not args.factor > 0:
         parser.error("--factor must be > 0")
     setup = Setup(source=args.source, random=args.strengths == "random", factor=args.factor,
                   draw_seed=args.draw_seed)
+    rows = args.rows if args.rows or not quick else QUICK_ROWS
+    pairs = [QUICK_PAIR] if quick else None
+    outside = list(OUTSIDE)[:1] if quick else None
+    tables: list[result_files.Table] = []
+    summary: list[Summary] = []
+    notes = [f"Load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}."]
+    parameters = {"strengths": args.strengths, "source": args.source, "draw seed": args.draw_seed,
+                  "factor": args.factor if args.strengths == "realistic" else None}
+
+    def collect(part: tuple[list[result_files.Table], list[Summary], list[str]]) -> None:
+        tables.extend(part[0])
+        summary.extend(part[1])
+        notes.extend(part[2])
+
     if args.only == "outside":
         if args.outside_seeds == 0:
             parser.error("--only outside needs --outside-seeds >= 1")
-        _outside(args.outside_seeds, setup)
-        return
-    if args.only == "pairs":
-        _pairs(args.pair_seeds, args.pair_first_seed, setup)
-        return
-    if not args.skip_singles:
-        _singles(args.seeds, setup, args.rows)
-    if args.pair_seeds:
-        _pairs(args.pair_seeds, args.pair_first_seed, setup)
-    if args.outside_seeds:
-        _outside(args.outside_seeds, setup)
+        collect(_outside(args.outside_seeds, setup, outside))
+        parameters.update({"outside seeds": args.outside_seeds, "outside cases": outside
+                           or list(OUTSIDE)})
+    elif args.only == "pairs":
+        collect(_pairs(args.pair_seeds, args.pair_first_seed, setup, pairs))
+        parameters.update({"pair seeds": args.pair_seeds, "pair first seed": args.pair_first_seed,
+                           "pairs": _pair_names(pairs)})
+    else:
+        if not args.skip_singles:
+            collect(_singles(args.seeds, setup, rows))
+            parameters.update({"seeds": args.seeds, "rows": rows or ["none", *EFFECT_NAMES]})
+        if args.pair_seeds:
+            collect(_pairs(args.pair_seeds, args.pair_first_seed, setup, pairs))
+            parameters.update({"pair seeds": args.pair_seeds,
+                               "pair first seed": args.pair_first_seed,
+                               "pairs": _pair_names(pairs)})
+        if args.outside_seeds:
+            collect(_outside(args.outside_seeds, setup, outside))
+            parameters.update({"outside seeds": args.outside_seeds,
+                               "outside cases": outside or list(OUTSIDE)})
+    if quick and not args.pair_seeds and not args.only:
+        notes.append("This quick run leaves the pairs out (--pair-seeds runs one).")
+    if summary:
+        tables.insert(0, result_files.Table(
+            "Against the targets: what was counted, out of how many campaigns, as a rate.",
+            ("measure", "count", "campaigns", "rate (%)", "target"), summary,
+            formats={"rate (%)": ".1f"}))
+    notes.append(f"Load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}.")
+    result_files.write(name, "Discrepancy workflow: the effect named against the effect hidden",
+                       tables, results=args.results, quick=quick, parameters=parameters,
+                       notes=notes)
 
 
-def _singles(seeds: int, setup: Setup, only: list[str] | None = None) -> None:
-    """One effect (or none) per campaign: the confusion table (``only``: these rows)."""
+def _pair_names(which: list[int] | None) -> list[str]:
+    """Return the pairs run (``which``: their indices in :data:`PAIRS`; None: all)."""
+    return ["+".join(PAIRS[k]) for k in (range(len(PAIRS)) if which is None else which)]
+
+
+def _singles(seeds: int, setup: Setup, only: list[str] | None = None
+             ) -> tuple[list[result_files.Table], list[Summary], list[str]]:
+    """One effect (or none) per campaign: the confusion table (``only``: these rows).
+
+    Return its tables, its summary rows and notes for the result file.
+    """
     columns = ["none", *EFFECT_NAMES]
     rows = [row for row in columns if not only or row in only]
     counts: dict[str, Counter[str]] = {row: Counter() for row in rows}
@@ -241,6 +338,7 @@ def _singles(seeds: int, setup: Setup, only: list[str] | None = None) -> None:
           + f"{'correct':>9}{'gap before':>12}{'gap after':>11}{'param err med/max':>19}"
           + f"{'explained':>10}{'left/noise':>11}{'range':>10}")
     correct_total = strict_total = 0
+    table = []
     for row in rows:
         strict_total += counts[row][row]
         correct = counts[row][row] + as_delay[row]
@@ -254,6 +352,10 @@ def _singles(seeds: int, setup: Setup, only: list[str] | None = None) -> None:
         print(f"{row:<{width}}" + "".join(f"{counts[row][c]:>9}" for c in columns)
               + f"{correct / seeds:>9.0%}{before:>12.4f}{after:>11.4f}{err_text:>19}"
               + f"{explained[row]:>10}{max(left[row]):>11.2f}{span:>10}")
+        table.append((row, *(counts[row][c] for c in columns), 100 * correct / seeds, before,
+                      after, 100 * float(np.median(err)) if err else None,
+                      100 * max(err) if err else None, explained[row], max(left[row]),
+                      span.lstrip("x") if span != "-" else None))
     print("left/noise: the largest systematic residual left in a channel after the named "
           "effects, over the noise's RMS there (worst campaign of the row; 1 = at the noise)")
     print("correct: the hidden effect named alone, or a tube named channel_delay with its "
@@ -274,6 +376,41 @@ def _singles(seeds: int, setup: Setup, only: list[str] | None = None) -> None:
     print(f"time: {elapsed:.0f} s, {elapsed / n_campaigns:.1f} s per campaign (data and "
           "diagnosis); load average after: "
           f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    names = [f"named {c}" for c in columns]
+    tables = [result_files.Table(
+        f"Confusion table, {seeds} campaign{'s' * (seeds != 1)} per row, {setup.describe()}: "
+        "per hidden effect the campaigns by the effect named, the share named correctly, the "
+        "median gap before and after, the parameter error of the correctly named, how many "
+        "were explained, the worst systematic residual left over the noise, and the strength "
+        "range drawn.",
+        ("hidden", *names, "correct (%)", "gap before", "gap after", "param error median (%)",
+         "param error max (%)", "explained", "left/noise", "range (x REALISTIC)"), table,
+        formats={"correct (%)": ".0f", "gap before": ".4f", "gap after": ".4f",
+                 "param error median (%)": ".1f", "param error max (%)": ".1f",
+                 "left/noise": ".2f"})]
+    miss_rows = [(row, float(m.split(" -> ")[0][1:]) if m.startswith("x") else None,
+                  m.split(" -> ")[-1]) for row, found in misses.items() for m in found]
+    if miss_rows:
+        tables.append(result_files.Table(
+            "The single-effect campaigns not named correctly: the hidden effect, its strength "
+            "factor, and what was named.",
+            ("hidden", "strength factor (x REALISTIC)", "named"), miss_rows,
+            formats={"strength factor (x REALISTIC)": ".2f"}))
+    summary: list[Summary] = [
+        ("single effects named correctly", correct_total, n_campaigns,
+         100 * correct_total / n_campaigns, ">= 95 %"),
+        ("single effects named by their own name", strict_total, n_campaigns,
+         100 * strict_total / n_campaigns, "-"),
+        ("single effects: named effects that did not pass the gap rule", broken, n_campaigns,
+         math.nan, "0")]
+    if "none" in rows:
+        false_alarms = seeds - counts["none"]["none"]
+        summary.insert(2, ("false alarms on clean data", false_alarms, seeds,
+                           100 * false_alarms / seeds, "0"))
+    notes = [f"Single effects: {elapsed:.0f} s, {elapsed / n_campaigns:.1f} s per campaign "
+             f"(data and diagnosis); {sum(as_delay.values())} tube(s) named channel_delay with "
+             "their phase delay counted as correct (a delay for every purpose of the model)."]
+    return tables, summary, notes
 
 
 def _as_its_delay(effect: Effect, report: DiscrepancyReport, others: tuple[str, ...] = (),
@@ -302,15 +439,22 @@ def _left_over(releases: list[Release], report: DiscrepancyReport) -> float:
     return max(sys / noise for sys, noise in levels.values() if noise > 0)
 
 
-def _pairs(seeds: int, first: int, setup: Setup) -> None:
-    """Pairs of effects: named exactly, each strength within 20 %."""
+def _pairs(seeds: int, first: int, setup: Setup, which: list[int] | None = None
+           ) -> tuple[list[result_files.Table], list[Summary], list[str]]:
+    """Pairs of effects: named exactly, each strength within 20 % (``which``: these pairs).
+
+    Return the tables, the summary rows and notes for the result file.
+    """
     started = time.monotonic()
     print()
     print(f"Pairs: {seeds} campaigns each, {setup.describe()}")
     print(f"{'pair':<40}{'fully right':>12}{'named both':>11}{'extra':>7}{'gap before':>12}"
           f"{'after 1':>9}{'after 2':>9}{'param err med/max':>19}{'explained':>10}")
     total = right_total = broken = as_delay = 0
+    table, wrong = [], []
     for k, pair in enumerate(PAIRS):
+        if which is not None and k not in which:
+            continue
         right = both = extra = explained = 0
         gaps: list[list[float]] = []
         errors: list[float] = []
@@ -343,6 +487,9 @@ def _pairs(seeds: int, first: int, setup: Setup) -> None:
             if not ok:
                 print(f"  {'+'.join(pair)} seed {seed} (x{factors[0]:.2f}, x{factors[1]:.2f}): "
                       f"named {names}, errors {[f'{x:.0%}' for x in err]}", flush=True)
+                wrong.append(("+".join(pair), seed, factors[0], factors[1],
+                              " + ".join(names) or "none",
+                              ", ".join(f"{x:.0%}" for x in err)))
         total += seeds
         right_total += right
         med = [float(np.median([g[i] for g in gaps if len(g) > i])) if any(len(g) > i
@@ -350,15 +497,46 @@ def _pairs(seeds: int, first: int, setup: Setup) -> None:
         err_text = "-" if not errors else f"{np.median(errors):.1%} / {max(errors):.1%}"
         print(f"{'+'.join(pair):<40}{right:>12}{both:>11}{extra:>7}{med[0]:>12.4f}"
               f"{med[1]:>9.4f}{med[2]:>9.4f}{err_text:>19}{explained:>10}", flush=True)
+        table.append(("+".join(pair), seeds, right, both, extra, *med,
+                      100 * float(np.median(errors)) if errors else None,
+                      100 * max(errors) if errors else None, explained))
     rate = right_total / max(total, 1)
+    elapsed = time.monotonic() - started
     print(f"pairs fully right: {right_total}/{total} = {rate:.1%} (of them {as_delay} with a "
           "tube named as its delay; target >= 90 %): "
           f"{'met' if rate >= 0.9 else 'MISSED'}; named effects that did not pass the gap "
-          f"rule: {broken} (target 0); {time.monotonic() - started:.0f} s")
+          f"rule: {broken} (target 0); {elapsed:.0f} s")
+    tables = [result_files.Table(
+        f"Pairs of effects, {seeds} campaign{'s' * (seeds != 1)} each, {setup.describe()}: "
+        "fully right (exactly the two named, every strength within 20 %), both named, more "
+        "than two named, the median gap before and after the first and second effect, the "
+        "parameter error where both were named, and how many were explained.",
+        ("pair", "campaigns", "fully right", "named both", "extra", "gap before",
+         "gap after 1", "gap after 2", "param error median (%)", "param error max (%)",
+         "explained"), table,
+        formats={"gap before": ".4f", "gap after 1": ".4f", "gap after 2": ".4f",
+                 "param error median (%)": ".1f", "param error max (%)": ".1f"})]
+    if wrong:
+        tables.append(result_files.Table(
+            "The pair campaigns not fully right: the pair, the seed, both strength factors "
+            "(x REALISTIC), what was named and each strength parameter's error.",
+            ("pair", "seed", "factor 1", "factor 2", "named", "parameter errors"), wrong,
+            formats={"factor 1": ".2f", "factor 2": ".2f"}))
+    summary: list[Summary] = [
+        ("pairs fully right", right_total, total, 100 * rate, ">= 90 %"),
+        ("pairs: named effects that did not pass the gap rule", broken, total, math.nan, "0")]
+    notes = [f"Pairs: {elapsed:.0f} s; {as_delay} of the fully right with a tube named as its "
+             "delay."]
+    return tables, summary, notes
 
 
-def _outside(seeds: int, setup: Setup) -> None:
-    """Physics outside the library: never explained; every named effect passed the gap rule."""
+def _outside(seeds: int, setup: Setup, which: list[str] | None = None
+             ) -> tuple[list[result_files.Table], list[Summary], list[str]]:
+    """Physics outside the library: never explained; every named effect passed the gap rule.
+
+    ``which``: these cases of :data:`OUTSIDE` only. Return the tables, the summary rows and
+    notes for the result file.
+    """
     started = time.monotonic()
     source = SOURCES[setup.source]
     print()
@@ -368,7 +546,10 @@ def _outside(seeds: int, setup: Setup) -> None:
     print(f"{'case':<22}{'seed':>5}  {'named effects':<34}{'gap before':>11}{'gap after':>10}"
           f"{'explained':>10}  tried and undone (gap before -> after)")
     explained_total = broken = 0
+    table = []
     for k, (label, campaign) in enumerate(OUTSIDE.items()):
+        if which is not None and label not in which:
+            continue
         for seed in range(seeds):
             report = diagnose(campaign(70_000 + 100 * k + seed, source), SECTION, depth=DEPTH)
             explained_total += report.explained
@@ -378,10 +559,28 @@ def _outside(seeds: int, setup: Setup) -> None:
                                for name, step in report.rejected) or "-"
             print(f"{label:<22}{seed:>5}  {named:<34}{report.gap_before:>11.4f}"
                   f"{report.gap_after:>10.4f}{str(report.explained):>10}  {undone}", flush=True)
-    total = seeds * len(OUTSIDE)
+            table.append((label, seed, named, report.gap_before, report.gap_after,
+                          report.explained, undone))
+    total = seeds * len(OUTSIDE if which is None else which)
+    elapsed = time.monotonic() - started
     print(f"explained: {explained_total}/{total} (target 0): "
           f"{'met' if explained_total == 0 else 'MISSED'}; named effects that did not pass the "
-          f"gap rule: {broken} (target 0); {time.monotonic() - started:.0f} s")
+          f"gap rule: {broken} (target 0); {elapsed:.0f} s")
+    source_text = "virtual tunnel" if setup.source == "tunnel" else "library simulation"
+    tables = [result_files.Table(
+        f"Out of library, {seeds} campaign{'s' * (seeds != 1)} each, data from the "
+        f"{source_text} (the growing mass: library), 2 % noise: the effects named, the gap "
+        "before and after, whether the campaign was called explained, and the steps tried "
+        "and undone by the gap rule.",
+        ("case", "seed", "named effects", "gap before", "gap after", "explained",
+         "tried and undone (gap before -> after)"), table,
+        formats={"gap before": ".4f", "gap after": ".4f"})]
+    summary: list[Summary] = [
+        ("out of library: explained", explained_total, total,
+         100 * explained_total / max(total, 1), "0"),
+        ("out of library: named effects that did not pass the gap rule", broken, total,
+         math.nan, "0")]
+    return tables, summary, [f"Out of library: {elapsed:.0f} s."]
 
 
 if __name__ == "__main__":

@@ -56,6 +56,13 @@ every process, so the times are one-core times. The timing table gives wall and 
 (``time.process_time``), minimum and median over the repeats: the host is shared, and the CPU
 time is what the identification itself costs (docs/development/e2rfc_speed.md: the times before and
 after the speed work, and what it changed).
+
+``--quick`` (CI): one seed, one timed repeat; of the tunnel rows the first clean and the first
+turbulent one of those asked (all of them with an explicit ``--rows``); of the smooth rows the
+flat plate at 2 % noise; the ablation on the plate. ``--results DIR`` also writes the tables to
+``DIR/<name>.json`` and ``.md`` (:mod:`result_files`): ``ident_accuracy`` for the default run,
+else the name says what ran: ``ident_accuracy_<part>[_<rows>][_<tunnel mode>][_<estimator>]...``
+(only the options that differ from the defaults, :func:`result_name`).
 """
 
 from __future__ import annotations
@@ -68,9 +75,11 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import argparse  # noqa: E402
 import dataclasses  # noqa: E402
 import math  # noqa: E402
+import sys  # noqa: E402
 import time  # noqa: E402
 from concurrent.futures import ProcessPoolExecutor  # noqa: E402
 from dataclasses import dataclass  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 from scipy.signal import lfilter  # noqa: E402
@@ -88,6 +97,9 @@ from ident.physics.turbulence import TurbulenceSpec
 from simulators import simulate_release  # noqa: E402
 from simulators.campaigns import scaled  # noqa: E402
 from simulators.decks import BLUFF_DECK, BLUFF_DECK_STATIC, bluff_deck_model  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import result_files  # noqa: E402 - beside this script
 
 SECTIONS = {
     "flat plate (mu 35, fa/fh 2.0)": SectionModel(
@@ -234,15 +246,20 @@ def timing(section, repeats=9):
 
 
 def timing_part(repeats):
-    """Print the timing table (``--part timing``, and the end of ``--part classic``)."""
+    """Print the timing table (``--part timing``, and the end of ``--part classic``); return it."""
     print(f"\nE2RFC time, 5 releases of 30 s at 500 Hz (2 % noise), one core (BLAS single-"
           f"threaded); {repeats} runs after a warm-up, min and median; wall = elapsed, CPU = "
           "this process's CPU time (the host is shared: CPU time is what the code costs):")
     header = f"  {'':<30}{'wall min':>10}{'wall med':>10}{'CPU min':>10}{'CPU med':>10}"
     print(header)
-    for label, wall_min, wall_med, cpu_min, cpu_med in timing(
-            SECTIONS["flat plate (mu 35, fa/fh 2.0)"], repeats):
+    rows = timing(SECTIONS["flat plate (mu 35, fa/fh 2.0)"], repeats)
+    for label, wall_min, wall_med, cpu_min, cpu_med in rows:
         print(f"  {label:<30}{wall_min:>9.3f}s{wall_med:>9.3f}s{cpu_min:>9.3f}s{cpu_med:>9.3f}s")
+    columns = ("structure", "wall min (s)", "wall median (s)", "CPU min (s)", "CPU median (s)")
+    return result_files.Table(
+        f"E2RFC's time on 5 releases of 30 s at 500 Hz (flat plate, 2 % noise), one core, "
+        f"minimum and median of {_count(repeats, 'run')} after a warm-up: wall time and this "
+        "process's CPU time.", columns, rows, formats=dict.fromkeys(columns[1:], ".3f"))
 
 
 # -- E2RFC in a real tunnel ----------------------------------------------------------------------
@@ -358,11 +375,24 @@ def _tunnel_run(args):
             seed)
 
 
-def tunnel_part(seeds, workers, modes=("after",), which="all", a3="fitted-or-zero",
-                first_seed=0, motion="filter", estimator="iv"):
+def tunnel_rows(which="all", quick=False):
+    """Return the names of the tunnel rows ``which`` asks (``quick``: one clean, one turbulent)."""
     names = (list(VARIANT_ROWS) if which == "variants" else
              [row for row in TUNNEL_ROWS
               if which == "all" or (which == "turbulent") == (TUNNEL_ROWS[row][3] > 0)])
+    if quick and which != "variants":
+        clean = [row for row in names if TUNNEL_ROWS[row][3] == 0]
+        turbulent = [row for row in names if TUNNEL_ROWS[row][3] > 0]
+        names = clean[:1] + turbulent[:1]
+    elif quick:
+        names = names[:1]
+    return names
+
+
+def tunnel_part(seeds, workers, modes=("after",), which="all", a3="fitted-or-zero",
+                first_seed=0, motion="filter", estimator="iv", names=None):
+    """Run the tunnel rows (``names``, default all of ``which``); return tables and warnings."""
+    names = tunnel_rows(which) if names is None else names
     jobs = [(row, seed, mode, a3, motion, estimator) for row in names for mode in modes
             for seed in range(first_seed, first_seed + seeds)]
     results = []
@@ -374,8 +404,13 @@ def tunnel_part(seeds, workers, modes=("after",), which="all", a3="fitted-or-zer
                   f"{100 * std:7.2f} % {elapsed:5.1f} s{' branch' if branch else ''}",
                   flush=True)
             results.append(result)
-    for mode in modes:
-        _tunnel_table([r for r in results if r[1] == mode], names, seeds, mode)
+    tables = [_tunnel_table([r for r in results if r[1] == mode], names, seeds, mode)
+              for mode in modes]
+    # A failed identification (an exception, tunnel_run) is the one without a time.
+    failed = [f"{r[0]} ({r[1]}) seed {r[6]}" for r in results if np.isnan(r[4])]
+    warnings = ([f"{len(failed)} identification(s) raised an exception and count as without "
+                 f"flutter: {'; '.join(failed)}."] if failed else [])
+    return tables, warnings
 
 
 def _tunnel_table(results, names, seeds, mode):
@@ -388,6 +423,7 @@ def _tunnel_table(results, names, seeds, mode):
     print(header)
     print("-" * len(header))
     covered = total = 0
+    table = []
     for row in names:
         rows = [(r[0], r[2], r[3], r[4], r[5]) for r in results if r[0] == row]
         err = np.abs([r[1] for r in rows]) * 100
@@ -395,12 +431,31 @@ def _tunnel_table(results, names, seeds, mode):
         inside = np.isfinite(err) & (err <= 2 * std)
         covered += int(inside.sum())
         total += len(rows)
-        print(f"{row:<26}{np.median(err):>9.2f}%{np.percentile(err, 90):>9.2f}%"
-              f"{100 * inside.mean():>11.0f}%{np.nanmedian(std):>8.2f}%"
-              f"{np.median([r[3] for r in rows]):>9.2f}s{int(np.sum(~np.isfinite(err))):>11d}"
-              f"{sum(r[4] for r in rows):>10d}")
+        line = (row, np.median(err), np.percentile(err, 90), 100 * inside.mean(),
+                np.nanmedian(std), np.median([r[3] for r in rows]),
+                int(np.sum(~np.isfinite(err))), int(np.sum(np.isnan([r[3] for r in rows]))),
+                sum(r[4] for r in rows), int(inside.sum()), len(rows))
+        table.append(line)
+        print(f"{row:<26}{line[1]:>9.2f}%{line[2]:>9.2f}%{line[3]:>11.0f}%{line[4]:>8.2f}%"
+              f"{line[5]:>9.2f}s{line[6]:>11d}{line[8]:>10d}")
     print(f"\ncoverage of the 2-std interval over all rows: {covered}/{total} "
           f"({100 * covered / total:.0f} %)")
+    table.append(("all rows", None, None, 100 * covered / total, None, None,
+                  sum(r[6] for r in table), sum(r[7] for r in table), sum(r[8] for r in table),
+                  covered, total))
+    columns = ("case", "median error (%)", "p90 error (%)", "2-std coverage (%)",
+               "median std (%)", "median time (s)", "no flutter", "failed", "branch", "covered",
+               "cases")
+    return result_files.Table(
+        f"E2RFC in a real tunnel ({mode}): 3 wind speeds (0.4/0.6/0.8 U_F) x 2 releases (the "
+        "variant rows: as named), 20 s at 500 Hz, 2 % noise, the turbulence rows with a "
+        f"{TUNNEL_HOLD_S:g} s hold before each release, {_count(seeds, 'seed')} per row: the "
+        "flutter speed's absolute error, the coverage of IdentifiedModel.flutter's 2-std "
+        "interval, its median std, the median time of identification plus uncertainty, the "
+        "cases without flutter (failed ones included) and those the turbulence branch ran.",
+        columns, table, formats={"median error (%)": ".2f", "p90 error (%)": ".2f",
+                                 "2-std coverage (%)": ".0f", "median std (%)": ".2f",
+                                 "median time (s)": ".2f"})
 
 
 #: The ablation's variants: (name, window of each release in s, holds used).
@@ -434,7 +489,7 @@ def ablation_run(args):
 
 
 def ablation_part(seeds, workers, rows=("plate, Jones, Iw 1 %", "bluff deck, Iw 1 %")):
-    """Closed-loop ML on the decay alone, the random response alone, and both."""
+    """Closed-loop ML on the decay alone, the random response alone, and both; return it."""
     jobs = [(row, seed, v) for row in rows for v in range(len(ABLATION))
             for seed in range(seeds)]
     with ProcessPoolExecutor(workers) as pool:
@@ -444,29 +499,67 @@ def ablation_part(seeds, workers, rows=("plate, Jones, Iw 1 %", "bluff deck, Iw 
     header = f"{'case':<24}{'data':<30}{'|err| med':>10}{'|err| p90':>10}{'2-std':>7}{'std med':>9}"
     print(header)
     print("-" * len(header))
+    table = []
     for row in rows:
         for name, *_ in ABLATION:
             got = [(e, sd) for r, n, e, sd in results if (r, n) == (row, name)]
             err = np.abs([e for e, _ in got]) * 100
             std = np.array([sd for _, sd in got]) * 100
             cover = np.mean(np.isfinite(err) & (err <= 2 * std))
+            table.append((row, name, np.median(err), np.percentile(err, 90), 100 * cover,
+                          np.nanmedian(std), int(np.sum(~np.isfinite(err)))))
             print(f"{row:<24}{name:<30}{np.median(err):>9.2f}%{np.percentile(err, 90):>9.2f}%"
                   f"{100 * cover:>6.0f}%{np.nanmedian(std):>8.2f}%")
+    return result_files.Table(
+        f"Closed-loop ML, what each part of the record tells ({_count(seeds, 'seed')} per "
+        "case): the flutter speed's absolute error, the coverage of the 2-std interval and the "
+        "median std (the Fisher information's alone) when fitted on the decay alone, on the "
+        "random response alone, and on both.",
+        ("case", "data", "median error (%)", "p90 error (%)", "2-std coverage (%)",
+         "median std (%)", "no flutter or failed"),
+        table, formats={"median error (%)": ".2f", "p90 error (%)": ".2f",
+                        "2-std coverage (%)": ".0f", "median std (%)": ".2f"})
+
+
+def _count(n, noun):
+    """Return ``"1 seed"`` or ``"3 seeds"``."""
+    return f"{n} {noun}{'' if n == 1 else 's'}"
+
+
+def result_name(args):
+    """Return the result file's name for the options of a run.
+
+    ``ident_accuracy``, then those of the part, rows, tunnel mode, turbulent estimator, motion,
+    A3 rule and first seed that differ from the defaults, joined by ``_``.
+    """
+    parts = [] if args.part == "all" else [args.part]
+    if args.part in ("all", "tunnel"):
+        parts += [value for value, default in (
+            (args.rows, "all"), (args.tunnel_mode, "after"),
+            (args.turbulent_estimator, e2rfc.TURBULENT_ESTIMATOR),
+            (args.turbulent_motion, _turbulent_fit.MOTION)) if value != default]
+        if args.turbulent_a3 != "fitted-or-zero":
+            parts.append(f"a3-{args.turbulent_a3}")
+        if args.first_seed:
+            parts.append(f"from{args.first_seed}")
+    return "_".join(["ident_accuracy", *parts]).replace("-", "_")
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, default=20)
+    parser.add_argument("--seeds", type=int, default=None, help="seeds per row (20; --quick: 1)")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--part", choices=("all", "classic", "tunnel", "timing", "ablation"),
                         default="all")
-    parser.add_argument("--repeats", type=int, default=9, help="timed runs of the timing table")
+    parser.add_argument("--repeats", type=int, default=None,
+                        help="timed runs of the timing table (9; --quick: 1)")
     parser.add_argument("--tunnel-mode", choices=("after", "before", "both"), default="after",
                         help="tunnel rows: as shipped, with the holds taken away, or both")
     parser.add_argument("--rows", choices=("all", "turbulent", "clean", "variants"),
-                        default="all",
+                        default=None,
                         help="which tunnel rows to run (variants: the turbulence rows changed "
-                             "in one thing, VARIANT_ROWS)")
+                             "in one thing, VARIANT_ROWS; default all, --quick: one clean and "
+                             "one turbulent)")
     parser.add_argument("--first-seed", type=int, default=0,
                         help="tunnel rows: the first seed (more seeds in another run)")
     parser.add_argument("--turbulent-a3", choices=("fitted-or-zero", "fitted", "choose", "e2rfc"),
@@ -480,34 +573,75 @@ def main():
                         default=e2rfc.TURBULENT_ESTIMATOR,
                         help="the turbulence branch's estimator (e2rfc.TURBULENT_ESTIMATOR): "
                              "refined IV (needs holds) or closed-loop maximum likelihood")
+    result_files.add_arguments(parser)
     args = parser.parse_args()
+    explicit_rows = args.rows is not None
+    args.rows = args.rows or "all"
+    seeds = args.seeds if args.seeds is not None else (1 if args.quick else 20)
+    repeats = args.repeats if args.repeats is not None else (1 if args.quick else 9)
+    if seeds < 1 or repeats < 1:
+        parser.error("--seeds and --repeats must be at least 1")
+    name = result_name(args)
+    parameters = {"part": args.part, "seeds": seeds, "workers": args.workers}
+    tables, warnings = [], []
+
+    def write():
+        what = f"{args.part} part" + (f", {args.rows} tunnel rows"
+                                      if args.part in ("all", "tunnel") else "")
+        result_files.write(
+            name, f"E2RFC's accuracy and speed ({what})", tables, results=args.results,
+            quick=args.quick, parameters=parameters,
+            notes=["Times are on one core (BLAS single-threaded) of a shared host: the wall "
+                   "times move with its load, the CPU times of the timing table less so."],
+            warnings=warnings)
+
     if args.part == "timing":
-        timing_part(args.repeats)
+        parameters = {"part": args.part, "repeats": repeats}
+        tables.append(timing_part(repeats))
+        write()
         return
     if args.part == "ablation":
-        ablation_part(args.seeds, args.workers)
+        rows = ("plate, Jones, Iw 1 %",) if args.quick else ("plate, Jones, Iw 1 %",
+                                                             "bluff deck, Iw 1 %")
+        parameters["rows"] = list(rows)
+        tables.append(ablation_part(seeds, args.workers, rows))
+        write()
         return
     if args.part in ("all", "tunnel"):
         modes = ("before", "after") if args.tunnel_mode == "both" else (args.tunnel_mode,)
-        tunnel_part(args.seeds, args.workers, modes, args.rows, args.turbulent_a3,
-                    args.first_seed, args.turbulent_motion, args.turbulent_estimator)
+        names = tunnel_rows(args.rows, quick=args.quick and not explicit_rows)
+        parameters.update({"first seed": args.first_seed, "rows": names,
+                           "tunnel mode": args.tunnel_mode, "turbulent A3": args.turbulent_a3,
+                           "turbulent motion": args.turbulent_motion,
+                           "turbulent estimator": args.turbulent_estimator,
+                           "hold (s)": TUNNEL_HOLD_S})
+        found, failed = tunnel_part(seeds, args.workers, modes, args.rows, args.turbulent_a3,
+                                    args.first_seed, args.turbulent_motion,
+                                    args.turbulent_estimator, names)
+        tables += found
+        warnings += failed
     if args.part == "tunnel":
+        write()
         return
-    jobs = [(s, m, n, seed) for s in SECTIONS for m in METHODS for n in NOISES
-            for seed in range(args.seeds)]
+    sections = list(SECTIONS)[:1] if args.quick else list(SECTIONS)
+    noises = (0.02,) if args.quick else NOISES
+    parameters.update({"sections": sections, "noises": list(noises), "repeats": repeats})
+    jobs = [(s, m, n, seed) for s in sections for m in METHODS for n in noises
+            for seed in range(seeds)]
     with ProcessPoolExecutor(args.workers) as pool:
         results = list(tqdm(pool.map(one_run, jobs), total=len(jobs), desc="identifications"))
 
     print(f"\nE2RFC: 3 wind speeds (0.4/0.6/0.8 U_F); FD route: 10 wind speeds (0.30..0.85 U_F);"
-          f" 20 s at 500 Hz; {args.seeds} seeds per row; times on one core.\n'E2RFC raw' is the"
+          f" 20 s at 500 Hz; {seeds} seeds per row; times on one core.\n'E2RFC raw' is the"
           " same estimator with regressors differentiated from the noisy displacements.\n")
     header = (f"{'section':<30}{'method':<11}{'noise':>6}{'U_F err med':>13}{'U_F err p90':>13}"
               f"{'FD err med':>12}{'time med':>10}{'|err|/std':>11}")
     print(header)
     print("-" * len(header))
-    for s in SECTIONS:
+    classic = []
+    for s in sections:
         for m in METHODS:
-            for n in NOISES:
+            for n in noises:
                 rows = [r for r in results if r[:3] == (s, m, n)]
                 err = np.abs([r[3] for r in rows]) * 100
                 fde = np.array([r[4] for r in rows]) * 100
@@ -519,7 +653,25 @@ def main():
                 print(f"{s:<30}{m:<11}{100 * n:>5.0f}%{np.median(err):>12.3f}%"
                       f"{np.percentile(err, 90):>12.3f}%{np.median(fde):>11.2f}%"
                       f"{np.median(t):>9.2f}s{z_text}")
-    timing_part(args.repeats)
+                classic.append((s, m, 100 * n, np.median(err), np.percentile(err, 90),
+                                np.median(fde), np.median(t),
+                                np.nanmedian(z) if meaningful else None))
+    columns = ("section", "method", "noise (%)", "median U_F error (%)", "p90 U_F error (%)",
+               "median FD error (%)", "median time (s)", "median error/std")
+    tables.append(result_files.Table(
+        "E2RFC (3 wind speeds, 0.4/0.6/0.8 U_F), E2RFC with regressors differentiated from the "
+        "noisy displacements ('E2RFC raw') and the FD route (10 wind speeds, 0.30-0.85 U_F), "
+        f"20 s at 500 Hz, {_count(seeds, 'seed')} per row: the flutter speed's absolute "
+        "error, the flutter derivatives' error (mean over the eight of max error / max true), "
+        "the median identification time on one core and the median error over the predicted "
+        "std.",
+        columns, classic,
+        formats={"noise (%)": ".0f", "median U_F error (%)": ".3f",
+                 "p90 U_F error (%)": ".3f", "median FD error (%)": ".2f",
+                 "median time (s)": ".2f", "median error/std": ".2f"}))
+    tables.append(timing_part(repeats))
+    write()
+
 
 if __name__ == "__main__":
     main()

@@ -14,7 +14,9 @@ frequencies across the range the releases measured whose error is within 2 of
 ``IdentifiedModel.flutter_derivative_std``; and on that range widened by 20 % on each side, as
 the plots show it), and the median identification time (one core).
 
-Run: ``.venv/bin/python benchmarks/ident_accuracy_3dof.py [--seeds 10] [--workers 2]``.
+Run: ``.venv/bin/python benchmarks/ident_accuracy_3dof.py [--seeds 10] [--workers 2]
+[--quick] [--results DIR]`` (``--quick``: one seed per noise level; ``--results``: also write
+``DIR/ident_accuracy_3dof.json`` and ``.md``, :mod:`result_files`).
 """
 
 from __future__ import annotations
@@ -25,8 +27,10 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: one-core tim
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
+import sys  # noqa: E402
 import time  # noqa: E402
 from concurrent.futures import ProcessPoolExecutor  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -35,6 +39,9 @@ from ident.identification import e2rfc, results
 from ident.model import flutter as fl
 from simulators.decks import BLUFF_DECK_3DOF, bluff_deck_3dof_model  # noqa: E402
 from simulators.tunnel import simulate_release  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import result_files  # noqa: E402 - beside this script
 
 HOLDS = ((0.010, 0.03, 0.010), (-0.008, 0.02, -0.012))
 FRACTIONS = (0.45, 0.65, 0.8)
@@ -76,22 +83,57 @@ def _fd_coverage(model: results.IdentifiedModel, truth: object, K: np.ndarray) -
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, default=10)
+    parser.add_argument("--seeds", type=int, default=None, help="seeds per noise level (10)")
     parser.add_argument("--workers", type=int, default=2)
+    result_files.add_arguments(parser)
     args = parser.parse_args()
+    seeds = args.seeds if args.seeds is not None else (1 if args.quick else 10)
+    noises = (0.02, 0.05)
+    if seeds < 1:
+        parser.error("--seeds must be at least 1")
     print(f"{'noise':>6} {'n':>3} {'|err| med %':>11} {'|err| p90 %':>11} {'2-std cov':>9} "
           f"{'std med %':>9} {'FD cov':>6} {'FD cov +-20%':>12} {'time med s':>10}")
+    table = []
+    no_flutter = 0
     with ProcessPoolExecutor(args.workers) as pool:
-        for noise in (0.02, 0.05):
-            rows = list(pool.map(one_case, [(noise, s) for s in range(args.seeds)]))
+        for noise in noises:
+            rows = list(pool.map(one_case, [(noise, s) for s in range(seeds)]))
             err = np.abs([r["error"] for r in rows])
-            print(f"{100 * noise:5.0f}% {len(rows):3d} {np.median(err):11.3f} "
-                  f"{np.percentile(err, 90):11.3f} "
-                  f"{np.mean([r['covered'] for r in rows]):9.2f} "
-                  f"{np.nanmedian([r['std'] for r in rows]):9.3f} "
-                  f"{np.mean([r['fd_covered'] for r in rows]):6.3f} "
-                  f"{np.mean([r['fd_wide'] for r in rows]):12.3f} "
-                  f"{np.median([r['time'] for r in rows]):10.2f}")
+            no_flutter += int(np.sum(~np.isfinite(err)))
+            line = (100 * noise, len(rows), np.median(err), np.percentile(err, 90),
+                    np.mean([r["covered"] for r in rows]),
+                    np.nanmedian([r["std"] for r in rows]),
+                    np.mean([r["fd_covered"] for r in rows]),
+                    np.mean([r["fd_wide"] for r in rows]),
+                    np.median([r["time"] for r in rows]))
+            table.append(line)
+            print(f"{line[0]:5.0f}% {line[1]:3d} {line[2]:11.3f} {line[3]:11.3f} {line[4]:9.2f} "
+                  f"{line[5]:9.3f} {line[6]:6.3f} {line[7]:12.3f} {line[8]:10.2f}")
+    columns = ("noise (%)", "campaigns", "median error (%)", "p90 error (%)",
+               "2-std coverage", "median std (%)", "FD coverage", "FD coverage, range +-20 %",
+               "median time (s)")
+    result_files.write(
+        "ident_accuracy_3dof", "E2RFC with three degrees of freedom (3-DOF bluff deck)",
+        [result_files.Table(
+            "E2RFC on the 3-DOF bluff deck, 3 speeds (0.45/0.65/0.8 U_F) x 2 releases of 20 s "
+            "at 500 Hz, seeded campaigns: the flutter speed's absolute error (median, 90th "
+            "percentile), the 2-std coverage (fraction), the median std, the 18 flutter "
+            "derivatives' 2-std coverage (fraction) and the median identification time.",
+            columns, table,
+            formats={"noise (%)": ".0f", "median error (%)": ".3f",
+                     "p90 error (%)": ".3f", "2-std coverage": ".2f",
+                     "median std (%)": ".3f", "FD coverage": ".3f",
+                     "FD coverage, range +-20 %": ".3f", "median time (s)": ".2f"})],
+        results=args.results, quick=args.quick,
+        parameters={"seeds": seeds, "noises": list(noises), "workers": args.workers,
+                    "fractions of U_F": list(FRACTIONS), "duration (s)": 20.0, "fs (Hz)": 500.0},
+        notes=["Times are the process CPU time of one identification, BLAS on one thread.",
+               "FD coverage: the fraction of the flutter derivatives' values across the measured "
+               "reduced frequencies within two reported standard deviations of the truth; the "
+               "next column on that range widened on each side, as the plots show it."],
+        warnings=([f"{no_flutter} identification(s) found no flutter speed: their error is "
+                   "undefined (NaN), and so are the median and p90 of their noise level."]
+                  if no_flutter else []))
 
 
 if __name__ == "__main__":

@@ -16,7 +16,9 @@ process's CPU time over all turns, and the ratio of each minimum to this checkou
 
 Run: ``git worktree add /tmp/start 789df70`` (issue 16's start), then
 ``.venv/bin/python benchmarks/ident_speed_compare.py --tree /tmp/start [--tree ...]
-[--rounds 3] [--repeats 5]``.
+[--rounds 3] [--repeats 5] [--quick] [--results DIR]`` (``--quick``: one turn of one timed run;
+``--results``: also write ``DIR/ident_speed_compare.json`` and ``.md``, :mod:`result_files`).
+Without ``--tree`` only this checkout is timed.
 """
 
 from __future__ import annotations
@@ -36,6 +38,10 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
+sys.path.insert(0, str(HERE))
+
+import result_files  # noqa: E402 - beside this script
+
 #: Where a checkout keeps E2RFC (in ident's subpackages, or flat as before them).
 E2RFC_PATHS = ("identification/e2rfc.py", "e2rfc.py")
 
@@ -105,33 +111,67 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--tree", action="append", default=[], type=Path,
                         help="another windrig checkout to time (repeatable)")
-    parser.add_argument("--rounds", type=int, default=3, help="turns of every checkout")
-    parser.add_argument("--repeats", type=int, default=5, help="timed runs per turn")
+    parser.add_argument("--rounds", type=int, default=None,
+                        help="turns of every checkout (3; --quick: 1)")
+    parser.add_argument("--repeats", type=int, default=None,
+                        help="timed runs per turn (5; --quick: 1)")
+    result_files.add_arguments(parser)
     args = parser.parse_args()
+    rounds = args.rounds if args.rounds is not None else (1 if args.quick else 3)
+    repeats = args.repeats if args.repeats is not None else (1 if args.quick else 5)
     trees = [ROOT, *(t.resolve() for t in args.tree)]
     for tree in trees[1:]:
         if not any((tree / "ident" / p).is_file() for p in E2RFC_PATHS):
             parser.error(f"--tree {tree}: not a windrig checkout (no e2rfc.py in ident)")
-    if args.rounds < 1 or args.repeats < 1:
+    if rounds < 1 or repeats < 1:
         parser.error("--rounds and --repeats must be at least 1")
     times: dict[Path, dict[str, list[float]]] = {t: {"chosen": [], "given": []} for t in trees}
     with tempfile.TemporaryDirectory() as tmp:
         data = Path(tmp) / "releases.npz"
         write_releases(data)
-        for _ in range(args.rounds):
+        for _ in range(rounds):
             for tree in trees:
-                for label, values in time_tree(tree, data, args.repeats).items():
+                for label, values in time_tree(tree, data, repeats).items():
                     times[tree][label].extend(values)
-    print(f"E2RFC CPU time, 5 releases of 30 s at 500 Hz, one core; {args.rounds} turns x "
-          f"{args.repeats} runs per checkout; ratio = this minimum / this checkout's minimum")
+    print(f"E2RFC CPU time, 5 releases of 30 s at 500 Hz, one core; {rounds} turns x "
+          f"{repeats} runs per checkout; ratio = this minimum / this checkout's minimum")
     print(f"  {'checkout':<44}{'option':<8}{'min':>8}{'median':>8}{'ratio':>7}")
+    rows = []
     for tree in trees:
-        name = f"{tree} ({_commit(tree)})"
+        commit = _commit(tree)
+        name = f"{tree} ({commit})"
         for label in ("chosen", "given"):
             values = np.array(times[tree][label])
             ratio = values.min() / np.min(times[ROOT][label])
             print(f"  {name[-44:]:<44}{label:<8}{values.min():>7.3f}s{np.median(values):>7.3f}s"
                   f"{ratio:>7.2f}")
+            rows.append(("this checkout" if tree == ROOT else str(tree), commit,
+                         OPTIONS[label], float(values.min()), float(np.median(values)),
+                         float(ratio)))
+    table = result_files.Table(
+        f"E2RFC's CPU time on 5 releases of 30 s at 500 Hz (one core), {rounds} turns x "
+        f"{repeats} timed runs per checkout, and each minimum over this checkout's.",
+        ("checkout", "commit", "structure", "CPU min (s)", "CPU median (s)",
+         "ratio to this checkout"),
+        rows, formats={"CPU min (s)": ".3f", "CPU median (s)": ".3f",
+                       "ratio to this checkout": ".2f"})
+    notes = ["Each checkout runs its own identification in a process of its own on the same "
+             "simulated releases; the checkouts take turns, so a slow spell of the host falls "
+             "on all of them, and the ratios hold where the absolute times do not."]
+    warnings = []
+    if len(trees) == 1:
+        warnings.append("No other checkout was given (--tree): the table times this checkout "
+                        "alone, and its ratios are one by definition.")
+    result_files.write(
+        "ident_speed_compare", "E2RFC's identification time against other checkouts", [table],
+        results=args.results, quick=args.quick,
+        parameters={"rounds": rounds, "repeats": repeats,
+                    "trees": [str(t) for t in trees[1:]]},
+        notes=notes, warnings=warnings)
+
+
+#: The table's name of each structure option the timer runs.
+OPTIONS = {"chosen": "chosen by evidence", "given": "given (2 lags, A3)"}
 
 
 def _commit(tree: Path) -> str:

@@ -153,6 +153,9 @@ def render_markdown(record: Mapping[str, Any]) -> str:
     """Return the Markdown of a result record: its tables, notes, warnings and provenance."""
     lines = [f"<!-- written by benchmarks/{record['benchmark']}.py from "
              f"{record['benchmark']}.json; do not edit -->", ""]
+    if record["mode"] == "quick":
+        lines += ["**A quick run: these figures show that the benchmark runs, not what windrig "
+                  "achieves; a full run (`make bench BENCH_MODE=full`) replaces them.**", ""]
     for table in record["tables"]:
         columns, formats = table["columns"], table.get("formats", {})
         lines += [f"**{table['caption']}**", "",

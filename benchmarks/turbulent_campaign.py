@@ -21,14 +21,24 @@ safety bound) and how many releases to take there (1-4, by the predicted gain pe
 second), until the std is within ``--target`` of U_F (2 %) or 8 speeds.
 
 Run: ``.venv/bin/python benchmarks/turbulent_campaign.py [--seeds 1 2 3] [--iw 0.01]
-[--adaptive [--target 0.02]] [--log FILE]``
+[--adaptive [--target 0.02]] [--log FILE] [--speeds 0.4,0.6,0.8] [--releases 2] [--hold 11]
+[--decay 20] [--max-speeds 8]`` (the fixed plan's speeds as fractions of U_F, its releases per
+speed, each release's hold and decay in s; the adaptive plan's first two speeds, its largest
+number of speeds). ``--quick`` (CI): one seed, a campaign of two speeds (0.4 and 0.6 U_F; E2RFC
+says nothing before two) with one release each, a hold of 1 s and a decay of 5 s (the adaptive
+one: holds of 1 s, decays of 5 s, at most three speeds), which the turbulence branch identifies
+without holds: the same rig, drivers, recorder and files, about a minute of wall time where a
+full seed takes four. ``--results DIR`` also writes the table to ``DIR/turbulent_campaign.json``
+and ``.md`` (``turbulent_campaign_adaptive`` with ``--adaptive``; :mod:`result_files`).
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import sys
 import tempfile
+import time
 from pathlib import Path
 
 from daq.campaign.plan import parse_plan
@@ -36,14 +46,17 @@ from daq.campaign.runner import run_plan
 from daq.config import parse_rig_config
 from daq.errors import ConfigError
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import result_files  # noqa: E402 - beside this script
+
 REPO = Path(__file__).resolve().parents[1]
 RIG = REPO / "rig_configs" / "sim_flat_plate.toml"
 U_F = 11.849  # m/s, the rig's flutter speed (its comment; checked against the outcome's truth)
 PLAN = """[campaign]
 mode = "fixed"
-releases_per_speed = 2
-hold_s = 11.0
-decay_s = 20.0
+releases_per_speed = {releases}
+hold_s = {hold}
+decay_s = {decay}
 settle_s = 1.0
 calz_end = false
 
@@ -53,9 +66,9 @@ wind_speeds = [{speeds}]
 
 ADAPTIVE_PLAN = """[campaign]
 mode = "adaptive"
-releases_per_speed = 2
-hold_s = 5.0
-decay_s = 20.0
+releases_per_speed = {releases}
+hold_s = {hold}
+decay_s = {decay}
 settle_s = 1.0
 calz_end = false
 turbulent_estimator = "ml"
@@ -68,9 +81,12 @@ target_std = {target}
 candidate_min = 4.0
 candidate_max = 10.5
 candidate_step = 0.5
-max_speeds = 8
+max_speeds = {max_speeds}
 max_releases_per_speed = 4
 """
+#: Options whose default differs in a quick run: (fixed plan, adaptive plan, --quick).
+DEFAULTS = {"speeds": ("0.4,0.6,0.8", "0.4,0.6", "0.4,0.6"), "releases": (2, 2, 1),
+            "hold": (11.0, 5.0, 1.0), "decay": (20.0, 20.0, 5.0), "max_speeds": (8, 8, 3)}
 
 
 def rig_text(seed: int, iw: float) -> str:
@@ -96,30 +112,55 @@ seed = {seed}
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
+    parser.add_argument("--seeds", type=int, nargs="+", default=None,
+                        help="gust-field seeds (1 2 3; --quick: 1)")
     parser.add_argument("--iw", type=float, default=0.01, help="vertical intensity (fraction)")
     parser.add_argument("--log", type=Path, help="write every campaign's progress lines here")
     parser.add_argument("--adaptive", action="store_true",
                         help="an adaptive campaign identified by closed-loop ML (docstring)")
     parser.add_argument("--target", type=float, default=0.02,
                         help="--adaptive: the target std as a fraction of U_F")
+    parser.add_argument("--speeds", default=None,
+                        help="the plan's wind speeds as fractions of U_F (0.4,0.6,0.8; "
+                             "adaptive: the first two, 0.4,0.6)")
+    parser.add_argument("--releases", type=int, default=None,
+                        help="releases per speed (2; --quick: 1)")
+    parser.add_argument("--hold", type=float, default=None,
+                        help="s held in the wind before each release (11, adaptive 5; "
+                             "--quick: 1)")
+    parser.add_argument("--decay", type=float, default=None,
+                        help="s of decay recorded per release (20; --quick: 5)")
+    parser.add_argument("--max-speeds", type=int, default=None,
+                        help="--adaptive: most speeds in all (8; --quick: 3)")
+    result_files.add_arguments(parser)
     args = parser.parse_args()
+    column = 2 if args.quick else 1 if args.adaptive else 0
+    for name, values in DEFAULTS.items():
+        if getattr(args, name) is None:
+            setattr(args, name, values[column])
+    if args.seeds is None:
+        args.seeds = [1] if args.quick else [1, 2, 3]
+    fractions = [float(v) for v in args.speeds.split(",")]
     if args.log is not None and not args.log.parent.is_dir():
         parser.error(f"--log {args.log}: folder {args.log.parent} does not exist")
     log: list[str] = []
     try:  # every seed's rig first: a wrong value is one error line, before any wind blows
         configs = {seed: parse_rig_config(rig_text(seed, args.iw), f"flat plate, Iw {args.iw:g}")
                    for seed in args.seeds}
+        speeds = ", ".join(f"{f * U_F:.2f}" for f in fractions)
+        values = {"speeds": speeds, "releases": args.releases, "hold": args.hold,
+                  "decay": args.decay}
+        if args.adaptive:
+            plan = parse_plan(ADAPTIVE_PLAN.format(target=args.target,
+                                                   max_speeds=args.max_speeds, **values),
+                              "adaptive turbulent plan")
+        else:
+            plan = parse_plan(PLAN.format(**values), "turbulent plan")
     except ConfigError as exc:
         parser.error(str(exc))
-    if args.adaptive:
-        speeds = ", ".join(f"{f * U_F:.2f}" for f in (0.4, 0.6))
-        plan = parse_plan(ADAPTIVE_PLAN.format(speeds=speeds, target=args.target),
-                          "adaptive turbulent plan")
-    else:
-        speeds = ", ".join(f"{f * U_F:.2f}" for f in (0.4, 0.6, 0.8))
-        plan = parse_plan(PLAN.format(speeds=speeds), "turbulent plan")
     rows = []
+    table = []
+    started = time.monotonic()
     for seed in args.seeds:
         config = configs[seed]
         with tempfile.TemporaryDirectory() as out:
@@ -141,13 +182,55 @@ def main() -> None:
                     + ("      -" if std is None else f" {std:6.3f}")
                     + f" {err:+8.2f}% {cover:>5}  {estimator}; {outcome.stopped_because}")
         print(rows[-1], flush=True)
-    what = (f"adaptive to a {100 * args.target:g} % std, closed-loop ML (5 s holds, 20 s decays)"
-            if args.adaptive else "3 speeds x 2 releases (11 s hold, 20 s decay)")
+        table.append((seed, n, truth, speed, std, err, cover, estimator, steps,
+                      outcome.wind_on_s, outcome.stopped_because))
+    what = (f"adaptive to a {100 * args.target:g} % std, closed-loop ML "
+            f"({args.hold:g} s holds, {args.decay:g} s decays)" if args.adaptive else
+            f"{len(fractions)} speeds x {args.releases} release{'s' * (args.releases != 1)} "
+            f"({args.hold:g} s hold, {args.decay:g} s decay)")
     print(f"\nflat plate, Iw {100 * args.iw:g} %, {what}, recorded on the simulated rig")
     print("seed rel  truth   U_F      std    error  2-std  estimator")
     print("\n".join(rows))
     if args.log is not None:
         args.log.write_text("\n".join(log) + "\n")
+    _write(args, what, table, fractions, time.monotonic() - started)
+
+
+def _write(args: argparse.Namespace, what: str, table: list[tuple[object, ...]],
+           fractions: list[float], wall: float) -> None:
+    """Write the result file (``--results``) of the campaigns in ``table``."""
+    columns = ("seed", "releases", "truth (m/s)", "U_F (m/s)", "std (m/s)", "error (%)",
+               "2-std covers", "estimator", "speeds (m/s) x releases", "wind on (s)",
+               "stopped because")
+    warnings = [f"seed {row[0]}: no flutter speed identified ({row[-1]})." for row in table
+                if row[3] is None]
+    if args.hold < 10.0 and not args.adaptive:
+        warnings.append(f"The holds ({args.hold:g} s) are too short for the refined-IV "
+                        "branch's noise model; the closed-loop branch (the plan's default "
+                        "estimator) takes holds as optional data.")
+    result_files.write(
+        "turbulent_campaign_adaptive" if args.adaptive else "turbulent_campaign",
+        "E2RFC in turbulence end to end on the simulated rig",
+        [result_files.Table(
+            f"Flat plate, Iw {100 * args.iw:g} %, {what}, recorded on the simulated rig: per "
+            "gust-field seed the identified flutter speed and its std against the simulated "
+            "tunnel's truth, whether the 2-std interval covers it, the estimator, the speeds "
+            "tested and why the campaign stopped.",
+            columns, table, formats={"truth (m/s)": ".3f", "U_F (m/s)": ".3f",
+                                     "std (m/s)": ".3f", "error (%)": "+.2f",
+                                     "wind on (s)": ".0f"})],
+        results=args.results, quick=args.quick,
+        parameters={"seeds": args.seeds, "iw": args.iw, "adaptive": args.adaptive,
+                    "target std": args.target if args.adaptive else None,
+                    "speeds (fractions of U_F)": fractions, "releases per speed": args.releases,
+                    "hold (s)": args.hold, "decay (s)": args.decay,
+                    "max speeds": args.max_speeds if args.adaptive else None},
+        notes=[f"The campaigns took {wall:.0f} s of wall time in all: the rig runs in real "
+               "time, every instrument simulated in a process of its own.",
+               "The same seed gives a different campaign each time: the gust field is fixed by "
+               "the seed, but which stretch of it each decay meets depends on the release "
+               "instants."],
+        warnings=warnings)
 
 
 if __name__ == "__main__":

@@ -31,7 +31,11 @@ before each release it does (see the doc's table).
 Run: ``.venv/bin/python benchmarks/turbulent_gls_experiment.py "ROW;ROW" SEEDS "today;2a3;2"
 [WORKERS]``
 (a variant ``NaN``: N lags, ``a3`` fit A3, ``f`` lag roots not searched) or
-``... oracle ROW N_SEEDS``.
+``... oracle ROW N_SEEDS``. Without arguments: the four turbulence rows, seeds 0-3, variants
+``today;2;2a3`` (:data:`DEFAULTS`), two workers. ``--quick`` (CI): the plate at 1 % turbulence,
+seed 0, the variant ``1`` (one searched lag root), unless given. ``--results DIR`` also writes the
+tables to ``DIR/turbulent_gls_experiment.json`` and ``.md`` (``turbulent_gls_experiment_oracle``
+for the oracle mode; :mod:`result_files`), with the ``PEM_*`` settings among the parameters.
 """
 from __future__ import annotations
 
@@ -40,18 +44,21 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
+import argparse  # noqa: E402
 import math  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from concurrent.futures import ProcessPoolExecutor  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 from scipy.optimize import least_squares  # noqa: E402
 from scipy.signal import butter, lfilter, savgol_filter, sosfilt, sosfiltfilt  # noqa: E402
 from scipy.stats import t as student_t  # noqa: E402
 
-sys.path.insert(0, os.path.dirname(__file__))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 import ident_accuracy as ia  # noqa: E402
+import result_files  # noqa: E402 - beside this script
 
 from ident import Release
 from ident.identification import e2rfc
@@ -328,7 +335,10 @@ def _run(args):
 
 
 def oracle(row, n_seeds):
-    """GLS with the true lag roots and the true residual's AR model, on pooled releases."""
+    """GLS with the true lag roots and the true residual's AR model, on pooled releases.
+
+    Return the correlation rows (U, then one per regressor) and the flutter-speed error (%).
+    """
     section, make_model, _, _, truth = ia.TUNNEL_ROWS[row]
     model = make_model()
     U_F = truth() if truth is not None else fl.analyze(section, model).speed
@@ -344,11 +354,13 @@ def oracle(row, n_seeds):
     ar = [[ar_fit(e[:, i]) for i in range(2)] for e in res]
     names = ["h", "a", "h'", "a'", "h''", "a''"] + [f"x{l}{c}" for l in range(model.d.size)
                                                      for c in "ha"]
+    correlations = []
     for j in (0, 2, 4):  # the first seed at 0.4, 0.6 and 0.8 U_F
         a = ar[j][0]
         ew = lfilter(a, [1.0], res[j][:, 0])[a.size:]
         Xw = lfilter(a, [1.0], Xs[j], axis=0)[a.size:]
         corr = [np.corrcoef(ew, Xw[:, c])[0, 1] for c in range(Xw.shape[1])]
+        correlations.append((rels[j].U, *corr))
         print(f"U {rels[j].U:.2f} m/s: corr(whitened lift residual, whitened regressor) "
               + ", ".join(f"{n} {c:+.2f}" for n, c in zip(names, corr, strict=True)))
     coef, _ = solve(rels, Xs, ar)
@@ -358,19 +370,130 @@ def oracle(row, n_seeds):
     speed = flutter_speed(section, found, 4 * U_F)
     print(f"{len(rels)} releases, true lag roots and noise model: flutter-speed error "
           f"{100 * (speed / U_F - 1):+.1f} % (U_max counts as no flutter)")
+    return names, correlations, len(rels), 100 * (speed / U_F - 1)
 
 
-if __name__ == "__main__":
-    if sys.argv[1] == "oracle":
-        oracle(sys.argv[2], int(sys.argv[3]))
-        sys.exit()
-    rows = sys.argv[1].split(";")
-    seeds = [int(x) for x in sys.argv[2].split(",")]
+#: The run without arguments (the table's GLS row of docs/development/e2rfc_turbulence.md):
+#: rows, seeds, variants; and what ``--quick`` runs instead.
+DEFAULTS = ("plate, Jones, Iw 1 %;plate, Jones, Iw 3 %;bluff deck, Iw 1 %;bluff deck, Iw 3 %",
+            "0,1,2,3", "today;2;2a3")
+QUICK = ("plate, Jones, Iw 1 %", "0", "1")
+
+
+def settings():
+    """Return the ``PEM_*`` settings this process runs with (the result file's parameters)."""
+    return {"PEM_CAUSAL": CAUSAL, "PEM_DLO": D_LO, "PEM_DHI": D_HI, "PEM_DECIM": DECIM,
+            "PEM_FC": FC, "PEM_DOBJ": D_OBJECTIVE, "PEM_PMAX": P_MAX,
+            "PEM_NOISE_FROM_FORCE": NOISE_FROM_FORCE, "PEM_HOLD": HOLD_S, "PEM_ORDER": ORDER,
+            "PEM_IV": ",".join(str(d) for d in IV_DELAYS) or "none",
+            "PEM_TRUTH_D": os.environ.get("PEM_TRUTH_D") == "1"}
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("rows", nargs="?", default=None,
+                        help='tunnel rows, "ROW;ROW" (ident_accuracy.TUNNEL_ROWS), or "oracle"')
+    parser.add_argument("seeds", nargs="?", default=None,
+                        help="seeds, comma-separated (oracle: the row)")
+    parser.add_argument("variants", nargs="?", default=None,
+                        help='"today;2a3;2": N lags, a3 fit A3, f lag roots not searched '
+                             "(oracle: the number of seeds pooled)")
+    parser.add_argument("workers", nargs="?", type=int, default=2, help="processes (2)")
+    result_files.add_arguments(parser)
+    args = parser.parse_args()
+    if args.rows == "oracle":
+        if args.seeds is None or args.variants is None:
+            parser.error("oracle needs a row and a number of seeds: oracle ROW N_SEEDS")
+        _oracle(args)
+        return
+    defaults = QUICK if args.quick else DEFAULTS
+    rows_text, seeds_text, variants_text = (given if given is not None else default
+                                            for given, default in zip(
+                                                (args.rows, args.seeds, args.variants), defaults,
+                                                strict=True))
+    rows = rows_text.split(";")
+    unknown = [r for r in rows if r not in ia.TUNNEL_ROWS]
+    if unknown:
+        parser.error(f"unknown rows {unknown}; ident_accuracy.TUNNEL_ROWS has "
+                     f"{list(ia.TUNNEL_ROWS)}")
+    seeds = [int(x) for x in seeds_text.split(",")]
     variants = []
-    for v in sys.argv[3].split(";"):
+    for v in variants_text.split(";"):
         variants.append("today" if v == "today" else (int(v[0]), "a3" in v, v.endswith("f")))
+    labels = dict(zip(variants, variants_text.split(";"), strict=True))
     jobs = [(r, s, v) for r in rows for s in seeds for v in variants]
-    with ProcessPoolExecutor(int(sys.argv[4]) if len(sys.argv) > 4 else 2) as pool:
+    runs = []
+    with ProcessPoolExecutor(args.workers) as pool:
         for row, seed, variant, err, std, el, info in pool.map(run, jobs):
             print(f"{row:<24} seed {seed:2d} {str(variant):<14} err {100 * err:8.2f} % "
                   f"std {100 * std:8.2f} %  {el:6.1f} s  {info}", flush=True)
+            outcome = ("failed" if info.startswith("failed") else
+                       "no flutter" if math.isinf(err) else "flutter")
+            runs.append((row, seed, labels[variant], outcome,
+                         100 * err if math.isfinite(err) else None,
+                         100 * std if math.isfinite(std) else None, el, info))
+    summary = []
+    for row in rows:
+        for label in labels.values():
+            mine = [r for r in runs if r[0] == row and r[2] == label]
+            # No flutter counts as an infinite error; a failed run has none.
+            err = [abs(r[4]) if r[3] == "flutter" else math.inf for r in mine
+                   if r[3] != "failed"]
+            summary.append((row, label, len(mine), sum(r[3] == "flutter" for r in mine),
+                            sum(r[3] == "no flutter" for r in mine),
+                            sum(r[3] == "failed" for r in mine),
+                            float(np.median(err)) if err else None,
+                            float(np.median([r[6] for r in mine]))))
+    tables = [
+        result_files.Table(
+            "Per row and variant (today = E2RFC as it ships; N = GLS with N lags, a3 = A3 "
+            "fitted, f = lag roots not searched): the runs, those that found a flutter speed, "
+            "found none below the searched speeds or failed, the median absolute error (no "
+            "flutter counted as infinite) and the median time.",
+            ("row", "variant", "runs", "flutter", "no flutter", "failed",
+             "median error (%)", "median time (s)"),
+            summary, formats={"median error (%)": ".1f", "median time (s)": ".1f"}),
+        result_files.Table(
+            "Every run: the flutter speed's signed error and its jackknife (or E2RFC's) std as "
+            "shares of the truth, the time of identification plus std, and what was found "
+            "(structure or lag roots).",
+            ("row", "seed", "variant", "outcome", "error (%)", "std (%)", "time (s)", "found"),
+            runs, formats={"error (%)": "+.2f", "std (%)": ".2f", "time (s)": ".1f"}),
+    ]
+    warnings = [f"{row} seed {seed} variant {label}: {info}"
+                for row, seed, label, outcome, *_, info in runs if outcome == "failed"]
+    result_files.write(
+        "turbulent_gls_experiment", "Iterated GLS and refined IV of E2RFC in turbulence "
+        "(an experiment, dropped)", tables, results=args.results, quick=args.quick,
+        parameters={"rows": rows, "seeds": seeds, "variants": list(labels.values()),
+                    "workers": args.workers, **settings()},
+        notes=["Each tunnel row's releases as ident_accuracy.py draws them, without holds "
+               "unless PEM_HOLD is set; the settings of the estimator are the PEM_* "
+               "parameters."],
+        warnings=warnings)
+
+
+def _oracle(args):
+    """Run the oracle mode and write its tables."""
+    row, n_seeds = args.seeds, int(args.variants)
+    names, correlations, n_releases, error = oracle(row, n_seeds)
+    tables = [
+        result_files.Table(
+            f"Oracle, {row}: the correlation of the whitened lift residual with each whitened "
+            "regressor, for the first seed's release at each wind speed.",
+            ("U (m/s)", *(f"corr {n}" for n in names)), correlations,
+            formats={"U (m/s)": ".2f", **{f"corr {n}": "+.2f" for n in names}}),
+        result_files.Table(
+            f"Oracle, {row}: GLS with the true lag roots and the true residual's AR model on "
+            "pooled releases; the flutter speed's error (no flutter counts as the searched "
+            "top speed).",
+            ("releases", "error (%)"), [(n_releases, error)], formats={"error (%)": "+.1f"}),
+    ]
+    result_files.write(
+        "turbulent_gls_experiment_oracle", "Iterated GLS in turbulence: the oracle", tables,
+        results=args.results, quick=args.quick,
+        parameters={"row": row, "seeds pooled": n_seeds, **settings()})
+
+
+if __name__ == "__main__":
+    main()

@@ -4,7 +4,7 @@ In turbulent flow the measured force is the self-excited force of the whole moti
 release's decay plus the random response the buffeting drives) plus the buffeting force. E2RFC's
 regressors come from a modal fit of the decay, which cannot follow the random response, and its
 least squares takes the buffeting for white noise: both bias it
-(docs/development/e2rfc_turbulence.md). This module fits the same rational-function model another
+(docs/guides/turbulence.md). This module fits the same rational-function model another
 way, measured in ``benchmarks/turbulent_gls_experiment.py``:
 
 - *Regressors from the measured motion*: ``q`` low-passed (zero phase) at :data:`FC_FACTOR`
