@@ -25,11 +25,10 @@ aerodynamics, identified by E2RFC unless given) with the releases it came from:
    model identified again, its structure chosen again; a structural one joins the structure;
    vortex forcing is taken out of the forces before E2RFC and added to each release's
    simulated forces), every release is simulated again, and the gap measured the same way.
-4. **Honesty** (:mod:`ident.discrepancy.residual_check`): what is left of measured minus simulated
-is
-   checked for a systematic part (beyond the white measurement noise); if there is one, the
-   report is not ``explained`` and says where it is (channel, frequency, amplitudes, wind
-   speeds).
+4. **Honesty** (:mod:`ident.discrepancy.residual_check`): what is left of measured minus
+   simulated is checked for a systematic part (beyond the white measurement noise); if there
+   is one, the report is not ``explained`` and says where it is (channel, frequency,
+   amplitudes, wind speeds).
 
 Not responsible for: reading files (:mod:`ident.records.run_file`), plots or the command line
 (``windrig diagnose`` in :mod:`daq`).

@@ -20,8 +20,7 @@ p.91, FPBA-01 manual p.113, ACS880 manual p.635):
   them; the positions come from the ABB Drives profile Status word tables cited above), 4 OFF_2_STA,
   5 OFF_3_STA, 6 SWC_ON_INHIB, 7 ALARM, 8 AT_SETPOINT, 9 REMOTE, 10 ABOVE_LIMIT;
 - Reference 1 is a signed word, 0..+/-20000 scaled to the maximum speed
-(docs/reference/wire_formats.md, "Fan
-  drive");
+  (docs/reference/wire_formats.md, "Fan drive");
 - Actual 1 is the speed with the same 20000 = maximum-speed scaling. [unverified] The drive manuals
   call ACT1 "selectable, e.g. speed": its source and scaling are drive parameters, so the rig must
   map ACT1 to motor speed with the Reference 1 scaling for this driver to be right.

@@ -97,9 +97,12 @@ def test_the_branch_finds_the_flutter_speed_in_1_percent_turbulence(turbulent_re
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("deck", "Iw"), [("plate", 0.03), ("bluff", 0.01), ("bluff", 0.03)])
-def test_the_branch_holds_on_every_turbulent_row_of_the_benchmark(deck, Iw):
-    """The other turbulence rows, seeds 0-2: median error, 2-std cover, intervals not blankets.
+@pytest.mark.parametrize(("deck", "Iw"), [("plate", 0.03), ("bluff", 0.03)])
+def test_the_branch_holds_on_other_turbulent_rows_of_the_benchmark(deck, Iw):
+    """Two other turbulence rows, seeds 0-2: median error, 2-std cover, intervals not blankets.
+
+    Refined IV is the alternative to the closed-loop default since that became the default; the
+    bluff deck at Iw 1 % (the slowest row here, about two minutes) is left to the benchmark.
 
     Bounds from the benchmark's 20 seeds per row (median / p90 |error|, cover): plate Iw 3 %
     7.4 / 36 %, 90 %; bluff Iw 1 % 10.5 / 25 %, 95 %; bluff Iw 3 % 8.6 / 33 %, 85 %. A median
