@@ -178,7 +178,7 @@ def main() -> None:
                            "direct": args.direct})
     result_files.write(
         result_name(args), "Speed of the full-bridge analyses", tables, results=args.results,
-        quick=args.quick, parameters=parameters,
+        quick=args.quick, script="bridge_speed", parameters=parameters,
         notes=["Wall times on a shared host move with its load."] + (
             ["The fast route's CPU time is its time on one idle core (single-threaded BLAS)."]
             if args.fast else []))

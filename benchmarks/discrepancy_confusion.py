@@ -275,6 +275,7 @@ def main() -> None:
     notes.append(f"Load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}.")
     result_files.write(name, "Discrepancy workflow: the effect named against the effect hidden",
                        tables, results=args.results, quick=quick, parameters=parameters,
+                       script="discrepancy_confusion",
                        notes=notes)
 
 

@@ -217,7 +217,7 @@ def main() -> None:
     result_files.write(
         "flutter_crb" if args.deck == "plate" else f"flutter_crb_{args.deck}",
         f"Cramer-Rao bound of the flutter speed in turbulence ({args.deck})", [table],
-        results=args.results, quick=args.quick,
+        results=args.results, quick=args.quick, script="flutter_crb",
         parameters={"deck": args.deck, "iw": intensities, "fractions of U_F": list(FRACTIONS),
                     "holds": [f"h {h} m, alpha {a} rad" for h, a in HOLDS],
                     "duration (s)": 20.0, "fs (Hz)": 500.0, "noise": 0.02, "shape terms": 3},

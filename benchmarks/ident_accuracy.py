@@ -61,8 +61,9 @@ after the speed work, and what it changed).
 turbulent one of those asked (all of them with an explicit ``--rows``); of the smooth rows the
 flat plate at 2 % noise; the ablation on the plate. ``--results DIR`` also writes the tables to
 ``DIR/<name>.json`` and ``.md`` (:mod:`result_files`): ``ident_accuracy`` for the default run,
-else the name says what ran: ``ident_accuracy_<part>[_<rows>][_<tunnel mode>][_<estimator>]...``
-(only the options that differ from the defaults, :func:`result_name`).
+else the name says what ran: ``ident_accuracy_<part>[_<rows>][_<estimator>]...`` (only the
+options that differ from the defaults, :func:`result_name`; ``--part tunnel --rows turbulent
+--tunnel-mode both``: ``ident_accuracy_tunnel_turbulent``, both modes' tables in it).
 """
 
 from __future__ import annotations
@@ -111,6 +112,8 @@ TRUTH = flat_plate.jones_model()
 NOISES = (0.0, 0.02, 0.05)
 E2RFC_SPEEDS = (0.4, 0.6, 0.8)
 FD_SPEEDS = tuple(np.linspace(0.3, 0.85, 10))
+#: The turbulence branch's options as imported (``one_run`` restores them in a shared worker).
+TURBULENT_DEFAULTS = (e2rfc.TURBULENT_A3, _turbulent_fit.MOTION, e2rfc.TURBULENT_ESTIMATOR)
 #: "E2RFC raw" is the ablation of the noise design: the same estimator with regressors built from
 #: the measured displacements by central differences instead of from the modal fit.
 METHODS = ("E2RFC", "E2RFC raw", "FD route")
@@ -196,6 +199,9 @@ def fd_error(section, model, releases):
 
 
 def one_run(args):
+    # A worker that ran tunnel jobs before holds their turbulence options: back to the defaults
+    # (smooth releases do not reach the turbulence branch, but a fresh worker would have them).
+    e2rfc.TURBULENT_A3, _turbulent_fit.MOTION, e2rfc.TURBULENT_ESTIMATOR = TURBULENT_DEFAULTS
     section_name, method, noise, seed = args
     section = SECTIONS[section_name]
     U_F = fl.analyze(section, TRUTH).speed
@@ -389,21 +395,23 @@ def tunnel_rows(which="all", quick=False):
     return names
 
 
-def tunnel_part(seeds, workers, modes=("after",), which="all", a3="fitted-or-zero",
-                first_seed=0, motion="filter", estimator="iv", names=None):
-    """Run the tunnel rows (``names``, default all of ``which``); return tables and warnings."""
-    names = tunnel_rows(which) if names is None else names
-    jobs = [(row, seed, mode, a3, motion, estimator) for row in names for mode in modes
+def tunnel_jobs(names, seeds, modes=("after",), a3="fitted-or-zero", first_seed=0,
+                motion="filter", estimator="iv"):
+    """Return the jobs of :func:`tunnel_run` for the rows ``names``, every mode and seed."""
+    return [(row, seed, mode, a3, motion, estimator) for row in names for mode in modes
             for seed in range(first_seed, first_seed + seeds)]
+
+
+def tunnel_report(found, names, seeds, modes):
+    """Print the tunnel runs ``found`` yields as they come, then their tables; return them."""
     results = []
-    with ProcessPoolExecutor(workers) as pool:
-        # Each result printed as it arrives: a long run stopped halfway keeps what it measured.
-        for result in pool.map(tunnel_run, jobs):
-            row, mode, err, std, elapsed, branch, seed = result
-            print(f"  {row:<24} {mode:<6} seed {seed:2d} err {100 * err:+8.2f} % std "
-                  f"{100 * std:7.2f} % {elapsed:5.1f} s{' branch' if branch else ''}",
-                  flush=True)
-            results.append(result)
+    # Each result printed as it arrives: a long run stopped halfway keeps what it measured.
+    for result in found:
+        row, mode, err, std, elapsed, branch, seed = result
+        print(f"  {row:<24} {mode:<6} seed {seed:2d} err {100 * err:+8.2f} % std "
+              f"{100 * std:7.2f} % {elapsed:5.1f} s{' branch' if branch else ''}",
+              flush=True)
+        results.append(result)
     tables = [_tunnel_table([r for r in results if r[1] == mode], names, seeds, mode)
               for mode in modes]
     # A failed identification (an exception, tunnel_run) is the one without a time.
@@ -529,14 +537,14 @@ def _count(n, noun):
 def result_name(args):
     """Return the result file's name for the options of a run.
 
-    ``ident_accuracy``, then those of the part, rows, tunnel mode, turbulent estimator, motion,
-    A3 rule and first seed that differ from the defaults, joined by ``_``.
+    ``ident_accuracy``, then those of the part, rows, turbulent estimator, motion, A3 rule and
+    first seed that differ from the defaults, joined by ``_``. Not the tunnel mode: the file
+    holds one table per mode, each captioned with it (``--tunnel-mode both``: two).
     """
     parts = [] if args.part == "all" else [args.part]
     if args.part in ("all", "tunnel"):
         parts += [value for value, default in (
-            (args.rows, "all"), (args.tunnel_mode, "after"),
-            (args.turbulent_estimator, e2rfc.TURBULENT_ESTIMATOR),
+            (args.rows, "all"), (args.turbulent_estimator, e2rfc.TURBULENT_ESTIMATOR),
             (args.turbulent_motion, _turbulent_fit.MOTION)) if value != default]
         if args.turbulent_a3 != "fitted-or-zero":
             parts.append(f"a3-{args.turbulent_a3}")
@@ -586,13 +594,14 @@ def main():
     tables, warnings = [], []
 
     def write():
-        what = f"{args.part} part" + (f", {args.rows} tunnel rows"
+        what = f"{args.part} part" + (f", {args.rows} tunnel rows, {args.tunnel_mode}"
                                       if args.part in ("all", "tunnel") else "")
         result_files.write(
             name, f"E2RFC's accuracy and speed ({what})", tables, results=args.results,
-            quick=args.quick, parameters=parameters,
-            notes=["Times are on one core (BLAS single-threaded) of a shared host: the wall "
-                   "times move with its load, the CPU times of the timing table less so."],
+            quick=args.quick, script="ident_accuracy", parameters=parameters,
+            notes=[] if args.part == "ablation" else [
+                "Times are on one core (BLAS single-threaded) of a shared host: the wall times "
+                "move with its load, the CPU times of the timing table less so."],
             warnings=warnings)
 
     if args.part == "timing":
@@ -607,29 +616,37 @@ def main():
         tables.append(ablation_part(seeds, args.workers, rows))
         write()
         return
-    if args.part in ("all", "tunnel"):
-        modes = ("before", "after") if args.tunnel_mode == "both" else (args.tunnel_mode,)
-        names = tunnel_rows(args.rows, quick=args.quick and not explicit_rows)
-        parameters.update({"first seed": args.first_seed, "rows": names,
-                           "tunnel mode": args.tunnel_mode, "turbulent A3": args.turbulent_a3,
-                           "turbulent motion": args.turbulent_motion,
-                           "turbulent estimator": args.turbulent_estimator,
-                           "hold (s)": TUNNEL_HOLD_S})
-        found, failed = tunnel_part(seeds, args.workers, modes, args.rows, args.turbulent_a3,
-                                    args.first_seed, args.turbulent_motion,
-                                    args.turbulent_estimator, names)
-        tables += found
-        warnings += failed
-    if args.part == "tunnel":
-        write()
-        return
-    sections = list(SECTIONS)[:1] if args.quick else list(SECTIONS)
-    noises = (0.02,) if args.quick else NOISES
-    parameters.update({"sections": sections, "noises": list(noises), "repeats": repeats})
-    jobs = [(s, m, n, seed) for s in sections for m in METHODS for n in noises
-            for seed in range(seeds)]
+    # The tunnel jobs first, then the smooth rows' in the same pool: its processes never idle.
     with ProcessPoolExecutor(args.workers) as pool:
-        results = list(tqdm(pool.map(one_run, jobs), total=len(jobs), desc="identifications"))
+        found = smooth = None
+        if args.part in ("all", "tunnel"):
+            modes = ("before", "after") if args.tunnel_mode == "both" else (args.tunnel_mode,)
+            names = tunnel_rows(args.rows, quick=args.quick and not explicit_rows)
+            parameters.update({"first seed": args.first_seed, "rows": names,
+                               "tunnel mode": args.tunnel_mode,
+                               "turbulent A3": args.turbulent_a3,
+                               "turbulent motion": args.turbulent_motion,
+                               "turbulent estimator": args.turbulent_estimator,
+                               "hold (s)": TUNNEL_HOLD_S})
+            found = pool.map(tunnel_run, tunnel_jobs(
+                names, seeds, modes, args.turbulent_a3, args.first_seed, args.turbulent_motion,
+                args.turbulent_estimator))
+        if args.part in ("all", "classic"):
+            sections = list(SECTIONS)[:1] if args.quick else list(SECTIONS)
+            noises = (0.02,) if args.quick else NOISES
+            parameters.update({"sections": sections, "noises": list(noises),
+                               "repeats": repeats})
+            jobs = [(s, m, n, seed) for s in sections for m in METHODS for n in noises
+                    for seed in range(seeds)]
+            smooth = pool.map(one_run, jobs)
+        if found is not None:
+            tables_found, failed = tunnel_report(found, names, seeds, modes)
+            tables += tables_found
+            warnings += failed
+        if smooth is None:
+            write()
+            return
+        results = list(tqdm(smooth, total=len(jobs), desc="identifications"))
 
     print(f"\nE2RFC: 3 wind speeds (0.4/0.6/0.8 U_F); FD route: 10 wind speeds (0.30..0.85 U_F);"
           f" 20 s at 500 Hz; {seeds} seeds per row; times on one core.\n'E2RFC raw' is the"

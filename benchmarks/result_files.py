@@ -99,13 +99,14 @@ def _commit() -> str:
 
 def write(name: str, title: str, tables: Sequence[Table], *, results: Path | None,
           quick: bool, parameters: Mapping[str, Any] | None = None,
-          notes: Sequence[str] = (), warnings: Sequence[str] = ()) -> dict[str, Any]:
+          notes: Sequence[str] = (), warnings: Sequence[str] = (),
+          script: str | None = None) -> dict[str, Any]:
     """Return the result record, and write it (JSON and Markdown) when ``results`` is given.
 
     Parameters
     ----------
     name : str
-        The benchmark's name (its script's stem).
+        The result's name: its script's stem, with a suffix for a run of one part or variant.
     title : str
         A title for the validation page's section.
     tables : sequence of Table
@@ -118,9 +119,12 @@ def write(name: str, title: str, tables: Sequence[Table], *, results: Path | Non
         What the run was asked (seeds, sizes, rows), JSON-serialisable.
     notes, warnings : sequence of str
         What a reader needs besides the tables; what may make a figure wrong.
+    script : str, optional
+        The script's stem, when ``name`` is not it.
     """
     record = {
-        "benchmark": name, "title": title, "mode": "quick" if quick else "full",
+        "benchmark": name, "script": script or name, "title": title,
+        "mode": "quick" if quick else "full",
         "parameters": {k: _plain(v) if not isinstance(v, (list, tuple)) else [_plain(x) for x in v]
                        for k, v in (parameters or {}).items()},
         "commit": _commit(),
@@ -151,7 +155,7 @@ def format_cell(value: Any, spec: str | None) -> str:
 
 def render_markdown(record: Mapping[str, Any]) -> str:
     """Return the Markdown of a result record: its tables, notes, warnings and provenance."""
-    lines = [f"<!-- written by benchmarks/{record['benchmark']}.py from "
+    lines = [f"<!-- written by benchmarks/{record.get('script', record['benchmark'])}.py from "
              f"{record['benchmark']}.json; do not edit -->", ""]
     if record["mode"] == "quick":
         lines += ["**A quick run: these figures show that the benchmark runs, not what windrig "
@@ -159,7 +163,7 @@ def render_markdown(record: Mapping[str, Any]) -> str:
     for table in record["tables"]:
         columns, formats = table["columns"], table.get("formats", {})
         lines += [f"**{table['caption']}**", "",
-                  "| " + " | ".join(columns) + " |",
+                  "| " + " | ".join(c.replace("|", "\\|") for c in columns) + " |",
                   "|" + "---|" * len(columns)]
         for row in table["rows"]:
             cells = [format_cell(v, formats.get(c)).replace("|", "\\|")

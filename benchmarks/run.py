@@ -1,7 +1,8 @@
 """Run every benchmark and collect its result files: ``make bench`` (quick) and full runs.
 
 ``python benchmarks/run.py --mode quick|full [--out DIR] [--only NAME ...]`` runs each script of
-:data:`BENCHMARKS` as ``python benchmarks/<name>.py [--quick] --results DIR`` in turn, one at a
+:data:`BENCHMARKS` as ``python benchmarks/<name>.py --results DIR`` with ``--quick``, or in full
+with its defaults and the parts of :data:`FULL_EXTRA`, in turn, one at a
 time (several benchmarks measure time, and two at once would slow each other), and writes
 ``DIR/index.json``: each benchmark's mode, exit status, wall time and, for a failure, its last
 lines of output. The quick mode (CI) shows that every benchmark runs and writes its files, in
@@ -32,29 +33,52 @@ BENCHMARKS = (
     "turbulent_campaign", "discrepancy_detectability", "discrepancy_confusion",
     "reprocess_scaling", "bridge_speed", "bridge_uncertainty",
 )
+#: The full mode's runs besides each script's defaults: the parts and variants the validation
+#: pages show, each writing a result file of its own name.
+FULL_EXTRA = {
+    "ident_accuracy": (
+        ("--part", "tunnel", "--rows", "turbulent", "--tunnel-mode", "both",
+         "--turbulent-estimator", "ml", "--seeds", "20"),
+        ("--part", "tunnel", "--rows", "variants", "--turbulent-estimator", "ml",
+         "--seeds", "20"),
+        ("--part", "ablation", "--seeds", "10"),
+    ),
+    "flutter_crb": (("--deck", "bluff"),),
+}
 #: Longest a quick run of one benchmark may take, s (a hung benchmark fails, not CI's clock).
 QUICK_TIMEOUT = 300.0
 
 
-def _run(name: str, mode: str, out: Path) -> dict[str, object]:
-    command = [sys.executable, str(HERE / f"{name}.py"), "--results", str(out)]
+def jobs(name: str, mode: str) -> list[tuple[str, ...]]:
+    """Return the argument lists ``name`` runs with in ``mode`` (one per result file)."""
     if mode == "quick":
-        command.append("--quick")
-    start = time.perf_counter()
+        return [("--quick",)]
+    return [(), *FULL_EXTRA.get(name, ())]
+
+
+def _written(out: Path, since: float) -> list[str]:
+    return sorted(p.stem for p in out.glob("*.json")
+                  if p.name != "index.json" and p.stat().st_mtime >= since)
+
+
+def _run(name: str, arguments: tuple[str, ...], mode: str, out: Path) -> dict[str, object]:
+    command = [sys.executable, str(HERE / f"{name}.py"), "--results", str(out), *arguments]
+    started, start = time.time(), time.perf_counter()
+    entry: dict[str, object] = {"benchmark": name, "arguments": list(arguments), "mode": mode}
     try:
         done = subprocess.run(command, capture_output=True, text=True, check=False,
                               timeout=QUICK_TIMEOUT if mode == "quick" else None)
     except subprocess.TimeoutExpired as exc:
-        tail = (exc.stdout or "")[-2000:] if isinstance(exc.stdout, str) else ""
-        return {"benchmark": name, "mode": mode, "status": "timed out",
-                "seconds": round(time.perf_counter() - start, 1), "output": tail}
-    seconds = round(time.perf_counter() - start, 1)
-    status = "ok" if done.returncode == 0 else f"exit {done.returncode}"
-    if status == "ok" and not (out / f"{name}.json").exists():
-        status = "no result file"
-    entry: dict[str, object] = {"benchmark": name, "mode": mode, "status": status,
-                                "seconds": seconds}
-    if status != "ok":
+        tail = exc.stdout[-2000:] if isinstance(exc.stdout, str) else ""
+        entry.update(status="timed out", seconds=round(time.perf_counter() - start, 1),
+                     output=tail)
+        return entry
+    entry["seconds"] = round(time.perf_counter() - start, 1)
+    entry["results"] = _written(out, started)
+    entry["status"] = ("ok" if done.returncode == 0 and entry["results"]
+                       else "no result file" if done.returncode == 0
+                       else f"exit {done.returncode}")
+    if entry["status"] != "ok":
         entry["output"] = (done.stdout + done.stderr)[-2000:]
     return entry
 
@@ -75,14 +99,17 @@ def main(argv: list[str] | None = None) -> int:
     index = json.loads(index_path.read_text()) if index_path.exists() else {}
     failed = []
     for name in args.only or BENCHMARKS:
-        print(f"{name} ({args.mode}) ...", flush=True)
-        entry = _run(name, args.mode, out)
-        index[name] = entry
-        index_path.write_text(json.dumps(index, indent=1, sort_keys=True) + "\n")
-        print(f"  {entry['status']} in {entry['seconds']} s", flush=True)
-        if entry["status"] != "ok":
-            failed.append(name)
-            print(str(entry.get("output", "")), file=sys.stderr)
+        for arguments in jobs(name, args.mode):
+            label = " ".join((name, *arguments))
+            print(f"{label} ({args.mode}) ...", flush=True)
+            entry = _run(name, arguments, args.mode, out)
+            index[label] = entry
+            index_path.write_text(json.dumps(index, indent=1, sort_keys=True) + "\n")
+            print(f"  {entry['status']} in {entry['seconds']} s: "
+                  f"{', '.join(entry.get('results', [])) or 'nothing written'}", flush=True)
+            if entry["status"] != "ok":
+                failed.append(label)
+                print(str(entry.get("output", "")), file=sys.stderr)
     if failed:
         print(f"error: {len(failed)} benchmark(s) did not run through: {', '.join(failed)}",
               file=sys.stderr)

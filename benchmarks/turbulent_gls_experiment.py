@@ -465,6 +465,7 @@ def main():
     result_files.write(
         "turbulent_gls_experiment", "Iterated GLS and refined IV of E2RFC in turbulence "
         "(an experiment, dropped)", tables, results=args.results, quick=args.quick,
+        script="turbulent_gls_experiment",
         parameters={"rows": rows, "seeds": seeds, "variants": list(labels.values()),
                     "workers": args.workers, **settings()},
         notes=["Each tunnel row's releases as ident_accuracy.py draws them, without holds "
@@ -491,7 +492,7 @@ def _oracle(args):
     ]
     result_files.write(
         "turbulent_gls_experiment_oracle", "Iterated GLS in turbulence: the oracle", tables,
-        results=args.results, quick=args.quick,
+        results=args.results, quick=args.quick, script="turbulent_gls_experiment",
         parameters={"row": row, "seeds pooled": n_seeds, **settings()})
 
 
