@@ -92,7 +92,7 @@ setup: $(STAMP) $(PLUGIN_STAMP) qt-libs
 # listed (--keep-going). The API reference's pages are written by docs/_apiref.py on each build.
 DOCS_STAMP := $(VENV)/.docs-installed
 docs: setup $(DOCS_STAMP)
-	$(VENV)/bin/sphinx-build -W --keep-going -q -b html docs docs/_build/html
+	$(VENV)/bin/sphinx-build -W --keep-going -q -j auto -b html docs docs/_build/html
 	@echo "the site: docs/_build/html/index.html"
 
 # The benchmarks (benchmarks/run.py): the quick mode shows each one runs and writes its result

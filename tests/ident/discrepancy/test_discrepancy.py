@@ -157,25 +157,26 @@ def test_backbone_of_a_linear_decay_is_flat_and_a_hardening_spring_bends_it():
     assert hard.frequency[big].mean() > hard.frequency[small].mean() + 0.05
 
 
-#: Pairs of effects that can occur together on one rig (a structural nonlinearity with a
-#: measurement fault, two structural ones, two measurement faults, shedding with drag ...).
+#: Pairs of effects that can occur together on one rig, one of each kind: a structural
+#: nonlinearity with a measurement fault, two structural ones, two measurement faults, the air's
+#: damping with the suspension's. ``benchmarks/discrepancy_confusion.py --only pairs`` runs
+#: more pairs over more seeds (quadratic damping with crosstalk or with shedding, friction or a
+#: tube with a cubic spring, and others); here each pair costs about a minute of CI time.
 PAIRS = [
     ("coulomb_friction", "channel_delay"),  # issue 20: the gap grew 0.40 -> 0.59 before
-    ("quadratic_damping", "sensor_crosstalk"),
     ("cubic_stiffness", "static_unbalance"),
-    ("coulomb_friction", "cubic_stiffness"),
     ("channel_delay", "sensor_crosstalk"),
-    ("quadratic_damping", "vortex_shedding"),
     ("aerodynamic_nonlinearity", "coulomb_friction"),  # the air's and the suspension's damping
-    ("tubing_distortion", "quadratic_damping"),
 ]
+#: Each pair's campaign seed (those it always had).
+PAIR_SEEDS = dict(zip(PAIRS, (300, 302, 304, 306), strict=True))
 
 
 @pytest.mark.parametrize("pair", PAIRS, ids=["+".join(p) for p in PAIRS])
 def test_two_hidden_effects_are_both_named_and_each_step_shrinks_the_gap(pair):
     effects = [REALISTIC[name] for name in pair]
     # 5 s decays (not 7.5 s) keep the test short; the fits are as good.
-    releases = simulated_campaign(effects, 300 + PAIRS.index(pair), duration=5.0)
+    releases = simulated_campaign(effects, PAIR_SEEDS[pair], duration=5.0)
     report = diagnose(releases, SECTION, depth=DEPTH)
     assert sorted(step.name for step in report.effects) == sorted(pair), report.summary()
     for effect in effects:
