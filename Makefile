@@ -96,10 +96,11 @@ docs: setup $(DOCS_STAMP)
 	@echo "the site: docs/_build/html/index.html"
 
 # The benchmarks (benchmarks/run.py): the quick mode shows each one runs and writes its result
-# files; the full mode writes the files the validation pages include (BENCH_ARGS="--only NAME").
+# files (two at a time: its figures do not count); the full mode, one at a time, writes the files
+# the validation pages include (BENCH_ARGS="--only NAME").
 BENCH_MODE ?= quick
 bench: setup
-	$(PY) benchmarks/run.py --mode $(BENCH_MODE) $(BENCH_ARGS)
+	$(PY) benchmarks/run.py --mode $(BENCH_MODE) $(if $(filter quick,$(BENCH_MODE)),--jobs 2) $(BENCH_ARGS)
 
 $(DOCS_STAMP): pyproject.toml $(STAMP)
 	$(PIP) install -q --progress-bar off -e '.[docs]'

@@ -3,7 +3,8 @@
 ``python benchmarks/run.py --mode quick|full [--out DIR] [--only NAME ...]`` runs each script of
 :data:`BENCHMARKS` as ``python benchmarks/<name>.py --results DIR`` with ``--quick``, or in full
 with its defaults and the parts of :data:`FULL_EXTRA`, in turn, one at a
-time (several benchmarks measure time, and two at once would slow each other), and writes
+time (several benchmarks measure time, and two at once would slow each other; a quick run,
+whose figures do not count, may run ``--jobs 2`` at once, as ``make bench`` does), and writes
 ``DIR/index.json``: each benchmark's mode, exit status, wall time and, for a failure, its last
 lines of output. The quick mode (CI) shows that every benchmark runs and writes its files, in
 a few minutes on two cores; its figures are not the documented ones. The full mode is the
@@ -15,9 +16,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import subprocess
 import sys
+import tempfile
 import time
+from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -56,14 +60,15 @@ def jobs(name: str, mode: str) -> list[tuple[str, ...]]:
     return [(), *FULL_EXTRA.get(name, ())]
 
 
-def _written(out: Path, since: float) -> list[str]:
-    return sorted(p.stem for p in out.glob("*.json")
-                  if p.name != "index.json" and p.stat().st_mtime >= since)
-
-
 def _run(name: str, arguments: tuple[str, ...], mode: str, out: Path) -> dict[str, object]:
-    command = [sys.executable, str(HERE / f"{name}.py"), "--results", str(out), *arguments]
-    started, start = time.time(), time.perf_counter()
+    """Run one benchmark job into a folder of its own, then move its result files to ``out``.
+
+    The folder of its own tells which files this job wrote when several run at once.
+    """
+    label = " ".join((name, *arguments))
+    scratch = Path(tempfile.mkdtemp(prefix=f".{name}-", dir=out))
+    command = [sys.executable, str(HERE / f"{name}.py"), "--results", str(scratch), *arguments]
+    start = time.perf_counter()
     entry: dict[str, object] = {"benchmark": name, "arguments": list(arguments), "mode": mode}
     try:
         done = subprocess.run(command, capture_output=True, text=True, check=False,
@@ -71,13 +76,17 @@ def _run(name: str, arguments: tuple[str, ...], mode: str, out: Path) -> dict[st
     except subprocess.TimeoutExpired as exc:
         tail = exc.stdout[-2000:] if isinstance(exc.stdout, str) else ""
         entry.update(status="timed out", seconds=round(time.perf_counter() - start, 1),
-                     output=tail)
+                     output=tail, label=label)
+        shutil.rmtree(scratch)
         return entry
-    entry["seconds"] = round(time.perf_counter() - start, 1)
-    entry["results"] = _written(out, started)
-    entry["status"] = ("ok" if done.returncode == 0 and entry["results"]
-                       else "no result file" if done.returncode == 0
-                       else f"exit {done.returncode}")
+    written = sorted(p.stem for p in scratch.glob("*.json"))
+    for path in scratch.iterdir():
+        path.replace(out / path.name)
+    shutil.rmtree(scratch)
+    entry.update(seconds=round(time.perf_counter() - start, 1), results=written, label=label,
+                 status=("ok" if done.returncode == 0 and written
+                         else "no result file" if done.returncode == 0
+                         else f"exit {done.returncode}"))
     if entry["status"] != "ok":
         entry["output"] = (done.stdout + done.stderr)[-2000:]
     return entry
@@ -91,21 +100,29 @@ def main(argv: list[str] | None = None) -> int:
                         help="result folder (default: benchmarks/results/quick for a quick "
                              "run, docs/validation/results for a full one)")
     parser.add_argument("--only", nargs="+", choices=BENCHMARKS, default=None, metavar="NAME")
+    parser.add_argument("--jobs", type=int, default=1,
+                        help="benchmarks run at once (quick mode only: a full run's timings "
+                             "need the host to themselves)")
     args = parser.parse_args(argv)
+    if args.jobs < 1 or (args.jobs > 1 and args.mode == "full"):
+        parser.error("--jobs: at least 1, and 1 in full mode (benchmarks time themselves)")
     out = args.out or (HERE / "results" / "quick" if args.mode == "quick"
                        else result_files.DOCS_RESULTS)
     out.mkdir(parents=True, exist_ok=True)
     index_path = out / "index.json"
     index = json.loads(index_path.read_text()) if index_path.exists() else {}
+    todo = [(name, arguments) for name in args.only or BENCHMARKS
+            for arguments in jobs(name, args.mode)]
     failed = []
-    for name in args.only or BENCHMARKS:
-        for arguments in jobs(name, args.mode):
-            label = " ".join((name, *arguments))
-            print(f"{label} ({args.mode}) ...", flush=True)
-            entry = _run(name, arguments, args.mode, out)
+    with ThreadPoolExecutor(max_workers=args.jobs) as pool:
+        running = [pool.submit(_run, name, arguments, args.mode, out)
+                   for name, arguments in todo]
+        for future in as_completed(running):
+            entry = future.result()
+            label = str(entry.pop("label"))
             index[label] = entry
             index_path.write_text(json.dumps(index, indent=1, sort_keys=True) + "\n")
-            print(f"  {entry['status']} in {entry['seconds']} s: "
+            print(f"{label} ({args.mode}): {entry['status']} in {entry['seconds']} s: "
                   f"{', '.join(entry.get('results', [])) or 'nothing written'}", flush=True)
             if entry["status"] != "ok":
                 failed.append(label)
@@ -114,7 +131,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {len(failed)} benchmark(s) did not run through: {', '.join(failed)}",
               file=sys.stderr)
         return 1
-    print(f"all {len(args.only or BENCHMARKS)} benchmarks ran; results in {out}")
+    print(f"all {len(todo)} benchmark runs done; results in {out}")
     return 0
 
 
