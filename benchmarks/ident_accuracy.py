@@ -395,6 +395,10 @@ def tunnel_rows(which="all", quick=False):
     return names
 
 
+#: What each tunnel mode is, in a result table's caption.
+TUNNEL_MODE_NAMES = {"after": "with holds", "before": "without holds"}
+
+
 def tunnel_jobs(names, seeds, modes=("after",), a3="fitted-or-zero", first_seed=0,
                 motion="filter", estimator="iv"):
     """Return the jobs of :func:`tunnel_run` for the rows ``names``, every mode and seed."""
@@ -454,10 +458,12 @@ def _tunnel_table(results, names, seeds, mode):
     columns = ("case", "median error (%)", "p90 error (%)", "2-std coverage (%)",
                "median std (%)", "median time (s)", "no flutter", "failed", "branch", "covered",
                "cases")
+    holds = (f"the turbulence rows with a {TUNNEL_HOLD_S:g} s hold before each release"
+             if mode == "after" else "the same releases without their holds")
     return result_files.Table(
-        f"E2RFC in a real tunnel ({mode}): 3 wind speeds (0.4/0.6/0.8 U_F) x 2 releases (the "
-        "variant rows: as named), 20 s at 500 Hz, 2 % noise, the turbulence rows with a "
-        f"{TUNNEL_HOLD_S:g} s hold before each release, {_count(seeds, 'seed')} per row: the "
+        f"E2RFC in a real tunnel ({TUNNEL_MODE_NAMES[mode]}): 3 wind speeds (0.4/0.6/0.8 U_F) "
+        "x 2 releases (the variant rows: as named), 20 s at 500 Hz, 2 % noise, "
+        f"{holds}, {_count(seeds, 'seed')} per row: the "
         "flutter speed's absolute error, the coverage of IdentifiedModel.flutter's 2-std "
         "interval, its median std, the median time of identification plus uncertainty, the "
         "cases without flutter (failed ones included) and those the turbulence branch ran.",
