@@ -156,9 +156,7 @@ def main() -> None:
                              "(sine_bridge's coupled deck)")
     result_files.add_arguments(parser)
     args = parser.parse_args()
-    for name, (full, quick) in DEFAULTS.items():
-        if getattr(args, name) is None:
-            setattr(args, name, quick if args.quick else full)
+    result_files.resolve_defaults(args, DEFAULTS)
     parameters = {"modes": args.modes, "nodes": args.nodes}
     tables = []
     if args.fast:

@@ -226,10 +226,7 @@ def main(argv: list[str] | None = None) -> None:
             parser.error("--hil-check writes no result files and has no --quick")
         hil_check(args.seeds or DEFAULTS["seeds"][0], args.repeats)
         return
-    for name, (full, quick) in DEFAULTS.items():
-        if getattr(args, name) is None:
-            value = quick if args.quick else full
-            setattr(args, name, list(value) if isinstance(value, list) else value)
+    result_files.resolve_defaults(args, DEFAULTS)
     if args.no_fd and "fd" in args.cases:
         args.cases.remove("fd")
     if not args.decay_periods > 0 or args.max_speeds < 2:

@@ -884,9 +884,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         f"a recorded 511-tap run replayed (timer {FRAME_MS} ms, then 0 ms)")
     result_files.add_arguments(parser)
     args = parser.parse_args(argv)
-    for name, (full, quick) in DEFAULTS.items():
-        if getattr(args, name) is None:
-            setattr(args, name, quick if args.quick else full)
+    result_files.resolve_defaults(args, DEFAULTS)
     args.runs = [r.strip() for r in args.runs.split(",") if r.strip()]
     if not args.runs or set(args.runs) - set(RUNS):
         parser.error(f"--runs: choose among {', '.join(RUNS)}")

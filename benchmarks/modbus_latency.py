@@ -90,9 +90,7 @@ def main(argv: list[str] | None = None) -> None:
                             help=f"{what} (default {full:g}; --quick: {quick:g})")
     result_files.add_arguments(parser)
     args = parser.parse_args(argv)
-    for name, (full, quick) in DEFAULTS.items():
-        if getattr(args, name) is None:
-            setattr(args, name, quick if args.quick else full)
+    result_files.resolve_defaults(args, DEFAULTS)
     if args.requests < 1 or not args.seconds > 0 or args.releases < 1:
         parser.error("--requests and --releases must be >= 1, --seconds > 0")
     logging.basicConfig(level=logging.ERROR)

@@ -94,9 +94,7 @@ def main(argv: list[str] | None = None) -> None:
                         f"{DEFAULTS['decay'][1]:g})")
     result_files.add_arguments(parser)
     args = parser.parse_args(argv)
-    for name, (full, quick) in DEFAULTS.items():
-        if getattr(args, name) is None:
-            setattr(args, name, quick if args.quick else full)
+    result_files.resolve_defaults(args, DEFAULTS)
     if not 1 <= args.campaigns <= len(DAMPING) or args.files < 3 or not args.decay > 0:
         parser.error(f"--campaigns must be 1-{len(DAMPING)}, --files >= 3, --decay > 0")
     root = Path(tempfile.mkdtemp(prefix="windrig_reprocess_bench_"))

@@ -86,6 +86,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="also write DIR/<name>.json and DIR/<name>.md")
 
 
+def resolve_defaults(args: argparse.Namespace,
+                     defaults: Mapping[str, tuple[Any, Any]]) -> None:
+    """Give each option left unset (None) its full or, with ``--quick``, its quick default.
+
+    ``defaults`` maps an option's attribute name to ``(full, quick)``; an option given on the
+    command line wins over both. A list default is copied, so that runs do not share it.
+    """
+    for name, (full, quick) in defaults.items():
+        if getattr(args, name) is None:
+            value = quick if args.quick else full
+            setattr(args, name, list(value) if isinstance(value, list) else value)
+
+
 def _commit() -> str:
     try:
         out = subprocess.run(["git", "rev-parse", "--short=12", "HEAD"], cwd=ROOT, check=True,
