@@ -74,13 +74,13 @@ def reexported_names(module: str, root: Path = ROOT) -> list[str]:
     return [n for n in exported if n not in defined]
 
 
-def _page(module: str) -> str:
+def _page(module: str, modules: list[str]) -> str:
     title = f"``{module}``"
     lines = [title, "=" * len(title), "", f".. automodule:: {module}", "   :members:"]
     reexported = reexported_names(module)
     if reexported:
         lines.append(f"   :exclude-members: {', '.join(reexported)}")
-    children = [m for m in public_modules() if m.rpartition(".")[0] == module]
+    children = [m for m in modules if m.rpartition(".")[0] == module]
     if children:
         lines += ["", ".. toctree::", "   :maxdepth: 1", ""]
         lines += [f"   {child}" for child in children]
@@ -90,7 +90,8 @@ def _page(module: str) -> str:
 def write_pages(out: Path) -> None:
     """Write ``out/<module>.rst`` for every public module and ``out/index.rst``; prune others."""
     out.mkdir(parents=True, exist_ok=True)
-    wanted = {f"{m}.rst": _page(m) for m in public_modules()}
+    modules = public_modules()  # one walk of the source tree, not one per page
+    wanted = {f"{m}.rst": _page(m, modules) for m in modules}
     index = ["API reference", "=============", "",
              "One page per public module, from its docstrings (numpydoc). Units are SI unless a "
              "docstring says otherwise; the conventions are those of "
