@@ -61,7 +61,8 @@ def identify_json() -> dict:
             "flutter_speed": u.speed, "flutter_speed_std_parts": {
                 "noise": u.parametric, "structure": u.structure,
                 "extrapolation": u.extrapolation, "one_lag_more": u.refinement,
-                "release_scatter": u.turbulence, "below_decaying_release": u.below_decay},
+                "release_scatter": u.turbulence, "below_decaying_release": u.below_decay,
+                "other_estimator": u.cross_check},
             "warnings": list(u.warnings)}
 
 

@@ -284,10 +284,12 @@ def predicted_std(analysis: CampaignAnalysis, releases: Sequence[Release],
 def _carried(u: FlutterUncertainty) -> float:
     """Return the parts carried unchanged into every prediction, m/s.
 
-    The structure spread and the distance below a decaying release (a bias of the fit in
-    turbulence that more releases at the same speeds share, :mod:`ident.identification.e2rfc`).
+    The structure spread, the distance below a decaying release (a bias of the fit in
+    turbulence that more releases at the same speeds share, :mod:`ident.identification.e2rfc`)
+    and the distance to the other estimator's flutter speed (a misfit that more releases
+    share).
     """
-    return math.sqrt(u.structure**2 + u.below_decay**2)
+    return math.sqrt(u.structure**2 + u.below_decay**2 + u.cross_check**2)
 
 
 def _reducible(analysis: CampaignAnalysis, releases: Sequence[Release],

@@ -58,7 +58,7 @@ PLOT_NAME = "bridge_flutter_uncertainty.png"
 #: The identify JSON's parts of the section's std (``flutter_speed_std_parts``) that are not
 #: the parameter covariance's.
 OTHER_PARTS = ("structure", "extrapolation", "one_lag_more", "release_scatter",
-               "below_decaying_release")
+               "below_decaying_release", "other_estimator")
 
 
 @dataclass(frozen=True, eq=False)

@@ -135,6 +135,8 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
             parts.insert(1, f"release scatter {u.turbulence:.3f}")
         if u.below_decay:
             parts.append(f"below a decaying release {u.below_decay:.3f}")
+        if u.cross_check:
+            parts.append(f"other estimator {u.cross_check:.3f}")
         print("  its std (m/s): " + ", ".join(parts))
     for label, speed, speed_std in zip(spread.labels[1:], spread.speeds[1:], spread.stds[1:],
                                        strict=True):

@@ -54,6 +54,7 @@ from scipy.optimize import least_squares
 from scipy.signal import butter, lfilter, savgol_filter, sosfiltfilt
 
 from ident.model.section import SectionModel
+from ident.numerics.sampling import decimation_factor
 from ident.numerics.selection import Candidate, select_one_se
 from ident.records.release import Release
 
@@ -177,7 +178,7 @@ class _Signals:
         # benchmark's sections: 50 Hz for a 12 Hz cut-off).
         fc = min(FC_FACTOR * f_max, 0.45 * fs)
         self.sos = butter(FILTER_ORDER, fc / (fs / 2), output="sos")
-        self.decim = max(1, min(int(round(fs / TARGET_FS)), int(fs // (4.0 * fc))))
+        self.decim = max(1, min(int(round(fs / TARGET_FS)), decimation_factor(fs, 4.0 * fc)))
         q = release.coordinates(B)
         forces = release.generalised_forces(B)
         f = forces / (qd * B**2)

@@ -142,7 +142,8 @@ class CampaignAnalysis:
             "flutter_std_parts": None if self.flutter_speed is None else {
                 "noise": u.parametric, "structure": u.structure,
                 "extrapolation": u.extrapolation, "one_lag_more": u.refinement,
-                "release_scatter": u.turbulence, "below_decaying_release": u.below_decay},
+                "release_scatter": u.turbulence, "below_decaying_release": u.below_decay,
+                "other_estimator": u.cross_check},
             "flutter_structures": dict(zip(self.structures.labels, self.structures.speeds,
                                            strict=True)),
             "flutter_speed_low": self.structures.low,

@@ -320,7 +320,9 @@ def _closed_loop(model: IdentifiedModel, releases: list[Release], section: Secti
     The structure is :data:`CLOSED_LOOP_LAGS` lags with A3 estimated; the covariance is the
     inverse Fisher information (the turbulence is in the likelihood, so no jackknife part);
     with three or more wind speeds the fit without the highest one is the extrapolation
-    part's refit.
+    part's refit. A fit that fails its own checks (:attr:`ClosedLoopFit.failed_checks`) is
+    cross-checked by refined IV when the holds allow it: the distance between the two flutter
+    speeds joins the std (:attr:`E2RFCDiagnostics.cross_check`).
     """
     base = model.diagnostics
     try:
@@ -344,17 +346,31 @@ def _closed_loop(model: IdentifiedModel, releases: list[Release], section: Secti
     holds = sum(r.hold is not None for r in releases)
     note = (f"turbulence: coefficients by {ESTIMATOR_CLOSED_LOOP} over {len(releases)} releases "
             f"and {holds} holds ({fit.iterations} iterations)")
+    cross_check, checks = None, []
+    if fit.failed_checks:
+        failed = (f"the closed-loop fit failed its own checks ({'; '.join(fit.failed_checks)}): "
+                  "the data hold something its model cannot describe (friction, a drift, a "
+                  "channel that is not what it says), so its Fisher deviation understates the "
+                  "error")
+        if _turbulent_fit.holds_suffice(releases):
+            other = _turbulent_model(model, releases, section, None, None)
+            cross_check = ("refined IV", RationalFunctionModel(other.A, other.d))
+            checks.append(f"{failed}; refined IV ran on the same releases as a cross-check")
+        else:
+            checks.append(f"{failed}; without a hold of >= {_turbulent_fit.MIN_HOLD_S:g} s "
+                          "before every release no second estimator can check it")
     diagnostics = replace(
         base, n_lags=fit.model.n_lags, with_A3=True,
         reason=f"{CLOSED_LOOP_LAGS} lags, A3 fitted; {note}",
         condition_number=math.nan, covariance=fit.covariance,
         parameter_index=fit.parameter_index, alternatives=(),
         warnings=(*(w.replace(_SCATTER_STD, _FISHER_STD) for w in base.warnings), note,
-                  *fit.warnings), estimator=ESTIMATOR_CLOSED_LOOP,
+                  *fit.warnings, *checks), estimator=ESTIMATOR_CLOSED_LOOP,
         bounded_at=_bounded_at(releases),
         _lag_roots=fit.model.d,
         _refits={"jackknife": (), "release_jackknife": (), "finer": None,
-                 "reduced": Deferred(reduced) if len(speeds) >= 3 else None})
+                 "reduced": Deferred(reduced) if len(speeds) >= 3 else None,
+                 "cross_check": cross_check})
     return IdentifiedModel(fit.model.A, fit.model.d, diagnostics)
 
 

@@ -196,6 +196,15 @@ class E2RFCDiagnostics:
             self.finer is not None and _rejected(list(self._prepared), self.finer,
                                                  self.with_A3, self.candidates)))
 
+    @property
+    def cross_check(self) -> tuple[str, RationalFunctionModel] | None:
+        """The other turbulence estimator's model, named, when the chosen one failed its checks.
+
+        Set by the closed-loop branch (:func:`ident.identification.e2rfc.identify`) when its
+        fit fails its own checks; None otherwise.
+        """
+        return self._computed("cross_check", lambda: None)  # type: ignore[return-value]
+
     def _computed(self, name: str, compute: Callable[[], object]) -> object:
         value = self._refits[name] if name in self._refits else compute()
         if isinstance(value, Deferred):  # another estimator's refit, run on first use

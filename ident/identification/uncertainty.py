@@ -30,6 +30,11 @@ How uncertain the flutter speed is (:meth:`IdentifiedModel.uncertainty`), from t
   the systematic part, with a warning. (Fitting each release only while its decay dominates,
   and instrumental variables with instruments from the predicted deterministic decay, were
   measured and dropped: docs/development/e2rfc_turbulence.md.)
+- *cross-check*: when the closed-loop estimator of turbulence fails its own checks (its
+  innovations far from white, or its search not converged: the data hold something its model
+  cannot describe), the other estimator runs on the same releases
+  (:attr:`E2RFCDiagnostics.cross_check`) and the distance between the two flutter speeds is
+  added to the systematic part, with a warning: two routes to one number that disagree.
 
 The refits of the extrapolation and one-lag-more parts never count below that same bound (a
 refit fluttering below a decaying release contradicts the data: it counts as fluttering
@@ -109,6 +114,8 @@ class UncertaintySources(Protocol):
     def finer(self) -> RationalFunctionModel | None: ...  # noqa: D102
     @property
     def finer_rejected(self) -> bool: ...  # noqa: D102
+    @property
+    def cross_check(self) -> tuple[str, RationalFunctionModel] | None: ...  # noqa: D102
 
 
 @dataclass(frozen=True)
@@ -137,6 +144,10 @@ class FlutterUncertainty:
     below_decay : float
         How far the flutter speed lies below the highest wind speed at which a release decayed
         on both modes (:attr:`E2RFCDiagnostics.decayed_at`); 0 when it does not.
+    cross_check : float
+        How far the other turbulence estimator's flutter speed lies from this one when the
+        closed-loop fit failed its own checks (:attr:`E2RFCDiagnostics.cross_check`); 0
+        otherwise.
     """
 
     speed: float | None
@@ -148,6 +159,7 @@ class FlutterUncertainty:
     n_releases: int
     warnings: tuple[str, ...] = ()
     below_decay: float = 0.0
+    cross_check: float = 0.0
 
     @property
     def statistical(self) -> float:
@@ -168,7 +180,7 @@ class FlutterUncertainty:
     def systematic(self) -> float:
         """The part more releases at these wind speeds do not reduce, m/s."""
         return math.sqrt(self.structure**2 + self.extrapolation**2 + self.refinement**2
-                         + self.below_decay**2)
+                         + self.below_decay**2 + self.cross_check**2)
 
     def releases_needed(self, target: float) -> int | None:
         """Releases (in the same proportion over the wind speeds) for a total std of ``target``.
@@ -194,6 +206,8 @@ class FlutterUncertainty:
             parts.append(f"release scatter {self.turbulence:.3g}")
         if self.below_decay:
             parts.append(f"below a decaying release {self.below_decay:.3g}")
+        if self.cross_check:
+            parts.append(f"other estimator {self.cross_check:.3g}")
         parts += [f"structure {self.structure:.3g}", f"extrapolation {self.extrapolation:.3g}",
                   f"one lag more {self.refinement:.3g}"]
         return f"{self.speed:.3f} +- {self.total:.3f} m/s ({', '.join(parts)})"
@@ -303,11 +317,20 @@ def flutter_uncertainty(section: SectionModel, result: _flutter.FlutterResult, p
             "decayed on every mode (or, closed-loop, no release grew): it contradicts the "
             "data (in turbulence, the random response biases the fit); the deviation "
             "includes the difference")
+    cross_check = 0.0
+    if diag.cross_check is not None:
+        # The two routes' distance, the other's speed held to what the data allow as above.
+        name, other = diag.cross_check
+        moved = max(refit_speed(other), lower)
+        cross_check = abs(moved - speed)
+        warnings.append(
+            f"{name} on the same releases puts the flutter speed at {moved:.3g} m/s "
+            f"({100 * (moved / speed - 1):+.0f} %); the deviation includes the difference")
     return FlutterUncertainty(speed=speed, parametric=parametric, structure=structure,
                               extrapolation=extrapolation, refinement=refinement,
                               turbulence=turbulence,
                               n_releases=diag.wind_speeds.size, warnings=tuple(warnings),
-                              below_decay=below_decay)
+                              below_decay=below_decay, cross_check=cross_check)
 
 
 def no_flutter_warnings(section: SectionModel, sources: UncertaintySources, U_max: float

@@ -42,5 +42,6 @@ def identified_flat_plate() -> dict[str, Any]:
             "flutter_speed_std_parts": {
                 "noise": u.parametric, "structure": u.structure,
                 "extrapolation": u.extrapolation, "one_lag_more": u.refinement,
-                "release_scatter": u.turbulence, "below_decaying_release": u.below_decay},
+                "release_scatter": u.turbulence, "below_decaying_release": u.below_decay,
+                "other_estimator": u.cross_check},
             "warnings": list(u.warnings)}

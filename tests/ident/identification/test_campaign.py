@@ -51,7 +51,8 @@ def test_the_analysis_holds_what_identify_and_the_flutter_analysis_give():
     assert as_json["flutter_speed"] == pytest.approx(analysis.flutter_speed)
     assert set(as_json["flutter_std_parts"]) == {"noise", "structure", "extrapolation",
                                                  "one_lag_more", "release_scatter",
-                                                 "below_decaying_release"}
+                                                 "below_decaying_release",
+                                                 "other_estimator"}
 
 
 def test_two_wind_speeds_are_enough_and_the_table_is_optional():
