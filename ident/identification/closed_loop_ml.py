@@ -316,9 +316,10 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
     Raises
     ------
     ValueError
-        On a 3-DOF section or releases, fewer than two wind speeds, releases at different
-        sampling rates, or a start at which the likelihood cannot be evaluated (no stabilising
-        Riccati solution). (A :class:`Release` holds no NaN: it refuses them itself.)
+        On a 3-DOF section or releases, fewer than two wind speeds, or a start at which the
+        likelihood cannot be evaluated (no stabilising Riccati solution). (A :class:`Release`
+        holds no NaN: it refuses them itself.) Releases may be sampled at different rates: each
+        record is discretised at its own.
     """
     if section.n_dof != 2 or any(r.n_dof != 2 for r in releases):
         raise ValueError("the closed-loop estimator is for two degrees of freedom (heave, pitch)")
