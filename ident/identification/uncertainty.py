@@ -323,9 +323,10 @@ def flutter_uncertainty(section: SectionModel, result: _flutter.FlutterResult, p
         name, other = diag.cross_check
         moved = max(refit_speed(other), lower)
         cross_check = abs(moved - speed)
-        warnings.append(
-            f"{name} on the same releases puts the flutter speed at {moved:.3g} m/s "
-            f"({100 * (moved / speed - 1):+.0f} %); the deviation includes the difference")
+        found = (f"finds no flutter below {U_max:.3g} m/s" if moved >= U_max else
+                 f"puts the flutter speed at {moved:.3g} m/s ({100 * (moved / speed - 1):+.0f} %)")
+        warnings.append(f"{name} on the same releases {found}; the deviation includes the "
+                        "difference")
     return FlutterUncertainty(speed=speed, parametric=parametric, structure=structure,
                               extrapolation=extrapolation, refinement=refinement,
                               turbulence=turbulence,

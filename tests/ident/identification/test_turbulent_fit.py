@@ -97,12 +97,14 @@ def test_the_branch_finds_the_flutter_speed_in_1_percent_turbulence(turbulent_re
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("deck", "Iw"), [("plate", 0.03), ("bluff", 0.03)])
+@pytest.mark.parametrize(("deck", "Iw"), [("bluff", 0.03)])
 def test_the_branch_holds_on_other_turbulent_rows_of_the_benchmark(deck, Iw):
-    """Two other turbulence rows, seeds 0-2: median error, 2-std cover, intervals not blankets.
+    """Another turbulence row, seeds 0-2: median error, 2-std cover, intervals not blankets.
 
-    Refined IV is the alternative to the closed-loop default since that became the default; the
-    bluff deck at Iw 1 % (the slowest row here, about two minutes) is left to the benchmark.
+    Refined IV is the alternative to the closed-loop default since that became the default:
+    the other deck at the other intensity is checked here (the plate at Iw 1 % above); the
+    plate at 3 % and the bluff deck at 1 % (about a minute each of the CI's time) are left to
+    the benchmark, which runs every row over 20 seeds.
 
     Bounds from the benchmark's 20 seeds per row (median / p90 |error|, cover): plate Iw 3 %
     7.4 / 36 %, 90 %; bluff Iw 1 % 10.5 / 25 %, 95 %; bluff Iw 3 % 8.6 / 33 %, 85 %. A median
