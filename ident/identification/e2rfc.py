@@ -57,6 +57,10 @@ starts from rest are warnings in ``diagnostics.warnings``).
 What it returns is :mod:`ident.identification.results` (:class:`IdentifiedModel` and its
 diagnostics); the flutter speed's uncertainty and its parts are
 :mod:`ident.identification.uncertainty`.
+
+Longer than 600 lines: the turbulence branches assemble the same diagnostics as E2RFC's fit
+and read its module settings (:data:`TURBULENT_ESTIMATOR`, :data:`TURBULENT_A3`) that the
+benchmarks set; moving them out is the next split, with those settings passed in.
 """
 
 from __future__ import annotations

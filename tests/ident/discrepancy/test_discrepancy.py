@@ -107,7 +107,7 @@ def test_the_aerodynamic_model_is_identified_again_beside_a_named_friction():
     # the decays with the friction's share taken out leaves it white (0.1-0.3 seen).
     from ident.discrepancy.effect_selection import simulate_channels
 
-    releases = simulated_campaign(scaled("coulomb_friction", 2.0), 11)
+    releases = simulated_campaign(scaled("coulomb_friction", 2.0), 11, duration=5.0)
     report = diagnose(releases, SECTION, depth=DEPTH)
     assert [step.name for step in report.effects] == ["coulomb_friction"], report.summary()
     assert report.refitted is not report.baseline
