@@ -142,7 +142,8 @@ class ClosedLoopFit:
         :data:`TOLERANCE` in log L, or the last :data:`STALLED` steps gained less than
         :data:`STALL_TOLERANCE`).
     fs : float
-        The decimated rate, Hz.
+        The lowest decimated rate of the records, Hz (each record is discretised at its own;
+        they differ only when the releases were recorded at different rates).
     whiteness : ndarray, shape (n_records, 4)
         Largest autocorrelation of each record's standardised innovations over lags 1-20, per
         channel (about 2/sqrt(n) if the model is right).
