@@ -139,11 +139,7 @@ class CampaignAnalysis:
             "flutter_speed": self.flutter_speed,
             "flutter_std": self.flutter_std,
             "flutter_frequency": self.flutter_frequency,
-            "flutter_std_parts": None if self.flutter_speed is None else {
-                "noise": u.parametric, "structure": u.structure,
-                "extrapolation": u.extrapolation, "one_lag_more": u.refinement,
-                "release_scatter": u.turbulence, "below_decaying_release": u.below_decay,
-                "other_estimator": u.cross_check},
+            "flutter_std_parts": None if self.flutter_speed is None else u.parts(),
             "flutter_structures": dict(zip(self.structures.labels, self.structures.speeds,
                                            strict=True)),
             "flutter_speed_low": self.structures.low,

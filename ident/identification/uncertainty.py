@@ -182,6 +182,13 @@ class FlutterUncertainty:
         return math.sqrt(self.structure**2 + self.extrapolation**2 + self.refinement**2
                          + self.below_decay**2 + self.cross_check**2)
 
+    def parts(self) -> dict[str, float]:
+        """Return the std's parts by their JSON names (``flutter_std_parts``), m/s."""
+        return {"noise": self.parametric, "structure": self.structure,
+                "extrapolation": self.extrapolation, "one_lag_more": self.refinement,
+                "release_scatter": self.turbulence, "below_decaying_release": self.below_decay,
+                "other_estimator": self.cross_check}
+
     def releases_needed(self, target: float) -> int | None:
         """Releases (in the same proportion over the wind speeds) for a total std of ``target``.
 

@@ -39,9 +39,5 @@ def identified_flat_plate() -> dict[str, Any]:
     u = model.uncertainty(FLAT_PLATE)
     return {"model": model.to_dict(), "model_covariance": ModelCovariance.of(model).to_dict(),
             "flutter_speed": u.speed,
-            "flutter_speed_std_parts": {
-                "noise": u.parametric, "structure": u.structure,
-                "extrapolation": u.extrapolation, "one_lag_more": u.refinement,
-                "release_scatter": u.turbulence, "below_decaying_release": u.below_decay,
-                "other_estimator": u.cross_check},
+            "flutter_speed_std_parts": u.parts(),
             "warnings": list(u.warnings)}
