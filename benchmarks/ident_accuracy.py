@@ -38,7 +38,9 @@ a subset;
 ``--turbulent-motion filter|smoother|smoother-sg`` selects how the branch builds its regressors'
 motion (``ident.identification._turbulent_fit.MOTION``; docs/development/e2rfc_turbulence.md
 measures the three); ``--turbulent-estimator ml`` runs the closed-loop maximum-likelihood branch
-instead (``ident.identification.closed_loop_ml``; with and without holds). The "branch" column
+instead (``ident.identification.closed_loop_ml``; with and without holds), and
+``--closed-loop-buffeting fourth-order`` its two-section buffeting model on exact block means
+(``e2rfc.CLOSED_LOOP_BUFFETING``). The "branch" column
 counts the identifications the turbulence branch (either) ran.
 
 Printed per row: the median and 90th percentile of |error|, the coverage of the 2-std interval
@@ -113,7 +115,8 @@ NOISES = (0.0, 0.02, 0.05)
 E2RFC_SPEEDS = (0.4, 0.6, 0.8)
 FD_SPEEDS = tuple(np.linspace(0.3, 0.85, 10))
 #: The turbulence branch's options as imported (``one_run`` restores them in a shared worker).
-TURBULENT_DEFAULTS = (e2rfc.TURBULENT_A3, _turbulent_fit.MOTION, e2rfc.TURBULENT_ESTIMATOR)
+TURBULENT_DEFAULTS = (e2rfc.TURBULENT_A3, _turbulent_fit.MOTION, e2rfc.TURBULENT_ESTIMATOR,
+                      e2rfc.CLOSED_LOOP_BUFFETING)
 #: "E2RFC raw" is the ablation of the noise design: the same estimator with regressors built from
 #: the measured displacements by central differences instead of from the modal fit.
 METHODS = ("E2RFC", "E2RFC raw", "FD route")
@@ -201,7 +204,8 @@ def fd_error(section, model, releases):
 def one_run(args):
     # A worker that ran tunnel jobs before holds their turbulence options: back to the defaults
     # (smooth releases do not reach the turbulence branch, but a fresh worker would have them).
-    e2rfc.TURBULENT_A3, _turbulent_fit.MOTION, e2rfc.TURBULENT_ESTIMATOR = TURBULENT_DEFAULTS
+    (e2rfc.TURBULENT_A3, _turbulent_fit.MOTION, e2rfc.TURBULENT_ESTIMATOR,
+     e2rfc.CLOSED_LOOP_BUFFETING) = TURBULENT_DEFAULTS
     section_name, method, noise, seed = args
     section = SECTIONS[section_name]
     U_F = fl.analyze(section, TRUTH).speed
@@ -360,10 +364,11 @@ def tunnel_run(args):
 
 
 def _tunnel_run(args):
-    row, seed, mode, a3, motion, estimator = args
+    row, seed, mode, a3, motion, estimator, buffeting = args
     e2rfc.TURBULENT_A3 = a3  # the turbulence branch's A3 option (set in each worker)
     _turbulent_fit.MOTION = motion  # and how its regressors' motion is estimated
     e2rfc.TURBULENT_ESTIMATOR = estimator  # and which estimator it runs
+    e2rfc.CLOSED_LOOP_BUFFETING = buffeting  # and the closed-loop branch's buffeting model
     section, make_model, _, _, truth, _ = row_spec(row)
     U_F = truth() if truth is not None else fl.analyze(section, make_model()).speed
     releases = tunnel_releases(row, seed)
@@ -400,9 +405,10 @@ TUNNEL_MODE_NAMES = {"after": "with holds", "before": "without holds"}
 
 
 def tunnel_jobs(names, seeds, modes=("after",), a3="fitted-or-zero", first_seed=0,
-                motion="filter", estimator="iv"):
+                motion="filter", estimator="iv", buffeting="second-order"):
     """Return the jobs of :func:`tunnel_run` for the rows ``names``, every mode and seed."""
-    return [(row, seed, mode, a3, motion, estimator) for row in names for mode in modes
+    return [(row, seed, mode, a3, motion, estimator, buffeting) for row in names
+            for mode in modes
             for seed in range(first_seed, first_seed + seeds)]
 
 
@@ -551,7 +557,8 @@ def result_name(args):
     if args.part in ("all", "tunnel"):
         parts += [value for value, default in (
             (args.rows, "all"), (args.turbulent_estimator, e2rfc.TURBULENT_ESTIMATOR),
-            (args.turbulent_motion, _turbulent_fit.MOTION)) if value != default]
+            (args.turbulent_motion, _turbulent_fit.MOTION),
+            (args.closed_loop_buffeting, e2rfc.CLOSED_LOOP_BUFFETING)) if value != default]
         if args.turbulent_a3 != "fitted-or-zero":
             parts.append(f"a3-{args.turbulent_a3}")
         if args.first_seed:
@@ -587,6 +594,10 @@ def main():
                         default=e2rfc.TURBULENT_ESTIMATOR,
                         help="the turbulence branch's estimator (e2rfc.TURBULENT_ESTIMATOR): "
                              "refined IV (needs holds) or closed-loop maximum likelihood")
+    parser.add_argument("--closed-loop-buffeting", default=e2rfc.CLOSED_LOOP_BUFFETING,
+                        choices=tuple(e2rfc.CLOSED_LOOP_BUFFETING_MODELS),
+                        help="the closed-loop branch's buffeting model "
+                             "(e2rfc.CLOSED_LOOP_BUFFETING)")
     result_files.add_arguments(parser)
     args = parser.parse_args()
     explicit_rows = args.rows is not None
@@ -633,10 +644,11 @@ def main():
                                "turbulent A3": args.turbulent_a3,
                                "turbulent motion": args.turbulent_motion,
                                "turbulent estimator": args.turbulent_estimator,
+                               "closed-loop buffeting": args.closed_loop_buffeting,
                                "hold (s)": TUNNEL_HOLD_S})
             found = pool.map(tunnel_run, tunnel_jobs(
                 names, seeds, modes, args.turbulent_a3, args.first_seed, args.turbulent_motion,
-                args.turbulent_estimator))
+                args.turbulent_estimator, args.closed_loop_buffeting))
         if args.part in ("all", "classic"):
             sections = list(SECTIONS)[:1] if args.quick else list(SECTIONS)
             noises = (0.02,) if args.quick else NOISES

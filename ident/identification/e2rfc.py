@@ -134,6 +134,13 @@ TURBULENT_ESTIMATORS = ("iv", "ml")
 #: own lag count (none in turbulence) every flutter speed came out low, -3 to -13 %; with two
 #: (Jones's count) the errors fall on both sides, -7 to +1 %, within their standard deviations.
 CLOSED_LOOP_LAGS = 2
+#: The closed-loop branch's buffeting model (``fit_closed_loop``'s options, by name): one
+#: second-order section per force on block means taken as samples, or two sections on exact
+#: block means. docs/development/e2rfc_turbulence.md measures the second's smaller bias and
+#: its two to three times the time.
+CLOSED_LOOP_BUFFETING = "second-order"
+#: name -> (``shaping_sections``, ``exact_block_means``).
+CLOSED_LOOP_BUFFETING_MODELS = {"second-order": (1, False), "fourth-order": (2, True)}
 #: ``diagnostics.estimator`` of the closed-loop branch.
 ESTIMATOR_CLOSED_LOOP = "closed-loop maximum likelihood (turbulence branch)"
 #: How E2RFC's turbulence warning ends, and how the closed-loop branch's ends in its place.
@@ -329,9 +336,11 @@ def _closed_loop(model: IdentifiedModel, releases: list[Release], section: Secti
     speeds joins the std (:attr:`E2RFCDiagnostics.cross_check`).
     """
     base = model.diagnostics
+    sections, exact = CLOSED_LOOP_BUFFETING_MODELS[CLOSED_LOOP_BUFFETING]
     try:
         fit = closed_loop_ml.fit_closed_loop(releases, section, model, with_A3=True,
-                                             n_lags=CLOSED_LOOP_LAGS)
+                                             n_lags=CLOSED_LOOP_LAGS, shaping_sections=sections,
+                                             exact_block_means=exact)
     except ValueError as exc:
         note = (f"turbulence: the closed-loop likelihood could not start from E2RFC's estimate "
                 f"({exc}); E2RFC's own, biased low in turbulence, is kept")
@@ -343,7 +352,9 @@ def _closed_loop(model: IdentifiedModel, releases: list[Release], section: Secti
     def reduced() -> RationalFunctionModel | None:
         """Return the fit without the highest wind speed, from the full fit."""
         try:
-            return closed_loop_ml.fit_closed_loop(below, section, fit.model, with_A3=True).model
+            return closed_loop_ml.fit_closed_loop(below, section, fit.model, with_A3=True,
+                                                  shaping_sections=sections,
+                                                  exact_block_means=exact).model
         except ValueError:  # likelihood not defined without the top speed: no extrapolation
             return None     # part, which the uncertainty's warnings then say
 

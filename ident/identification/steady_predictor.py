@@ -18,7 +18,8 @@ import numpy as np
 import numpy.typing as npt
 from scipy.signal import lfilter
 
-__all__ = ["RICCATI_ITERATIONS", "SteadyPredictor", "neg_log_likelihood", "riccati"]
+__all__ = ["RICCATI_ITERATIONS", "SteadyPredictor", "decorrelated", "neg_log_likelihood",
+           "riccati"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -77,6 +78,22 @@ def riccati(Phi: FloatArray, C: FloatArray, Qd: FloatArray, R: FloatArray) -> Fl
     raise ValueError("the steady-state Riccati equation has no stabilising solution here")
 
 
+def decorrelated(Phi: FloatArray, Qd: FloatArray, C: FloatArray, R: FloatArray, M: FloatArray
+                 ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Return the predictor's model with output noise uncorrelated with the process noise.
+
+    For ``x_{k+1} = Phi x_k + w_k``, ``y_k = C x_k + u_k`` with ``E[w u^T] = M``, ``E[u u^T] =
+    R``, the predictor's gain is ``(Phi P C^T + M) S^-1``. With ``G = M R^-1`` the model
+    ``Phi - G C``, ``Qd - G M^T`` has uncorrelated noises, the same Riccati solution ``P`` and
+    the same closed loop, and the gain is its own plus ``G``. Returns ``(Phi - G C, Qd - G M^T,
+    G)``: the first two and ``C``, ``R`` make a :class:`SteadyPredictor` with
+    ``feedthrough=G``.
+    """
+    G = np.asarray(np.linalg.solve(R, M.T).T, dtype=float)
+    Qd_u = Qd - G @ M.T
+    return Phi - G @ C, 0.5 * (Qd_u + Qd_u.T), G
+
+
 class SteadyPredictor:
     """The steady-state Kalman predictor of one model, in modal coordinates.
 
@@ -90,6 +107,9 @@ class SteadyPredictor:
         Measurement-noise covariance (positive definite).
     P : ndarray, shape (n_x, n_x), optional
         The Riccati solution, when known (:meth:`perturbed`); else solved by :func:`riccati`.
+    feedthrough : ndarray, shape (n_x, n_y), optional
+        Added to the gain: for output noise correlated with the process noise
+        (:func:`decorrelated`), whose ``Phi`` and ``Qd`` are then the decorrelated ones.
 
     Raises
     ------
@@ -98,8 +118,9 @@ class SteadyPredictor:
     """
 
     def __init__(self, Phi: FloatArray, Qd: FloatArray, C: FloatArray, R: FloatArray,
-                 P: FloatArray | None = None) -> None:
+                 P: FloatArray | None = None, feedthrough: FloatArray | None = None) -> None:
         self.Phi, self.Qd, self.C, self.R = Phi, Qd, C, R
+        self.feedthrough = feedthrough
         self.P = riccati(Phi, C, Qd, R) if P is None else P
         self.S = C @ self.P @ C.T + R
         self.Kp = Phi @ self.P @ C.T @ np.linalg.inv(self.S)
@@ -107,7 +128,8 @@ class SteadyPredictor:
         if np.max(np.abs(self.lam)) >= 1.0:
             raise ValueError("the predictor is unstable")
         self.V_inv = np.linalg.inv(self.V)
-        self.drive = self.V_inv @ self.Kp
+        gain = self.Kp if feedthrough is None else self.Kp + feedthrough
+        self.drive = self.V_inv @ gain
         self.CV = C @ self.V
         self.n_x, self.n_y = Phi.shape[0], C.shape[0]
         # The matrix is real, so its complex modes come in conjugate pairs (LAPACK returns
@@ -116,8 +138,8 @@ class SteadyPredictor:
         self.run = np.flatnonzero(self.lam.imag >= 0.0)
         self.CV_run = self.CV[:, self.run] * np.where(self.lam[self.run].imag > 0.0, 2.0, 1.0)
 
-    def perturbed(self, Phi: FloatArray, Qd: FloatArray, C: FloatArray, R: FloatArray
-                  ) -> SteadyPredictor:
+    def perturbed(self, Phi: FloatArray, Qd: FloatArray, C: FloatArray, R: FloatArray,
+                  feedthrough: FloatArray | None = None) -> SteadyPredictor:
         """Return the predictor of nearby matrices, its Riccati solution to first order.
 
         The change ``dP`` of the Riccati solution solves the Stein equation
@@ -139,7 +161,8 @@ class SteadyPredictor:
         M_modal = self.V_inv @ M @ self.V_inv.conj().T
         Y = M_modal / (1.0 - self.lam[:, None] * self.lam.conj()[None, :])
         dP = (self.V @ Y @ self.V.conj().T).real
-        return SteadyPredictor(Phi, Qd, C, R, P=self.P + 0.5 * (dP + dP.T))
+        return SteadyPredictor(Phi, Qd, C, R, P=self.P + 0.5 * (dP + dP.T),
+                               feedthrough=feedthrough)
 
     def innovations(self, y: FloatArray, nuisance: FloatArray | None = None) -> FloatArray:
         """Innovations of ``y`` (n, n_y) less offsets ``nuisance[:n_y]``, from ``nuisance[n_y:]``.
