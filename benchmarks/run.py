@@ -33,7 +33,8 @@ import result_files  # noqa: E402 - beside this script
 BENCHMARKS = (
     "decode_ild1420", "decode_ptb330", "decode_scanivalve", "modbus_latency", "daq_throughput",
     "console_frame_rate", "nexus_validation", "ident_speed_compare", "ident_accuracy",
-    "ident_accuracy_3dof", "flutter_crb", "turbulent_gls_experiment", "campaign_efficiency",
+    "ident_accuracy_3dof", "flutter_crb", "closed_loop_bias", "turbulent_gls_experiment",
+    "campaign_efficiency",
     "turbulent_campaign", "discrepancy_detectability", "discrepancy_confusion",
     "reprocess_scaling", "bridge_speed", "bridge_uncertainty",
 )
@@ -43,6 +44,9 @@ FULL_EXTRA = {
     "ident_accuracy": (
         ("--part", "tunnel", "--rows", "turbulent", "--tunnel-mode", "both",
          "--turbulent-estimator", "ml", "--seeds", "20"),
+        ("--part", "tunnel", "--rows", "turbulent", "--tunnel-mode", "both",
+         "--turbulent-estimator", "ml", "--closed-loop-buffeting", "fourth-order",
+         "--seeds", "20"),
         ("--part", "tunnel", "--rows", "variants", "--turbulent-estimator", "ml",
          "--seeds", "20"),
         ("--part", "ablation", "--seeds", "10"),

@@ -8,7 +8,8 @@ Gaussian likelihood of every release at every wind speed together, over
 - Roger's coefficients ``A_k`` and lag roots ``d_l``, shared across speeds through the reduced
   frequency (:class:`~ident.model.rfc.RationalFunctionModel`);
 - per wind speed, the buffeting force as white noise through a second-order shaping filter per
-  force with the lift-moment correlation (:class:`~ident.identification.innovations.ShapingFilter`);
+  force (or several in cascade, ``shaping_sections``) with the lift-moment correlation
+  (:class:`~ident.identification.innovations.ShapingFilter`);
 - per release, the four channels' sensor-noise standard deviations;
 - per record, concentrated out by generalised least squares: the channels' constant offsets
   (mean wind load, static deflection, zero drift) and the initial state.
@@ -18,7 +19,10 @@ channels see the buffeting alone there, the displacement channels only noise. It
 present, never required.
 
 The model per release is :class:`~ident.identification.innovations.ReleaseModel` on the record
-averaged over blocks to about :data:`TARGET_FACTOR` times the highest still-air frequency. The
+averaged over blocks to about :data:`TARGET_FACTOR` times the highest still-air frequency; the
+block means are taken as samples of the state, or (``exact_block_means``) modelled as the means
+they are (:func:`~ident.identification.innovations.block_means`), whose output noise is then
+correlated with the process noise (:func:`~ident.identification.steady_predictor.decorrelated`). The
 likelihood is that of the steady-state Kalman predictor ``x_{k+1} = Phi x_k + K_p (y_k - C x_k)``,
 ``K_p = Phi P C^T S^-1`` with ``P`` from the discrete Riccati equation (:func:`riccati`): with
 the innovations ``e_k`` and their covariance ``S``,
@@ -558,7 +562,8 @@ def _initial(records: list[_Record], layout: _Layout, start: RationalFunctionMod
         rate = np.std(np.diff(force, axis=0), axis=0) * fs / np.maximum(
             np.std(force, axis=0), 1e-300)
         fc = np.clip(rate / (2.0 * math.pi), 0.5 * f_max, 5.0 * f_max)
-        # Later sections an octave apart above the first, each with a zero near its corner.
+        # Later sections an octave apart above the first, each with a zero an octave above
+        # its own natural frequency.
         S = layout.sections
         f = fc[:, None] * 2.0 ** np.arange(S)[None, :]
         zeros = ZERO_START / (2.0 * math.pi * f) if S > 1 else None

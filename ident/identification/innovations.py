@@ -262,7 +262,7 @@ class ReleaseModel:
 
     @property
     def n_states(self) -> int:
-        """Number of states: the aeroelastic ones and the shaping filter's four."""
+        """Number of states: the aeroelastic ones and the shaping filter's."""
         return int(self.Phi.shape[0])
 
     def initial_state(self, h0: float, alpha0: float) -> FloatArray:
