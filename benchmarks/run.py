@@ -49,6 +49,8 @@ FULL_EXTRA = {
          "--seeds", "20"),
         ("--part", "tunnel", "--rows", "variants", "--turbulent-estimator", "ml",
          "--seeds", "20"),
+        ("--part", "tunnel", "--rows", "variants", "--turbulent-estimator", "ml",
+         "--closed-loop-buffeting", "fourth-order", "--seeds", "20"),
         ("--part", "ablation", "--seeds", "10"),
     ),
     "flutter_crb": (("--deck", "bluff"),),
