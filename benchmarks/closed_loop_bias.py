@@ -119,10 +119,7 @@ def run(args):
     elapsed = time.perf_counter() - began
     if found.speed is None:
         return source, name, seed, math.inf, math.nan, fit.converged, elapsed
-    dU_dA, dU_dd = fl.speed_sensitivity(section, fit.model, found.speed, found.frequency)
-    gradient = np.array([dU_dA[k, i, j] for k, i, j in fit.parameter_index]
-                        + list(dU_dd * fit.model.d))
-    std = math.sqrt(max(float(gradient @ fit.covariance @ gradient), 0.0))
+    std = ia.fisher_flutter_std(section, fit, found)
     return (source, name, seed, found.speed / U_F - 1.0, std / U_F, fit.converged, elapsed)
 
 

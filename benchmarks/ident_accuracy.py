@@ -501,11 +501,15 @@ def ablation_run(args):
         return row, name, np.inf, np.nan
     if found.speed is None:
         return row, name, np.inf, np.nan
+    return row, name, found.speed / U_F - 1.0, fisher_flutter_std(section, fit, found) / U_F
+
+
+def fisher_flutter_std(section, fit, found):
+    """Return the flutter speed's std (m/s) from a closed-loop fit's Fisher covariance."""
     dU_dA, dU_dd = fl.speed_sensitivity(section, fit.model, found.speed, found.frequency)
     gradient = np.array([dU_dA[k, i, j] for k, i, j in fit.parameter_index]
                         + list(dU_dd * fit.model.d))
-    std = math.sqrt(max(float(gradient @ fit.covariance @ gradient), 0.0))
-    return row, name, found.speed / U_F - 1.0, std / U_F
+    return math.sqrt(max(float(gradient @ fit.covariance @ gradient), 0.0))
 
 
 def ablation_part(seeds, workers, rows=("plate, Jones, Iw 1 %", "bluff deck, Iw 1 %")):
