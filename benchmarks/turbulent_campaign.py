@@ -18,7 +18,9 @@ About 4 minutes per seed (wind on 225 s).
 likelihood (``turbulent_estimator = "ml"``, holds of 5 s as extra data): two releases at 0.4 and
 0.6 U_F, then :mod:`daq.campaign.adaptive` chooses each next speed (4-10.5 m/s, within the
 safety bound) and how many releases to take there (1-4, by the predicted gain per wind-on
-second), until the std is within ``--target`` of U_F (2 %) or 8 speeds.
+second; ``--max-releases``, 4), until the std is within ``--target`` of U_F (2 %) or
+``--max-speeds`` (8); ``--closed-loop-buffeting fourth-order`` fits the fourth-order buffeting
+model (written to ``turbulent_campaign_adaptive_fourth_order``).
 
 Run: ``.venv/bin/python benchmarks/turbulent_campaign.py [--seeds 1 2 3] [--iw 0.01]
 [--adaptive [--target 0.02]] [--log FILE] [--speeds 0.4,0.6,0.8] [--releases 2] [--hold 11]
@@ -72,6 +74,7 @@ decay_s = {decay}
 settle_s = 1.0
 calz_end = false
 turbulent_estimator = "ml"
+closed_loop_buffeting = "{buffeting}"
 
 [speeds]
 wind_speeds = [{speeds}]
@@ -82,11 +85,12 @@ candidate_min = 4.0
 candidate_max = 10.5
 candidate_step = 0.5
 max_speeds = {max_speeds}
-max_releases_per_speed = 4
+max_releases_per_speed = {max_releases}
 """
 #: Options whose default differs in a quick run: (fixed plan, adaptive plan, --quick).
 DEFAULTS = {"speeds": ("0.4,0.6,0.8", "0.4,0.6", "0.4,0.6"), "releases": (2, 2, 1),
-            "hold": (11.0, 5.0, 1.0), "decay": (20.0, 20.0, 5.0), "max_speeds": (8, 8, 3)}
+            "hold": (11.0, 5.0, 1.0), "decay": (20.0, 20.0, 5.0), "max_speeds": (8, 8, 3),
+            "max_releases": (4, 4, 4)}
 
 
 def rig_text(seed: int, iw: float) -> str:
@@ -132,6 +136,11 @@ def main() -> None:
                         help="s of decay recorded per release (20; --quick: 5)")
     parser.add_argument("--max-speeds", type=int, default=None,
                         help="--adaptive: most speeds in all (8; --quick: 3)")
+    parser.add_argument("--max-releases", type=int, default=None,
+                        help="--adaptive: most releases at one chosen speed (4)")
+    parser.add_argument("--closed-loop-buffeting", choices=("second-order", "fourth-order"),
+                        default="second-order",
+                        help="--adaptive: the closed-loop estimator's buffeting model")
     result_files.add_arguments(parser)
     args = parser.parse_args()
     column = 2 if args.quick else 1 if args.adaptive else 0
@@ -151,8 +160,9 @@ def main() -> None:
         values = {"speeds": speeds, "releases": args.releases, "hold": args.hold,
                   "decay": args.decay}
         if args.adaptive:
-            plan = parse_plan(ADAPTIVE_PLAN.format(target=args.target,
-                                                   max_speeds=args.max_speeds, **values),
+            plan = parse_plan(ADAPTIVE_PLAN.format(
+                target=args.target, max_speeds=args.max_speeds, max_releases=args.max_releases,
+                buffeting=args.closed_loop_buffeting, **values),
                               "adaptive turbulent plan")
         else:
             plan = parse_plan(PLAN.format(**values), "turbulent plan")
@@ -185,7 +195,8 @@ def main() -> None:
         table.append((seed, n, truth, speed, std, err, cover, estimator, steps,
                       outcome.wind_on_s, outcome.stopped_because))
     what = (f"adaptive to a {100 * args.target:g} % std, closed-loop ML "
-            f"({args.hold:g} s holds, {args.decay:g} s decays)" if args.adaptive else
+            f"({args.closed_loop_buffeting} buffeting model; {args.hold:g} s holds, "
+            f"{args.decay:g} s decays)" if args.adaptive else
             f"{len(fractions)} speeds x {args.releases} release{'s' * (args.releases != 1)} "
             f"({args.hold:g} s hold, {args.decay:g} s decay)")
     print(f"\nflat plate, Iw {100 * args.iw:g} %, {what}, recorded on the simulated rig")
@@ -208,8 +219,11 @@ def _write(args: argparse.Namespace, what: str, table: list[tuple[object, ...]],
         warnings.append(f"The holds ({args.hold:g} s) are too short for the refined-IV "
                         "branch's noise model; the closed-loop branch (the plan's default "
                         "estimator) takes holds as optional data.")
+    name = "turbulent_campaign_adaptive" if args.adaptive else "turbulent_campaign"
+    if args.adaptive and args.closed_loop_buffeting != "second-order":
+        name += "_" + args.closed_loop_buffeting.replace("-", "_")
     result_files.write(
-        "turbulent_campaign_adaptive" if args.adaptive else "turbulent_campaign",
+        name,
         "E2RFC in turbulence end to end on the simulated rig",
         [result_files.Table(
             f"Flat plate, Iw {100 * args.iw:g} %, {what}, recorded on the simulated rig: per "
@@ -224,7 +238,10 @@ def _write(args: argparse.Namespace, what: str, table: list[tuple[object, ...]],
                     "target std": args.target if args.adaptive else None,
                     "speeds (fractions of U_F)": fractions, "releases per speed": args.releases,
                     "hold (s)": args.hold, "decay (s)": args.decay,
-                    "max speeds": args.max_speeds if args.adaptive else None},
+                    "max speeds": args.max_speeds if args.adaptive else None,
+                    "max releases per speed": args.max_releases if args.adaptive else None,
+                    "closed-loop buffeting": (args.closed_loop_buffeting if args.adaptive
+                                              else None)},
         notes=[f"The campaigns took {wall:.0f} s of wall time in all: the rig runs in real "
                "time, every instrument simulated in a process of its own.",
                "The same seed gives a different campaign each time: the gust field is fixed by "

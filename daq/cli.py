@@ -107,6 +107,10 @@ def _build_parser() -> argparse.ArgumentParser:
                       help="rows of --table, U/(f B) (default: the releases' span)")
     p_id.add_argument("--turbulent-estimator", choices=("iv", "ml"),
                       help="in turbulence: closed-loop ML (default; 2-DOF) or refined IV")
+    p_id.add_argument("--closed-loop-buffeting", choices=("second-order", "fourth-order"),
+                      help="closed-loop ML's buffeting model: second-order (default) or "
+                           "fourth-order (less biased with many releases per speed, about "
+                           "twice the time)")
 
     p_diag = sub.add_parser(
         "diagnose",
@@ -572,7 +576,8 @@ def _dispatch(args: argparse.Namespace) -> int:
                             tubing_correction=not args.no_tubing_correction, route=args.route,
                             detect_releases=args.detect_releases, table_path=args.table,
                             reduced_velocities=args.reduced_velocities,
-                            turbulent_estimator=args.turbulent_estimator)
+                            turbulent_estimator=args.turbulent_estimator,
+                            closed_loop_buffeting=args.closed_loop_buffeting)
     if args.command == "reprocess":
         return _reprocess(args)
     if args.command == "diagnose":

@@ -34,6 +34,9 @@ The plan (units SI; the example plans are ``rig_configs/plans/*.toml``)::
     turbulent_estimator = "ml"  # releases in turbulence: "ml" (closed-loop maximum
                                 # likelihood; holds optional; 2-DOF, a 3-DOF section runs
                                 # "iv") or "iv" (refined IV, needs the holds)
+    closed_loop_buffeting = "second-order"  # the "ml" estimator's buffeting model:
+                                # "second-order" or "fourth-order" (less biased with many
+                                # releases per speed, about twice the time)
 
     [speeds]
     wind_speeds = [5.0, 7.0]    # m/s; or fan_rpm = [500, 700] (set-points, rpm), not both
@@ -92,6 +95,8 @@ RELEASES = ("auto", "plc", "manual")
 IDENTIFICATIONS = ("e2rfc", "displacement")
 #: E2RFC's estimators of releases in turbulence (``e2rfc.TURBULENT_ESTIMATORS``).
 TURBULENT_ESTIMATORS = ("iv", "ml")
+#: The closed-loop estimator's buffeting models (``e2rfc.CLOSED_LOOP_BUFFETING_MODELS``).
+CLOSED_LOOP_BUFFETINGS = ("second-order", "fourth-order")
 #: Fewest wind speeds the displacement-only route identifies from (its known weakness).
 DISPLACEMENT_MIN_SPEEDS = 3
 MAX_RELEASES_PER_SPEED = 20
@@ -180,6 +185,9 @@ class CampaignPlan:
     turbulent_estimator : str
         E2RFC's estimator of releases in turbulence, ``"ml"`` (default) or ``"iv"``
         (:func:`ident.identification.e2rfc.identify`).
+    closed_loop_buffeting : str
+        The closed-loop estimator's buffeting model, ``"second-order"`` (default) or
+        ``"fourth-order"`` (:func:`ident.identification.e2rfc.identify`).
     """
 
     mode: str
@@ -200,6 +208,7 @@ class CampaignPlan:
     release: str = "auto"
     identification: str = "e2rfc"
     turbulent_estimator: str = "ml"
+    closed_loop_buffeting: str = "second-order"
 
     def release_method(self, config: RigConfig) -> str:
         """Return how this plan releases on ``config``: ``"plc"`` or ``"manual"``."""
@@ -327,7 +336,8 @@ def parse_plan(text: str, source: str = "<string>") -> CampaignPlan:
     check_keys(c, where, {"mode"}, {"releases_per_speed", "decay_s", "settle_s",
                                     "steady_tolerance", "pause_s", "calz_start", "calz_end",
                                     "files", "decay_end", "hold_s", "release",
-                                    "identification", "turbulent_estimator"})
+                                    "identification", "turbulent_estimator",
+                                    "closed_loop_buffeting"})
     mode = c["mode"]
     if mode not in MODES:
         raise ConfigError(f"{where} mode = {mode!r}; allowed: {', '.join(MODES)}")
@@ -357,6 +367,10 @@ def parse_plan(text: str, source: str = "<string>") -> CampaignPlan:
     if estimator not in TURBULENT_ESTIMATORS:
         raise ConfigError(f"{where} turbulent_estimator = {estimator!r}; allowed: "
                           f"{', '.join(TURBULENT_ESTIMATORS)}")
+    buffeting = c.get("closed_loop_buffeting", "second-order")
+    if buffeting not in CLOSED_LOOP_BUFFETINGS:
+        raise ConfigError(f"{where} closed_loop_buffeting = {buffeting!r}; allowed: "
+                          f"{', '.join(CLOSED_LOOP_BUFFETINGS)}")
 
     where = f"{source} [speeds]"
     s = data["speeds"]
@@ -402,7 +416,7 @@ def parse_plan(text: str, source: str = "<string>") -> CampaignPlan:
                         pause_s=pause_s, calz_start=calz_start, calz_end=calz_end,
                         adaptive=adaptive, source=source, files=files, decay_end=decay_end,
                         hold_s=hold_s, release=release, identification=identification,
-                        turbulent_estimator=estimator)
+                        turbulent_estimator=estimator, closed_loop_buffeting=buffeting)
 
 
 def load_plan(path: str | Path) -> CampaignPlan:

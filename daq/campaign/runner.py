@@ -189,7 +189,8 @@ def _analysis(runs: list[RunFile], plan: CampaignPlan) -> CampaignAnalysis | Non
     if len(distinct_wind_speeds([r.U for r in releases])) < 2:
         return None
     return analyze_campaign(releases, campaign_section(runs), table=False,
-                            turbulent_estimator=plan.turbulent_estimator)
+                            turbulent_estimator=plan.turbulent_estimator,
+                            closed_loop_buffeting=plan.closed_loop_buffeting)
 
 
 def _truth_speed(config: RigConfig) -> float | None:

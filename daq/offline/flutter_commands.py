@@ -36,7 +36,8 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
                  n_lags: int | None = None, tubing_correction: bool = True,
                  route: str = "auto", detect_releases: bool = False,
                  table_path: Path | None = None, reduced_velocities: str | None = None,
-                 turbulent_estimator: str | None = None) -> int:
+                 turbulent_estimator: str | None = None,
+                 closed_loop_buffeting: str | None = None) -> int:
     """Identify the releases of run files and print the model and flutter speed; return 0.
 
     Parameters
@@ -64,6 +65,8 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
     turbulent_estimator : {"iv", "ml"}, optional
         The estimator of releases in turbulence (default: E2RFC's, closed-loop maximum
         likelihood, :mod:`ident.identification.closed_loop_ml`); ``"iv"``: refined IV.
+    closed_loop_buffeting : {"second-order", "fourth-order"}, optional
+        The closed-loop estimator's buffeting model (default E2RFC's, second-order).
     """
     from daq.offline.derivative_table import (
         check_model_dof,
@@ -107,7 +110,8 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
           f"{sorted({round(r.U, 2) for r in releases})} m/s{tubing_note(runs)}")
     try:
         analysis = analyze_campaign(releases, section, n_lags=n_lags, table=False,
-                                    turbulent_estimator=turbulent_estimator)
+                                    turbulent_estimator=turbulent_estimator,
+                                    closed_loop_buffeting=closed_loop_buffeting)
     except ValueError as exc:
         if section.n_dof == 2 or isinstance(exc, IdentError):
             raise

@@ -153,7 +153,7 @@ class CampaignAnalysis:
 def analyze_campaign(
     releases: Sequence[Release], section: SectionModel, *, n_lags: int | None = None,
     with_A3: bool | None = None, table: bool = True, U_max: float | None = None,
-    turbulent_estimator: str | None = None,
+    turbulent_estimator: str | None = None, closed_loop_buffeting: str | None = None,
 ) -> CampaignAnalysis:
     """Identify a campaign's releases and analyse the model (see the module docstring).
 
@@ -174,6 +174,8 @@ def analyze_campaign(
     turbulent_estimator : {"iv", "ml"}, optional
         The estimator of releases in turbulence (:func:`ident.identification.e2rfc.identify`;
         None: its default).
+    closed_loop_buffeting : {"second-order", "fourth-order"}, optional
+        The closed-loop estimator's buffeting model (the same function's; None: its default).
 
     Returns
     -------
@@ -186,7 +188,8 @@ def analyze_campaign(
     """
     releases = list(releases)
     model = e2rfc.identify(releases, section, n_lags=n_lags, with_A3=with_A3,
-                           turbulent_estimator=turbulent_estimator)
+                           turbulent_estimator=turbulent_estimator,
+                           closed_loop_buffeting=closed_loop_buffeting)
     try:
         flutter, uncertainty = model.analysis(section, U_max)
     except _flutter.StillAirModesError as exc:

@@ -156,6 +156,7 @@ def identify(
     n_lags: int | None = None,
     with_A3: bool | None = None,
     turbulent_estimator: str | None = None,
+    closed_loop_buffeting: str | None = None,
 ) -> IdentifiedModel:
     """Identify the rational-function model of the self-excited forces from releases (E2RFC).
 
@@ -173,6 +174,11 @@ def identify(
         The estimator of releases in turbulence (default :data:`TURBULENT_ESTIMATOR`, "ml"):
         closed-loop maximum likelihood (two degrees of freedom; a 3-DOF section runs refined IV
         and says so), or refined IV with the holds' noise model. Smooth flow ignores it.
+    closed_loop_buffeting : {"second-order", "fourth-order"}, optional
+        The closed-loop estimator's buffeting model (default :data:`CLOSED_LOOP_BUFFETING`):
+        one second-order shaping section per force on block means taken as samples, or two
+        sections on exact block means (less biased with many releases per speed, about twice
+        the time; :data:`CLOSED_LOOP_BUFFETING_MODELS`). Ignored by the other estimators.
 
     Returns
     -------
@@ -227,19 +233,23 @@ def identify(
     if estimator not in TURBULENT_ESTIMATORS:
         raise ValueError(f"turbulent_estimator must be one of {TURBULENT_ESTIMATORS}, got "
                          f"{turbulent_estimator!r}")
+    buffeting = CLOSED_LOOP_BUFFETING if closed_loop_buffeting is None else closed_loop_buffeting
+    if buffeting not in CLOSED_LOOP_BUFFETING_MODELS:
+        raise ValueError(f"closed_loop_buffeting must be one of "
+                         f"{tuple(CLOSED_LOOP_BUFFETING_MODELS)}, got {closed_loop_buffeting!r}")
     model = _identify_prepared(prepared, section, n_lags, with_A3)
-    return _guarded(_turbulence_branch(model, releases, section, n_lags, with_A3, estimator),
-                    prepared, section, guards)
+    return _guarded(_turbulence_branch(model, releases, section, n_lags, with_A3, estimator,
+                                       buffeting), prepared, section, guards)
 
 
 def _turbulence_branch(model: IdentifiedModel, releases: list[Release], section: SectionModel,
                        n_lags: int | None, with_A3: bool | None,
-                       estimator: str) -> IdentifiedModel:
+                       estimator: str, buffeting: str) -> IdentifiedModel:
     """Return E2RFC's model, or in turbulence the branch's (or a note on holds)."""
     if not model.diagnostics.turbulent:
         return model
     if estimator == "ml" and section.n_dof == 2:
-        return _closed_loop(model, releases, section)
+        return _closed_loop(model, releases, section, buffeting)
     if estimator == "ml":
         note = ("closed-loop maximum likelihood identifies 2-DOF sections only: the refined-IV "
                 "estimator ran on these 3-DOF releases")
@@ -324,8 +334,8 @@ def _turbulent_model(model: IdentifiedModel, releases: list[Release], section: S
                      "reduced": reduced, "finer": None})
 
 
-def _closed_loop(model: IdentifiedModel, releases: list[Release], section: SectionModel
-                 ) -> IdentifiedModel:
+def _closed_loop(model: IdentifiedModel, releases: list[Release], section: SectionModel,
+                 buffeting: str) -> IdentifiedModel:
     """Refit E2RFC's turbulent releases by closed-loop maximum likelihood from its estimate.
 
     The structure is :data:`CLOSED_LOOP_LAGS` lags with A3 estimated; the covariance is the
@@ -336,7 +346,7 @@ def _closed_loop(model: IdentifiedModel, releases: list[Release], section: Secti
     speeds joins the std (:attr:`E2RFCDiagnostics.cross_check`).
     """
     base = model.diagnostics
-    sections, exact = CLOSED_LOOP_BUFFETING_MODELS[CLOSED_LOOP_BUFFETING]
+    sections, exact = CLOSED_LOOP_BUFFETING_MODELS[buffeting]
     try:
         fit = closed_loop_ml.fit_closed_loop(releases, section, model, with_A3=True,
                                              n_lags=CLOSED_LOOP_LAGS, shaping_sections=sections,

@@ -63,6 +63,10 @@ def test_defaults_and_candidates():
     # E2RFC's.
     assert plan_module.TURBULENT_ESTIMATORS == e2rfc.TURBULENT_ESTIMATORS
     assert plan.turbulent_estimator == e2rfc.TURBULENT_ESTIMATOR
+    assert plan_module.CLOSED_LOOP_BUFFETINGS == tuple(e2rfc.CLOSED_LOOP_BUFFETING_MODELS)
+    assert plan.closed_loop_buffeting == e2rfc.CLOSED_LOOP_BUFFETING
+    assert parse_plan(FIXED.replace("decay_s = 5.0", 'decay_s = 5.0\nclosed_loop_buffeting = '
+                                    '"fourth-order"')).closed_loop_buffeting == "fourth-order"
     assert parse_plan(FIXED.replace("decay_s = 5.0", 'decay_s = 5.0\nturbulent_estimator = "iv"')
                       ).turbulent_estimator == "iv"
     assert plan.hold_s == 0.5  # daq.procedure.HOLD_S, the console's
@@ -101,6 +105,8 @@ def test_fan_set_points_become_wind_speeds():
      r"\[campaign\] hold_s = 0.0 is outside the allowed range \[0.1, 600.0\]"),
     ("decay_s = 5.0", 'decay_s = 5.0\nturbulent_estimator = "kalman"',
      r"\[campaign\] turbulent_estimator = 'kalman'; allowed: iv, ml"),
+    ("decay_s = 5.0", 'decay_s = 5.0\nclosed_loop_buffeting = "white"',
+     r"\[campaign\] closed_loop_buffeting = 'white'; allowed: second-order, fourth-order"),
 ])
 def test_fixed_plan_errors_name_the_key(old, new, match):
     assert old in FIXED

@@ -410,6 +410,9 @@ def test_the_estimator_is_chosen_by_name_and_a_3dof_section_says_which_ran():
     releases, _, _ = own_model_releases(seed=1, duration=2.0, fs=200.0)
     with pytest.raises(ValueError, match=r"turbulent_estimator must be one of \('iv', 'ml'\)"):
         e2rfc.identify(releases, PLATE, turbulent_estimator="kalman")
+    with pytest.raises(ValueError, match=r"closed_loop_buffeting must be one of "
+                       r"\('second-order', 'fourth-order'\), got 'sixth-order'"):
+        e2rfc.identify(releases, PLATE, closed_loop_buffeting="sixth-order")
     sway = PLATE.replace(fp=1.3, zeta_p=0.004)
     truth = flat_plate.jones_model().with_sway(quasi_steady_model(StaticCoefficients.flat_plate()))
     U_F = fl.analyze(sway, truth).speed
