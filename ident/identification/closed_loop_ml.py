@@ -30,8 +30,11 @@ the innovations ``e_k`` and their covariance ``S``,
     -log L = sum_records [ n/2 (4 log 2 pi + log det S) + 1/2 sum_k e_k^T S^-1 e_k ].
 
 It maximises it by Fisher scoring with Levenberg-Marquardt damping. The derivatives of
-``e_k`` and ``S`` come by forward differences (the Riccati solution's change from a Stein
-equation, :meth:`SteadyPredictor.perturbed`), and the Fisher information is
+``e_k`` and ``S`` come from forward differences of the model's matrices, carried through the
+predictor to first order (the Riccati solution's change from a Stein equation, the
+innovations' from one pass of the base predictor's filter for all parameters together:
+:meth:`SteadyPredictor.change`, :meth:`SteadyPredictor.innovation_changes`), and the Fisher
+information is
 
     F_ij = sum_k de_k/dth_i^T S^-1 de_k/dth_j + n/2 tr(S^-1 dS/dth_i S^-1 dS/dth_j),
 
@@ -62,7 +65,12 @@ import numpy.typing as npt
 
 from ident.identification.innovations import ReleaseModel, ShapingFilter, block_means, discretise
 from ident.identification.results import distinct_wind_speeds
-from ident.identification.steady_predictor import SteadyPredictor, decorrelated, neg_log_likelihood
+from ident.identification.steady_predictor import (
+    PredictorChange,
+    SteadyPredictor,
+    decorrelated,
+    neg_log_likelihood,
+)
 from ident.identification.uncertainty import nearest_wind_speed
 from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel
@@ -663,20 +671,22 @@ class _Objective:
             W = np.linalg.inv(np.linalg.cholesky(S))
             Q, _ = np.linalg.qr(at.columns[r])
             params = self.layout.affecting(record)
-            D = np.empty((len(params), e.size))
-            Sw = np.empty((len(params), 4, 4))
+            changes, steps = [], np.empty(len(params))
             for row, p in enumerate(params):
                 h = STEP * max(1.0, abs(theta[p]))
                 shifted = theta.copy()
                 shifted[p] += h
                 try:
-                    predictor = self._perturbed(base, shifted, record)
-                except ValueError:  # at the edge of the stable models: a backward difference
+                    change = self._change(base, shifted, record)
+                except ValueError:  # at the edge of the models: a backward difference
                     h, shifted[p] = -h, theta[p] - h
-                    predictor = self._perturbed(base, shifted, record)
-                e1 = predictor.innovations(record.y, nuisance)
-                D[row] = (((e1 - e) / h) @ W.T).ravel()
-                Sw[row] = W @ ((predictor.S - S) / h) @ W.T
+                    change = self._change(base, shifted, record)
+                changes.append(change)
+                steps[row] = h
+            de = base.innovation_changes(record.y, nuisance, changes) / steps[:, None, None]
+            D = (de @ W.T).reshape(len(params), e.size)
+            Sw = np.stack([W @ ((c.S - S) / h) @ W.T for c, h in zip(changes, steps,
+                                                                      strict=True)])
             D_perp = D - (D @ Q) @ Q.T
             n_k = e.shape[0]
             idx = np.array(params)
@@ -688,15 +698,11 @@ class _Objective:
                        - 0.5 * np.einsum("iab,ba->i", Sw, Ew))
         return F, g
 
-    def _perturbed(self, base: SteadyPredictor, theta: FloatArray, record: _Record
-                   ) -> SteadyPredictor:
-        """Return the predictor at ``theta``, its Riccati solution from ``base``'s (1st order)."""
+    def _change(self, base: SteadyPredictor, theta: FloatArray, record: _Record
+                ) -> PredictorChange:
+        """Return the predictor's change from ``base`` at ``theta`` (first order)."""
         Phi, Qd, C, R, gain = self.matrices(theta, record)
-        try:
-            return base.perturbed(Phi, Qd, C, R, feedthrough=gain)
-        except ValueError:  # the first order left the stable predictors (a lightly damped
-            # mode near the unit circle): solve exactly
-            return SteadyPredictor(Phi, Qd, C, R, feedthrough=gain)
+        return base.change(Phi, Qd, C, R, feedthrough=gain)
 
     def whiteness(self, at: _Evaluation) -> FloatArray:
         """Largest autocorrelation of each record's standardised innovations, lags 1-20."""

@@ -5,21 +5,23 @@ steady-state predictor is ``x_{k+1} = Phi x_k + Kp e_k`` with the innovations
 ``e_k = y_k - C x_k``, ``Kp = Phi P C^T S^-1``, ``S = C P C^T + R`` and ``P`` the stabilising
 solution of the discrete Riccati equation (:func:`riccati`). :class:`SteadyPredictor` runs it
 in the modal coordinates of ``Phi - Kp C``, concentrates a record's constant offsets and
-initial state out by least squares, and gives the Riccati solution of a nearby model to first
-order (the Fisher information's forward differences, :mod:`ident.identification.closed_loop_ml`);
+initial state out by least squares, and gives a nearby model's predictor and innovations to
+first order (the Fisher information's derivatives, :mod:`ident.identification.closed_loop_ml`);
 :func:`neg_log_likelihood` is ``-log L`` of the innovations.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 from scipy.signal import lfilter
 
-__all__ = ["RICCATI_ITERATIONS", "SteadyPredictor", "decorrelated", "neg_log_likelihood",
-           "riccati"]
+__all__ = ["RICCATI_ITERATIONS", "PredictorChange", "SteadyPredictor", "decorrelated",
+           "neg_log_likelihood", "riccati"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -94,6 +96,26 @@ def decorrelated(Phi: FloatArray, Qd: FloatArray, C: FloatArray, R: FloatArray, 
     return Phi - G @ C, 0.5 * (Qd_u + Qd_u.T), G
 
 
+@dataclass(frozen=True)
+class PredictorChange:
+    """A nearby predictor, to first order (:meth:`SteadyPredictor.change`).
+
+    Attributes
+    ----------
+    P, S : ndarray
+        Its Riccati solution and innovation covariance.
+    closed_loop, gain, C : ndarray
+        The changes of the closed loop ``Phi - Kp C``, of the gain (with any feedthrough) and
+        of the output matrix.
+    """
+
+    P: FloatArray
+    S: FloatArray
+    closed_loop: FloatArray
+    gain: FloatArray
+    C: FloatArray
+
+
 class SteadyPredictor:
     """The steady-state Kalman predictor of one model, in modal coordinates.
 
@@ -124,23 +146,25 @@ class SteadyPredictor:
         self.P = riccati(Phi, C, Qd, R) if P is None else P
         self.S = C @ self.P @ C.T + R
         self.Kp = Phi @ self.P @ C.T @ np.linalg.inv(self.S)
-        self.lam, self.V = np.linalg.eig(Phi - self.Kp @ C)
+        self.closed_loop = Phi - self.Kp @ C
+        self.lam, self.V = np.linalg.eig(self.closed_loop)
         if np.max(np.abs(self.lam)) >= 1.0:
             raise ValueError("the predictor is unstable")
         self.V_inv = np.linalg.inv(self.V)
-        gain = self.Kp if feedthrough is None else self.Kp + feedthrough
-        self.drive = self.V_inv @ gain
+        self.gain = self.Kp if feedthrough is None else self.Kp + feedthrough
+        self.drive = self.V_inv @ self.gain
         self.CV = C @ self.V
         self.n_x, self.n_y = Phi.shape[0], C.shape[0]
         # The matrix is real, so its complex modes come in conjugate pairs (LAPACK returns
         # them adjacent, with conjugate vectors): the recursion of the one with positive
         # imaginary part, doubled, stands for both.
         self.run = np.flatnonzero(self.lam.imag >= 0.0)
-        self.CV_run = self.CV[:, self.run] * np.where(self.lam[self.run].imag > 0.0, 2.0, 1.0)
+        self.doubling = np.where(self.lam[self.run].imag > 0.0, 2.0, 1.0)
+        self.CV_run = self.CV[:, self.run] * self.doubling
 
-    def perturbed(self, Phi: FloatArray, Qd: FloatArray, C: FloatArray, R: FloatArray,
-                  feedthrough: FloatArray | None = None) -> SteadyPredictor:
-        """Return the predictor of nearby matrices, its Riccati solution to first order.
+    def change(self, Phi: FloatArray, Qd: FloatArray, C: FloatArray, R: FloatArray,
+               feedthrough: FloatArray | None = None) -> PredictorChange:
+        """Return how the predictor changes for nearby matrices, to first order.
 
         The change ``dP`` of the Riccati solution solves the Stein equation
         ``dP = Phi_c dP Phi_c^T + M`` with ``Phi_c = Phi - Kp C`` (this predictor's, already
@@ -152,17 +176,22 @@ class SteadyPredictor:
 
         For a forward difference this is as exact as solving the Riccati equation again (its
         error is of the second order in the step, like the difference's own), at a tenth of
-        the cost.
+        the cost; the nearby predictor is neither diagonalised nor checked for stability (its
+        innovations' change comes from this one's filter, :meth:`innovation_changes`).
         """
         dPhi, dC = Phi - self.Phi, C - self.C
-        Pc = self.P @ (self.Phi - self.Kp @ self.C).T
+        Pc = self.P @ self.closed_loop.T
         M = (dPhi @ Pc + Pc.T @ dPhi.T - Pc.T @ dC.T @ self.Kp.T - self.Kp @ dC @ Pc
              + (Qd - self.Qd) + self.Kp @ (R - self.R) @ self.Kp.T)
         M_modal = self.V_inv @ M @ self.V_inv.conj().T
         Y = M_modal / (1.0 - self.lam[:, None] * self.lam.conj()[None, :])
         dP = (self.V @ Y @ self.V.conj().T).real
-        return SteadyPredictor(Phi, Qd, C, R, P=self.P + 0.5 * (dP + dP.T),
-                               feedthrough=feedthrough)
+        P = self.P + 0.5 * (dP + dP.T)
+        S = C @ P @ C.T + R
+        Kp = Phi @ P @ C.T @ np.linalg.inv(S)
+        gain = Kp if feedthrough is None else Kp + feedthrough
+        return PredictorChange(P=P, S=S, closed_loop=(Phi - Kp @ C) - self.closed_loop,
+                               gain=gain - self.gain, C=dC)
 
     def innovations(self, y: FloatArray, nuisance: FloatArray | None = None) -> FloatArray:
         """Innovations of ``y`` (n, n_y) less offsets ``nuisance[:n_y]``, from ``nuisance[n_y:]``.
@@ -170,6 +199,52 @@ class SteadyPredictor:
         ``x_{k+1} = Phi x_k + Kp e_k`` in modal coordinates ``z = V^-1 x``: one first-order
         recursion per real mode or conjugate pair, run by scipy's lfilter in C.
         """
+        u, z = self._modal_states(y, nuisance)
+        return np.asarray(u - (z @ self.CV_run.T).real, dtype=float)
+
+    def innovation_changes(self, y: FloatArray, nuisance: FloatArray,
+                           changes: Sequence[PredictorChange]) -> FloatArray:
+        """First-order changes of the innovations for each change, the nuisance held.
+
+        With ``x_{k+1} = Phi_c x_k + K u_k`` and ``e_k = u_k - C x_k`` (``u`` the record less
+        its offsets, ``K`` the gain, ``Phi_c`` the closed loop), a change moves the states by
+        ``dx_{k+1} = Phi_c dx_k + dPhi_c x_k + dK u_k`` (``dx_0 = 0``: the initial state is
+        held) and the innovations by ``de_k = -dC x_k - C dx_k``. Every change runs through
+        this predictor's own modes, so all of them take one filter pass per mode rather than
+        one predictor each.
+
+        Returns
+        -------
+        ndarray, shape (len(changes), n, n_y)
+        """
+        u, z = self._modal_states(y, nuisance)
+        x = (z @ (self.V[:, self.run] * self.doubling).T).real  # (n, n_x)
+        n, n_p, n_run = y.shape[0], len(changes), self.run.size
+        project = self.V_inv[self.run]  # (n_run, n_x): into the run modes
+        # The modal inputs of every change at once, time along the last (contiguous) axis
+        # and real and imaginary parts by real products: rows (mode, change).
+        from_x = np.stack([project @ c.closed_loop for c in changes], axis=1)
+        from_u = np.stack([project @ c.gain for c in changes], axis=1)
+        from_x, from_u = from_x.reshape(n_run * n_p, -1), from_u.reshape(n_run * n_p, -1)
+        xT, uT = np.ascontiguousarray(x[:-1].T), np.ascontiguousarray(u[:-1].T)
+        beta_re = (from_x.real @ xT + from_u.real @ uT).reshape(n_run, n_p, n - 1)
+        beta_im = (from_x.imag @ xT + from_u.imag @ uT).reshape(n_run, n_p, n - 1)
+        dz = np.zeros((n_run, n_p, n), dtype=complex)
+        for column, m in enumerate(self.run):
+            root = self.lam[m]
+            if root.imag == 0.0:  # a real mode: real arithmetic, half the work
+                dz[column, :, 1:] = lfilter([1.0], [1.0, -root.real], beta_re[column], axis=-1)
+            else:
+                dz[column, :, 1:] = lfilter([1.0], [1.0, -root],
+                                            beta_re[column] + 1j * beta_im[column], axis=-1)
+        C_dx = (self.CV_run @ dz.reshape(n_run, n_p * n)).real.reshape(self.n_y, n_p, n)
+        d_C = np.stack([c.C for c in changes], axis=1).reshape(self.n_y * n_p, -1)
+        de = -(d_C @ x.T).reshape(self.n_y, n_p, n) - C_dx
+        return np.ascontiguousarray(np.moveaxis(de, 0, -1))
+
+    def _modal_states(self, y: FloatArray, nuisance: FloatArray | None
+                      ) -> tuple[FloatArray, FloatArray]:
+        """Return ``u`` (the record less its offsets) and the modal states ``z`` (run modes)."""
         n_y = self.n_y
         offsets = np.zeros(n_y) if nuisance is None else nuisance[:n_y]
         z0 = (np.zeros(self.n_x, dtype=complex) if nuisance is None
@@ -185,7 +260,7 @@ class SteadyPredictor:
             else:
                 drive, start = beta[:, column], z0[m]
             z[1:, column] = lfilter([1.0], [1.0, -root], drive, zi=[root * start])[0]
-        return np.asarray(u - (z @ self.CV_run.T).real, dtype=float)
+        return u, z
 
     def concentrated(self, y: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Innovations with the offsets and the initial state at their GLS estimates.
