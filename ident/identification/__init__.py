@@ -10,9 +10,14 @@
 - :mod:`~ident.identification.innovations`: a release in turbulence as a discrete state-space
   model (buffeting through a shaping filter, sensor noise) and its exact likelihood from a
   Kalman filter's innovations;
+- :mod:`~ident.identification.steady_predictor`: the steady-state Kalman predictor, its
+  likelihood and its first-order changes;
+- :mod:`~ident.identification.closed_loop_ml`: closed-loop maximum likelihood of releases in
+  turbulence (the turbulence branch's default);
 - :mod:`~ident.identification.campaign`: one campaign's analysis for the front ends.
 
 E2RFC's private machinery: ``_regressors`` (per-release regressors), ``_e2rfc_problem`` (the
 stacked problem and its structure search), ``_stacked`` and ``_full_rows`` (its residuals,
-Jacobians and Gram matrices), ``_turbulent_fit`` (the turbulence branch).
+Jacobians and Gram matrices), ``_turbulent_fit`` (the refined-IV turbulence branch);
+``_closed_loop_parameters`` (the closed-loop fit's records, parameter layout and start).
 """

@@ -19,7 +19,7 @@ import pytest
 import scipy.linalg
 
 from ident import Release, SectionModel
-from ident.identification import closed_loop_ml, e2rfc, steady_predictor
+from ident.identification import _closed_loop_parameters, closed_loop_ml, e2rfc, steady_predictor
 from ident.identification.innovations import ReleaseModel, ShapingFilter, kalman_filter
 from ident.identification.results import IdentifiedModel
 from ident.model import flat_plate
@@ -164,10 +164,10 @@ def test_channel_offsets_are_concentrated_out():
     """A constant added to every channel (a zero drift, a mean load) leaves log L unchanged."""
     releases, truth, _ = own_model_releases(seed=5, duration=6.0, fs=200.0)
     section, speeds = PLATE, closed_loop_ml.distinct_wind_speeds([r.U for r in releases])
-    records = closed_loop_ml._records(releases[:2], section, speeds, 4.0, True)
-    layout = closed_loop_ml._Layout(2, truth.n_lags, True, len(speeds), 2)
+    records = _closed_loop_parameters.records(releases[:2], section, speeds, 4.0, True)
+    layout = _closed_loop_parameters.Layout(2, truth.n_lags, True, len(speeds), 2)
     objective = closed_loop_ml._Objective(records, section, layout)
-    theta = closed_loop_ml._initial(records, layout, truth, section, 4.0)
+    theta = _closed_loop_parameters.initial(records, layout, truth, section, 4.0)
     before = objective.evaluate(theta).nll
     for record in records:
         record.y = record.y + np.array([1e-3, 0.01, 0.5, 0.05])
@@ -361,10 +361,11 @@ def test_a_channel_measured_almost_without_noise_is_not_trusted_beyond_the_floor
             releases.append(Release(t=np.arange(1200) / 200.0, h=y[:, 0], alpha=y[:, 1],
                                     lift=y[:, 2], moment=y[:, 3], U=U))
     fit = closed_loop_ml.fit_closed_loop(releases, PLATE, truth, n_lags=2)
-    factor = closed_loop_ml._factor(200.0, max(PLATE.fh, PLATE.fa))
+    factor = _closed_loop_parameters.block_size(200.0, max(PLATE.fh, PLATE.fa))
     for r, noise in zip(releases, fit.noise_std, strict=True):
-        y = closed_loop_ml._decimate(np.column_stack([r.h, r.alpha, r.lift, r.moment]), factor)
-        floor = closed_loop_ml.NOISE_FLOOR * np.std(y, axis=0)
+        y = _closed_loop_parameters.decimate(np.column_stack([r.h, r.alpha, r.lift, r.moment]),
+                                             factor)
+        floor = _closed_loop_parameters.NOISE_FLOOR * np.std(y, axis=0)
         assert np.all(noise >= floor * (1 - 1e-9))
         np.testing.assert_allclose(noise[:2], floor[:2], rtol=1e-6)
         assert np.all(noise[2:] > floor[2:])
