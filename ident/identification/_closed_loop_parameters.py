@@ -85,6 +85,7 @@ class Layout:
         self.log_lag_range = (-math.inf, math.inf)
 
     def model(self, theta: FloatArray) -> RationalFunctionModel:
+        """Return the rational-function model of ``theta``'s aerodynamic part."""
         A = np.zeros((3 + self.n_lags, self.n_dof, self.n_dof))
         for value, (k, i, j) in zip(theta[:self.n_A], self.index, strict=True):
             A[k, i, j] = value

@@ -133,6 +133,8 @@ TURBULENT_ESTIMATORS = ("iv", "ml")
 #: Lags of the closed-loop branch. Measured (plate, 1 % turbulence, 6 seeds): from E2RFC's
 #: own lag count (none in turbulence) every flutter speed came out low, -3 to -13 %; with two
 #: (Jones's count) the errors fall on both sides, -7 to +1 %, within their standard deviations.
+#: On the bluff deck (ten lags in truth) a third raised log L by 26-35 but left the errors as
+#: they were, at twice the time (docs/development/e2rfc_turbulence.md).
 CLOSED_LOOP_LAGS = 2
 #: The closed-loop branch's buffeting model (``fit_closed_loop``'s options, by name): one
 #: second-order section per force on block means taken as samples, or two sections on exact
