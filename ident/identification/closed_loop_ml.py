@@ -342,7 +342,7 @@ def _maximise(objective: _Objective, layout: Layout, theta: FloatArray, current:
 
 
 class _Objective:
-    """-log L of every record and its Fisher information, by forward differences."""
+    """-log L of every record and its Fisher information (derivatives to first order)."""
 
     def __init__(self, records: list[Record], section: SectionModel, layout: Layout,
                  exact_block_means: bool = False) -> None:

@@ -204,7 +204,7 @@ class SteadyPredictor:
 
     def innovation_changes(self, y: FloatArray, nuisance: FloatArray,
                            changes: Sequence[PredictorChange]) -> FloatArray:
-        """First-order changes of the innovations for each change, the nuisance held.
+        """Return the first-order changes of the innovations for each change, nuisance held.
 
         With ``x_{k+1} = Phi_c x_k + K u_k`` and ``e_k = u_k - C x_k`` (``u`` the record less
         its offsets, ``K`` the gain, ``Phi_c`` the closed loop), a change moves the states by
@@ -213,9 +213,19 @@ class SteadyPredictor:
         this predictor's own modes, so all of them take one filter pass per mode rather than
         one predictor each.
 
+        Parameters
+        ----------
+        y : ndarray, shape (n, n_y)
+            The record, in its channels' units.
+        nuisance : ndarray, shape (n_y + n_x,)
+            Its offsets and initial state (:meth:`concentrated`), held.
+        changes : sequence of PredictorChange
+            From :meth:`change`.
+
         Returns
         -------
         ndarray, shape (len(changes), n, n_y)
+            The innovations' changes, in the channels' units.
         """
         u, z = self._modal_states(y, nuisance)
         x = (z @ (self.V[:, self.run] * self.doubling).T).real  # (n, n_x)
