@@ -391,8 +391,13 @@ class _DeviceCheck:
 
 # -- per kind ------------------------------------------------------------------------------------
 def _clocked(check: _DeviceCheck, readings: list[Reading], nominal_hz: float,
-             found: _Findings) -> None:
-    """Rate on the device's clock, and the device clock against the host's."""
+             found: _Findings, read: Callable[[float], Reading] | None = None) -> None:
+    """Rate on the device's clock, and the device clock against the host's.
+
+    A clock ratio out of tolerance is measured once more on a second window (``read``, the
+    device's streaming read) before it counts: a clock that is wrong is wrong again, while a
+    host busy through one half of a window (a loaded test machine measured 1.24) is not.
+    """
     found.nominal_rate_hz = float(nominal_hz)
     if not readings:
         found.problems.append(f"no data within {check.window_s:g} s")
@@ -412,7 +417,13 @@ def _clocked(check: _DeviceCheck, readings: list[Reading], nominal_hz: float,
     if off > check.limits.rate_tolerance:
         found.problems.append(f"rate {found.rate_hz:.1f} Hz, configured {nominal_hz:g} Hz")
     ratio = _clock_ratio(host, device)
-    if not abs(ratio - 1.0) <= check.limits.clock_rate_tolerance:
+    tolerance = check.limits.clock_rate_tolerance
+    if not abs(ratio - 1.0) <= tolerance and read is not None:
+        first, ratio = ratio, _restreamed_ratio(check, read)
+        if abs(ratio - 1.0) <= tolerance:
+            found.notes.append(f"its clock ran at {first:.3f} x the host's over the first "
+                               f"window and {ratio:.4f} x over a second: the host was busy")
+    if not abs(ratio - 1.0) <= tolerance:
         found.problems.append(f"device clock runs at {ratio:.3f} x the host's")
     base = str(readings[-1].info.get("time_base", ""))
     if base == "ptp" or (not base and device[-1] > _ABSOLUTE_TIME_S):
@@ -427,6 +438,21 @@ def _clocked(check: _DeviceCheck, readings: list[Reading], nominal_hz: float,
         found.notes.append("frame times start at 0 with the scan: no PTP time")
     else:
         found.clock = f"free-running, t = {device[-1]:.3f} s, rate x{ratio:.4f}"
+
+
+def _streaming_read(driver: Any) -> Callable[[float], Reading]:
+    """Return ``read(timeout_s)`` of a streaming driver."""
+    return lambda timeout_s: driver.read(timeout_s=timeout_s)
+
+
+def _restreamed_ratio(check: _DeviceCheck, read: Callable[[float], Reading]) -> float:
+    """Return the clock ratio over a second window (nan without enough samples)."""
+    readings = [r for r in check.stream(read) if r.device_time is not None]
+    if sum(r.counter.size for r in readings) < 3:
+        return float("nan")
+    device = np.concatenate([r.device_time for r in readings])
+    host = np.concatenate([r.host_time_ns for r in readings]) * 1e-9
+    return _clock_ratio(host, device)
 
 
 def _clock_ratio(host: np.ndarray, device: np.ndarray) -> float:
@@ -482,8 +508,9 @@ def _laser(check: _DeviceCheck, driver: Any, found: _Findings) -> None:
     info = driver.info()
     found.identity = ", ".join(
         f"{key.lower()} {info[key]}" for key in ("Name", "Serial", "Version") if key in info)
-    readings = check.stream(lambda t: driver.read(timeout_s=t))
-    _clocked(check, readings, float(check.inst.settings["rate_hz"]), found)
+    read = _streaming_read(driver)
+    readings = check.stream(read)
+    _clocked(check, readings, float(check.inst.settings["rate_hz"]), found, read)
     if not readings:
         return
     distance = np.concatenate([r.channels["distance"] for r in readings])
@@ -555,8 +582,9 @@ def _analog(check: _DeviceCheck, driver: Any, found: _Findings) -> None:
     info = driver.info()
     found.identity = ", ".join(f"{key.lower()} {info[key]}" for key in ("Name", "Version")
                                if key in info)
-    readings = check.stream(lambda t: driver.read(timeout_s=t))
-    _clocked(check, readings, float(check.inst.settings["rate_hz"]), found)
+    read = _streaming_read(driver)
+    readings = check.stream(read)
+    _clocked(check, readings, float(check.inst.settings["rate_hz"]), found, read)
     if not readings:
         return
     described = driver.describe()
