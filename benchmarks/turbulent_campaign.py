@@ -23,10 +23,11 @@ second; ``--max-releases``, 4), until the std is within ``--target`` of U_F (2 %
 model (written to ``turbulent_campaign_adaptive_fourth_order``).
 
 Run: ``.venv/bin/python benchmarks/turbulent_campaign.py [--seeds 1 2 3] [--iw 0.01]
-[--adaptive [--target 0.02]] [--log FILE] [--speeds 0.4,0.6,0.8] [--releases 2] [--hold 11]
-[--decay 20] [--max-speeds 8]`` (the fixed plan's speeds as fractions of U_F, its releases per
-speed, each release's hold and decay in s; the adaptive plan's first two speeds, its largest
-number of speeds). ``--quick`` (CI): one seed, a campaign of two speeds (0.4 and 0.6 U_F; E2RFC
+[--adaptive [--target 0.02] [--max-speeds 8] [--max-releases 4] [--closed-loop-buffeting
+fourth-order]] [--log FILE] [--speeds 0.4,0.6,0.8] [--releases 2] [--hold 11] [--decay 20]``
+(the fixed plan's speeds as fractions of U_F, its releases per speed, each release's hold and
+decay in s; the adaptive plan's first two speeds, its largest number of speeds and of releases
+at one speed). ``--quick`` (CI): one seed, a campaign of two speeds (0.4 and 0.6 U_F; E2RFC
 says nothing before two) with one release each, a hold of 1 s and a decay of 5 s (the adaptive
 one: holds of 1 s, decays of 5 s, at most three speeds), which the turbulence branch identifies
 without holds: the same rig, drivers, recorder and files, about a minute of wall time where a
