@@ -34,7 +34,9 @@ RATE_HZ = 4000.0
 class TimedLaser:
     """A laser whose samples arrive ``latency(t)`` after their device time ``clock * t``.
 
-    ``t`` is host time since the driver opened, s; ``clock`` the device clock's rate against
+    ``t`` is host time since the first read, s (not since the driver opened: how long the
+    check takes to start reading depends on the host's load, and the backlog must cover the
+    first half of the first window whatever it is); ``clock`` the device clock's rate against
     the host's (1: a sound clock).
     """
 
@@ -46,9 +48,8 @@ class TimedLaser:
         self.sent = 0
 
     def open(self) -> None:
-        """Open the transport and start the device's clock."""
+        """Open the transport."""
         self.transport.open()
-        self.opened_ns = time.monotonic_ns()
 
     def close(self) -> None:
         """Close the transport."""
@@ -69,6 +70,8 @@ class TimedLaser:
 
     def read(self, timeout_s: float = 1.0) -> Reading:
         """Return every sample that has arrived by now (waiting 10 ms for more)."""
+        if not self.opened_ns:  # the device's clock starts with the first read
+            self.opened_ns = time.monotonic_ns()
         time.sleep(0.01)
         now_s = (time.monotonic_ns() - self.opened_ns) * 1e-9
         k = np.arange(self.sent, self.sent + int(2 * RATE_HZ))
