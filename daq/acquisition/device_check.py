@@ -475,7 +475,7 @@ def _scanner(check: _DeviceCheck, driver: Any, found: _Findings) -> None:
     state = driver.status()
     driver.start()
     try:
-        readings = check.stream(lambda t: driver.read(timeout_s=t))
+        readings = check.stream(_streaming_read(driver))
     finally:
         driver.stop()
     serials = [s for s in driver.serial_numbers if s is not None]
