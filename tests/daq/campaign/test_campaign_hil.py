@@ -185,7 +185,10 @@ def test_the_plans_hold_is_recorded_and_read_back_as_each_releases_hold(tmp_path
         with h5py.File(path, "r") as f:
             events = f["/entry/events"][:]
             sync_time = f["/entry/sync/time"][:]
-            late = ~np.isfinite(f["/entry/sync/lift"][:])
+            # A release's columns (those the reader reads a hold of), NaN where a late
+            # instrument's block left a row without its data.
+            late = ~np.all([np.isfinite(f[f"/entry/sync/{name}"][:])
+                            for name in ("h", "alpha", "lift", "moment")], axis=0)
         release_time = next(float(row["time"]) for row in events if row["kind"] == b"release")
         arm = min(float(row["time"]) for row in events if row["kind"] == b"arm")
         # The plan's hold, as the file records it: armed 11 s before the release, plus the
@@ -195,13 +198,16 @@ def test_the_plans_hold_is_recorded_and_read_back_as_each_releases_hold(tmp_path
         assert 11.0 <= release_time - arm < 2 * 11.0
         # Read back from 0.25 s after the arm to 0.05 s before the release (10.7 s), less a
         # sync row or two at each end: 10.74 s measured. Rows that a busy host's late scanner
-        # blocks left without forces (NaN in /entry/sync, 0.42 s once) are not a hold's: the
-        # hold starts after the last of them.
+        # or laser blocks left without data (NaN in /entry/sync, 0.42 s once) are not a hold's:
+        # the hold starts after the last of them (a CI run once read 6.96 s where the forces
+        # alone would have left 7.86: a laser's late rows came after the scanner's).
         window = (sync_time >= arm + 0.25) & (sync_time < release_time - 0.05)
         lost = float(np.sum(late & window)) * float(np.median(np.diff(sync_time)))
         start = max(arm + 0.25, float(sync_time[late & window].max(initial=-np.inf)))
         assert release.hold.duration == pytest.approx(release_time - 0.05 - start, abs=0.02)
-        assert 8.0 <= release.hold.duration < 2 * 11.0 - 0.3  # not the default 0.5 s nor 2 x 11
+        # Not the default 0.5 s hold (0.2 s read back) nor 2 x 11 s; late rows 3 s into the
+        # hold were seen on a loaded host, hence 5 s and not 10.
+        assert 5.0 <= release.hold.duration < 2 * 11.0 - 0.3
         assert lost < 1.0  # late rows are a moment's, not the hold's
     # The wind-on time counts the holds: two speeds of at least 11 s + 3 s.
     assert outcome.wind_on_s is not None and outcome.wind_on_s > 2 * 14.0
