@@ -19,5 +19,6 @@
 E2RFC's private machinery: ``_regressors`` (per-release regressors), ``_e2rfc_problem`` (the
 stacked problem and its structure search), ``_stacked`` and ``_full_rows`` (its residuals,
 Jacobians and Gram matrices), ``_turbulent_fit`` (the refined-IV turbulence branch);
-``_closed_loop_parameters`` (the closed-loop fit's records, parameter layout and start).
+``_closed_loop_parameters`` (the closed-loop fit's records, parameter layout and start),
+``_closed_loop_starts`` (more starts when its first maximum contradicts the releases).
 """

@@ -74,7 +74,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ident.errors import RankDeficiencyError
-from ident.identification import _turbulent_fit, closed_loop_ml
+from ident.identification import _closed_loop_starts, _turbulent_fit, closed_loop_ml
 from ident.identification._e2rfc_problem import FinalFit, Problem, improves
 from ident.identification._regressors import PreparedRelease, prepare
 from ident.identification.modal import ModalFit
@@ -349,15 +349,16 @@ def _closed_loop(model: IdentifiedModel, releases: list[Release], section: Secti
     """
     base = model.diagnostics
     sections, exact = CLOSED_LOOP_BUFFETING_MODELS[buffeting]
+    refit = partial(closed_loop_ml.fit_closed_loop, releases, section, with_A3=True,
+                    n_lags=CLOSED_LOOP_LAGS, shaping_sections=sections, exact_block_means=exact)
     try:
-        fit = closed_loop_ml.fit_closed_loop(releases, section, model, with_A3=True,
-                                             n_lags=CLOSED_LOOP_LAGS, shaping_sections=sections,
-                                             exact_block_means=exact)
+        fit = refit(model)
     except ValueError as exc:
         note = (f"turbulence: the closed-loop likelihood could not start from E2RFC's estimate "
                 f"({exc}); E2RFC's own, biased low in turbulence, is kept")
         return IdentifiedModel(model.A, model.d,
                                replace(base, warnings=(*base.warnings, note)))
+    fit, restarted = _closed_loop_starts.search_again(fit, section, _bounded_at(releases), refit)
     speeds = distinct_wind_speeds([r.U for r in releases])
     below = [r for r in releases if r.U < speeds[-1] / (1 + DISTINCT_U_RTOL)]
 
@@ -392,7 +393,8 @@ def _closed_loop(model: IdentifiedModel, releases: list[Release], section: Secti
         condition_number=math.nan, covariance=fit.covariance,
         parameter_index=fit.parameter_index, alternatives=(),
         warnings=(*(w.replace(_SCATTER_STD, _FISHER_STD) for w in base.warnings), note,
-                  *fit.warnings, *checks), estimator=ESTIMATOR_CLOSED_LOOP,
+                  *([restarted] if restarted else []), *fit.warnings, *checks),
+        estimator=ESTIMATOR_CLOSED_LOOP,
         bounded_at=_bounded_at(releases),
         _lag_roots=fit.model.d,
         _refits={"jackknife": (), "release_jackknife": (), "finer": None,
