@@ -46,6 +46,10 @@ class SpeedStep:
     resumed : bool
         Read back from an earlier session (not known to have decayed: its file may be the
         one a growing decay stopped).
+    flutter_std_parts : dict of str to float or None
+        The std's parts after this speed, by their JSON names
+        (:meth:`~ident.identification.uncertainty.FlutterUncertainty.parts`), m/s: which part
+        moved when the std did.
     """
 
     index: int
@@ -58,6 +62,7 @@ class SpeedStep:
     wind_on_s: float | None = None
     paths: list[Path] = field(default_factory=list)
     resumed: bool = False
+    flutter_std_parts: dict[str, float] | None = None
 
     def __post_init__(self) -> None:
         if not self.paths:

@@ -53,6 +53,15 @@ def _number(x: float | None) -> float | None:
     return None if x is None or not math.isfinite(x) else float(x)
 
 
+def _largest_part(parts: dict[str, float | None] | None) -> str:
+    """Return the std's largest part as ``"release scatter 0.412"`` ("" without parts)."""
+    known = {name: value for name, value in (parts or {}).items() if value}
+    if not known:
+        return ""
+    name = max(known, key=lambda k: known[k] or 0.0)
+    return f"{name.replace('_', ' ')} {known[name]:.3f}"
+
+
 def report_dict(outcome: CampaignOutcome) -> dict[str, Any]:
     """Return the JSON content of ``campaign.json`` (module docstring)."""
     U_F, std = outcome.flutter_speed, outcome.flutter_std
@@ -70,6 +79,9 @@ def report_dict(outcome: CampaignOutcome) -> dict[str, Any]:
                      "files": [path.name for path in s.paths], "releases": s.releases,
                      "why": s.why, "flutter_speed": _number(s.flutter_speed),
                      "flutter_speed_std": _number(s.flutter_std),
+                     "flutter_speed_std_parts": (
+                         None if s.flutter_std_parts is None
+                         else {k: _number(v) for k, v in s.flutter_std_parts.items()}),
                      "wind_on_s": s.wind_on_s} for s in outcome.steps],
         "choices": [{"speed": c.speed, "releases": c.releases, "reason": c.reason,
                      "current_std": _number(c.current_std),
@@ -132,14 +144,15 @@ def _markdown(data: dict[str, Any], paths: dict[str, Path]) -> str:
     lines.append(headline + ".")
     lines += ["", f"Stopped because: {data['stopped_because']}", "",
               f"Wind on {data['wind_on_s']:.1f} s, wall time {data['wall_s']:.1f} s.", "",
-              "| # | U (m/s) | releases | U_F after (m/s) | std (m/s) | wind on (s) | why |",
-              "|---|---|---|---|---|---|---|"]
+              "| # | U (m/s) | releases | U_F after (m/s) | std (m/s) | its largest part (m/s) "
+              "| wind on (s) | why |",
+              "|---|---|---|---|---|---|---|---|"]
     for h in data["history"]:
         uf = "" if h["flutter_speed"] is None else f"{h['flutter_speed']:.3f}"
         sd = "" if h["flutter_speed_std"] is None else f"{h['flutter_speed_std']:.3f}"
         on = "" if h["wind_on_s"] is None else f"{h['wind_on_s']:.1f}"
-        lines.append(f"| {h['index']} | {h['U']:.2f} | {h['releases']} | {uf} | {sd} | {on} | "
-                     f"{h['why']} |")
+        lines.append(f"| {h['index']} | {h['U']:.2f} | {h['releases']} | {uf} | {sd} | "
+                     f"{_largest_part(h.get('flutter_speed_std_parts'))} | {on} | {h['why']} |")
     lines.append("")
     if data["choices"]:
         lines += ["Adaptive decisions (predicted std of the flutter speed after releases at each "

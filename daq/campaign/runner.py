@@ -431,6 +431,10 @@ def _say_estimate(say: Callable[[str], None], analysis: CampaignAnalysis | None)
         std = analysis.flutter_std or math.nan
         say(f"E2RFC: flutter speed {analysis.flutter_speed:.3f} +- {std:.3f} m/s "
             f"({100 * std / analysis.flutter_speed:.2f} %), {analysis.structure}")
+        # Which parts make the std (a jump at a new speed is one part's, and says which).
+        parts = analysis.uncertainty.parts()
+        say("  std parts (m/s): " + ", ".join(
+            f"{name.replace('_', ' ')} {value:.3f}" for name, value in parts.items() if value))
 
 
 def _record_speed(session: _Session, outcome: CampaignOutcome, index: int, U: float, why: str,
@@ -612,6 +616,8 @@ def _update(session: _Session, outcome: CampaignOutcome, step: SpeedStep) -> Non
     if outcome.analysis is not None:
         step.flutter_speed = outcome.analysis.flutter_speed
         step.flutter_std = outcome.analysis.flutter_std
+        if outcome.analysis.flutter_speed is not None:
+            step.flutter_std_parts = outcome.analysis.uncertainty.parts()
 
 
 def _modes(run: RunFile) -> list[str]:

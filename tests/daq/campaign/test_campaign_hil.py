@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import _thread
 import json
+import math
 from pathlib import Path
 
 import h5py
@@ -107,6 +108,13 @@ def test_adaptive_campaign_reaches_its_target_near_the_truth(tmp_path, capsys):
     # seen: 0.129 then 0.137 m/s.)
     stds = [h["flutter_speed_std"] for h in report["history"] if h["flutter_speed_std"]]
     assert len(stds) == len(speeds) - 1 and stds[-1] == pytest.approx(std)
+    for h in report["history"]:  # each std is its parts combined (FlutterUncertainty.total)
+        if h["flutter_speed_std"]:
+            parts = h["flutter_speed_std_parts"]
+            statistical = parts["release_scatter"] or parts["noise"]
+            systematic = [v for k, v in parts.items() if k not in ("noise", "release_scatter")]
+            assert math.hypot(statistical, *systematic) == pytest.approx(
+                h["flutter_speed_std"], rel=1e-9)
     assert 0 < report["wind_on_s"] < report["wall_s"]
     for name in ("campaign_std_history.png", "campaign_flutter.png",
                  "campaign_flutter_derivatives.png", "campaign.md"):
