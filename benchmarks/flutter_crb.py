@@ -21,6 +21,13 @@ only" keeps the first term alone (what an estimator that treats the random respo
 reach). The random response starts at rest at the release and the DFT treats it as stationary:
 the bound is slightly optimistic.
 
+A hold before a release (``hold_s``; the model held still in the wind, the taps reading the
+buffeting force itself) adds the Whittle information of its force spectrum to the release's
+nuisance parameters, which the two share: the hold tells the estimator the buffeting spectrum
+it would otherwise have to learn from the motion. A release listed twice at a speed (the same
+hold) is computed once and counted twice. ``benchmarks/ident_accuracy.py`` prints the bound of
+its own rows' releases beside their errors through :func:`flutter_speed_bound`.
+
 For the flat plate every coefficient of the Roger model and both lag roots are unknown, as E2RFC
 fits them. For the bluff deck (``--deck bluff``; its entries have lags of their own, ten in all)
 its own structure is known to the bound: its nonzero coefficients and every lag root unknown, its
@@ -59,6 +66,9 @@ import result_files  # noqa: E402 - beside this script
 PLATE = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
 HOLDS = ((0.004, 0.02), (-0.003, 0.012))
 FRACTIONS = (0.4, 0.6, 0.8)
+#: Seconds of the hold in the wind before each release in the table's last column (as
+#: ``ident_accuracy.py``'s turbulence rows).
+HOLD_S = 10.0
 
 
 def vertical_gusts(Iw: float) -> TurbulenceSpec:
@@ -89,12 +99,65 @@ def _decay(section: SectionModel, model: RationalFunctionModel, U: float, hold: 
     return np.fft.rfft(channels, axis=0)[1:-1], channels.std(axis=0)
 
 
+def _hold_transfer(section: SectionModel, n_freq: int) -> np.ndarray:
+    """``T``, shape (K, 4, 2), of a held model: the taps read the buffeting force itself."""
+    T = np.zeros((n_freq, 4, 2))
+    T[:, 2, 0] = 1.0 / section.B
+    T[:, 3, 1] = 1.0
+    return T
+
+
+def _mean_information(dM: np.ndarray, S_inv: np.ndarray) -> np.ndarray:
+    """Whittle information of the deterministic part: ``2 Re sum_k dM_k^H S_k^-1 dM_k``."""
+    weighted = np.einsum("kab,pkb->pka", S_inv, dM)
+    return 2 * np.real(np.einsum("pka,qka->pq", np.conj(dM), weighted))
+
+
+def _spectral_information(dS: np.ndarray, S_inv: np.ndarray) -> np.ndarray:
+    """Whittle information of the random part: ``sum_k tr(S_k^-1 dS_i S_k^-1 dS_j)``."""
+    R = np.einsum("kab,pkbc->pkac", S_inv, dS)
+    return np.real(np.einsum("pkab,qkba->pq", R, R))
+
+
 def flutter_speed_bound(section: SectionModel, model: RationalFunctionModel, Iw: float, *,
                         static: StaticCoefficients, fractions=FRACTIONS, holds=HOLDS,
                         duration: float = 20.0, fs: float = 500.0, noise: float = 0.02,
-                        span: float = 1.0, n_shape: int = 3, known_zeros: bool = False
-                        ) -> tuple[float, float, float]:
-    """Return the flutter speed and the bounds on its std, full and deterministic-only (m/s)."""
+                        span: float = 1.0, n_shape: int = 3, known_zeros: bool = False,
+                        hold_s: float = 0.0, gusts: TurbulenceSpec | None = None,
+                        f_max: float | None = None) -> tuple[float, float, float]:
+    """Return the flutter speed and the bounds on its std, full and deterministic-only (m/s).
+
+    Parameters
+    ----------
+    section, model : SectionModel, RationalFunctionModel
+        The truth the releases are simulated from.
+    Iw : float
+        Vertical turbulence intensity (of :func:`vertical_gusts`, unless ``gusts`` is given).
+    static : StaticCoefficients
+        Static coefficients of the quasi-steady buffeting.
+    fractions : sequence of float
+        Wind speeds as fractions of the flutter speed.
+    holds : sequence of (float, float)
+        Each release's initial ``(h0 m, alpha0 rad)`` at every speed: a hold listed twice is two
+        releases (their Fisher information is computed once).
+    duration, fs, noise, span : float
+        Release length (s), sample rate (Hz), white noise as a share of each channel's RMS, span
+        of the section model (m).
+    n_shape : int
+        Terms of the buffeting spectrum's shape, a nuisance per release.
+    known_zeros : bool
+        Whether the model's zero coefficients are known (its own structure) or every coefficient
+        of Roger's form is unknown.
+    hold_s : float
+        Seconds of the model held in the wind before each release, s (0: none). The taps read
+        the buffeting force itself then: the hold informs the release's buffeting spectrum (a
+        nuisance), not the aerodynamic coefficients.
+    gusts : TurbulenceSpec, optional
+        The turbulence, when not :func:`vertical_gusts` of ``Iw``.
+    f_max : float, optional
+        Highest frequency of the data, Hz (default: the Nyquist frequency): an estimator that
+        sees block means of the records sees only the band below their Nyquist frequency.
+    """
     result = fl.analyze(section, model)
     U_F = result.speed
     # Every coefficient unknown (Roger's form, as E2RFC fits it), or with ``known_zeros`` the
@@ -113,54 +176,35 @@ def flutter_speed_bound(section: SectionModel, model: RationalFunctionModel, Iw:
 
     n = int(round(duration * fs))
     f = np.fft.rfftfreq(n, 1 / fs)[1:-1]
-    x = np.log(f / f.mean())
-    x = (x - x.mean()) / x.std()
-    spec = vertical_gusts(Iw)
+    if f_max is not None:
+        f = f[f <= f_max]
+    log_mean = np.log(f / f.mean()).mean()
+    log_std = np.log(f / f.mean()).std()
+
+    def shape_x(freq: np.ndarray) -> np.ndarray:  # the same function of f for hold and release
+        return (np.log(freq / f.mean()) - log_mean) / log_std
+
+    spec = gusts if gusts is not None else vertical_gusts(Iw)
     n_nuisance = 3 + n_shape
     n_releases = len(fractions) * len(holds)
     size = n_theta + n_nuisance * n_releases
     F_full = np.zeros((size, size))
     F_mean = np.zeros((n_theta, n_theta))
+    n_hold = int(round(hold_s * fs))
     r = 0
     for fraction in fractions:
         U = fraction * U_F
-        Sb = buffeting_force_spectrum(spec, static, f, U=U, B=section.B, span=span,
-                                      rho=section.rho)[:, :2, :2] * n * fs / 2
-        Sb = Sb + 1e-6 * np.trace(Sb, axis1=1, axis2=2)[:, None, None] * np.eye(2)
+        cached: dict[tuple[float, float], tuple[np.ndarray, np.ndarray]] = {}
         for hold in holds:
-            M0, rms = _decay(section, model, U, hold, n, fs)
-            T0 = _transfer(section, model, U, f)
-            S = T0 @ Sb @ np.conj(np.swapaxes(T0, 1, 2)) + np.diag(n * (noise * rms) ** 2)
-            S_inv = np.linalg.inv(S)
-            dM, dS = [], []
-            for p in range(n_theta):
-                h = 1e-6 * max(1.0, abs(theta0[p]))
-                plus, minus = theta0.copy(), theta0.copy()
-                plus[p] += h
-                minus[p] -= h
-                m_plus, m_minus = with_theta(plus), with_theta(minus)
-                dM.append((_decay(section, m_plus, U, hold, n, fs)[0]
-                           - _decay(section, m_minus, U, hold, n, fs)[0]) / (2 * h))
-                T_plus, T_minus = (_transfer(section, m, U, f) for m in (m_plus, m_minus))
-                dS.append((T_plus @ Sb @ np.conj(np.swapaxes(T_plus, 1, 2))
-                           - T_minus @ Sb @ np.conj(np.swapaxes(T_minus, 1, 2))) / (2 * h))
-            # Nuisance: the spectrum's level (symmetric 2 x 2) and shape exp(sum c_j x^j).
-            for E in (np.array([[1, 0], [0, 0]]), np.array([[0, 1], [1, 0]]),
-                      np.array([[0, 0], [0, 1]])):
-                dM.append(np.zeros_like(M0))
-                dS.append(T0 @ (0.5 * (E @ Sb + Sb @ E)) @ np.conj(np.swapaxes(T0, 1, 2)))
-            for j in range(1, n_shape + 1):
-                dM.append(np.zeros_like(M0))
-                dS.append(T0 @ (Sb * (x**j)[:, None, None]) @ np.conj(np.swapaxes(T0, 1, 2)))
-            dM_arr, dS_arr = np.array(dM), np.array(dS)
-            weighted = np.einsum("kab,pkb->pka", S_inv, dM_arr)
-            F_m = 2 * np.real(np.einsum("pka,qka->pq", np.conj(dM_arr), weighted))
-            R = np.einsum("kab,pkbc->pkac", S_inv, dS_arr)
-            F_c = np.real(np.einsum("pkab,qkba->pq", R, R))
+            if hold not in cached:
+                cached[hold] = _release_information(
+                    section, model, with_theta, theta0, spec, static, U, hold, f, shape_x,
+                    n=n, fs=fs, noise=noise, span=span, n_shape=n_shape, n_hold=n_hold)
+            F, F_m = cached[hold]
             columns = list(range(n_theta)) + list(range(n_theta + n_nuisance * r,
                                                         n_theta + n_nuisance * (r + 1)))
-            F_full[np.ix_(columns, columns)] += F_m + F_c
-            F_mean += F_m[:n_theta, :n_theta]
+            F_full[np.ix_(columns, columns)] += F
+            F_mean += F_m
             r += 1
     dU_dA, dU_dd = fl.speed_sensitivity(section, model, U_F, result.frequency)
     g = np.concatenate([[dU_dA[a] for a in index], dU_dd * model.d])
@@ -168,6 +212,57 @@ def flutter_speed_bound(section: SectionModel, model: RationalFunctionModel, Iw:
     full = math.sqrt(g_full @ np.linalg.pinv(F_full) @ g_full)
     mean_only = math.sqrt(g @ np.linalg.pinv(F_mean) @ g)
     return float(U_F), full, mean_only
+
+
+def _release_information(section, model, with_theta, theta0, spec, static, U, hold, f, shape_x,
+                         *, n, fs, noise, span, n_shape, n_hold):
+    """Fisher information of one release (and its hold): full, and the decay's alone."""
+    n_theta = theta0.size
+
+    def spectrum(freq: np.ndarray, length: int) -> np.ndarray:
+        Sb = buffeting_force_spectrum(spec, static, freq, U=U, B=section.B, span=span,
+                                      rho=section.rho)[:, :2, :2] * length * fs / 2
+        return Sb + 1e-6 * np.trace(Sb, axis1=1, axis2=2)[:, None, None] * np.eye(2)
+
+    def nuisance_dS(T: np.ndarray, Sb: np.ndarray, x: np.ndarray) -> list[np.ndarray]:
+        """Spectral derivatives in the level (symmetric 2 x 2) and shape exp(sum c_j x^j)."""
+        TH = np.conj(np.swapaxes(T, 1, 2))
+        dS = [T @ (0.5 * (E @ Sb + Sb @ E)) @ TH
+              for E in (np.array([[1, 0], [0, 0]]), np.array([[0, 1], [1, 0]]),
+                        np.array([[0, 0], [0, 1]]))]
+        return dS + [T @ (Sb * (x**j)[:, None, None]) @ TH for j in range(1, n_shape + 1)]
+
+    Sb = spectrum(f, n)
+    _, rms = _decay(section, model, U, hold, n, fs)
+    T0 = _transfer(section, model, U, f)
+    S = T0 @ Sb @ np.conj(np.swapaxes(T0, 1, 2)) + np.diag(n * (noise * rms) ** 2)
+    dM, dS = [], []
+    for p in range(n_theta):
+        h = 1e-6 * max(1.0, abs(theta0[p]))
+        plus, minus = theta0.copy(), theta0.copy()
+        plus[p] += h
+        minus[p] -= h
+        m_plus, m_minus = with_theta(plus), with_theta(minus)
+        dM.append((_decay(section, m_plus, U, hold, n, fs)[0][:f.size]
+                   - _decay(section, m_minus, U, hold, n, fs)[0][:f.size]) / (2 * h))
+        T_plus, T_minus = (_transfer(section, m, U, f) for m in (m_plus, m_minus))
+        dS.append((T_plus @ Sb @ np.conj(np.swapaxes(T_plus, 1, 2))
+                   - T_minus @ Sb @ np.conj(np.swapaxes(T_minus, 1, 2))) / (2 * h))
+    nuisance = nuisance_dS(T0, Sb, shape_x(f))
+    S_inv = np.linalg.inv(S)
+    F_m = _mean_information(np.array(dM), S_inv)
+    F = _spectral_information(np.array(dS + nuisance), S_inv)
+    F[:n_theta, :n_theta] += F_m
+    if n_hold > 2:
+        f_hold = np.fft.rfftfreq(n_hold, 1 / fs)[1:-1]
+        f_hold = f_hold[f_hold <= f[-1]]
+        Sb_hold = spectrum(f_hold, n_hold)
+        T_hold = _hold_transfer(section, f_hold.size)
+        S_hold = (T_hold @ Sb_hold @ np.swapaxes(T_hold, 1, 2)
+                  + np.diag(n_hold * (noise * rms) ** 2))
+        dS_hold = np.array(nuisance_dS(T_hold, Sb_hold, shape_x(f_hold)))
+        F[n_theta:, n_theta:] += _spectral_information(dS_hold, np.linalg.inv(S_hold))
+    return F, F_m
 
 
 def main() -> None:
@@ -192,35 +287,41 @@ def main() -> None:
     print(f"{name} ({free} coefficients and {model.d.size} lag roots unknown), {n} releases of "
           "20 s at 500 Hz (0.4/0.6/0.8 U_F, 2 holds), 2 % noise.\n")
     print(f"{'Iw':>5}{'CRB std':>10}{'median |err| >=':>17}{'det. only':>11}"
-          f"{'releases for median 1 %':>26}")
+          f"{'releases for median 1 %':>26}{f'with {HOLD_S:g} s holds':>18}")
     rows = []
     for Iw in intensities:
         U_F, full, mean_only = flutter_speed_bound(section, model, Iw, static=static,
                                                    known_zeros=args.deck == "bluff")
+        _, held, _ = flutter_speed_bound(section, model, Iw, static=static,
+                                         known_zeros=args.deck == "bluff", hold_s=HOLD_S)
         # |error| of an efficient estimator is half-normal: its median is 0.674 std.
         needed = math.ceil(n * (0.674 * full / (0.01 * U_F)) ** 2)
         print(f"{100 * Iw:>4.0f}%{100 * full / U_F:>9.2f}%{100 * 0.674 * full / U_F:>16.2f}%"
-              f"{100 * mean_only / U_F:>10.2f}%{needed:>26d}")
+              f"{100 * mean_only / U_F:>10.2f}%{needed:>26d}{100 * held / U_F:>17.2f}%")
         rows.append((100 * Iw, U_F, 100 * full / U_F, 100 * 0.674 * full / U_F,
-                     100 * mean_only / U_F, needed))
+                     100 * mean_only / U_F, needed, 100 * held / U_F))
     table = result_files.Table(
         f"{name}: {free} coefficients and {model.d.size} lag roots unknown, {n} releases of 20 s "
         "at 500 Hz (0.4/0.6/0.8 U_F, 2 holds), 2 % noise; the Cramer-Rao bound on the flutter "
         "speed's std (as a share of U_F), the median absolute error of an estimator at the "
-        "bound, the bound from the deterministic decay alone, and the releases of 20 s a 1 % "
-        "median would need.",
+        "bound, the bound from the deterministic decay alone, the releases of 20 s a 1 % "
+        f"median would need, and the bound with a hold of {HOLD_S:g} s in the wind before each "
+        "release.",
         ("Iw (%)", "U_F (m/s)", "CRB std (%)", "median error at the bound (%)",
-         "deterministic only (%)", "releases for a 1 % median"),
+         "deterministic only (%)", "releases for a 1 % median",
+         f"CRB std with {HOLD_S:g} s holds (%)"),
         rows, formats={"Iw (%)": ".0f", "U_F (m/s)": ".3f", "CRB std (%)": ".2f",
                        "median error at the bound (%)": ".2f",
-                       "deterministic only (%)": ".2f"})
+                       "deterministic only (%)": ".2f",
+                       f"CRB std with {HOLD_S:g} s holds (%)": ".2f"})
     result_files.write(
         "flutter_crb" if args.deck == "plate" else f"flutter_crb_{args.deck}",
         f"Cramer-Rao bound of the flutter speed in turbulence ({args.deck})", [table],
         results=args.results, quick=args.quick, script="flutter_crb",
         parameters={"deck": args.deck, "iw": intensities, "fractions of U_F": list(FRACTIONS),
                     "holds": [f"h {h} m, alpha {a} rad" for h, a in HOLDS],
-                    "duration (s)": 20.0, "fs (Hz)": 500.0, "noise": 0.02, "shape terms": 3},
+                    "duration (s)": 20.0, "fs (Hz)": 500.0, "noise": 0.02, "shape terms": 3,
+                    "hold (s)": HOLD_S},
         notes=["The median error at the bound is the median of a half-normal error whose std "
                "is the bound's. The random response is treated as stationary from the "
                "release, so the bound is slightly optimistic."])

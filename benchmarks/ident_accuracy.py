@@ -102,6 +102,7 @@ from simulators.campaigns import scaled  # noqa: E402
 from simulators.decks import BLUFF_DECK, BLUFF_DECK_STATIC, bluff_deck_model  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import flutter_crb  # noqa: E402 - beside this script
 import result_files  # noqa: E402 - beside this script
 
 SECTIONS = {
@@ -386,6 +387,46 @@ def _tunnel_run(args):
             seed)
 
 
+#: Median of a half-normal error over its std: an estimator at the bound has this median error.
+HALF_NORMAL_MEDIAN = 0.6745
+
+
+def row_bound(args):
+    """Return the median error (share of U_F) of an estimator at the Cramer-Rao bound.
+
+    ``args``: the row and tunnel mode. The bound is ``flutter_crb.flutter_speed_bound``'s for
+    the row's releases: its speeds, releases per speed and their holds (initial displacements),
+    the hold in the wind before each (mode "after") or none, and its gust spectrum (Gaussian:
+    a non-Gaussian row's bound is its Gaussian twin's; physics the row adds, such as friction,
+    is not in it). The plate's Roger coefficients are all unknown to the bound, the bluff
+    deck's structure is known (its zeros), as in ``flutter_crb.py``. None for a row in smooth
+    flow.
+    """
+    row, mode = args
+    section, make_model, static, Iw, _, change = row_spec(row)
+    if not Iw:
+        return row, mode, None
+    model = make_model()
+    gusts = dataclasses.replace(vertical_gusts(Iw), **change.get("gusts", {}))
+    holds = [HOLDS[j % len(HOLDS)] for j in range(change.get("per_speed", len(HOLDS)))]
+    U_F, std, _ = flutter_crb.flutter_speed_bound(
+        section, model, Iw, static=static, fractions=E2RFC_SPEEDS, holds=holds,
+        known_zeros=make_model is bluff_deck_model, gusts=gusts,
+        hold_s=TUNNEL_HOLD_S if mode == "after" else 0.0)
+    return row, mode, HALF_NORMAL_MEDIAN * std / U_F
+
+
+def bound_note(seeds):
+    """Say how far the median of ``seeds`` errors of an estimator at the bound scatters."""
+    errors = np.abs(np.random.default_rng(0).normal(size=(100_000, seeds)))
+    low, high = np.percentile(np.median(errors, axis=1) / HALF_NORMAL_MEDIAN, [10, 90])
+    return (f"The bound's median error is {HALF_NORMAL_MEDIAN:.3f} times its std (a half-normal "
+            "error). Over "
+            f"{_count(seeds, 'seed')}, an estimator at the bound would show a median error "
+            f"between {low:.2f} and {high:.2f} times it in 80 % of rows (its sampling "
+            "scatter, by simulation): a ratio within that is as good as the bound.")
+
+
 def tunnel_rows(which="all", quick=False):
     """Return the names of the tunnel rows ``which`` asks (``quick``: one clean, one turbulent)."""
     names = (list(VARIANT_ROWS) if which == "variants" else
@@ -412,8 +453,11 @@ def tunnel_jobs(names, seeds, modes=("after",), a3="fitted-or-zero", first_seed=
             for seed in range(first_seed, first_seed + seeds)]
 
 
-def tunnel_report(found, names, seeds, modes):
-    """Print the tunnel runs ``found`` yields as they come, then their tables; return them."""
+def tunnel_report(found, names, seeds, modes, bounds):
+    """Print the tunnel runs ``found`` yields as they come, then their tables; return them.
+
+    ``bounds``: (row, mode) -> the median error at the Cramer-Rao bound (:func:`row_bound`).
+    """
     results = []
     # Each result printed as it arrives: a long run stopped halfway keeps what it measured.
     for result in found:
@@ -422,7 +466,8 @@ def tunnel_report(found, names, seeds, modes):
               f"{100 * std:7.2f} % {elapsed:5.1f} s{' branch' if branch else ''}",
               flush=True)
         results.append(result)
-    tables = [_tunnel_table([r for r in results if r[1] == mode], names, seeds, mode)
+    tables = [_tunnel_table([r for r in results if r[1] == mode], names, seeds, mode,
+                            {row: bounds[row, mode] for row in names})
               for mode in modes]
     # A failed identification (an exception, tunnel_run) is the one without a time.
     failed = [f"{r[0]} ({r[1]}) seed {r[6]}" for r in results if np.isnan(r[4])]
@@ -431,13 +476,14 @@ def tunnel_report(found, names, seeds, modes):
     return tables, warnings
 
 
-def _tunnel_table(results, names, seeds, mode):
+def _tunnel_table(results, names, seeds, mode, bounds):
     print(f"\nE2RFC in a real tunnel ({mode}): 3 wind speeds (0.4/0.6/0.8 U_F) x 2 releases "
           "(the variant rows: as named), 20 s"
           f" at 500 Hz, 2 % noise, turbulence rows with a {TUNNEL_HOLD_S:g} s hold before each "
           f"release; {seeds} seeds per row; std = IdentifiedModel.flutter's (total).\n")
-    header = (f"{'case':<26}{'|err| med':>10}{'|err| p90':>10}{'2-std cover':>12}"
-              f"{'std med':>9}{'time med':>10}{'no flutter':>11}{'branch':>10}")
+    header = (f"{'case':<26}{'|err| med':>10}{'at CRB':>8}{'ratio':>7}{'|err| p90':>10}"
+              f"{'2-std cover':>12}{'std med':>9}{'time med':>10}{'no flutter':>11}"
+              f"{'branch':>10}")
     print(header)
     print("-" * len(header))
     covered = total = 0
@@ -449,31 +495,39 @@ def _tunnel_table(results, names, seeds, mode):
         inside = np.isfinite(err) & (err <= 2 * std)
         covered += int(inside.sum())
         total += len(rows)
-        line = (row, np.median(err), np.percentile(err, 90), 100 * inside.mean(),
+        bound = None if bounds[row] is None else 100 * bounds[row]
+        ratio = None if bound is None else float(np.median(err)) / bound
+        line = (row, np.median(err), bound, ratio, np.percentile(err, 90), 100 * inside.mean(),
                 np.nanmedian(std), np.median([r[3] for r in rows]),
                 int(np.sum(~np.isfinite(err))), int(np.sum(np.isnan([r[3] for r in rows]))),
                 sum(r[4] for r in rows), int(inside.sum()), len(rows))
         table.append(line)
-        print(f"{row:<26}{line[1]:>9.2f}%{line[2]:>9.2f}%{line[3]:>11.0f}%{line[4]:>8.2f}%"
-              f"{line[5]:>9.2f}s{line[6]:>11d}{line[8]:>10d}")
+        at_bound = "n/a" if bound is None else f"{bound:.2f}%"
+        times = "n/a" if ratio is None else f"{ratio:.2f}"
+        print(f"{row:<26}{line[1]:>9.2f}%{at_bound:>8}{times:>7}{line[4]:>9.2f}%"
+              f"{line[5]:>11.0f}%{line[6]:>8.2f}%{line[7]:>9.2f}s{line[8]:>11d}{line[10]:>10d}")
     print(f"\ncoverage of the 2-std interval over all rows: {covered}/{total} "
           f"({100 * covered / total:.0f} %)")
-    table.append(("all rows", None, None, 100 * covered / total, None, None,
-                  sum(r[6] for r in table), sum(r[7] for r in table), sum(r[8] for r in table),
+    table.append(("all rows", None, None, None, None, 100 * covered / total, None, None,
+                  sum(r[8] for r in table), sum(r[9] for r in table), sum(r[10] for r in table),
                   covered, total))
-    columns = ("case", "median error (%)", "p90 error (%)", "2-std coverage (%)",
-               "median std (%)", "median time (s)", "no flutter", "failed", "branch", "covered",
-               "cases")
+    columns = ("case", "median error (%)", "median error at the bound (%)", "error / bound",
+               "p90 error (%)", "2-std coverage (%)", "median std (%)", "median time (s)",
+               "no flutter", "failed", "branch", "covered", "cases")
     holds = (f"the turbulence rows with a {TUNNEL_HOLD_S:g} s hold before each release"
              if mode == "after" else "the same releases without their holds")
     return result_files.Table(
         f"E2RFC in a real tunnel ({TUNNEL_MODE_NAMES[mode]}): 3 wind speeds (0.4/0.6/0.8 U_F) "
         "x 2 releases (the variant rows: as named), 20 s at 500 Hz, 2 % noise, "
         f"{holds}, {_count(seeds, 'seed')} per row: the "
-        "flutter speed's absolute error, the coverage of IdentifiedModel.flutter's 2-std "
+        "flutter speed's absolute error, beside it the median error of an estimator at the "
+        "Cramer-Rao bound of the same releases (flutter_crb.py) and their ratio, the coverage "
+        "of IdentifiedModel.flutter's 2-std "
         "interval, its median std, the median time of identification plus uncertainty, the "
         "cases without flutter (failed ones included) and those the turbulence branch ran.",
-        columns, table, formats={"median error (%)": ".2f", "p90 error (%)": ".2f",
+        columns, table, formats={"median error (%)": ".2f",
+                                 "median error at the bound (%)": ".2f",
+                                 "error / bound": ".2f", "p90 error (%)": ".2f",
                                  "2-std coverage (%)": ".0f", "median std (%)": ".2f",
                                  "median time (s)": ".2f"})
 
@@ -622,7 +676,8 @@ def main():
             quick=args.quick, script="ident_accuracy", parameters=parameters,
             notes=[] if args.part == "ablation" else [
                 "Times are on one core (BLAS single-threaded) of a shared host: the wall times "
-                "move with its load, the CPU times of the timing table less so."],
+                "move with its load, the CPU times of the timing table less so."]
+            + ([bound_note(seeds)] if args.part in ("all", "tunnel") else []),
             warnings=warnings)
 
     if args.part == "timing":
@@ -650,6 +705,7 @@ def main():
                                "turbulent estimator": args.turbulent_estimator,
                                "closed-loop buffeting": args.closed_loop_buffeting,
                                "hold (s)": TUNNEL_HOLD_S})
+            bounds = pool.map(row_bound, [(row, mode) for row in names for mode in modes])
             found = pool.map(tunnel_run, tunnel_jobs(
                 names, seeds, modes, args.turbulent_a3, args.first_seed, args.turbulent_motion,
                 args.turbulent_estimator, args.closed_loop_buffeting))
@@ -662,7 +718,8 @@ def main():
                     for seed in range(seeds)]
             smooth = pool.map(one_run, jobs)
         if found is not None:
-            tables_found, failed = tunnel_report(found, names, seeds, modes)
+            tables_found, failed = tunnel_report(
+                found, names, seeds, modes, {(row, mode): b for row, mode, b in bounds})
             tables += tables_found
             warnings += failed
         if smooth is None:
