@@ -403,8 +403,7 @@ def _clocked(check: _DeviceCheck, readings: list[Reading], nominal_hz: float,
         found.problems.append(f"no data within {check.window_s:g} s")
         return
     counter = np.concatenate([r.counter for r in readings])
-    device = np.concatenate([r.device_time for r in readings if r.device_time is not None])
-    host = np.concatenate([r.host_time_ns for r in readings]) * 1e-9
+    host, device = _times(readings)
     if counter.size < 3 or device.size != counter.size:
         found.problems.append(f"only {counter.size} sample(s) in {check.window_s:g} s")
         return
@@ -445,14 +444,19 @@ def _streaming_read(driver: Any) -> Callable[[float], Reading]:
     return lambda timeout_s: driver.read(timeout_s=timeout_s)
 
 
+def _times(readings: list[Reading]) -> tuple[np.ndarray, np.ndarray]:
+    """Return the host times (s) of every sample and the device times of those that have one."""
+    host = np.concatenate([r.host_time_ns for r in readings]) * 1e-9
+    device = np.concatenate([r.device_time for r in readings if r.device_time is not None])
+    return host, device
+
+
 def _restreamed_ratio(check: _DeviceCheck, read: Callable[[float], Reading]) -> float:
     """Return the clock ratio over a second window (nan without enough samples)."""
     readings = [r for r in check.stream(read) if r.device_time is not None]
     if sum(r.counter.size for r in readings) < 3:
         return float("nan")
-    device = np.concatenate([r.device_time for r in readings])
-    host = np.concatenate([r.host_time_ns for r in readings]) * 1e-9
-    return _clock_ratio(host, device)
+    return _clock_ratio(*_times(readings))
 
 
 def _clock_ratio(host: np.ndarray, device: np.ndarray) -> float:
