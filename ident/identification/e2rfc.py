@@ -348,17 +348,24 @@ def _closed_loop(model: IdentifiedModel, releases: list[Release], section: Secti
     speeds joins the std (:attr:`E2RFCDiagnostics.cross_check`).
     """
     base = model.diagnostics
-    sections, exact = CLOSED_LOOP_BUFFETING_MODELS[buffeting]
-    refit = partial(closed_loop_ml.fit_closed_loop, releases, section, with_A3=True,
-                    n_lags=CLOSED_LOOP_LAGS, shaping_sections=sections, exact_block_means=exact)
+
+    def search(name: str) -> partial[closed_loop_ml.ClosedLoopFit]:
+        """Return the closed-loop search with the buffeting model ``name``; call it on a start."""
+        sections, exact = CLOSED_LOOP_BUFFETING_MODELS[name]
+        return partial(closed_loop_ml.fit_closed_loop, releases, section, with_A3=True,
+                       n_lags=CLOSED_LOOP_LAGS, shaping_sections=sections,
+                       exact_block_means=exact)
+
     try:
-        fit = refit(model)
+        fit = search(buffeting)(model)
     except ValueError as exc:
         note = (f"turbulence: the closed-loop likelihood could not start from E2RFC's estimate "
                 f"({exc}); E2RFC's own, biased low in turbulence, is kept")
         return IdentifiedModel(model.A, model.d,
                                replace(base, warnings=(*base.warnings, note)))
-    fit, restarted = _closed_loop_starts.search_again(fit, section, _bounded_at(releases), refit)
+    fit, restarted = _closed_loop_starts.search_again(fit, section, _bounded_at(releases),
+                                                      search(buffeting))
+    sections, exact = CLOSED_LOOP_BUFFETING_MODELS[buffeting]
     speeds = distinct_wind_speeds([r.U for r in releases])
     below = [r for r in releases if r.U < speeds[-1] / (1 + DISTINCT_U_RTOL)]
 

@@ -295,6 +295,7 @@ def test_a_first_maximum_that_the_releases_refute_is_searched_again():
     first = float(note.split("fluttered at ")[1].split(" m/s")[0])
     assert first < 0.1 * U_F
     assert "kept a maximum" in note and "higher in log L" in note
+    assert note.endswith("the best the releases allow")
     u = model.uncertainty(BLUFF_DECK)
     assert abs(u.speed / U_F - 1.0) < 0.15
     assert abs(u.speed - U_F) <= 2.0 * u.total
