@@ -315,13 +315,14 @@ def test_a_release_above_flutter_is_not_counted_as_bounded():
 #: The benchmark's variant rows (``benchmarks/ident_accuracy.py --rows variants``, 20 seeds):
 #: the plate at Iw 1 % with holds, changed in one thing. name -> (change, |error| bound, std
 #: multiple the error must lie within). Measured rows (median / p90 |error|, 2-std cover):
-#: non-Gaussian gusts (skewness 0.5, kurtosis 4.5) 2.62 / 6.82 %, 100 %; Coulomb friction at its
-#: realistic strength 3.74 / 8.43 %, 95 %; a Davenport admittance with a 1 m scale (a force
-#: spectrum the second-order filter matches worse) 5.89 / 94.1 %, 100 % (its tail: fits far
-#: below, widened by the part below a decaying release). Seed 0 of each (not chosen: the
-#: first): -7.27 % (std 6.65 %), +8.81 % (13.2 %), -5.91 % (4.59 %). The error bounds lie
-#: above the rows' medians, near their 90th percentiles; the std multiple is 2 where the row
-#: covered 95 % or more, 3 for the Davenport row (its earlier runs covered 90 %).
+#: non-Gaussian gusts (skewness 0.5, kurtosis 4.5) 2.42 / 6.96 %, 100 %; Coulomb friction at its
+#: realistic strength 3.57 / 6.65 %, 100 %; a Davenport admittance with a 1 m scale (a force
+#: spectrum the second-order filter matches worse) 4.95 / 7.27 %, 100 % (one seed of 20 at
+#: -99 %, every maximum the search found refuted by the records, widened by the part below a
+#: decaying release). Seed 0 of each (not chosen: the first): -7.23 % (std 6.71 %), +6.09 %
+#: (8.91 %), -7.01 % (6.38 %). The error bounds lie above the rows' medians, near their 90th
+#: percentiles; the std multiple is 2 where the row covered 95 % or more, 3 for the Davenport
+#: row (its earlier runs covered 90 %).
 VARIANTS = {
     "non-Gaussian gusts": ({"gusts": {"skewness": 0.5, "kurtosis": 4.5}}, 0.08, 2.0),
     "friction": ({"effects": ("coulomb_friction",)}, 0.10, 2.0),
@@ -354,7 +355,7 @@ def test_the_branch_holds_where_the_tunnel_is_not_its_model(variant):
     assert u.speed is not None
     assert abs(u.speed / U_F - 1.0) < bound
     assert abs(u.speed - U_F) <= multiple * u.total
-    assert u.total < 0.25 * U_F  # not a blanket: the rows' median stds are 6.7-8.6 %
+    assert u.total < 0.25 * U_F  # not a blanket: the rows' median stds are 6.7-8.9 %
     # Friction fails the fit's own checks (force innovations far from white, 0.52-0.71 over
     # the benchmark's seeds): refined IV on the same releases checks it, and the distance
     # joins the std, said in a warning. The other variants pass (0.06-0.18).
