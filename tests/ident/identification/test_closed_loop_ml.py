@@ -223,7 +223,7 @@ def test_e2rfc_runs_the_closed_loop_branch_in_the_tunnel_s_turbulence():
     Plain E2RFC (the refined-IV branch without holds keeps its estimate) is +11.1 % off here,
     std 135 %; the closed-loop branch gives -3.6 %, std 7.1 % (7.0 % of it the Fisher
     information's, no jackknife part). Bounds: within 2 std, and under 8 % (the benchmark
-    row's 90th percentile without holds is 8.1 %, its median 3.2 %).
+    row's 90th percentile without holds is 8.4 %, its median 3.3 %).
     """
     truth = flat_plate.jones_model()
     U_F = fl.analyze(PLATE, truth).speed
