@@ -43,12 +43,14 @@ instead (``ident.identification.closed_loop_ml``; with and without holds), and
 (``e2rfc.CLOSED_LOOP_BUFFETING``). The "branch" column
 counts the identifications the turbulence branch (either) ran.
 
-Printed per row: the median and 90th percentile of |error|, the coverage of the 2-std interval
+Printed per row: the median and 90th percentile of |error| (beside the median, that of an
+estimator at the Cramer-Rao bound of the row's own releases, :func:`row_bound`, and the ratio;
+n/a in smooth flow), the coverage of the 2-std interval
 (``IdentifiedModel.flutter``'s std: noise, structure, extrapolation, one lag more, release
 scatter, below a decaying release), the median std, the median time of identification plus
 uncertainty, and the count of identifications without flutter below the searched speeds
 (counted as not covered); then the coverage over all rows. ``benchmarks/flutter_crb.py`` gives
-the Cramer-Rao bound of the turbulence rows; docs/development/e2rfc_turbulence.md the table before
+the Cramer-Rao bound on its own; docs/development/e2rfc_turbulence.md the table before
 and after, and the estimators tried.
 
 Run: ``.venv/bin/python benchmarks/ident_accuracy.py [--seeds 20] [--workers 2] [--part all]
@@ -503,8 +505,8 @@ def _tunnel_table(results, names, seeds, mode, bounds):
                 sum(r[4] for r in rows), int(inside.sum()), len(rows))
         table.append(line)
         at_bound = "n/a" if bound is None else f"{bound:.2f}%"
-        times = "n/a" if ratio is None else f"{ratio:.2f}"
-        print(f"{row:<26}{line[1]:>9.2f}%{at_bound:>8}{times:>7}{line[4]:>9.2f}%"
+        ratio_text = "n/a" if ratio is None else f"{ratio:.2f}"
+        print(f"{row:<26}{line[1]:>9.2f}%{at_bound:>8}{ratio_text:>7}{line[4]:>9.2f}%"
               f"{line[5]:>11.0f}%{line[6]:>8.2f}%{line[7]:>9.2f}s{line[8]:>11d}{line[10]:>10d}")
     print(f"\ncoverage of the 2-std interval over all rows: {covered}/{total} "
           f"({100 * covered / total:.0f} %)")

@@ -343,29 +343,24 @@ def _closed_loop(model: IdentifiedModel, releases: list[Release], section: Secti
     The structure is :data:`CLOSED_LOOP_LAGS` lags with A3 estimated; the covariance is the
     inverse Fisher information (the turbulence is in the likelihood, so no jackknife part);
     with three or more wind speeds the fit without the highest one is the extrapolation
-    part's refit. A fit that fails its own checks (:attr:`ClosedLoopFit.failed_checks`) is
-    cross-checked by refined IV when the holds allow it: the distance between the two flutter
-    speeds joins the std (:attr:`E2RFCDiagnostics.cross_check`).
+    part's refit. A first maximum that flutters below a speed at which no release grew is
+    searched again from other starts (:mod:`ident.identification._closed_loop_starts`). A fit
+    that fails its own checks (:attr:`ClosedLoopFit.failed_checks`) is cross-checked by refined
+    IV when the holds allow it: the distance between the two flutter speeds joins the std
+    (:attr:`E2RFCDiagnostics.cross_check`).
     """
     base = model.diagnostics
-
-    def search(name: str) -> partial[closed_loop_ml.ClosedLoopFit]:
-        """Return the closed-loop search with the buffeting model ``name``; call it on a start."""
-        sections, exact = CLOSED_LOOP_BUFFETING_MODELS[name]
-        return partial(closed_loop_ml.fit_closed_loop, releases, section, with_A3=True,
-                       n_lags=CLOSED_LOOP_LAGS, shaping_sections=sections,
-                       exact_block_means=exact)
-
+    sections, exact = CLOSED_LOOP_BUFFETING_MODELS[buffeting]
+    search = partial(closed_loop_ml.fit_closed_loop, releases, section, with_A3=True,
+                     n_lags=CLOSED_LOOP_LAGS, shaping_sections=sections, exact_block_means=exact)
     try:
-        fit = search(buffeting)(model)
+        fit = search(model)
     except ValueError as exc:
         note = (f"turbulence: the closed-loop likelihood could not start from E2RFC's estimate "
                 f"({exc}); E2RFC's own, biased low in turbulence, is kept")
         return IdentifiedModel(model.A, model.d,
                                replace(base, warnings=(*base.warnings, note)))
-    fit, restarted = _closed_loop_starts.search_again(fit, section, _bounded_at(releases),
-                                                      search(buffeting))
-    sections, exact = CLOSED_LOOP_BUFFETING_MODELS[buffeting]
+    fit, restarted = _closed_loop_starts.search_again(fit, section, _bounded_at(releases), search)
     speeds = distinct_wind_speeds([r.U for r in releases])
     below = [r for r in releases if r.U < speeds[-1] / (1 + DISTINCT_U_RTOL)]
 
