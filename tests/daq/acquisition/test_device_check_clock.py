@@ -22,13 +22,13 @@ import pytest
 
 from daq.acquisition.device_check import check_rig
 from daq.config import load_rig_config
-from daq.instruments import registry
 from daq.instruments.entry import DriverEntry
 from daq.instruments.reading import Reading
 
+from support.drivers_in_code import rigs_with_drivers
+
 pytestmark = pytest.mark.realtime
 
-TESTS = Path(__file__).resolve().parents[1]
 RATE_HZ = 4000.0
 
 
@@ -95,22 +95,17 @@ CASES = {  # name -> (latency of the first read's samples s, clock rate)
 @pytest.fixture
 def timed_rigs(tmp_path: Path) -> Iterator[dict[str, Path]]:
     """Yield a rig config per case, each with one timed laser registered in code."""
-    configs = {}
-    for case, (backlog, clock) in CASES.items():
-        name = f"timed_laser_{case}"
-        registry.register(DriverEntry(
-            name=name, role="lasers",
+    drivers = {
+        case: (DriverEntry(
+            name=f"timed_laser_{case}", role="lasers",
             factory=lambda link, settings, b=backlog, c=clock: TimedLaser(
                 link, settings, backlog_s=b, clock=c),
-            validate=lambda table, where: dict(table)))
-        path = tmp_path / f"{case}.toml"
-        path.write_text((TESTS / "minimal_rig.toml").read_text()
-                        + f'\n[[lasers]]\nname = "laser"\ndriver = "{name}"\nurl = "loop://"\n'
-                        f"range_mm = 50\nrate_hz = {RATE_HZ}\n")
-        configs[case] = path
-    yield configs
-    for case in CASES:
-        registry.unregister(f"timed_laser_{case}")
+            validate=lambda table, where: dict(table)),
+            f'\n[[lasers]]\nname = "laser"\ndriver = "timed_laser_{case}"\nurl = "loop://"\n'
+            f"range_mm = 50\nrate_hz = {RATE_HZ}\n")
+        for case, (backlog, clock) in CASES.items()}
+    with rigs_with_drivers(tmp_path, drivers) as configs:
+        yield configs
 
 
 def test_a_host_busy_through_one_window_is_a_note_not_a_failure(timed_rigs):

@@ -18,12 +18,12 @@ import pytest
 from daq.acquisition.device_check import check_rig
 from daq.cli import main
 from daq.config import load_rig_config
-from daq.instruments import registry
 from daq.instruments.entry import DriverEntry
+
+from support.drivers_in_code import rigs_with_drivers
 
 pytestmark = pytest.mark.realtime
 
-TESTS = Path(__file__).resolve().parents[1]
 
 #: What each crashing driver's read() raises, and the line the check must print for it.
 CRASHES = {
@@ -64,21 +64,16 @@ class CrashingBarometer:
 @pytest.fixture
 def crashing(tmp_path: Path) -> Iterator[dict[str, Path]]:
     """Yield a rig config per crash, each with one crashing barometer registered in code."""
-    configs = {}
-    for case, (error, _) in CRASHES.items():
-        name = f"crashing_barometer_{case}"
-        registry.register(DriverEntry(
-            name=name, role="barometer",
+    drivers = {
+        case: (DriverEntry(
+            name=f"crashing_barometer_{case}", role="barometer",
             factory=lambda link, settings, error=error: CrashingBarometer(link, settings,
                                                                            error=error),
-            validate=lambda table, where: dict(table)))
-        path = tmp_path / f"{case}.toml"
-        path.write_text((TESTS / "minimal_rig.toml").read_text()
-                        + f'\n[barometer]\ndriver = "{name}"\nurl = "loop://"\n')
-        configs[case] = path
-    yield configs
-    for case in CRASHES:
-        registry.unregister(f"crashing_barometer_{case}")
+            validate=lambda table, where: dict(table)),
+            f'\n[barometer]\ndriver = "crashing_barometer_{case}"\nurl = "loop://"\n')
+        for case, (error, _) in CRASHES.items()}
+    with rigs_with_drivers(tmp_path, drivers) as configs:
+        yield configs
 
 
 @pytest.mark.parametrize("case", sorted(CRASHES))
