@@ -37,19 +37,7 @@ from ident.model import flutter as _flutter
 from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel
 
-__all__ = ["refuted_at", "search_again"]
-
-
-def refuted_at(fit: ClosedLoopFit, section: SectionModel, bounded_at: float | None
-               ) -> float | None:
-    """Return the flutter speed (m/s) of a fit the releases refute, or None when they do not.
-
-    Refuted: it flutters below ``bounded_at``, the highest wind speed at which no release grew.
-    """
-    if bounded_at is None:
-        return None
-    speed = _flutter.analyze(section, fit.model).speed
-    return speed if speed is not None and speed < bounded_at else None
+__all__ = ["search_again"]
 
 
 def search_again(fit: ClosedLoopFit, section: SectionModel, bounded_at: float | None,
@@ -77,24 +65,31 @@ def search_again(fit: ClosedLoopFit, section: SectionModel, bounded_at: float | 
         refuted, the one of highest likelihood is kept (the caller's check against the
         records then widens its interval).
     """
-    first = refuted_at(fit, section, bounded_at)
-    if first is None:
+    if bounded_at is None:
         return fit, None
-    fits, failed = [fit], []
+    first = _flutter.analyze(section, fit.model).speed
+    if first is None or not _refuted(first, bounded_at):
+        return fit, None
+    found: list[tuple[ClosedLoopFit, float | None]] = [(fit, first)]  # each with its flutter
+    failed = []
     for name, start in (("its own maximum", fit.model),
                         ("the flat plate's aerodynamics", flat_plate.jones_model())):
         try:
-            fits.append(refit(start))
+            other = refit(start)
         except ValueError as exc:
             failed.append(f"{name} ({exc})")
-    allowed = [f for f in fits if refuted_at(f, section, bounded_at) is None]
-    best = min(allowed or fits, key=lambda f: f.neg_log_likelihood)
+            continue
+        found.append((other, _flutter.analyze(section, other.model).speed))
+    allowed = [(f, speed) for f, speed in found if not _refuted(speed, bounded_at)]
+    best, speed = min(allowed or found, key=lambda pair: pair[0].neg_log_likelihood)
+    fluttering = ("without flutter in the searched range" if speed is None
+                  else f"fluttering at {speed:.3g} m/s")
     if best is fit:
-        kept = f"the first, {_speed(fit, section)}"
+        kept = f"the first, {fluttering}"
     else:
         change = fit.neg_log_likelihood - best.neg_log_likelihood
         kept = (f"a maximum {abs(change):.1f} {'higher' if change > 0 else 'lower'} in log L "
-                f"than the first, {_speed(best, section)}")
+                f"than the first, {fluttering}")
     return best, (
         f"turbulence: the likelihood's first maximum fluttered at {first:.3g} m/s, below "
         f"{bounded_at:.3g} m/s where no release grew; searched again from its own "
@@ -104,7 +99,6 @@ def search_again(fit: ClosedLoopFit, section: SectionModel, bounded_at: float | 
            else f": every maximum is refuted, kept {kept}"))
 
 
-def _speed(fit: ClosedLoopFit, section: SectionModel) -> str:
-    speed = _flutter.analyze(section, fit.model).speed
-    return ("without flutter in the searched range" if speed is None
-            else f"fluttering at {speed:.3g} m/s")
+def _refuted(speed: float | None, bounded_at: float) -> bool:
+    """Tell whether the releases refute a flutter speed (None: none): below ``bounded_at``."""
+    return speed is not None and speed < bounded_at

@@ -360,7 +360,8 @@ def _closed_loop(model: IdentifiedModel, releases: list[Release], section: Secti
                 f"({exc}); E2RFC's own, biased low in turbulence, is kept")
         return IdentifiedModel(model.A, model.d,
                                replace(base, warnings=(*base.warnings, note)))
-    fit, restarted = _closed_loop_starts.search_again(fit, section, _bounded_at(releases), search)
+    bounded_at = _bounded_at(releases)
+    fit, restarted = _closed_loop_starts.search_again(fit, section, bounded_at, search)
     speeds = distinct_wind_speeds([r.U for r in releases])
     below = [r for r in releases if r.U < speeds[-1] / (1 + DISTINCT_U_RTOL)]
 
@@ -397,7 +398,7 @@ def _closed_loop(model: IdentifiedModel, releases: list[Release], section: Secti
         warnings=(*(w.replace(_SCATTER_STD, _FISHER_STD) for w in base.warnings), note,
                   *([restarted] if restarted else []), *fit.warnings, *checks),
         estimator=ESTIMATOR_CLOSED_LOOP,
-        bounded_at=_bounded_at(releases),
+        bounded_at=bounded_at,
         _lag_roots=fit.model.d,
         _refits={"jackknife": (), "release_jackknife": (), "finer": None,
                  "reduced": Deferred(reduced) if len(speeds) >= 3 else None,
