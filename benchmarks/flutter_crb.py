@@ -47,6 +47,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -99,6 +100,28 @@ def _decay(section: SectionModel, model: RationalFunctionModel, U: float, hold: 
     return np.fft.rfft(channels, axis=0)[1:-1], channels.std(axis=0)
 
 
+@dataclass(frozen=True)
+class FlutterBound:
+    """The flutter speed and the Cramer-Rao bounds on its std, m/s.
+
+    Attributes
+    ----------
+    U_F : float
+        The truth's flutter speed.
+    std : float
+        The bound from the releases alone.
+    std_with_holds : float
+        With the holds of ``hold_s`` before each release too (``std`` without them).
+    deterministic : float
+        From the releases' deterministic decay alone.
+    """
+
+    U_F: float
+    std: float
+    std_with_holds: float
+    deterministic: float
+
+
 def _hold_transfer(section: SectionModel, n_freq: int) -> np.ndarray:
     """``T``, shape (K, 4, 2), of a held model: the taps read the buffeting force itself."""
     T = np.zeros((n_freq, 4, 2))
@@ -124,8 +147,8 @@ def flutter_speed_bound(section: SectionModel, model: RationalFunctionModel, Iw:
                         duration: float = 20.0, fs: float = 500.0, noise: float = 0.02,
                         span: float = 1.0, n_shape: int = 3, known_zeros: bool = False,
                         hold_s: float = 0.0, gusts: TurbulenceSpec | None = None,
-                        f_max: float | None = None) -> tuple[float, float, float]:
-    """Return the flutter speed and the bounds on its std, full and deterministic-only (m/s).
+                        f_max: float | None = None) -> FlutterBound:
+    """Return the flutter speed and the bounds on its std (:class:`FlutterBound`).
 
     Parameters
     ----------
@@ -149,9 +172,10 @@ def flutter_speed_bound(section: SectionModel, model: RationalFunctionModel, Iw:
         Whether the model's zero coefficients are known (its own structure) or every coefficient
         of Roger's form is unknown.
     hold_s : float
-        Seconds of the model held in the wind before each release, s (0: none). The taps read
-        the buffeting force itself then: the hold informs the release's buffeting spectrum (a
-        nuisance), not the aerodynamic coefficients.
+        Seconds of the model held in the wind before each release, s (0: none), for
+        :attr:`FlutterBound.std_with_holds`. The taps read the buffeting force itself then: the
+        hold informs the release's buffeting spectrum (a nuisance), not the aerodynamic
+        coefficients; the releases' own information is computed once for both bounds.
     gusts : TurbulenceSpec, optional
         The turbulence, when not :func:`vertical_gusts` of ``Iw``.
     f_max : float, optional
@@ -189,34 +213,38 @@ def flutter_speed_bound(section: SectionModel, model: RationalFunctionModel, Iw:
     n_releases = len(fractions) * len(holds)
     size = n_theta + n_nuisance * n_releases
     F_full = np.zeros((size, size))
+    F_holds = np.zeros((size, size))  # what the holds add
     F_mean = np.zeros((n_theta, n_theta))
     n_hold = int(round(hold_s * fs))
     r = 0
     for fraction in fractions:
         U = fraction * U_F
-        cached: dict[tuple[float, float], tuple[np.ndarray, np.ndarray]] = {}
+        cached: dict[tuple[float, float], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         for hold in holds:
             if hold not in cached:
                 cached[hold] = _release_information(
                     section, model, with_theta, theta0, spec, static, U, hold, f, shape_x,
                     n=n, fs=fs, noise=noise, span=span, n_shape=n_shape, n_hold=n_hold)
-            F, F_m = cached[hold]
+            F, F_m, F_hold = cached[hold]
             columns = list(range(n_theta)) + list(range(n_theta + n_nuisance * r,
                                                         n_theta + n_nuisance * (r + 1)))
             F_full[np.ix_(columns, columns)] += F
+            nuisance = columns[n_theta:]
+            F_holds[np.ix_(nuisance, nuisance)] += F_hold
             F_mean += F_m
             r += 1
     dU_dA, dU_dd = fl.speed_sensitivity(section, model, U_F, result.frequency)
     g = np.concatenate([[dU_dA[a] for a in index], dU_dd * model.d])
     g_full = np.concatenate([g, np.zeros(size - n_theta)])
-    full = math.sqrt(g_full @ np.linalg.pinv(F_full) @ g_full)
-    mean_only = math.sqrt(g @ np.linalg.pinv(F_mean) @ g)
-    return float(U_F), full, mean_only
+    return FlutterBound(
+        U_F=float(U_F), std=math.sqrt(g_full @ np.linalg.pinv(F_full) @ g_full),
+        std_with_holds=math.sqrt(g_full @ np.linalg.pinv(F_full + F_holds) @ g_full),
+        deterministic=math.sqrt(g @ np.linalg.pinv(F_mean) @ g))
 
 
 def _release_information(section, model, with_theta, theta0, spec, static, U, hold, f, shape_x,
                          *, n, fs, noise, span, n_shape, n_hold):
-    """Fisher information of one release (and its hold): full, and the decay's alone."""
+    """Fisher information of one release: full, the decay's alone, and its hold's (nuisance)."""
     n_theta = theta0.size
 
     def spectrum(freq: np.ndarray, length: int) -> np.ndarray:
@@ -253,6 +281,7 @@ def _release_information(section, model, with_theta, theta0, spec, static, U, ho
     F_m = _mean_information(np.array(dM), S_inv)
     F = _spectral_information(np.array(dS + nuisance), S_inv)
     F[:n_theta, :n_theta] += F_m
+    F_hold = np.zeros((len(nuisance), len(nuisance)))
     if n_hold > 2:
         f_hold = np.fft.rfftfreq(n_hold, 1 / fs)[1:-1]
         f_hold = f_hold[f_hold <= f[-1]]
@@ -261,8 +290,8 @@ def _release_information(section, model, with_theta, theta0, spec, static, U, ho
         S_hold = (T_hold @ Sb_hold @ np.swapaxes(T_hold, 1, 2)
                   + np.diag(n_hold * (noise * rms) ** 2))
         dS_hold = np.array(nuisance_dS(T_hold, Sb_hold, shape_x(f_hold)))
-        F[n_theta:, n_theta:] += _spectral_information(dS_hold, np.linalg.inv(S_hold))
-    return F, F_m
+        F_hold = _spectral_information(dS_hold, np.linalg.inv(S_hold))
+    return F, F_m, F_hold
 
 
 def main() -> None:
@@ -290,10 +319,10 @@ def main() -> None:
           f"{'releases for median 1 %':>26}{f'with {HOLD_S:g} s holds':>18}")
     rows = []
     for Iw in intensities:
-        U_F, full, mean_only = flutter_speed_bound(section, model, Iw, static=static,
-                                                   known_zeros=args.deck == "bluff")
-        _, held, _ = flutter_speed_bound(section, model, Iw, static=static,
-                                         known_zeros=args.deck == "bluff", hold_s=HOLD_S)
+        bound = flutter_speed_bound(section, model, Iw, static=static,
+                                    known_zeros=args.deck == "bluff", hold_s=HOLD_S)
+        U_F, full, held, mean_only = (bound.U_F, bound.std, bound.std_with_holds,
+                                      bound.deterministic)
         # |error| of an efficient estimator is half-normal: its median is 0.674 std.
         needed = math.ceil(n * (0.674 * full / (0.01 * U_F)) ** 2)
         print(f"{100 * Iw:>4.0f}%{100 * full / U_F:>9.2f}%{100 * 0.674 * full / U_F:>16.2f}%"

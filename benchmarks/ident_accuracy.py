@@ -393,10 +393,10 @@ def _tunnel_run(args):
 HALF_NORMAL_MEDIAN = 0.6745
 
 
-def row_bound(args):
-    """Return the median error (share of U_F) of an estimator at the Cramer-Rao bound.
+def row_bound(row):
+    """Return the median error (share of U_F) of an estimator at the Cramer-Rao bound, per mode.
 
-    ``args``: the row and tunnel mode. The bound is ``flutter_crb.flutter_speed_bound``'s for
+    ``{"before": ..., "after": ...}``: the bound is ``flutter_crb.flutter_speed_bound``'s for
     the row's releases: its speeds, releases per speed and their holds (initial displacements),
     the hold in the wind before each (mode "after") or none, and its gust spectrum (Gaussian:
     a non-Gaussian row's bound is its Gaussian twin's; physics the row adds, such as friction,
@@ -404,18 +404,17 @@ def row_bound(args):
     deck's structure is known (its zeros), as in ``flutter_crb.py``. None for a row in smooth
     flow.
     """
-    row, mode = args
     section, make_model, static, Iw, _, change = row_spec(row)
     if not Iw:
-        return row, mode, None
+        return dict.fromkeys(TUNNEL_MODE_NAMES)
     model = make_model()
     gusts = dataclasses.replace(vertical_gusts(Iw), **change.get("gusts", {}))
     holds = [HOLDS[j % len(HOLDS)] for j in range(change.get("per_speed", len(HOLDS)))]
-    U_F, std, _ = flutter_crb.flutter_speed_bound(
+    bound = flutter_crb.flutter_speed_bound(
         section, model, Iw, static=static, fractions=E2RFC_SPEEDS, holds=holds,
-        known_zeros=make_model is bluff_deck_model, gusts=gusts,
-        hold_s=TUNNEL_HOLD_S if mode == "after" else 0.0)
-    return row, mode, HALF_NORMAL_MEDIAN * std / U_F
+        known_zeros=make_model is bluff_deck_model, gusts=gusts, hold_s=TUNNEL_HOLD_S)
+    return {"before": HALF_NORMAL_MEDIAN * bound.std / bound.U_F,
+            "after": HALF_NORMAL_MEDIAN * bound.std_with_holds / bound.U_F}
 
 
 def bound_note(seeds):
@@ -707,7 +706,7 @@ def main():
                                "turbulent estimator": args.turbulent_estimator,
                                "closed-loop buffeting": args.closed_loop_buffeting,
                                "hold (s)": TUNNEL_HOLD_S})
-            bounds = pool.map(row_bound, [(row, mode) for row in names for mode in modes])
+            bounds = pool.map(row_bound, names)
             found = pool.map(tunnel_run, tunnel_jobs(
                 names, seeds, modes, args.turbulent_a3, args.first_seed, args.turbulent_motion,
                 args.turbulent_estimator, args.closed_loop_buffeting))
@@ -721,7 +720,9 @@ def main():
             smooth = pool.map(one_run, jobs)
         if found is not None:
             tables_found, failed = tunnel_report(
-                found, names, seeds, modes, {(row, mode): b for row, mode, b in bounds})
+                found, names, seeds, modes,
+                {(row, mode): b[mode] for row, b in zip(names, bounds, strict=True)
+                 for mode in modes})
             tables += tables_found
             warnings += failed
         if smooth is None:
