@@ -506,6 +506,8 @@ def _tunnel_table(results, names, seeds, mode, bounds):
         total += len(rows)
         first, sampled = (None, None) if bounds[row] is None else (
             100 * bounds[row][0], 100 * bounds[row][1])
+        if sampled is not None and math.isnan(sampled):  # the draws leave the deck's models
+            sampled = None
         median = float(np.median(err))
         ratio = None if first is None else median / first
         sampled_ratio = None if sampled is None else median / sampled
