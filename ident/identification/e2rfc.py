@@ -58,9 +58,9 @@ What it returns is :mod:`ident.identification.results` (:class:`IdentifiedModel`
 diagnostics); the flutter speed's uncertainty and its parts are
 :mod:`ident.identification.uncertainty`.
 
-Longer than 600 lines: the turbulence branches assemble the same diagnostics as E2RFC's fit
-and read its module settings (:data:`TURBULENT_ESTIMATOR`, :data:`TURBULENT_A3`) that the
-benchmarks set; moving them out is the next split, with those settings passed in.
+The turbulence branch itself is :mod:`ident.identification._e2rfc_turbulence`; its settings
+(:data:`TURBULENT_ESTIMATOR`, :data:`TURBULENT_A3`, :data:`CLOSED_LOOP_BUFFETING`) live here,
+where the benchmarks set them, and go to it as arguments.
 """
 
 from __future__ import annotations
@@ -74,32 +74,35 @@ import numpy as np
 import numpy.typing as npt
 
 from ident.errors import RankDeficiencyError
-from ident.identification import _closed_loop_starts, _turbulent_fit, closed_loop_ml
 from ident.identification._e2rfc_problem import FinalFit, Problem, improves
+from ident.identification._e2rfc_turbulence import (
+    CLOSED_LOOP_BUFFETING_MODELS,
+    CLOSED_LOOP_LAGS,
+    ESTIMATOR_CLOSED_LOOP,
+    ESTIMATOR_TURBULENT,
+    SCATTER_STD,
+    turbulence_branch,
+)
 from ident.identification._regressors import PreparedRelease, prepare
 from ident.identification.modal import ModalFit
 from ident.identification.results import (
-    DISTINCT_U_RTOL,
-    GROWTH_LIMIT,
     MODE_NAMES,
     RANDOM_RESPONSE_LIMIT,
-    Deferred,
     E2RFCDiagnostics,
     IdentifiedModel,
     K_ranges,
     distinct_wind_speeds,
 )
-from ident.identification.uncertainty import REFIT_GRID, nearest_wind_speed
-from ident.model import flutter as _flutter
 from ident.model.conventions import name_modes
-from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel
 from ident.numerics.selection import Candidate, select_one_se, within_one_se
 from ident.numerics.threads import single_threaded_blas
 from ident.records import plausibility
 from ident.records.release import Release
 
-__all__ = ["ESTIMATOR_TURBULENT", "TURBULENT_A3", "identify", "reduced_frequency_span"]
+__all__ = ["CLOSED_LOOP_BUFFETING", "CLOSED_LOOP_BUFFETING_MODELS", "CLOSED_LOOP_LAGS",
+           "ESTIMATOR_CLOSED_LOOP", "ESTIMATOR_TURBULENT", "TURBULENT_A3", "TURBULENT_ESTIMATOR",
+           "identify", "reduced_frequency_span"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -111,8 +114,6 @@ MODE_SNR_MIN = 20.0
 #: not white (measured: 1.0 for exact Roger aerodynamics, 3 for the exact-Theodorsen plate, 5 to
 #: 30 for friction, quadratic damping, a cubic spring or a 10 ms channel delay).
 WHITENESS_WARN = 5.0
-#: ``diagnostics.estimator`` of the turbulence branch (module docstring).
-ESTIMATOR_TURBULENT = "refined IV with the holds' noise model (turbulence branch)"
 #: A3 in the turbulence branch: "fitted-or-zero" (fitted; zero only when every structure with
 #: A3 fitted flutters below a wind speed where a release decayed), "fitted" always, "choose"
 #: (fitted or zero by held-out error with the lag count), or "e2rfc" as E2RFC's own choice on
@@ -130,25 +131,11 @@ TURBULENT_A3 = "fitted-or-zero"
 TURBULENT_ESTIMATOR = "ml"
 #: The turbulence branch's estimators, by name.
 TURBULENT_ESTIMATORS = ("iv", "ml")
-#: Lags of the closed-loop branch. Measured (plate, 1 % turbulence, 6 seeds): from E2RFC's
-#: own lag count (none in turbulence) every flutter speed came out low, -3 to -13 %; with two
-#: (Jones's count) the errors fall on both sides, -7 to +1 %, within their standard deviations.
-#: On the bluff deck (ten lags in truth) a third raised log L by 26-35 but left the errors as
-#: they were, at twice the time (docs/development/e2rfc_turbulence.md).
-CLOSED_LOOP_LAGS = 2
 #: The closed-loop branch's buffeting model (``fit_closed_loop``'s options, by name): one
 #: second-order section per force on block means taken as samples, or two sections on exact
 #: block means. docs/development/e2rfc_turbulence.md measures the second's smaller bias and
 #: its two to three times the time.
 CLOSED_LOOP_BUFFETING = "second-order"
-#: name -> (``shaping_sections``, ``exact_block_means``).
-CLOSED_LOOP_BUFFETING_MODELS = {"second-order": (1, False), "fourth-order": (2, True)}
-#: ``diagnostics.estimator`` of the closed-loop branch.
-ESTIMATOR_CLOSED_LOOP = "closed-loop maximum likelihood (turbulence branch)"
-#: How E2RFC's turbulence warning ends, and how the closed-loop branch's ends in its place.
-_SCATTER_STD = "the flutter speed's deviation is the release-to-release scatter"
-_FISHER_STD = ("the closed-loop likelihood models the random response, and the flutter speed's "
-               "deviation is its Fisher information's")
 
 
 @single_threaded_blas
@@ -240,170 +227,9 @@ def identify(
         raise ValueError(f"closed_loop_buffeting must be one of "
                          f"{tuple(CLOSED_LOOP_BUFFETING_MODELS)}, got {closed_loop_buffeting!r}")
     model = _identify_prepared(prepared, section, n_lags, with_A3)
-    return _guarded(_turbulence_branch(model, releases, section, n_lags, with_A3, estimator,
-                                       buffeting), prepared, section, guards)
-
-
-def _turbulence_branch(model: IdentifiedModel, releases: list[Release], section: SectionModel,
-                       n_lags: int | None, with_A3: bool | None,
-                       estimator: str, buffeting: str) -> IdentifiedModel:
-    """Return E2RFC's model, or in turbulence the branch's (or a note on holds)."""
-    if not model.diagnostics.turbulent:
-        return model
-    if estimator == "ml" and section.n_dof == 2:
-        return _closed_loop(model, releases, section, buffeting)
-    if estimator == "ml":
-        note = ("closed-loop maximum likelihood identifies 2-DOF sections only: the refined-IV "
-                "estimator ran on these 3-DOF releases")
-        model = IdentifiedModel(model.A, model.d, replace(
-            model.diagnostics, warnings=(*model.diagnostics.warnings, note)))
-    if not _turbulent_fit.holds_suffice(releases):
-        held = [r.hold.duration for r in releases if r.hold is not None]
-        have = (f"the shortest hold here is {min(held):.3g} s" if len(held) == len(releases)
-                else f"{len(releases) - len(held)} of {len(releases)} releases have none")
-        note = (f"turbulence needs a hold of >= {_turbulent_fit.MIN_HOLD_S:g} s before each "
-                f"release (the model held in the wind; {have}): with it the refined-IV "
-                "estimator runs, without it today's, biased low in turbulence")
-        diagnostics = replace(model.diagnostics, warnings=(*model.diagnostics.warnings, note))
-        return IdentifiedModel(model.A, model.d, diagnostics)
-    return _turbulent_model(model, releases, section, n_lags, with_A3)
-
-
-def _turbulent_model(model: IdentifiedModel, releases: list[Release], section: SectionModel,
-                     n_lags: int | None, with_A3: bool | None) -> IdentifiedModel:
-    """Refit E2RFC's turbulent releases by refined IV with the holds' noise model.
-
-    The result keeps E2RFC's data diagnostics (modal fits, random response, covered reduced
-    frequencies); its coefficients, structure, covariance, alternatives and refits are the
-    branch's, so that :meth:`IdentifiedModel.uncertainty` combines the same parts.
-    """
-    base = model.diagnostics
-    a3_options: tuple[bool, ...] = (
-        (with_A3,) if with_A3 is not None else (True, False) if TURBULENT_A3 == "choose"
-        else (base.with_A3,) if TURBULENT_A3 == "e2rfc" else (True,))
-    speeds = distinct_wind_speeds([r.U for r in releases])
-    reduced_below = speeds[-1] / (1 + DISTINCT_U_RTOL) if len(speeds) >= 3 else None
-    stable = base.decayed_at
-
-    def admissible(fit: _turbulent_fit.TurbulentFit) -> bool:
-        """Whether a fit's flutter speed (if any) lies above every decaying release's speed."""
-        if stable is None:
-            return True
-        try:
-            found = _flutter.analyze(section, RationalFunctionModel(fit.A, fit.d),
-                                     n_points=REFIT_GRID).speed
-        except ValueError:  # no still-air modes, a lost branch: nothing to trust
-            return False
-        return found is None or float(found) >= stable
-
-    found = _turbulent_fit.fit_turbulent(
-        releases, section, a3_options=a3_options, n_lags=n_lags, reduced_below=reduced_below,
-        admissible=admissible)
-    if found.contradicted and with_A3 is None and TURBULENT_A3 == "fitted-or-zero":
-        fallback = _turbulent_fit.fit_turbulent(
-            releases, section, a3_options=(False,), n_lags=n_lags,
-            reduced_below=reduced_below, admissible=admissible)
-        if not fallback.contradicted:
-            found = _with_reason(fallback, "every structure with A3 fitted "
-                                               "flutters below a decaying release's wind speed")
-    note = (f"turbulence: coefficients by {ESTIMATOR_TURBULENT} from holds of "
-            f"{min(r.hold.duration for r in releases if r.hold is not None):.3g} s or more; "
-            f"{found.reason}")
-
-    def assemble(fit: _turbulent_fit.TurbulentFit, reason: str,
-                 alternatives: tuple[IdentifiedModel, ...], refits: dict[str, object]
-                 ) -> IdentifiedModel:
-        diagnostics = replace(
-            base, n_lags=fit.d.size, with_A3=fit.with_A3, reason=reason,
-            candidates=found.candidates, release_residuals=fit.release_residuals,
-            condition_number=math.nan, covariance=fit.covariance,
-            parameter_index=fit.parameter_index, alternatives=alternatives,
-            warnings=(*base.warnings, note), estimator=ESTIMATOR_TURBULENT,
-            _lag_roots=fit.d, _refits=refits)
-        return IdentifiedModel(fit.A, fit.d, diagnostics)
-
-    # The branch's refits replace E2RFC's (filled here: they came with the structure choice).
-    none: dict[str, object] = {"jackknife": (), "release_jackknife": (), "reduced": None,
-                               "finer": None}
-    alternatives = tuple(
-        assemble(f, "within one standard error of the best, not chosen", (), dict(none))
-        for f in found.alternatives)
-    jackknife = tuple(RationalFunctionModel(f.A, f.d) for f in found.leave_one_out)
-    reduced = (None if found.reduced is None
-               else RationalFunctionModel(found.reduced.A, found.reduced.d))
-    return assemble(found.chosen, found.reason, alternatives,
-                    {"jackknife": jackknife, "release_jackknife": jackknife,
-                     "reduced": reduced, "finer": None})
-
-
-def _closed_loop(model: IdentifiedModel, releases: list[Release], section: SectionModel,
-                 buffeting: str) -> IdentifiedModel:
-    """Refit E2RFC's turbulent releases by closed-loop maximum likelihood from its estimate.
-
-    The structure is :data:`CLOSED_LOOP_LAGS` lags with A3 estimated; the covariance is the
-    inverse Fisher information (the turbulence is in the likelihood, so no jackknife part);
-    with three or more wind speeds the fit without the highest one is the extrapolation
-    part's refit. A first maximum that flutters below a speed at which no release grew is
-    searched again from other starts (:mod:`ident.identification._closed_loop_starts`). A fit
-    that fails its own checks (:attr:`ClosedLoopFit.failed_checks`) is cross-checked by refined
-    IV when the holds allow it: the distance between the two flutter speeds joins the std
-    (:attr:`E2RFCDiagnostics.cross_check`).
-    """
-    base = model.diagnostics
-    sections, exact = CLOSED_LOOP_BUFFETING_MODELS[buffeting]
-    search = partial(closed_loop_ml.fit_closed_loop, releases, section, with_A3=True,
-                     n_lags=CLOSED_LOOP_LAGS, shaping_sections=sections, exact_block_means=exact)
-    try:
-        fit = search(model)
-    except ValueError as exc:
-        note = (f"turbulence: the closed-loop likelihood could not start from E2RFC's estimate "
-                f"({exc}); E2RFC's own, biased low in turbulence, is kept")
-        return IdentifiedModel(model.A, model.d,
-                               replace(base, warnings=(*base.warnings, note)))
-    bounded_at = _bounded_at(releases)
-    fit, restarted = _closed_loop_starts.search_again(fit, section, bounded_at, search)
-    speeds = distinct_wind_speeds([r.U for r in releases])
-    below = [r for r in releases if r.U < speeds[-1] / (1 + DISTINCT_U_RTOL)]
-
-    def reduced() -> RationalFunctionModel | None:
-        """Return the fit without the highest wind speed, from the full fit."""
-        try:
-            return closed_loop_ml.fit_closed_loop(below, section, fit.model, with_A3=True,
-                                                  shaping_sections=sections,
-                                                  exact_block_means=exact).model
-        except ValueError:  # likelihood not defined without the top speed: no extrapolation
-            return None     # part, which the uncertainty's warnings then say
-
-    holds = sum(r.hold is not None for r in releases)
-    note = (f"turbulence: coefficients by {ESTIMATOR_CLOSED_LOOP} over {len(releases)} releases "
-            f"and {holds} holds ({fit.iterations} iterations)")
-    cross_check, checks = None, []
-    if fit.failed_checks:
-        failed = (f"the closed-loop fit failed its own checks ({'; '.join(fit.failed_checks)}): "
-                  "the data hold something its model cannot describe (friction, a drift, a "
-                  "channel that is not what it says), so its Fisher deviation understates the "
-                  "error")
-        if _turbulent_fit.holds_suffice(releases):
-            other = _turbulent_model(model, releases, section, None, None)
-            cross_check = ("refined IV", RationalFunctionModel(other.A, other.d))
-            checks.append(f"{failed}; refined IV ran on the same releases as a cross-check")
-        else:
-            checks.append(f"{failed}; without a hold of >= {_turbulent_fit.MIN_HOLD_S:g} s "
-                          "before every release no second estimator can check it")
-    diagnostics = replace(
-        base, n_lags=fit.model.n_lags, with_A3=True,
-        reason=f"{CLOSED_LOOP_LAGS} lags, A3 fitted; {note}",
-        condition_number=math.nan, covariance=fit.covariance,
-        parameter_index=fit.parameter_index, alternatives=(),
-        warnings=(*(w.replace(_SCATTER_STD, _FISHER_STD) for w in base.warnings), note,
-                  *([restarted] if restarted else []), *fit.warnings, *checks),
-        estimator=ESTIMATOR_CLOSED_LOOP,
-        bounded_at=bounded_at,
-        _lag_roots=fit.model.d,
-        _refits={"jackknife": (), "release_jackknife": (), "finer": None,
-                 "reduced": Deferred(reduced) if len(speeds) >= 3 else None,
-                 "cross_check": cross_check})
-    return IdentifiedModel(fit.model.A, fit.model.d, diagnostics)
+    return _guarded(turbulence_branch(model, releases, section, n_lags, with_A3,
+                                      estimator=estimator, buffeting=buffeting,
+                                      a3_rule=TURBULENT_A3), prepared, section, guards)
 
 
 def _identify_prepared(
@@ -479,7 +305,7 @@ class _Context:
                 warnings.append(
                     f"the decays turn into a random response (turbulence: residual "
                     f"{float(np.median(random_response)):.3g} times the noise): the modal fits "
-                    f"and the least-squares covariance do not hold; {_SCATTER_STD}")
+                    f"and the least-squares covariance do not hold; {SCATTER_STD}")
             elif fit.residual_inflation > WHITENESS_WARN:
                 warnings.append(
                     f"the force residuals are not white (their autocorrelation inflates the "
@@ -542,12 +368,6 @@ def _guarded(model: IdentifiedModel, prepared: list[PreparedRelease], section: S
     return IdentifiedModel(model.A, model.d, diagnostics)
 
 
-def _with_reason(found: _turbulent_fit.TurbulentResult, why: str
-                               ) -> _turbulent_fit.TurbulentResult:
-    """Return a turbulence-branch result whose reason starts with ``why``."""
-    return replace(found, reason=f"{why}: {found.reason}")
-
-
 def _random_response(fit: ModalFit) -> float:
     """Return a release's modal-fit residual over its white measurement noise (larger channel)."""
     scale = np.maximum(fit.noise, 1e-9 * np.maximum(fit.residual_rms, 1e-300))
@@ -565,23 +385,6 @@ def reduced_frequency_span(releases: Sequence[Release], section: SectionModel,
     frequencies = [section.fh, section.fa] + ([] if section.fp is None else [section.fp])
     K = [section.B * 2 * math.pi * f / r.U for r in releases for f in frequencies]
     return np.linspace(0.8 * min(K), 1.2 * max(K), n)
-
-
-def _bounded_at(releases: list[Release]) -> float | None:
-    """Highest wind speed at which no release's motion grew over its record, m/s.
-
-    A displacement grew when its RMS about the record's mean over the last quarter exceeds
-    :data:`~ident.identification.results.GROWTH_LIMIT` times that over the first quarter.
-    """
-    speeds = distinct_wind_speeds([r.U for r in releases])
-    grown = dict.fromkeys(speeds, False)
-    for r in releases:
-        quarter = r.t.size // 4
-        U = speeds[nearest_wind_speed(r.U, speeds)]
-        for x in (r.h - r.h.mean(), r.alpha - r.alpha.mean()):
-            grown[U] |= bool(np.std(x[-quarter:]) > GROWTH_LIMIT * np.std(x[:quarter]))
-    bounded = [U for U, g in grown.items() if not g]
-    return max(bounded) if bounded else None
 
 
 def _check_wind_speeds(releases: list[Release]) -> None:

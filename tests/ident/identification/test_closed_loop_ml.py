@@ -19,7 +19,13 @@ import pytest
 import scipy.linalg
 
 from ident import Release, SectionModel
-from ident.identification import _closed_loop_parameters, closed_loop_ml, e2rfc, steady_predictor
+from ident.identification import (
+    _closed_loop_parameters,
+    _e2rfc_turbulence,
+    closed_loop_ml,
+    e2rfc,
+    steady_predictor,
+)
 from ident.identification.innovations import ReleaseModel, ShapingFilter, kalman_filter
 from ident.identification.results import IdentifiedModel
 from ident.model import flat_plate
@@ -308,8 +314,8 @@ def test_a_release_above_flutter_is_not_counted_as_bounded():
     releases = [Release.from_simulation(simulate_release(
         PLATE, truth, f * U_F, 0.0, 0.01, duration=20.0, fs=500.0, noise=0.02, rng=(5, i)))
         for i, f in enumerate((0.6, 0.9, 1.03))]
-    assert e2rfc._bounded_at(releases) == pytest.approx(0.9 * U_F)
-    assert e2rfc._bounded_at(releases[2:]) is None
+    assert _e2rfc_turbulence.bounded_at(releases) == pytest.approx(0.9 * U_F)
+    assert _e2rfc_turbulence.bounded_at(releases[2:]) is None
 
 
 #: The benchmark's variant rows (``benchmarks/ident_accuracy.py --rows variants``, 20 seeds):
