@@ -44,8 +44,9 @@ instead (``ident.identification.closed_loop_ml``; with and without holds), and
 counts the identifications the turbulence branch (either) ran.
 
 Printed per row: the median and 90th percentile of |error| (beside the median, that of an
-estimator at the Cramer-Rao bound of the row's own releases, :func:`row_bound`, and the ratio;
-n/a in smooth flow), the coverage of the 2-std interval
+estimator at the Cramer-Rao bound of the row's own releases, :func:`row_bound`, to first order
+and over coefficients drawn from the bound's covariance, and the ratios; n/a in smooth flow,
+and the sampled one where the draws leave the section's models), the coverage of the 2-std interval
 (``IdentifiedModel.flutter``'s std: noise, structure, extrapolation, one lag more, release
 scatter, below a decaying release), the median std, the median time of identification plus
 uncertainty, and the count of identifications without flutter below the searched speeds
