@@ -221,8 +221,8 @@ def _closed_loop(model: IdentifiedModel, releases: list[Release], section: Secti
     return IdentifiedModel(fit.model.A, fit.model.d, diagnostics)
 
 
-def _with_reason(found: _turbulent_fit.TurbulentResult, why: str
-                               ) -> _turbulent_fit.TurbulentResult:
+def _with_reason(found: _turbulent_fit.TurbulentResult,
+                 why: str) -> _turbulent_fit.TurbulentResult:
     """Return a turbulence-branch result whose reason starts with ``why``."""
     return replace(found, reason=f"{why}: {found.reason}")
 
