@@ -33,7 +33,8 @@ Not responsible for: starting simulators (the command line passes a simulated ri
 for a recording), or deciding what to do about a failure (the callers).
 
 What each kind of device is read for and judged by (its rate, its clock, its readings) is
-:mod:`daq.acquisition._device_inspections`; this module runs the checks and reports them.
+:mod:`daq.acquisition.device_inspections`, with the thresholds (:class:`CheckLimits`); this
+module runs the checks and reports them.
 """
 
 from __future__ import annotations
@@ -49,7 +50,7 @@ from typing import Any
 
 import numpy as np
 
-from daq.acquisition._device_inspections import INSPECT, Findings
+from daq.acquisition.device_inspections import INSPECT, CheckLimits, Findings
 from daq.acquisition.drivers import ROLE_KINDS
 from daq.config import InstrumentConfig, RigConfig
 from daq.errors import DaqError, DeviceCheckError
@@ -60,44 +61,6 @@ __all__ = ["CheckLimits", "CheckResult", "check_rig", "failure_lines", "format_t
            "require_devices_ok"]
 
 log = logging.getLogger(__name__)
-
-@dataclass(frozen=True)
-class CheckLimits:
-    """Thresholds of the plausibility checks.
-
-    Attributes
-    ----------
-    zero_tolerance_pa : float
-        Wind off, the median ``|p|`` over the taps and the Pitot's ``|p|`` must be below this, Pa.
-        50 Pa lies above the zero offsets a scanner keeps between two CALZs (tens of Pa; the
-        simulated scanner's are 10 Pa rms) and below the dynamic pressure of a test wind
-        (q = 50 Pa at 9 m/s).
-    rate_tolerance : float
-        Measured rate of a clocked device (counter over device time) against its configured
-        rate, relative. 2 %: a wrong setting is off by a factor, a healthy device by ppm.
-    clock_rate_tolerance : float
-        Device time advanced over host time during the window, relative. 10 %: the least
-        latency of each half of a 0.5 s window is known to a few ms on a busy host (a few %);
-        a stuck clock or one in the wrong unit is off by 100 % or more.
-    laser_valid_fraction : float
-        Fewest valid laser samples (no error value), fraction. A laser on its target at rest
-        gives no error values; a few are allowed (a dust grain).
-    pressure_range_pa : (float, float)
-        A laboratory's air pressure, Pa: the PTB330's 500 to 1100 hPa range.
-    temperature_range_k : (float, float)
-        A laboratory's air temperature, K (-10 to 50 degC).
-    fan_stopped_rpm : float
-        The fan is stopped when ``|actual speed|`` is below this, rpm.
-    """
-
-    zero_tolerance_pa: float = 50.0
-    rate_tolerance: float = 0.02
-    clock_rate_tolerance: float = 0.10
-    laser_valid_fraction: float = 0.99
-    pressure_range_pa: tuple[float, float] = (50_000.0, 110_000.0)
-    temperature_range_k: tuple[float, float] = (263.15, 323.15)
-    fan_stopped_rpm: float = 5.0
-
 
 @dataclass(frozen=True)
 class CheckResult:

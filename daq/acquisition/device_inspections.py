@@ -4,9 +4,9 @@ One function per kind (scanner, laser, barometer, fan drive, PLC, analog inputs)
 device's own check thread once its driver is open (:data:`INSPECT`): it asks the device's
 identity where the protocol gives one, reads it for the check's window, and writes what it
 found into the check's :class:`Findings`; the clocked kinds also measure their rate on the
-device's clock and that clock against the host's (:func:`_clocked`). The thresholds are
-:class:`~daq.acquisition.device_check.CheckLimits`; running the checks and reporting them is
-:mod:`daq.acquisition.device_check`.
+device's clock and that clock against the host's (:func:`_clocked`), all judged by the
+thresholds of :class:`CheckLimits`. Running the checks and reporting them is
+:mod:`daq.acquisition.device_check`, which re-exports :class:`CheckLimits`.
 """
 
 from __future__ import annotations
@@ -14,19 +14,57 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
 from daq.config import InstrumentConfig, RigConfig
 from daq.instruments.reading import Reading
 
-if TYPE_CHECKING:
-    from daq.acquisition.device_check import CheckLimits
+__all__ = ["INSPECT", "CheckLimits", "DeviceSession", "Findings"]
 
 #: Frame times above this are on an absolute (PTP) base, s (2001-09-09; the scanner driver's own
 #: rule for its ``time_base``).
 _ABSOLUTE_TIME_S = 1e9
+
+
+@dataclass(frozen=True)
+class CheckLimits:
+    """Thresholds of the plausibility checks.
+
+    Attributes
+    ----------
+    zero_tolerance_pa : float
+        Wind off, the median ``|p|`` over the taps and the Pitot's ``|p|`` must be below this, Pa.
+        50 Pa lies above the zero offsets a scanner keeps between two CALZs (tens of Pa; the
+        simulated scanner's are 10 Pa rms) and below the dynamic pressure of a test wind
+        (q = 50 Pa at 9 m/s).
+    rate_tolerance : float
+        Measured rate of a clocked device (counter over device time) against its configured
+        rate, relative. 2 %: a wrong setting is off by a factor, a healthy device by ppm.
+    clock_rate_tolerance : float
+        Device time advanced over host time during the window, relative. 10 %: the least
+        latency of each half of a 0.5 s window is known to a few ms on a busy host (a few %);
+        a stuck clock or one in the wrong unit is off by 100 % or more.
+    laser_valid_fraction : float
+        Fewest valid laser samples (no error value), fraction. A laser on its target at rest
+        gives no error values; a few are allowed (a dust grain).
+    pressure_range_pa : (float, float)
+        A laboratory's air pressure, Pa: the PTB330's 500 to 1100 hPa range.
+    temperature_range_k : (float, float)
+        A laboratory's air temperature, K (-10 to 50 degC).
+    fan_stopped_rpm : float
+        The fan is stopped when ``|actual speed|`` is below this, rpm.
+    """
+
+    zero_tolerance_pa: float = 50.0
+    rate_tolerance: float = 0.02
+    clock_rate_tolerance: float = 0.10
+    laser_valid_fraction: float = 0.99
+    pressure_range_pa: tuple[float, float] = (50_000.0, 110_000.0)
+    temperature_range_k: tuple[float, float] = (263.15, 323.15)
+    fan_stopped_rpm: float = 5.0
+
 
 
 @dataclass
