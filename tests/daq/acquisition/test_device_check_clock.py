@@ -6,7 +6,7 @@ the tests do not depend on the machine's load: the first read brings a backlog (
 samples that reached the host ``backlog_s`` after their device time), every later read 20 ms
 of samples with a 1 ms latency. A host busy through the first part of a check made one window's
 clock ratio come out 1.24 on a loaded CI machine, where the tolerance is 10 %; the backlog here
-gives the first window a ratio of 1.25 or more and the second window none. A clock that is itself
+gives the first window a ratio of 1.15 or more and the second window none. A clock that is itself
 wrong (1.3 times the host's) fails both windows.
 """
 
@@ -87,7 +87,7 @@ BACKLOG_SAMPLES = int(RATE_HZ)  # 1 s: more than twice what 25 reads of 20 ms br
 BLOCK_SAMPLES = int(0.02 * RATE_HZ)
 
 CASES = {  # name -> (latency of the first read's samples s, clock rate)
-    "busy_host": (0.2, 1.0),  # ratio 1.25 or more over the first window
+    "busy_host": (0.2, 1.0),  # ratio 1.15 or more over the first window
     "wrong_clock": (1e-3, 1.3),
 }
 
@@ -114,9 +114,11 @@ def test_a_host_busy_through_one_window_is_a_note_not_a_failure(timed_rigs):
     assert result.ok, result.problems
     (note,) = [n for n in result.notes if "the host was busy" in n]
     first = float(note.split("ran at ")[1].split(" x")[0])
-    # The least latencies of the halves: 0.2 s (at some sample of the backlog, all equal to
-    # the nanosecond) and 1 ms at 1 s, at most 1 s apart: 1 / (1 - 0.199) or more.
-    assert first >= 1.0 / (1.0 - 0.199) - 1e-3  # printed to 3 decimals
+    # The least latencies of the halves: 0.2 s and 1 ms, each at whichever sample the float
+    # rounding of the nanosecond stamps favours (all equal to the nanosecond), so at any
+    # sample of the backlog's first half and of the later reads: at most 1.5 s apart (1 s of
+    # backlog, at most 25 reads of 20 ms), which gives 1 / (1 - 0.199 / 1.5) or more.
+    assert first >= 1.0 / (1.0 - 0.199 / 1.5) - 1e-3  # printed to 3 decimals
 
 
 def test_a_clock_that_is_wrong_fails_on_both_windows(timed_rigs):
