@@ -181,6 +181,49 @@ def test_channel_offsets_are_concentrated_out():
     assert objective.evaluate(theta).nll == pytest.approx(before, rel=1e-9)
 
 
+def test_the_pooled_portmanteau_statistic_sums_every_record_s_lagged_products():
+    """Against a direct sum over lags and records, and chi-square for white innovations.
+
+    Six records of 2000 samples, as 3 speeds x 2 releases at the decimated rate. Each record's
+    innovations have their own covariance (a channel with ten times the std, correlated ones):
+    standardised by it, they are white. The statistic is chi-square with 20 degrees of freedom
+    there: over 200 draws of four channels its mean is within 4 standard errors (0.22) of 20,
+    and at most 3 draws exceed the limit on some channel (chance 1 in 1000 per draw: 0.2
+    expected). A moving average of coefficient 0.1 on one channel (lag-1 autocorrelation 0.1)
+    adds about N 0.1^2 = 120 there alone.
+    """
+    rng = np.random.default_rng(7)
+    L = np.array([[1.0, 0, 0, 0], [0.5, 1.0, 0, 0], [0, 0, 10.0, 0], [0, 0, 3.0, 2.0]])
+    S = L @ L.T
+
+    def records(coefficient=0.0):
+        out = []
+        for _ in range(6):
+            w = rng.standard_normal((2000, 4))
+            w[1:, 2] += coefficient * w[:-1, 2]  # a moving average: lag-1 correlation ~ 0.1
+            out.append(w @ L.T)
+        return out
+
+    e = records()
+    found = closed_loop_ml.pooled_portmanteau(e, [S] * 6)
+    u = [x @ np.linalg.inv(L).T for x in e]
+    u = [x - x.mean(axis=0) for x in u]
+    N = sum(x.shape[0] for x in u)
+    for c in range(4):
+        power = sum(float(x[:, c] @ x[:, c]) for x in u)
+        rho = [sum(float(x[lag:, c] @ x[:-lag, c]) for x in u) / power for lag in range(1, 21)]
+        assert found[c] == pytest.approx(N * sum(r * r for r in rho), rel=1e-12)
+    limit = closed_loop_ml.portmanteau_limit()
+    assert 45.0 < limit < 55.0  # chi-square(20) at 1 - 0.001 / 4: 49.6
+    draws = np.array([closed_loop_ml.pooled_portmanteau(records(), [S] * 6)
+                      for _ in range(200)])
+    assert abs(draws.mean() - 20.0) < 4 * math.sqrt(40.0 / 800)
+    assert np.sum(np.any(draws > limit, axis=1)) <= 3
+    coloured = closed_loop_ml.pooled_portmanteau(records(0.1), [S] * 6)
+    assert coloured[2] > 2 * limit
+    assert np.all(np.delete(coloured, 2) < limit)
+
+
 def test_recovers_the_flutter_speed_of_data_from_its_own_model():
     """Started from E2RFC's estimate, the flutter speed within 2.5 std of the truth.
 
@@ -199,6 +242,8 @@ def test_recovers_the_flutter_speed_of_data_from_its_own_model():
     assert std < 0.10 * U_F
     assert abs(speed - U_F) <= 2.5 * std
     assert np.all(fit.whiteness < 0.12)  # 2000 samples: chance stays below about 0.09
+    assert np.all(fit.portmanteau < closed_loop_ml.portmanteau_limit())
+    assert not any("portmanteau" in w for w in fit.warnings)
     for sf in fit.shaping:  # the buffeting's corner frequency, within 15 %
         assert np.allclose(sf.frequencies, 4.0, rtol=0.15)
 
@@ -221,13 +266,14 @@ def test_the_fourth_order_buffeting_model_recovers_its_own_model_s_flutter_speed
     assert std < 0.10 * U_F
     assert abs(speed - U_F) <= 2.5 * std
     assert np.all(fit.whiteness < 0.12)
+    assert np.all(fit.portmanteau < closed_loop_ml.portmanteau_limit())
 
 
 def test_e2rfc_runs_the_closed_loop_branch_in_the_tunnel_s_turbulence():
     """The benchmark's plate campaign at 1 % turbulence (its seed-2 draws), without holds.
 
     Plain E2RFC (the refined-IV branch without holds keeps its estimate) is +11.1 % off here,
-    std 135 %; the closed-loop branch gives -3.6 %, std 7.1 % (7.0 % of it the Fisher
+    std 135 %; the closed-loop branch gives -2.5 %, std 8.7 % (8.5 % of it the Fisher
     information's, no jackknife part). Bounds: within 2 std, and under 8 % (the benchmark
     row's 90th percentile without holds is 8.4 %, its median 3.3 %).
     """
@@ -251,6 +297,11 @@ def test_e2rfc_runs_the_closed_loop_branch_in_the_tunnel_s_turbulence():
     # The fit passes its own checks: no cross-check ran, none joins the std.
     assert u.cross_check == 0.0 and model.diagnostics.cross_check is None
     assert not any("failed its own checks" in w for w in warnings)
+    # Pooled over the six records the innovations are not white (pitch 118 against a limit
+    # of 50; the fourth-order model's are, 12-31 on the benchmark's rows): said, with the
+    # remedy.
+    (pooled,) = [w for w in warnings if "portmanteau" in w]
+    assert "pitch" in pooled and "fourth-order" in pooled
     assert abs(u.speed - U_F) <= 2.0 * u.total
     assert abs(u.speed / U_F - 1.0) < 0.08
     # No release grew, so the data bound the flutter speed from below at the top speed: a
