@@ -673,7 +673,7 @@ def main():
                         help="the turbulence branch's estimator (e2rfc.TURBULENT_ESTIMATOR): "
                              "refined IV (needs holds) or closed-loop maximum likelihood")
     parser.add_argument("--closed-loop-buffeting", default=e2rfc.CLOSED_LOOP_BUFFETING,
-                        choices=tuple(e2rfc.CLOSED_LOOP_BUFFETING_MODELS),
+                        choices=e2rfc.CLOSED_LOOP_BUFFETING_CHOICES,
                         help="the closed-loop branch's buffeting model "
                              "(e2rfc.CLOSED_LOOP_BUFFETING)")
     result_files.add_arguments(parser)

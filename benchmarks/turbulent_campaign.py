@@ -139,7 +139,8 @@ def main() -> None:
                         help="--adaptive: most speeds in all (8; --quick: 3)")
     parser.add_argument("--max-releases", type=int, default=None,
                         help="--adaptive: most releases at one chosen speed (4)")
-    parser.add_argument("--closed-loop-buffeting", choices=("second-order", "fourth-order"),
+    parser.add_argument("--closed-loop-buffeting",
+                        choices=("second-order", "fourth-order", "by-evidence"),
                         default="second-order",
                         help="--adaptive: the closed-loop estimator's buffeting model")
     result_files.add_arguments(parser)

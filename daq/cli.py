@@ -107,10 +107,12 @@ def _build_parser() -> argparse.ArgumentParser:
                       help="rows of --table, U/(f B) (default: the releases' span)")
     p_id.add_argument("--turbulent-estimator", choices=("iv", "ml"),
                       help="in turbulence: closed-loop ML (default; 2-DOF) or refined IV")
-    p_id.add_argument("--closed-loop-buffeting", choices=("second-order", "fourth-order"),
-                      help="closed-loop ML's buffeting model: second-order (default) or "
-                           "fourth-order (less biased with many releases per speed, about "
-                           "twice the time)")
+    p_id.add_argument("--closed-loop-buffeting",
+                      choices=("second-order", "fourth-order", "by-evidence"),
+                      help="closed-loop ML's buffeting model: second-order (default), "
+                           "fourth-order (less biased, about twice the time) or by-evidence "
+                           "(fourth-order when the second-order's innovations are not white "
+                           "and Schwarz's criterion favours it)")
 
     p_diag = sub.add_parser(
         "diagnose",

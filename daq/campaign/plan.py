@@ -35,8 +35,9 @@ The plan (units SI; the example plans are ``rig_configs/plans/*.toml``)::
                                 # likelihood; holds optional; 2-DOF, a 3-DOF section runs
                                 # "iv") or "iv" (refined IV, needs the holds)
     closed_loop_buffeting = "second-order"  # the "ml" estimator's buffeting model:
-                                # "second-order" or "fourth-order" (less biased with many
-                                # releases per speed, about twice the time)
+                                # "second-order", "fourth-order" (less biased, about twice
+                                # the time) or "by-evidence" (the fourth when the second's
+                                # innovations are not white and the evidence favours it)
 
     [speeds]
     wind_speeds = [5.0, 7.0]    # m/s; or fan_rpm = [500, 700] (set-points, rpm), not both
@@ -95,8 +96,9 @@ RELEASES = ("auto", "plc", "manual")
 IDENTIFICATIONS = ("e2rfc", "displacement")
 #: E2RFC's estimators of releases in turbulence (``e2rfc.TURBULENT_ESTIMATORS``).
 TURBULENT_ESTIMATORS = ("iv", "ml")
-#: The closed-loop estimator's buffeting models (``e2rfc.CLOSED_LOOP_BUFFETING_MODELS``).
-CLOSED_LOOP_BUFFETINGS = ("second-order", "fourth-order")
+#: The closed-loop estimator's buffeting models, or the evidence's choice between them
+#: (``e2rfc.CLOSED_LOOP_BUFFETING_CHOICES``).
+CLOSED_LOOP_BUFFETINGS = ("second-order", "fourth-order", "by-evidence")
 #: Fewest wind speeds the displacement-only route identifies from (its known weakness).
 DISPLACEMENT_MIN_SPEEDS = 3
 MAX_RELEASES_PER_SPEED = 20
@@ -186,8 +188,8 @@ class CampaignPlan:
         E2RFC's estimator of releases in turbulence, ``"ml"`` (default) or ``"iv"``
         (:func:`ident.identification.e2rfc.identify`).
     closed_loop_buffeting : str
-        The closed-loop estimator's buffeting model, ``"second-order"`` (default) or
-        ``"fourth-order"`` (:func:`ident.identification.e2rfc.identify`).
+        The closed-loop estimator's buffeting model, ``"second-order"`` (default),
+        ``"fourth-order"`` or ``"by-evidence"`` (:func:`ident.identification.e2rfc.identify`).
     """
 
     mode: str

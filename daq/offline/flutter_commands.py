@@ -65,8 +65,9 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
     turbulent_estimator : {"iv", "ml"}, optional
         The estimator of releases in turbulence (default: E2RFC's, closed-loop maximum
         likelihood, :mod:`ident.identification.closed_loop_ml`); ``"iv"``: refined IV.
-    closed_loop_buffeting : {"second-order", "fourth-order"}, optional
-        The closed-loop estimator's buffeting model (default E2RFC's, second-order).
+    closed_loop_buffeting : {"second-order", "fourth-order", "by-evidence"}, optional
+        The closed-loop estimator's buffeting model (default E2RFC's, second-order), or the
+        one the evidence favours.
     """
     from daq.offline.derivative_table import (
         check_model_dof,

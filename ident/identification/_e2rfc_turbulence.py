@@ -44,6 +44,12 @@ ESTIMATOR_TURBULENT = "refined IV with the holds' noise model (turbulence branch
 CLOSED_LOOP_LAGS = 2
 #: name -> (``shaping_sections``, ``exact_block_means``).
 CLOSED_LOOP_BUFFETING_MODELS = {"second-order": (1, False), "fourth-order": (2, True)}
+#: The buffeting choice that fits the second-order model and, when its innovations pooled over
+#: the records are not white, the fourth-order one too, keeping the fit of lower Schwarz
+#: criterion (:func:`_by_evidence`).
+BY_EVIDENCE = "by-evidence"
+#: What ``closed_loop_buffeting`` may be: a model's name or :data:`BY_EVIDENCE`.
+CLOSED_LOOP_BUFFETING_CHOICES = (*CLOSED_LOOP_BUFFETING_MODELS, BY_EVIDENCE)
 #: ``diagnostics.estimator`` of the closed-loop branch.
 ESTIMATOR_CLOSED_LOOP = "closed-loop maximum likelihood (turbulence branch)"
 #: How E2RFC's turbulence warning ends, and how the closed-loop branch's ends in its place.
@@ -162,21 +168,24 @@ def _closed_loop(model: IdentifiedModel, releases: list[Release], section: Secti
     searched again from other starts (:mod:`ident.identification._closed_loop_starts`). A fit
     that fails its own checks (:attr:`ClosedLoopFit.failed_checks`) is cross-checked by refined
     IV when the holds allow it: the distance between the two flutter speeds joins the std
-    (:attr:`E2RFCDiagnostics.cross_check`).
+    (:attr:`E2RFCDiagnostics.cross_check`). The buffeting model is ``buffeting``'s, or with
+    :data:`BY_EVIDENCE` the one the evidence favours (:func:`_by_evidence`); the note says which.
     """
     base = model.diagnostics
-    sections, exact = CLOSED_LOOP_BUFFETING_MODELS[buffeting]
-    search = partial(closed_loop_ml.fit_closed_loop, releases, section, with_A3=True,
-                     n_lags=CLOSED_LOOP_LAGS, shaping_sections=sections, exact_block_means=exact)
+    stable_to = bounded_at(releases)
+    first = "second-order" if buffeting == BY_EVIDENCE else buffeting
     try:
-        fit = search(model)
+        fit, restarted = _searched(model, releases, section, first, stable_to)
     except ValueError as exc:
         note = (f"turbulence: the closed-loop likelihood could not start from E2RFC's estimate "
                 f"({exc}); E2RFC's own, biased low in turbulence, is kept")
         return IdentifiedModel(model.A, model.d,
                                replace(base, warnings=(*base.warnings, note)))
-    stable_to = bounded_at(releases)
-    fit, restarted = _closed_loop_starts.search_again(fit, section, stable_to, search)
+    chosen, evidence = first, ""
+    if buffeting == BY_EVIDENCE:
+        fit, restarted, chosen, evidence = _by_evidence(model, releases, section, stable_to,
+                                                        (fit, restarted))
+    sections, exact = CLOSED_LOOP_BUFFETING_MODELS[chosen]
     speeds = distinct_wind_speeds([r.U for r in releases])
     below = [r for r in releases if r.U < speeds[-1] / (1 + DISTINCT_U_RTOL)]
 
@@ -191,7 +200,8 @@ def _closed_loop(model: IdentifiedModel, releases: list[Release], section: Secti
 
     holds = sum(r.hold is not None for r in releases)
     note = (f"turbulence: coefficients by {ESTIMATOR_CLOSED_LOOP} over {len(releases)} releases "
-            f"and {holds} holds ({fit.iterations} iterations)")
+            f"and {holds} holds ({fit.iterations} iterations, {chosen} buffeting model"
+            f"{evidence})")
     cross_check, checks = None, []
     if fit.failed_checks:
         failed = (f"the closed-loop fit failed its own checks ({'; '.join(fit.failed_checks)}): "
@@ -219,6 +229,52 @@ def _closed_loop(model: IdentifiedModel, releases: list[Release], section: Secti
                  "reduced": Deferred(reduced) if len(speeds) >= 3 else None,
                  "cross_check": cross_check})
     return IdentifiedModel(fit.model.A, fit.model.d, diagnostics)
+
+
+def _searched(start: IdentifiedModel, releases: list[Release], section: SectionModel,
+              buffeting: str, stable_to: float | None
+              ) -> tuple[closed_loop_ml.ClosedLoopFit, str | None]:
+    """Return the closed-loop fit with a buffeting model from ``start``, searched again if need be.
+
+    Raises ValueError when the likelihood cannot start from ``start``.
+    """
+    sections, exact = CLOSED_LOOP_BUFFETING_MODELS[buffeting]
+    search = partial(closed_loop_ml.fit_closed_loop, releases, section, with_A3=True,
+                     n_lags=CLOSED_LOOP_LAGS, shaping_sections=sections, exact_block_means=exact)
+    return _closed_loop_starts.search_again(search(start), section, stable_to, search)
+
+
+def _by_evidence(start: IdentifiedModel, releases: list[Release], section: SectionModel,
+                 stable_to: float | None,
+                 second: tuple[closed_loop_ml.ClosedLoopFit, str | None]
+                 ) -> tuple[closed_loop_ml.ClosedLoopFit, str | None, str, str]:
+    """Return the fit the evidence favours, its restart note, its model's name and why.
+
+    The second-order fit stands when its innovations pooled over the records are white
+    (:attr:`ClosedLoopFit.portmanteau`); otherwise the fourth-order model is fitted from the
+    same start and the fit of lower Schwarz criterion is kept (both models count their
+    concentrated offsets and initial states: the fourth-order one has eight more shaping
+    parameters per wind speed and eight more states per record). The reason ends the note.
+    """
+    fit, restarted = second
+    limit = closed_loop_ml.portmanteau_limit()
+    if not np.any(fit.portmanteau > limit):
+        return fit, restarted, "second-order", (
+            f", chosen by evidence: its innovations pooled over the records are white, "
+            f"portmanteau statistic {float(fit.portmanteau.max()):.0f} < {limit:.0f}")
+    try:
+        richer, richer_restarted = _searched(start, releases, section, "fourth-order", stable_to)
+    except ValueError as exc:
+        return fit, restarted, "second-order", (
+            f", chosen by evidence: the second-order model's pooled innovations are not white, "
+            f"but the fourth-order likelihood could not start ({exc})")
+    gain = fit.schwarz - richer.schwarz
+    why = (f", chosen by evidence: the second-order model's pooled innovations are not white "
+           f"(portmanteau statistic {float(fit.portmanteau.max()):.0f} > {limit:.0f}) and "
+           f"Schwarz's criterion favours the ")
+    if gain > 0.0:
+        return richer, richer_restarted, "fourth-order", f"{why}fourth-order model by {gain:.0f}"
+    return fit, restarted, "second-order", f"{why}second-order model by {-gain:.0f}"
 
 
 def _with_reason(found: _turbulent_fit.TurbulentResult,

@@ -162,6 +162,11 @@ class ClosedLoopFit:
     whiteness : ndarray, shape (n_records, 4)
         Largest autocorrelation of each record's standardised innovations over lags 1-20, per
         channel (about 2/sqrt(n) if the model is right).
+    n_parameters : int
+        Parameters estimated: those searched and, per record, the concentrated offsets and
+        initial state (what Schwarz's criterion counts).
+    n_samples : int
+        Scalar samples of every record together (block means times channels).
     portmanteau : ndarray, shape (4,)
         Per channel, ``N sum_l rho_l^2`` over lags ``l`` of 1-:data:`PORTMANTEAU_LAGS`, with
         ``rho_l`` the autocorrelation of the standardised innovations pooled over every record
@@ -185,7 +190,17 @@ class ClosedLoopFit:
     fs: float
     whiteness: FloatArray
     portmanteau: FloatArray
+    n_parameters: int
+    n_samples: int
     warnings: tuple[str, ...] = field(default=())
+
+    @property
+    def schwarz(self) -> float:
+        """Schwarz's criterion in log-likelihood units: ``-log L + n_parameters ln(n_samples)/2``.
+
+        Of two fits of the same records, the lower is the model the evidence favours.
+        """
+        return self.neg_log_likelihood + 0.5 * self.n_parameters * math.log(self.n_samples)
 
     @property
     def failed_checks(self) -> tuple[str, ...]:
@@ -315,7 +330,9 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
         noise_std=np.array([layout.noise(theta, r) for r in range(len(releases))]),
         neg_log_likelihood=current.nll, iterations=iterations, converged=converged,
         fs=min(record.fs for record in records),
-        whiteness=whiteness, portmanteau=portmanteau, warnings=tuple(warnings))
+        whiteness=whiteness, portmanteau=portmanteau,
+        n_parameters=layout.size + sum(v.size for v in current.nuisance),
+        n_samples=sum(record.y.size for record in records), warnings=tuple(warnings))
 
 
 def _maximise(objective: _Objective, layout: Layout, theta: FloatArray, current: _Evaluation

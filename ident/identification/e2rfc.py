@@ -76,6 +76,8 @@ import numpy.typing as npt
 from ident.errors import RankDeficiencyError
 from ident.identification._e2rfc_problem import FinalFit, Problem, improves
 from ident.identification._e2rfc_turbulence import (
+    BY_EVIDENCE,
+    CLOSED_LOOP_BUFFETING_CHOICES,
     CLOSED_LOOP_BUFFETING_MODELS,
     CLOSED_LOOP_LAGS,
     ESTIMATOR_CLOSED_LOOP,
@@ -100,7 +102,8 @@ from ident.numerics.threads import single_threaded_blas
 from ident.records import plausibility
 from ident.records.release import Release
 
-__all__ = ["CLOSED_LOOP_BUFFETING", "CLOSED_LOOP_BUFFETING_MODELS", "CLOSED_LOOP_LAGS",
+__all__ = ["BY_EVIDENCE", "CLOSED_LOOP_BUFFETING", "CLOSED_LOOP_BUFFETING_CHOICES",
+           "CLOSED_LOOP_BUFFETING_MODELS", "CLOSED_LOOP_LAGS",
            "ESTIMATOR_CLOSED_LOOP", "ESTIMATOR_TURBULENT", "TURBULENT_A3", "TURBULENT_ESTIMATOR",
            "identify", "reduced_frequency_span"]
 
@@ -134,7 +137,9 @@ TURBULENT_ESTIMATORS = ("iv", "ml")
 #: The closed-loop branch's buffeting model (``fit_closed_loop``'s options, by name): one
 #: second-order section per force on block means taken as samples, or two sections on exact
 #: block means. docs/development/e2rfc_turbulence.md measures the second's smaller bias and
-#: its two to three times the time.
+#: its two to three times the time. ``"by-evidence"`` (:data:`BY_EVIDENCE`) fits the first and,
+#: when its innovations pooled over the records are not white, the second too, keeping the
+#: fit Schwarz's criterion favours.
 CLOSED_LOOP_BUFFETING = "second-order"
 
 
@@ -163,11 +168,13 @@ def identify(
         The estimator of releases in turbulence (default :data:`TURBULENT_ESTIMATOR`, "ml"):
         closed-loop maximum likelihood (two degrees of freedom; a 3-DOF section runs refined IV
         and says so), or refined IV with the holds' noise model. Smooth flow ignores it.
-    closed_loop_buffeting : {"second-order", "fourth-order"}, optional
+    closed_loop_buffeting : {"second-order", "fourth-order", "by-evidence"}, optional
         The closed-loop estimator's buffeting model (default :data:`CLOSED_LOOP_BUFFETING`):
         one second-order shaping section per force on block means taken as samples, or two
-        sections on exact block means (less biased with many releases per speed, about twice
-        the time; :data:`CLOSED_LOOP_BUFFETING_MODELS`). Ignored by the other estimators.
+        sections on exact block means (less biased, about twice the time;
+        :data:`CLOSED_LOOP_BUFFETING_MODELS`), or the first unless its innovations pooled over
+        the records are not white and Schwarz's criterion favours the second (then both are
+        fitted). Ignored by the other estimators.
 
     Returns
     -------
@@ -223,9 +230,9 @@ def identify(
         raise ValueError(f"turbulent_estimator must be one of {TURBULENT_ESTIMATORS}, got "
                          f"{turbulent_estimator!r}")
     buffeting = CLOSED_LOOP_BUFFETING if closed_loop_buffeting is None else closed_loop_buffeting
-    if buffeting not in CLOSED_LOOP_BUFFETING_MODELS:
+    if buffeting not in CLOSED_LOOP_BUFFETING_CHOICES:
         raise ValueError(f"closed_loop_buffeting must be one of "
-                         f"{tuple(CLOSED_LOOP_BUFFETING_MODELS)}, got {closed_loop_buffeting!r}")
+                         f"{CLOSED_LOOP_BUFFETING_CHOICES}, got {closed_loop_buffeting!r}")
     model = _identify_prepared(prepared, section, n_lags, with_A3)
     return _guarded(turbulence_branch(model, releases, section, n_lags, with_A3,
                                       estimator=estimator, buffeting=buffeting,

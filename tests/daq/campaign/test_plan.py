@@ -63,7 +63,7 @@ def test_defaults_and_candidates():
     # E2RFC's.
     assert plan_module.TURBULENT_ESTIMATORS == e2rfc.TURBULENT_ESTIMATORS
     assert plan.turbulent_estimator == e2rfc.TURBULENT_ESTIMATOR
-    assert plan_module.CLOSED_LOOP_BUFFETINGS == tuple(e2rfc.CLOSED_LOOP_BUFFETING_MODELS)
+    assert plan_module.CLOSED_LOOP_BUFFETINGS == e2rfc.CLOSED_LOOP_BUFFETING_CHOICES
     assert plan.closed_loop_buffeting == e2rfc.CLOSED_LOOP_BUFFETING
     assert parse_plan(FIXED.replace("decay_s = 5.0", 'decay_s = 5.0\nclosed_loop_buffeting = '
                                     '"fourth-order"')).closed_loop_buffeting == "fourth-order"
