@@ -244,6 +244,16 @@ def test_recovers_the_flutter_speed_of_data_from_its_own_model():
     assert np.all(fit.whiteness < 0.12)  # 2000 samples: chance stays below about 0.09
     assert np.all(fit.portmanteau < closed_loop_ml.portmanteau_limit())
     assert not any("portmanteau" in w for w in fit.warnings)
+    # Schwarz's criterion counts what was estimated: 20 A entries and 2 lag roots, 7 shaping
+    # parameters per speed, 4 noise stds per release, and per record 4 offsets and the
+    # initial state (12 states: 4 of the structure, 4 lag states, 4 of the shaping filter)
+    # over 12 s of block means at 100 Hz on 4 channels.
+    n_states = ReleaseModel(PLATE, truth, 5.0, 100.0, shaping(5.0), NOISE).n_states
+    assert n_states == 12
+    assert fit.n_parameters == 22 + 3 * 7 + 6 * 4 + 6 * (4 + n_states)
+    assert fit.n_samples == 6 * 1200 * 4
+    assert fit.schwarz == pytest.approx(
+        fit.neg_log_likelihood + 0.5 * fit.n_parameters * math.log(fit.n_samples), rel=1e-12)
     for sf in fit.shaping:  # the buffeting's corner frequency, within 15 %
         assert np.allclose(sf.frequencies, 4.0, rtol=0.15)
 
@@ -327,6 +337,45 @@ def test_e2rfc_runs_the_closed_loop_branch_in_the_tunnel_s_turbulence():
     assert crossed.total**2 == pytest.approx(u.total**2 + crossed.cross_check**2, rel=1e-6)
     assert any(w.startswith("refined IV on the same releases puts the flutter speed at")
                for w in crossed.warnings)
+
+
+@pytest.mark.slow
+def test_the_evidence_takes_the_fourth_order_model_only_where_the_innovations_ask_for_it():
+    """``closed_loop_buffeting="by-evidence"`` on the estimator's own model class and the tunnel.
+
+    Drawn from the second-order model itself (12 s, seed 0), the pooled statistic is 17-27
+    against the limit of 50: the second-order fit stands, and no second fit runs. On the
+    tunnel's 1 % turbulence (the draws of the tunnel test above) the second-order model's pitch
+    innovations reach 118: the fourth-order model is fitted too, and Schwarz's criterion favours
+    it by 24 for its 24 more shaping parameters and 48 more initial states. It gives -2.3 %,
+    std 6.6 % (the second-order model -2.5 %, std 8.7 %): within 2 std and 8 % as there.
+    """
+    releases, _, _ = own_model_releases(seed=0, duration=12.0)
+    model = e2rfc.identify(releases, PLATE, closed_loop_buffeting="by-evidence")
+    (note,) = [w for w in model.diagnostics.warnings if "chosen by evidence" in w]
+    assert "second-order buffeting model" in note and "are white" in note
+    assert not any("portmanteau" in w for w in model.diagnostics.warnings if w != note)
+
+    truth = flat_plate.jones_model()
+    U_F = fl.analyze(PLATE, truth).speed
+    wind = {"static": StaticCoefficients.flat_plate(), "span": 1.0,
+            "turbulence": TurbulenceSpec(Iu=0.0, Iw=0.01, Lux=1.0, Lwx=0.3, Cuy=10.0, Cwy=8.0)}
+    releases = [Release.from_simulation(simulate_release(
+        PLATE, truth, f * U_F, h0, a0, duration=20.0, fs=500.0, noise=0.02,
+        rng=(2, i, j, 10), **wind))
+        for i, f in enumerate((0.4, 0.6, 0.8)) for j, (h0, a0) in enumerate(HOLDS)]
+    model = e2rfc.identify(releases, PLATE, closed_loop_buffeting="by-evidence")
+    (note,) = [w for w in model.diagnostics.warnings if "chosen by evidence" in w]
+    assert "fourth-order buffeting model" in note and "not white" in note
+    gain = float(note.split("favours the fourth-order model by ")[1].rstrip(")"))
+    assert gain > 0.0
+    # The chosen fit's own innovations are white pooled: no warning of them remains.
+    assert not any("portmanteau" in w for w in model.diagnostics.warnings if w != note)
+    u = model.uncertainty(PLATE)
+    assert abs(u.speed - U_F) <= 2.0 * u.total
+    assert abs(u.speed / U_F - 1.0) < 0.08
+    with pytest.raises(ValueError, match="closed_loop_buffeting must be one of"):
+        e2rfc.identify(releases, PLATE, closed_loop_buffeting="sixth-order")
 
 
 @pytest.mark.slow
