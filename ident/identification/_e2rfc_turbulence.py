@@ -252,9 +252,9 @@ def _by_evidence(start: IdentifiedModel, releases: list[Release], section: Secti
 
     The second-order fit stands when its innovations pooled over the records are white
     (:attr:`ClosedLoopFit.portmanteau`); otherwise the fourth-order model is fitted from the
-    same start and the fit of lower Schwarz criterion is kept (both models count their
-    concentrated offsets and initial states: the fourth-order one has eight more shaping
-    parameters per wind speed and eight more states per record). The reason ends the note.
+    same start and the fit of lower Schwarz criterion is kept
+    (:attr:`ClosedLoopFit.schwarz`: the fourth-order model has eight more shaping parameters
+    per wind speed and four more initial states per record). The reason ends the note.
     """
     fit, restarted = second
     limit = closed_loop_ml.portmanteau_limit()
