@@ -365,7 +365,7 @@ def tunnel_run(args):
     except Exception as exc:  # noqa: BLE001 - a benchmark reports every failure and goes on
         row, seed, mode, *_ = args
         print(f"FAILED {row} seed {seed} {mode}: {exc!r}", flush=True)
-        return row, mode, np.inf, np.nan, np.nan, False, seed
+        return row, mode, np.inf, np.nan, np.nan, False, seed, False
 
 
 def _tunnel_run(args):
@@ -385,10 +385,12 @@ def _tunnel_run(args):
     elapsed = time.perf_counter() - start
     branch = model.diagnostics.estimator in (e2rfc.ESTIMATOR_TURBULENT,
                                              e2rfc.ESTIMATOR_CLOSED_LOOP)
+    # The closed-loop branch's note names its buffeting model (chosen by evidence or not).
+    fourth = "fourth-order buffeting model" in model.diagnostics.reason
     if uncertainty.speed is None:
-        return row, mode, np.inf, np.nan, elapsed, branch, seed
+        return row, mode, np.inf, np.nan, elapsed, branch, seed, fourth
     return (row, mode, uncertainty.speed / U_F - 1.0, uncertainty.total / U_F, elapsed, branch,
-            seed)
+            seed, fourth)
 
 
 #: Median of a half-normal error over its std: an estimator at the bound has this median error.
@@ -470,10 +472,10 @@ def tunnel_report(found, names, seeds, modes, bounds):
     results = []
     # Each result printed as it arrives: a long run stopped halfway keeps what it measured.
     for result in found:
-        row, mode, err, std, elapsed, branch, seed = result
+        row, mode, err, std, elapsed, branch, seed, fourth = result
         print(f"  {row:<24} {mode:<6} seed {seed:2d} err {100 * err:+8.2f} % std "
-              f"{100 * std:7.2f} % {elapsed:5.1f} s{' branch' if branch else ''}",
-              flush=True)
+              f"{100 * std:7.2f} % {elapsed:5.1f} s{' branch' if branch else ''}"
+              f"{' fourth-order' if fourth else ''}", flush=True)
         results.append(result)
     tables = [_tunnel_table([r for r in results if r[1] == mode], names, seeds, mode,
                             {row: bounds[row, mode] for row in names})
@@ -493,13 +495,13 @@ def _tunnel_table(results, names, seeds, mode, bounds):
     header = (f"{'case':<26}{'|err| med':>10}{'at CRB':>8}{'ratio':>7}{'sampled':>9}"
               f"{'ratio':>7}{'|err| p90':>10}"
               f"{'2-std cover':>12}{'std med':>9}{'time med':>10}{'no flutter':>11}"
-              f"{'branch':>10}")
+              f"{'branch':>10}{'4th ord':>8}")
     print(header)
     print("-" * len(header))
     covered = total = 0
     table = []
     for row in names:
-        rows = [(r[0], r[2], r[3], r[4], r[5]) for r in results if r[0] == row]
+        rows = [(r[0], r[2], r[3], r[4], r[5], r[7]) for r in results if r[0] == row]
         err = np.abs([r[1] for r in rows]) * 100
         std = np.array([r[2] for r in rows]) * 100
         inside = np.isfinite(err) & (err <= 2 * std)
@@ -515,22 +517,23 @@ def _tunnel_table(results, names, seeds, mode, bounds):
         line = (row, median, first, ratio, sampled, sampled_ratio, np.percentile(err, 90),
                 100 * inside.mean(), np.nanmedian(std), np.median([r[3] for r in rows]),
                 int(np.sum(~np.isfinite(err))), int(np.sum(np.isnan([r[3] for r in rows]))),
-                sum(r[4] for r in rows), int(inside.sum()), len(rows))
+                sum(r[4] for r in rows), sum(r[5] for r in rows), int(inside.sum()),
+                len(rows))
         table.append(line)
         shown = ["n/a" if v is None else f"{v:.2f}{unit}"
                  for v, unit in ((first, "%"), (ratio, ""), (sampled, "%"), (sampled_ratio, ""))]
         print(f"{row:<26}{median:>9.2f}%{shown[0]:>8}{shown[1]:>7}{shown[2]:>9}{shown[3]:>7}"
               f"{line[6]:>9.2f}%{line[7]:>11.0f}%{line[8]:>8.2f}%{line[9]:>9.2f}s"
-              f"{line[10]:>11d}{line[12]:>10d}")
+              f"{line[10]:>11d}{line[12]:>10d}{line[13]:>8d}")
     print(f"\ncoverage of the 2-std interval over all rows: {covered}/{total} "
           f"({100 * covered / total:.0f} %)")
     table.append(("all rows", None, None, None, None, None, None, 100 * covered / total, None,
                   None, sum(r[10] for r in table), sum(r[11] for r in table),
-                  sum(r[12] for r in table), covered, total))
+                  sum(r[12] for r in table), sum(r[13] for r in table), covered, total))
     columns = ("case", "median error (%)", "median error at the bound (%)", "error / bound",
                "sampled median error at the bound (%)", "error / sampled bound",
                "p90 error (%)", "2-std coverage (%)", "median std (%)", "median time (s)",
-               "no flutter", "failed", "branch", "covered", "cases")
+               "no flutter", "failed", "branch", "fourth-order", "covered", "cases")
     holds = (f"the turbulence rows with a {TUNNEL_HOLD_S:g} s hold before each release"
              if mode == "after" else "the same releases without their holds")
     return result_files.Table(
@@ -542,7 +545,8 @@ def _tunnel_table(results, names, seeds, mode, bounds):
         "coefficients drawn from the bound's covariance) and the ratios, the coverage "
         "of IdentifiedModel.flutter's 2-std "
         "interval, its median std, the median time of identification plus uncertainty, the "
-        "cases without flutter (failed ones included) and those the turbulence branch ran.",
+        "cases without flutter (failed ones included), those the turbulence branch ran and "
+        "those whose closed-loop fit has the fourth-order buffeting model.",
         columns, table, formats={"median error (%)": ".2f",
                                  "median error at the bound (%)": ".2f",
                                  "error / bound": ".2f",
