@@ -122,7 +122,8 @@ PORTMANTEAU_LAGS = 20
 #: (plate, Iw 1 %, no holds, seeds 0-2): with one section per force the statistic of heave,
 #: pitch and lift was 44-59 over 3 speeds x 2 releases and 99-206 over 3 x 8; with two
 #: sections on exact block means 12-31 on every channel (chance: 20 on average), that model
-#: 167-170 (3 x 2) and 575-598 (3 x 8) higher in log L for 24 more parameters.
+#: 167-170 (3 x 2) and 575-598 (3 x 8) higher in log L for 24 more parameters and four more
+#: initial states per record.
 PORTMANTEAU_LEVEL = 1e-3
 #: The channels of a record, in their order.
 CHANNELS = ("heave", "pitch", "lift", "moment")
