@@ -20,7 +20,12 @@ from functools import partial
 
 import numpy as np
 
-from ident.identification import _closed_loop_starts, _turbulent_fit, closed_loop_ml
+from ident.identification import (
+    _closed_loop_starts,
+    _turbulent_fit,
+    closed_loop_ml,
+    innovation_checks,
+)
 from ident.identification.results import (
     DISTINCT_U_RTOL,
     GROWTH_LIMIT,
@@ -257,7 +262,7 @@ def _by_evidence(start: IdentifiedModel, releases: list[Release], section: Secti
     per wind speed and four more initial states per record). The reason ends the note.
     """
     fit, restarted = second
-    limit = closed_loop_ml.portmanteau_limit()
+    limit = innovation_checks.portmanteau_limit()
     if not np.any(fit.portmanteau > limit):
         return fit, restarted, "second-order", (
             f", chosen by evidence: its innovations pooled over the records are white, "

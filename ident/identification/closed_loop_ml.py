@@ -43,8 +43,9 @@ at hand. The steady gain costs a little of the exact filter's efficiency over th
 of each record (where the exact filter's covariance has not yet settled), not its consistency.
 
 At the maximum the innovations are checked for whiteness, each record's alone and all records
-pooled (:func:`pooled_portmanteau`, which has the power of every record together): innovations
-that are not white mean a model that misses part of the data (a warning says which channels).
+pooled (:mod:`ident.identification.innovation_checks`, with the power of every record
+together): innovations that are not white mean a model that misses part of the data (a warning
+says which channels).
 
 The steady-state predictor itself, the Riccati solution and the likelihood of one record are
 :mod:`ident.identification.steady_predictor`.
@@ -66,10 +67,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
-import scipy.stats
 
 from ident.identification import _closed_loop_parameters as setup
 from ident.identification._closed_loop_parameters import Layout, Record
+from ident.identification.innovation_checks import pooled_portmanteau, portmanteau_warning
 from ident.identification.innovations import ReleaseModel, ShapingFilter, block_means, discretise
 from ident.identification.results import distinct_wind_speeds
 from ident.identification.steady_predictor import (
@@ -83,8 +84,7 @@ from ident.model.section import SectionModel
 from ident.numerics.threads import single_threaded_blas
 from ident.records.release import Release
 
-__all__ = ["ClosedLoopFit", "MAX_ITERATIONS", "fit_closed_loop", "pooled_portmanteau",
-           "portmanteau_limit"]
+__all__ = ["ClosedLoopFit", "MAX_ITERATIONS", "fit_closed_loop"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -115,18 +115,6 @@ WHITE_LIMIT = 4.0
 #: lacks; 6 of 8 searches did not converge either); 0.95 on a rig campaign whose records were
 #: decimated by the wrong factor (a rate a rounding short of 500 Hz), fitted at -33 %.
 GROSS_WHITENESS = 0.5
-#: Lags of the pooled portmanteau statistic (:attr:`ClosedLoopFit.portmanteau`).
-PORTMANTEAU_LAGS = 20
-#: Chance of the pooled portmanteau statistic exceeding its limit on any of the four channels
-#: when the model is right (split evenly between them; the limit is then 50). Measured
-#: (plate, Iw 1 %, no holds, seeds 0-2): with one section per force the statistic of heave,
-#: pitch and lift was 44-59 over 3 speeds x 2 releases and 99-206 over 3 x 8; with two
-#: sections on exact block means 12-31 on every channel (chance: 20 on average), that model
-#: 167-170 (3 x 2) and 575-598 (3 x 8) higher in log L for 24 more parameters and four more
-#: initial states per record.
-PORTMANTEAU_LEVEL = 1e-3
-#: The channels of a record, in their order.
-CHANNELS = ("heave", "pitch", "lift", "moment")
 
 
 @dataclass(frozen=True)
@@ -172,12 +160,12 @@ class ClosedLoopFit:
     n_samples : int
         Scalar samples of every record together (block means times channels).
     portmanteau : ndarray, shape (4,)
-        Per channel, ``N sum_l rho_l^2`` over lags ``l`` of 1-:data:`PORTMANTEAU_LAGS`, with
-        ``rho_l`` the autocorrelation of the standardised innovations pooled over every record
-        and ``N`` their number of samples: chi-square with :data:`PORTMANTEAU_LAGS` degrees of
-        freedom if the model is right (a little less, for the parameters fitted). Pooled, it
-        has the power of all the records together, where each record's :attr:`whiteness` has
-        the power of one.
+        Per channel, ``N sum_l rho_l^2`` over lags ``l`` of 1-20, with ``rho_l`` the
+        autocorrelation of the standardised innovations pooled over every record and ``N``
+        their number of samples (``innovation_checks.pooled_portmanteau``): chi-square with
+        20 degrees of freedom if the model is right (a little less, for the parameters
+        fitted). Pooled, it has the power of all the records together, where each record's
+        :attr:`whiteness` has the power of one.
     warnings : tuple of str
     """
 
@@ -333,7 +321,7 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
             f"model ({shaping_sections} second-order section(s) per force) or the aerodynamic "
             "one misses part of the data; the Fisher covariance may understate the error")
     portmanteau = pooled_portmanteau(current.e, current.S)
-    warnings.extend(_portmanteau_warning(portmanteau, len(records), shaping_sections))
+    warnings.extend(portmanteau_warning(portmanteau, len(records), shaping_sections))
     return ClosedLoopFit(
         model=layout.model(theta), with_A3=with_A3, covariance=covariance,
         parameter_index=layout.index,
@@ -520,62 +508,6 @@ class _Objective:
                    for lag in range(1, 21)]
             out.append(np.max(acf, axis=0))
         return np.array(out)
-
-
-def pooled_portmanteau(innovations: Sequence[FloatArray], covariances: Sequence[FloatArray],
-                       lags: int = PORTMANTEAU_LAGS) -> FloatArray:
-    """Return the portmanteau statistic per channel of innovations pooled over records.
-
-    Parameters
-    ----------
-    innovations : sequence of ndarray, shape (n_r, n_y)
-        Each record's innovations, in its channels' units.
-    covariances : sequence of ndarray, shape (n_y, n_y)
-        Their covariances (each record's are standardised by its own).
-    lags : int, optional
-        Lags 1 to ``lags`` are summed.
-
-    Returns
-    -------
-    ndarray, shape (n_y,)
-        ``N sum_l rho_l^2`` with ``rho_l`` the autocorrelation at lag ``l`` of the standardised
-        innovations, products summed over every record before dividing by their power, and
-        ``N`` the samples of every record: chi-square with ``lags`` degrees of freedom for
-        white innovations.
-    """
-    n_y = innovations[0].shape[1]
-    products, power, samples = np.zeros((lags, n_y)), np.zeros(n_y), 0
-    for e, S in zip(innovations, covariances, strict=True):
-        u = e @ np.linalg.inv(np.linalg.cholesky(S)).T
-        u = u - u.mean(axis=0)
-        for lag in range(1, lags + 1):
-            products[lag - 1] += np.sum(u[lag:] * u[:-lag], axis=0)
-        power += np.sum(u * u, axis=0)
-        samples += e.shape[0]
-    return np.asarray(samples * np.sum((products / power) ** 2, axis=0), dtype=float)
-
-
-def portmanteau_limit() -> float:
-    """Return the pooled portmanteau statistic's limit (:data:`PORTMANTEAU_LEVEL`, 4 channels)."""
-    return float(scipy.stats.chi2.isf(PORTMANTEAU_LEVEL / len(CHANNELS), PORTMANTEAU_LAGS))
-
-
-def _portmanteau_warning(portmanteau: FloatArray, n_records: int,
-                         shaping_sections: int) -> list[str]:
-    """Return the warning of innovations not white pooled over the records (or none)."""
-    limit = portmanteau_limit()
-    if not np.any(portmanteau > limit):
-        return []
-    channels = ", ".join(f"{name} {q:.0f}" for name, q in zip(CHANNELS, portmanteau,
-                                                              strict=True) if q > limit)
-    remedy = ("; one section per force follows a gust spectrum too loosely: the fourth-order "
-              "buffeting model (closed_loop_buffeting='fourth-order', "
-              "--closed-loop-buffeting fourth-order) removes most of that bias at about twice "
-              "the time" if shaping_sections == 1 else "")
-    return [f"the innovations pooled over the {n_records} records are not white (portmanteau "
-            f"statistic over lags 1-{PORTMANTEAU_LAGS}: {channels}; chance stays below "
-            f"{limit:.0f}): the model misses part of the data, which biases the estimate "
-            f"beyond what its Fisher deviation says{remedy}"]
 
 
 def _hold_matrices(shaping: ShapingFilter, B: float, fs: float
