@@ -67,6 +67,19 @@ def own_model_releases(seed, duration=20.0, fs=500.0):
     return releases, truth, U_F
 
 
+def tunnel_releases_seed_2():
+    """Return the plate releases at 1 % turbulence (seed 2, no holds) and their U_F, m/s."""
+    truth = flat_plate.jones_model()
+    U_F = fl.analyze(PLATE, truth).speed
+    wind = {"static": StaticCoefficients.flat_plate(), "span": 1.0,
+            "turbulence": TurbulenceSpec(Iu=0.0, Iw=0.01, Lux=1.0, Lwx=0.3, Cuy=10.0, Cwy=8.0)}
+    releases = [Release.from_simulation(simulate_release(
+        PLATE, truth, f * U_F, h0, a0, duration=20.0, fs=500.0, noise=0.02,
+        rng=(2, i, j, 10), **wind))
+        for i, f in enumerate((0.4, 0.6, 0.8)) for j, (h0, a0) in enumerate(HOLDS)]
+    return releases, U_F
+
+
 def flutter_std(fit):
     """Return the flutter speed and its std from the fit's covariance (first order), m/s."""
     result = fl.analyze(PLATE, fit.model)
@@ -290,14 +303,7 @@ def test_e2rfc_runs_the_closed_loop_branch_in_the_tunnel_s_turbulence():
     information's, no jackknife part). Bounds: within 2 std, and under 8 % (the benchmark
     row's 90th percentile without holds is 8.4 %, its median 3.3 %).
     """
-    truth = flat_plate.jones_model()
-    U_F = fl.analyze(PLATE, truth).speed
-    wind = {"static": StaticCoefficients.flat_plate(), "span": 1.0,
-            "turbulence": TurbulenceSpec(Iu=0.0, Iw=0.01, Lux=1.0, Lwx=0.3, Cuy=10.0, Cwy=8.0)}
-    releases = [Release.from_simulation(simulate_release(
-        PLATE, truth, f * U_F, h0, a0, duration=20.0, fs=500.0, noise=0.02,
-        rng=(2, i, j, 10), **wind))
-        for i, f in enumerate((0.4, 0.6, 0.8)) for j, (h0, a0) in enumerate(HOLDS)]
+    releases, U_F = tunnel_releases_seed_2()
     model = e2rfc.identify(releases, PLATE, turbulent_estimator="ml")
     assert model.diagnostics.estimator == e2rfc.ESTIMATOR_CLOSED_LOOP
     assert model.n_lags == e2rfc.CLOSED_LOOP_LAGS
@@ -359,14 +365,7 @@ def test_the_evidence_takes_the_fourth_order_model_only_where_the_innovations_as
     assert "second-order buffeting model" in note and "are white" in note
     assert not any("portmanteau" in w for w in model.diagnostics.warnings if w != note)
 
-    truth = flat_plate.jones_model()
-    U_F = fl.analyze(PLATE, truth).speed
-    wind = {"static": StaticCoefficients.flat_plate(), "span": 1.0,
-            "turbulence": TurbulenceSpec(Iu=0.0, Iw=0.01, Lux=1.0, Lwx=0.3, Cuy=10.0, Cwy=8.0)}
-    releases = [Release.from_simulation(simulate_release(
-        PLATE, truth, f * U_F, h0, a0, duration=20.0, fs=500.0, noise=0.02,
-        rng=(2, i, j, 10), **wind))
-        for i, f in enumerate((0.4, 0.6, 0.8)) for j, (h0, a0) in enumerate(HOLDS)]
+    releases, U_F = tunnel_releases_seed_2()
     model = e2rfc.identify(releases, PLATE, closed_loop_buffeting="by-evidence")
     (note,) = [w for w in model.diagnostics.warnings if "chosen by evidence" in w]
     assert "fourth-order buffeting model" in note and "not white" in note
