@@ -14,6 +14,8 @@
   likelihood and its first-order changes;
 - :mod:`~ident.identification.closed_loop_ml`: closed-loop maximum likelihood of releases in
   turbulence (the turbulence branch's default);
+- :mod:`~ident.identification.innovation_checks`: whether a fit's innovations, pooled over
+  its records, are white;
 - :mod:`~ident.identification.campaign`: one campaign's analysis for the front ends.
 
 E2RFC's private machinery: ``_regressors`` (per-release regressors), ``_e2rfc_problem`` (the
