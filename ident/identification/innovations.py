@@ -217,7 +217,7 @@ class ReleaseModel:
 
     def __post_init__(self) -> None:
         section = self.section
-        if self.rho is not None:
+        if self.rho is not None and self.rho != section.rho:  # a copy costs the fit's loop
             section = section.replace(rho=v.positive("rho", self.rho))
         if section.n_dof != 2:
             raise ValueError("ReleaseModel is for a section with two degrees of freedom "

@@ -229,25 +229,33 @@ class SteadyPredictor:
         """
         u, z = self._modal_states(y, nuisance)
         x = (z @ (self.V[:, self.run] * self.doubling).T).real  # (n, n_x)
-        n, n_p, n_run = y.shape[0], len(changes), self.run.size
+        n, n_p = y.shape[0], len(changes)
         project = self.V_inv[self.run]  # (n_run, n_x): into the run modes
-        # The modal inputs of every change at once, time along the last (contiguous) axis
-        # and real and imaginary parts by real products: rows (mode, change).
-        from_x = np.stack([project @ c.closed_loop for c in changes], axis=1)
-        from_u = np.stack([project @ c.gain for c in changes], axis=1)
-        from_x, from_u = from_x.reshape(n_run * n_p, -1), from_u.reshape(n_run * n_p, -1)
-        xT, uT = np.ascontiguousarray(x[:-1].T), np.ascontiguousarray(u[:-1].T)
-        beta_re = (from_x.real @ xT + from_u.real @ uT).reshape(n_run, n_p, n - 1)
-        beta_im = (from_x.imag @ xT + from_u.imag @ uT).reshape(n_run, n_p, n - 1)
-        dz = np.zeros((n_run, n_p, n), dtype=complex)
-        for column, m in enumerate(self.run):
-            root = self.lam[m]
-            if root.imag == 0.0:  # a real mode: real arithmetic, half the work
-                dz[column, :, 1:] = lfilter([1.0], [1.0, -root.real], beta_re[column], axis=-1)
-            else:
-                dz[column, :, 1:] = lfilter([1.0], [1.0, -root],
-                                            beta_re[column] + 1j * beta_im[column], axis=-1)
-        C_dx = (self.CV_run @ dz.reshape(n_run, n_p * n)).real.reshape(self.n_y, n_p, n)
+        # The modal inputs of every change at once: rows (mode, change), columns the states
+        # then the channels, against the states and the record stacked (time contiguous).
+        inputs = np.stack([np.hstack([project @ c.closed_loop, project @ c.gain])
+                           for c in changes], axis=1)
+        xu = np.ascontiguousarray(np.hstack([x[:-1], u[:-1]]).T)
+        roots = self.lam[self.run]
+        C_dx = np.zeros((self.n_y, n_p, n))
+        # Real modes in real arithmetic, complex ones in complex: each group is one product
+        # (real and imaginary parts copied contiguous, which BLAS needs) and one filter per mode.
+        for complex_modes in (False, True):
+            group = (roots.imag != 0.0) == complex_modes
+            k = int(group.sum())
+            if k == 0:
+                continue
+            rows = inputs[group].reshape(k * n_p, -1)
+            beta = np.ascontiguousarray(rows.real) @ xu
+            if complex_modes:
+                beta = beta + 1j * (np.ascontiguousarray(rows.imag) @ xu)
+            beta = beta.reshape(k, n_p, n - 1)
+            dz = np.zeros((k, n_p, n), dtype=beta.dtype)
+            for column, root in enumerate(roots[group]):
+                pole = root if complex_modes else root.real
+                dz[column, :, 1:] = lfilter([1.0], [1.0, -pole], beta[column], axis=-1)
+            CV = self.CV_run[:, group] if complex_modes else self.CV_run[:, group].real
+            C_dx += (CV @ dz.reshape(k, n_p * n)).real.reshape(self.n_y, n_p, n)
         d_C = np.stack([c.C for c in changes], axis=1).reshape(self.n_y * n_p, -1)
         de = -(d_C @ x.T).reshape(self.n_y, n_p, n) - C_dx
         return np.ascontiguousarray(np.moveaxis(de, 0, -1))
@@ -284,7 +292,11 @@ class SteadyPredictor:
         e = self.innovations(y)
         W = np.linalg.inv(np.linalg.cholesky(self.S))
         CVw = W @ self.CV
-        powers = self.lam[None, :] ** np.arange(n)[:, None]  # exact at lam = 0
+        # lam^k by a running product: a tenth of the cost of complex powers (which take
+        # exp(k log lam), as inexact by k rounding errors) and exact at lam = 0.
+        powers = np.empty((n, self.lam.size), dtype=complex)
+        powers[0], powers[1:] = 1.0, self.lam
+        np.cumprod(powers, axis=0, out=powers)
         geometric = (1.0 - powers) / (1.0 - self.lam)[None, :]
         m = self.lam.size
         initial = ((powers[:, None, :] * CVw[None]).reshape(n_y * n, m) @ self.V_inv).real
