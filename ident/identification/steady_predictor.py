@@ -231,34 +231,50 @@ class SteadyPredictor:
         x = (z @ (self.V[:, self.run] * self.doubling).T).real  # (n, n_x)
         n, n_p = y.shape[0], len(changes)
         project = self.V_inv[self.run]  # (n_run, n_x): into the run modes
-        # The modal inputs of every change at once: rows (mode, change), columns the states
-        # then the channels, against the states and the record stacked (time contiguous).
+        # The modal inputs of every change: (mode, change, signal), the signals being the
+        # states then the channels, stacked with time contiguous.
         inputs = np.stack([np.hstack([project @ c.closed_loop, project @ c.gain])
                            for c in changes], axis=1)
-        xu = np.ascontiguousarray(np.hstack([x[:-1], u[:-1]]).T)
+        signals = np.ascontiguousarray(np.hstack([x[:-1], u[:-1]]).T)
+        n_s = signals.shape[0]
         roots = self.lam[self.run]
-        C_dx = np.zeros((self.n_y, n_p, n))
-        # Real modes in real arithmetic, complex ones in complex: each group is one product
-        # (real and imaginary parts copied contiguous, which BLAS needs) and one filter per mode.
-        for complex_modes in (False, True):
-            group = (roots.imag != 0.0) == complex_modes
-            k = int(group.sum())
-            if k == 0:
-                continue
-            rows = inputs[group].reshape(k * n_p, -1)
-            beta = np.ascontiguousarray(rows.real) @ xu
-            if complex_modes:
-                beta = beta + 1j * (np.ascontiguousarray(rows.imag) @ xu)
-            beta = beta.reshape(k, n_p, n - 1)
-            dz = np.zeros((k, n_p, n), dtype=beta.dtype)
-            for column, root in enumerate(roots[group]):
-                pole = root if complex_modes else root.real
-                dz[column, :, 1:] = lfilter([1.0], [1.0, -pole], beta[column], axis=-1)
-            CV = self.CV_run[:, group] if complex_modes else self.CV_run[:, group].real
-            C_dx += (CV @ dz.reshape(k, n_p * n)).real.reshape(self.n_y, n_p, n)
+        C_dx = np.zeros((self.n_y * n_p, n))
+        # The filter is linear, so each mode filters the few signals rather than the many
+        # changes' inputs, and one product per group sums over modes and signals: C dz of
+        # change p is the sum over modes and signals of CV inputs times the filtered signal.
+        real = roots.imag == 0.0
+        if np.any(real):
+            filtered = np.stack([lfilter([1.0], [1.0, -root.real], signals, axis=-1)
+                                 for root in roots[real]])
+            weights = self._weights(real, inputs)
+            C_dx[:, 1:] += np.ascontiguousarray(weights.real) @ filtered.reshape(-1, n - 1)
+        if not np.all(real):
+            # A complex mode z+ = r z + s driven by real s is, with w = s / (1 - 2 Re(r) q^-1
+            # + |r|^2 q^-2) (one real filter, a fifth of a complex one's cost),
+            # z+ = w - conj(r) w-: so Re(W z+) = Re(W) w - (Re(r) Re(W) + Im(r) Im(W)) w-.
+            complex_roots = roots[~real]
+            filtered = np.stack([lfilter([1.0], [1.0, -2.0 * r.real, abs(r) ** 2], signals,
+                                         axis=-1) for r in complex_roots])
+            weights = self._weights(~real, inputs).reshape(self.n_y * n_p, -1, n_s)
+            lagged = -(complex_roots.real[:, None] * weights.real
+                       + complex_roots.imag[:, None] * weights.imag)
+            both = np.vstack([weights.real.reshape(self.n_y * n_p, -1),
+                              lagged.reshape(self.n_y * n_p, -1)]) @ filtered.reshape(-1, n - 1)
+            C_dx[:, 1:] += both[:self.n_y * n_p]
+            C_dx[:, 2:] += both[self.n_y * n_p:, :-1]
+        C_dx = C_dx.reshape(self.n_y, n_p, n)
         d_C = np.stack([c.C for c in changes], axis=1).reshape(self.n_y * n_p, -1)
         de = -(d_C @ x.T).reshape(self.n_y, n_p, n) - C_dx
         return np.ascontiguousarray(np.moveaxis(de, 0, -1))
+
+    def _weights(self, modes: npt.NDArray[np.bool_], inputs: np.ndarray) -> np.ndarray:
+        """Return ``CV`` times the modal inputs: rows (channel, change), columns (mode, signal).
+
+        ``modes`` picks run modes; ``inputs`` is (run mode, change, signal).
+        """
+        n_p = inputs.shape[1]
+        return (self.CV_run[:, modes][:, None, :, None]
+                * inputs[modes].transpose(1, 0, 2)[None]).reshape(self.n_y * n_p, -1)
 
     def _modal_states(self, y: FloatArray, nuisance: FloatArray | None
                       ) -> tuple[FloatArray, FloatArray]:
