@@ -74,7 +74,6 @@ from ident.identification.innovation_checks import pooled_portmanteau, portmante
 from ident.identification.innovations import ReleaseModel, ShapingFilter, block_means, discretise
 from ident.identification.results import distinct_wind_speeds
 from ident.identification.steady_predictor import (
-    PredictorChange,
     SteadyPredictor,
     decorrelated,
     neg_log_likelihood,
@@ -465,18 +464,20 @@ class _Objective:
             W = np.linalg.inv(np.linalg.cholesky(S))
             Q, _ = np.linalg.qr(at.columns[r])
             params = self.layout.affecting(record)
-            changes, steps = [], np.empty(len(params))
+            nearby, steps = [], np.empty(len(params))
             for row, p in enumerate(params):
                 h = STEP * max(1.0, abs(theta[p]))
                 shifted = theta.copy()
                 shifted[p] += h
                 try:
-                    change = self._change(base, shifted, record)
+                    matrices = self.matrices(shifted, record)
                 except ValueError:  # at the edge of the models: a backward difference
                     h, shifted[p] = -h, theta[p] - h
-                    change = self._change(base, shifted, record)
-                changes.append(change)
+                    matrices = self.matrices(shifted, record)
+                nearby.append(matrices)
                 steps[row] = h
+            # The predictor's change for every perturbed model at once, to first order.
+            changes = base.changes(*(np.stack(part) for part in zip(*nearby, strict=True)))
             de = base.innovation_changes(record.y, nuisance, changes) / steps[:, None, None]
             D = (de @ W.T).reshape(len(params), e.size)
             Sw = np.stack([W @ ((c.S - S) / h) @ W.T for c, h in zip(changes, steps,
@@ -491,12 +492,6 @@ class _Objective:
             g[idx] += (D @ ew + 0.5 * n_k * np.einsum("iaa->i", Sw)
                        - 0.5 * np.einsum("iab,ba->i", Sw, Ew))
         return F, g
-
-    def _change(self, base: SteadyPredictor, theta: FloatArray, record: Record
-                ) -> PredictorChange:
-        """Return the predictor's change from ``base`` at ``theta`` (first order)."""
-        Phi, Qd, C, R, gain = self.matrices(theta, record)
-        return base.change(Phi, Qd, C, R, feedthrough=gain)
 
     def whiteness(self, at: _Evaluation) -> FloatArray:
         """Largest autocorrelation of each record's standardised innovations, lags 1-20."""

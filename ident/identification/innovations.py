@@ -244,7 +244,8 @@ class ReleaseModel:
         """
         system = AeroelasticSystem(self.section, self.model, self.U)
         A_b, B_b, C_b = self.shaping.matrices()
-        A, F = system.matrix(), system.force_matrix()
+        A = system.matrix()
+        F = system.force_matrix(A)
         nz, nb, k, B = system.n_states, A_b.shape[0], 2, self.section.B
         Meff_inv = np.linalg.inv(system.effective_mass())
         Ac = np.zeros((nz + nb, nz + nb))
@@ -340,6 +341,8 @@ def block_means(Phi: FloatArray, Qd: FloatArray, C: FloatArray, m: int
         Cross-covariance ``E[w_k (C eta_k)^T]``.
     """
     n = Phi.shape[0]
+    if m == 1:  # samples as they are (the fit's default): nothing to average
+        return Phi, 0.5 * (Qd + Qd.T), C, np.zeros((C.shape[0],) * 2), np.zeros((n, C.shape[0]))
     powers = np.empty((m, n, n))  # Phi^0 .. Phi^(m-1)
     powers[0] = np.eye(n)
     for j in range(1, m):

@@ -91,6 +91,8 @@ def decorrelated(Phi: FloatArray, Qd: FloatArray, C: FloatArray, R: FloatArray, 
     G)``: the first two and ``C``, ``R`` make a :class:`SteadyPredictor` with
     ``feedthrough=G``.
     """
+    if not np.any(M):  # uncorrelated already (samples rather than block means)
+        return Phi, 0.5 * (Qd + Qd.T), np.zeros_like(M)
     G = np.asarray(np.linalg.solve(R, M.T).T, dtype=float)
     Qd_u = Qd - G @ M.T
     return Phi - G @ C, 0.5 * (Qd_u + Qd_u.T), G
@@ -179,19 +181,34 @@ class SteadyPredictor:
         the cost; the nearby predictor is neither diagonalised nor checked for stability (its
         innovations' change comes from this one's filter, :meth:`innovation_changes`).
         """
+        return self.changes(Phi[None], Qd[None], C[None], R[None],
+                            None if feedthrough is None else feedthrough[None])[0]
+
+    def changes(self, Phi: FloatArray, Qd: FloatArray, C: FloatArray, R: FloatArray,
+                feedthrough: FloatArray | None = None) -> list[PredictorChange]:
+        """:meth:`change` for many nearby models at once: each argument stacked on a first axis.
+
+        One batched product per step instead of one per model: a fit takes a change for
+        every parameter it perturbs at every iteration.
+        """
         dPhi, dC = Phi - self.Phi, C - self.C
         Pc = self.P @ self.closed_loop.T
-        M = (dPhi @ Pc + Pc.T @ dPhi.T - Pc.T @ dC.T @ self.Kp.T - self.Kp @ dC @ Pc
+        dPhi_Pc = dPhi @ Pc
+        Kp_dC_Pc = self.Kp @ dC @ Pc
+        M = (dPhi_Pc + dPhi_Pc.transpose(0, 2, 1) - Kp_dC_Pc.transpose(0, 2, 1) - Kp_dC_Pc
              + (Qd - self.Qd) + self.Kp @ (R - self.R) @ self.Kp.T)
         M_modal = self.V_inv @ M @ self.V_inv.conj().T
         Y = M_modal / (1.0 - self.lam[:, None] * self.lam.conj()[None, :])
         dP = (self.V @ Y @ self.V.conj().T).real
-        P = self.P + 0.5 * (dP + dP.T)
-        S = C @ P @ C.T + R
-        Kp = Phi @ P @ C.T @ np.linalg.inv(S)
+        P = self.P + 0.5 * (dP + dP.transpose(0, 2, 1))
+        CT = C.transpose(0, 2, 1)
+        S = C @ P @ CT + R
+        Kp = Phi @ P @ CT @ np.linalg.inv(S)
         gain = Kp if feedthrough is None else Kp + feedthrough
-        return PredictorChange(P=P, S=S, closed_loop=(Phi - Kp @ C) - self.closed_loop,
-                               gain=gain - self.gain, C=dC)
+        closed_loop = (Phi - Kp @ C) - self.closed_loop
+        d_gain = gain - self.gain
+        return [PredictorChange(P=P[i], S=S[i], closed_loop=closed_loop[i], gain=d_gain[i],
+                                C=dC[i]) for i in range(Phi.shape[0])]
 
     def innovations(self, y: FloatArray, nuisance: FloatArray | None = None) -> FloatArray:
         """Innovations of ``y`` (n, n_y) less offsets ``nuisance[:n_y]``, from ``nuisance[n_y:]``.

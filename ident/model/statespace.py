@@ -113,11 +113,13 @@ class AeroelasticSystem:
             A[rows, rows] = -(self.U / s.B) * self.model.d[l] * np.eye(k)
         return A
 
-    def force_matrix(self) -> npt.NDArray[np.float64]:
+    def force_matrix(self, state_matrix: npt.NDArray[np.float64] | None = None
+                     ) -> npt.NDArray[np.float64]:
         """Output matrix ``F`` with ``f = F z`` (``[L B, M]``, with sway ``[L B, M, D B]``).
 
         Shape (n, n_states). The added-mass term needs ``q''``, which is itself linear in the
-        state (the rows of ``q''`` in ``A z``).
+        state (the rows of ``q''`` in ``A z``). ``state_matrix``: this system's :meth:`matrix`
+        when the caller has it already (a fit builds both for every parameter it perturbs).
         """
         s, k = self.section, self.n_dof
         stiffness, damping, *lag_gains = self._aero_terms()
@@ -127,7 +129,8 @@ class AeroelasticSystem:
         for l, gain in enumerate(lag_gains):  # noqa: E741 - lag index
             F[:, (2 + l) * k : (3 + l) * k] = gain
         added_mass = 0.5 * s.rho * s.B**4 * self.model.A[2]
-        return F + added_mass @ self.matrix()[k : 2 * k, :]
+        A = self.matrix() if state_matrix is None else state_matrix
+        return F + added_mass @ A[k : 2 * k, :]
 
     def forces(
         self, z: npt.NDArray[np.float64], qdd: npt.NDArray[np.float64]
