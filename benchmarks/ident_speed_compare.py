@@ -19,6 +19,12 @@ Run: ``git worktree add /tmp/start 789df70`` (issue 16's start), then
 [--rounds 3] [--repeats 5] [--quick] [--results DIR]`` (``--quick``: one turn of one timed run;
 ``--results``: also write ``DIR/ident_speed_compare.json`` and ``.md``, :mod:`result_files`).
 Without ``--tree`` only this checkout is timed.
+
+``--flow turbulent`` times the closed-loop branch instead: the tunnel benchmark's plate in 1 %
+turbulence (``ident_accuracy.py --part tunnel``, seed 0: 3 speeds x 2 releases of 20 s at
+500 Hz, no holds), identification and its uncertainty (which refits without the highest
+speed), with the second-order buffeting model (the default) and with the model chosen by
+evidence. A checkout from before the evidence's choice fails on that option.
 """
 
 from __future__ import annotations
@@ -45,7 +51,9 @@ import result_files  # noqa: E402 - beside this script
 #: Where a checkout keeps E2RFC (in ident's subpackages, or flat as before them).
 E2RFC_PATHS = ("identification/e2rfc.py", "e2rfc.py")
 
-#: Run inside each checkout: build the releases from the arrays, time identify, print JSON.
+#: Run inside each checkout: build the releases from the arrays, time identify (and, where
+#: asked, the uncertainty), print JSON. argv: data, section JSON, repeats, options JSON
+#: (label -> [identify's keyword arguments, whether to time the uncertainty too]).
 _TIMER = r"""
 import json, os, sys, time
 os.environ["OPENBLAS_NUM_THREADS"] = "1"
@@ -58,47 +66,87 @@ except ImportError:  # a checkout from before
 data = np.load(sys.argv[1])
 section = SectionModel(**json.loads(sys.argv[2]))
 releases = [Release(t=data[f"t{i}"], h=data[f"h{i}"], alpha=data[f"alpha{i}"],
-                    lift=data[f"lift{i}"], moment=data[f"moment{i}"], U=float(data["U"][i]))
+                    lift=data[f"lift{i}"], moment=data[f"moment{i}"], U=float(data["U"][i]),
+                    rho=float(data["rho"][i]))
             for i in range(data["U"].size)]
+
+def run(kwargs, with_uncertainty):
+    model = identify(releases, section, **kwargs)
+    if with_uncertainty:
+        model.uncertainty(section)
+
 out = {}
-for label, kwargs in (("chosen", {}), ("given", {"n_lags": 2, "with_A3": True})):
-    identify(releases, section, **kwargs)  # warm-up
+for label, (kwargs, with_uncertainty) in json.loads(sys.argv[4]).items():
+    run(kwargs, with_uncertainty)  # warm-up
     times = []
     for _ in range(int(sys.argv[3])):
         start = time.process_time()
-        identify(releases, section, **kwargs)
+        run(kwargs, with_uncertainty)
         times.append(time.process_time() - start)
     out[label] = times
 print(json.dumps(out))
 """
 
+#: Per flow: what the table says of the releases, and the options timed (label -> identify's
+#: keyword arguments, whether the uncertainty is timed too, the table's name of the option).
+FLOWS = {
+    "smooth": ("5 releases of 30 s at 500 Hz in smooth flow", {
+        "chosen": ({}, False, "chosen by evidence"),
+        "given": ({"n_lags": 2, "with_A3": True}, False, "given (2 lags, A3)"),
+    }),
+    "turbulent": ("3 x 2 releases of 20 s at 500 Hz in 1 % turbulence, with the uncertainty", {
+        "second-order": ({"closed_loop_buffeting": "second-order"}, True,
+                         "second-order buffeting model"),
+        "by-evidence": ({"closed_loop_buffeting": "by-evidence"}, True,
+                        "buffeting model by evidence"),
+    }),
+}
+
+#: The tunnel benchmark's row and seed the turbulent flow's releases come from.
+TURBULENT_ROW, TURBULENT_SEED = "plate, Jones, Iw 1 %", 0
+
 SECTION = {"B": 0.3, "m": 3.0, "I": 0.03, "fh": 2.0, "fa": 4.0, "zeta_h": 0.005,
            "zeta_a": 0.005, "rho": 1.225}
 
 
-def write_releases(path: Path) -> None:
-    """Simulate the timing releases with this checkout and save their arrays to ``path``."""
+def write_releases(path: Path, flow: str) -> dict[str, float]:
+    """Simulate the flow's releases with this checkout, save their arrays to ``path``.
+
+    Returns the section's parameters (:class:`~ident.SectionModel`'s keywords).
+    """
     sys.path.insert(0, str(HERE))
     sys.path.insert(0, str(ROOT))
+    import dataclasses
+
     import ident_accuracy as accuracy
 
     from ident import SectionModel
     from ident.model import flutter as fl
 
-    section = SectionModel(**SECTION)
-    U_F = fl.analyze(section, accuracy.TRUTH).speed
-    releases = accuracy.make_releases(section, U_F, (0.4, 0.5, 0.6, 0.7, 0.8), 0.02, 0,
-                                      duration=30.0)
+    if flow == "turbulent":
+        section = accuracy.row_spec(TURBULENT_ROW)[0]
+        releases = [dataclasses.replace(r, hold=None)
+                    for r in accuracy.tunnel_releases(TURBULENT_ROW, TURBULENT_SEED)]
+    else:
+        section = SectionModel(**SECTION)
+        U_F = fl.analyze(section, accuracy.TRUTH).speed
+        releases = accuracy.make_releases(section, U_F, (0.4, 0.5, 0.6, 0.7, 0.8), 0.02, 0,
+                                          duration=30.0)
     arrays = {f"{name}{i}": getattr(r, name) for i, r in enumerate(releases)
               for name in ("t", "h", "alpha", "lift", "moment")}
-    np.savez(path, U=np.array([r.U for r in releases]), **arrays)
+    rho = [section.rho if r.rho is None else r.rho for r in releases]
+    np.savez(path, U=np.array([r.U for r in releases]), rho=np.array(rho), **arrays)
+    return {k: v for k, v in dataclasses.asdict(section).items() if v is not None}
 
 
-def time_tree(tree: Path, data: Path, repeats: int) -> dict[str, list[float]]:
+def time_tree(tree: Path, data: Path, section: dict[str, float], repeats: int, flow: str
+              ) -> dict[str, list[float]]:
     """Run the timer in ``tree`` (its own ``ident``) and return its CPU times per option."""
     env = dict(os.environ, PYTHONPATH=str(tree), OPENBLAS_NUM_THREADS="1")
+    options = {label: [kwargs, timed] for label, (kwargs, timed, _) in FLOWS[flow][1].items()}
     done = subprocess.run(
-        [sys.executable, "-c", _TIMER, str(data), json.dumps(SECTION), str(repeats)],
+        [sys.executable, "-c", _TIMER, str(data), json.dumps(section), str(repeats),
+         json.dumps(options)],
         cwd=tree, env=env, capture_output=True, text=True, check=False)
     if done.returncode != 0:
         last = (done.stderr.strip().splitlines() or ["no output"])[-1]
@@ -111,48 +159,52 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--tree", action="append", default=[], type=Path,
                         help="another windrig checkout to time (repeatable)")
+    parser.add_argument("--flow", choices=tuple(FLOWS), default="smooth",
+                        help="smooth-flow releases (default) or the closed-loop branch's "
+                             "turbulent ones")
     parser.add_argument("--rounds", type=int, default=None,
                         help="turns of every checkout (3; --quick: 1)")
     parser.add_argument("--repeats", type=int, default=None,
-                        help="timed runs per turn (5; --quick: 1)")
+                        help="timed runs per turn (5, turbulent 1; --quick: 1)")
     result_files.add_arguments(parser)
     args = parser.parse_args()
     rounds = args.rounds if args.rounds is not None else (1 if args.quick else 3)
-    repeats = args.repeats if args.repeats is not None else (1 if args.quick else 5)
+    repeats = args.repeats if args.repeats is not None else (
+        1 if args.quick or args.flow == "turbulent" else 5)
     trees = [ROOT, *(t.resolve() for t in args.tree)]
     for tree in trees[1:]:
         if not any((tree / "ident" / p).is_file() for p in E2RFC_PATHS):
             parser.error(f"--tree {tree}: not a windrig checkout (no e2rfc.py in ident)")
     if rounds < 1 or repeats < 1:
         parser.error("--rounds and --repeats must be at least 1")
-    times: dict[Path, dict[str, list[float]]] = {t: {"chosen": [], "given": []} for t in trees}
+    what, options = FLOWS[args.flow]
+    times: dict[Path, dict[str, list[float]]] = {t: {o: [] for o in options} for t in trees}
     with tempfile.TemporaryDirectory() as tmp:
         data = Path(tmp) / "releases.npz"
-        write_releases(data)
+        section = write_releases(data, args.flow)
         for _ in range(rounds):
             for tree in trees:
-                for label, values in time_tree(tree, data, repeats).items():
+                for label, values in time_tree(tree, data, section, repeats, args.flow).items():
                     times[tree][label].extend(values)
-    print(f"E2RFC CPU time, 5 releases of 30 s at 500 Hz, one core; {rounds} turns x "
-          f"{repeats} runs per checkout; ratio = this minimum / this checkout's minimum")
-    print(f"  {'checkout':<44}{'option':<8}{'min':>8}{'median':>8}{'ratio':>7}")
+    print(f"E2RFC CPU time, {what}, one core; {rounds} turns x {repeats} runs per checkout; "
+          f"ratio = this minimum / this checkout's minimum")
+    print(f"  {'checkout':<44}{'option':<14}{'min':>8}{'median':>8}{'ratio':>7}")
     rows = []
     for tree in trees:
         commit = _commit(tree)
         name = f"{tree} ({commit})"
-        for label in ("chosen", "given"):
+        for label, (_, _, option) in options.items():
             values = np.array(times[tree][label])
             ratio = values.min() / np.min(times[ROOT][label])
-            print(f"  {name[-44:]:<44}{label:<8}{values.min():>7.3f}s{np.median(values):>7.3f}s"
-                  f"{ratio:>7.2f}")
-            rows.append(("this checkout" if tree == ROOT else str(tree), commit,
-                         OPTIONS[label], float(values.min()), float(np.median(values)),
-                         float(ratio)))
+            print(f"  {name[-44:]:<44}{label:<14}{values.min():>7.3f}s"
+                  f"{np.median(values):>7.3f}s{ratio:>7.2f}")
+            rows.append(("this checkout" if tree == ROOT else str(tree), commit, option,
+                         float(values.min()), float(np.median(values)), float(ratio)))
     table = result_files.Table(
-        f"E2RFC's CPU time on 5 releases of 30 s at 500 Hz (one core), {rounds} turns x "
-        f"{repeats} timed runs per checkout, and each minimum over this checkout's.",
-        ("checkout", "commit", "structure", "CPU min (s)", "CPU median (s)",
-         "ratio to this checkout"),
+        f"E2RFC's CPU time on {what} (one core), {rounds} turns x {repeats} timed runs per "
+        f"checkout, and each minimum over this checkout's.",
+        ("checkout", "commit", "structure" if args.flow == "smooth" else "buffeting model",
+         "CPU min (s)", "CPU median (s)", "ratio to this checkout"),
         rows, formats={"CPU min (s)": ".3f", "CPU median (s)": ".3f",
                        "ratio to this checkout": ".2f"})
     notes = ["Each checkout runs its own identification in a process of its own on the same "
@@ -162,16 +214,14 @@ def main() -> None:
     if len(trees) == 1:
         warnings.append("No other checkout was given (--tree): the table times this checkout "
                         "alone, and its ratios are one by definition.")
+    name = "ident_speed_compare" + ("" if args.flow == "smooth" else f"_{args.flow}")
     result_files.write(
-        "ident_speed_compare", "E2RFC's identification time against other checkouts", [table],
-        results=args.results, quick=args.quick,
-        parameters={"rounds": rounds, "repeats": repeats,
+        name, "E2RFC's identification time against other checkouts"
+        + ("" if args.flow == "smooth" else f" ({args.flow} flow)"),
+        [table], results=args.results, quick=args.quick,
+        parameters={"flow": args.flow, "rounds": rounds, "repeats": repeats,
                     "trees": [str(t) for t in trees[1:]]},
         notes=notes, warnings=warnings)
-
-
-#: The table's name of each structure option the timer runs.
-OPTIONS = {"chosen": "chosen by evidence", "given": "given (2 lags, A3)"}
 
 
 def _commit(tree: Path) -> str:
