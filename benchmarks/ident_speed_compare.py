@@ -198,7 +198,8 @@ def main() -> None:
             ratio = values.min() / np.min(times[ROOT][label])
             print(f"  {name[-44:]:<44}{label:<14}{values.min():>7.3f}s"
                   f"{np.median(values):>7.3f}s{ratio:>7.2f}")
-            rows.append(("this checkout" if tree == ROOT else str(tree), commit, option,
+            # Another checkout by its commit: its path is a scratch folder of the run.
+            rows.append(("this checkout" if tree == ROOT else f"checkout {commit}", commit, option,
                          float(values.min()), float(np.median(values)), float(ratio)))
     table = result_files.Table(
         f"E2RFC's CPU time on {what} (one core), {rounds} turns x {repeats} timed runs per "
@@ -218,9 +219,9 @@ def main() -> None:
     result_files.write(
         name, "E2RFC's identification time against other checkouts"
         + ("" if args.flow == "smooth" else f" ({args.flow} flow)"),
-        [table], results=args.results, quick=args.quick,
+        [table], results=args.results, quick=args.quick, script="ident_speed_compare",
         parameters={"flow": args.flow, "rounds": rounds, "repeats": repeats,
-                    "trees": [str(t) for t in trees[1:]]},
+                    "trees": [_commit(t) for t in trees[1:]]},
         notes=notes, warnings=warnings)
 
 

@@ -54,6 +54,7 @@ FULL_EXTRA = {
         ("--part", "ablation", "--seeds", "10"),
     ),
     "flutter_crb": (("--deck", "bluff"),),
+    "ident_speed_compare": (("--flow", "turbulent"),),
 }
 #: Longest a quick run of one benchmark may take, s (a hung benchmark fails, not CI's clock).
 QUICK_TIMEOUT = 300.0
