@@ -129,7 +129,13 @@ class AeroelasticSystem:
         for l, gain in enumerate(lag_gains):  # noqa: E741 - lag index
             F[:, (2 + l) * k : (3 + l) * k] = gain
         added_mass = 0.5 * s.rho * s.B**4 * self.model.A[2]
-        A = self.matrix() if state_matrix is None else state_matrix
+        if state_matrix is None:
+            A = self.matrix()
+        else:
+            A = np.asarray(state_matrix, dtype=float)
+            if A.shape != (self.n_states, self.n_states):
+                raise ValueError(f"state_matrix must be this system's matrix(), shape "
+                                 f"{(self.n_states, self.n_states)}, got {A.shape}")
         return F + added_mass @ A[k : 2 * k, :]
 
     def forces(

@@ -146,7 +146,17 @@ def test_the_innovations_change_as_the_nearby_predictors_innovations_do():
     e = predictor.innovations(y, nuisance)
     changes = [predictor.change(m.Phi, m.Qd, m.C, m.R, feedthrough=1.1 * feedthrough)
                for m in nearby]
-    de = predictor.innovation_changes(y, nuisance, changes)
+    # The fit takes them in one batch: the same changes as one at a time (each a handful of
+    # products of 16 x 16 matrices, so rounding stays near 1e-15 of each field's size).
+    batch = predictor.changes(*(np.stack([getattr(m, name) for m in nearby])
+                                for name in ("Phi", "Qd", "C", "R")),
+                              feedthrough=np.stack([1.1 * feedthrough] * len(nearby)))
+    for one, many in zip(changes, batch, strict=True):
+        for name in ("P", "S", "closed_loop", "gain", "C"):
+            want = getattr(one, name)
+            np.testing.assert_allclose(getattr(many, name), want, rtol=0,
+                                       atol=1e-12 * np.abs(want).max())
+    de = predictor.innovation_changes(y, nuisance, batch)
     assert de.shape == (3, 600, 4)
     for m, first_order in zip(nearby, de, strict=True):
         exact = steady_predictor.SteadyPredictor(m.Phi, m.Qd, m.C, m.R,

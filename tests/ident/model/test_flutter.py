@@ -213,6 +213,11 @@ def test_force_matrix_is_designs_force_formula(model, U):
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * term_scale)
     # forces() with the linear system's own accelerations is the same thing.
     np.testing.assert_allclose(system.forces(z, Az[2:4]), want, rtol=0, atol=1e-12 * term_scale)
+    # Given the state matrix the caller built, the same matrix to the bit; a matrix of
+    # another system's size is refused, not sliced.
+    np.testing.assert_array_equal(system.force_matrix(system.matrix()), system.force_matrix())
+    with pytest.raises(ValueError, match="state_matrix must be"):
+        system.force_matrix(np.eye(system.n_states + 2))
 
 
 def test_initial_state_is_a_release_from_rest():
