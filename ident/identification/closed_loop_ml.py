@@ -320,7 +320,8 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
             f"model ({shaping_sections} second-order section(s) per force) or the aerodynamic "
             "one misses part of the data; the Fisher covariance may understate the error")
     portmanteau = pooled_portmanteau(current.e, current.S)
-    warnings.extend(portmanteau_warning(portmanteau, len(records), shaping_sections))
+    warnings.extend(portmanteau_warning(portmanteau, len(records), shaping_sections,
+                                        n_holds=sum(r.held for r in records)))
     return ClosedLoopFit(
         model=layout.model(theta), with_A3=with_A3, covariance=covariance,
         parameter_index=layout.index,

@@ -80,8 +80,14 @@ def portmanteau_limit() -> float:
 
 
 def portmanteau_warning(portmanteau: FloatArray, n_records: int,
-                         shaping_sections: int) -> list[str]:
-    """Return the warning of innovations not white pooled over the records (or none)."""
+                         shaping_sections: int, n_holds: int = 0) -> list[str]:
+    """Return the warning of innovations not white pooled over the records (or none).
+
+    ``n_holds``: how many of the records are holds before a release. Without any, the
+    buffeting spectrum is learnt from the motion alone, and a gust spectrum that the filter
+    does not follow pulls the flutter speed most (docs/development/e2rfc_turbulence.md): the
+    warning then says that holds are the remedy too.
+    """
     limit = portmanteau_limit()
     if not np.any(portmanteau > limit):
         return []
@@ -91,6 +97,10 @@ def portmanteau_warning(portmanteau: FloatArray, n_records: int,
               "buffeting model (closed_loop_buffeting='fourth-order', "
               "--closed-loop-buffeting fourth-order) removes most of that bias at about twice "
               "the time" if shaping_sections == 1 else "")
+    if n_holds == 0:
+        remedy += ("; without a hold in the wind before each release the buffeting spectrum "
+                   "is learnt from the motion alone, and a spectrum the filter does not follow "
+                   "then pulls the flutter speed most, mostly upwards: record holds")
     return [f"the innovations pooled over the {n_records} records are not white (portmanteau "
             f"statistic over lags 1-{PORTMANTEAU_LAGS}: {channels}; chance stays below "
             f"{limit:.0f}): the model misses part of the data, which biases the estimate "

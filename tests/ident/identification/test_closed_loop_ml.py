@@ -246,6 +246,13 @@ def test_the_pooled_portmanteau_statistic_sums_every_record_s_lagged_products():
     coloured = innovation_checks.pooled_portmanteau(records(0.1), [S] * 6)
     assert coloured[2] > 2 * limit
     assert np.all(np.delete(coloured, 2) < limit)
+    # The warning names the channel and the remedies: the fourth-order model and, where no
+    # record is a hold, holds (the buffeting spectrum is otherwise learnt from the motion).
+    (warning,) = innovation_checks.portmanteau_warning(coloured, 6, 1)
+    assert "lift" in warning and "fourth-order" in warning and "record holds" in warning
+    (held,) = innovation_checks.portmanteau_warning(coloured, 12, 1, n_holds=6)
+    assert "record holds" not in held and "12 records" in held
+    assert innovation_checks.portmanteau_warning(np.minimum(coloured, limit), 6, 1) == []
 
 
 def test_recovers_the_flutter_speed_of_data_from_its_own_model():
@@ -330,7 +337,7 @@ def test_e2rfc_runs_the_closed_loop_branch_in_the_tunnel_s_turbulence():
     # of 50; the fourth-order model's are, 12-31 on the benchmark's rows): said, with the
     # remedy.
     (pooled,) = [w for w in warnings if "portmanteau" in w]
-    assert "pitch" in pooled and "fourth-order" in pooled
+    assert "pitch" in pooled and "fourth-order" in pooled and "record holds" in pooled
     assert abs(u.speed - U_F) <= 2.0 * u.total
     assert abs(u.speed / U_F - 1.0) < 0.08
     # No release grew, so the data bound the flutter speed from below at the top speed: a
