@@ -34,6 +34,7 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: one-core timings
 
 import argparse
+import dataclasses
 import json
 import subprocess
 import sys
@@ -116,8 +117,6 @@ def write_releases(path: Path, flow: str) -> dict[str, float]:
     """
     sys.path.insert(0, str(HERE))
     sys.path.insert(0, str(ROOT))
-    import dataclasses
-
     import ident_accuracy as accuracy
 
     from ident import SectionModel

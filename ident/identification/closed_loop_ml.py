@@ -471,11 +471,11 @@ class _Objective:
                 shifted = theta.copy()
                 shifted[p] += h
                 try:
-                    matrices = self.matrices(shifted, record)
+                    perturbed = self.matrices(shifted, record)
                 except ValueError:  # at the edge of the models: a backward difference
                     h, shifted[p] = -h, theta[p] - h
-                    matrices = self.matrices(shifted, record)
-                nearby.append(matrices)
+                    perturbed = self.matrices(shifted, record)
+                nearby.append(perturbed)
                 steps[row] = h
             # The predictor's change for every perturbed model at once, to first order.
             changes = base.changes(*(np.stack(part) for part in zip(*nearby, strict=True)))

@@ -80,7 +80,7 @@ def portmanteau_limit() -> float:
 
 
 def portmanteau_warning(portmanteau: FloatArray, n_records: int,
-                         shaping_sections: int, n_holds: int = 0) -> list[str]:
+                         shaping_sections: int, *, n_holds: int) -> list[str]:
     """Return the warning of innovations not white pooled over the records (or none).
 
     ``n_holds``: how many of the records are holds before a release. Without any, the
