@@ -9,7 +9,9 @@ moment]``:
 - the deterministic decay ``mu(t)`` (its DFT, in the noise of the random response);
 - the random response, Gaussian with the cross-spectral matrix ``S = T S_b T^H + N``, where ``T``
   maps the buffeting force to the four channels through the aeroelastic system and ``N`` is the
-  white noise;
+  white noise: each channel's 2 % of the RMS of its whole clean record as the simulator draws
+  it (decay, random response, mean wind load and the hold before the release), which in
+  turbulence is several times the decay's own RMS;
 
     F_ij = sum_k [2 Re(dM_k^H S_k^-1 dM_k) + tr(S_k^-1 dS_i S_k^-1 dS_j)]
 
@@ -87,6 +89,9 @@ FAR_SHARE = 0.1
 SAMPLE_GRID = 150
 #: Draws with ``--quick`` (CI): enough to exercise the path.
 QUICK_SAMPLES = 40
+#: Gust draws whose clean records set each channel's noise level (:func:`_recorded_rms`): the
+#: mean square of a 20 s record's random response scatters by some per cent between draws.
+RMS_DRAWS = 4
 
 
 def vertical_gusts(Iw: float) -> TurbulenceSpec:
@@ -110,11 +115,32 @@ def _transfer(section: SectionModel, model: RationalFunctionModel, U: float, f: 
 
 
 def _decay(section: SectionModel, model: RationalFunctionModel, U: float, hold: tuple[float, float],
-           n: int, fs: float) -> tuple[np.ndarray, np.ndarray]:
-    """DFT of the noise-free decay (bins 1..n/2-1) and each channel's RMS."""
+           n: int, fs: float) -> np.ndarray:
+    """DFT of the noise-free decay in smooth flow (bins 1..n/2-1)."""
     r = simulate_release(section, model, U, *hold, duration=n / fs, fs=fs)
-    channels = np.column_stack([r.h, r.alpha, r.lift, r.moment])
-    return np.fft.rfft(channels, axis=0)[1:-1], channels.std(axis=0)
+    return np.fft.rfft(np.column_stack([r.h, r.alpha, r.lift, r.moment]), axis=0)[1:-1]
+
+
+def _recorded_rms(section: SectionModel, model: RationalFunctionModel, U: float,
+                  hold: tuple[float, float], n: int, fs: float, spec: TurbulenceSpec,
+                  static: StaticCoefficients, span: float, n_hold: int) -> np.ndarray:
+    """RMS of each clean channel of the release as simulated, the scale of its noise.
+
+    ``simulate_release`` draws each channel's noise as a share of the RMS of the whole clean
+    record: the decay, the random response, the mean wind load and the static deflection it
+    causes, and the hold before the release (``n_hold`` samples; a record whose hold is taken
+    away later keeps that noise). The decay's own RMS is a fraction of it in turbulence (at
+    0.8 U_F on the benchmark's rows from a half to a thirtieth, channel by channel). Averaged
+    over :data:`RMS_DRAWS` gust draws.
+    """
+    mean_square = np.zeros(4)
+    for draw in range(RMS_DRAWS):
+        r = simulate_release(section, model, U, *hold, duration=n / fs, fs=fs,
+                             rng=(draw, 7919), static=static, turbulence=spec, span=span,
+                             pre_s=n_hold / fs)
+        clean = np.column_stack([r.clean[name] for name in ("h", "alpha", "lift", "moment")])
+        mean_square += np.mean(clean**2, axis=0) / RMS_DRAWS
+    return np.sqrt(mean_square)
 
 
 @dataclass(frozen=True)
@@ -334,7 +360,7 @@ def _release_information(section, model, with_theta, theta0, spec, static, U, ho
         return dS + [T @ (Sb * (x**j)[:, None, None]) @ TH for j in range(1, n_shape + 1)]
 
     Sb = spectrum(f, n)
-    _, rms = _decay(section, model, U, hold, n, fs)
+    rms = _recorded_rms(section, model, U, hold, n, fs, spec, static, span, n_hold)
     T0 = _transfer(section, model, U, f)
     S = T0 @ Sb @ np.conj(np.swapaxes(T0, 1, 2)) + np.diag(n * (noise * rms) ** 2)
     dM, dS = [], []
@@ -344,8 +370,8 @@ def _release_information(section, model, with_theta, theta0, spec, static, U, ho
         plus[p] += h
         minus[p] -= h
         m_plus, m_minus = with_theta(plus), with_theta(minus)
-        dM.append((_decay(section, m_plus, U, hold, n, fs)[0][:f.size]
-                   - _decay(section, m_minus, U, hold, n, fs)[0][:f.size]) / (2 * h))
+        dM.append((_decay(section, m_plus, U, hold, n, fs)[:f.size]
+                   - _decay(section, m_minus, U, hold, n, fs)[:f.size]) / (2 * h))
         T_plus, T_minus = (_transfer(section, m, U, f) for m in (m_plus, m_minus))
         dS.append((T_plus @ Sb @ np.conj(np.swapaxes(T_plus, 1, 2))
                    - T_minus @ Sb @ np.conj(np.swapaxes(T_minus, 1, 2))) / (2 * h))
