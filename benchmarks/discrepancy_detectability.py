@@ -71,8 +71,8 @@ def main() -> None:
     seeds = args.seeds if args.seeds is not None else (1 if args.quick else 2)
     effects = (args.effects if args.effects is not None
                else list(REALISTIC)[:1] if args.quick else list(REALISTIC))
-    factors = (tuple(float(f) for f in args.factors.split(",")) if args.factors is not None
-               else QUICK_FACTORS if args.quick else FACTORS)
+    factors = (tuple(result_files.number_list(parser, "--factors", args.factors, 0.0, math.inf))
+               if args.factors is not None else QUICK_FACTORS if args.quick else FACTORS)
     if seeds < 1:
         parser.error("--seeds must be >= 1")
     if list(factors) != sorted(factors) or not all(f > 0 for f in factors):

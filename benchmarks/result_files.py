@@ -86,6 +86,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="also write DIR/<name>.json and DIR/<name>.md")
 
 
+def number_list(parser: argparse.ArgumentParser, option: str, text: str, low: float,
+                high: float, hint: str = "") -> list[float]:
+    """Return ``text``'s comma-separated numbers, each in ``(low, high)``, or exit with one line.
+
+    A word that is not a number, or a number outside the range (a percentage typed for a
+    fraction, a speed at or beyond flutter), is ``parser.error``'s one line naming ``option``
+    (and ``hint``, what the numbers are, after the range).
+    """
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        parser.error(f"{option} takes numbers separated by commas, got {text!r}")
+    if not all(low < v < high for v in values):
+        parser.error(f"{option} takes numbers between {low:g} and {high:g} (exclusive"
+                     f"{'; ' + hint if hint else ''}), got {text!r}")
+    return values
+
+
 def resolve_defaults(args: argparse.Namespace,
                      defaults: Mapping[str, tuple[Any, Any]]) -> None:
     """Give each option left unset (None) its full or, with ``--quick``, its quick default.

@@ -151,7 +151,9 @@ def main() -> None:
             setattr(args, name, values[column])
     if args.seeds is None:
         args.seeds = [1] if args.quick else [1, 2, 3]
-    fractions = [float(v) for v in args.speeds.split(",")]
+    # Fractions of the flutter speed: a campaign stops short of flutter.
+    fractions = result_files.number_list(parser, "--speeds", args.speeds, 0.0, 1.0,
+                                         "fractions of U_F")
     if args.log is not None and not args.log.parent.is_dir():
         parser.error(f"--log {args.log}: folder {args.log.parent} does not exist")
     log: list[str] = []

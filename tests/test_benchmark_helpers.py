@@ -1,0 +1,59 @@
+"""Helpers the benchmarks share: their command-line lists and the bound's inverse.
+
+The benchmarks are scripts, not a package; these are the parts whose failure would be silent
+(a wrong figure in a table) or a traceback for a user's typing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+
+import flutter_crb  # noqa: E402 - benchmarks/ is not a package
+import result_files  # noqa: E402
+
+
+@pytest.mark.parametrize(("text", "expected"), [
+    ("0.01,abc", "--iw takes numbers separated by commas, got '0.01,abc'"),
+    ("1,3", "--iw takes numbers between 0 and 0.5 (exclusive; fractions), got '1,3'"),
+])
+def test_number_list_refuses_bad_input_with_one_error_line(capsys, text, expected):
+    parser = argparse.ArgumentParser(prog="bench")
+    with pytest.raises(SystemExit) as exit_:
+        result_files.number_list(parser, "--iw", text, 0.0, 0.5, "fractions")
+    assert exit_.value.code == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert lines[-1] == f"bench: error: {expected}"
+    assert not any("Traceback" in line for line in lines)
+
+
+def test_number_list_returns_the_numbers_in_order():
+    parser = argparse.ArgumentParser(prog="bench")
+    assert result_files.number_list(parser, "--speeds", "0.4, 0.6,0.8", 0.0, 1.0) == [0.4, 0.6,
+                                                                                         0.8]
+
+
+def test_bound_inverse_resolves_parameters_of_very_different_scale():
+    """A badly scaled information matrix is inverted, not truncated.
+
+    Its parameters span nine decades (a hold measures a displacement to micrometres, the
+    coefficients are near one): invertible once scaled, while ``pinv``'s cut-off, relative to
+    the largest singular value, drops directions of it unscaled.
+    """
+    rng = np.random.default_rng(3)
+    Q = np.linalg.qr(rng.standard_normal((8, 8)))[0]
+    well = Q @ np.diag(np.logspace(0, 3, 8)) @ Q.T  # condition number 1e3 once scaled
+    scale = np.diag(np.logspace(-3, 6, 8))
+    F = scale @ well @ scale
+    exact = np.linalg.inv(scale) @ np.linalg.inv(well) @ np.linalg.inv(scale)
+    # Relative to each variance: a well-conditioned inverse is good to about 1e-12; 1e-8 leaves
+    # room for the scaling's rounding, and the unscaled pinv misses by orders more.
+    relative = np.sqrt(np.outer(np.diag(exact), np.diag(exact)))
+    assert np.max(np.abs(flutter_crb._inverse(F) - exact) / relative) < 1e-8
+    assert np.max(np.abs(np.linalg.pinv(F) - exact) / relative) > 1e-2
