@@ -33,8 +33,8 @@ import result_files  # noqa: E402 - beside this script
 BENCHMARKS = (
     "decode_ild1420", "decode_ptb330", "decode_scanivalve", "modbus_latency", "daq_throughput",
     "console_frame_rate", "nexus_validation", "ident_speed_compare", "ident_accuracy",
-    "ident_accuracy_3dof", "flutter_crb", "closed_loop_bias", "turbulent_gls_experiment",
-    "campaign_efficiency",
+    "ident_accuracy_3dof", "flutter_crb", "flutter_crb_exact", "closed_loop_bias",
+    "turbulent_gls_experiment", "campaign_efficiency",
     "turbulent_campaign", "discrepancy_detectability", "discrepancy_confusion",
     "reprocess_scaling", "bridge_speed", "bridge_uncertainty",
 )
