@@ -74,6 +74,7 @@ from ident.model.rfc import RationalFunctionModel
 from ident.physics.turbulence import TurbulenceSpec, buffeting_force_spectrum
 from simulators import simulate_release
 from simulators.decks import BLUFF_DECK, BLUFF_DECK_STATIC, bluff_deck_model
+from simulators.tunnel import noise_scale
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import result_files  # noqa: E402 - beside this script
@@ -142,10 +143,11 @@ def _recorded_rms(section: SectionModel, model: RationalFunctionModel, U: float,
                   static: StaticCoefficients, span: float, n_hold: int) -> np.ndarray:
     """RMS of each clean channel of the release as simulated, the scale of its noise.
 
-    ``simulate_release`` draws each channel's noise as a share of the RMS of the whole clean
-    record: the decay, the random response, the mean wind load and the static deflection it
-    causes, and the hold before the release (``n_hold`` samples; a record whose hold is taken
-    away later keeps that noise). The decay's own RMS is a fraction of it in turbulence (at
+    ``simulate_release`` draws each channel's noise as a share of
+    :func:`simulators.tunnel.noise_scale`, the RMS of the whole clean record: the decay, the
+    random response, the mean wind load and the static deflection it causes, and the hold
+    before the release (``n_hold`` samples; a record whose hold is taken away later keeps that
+    noise). The decay's own RMS is a fraction of it in turbulence (at
     0.8 U_F on the benchmark's rows from a half to a thirtieth, channel by channel). Averaged
     over :data:`RMS_DRAWS` gust draws.
     """
@@ -154,8 +156,8 @@ def _recorded_rms(section: SectionModel, model: RationalFunctionModel, U: float,
         r = simulate_release(section, model, U, *hold, duration=n / fs, fs=fs,
                              rng=(draw, 7919), static=static, turbulence=spec, span=span,
                              pre_s=n_hold / fs)
-        clean = np.column_stack([r.clean[name] for name in ("h", "alpha", "lift", "moment")])
-        mean_square += np.mean(clean**2, axis=0) / RMS_DRAWS
+        mean_square += np.array([noise_scale(r.clean[name])
+                                 for name in ("h", "alpha", "lift", "moment")])**2 / RMS_DRAWS
     return np.sqrt(mean_square)
 
 

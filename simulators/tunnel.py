@@ -34,7 +34,7 @@ from ident.physics.tubing import TubingSet, distort
 from ident.physics.turbulence import GustField, TurbulenceSpec
 from ident.simulation.decay import CHANNELS, CHANNELS_3DOF, channels, simulate_decay
 
-__all__ = ["CHANNELS", "SimulatedRelease", "simulate_release"]
+__all__ = ["CHANNELS", "SimulatedRelease", "noise_scale", "simulate_release"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -209,8 +209,8 @@ def simulate_release(
         for name in names:  # in CHANNELS_3DOF order: a 2-DOF record draws as before
             frac = noise_frac[name]
             if frac:
-                rms = math.sqrt(float(np.mean(clean[name] ** 2)))
-                measured[name] = measured[name] + generator.normal(0.0, frac * rms, t.size)
+                measured[name] = measured[name] + generator.normal(
+                    0.0, frac * noise_scale(clean[name]), t.size)
     return SimulatedRelease(
         t=t,
         **measured,
@@ -225,6 +225,16 @@ def simulate_release(
         effects=decay.effects,
         p0=decay.p0,
     )
+
+
+def noise_scale(clean: npt.ArrayLike) -> float:
+    """Return what a channel's noise fraction multiplies: the RMS of its whole clean record.
+
+    The whole record as recorded: the decay, the random response in turbulence, the mean wind
+    load and the static deflection it causes, and the held part before the release. In
+    turbulence that is several times the decay's own RMS.
+    """
+    return math.sqrt(float(np.mean(np.asarray(clean, dtype=float) ** 2)))
 
 
 def _noise_fractions(noise: float | Mapping[str, float]) -> dict[str, float]:
