@@ -147,9 +147,9 @@ def _recorded_rms(section: SectionModel, model: RationalFunctionModel, U: float,
     :func:`simulators.tunnel.noise_scale`, the RMS of the whole clean record: the decay, the
     random response, the mean wind load and the static deflection it causes, and the hold
     before the release (``n_hold`` samples; a record whose hold is taken away later keeps that
-    noise). The decay's own RMS is a fraction of it in turbulence (at
-    0.8 U_F on the benchmark's rows from a half to a thirtieth, channel by channel). Averaged
-    over :data:`RMS_DRAWS` gust draws.
+    noise). The decay's own RMS is a fraction of it in turbulence (at 0.8 U_F on the
+    benchmark's rows from a half to a thirtieth, channel by channel). Averaged over
+    :data:`RMS_DRAWS` gust draws.
     """
     mean_square = np.zeros(4)
     for draw in range(RMS_DRAWS):
@@ -174,7 +174,7 @@ class FlutterBound:
     std_with_holds : float
         With the holds of ``hold_s`` before each release too (``std`` without them).
     deterministic : float
-        From the releases' deterministic decay alone.
+        From the releases' deterministic decay alone (their held displacements unknown).
     sampled_median, sampled_median_with_holds : float
         The median absolute flutter-speed error of an efficient estimator of the coefficients:
         over draws of them from the normal distribution of the bound's covariance, the median
@@ -417,8 +417,8 @@ def _release_information(section, model, with_theta, theta0, spec, static, U, ho
         dS.append((T_plus @ Sb @ np.conj(np.swapaxes(T_plus, 1, 2))
                    - T_minus @ Sb @ np.conj(np.swapaxes(T_minus, 1, 2))) / (2 * h))
     nuisance = nuisance_dS(T0, Sb, shape_x(f))
-    # The displacement the model was held at: the decay is affine in it, so a difference of
-    # one unit is exact. The spectrum does not depend on it.
+    # The displacement the model was held at: the decay is affine in it, so a finite difference
+    # of any step is exact. The spectrum does not depend on it.
     at_hold = _decay(section, model, U, hold, n, fs, static)[:f.size]
     d_held = [(_decay(section, model, U, (hold[0] + 1e-3 * (a == 0), hold[1] + 1e-3 * (a == 1)),
                       n, fs, static)[:f.size] - at_hold) / 1e-3 for a in range(N_HELD)]
