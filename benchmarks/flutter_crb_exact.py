@@ -202,26 +202,30 @@ def bounds(section: SectionModel, model: RationalFunctionModel, static: StaticCo
                                    static=static)
         rest_at = (float(settled.h[-3000:].mean()), float(settled.alpha[-3000:].mean()))
 
-        def decay(theta, held, U=U):
+        def released(theta, U=U):
+            """Return the channels' free response to a unit held ``(h, alpha)``, (4N, 2)."""
             A, _, C = _augmented(section, with_theta(theta), U, shape0)
             Phi = sla.expm(A * dt)
-            x = np.zeros(A.shape[0])
-            x[0], x[1] = held[0] / section.B, held[1]
-            y = np.empty((N, 4))
+            x = np.zeros((A.shape[0], 2))
+            x[0, 0], x[1, 1] = 1.0 / section.B, 1.0
+            y = np.empty((N, 4, 2))
             for k in range(N):
                 y[k] = C @ x
                 x = Phi @ x
-            return y.ravel()
+            return y.reshape(4 * N, 2)
 
+        # The decay is linear in the held displacement: one response per step, for every hold.
+        at_theta0 = released(theta0)
+        d_released = [(released(plus[0]) - released(minus[0])) / width
+                      for plus, minus, width in steps[:n_theta]]
         for hold in flutter_crb.HOLDS:
             rms = flutter_crb._recorded_rms(section, model, U, hold, int(DURATION * RECORDED_FS),
                                             RECORDED_FS, spec, static, 1.0, 0)
             noise = (NOISE * rms) ** 2 * fs / RECORDED_FS  # block means'
-            amplitude = (hold[0] - rest_at[0], hold[1] - rest_at[1])
-            d_mean = [(decay(plus[0], amplitude) - decay(minus[0], amplitude)) / width
-                      for plus, minus, width in steps[:n_theta]]
+            amplitude = np.array([hold[0] - rest_at[0], hold[1] - rest_at[1]])
+            d_mean = [d @ amplitude for d in d_released]
             d_mean += [np.zeros(4 * N)] * (n_random - n_theta)
-            d_mean += [decay(theta0, np.eye(2)[j]) for j in range(2)]   # held displacement
+            d_mean += [at_theta0[:, j] for j in range(2)]                # held displacement
             d_mean += [np.tile(np.eye(4)[c], N) for c in range(4)]       # offsets
             n_noise = np.tile(noise, N)
             per_release["stationary"].append(_information(
