@@ -111,8 +111,8 @@ def _build_parser() -> argparse.ArgumentParser:
                       choices=("second-order", "fourth-order", "by-evidence"),
                       help="closed-loop ML's buffeting model: second-order (default), "
                            "fourth-order (less biased, about twice the time) or by-evidence "
-                           "(fourth-order when the second-order's innovations are not white "
-                           "and Schwarz's criterion favours it)")
+                           "(fourth-order when the second-order's innovations pooled over "
+                           "the records are not white)")
 
     p_diag = sub.add_parser(
         "diagnose",

@@ -37,7 +37,7 @@ The plan (units SI; the example plans are ``rig_configs/plans/*.toml``)::
     closed_loop_buffeting = "second-order"  # the "ml" estimator's buffeting model:
                                 # "second-order", "fourth-order" (less biased, about twice
                                 # the time) or "by-evidence" (the fourth when the second's
-                                # innovations are not white and the evidence favours it)
+                                # innovations pooled over the records are not white)
 
     [speeds]
     wind_speeds = [5.0, 7.0]    # m/s; or fan_rpm = [500, 700] (set-points, rpm), not both

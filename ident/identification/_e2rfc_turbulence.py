@@ -50,8 +50,8 @@ CLOSED_LOOP_LAGS = 2
 #: name -> (``shaping_sections``, ``exact_block_means``).
 CLOSED_LOOP_BUFFETING_MODELS = {"second-order": (1, False), "fourth-order": (2, True)}
 #: The buffeting choice that fits the second-order model and, when its innovations pooled over
-#: the records are not white, the fourth-order one too, keeping the fit of lower Schwarz
-#: criterion (:func:`_by_evidence`).
+#: the records are not white, the fourth-order one, keeping it unless its search ended lower in
+#: likelihood (:func:`_by_evidence`).
 BY_EVIDENCE = "by-evidence"
 #: What ``closed_loop_buffeting`` may be: a model's name or :data:`BY_EVIDENCE`.
 CLOSED_LOOP_BUFFETING_CHOICES = (*CLOSED_LOOP_BUFFETING_MODELS, BY_EVIDENCE)
@@ -253,13 +253,17 @@ def _by_evidence(start: IdentifiedModel, releases: list[Release], section: Secti
                  stable_to: float | None,
                  second: tuple[closed_loop_ml.ClosedLoopFit, str | None]
                  ) -> tuple[closed_loop_ml.ClosedLoopFit, str | None, str, str]:
-    """Return the fit the evidence favours, its restart note, its model's name and why.
+    """Return the fit the evidence calls for, its restart note, its model's name and why.
 
     The second-order fit stands when its innovations pooled over the records are white
-    (:attr:`ClosedLoopFit.portmanteau`); otherwise the fourth-order model is fitted from the
-    same start and the fit of lower Schwarz criterion is kept
-    (:attr:`ClosedLoopFit.schwarz`: the fourth-order model has eight more shaping parameters
-    per wind speed and four more initial states per record). The reason ends the note.
+    (:attr:`ClosedLoopFit.portmanteau`): the cheaper buffeting model then describes the data.
+    Otherwise the fourth-order model is fitted from the same start and kept, unless its search
+    ended lower in likelihood than the second-order one (a model that contains the other
+    cannot fit worse at its maximum). Not Schwarz's criterion: it weighs prediction against
+    parameters, where in closed loop the buffeting model's misfit biases the self-excited
+    coefficients themselves (the buffeting drives the motion the coefficients are told
+    from), so a noise model the innovations reject is to be replaced whatever its parameter
+    count. The reason ends the note.
     """
     fit, restarted = second
     limit = innovation_checks.portmanteau_limit()
@@ -273,13 +277,16 @@ def _by_evidence(start: IdentifiedModel, releases: list[Release], section: Secti
         return fit, restarted, "second-order", (
             f", chosen by evidence: the second-order model's pooled innovations are not white, "
             f"but the fourth-order likelihood could not start ({exc})")
-    gain = fit.schwarz - richer.schwarz
+    gain = fit.neg_log_likelihood - richer.neg_log_likelihood
     why = (f", chosen by evidence: the second-order model's pooled innovations are not white "
-           f"(portmanteau statistic {float(fit.portmanteau.max()):.0f} > {limit:.0f}) and "
-           f"Schwarz's criterion favours the ")
-    if gain > 0.0:
-        return richer, richer_restarted, "fourth-order", f"{why}fourth-order model by {gain:.0f}"
-    return fit, restarted, "second-order", f"{why}second-order model by {-gain:.0f}"
+           f"(portmanteau statistic {float(fit.portmanteau.max()):.0f} > {limit:.0f})")
+    if gain >= 0.0:
+        return richer, richer_restarted, "fourth-order", (
+            f"{why}; the fourth-order fit is {gain:.0f} higher in log-likelihood, pooled "
+            f"statistic {float(richer.portmanteau.max()):.0f}")
+    return fit, restarted, "second-order", (
+        f"{why}, but the fourth-order search ended {-gain:.0f} lower in log-likelihood: "
+        f"a maximum it did not reach, so the second-order fit stands")
 
 
 def _with_reason(found: _turbulent_fit.TurbulentResult,

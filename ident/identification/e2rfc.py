@@ -138,8 +138,8 @@ TURBULENT_ESTIMATORS = ("iv", "ml")
 #: second-order section per force on block means taken as samples, or two sections on exact
 #: block means. docs/development/e2rfc_turbulence.md measures the second's smaller bias and
 #: its two to three times the time. ``"by-evidence"`` (:data:`BY_EVIDENCE`) fits the first and,
-#: when its innovations pooled over the records are not white, the second too, keeping the
-#: fit Schwarz's criterion favours.
+#: when its innovations pooled over the records are not white, the second in its place (a
+#: buffeting model the innovations reject biases the self-excited coefficients in closed loop).
 CLOSED_LOOP_BUFFETING = "second-order"
 
 
@@ -173,8 +173,8 @@ def identify(
         one second-order shaping section per force on block means taken as samples, or two
         sections on exact block means (less biased, about twice the time;
         :data:`CLOSED_LOOP_BUFFETING_MODELS`), or the first unless its innovations pooled over
-        the records are not white and Schwarz's criterion favours the second (then both are
-        fitted). Ignored by the other estimators.
+        the records are not white (then the second is fitted too and kept). Ignored by the
+        other estimators.
 
     Returns
     -------
