@@ -19,8 +19,9 @@ likelihood (``turbulent_estimator = "ml"``, holds of 5 s as extra data): two rel
 0.6 U_F, then :mod:`daq.campaign.adaptive` chooses each next speed (4-10.5 m/s, within the
 safety bound) and how many releases to take there (1-4, by the predicted gain per wind-on
 second; ``--max-releases``, 4), until the std is within ``--target`` of U_F (2 %) or
-``--max-speeds`` (8); ``--closed-loop-buffeting fourth-order`` fits the fourth-order buffeting
-model (written to ``turbulent_campaign_adaptive_fourth_order``).
+``--max-speeds`` (8); ``--closed-loop-buffeting fourth-order`` (or ``second-order``) fits that
+buffeting model alone rather than the one chosen by evidence, E2RFC's default (written to
+``turbulent_campaign_adaptive_fourth_order``, ``..._second_order``).
 
 Run: ``.venv/bin/python benchmarks/turbulent_campaign.py [--seeds 1 2 3] [--iw 0.01]
 [--adaptive [--target 0.02] [--max-speeds 8] [--max-releases 4] [--closed-loop-buffeting
@@ -48,6 +49,7 @@ from daq.campaign.plan import parse_plan
 from daq.campaign.runner import run_plan
 from daq.config import parse_rig_config
 from daq.errors import ConfigError
+from ident.identification.e2rfc import CLOSED_LOOP_BUFFETING
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import result_files  # noqa: E402 - beside this script
@@ -141,7 +143,7 @@ def main() -> None:
                         help="--adaptive: most releases at one chosen speed (4)")
     parser.add_argument("--closed-loop-buffeting",
                         choices=("second-order", "fourth-order", "by-evidence"),
-                        default="second-order",
+                        default=CLOSED_LOOP_BUFFETING,
                         help="--adaptive: the closed-loop estimator's buffeting model")
     result_files.add_arguments(parser)
     args = parser.parse_args()
@@ -224,7 +226,7 @@ def _write(args: argparse.Namespace, what: str, table: list[tuple[object, ...]],
                         "branch's noise model; the closed-loop branch (the plan's default "
                         "estimator) takes holds as optional data.")
     name = "turbulent_campaign_adaptive" if args.adaptive else "turbulent_campaign"
-    if args.adaptive and args.closed_loop_buffeting != "second-order":
+    if args.adaptive and args.closed_loop_buffeting != CLOSED_LOOP_BUFFETING:
         name += "_" + args.closed_loop_buffeting.replace("-", "_")
     result_files.write(
         name,

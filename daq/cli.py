@@ -109,10 +109,10 @@ def _build_parser() -> argparse.ArgumentParser:
                       help="in turbulence: closed-loop ML (default; 2-DOF) or refined IV")
     p_id.add_argument("--closed-loop-buffeting",
                       choices=("second-order", "fourth-order", "by-evidence"),
-                      help="closed-loop ML's buffeting model: second-order (default), "
-                           "fourth-order (less biased, about twice the time) or by-evidence "
-                           "(fourth-order when the second-order's innovations pooled over "
-                           "the records are not white)")
+                      help="closed-loop ML's buffeting model: by-evidence (default: "
+                           "fourth-order where the second-order one's innovations pooled "
+                           "over the records are not white), second-order or fourth-order "
+                           "(less biased, about twice the time)")
 
     p_diag = sub.add_parser(
         "diagnose",

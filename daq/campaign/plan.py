@@ -34,10 +34,10 @@ The plan (units SI; the example plans are ``rig_configs/plans/*.toml``)::
     turbulent_estimator = "ml"  # releases in turbulence: "ml" (closed-loop maximum
                                 # likelihood; holds optional; 2-DOF, a 3-DOF section runs
                                 # "iv") or "iv" (refined IV, needs the holds)
-    closed_loop_buffeting = "second-order"  # the "ml" estimator's buffeting model:
-                                # "second-order", "fourth-order" (less biased, about twice
-                                # the time) or "by-evidence" (the fourth when the second's
-                                # innovations pooled over the records are not white)
+    closed_loop_buffeting = "by-evidence"  # the "ml" estimator's buffeting model: the
+                                # fourth-order one where the second-order one's innovations
+                                # pooled over the records are not white, else the second;
+                                # or either alone ("second-order", "fourth-order")
 
     [speeds]
     wind_speeds = [5.0, 7.0]    # m/s; or fan_rpm = [500, 700] (set-points, rpm), not both
@@ -188,8 +188,8 @@ class CampaignPlan:
         E2RFC's estimator of releases in turbulence, ``"ml"`` (default) or ``"iv"``
         (:func:`ident.identification.e2rfc.identify`).
     closed_loop_buffeting : str
-        The closed-loop estimator's buffeting model, ``"second-order"`` (default),
-        ``"fourth-order"`` or ``"by-evidence"`` (:func:`ident.identification.e2rfc.identify`).
+        The closed-loop estimator's buffeting model, ``"by-evidence"`` (default),
+        ``"second-order"`` or ``"fourth-order"`` (:func:`ident.identification.e2rfc.identify`).
     """
 
     mode: str
@@ -210,7 +210,7 @@ class CampaignPlan:
     release: str = "auto"
     identification: str = "e2rfc"
     turbulent_estimator: str = "ml"
-    closed_loop_buffeting: str = "second-order"
+    closed_loop_buffeting: str = "by-evidence"
 
     def release_method(self, config: RigConfig) -> str:
         """Return how this plan releases on ``config``: ``"plc"`` or ``"manual"``."""
@@ -369,7 +369,7 @@ def parse_plan(text: str, source: str = "<string>") -> CampaignPlan:
     if estimator not in TURBULENT_ESTIMATORS:
         raise ConfigError(f"{where} turbulent_estimator = {estimator!r}; allowed: "
                           f"{', '.join(TURBULENT_ESTIMATORS)}")
-    buffeting = c.get("closed_loop_buffeting", "second-order")
+    buffeting = c.get("closed_loop_buffeting", "by-evidence")
     if buffeting not in CLOSED_LOOP_BUFFETINGS:
         raise ConfigError(f"{where} closed_loop_buffeting = {buffeting!r}; allowed: "
                           f"{', '.join(CLOSED_LOOP_BUFFETINGS)}")

@@ -66,8 +66,8 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
         The estimator of releases in turbulence (default: E2RFC's, closed-loop maximum
         likelihood, :mod:`ident.identification.closed_loop_ml`); ``"iv"``: refined IV.
     closed_loop_buffeting : {"second-order", "fourth-order", "by-evidence"}, optional
-        The closed-loop estimator's buffeting model (default E2RFC's, second-order), or the
-        one the evidence favours.
+        The closed-loop estimator's buffeting model (default E2RFC's, by evidence), or either
+        model alone.
     """
     from daq.offline.derivative_table import (
         check_model_dof,
