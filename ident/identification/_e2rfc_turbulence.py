@@ -259,11 +259,11 @@ def _by_evidence(start: IdentifiedModel, releases: list[Release], section: Secti
     (:attr:`ClosedLoopFit.portmanteau`): the cheaper buffeting model then describes the data.
     Otherwise the fourth-order model is fitted from the same start and kept, unless its search
     ended lower in likelihood than the second-order one (the richer model, on block means
-    modelled exactly, fits at least as well at its maximum). Not Schwarz's criterion: it weighs prediction against
-    parameters, where in closed loop the buffeting model's misfit biases the self-excited
-    coefficients themselves (the buffeting drives the motion the coefficients are told
-    from), so a noise model the innovations reject is to be replaced whatever its parameter
-    count. The reason ends the note.
+    modelled exactly, fits at least as well at its maximum). Not Schwarz's criterion: it
+    weighs prediction against parameters, where in closed loop the buffeting model's misfit
+    biases the self-excited coefficients themselves (the buffeting drives the motion the
+    coefficients are told from), so a noise model the innovations reject is to be replaced
+    whatever its parameter count. The reason ends the note.
     """
     fit, restarted = second
     limit = innovation_checks.portmanteau_limit()
