@@ -62,6 +62,7 @@ class Record:
     group: int             # wind-speed index
     release: int           # release index (its noise parameters)
     held: bool             # a hold: the model does not move
+    from_rest: bool = False  # starts at the release: the lag states are zero there
 
 
 class Layout:
@@ -199,13 +200,21 @@ def records(releases: Sequence[Release], section: SectionModel, speeds: list[flo
         fs = next((seen for seen in rates if abs(fs - seen) <= RATE_RTOL * seen), fs)
         rates.append(fs)
         y = np.column_stack([r.h, r.alpha, r.lift, r.moment])
+        t = r.t
         if window is not None:
-            y = y[(r.t >= window[0]) & (r.t < window[1])]
+            kept = (r.t >= window[0]) & (r.t < window[1])
+            y, t = y[kept], r.t[kept]
             if y.shape[0] < 50 * factor:
                 raise ValueError(f"the window {window} s leaves {y.shape[0]} samples of a "
                                  f"release; at least {50 * factor} are needed")
+        # A release starts from rest (Release's contract): its lag states, driven by the
+        # velocity, are zero at t = 0. A block mean taken as the state's sample stands half a
+        # block later, when they are at most (2 pi / 50)^2 / 2 = 0.8 % of the released
+        # displacement (a block is 1/TARGET_FACTOR of the fastest mode's period). A window
+        # that starts later knows nothing of them.
+        from_rest = bool(t[0] < factor / r.fs)
         records.append(Record(decimate(y, factor), fs, factor, r.U, rho, group, index,
-                               False))
+                              False, from_rest))
         if use_holds and r.hold is not None and r.hold.t.size > 50 * factor:
             hold = np.column_stack([r.hold.h, r.hold.alpha, r.hold.lift, r.hold.moment])
             records.append(Record(decimate(hold, factor), fs, factor, r.U, rho, group, index,

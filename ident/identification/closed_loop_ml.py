@@ -12,7 +12,8 @@ Gaussian likelihood of every release at every wind speed together, over
   (:class:`~ident.identification.innovations.ShapingFilter`);
 - per release, the four channels' sensor-noise standard deviations;
 - per record, concentrated out by generalised least squares: the channels' constant offsets
-  (mean wind load, static deflection, zero drift) and the initial state.
+  (mean wind load, static deflection, zero drift) and the initial state, but for a release's
+  lag states, which are zero at the release (it starts from rest).
 
 A hold before a release (the model held in the wind) adds its record as extra data: the force
 channels see the buffeting alone there, the displacement channels only noise. It is used when
@@ -154,8 +155,9 @@ class ClosedLoopFit:
         Parameters estimated whose information grows with the records' length: those searched
         and each record's concentrated offsets.
     n_initial_states : int
-        The concentrated initial states' entries, every record's together: their information
-        is that of the first samples after the release, whatever the length.
+        The concentrated initial states' entries, every record's together (a release's lag
+        states, known to be zero, are not among them): their information is that of the
+        first samples after the release, whatever the length.
     n_samples : int
         Scalar samples of every record together (block means times channels).
     portmanteau : ndarray, shape (4,)
@@ -332,7 +334,7 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
         fs=min(record.fs for record in records),
         whiteness=whiteness, portmanteau=portmanteau,
         n_parameters=layout.size + 4 * len(records),
-        n_initial_states=sum(v.size - 4 for v in current.nuisance),
+        n_initial_states=sum(c.shape[1] - 4 for c in current.columns),
         n_samples=sum(record.y.size for record in records), warnings=tuple(warnings))
 
 
@@ -430,6 +432,18 @@ class _Objective:
         Phi, Qd, C, R, gain = self.matrices(theta, record)
         return SteadyPredictor(Phi, Qd, C, R, feedthrough=gain)
 
+    def at_zero(self, record: Record) -> range:
+        """Entries of a record's initial state known to be zero: a release's lag states.
+
+        The state is ``[q, q', lag states, buffeting]`` (:class:`ReleaseModel`); a release from
+        rest has its lag states at zero (:class:`~ident.records.release.Release`), which
+        concentrating them out would leave to the record to tell.
+        """
+        if record.held or not record.from_rest:
+            return range(0)
+        n_dof = self.layout.n_dof
+        return range(2 * n_dof, 2 * n_dof + n_dof * self.layout.n_lags)
+
     def evaluate(self, theta: FloatArray) -> _Evaluation:
         """-log L with each record's offsets and initial state concentrated out."""
         self._dynamics.clear()
@@ -437,7 +451,7 @@ class _Objective:
         for record in self.records:
             try:
                 predictor = self.predictor(theta, record)
-                e, columns, nuisance = predictor.concentrated(record.y)
+                e, columns, nuisance = predictor.concentrated(record.y, self.at_zero(record))
             except (ValueError, np.linalg.LinAlgError):  # no stable predictor: not a maximum
                 return _Evaluation(math.inf, [], [], [], [], [])
             out.e.append(e)

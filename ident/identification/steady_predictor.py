@@ -313,13 +313,16 @@ class SteadyPredictor:
             z[1:, column] = lfilter([1.0], [1.0, -root], drive, zi=[root * start])[0]
         return u, z
 
-    def concentrated(self, y: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    def concentrated(self, y: FloatArray, at_zero: Sequence[int] = ()
+                     ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Innovations with the offsets and the initial state at their GLS estimates.
 
-        Returns the innovations (n, n_y), the whitened nuisance columns (n_y n, n_y + n_x) and
-        the estimates ``[offsets (n_y), initial state (n_x)]``. The columns: a unit initial state
-        along axis j gives ``C A^k e_j = CV lam^k V^-1 e_j``; a unit offset on channel c gives
-        ``1_c - CV g_k V^-1 Kp 1_c``, ``g_k = (1 - lam^k) / (1 - lam)`` (``|lam| < 1``).
+        Returns the innovations (n, n_y), the whitened nuisance columns (n_y n, n_y + n_x less
+        ``at_zero``) and the estimates ``[offsets (n_y), initial state (n_x)]``, the entries
+        ``at_zero`` of the initial state held at zero (known, not estimated: no column). The
+        columns: a unit initial state along axis j gives ``C A^k e_j = CV lam^k V^-1 e_j``; a
+        unit offset on channel c gives ``1_c - CV g_k V^-1 Kp 1_c``, ``g_k = (1 - lam^k) / (1 -
+        lam)`` (``|lam| < 1``).
         """
         n, n_y = y.shape[0], self.n_y
         e = self.innovations(y)
@@ -335,7 +338,8 @@ class SteadyPredictor:
         initial = ((powers[:, None, :] * CVw[None]).reshape(n_y * n, m) @ self.V_inv).real
         offsets = (np.tile(W, (n, 1))
                    - ((geometric[:, None, :] * CVw[None]).reshape(n_y * n, m) @ self.drive).real)
-        columns = np.hstack([offsets, initial])
+        free = np.setdiff1d(np.arange(self.n_x), np.asarray(at_zero, dtype=int))
+        columns = np.hstack([offsets, initial[:, free]])
         ew = (e @ W.T).reshape(n_y * n)
         # Least squares on the columns themselves, not on their normal equations: the initial
         # states of lightly damped modes and the offsets are nearly collinear (the columns'
@@ -343,6 +347,8 @@ class SteadyPredictor:
         # double precision, where a rank cut-off made -log L jump by about 1 between
         # neighbouring parameter values. The cut-off left here drops only columns that are
         # zero to round-off (a lag state whose coefficients are zero moves no output).
-        nuisance = np.linalg.lstsq(columns, ew, rcond=RANK_RTOL)[0]
-        e = ((ew - columns @ nuisance).reshape(n, n_y)) @ np.linalg.inv(W).T
+        estimate = np.linalg.lstsq(columns, ew, rcond=RANK_RTOL)[0]
+        e = ((ew - columns @ estimate).reshape(n, n_y)) @ np.linalg.inv(W).T
+        nuisance = np.zeros(n_y + self.n_x)
+        nuisance[:n_y], nuisance[n_y + free] = estimate[:n_y], estimate[n_y:]
         return e, columns, nuisance
