@@ -16,9 +16,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from functools import partial
+from functools import cache, partial
 
 import numpy as np
+import numpy.typing as npt
 
 from ident.identification import (
     _closed_loop_starts,
@@ -38,6 +39,8 @@ from ident.model import flutter as _flutter
 from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel
 from ident.records.release import Release
+
+FloatArray = npt.NDArray[np.float64]
 
 #: ``diagnostics.estimator`` of the turbulence branch (module docstring).
 ESTIMATOR_TURBULENT = "refined IV with the holds' noise model (turbulence branch)"
@@ -194,14 +197,23 @@ def _closed_loop(model: IdentifiedModel, releases: list[Release], section: Secti
     speeds = distinct_wind_speeds([r.U for r in releases])
     below = [r for r in releases if r.U < speeds[-1] / (1 + DISTINCT_U_RTOL)]
 
-    def reduced() -> RationalFunctionModel | None:
+    @cache
+    def reduced() -> closed_loop_ml.ClosedLoopFit | None:
         """Return the fit without the highest wind speed, from the full fit."""
         try:
             return closed_loop_ml.fit_closed_loop(below, section, fit.model, with_A3=True,
                                                   shaping_sections=sections,
-                                                  exact_block_means=exact).model
+                                                  exact_block_means=exact)
         except ValueError:  # likelihood not defined without the top speed: no extrapolation
             return None     # part, which the uncertainty's warnings then say
+
+    def reduced_model() -> RationalFunctionModel | None:
+        found = reduced()
+        return None if found is None else found.model
+
+    def reduced_covariance() -> FloatArray | None:
+        found = reduced()
+        return None if found is None else found.covariance
 
     holds = sum(r.hold is not None for r in releases)
     note = (f"turbulence: coefficients by {ESTIMATOR_CLOSED_LOOP} over {len(releases)} releases "
@@ -231,7 +243,9 @@ def _closed_loop(model: IdentifiedModel, releases: list[Release], section: Secti
         bounded_at=stable_to,
         _lag_roots=fit.model.d,
         _refits={"jackknife": (), "release_jackknife": (), "finer": None,
-                 "reduced": Deferred(reduced) if len(speeds) >= 3 else None,
+                 "reduced": Deferred(reduced_model) if len(speeds) >= 3 else None,
+                 "reduced_covariance": (Deferred(reduced_covariance) if len(speeds) >= 3
+                                        else None),
                  "cross_check": cross_check})
     return IdentifiedModel(fit.model.A, fit.model.d, diagnostics)
 

@@ -178,6 +178,17 @@ class E2RFCDiagnostics:
         return self._computed("reduced", self._reduced)  # type: ignore[return-value]
 
     @property
+    def reduced_covariance(self) -> FloatArray | None:
+        """Covariance of :attr:`reduced`'s parameters, in :attr:`parameter_index`'s layout.
+
+        Given where the refit's estimator has one of its own (the closed-loop branch's inverse
+        Fisher information); None otherwise. The extrapolation part takes the statistical
+        scatter of the refit's move off with it (:func:`~ident.identification.uncertainty.
+        flutter_uncertainty`).
+        """
+        return self._computed("reduced_covariance", lambda: None)  # type: ignore[return-value]
+
+    @property
     def reduced_K(self) -> dict[str, tuple[float, float]]:
         """Reduced frequencies the releases of :attr:`reduced` cover, by mode."""
         return self._computed("reduced_K", lambda: K_ranges(  # type: ignore[return-value]

@@ -10,7 +10,11 @@ How uncertain the flutter speed is (:meth:`IdentifiedModel.uncertainty`), from t
   frequency than the releases cover, where a rational function fitted over the covered range
   can drift (real decks are not exactly of Roger's form). With releases at three or more wind
   speeds the model is fitted again without the highest one; how far its flutter speed moves,
-  scaled by how much farther it extrapolates, measures that drift;
+  scaled by how much farther it extrapolates, measures that drift. Where the refit's estimator
+  gives its own covariance (the closed-loop branch), the move's statistical scatter is taken
+  off first: for two efficient fits of nested data the variance of their difference is the
+  difference of their variances (Hausman's argument), and the parametric part already
+  carries the full fit's own. What is left of the move's square beyond that is the drift;
 - *turbulence*: in turbulent flow the decays turn into a random response (buffeting), which the
   modal fit cannot follow and which is correlated over whole periods, so the least-squares
   covariance says nothing. The releases' buffeting is independent from one release to the next,
@@ -110,6 +114,8 @@ class UncertaintySources(Protocol):
     def reduced(self) -> RationalFunctionModel | None: ...  # noqa: D102
     @property
     def reduced_K(self) -> dict[str, tuple[float, float]]: ...  # noqa: D102
+    @property
+    def reduced_covariance(self) -> FloatArray | None: ...  # noqa: D102
     @property
     def finer(self) -> RationalFunctionModel | None: ...  # noqa: D102
     @property
@@ -226,13 +232,47 @@ def parametric(section: SectionModel, model: RationalFunctionModel, sources: Unc
     result = _flutter.analyze(section, model, U_max)
     if result.speed is None or result.frequency is None:
         return result, None
+    return result, _first_order_std(section, model, result, sources.parameter_index,
+                                    sources.covariance)
+
+
+def _first_order_std(section: SectionModel, model: RationalFunctionModel,
+                     result: _flutter.FlutterResult, index: Sequence[tuple[int, int, int]],
+                     covariance: FloatArray) -> float:
+    """Return the flutter speed's std from a parameter covariance, to first order (m/s).
+
+    ``result`` is ``model``'s flutter analysis, with a flutter speed (NaN without one);
+    ``covariance`` is over the coefficients at ``index`` and the log lag roots.
+    """
+    if result.speed is None or result.frequency is None:
+        return math.nan
     dU_dA, dU_dd = _flutter.speed_sensitivity(section, model, result.speed, result.frequency)
     gradient = np.array(
-        [dU_dA[k, i, j] for k, i, j in sources.parameter_index]
+        [dU_dA[k, i, j] for k, i, j in index]
         + list(dU_dd * model.d)  # the covariance is in log(d)
     )
-    variance = float(gradient @ sources.covariance @ gradient)
-    return result, math.sqrt(max(variance, 0.0))
+    variance = float(gradient @ covariance @ gradient)
+    return math.sqrt(max(variance, 0.0))
+
+
+def _move_scatter(section: SectionModel, model: RationalFunctionModel,
+                  covariance: FloatArray | None, index: Sequence[tuple[int, int, int]],
+                  U_max: float, parametric: float) -> float:
+    """Std of the extrapolation refit's move from statistics alone (m/s); 0 if unknown.
+
+    Hausman's argument: the refit on a subset of the data and the full fit are both
+    efficient, so their difference has the variance ``var(refit) - var(full)``.
+    """
+    if covariance is None:
+        return 0.0
+    try:
+        found = _flutter.analyze(section, model, U_max, n_points=REFIT_GRID)
+    except ValueError:  # no still-air modes: a wild refit, whose move is kept whole
+        return 0.0
+    refit = _first_order_std(section, model, found, index, covariance)
+    if not math.isfinite(refit):  # no flutter below U_max: the move is kept whole
+        return 0.0
+    return math.sqrt(max(refit**2 - parametric**2, 0.0))
 
 
 def flutter_uncertainty(section: SectionModel, result: _flutter.FlutterResult, parametric: float,
@@ -296,7 +336,10 @@ def flutter_uncertainty(section: SectionModel, result: _flutter.FlutterResult, p
             # ratio of the extrapolation distances (in log K).
             moved = max(refit_speed(reduced), lower)
             reach = max(math.log(K_min / K_F), 0.0) / math.log(reduced_K_min / K_F)
-            extrapolation = abs(moved - speed) * min(reach, 1.0)
+            scatter = _move_scatter(section, reduced, diag.reduced_covariance,
+                                    diag.parameter_index, U_max, parametric)
+            drift = math.sqrt(max((moved - speed)**2 - scatter**2, 0.0))
+            extrapolation = drift * min(reach, 1.0)
         elif reduced_K_min > K_F and len(distinct_wind_speeds(list(diag.wind_speeds))) >= 3:
             warnings.append(
                 "the refit without the highest wind speed failed, so the std has no "

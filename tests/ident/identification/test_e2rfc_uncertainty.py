@@ -167,3 +167,37 @@ def test_a_failed_refit_without_the_top_speed_is_named_not_taken_for_no_extrapol
     assert any("refit without the highest wind speed failed" in w for w in u.warnings)
     assert not any("refit without the highest" in w
                    for w in identified.uncertainty(BLUFF_DECK).warnings)
+
+
+def test_the_extrapolation_part_takes_the_refits_statistical_scatter_off():
+    """Hausman's argument: the refit's move less what its own statistics would move it.
+
+    The bluff deck above (smooth flow: its refit gives no covariance, so the whole move
+    counts). Given a covariance for the refit (as the closed-loop branch's Fisher information
+    gives), the move's square loses ``std(refit)^2 - std(full)^2``: nothing with a refit known
+    exactly or as well as the full fit (the whole move stays), all of it with one known a
+    thousand times worse in variance (the move is then statistics), and in between part of
+    it, the more the less the refit is known (measured: 1.09 % of U_F whole, 1.00 % at 3
+    times the full fit's covariance, 0.61 % at 10, none at 30).
+    """
+    from dataclasses import replace
+
+    from ident.identification.results import IdentifiedModel
+
+    model = bluff_deck_model()
+    identified = e2rfc.identify(campaign(BLUFF_DECK, model, seed=3, holds=HOLDS[:1],
+                                         duration=20.0), BLUFF_DECK)
+    whole = identified.uncertainty(BLUFF_DECK).extrapolation
+    assert whole > 0.0
+    diag = identified.diagnostics
+
+    def extrapolation(scale):
+        covariance = scale * diag.covariance
+        refit = IdentifiedModel(identified.A, identified.d, replace(
+            diag, _refits={**diag._refits, "reduced_covariance": covariance}))
+        return refit.uncertainty(BLUFF_DECK).extrapolation
+
+    assert extrapolation(0.0) == pytest.approx(whole, rel=1e-12)
+    assert extrapolation(1.0) == pytest.approx(whole, rel=1e-12)
+    parts = [extrapolation(scale) for scale in (3.0, 10.0, 1e3)]
+    assert whole > parts[0] > parts[1] > parts[2] == 0.0
