@@ -492,17 +492,17 @@ def test_a_release_above_flutter_is_not_counted_as_bounded():
 #: The benchmark's variant rows (``benchmarks/ident_accuracy.py --rows variants``, 20 seeds):
 #: the plate at Iw 1 % with holds, changed in one thing. name -> (change, |error| bound, std
 #: multiple the error must lie within). Measured rows with the default buffeting model, chosen
-#: by evidence (median / p90 |error|, 2-std cover): non-Gaussian gusts (skewness 0.5, kurtosis
-#: 4.5) 3.07 / 6.70 %, 100 %; Coulomb friction at its realistic strength 3.57 / 6.65 %, 100 %;
-#: a Davenport admittance with a 1 m scale (a force spectrum the second-order filter matches
-#: worse, the fourth-order one taken on every seed) 2.97 / 7.67 %, 100 %. Seed 0 of each (not
-#: chosen: the first): -5.46 % (std 6.95 %), +6.09 % (8.91 %), -5.70 % (5.30 %). The error
-#: bounds lie above the rows' medians, near their 90th percentiles; the std multiple is 2, every
-#: row having covered 95 % or more.
+#: by evidence, the lag states held at zero at the release (median / p90 |error|, 2-std
+#: cover): non-Gaussian gusts (skewness 0.5, kurtosis 4.5) 4.02 / 5.82 %, 85 %; Coulomb friction
+#: at its realistic strength 2.94 / 8.97 %, 100 %; a Davenport admittance with a 1 m scale (a
+#: force spectrum the second-order filter matches worse, the fourth-order one taken on every
+#: seed) 4.49 / 8.51 %, 85 %. Seed 0 of each (not chosen: the first): -5.39 % (std 4.45 %),
+#: +8.93 % (8.88 %), -6.49 % (3.80 %). The error bounds lie at or above the rows' 90th
+#: percentiles; the std multiple is 2, the rows having covered 85-100 %.
 VARIANTS = {
     "non-Gaussian gusts": ({"gusts": {"skewness": 0.5, "kurtosis": 4.5}}, 0.08, 2.0),
     "friction": ({"effects": ("coulomb_friction",)}, 0.10, 2.0),
-    "Davenport, 1 m": ({"gusts": {"Lwx": 1.0, "admittance": "davenport"}}, 0.08, 2.0),
+    "Davenport, 1 m": ({"gusts": {"Lwx": 1.0, "admittance": "davenport"}}, 0.09, 2.0),
 }
 
 
@@ -531,7 +531,7 @@ def test_the_branch_holds_where_the_tunnel_is_not_its_model(variant):
     assert u.speed is not None
     assert abs(u.speed / U_F - 1.0) < bound
     assert abs(u.speed - U_F) <= multiple * u.total
-    assert u.total < 0.25 * U_F  # not a blanket: the rows' median stds are 6.7-8.9 %
+    assert u.total < 0.25 * U_F  # not a blanket: the rows' median stds are 3.8-7.5 %
     # Friction fails the fit's own checks (force innovations far from white, 0.52-0.71 over
     # the benchmark's seeds): refined IV on the same releases checks it, and the distance
     # joins the std, said in a warning. The other variants pass (0.06-0.18).
