@@ -51,7 +51,7 @@ test test-fast demo screenshot: export MPLBACKEND := Agg
 # Each part has its own temporary directory; the pure part's report is printed when both are
 # done. tests/test_suite_split.py fails on a real-time test module left unmarked. (Exit code
 # 5, nothing collected, is a PYTEST_ARGS filter's doing.)
-PURE_TESTS := $(PY) -m pytest -q -p no:cacheprovider --durations=40 -n 2 --dist worksteal -m "not realtime"
+PURE_TESTS := $(PY) -m pytest -q -p no:cacheprovider --durations=40 -n 2 -m "not realtime"
 REALTIME_TESTS := $(PY) -m pytest -q -p no:cacheprovider --durations=40 -m realtime
 
 # Both parts always run; the target fails if either did.
