@@ -256,21 +256,19 @@ def _first_order_std(section: SectionModel, model: RationalFunctionModel,
 
 
 def _move_scatter(section: SectionModel, model: RationalFunctionModel,
-                  covariance: FloatArray | None, index: Sequence[tuple[int, int, int]],
-                  U_max: float, parametric: float) -> float:
+                  found: _flutter.FlutterResult | None, covariance: FloatArray | None,
+                  index: Sequence[tuple[int, int, int]], parametric: float) -> float:
     """Std of the extrapolation refit's move from statistics alone (m/s); 0 if unknown.
 
-    Hausman's argument: the refit on a subset of the data and the full fit are both
-    efficient, so their difference has the variance ``var(refit) - var(full)``.
+    ``found`` is the refit ``model``'s flutter analysis (None: a wild refit without two
+    still-air modes). Hausman's argument: the refit on a subset of the data and the full fit
+    are both efficient, so their difference has the variance ``var(refit) - var(full)``.
+    Without a covariance, a flutter speed or two still-air modes, the move is kept whole.
     """
-    if covariance is None:
-        return 0.0
-    try:
-        found = _flutter.analyze(section, model, U_max, n_points=REFIT_GRID)
-    except ValueError:  # no still-air modes: a wild refit, whose move is kept whole
+    if covariance is None or found is None:
         return 0.0
     refit = _first_order_std(section, model, found, index, covariance)
-    if not math.isfinite(refit):  # no flutter below U_max: the move is kept whole
+    if not math.isfinite(refit):  # no flutter below U_max
         return 0.0
     return math.sqrt(max(refit**2 - parametric**2, 0.0))
 
@@ -287,18 +285,24 @@ def flutter_uncertainty(section: SectionModel, result: _flutter.FlutterResult, p
     U_max = result.U_max
     warnings = list(diag.warnings)
 
-    def refit_speed(model: RationalFunctionModel) -> float:
-        """Flutter speed of a refitted model, m/s.
+    def refit_analysis(model: RationalFunctionModel) -> _flutter.FlutterResult | None:
+        """Flutter analysis of a refitted model (None without two still-air modes)."""
+        try:
+            return _flutter.analyze(section, model, U_max, n_points=REFIT_GRID)
+        except ValueError:  # StillAirModesError, or a branch the search lost
+            return None
+
+    def speed_of(found: _flutter.FlutterResult | None) -> float:
+        """Flutter speed of a refit's analysis, m/s.
 
         A refit without flutter below ``U_max`` (or without two still-air modes, a wild
         refit) counts as ``U_max``: as far as the search can tell, so that the spread stays
         finite and large rather than infinite.
         """
-        try:
-            found = _flutter.analyze(section, model, U_max, n_points=REFIT_GRID).speed
-        except ValueError:  # StillAirModesError, or a branch the search lost
-            return U_max
-        return U_max if found is None else float(found)
+        return U_max if found is None or found.speed is None else float(found.speed)
+
+    def refit_speed(model: RationalFunctionModel) -> float:
+        return speed_of(refit_analysis(model))
 
     structure = 0.0
     if diag.alternatives:
@@ -334,10 +338,11 @@ def flutter_uncertainty(section: SectionModel, result: _flutter.FlutterResult, p
         if reduced is not None:
             # How far the flutter speed moves when the coverage shrinks, scaled by the
             # ratio of the extrapolation distances (in log K).
-            moved = max(refit_speed(reduced), lower)
+            analysis = refit_analysis(reduced)
+            moved = max(speed_of(analysis), lower)
             reach = max(math.log(K_min / K_F), 0.0) / math.log(reduced_K_min / K_F)
-            scatter = _move_scatter(section, reduced, diag.reduced_covariance,
-                                    diag.parameter_index, U_max, parametric)
+            scatter = _move_scatter(section, reduced, analysis, diag.reduced_covariance,
+                                    diag.parameter_index, parametric)
             drift = math.sqrt(max((moved - speed)**2 - scatter**2, 0.0))
             extrapolation = drift * min(reach, 1.0)
         elif reduced_K_min > K_F and len(distinct_wind_speeds(list(diag.wind_speeds))) >= 3:
