@@ -271,6 +271,7 @@ class DeviceState:
     break_pending: bool = False  # the clock restarted: mark the break in the view (_push)
     clock_restarts: int = 0  # clock maps started afresh after a device clock restart
     settle_until: float = math.nan  # device time up to which a new epoch's rows are held back
+    settle_host_until: float = math.nan  # and the host time (run s) up to which they are
     held: list[tuple[StreamBlock, FloatArray, npt.NDArray[np.bool_] | None]] = field(
         default_factory=list)  # rows of the new epoch waiting for its map to settle
     raw_rows: RawRows | None = None  # the block's values -> the raw stream's rows

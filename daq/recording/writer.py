@@ -14,11 +14,13 @@ reset) after which the device time goes back (relative frame times without PTP r
 starts a fresh clock map and timeline for that device, from the first sample after the gap (a
 block is split there); the rows already written keep their times, a NaN sample marks the break
 in the sync view, and a ``clock_restart`` event records it. The new epoch's samples reach the
-sync view only once ``RESTART_SETTLE_S`` of them have arrived: a fresh map rests on the least
-arrival latency seen, and a first block delayed by the host (a busy machine, the reconnect
-itself) would otherwise place the new epoch late by that delay. Device times that move forward
-across the gap (PTP, or relative ones the engine continued, as after ``Acquisition.calz``) keep
-their map. The final clock fit in ``/entry/sync`` attrs then describes the last clock epoch only.
+sync view only once ``RESTART_SETTLE_S`` of them have arrived, and as long again has passed on
+the host since the first of them: a fresh map rests on the least arrival latency seen, and a
+first block delayed by the host (a busy machine, the reconnect itself) would otherwise place
+the new epoch late by that delay; a backlog that reaches the host at once is no measure of it.
+Device times that move forward across the gap (PTP, or relative ones the engine continued, as
+after ``Acquisition.calz``) keep their map. The final clock fit in ``/entry/sync`` attrs then
+describes the last clock epoch only.
 
 Not responsible for: reading devices or threads (the engine), the numerics of clocks, resampling
 and conversions (:mod:`daq.sync`), the file (:mod:`daq.recording.recorder`), running a rig into
@@ -85,9 +87,12 @@ DEFAULT_RHO = 1.2
 #: alike); the clock map takes the median over its anchors.
 MAX_ANCHOR_ROUND_TRIP_S = 3e-3
 #: After a device clock restart, the new epoch's samples are held back from the sync view until
-#: this much device time has arrived, s: the fresh clock map then rests on the least-latency
-#: block among them (12 blocks of 20 ms), not on the first one alone. Measured with two CPU
-#: hogs on the two cores: a first block 124 ms late, the blocks after it back to ~1 ms.
+#: this much device time has arrived and this much host time has passed since the first of
+#: them arrived, s: the fresh clock map then rests on the least-latency block among them (12
+#: blocks of 20 ms), not on the first one alone. Measured with two CPU hogs on the two cores: a
+#: first block 124 ms late, the blocks after it back to ~1 ms. Host time too: a reconnect late
+#: by more than this delivers the new scan's first RESTART_SETTLE_S as one backlog, every block
+#: of it late (a CI run: the fresh map 78 ms late).
 RESTART_SETTLE_S = 0.25
 
 FloatArray = npt.NDArray[np.float64]
@@ -292,8 +297,9 @@ class RunWriter:
         Called with a whole block, or with the rows on one side of a restart gap. After a
         restart gap (``dev.restart_pending``) the first finite device time decides whether the
         device clock restarted (see :meth:`_restart_clock`). After a restart the rows are held
-        back from the sync view until ``RESTART_SETTLE_S`` of device time has arrived; the
-        clock map takes every block's pair at once.
+        back from the sync view until ``RESTART_SETTLE_S`` of device time has arrived and as
+        much host time has passed since the first of them; the clock map takes every block's
+        pair at once.
         """
         assert dev.clock is not None
         t_dev = np.asarray(block.device_time, dtype=np.float64)
@@ -333,12 +339,14 @@ class RunWriter:
             self._push(dev, block, t_dev, finite)
             return
         dev.held.append((block, t_dev, finite))
-        if dev.last_device_time >= dev.settle_until:
+        if (dev.last_device_time >= dev.settle_until
+                and float(t_host[last]) >= dev.settle_host_until):
             self._release_held(dev)
 
     def _release_held(self, dev: DeviceState) -> None:
         """Push the rows held since a clock restart, on the map fitted from all of them."""
-        held, dev.held, dev.settle_until = dev.held, [], math.nan
+        held, dev.held = dev.held, []
+        dev.settle_until = dev.settle_host_until = math.nan
         for block, t_dev, finite in held:
             self._push(dev, block, t_dev, finite)
 
@@ -378,6 +386,7 @@ class RunWriter:
         dev.clock_restarts += 1
         dev.break_pending = True
         dev.settle_until = t_device + RESTART_SETTLE_S
+        dev.settle_host_until = t_host + RESTART_SETTLE_S
         text = (f"{dev.name}: device clock restarted (device time {t_device:.6f} s after "
                 f"{previous:.6f} s); clock map started afresh, latency floor "
                 f"{floor * 1e3:.3f} ms kept")
