@@ -20,7 +20,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ident.identification.innovations import ShapingFilter
-from ident.identification.uncertainty import nearest_wind_speed
+from ident.identification.uncertainty import DISTINCT_U_RTOL, nearest_wind_speed
 from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel
 from ident.numerics.sampling import RATE_RTOL, decimation_factor
@@ -110,6 +110,24 @@ class Layout:
         zeros = (p[2 * k + 3:3 * k + 3].reshape(2, self.sections) / (2.0 * math.pi * f)
                  if self.sections > 1 else None)
         return ShapingFilter(f, np.exp(p[k:2 * k]).reshape(2, self.sections), L, zeros)
+
+    def set_shaping(self, theta: FloatArray, group: int, shaping: ShapingFilter) -> None:
+        """Write ``shaping`` into ``theta`` as wind speed ``group``'s filter, in place.
+
+        The inverse of :meth:`shaping`; the filter's sections must number :attr:`sections`.
+        """
+        f, zeta, L = shaping.frequencies, shaping.damping, shaping.L
+        if f.shape != (2, self.sections):
+            raise ValueError(f"a shaping filter of {f.shape[1]} section(s) per force cannot "
+                             f"start one of {self.sections}")
+        p0, k = self.shaping0 + self.n_shaping * group, 2 * self.sections
+        theta[p0:p0 + k] = np.log(f).ravel()
+        theta[p0 + k:p0 + 2 * k] = np.log(zeta).ravel()
+        theta[p0 + 2 * k] = math.log(L[0, 0])
+        theta[p0 + 2 * k + 1] = L[1, 0] / L[0, 0]
+        theta[p0 + 2 * k + 2] = math.log(max(abs(L[1, 1]) / L[0, 0], 1e-4))
+        if self.sections > 1:
+            theta[p0 + 2 * k + 3:p0 + 3 * k + 3] = (shaping.zeros * 2.0 * math.pi * f).ravel()
 
     def step_limits(self, theta: FloatArray) -> FloatArray:
         """Return the largest move of each parameter in one step.
@@ -295,3 +313,29 @@ def initial(records: list[Record], layout: Layout, start: RationalFunctionModel,
         if S > 1:
             theta[p0 + 2 * k + 3:p0 + 3 * k + 3] = ZERO_START
     return theta
+
+
+def warm_nuisance(theta: FloatArray, layout: Layout, speeds: Sequence[float],
+                  shaping: Sequence[tuple[float, ShapingFilter]],
+                  noise: Sequence[FloatArray]) -> None:
+    """Start the shaping filters and noise from another fit's, in place.
+
+    ``shaping`` holds (wind speed, filter) pairs of a fit of a superset of the releases: each
+    of ``speeds`` takes the filter of the same speed (nearest, within the speeds' tolerance),
+    else keeps its start. ``noise`` holds each release's four noise stds there, in this fit's
+    order; each is kept above its floor. Near the other fit's maximum, the nuisance starts
+    near this one's: the refit without the top speed then takes a few scoring steps where a
+    start from the records' own statistics took about fifteen.
+    """
+    if len(noise) != (layout.size - layout.noise0) // 4:
+        raise ValueError(f"{len(noise)} releases' noise for a fit of "
+                         f"{(layout.size - layout.noise0) // 4}")
+    known = [U for U, _ in shaping]
+    for group, U in enumerate(speeds):
+        nearest = nearest_wind_speed(U, known) if known else -1
+        if nearest >= 0 and abs(known[nearest] - U) <= DISTINCT_U_RTOL * U:
+            layout.set_shaping(theta, group, shaping[nearest][1])
+    for release, std in enumerate(noise):
+        at = slice(layout.noise0 + 4 * release, layout.noise0 + 4 * release + 4)
+        theta[at] = np.maximum(np.log(np.maximum(np.asarray(std, dtype=float), 1e-300)),
+                               layout.noise_floor[4 * release: 4 * release + 4])

@@ -195,15 +195,15 @@ def _closed_loop(model: IdentifiedModel, releases: list[Release], section: Secti
                                                         (fit, restarted))
     sections, exact = CLOSED_LOOP_BUFFETING_MODELS[chosen]
     speeds = distinct_wind_speeds([r.U for r in releases])
-    below = [r for r in releases if r.U < speeds[-1] / (1 + DISTINCT_U_RTOL)]
+    kept = [i for i, r in enumerate(releases) if r.U < speeds[-1] / (1 + DISTINCT_U_RTOL)]
 
     @cache
     def reduced() -> closed_loop_ml.ClosedLoopFit | None:
         """Return the fit without the highest wind speed, from the full fit."""
         try:
-            return closed_loop_ml.fit_closed_loop(below, section, fit.model, with_A3=True,
-                                                  shaping_sections=sections,
-                                                  exact_block_means=exact)
+            return closed_loop_ml.fit_closed_loop(
+                [releases[i] for i in kept], section, fit.model, with_A3=True,
+                shaping_sections=sections, exact_block_means=exact, nuisance_from=(fit, kept))
         except ValueError:  # likelihood not defined without the top speed: no extrapolation
             return None     # part, which the uncertainty's warnings then say
 

@@ -238,7 +238,9 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
                     start: RationalFunctionModel, *, with_A3: bool = True,
                     n_lags: int | None = None, use_holds: bool = True,
                     window: tuple[float, float] | None = None, shaping_sections: int = 1,
-                    exact_block_means: bool = False) -> ClosedLoopFit:
+                    exact_block_means: bool = False,
+                    nuisance_from: tuple[ClosedLoopFit, Sequence[int]] | None = None
+                    ) -> ClosedLoopFit:
     """Maximise the likelihood of every release (and hold) together, from ``start``.
 
     Parameters
@@ -273,6 +275,12 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
         on six seeds, exact block means both sides of the truth. On von Karman buffeting
         with one section it found spurious maxima; with two it did not
         (docs/development/e2rfc_turbulence.md). Default False.
+    nuisance_from : (ClosedLoopFit, sequence of int), optional
+        A fit of a superset of ``releases`` with the same buffeting model, and the index there
+        of each release here: its shaping filters (by wind speed) and noise stds (by release)
+        start this fit's, instead of the records' own statistics. For a refit of part of the
+        data (the extrapolation part's, without the top speed): the same maximum in fewer
+        steps.
 
     Returns
     -------
@@ -301,6 +309,11 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
     layout.log_lag_range = setup.log_lag_range(section, speeds)
     objective = _Objective(records, section, layout, exact_block_means)
     theta = setup.initial(records, layout, start, section, f_max)
+    if nuisance_from is not None:
+        other, index = nuisance_from
+        setup.warm_nuisance(theta, layout, speeds, list(zip(other.wind_speeds, other.shaping,
+                                                            strict=True)),
+                            [other.noise_std[i] for i in index])
     current = objective.evaluate(theta)
     if not math.isfinite(current.nll):
         raise ValueError("the likelihood cannot be evaluated at the start (no stabilising "

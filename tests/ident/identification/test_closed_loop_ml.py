@@ -331,6 +331,54 @@ def test_recovers_the_flutter_speed_of_data_from_its_own_model():
         assert np.allclose(sf.frequencies, 4.0, rtol=0.15)
 
 
+@pytest.mark.parametrize("sections", [1, 2])
+def test_a_shaping_filter_written_into_the_parameters_reads_back_as_itself(sections):
+    """``Layout.set_shaping`` is ``Layout.shaping``'s inverse (the warm start's encoding)."""
+    layout = _closed_loop_parameters.Layout(2, 2, True, 3, 6, sections)
+    f = np.array([[3.0, 6.5], [4.2, 9.0]])[:, :sections]
+    zeros = np.array([[0.05, 0.02], [0.04, 0.01]])[:, :sections] if sections > 1 else None
+    filt = ShapingFilter(f, np.full((2, sections), 0.6), [[0.02, 0.0], [-0.004, 0.001]], zeros)
+    theta = np.zeros(layout.size)
+    layout.set_shaping(theta, 1, filt)
+    back = layout.shaping(theta, 1)
+    for name in ("frequencies", "damping", "L"):
+        assert np.allclose(getattr(back, name), getattr(filt, name), rtol=1e-12), name
+    if sections > 1:
+        assert np.allclose(back.zeros, filt.zeros, rtol=1e-12)
+    assert not np.any(theta[layout.shaping0:layout.shaping0 + layout.n_shaping])  # group 0
+    other = ShapingFilter(f[:, :1] if sections > 1 else np.c_[f, f], np.full(
+        (2, 1 if sections > 1 else 2), 0.6), [[0.02, 0.0], [0.0, 0.001]])
+    with pytest.raises(ValueError, match="section"):
+        layout.set_shaping(theta, 0, other)
+
+
+def test_the_refit_without_the_top_speed_starts_from_the_full_fit_s_nuisance():
+    """The extrapolation part's refit reaches the same maximum in fewer steps.
+
+    Its shaping filters and noise start from the full fit's (``nuisance_from``), not from the
+    records' statistics. Same maximum: -log L within 0.05, and the flutter speed within 0.32
+    of its std. The search stops when a full scoring step could gain less than
+    ``closed_loop_ml.TOLERANCE`` (0.05) in log L, and a move of k std along the flutter
+    speed's direction costs k^2 / 2 of it, so two stopping points can lie sqrt(2 x 0.05) =
+    0.32 std apart (measured here: 0.10 std, the warm start in fewer steps).
+    """
+    releases, _, _ = own_model_releases(seed=0, duration=12.0)
+    start = e2rfc.identify(releases, PLATE)
+    full = closed_loop_ml.fit_closed_loop(releases, PLATE, start, n_lags=2)
+    kept = [0, 1, 2, 3]  # the two lower speeds
+    below = [releases[i] for i in kept]
+    cold = closed_loop_ml.fit_closed_loop(below, PLATE, full.model)
+    warm = closed_loop_ml.fit_closed_loop(below, PLATE, full.model, nuisance_from=(full, kept))
+    assert cold.converged and warm.converged
+    assert warm.iterations < cold.iterations, (warm.iterations, cold.iterations)
+    assert warm.neg_log_likelihood == pytest.approx(cold.neg_log_likelihood, abs=0.05)
+    speed_cold, std = flutter_std(cold)
+    speed_warm, _ = flutter_std(warm)
+    assert abs(speed_warm - speed_cold) < math.sqrt(2 * closed_loop_ml.TOLERANCE) * std
+    with pytest.raises(ValueError, match="releases' noise"):
+        closed_loop_ml.fit_closed_loop(below, PLATE, full.model, nuisance_from=(full, [0, 1]))
+
+
 def test_the_fourth_order_buffeting_model_recovers_its_own_model_s_flutter_speed():
     """Two sections per force on exact block means nest the one-section truth: within 2.5 std.
 
