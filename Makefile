@@ -50,8 +50,11 @@ test test-fast demo screenshot: export MPLBACKEND := Agg
 # taking a core from a deadline (the scheduler gives a nice-0 task that wakes the CPU at once).
 # Each part has its own temporary directory; the pure part's report is printed when both are
 # done. tests/test_suite_split.py fails on a real-time test module left unmarked. (Exit code
-# 5, nothing collected, is a PYTEST_ARGS filter's doing.)
-PURE_TESTS := $(PY) -m pytest -q -p no:cacheprovider --durations=40 -n 2 -m "not realtime"
+# 5, nothing collected, is a PYTEST_ARGS filter's doing.) The pure part's workers steal each
+# other's queued tests (--dist worksteal): a few long tests left at the end of one queue would
+# otherwise keep a core idle.
+PURE_TESTS := $(PY) -m pytest -q -p no:cacheprovider --durations=40 -n 2 --dist worksteal \
+    -m "not realtime"
 REALTIME_TESTS := $(PY) -m pytest -q -p no:cacheprovider --durations=40 -m realtime
 
 # Both parts always run; the target fails if either did.
