@@ -45,6 +45,9 @@ TARGET_FACTOR = 25.0
 #: noise.
 NOISE_FLOOR = 5e-3
 
+#: Least ratio L11 / L00 of a shaping filter's Cholesky factor (the search's bound, and the
+#: floor a warm start writes): the moment's own gust, never quite none.
+L11_RATIO_MIN = 1e-4
 #: Start of each later section's zero, as ``tau w`` (:class:`ShapingFilter`): the likelihood
 #: is even in it, so it cannot start at 0, where its derivative vanishes.
 ZERO_START = 0.5
@@ -125,7 +128,7 @@ class Layout:
         theta[p0 + k:p0 + 2 * k] = np.log(zeta).ravel()
         theta[p0 + 2 * k] = math.log(L[0, 0])
         theta[p0 + 2 * k + 1] = L[1, 0] / L[0, 0]
-        theta[p0 + 2 * k + 2] = math.log(max(abs(L[1, 1]) / L[0, 0], 1e-4))
+        theta[p0 + 2 * k + 2] = math.log(max(abs(L[1, 1]) / L[0, 0], L11_RATIO_MIN))
         if self.sections > 1:
             theta[p0 + 2 * k + 3:p0 + 3 * k + 3] = (shaping.zeros * 2.0 * math.pi * f).ravel()
 
@@ -144,15 +147,16 @@ class Layout:
         """Return the lower and upper bounds of the parameters.
 
         The lag roots within :attr:`log_lag_range` (E2RFC's own: a factor 20 beyond the reduced
-        frequencies the releases cover), ``L11 / L00`` at least 1e-4 (its log), each noise at
-        least a thousandth of its starting value and at least its :data:`NOISE_FLOOR`; the
-        rest unbounded.
+        frequencies the releases cover), ``L11 / L00`` at least :data:`L11_RATIO_MIN` (its
+        log), each noise at least a thousandth of its starting value and at least its
+        :data:`NOISE_FLOOR`; the rest unbounded.
         """
         lower, upper = np.full(self.size, -np.inf), np.full(self.size, np.inf)
         lower[self.n_A:self.n_aero], upper[self.n_A:self.n_aero] = self.log_lag_range
         groups = (self.noise0 - self.shaping0) // self.n_shaping
         L11 = 4 * self.sections + 2
-        lower[[self.shaping0 + self.n_shaping * g + L11 for g in range(groups)]] = math.log(1e-4)
+        lower[[self.shaping0 + self.n_shaping * g + L11 for g in range(groups)]] = math.log(
+            L11_RATIO_MIN)
         lower[self.noise0:] = np.maximum(theta[self.noise0:] - math.log(1e3), self.noise_floor)
         return lower, upper
 
