@@ -82,10 +82,15 @@ _CALZ_FIELDS = ("pause_s", "calz_s", "wind_speed_now", "frames_averaged", "offse
 #: Air density used before the barometer's first reading, kg/m^3 (recorded in the rho column).
 DEFAULT_RHO = 1.2
 
-#: A trigger pulse whose command took longer than this (round trip, s) is no anchor: its host
-#: time, the midpoint, is off by at most half of it, and typically far less (the two legs are
-#: alike); the clock map takes the median over its anchors.
-MAX_ANCHOR_ROUND_TRIP_S = 3e-3
+#: A trigger pulse whose command took longer than this (round trip, s) is no anchor. Its host
+#: time, the midpoint, is off by at most half the round trip and typically far less (the two
+#: legs are alike), and the clock map already takes the median over the least uncertain third
+#: of its anchors. This cut only keeps out pulses that could not tell a latency floor (0.1-2 ms)
+#: from nothing. A tighter one starved the maps on a busy host: on 2 cores with the test suite
+#: running beside a recording, half the round trips exceeded 3 ms (1-17 ms), and a 3 ms cut
+#: left 4-7 anchors per file (none on a slower host) against 19-21 with this one; the maps'
+#: mean misalignment was 0.15-0.56 ms with the 3 ms cut and 0.14-0.22 ms with this one.
+MAX_ANCHOR_ROUND_TRIP_S = 20e-3
 #: After a device clock restart, the new epoch's samples are held back from the sync view until
 #: this much device time has arrived and this much host time has passed since the first of
 #: them arrived, s: the fresh clock map then rests on the least-latency block among them (12

@@ -290,9 +290,10 @@ def test_plc_trigger_round_trip_is_the_write_alone_not_a_wait_for_the_bus(plc, t
     """Another thread's request holding the bus: the pulse's time is bracketed after the wait.
 
     The pulse's host time is the midpoint of its write's round trip, and the writer takes it as
-    a clock anchor only if the round trip is short (3 ms). A wait for a poll of the same bus
-    (the engine reads the PLC at 10 Hz) counted in that round trip would refuse good anchors
-    and move the midpoint before the edge.
+    a clock anchor only if the round trip is short (``MAX_ANCHOR_ROUND_TRIP_S``), the map's
+    floor from the shortest. A wait for a poll of the same bus (the engine reads the PLC at
+    10 Hz) counted in that round trip would refuse good anchors and move the midpoint before
+    the edge.
     """
     sim, drive = plc
     drive.trigger_pulse()  # the line is low after a pulse: the next write is the timed one

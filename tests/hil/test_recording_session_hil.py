@@ -26,13 +26,15 @@ from support.configs import DRIFTING_CLOCKS, SIM_FLAT_PLATE
 
 pytestmark = pytest.mark.realtime
 
-#: Mean misalignment between devices over the second file, from its time 0: the settled clock
-#: maps' range (0.1-0.3 ms on a loaded 2-core host; unsettled maps are 0.3-0.9 ms off over a
-#: file's first seconds). The single-file test holds 0.2 ms averaged over 14 settled seconds;
-#: this file is 5 s long, so one refit's error weighs more (0.22-0.24 ms measured in CI, once
-#: 0.33 ms while the whole suite's pure part ran beside it).
-TARGET_S = 0.4e-3
-#: Largest spread right after a refit (the single-file test's bound).
+#: Mean misalignment between devices over the second file, from its time 0: the single-file
+#: test's bound (test_sync_alignment_hil.py, force and motion within 0.5 ms), which that test
+#: holds only after CLOCK_SETTLE_S (unsettled maps are 0.3-0.9 ms off over a file's first
+#: seconds). Measured: 0.22-0.33 ms in CI; 0.14-0.37 ms with the whole suite and a busy loop
+#: beside on 2 cores. (A CI run once found 0.92 ms: every trigger pulse's round trip had been
+#: over the 3 ms the writer then required of an anchor, and no map had an anchor.)
+TARGET_S = 0.5e-3
+#: Largest spread right after a refit, s, unless the two least certain maps say they know less
+#: (the single-file test's bound). 0.34-0.75 ms measured on a loaded 2-core host.
 MAX_SPREAD_S = 1e-3
 
 
@@ -82,8 +84,6 @@ def test_a_later_file_is_aligned_from_its_start(tmp_path):
                            decay_truth=rig.decay_truth, origin_s=rig.origin_s)
     clocks = result["clocks"]
     report = f"clocks {clocks}\nfits {summary['clock_fits']}"
-    assert clocks["misalignment_s"] < TARGET_S, report
-    assert clocks["misalignment_max_s"] < MAX_SPREAD_S, report
     for name in ("scanner", "laser_front", "laser_rear", "laser_check"):
         # Every device's map has anchors. How many of the pre-roll's pulses join the file's own
         # (9 in 4.5 s) depends on when each map first became ready during the pre-roll: a
@@ -91,6 +91,10 @@ def test_a_later_file_is_aligned_from_its_start(tmp_path):
         # pairing distance from its pulse (0 to 3 of them measured, CI and development): not
         # a bound to hold. The pre-roll's blocks and pulses themselves are checked below.
         assert summary["clock_fits"][name]["anchors"] >= 1, report
+    assert clocks["misalignment_s"] < TARGET_S, report
+    uncertain = sorted((fit["anchor_uncertainty_s"] for fit in summary["clock_fits"].values()),
+                       reverse=True)
+    assert clocks["misalignment_max_s"] < max(MAX_SPREAD_S, uncertain[0] + uncertain[1]), report
     with h5py.File(first, "r") as f:
         assert "calz_scanner_start" in f["entry/metadata"]  # the session's CALZ: first file
         assert f["entry/releases"].shape[0] == 1
