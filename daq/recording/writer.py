@@ -83,13 +83,12 @@ _CALZ_FIELDS = ("pause_s", "calz_s", "wind_speed_now", "frames_averaged", "offse
 DEFAULT_RHO = 1.2
 
 #: A trigger pulse whose command took longer than this (round trip, s) is no anchor. Its host
-#: time, the midpoint, is off by at most half the round trip and typically far less (the two
-#: legs are alike), and the clock map already takes the median over the least uncertain third
-#: of its anchors. This cut only keeps out pulses that could not tell a latency floor (0.1-2 ms)
-#: from nothing. A tighter one starved the maps on a busy host: on 2 cores with the test suite
-#: running beside a recording, half the round trips exceeded 3 ms (1-17 ms), and a 3 ms cut
-#: left 4-7 anchors per file (none on a slower host) against 19-21 with this one; the maps'
-#: mean misalignment was 0.15-0.56 ms with the 3 ms cut and 0.14-0.22 ms with this one.
+#: time, the midpoint, is off by at most half the round trip. The clock map prefers the pulses
+#: under 3 ms (:data:`~daq.sync.clock_map.PREFERRED_ANCHOR_UNCERTAINTY_S`) and takes slower
+#: ones only while it has fewer than three of those: on 2 cores with the test suite running
+#: beside a recording, half the round trips exceeded 3 ms (1-17 ms measured), and a file whose
+#: pulses were all over it had no anchor at all, each map late by its own transport latency
+#: (devices 0.9 ms apart). Anchors common to every device keep them together.
 MAX_ANCHOR_ROUND_TRIP_S = 20e-3
 #: After a device clock restart, the new epoch's samples are held back from the sync view until
 #: this much device time has arrived and this much host time has passed since the first of

@@ -92,7 +92,8 @@ def test_sync_view_is_aligned_to_the_truth(tmp_path, flow):
         result = check_run(path, tracker, true_time_of=rig.true_time_of,
                            decay_truth=rig.decay_truth, origin_s=rig.origin_s)
     clocks, signals = result["clocks"], result["signals"]
-    report = f"clocks {clocks}\nsignals {signals}\nfits {summary['clock_fits']}"
+    report = (f"clocks {clocks}\nsignals {signals}\nfits {summary['clock_fits']}\n"
+              f"timelines {summary['timelines']}")
     with h5py.File(path, "r") as f:
         attrs = dict(f["entry/sync"].attrs)
     # Reported in the file.
