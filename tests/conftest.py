@@ -7,8 +7,8 @@
   process delivers, failing with ``what`` at its deadline, instead of a fixed sleep.
 - Tests that stream in real time (sockets, the simulated rig, threads with deadlines, real
   clocks, Qt timers, Dask clusters) carry ``pytestmark = pytest.mark.realtime``: ``make test``
-  runs them on their own after the pure tests, which run on two workers. ``test_suite_split.py``
-  fails on a module that shows such a sign without the mark.
+  runs them in one process beside the pure tests, which run on two workers at the lowest CPU
+  priority. ``test_suite_split.py`` fails on a module that shows such a sign without the mark.
 - What many test modules share (the flat-plate section, the config paths, the fast fan, run
   files) is written once in the package ``tests/support`` (on the ``pythonpath``).
 - Hardware tests (``@pytest.mark.hardware``) run only with ``--rig-config PATH``; without it they
