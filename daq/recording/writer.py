@@ -82,14 +82,10 @@ _CALZ_FIELDS = ("pause_s", "calz_s", "wind_speed_now", "frames_averaged", "offse
 #: Air density used before the barometer's first reading, kg/m^3 (recorded in the rho column).
 DEFAULT_RHO = 1.2
 
-#: A trigger pulse whose command took longer than this (round trip, s) is no anchor. Its host
-#: time, the midpoint, is off by at most half the round trip. The clock map prefers the pulses
-#: under 3 ms (:data:`~daq.sync.clock_map.PREFERRED_ANCHOR_UNCERTAINTY_S`) and takes slower
-#: ones only while it has fewer than three of those: on 2 cores with the test suite running
-#: beside a recording, half the round trips exceeded 3 ms (1-17 ms measured), and a file whose
-#: pulses were all over it had no anchor at all, each map late by its own transport latency
-#: (devices 0.9 ms apart). Anchors common to every device keep them together.
-MAX_ANCHOR_ROUND_TRIP_S = 20e-3
+#: A trigger pulse whose command took longer than this (round trip, s) is no anchor: its host
+#: time, the midpoint, is off by at most half of it, and typically far less (the two legs are
+#: alike); the clock map takes the median over its anchors.
+MAX_ANCHOR_ROUND_TRIP_S = 3e-3
 #: After a device clock restart, the new epoch's samples are held back from the sync view until
 #: this much device time has arrived and this much host time has passed since the first of
 #: them arrived, s: the fresh clock map then rests on the least-latency block among them (12

@@ -35,7 +35,6 @@ from daq.sync.checks import float_1d, positive
 
 __all__ = [
     "MIN_FLOOR_ANCHORS",
-    "PREFERRED_ANCHOR_UNCERTAINTY_S",
     "ClockMap",
     "trigger_times_from_flags",
     "trigger_times_from_latch",
@@ -48,11 +47,6 @@ _MAD_TO_SIGMA: Final = 1.4826
 
 #: Fewest anchors whose median is the latency floor (robust to one mis-paired pulse).
 MIN_FLOOR_ANCHORS: Final = 3
-#: Anchors at most this uncertain (s; a 3 ms round trip) are preferred: while the map holds
-#: MIN_FLOOR_ANCHORS of them, the floor comes from them alone. On a busy host most pulses are
-#: slower, and their midpoints are off by their legs' asymmetry, often by milliseconds and often
-#: one way (a reply may wait for a busy recorder); many of them must not outvote a few fast ones.
-PREFERRED_ANCHOR_UNCERTAINTY_S: Final = 1.5e-3
 
 #: Points used by :func:`_theil_sen_slope` (more are thinned evenly): 7140 pairs.
 _MAX_SLOPE_POINTS = 120
@@ -156,8 +150,7 @@ class ClockMap:
         default), long enough to measure drift to well below 1 ppm, short enough to follow a
         thermal drift change.
     max_anchors : int
-        Anchors held (>= 1); the oldest is forgotten first. 64 PLC pulses (0.5 s apart) hold
-        32 s of anchors, of which a busy host's fast ones are a few.
+        Anchors held (>= 1); the oldest is forgotten first.
     assumed_floor_s : float
         Latency floor used while there is no anchor, s (>= 0), e.g. a measured USB latency.
 
@@ -173,7 +166,7 @@ class ClockMap:
     True
     """
 
-    def __init__(self, *, window_s: float = 2.0, n_windows: int = 150, max_anchors: int = 64,
+    def __init__(self, *, window_s: float = 2.0, n_windows: int = 150, max_anchors: int = 32,
                  assumed_floor_s: float = 0.0) -> None:
         self.window_s = positive("window_s", window_s)
         if isinstance(n_windows, bool) or not isinstance(n_windows, int) or n_windows < 3:
@@ -440,16 +433,13 @@ class ClockMap:
     def latency_floor_s(self) -> float:
         """Transport latency floor subtracted from the envelope, s.
 
-        The median of ``envelope(t_device) - t_host`` over the least uncertain anchors, or
+        The median of ``envelope(t_device) - t_host`` over the least uncertain anchors (the
+        third with the smallest ``uncertainty_s``, at least :data:`MIN_FLOOR_ANCHORS`), or
         ``assumed_floor_s`` when no anchor has been measured against the envelope yet. The
         choice is NTP's clock filter: a command's host time is the midpoint of its round trip,
         off by the asymmetry of its two legs, which can grow with the round trip (on a loaded
         host, a request or its reply waits for a busy process); the median keeps one mis-paired
-        pulse from moving the floor. The anchors are the third with the smallest
-        ``uncertainty_s`` (at least :data:`MIN_FLOOR_ANCHORS`) of those within
-        :data:`PREFERRED_ANCHOR_UNCERTAINTY_S` when there are that many; else the
-        :data:`MIN_FLOOR_ANCHORS` least uncertain of all (anchors common to every device keep
-        the devices together even when each is off the host's time by milliseconds).
+        pulse from moving the floor.
         """
         best = self._best_anchors()
         return float(np.median(best[:, 2])) if best.shape[0] else self.assumed_floor_s
@@ -470,15 +460,11 @@ class ClockMap:
         return held[np.isfinite(held[:, 2])]
 
     def _best_anchors(self) -> FloatArray:
-        """Return the anchors the floor is the median of (see :attr:`latency_floor_s`)."""
+        """Return the least uncertain third of the measured anchors (>= MIN_FLOOR_ANCHORS)."""
         held = self._measured_anchors()
-        preferred = held[held[:, 3] <= PREFERRED_ANCHOR_UNCERTAINTY_S]
-        if preferred.shape[0] >= MIN_FLOOR_ANCHORS:
-            held, n = preferred, max(MIN_FLOOR_ANCHORS, preferred.shape[0] // 3)
-        else:
-            n = MIN_FLOOR_ANCHORS
-        if held.shape[0] <= n:
+        if held.shape[0] <= MIN_FLOOR_ANCHORS:
             return held
+        n = max(MIN_FLOOR_ANCHORS, held.shape[0] // 3)
         return held[np.argsort(held[:, 3], kind="stable")[:n]]
 
     @property

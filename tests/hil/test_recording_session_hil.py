@@ -31,7 +31,7 @@ pytestmark = pytest.mark.realtime
 #: holds only after CLOCK_SETTLE_S (unsettled maps are 0.3-0.9 ms off over a file's first
 #: seconds). Measured: 0.22-0.33 ms in CI; 0.14-0.37 ms with the whole suite and a busy loop
 #: beside on 2 cores. (A CI run once found 0.92 ms: every trigger pulse's round trip had been
-#: over the 3 ms the writer then required of an anchor, and no map had an anchor.)
+#: over the 3 ms the writer requires of an anchor, and no map had an anchor; checked first.)
 TARGET_S = 0.5e-3
 #: Largest spread right after a refit, s, unless the two least certain maps say they know less
 #: (the single-file test's bound). 0.34-0.75 ms measured on a loaded 2-core host.
