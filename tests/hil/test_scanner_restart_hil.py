@@ -38,9 +38,7 @@ import h5py
 import numpy as np
 import pytest
 
-from daq.acquisition.records import Event, StreamBlock
 from daq.config import RigConfig, parse_rig_config
-from daq.instruments.reading import Gap
 from daq.recording import writer as pipeline
 from daq.recording.run import record_run
 from daq.recording.writer import RunWriter
@@ -48,6 +46,7 @@ from daq.sim.rig_process import start_rig_process
 from daq.sim.sync_check import ClockTruthTracker
 
 from support.configs import SIM_FLAT_PLATE
+from support.scanner_stream import LATENCY_S, PTP_EPOCH_S, PULSE_S, scanner_run_docs
 
 pytestmark = pytest.mark.realtime
 
@@ -205,16 +204,6 @@ def test_after_a_reset_without_ptp_the_sync_view_is_finite_and_aligned_again(
 # ------------------------------------------------------------------------------------------------
 # 2. The writer alone: exact synthetic clocks, the three kinds of restart gap
 # ------------------------------------------------------------------------------------------------
-LATENCY_S = 1.0003e-3  # every frame arrives this late; off the sync grid, so no row is a sample
-PULSE_S = 0.5  # the PLC's trigger pulses (clock anchors), every 0.5 s from 0.25 s
-PTP_EPOCH_S = 1_767_225_600.0
-T0_NS = 10_000_000_000
-
-
-def ns(t: Any) -> Any:
-    return (T0_NS + np.round(np.asarray(t) * 1e9)).astype(np.int64)
-
-
 def scanner_docs(base: str, old_frames: int, stall_s: float = 0.0
                  ) -> tuple[list[tuple[str, Any]], np.ndarray, np.ndarray, np.ndarray]:
     """Start, scanner blocks of 10 frames, trigger events, stop: a scan, a restart, a scan.
@@ -252,25 +241,9 @@ def scanner_docs(base: str, old_frames: int, stall_s: float = 0.0
         first = old_frames - old_frames % 10
         held_until = float(arrival[min(first + 9, true.size - 1)]) + stall_s
         arrival[first:] = np.maximum(arrival[first:], held_until)
-    items: list[tuple[float, str, Any]] = []
-    for seq, lo in enumerate(range(0, true.size, 10)):
-        sl = slice(lo, lo + 10)
-        gaps = (Gap(old_frames, -1, "restart"),) if lo <= old_frames < lo + 10 else ()
-        host = ns(arrival[sl])
-        items.append((float(arrival[sl][-1]), "block", StreamBlock(
-            device="scanner", kind="scanner", seq=seq, host_time_ns=host,
-            device_time=device[sl], counter=counter[sl],
-            values={"pressure": pressure[sl], "pitot": pressure[sl, 63],
-                    "trigger_time": trigger_time[sl]}, gaps=gaps)))
-    for t in pulses:  # the event reaches the writer once the PLC acknowledged (0.2 ms)
-        items.append((float(t) + 2e-4, "event", Event(
-            kind="trigger", host_time_ns=int(ns(t)), device="plc", text="trigger pulse",
-            data={"round_trip_s": 4e-4})))
-    items.sort(key=lambda item: item[0])
-    docs: list[tuple[str, Any]] = [("start", {"host_time_ns": T0_NS, "devices": {
-        "scanner": {"kind": "scanner", "describe": {}}}})]
-    docs += [(name, doc) for _, name, doc in items]
-    docs.append(("stop", {"reason": "duration", "duration_s": float(true[-1])}))
+    # Each pulse's event reaches the writer once the PLC acknowledged (0.2 ms).
+    docs = scanner_run_docs(true, device, counter, pressure, trigger_time, arrival, pulses,
+                            round_trip_s=4e-4, restart_at=old_frames)
     return docs, true, device, pulses
 
 

@@ -13,6 +13,9 @@ configs
     tests append to it (the fast fan, clocks that drift).
 clocks
     A monotonic clock that a test sets by hand.
+scanner_stream
+    A synthetic pressure-scanner stream with PLC trigger pulses on exact clocks, cut into the
+    run writer's blocks and events.
 run_files
     Run files written through the real recorder, and read as a live reader would.
 outside_library

@@ -15,51 +15,25 @@ from typing import Any
 import numpy as np
 import pytest
 
-from daq.acquisition.records import Event, StreamBlock
 from daq.config import parse_rig_config
 from daq.recording.writer import MAX_ANCHOR_ROUND_TRIP_S, RunWriter
 
 from support.configs import SIM_FLAT_PLATE
+from support.scanner_stream import LATENCY_S, PTP_EPOCH_S, PULSE_S, scanner_run_docs
 
 RATE_HZ = 500.0  # the scanner's frame rate in sim_flat_plate.toml
-LATENCY_S = 1.0003e-3  # every frame arrives this late (off the sync grid)
-PULSE_S = 0.5  # the PLC's trigger pulses, every 0.5 s from 0.25 s
-PTP_EPOCH_S = 1_767_225_600.0
-T0_NS = 10_000_000_000
 DURATION_S = 6.0
 
 
-def _ns(t: Any) -> Any:
-    return (T0_NS + np.round(np.asarray(t) * 1e9)).astype(np.int64)
-
-
 def _docs(round_trip_s: float) -> list[tuple[str, Any]]:
-    """Start, scanner blocks of 10 frames with latched trigger times, trigger events, stop."""
+    """One scan on PTP time whose scanner latches every pulse; the pulses' round trips given."""
     true = np.arange(int(DURATION_S * RATE_HZ)) / RATE_HZ
     pulses = np.arange(0.25, true[-1], PULSE_S)
     k = np.searchsorted(pulses, true, side="right") - 1  # the last pulse at each frame
     trigger_time = np.where(k >= 0, PTP_EPOCH_S + pulses[np.maximum(k, 0)], np.nan)
-    arrival = true + LATENCY_S
-    items: list[tuple[float, str, Any]] = []
-    for seq, lo in enumerate(range(0, true.size, 10)):
-        sl = slice(lo, lo + 10)
-        pressure = np.zeros((true[sl].size, 64))
-        counter = np.arange(lo + 1, lo + 1 + pressure.shape[0])
-        items.append((float(arrival[sl][-1]), "block", StreamBlock(
-            device="scanner", kind="scanner", seq=seq, host_time_ns=_ns(arrival[sl]),
-            device_time=PTP_EPOCH_S + true[sl], counter=counter,
-            values={"pressure": pressure, "pitot": pressure[:, 63],
-                    "trigger_time": trigger_time[sl]}, gaps=())))
-    for t in pulses:  # the event reaches the writer when the reply came back
-        items.append((float(t) + 0.5 * round_trip_s, "event", Event(
-            kind="trigger", host_time_ns=int(_ns(t)), device="plc", text="trigger pulse",
-            data={"round_trip_s": round_trip_s})))
-    items.sort(key=lambda item: item[0])
-    docs: list[tuple[str, Any]] = [("start", {"host_time_ns": T0_NS, "devices": {
-        "scanner": {"kind": "scanner", "describe": {}}}})]
-    docs += [(name, doc) for _, name, doc in items]
-    docs.append(("stop", {"reason": "duration", "duration_s": DURATION_S}))
-    return docs
+    return scanner_run_docs(true, PTP_EPOCH_S + true, np.arange(1, true.size + 1),
+                            np.zeros((true.size, 64)), trigger_time, true + LATENCY_S, pulses,
+                            round_trip_s=round_trip_s)
 
 
 def _scanner_fit(tmp_path: Path, round_trip_s: float) -> dict[str, float]:
