@@ -346,6 +346,8 @@ def _acquire(args: argparse.Namespace) -> int:
         print(f"against the simulators' clocks (after {clocks['settle_s']:g} s): mean error "
               f"{errors}; misalignment between devices {clocks['misalignment_s'] * 1e3:.3f} ms "
               f"mean, {clocks['misalignment_max_s'] * 1e3:.3f} ms largest")
+    for warning in summary.get("warnings", []):
+        print(f"warning: {warning}", file=sys.stderr)
     for error in summary["errors"]:
         print(f"error: {error}")
     return 0 if not summary["errors"] else 1

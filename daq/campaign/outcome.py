@@ -92,6 +92,9 @@ class CampaignOutcome:
         The adaptive decisions, in order.
     max_fan_rpm_commanded : float
         Highest fan set-point sent this session, rpm.
+    recording_warnings : list of str
+        What the run files' writers warned of (a clock map without a trigger anchor), each
+        prefixed with its file's name.
     """
 
     steps: list[SpeedStep] = field(default_factory=list)
@@ -103,6 +106,7 @@ class CampaignOutcome:
     resumed: int = 0
     choices: list[Choice] = field(default_factory=list)
     max_fan_rpm_commanded: float = 0.0
+    recording_warnings: list[str] = field(default_factory=list)
 
     @property
     def flutter_speed(self) -> float | None:

@@ -1,14 +1,14 @@
 """The campaign's report: DIR/campaign.json, PNG plots and a short Markdown page.
 
 Responsibility: :func:`write_report` writes what a :class:`~daq.campaign.runner.CampaignOutcome`
-holds into the output directory: ``campaign.json`` (``flutter_speed``, ``flutter_speed_std``
-(m/s), ``speeds`` (m/s, in the order tested), ``wind_on_s``, ``stopped_because``, with a
-simulated rig ``truth_flutter_speed``; the std after each speed, the adaptive decisions, the
-E2RFC analysis), ``campaign_std_history.png`` (the flutter speed and its std after each
-speed), ``campaign_flutter.png`` (frequency and damping of both branches against U, the
-speeds tested marked), ``campaign_flutter_derivatives.png`` (the model's derivatives over the
-covered reduced frequencies) and ``campaign.md``. :func:`read_previous` reads an earlier
-session's ``campaign.json`` back (a resumed campaign carries its wind-on time on).
+holds into the output directory: ``campaign.json`` (``flutter_speed``, ``flutter_speed_std`` (m/s),
+``speeds`` (m/s, in the order tested), ``wind_on_s``, ``stopped_because``, with a simulated rig
+``truth_flutter_speed``; the std after each speed, the adaptive decisions, the E2RFC analysis, and
+``warnings``: the run files' and the analysis's caveats), ``campaign_std_history.png`` (the flutter
+speed and its std after each speed), ``campaign_flutter.png`` (frequency and damping of both
+branches against U, the speeds tested marked), ``campaign_flutter_derivatives.png`` (the model's
+derivatives over the covered reduced frequencies) and ``campaign.md``. :func:`read_previous` reads
+an earlier session's ``campaign.json`` back (a resumed campaign carries its wind-on time on).
 
 Not responsible for: running the campaign (:mod:`daq.campaign.runner`) or the numbers
 (:mod:`ident`).
@@ -95,6 +95,9 @@ def report_dict(outcome: CampaignOutcome) -> dict[str, Any]:
                                   else U_F / outcome.truth_flutter_speed - 1.0)
     if outcome.analysis is not None:
         data["analysis"] = outcome.analysis.to_dict()
+    # The recordings' caveats and the last analysis's, in one place.
+    data["warnings"] = list(outcome.recording_warnings) + list(
+        data.get("analysis", {}).get("warnings", []))
     return data
 
 
@@ -142,6 +145,8 @@ def _markdown(data: dict[str, Any], paths: dict[str, Path]) -> str:
         headline += (f"; simulated truth {data['truth_flutter_speed']:.3f} m/s"
                      + ("" if err is None else f" (error {100 * err:+.2f} %)"))
     lines.append(headline + ".")
+    if data["warnings"]:  # next to the number they qualify
+        lines += ["", "Warnings:", ""] + [f"- {w}" for w in data["warnings"]]
     lines += ["", f"Stopped because: {data['stopped_because']}", "",
               f"Wind on {data['wind_on_s']:.1f} s, wall time {data['wall_s']:.1f} s.", "",
               "| # | U (m/s) | releases | U_F after (m/s) | std (m/s) | its largest part (m/s) "

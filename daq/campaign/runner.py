@@ -589,8 +589,11 @@ def _record_file(session: _Session, outcome: CampaignOutcome, path: Path, rpm: f
                 acq.stop_fan()
 
     recording = session.recording()
-    recording.record(path, actions=actions, until=done, duration_s=duration,
-                     operator_notes=notes)
+    _, summary = recording.record(path, actions=actions, until=done, duration_s=duration,
+                                  operator_notes=notes)
+    for text in summary.get("warnings", []):
+        say(f"  warning: {text}")
+        outcome.recording_warnings.append(f"{path.name}: {text}")
     if not done.is_set():
         return "interrupted"
     return "grown" if grown.is_set() else "done"

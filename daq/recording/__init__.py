@@ -12,6 +12,8 @@
 - :mod:`~daq.recording.writer`: :class:`RunWriter`, the engine subscriber that maps clocks,
   resamples and writes the raw streams, the sync view, releases and events;
 - :mod:`~daq.recording.devices`: what the writer keeps per device (clock map, triggers, restarts);
+- :mod:`~daq.recording.trigger_anchors`: the PLC's trigger pulses as clock anchors, and the
+  warning of a file whose clock maps have none;
 - :mod:`~daq.recording.releases`: the releases table, filled as the decays end;
 - :mod:`~daq.recording.sync_view`: the sync view's physical columns from the resampled streams;
 - :mod:`~daq.recording.raw_batches`: raw rows buffered between appends;

@@ -265,6 +265,8 @@ class DeviceState:
     overflow_samples: int = 0
     last_trigger: float = -math.inf  # scanner: last latched trigger time taken
     pending_triggers: list[float] = field(default_factory=list)  # device times not yet paired
+    trigger_channel: bool = False  # its blocks carry trigger times (latch or flags)
+    trigger_times: int = 0  # trigger times it reported in the file
     last_device_time: float = math.nan  # newest finite device time mapped, s
     last_host: float = -math.inf  # host time (run s) of the newest sample pushed to the view
     restart_pending: bool = False  # a restart gap was seen; its first timed sample decides
@@ -303,7 +305,9 @@ class DeviceState:
                 found = trigger_times_from_flags(t_dev[ok], flags[ok], 1.0 / self.rate_hz)
         else:
             return
+        self.trigger_channel = True
         if found.size:
+            self.trigger_times += found.size
             self.pending_triggers.extend(float(t) for t in found)
             del self.pending_triggers[:-32]
         self.pair_triggers(trigger_events)

@@ -569,6 +569,8 @@ def storable_metadata(value: Any) -> Any:
                 for k, v in value.items()}
     if value is None:
         return ""
+    if isinstance(value, list) and all(isinstance(v, str) for v in value):
+        return np.array(value, dtype=str)  # strings even when empty (an empty list is float)
     return value
 
 

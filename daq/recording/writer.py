@@ -35,7 +35,8 @@ closed, and later docs are ignored; :func:`daq.recording.run.record_run` raises 
 Longer than 600 lines: :class:`RunWriter` is one subscriber whose start, blocks, clock restarts,
 events and stop all work on the same per-run state (the devices' clock maps, the resampler, the
 rows written); what needs none of it is in its helpers (:mod:`daq.recording.devices`,
-:mod:`daq.recording.releases`, :mod:`daq.recording.raw_batches`, :mod:`daq.recording.sync_view`).
+:mod:`daq.recording.releases`, :mod:`daq.recording.raw_batches`, :mod:`daq.recording.sync_view`,
+:mod:`daq.recording.trigger_anchors`).
 """
 
 from __future__ import annotations
@@ -43,7 +44,6 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections import deque
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -68,6 +68,7 @@ from daq.recording.recorder import RunRecorder
 from daq.recording.recorder_protocol import Recorder
 from daq.recording.releases import ReleaseRows
 from daq.recording.sync_view import physical_columns, polled_conditions, tap_columns
+from daq.recording.trigger_anchors import TriggerPulses
 from daq.sync.resample import Resampler, StreamSpec, SyncBlock
 from daq.tubing_config import tubing_metadata
 
@@ -82,10 +83,6 @@ _CALZ_FIELDS = ("pause_s", "calz_s", "wind_speed_now", "frames_averaged", "offse
 #: Air density used before the barometer's first reading, kg/m^3 (recorded in the rho column).
 DEFAULT_RHO = 1.2
 
-#: A trigger pulse whose command took longer than this (round trip, s) is no anchor: its host
-#: time, the midpoint, is off by at most half of it, and typically far less (the two legs are
-#: alike); the clock map takes the median over its anchors.
-MAX_ANCHOR_ROUND_TRIP_S = 3e-3
 #: After a device clock restart, the new epoch's samples are held back from the sync view until
 #: this much device time has arrived and this much host time has passed since the first of
 #: them arrived, s: the fresh clock map then rests on the least-latency block among them (12
@@ -168,7 +165,7 @@ class RunWriter:
         self._sync_rows = 0
         self._release_rows = ReleaseRows(f_max=max(config.section.fh, config.section.fa))
         self._calz_count: dict[str, int] = {}
-        self._trigger_events: deque[tuple[float, float]] = deque(maxlen=64)  # (t, +-s) pulses
+        self._pulses = TriggerPulses()  # the PLC's trigger pulses: the clock maps' anchors
         self._view_pieces: dict[str, list[tuple[FloatArray, FloatArray]]] = {}
         self._n_taps = config.taps.n_taps
         self._tap_columns, self._fan_rpm = tap_columns(config.calibration, self._n_taps), math.nan
@@ -330,10 +327,10 @@ class RunWriter:
             ends = np.append(rows[reads], last)
             dev.clock.update(t_dev[ends], t_host[ends])
         if self.use_trigger_anchors:
-            dev.anchor_triggers(block, t_dev, self._trigger_events)
+            dev.anchor_triggers(block, t_dev, self._pulses.events)
             if dev.pending_triggers:
                 # pulses seen before the clock map was ready
-                dev.pair_triggers(self._trigger_events)
+                dev.pair_triggers(self._pulses.events)
         dev.last_device_time = float(t_dev[last])
         if math.isnan(dev.settle_until):
             self._push(dev, block, t_dev, finite)
@@ -541,13 +538,11 @@ class RunWriter:
             self._release_rows.operator(event.kind, t, self.release_hook)
         elif event.kind == "trigger":
             # Its host time is known to half the command's round trip: an anchor if that is short.
-            round_trip = float(event.data.get("round_trip_s", 0.0))
-            if round_trip > MAX_ANCHOR_ROUND_TRIP_S:
+            if not self._pulses.take(t, float(event.data.get("round_trip_s", 0.0))):
                 return
-            self._trigger_events.append((t, 0.5 * round_trip))
             for dev in self._devices.values():
                 if dev.pending_triggers:
-                    dev.pair_triggers(self._trigger_events)
+                    dev.pair_triggers(self._pulses.events)
 
     # -- stop ----------------------------------------------------------------------------------
     def _stop(self, doc: Mapping[str, Any]) -> None:
@@ -570,6 +565,13 @@ class RunWriter:
         rec.set_sync_attrs(clock_offset_s=offsets, clock_drift_ppm=drifts,
                            residual_misalignment_s=max(residuals) if residuals else None)
         summary = self._summary(doc)
+        # A clock map without an anchor is late by its device's transport latency: say so in
+        # the file's events, the summary and the log (the file is still written).
+        t_stop = (float(self._time(doc["host_time_ns"])) if "host_time_ns" in doc
+                  else float(doc.get("duration_s", 0.0)))
+        for text in summary["warnings"]:
+            log.warning("%s", text)
+            rec.add_event(t_stop, "warning", text)
         rec.add_metadata("acquisition_summary", storable_metadata(summary))
         rec.close()
         self.summary = summary
@@ -607,6 +609,8 @@ class RunWriter:
                               "steps": d.timeline.steps}
                           for n, d in self._devices.items() if d.timeline is not None},
             "clock_fits": self.clock_fits(),
+            "warnings": self._pulses.anchor_warnings(self._devices,
+                                                     anchors_used=self.use_trigger_anchors),
         }
 
 

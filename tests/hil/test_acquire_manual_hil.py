@@ -27,7 +27,6 @@ from support.configs import FAST_FAN, SIM_FLAT_PLATE
 pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
 
-
 def test_acquire_records_a_release_by_hand_from_the_terminal(tmp_path, monkeypatch, capsys):
     text, n = re.subn(r"\n\[plc\]\n(?:[^\[\n].*\n|\n)*", "\n",
                       SIM_FLAT_PLATE.read_text())
@@ -63,6 +62,11 @@ def test_acquire_records_a_release_by_hand_from_the_terminal(tmp_path, monkeypat
     assert "(the rig has no PLC)" in captured.err
     assert "release 1: recorded" in captured.err and "model held" in captured.err
     assert "1 release(s)" in captured.out
+    # No PLC, no trigger pulse: the command warns that the clocks have no anchor, naming them.
+    (warning,) = [line for line in captured.err.splitlines()
+                  if line.startswith("warning: ") and "anchor" in line]
+    assert "no PLC trigger pulse reached this file" in warning
+    assert "the clock maps of scanner" in warning and "have no anchor" in warning
     # q ended the recording before its 30 s (the rig's start before it is not counted).
     recorded_s = float(re.search(r"run\.h5: ([0-9.]+) s \(", captured.out).group(1))
     assert recorded_s < 20.0

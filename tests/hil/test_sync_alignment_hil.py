@@ -19,7 +19,7 @@ import pytest
 from daq.config import parse_rig_config
 from daq.recording.devices import CLOCK_SETTLE_S
 from daq.recording.run import record_run
-from daq.recording.writer import MAX_ANCHOR_ROUND_TRIP_S
+from daq.recording.trigger_anchors import MAX_ANCHOR_ROUND_TRIP_S
 from daq.sim.rig_process import start_rig_process
 from daq.sim.sync_check import ClockTruthTracker, check_run
 

@@ -71,6 +71,10 @@ wind_speeds = [4.0, 6.0, 8.0]
             assert f["entry/releases"].shape[0] == 1
         assert kinds.count("release_detected") == 1 and "release" not in kinds
     assert not any("gap" in line for line in lines), lines
+    # No PLC: no trigger pulse anchors the lasers' clocks, which every file warns of.
+    unanchored = [w for w in outcome.recording_warnings if "no PLC trigger pulse" in w]
+    assert [w.split(":")[0] for w in unanchored] == [p.name for p in paths], lines
+    assert sum("warning: no PLC trigger pulse" in line for line in lines) == len(paths)
     assert any("displacement-only route: identify after the campaign" in line
                for line in lines)
 

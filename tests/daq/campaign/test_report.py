@@ -21,7 +21,12 @@ def _outcome(tmp_path: Path) -> CampaignOutcome:
                            "extrapolation": 0.0})]
     choice = Choice(9.5, "chosen 9.50 m/s", 0.4, ((9.0, 0.2), (9.5, 0.17)), 9.6)
     return CampaignOutcome(steps=steps, stopped_because="target met", wind_on_s=45.0,
-                           wall_s=50.0, truth_flutter_speed=11.849, choices=[choice])
+                           wall_s=50.0, truth_flutter_speed=11.849, choices=[choice],
+                           recording_warnings=[f"u7.h5: {NO_ANCHOR}"])
+
+
+#: A run file's warning, as the runner keeps it (named by its file).
+NO_ANCHOR = "no PLC trigger pulse reached this file: the clock map of scanner has no anchor"
 
 
 def test_campaign_json_holds_what_the_issue_asks(tmp_path):
@@ -39,9 +44,11 @@ def test_campaign_json_holds_what_the_issue_asks(tmp_path):
     assert [h["flutter_speed_std_parts"] for h in data["history"][:2]] == [None, None]
     assert data["history"][2]["flutter_speed_std_parts"]["release_scatter"] == 0.07
     assert data["choices"][0]["predicted_std"] == [[9.0, 0.2], [9.5, 0.17]]
+    assert data["warnings"] == [f"u7.h5: {NO_ANCHOR}"]  # no analysis: the recordings' only
     assert paths["std_history"].stat().st_size > 0
     page = paths["markdown"].read_text()
     assert "Stopped because: target met" in page
+    assert f"Warnings:\n\n- u7.h5: {NO_ANCHOR}\n" in page
     assert "| 3 | 9.50 | 2 | 11.910 | 0.080 | release scatter 0.070 | 40.0 |" in page
     assert "| 2 | 7.00 | 2 | 11.900 | 0.400 |  | 25.0 |" in page  # no parts: nothing made up
     assert "bound 9.60 m/s; 9.00: 0.200, 9.50: 0.170" in page

@@ -205,8 +205,11 @@ def test_release_row_and_events(run):
     assert math.isclose(row["alpha0"], 0.02, rel_tol=1e-4)
     assert math.isclose(row["U"], math.sqrt(2 * QD / RHO), rel_tol=1e-6)
     kinds = [k.decode() for k in events["kind"]]
-    assert kinds == ["note", "release"]
+    # These docs have no PLC trigger pulse: the file says its clock maps had no anchor.
+    assert kinds == ["note", "release", "warning"]
     assert b"command_ns" in events["text"][1]
+    assert events["text"][2].decode().startswith("no PLC trigger pulse reached this file")
+    assert events["time"][2] >= t[-1]  # at the file's end
 
 
 def test_two_releases_split_the_decays(config, tmp_path):
