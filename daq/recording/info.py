@@ -150,7 +150,9 @@ def run_info(path: str | os.PathLike[str]) -> dict[str, Any]:
         ``windrig recover`` did, or None), ``missing`` (the optional parts the file lacks:
         ``/entry/config``, ``/entry/instrument``, ``/entry/releases``, ``/entry/events``) and
         ``imported`` (where ``windrig import`` read it from: ``source``, ``sha256``, ``test``,
-        ``format``, ``map_file``, ``map``; or None). NaN is None.
+        ``format``, ``map_file``, ``map``; or None) and ``warnings`` (the texts of the
+        file's ``warning`` events: the device check's notes, a fan target not reached, clocks
+        no trigger pulse anchored). NaN is None.
 
     Raises
     ------
@@ -264,6 +266,7 @@ def _describe(path: Path, f: h5py.File) -> dict[str, Any]:
         # `windrig import`'s provenance (daq.exchange.importing): source, sha256, test, format,
         # map_file and the map's text; None for a recorded run.
         "imported": _plain(metadata["import"]) if "import" in metadata else None,
+        "warnings": [e["text"] for e in events if e["kind"] == "warning"],
     })
 
 

@@ -42,6 +42,7 @@ def test_info_lists_the_releases_section_and_state(tmp_path, capsys):
     assert [r["alpha0"] for r in info["releases"]] == pytest.approx([0.02, 0.02], abs=1e-6)
     assert info["releases"][0]["decay_s"] == pytest.approx(4.0, abs=0.01)
     assert info["recovery"] is None and info["calz"] == {}
+    assert info["warnings"] == []  # no warning event in this file
 
     assert main(["info", str(path), "--json"]) == 0
     assert json.loads(capsys.readouterr().out) == json.loads(json.dumps(info))

@@ -20,6 +20,7 @@ import pytest
 
 from daq.config import parse_rig_config
 from daq.recording.devices import DeviceState, new_clock_map
+from daq.recording.info import run_info
 from daq.recording.trigger_anchors import MAX_ANCHOR_ROUND_TRIP_S, TriggerPulses
 from daq.recording.writer import RunWriter
 
@@ -134,8 +135,9 @@ def test_a_map_without_anchors_is_warned_of_with_its_cause(tmp_path: Path, cause
     for word in (*words, "the clock map of scanner has no anchor",
                  "late by its transport latency"):
         assert word in warning, warning
-    # The file keeps it: in the stored summary and as an event (what `windrig info` shows).
+    # The file keeps it: in the stored summary and as an event, which `windrig info` shows.
     assert _file_warnings(tmp_path / "run.h5") == ([warning], [warning])
+    assert run_info(tmp_path / "run.h5")["warnings"] == [warning]
 
 
 def test_a_latched_trigger_without_its_pulse_is_no_anchor_but_counted() -> None:
