@@ -84,6 +84,12 @@ class RecordedSpeed:
         """Releases read back from the files."""
         return sum(len(run.releases) for run in self.runs)
 
+    @property
+    def recording_warnings(self) -> list[str]:
+        """What the files' writer warned of, each led by its file's name (as when recorded)."""
+        return [f"{Path(run.path).name}: {text}" for run in self.runs
+                for text in run.recording_warnings]
+
 
 def read_back(out: Path, say: Callable[[str], None], *,
               displacements_only: bool = False) -> list[RecordedSpeed]:

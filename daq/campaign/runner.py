@@ -341,6 +341,7 @@ def _loop(session: _Session, outcome: CampaignOutcome) -> None:
         outcome.steps.append(SpeedStep(found.index, found.U, found.paths[0], found.releases,
                                        f"{why} (resumed)", paths=found.paths, resumed=True))
         session.runs.extend(found.runs)
+        outcome.recording_warnings.extend(found.recording_warnings)
         outcome.resumed += 1
     if outcome.resumed:
         say(f"resume: {outcome.resumed} speed(s) read back from {session.out}")

@@ -32,7 +32,7 @@ import numpy as np
 
 from ident.discrepancy.workflow import backbone, diagnose
 from ident.errors import IdentError
-from ident.records.run_file import campaign_section, read_run
+from ident.records.run_file import campaign_section, read_run, recording_notes
 
 __all__ = ["run_diagnose"]
 
@@ -71,16 +71,21 @@ def run_diagnose(files: Sequence[Path], out: Path, *, depth: float | None = None
         print(f"error: {exc}", file=sys.stderr)
         return 2
     print(report.summary())
+    # A file whose clocks had no trigger anchor holds motion and forces a latency apart,
+    # which a channel delay found here may be: say so before any effect is believed.
+    notes = recording_notes(runs)
+    for note in notes:
+        print(f"warning: {note}")
     out.mkdir(parents=True, exist_ok=True)
     for name, path in _plots(out, releases, report, section).items():
         print(f"plot {name}: {path}")
     if json_path is not None:
-        json_path.write_text(json.dumps(_as_json(report, files), indent=2))
+        json_path.write_text(json.dumps(_as_json(report, files, notes), indent=2))
         print(f"wrote {json_path}")
     return 0
 
 
-def _as_json(report: Any, files: Sequence[Path]) -> dict[str, Any]:
+def _as_json(report: Any, files: Sequence[Path], notes: Sequence[str]) -> dict[str, Any]:
     return {
         "files": [str(p) for p in files],
         "effect": report.effect,
@@ -107,7 +112,7 @@ def _as_json(report: Any, files: Sequence[Path]) -> dict[str, Any]:
         "units": {"gap_before": "1 (RMS gap of each channel over its RMS, averaged)",
                   "gap_after": "1 (as gap_before)", "parameters": "per effect: see units"},
         # What the named effects leave unexplained is what a reader must know first.
-        "warnings": [f.text() for f in report.unexplained],
+        "warnings": [f.text() for f in report.unexplained] + list(notes),
     }
 
 

@@ -79,7 +79,13 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
     from ident.errors import IdentError
     from ident.identification.campaign import analyze_campaign
     from ident.identification.covariance import ModelCovariance
-    from ident.records.run_file import campaign_section, forces_recorded, read_run, tubing_note
+    from ident.records.run_file import (
+        campaign_section,
+        forces_recorded,
+        read_run,
+        recording_notes,
+        tubing_note,
+    )
 
     if route not in ("auto", "e2rfc", "displacement"):
         raise UsageError(f"--route {route!r}: one of auto, e2rfc, displacement")
@@ -97,7 +103,7 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
                          "give the derivatives' std; the table needs E2RFC (files with forces)")
     runs = [read_run(p, tubing_correction=tubing_correction, detect_releases=detect_releases,
                      displacements_only=displacement) for p in files]
-    notes = _detections(runs) if detect_releases else []
+    notes = (_detections(runs) if detect_releases else []) + recording_notes(runs)
     section = campaign_section(runs)
     if displacement:
         from daq.offline.displacement_route import run_displacement_route

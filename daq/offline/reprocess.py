@@ -46,13 +46,13 @@ from ident.identification.campaign import analyze_campaign
 from ident.identification.modal import fit_release_modes
 from ident.model.section import SectionModel
 from ident.records.release import Release
-from ident.records.run_file import read_run
+from ident.records.run_file import read_run, recording_notes
 
 __all__ = ["ReprocessSettings", "expand_paths", "load_reprocess_config",
            "process_campaign", "process_file", "reprocess"]
 
 #: Bumped when the per-file results change meaning: old cache entries are then not reused.
-CACHE_VERSION = 2  # 2: a file result has the section depth
+CACHE_VERSION = 3  # 2: a file result has the section depth; 3: its recording warnings
 
 
 @dataclass(frozen=True)
@@ -197,7 +197,8 @@ def process_file(path: str) -> dict[str, Any]:
         ``releases``: per release its
         arrays (``t``, ``h``, ``alpha``, ``lift``, ``moment``), ``U``, ``rho``, ``index`` and
         its modes (``f_h``, ``zeta_h``, ``f_a``, ``zeta_a``; NaN with ``modal_error`` when the
-        fit fails).
+        fit fails), and ``recording_warnings`` (its writer's, led by its path: they join its
+        campaign's ``warnings``).
     """
     try:
         run = read_run(path)
@@ -221,7 +222,7 @@ def process_file(path: str) -> dict[str, Any]:
     shape = section.replace(rho=1.0).to_dict()  # the model; air density differs by run
     return {"path": path, "rig": run.rig_name, "section": section.to_dict(), "depth": run.depth,
             "campaign": f"{run.rig_name} {json.dumps(shape, sort_keys=True)}",
-            "releases": releases}
+            "releases": releases, "recording_warnings": recording_notes([run])}
 
 
 def process_campaign(name: str, files: list[dict[str, Any]],
@@ -274,7 +275,9 @@ def process_campaign(name: str, files: list[dict[str, Any]],
                flutter_structures=summary["flutter_structures"],
                flutter_speed_low=summary["flutter_speed_low"],
                flutter_speed_high=summary["flutter_speed_high"],
-               flutter_std_parts=summary["flutter_std_parts"], warnings=summary["warnings"],
+               flutter_std_parts=summary["flutter_std_parts"],
+               warnings=[*(w for f in files for w in f["recording_warnings"]),
+                         *summary["warnings"]],
                K=analysis.K, derivatives=analysis.derivatives,
                curves={"U": result.U, "frequencies": result.frequencies,
                        "damping": result.damping, "mode_names": list(result.mode_names)})

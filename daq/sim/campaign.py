@@ -54,7 +54,7 @@ from ident.model import flutter
 from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel
 from ident.records.release import Release
-from ident.records.run_file import campaign_section, read_run
+from ident.records.run_file import campaign_section, read_run, recording_notes
 from simulators.virtual_tunnel import AirState
 
 __all__ = ["CampaignResult", "run_campaign", "simulated_truth"]
@@ -98,6 +98,9 @@ class CampaignResult:
         The whole campaign analysis (:func:`ident.identification.campaign.analyze_campaign`).
     identification_error : str or None
         Why a 3-DOF campaign was not identified (None: it was, or the rig is 2-DOF).
+    recording_warnings : list of str
+        What the run files' writer warned of, each led by its file (a clock without a
+        trigger anchor: :func:`ident.records.run_file.recording_notes`).
     """
 
     files: list[Path]
@@ -115,6 +118,13 @@ class CampaignResult:
     structures: results.StructureSpread | None = None
     analysis: CampaignAnalysis | None = field(default=None, repr=False)
     identification_error: str | None = None
+    recording_warnings: list[str] = field(default_factory=list)
+
+    @property
+    def warnings(self) -> list[str]:
+        """The recordings' warnings, then the analysis's."""
+        return [*self.recording_warnings,
+                *(() if self.analysis is None else self.analysis.warnings)]
 
     def summary(self) -> str:
         """Plain-text summary for operators and logs."""
@@ -133,10 +143,9 @@ class CampaignResult:
             lines.append(f"identified flutter speed  {self.identified_speed:.3f}{std} m/s")
             if self.structures is not None:
                 lines.append(f"structure                 {self.structures.summary()}")
-            if self.analysis is not None:
-                lines.extend(f"warning: {w}" for w in self.analysis.warnings)
             if self.relative_error is not None:
                 lines.append(f"relative error            {100 * self.relative_error:+.2f} %")
+        lines.extend(f"warning: {w}" for w in self.warnings)
         lines.append("wall time " + ", ".join(f"{k} {v:.1f} s" for k, v in self.timings.items()))
         lines.extend(f"plot {name}: {path}" for name, path in self.plots.items())
         return "\n".join(lines)
@@ -289,7 +298,7 @@ def run_campaign(config: RigConfig, out_dir: str | Path, *,
                  "total": time.monotonic() - started},
         plots=plots, model=None if analysis is None else analysis.model, releases=releases,
         structures=None if analysis is None else analysis.structures, analysis=analysis,
-        identification_error=why)
+        identification_error=why, recording_warnings=recording_notes(runs))
 
 
 def _identify(releases: list[Release], section: SectionModel, n_lags: int | None,

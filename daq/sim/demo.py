@@ -156,7 +156,7 @@ def _summary(result: Any, truth: Any, rows: list[dict[str, Any]],
         "identified_flutter_speed_std_parts": (
             None if result.analysis is None
             else result.analysis.to_dict()["flutter_std_parts"]),
-        "warnings": [] if result.analysis is None else list(result.analysis.warnings),
+        "warnings": result.warnings,
         "identification_error": result.identification_error,
         "releases": rows,
         "timings_s": {**result.timings, "demo_total": wall_s},

@@ -63,7 +63,8 @@ from ident.records.release import Release, ReleaseHold
 from ident.records.release_onset import ReleaseOnset, find_releases
 
 __all__ = ["FileFormatError", "HOLD_GUARD_S", "HOLD_SETTLE_S", "HOLD_U_RTOL", "RunFile",
-           "TUBING_LEAD_S", "campaign_section", "forces_recorded", "read_run", "tubing_note"]
+           "TUBING_LEAD_S", "campaign_section", "forces_recorded", "read_run", "recording_notes",
+           "tubing_note"]
 
 _SECTION_FIELDS = ("B", "m", "I", "fh", "fa", "zeta_h", "zeta_a", "S", "fp", "zeta_p", "m_p")
 #: Columns of ``/entry/sync`` a 3-DOF file has (docs/reference/file_format.md).
@@ -122,6 +123,11 @@ class RunFile:
         Whether ``/entry/sync`` holds any lift and moment (a rig without taps has none).
     detected : tuple of ReleaseOnset
         With ``read_run(detect_releases=True)``: the onset of each release found, in order.
+    recording_warnings : tuple of str
+        What the file's writer warned of when it closed the file
+        (``/entry/metadata/acquisition_summary/warnings``: a device whose clock no trigger
+        pulse anchored, its samples then late by its transport latency); empty for a file
+        without (an older or imported one).
     """
 
     path: str
@@ -134,6 +140,7 @@ class RunFile:
     cuts: tuple[str, ...] = ()
     has_forces: bool = True
     detected: tuple[ReleaseOnset, ...] = ()
+    recording_warnings: tuple[str, ...] = ()
 
 
 #: With ``cut_at_gaps``, a release cut before a gap is kept when at least this many periods of
@@ -216,6 +223,9 @@ def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True,
             dead_part = "/entry/calibration/taps/dead"
             dead = (np.asarray(f[dead_part][()], dtype=np.int64) if dead_part in f
                     else np.zeros(0, dtype=np.int64))
+            part = "/entry/metadata/acquisition_summary/warnings"
+            recording_warnings = (tuple(_text(w) for w in np.atleast_1d(f[part][()]))
+                                  if part in f else ())
             # Arm events mark where each hold starts (issue 16); a file without events has
             # none, and its holds start at the previous release's end.
             arms = np.zeros(0)
@@ -284,7 +294,8 @@ def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True,
     return RunFile(path=path, section=section, releases=tuple(releases), rig_name=rig_name,
                    depth=depth, tubing=tubing,
                    tubing_corrected=tubing is not None and tubing_correction, cuts=tuple(cuts),
-                   has_forces=has_forces, detected=detected)
+                   has_forces=has_forces, detected=detected,
+                   recording_warnings=recording_warnings)
 
 
 def _detected_table(sync: dict[str, np.ndarray], section: SectionModel,
@@ -536,6 +547,16 @@ def tubing_note(runs: Sequence[RunFile]) -> str:
         return ""
     state = "corrected for" if all(run.tubing_corrected for run in tubed) else "NOT corrected for"
     return f"; forces {state} the pressure tubing of {len(tubed)} of {len(runs)} file(s)"
+
+
+def recording_notes(runs: Sequence[RunFile]) -> list[str]:
+    """Return the runs' recording warnings, each led by its file's path (identification's too).
+
+    A file whose clocks no trigger pulse anchored has motion and forces up to a transport
+    latency apart: what is identified from it inherits that, so its warning goes on.
+    """
+    return [f"{run.path}: recorded with a warning: {text}"
+            for run in runs for text in run.recording_warnings]
 
 
 def _text(value: Any) -> str:

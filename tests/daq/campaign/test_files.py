@@ -5,6 +5,15 @@ from __future__ import annotations
 from pathlib import Path
 
 from daq.campaign.files import interrupted_name, read_back, run_file_name
+from daq.config import parse_rig_config
+from daq.recording.layout import storable_metadata
+from daq.recording.synthetic import write_release_run
+from ident import Release
+from ident.model import flat_plate
+from simulators import simulate_release
+
+from support.configs import SIM_FLAT_PLATE
+from support.sections import FLAT_PLATE
 
 
 def test_names_of_speeds_releases_and_interrupted_files():
@@ -27,3 +36,17 @@ def test_read_back_groups_by_speed_skips_interrupted_and_reports_unreadable(tmp_
     # None of them is a run file: each is named once, kept out of the fit, none invented.
     assert len(said) == 3 and all("is not usable" in line for line in said)
     assert all(s.runs == [] and s.releases == 0 for s in speeds)
+
+
+def test_an_earlier_files_recording_warning_is_read_back_with_its_name(tmp_path):
+    config = parse_rig_config(SIM_FLAT_PLATE.read_text(), "sim_flat_plate.toml")
+    release = Release.from_simulation(simulate_release(
+        FLAT_PLATE, flat_plate.jones_model(), 5.0, 0.004, 0.02, duration=4.0, fs=250.0))
+    warning = "no PLC trigger pulse reached this file: the clock map of scanner has no anchor"
+    for name, warnings in (("speed01_U05.00.h5", [warning]), ("speed02_U07.00.h5", [])):
+        write_release_run(tmp_path / name, config, [release], metadata={
+            "acquisition_summary": storable_metadata({"warnings": warnings})})
+    speeds = read_back(tmp_path, [].append)
+    assert [s.releases for s in speeds] == [1, 1]
+    assert speeds[0].recording_warnings == [f"speed01_U05.00.h5: {warning}"]
+    assert speeds[1].recording_warnings == []

@@ -20,6 +20,7 @@ import pytest
 from daq.cli import main
 from daq.config import parse_rig_config
 from daq.offline.reprocess import ReprocessSettings, expand_paths, process_file, reprocess
+from daq.recording.layout import storable_metadata
 from daq.recording.synthetic import write_release_run
 from simulators.campaigns import FRACTIONS, simulated_campaign
 
@@ -28,11 +29,17 @@ from support.configs import SIM_FLAT_PLATE
 pytestmark = pytest.mark.realtime
 
 
-def write_run(path: Path, releases: list) -> None:
-    """Write releases into a run file of the flat-plate rig."""
+#: A recording warning one file carries, as the run writer stores it when no pulse anchored.
+UNANCHORED = ("no PLC trigger pulse reached this file (no PLC, or its pulses off or failing): "
+              "the clock map of scanner has no anchor")
+
+
+def write_run(path: Path, releases: list, warnings: tuple[str, ...] = ()) -> None:
+    """Write releases into a run file of the flat-plate rig, with the writer's warnings."""
     config = parse_rig_config(SIM_FLAT_PLATE.read_text(),
                               "sim_flat_plate.toml")
-    write_release_run(path, config, releases)
+    write_release_run(path, config, releases, metadata={"acquisition_summary": storable_metadata(
+        {"warnings": list(warnings)})})
 
 
 @pytest.fixture(scope="module")
@@ -41,7 +48,8 @@ def folder(tmp_path_factory) -> Path:
     releases = simulated_campaign(None, seed=11, duration=5.0)
     per_speed = len(releases) // len(FRACTIONS)
     for i in range(len(FRACTIONS)):
-        write_run(root / f"run_{i}.h5", releases[i * per_speed:(i + 1) * per_speed])
+        write_run(root / f"run_{i}.h5", releases[i * per_speed:(i + 1) * per_speed],
+                  (UNANCHORED,) if i == 1 else ())
     good = root / "run_0.h5"
     truncated = root / "run_9_truncated.h5"
     shutil.copy(good, truncated)
@@ -80,6 +88,9 @@ def test_reprocess_matches_identify_and_reports_the_bad_files(folder, tmp_path, 
     assert (campaign["flutter_speed_low"] <= campaign["flutter_speed"]
             <= campaign["flutter_speed_high"])
     assert campaign["effect"] is None  # a clean campaign: no discrepancy
+    # The file recorded with a warning says so, first, in both, and by the same words.
+    assert expected["warnings"][0] == f"{good[1]}: recorded with a warning: {UNANCHORED}"
+    assert campaign["warnings"] == expected["warnings"]
 
     with (out / "releases.csv").open() as f:
         rows = list(csv.DictReader(f))

@@ -23,6 +23,7 @@ from daq.recording.devices import DeviceState, new_clock_map
 from daq.recording.info import run_info
 from daq.recording.trigger_anchors import MAX_ANCHOR_ROUND_TRIP_S, TriggerPulses
 from daq.recording.writer import RunWriter
+from ident.records.run_file import read_run, recording_notes
 
 from support.configs import SIM_FLAT_PLATE
 from support.scanner_stream import LATENCY_S, PTP_EPOCH_S, PULSE_S, scanner_run_docs
@@ -100,6 +101,7 @@ def test_a_file_with_anchors_warns_of_nothing(tmp_path: Path) -> None:
     summary = _summary(tmp_path, _docs(0.4e-3))
     assert summary["warnings"] == []
     assert _file_warnings(tmp_path / "run.h5") == ([], [])
+    assert read_run(tmp_path / "run.h5").recording_warnings == ()
 
 
 def _no_trigger_channel(docs: list[tuple[str, Any]]) -> list[tuple[str, Any]]:
@@ -138,6 +140,10 @@ def test_a_map_without_anchors_is_warned_of_with_its_cause(tmp_path: Path, cause
     # The file keeps it: in the stored summary and as an event, which `windrig info` shows.
     assert _file_warnings(tmp_path / "run.h5") == ([warning], [warning])
     assert run_info(tmp_path / "run.h5")["warnings"] == [warning]
+    # Identification reads it back and passes it on, led by the file.
+    run = read_run(tmp_path / "run.h5")
+    assert run.recording_warnings == (warning,)
+    assert recording_notes([run]) == [f"{run.path}: recorded with a warning: {warning}"]
 
 
 def test_a_latched_trigger_without_its_pulse_is_no_anchor_but_counted() -> None:
