@@ -76,7 +76,8 @@ from daq.config import RigConfig, parse_rig_config
 from ident.identification.fd_method import identify as fd_identify
 from ident.identification.results import distinct_wind_speeds
 from ident.model import flutter
-from ident.records.run_file import campaign_section, read_run
+from ident.records.run_file import read_run
+from ident.records.run_set import campaign_section
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import result_files  # noqa: E402 - beside this script

@@ -90,7 +90,8 @@ from ident.identification.campaign import CampaignAnalysis, analyze_campaign
 from ident.identification.modal import fit_release_modes
 from ident.identification.results import distinct_wind_speeds
 from ident.records.release import Release
-from ident.records.run_file import RunFile, campaign_section, read_run
+from ident.records.run_file import RunFile, read_run
+from ident.records.run_set import campaign_section
 
 __all__ = ["CHECK_FAILED", "CampaignOutcome", "SpeedStep", "run_plan"]
 

@@ -32,7 +32,8 @@ import numpy as np
 
 from ident.discrepancy.workflow import backbone, diagnose
 from ident.errors import IdentError
-from ident.records.run_file import campaign_section, read_run, recording_notes
+from ident.records.run_file import read_run
+from ident.records.run_set import campaign_section, recording_notes
 
 __all__ = ["run_diagnose"]
 

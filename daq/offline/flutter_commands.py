@@ -79,13 +79,8 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
     from ident.errors import IdentError
     from ident.identification.campaign import analyze_campaign
     from ident.identification.covariance import ModelCovariance
-    from ident.records.run_file import (
-        campaign_section,
-        forces_recorded,
-        read_run,
-        recording_notes,
-        tubing_note,
-    )
+    from ident.records.run_file import forces_recorded, read_run
+    from ident.records.run_set import campaign_section, recording_notes, tubing_note
 
     if route not in ("auto", "e2rfc", "displacement"):
         raise UsageError(f"--route {route!r}: one of auto, e2rfc, displacement")

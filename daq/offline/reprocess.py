@@ -46,7 +46,8 @@ from ident.identification.campaign import analyze_campaign
 from ident.identification.modal import fit_release_modes
 from ident.model.section import SectionModel
 from ident.records.release import Release
-from ident.records.run_file import read_run, recording_notes
+from ident.records.run_file import read_run
+from ident.records.run_set import recording_notes
 
 __all__ = ["ReprocessSettings", "expand_paths", "load_reprocess_config",
            "process_campaign", "process_file", "reprocess"]

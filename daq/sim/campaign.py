@@ -54,7 +54,8 @@ from ident.model import flutter
 from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel
 from ident.records.release import Release
-from ident.records.run_file import campaign_section, read_run, recording_notes
+from ident.records.run_file import read_run
+from ident.records.run_set import campaign_section, recording_notes
 from simulators.virtual_tunnel import AirState
 
 __all__ = ["CampaignResult", "run_campaign", "simulated_truth"]
@@ -100,7 +101,7 @@ class CampaignResult:
         Why a 3-DOF campaign was not identified (None: it was, or the rig is 2-DOF).
     recording_warnings : list of str
         What the run files' writer warned of, each led by its file (a clock without a
-        trigger anchor: :func:`ident.records.run_file.recording_notes`).
+        trigger anchor: :func:`ident.records.run_set.recording_notes`).
     """
 
     files: list[Path]

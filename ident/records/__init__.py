@@ -2,6 +2,8 @@
 
 - :mod:`~ident.records.release`: one free-vibration release (``Release``), validated;
 - :mod:`~ident.records.run_file`: the one thin module through which ident reads run files;
+- :mod:`~ident.records.run_set`: what a campaign's files say together (their one section model,
+  their tubing correction, the warnings they were recorded with);
 - :mod:`~ident.records.release_onset`: the release instant found in the displacements alone
   (a release by hand, a file without release events);
 - :mod:`~ident.records.plausibility`: guards against unit and sign mistakes (a pitch in

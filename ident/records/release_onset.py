@@ -185,8 +185,14 @@ def noise_levels(t: object, *channels: object) -> FloatArray:
     if n_blocks == 0:
         return out
     blocks = d2[: n_blocks * block].reshape(n_blocks, block, X.shape[1])
-    with np.errstate(invalid="ignore"):
-        stds = np.nanstd(blocks, axis=1) / math.sqrt(6.0)  # var(d2) = 6 var(noise)
+    # The std of each block's finite values (a block inside a gap has none: NaN, left out
+    # below); by counts rather than np.nanstd, which warns of every such block.
+    finite = np.isfinite(blocks)
+    count = finite.sum(axis=1)
+    mean = np.where(finite, blocks, 0.0).sum(axis=1) / np.maximum(count, 1)
+    square = np.where(finite, blocks - mean[:, None, :], 0.0) ** 2
+    spread = np.sqrt(square.sum(axis=1) / np.maximum(count, 1))
+    stds = np.where(count > 0, spread, math.nan) / math.sqrt(6.0)  # var(d2) = 6 var(noise)
     for c in range(X.shape[1]):
         good = stds[:, c][np.isfinite(stds[:, c])]
         if good.size:

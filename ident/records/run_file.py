@@ -63,8 +63,7 @@ from ident.records.release import Release, ReleaseHold
 from ident.records.release_onset import ReleaseOnset, find_releases
 
 __all__ = ["FileFormatError", "HOLD_GUARD_S", "HOLD_SETTLE_S", "HOLD_U_RTOL", "RunFile",
-           "TUBING_LEAD_S", "campaign_section", "forces_recorded", "read_run", "recording_notes",
-           "tubing_note"]
+           "TUBING_LEAD_S", "forces_recorded", "read_run"]
 
 _SECTION_FIELDS = ("B", "m", "I", "fh", "fa", "zeta_h", "zeta_a", "S", "fp", "zeta_p", "m_p")
 #: Columns of ``/entry/sync`` a 3-DOF file has (docs/reference/file_format.md).
@@ -503,60 +502,6 @@ def forces_recorded(path: str | os.PathLike[str]) -> bool:
                        for name in ("lift", "moment"))
     except (OSError, KeyError, RuntimeError, ValueError):  # read_run names the problem
         return True
-
-
-def campaign_section(runs: Sequence[RunFile]) -> SectionModel:
-    """Return the one section model of a campaign's run files, with the median air density.
-
-    Parameters
-    ----------
-    runs : sequence of RunFile
-        Files of one campaign (one section model, any wind speeds).
-
-    Returns
-    -------
-    SectionModel
-        The stored section with ``rho`` the median of the files' measured densities.
-
-    Raises
-    ------
-    FileFormatError
-        If there are no runs, or if the files' sections differ (other than in air density):
-        releases of different models cannot be identified together.
-    """
-    if not runs:
-        raise FileFormatError("no run files given")
-    first = runs[0].section
-    for run in runs[1:]:
-        if run.section.replace(rho=first.rho) != first:
-            raise FileFormatError(f"{run.path}: its section model differs from the one of "
-                                  f"{runs[0].path}; identify one section model at a time")
-    return first.replace(rho=float(np.median([run.section.rho for run in runs])))
-
-
-def tubing_note(runs: Sequence[RunFile]) -> str:
-    """Say whether the runs' forces were corrected for their recorded tubing ("" if none has).
-
-    Returns
-    -------
-    str
-        E.g. ``"; forces corrected for the pressure tubing of 2 of 3 file(s)"``.
-    """
-    tubed = [run for run in runs if run.tubing is not None]
-    if not tubed:
-        return ""
-    state = "corrected for" if all(run.tubing_corrected for run in tubed) else "NOT corrected for"
-    return f"; forces {state} the pressure tubing of {len(tubed)} of {len(runs)} file(s)"
-
-
-def recording_notes(runs: Sequence[RunFile]) -> list[str]:
-    """Return the runs' recording warnings, each led by its file's path (identification's too).
-
-    A file whose clocks no trigger pulse anchored has motion and forces up to a transport
-    latency apart: what is identified from it inherits that, so its warning goes on.
-    """
-    return [f"{run.path}: recorded with a warning: {text}"
-            for run in runs for text in run.recording_warnings]
 
 
 def _text(value: Any) -> str:

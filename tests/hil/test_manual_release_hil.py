@@ -36,7 +36,8 @@ from daq.sim.campaign import simulated_truth
 from daq.sim.recording import record_simulated_run
 from ident.identification.campaign import analyze_campaign
 from ident.model import flutter
-from ident.records.run_file import campaign_section, read_run
+from ident.records.run_file import read_run
+from ident.records.run_set import campaign_section
 
 from support.configs import FAST_FAN, SIM_FLAT_PLATE
 

@@ -29,7 +29,8 @@ from daq.console.window import ConsoleWindow
 from daq.recording.synthetic import write_release_run
 from ident.identification.modal import fit_release_modes
 from ident.model import flat_plate, flutter
-from ident.records.run_file import campaign_section, read_run
+from ident.records.run_file import read_run
+from ident.records.run_set import campaign_section
 from simulators import simulate_release
 
 from support.clocks import ManualClock

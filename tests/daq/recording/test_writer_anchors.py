@@ -23,7 +23,8 @@ from daq.recording.devices import DeviceState, new_clock_map
 from daq.recording.info import run_info
 from daq.recording.trigger_anchors import MAX_ANCHOR_ROUND_TRIP_S, TriggerPulses
 from daq.recording.writer import RunWriter
-from ident.records.run_file import read_run, recording_notes
+from ident.records.run_file import read_run
+from ident.records.run_set import recording_notes
 
 from support.configs import SIM_FLAT_PLATE
 from support.scanner_stream import LATENCY_S, PTP_EPOCH_S, PULSE_S, scanner_run_docs

@@ -18,6 +18,7 @@ from ident.records.release_onset import (
     MIN_SNR,
     find_releases,
     locate_release,
+    noise_levels,
     still_start_before,
 )
 from simulators.tunnel import simulate_release
@@ -116,3 +117,26 @@ def test_the_hold_after_a_catch_is_found_before_the_key():
     t, h, alpha, truth, caught = _record()
     start = still_start_before(t, h, alpha, before=caught + 0.5, after=truth[0])
     assert start is not None and caught <= start < caught + 0.1
+
+
+def test_a_gap_longer_than_a_noise_block_leaves_the_noise_level_to_the_other_blocks():
+    """A gap (NaN rows) spanning whole blocks of the noise estimate: no warning, same level.
+
+    The noise level is the 10th percentile over blocks of the second differences' std; blocks
+    inside the gap have no finite value and are left out, so the level is that of the rest
+    (here exactly: the same rows without the gap's blocks), and the hold is still found.
+    """
+    rng = np.random.default_rng(3)
+    t = np.arange(int(4 * FS)) / FS
+    h = 0.004 + 5e-6 * rng.standard_normal(t.size)
+    alpha = 0.02 + 2.5e-5 * rng.standard_normal(t.size)
+    gapped_h, gapped_alpha = h.copy(), alpha.copy()
+    gapped_h[500:900] = gapped_alpha[500:900] = np.nan  # 0.8 s: several whole blocks
+    level = noise_levels(t, gapped_h, gapped_alpha)  # pytest turns a RuntimeWarning into an error
+    assert np.all(np.isfinite(level))
+    # Against the rows before the gap alone (their own blocks): the same order of level.
+    before = noise_levels(t[:498], h[:498], alpha[:498])
+    np.testing.assert_allclose(level, before, rtol=0.3)  # 10th percentiles of ~10-20 blocks
+    # Still again from the gap's end (1.8 s) on, within the rolling window's half-width.
+    start = still_start_before(t, gapped_h, gapped_alpha, before=4.0, after=1.0)
+    assert start is not None and 1.8 <= start < 1.9
