@@ -290,6 +290,7 @@ class TaskGroup:
             if self._ai is None:
                 raise TransportError(f"{self.address.url}: the task is closed")
             try:
+                asked = time.monotonic()
                 total = self._acquired()
                 host_ns = time.monotonic_ns()
                 now = time.monotonic()
@@ -303,7 +304,9 @@ class TaskGroup:
             except errors.DaqError as exc:
                 self._fault(exc)
                 continue
-            if now >= deadline:
+            # Only a count asked for after the deadline says that none came in time: one asked
+            # before it may have been answered late (a stalled link), counting from then.
+            if asked >= deadline:
                 raise TransportTimeout(f"{self.address.url}: no sample within {timeout_s:g} s")
             # Sleep until the block is due (or the deadline): few status queries per block.
             wait = (target - max(n, 0)) / self.rate_hz

@@ -201,6 +201,37 @@ def test_overwritten_samples_are_a_gap_counted_on_the_sample_index(tunnel):
     assert gap.length >= 1400
 
 
+def test_a_count_answered_late_is_asked_again_before_a_timeout(tunnel, monkeypatch):
+    """A stalled link answers the sample count as it was when asked, after the deadline.
+
+    CI once: a stall began right after a read had drained every sample; the count came back
+    1.2 s later still saying none, and the read gave up though the device had sampled all
+    along. The count asked for after the deadline is what decides.
+    """
+    sim, standin = start_daq(tunnel)
+    with laser(f"nidaqmx://Dev1/ai0?standin={standin}") as d:
+        try:
+            read_for(d, 0.1)
+            group = d.task_group
+            real = group._acquired
+            late = {"answers": 0}
+
+            def stalled_count():
+                if late["answers"] == 0:  # the count when asked, answered past the deadline
+                    late["answers"] += 1
+                    stale = group._next
+                    time.sleep(0.3)
+                    return stale
+                return real()
+
+            monkeypatch.setattr(group, "_acquired", stalled_count)
+            reading = d.read(timeout_s=0.2)
+        finally:
+            sim.stop()
+    assert late["answers"] == 1
+    assert reading.counter.size > 0
+
+
 def test_lost_device_is_recreated_with_a_restart_gap(tunnel):
     sim, standin = start_daq(tunnel)
     try:
