@@ -38,7 +38,8 @@ import numpy.typing as npt
 
 from daq.recording.layout import per_device_attr
 
-__all__ = ["ClockTruthTracker", "check_run", "measure_alignment", "write_alignment"]
+__all__ = ["ClockTruthTracker", "check_run", "measure_alignment", "release_rows",
+           "write_alignment"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -113,11 +114,7 @@ def measure_alignment(path: str | Path, truth: Callable[[FloatArray], Mapping[st
         names = [*CHANNEL_SOURCES, *(k for k in SWAY_SOURCES if k in f["entry/sync"])]
         sync = {k: f["entry/sync"][k][:] for k in ("time", *names)}
         releases = f["entry/releases"][:]
-    keep = np.zeros(sync["time"].size, dtype=bool)
-    for row in releases:
-        start, stop = int(row["start_index"]), int(row["stop_index"])
-        t = sync["time"][start:stop]
-        keep[start:stop] = t >= float(row["release_time"]) + SKIP_AFTER_RELEASE_S
+    keep = release_rows(sync["time"], releases)
     t_true = sync["time"][keep] + float(true_time_of_run_start)
     x = truth(t_true)
     x_plus = truth(t_true + _DERIVATIVE_STEP_S)
@@ -151,6 +148,28 @@ def measure_alignment(path: str | Path, truth: Callable[[FloatArray], Mapping[st
         "max_abs_delay_s": max(abs(v) for v in values) if values else math.nan,
         "rows": rows,
     }
+
+
+def release_rows(time: FloatArray, releases: npt.NDArray[Any]) -> npt.NDArray[np.bool_]:
+    """Return which rows of the sync view hold a free decay, its first instants left out.
+
+    Parameters
+    ----------
+    time : ndarray
+        ``/entry/sync/time``, s.
+    releases : ndarray
+        ``/entry/releases`` (``start_index``, ``stop_index``, ``release_time``).
+
+    Returns
+    -------
+    ndarray of bool
+        True on the rows of every release from ``SKIP_AFTER_RELEASE_S`` after its instant.
+    """
+    keep = np.zeros(time.size, dtype=bool)
+    for row in releases:
+        start, stop = int(row["start_index"]), int(row["stop_index"])
+        keep[start:stop] = time[start:stop] >= float(row["release_time"]) + SKIP_AFTER_RELEASE_S
+    return keep
 
 
 def write_alignment(path: str | Path, *, clocks: Mapping[str, Any],

@@ -21,7 +21,8 @@ from daq.recording.devices import CLOCK_SETTLE_S
 from daq.recording.run import record_run
 from daq.recording.trigger_anchors import MAX_ANCHOR_ROUND_TRIP_S
 from daq.sim.rig_process import start_rig_process
-from daq.sim.sync_check import ClockTruthTracker, check_run
+from daq.sim.sync_check import ClockTruthTracker, check_run, release_rows
+from daq.sync.conversions import heave_pitch_from_lasers
 
 from support.configs import DRIFTING_CLOCKS, SIM_FLAT_PLATE
 
@@ -159,12 +160,12 @@ def cross_motion_leak_s(config, spread_s, path):
     rms (Cauchy-Schwarz), taken from the recorded motion over the releases.
     """
     x = np.array([float(laser.settings["x"]) for laser in config.heave_pitch_lasers])
-    weights = np.linalg.pinv(np.column_stack([np.ones(x.size), x]))
+    # The weights are what the recorder's own solution makes of each laser alone.
+    unit = heave_pitch_from_lasers(np.eye(x.size), x, 0.0)
+    weights = np.vstack([unit.h, unit.alpha])
     with h5py.File(path, "r") as f:
         sync = {k: f["entry/sync"][k][:] for k in ("time", "h", "alpha")}
-        rows = np.zeros(sync["time"].size, dtype=bool)
-        for row in f["entry/releases"][:]:
-            rows[int(row["start_index"]):int(row["stop_index"])] = True
+        rows = release_rows(sync["time"], f["entry/releases"][:])
     rms = {k: float(np.sqrt(np.nanmean(np.gradient(sync[k][rows], sync["time"][rows])**2)))
            for k in ("h", "alpha")}
     half = 0.5 * float(spread_s)
