@@ -55,6 +55,7 @@ from ident.model.section import SectionModel
 from ident.numerics import validate as v
 from ident.numerics.selection import Candidate
 from ident.numerics.threads import single_threaded_blas
+from ident.records import plausibility
 from ident.records.release import SAMPLING_RTOL, Release
 from ident.tables.roger_table import RogerProblem, select_structure
 
@@ -245,6 +246,7 @@ def _check_releases(releases: Sequence[Release]) -> list[Release]:
     for r in out:
         if not isinstance(r, Release):
             raise TypeError(f"releases must be ident.Release objects, got {type(r).__name__}")
+        plausibility.check_channels(r, ("h", "alpha", "p"))
     return out
 
 

@@ -12,6 +12,11 @@ What each check can honestly detect, measured on the flat plate of the tests (B 
 fh = 2 Hz, fa = 4 Hz, Jones's aerodynamics, releases from 4 mm and 0.02 rad at 0.4, 0.6 and
 0.8 of its flutter speed, 2 % noise; ``tests/ident/records/test_plausibility.py``):
 
+- **Dead channels** (:func:`check_release`, before identification). A channel that reads one
+  value in every sample of a release (a tap or laser not connected, a column an import map
+  filled with zeros) is refused, naming it: unguarded, a constant force broke the least
+  squares with a linear-algebra error, and a stuck pitch identified a model whose warnings
+  named every cause but the channel.
 - **Amplitudes** (:func:`check_release`, before identification). A pitch oscillating over
   more than :data:`ALPHA_AMPLITUDE_MAX` (0.3 rad, 17 degrees) about its mean is no section
   model's: a pitch in degrees (holds of 2-10 degrees read as radians) is refused. So is a
@@ -70,8 +75,8 @@ from ident.records.release import Release
 from ident.records.release_onset import locate_release
 
 __all__ = ["ALPHA_AMPLITUDE_MAX", "FORCE_BOUND_FACTOR", "FORCE_SCALE_TOLERANCE",
-           "HEAVE_AMPLITUDE_MAX", "START_OFFSET_WARN_S", "check_model", "check_release",
-           "check_start", "force_scale", "start_offset"]
+           "HEAVE_AMPLITUDE_MAX", "START_OFFSET_WARN_S", "check_channels", "check_model",
+           "check_release", "check_start", "force_scale", "start_offset"]
 
 FloatArray = npt.NDArray[np.float64]
 ComplexArray = npt.NDArray[np.complex128]
@@ -136,10 +141,11 @@ def check_release(release: Release, section: SectionModel) -> list[str]:
     Raises
     ------
     PlausibilityError
-        A pitch amplitude over :data:`ALPHA_AMPLITUDE_MAX` ("alpha looks like degrees"), a
-        heave or sway amplitude over :data:`HEAVE_AMPLITUDE_MAX` deck widths ("looks like
-        millimetres").
+        A channel that reads one value in every sample ("a dead channel"), a pitch amplitude
+        over :data:`ALPHA_AMPLITUDE_MAX` ("alpha looks like degrees"), a heave or sway
+        amplitude over :data:`HEAVE_AMPLITUDE_MAX` deck widths ("looks like millimetres").
     """
+    check_channels(release)
     name = _name(release)
     alpha = _amplitude(release.alpha)
     if alpha > ALPHA_AMPLITUDE_MAX:
@@ -159,6 +165,35 @@ def check_release(release: Release, section: SectionModel) -> list[str]:
                 f"{amplitude / B:.3g} deck widths (B = {B:g} m; at most {HEAVE_AMPLITUDE_MAX:g} "
                 f"B); convert it to metres (/1000: {amplitude / 1000:.3g} m)")
     return _force_magnitude(release, section)
+
+
+#: Each channel of a release: its name and unit (the Release's fields).
+_CHANNEL_UNITS = {"h": "m", "alpha": "rad", "p": "m", "lift": "N/m", "moment": "N m/m",
+                 "drag": "N/m"}
+
+
+def check_channels(release: Release, channels: Sequence[str] = tuple(_CHANNEL_UNITS)) -> None:
+    """Raise PlausibilityError on a channel that reads the same value in every sample.
+
+    ``channels`` names the release's fields to check (those absent from it are skipped): all by
+    default; the displacement-only route checks the motion alone, since it reads no force.
+
+    Not a threshold on a small spread: a real channel that barely moves (a force at a low wind
+    speed, a sway that the wind hardly drives) still carries its noise, and what is too little
+    to identify from is for the fits to say. One value throughout is no sensor's reading.
+    """
+    name = _name(release)
+    for channel in channels:
+        unit = _CHANNEL_UNITS[channel]
+        values = getattr(release, channel)
+        if values is not None and values.size > 1 and np.ptp(values) == 0.0:
+            force = channel in ("lift", "moment", "drag")
+            raise PlausibilityError(
+                f"{name}: the {channel} channel reads {float(values[0]):.6g} {unit} in every "
+                f"one of its {values.size} samples: a dead or disconnected sensor, or a column "
+                "the import filled; fix the channel or leave this release out"
+                + ("; without forces, the displacement-only route (windrig identify --route "
+                   "displacement) reads the lasers alone" if force else ""))
 
 
 def _force_magnitude(release: Release, section: SectionModel) -> list[str]:

@@ -8,6 +8,7 @@ reading of two decaying, coupled modes) rather than hide it behind loose toleran
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -17,6 +18,7 @@ from scipy.optimize import linear_sum_assignment
 from ident import (
     AeroelasticSystem,
     NonUniformSamplingError,
+    PlausibilityError,
     RankDeficiencyError,
     RationalFunctionModel,
     Release,
@@ -262,6 +264,21 @@ def test_fewer_than_three_wind_speeds_are_refused(releases):
         fd_method.identify([releases[0], twice, releases[5]], FLAT_PLATE)
     with pytest.raises(RankDeficiencyError, match="no releases given"):
         fd_method.identify([], FLAT_PLATE)
+
+
+def test_a_dead_laser_is_refused_naming_it_but_not_a_dead_force(releases):
+    """A heave of zeros is refused by name; zeros in the forces (no taps) change nothing.
+
+    The route reads the motion alone.
+    """
+    dead = [releases[0], dataclasses.replace(releases[1], h=np.zeros_like(releases[1].h)),
+            *releases[2:]]
+    with pytest.raises(PlausibilityError, match="the h channel reads 0 m in every one"):
+        fd_method.identify(dead, FLAT_PLATE)
+    no_taps = [dataclasses.replace(r, lift=np.zeros_like(r.lift),
+                                   moment=np.zeros_like(r.moment)) for r in releases]
+    with_taps, without = (fd_method.identify(r, FLAT_PLATE) for r in (releases, no_taps))
+    np.testing.assert_array_equal(without.A, with_taps.A)
 
 
 def test_bad_arguments_are_refused(releases):

@@ -11,6 +11,7 @@ caught by a message that names it.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 
@@ -136,6 +137,27 @@ def test_heave_in_millimetres_is_refused_naming_it(records):
     releases = _releases(records, lambda c: {**c, "h": 1e3 * c["h"]})
     with pytest.raises(PlausibilityError, match="h looks like millimetres"):
         e2rfc.identify(releases, FLAT_PLATE)
+
+
+@pytest.mark.parametrize(("channel", "value"), [("moment", 0.0), ("lift", 0.0), ("alpha", 0.01)],
+                         ids=["moment-zeros", "lift-zeros", "alpha-stuck"])
+def test_a_dead_channel_is_refused_naming_it(records, channel, value):
+    """A channel of one value is refused by name.
+
+    Unguarded: zeros in a force broke the least squares with a LinAlgError; a stuck pitch
+    identified a model whose warnings named everything but the channel.
+    """
+    releases = _releases(records)
+    releases[1] = dataclasses.replace(
+        releases[1], **{channel: np.full_like(getattr(releases[1], channel), value)})
+    with pytest.raises(PlausibilityError, match=f"the {channel} channel reads {value:g} "):
+        e2rfc.identify(releases, FLAT_PLATE)
+
+
+def test_a_channel_that_barely_moves_is_not_called_dead(records):
+    """Only one value throughout is refused: a force a millionth of its size still has noise."""
+    release = _releases(records, lambda c: {**c, "moment": 1e-6 * c["moment"]})[1]
+    plausibility.check_channels(release)  # no error
 
 
 def test_forces_far_beyond_what_the_wind_can_give_are_warned_of(records):
