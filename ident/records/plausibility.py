@@ -17,6 +17,12 @@ fh = 2 Hz, fa = 4 Hz, Jones's aerodynamics, releases from 4 mm and 0.02 rad at 0
   filled with zeros) is refused, naming it: unguarded, a constant force broke the least
   squares with a linear-algebra error, and a stuck pitch identified a model whose warnings
   named every cause but the channel.
+- **Frequencies** (:func:`check_release`). Where neither displacement's spectrum peaks within
+  :data:`FREQUENCY_FACTOR` of the section's still-air frequencies (a factor 3 below the lowest
+  to 3 above the highest: the wind moves a mode by tens of per cent, not by three times), the
+  record and the section cannot be one rig's: refused, naming a time axis in milliseconds or
+  frequencies in rad/s when the ratio says so. Unguarded, a time axis in ms gave "no flutter"
+  with warnings about the release instant.
 - **Amplitudes** (:func:`check_release`, before identification). A pitch oscillating over
   more than :data:`ALPHA_AMPLITUDE_MAX` (0.3 rad, 17 degrees) about its mean is no section
   model's: a pitch in degrees (holds of 2-10 degrees read as radians) is refused. So is a
@@ -75,8 +81,8 @@ from ident.records.release import Release
 from ident.records.release_onset import locate_release
 
 __all__ = ["ALPHA_AMPLITUDE_MAX", "FORCE_BOUND_FACTOR", "FORCE_SCALE_TOLERANCE",
-           "HEAVE_AMPLITUDE_MAX", "START_OFFSET_WARN_S", "check_channels", "check_model",
-           "check_release", "check_start", "force_scale", "start_offset"]
+           "FREQUENCY_FACTOR", "HEAVE_AMPLITUDE_MAX", "START_OFFSET_WARN_S", "check_channels",
+           "check_model", "check_release", "check_start", "force_scale", "start_offset"]
 
 FloatArray = npt.NDArray[np.float64]
 ComplexArray = npt.NDArray[np.complex128]
@@ -88,6 +94,10 @@ ALPHA_AMPLITUDE_MAX = 0.3
 #: Largest heave (and sway) amplitude of a section model, in deck widths B. Holds are a few
 #: per cent of B; millimetres read as metres are hundreds of B.
 HEAVE_AMPLITUDE_MAX = 0.5
+#: How far outside the section's still-air frequencies (below the lowest, above the highest)
+#: a displacement's spectral peak may lie. Wind shifts a mode by tens of per cent (a plate's
+#: pitch mode from 4 to 3 Hz at flutter); a time axis in ms is a factor 1000, rad/s for Hz 6.3.
+FREQUENCY_FACTOR = 3.0
 #: How far a force may exceed the flat plate's largest ``|Q(iK)|`` times the motion. Bluff
 #: decks' flutter derivatives and static slopes are a few times a plate's (a lift slope of
 #: 6-15 per rad against 2 pi), so ten times is generous enough never to warn on a real deck.
@@ -141,12 +151,15 @@ def check_release(release: Release, section: SectionModel) -> list[str]:
     Raises
     ------
     PlausibilityError
-        A channel that reads one value in every sample ("a dead channel"), a pitch amplitude
-        over :data:`ALPHA_AMPLITUDE_MAX` ("alpha looks like degrees"), a heave or sway
-        amplitude over :data:`HEAVE_AMPLITUDE_MAX` deck widths ("looks like millimetres").
+        A channel that reads one value in every sample ("a dead channel"), displacements that
+        oscillate far from the section's still-air frequencies (:data:`FREQUENCY_FACTOR`; "t
+        looks like milliseconds", "frequencies look like rad/s"), a pitch amplitude over
+        :data:`ALPHA_AMPLITUDE_MAX` ("alpha looks like degrees"), a heave or sway amplitude
+        over :data:`HEAVE_AMPLITUDE_MAX` deck widths ("looks like millimetres").
     """
     check_channels(release)
     name = _name(release)
+    _check_frequencies(release, section, name)
     alpha = _amplitude(release.alpha)
     if alpha > ALPHA_AMPLITUDE_MAX:
         raise PlausibilityError(
@@ -194,6 +207,35 @@ def check_channels(release: Release, channels: Sequence[str] = tuple(_CHANNEL_UN
                 "the import filled; fix the channel or leave this release out"
                 + ("; without forces, the displacement-only route (windrig identify --route "
                    "displacement) reads the lasers alone" if force else ""))
+
+
+def _peak_frequency(x: FloatArray, fs: float) -> float:
+    """Frequency of a channel's periodogram peak, Hz (the mean left out)."""
+    power = np.abs(np.fft.rfft(x - x.mean()))**2
+    power[0] = 0.0
+    return float(np.argmax(power) * fs / x.size)
+
+
+def _check_frequencies(release: Release, section: SectionModel, name: str) -> None:
+    """Raise PlausibilityError when neither displacement oscillates near the section's modes."""
+    still_air = [f for f in (section.fh, section.fa, section.fp) if f is not None]
+    low, high = min(still_air) / FREQUENCY_FACTOR, max(still_air) * FREQUENCY_FACTOR
+    peaks = [_peak_frequency(x, release.fs) for x in (release.h, release.alpha)]
+    if any(low <= f <= high for f in peaks):
+        return
+    ratio = max(peaks) / max(still_air)
+    if 1e-3 / 1.5 < ratio < 1e-3 * 1.5:
+        why = "t looks like milliseconds: give it in seconds (/1000)"
+    elif 1 / (2 * math.pi * 1.5) < ratio < 1.5 / (2 * math.pi):
+        why = "the section's frequencies look like rad/s: give them in Hz (/2 pi)"
+    else:
+        why = ("the section's still-air frequencies, or the unit of the time axis, are not "
+               "this record's")
+    raise PlausibilityError(
+        f"{name}: h and alpha oscillate at {peaks[0]:.3g} and {peaks[1]:.3g} Hz, but the "
+        f"section's still-air frequencies are {', '.join(f'{f:g}' for f in still_air)} Hz "
+        f"(a mode moves with the wind by tens of per cent, not a factor "
+        f"{FREQUENCY_FACTOR:g}): {why}")
 
 
 def _force_magnitude(release: Release, section: SectionModel) -> list[str]:

@@ -26,6 +26,12 @@ SAMPLING_RTOL = 1e-6
 MIN_PERIODS = 3
 #: Fewest samples per release, whatever the rate.
 MIN_SAMPLES = 64
+#: Latest first sample of a release, s after the release instant. A record cut at the first
+#: sample after the instant starts within a step of it, and the instants the plausibility checks
+#: find wrong are tens of ms off; a time axis that starts later is a clock's, not the release's
+#: (the model's lag states are zero at t = 0, and exponentials of a decay at t of 100 s
+#: overflowed the fit).
+START_MAX_S = 0.5
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -183,8 +189,9 @@ class Release(_Record):
     ------
     ValueError
         Wrong shapes or lengths, non-finite values (NaN marks a gap: cut the release before it),
-        U <= 0, a hold that is not a :class:`ReleaseHold` or whose channels or sampling interval
-        differ from the release's.
+        a time axis that does not start at the release instant (its first sample before
+        ``-dt / 2`` or after :data:`START_MAX_S`), U <= 0, a hold that is not a
+        :class:`ReleaseHold` or whose channels or sampling interval differ from the release's.
     NonUniformSamplingError
         Time steps differ by more than ``SAMPLING_RTOL`` of the mean step, or t is not increasing.
     InsufficientDataError
@@ -210,6 +217,12 @@ class Release(_Record):
                 f"a release needs at least {MIN_SAMPLES} samples, got {arrays['t'].size}"
             )
         dt = _check_uniform(arrays["t"])
+        start = float(arrays["t"][0])
+        if not -0.5 * dt <= start <= START_MAX_S:
+            raise ValueError(
+                f"t starts at {start:.6g} s: a release's time is counted from the release "
+                f"instant, its first sample at or just after t = 0 (up to {START_MAX_S:g} s); "
+                "subtract the instant the model was let go (times before it belong to the hold)")
         if self.hold is not None:
             if not isinstance(self.hold, ReleaseHold):
                 raise ValueError(f"hold must be a ReleaseHold, got {type(self.hold).__name__}")

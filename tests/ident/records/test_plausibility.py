@@ -154,6 +154,21 @@ def test_a_dead_channel_is_refused_naming_it(records, channel, value):
         e2rfc.identify(releases, FLAT_PLATE)
 
 
+def test_a_time_axis_in_milliseconds_is_refused_naming_it(records):
+    """Unguarded: "no flutter", with warnings of release instants 8-57 ms off."""
+    releases = [dataclasses.replace(r, t=1e3 * r.t) for r in _releases(records, hold=False)]
+    with pytest.raises(PlausibilityError, match="t looks like milliseconds"):
+        e2rfc.identify(releases, FLAT_PLATE)
+
+
+def test_still_air_frequencies_in_rad_per_s_are_refused_naming_them(records):
+    """A section of 12.6 and 25.1 'Hz' (rad/s) for a record oscillating at 2 and 3.9 Hz."""
+    in_rad_s = dataclasses.replace(FLAT_PLATE, fh=2 * math.pi * FLAT_PLATE.fh,
+                                   fa=2 * math.pi * FLAT_PLATE.fa)
+    with pytest.raises(PlausibilityError, match="frequencies look like rad/s"):
+        e2rfc.identify(_releases(records), in_rad_s)
+
+
 def test_a_channel_that_barely_moves_is_not_called_dead(records):
     """Only one value throughout is refused: a force a millionth of its size still has noise."""
     release = _releases(records, lambda c: {**c, "moment": 1e-6 * c["moment"]})[1]

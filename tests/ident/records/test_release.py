@@ -69,3 +69,21 @@ def test_too_short_releases_are_refused():
     # 2 Hz for 0.8 s: 1.6 periods.
     with pytest.raises(InsufficientDataError, match="at least 3 oscillation periods"):
         Release(**decay(n=160), U=6.0)
+
+
+@pytest.mark.parametrize("offset", [100.0, 0.51, -0.01], ids=["clock", "late", "before"])
+def test_a_time_axis_that_does_not_start_at_the_release_is_refused(offset):
+    """A clock's time (100 s) or samples before the instant are refused, naming the start.
+
+    Unguarded, a decay at t of 100 s stopped the fit with "Eigenvalues did not converge".
+    """
+    data = decay()
+    with pytest.raises(ValueError, match=f"t starts at {offset:g} s: a release's time"):
+        Release(**(data | {"t": data["t"] + offset}), U=6.0)
+
+
+def test_a_first_sample_just_after_the_instant_is_accepted():
+    """Cut at the first sample after a late-found instant: up to 0.5 s, and -dt/2 of rounding."""
+    data = decay()
+    for offset in (0.03, 0.5, -0.4 / 200.0):
+        assert Release(**(data | {"t": data["t"] + offset}), U=6.0).t[0] == pytest.approx(offset)
