@@ -48,7 +48,11 @@ fh = 2 Hz, fa = 4 Hz, Jones's aerodynamics, releases from 4 mm and 0.02 rad at 0
   off, its pitch mode growing at 4.7 m/s where the measured one is damped 1.9 %; a lift alone
   halved: 36 %) is warned of with its worst mode, above :data:`MISFIT_WARN`. Effects the
   model lacks stay below it (friction 0.24, a 10 ms channel delay 0.21, a cubic spring 0.03:
-  the whiteness of the force residuals speaks for them).
+  the whiteness of the force residuals speaks for them). Where the model with one
+  displacement's column rescaled by a unit's factor (:data:`UNIT_MISTAKES`: heave in mm or
+  cm, pitch in degrees) predicts the decays within :data:`SCALE_EXPLAINS`, the warning names
+  that unit instead: a pitch of 0.23 degrees read as radians passes the amplitude check and
+  identified +131 % with a std of 0.5 %; rescaled, its model predicts the decays to 0.1 %.
 - **Release instant** (:func:`check_start`). A release from rest starts with zero velocity in
   every coordinate. The instant where the decay's velocity vanishes, found from the modal
   fit extrapolated backwards (:func:`start_offset`) or, with a still hold before the release,
@@ -81,8 +85,9 @@ from ident.records.release import Release
 from ident.records.release_onset import locate_release
 
 __all__ = ["ALPHA_AMPLITUDE_MAX", "FORCE_BOUND_FACTOR", "FORCE_SCALE_TOLERANCE",
-           "FREQUENCY_FACTOR", "HEAVE_AMPLITUDE_MAX", "START_OFFSET_WARN_S", "check_channels",
-           "check_model", "check_release", "check_start", "force_scale", "start_offset"]
+           "FREQUENCY_FACTOR", "HEAVE_AMPLITUDE_MAX", "START_OFFSET_WARN_S", "UNIT_MISTAKES",
+           "check_channels", "check_model", "check_release", "check_start", "force_scale",
+           "start_offset"]
 
 FloatArray = npt.NDArray[np.float64]
 ComplexArray = npt.NDArray[np.complex128]
@@ -413,6 +418,31 @@ def _misfit(section: SectionModel, model: RationalFunctionModel, speeds: Sequenc
     return float(np.sqrt(np.mean(np.abs(predicted - measured_shift) ** 2 / size**2)))
 
 
+#: Unit mistakes of a displacement tried by :func:`_unit_mistake`: (coordinate, its name,
+#: the unit it was read in, the factor from the wrong unit's numbers to the right one's).
+UNIT_MISTAKES = ((0, "h", "millimetres", 1e-3), (0, "h", "centimetres", 1e-2),
+                 (1, "alpha", "degrees", math.pi / 180))
+
+
+def _unit_mistake(section: SectionModel, model: RationalFunctionModel, speeds: Sequence[float],
+                  measured: Sequence[ComplexArray]) -> tuple[str, str, float] | None:
+    """Return ``(channel, unit, misfit)`` of the unit mistake that explains the decays, or None.
+
+    A displacement read in a wrong unit scales its column of the identified ``Q`` by the unit's
+    factor, not the decays' eigenvalues: the model with that column rescaled predicts them
+    again, to within :data:`SCALE_EXPLAINS`. Amplitude checks catch such a channel when its
+    holds are large; with small ones (a pitch of 0.2 degrees) only this does.
+    """
+    best: tuple[str, str, float] | None = None
+    for column, name, unit, factor in UNIT_MISTAKES:
+        A = np.array(model.A, dtype=float)
+        A[:, :, column] /= factor
+        misfit = _misfit(section, RationalFunctionModel(A, model.d), speeds, measured)
+        if misfit < SCALE_EXPLAINS and (best is None or misfit < best[2]):
+            best = (name, unit, misfit)
+    return best
+
+
 def force_scale(section: SectionModel, model: RationalFunctionModel, speeds: Sequence[float],
                 measured: Sequence[ComplexArray]) -> tuple[float, float]:
     """Return the factor on the model's forces that best predicts the measured decays.
@@ -495,6 +525,13 @@ def check_model(section: SectionModel, model: RationalFunctionModel, speeds: Seq
             "total over the model's span rather than per unit span (N/m; a span of "
             f"{1.0 / k:.3g} m?), a force calibration off, or the section's mass and inertia "
             f"off by {k:.3g}")
+    elif as_identified > MISFIT_WARN and (unit := _unit_mistake(section, model, speeds,
+                                                                measured)) is not None:
+        warnings.append(
+            f"the identified model does not predict the measured decays "
+            f"({100 * as_identified:.0f} % off), but does once {unit[0]} is taken as "
+            f"{unit[1]} ({100 * unit[2]:.2g} % off): {unit[0]} looks like {unit[1]} (small "
+            f"holds pass the amplitude check); convert it, or the flutter speed is wrong")
     elif as_identified > MISFIT_WARN:
         errors = np.abs(predicted - measured_shift) / np.maximum(np.abs(measured_shift), 1e-12)
         worst = int(np.argmax(errors))

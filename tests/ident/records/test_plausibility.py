@@ -169,6 +169,39 @@ def test_still_air_frequencies_in_rad_per_s_are_refused_naming_them(records):
         e2rfc.identify(_releases(records), in_rad_s)
 
 
+@pytest.fixture(scope="module")
+def small_holds():
+    """Releases from 0.2 mm and 0.004 rad (0.23 degrees): within any amplitude check."""
+    out = []
+    for i, fraction in enumerate((0.4, 0.6, 0.8)):
+        sim = simulate_decay(FLAT_PLATE, JONES, fraction * U_F, 0.0002, 0.004, n=int(20 * FS),
+                             fs=FS)
+        rng = np.random.default_rng(201 + i)
+        channels = {name: getattr(sim, name) for name in ("h", "alpha", "lift", "moment")}
+        channels = {name: x + NOISE * np.std(x) * rng.standard_normal(x.size)
+                    for name, x in channels.items()}
+        out.append(Release(t=sim.t, **channels, U=fraction * U_F))
+    return out
+
+
+@pytest.mark.parametrize(("channel", "factor", "unit"),
+                         [("alpha", 180 / math.pi, "degrees"), ("h", 100.0, "centimetres")])
+def test_small_displacements_in_a_wrong_unit_are_warned_of_naming_it(small_holds, channel,
+                                                                     factor, unit):
+    """A small pitch in degrees, or heave in centimetres, is named by the decays it explains.
+
+    Unguarded (pitch in degrees): +131 % with a std of 0.5 %, "a force channel's sign or unit"
+    the only hint. The model with that column rescaled predicts the decays again.
+    """
+    right = e2rfc.identify(small_holds, FLAT_PLATE)
+    assert right.diagnostics.warnings == ()  # no false alarm at these holds
+    wrong = [dataclasses.replace(r, **{channel: factor * getattr(r, channel)})
+             for r in small_holds]
+    model = e2rfc.identify(wrong, FLAT_PLATE)
+    found = [w for w in model.diagnostics.warnings if f"{channel} looks like {unit}" in w]
+    assert len(found) == 1, model.diagnostics.warnings
+
+
 def test_a_channel_that_barely_moves_is_not_called_dead(records):
     """Only one value throughout is refused: a force a millionth of its size still has noise."""
     release = _releases(records, lambda c: {**c, "moment": 1e-6 * c["moment"]})[1]
