@@ -224,6 +224,7 @@ def identify(
     if n_lags is not None and (not isinstance(n_lags, int) or not 0 <= n_lags <= 3):
         raise ValueError(f"n_lags must be an integer in 0..3 or None, got {n_lags!r}")
     guards = [w for r in releases for w in plausibility.check_release(r, section)]
+    guards += plausibility.check_air_density(releases, section)
     prepared = [prepare(r, section) for r in releases]
     if section.n_dof == 3:
         _check_modes_excited(prepared, section)

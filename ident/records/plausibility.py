@@ -23,6 +23,11 @@ fh = 2 Hz, fa = 4 Hz, Jones's aerodynamics, releases from 4 mm and 0.02 rad at 0
   record and the section cannot be one rig's: refused, naming a time axis in milliseconds or
   frequencies in rad/s when the ratio says so. Unguarded, a time axis in ms gave "no flutter"
   with warnings about the release instant.
+- **Air density** (:func:`check_air_density`, before identification). A density outside
+  :data:`AIR_DENSITY_RANGE` is no wind tunnel's air: warned of, naming g/m^3 or g/cm^3 where
+  the factor says so. The flutter speed of the section itself does not see it (the forces
+  are divided by it and multiplied again), but its flutter derivatives and every bridge they
+  go to do.
 - **Amplitudes** (:func:`check_release`, before identification). A pitch oscillating over
   more than :data:`ALPHA_AMPLITUDE_MAX` (0.3 rad, 17 degrees) about its mean is no section
   model's: a pitch in degrees (holds of 2-10 degrees read as radians) is refused. So is a
@@ -84,10 +89,10 @@ from ident.model.statespace import AeroelasticSystem
 from ident.records.release import Release
 from ident.records.release_onset import locate_release
 
-__all__ = ["ALPHA_AMPLITUDE_MAX", "FORCE_BOUND_FACTOR", "FORCE_SCALE_TOLERANCE",
-           "FREQUENCY_FACTOR", "HEAVE_AMPLITUDE_MAX", "START_OFFSET_WARN_S", "UNIT_MISTAKES",
-           "check_channels", "check_model", "check_release", "check_start", "force_scale",
-           "start_offset"]
+__all__ = ["AIR_DENSITY_RANGE", "ALPHA_AMPLITUDE_MAX", "FORCE_BOUND_FACTOR",
+           "FORCE_SCALE_TOLERANCE", "FREQUENCY_FACTOR", "HEAVE_AMPLITUDE_MAX",
+           "START_OFFSET_WARN_S", "UNIT_MISTAKES", "check_air_density", "check_channels",
+           "check_model", "check_release", "check_start", "force_scale", "start_offset"]
 
 FloatArray = npt.NDArray[np.float64]
 ComplexArray = npt.NDArray[np.complex128]
@@ -103,6 +108,9 @@ HEAVE_AMPLITUDE_MAX = 0.5
 #: a displacement's spectral peak may lie. Wind shifts a mode by tens of per cent (a plate's
 #: pitch mode from 4 to 3 Hz at flutter); a time axis in ms is a factor 1000, rad/s for Hz 6.3.
 FREQUENCY_FACTOR = 3.0
+#: Air densities of a wind tunnel, kg/m^3: from a high-altitude laboratory on a hot day
+#: (about 0.7 at 3000 m) to a cold sea-level one (1.4), with margin.
+AIR_DENSITY_RANGE = (0.5, 1.6)
 #: How far a force may exceed the flat plate's largest ``|Q(iK)|`` times the motion. Bluff
 #: decks' flutter derivatives and static slopes are a few times a plate's (a lift slope of
 #: 6-15 per rad against 2 pi), so ten times is generous enough never to warn on a real deck.
@@ -183,6 +191,39 @@ def check_release(release: Release, section: SectionModel) -> list[str]:
                 f"{amplitude / B:.3g} deck widths (B = {B:g} m; at most {HEAVE_AMPLITUDE_MAX:g} "
                 f"B); convert it to metres (/1000: {amplitude / 1000:.3g} m)")
     return _force_magnitude(release, section)
+
+
+def check_air_density(releases: Sequence[Release], section: SectionModel) -> list[str]:
+    """Warn once of each air density (a release's, else the section's) that is not air's.
+
+    Returns
+    -------
+    list of str
+        One warning per distinct density outside :data:`AIR_DENSITY_RANGE`, naming where it
+        came from and the likely unit.
+    """
+    sources: dict[float, str] = {}
+    for release in releases:
+        if release.rho is None:
+            sources.setdefault(section.rho, "the section's")
+        else:
+            sources.setdefault(release.rho, f"{_name(release)}'s")
+    low, high = AIR_DENSITY_RANGE
+    warnings = []
+    for rho, where in sources.items():
+        if low <= rho <= high:
+            continue
+        if low <= rho / 1e3 <= high:
+            unit = "g/m^3? (/1000)"
+        elif low <= rho * 1e3 <= high:
+            unit = "g/cm^3 or kg/l? (x1000)"
+        else:
+            unit = "a unit or a typing mistake?"
+        warnings.append(
+            f"{where} air density is {rho:g} kg/m^3, no wind tunnel's air ({low:g}-{high:g}): "
+            f"{unit}; the flutter speed does not depend on it, but the flutter derivatives "
+            "scale with its inverse, and so would a bridge's analysis from them")
+    return warnings
 
 
 #: Each channel of a release: its name and unit (the Release's fields).
