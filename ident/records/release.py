@@ -190,7 +190,7 @@ class Release(_Record):
     ValueError
         Wrong shapes or lengths, non-finite values (NaN marks a gap: cut the release before it),
         a time axis that does not start at the release instant (its first sample before
-        ``-dt / 2`` or after :data:`START_MAX_S`), U <= 0, a hold that is not a
+        ``-dt`` or after :data:`START_MAX_S`), U <= 0, a hold that is not a
         :class:`ReleaseHold` or whose channels or sampling interval differ from the release's.
     NonUniformSamplingError
         Time steps differ by more than ``SAMPLING_RTOL`` of the mean step, or t is not increasing.
@@ -218,7 +218,9 @@ class Release(_Record):
             )
         dt = _check_uniform(arrays["t"])
         start = float(arrays["t"][0])
-        if not -0.5 * dt <= start <= START_MAX_S:
+        # An importer starts a release at the sample nearest its instant: up to half a step
+        # before it, a step with the float arithmetic of the times.
+        if not -dt <= start <= START_MAX_S:
             raise ValueError(
                 f"t starts at {start:.6g} s: a release's time is counted from the release "
                 f"instant, its first sample at or just after t = 0 (up to {START_MAX_S:g} s); "

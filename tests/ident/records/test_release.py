@@ -83,7 +83,7 @@ def test_a_time_axis_that_does_not_start_at_the_release_is_refused(offset):
 
 
 def test_a_first_sample_just_after_the_instant_is_accepted():
-    """Cut at the first sample after a late-found instant: up to 0.5 s, and -dt/2 of rounding."""
+    """A first sample up to 0.5 s after the instant, or nearest it (under a step before it)."""
     data = decay()
-    for offset in (0.03, 0.5, -0.4 / 200.0):
+    for offset in (0.03, 0.5, -0.5 / 200.0, -0.9 / 200.0):
         assert Release(**(data | {"t": data["t"] + offset}), U=6.0).t[0] == pytest.approx(offset)
