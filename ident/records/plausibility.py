@@ -164,7 +164,7 @@ def check_release(release: Release, section: SectionModel) -> list[str]:
     """
     check_channels(release)
     name = _name(release)
-    _check_frequencies(release, section, name)
+    _check_sampling(release, section, name)
     alpha = _amplitude(release.alpha)
     if alpha > ALPHA_AMPLITUDE_MAX:
         raise PlausibilityError(
@@ -247,7 +247,7 @@ def check_channels(release: Release, channels: Sequence[str] = tuple(_CHANNEL_UN
                    "displacement) reads the lasers alone" if force else ""))
 
 
-def _check_frequencies(release: Release, section: SectionModel, name: str) -> None:
+def _check_sampling(release: Release, section: SectionModel, name: str) -> None:
     """Raise PlausibilityError when the record is sampled too slowly to hold any of the modes.
 
     Only that: where the displacements' spectra peak is no test of the section's frequencies,
