@@ -543,7 +543,31 @@ def _describe(exc: BaseException) -> str:
     return text or type(exc).__name__
 
 
+#: Options that name a file a command writes whole (``info --json`` and ``drivers --json``
+#: are flags, not paths).
+_OUTPUT_FILES = ("json", "write_bridge")
+
+
+def _refuse_run_file_as_output(args: argparse.Namespace) -> None:
+    """Raise UsageError if an output option names an existing HDF5 file: a run is kept.
+
+    ``windrig info --json`` is a flag, so ``windrig identify --json RUN.h5 ...`` reads like
+    one and would have written the JSON over the run file.
+    """
+    for option in _OUTPUT_FILES:
+        path = getattr(args, option, None)
+        if isinstance(path, Path) and path.is_file():
+            import h5py  # only when the path exists: --help stays fast
+
+            if h5py.is_hdf5(path):
+                raise UsageError(
+                    f"--{option.replace('_', '-')} {path}: an HDF5 file (a run file?) that the "
+                    "output would overwrite; the option takes the path of the file to write "
+                    "(unlike windrig info --json, a flag)")
+
+
 def _dispatch(args: argparse.Namespace) -> int:
+    _refuse_run_file_as_output(args)
     if args.command == "demo":
         from daq.sim import demo
 

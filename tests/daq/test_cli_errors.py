@@ -123,6 +123,11 @@ CASES = [
     (["info", "{d}/truncated.h5"], 2, "truncated.h5: HDF5 cannot open it (truncated?)"),
     (["identify", "{d}/truncated.h5"], 2, "truncated.h5: cannot be opened as HDF5"),
     (["recover", "{d}/truncated.h5"], 1, "truncated.h5: HDF5 cannot read it even read-only"),
+    # --json read as a flag (as windrig info's): the run file after it is not overwritten.
+    (["identify", "--json", "{d}/one_speed.h5", "{d}/one_speed.h5"], 2,
+     "--json {d}/one_speed.h5: an HDF5 file (a run file?) that the output would overwrite"),
+    (["diagnose", "--json", "{d}/empty.h5", "{d}/one_speed.h5", "--out", "{d}/o"], 2,
+     "--json {d}/empty.h5: an HDF5 file"),
 ]
 
 
@@ -137,6 +142,7 @@ def test_bad_input_is_one_error_line(files, capsys, argv, status, message):
     assert len(lines) == 1 and lines[0].startswith("error: "), err
     assert message in lines[0], lines[0]
     assert "Traceback" not in err
+    assert h5py.is_hdf5(files / "one_speed.h5") and h5py.is_hdf5(files / "empty.h5")
 
 
 def test_debug_shows_the_traceback(files):
