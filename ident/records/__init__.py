@@ -6,7 +6,7 @@
   their tubing correction, the warnings they were recorded with);
 - :mod:`~ident.records.release_onset`: the release instant found in the displacements alone
   (a release by hand, a file without release events);
-- :mod:`~ident.records.plausibility`: guards against unit and sign mistakes (a pitch in
-  degrees, forces over the span, a lift of the wrong sign, a late release instant), run by
-  E2RFC.
+- :mod:`~ident.records.plausibility`: guards against unit and sign mistakes and dead channels
+  (a pitch in degrees, a time axis in ms, forces over the span, a lift of the wrong sign, an
+  air density in g/m^3, a late release instant, a channel of one value), run by E2RFC.
 """
