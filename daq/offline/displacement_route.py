@@ -73,6 +73,7 @@ def run_displacement_route(runs: Sequence[Any], files: Sequence[Path], section: 
     """
     from daq.errors import UsageError
     from ident.identification.fd_method import identify
+    from ident.identification.uncertainty import ceiling_warnings
     from ident.model import flutter
 
     if section.n_dof != 2:
@@ -96,7 +97,9 @@ def run_displacement_route(runs: Sequence[Any], files: Sequence[Path], section: 
     else:
         print(f"flutter speed {result.speed:.3f} m/s (no std: see the warnings), frequency "
               f"{result.frequency:.3f} Hz ({result.critical_mode} branch)")
-    warnings = [*extra_warnings, *CAVEATS]
+    ceiling = (ceiling_warnings(section, table.U, result.U_max) if result.speed is None
+               else ())
+    warnings = [*extra_warnings, *table.warnings, *ceiling, *CAVEATS]
     for warning in warnings:
         print(f"warning: {warning}")
     if json_path is not None:

@@ -44,6 +44,7 @@ import numpy.typing as npt
 
 from ident.errors import InsufficientDataError, NonUniformSamplingError, RankDeficiencyError
 from ident.identification.modal import ModalFit, fit_modes
+from ident.identification.results import RANDOM_RESPONSE_LIMIT
 from ident.model.conventions import (
     FLUTTER_DERIVATIVE_NAMES,
     Q_from_flutter_derivatives,
@@ -55,7 +56,7 @@ from ident.model.section import SectionModel
 from ident.numerics import validate as v
 from ident.numerics.selection import Candidate
 from ident.numerics.threads import single_threaded_blas
-from ident.records import plausibility
+from ident.records import decay_checks, plausibility
 from ident.records.release import SAMPLING_RTOL, Release
 from ident.tables.roger_table import RogerProblem, select_structure
 
@@ -119,6 +120,9 @@ class DecayDerivativeTable:
         Per row, the modal fit of each release's ``[h/B, alpha]``.
     K_0, C_0 : ndarray, shape (2, 2)
         Still-air stiffness (N m/m) and damping (N m s/m) the aerodynamic parts are taken from.
+    warnings : tuple of str
+        The section's still-air frequencies far from what the decays ring at
+        (:func:`ident.records.decay_checks.check_frequencies`).
     """
 
     U: FloatArray
@@ -130,6 +134,7 @@ class DecayDerivativeTable:
     modal_fits: tuple[tuple[ModalFit, ...], ...] = field(repr=False)
     K_0: FloatArray = field(repr=False)
     C_0: FloatArray = field(repr=False)
+    warnings: tuple[str, ...] = ()
 
     def Q_entries(self) -> tuple[FloatArray, ComplexArray]:
         """Return the table as samples of ``Q(iK)``, each entry at the K it was measured at.
@@ -196,6 +201,9 @@ def flutter_derivatives(
         No releases, or a decay in which two oscillatory modes cannot be found.
     RankDeficiencyError
         A decay whose two mode shapes are nearly parallel (the system matrix is not determined).
+    PlausibilityError
+        The section's still-air frequencies look like rad/s, or fh and fa swapped: what the
+        decays ring at says so (:func:`ident.records.decay_checks.check_frequencies`).
     TypeError
         If ``releases`` holds something other than :class:`Release` objects.
 
@@ -227,6 +235,9 @@ def flutter_derivatives(
     K_0, C_0 = _still_air_reference(still_air, section)
     groups = _group_by_speed(releases)
     rows = [_group_row(group, section, K_0, C_0) for group in groups]
+    warnings = decay_checks.check_frequencies(
+        section, [row["U"] for row in rows for _ in row["frequencies"]],
+        [f for row in rows for f in row["frequencies"]])
     names = FLUTTER_DERIVATIVE_NAMES
     return DecayDerivativeTable(
         U=np.array([row["U"] for row in rows]),
@@ -238,6 +249,7 @@ def flutter_derivatives(
         modal_fits=tuple(row["fits"] for row in rows),
         K_0=K_0,
         C_0=C_0,
+        warnings=tuple(warnings),
     )
 
 
@@ -281,6 +293,10 @@ def _group_row(
         "mean": {n: float(x.mean()) for n, x in fds.items()},
         "std": {n: float(x.std(ddof=1)) if x.size > 1 else math.nan for n, x in fds.items()},
         "fits": tuple(system.fit for system, _ in per_release),
+        "frequencies": [(abs(system.lam_h.imag) / (2 * math.pi),
+                         abs(system.lam_a.imag) / (2 * math.pi))
+                        for system, _ in per_release if system.fit.random_response
+                        <= RANDOM_RESPONSE_LIMIT],
     }
 
 
@@ -480,6 +496,9 @@ def identify(
     RankDeficiencyError
         Releases at fewer than three wind speeds, or a table that cannot determine the requested
         structure.
+    PlausibilityError
+        The section's still-air frequencies look like rad/s, or swapped
+        (:func:`flutter_derivatives`).
     ValueError
         ``n_lags`` outside 0..3.
 

@@ -96,6 +96,16 @@ class ModalFit:
         return np.asarray(-modes.real / np.abs(modes), dtype=float)
 
     @property
+    def random_response(self) -> float:
+        """The residual rms over the white measurement noise, larger channel.
+
+        About 1 for a decay fitted to its noise; 10-60 for a random response (turbulence).
+        """
+        scale = np.maximum(self.noise, 1e-9 * np.maximum(self.residual_rms, 1e-300))
+        return (float(np.max(self.residual_rms / scale)) if np.any(self.residual_rms > 0)
+                else 0.0)
+
+    @property
     def real_poles(self) -> FloatArray:
         """Non-oscillatory poles (aerodynamic lags, overdamped motion), 1/s."""
         return np.asarray(self.poles[self.poles.imag == 0].real, dtype=float)

@@ -69,10 +69,10 @@ from ident.model.conventions import derivative_layout, reduced_frequency
 from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel
 
-__all__ = ["DISTINCT_U_RTOL", "EXTRAPOLATION_WARN", "REFIT_GRID", "FlutterUncertainty",
-           "UncertaintySources", "distinct_wind_speeds", "flutter_derivative_std",
-           "flutter_uncertainty", "jackknife_std", "nearest_wind_speed", "no_flutter_warnings",
-           "parametric"]
+__all__ = ["CEILING_WARN", "DISTINCT_U_RTOL", "EXTRAPOLATION_WARN", "REFIT_GRID",
+           "FlutterUncertainty", "UncertaintySources", "ceiling_warnings", "distinct_wind_speeds",
+           "flutter_derivative_std", "flutter_uncertainty", "jackknife_std", "nearest_wind_speed",
+           "no_flutter_warnings", "parametric"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -85,6 +85,15 @@ REFIT_GRID = 150
 #: Largest extrapolation, as the ratio of the lowest covered reduced frequency to the flutter
 #: one, accepted without a warning.
 EXTRAPOLATION_WARN = 1.1
+#: Without flutter below the search's ceiling ``U_max``, releases that reach this fraction of
+#: it are warned of: their reduced velocities are beyond most decks' flutter point (the
+#: default ceiling is a reduced velocity ``U / (f B)`` of about 31 for the faster mode), and
+#: "no flutter" then rests on little room above the data. Campaigns reach 0.2-0.3 of it; wind
+#: speeds in km/h (x 3.6) or mph (x 2.24) put them at 0.6-0.9.
+CEILING_WARN = 0.5
+#: Reduced velocity ``U / (f B)`` (the faster of heave and pitch) beyond the flutter point of
+#: most decks (full bridges' are about 5-15) and of the section models built for them.
+UNUSUAL_REDUCED_VELOCITY = 15.0
 
 
 class UncertaintySources(Protocol):
@@ -397,8 +406,9 @@ def no_flutter_warnings(section: SectionModel, sources: UncertaintySources, U_ma
     some of the jackknife refits do flutter below U_max, say so (how many, and where).
     """
     diag = sources
+    ceiling = ceiling_warnings(section, diag.wind_speeds, U_max)
     if not diag.turbulent:
-        return diag.warnings
+        return (*diag.warnings, *ceiling)
     speeds = []
     for model in diag.jackknife:
         try:
@@ -410,11 +420,37 @@ def no_flutter_warnings(section: SectionModel, sources: UncertaintySources, U_ma
         if found is not None:
             speeds.append(float(found))
     if not speeds:
-        return diag.warnings
-    return (*diag.warnings,
+        return (*diag.warnings, *ceiling)
+    return (*diag.warnings, *ceiling,
             f"no flutter below {U_max:.3g} m/s, but {len(speeds)} of {len(diag.jackknife)} "
             f"refits with one release left out flutter at {min(speeds):.3g}-"
             f"{max(speeds):.3g} m/s: these releases do not determine the flutter speed")
+
+
+def ceiling_warnings(section: SectionModel, speeds: npt.ArrayLike, U_max: float
+                     ) -> tuple[str, ...]:
+    """Warn of "no flutter below U_max" from releases close to ``U_max`` (:data:`CEILING_WARN`).
+
+    Parameters
+    ----------
+    section : SectionModel
+    speeds : array_like
+        The releases' wind speeds, m/s.
+    U_max : float
+        The flutter search's ceiling, m/s.
+    """
+    top = float(np.max(speeds)) if np.size(speeds) else 0.0
+    if top < CEILING_WARN * U_max:
+        return ()
+    f_fast = max(section.fh, section.fa)
+    reduced_velocity = top / (f_fast * section.B)
+    units = ("" if reduced_velocity <= UNUSUAL_REDUCED_VELOCITY else
+             f"; their reduced velocity U / (f B) of {reduced_velocity:.3g} for the {f_fast:g} "
+             "Hz mode is beyond most decks' flutter point: if the wind speeds are in km/h or "
+             "mph, convert them to m/s (/3.6, /2.237)")
+    return (f"no flutter below {U_max:.3g} m/s, but the releases reach {top:.3g} m/s, "
+            f"{top / U_max:.2f} of that ceiling: search further (U_max) before calling the "
+            f"section stable{units}",)
 
 
 def flutter_derivative_std(model: RationalFunctionModel, sources: UncertaintySources,

@@ -6,7 +6,11 @@
   their tubing correction, the warnings they were recorded with);
 - :mod:`~ident.records.release_onset`: the release instant found in the displacements alone
   (a release by hand, a file without release events);
-- :mod:`~ident.records.plausibility`: guards against unit and sign mistakes and dead channels
-  (a pitch in degrees, a time axis in ms, forces over the span, a lift of the wrong sign, an
-  air density in g/m^3, a late release instant, a channel of one value), run by E2RFC.
+- :mod:`~ident.records.plausibility`: guards against unit mistakes and dead channels in each
+  release (a pitch in degrees, a time axis in ms, forces far beyond the wind's, an air density
+  in g/m^3, a late release instant, a channel of one value), run by E2RFC;
+- :mod:`~ident.records.decay_checks`: the section and the identified model against the
+  measured decays (still-air frequencies in rad/s or swapped, forces off by a factor, a lift of
+  the wrong sign, a small displacement in a wrong unit), run by E2RFC (the frequencies by the
+  displacement-only route too).
 """

@@ -32,26 +32,8 @@ fh = 2 Hz, fa = 4 Hz, Jones's aerodynamics, releases from 4 mm and 0.02 rad at 0
   times :data:`FORCE_BOUND_FACTOR` times the largest entry of a flat plate's ``|Q(iK)|`` at
   the release's reduced frequencies (bluff decks' derivatives are a few times a plate's, never
   ten times): a force in a wrong unit, or total over a long span, is warned of. A total force
-  over a span near 1 m (0.9x) is far inside any such bound: the consistency below finds it.
-- **Forces against motion** (:func:`check_model`, after identification). The identified
-  model, put into the section's equations of motion at each release's wind speed, must
-  predict the decays that were measured: each mode's eigenvalue shift from still air,
-  predicted against measured. Correct data agree to 0.2 %. A lift of the wrong sign predicts
-  heave modes that grow where the measured ones decay (and ``H1* > 0`` at every release,
-  where any deck's aerodynamic damping of heave makes ``H1* < 0``): refused. Forces off by a
-  common factor (total over a 0.9 m span: the predicted aerodynamic shifts are 0.84-0.93 of
-  the measured ones) are warned of with the factor that reconciles them, when it is more than
-  :data:`FORCE_SCALE_TOLERANCE` from 1 and explains the decays (:data:`SCALE_EXPLAINS`); this
-  also catches a section whose mass or inertia is off by that factor, which the message says.
-  A model that predicts the decays badly however scaled (a moment of the wrong sign: 138 %
-  off, its pitch mode growing at 4.7 m/s where the measured one is damped 1.9 %; a lift alone
-  halved: 36 %) is warned of with its worst mode, above :data:`MISFIT_WARN`. Effects the
-  model lacks stay below it (friction 0.24, a 10 ms channel delay 0.21, a cubic spring 0.03:
-  the whiteness of the force residuals speaks for them). Where the model with one
-  displacement's column rescaled by a unit's factor (:data:`UNIT_MISTAKES`: heave in mm or
-  cm, pitch in degrees) predicts the decays within :data:`SCALE_EXPLAINS`, the warning names
-  that unit instead: a pitch of 0.23 degrees read as radians passes the amplitude check and
-  identified +131 % with a std of 0.5 %; rescaled, its model predicts the decays to 0.1 %.
+  over a span near 1 m (0.9x) is far inside any such bound: the forces against the motion
+  (:mod:`ident.records.decay_checks`) find it.
 - **Release instant** (:func:`check_start`). A release from rest starts with zero velocity in
   every coordinate. The instant where the decay's velocity vanishes, found from the modal
   fit extrapolated backwards (:func:`start_offset`) or, with a still hold before the release,
@@ -62,7 +44,8 @@ fh = 2 Hz, fa = 4 Hz, Jones's aerodynamics, releases from 4 mm and 0.02 rad at 0
   decay away from exponentials and its zero 3-10 ms away from a right instant).
 
 Not responsible for: the shapes, finiteness and sampling of a release
-(:mod:`ident.records.release`), fitting anything (:mod:`ident.identification`).
+(:mod:`ident.records.release`), the section and the identified model against the measured
+decays (:mod:`ident.records.decay_checks`), fitting anything (:mod:`ident.identification`).
 """
 
 from __future__ import annotations
@@ -77,19 +60,15 @@ from scipy.optimize import minimize_scalar
 from ident.errors import PlausibilityError, ReleaseNotFoundError
 from ident.model import flat_plate
 from ident.model.conventions import Q_from_flutter_derivatives
-from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel
-from ident.model.statespace import AeroelasticSystem
 from ident.records.release import Release
 from ident.records.release_onset import locate_release
 
-__all__ = ["AIR_DENSITY_RANGE", "ALPHA_AMPLITUDE_MAX", "FORCE_BOUND_FACTOR",
-           "FORCE_SCALE_TOLERANCE", "FREQUENCY_FACTOR", "HEAVE_AMPLITUDE_MAX",
-           "START_OFFSET_WARN_S", "UNIT_MISTAKES", "check_air_density", "check_channels",
-           "check_model", "check_release", "check_start", "force_scale", "start_offset"]
+__all__ = ["AIR_DENSITY_RANGE", "ALPHA_AMPLITUDE_MAX", "FORCE_BOUND_FACTOR", "FREQUENCY_FACTOR",
+           "HEAVE_AMPLITUDE_MAX", "START_OFFSET_WARN_S", "check_air_density", "check_channels",
+           "check_release", "check_start", "start_offset"]
 
 FloatArray = npt.NDArray[np.float64]
-ComplexArray = npt.NDArray[np.complex128]
 
 #: Largest pitch amplitude (half the peak-to-peak about the mean) of a section model, rad.
 #: Holds are 0.01-0.1 rad; 0.3 rad (17 degrees) is beyond any rig's, and a hold of 0.3
@@ -108,10 +87,6 @@ AIR_DENSITY_RANGE = (0.5, 1.6)
 #: decks' flutter derivatives and static slopes are a few times a plate's (a lift slope of
 #: 6-15 per rad against 2 pi), so ten times is generous enough never to warn on a real deck.
 FORCE_BOUND_FACTOR = 10.0
-#: Force scale (measured over what the motion implies) further than this from 1 is warned
-#: of. Correct simulated data give 1 within 0.3 %; a section's still-air damping known to
-#: 0.1 % of critical moves the scale by about 1 % at the wind speeds of a campaign.
-FORCE_SCALE_TOLERANCE = 0.05
 #: A release instant this far (s) from where the decay starts from rest is warned of. The
 #: backward extrapolation finds the start within 0.5 ms on 2 % noise; release_onset within
 #: 0.1-1.5 ms (its module docstring).
@@ -126,12 +101,6 @@ MODAL_FIT_EXCESS_MAX = 1.5
 #: ... and only when both coordinates' velocities vanish together there: their rms, each over
 #: its scale, below this (0.01-0.06 on 2 % noise for a late instant).
 START_VELOCITY_MAX = 0.1
-#: A common factor on the forces is named only when it explains the decays: the shifts'
-#: misfit with it below this (0.001 on 2 % noise; friction or a delayed channel leave 0.2).
-SCALE_EXPLAINS = 0.1
-#: Misfit of the model's predicted shifts (as identified) above which the model is said not
-#: to predict the decays (correct data 0.001-0.002; a 10 ms channel delay 0.2, friction 0.2).
-MISFIT_WARN = 0.25
 
 
 def _amplitude(x: FloatArray) -> float:
@@ -405,172 +374,3 @@ def check_start(release: Release, section: SectionModel,
             f"the decay starts at t = {1e3 * offset:+.1f} ms ({how}); the lag states start at "
             "zero at t = 0, so the model is fitted to a release that did not happen then: "
             "give the instant the model was let go"]
-
-
-def _oscillatory(eigenvalues: ComplexArray) -> ComplexArray:
-    return eigenvalues[eigenvalues.imag > 1e-9 * np.abs(eigenvalues).max()]
-
-
-def _shifts(section: SectionModel, model: RationalFunctionModel, speeds: Sequence[float],
-            measured: Sequence[ComplexArray]) -> tuple[ComplexArray, ComplexArray]:
-    """Return the predicted and the measured eigenvalue shifts from still air, 1/s.
-
-    One entry per measured mode of every release, in order; each matched to the nearest
-    still-air and the nearest predicted oscillatory eigenvalue.
-    """
-    still_model = RationalFunctionModel(np.zeros((3, model.n_dof, model.n_dof)), [])
-    still = _oscillatory(AeroelasticSystem(section, still_model, 0.0).eigenvalues())
-    predicted_all, measured_all = [], []
-    for U, modes in zip(speeds, measured, strict=True):
-        predicted = _oscillatory(AeroelasticSystem(section, model, U).eigenvalues())
-        for lam in modes:
-            lam0 = still[np.argmin(np.abs(still - lam))]
-            lam_p = predicted[np.argmin(np.abs(predicted - lam))]
-            predicted_all.append(lam_p - lam0)
-            measured_all.append(lam - lam0)
-    return np.asarray(predicted_all), np.asarray(measured_all)
-
-
-def _zeta(lam: complex) -> float:
-    """Damping ratio of an eigenvalue, ``-Re / |lam|`` (negative: the mode grows)."""
-    return float(-lam.real / abs(lam))
-
-
-def _misfit(section: SectionModel, model: RationalFunctionModel, speeds: Sequence[float],
-            measured: Sequence[ComplexArray]) -> float:
-    """Return the rms misfit of the predicted eigenvalue shifts, each over the measured one."""
-    predicted, measured_shift = _shifts(section, model, speeds, measured)
-    size = np.maximum(np.abs(measured_shift), 1e-12)
-    return float(np.sqrt(np.mean(np.abs(predicted - measured_shift) ** 2 / size**2)))
-
-
-#: Unit mistakes of a displacement tried by :func:`_unit_mistake`: (coordinate, its name,
-#: the unit it was read in, the factor from the wrong unit's numbers to the right one's).
-UNIT_MISTAKES = ((0, "h", "millimetres", 1e-3), (0, "h", "centimetres", 1e-2),
-                 (1, "alpha", "degrees", math.pi / 180))
-
-
-def _unit_mistake(section: SectionModel, model: RationalFunctionModel, speeds: Sequence[float],
-                  measured: Sequence[ComplexArray]) -> tuple[str, str, float] | None:
-    """Return ``(channel, unit, misfit)`` of the unit mistake that explains the decays, or None.
-
-    A displacement read in a wrong unit scales its column of the identified ``Q`` by the unit's
-    factor, not the decays' eigenvalues: the model with that column rescaled predicts them
-    again, to within :data:`SCALE_EXPLAINS`. Amplitude checks catch such a channel when its
-    holds are large; with small ones (a pitch of 0.2 degrees) only this does.
-    """
-    best: tuple[str, str, float] | None = None
-    for column, name, unit, factor in UNIT_MISTAKES:
-        A = np.array(model.A, dtype=float)
-        A[:, :, column] /= factor
-        misfit = _misfit(section, RationalFunctionModel(A, model.d), speeds, measured)
-        if misfit < SCALE_EXPLAINS and (best is None or misfit < best[2]):
-            best = (name, unit, misfit)
-    return best
-
-
-def force_scale(section: SectionModel, model: RationalFunctionModel, speeds: Sequence[float],
-                measured: Sequence[ComplexArray]) -> tuple[float, float]:
-    """Return the factor on the model's forces that best predicts the measured decays.
-
-    The model times ``k``, in the section's equations of motion at each wind speed, predicts
-    each measured mode's eigenvalue shift from still air; ``k`` minimises the shifts' misfit
-    relative to their size (a bounded search over ``log k`` in ``[-log 1000, log 1000]``).
-
-    Returns
-    -------
-    k : float
-        1 for forces consistent with the motion; 1/0.9 for forces total over a 0.9 m span.
-    misfit : float
-        The remaining rms misfit of the shifts relative to the measured shifts.
-    """
-    def misfit(log_k: float) -> float:
-        scaled = RationalFunctionModel(math.exp(log_k) * model.A, model.d)
-        return _misfit(section, scaled, speeds, measured)
-
-    found = minimize_scalar(misfit, bounds=(-math.log(1e3), math.log(1e3)), method="bounded",
-                            options={"xatol": 1e-4})
-    return math.exp(float(found.x)), float(found.fun)
-
-
-def check_model(section: SectionModel, model: RationalFunctionModel, speeds: Sequence[float],
-                measured: Sequence[ComplexArray], heave: Sequence[int]) -> list[str]:
-    """Check an identified model against the decays it came from (module docstring).
-
-    Parameters
-    ----------
-    section : SectionModel
-    model : RationalFunctionModel
-        The identified model.
-    speeds : sequence of float
-        Each release's wind speed, m/s.
-    measured : sequence of complex ndarray
-        Each release's measured oscillatory eigenvalues (modal fit), 1/s.
-    heave : sequence of int
-        Index into each ``measured`` of its heave-dominated mode.
-
-    Returns
-    -------
-    list of str
-        Warnings: forces off by a factor, or a model that does not predict the decays.
-
-    Raises
-    ------
-    PlausibilityError
-        The lift's sign looks flipped: every release's measured heave mode is damped by the
-        wind, the model's heave mode grows, and ``H1* > 0`` at every release.
-    """
-    predicted, measured_shift = _shifts(section, model, speeds, measured)
-    n_modes = [len(m) for m in measured]
-    starts = np.cumsum([0, *n_modes[:-1]])
-    heave_rows = [int(s + i) for s, i in zip(starts, heave, strict=True)]
-    damped = all(measured_shift[r].real < 0 for r in heave_rows)
-    grows = all(predicted[r].real > 0 for r in heave_rows)
-    K = np.array([section.B * abs(m[i].imag) / U
-                  for m, i, U in zip(measured, heave, speeds, strict=True)])
-    H1 = model.flutter_derivatives(K)["H1"]
-    if damped and grows and np.all(H1 > 0):
-        raise PlausibilityError(
-            "the lift's sign looks flipped (lift positive upward; windrig's is positive "
-            "downward, along h): the wind damps every release's heave mode, but the model "
-            f"identified from these forces has H1* = {float(H1.min()):.3g} to "
-            f"{float(H1.max()):.3g} > 0 at the releases' reduced frequencies (any deck's "
-            "aerodynamic damping of heave makes H1* < 0) and predicts heave modes that grow; "
-            "negate the lift")
-    as_identified = _misfit(section, model, speeds, measured)
-    warnings: list[str] = []
-    if as_identified < FORCE_SCALE_TOLERANCE / 2:
-        # The shifts scale about as the forces do: a misfit this small leaves no room for a
-        # factor beyond the tolerance (and the search, 85 % of these checks' time, is spared).
-        return warnings
-    k, remaining = force_scale(section, model, speeds, measured)
-    if abs(1.0 / k - 1.0) > FORCE_SCALE_TOLERANCE and remaining < SCALE_EXPLAINS:
-        warnings.append(
-            f"the forces are {1.0 / k:.3g} times what the decays imply (the model predicts "
-            f"the measured frequencies and damping with its forces times {k:.3g}): forces "
-            "total over the model's span rather than per unit span (N/m; a span of "
-            f"{1.0 / k:.3g} m?), a force calibration off, or the section's mass and inertia "
-            f"off by {k:.3g}")
-    elif as_identified > MISFIT_WARN and (unit := _unit_mistake(section, model, speeds,
-                                                                measured)) is not None:
-        warnings.append(
-            f"the identified model does not predict the measured decays "
-            f"({100 * as_identified:.0f} % off), but does once {unit[0]} is taken as "
-            f"{unit[1]} ({100 * unit[2]:.2g} % off): {unit[0]} looks like {unit[1]} (small "
-            f"holds pass the amplitude check); convert it, or the flutter speed is wrong")
-    elif as_identified > MISFIT_WARN:
-        errors = np.abs(predicted - measured_shift) / np.maximum(np.abs(measured_shift), 1e-12)
-        worst = int(np.argmax(errors))
-        U = np.repeat(np.asarray(speeds, dtype=float), n_modes)[worst]
-        lam = np.concatenate(list(measured))[worst]
-        lam_p = lam - measured_shift[worst] + predicted[worst]
-        warnings.append(
-            f"the identified model does not predict the measured decays (the frequency and "
-            f"damping shifts from still air it predicts are {100 * as_identified:.0f} % off "
-            f"the measured ones; worst at {U:.3g} m/s, the {lam.imag / (2 * math.pi):.3g} Hz "
-            f"mode: damping ratio {100 * _zeta(lam_p):.2g} % predicted, {100 * _zeta(lam):.2g} % "
-            "measured): a force channel's sign or unit (a moment of the wrong sign, a lift "
-            "scaled apart from the moment), an effect the model lacks (friction, a delayed "
-            "channel: windrig diagnose names it), or the section's still-air frequencies and "
-            "damping")
-    return warnings

@@ -1,0 +1,114 @@
+"""The section and the identified model against the measured decays.
+
+The still-air frequencies are checked on the modes the simulated releases ring at (the flat
+plate of the tests, Jones's aerodynamics, 2 % noise), through both identification routes; the
+force scale on exact eigenvalues of the section with the model.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from ident.errors import PlausibilityError
+from ident.identification import e2rfc, fd_method
+from ident.model import flat_plate, flutter
+from ident.model.rfc import RationalFunctionModel
+from ident.model.statespace import AeroelasticSystem
+from ident.records import decay_checks
+from ident.records.release import Release
+from simulators.tunnel import simulate_release
+
+from support.sections import FLAT_PLATE
+
+JONES = flat_plate.jones_model()
+U_F = flutter.analyze(FLAT_PLATE, JONES).speed
+SWAY = dataclasses.replace(FLAT_PLATE, fp=1.3, zeta_p=0.004)
+IN_RAD_S = dataclasses.replace(FLAT_PLATE, fh=2 * math.pi * FLAT_PLATE.fh,
+                               fa=2 * math.pi * FLAT_PLATE.fa)
+SWAPPED = dataclasses.replace(FLAT_PLATE, fh=FLAT_PLATE.fa, fa=FLAT_PLATE.fh)
+
+
+@pytest.fixture(scope="module")
+def releases():
+    """Two releases at each of 0.4, 0.6 and 0.8 of the flutter speed, 10 s at 250 Hz, seeded."""
+    return [Release.from_simulation(simulate_release(
+        FLAT_PLATE, JONES, fraction * U_F, 0.004, 0.02, duration=10.0, fs=250.0, noise=0.02,
+        rng=(7, j, i))) for i, fraction in enumerate((0.4, 0.6, 0.8)) for j in range(2)]
+
+
+def test_still_air_frequencies_a_few_per_cent_off_pass():
+    """The wind moves a mode by a few per cent at the lowest speed: no word."""
+    assert decay_checks.check_frequencies(FLAT_PLATE, [4.7, 9.4], [[2.06, 3.87], [2.1, 3.3]]) == []
+
+
+def test_a_first_release_near_flutter_is_not_refused():
+    """The plate at 0.98 of its flutter speed: pitch at 0.75 fa, within the warning's factor."""
+    assert decay_checks.check_frequencies(FLAT_PLATE, [11.5], [[2.06, 2.99]]) == []
+
+
+@pytest.mark.parametrize(("section", "match"), [
+    (IN_RAD_S, r"look like rad/s, not Hz.*fh = 2 Hz, fa = 4 Hz"),
+    (dataclasses.replace(FLAT_PLATE, fh=FLAT_PLATE.fh / (2 * math.pi),
+                         fa=FLAT_PLATE.fa / (2 * math.pi)), "divided by 2 pi once too often"),
+    (SWAPPED, r"fh and fa look swapped.*swap them \(fh = 2 Hz, fa = 4 Hz\)"),
+], ids=["rad/s", "divided twice", "swapped"])
+def test_frequencies_in_a_wrong_unit_or_swapped_are_refused_naming_it(section, match):
+    with pytest.raises(PlausibilityError, match=match):
+        decay_checks.check_frequencies(section, [4.7, 4.7, 9.4],
+                                       [[2.0, 3.87], [2.01, 3.88], [2.1, 3.2]])
+
+
+def test_three_degrees_of_freedom_name_the_pair_swapped():
+    swapped = dataclasses.replace(SWAY, fh=SWAY.fp, fp=SWAY.fh)
+    with pytest.raises(PlausibilityError, match=r"fh and fp look swapped"):
+        decay_checks.check_frequencies(swapped, [4.0], [[2.02, 3.9, 1.31]])
+    assert decay_checks.check_frequencies(SWAY, [4.0], [[2.02, 3.9, 1.31]]) == []
+
+
+def test_frequencies_off_in_no_known_way_are_warned_of():
+    """Pitch at half its still-air frequency: no unit explains it, so a warning, not an error."""
+    warnings = decay_checks.check_frequencies(FLAT_PLATE, [4.7], [[2.0, 2.0]])
+    assert len(warnings) == 1 and "not the releases'" in warnings[0]
+    assert "2 Hz (pitch)" in warnings[0] and "fa = 4 Hz" in warnings[0]
+
+
+@pytest.mark.parametrize(("section", "match"), [(IN_RAD_S, "look like rad/s"),
+                                                (SWAPPED, "fh and fa look swapped")],
+                         ids=["rad/s", "swapped"])
+def test_e2rfc_refuses_a_section_whose_frequencies_the_decays_deny(releases, section, match):
+    """Unguarded, rad/s gave +528 % with a std of 0.3 %, swapped "no flutter"; each a misfit."""
+    with pytest.raises(PlausibilityError, match=match):
+        e2rfc.identify(releases, section)
+
+
+@pytest.mark.parametrize(("section", "match"), [(IN_RAD_S, "look like rad/s"),
+                                                (SWAPPED, "fh and fa look swapped")],
+                         ids=["rad/s", "swapped"])
+def test_the_displacement_route_refuses_them_too(releases, section, match):
+    with pytest.raises(PlausibilityError, match=match):
+        fd_method.identify(releases, section)
+
+
+def test_both_routes_accept_the_right_section(releases):
+    assert fd_method.flutter_derivatives(releases, FLAT_PLATE).warnings == ()
+    model = e2rfc.identify(releases, FLAT_PLATE)
+    assert not [w for w in model.diagnostics.warnings if "frequencies" in w]
+
+
+def test_force_scale_of_the_true_model_is_one_and_of_a_scaled_one_its_inverse():
+    """Eigenvalues of the section with the model: measured = predicted when the scale is 1."""
+    speeds = [4.0, 8.0]
+    measured = []
+    for U in speeds:
+        lam = AeroelasticSystem(FLAT_PLATE, JONES, U).eigenvalues()
+        measured.append(np.sort_complex(lam[lam.imag > 1e-6]))
+    k, misfit = decay_checks.force_scale(FLAT_PLATE, JONES, speeds, measured)
+    # Exact eigenvalues: the bounded search's tolerance (1e-4 in log k).
+    assert k == pytest.approx(1.0, abs=1e-4) and misfit < 1e-4
+    scaled = RationalFunctionModel(0.8 * JONES.A, JONES.d)
+    k, _ = decay_checks.force_scale(FLAT_PLATE, scaled, speeds, measured)
+    assert k == pytest.approx(1 / 0.8, rel=1e-3)
