@@ -67,7 +67,7 @@ def search_again(fit: ClosedLoopFit, section: SectionModel, bounded_at: float | 
     """
     if bounded_at is None:
         return fit, None
-    first = _flutter.analyze(section, fit.model).speed
+    first = _flutter_speed(section, fit.model)
     if first is None or not _refuted(first, bounded_at):
         return fit, None
     found: list[tuple[ClosedLoopFit, float | None]] = [(fit, first)]  # each with its flutter
@@ -79,10 +79,11 @@ def search_again(fit: ClosedLoopFit, section: SectionModel, bounded_at: float | 
         except ValueError as exc:
             failed.append(f"{name} ({exc})")
             continue
-        found.append((other, _flutter.analyze(section, other.model).speed))
+        found.append((other, _flutter_speed(section, other.model)))
     allowed = [(f, speed) for f, speed in found if not _refuted(speed, bounded_at)]
     best, speed = min(allowed or found, key=lambda pair: pair[0].neg_log_likelihood)
     fluttering = ("without flutter in the searched range" if speed is None
+                  else "unstable in still air" if speed == 0.0
                   else f"fluttering at {speed:.3g} m/s")
     if best is fit:
         kept = f"the first, {fluttering}"
@@ -90,13 +91,26 @@ def search_again(fit: ClosedLoopFit, section: SectionModel, bounded_at: float | 
         change = fit.neg_log_likelihood - best.neg_log_likelihood
         kept = (f"a maximum {abs(change):.1f} {'higher' if change > 0 else 'lower'} in log L "
                 f"than the first, {fluttering}")
+    was = "was unstable in still air" if first == 0.0 else f"fluttered at {first:.3g} m/s"
     return best, (
-        f"turbulence: the likelihood's first maximum fluttered at {first:.3g} m/s, below "
+        f"turbulence: the likelihood's first maximum {was}, below "
         f"{bounded_at:.3g} m/s where no release grew; searched again from its own "
         "coefficients (buffeting and noise afresh) and from the flat plate's aerodynamics"
         + (f" (could not start from {'; '.join(failed)})" if failed else "")
         + (f": kept {kept}, the best the releases allow" if allowed
            else f": every maximum is refuted, kept {kept}"))
+
+
+def _flutter_speed(section: SectionModel, model: RationalFunctionModel) -> float | None:
+    """Return a maximum's flutter speed, m/s: None without flutter, 0 when unstable in still air.
+
+    A maximum whose added mass overturns the structure's (:class:`StillAirModesError`) has a
+    mode that grows without wind: any release that decayed refutes it, as a speed of zero.
+    """
+    try:
+        return _flutter.analyze(section, model).speed
+    except _flutter.StillAirModesError:
+        return 0.0
 
 
 def _refuted(speed: float | None, bounded_at: float) -> bool:

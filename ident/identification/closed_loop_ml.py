@@ -462,11 +462,14 @@ class _Objective:
         self._dynamics.clear()
         out = _Evaluation(0.0, [], [], [], [], [])
         for record in self.records:
+            # A trial step far out (a search from a wild start) can make the block transition
+            # or the Riccati solution overflow: that is no maximum either, not a warning.
             try:
-                predictor = self.predictor(theta, record)
-                e, columns, nuisance = predictor.concentrated(record.y, self.at_zero(record))
-            except (ValueError, np.linalg.LinAlgError):  # no stable predictor: not a maximum
-                return _Evaluation(math.inf, [], [], [], [], [])
+                with np.errstate(over="raise", invalid="raise"):
+                    predictor = self.predictor(theta, record)
+                    e, columns, nuisance = predictor.concentrated(record.y, self.at_zero(record))
+            except (ValueError, FloatingPointError, np.linalg.LinAlgError):
+                return _Evaluation(math.inf, [], [], [], [], [])  # no stable predictor
             out.e.append(e)
             out.S.append(predictor.S)
             out.columns.append(columns)

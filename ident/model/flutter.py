@@ -143,7 +143,8 @@ class StillAirModesError(ValueError):
     """The model at the start of the search has not one oscillatory mode per degree of freedom.
 
     A wild refit (an alternative structure, a jackknife refit) can have an added mass that
-    overturns the structure's: its flutter search has nowhere to start.
+    overturns the structure's (no oscillatory mode, or one that grows without wind): its flutter
+    search has nowhere to start.
     """
 
 
@@ -161,6 +162,14 @@ def _initial_branches(
             f"expected {n} oscillatory still-air modes, found {oscillatory.size}: the section is "
             "overdamped or the aerodynamic model dominates the structure at low wind speed"
         )
+    growing = lam[oscillatory].real > _UNSTABLE_RTOL * np.abs(lam[oscillatory])
+    if growing.any():
+        worst = lam[oscillatory][np.argmax(lam[oscillatory].real)]
+        raise StillAirModesError(
+            f"a mode grows in still air ({abs(worst.imag) / (2 * math.pi):.3g} Hz, damping "
+            f"ratio {-worst.real / abs(worst):.3g}): the model's aerodynamic added mass (A3, "
+            "which stays as the wind speed goes to zero) overturns the structure's, so no "
+            "flutter speed can be defined")
     order = list(name_modes(vec[0:n, oscillatory].T, section.mass_matrix()))
     return np.asarray(lam[oscillatory[order]], dtype=complex)
 

@@ -394,3 +394,17 @@ def test_grid_size_accepts_numpy_integers():
     s = SECTIONS["unbalanced_B0.3"]
     assert flutter.analyze(s, JONES, n_points=np.int64(200)).speed == pytest.approx(
         flutter.analyze(s, JONES, n_points=200).speed, rel=1e-12)
+
+
+def test_a_model_whose_added_mass_makes_a_mode_grow_in_still_air_is_refused_naming_it():
+    """A wild fit's skew added mass couples the modes without wind: 2.2 Hz grows at 28 %.
+
+    Before, the crossing's refinement met a mode already growing at zero wind and stopped on
+    scipy's "f(a) and f(b) must have different signs".
+    """
+    A = np.zeros((3, 2, 2))
+    A[2] = [[0.0, 20.0], [-20.0, 0.0]]
+    with pytest.raises(flutter.StillAirModesError, match=r"a mode grows in still air \(2.23 Hz"):
+        flutter.analyze(FLAT_PLATE, RationalFunctionModel(A, []))
+    A[2] *= 0.25  # the same coupling, weaker than the structure: it analyses as before
+    assert flutter.analyze(FLAT_PLATE, RationalFunctionModel(A, [])).speed is None
