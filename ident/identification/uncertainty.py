@@ -70,9 +70,10 @@ from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel
 
 __all__ = ["CEILING_WARN", "DISTINCT_U_RTOL", "EXTRAPOLATION_WARN", "REFIT_GRID",
-           "FlutterUncertainty", "UncertaintySources", "ceiling_warnings", "distinct_wind_speeds",
-           "flutter_derivative_std", "flutter_uncertainty", "jackknife_std", "nearest_wind_speed",
-           "no_flutter_warnings", "parametric"]
+           "UNUSUAL_REDUCED_VELOCITY", "FlutterUncertainty", "UncertaintySources",
+           "ceiling_warnings", "distinct_wind_speeds", "flutter_derivative_std",
+           "flutter_uncertainty", "jackknife_std", "nearest_wind_speed", "no_flutter_warnings",
+           "parametric"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -438,6 +439,12 @@ def ceiling_warnings(section: SectionModel, speeds: npt.ArrayLike, U_max: float
         The releases' wind speeds, m/s.
     U_max : float
         The flutter search's ceiling, m/s.
+
+    Returns
+    -------
+    tuple of str
+        One warning when the releases reach :data:`CEILING_WARN` of ``U_max`` (naming km/h and
+        mph beyond :data:`UNUSUAL_REDUCED_VELOCITY`), else none.
     """
     top = float(np.max(speeds)) if np.size(speeds) else 0.0
     if top < CEILING_WARN * U_max:

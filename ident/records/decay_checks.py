@@ -4,7 +4,8 @@
 modal fits measured (each release's oscillatory eigenvalues) against what the section and the
 identified model say. :func:`ident.identification.e2rfc.identify` runs them on releases in
 smooth flow (in turbulence the modal fits neither start from rest nor give the damping to the
-precision needed) and adds their warnings to the model's.
+precision needed) and adds their warnings to the model's; the displacement-only route
+(:mod:`ident.identification.fd_method`) runs the frequency check.
 
 Measured on the flat plate of the tests (B = 0.3 m, fh = 2 Hz, fa = 4 Hz, Jones's
 aerodynamics, releases from 4 mm and 0.02 rad at 0.4, 0.6 and 0.8 of its flutter speed, 2 %
@@ -111,7 +112,8 @@ def check_frequencies(section: SectionModel, speeds: Sequence[float],
     Returns
     -------
     list of str
-        A warning when the frequencies are off in a way no mistake below explains.
+        A warning when a mode is more than :data:`FREQUENCY_WARN` times off in a way no
+        mistake below explains.
 
     Raises
     ------
