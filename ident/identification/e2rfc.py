@@ -227,7 +227,7 @@ def identify(
     guards = [w for r in releases for w in plausibility.check_release(r, section)]
     guards += plausibility.check_air_density(releases, section)
     prepared = [prepare(r, section) for r in releases]
-    guards += _check_frequencies(prepared, section)
+    guards += _check_still_air(prepared, section)
     if section.n_dof == 3:
         _check_modes_excited(prepared, section)
     estimator = TURBULENT_ESTIMATOR if turbulent_estimator is None else turbulent_estimator
@@ -380,28 +380,40 @@ def _guarded(model: IdentifiedModel, prepared: list[PreparedRelease], section: S
     return IdentifiedModel(model.A, model.d, diagnostics)
 
 
-def _check_frequencies(prepared: list[PreparedRelease], section: SectionModel) -> list[str]:
-    """Check the section's still-air frequencies against the smooth releases' modal fits.
+def _check_still_air(prepared: list[PreparedRelease], section: SectionModel) -> list[str]:
+    """Check the section's still-air frequencies and damping against what the releases show.
 
-    Releases with a random response are left out: in turbulence the modal fit's pitch-named
-    mode rings at 0.2-0.5 of the pitch's frequency on many releases (gust-driven motion below
-    the modes; the benchmark's plate and bluff deck at Iw 1-3 %).
+    A decay's modes are its modal fit's, named by their shapes; their frequencies and, in
+    smooth flow, damping ratios are checked. A release with a random response gives each
+    coordinate's spectral peak instead, for the frequencies only
+    (:func:`ident.records.decay_checks.ringing_frequencies`): in turbulence the modal fit's
+    pitch-named mode rings at 0.2-0.5 of the pitch's frequency on many releases (gust-driven
+    motion below the modes; the benchmark's plate and bluff deck at Iw 1-3 %).
 
     Raises
     ------
     PlausibilityError
         Frequencies in rad/s, or two of them swapped
-        (:func:`ident.records.decay_checks.check_frequencies`).
+        (:func:`ident.records.decay_checks.check_frequencies`); damping ratios in per cent
+        (:func:`ident.records.decay_checks.check_damping`).
     """
     speeds, frequencies = [], []
+    smooth_speeds, damping = [], []
     for p in prepared:
         fit = p.fit
-        if fit.modes.size < section.n_dof or fit.random_response > RANDOM_RESPONSE_LIMIT:
+        if fit.random_response > RANDOM_RESPONSE_LIMIT:
+            rung = decay_checks.ringing_frequencies(p.release, section.n_dof)
+        elif fit.modes.size < section.n_dof:
             continue
-        named = name_modes(fit.mode_shapes(), section.mass_matrix())
+        else:
+            named = name_modes(fit.mode_shapes(), section.mass_matrix())
+            rung = [float(fit.frequencies[i]) for i in named]
+            smooth_speeds.append(p.U)
+            damping.append([float(fit.damping[i]) for i in named])
         speeds.append(p.U)
-        frequencies.append([float(fit.frequencies[i]) for i in named])
-    return decay_checks.check_frequencies(section, speeds, frequencies)
+        frequencies.append(rung)
+    warnings = decay_checks.check_frequencies(section, speeds, frequencies)
+    return warnings + decay_checks.check_damping(section, smooth_speeds, damping)
 
 
 def reduced_frequency_span(releases: Sequence[Release], section: SectionModel,

@@ -122,7 +122,8 @@ class DecayDerivativeTable:
         Still-air stiffness (N m/m) and damping (N m s/m) the aerodynamic parts are taken from.
     warnings : tuple of str
         The section's still-air frequencies far from what the decays ring at
-        (:func:`ident.records.decay_checks.check_frequencies`).
+        (:func:`ident.records.decay_checks.check_frequencies`), and its damping ratios far
+        above what they decay at (:func:`ident.records.decay_checks.check_damping`).
     """
 
     U: FloatArray
@@ -203,7 +204,9 @@ def flutter_derivatives(
         A decay whose two mode shapes are nearly parallel (the system matrix is not determined).
     PlausibilityError
         The section's still-air frequencies look like rad/s, or fh and fa swapped: what the
-        decays ring at says so (:func:`ident.records.decay_checks.check_frequencies`).
+        decays ring at says so (:func:`ident.records.decay_checks.check_frequencies`); or,
+        without ``still_air``, its damping ratios look given in per cent
+        (:func:`ident.records.decay_checks.check_damping`).
     TypeError
         If ``releases`` holds something other than :class:`Release` objects.
 
@@ -235,9 +238,12 @@ def flutter_derivatives(
     K_0, C_0 = _still_air_reference(still_air, section)
     groups = _group_by_speed(releases)
     rows = [_group_row(group, section, K_0, C_0) for group in groups]
+    speeds = [row["U"] for row in rows for _ in row["frequencies"]]
     warnings = decay_checks.check_frequencies(
-        section, [row["U"] for row in rows for _ in row["frequencies"]],
-        [f for row in rows for f in row["frequencies"]])
+        section, speeds, [f for row in rows for f in row["frequencies"]])
+    if still_air is None:  # the section's damping is the reference the decays are read from
+        warnings += decay_checks.check_damping(
+            section, speeds, [z for row in rows for z in row["damping"]])
     names = FLUTTER_DERIVATIVE_NAMES
     return DecayDerivativeTable(
         U=np.array([row["U"] for row in rows]),
@@ -297,6 +303,10 @@ def _group_row(
                          abs(system.lam_a.imag) / (2 * math.pi))
                         for system, _ in per_release if system.fit.random_response
                         <= RANDOM_RESPONSE_LIMIT],
+        "damping": [(-system.lam_h.real / abs(system.lam_h),
+                     -system.lam_a.real / abs(system.lam_a))
+                    for system, _ in per_release if system.fit.random_response
+                    <= RANDOM_RESPONSE_LIMIT],
     }
 
 
