@@ -222,13 +222,14 @@ def run_flutter(section_path: Path, *, model_path: Path | None = None,
     out : Path, optional
         Folder of the design report (``report.md`` and its plots, :mod:`daq.offline.design_report`).
     """
+    from ident.model.section import proportion_warnings
     from ident.tables.flutter_routes import section_flutter
 
     if u_max is not None and not u_max > 0:
         raise UsageError(f"--u-max {u_max:g}: must be > 0 m/s")
     section, defaults = _read_section(section_path)
     out_keys: dict[str, Any] = {}
-    warnings: list[str] = []
+    warnings: list[str] = proportion_warnings(section, source=str(section_path))
     if table_path is not None:
         table, fit = _table_fit(table_path, convention, section, out_keys, warnings)
         routes = section_flutter(section, table=table, fit=fit, U_max=u_max)

@@ -97,7 +97,7 @@ from ident.identification.results import (
     distinct_wind_speeds,
 )
 from ident.model.conventions import name_modes
-from ident.model.section import SectionModel
+from ident.model.section import SectionModel, proportion_warnings
 from ident.numerics.selection import Candidate, select_one_se, within_one_se
 from ident.numerics.threads import single_threaded_blas
 from ident.records import decay_checks, plausibility
@@ -226,6 +226,7 @@ def identify(
         raise ValueError(f"n_lags must be an integer in 0..3 or None, got {n_lags!r}")
     guards = [w for r in releases for w in plausibility.check_release(r, section)]
     guards += plausibility.check_air_density(releases, section)
+    guards += proportion_warnings(section)
     prepared = [prepare(r, section) for r in releases]
     guards += _check_still_air(prepared, section)
     if section.n_dof == 3:

@@ -52,7 +52,7 @@ from ident.model.conventions import (
     name_modes,
 )
 from ident.model.rfc import RationalFunctionModel
-from ident.model.section import SectionModel
+from ident.model.section import SectionModel, proportion_warnings
 from ident.numerics import validate as v
 from ident.numerics.selection import Candidate
 from ident.numerics.threads import single_threaded_blas
@@ -121,9 +121,11 @@ class DecayDerivativeTable:
     K_0, C_0 : ndarray, shape (2, 2)
         Still-air stiffness (N m/m) and damping (N m s/m) the aerodynamic parts are taken from.
     warnings : tuple of str
-        The section's still-air frequencies far from what the decays ring at
-        (:func:`ident.records.decay_checks.check_frequencies`), and its damping ratios far
-        above what they decay at (:func:`ident.records.decay_checks.check_damping`).
+        The section's proportions unlike a section model's
+        (:func:`ident.model.section.proportion_warnings`), its still-air frequencies far from
+        what the decays ring at (:func:`ident.records.decay_checks.check_frequencies`), and its
+        damping ratios far above what they decay at
+        (:func:`ident.records.decay_checks.check_damping`).
     """
 
     U: FloatArray
@@ -239,7 +241,8 @@ def flutter_derivatives(
     groups = _group_by_speed(releases)
     rows = [_group_row(group, section, K_0, C_0) for group in groups]
     speeds = [row["U"] for row in rows for _ in row["frequencies"]]
-    warnings = decay_checks.check_frequencies(
+    warnings = proportion_warnings(section)
+    warnings += decay_checks.check_frequencies(
         section, speeds, [f for row in rows for f in row["frequencies"]])
     if still_air is None:  # the section's damping is the reference the decays are read from
         warnings += decay_checks.check_damping(

@@ -9,7 +9,8 @@ aerodynamics; :mod:`ident.model.statespace` couples it with a
 
 :func:`section_defaults` names the defaults a section file leaves to be taken (``rho``, ``S``,
 and with sway ``zeta_p`` and ``m_p``), so that a command prints and records them: a default is
-never silent.
+never silent. :func:`proportion_warnings` says when the section's width, mass and inertia do not
+fit together as a section model's do, and names the unit that would make them.
 """
 
 from __future__ import annotations
@@ -23,7 +24,31 @@ import numpy.typing as npt
 
 from ident.numerics import validate as v
 
-__all__ = ["SectionModel", "section_defaults"]
+__all__ = ["GYRATION_RANGE", "MASS_RATIO_RANGE", "SectionModel", "proportion_warnings",
+           "section_defaults"]
+
+#: Range of the radius of gyration over the width, ``sqrt(I / m) / B``, outside which a
+#: section's proportions are warned of. A uniform plate has 0.29, bridge decks 0.3-0.4 (the
+#: Great Belt's 0.34), section models with masses at their ends up to about 0.6; the range is
+#: three times wider each way. A unit slip moves it by 10-1000 times.
+GYRATION_RANGE = (0.05, 1.5)
+#: Range of the mass ratio ``m / (rho B^2)`` outside which a section's mass is warned of:
+#: decks and their section models are 5-200 (the tests' plate 27, the Great Belt's 19).
+MASS_RATIO_RANGE = (0.5, 5000.0)
+#: Unit slips :func:`proportion_warnings` tries: the fields, their factor to SI, the slip.
+_UNIT_SLIPS: tuple[tuple[tuple[str, ...], float, str], ...] = (
+    (("B",), 1e-3, "B looks like millimetres"),
+    (("B",), 1e-2, "B looks like centimetres"),
+    (("m",), 1e-3, "m looks like g/m"),
+    (("m",), 1e3, "m looks like t/m"),
+    (("I",), 1e-3, "I looks like g m^2/m"),
+    (("I",), 1e-4, "I looks like kg cm^2/m"),
+    (("I",), 1e-7, "I looks like g cm^2/m"),
+    (("m", "I"), 1e-3, "m and I look like grams (g/m, g m^2/m)"),
+)
+#: Proportions a unit slip's correction must reach to be named: typical, not merely possible.
+_TYPICAL_GYRATION = (0.1, 0.8)
+_TYPICAL_MASS_RATIO = (1.0, 1000.0)
 
 
 @dataclass(frozen=True)
@@ -250,3 +275,63 @@ def section_defaults(data: dict[str, Any], source: str = "") -> list[str]:
             out.append(f"{where}no m_p: taken as m = {mass} kg/m (the sway carriage adds no "
                        "mass)")
     return out
+
+
+def proportion_warnings(section: SectionModel, source: str = "") -> list[str]:
+    """Return a warning when the section's width, mass and inertia do not fit together.
+
+    The radius of gyration over the width, ``sqrt(I / m) / B``, must lie in
+    :data:`GYRATION_RANGE`, and the mass ratio ``m / (rho B^2)`` in :data:`MASS_RATIO_RANGE`.
+    Outside, the flutter speed is wrong (``m`` or ``I`` off) or the reduced frequencies and
+    flutter derivatives are (``B`` off), so the warning names the one unit slip that brings
+    both to a section model's typical proportions, if one does.
+
+    Parameters
+    ----------
+    section : SectionModel
+    source : str, optional
+        Where the section came from, named at the start of the line.
+
+    Returns
+    -------
+    list of str
+        Empty, or one line.
+
+    Examples
+    --------
+    >>> plate = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005)
+    >>> proportion_warnings(plate)
+    []
+    >>> print(proportion_warnings(plate.replace(m=3000.0))[0])  # doctest: +NORMALIZE_WHITESPACE
+    the section's proportions are not a section model's: radius of gyration sqrt(I/m) = 0.0032 m
+    is 0.011 of the width B = 0.3 m (0.05-1.5), mass ratio m/(rho B^2) = 2.7e+04 (0.5-5000):
+    m looks like g/m (m = 3 kg/m?); the flutter speed and the derivatives depend on them
+    """
+    def proportions(B: float, m: float, I: float) -> tuple[float, float]:
+        return math.sqrt(I / m) / B, m / (section.rho * B**2)
+
+    values = {"B": section.B, "m": section.m, "I": section.I}
+    gyration, mass_ratio = proportions(**values)
+    if (GYRATION_RANGE[0] <= gyration <= GYRATION_RANGE[1]
+            and MASS_RATIO_RANGE[0] <= mass_ratio <= MASS_RATIO_RANGE[1]):
+        return []
+    fixes = []
+    units = {"B": "m", "m": "kg/m", "I": "kg m^2/m"}
+    for names, factor, slip in _UNIT_SLIPS:
+        fixed = {k: x * factor if k in names else x for k, x in values.items()}
+        g, mu = proportions(**fixed)
+        if (_TYPICAL_GYRATION[0] <= g <= _TYPICAL_GYRATION[1]
+                and _TYPICAL_MASS_RATIO[0] <= mu <= _TYPICAL_MASS_RATIO[1]):
+            # Nearest a uniform plate's gyration first: g m^2 and kg cm^2 may both fit.
+            fixes.append((abs(math.log(g / 0.29)), f"{slip} (" + ", ".join(
+                f"{k} = {fixed[k]:.4g} {units[k]}" for k in names) + "?)"))
+    fixes.sort()
+    cause = ("check their units (B in m, m in kg/m, I in kg m^2/m, per metre of span)"
+             if not fixes else fixes[0][1] if len(fixes) == 1
+             else f"{fixes[0][1]}, or another unit")
+    where = f"{source}: " if source else ""
+    return [f"{where}the section's proportions are not a section model's: radius of gyration "
+            f"sqrt(I/m) = {gyration * section.B:.2g} m is {gyration:.2g} of the width B = "
+            f"{section.B:.4g} m ({GYRATION_RANGE[0]:g}-{GYRATION_RANGE[1]:g}), mass ratio "
+            f"m/(rho B^2) = {mass_ratio:.2g} ({MASS_RATIO_RANGE[0]:g}-{MASS_RATIO_RANGE[1]:g}): "
+            f"{cause}; the flutter speed and the derivatives depend on them"]

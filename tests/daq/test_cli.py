@@ -40,6 +40,19 @@ def test_flutter_command_refuses_an_unknown_section_key(tmp_path, capsys):
     assert "zeta_alpha" in capsys.readouterr().err
 
 
+def test_flutter_command_names_a_section_unit_slip(tmp_path, capsys):
+    """A mass in g/m gives "no flutter" within the search, now with the slip named."""
+    (tmp_path / "s.json").write_text(json.dumps(FLAT_PLATE.replace(m=3000.0).to_dict()))
+    (tmp_path / "m.json").write_text(json.dumps(flat_plate.jones_model().to_dict()))
+    out = tmp_path / "out.json"
+    assert main(["flutter", "--section", str(tmp_path / "s.json"), "--model",
+                 str(tmp_path / "m.json"), "--json", str(out)]) == 0
+    printed = [line for line in capsys.readouterr().out.splitlines()
+               if line.startswith("warning: ") and "m looks like g/m" in line]
+    assert len(printed) == 1
+    assert any("m looks like g/m" in w for w in json.loads(out.read_text())["warnings"])
+
+
 def test_flutter_command_in_three_degrees_of_freedom(tmp_path, capsys):
     """A section with sway and a 3-DOF model: the library's speed; the JSON has 3x3 A."""
     from ident.model.quasi_steady import StaticCoefficients, quasi_steady_model
