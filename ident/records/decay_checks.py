@@ -108,8 +108,9 @@ FREQUENCY_WARN = 1.5
 DAMPING_IN_PER_CENT = 0.1
 #: A still-air damping ratio more than this many times the total the releases decay at, at the
 #: lowest wind speed, and more than :data:`DAMPING_WARN_EXCESS` above it, is warned of: only a
-#: negative aerodynamic damping lowers the total, and at the lowest speed of a campaign its
-#: share is small (the bluff deck's pitch near torsional flutter stays within 0.01 of it).
+#: negative aerodynamic damping lowers the total (the benchmark's sections decay there at 3.8
+#: times their structural damping or more); a deck's pitch near torsional flutter may approach
+#: zero total damping, which the excess a warning needs leaves alone at usual damping.
 DAMPING_WARN = 2.0
 #: The excess of the still-air damping over the measured total that a warning needs (1 %).
 DAMPING_WARN_EXCESS = 0.01
