@@ -297,7 +297,8 @@ def ringing_frequencies(release: Release, n_dof: int) -> list[float]:
             out.append(float(f[i]))
             continue
         lo, mid, hi = np.log(velocity[i - 1:i + 2])
-        shift = 0.5 * (lo - hi) / (lo - 2.0 * mid + hi)
+        curvature = lo - 2.0 * mid + hi  # < 0 at a strict peak; 0 on a flat top
+        shift = 0.5 * (lo - hi) / curvature if curvature < 0.0 else 0.0
         out.append(float(f[i] + shift * (f[1] - f[0])))
     return out
 
