@@ -230,13 +230,19 @@ def run_flutter(section_path: Path, *, model_path: Path | None = None,
     section, defaults = _read_section(section_path)
     out_keys: dict[str, Any] = {}
     warnings: list[str] = proportion_warnings(section, source=str(section_path))
-    if table_path is not None:
-        table, fit = _table_fit(table_path, convention, section, out_keys, warnings)
-        routes = section_flutter(section, table=table, fit=fit, U_max=u_max)
-    else:
-        assert model_path is not None
-        routes = section_flutter(section, model=_read_model(model_path, section.n_dof,
-                                                             section_path), U_max=u_max)
+    try:
+        if table_path is not None:
+            table, fit = _table_fit(table_path, convention, section, out_keys, warnings)
+            routes = section_flutter(section, table=table, fit=fit, U_max=u_max)
+        else:
+            assert model_path is not None
+            routes = section_flutter(section, model=_read_model(model_path, section.n_dof,
+                                                                 section_path), U_max=u_max)
+    except Exception:
+        # The error line follows; what the checks found may be its cause.
+        for warning in warnings:
+            print(f"warning: {warning}")
+        raise
     comparison = routes.comparison
     print(f"state space: {routes.state_space.summary()}")
     print(f"frequency domain ({'the table' if table_path else 'the model'}'s flutter "

@@ -35,6 +35,12 @@ The checks, and why each can be trusted:
   are not used. Only the signs are compared, on rows where both sides are clearly non-zero: a
   column whose sign is the opposite over most of them contradicts the other column (lift or
   heave positive upward, i.e. the ``z_up`` convention read as Scanlan's, flips exactly H3* and A1*).
+- **A reduced velocity headed K** (:func:`_reduced_velocity_as_k`). Against K the derivatives
+  that quasi-steady aerodynamics dominates fall as ``1 / K`` (H1*, A1*) and ``1 / K^2`` (H3*,
+  A3*): fitted as powers of K over the table, -1.1 to -1.2 and -1.8 to -2.2 on the exact flat
+  plate and the shipped bluff deck, over K 0.2-3 and over any third of it. A first column of
+  ``Ur = 2 pi / K`` headed ``K`` turns each power's sign; a table whose given ones (two or more)
+  all grow faster than ``K^0.5``, over a span of two or more in K, is reported.
 - **Sparse tables**: fewer than :data:`SPARSE_ROWS` rows, so most of the curve the flutter
   analysis uses lies between rows.
 - **Missing columns**, filled with zero by the reader, named with what they govern.
@@ -109,6 +115,11 @@ _SHIFT_SHARE = 0.25
 _DAMPING = ("H1", "A2", "P1")
 # Inter-relations used at the level of signs: (column, other column) with X ~ K Y.
 _RELATIONS = (("H1", "H3"), ("A1", "A3"))
+# Derivatives that fall as a power of K (quasi-steady), the power a reduced velocity headed K
+# turns positive, and the span in K the fit needs.
+_FALLING = ("H1", "H3", "A1", "A3")
+_RISING_POWER = 0.5
+_POWER_SPAN = 2.0
 
 
 def check_table(table: FlutterDerivativeTable, path: str | os.PathLike[str] | None = None
@@ -157,7 +168,9 @@ def check_table(table: FlutterDerivativeTable, path: str | os.PathLike[str] | No
         out.extend(where + text for text in found)
         if level is not None:
             scatter.append(level)
-    for name in _DAMPING:
+    headed_k = _reduced_velocity_as_k(table, given)
+    out.extend(where + text for text in headed_k)
+    for name in _DAMPING if not headed_k else ():  # its damping does not vanish at large "K"
         if name in given:
             out.extend(where + text for text in _shifted_damping(table, name, noise[name]))
     for x_name, y_name in _RELATIONS:
@@ -350,6 +363,26 @@ def _sign_flips(table: FlutterDerivativeTable, name: str, rows: list[int]) -> li
             out.append(f"{name}* at {_label(table, i, rows)}: {y[i]:.4g} has the opposite sign "
                        f"of both neighbours ({left:.4g}, {right:.4g}): a sign typo?")
     return out
+
+
+def _reduced_velocity_as_k(table: FlutterDerivativeTable, given: list[str]) -> list[str]:
+    """Return a finding when the quasi-steady derivatives grow with K as they do with Ur."""
+    K = table.K
+    if K[-1] / K[0] < _POWER_SPAN:
+        return []
+    powers = {}
+    for name in _FALLING:
+        magnitude = np.abs(table.values[name]) if name in given else np.zeros(0)
+        ok = magnitude > 0.0
+        if ok.sum() >= 3:
+            powers[name] = float(np.polyfit(np.log(K[ok]), np.log(magnitude[ok]), 1)[0])
+    if len(powers) < 2 or min(powers.values()) <= _RISING_POWER:
+        return []
+    grows = ", ".join(f"{n}* as K^{p:.2g}" for n, p in powers.items())
+    return [f"the first column looks like the reduced velocity Ur = U / (f B), not K = B omega "
+            f"/ U: {grows}, where against K they fall as 1/K (H1*, A1*) and 1/K^2 (H3*, A3*); "
+            f"head it Ur (its {K[0]:.4g} to {K[-1]:.4g} are K {2 * math.pi / K[-1]:.4g} to "
+            f"{2 * math.pi / K[0]:.4g}), or every result from this table is wrong"]
 
 
 def _shifted_damping(table: FlutterDerivativeTable, name: str,

@@ -6,7 +6,9 @@ The demo (a whole simulated campaign) is tested end to end in tests/hil/test_dem
 from __future__ import annotations
 
 import json
+import math
 
+import numpy as np
 import pytest
 
 from daq.cli import main
@@ -51,6 +53,28 @@ def test_flutter_command_names_a_section_unit_slip(tmp_path, capsys):
                if line.startswith("warning: ") and "m looks like g/m" in line]
     assert len(printed) == 1
     assert any("m looks like g/m" in w for w in json.loads(out.read_text())["warnings"])
+
+
+def test_flutter_command_prints_the_table_s_findings_before_its_error(tmp_path, capsys):
+    """Print the warning that names a table's Ur headed K before the error it causes.
+
+    The plate's table with Ur = 2 pi / K under a K header stops the analysis (a mode grows
+    in still air); the warning was lost with the error.
+    """
+    K = np.geomspace(0.2, 3.0, 15)[::-1]
+    fd = flat_plate.flutter_derivatives(K)
+    names = ("H1", "H2", "H3", "H4", "A1", "A2", "A3", "A4")
+    rows = [",".join(["K", *names])] + [
+        ",".join(f"{x:.6g}" for x in (2 * math.pi / K[i], *(fd[n][i] for n in names)))
+        for i in range(K.size)]
+    (tmp_path / "t.csv").write_text("\n".join(rows) + "\n")
+    (tmp_path / "s.json").write_text(json.dumps(FLAT_PLATE.to_dict()))
+    code = main(["flutter", "--section", str(tmp_path / "s.json"), "--table",
+                 str(tmp_path / "t.csv")])
+    captured = capsys.readouterr()
+    assert code != 0 and captured.err.startswith("error: ")
+    (warning,) = [line for line in captured.out.splitlines() if line.startswith("warning: ")]
+    assert "the first column looks like the reduced velocity Ur" in warning
 
 
 def test_flutter_command_in_three_degrees_of_freedom(tmp_path, capsys):

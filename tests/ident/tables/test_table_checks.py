@@ -180,6 +180,27 @@ def test_a_table_in_the_other_lift_sign_contradicts_the_inter_relations():
         assert all("convention z_up" in w for w in found)
 
 
+@pytest.mark.parametrize("which", ["plate", "example deck", "3-DOF bluff deck"])
+def test_a_reduced_velocity_headed_k_is_named(which):
+    """The rows' Ur = 2 pi / K written in the K column: each power of K turns its sign.
+
+    The clean tables above (the same sections over K 0.02-6, and noisy ones) are not
+    reported: their quasi-steady derivatives fall as K^-1.1 to K^-2.2.
+    """
+    table = {"plate": _plate(30), "example deck": _example(),
+             "3-DOF bluff deck": FlutterDerivativeTable.from_model(
+                 bluff_deck_3dof_model(), np.geomspace(0.3, 3.14, 19))}[which]
+    assert check_table(table) == []
+    Ur = 2 * math.pi / table.K
+    order = np.argsort(Ur)
+    headed_k = FlutterDerivativeTable(Ur[order], {n: v[order] for n, v in table.values.items()})
+    # One cause, not its echoes: the damping derivatives then tend to a constant at large
+    # "K", which the shifted-column check would report too.
+    (found,) = check_table(headed_k)
+    assert "looks like the reduced velocity Ur" in found and "head it Ur" in found
+    assert f"K {table.K[0]:.4g} to {table.K[-1]:.4g}" in found
+
+
 def test_a_sparse_table_is_said_to_be_sparse_and_its_sign_typo_found():
     table = _plate(30)
     rows = np.round(np.linspace(0, table.K.size - 1, 8)).astype(int)
