@@ -51,6 +51,10 @@ noise; ``tests/ident/records/test_decay_checks.py``):
   cm, pitch in degrees) predicts the decays within :data:`SCALE_EXPLAINS`, the warning names
   that unit instead: a pitch of 0.23 degrees read as radians passes the amplitude check and
   identified +131 % with a std of 0.5 %; rescaled, its model predicts the decays to 0.1 %.
+  The decays cannot tell a heave column too weak from a section mass too large (or pitch
+  from inertia): the warning gives that reading too (the plate with m in g/m: "h looks like
+  millimetres ... the section's m = 3000 kg/m may be 1e+03 times too large"), beside the
+  section's own proportion check (:func:`ident.model.section.proportion_warnings`).
 
 Not responsible for: a release's own checks (:mod:`ident.records.plausibility`), the modal
 fits (:mod:`ident.identification.modal`).
@@ -344,24 +348,27 @@ def _misfit(section: SectionModel, model: RationalFunctionModel, speeds: Sequenc
 #: the unit it was read in, the factor from the wrong unit's numbers to the right one's).
 UNIT_MISTAKES = ((0, "h", "millimetres", 1e-3), (0, "h", "centimetres", 1e-2),
                  (1, "alpha", "degrees", math.pi / 180))
+#: The section's field whose excess by the unit's factor the decays cannot tell from a
+#: displacement in that unit (a heave column too weak acts as a mass too large).
+_UNIT_TWIN = {"h": ("m", "kg/m"), "alpha": ("I", "kg m^2/m")}
 
 
 def _unit_mistake(section: SectionModel, model: RationalFunctionModel, speeds: Sequence[float],
-                  measured: Sequence[ComplexArray]) -> tuple[str, str, float] | None:
-    """Return ``(channel, unit, misfit)`` of the unit mistake that explains the decays, or None.
+                  measured: Sequence[ComplexArray]) -> tuple[str, str, float, float] | None:
+    """Return ``(channel, unit, misfit, factor)`` of the unit mistake that explains the decays.
 
     A displacement read in a wrong unit scales its column of the identified ``Q`` by the unit's
     factor, not the decays' eigenvalues: the model with that column rescaled predicts them
     again, to within :data:`SCALE_EXPLAINS`. Amplitude checks catch such a channel when its
     holds are large; with small ones (a pitch of 0.2 degrees) only this does.
     """
-    best: tuple[str, str, float] | None = None
+    best: tuple[str, str, float, float] | None = None
     for column, name, unit, factor in UNIT_MISTAKES:
         A = np.array(model.A, dtype=float)
         A[:, :, column] /= factor
         misfit = _misfit(section, RationalFunctionModel(A, model.d), speeds, measured)
         if misfit < SCALE_EXPLAINS and (best is None or misfit < best[2]):
-            best = (name, unit, misfit)
+            best = (name, unit, misfit, factor)
     return best
 
 
@@ -449,11 +456,15 @@ def check_model(section: SectionModel, model: RationalFunctionModel, speeds: Seq
             f"off by {k:.3g}")
     elif as_identified > MISFIT_WARN and (unit := _unit_mistake(section, model, speeds,
                                                                 measured)) is not None:
+        twin = _UNIT_TWIN[unit[0]]
+        twin_value = float(getattr(section, twin[0]))
         warnings.append(
             f"the identified model does not predict the measured decays "
             f"({100 * as_identified:.0f} % off), but does once {unit[0]} is taken as "
             f"{unit[1]} ({100 * unit[2]:.2g} % off): {unit[0]} looks like {unit[1]} (small "
-            f"holds pass the amplitude check); convert it, or the flutter speed is wrong")
+            f"holds pass the amplitude check); convert it, or the flutter speed is wrong "
+            f"(if {unit[0]} is right, the section's {twin[0]} = {twin_value:.4g} {twin[1]} "
+            f"may be {1 / unit[3]:.3g} times too large: it acts alike)")
     elif as_identified > MISFIT_WARN:
         errors = np.abs(predicted - measured_shift) / np.maximum(np.abs(measured_shift), 1e-12)
         worst = int(np.argmax(errors))

@@ -190,14 +190,17 @@ def small_holds():
     return out
 
 
-@pytest.mark.parametrize(("channel", "factor", "unit"),
-                         [("alpha", 180 / math.pi, "degrees"), ("h", 100.0, "centimetres")])
+@pytest.mark.parametrize(("channel", "factor", "unit", "twin"),
+                         [("alpha", 180 / math.pi, "degrees", "I = 0.03 kg m^2/m may be 57.3"),
+                          ("h", 100.0, "centimetres", "m = 3 kg/m may be 100")])
 def test_small_displacements_in_a_wrong_unit_are_warned_of_naming_it(small_holds, channel,
-                                                                     factor, unit):
+                                                                     factor, unit, twin):
     """A small pitch in degrees, or heave in centimetres, is named by the decays it explains.
 
     Unguarded (pitch in degrees): +131 % with a std of 0.5 %, "a force channel's sign or unit"
-    the only hint. The model with that column rescaled predicts the decays again.
+    the only hint. The model with that column rescaled predicts the decays again; so would
+    the right one with the section's inertia (mass) that factor too large, which the warning
+    names as the other reading.
     """
     right = e2rfc.identify(small_holds, FLAT_PLATE)
     assert right.diagnostics.warnings == ()  # no false alarm at these holds
@@ -206,6 +209,7 @@ def test_small_displacements_in_a_wrong_unit_are_warned_of_naming_it(small_holds
     model = e2rfc.identify(wrong, FLAT_PLATE)
     found = [w for w in model.diagnostics.warnings if f"{channel} looks like {unit}" in w]
     assert len(found) == 1, model.diagnostics.warnings
+    assert f"if {channel} is right, the section's {twin} times too large" in found[0]
 
 
 @pytest.mark.parametrize(("rho", "unit"), [(1225.0, "g/m^3"), (0.001225, "g/cm^3")])
