@@ -295,6 +295,9 @@ def _group_row(
         rho = section.rho if r.rho is None else r.rho
         per_release.append((system, _release_derivatives(system, K_0, C_0, r.U, rho, section.B)))
     fds = {n: np.array([fd[n] for _, (fd, _, _) in per_release]) for n in FLUTTER_DERIVATIVE_NAMES}
+    # The still-air checks read decays only: a buffeted release's modal fit does not name them.
+    decays = [system for system, _ in per_release
+              if system.fit.random_response <= RANDOM_RESPONSE_LIMIT]
     return {
         "U": float(np.mean([r.U for r in group])),
         "K_h": float(np.mean([K_h for _, (_, K_h, _) in per_release])),
@@ -302,14 +305,10 @@ def _group_row(
         "mean": {n: float(x.mean()) for n, x in fds.items()},
         "std": {n: float(x.std(ddof=1)) if x.size > 1 else math.nan for n, x in fds.items()},
         "fits": tuple(system.fit for system, _ in per_release),
-        "frequencies": [(abs(system.lam_h.imag) / (2 * math.pi),
-                         abs(system.lam_a.imag) / (2 * math.pi))
-                        for system, _ in per_release if system.fit.random_response
-                        <= RANDOM_RESPONSE_LIMIT],
-        "damping": [(-system.lam_h.real / abs(system.lam_h),
-                     -system.lam_a.real / abs(system.lam_a))
-                    for system, _ in per_release if system.fit.random_response
-                    <= RANDOM_RESPONSE_LIMIT],
+        "frequencies": [(abs(s.lam_h.imag) / (2 * math.pi), abs(s.lam_a.imag) / (2 * math.pi))
+                        for s in decays],
+        "damping": [(-s.lam_h.real / abs(s.lam_h), -s.lam_a.real / abs(s.lam_a))
+                    for s in decays],
     }
 
 

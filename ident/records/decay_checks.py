@@ -129,6 +129,14 @@ FREQUENCY_MISTAKES = (("look like rad/s, not Hz", "give them in Hz (/2 pi)", 1 /
 _STILL_AIR = (("fh", "heave"), ("fa", "pitch"), ("fp", "sway"))
 
 
+def _median_at_lowest(speeds: Sequence[float], values: Sequence[Sequence[float]]
+                      ) -> tuple[float, FloatArray]:
+    """Return the lowest wind speed (m/s) and the median of its releases' values per mode."""
+    lowest = min(speeds)
+    at_lowest = [x for U, x in zip(speeds, values, strict=True) if U <= lowest * 1.001]
+    return lowest, np.median(np.asarray(at_lowest, dtype=float), axis=0)
+
+
 def check_frequencies(section: SectionModel, speeds: Sequence[float],
                       frequencies: Sequence[Sequence[float]]) -> list[str]:
     """Check the section's still-air frequencies against the modes the releases ring at.
@@ -162,9 +170,7 @@ def check_frequencies(section: SectionModel, speeds: Sequence[float],
         return []
     n = section.n_dof
     given = np.array([getattr(section, attr) for attr, _ in _STILL_AIR[:n]], dtype=float)
-    lowest = min(speeds)
-    at_lowest = [f for U, f in zip(speeds, frequencies, strict=True) if U <= lowest * 1.001]
-    rung = np.median(np.asarray(at_lowest, dtype=float), axis=0)
+    lowest, rung = _median_at_lowest(speeds, frequencies)
     names = [name for _, name in _STILL_AIR[:n]]
 
     def off(still: FloatArray) -> FloatArray:
@@ -238,9 +244,7 @@ def check_damping(section: SectionModel, speeds: Sequence[float],
     attrs = ("zeta_h", "zeta_a", "zeta_p")[:n]
     names = [name for _, name in _STILL_AIR[:n]]
     given = np.array([getattr(section, a) or 0.0 for a in attrs], dtype=float)
-    lowest = min(speeds)
-    at_lowest = [z for U, z in zip(speeds, damping, strict=True) if U <= lowest * 1.001]
-    measured = np.median(np.asarray(at_lowest, dtype=float), axis=0)
+    lowest, measured = _median_at_lowest(speeds, damping)
     where = (f"at {lowest:.3g} m/s the releases decay at "
              + ", ".join(f"{100 * z:.2g} % of critical ({name})"
                          for z, name in zip(measured, names, strict=True)))

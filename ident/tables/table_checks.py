@@ -170,9 +170,10 @@ def check_table(table: FlutterDerivativeTable, path: str | os.PathLike[str] | No
             scatter.append(level)
     headed_k = _reduced_velocity_as_k(table, given)
     out.extend(where + text for text in headed_k)
-    for name in _DAMPING if not headed_k else ():  # its damping does not vanish at large "K"
-        if name in given:
-            out.extend(where + text for text in _shifted_damping(table, name, noise[name]))
+    # Headed K, a table's damping does not vanish at large "K": the same cause, not a shift.
+    shifts = [] if headed_k else [name for name in _DAMPING if name in given]
+    for name in shifts:
+        out.extend(where + text for text in _shifted_damping(table, name, noise[name]))
     for x_name, y_name in _RELATIONS:
         if x_name in given and y_name in given:
             out.extend(where + text for text in _relation_signs(table, x_name, y_name, rows))

@@ -33,6 +33,10 @@ SWAY = dataclasses.replace(FLAT_PLATE, fp=1.3, zeta_p=0.004)
 IN_RAD_S = dataclasses.replace(FLAT_PLATE, fh=2 * math.pi * FLAT_PLATE.fh,
                                fa=2 * math.pi * FLAT_PLATE.fa)
 SWAPPED = dataclasses.replace(FLAT_PLATE, fh=FLAT_PLATE.fa, fa=FLAT_PLATE.fh)
+#: The sections the identification refuses, with what its error says.
+REFUSED_SECTIONS = pytest.mark.parametrize(
+    ("section", "match"), [(IN_RAD_S, "look like rad/s"), (SWAPPED, "fh and fa look swapped")],
+    ids=["rad/s", "swapped"])
 
 
 @pytest.fixture(scope="module")
@@ -79,18 +83,14 @@ def test_frequencies_off_in_no_known_way_are_warned_of():
     assert "2 Hz (pitch)" in warnings[0] and "fa = 4 Hz" in warnings[0]
 
 
-@pytest.mark.parametrize(("section", "match"), [(IN_RAD_S, "look like rad/s"),
-                                                (SWAPPED, "fh and fa look swapped")],
-                         ids=["rad/s", "swapped"])
+@REFUSED_SECTIONS
 def test_e2rfc_refuses_a_section_whose_frequencies_the_decays_deny(releases, section, match):
     """Unguarded, rad/s gave +528 % with a std of 0.3 %, swapped "no flutter"; each a misfit."""
     with pytest.raises(PlausibilityError, match=match):
         e2rfc.identify(releases, section)
 
 
-@pytest.mark.parametrize(("section", "match"), [(IN_RAD_S, "look like rad/s"),
-                                                (SWAPPED, "fh and fa look swapped")],
-                         ids=["rad/s", "swapped"])
+@REFUSED_SECTIONS
 def test_the_displacement_route_refuses_them_too(releases, section, match):
     with pytest.raises(PlausibilityError, match=match):
         fd_method.identify(releases, section)
@@ -172,9 +172,7 @@ def test_in_turbulence_each_coordinate_rings_at_its_mode(buffeted):
     assert decay_checks.check_frequencies(FLAT_PLATE, speeds, rung) == []
 
 
-@pytest.mark.parametrize(("section", "match"), [(IN_RAD_S, "look like rad/s"),
-                                                (SWAPPED, "fh and fa look swapped")],
-                         ids=["rad/s", "swapped"])
+@REFUSED_SECTIONS
 def test_in_turbulence_e2rfc_refuses_them_as_well(buffeted, section, match):
     """Before, the modal fits of buffeted releases were not used, and nothing checked."""
     with pytest.raises(PlausibilityError, match=match):
