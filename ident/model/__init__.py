@@ -2,7 +2,8 @@
 
 - :mod:`~ident.model.conventions`: signs, coordinates, flutter derivatives <-> ``Q(iK)``,
   the naming of modes (heave, pitch, sway);
-- :mod:`~ident.model.section`: the spring-mounted section model (``SectionModel``);
+- :mod:`~ident.model.section`: the spring-mounted section model (``SectionModel``), the
+  defaults a section file leaves and the check of its proportions (a unit slip);
 - :mod:`~ident.model.rfc`: Roger's rational-function model (``RationalFunctionModel``);
 - :mod:`~ident.model.roger`: Roger's least-squares fit of ``Q`` samples;
 - :mod:`~ident.model.statespace`: the state-space equations of motion in the wind;

@@ -10,7 +10,8 @@
   release (a pitch in degrees, a time axis in ms, forces far beyond the wind's, an air density
   in g/m^3, a late release instant, a channel of one value), run by E2RFC;
 - :mod:`~ident.records.decay_checks`: the section and the identified model against the
-  measured decays (still-air frequencies in rad/s or swapped, forces off by a factor, a lift of
-  the wrong sign, a small displacement in a wrong unit), run by E2RFC (the frequencies by the
+  measured decays (still-air frequencies in rad/s or swapped, in turbulence from the spectral
+  peaks; damping in per cent; forces off by a factor, a lift of the wrong sign, a small
+  displacement in a wrong unit), run by E2RFC (the frequencies and damping by the
   displacement-only route too).
 """
