@@ -230,7 +230,8 @@ def check_damping(section: SectionModel, speeds: Sequence[float],
     -------
     list of str
         A warning per mode whose still-air ratio is more than :data:`DAMPING_WARN` times the
-        measured total and :data:`DAMPING_WARN_EXCESS` above it.
+        measured total and :data:`DAMPING_WARN_EXCESS` above it; where that total is negative
+        (the mode grows), the warning names the releases, not the section's damping.
 
     Raises
     ------
@@ -259,6 +260,14 @@ def check_damping(section: SectionModel, speeds: Sequence[float],
             "give " + ", ".join(f"{attrs[i]} = {given[i] / 100:.4g}" for i in wrong))
     out = []
     for i in np.flatnonzero(high & (given - measured > DAMPING_WARN_EXCESS)):
+        if measured[i] < 0.0:
+            # A mode that grows at the lowest speed says nothing of the structural damping.
+            out.append(f"the {names[i]} mode grows at the lowest wind speed ({where}): those "
+                       "releases are not free decays (a random response of turbulence too "
+                       "weak to be recognised as one, forcing by vortex shedding or a "
+                       "vibrating floor, or an instability already at that speed), so the "
+                       f"section's {attrs[i]} is not checked against them")
+            continue
         out.append(f"the section's {attrs[i]} = {given[i]:.4g} ({100 * given[i]:.3g} % of "
                    f"critical) is more than {DAMPING_WARN:g} times what the {names[i]} mode "
                    f"decays at with the wind ({where}): only a negative aerodynamic damping "

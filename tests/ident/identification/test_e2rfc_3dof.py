@@ -22,7 +22,8 @@ from ident.model import flutter as fl
 from ident.model.quasi_steady import StaticCoefficients, quasi_steady_model
 from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel
-from simulators.decks import BLUFF_DECK_3DOF, bluff_deck_3dof_model
+from ident.physics.turbulence import TurbulenceSpec
+from simulators.decks import BLUFF_DECK_3DOF, BLUFF_DECK_3DOF_STATIC, bluff_deck_3dof_model
 from simulators.tunnel import simulate_release
 
 SWAY = SectionModel(B=0.3, m=3.0, I=0.03, fh=2.0, fa=4.0, zeta_h=0.005, zeta_a=0.005,
@@ -154,3 +155,26 @@ def test_a_2dof_identification_is_unchanged_by_the_generalisation():
     assert model.n_dof == 2
     np.testing.assert_allclose(model.d, truth.d, rtol=1e-4)
     assert math.isfinite(model.diagnostics.condition_number)
+
+
+def test_weak_turbulence_under_the_limit_is_named_and_the_section_not_blamed():
+    """3-DOF bluff deck at Iu = Iw = 1 % with 10 s holds and 2 % noise (seed 1).
+
+    Its decays' residuals are 8.5-21 times the noise (median 9.8, under the 10 at which the
+    releases count as turbulent), so plain E2RFC runs with smooth flow's checks. Before, they
+    blamed the section's zeta_h (a heave mode growing at 0.45 U_F, -2.3 % of critical) and
+    friction; now the growth is named as the releases' and buffeting among the causes.
+    """
+    truth = bluff_deck_3dof_model()
+    U_F = float(fl.analyze(BLUFF_DECK_3DOF, truth).speed)  # type: ignore[arg-type]
+    gusts = TurbulenceSpec(Iu=0.01, Iw=0.01, Lux=1.0, Lwx=0.3, Cuy=10.0, Cwy=8.0)
+    releases = [Release.from_simulation(simulate_release(
+        BLUFF_DECK_3DOF, truth, f * U_F, h0, a0, p0=p0, duration=20.0, fs=500.0, noise=0.02,
+        rng=(1, i, j, 3), static=BLUFF_DECK_3DOF_STATIC, turbulence=gusts, span=1.0,
+        pre_s=10.0))
+        for i, f in enumerate((0.45, 0.65, 0.8))
+        for j, (h0, a0, p0) in enumerate(((0.010, 0.03, 0.010), (-0.008, 0.02, -0.012)))]
+    warnings = e2rfc.identify(releases, BLUFF_DECK_3DOF).diagnostics.warnings
+    assert not [w for w in warnings if "check the section's damping" in w], warnings
+    assert [w for w in warnings if "heave mode grows at the lowest wind speed" in w], warnings
+    assert [w for w in warnings if "not white" in w and "buffeting too weak" in w], warnings

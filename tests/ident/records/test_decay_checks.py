@@ -124,6 +124,14 @@ def test_damping_above_the_measured_total_is_warned_of_and_near_it_passes():
     assert decay_checks.check_damping(FLAT_PLATE, [4.7], [[0.053, 0.019]]) == []
 
 
+def test_a_mode_growing_at_the_lowest_speed_blames_the_releases_not_the_damping():
+    """A heave decaying at -2.3 % of critical is not a free decay: zeta_h is not checked."""
+    (warning,) = decay_checks.check_damping(FLAT_PLATE, [4.7], [[-0.023, 0.019]])
+    assert warning.startswith("the heave mode grows at the lowest wind speed")
+    assert "-2.3 % of critical (heave)" in warning and "zeta_h is not checked" in warning
+    assert "check the section's damping" not in warning
+
+
 def test_e2rfc_refuses_damping_in_per_cent(releases):
     """Unguarded, 50 % of critical gave a warning that blamed the forces' sign or unit."""
     per_cent = dataclasses.replace(FLAT_PLATE, zeta_h=0.5, zeta_a=0.5)
