@@ -144,10 +144,9 @@ TURBULENT_ESTIMATORS = ("iv", "ml")
 #: second-order section per force on block means taken as samples, or two sections on exact
 #: block means. docs/development/e2rfc_turbulence.md measures the second's smaller bias and
 #: its two to three times the time. ``"by-evidence"`` (:data:`BY_EVIDENCE`, the default) fits
-#: the first and, when its innovations pooled over the records are not white, the second in
-#: its place (a buffeting model the innovations reject biases the self-excited coefficients in
-#: closed loop): on the benchmark's turbulence rows every median error within 1.2 times the
-#: Cramer-Rao bound's, where either model alone misses on some row.
+#: both and keeps the second when the first's innovations pooled over the records are not
+#: white, or when the second is higher in likelihood than chance allows its extra parameters
+#: (a buffeting model the data reject biases the self-excited coefficients in closed loop).
 CLOSED_LOOP_BUFFETING = "by-evidence"
 
 
@@ -180,9 +179,9 @@ def identify(
         The closed-loop estimator's buffeting model (default :data:`CLOSED_LOOP_BUFFETING`):
         one second-order shaping section per force on block means taken as samples, or two
         sections on exact block means (less biased, about twice the time;
-        :data:`CLOSED_LOOP_BUFFETING_MODELS`), or the first unless its innovations pooled over
-        the records are not white (then the second is fitted too and kept). Ignored by the
-        other estimators.
+        :data:`CLOSED_LOOP_BUFFETING_MODELS`), or both, keeping the second where the first's
+        innovations pooled over the records are not white or a likelihood-ratio test at the
+        1 % level prefers it. Ignored by the other estimators.
 
     Returns
     -------

@@ -459,11 +459,13 @@ def test_e2rfc_runs_the_closed_loop_branch_in_the_tunnel_s_turbulence():
 
 
 @pytest.mark.slow
-def test_the_evidence_takes_the_fourth_order_model_only_where_the_innovations_ask_for_it():
+def test_the_evidence_takes_the_fourth_order_model_only_where_the_data_ask_for_it():
     """``closed_loop_buffeting="by-evidence"`` on the estimator's own model class and the tunnel.
 
     Drawn from the second-order model itself (12 s, seed 0), the pooled statistic is 17-27
-    against the limit of 50: the second-order fit stands, and no second fit runs. On the
+    against the limit of 50, and the fourth-order fit gains 20-32 in log-likelihood on seeds
+    0-3, against the 37 that chance gives its 48 parameters more at the 1 % level: the
+    second-order fit stands. On the
     tunnel's 1 % turbulence (the draws of the tunnel test above) the second-order model's pitch
     innovations reach 117: the fourth-order model is fitted too, ends 291 higher in
     log-likelihood (pooled statistic 22), and is kept. It gives -2.8 %, std 5.2 % (the
@@ -473,6 +475,9 @@ def test_the_evidence_takes_the_fourth_order_model_only_where_the_innovations_as
     model = e2rfc.identify(releases, PLATE, closed_loop_buffeting="by-evidence")
     (note,) = [w for w in model.diagnostics.warnings if "chosen by evidence" in w]
     assert "second-order buffeting model" in note and "are white" in note
+    gain = float(note.split("the fourth-order fit is only ")[1].split(" higher")[0])
+    needed = float(note.split("(needed: ")[1].split(" for")[0])
+    assert 0.0 < gain <= needed
     assert not any("portmanteau" in w for w in model.diagnostics.warnings if w != note)
 
     releases, U_F = tunnel_releases_seed_2()
@@ -486,6 +491,35 @@ def test_the_evidence_takes_the_fourth_order_model_only_where_the_innovations_as
     u = model.uncertainty(PLATE)
     assert abs(u.speed - U_F) <= 2.0 * u.total
     assert abs(u.speed / U_F - 1.0) < 0.08
+
+
+@pytest.mark.slow
+def test_weak_buffeting_with_white_innovations_takes_the_fourth_order_model_by_likelihood():
+    """The bluff deck at Iw 0.5 % (no holds, seed 1): white innovations, a biased second order.
+
+    Under the sensors' noise the buffeting's misfit leaves the second-order model's pooled
+    innovations white (statistic 33 < 50), yet it biased the flutter speed low: over seeds 0-16
+    a mean of -3.3 %, 14 of 17 below the truth, 3 outside 2 std (this seed -8.8 %, std 3.3 %).
+    The fourth-order fit is 44 higher in log-likelihood, beyond the 37 that chance gives its
+    extra parameters, and is kept: mean +0.1 %, 8 of 17 below, all 17 within 2 std (this seed
+    -5.3 %, std 4.1 %). The bound: 2 std, as for any seed; 7 % is this seed's error with room
+    for the last digits of a search that stops on a stall rule.
+    """
+    truth = bluff_deck_model()
+    U_F = fl.analyze(BLUFF_DECK, truth).speed
+    wind = {"static": BLUFF_DECK_STATIC, "span": 1.0,
+            "turbulence": TurbulenceSpec(Iu=0.0, Iw=0.005, Lux=1.0, Lwx=0.3, Cuy=10.0, Cwy=8.0)}
+    releases = [Release.from_simulation(simulate_release(
+        BLUFF_DECK, truth, f * U_F, h0, a0, duration=20.0, fs=500.0, noise=0.02,
+        rng=(1, i, j, 5), **wind))
+        for i, f in enumerate((0.4, 0.6, 0.8)) for j, (h0, a0) in enumerate(HOLDS)]
+    model = e2rfc.identify(releases, BLUFF_DECK)
+    (note,) = [w for w in model.diagnostics.warnings if "chosen by evidence" in w]
+    assert "fourth-order buffeting model" in note and "are white" in note
+    assert "beyond the" in note
+    u = model.uncertainty(BLUFF_DECK)
+    assert abs(u.speed - U_F) <= 2.0 * u.total
+    assert abs(u.speed / U_F - 1.0) < 0.07
 
 
 @pytest.mark.slow
