@@ -316,15 +316,15 @@ class _Context:
         """Assemble an :class:`IdentifiedModel`, with the data checks when asked."""
         prepared = self.prepared
         random_response = np.array([p.fit.random_response for p in prepared])
+        ratio = float(np.median(random_response))
         warnings: list[str] = []
         if checks:
-            if float(np.median(random_response)) > RANDOM_RESPONSE_LIMIT:
+            if ratio > RANDOM_RESPONSE_LIMIT:
                 warnings.append(
                     f"the decays turn into a random response (turbulence: residual "
-                    f"{float(np.median(random_response)):.3g} times the noise): the modal fits "
+                    f"{ratio:.3g} times the noise): the modal fits "
                     f"and the least-squares covariance do not hold; {SCATTER_STD}")
             elif fit.residual_inflation > WHITENESS_WARN:
-                ratio = float(np.median(random_response))
                 # Weak turbulence (3-DOF releases at Iw 1 % with 2 % noise: 7-21 per release)
                 # can fall under the limit; its buffeting is then one of the likely causes.
                 weak = (f", or buffeting too weak to be taken as turbulence (the decays' "
