@@ -68,7 +68,8 @@ flat plate at 2 % noise; the ablation on the plate. ``--results DIR`` also write
 ``DIR/<name>.json`` and ``.md`` (:mod:`result_files`): ``ident_accuracy`` for the default run,
 else the name says what ran: ``ident_accuracy_<part>[_<rows>][_<estimator>]...`` (only the
 options that differ from the defaults, :func:`result_name`; ``--part tunnel --rows turbulent
---tunnel-mode both``: ``ident_accuracy_tunnel_turbulent``, both modes' tables in it).
+--tunnel-mode both``: ``ident_accuracy_tunnel_turbulent``, both modes' tables in it; with
+``--seeds 40``, ``..._seeds40``).
 """
 
 from __future__ import annotations
@@ -623,6 +624,10 @@ def ablation_part(seeds, workers, rows=("plate, Jones, Iw 1 %", "bluff deck, Iw 
                         "2-std coverage (%)": ".0f", "median std (%)": ".2f"})
 
 
+#: Seeds per row of a full run: the issue's tables (more, ``--seeds``, settle the medians).
+SEEDS = 20
+
+
 def _count(n, noun):
     """Return ``"1 seed"`` or ``"3 seeds"``."""
     return f"{n} {noun}{'' if n == 1 else 's'}"
@@ -631,9 +636,10 @@ def _count(n, noun):
 def result_name(args):
     """Return the result file's name for the options of a run.
 
-    ``ident_accuracy``, then those of the part, rows, turbulent estimator, motion, A3 rule and
-    first seed that differ from the defaults, joined by ``_``. Not the tunnel mode: the file
-    holds one table per mode, each captioned with it (``--tunnel-mode both``: two).
+    ``ident_accuracy``, then those of the part, rows, turbulent estimator, motion, A3 rule,
+    first seed and number of seeds (of the tunnel rows) that differ from the defaults, joined by
+    ``_``. Not the tunnel mode: the file holds one table per mode, each captioned with it
+    (``--tunnel-mode both``: two).
     """
     parts = [] if args.part == "all" else [args.part]
     if args.part in ("all", "tunnel"):
@@ -645,6 +651,8 @@ def result_name(args):
             parts.append(f"a3-{args.turbulent_a3}")
         if args.first_seed:
             parts.append(f"from{args.first_seed}")
+        if args.seeds not in (None, SEEDS):
+            parts.append(f"seeds{args.seeds}")
     return "_".join(["ident_accuracy", *parts]).replace("-", "_")
 
 
@@ -684,7 +692,7 @@ def main():
     args = parser.parse_args()
     explicit_rows = args.rows is not None
     args.rows = args.rows or "all"
-    seeds = args.seeds if args.seeds is not None else (1 if args.quick else 20)
+    seeds = args.seeds if args.seeds is not None else (1 if args.quick else SEEDS)
     repeats = args.repeats if args.repeats is not None else (1 if args.quick else 9)
     if seeds < 1 or repeats < 1:
         parser.error("--seeds and --repeats must be at least 1")

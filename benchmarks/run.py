@@ -44,6 +44,8 @@ FULL_EXTRA = {
     "ident_accuracy": (
         ("--part", "tunnel", "--rows", "turbulent", "--tunnel-mode", "both",
          "--turbulent-estimator", "ml", "--seeds", "20"),
+        ("--part", "tunnel", "--rows", "turbulent", "--tunnel-mode", "both",
+         "--turbulent-estimator", "ml", "--seeds", "40"),
         *(("--part", "tunnel", "--rows", "turbulent", "--tunnel-mode", "both",
            "--turbulent-estimator", "ml", "--closed-loop-buffeting", model, "--seeds", "20")
           for model in ("fourth-order", "second-order")),
