@@ -37,7 +37,7 @@ from ident.model import flutter as _flutter
 from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel
 
-__all__ = ["search_again"]
+__all__ = ["refuted", "search_again"]
 
 
 def search_again(fit: ClosedLoopFit, section: SectionModel, bounded_at: float | None,
@@ -99,6 +99,15 @@ def search_again(fit: ClosedLoopFit, section: SectionModel, bounded_at: float | 
         + (f" (could not start from {'; '.join(failed)})" if failed else "")
         + (f": kept {kept}, the best the releases allow" if allowed
            else f": every maximum is refuted, kept {kept}"))
+
+
+def refuted(fit: ClosedLoopFit, section: SectionModel, bounded_at: float | None) -> bool:
+    """Tell whether the releases refute ``fit``'s maximum: it flutters below ``bounded_at``.
+
+    ``bounded_at`` is the highest wind speed at which no release grew, m/s (None: nothing can
+    refute). A maximum unstable in still air is refuted by any release that decayed.
+    """
+    return bounded_at is not None and _refuted(_flutter_speed(section, fit.model), bounded_at)
 
 
 def _flutter_speed(section: SectionModel, model: RationalFunctionModel) -> float | None:
