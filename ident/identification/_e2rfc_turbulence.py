@@ -359,14 +359,17 @@ def _by_evidence(start: IdentifiedModel, releases: list[Release], section: Secti
     # the fourth-order fit, which fluttered within 6 % of the truth.
     refuted = [_closed_loop_starts.refuted(f, section, stable_to) for f in (fit, richer)]
     if stable_to is not None and refuted[0] != refuted[1]:
-        kept, lost = ("fourth-order", "second-order") if refuted[0] else ("second-order",
-                                                                          "fourth-order")
+        if refuted[0]:
+            chosen, chosen_restarted, kept, lost = (richer, richer_restarted, "fourth-order",
+                                                    "second-order")
+        else:
+            chosen, chosen_restarted, kept, lost = fit, restarted, "second-order", "fourth-order"
         above = -gain if refuted[0] else gain  # the refuted one's log L above the kept one's
-        return (*((richer, richer_restarted) if refuted[0] else (fit, restarted)), kept, (
+        return chosen, chosen_restarted, kept, (
             f", chosen by evidence: every {lost} maximum found flutters below "
             f"{stable_to:.3g} m/s, where no release grew, and the {kept} one does not (the "
             f"refuted one {abs(above):.0f} {'higher' if above > 0 else 'lower'} in "
-            f"log-likelihood)"))
+            f"log-likelihood)")
     if white:
         # Weak buffeting under the sensors' noise leaves the innovations white however the
         # filter misfits it, yet the misfit still biases the coefficients (the bluff deck at
