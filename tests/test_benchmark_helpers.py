@@ -14,6 +14,8 @@ import numpy as np
 import pytest
 
 from ident.model import flat_plate
+from ident.model import flutter as fl
+from simulators.decks import BLUFF_DECK, bluff_deck_model
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
@@ -97,9 +99,6 @@ def test_two_lag_approximant_is_the_fits_class_and_flutters_with_the_deck():
     the table's grid while a model that is not the deck's fails by far (the flat plate's
     aerodynamics on this section: 31 % above).
     """
-    from ident.model import flutter as fl
-    from simulators.decks import BLUFF_DECK, bluff_deck_model
-
     model = flutter_crb.two_lag_approximant()
     assert model.d.size == 2 and model.A.shape == (5, 2, 2)
     assert np.all(model.A[2] != 0.0)  # A3, the added mass, fitted too
