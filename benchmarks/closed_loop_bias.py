@@ -106,12 +106,10 @@ def run(args):
         U_F = fl.analyze(section, ia.row_spec(ROW)[1]()).speed
     e2rfc.TURBULENT_ESTIMATOR = "iv"  # without holds: plain E2RFC's estimate, the start
     start = e2rfc.identify([dataclasses.replace(r, hold=None) for r in releases], section)
-    sections, exact = e2rfc.CLOSED_LOOP_BUFFETING_MODELS[name]
     began = time.perf_counter()
     try:
         fit = closed_loop_ml.fit_closed_loop(releases, section, start, n_lags=2,
-                                             shaping_sections=sections,
-                                             exact_block_means=exact)
+                                             **e2rfc.CLOSED_LOOP_BUFFETING_MODELS[name])
         found = fl.analyze(section, fit.model)
     except ValueError as exc:
         print(f"FAILED {source} {name} seed {seed}: {exc}", flush=True)

@@ -49,7 +49,7 @@ from daq.campaign.plan import parse_plan
 from daq.campaign.runner import run_plan
 from daq.config import parse_rig_config
 from daq.errors import ConfigError
-from ident.identification.e2rfc import CLOSED_LOOP_BUFFETING
+from ident.identification.e2rfc import CLOSED_LOOP_BUFFETING, CLOSED_LOOP_BUFFETING_CHOICES
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import result_files  # noqa: E402 - beside this script
@@ -142,7 +142,7 @@ def main() -> None:
     parser.add_argument("--max-releases", type=int, default=None,
                         help="--adaptive: most releases at one chosen speed (4)")
     parser.add_argument("--closed-loop-buffeting",
-                        choices=("second-order", "fourth-order", "by-evidence"),
+                        choices=CLOSED_LOOP_BUFFETING_CHOICES,
                         default=CLOSED_LOOP_BUFFETING,
                         help="--adaptive: the closed-loop estimator's buffeting model")
     result_files.add_arguments(parser)

@@ -108,11 +108,14 @@ def _build_parser() -> argparse.ArgumentParser:
     p_id.add_argument("--turbulent-estimator", choices=("iv", "ml"),
                       help="in turbulence: closed-loop ML (default; 2-DOF) or refined IV")
     p_id.add_argument("--closed-loop-buffeting",
-                      choices=("second-order", "fourth-order", "by-evidence"),
+                      choices=("second-order", "fourth-order", "second-order-per-speed",
+                               "fourth-order-per-speed", "by-evidence"),
                       help="closed-loop ML's buffeting model: by-evidence (default: "
                            "fourth-order where the second-order one's innovations pooled "
                            "over the records are not white), second-order or fourth-order "
-                           "(less biased, about twice the time)")
+                           "(less biased, about twice the time); one filter for every speed, "
+                           "scaled with it, or with -per-speed one per speed (turbulence "
+                           "that does not scale with the speed)")
 
     p_diag = sub.add_parser(
         "diagnose",

@@ -37,7 +37,9 @@ The plan (units SI; the example plans are ``rig_configs/plans/*.toml``)::
     closed_loop_buffeting = "by-evidence"  # the "ml" estimator's buffeting model: the
                                 # fourth-order one where the second-order one's innovations
                                 # pooled over the records are not white, else the second;
-                                # or either alone ("second-order", "fourth-order")
+                                # or either alone ("second-order", "fourth-order"); each
+                                # one filter for all speeds, scaled with the speed, or
+                                # "-per-speed" (turbulence changed between speeds)
 
     [speeds]
     wind_speeds = [5.0, 7.0]    # m/s; or fan_rpm = [500, 700] (set-points, rpm), not both
@@ -98,7 +100,8 @@ IDENTIFICATIONS = ("e2rfc", "displacement")
 TURBULENT_ESTIMATORS = ("iv", "ml")
 #: The closed-loop estimator's buffeting models, or the evidence's choice between them
 #: (``e2rfc.CLOSED_LOOP_BUFFETING_CHOICES``).
-CLOSED_LOOP_BUFFETINGS = ("second-order", "fourth-order", "by-evidence")
+CLOSED_LOOP_BUFFETINGS = ("second-order", "fourth-order", "second-order-per-speed",
+                          "fourth-order-per-speed", "by-evidence")
 #: Fewest wind speeds the displacement-only route identifies from (its known weakness).
 DISPLACEMENT_MIN_SPEEDS = 3
 MAX_RELEASES_PER_SPEED = 20

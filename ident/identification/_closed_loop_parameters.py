@@ -48,6 +48,13 @@ NOISE_FLOOR = 5e-3
 #: Least ratio L11 / L00 of a shaping filter's Cholesky factor (the search's bound, and the
 #: floor a warm start writes): the moment's own gust, never quite none.
 L11_RATIO_MIN = 1e-4
+#: The exponents of the wind speed in a shared buffeting filter's frequencies and white-noise
+#: level (:meth:`Layout.shaping`) where gusts of a fixed intensity and integral scale act
+#: quasi-steadily: the force is ``rho U^2 B`` times the gust over ``U`` (``Iu U / U``), its
+#: spectrum a function of the wavenumber ``f / U`` (Taylor's frozen turbulence), so its
+#: frequencies scale as ``U`` and its low-frequency spectral density (``L L^T``) as
+#: ``rho^2 U^3``. The search's start; the fit estimates both.
+QUASI_STEADY_EXPONENTS = (1.0, 1.5)
 #: Start of each later section's zero, as ``tau w`` (:class:`ShapingFilter`): the likelihood
 #: is even in it, so it cannot start at 0, where its derivative vanishes.
 ZERO_START = 0.5
@@ -72,7 +79,8 @@ class Layout:
     """Where each parameter sits in the vector ``theta``."""
 
     def __init__(self, n_dof: int, n_lags: int, with_A3: bool, n_groups: int,
-                 n_releases: int, sections: int = 1) -> None:
+                 n_releases: int, sections: int = 1,
+                 scaled: FloatArray | None = None) -> None:
         terms = ([0, 1, 2] if with_A3 else [0, 1]) + [3 + m for m in range(n_lags)]
         self.index = tuple((k, i, j) for i in range(n_dof) for k in terms for j in range(n_dof))
         self.n_A, self.n_lags, self.n_dof = len(self.index), n_lags, n_dof
@@ -81,7 +89,16 @@ class Layout:
         #: Parameters of a wind speed's shaping filter (:meth:`shaping`).
         self.n_shaping = 3 + 4 * sections + (2 * sections if sections > 1 else 0)
         self.shaping0 = self.n_aero
-        self.noise0 = self.shaping0 + self.n_shaping * n_groups
+        #: Per wind speed, ``log(U / U_ref)`` and ``log(rho / rho_ref)`` of one filter shared by
+        #: every speed (:meth:`shaping`); None: a filter per speed.
+        self.scaled = None if scaled is None else np.asarray(scaled, dtype=float)
+        #: Shaping parameters in ``theta``: a block per speed, or one shared block and its two
+        #: scaling exponents.
+        self.n_groups = n_groups
+        self.n_shaping_blocks = n_groups if scaled is None else 1
+        self.shaping_size = (self.n_shaping * n_groups if scaled is None
+                             else self.n_shaping + 2)
+        self.noise0 = self.shaping0 + self.shaping_size
         self.size = self.noise0 + 4 * n_releases
         #: log of each channel's least noise std (:data:`NOISE_FLOOR`; :func:`noise_floor`).
         self.noise_floor = np.full(4 * n_releases, -np.inf)
@@ -103,9 +120,14 @@ class Layout:
         (docs/development/e2rfc_turbulence.md). ``L11`` in log: the likelihood depends on its
         square, so it is flat in ``L11`` at 0 (a lift and moment that are one gust's) and
         Fisher scoring would stall there.
+
+        With one filter shared by the speeds (:attr:`scaled`), the block is that filter's at
+        the reference speed and density, followed by two exponents ``a`` and ``b``: at speed
+        ``U`` the frequencies are the block's times ``(U / U_ref)^a`` and ``L`` its times
+        ``(rho / rho_ref) (U / U_ref)^b``; damping, zeros (as ``tau w``) and the lift-moment
+        correlation are the block's.
         """
-        p = theta[self.shaping0 + self.n_shaping * group:
-                  self.shaping0 + self.n_shaping * (group + 1)]
+        p = self._block(theta, group)
         k = 2 * self.sections
         f = np.exp(p[0:k]).reshape(2, self.sections)
         L00 = math.exp(p[2 * k])
@@ -114,19 +136,42 @@ class Layout:
                  if self.sections > 1 else None)
         return ShapingFilter(f, np.exp(p[k:2 * k]).reshape(2, self.sections), L, zeros)
 
+    def _block(self, theta: FloatArray, group: int) -> FloatArray:
+        """Return wind speed ``group``'s shaping parameters (:meth:`shaping`'s layout)."""
+        if self.scaled is None:
+            return theta[self.shaping0 + self.n_shaping * group:
+                         self.shaping0 + self.n_shaping * (group + 1)]
+        p = theta[self.shaping0:self.shaping0 + self.n_shaping].copy()
+        a, b = theta[self.shaping0 + self.n_shaping:self.shaping0 + self.n_shaping + 2]
+        log_U, log_rho = self.scaled[group]
+        k = 2 * self.sections
+        p[0:k] += a * log_U
+        p[2 * k] += b * log_U + log_rho
+        return p
+
+    def shaping_offset(self, group: int) -> int:
+        """Return where wind speed ``group``'s shaping block starts in ``theta``."""
+        return self.shaping0 + (0 if self.scaled is not None else self.n_shaping * group)
+
     def set_shaping(self, theta: FloatArray, group: int, shaping: ShapingFilter) -> None:
         """Write ``shaping`` into ``theta`` as wind speed ``group``'s filter, in place.
 
         The inverse of :meth:`shaping`; the filter's sections must number :attr:`sections`.
+        With a shared filter, its block is set so that speed ``group``'s filter is
+        ``shaping`` at the exponents already in ``theta``.
         """
         f, zeta, L = shaping.frequencies, shaping.damping, shaping.L
         if f.shape != (2, self.sections):
             raise ValueError(f"a shaping filter of {f.shape[1]} section(s) per force cannot "
                              f"start one of {self.sections}")
-        p0, k = self.shaping0 + self.n_shaping * group, 2 * self.sections
-        theta[p0:p0 + k] = np.log(f).ravel()
+        p0, k = self.shaping_offset(group), 2 * self.sections
+        a = b = log_U = log_rho = 0.0
+        if self.scaled is not None:
+            a, b = theta[p0 + self.n_shaping:p0 + self.n_shaping + 2]
+            log_U, log_rho = self.scaled[group]
+        theta[p0:p0 + k] = np.log(f).ravel() - a * log_U
         theta[p0 + k:p0 + 2 * k] = np.log(zeta).ravel()
-        theta[p0 + 2 * k] = math.log(L[0, 0])
+        theta[p0 + 2 * k] = math.log(L[0, 0]) - b * log_U - log_rho
         theta[p0 + 2 * k + 1] = L[1, 0] / L[0, 0]
         theta[p0 + 2 * k + 2] = math.log(max(abs(L[1, 1]) / L[0, 0], L11_RATIO_MIN))
         if self.sections > 1:
@@ -153,9 +198,8 @@ class Layout:
         """
         lower, upper = np.full(self.size, -np.inf), np.full(self.size, np.inf)
         lower[self.n_A:self.n_aero], upper[self.n_A:self.n_aero] = self.log_lag_range
-        groups = (self.noise0 - self.shaping0) // self.n_shaping
         L11 = 4 * self.sections + 2
-        lower[[self.shaping0 + self.n_shaping * g + L11 for g in range(groups)]] = math.log(
+        lower[[self.shaping_offset(g) + L11 for g in range(self.n_shaping_blocks)]] = math.log(
             L11_RATIO_MIN)
         lower[self.noise0:] = np.maximum(theta[self.noise0:] - math.log(1e3), self.noise_floor)
         return lower, upper
@@ -167,8 +211,9 @@ class Layout:
     def affecting(self, record: Record) -> list[int]:
         """Return the parameters a record's likelihood depends on."""
         aero = [] if record.held else list(range(self.n_aero))
-        shaping = list(range(self.shaping0 + self.n_shaping * record.group,
-                             self.shaping0 + self.n_shaping * (record.group + 1)))
+        p0 = self.shaping_offset(record.group)
+        shaping = list(range(p0, p0 + (self.n_shaping if self.scaled is None
+                                       else self.shaping_size)))
         noise = list(range(self.noise0 + 4 * record.release,
                            self.noise0 + 4 * record.release + 4))
         return aero + shaping + noise
@@ -276,7 +321,7 @@ def initial(records: list[Record], layout: Layout, start: RationalFunctionModel,
     A = start.A
     theta[:layout.n_A] = [A[k, i, j] if k < A.shape[0] else 0.0 for k, i, j in layout.index]
     theta[layout.n_A:layout.n_aero] = np.log(np.maximum(start.d, 1e-6))
-    n_groups = 1 + max(rec.group for rec in records)
+    present = sorted({rec.group for rec in records})
     for r in range(1 + max(rec.release for rec in records)):
         own = [rec for rec in records if rec.release == r]
         y = np.vstack([rec.y for rec in own])
@@ -286,7 +331,8 @@ def initial(records: list[Record], layout: Layout, start: RationalFunctionModel,
         theta[layout.noise0 + 4 * r: layout.noise0 + 4 * r + 4] = np.maximum(np.log(
             np.maximum(std, 1e-12 * np.maximum(np.std(y, axis=0), 1e-300))),
             layout.noise_floor[4 * r: 4 * r + 4])
-    for g in range(n_groups):
+    blocks = np.zeros((layout.n_groups, layout.n_shaping))
+    for g in present:
         own = [rec for rec in records if rec.group == g]
         # The buffeting force's level and bandwidth from a hold (force alone) or else the
         # second half of the releases (mostly random response).
@@ -308,20 +354,32 @@ def initial(records: list[Record], layout: Layout, start: RationalFunctionModel,
         unit = np.sqrt(np.diag(C_b @ P @ C_b.T))
         cov = np.cov(force.T) / np.outer(unit, unit)
         L = np.linalg.cholesky(cov + 1e-9 * np.trace(cov) * np.eye(2))
-        p0, k = layout.shaping0 + layout.n_shaping * g, 2 * S
-        theta[p0:p0 + k] = np.log(f).ravel()
-        theta[p0 + k:p0 + 2 * k] = math.log(0.7)
-        theta[p0 + 2 * k] = math.log(L[0, 0])
-        theta[p0 + 2 * k + 1] = L[1, 0] / L[0, 0]
-        theta[p0 + 2 * k + 2] = math.log(max(L[1, 1] / L[0, 0], 1e-3))
+        k = 2 * S
+        blocks[g, :k] = np.log(f).ravel()
+        blocks[g, k:2 * k] = math.log(0.7)
+        blocks[g, 2 * k] = math.log(L[0, 0])
+        blocks[g, 2 * k + 1] = L[1, 0] / L[0, 0]
+        blocks[g, 2 * k + 2] = math.log(max(L[1, 1] / L[0, 0], 1e-3))
         if S > 1:
-            theta[p0 + 2 * k + 3:p0 + 3 * k + 3] = ZERO_START
+            blocks[g, 2 * k + 3:3 * k + 3] = ZERO_START
+    if layout.scaled is None:
+        theta[layout.shaping0:layout.noise0] = blocks.ravel()
+        return theta
+    # One filter for every speed: each speed's start scaled back to the reference by the
+    # quasi-steady exponents, and averaged.
+    a, b = QUASI_STEADY_EXPONENTS
+    k = 2 * layout.sections
+    blocks[:, :k] -= a * layout.scaled[:, :1]
+    blocks[:, 2 * k] -= b * layout.scaled[:, 0] + layout.scaled[:, 1]
+    theta[layout.shaping0:layout.shaping0 + layout.n_shaping] = blocks[present].mean(axis=0)
+    theta[layout.shaping0 + layout.n_shaping:layout.noise0] = a, b
     return theta
 
 
 def warm_nuisance(theta: FloatArray, layout: Layout, speeds: Sequence[float],
                   shaping: Sequence[tuple[float, ShapingFilter]],
-                  noise: Sequence[FloatArray]) -> None:
+                  noise: Sequence[FloatArray],
+                  exponents: tuple[float, float] | None = None) -> None:
     """Start the shaping filters and noise from another fit's, in place.
 
     ``shaping`` holds (wind speed, filter) pairs of a fit of a superset of the releases: each
@@ -329,13 +387,22 @@ def warm_nuisance(theta: FloatArray, layout: Layout, speeds: Sequence[float],
     else keeps its start. ``noise`` holds each release's four noise stds there, in this fit's
     order; each is kept above its floor. Near the other fit's maximum, the nuisance starts
     near this one's: the refit without the top speed then takes a few scoring steps where a
-    start from the records' own statistics took about fifteen.
+    start from the records' own statistics took about fifteen. With one filter shared by the
+    speeds (:attr:`Layout.scaled`), ``exponents`` (the other fit's, when it shared one too)
+    start its two exponents, and the filter of the speed nearest the reference its block.
     """
     if len(noise) != (layout.size - layout.noise0) // 4:
         raise ValueError(f"{len(noise)} releases' noise for a fit of "
                          f"{(layout.size - layout.noise0) // 4}")
     known = [U for U, _ in shaping]
-    for group, U in enumerate(speeds):
+    groups: Sequence[int] = range(len(speeds))
+    if layout.scaled is not None:
+        if exponents is not None:
+            first = layout.shaping0 + layout.n_shaping
+            theta[first:first + 2] = exponents
+        groups = [int(np.argmin(np.abs(layout.scaled[:, 0])))]
+    for group in groups:
+        U = speeds[group]
         nearest = nearest_wind_speed(U, known) if known else -1
         if nearest >= 0 and abs(known[nearest] - U) <= DISTINCT_U_RTOL * U:
             layout.set_shaping(theta, group, shaping[nearest][1])

@@ -174,7 +174,7 @@ def analyze_campaign(
     turbulent_estimator : {"iv", "ml"}, optional
         The estimator of releases in turbulence (:func:`ident.identification.e2rfc.identify`;
         None: its default).
-    closed_loop_buffeting : {"second-order", "fourth-order", "by-evidence"}, optional
+    closed_loop_buffeting : str, optional
         The closed-loop estimator's buffeting model (the same function's; None: its default).
 
     Returns

@@ -88,8 +88,10 @@ __all__ = ["ClosedLoopFit", "MAX_ITERATIONS", "fit_closed_loop"]
 
 FloatArray = npt.NDArray[np.float64]
 
-#: Most Fisher-scoring iterations.
-MAX_ITERATIONS = 40
+#: Most Fisher-scoring iterations. With one buffeting filter shared by the speeds the search
+#: took 12-24 on the bluff deck's and plate's rows, but 49 on the plate under a Davenport
+#: admittance (seed 0; 25 with a filter per speed), where 40 had stopped it unconverged.
+MAX_ITERATIONS = 60
 #: The search ends when a full Fisher-scoring step would gain less than this in log L (a third
 #: of a standard deviation of the likelihood-ratio statistic along the step).
 TOLERANCE = 5e-2
@@ -134,6 +136,10 @@ class ClosedLoopFit:
         ``(k, i, j)`` of each ``A`` entry in ``covariance``.
     shaping : tuple of ShapingFilter
         The buffeting force per wind speed (``wind_speeds``).
+    shaping_exponents : (float, float) or None
+        With one buffeting filter shared by the speeds (``shared_buffeting``), the fitted
+        exponents of the wind speed in its frequencies and its white-noise level
+        (quasi-steady buffeting in gusts of fixed intensity and scale: 1 and 1.5); else None.
     wind_speeds : tuple of float
         The distinct wind speeds, m/s.
     noise_std : ndarray, shape (n_releases, 4)
@@ -187,6 +193,7 @@ class ClosedLoopFit:
     n_initial_states: int
     n_samples: int
     warnings: tuple[str, ...] = field(default=())
+    shaping_exponents: tuple[float, float] | None = None
 
     @property
     def schwarz(self) -> float:
@@ -238,7 +245,7 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
                     start: RationalFunctionModel, *, with_A3: bool = True,
                     n_lags: int | None = None, use_holds: bool = True,
                     window: tuple[float, float] | None = None, shaping_sections: int = 1,
-                    exact_block_means: bool = False,
+                    exact_block_means: bool = False, shared_buffeting: bool = False,
                     nuisance_from: tuple[ClosedLoopFit, Sequence[int]] | None = None
                     ) -> ClosedLoopFit:
     """Maximise the likelihood of every release (and hold) together, from ``start``.
@@ -275,6 +282,12 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
         on six seeds, exact block means both sides of the truth. On von Karman buffeting
         with one section it found spurious maxima; with two it did not
         (docs/development/e2rfc_turbulence.md). Default False.
+    shared_buffeting : bool, optional
+        One shaping filter for every wind speed, scaled to each as buffeting scales in gusts
+        of a fixed intensity and integral scale: its frequencies as ``U^a`` and its
+        white-noise level as ``rho U^b``, both exponents fitted (quasi-steady: 1 and 1.5).
+        A filter per speed (default False) has three times the buffeting parameters with
+        three speeds, each told by that speed's releases alone.
     nuisance_from : (ClosedLoopFit, sequence of int), optional
         A fit of a superset of ``releases`` with the same buffeting model, and the index there
         of each release here: its shaping filters (by wind speed) and noise stds (by release)
@@ -304,7 +317,15 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
     start = setup.with_lags(start, start.n_lags if n_lags is None else n_lags)
     if not isinstance(shaping_sections, int) or shaping_sections < 1:
         raise ValueError(f"shaping_sections must be an integer >= 1, got {shaping_sections!r}")
-    layout = Layout(2, start.n_lags, with_A3, len(speeds), len(releases), shaping_sections)
+    scaled = None
+    if shared_buffeting:
+        U_ref = math.exp(float(np.mean(np.log(speeds))))
+        rho = [np.mean([rec.rho for rec in records if rec.group == g])
+               for g in range(len(speeds))]
+        scaled = np.column_stack([np.log(np.asarray(speeds) / U_ref),
+                                  np.log(np.asarray(rho) / section.rho)])
+    layout = Layout(2, start.n_lags, with_A3, len(speeds), len(releases), shaping_sections,
+                    scaled)
     layout.noise_floor = setup.noise_floor(records, len(releases))
     layout.log_lag_range = setup.log_lag_range(section, speeds)
     objective = _Objective(records, section, layout, exact_block_means)
@@ -313,7 +334,7 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
         other, index = nuisance_from
         setup.warm_nuisance(theta, layout, speeds, list(zip(other.wind_speeds, other.shaping,
                                                             strict=True)),
-                            [other.noise_std[i] for i in index])
+                            [other.noise_std[i] for i in index], other.shaping_exponents)
     current = objective.evaluate(theta)
     if not math.isfinite(current.nll):
         raise ValueError("the likelihood cannot be evaluated at the start (no stabilising "
@@ -348,7 +369,9 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
         whiteness=whiteness, portmanteau=portmanteau,
         n_parameters=layout.size + 4 * len(records),
         n_initial_states=sum(c.shape[1] - 4 for c in current.columns),
-        n_samples=sum(record.y.size for record in records), warnings=tuple(warnings))
+        n_samples=sum(record.y.size for record in records), warnings=tuple(warnings),
+        shaping_exponents=(None if scaled is None else
+                           (float(theta[layout.noise0 - 2]), float(theta[layout.noise0 - 1]))))
 
 
 def _maximise(objective: _Objective, layout: Layout, theta: FloatArray, current: _Evaluation

@@ -140,13 +140,15 @@ TURBULENT_A3 = "fitted-or-zero"
 TURBULENT_ESTIMATOR = "ml"
 #: The turbulence branch's estimators, by name.
 TURBULENT_ESTIMATORS = ("iv", "ml")
-#: The closed-loop branch's buffeting model (``fit_closed_loop``'s options, by name): one
-#: second-order section per force on block means taken as samples, or two sections on exact
-#: block means. docs/development/e2rfc_turbulence.md measures the second's smaller bias and
-#: its two to three times the time. ``"by-evidence"`` (:data:`BY_EVIDENCE`, the default) fits
-#: both and keeps the second when the first's innovations pooled over the records are not
-#: white, or when the second is higher in likelihood than chance allows its extra parameters
-#: (a buffeting model the data reject biases the self-excited coefficients in closed loop).
+#: The closed-loop branch's buffeting model (``fit_closed_loop``'s options, by name,
+#: :data:`CLOSED_LOOP_BUFFETING_MODELS`): one second-order section per force on block means
+#: taken as samples, or two sections on exact block means, one filter shared by the wind
+#: speeds or (``-per-speed``) one per speed. docs/development/e2rfc_turbulence.md measures the
+#: fourth-order model's smaller bias and its two to three times the time. ``"by-evidence"``
+#: (:data:`BY_EVIDENCE`, the default) fits both shared models and keeps the fourth-order one
+#: when the second-order one's innovations pooled over the records are not white, or when it
+#: is higher in likelihood than chance allows its extra parameters (a buffeting model the
+#: data reject biases the self-excited coefficients in closed loop).
 CLOSED_LOOP_BUFFETING = "by-evidence"
 
 
@@ -175,13 +177,16 @@ def identify(
         The estimator of releases in turbulence (default :data:`TURBULENT_ESTIMATOR`, "ml"):
         closed-loop maximum likelihood (two degrees of freedom; a 3-DOF section runs refined IV
         and says so), or refined IV with the holds' noise model. Smooth flow ignores it.
-    closed_loop_buffeting : {"second-order", "fourth-order", "by-evidence"}, optional
-        The closed-loop estimator's buffeting model (default :data:`CLOSED_LOOP_BUFFETING`):
-        one second-order shaping section per force on block means taken as samples, or two
-        sections on exact block means (less biased, about twice the time;
-        :data:`CLOSED_LOOP_BUFFETING_MODELS`), or both, keeping the second where the first's
-        innovations pooled over the records are not white or a likelihood-ratio test at the
-        1 % level prefers it. Ignored by the other estimators.
+    closed_loop_buffeting : str, optional
+        The closed-loop estimator's buffeting model (default :data:`CLOSED_LOOP_BUFFETING`),
+        one of :data:`CLOSED_LOOP_BUFFETING_CHOICES`: ``"second-order"``, one second-order
+        shaping section per force on block means taken as samples; ``"fourth-order"``, two
+        sections on exact block means (less biased, about twice the time); each one filter
+        for every wind speed, scaled as quasi-steady buffeting scales with the speed, or with
+        ``"-per-speed"`` a filter per speed (turbulence that does not scale with the speed);
+        ``"by-evidence"``, both shared models, keeping the fourth-order one where the
+        second-order one's innovations pooled over the records are not white or a
+        likelihood-ratio test at the 1 % level prefers it. Ignored by the other estimators.
 
     Returns
     -------
