@@ -16,8 +16,9 @@ sources of releases with two buffeting models:
 
 and the models ``second-order-per-speed`` (one section per force, block means taken as
 samples of the state) and ``fourth-order-per-speed`` (two sections with zeros, the block means
-modelled exactly), each a filter per wind speed (``e2rfc.CLOSED_LOOP_BUFFETING_MODELS``). Both fits start from plain E2RFC's estimate on the
-releases without their holds; 3 speeds (0.4, 0.6, 0.8 U_F) x 8 releases of 20 s.
+modelled exactly), each a filter per wind speed (``e2rfc.CLOSED_LOOP_BUFFETING_MODELS``).
+Both fits start from plain E2RFC's estimate on the releases without their holds; 3 speeds
+(0.4, 0.6, 0.8 U_F) x 8 releases of 20 s.
 
 Printed per source and model: the flutter-speed error of each seed, their mean and median
 absolute value, the median Fisher std (the likelihood's own, without the structure and
