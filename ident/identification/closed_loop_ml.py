@@ -9,7 +9,8 @@ Gaussian likelihood of every release at every wind speed together, over
   frequency (:class:`~ident.model.rfc.RationalFunctionModel`);
 - per wind speed, the buffeting force as white noise through a second-order shaping filter per
   force (or several in cascade, ``shaping_sections``) with the lift-moment correlation
-  (:class:`~ident.identification.innovations.ShapingFilter`);
+  (:class:`~ident.identification.innovations.ShapingFilter`); or one filter for every speed,
+  scaled to each as buffeting scales with the speed (``shared_buffeting``);
 - per release, the four channels' sensor-noise standard deviations;
 - per record, concentrated out by generalised least squares: the channels' constant offsets
   (mean wind load, static deflection, zero drift) and the initial state, but for a release's
