@@ -99,6 +99,10 @@ class Layout:
         self.shaping_size = (self.n_shaping * n_groups if scaled is None
                              else self.n_shaping + 2)
         self.noise0 = self.shaping0 + self.shaping_size
+        #: Where a shared filter's two exponents sit in ``theta`` (:meth:`shaping`); None with a
+        #: filter per speed.
+        self.exponents = (None if scaled is None
+                          else slice(self.shaping0 + self.n_shaping, self.noise0))
         self.size = self.noise0 + 4 * n_releases
         #: log of each channel's least noise std (:data:`NOISE_FLOOR`; :func:`noise_floor`).
         self.noise_floor = np.full(4 * n_releases, -np.inf)
@@ -142,7 +146,7 @@ class Layout:
             return theta[self.shaping0 + self.n_shaping * group:
                          self.shaping0 + self.n_shaping * (group + 1)]
         p = theta[self.shaping0:self.shaping0 + self.n_shaping].copy()
-        a, b = theta[self.shaping0 + self.n_shaping:self.shaping0 + self.n_shaping + 2]
+        a, b = theta[self.exponents]
         log_U, log_rho = self.scaled[group]
         k = 2 * self.sections
         p[0:k] += a * log_U
@@ -167,7 +171,7 @@ class Layout:
         p0, k = self.shaping_offset(group), 2 * self.sections
         a = b = log_U = log_rho = 0.0
         if self.scaled is not None:
-            a, b = theta[p0 + self.n_shaping:p0 + self.n_shaping + 2]
+            a, b = theta[self.exponents]
             log_U, log_rho = self.scaled[group]
         theta[p0:p0 + k] = np.log(f).ravel() - a * log_U
         theta[p0 + k:p0 + 2 * k] = np.log(zeta).ravel()
@@ -372,7 +376,7 @@ def initial(records: list[Record], layout: Layout, start: RationalFunctionModel,
     blocks[:, :k] -= a * layout.scaled[:, :1]
     blocks[:, 2 * k] -= b * layout.scaled[:, 0] + layout.scaled[:, 1]
     theta[layout.shaping0:layout.shaping0 + layout.n_shaping] = blocks[present].mean(axis=0)
-    theta[layout.shaping0 + layout.n_shaping:layout.noise0] = a, b
+    theta[layout.exponents] = a, b
     return theta
 
 
@@ -398,8 +402,7 @@ def warm_nuisance(theta: FloatArray, layout: Layout, speeds: Sequence[float],
     groups: Sequence[int] = range(len(speeds))
     if layout.scaled is not None:
         if exponents is not None:
-            first = layout.shaping0 + layout.n_shaping
-            theta[first:first + 2] = exponents
+            theta[layout.exponents] = exponents
         groups = [int(np.argmin(np.abs(layout.scaled[:, 0])))]
     for group in groups:
         U = speeds[group]

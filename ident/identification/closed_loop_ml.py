@@ -371,8 +371,9 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
         n_parameters=layout.size + 4 * len(records),
         n_initial_states=sum(c.shape[1] - 4 for c in current.columns),
         n_samples=sum(record.y.size for record in records), warnings=tuple(warnings),
-        shaping_exponents=(None if scaled is None else
-                           (float(theta[layout.noise0 - 2]), float(theta[layout.noise0 - 1]))))
+        shaping_exponents=(None if layout.exponents is None else
+                           (float(theta[layout.exponents][0]),
+                            float(theta[layout.exponents][1]))))
 
 
 def _maximise(objective: _Objective, layout: Layout, theta: FloatArray, current: _Evaluation
