@@ -234,6 +234,7 @@ class _DeviceCheck:
         self.driver: Any = None
         self._lock = threading.Lock()
         self._abandoned: str | None = None
+        self._gave_up = False  # the device's own thread ended its check on an exception
         self._start = time.monotonic()
         self._elapsed = 0.0
         self.thread = threading.Thread(target=self._run, name=f"windrig-check-{inst.name}",
@@ -242,7 +243,11 @@ class _DeviceCheck:
     def abandon(self, timeout_s: float) -> None:
         """Give up on a device that did not finish in time: say so, close its driver."""
         with self._lock:
-            self._abandoned = f"no answer within {timeout_s:g} s"
+            # The driver's own timeout may have fired a moment before ours (a scanner's command
+            # timeout is 2 s, the check's default too): then its failure says why already, and a
+            # second line for the same silence would only confuse.
+            if not self._gave_up:
+                self._abandoned = f"no answer within {timeout_s:g} s"
             self._elapsed = time.monotonic() - self._start
         driver = self.driver
         if driver is not None:
@@ -278,14 +283,14 @@ class _DeviceCheck:
             try:
                 self.driver.open()
             except Exception as exc:
-                if self._abandoned is None:  # else: closed under it, "no answer" says why
-                    self._failed("unreachable", exc)
+                # A device that accepts the connection and stays silent is there but mute.
+                self._failed("no answer" if isinstance(exc, TimeoutError) else "unreachable",
+                             exc)
                 return self._done()
             found.reachable = True
             INSPECT[self.kind](self, self.driver, found)
         except Exception as exc:
-            if self._abandoned is None:
-                self._failed("check failed", exc)
+            self._failed("check failed", exc)
         finally:
             try:
                 self.driver.close()
@@ -297,7 +302,10 @@ class _DeviceCheck:
     def _failed(self, what: str, exc: Exception) -> None:
         """Record ``exc`` as this device's problem (one line), its traceback in the log."""
         log.debug("device check of %s: %s", self.inst.name, what, exc_info=exc)
-        self.found.problems.append(f"{what}: {_failure(exc)}")
+        with self._lock:
+            if self._abandoned is None:  # else: closed under it, "no answer within" says why
+                self.found.problems.append(f"{what}: {_failure(exc)}")
+                self._gave_up = True
 
     def _done(self) -> None:
         with self._lock:

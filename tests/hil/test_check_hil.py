@@ -108,9 +108,29 @@ def test_a_device_that_never_answers_is_given_up_after_the_timeout(rig):
         results = {r.device: r for r in check_rig(config, timeout_s=2.0, only=["scanner",
                                                                              "fan"])}
         took = time.monotonic() - start
-    assert results["scanner"].problems == ("no answer within 2 s",)
+    # One line either way the race between the scanner's own 2 s command timeout and the
+    # check's 2 s falls: the check's "no answer within 2 s", or the driver's own timeout.
+    (problem,) = results["scanner"].problems
+    assert problem in ("no answer within 2 s",
+                       f"no answer: {url}: no reply line within 2 s (received b'')"), problem
     assert results["fan"].ok
     assert took < 3.5  # the timeout, plus at most 1 s for the closed driver's thread to end
+
+
+def test_a_silent_device_s_own_timeout_is_named_as_no_answer(rig):
+    """The check's timeout above the scanner's 2 s command timeout: the driver's line, once."""
+    import dataclasses
+    import socket
+
+    with socket.create_server(("127.0.0.1", 0)) as silent:
+        url = f"tcp://127.0.0.1:{silent.getsockname()[1]}"
+        instruments = tuple(dataclasses.replace(i, url=url) for i in rig.config.instruments
+                            if i.name == "scanner")
+        config = dataclasses.replace(rig.config, instruments=instruments)
+        (result,) = check_rig(config, timeout_s=6.0)
+    # Not "unreachable": the port accepted; and the command's timeout, not a read's last slice.
+    assert result.problems == (f"no answer: {url}: no reply line within 2 s (received b'')",)
+    assert 1.9 < result.elapsed_s < 5.0  # the driver's 2 s, well before the check's 6 s
 
 
 def test_a_running_fan_fails_the_wind_off_check(rig):

@@ -491,11 +491,14 @@ class ScanivalveMps4264:
                 raise ProtocolError(f"{self.transport.url}: no line end within 4096 bytes: "
                                     f"{bytes(buf[:64]).hex(' ')} ...")
             remaining = deadline - time.monotonic()
-            if remaining <= 0:
+            try:
+                if remaining <= 0:
+                    raise TransportTimeout("the command timeout passed")
+                buf += self.transport.read(4096, remaining)
+            except TransportTimeout as exc:  # say the command's timeout, not the last slice's
                 raise TransportTimeout(f"{self.transport.url}: no reply line within "
                                        f"{self.settings.command_timeout_s:g} s (received "
-                                       f"{bytes(buf)!r})")
-            buf += self.transport.read(4096, remaining)
+                                       f"{bytes(buf)!r})") from exc
 
     # -- data ------------------------------------------------------------------------------------
     def _reset_run_state(self) -> None:
