@@ -213,3 +213,18 @@ def test_identify_names_a_bad_file(tmp_path, capsys):
     assert "junk.h5" in capsys.readouterr().err
     with pytest.raises(FileFormatError, match="junk.h5"):
         main(["--debug", "identify", str(junk)])
+
+
+def test_identify_s_turbulence_choices_are_e2rfc_s_names():
+    """The CLI lists its choices literally (a fast ``--help`` imports no numerics): the same."""
+    import argparse
+
+    from daq.campaign import plan
+    from daq.cli import _build_parser
+
+    parser = _build_parser()
+    identify = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)
+                    ).choices["identify"]
+    choices = {a.dest: tuple(a.choices) for a in identify._actions if a.choices is not None}
+    assert choices["closed_loop_buffeting"] == plan.CLOSED_LOOP_BUFFETINGS
+    assert choices["turbulent_estimator"] == plan.TURBULENT_ESTIMATORS

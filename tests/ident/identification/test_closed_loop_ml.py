@@ -403,12 +403,26 @@ def test_one_shaping_filter_shared_by_the_speeds_fits_the_buffeting_s_scaling():
     assert fit.converged
     a, b = fit.shaping_exponents
     assert abs(a) < 0.3 and abs(b - 2.0) < 0.3
+    # Not frozen gusts (those give 1 and 1.5): said, with the remedy.
+    (note,) = [w for w in fit.warnings if "shared by the wind speeds scales as" in w]
+    assert f"U^{a:.2f}" in note and "fourth-order-per-speed" in note
     for sf in fit.shaping:
         assert np.allclose(sf.frequencies, 4.0, rtol=0.15)
     speed, std = flutter_std(fit)
     assert std < 0.10 * U_F
     assert abs(speed - U_F) <= 2.5 * std
     assert fit.n_parameters == 22 + 7 + 2 + 6 * 4 + 6 * 4
+
+
+def test_the_shared_filter_s_exponents_are_warned_of_only_far_from_frozen_gusts():
+    """Beyond the tolerance and three std either exponent warns; within either, none."""
+    tol = closed_loop_ml.EXPONENT_TOLERANCE
+    assert closed_loop_ml.exponent_warning((1.0, 1.5), (0.05, 0.05)) == []
+    assert closed_loop_ml.exponent_warning((1.0 + 0.9 * tol, 1.5 - 0.9 * tol), (0.01, 0.01)) == []
+    assert closed_loop_ml.exponent_warning((1.0, 1.5 + 1.1 * tol), (0.01, 0.01))
+    assert closed_loop_ml.exponent_warning((1.0 - 1.1 * tol, 1.5), (0.01, 0.01))
+    # Far, but within three of a large std (short records): the data do not say it.
+    assert closed_loop_ml.exponent_warning((1.0, 1.5 + 2.0 * tol), (tol, tol)) == []
 
 
 def test_the_refit_without_the_top_speed_starts_from_the_full_fit_s_nuisance():
@@ -542,6 +556,9 @@ def test_the_evidence_takes_the_fourth_order_model_only_where_the_data_ask_for_i
     model = e2rfc.identify(releases, PLATE, closed_loop_buffeting="by-evidence")
     (note,) = [w for w in model.diagnostics.warnings if "chosen by evidence" in w]
     assert "fourth-order buffeting model" in note and "not white" in note
+    # The tunnel's gusts are frozen (fixed intensity and scale): no word of the scaling.
+    assert not any("shared by the wind speeds scales as" in w
+                   for w in model.diagnostics.warnings)
     gain = float(note.split("the fourth-order fit is ")[1].split(" higher")[0])
     assert gain > 0.0
     # The chosen fit's own innovations are white pooled: no warning of them remains.
