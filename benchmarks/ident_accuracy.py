@@ -48,7 +48,9 @@ estimator at the Cramer-Rao bound of the row's own releases, :func:`row_bound`, 
 and over coefficients drawn from the bound's covariance, and the ratios; n/a in smooth flow,
 and the sampled one where the draws leave the section's models), the coverage of the 2-std interval
 (``IdentifiedModel.flutter``'s std: noise, structure, extrapolation, one lag more, release
-scatter, below a decaying release), the median std, the median time of identification plus
+scatter, below a decaying release; on the tunnel rows ``FlutterUncertainty.interval``, drawn
+in the log of the distance beyond the highest speed the releases show stable, and the
+estimate +- 2 std beside it), the median std, the median time of identification plus
 uncertainty, and the count of identifications without flutter below the searched speeds
 (counted as not covered); then the coverage over all rows. ``benchmarks/flutter_crb.py`` gives
 the Cramer-Rao bound on its own; docs/development/e2rfc_turbulence.md the table before
@@ -366,7 +368,7 @@ def tunnel_run(args):
     except Exception as exc:  # noqa: BLE001 - a benchmark reports every failure and goes on
         row, seed, mode, *_ = args
         print(f"FAILED {row} seed {seed} {mode}: {exc!r}", flush=True)
-        return row, mode, np.inf, np.nan, np.nan, False, seed, False
+        return row, mode, np.inf, np.nan, np.nan, False, seed, False, (np.nan, np.nan)
 
 
 def _tunnel_run(args):
@@ -389,9 +391,10 @@ def _tunnel_run(args):
     # The closed-loop branch's note names its buffeting model (chosen by evidence or not).
     fourth = "fourth-order buffeting model" in model.diagnostics.reason
     if uncertainty.speed is None:
-        return row, mode, np.inf, np.nan, elapsed, branch, seed, fourth
+        return row, mode, np.inf, np.nan, elapsed, branch, seed, fourth, (np.nan, np.nan)
+    low, high = uncertainty.interval()
     return (row, mode, uncertainty.speed / U_F - 1.0, uncertainty.total / U_F, elapsed, branch,
-            seed, fourth)
+            seed, fourth, (low / U_F - 1.0, high / U_F - 1.0))
 
 
 #: Median of a half-normal error over its std: an estimator at the bound has this median error.
@@ -473,9 +476,10 @@ def tunnel_report(found, names, seeds, modes, bounds):
     results = []
     # Each result printed as it arrives: a long run stopped halfway keeps what it measured.
     for result in found:
-        row, mode, err, std, elapsed, branch, seed, fourth = result
+        row, mode, err, std, elapsed, branch, seed, fourth, (low, high) = result
         print(f"  {row:<24} {mode:<6} seed {seed:2d} err {100 * err:+8.2f} % std "
-              f"{100 * std:7.2f} % {elapsed:5.1f} s{' branch' if branch else ''}"
+              f"{100 * std:7.2f} % interval {100 * low:+7.2f} to {100 * high:+7.2f} % "
+              f"{elapsed:5.1f} s{' branch' if branch else ''}"
               f"{' fourth-order' if fourth else ''}", flush=True)
         results.append(result)
     tables = [_tunnel_table([r for r in results if r[1] == mode], names, seeds, mode,
@@ -499,14 +503,18 @@ def _tunnel_table(results, names, seeds, mode, bounds):
               f"{'branch':>10}{'4th ord':>8}")
     print(header)
     print("-" * len(header))
-    covered = total = 0
+    covered = symmetric = total = 0
     table = []
     for row in names:
-        rows = [(r[0], r[2], r[3], r[4], r[5], r[7]) for r in results if r[0] == row]
+        rows = [(r[0], r[2], r[3], r[4], r[5], r[7], r[8]) for r in results if r[0] == row]
         err = np.abs([r[1] for r in rows]) * 100
         std = np.array([r[2] for r in rows]) * 100
-        inside = np.isfinite(err) & (err <= 2 * std)
+        # IdentifiedModel's 2-std interval (FlutterUncertainty.interval: longer above), and
+        # the estimate +- 2 std beside it.
+        inside = np.array([low <= 0.0 <= high for low, high in (r[6] for r in rows)])
+        plain = np.isfinite(err) & (err <= 2 * std)
         covered += int(inside.sum())
+        symmetric += int(plain.sum())
         total += len(rows)
         first, sampled = (None, None) if bounds[row] is None else (
             100 * bounds[row][0], 100 * bounds[row][1])
@@ -519,7 +527,7 @@ def _tunnel_table(results, names, seeds, mode, bounds):
                 100 * inside.mean(), np.nanmedian(std), np.median([r[3] for r in rows]),
                 int(np.sum(~np.isfinite(err))), int(np.sum(np.isnan([r[3] for r in rows]))),
                 sum(r[4] for r in rows), sum(r[5] for r in rows), int(inside.sum()),
-                len(rows))
+                len(rows), 100 * plain.mean())
         table.append(line)
         shown = ["n/a" if v is None else f"{v:.2f}{unit}"
                  for v, unit in ((first, "%"), (ratio, ""), (sampled, "%"), (sampled_ratio, ""))]
@@ -527,14 +535,16 @@ def _tunnel_table(results, names, seeds, mode, bounds):
               f"{line[6]:>9.2f}%{line[7]:>11.0f}%{line[8]:>8.2f}%{line[9]:>9.2f}s"
               f"{line[10]:>11d}{line[12]:>10d}{line[13]:>8d}")
     print(f"\ncoverage of the 2-std interval over all rows: {covered}/{total} "
-          f"({100 * covered / total:.0f} %)")
+          f"({100 * covered / total:.0f} %; the estimate +- 2 std: {symmetric}/{total})")
     table.append(("all rows", None, None, None, None, None, None, 100 * covered / total, None,
                   None, sum(r[10] for r in table), sum(r[11] for r in table),
-                  sum(r[12] for r in table), sum(r[13] for r in table), covered, total))
+                  sum(r[12] for r in table), sum(r[13] for r in table), covered, total,
+                  100 * symmetric / total))
     columns = ("case", "median error (%)", "median error at the bound (%)", "error / bound",
                "sampled median error at the bound (%)", "error / sampled bound",
                "p90 error (%)", "2-std coverage (%)", "median std (%)", "median time (s)",
-               "no flutter", "failed", "branch", "fourth-order", "covered", "cases")
+               "no flutter", "failed", "branch", "fourth-order", "covered", "cases",
+               "+- 2 std coverage (%)")
     holds = (f"the turbulence rows with a {TUNNEL_HOLD_S:g} s hold before each release"
              if mode == "after" else "the same releases without their holds")
     return result_files.Table(
@@ -544,17 +554,19 @@ def _tunnel_table(results, names, seeds, mode, bounds):
         "flutter speed's absolute error, beside it the median error of an estimator at the "
         "Cramer-Rao bound of the same releases (flutter_crb.py; to first order, and over "
         "coefficients drawn from the bound's covariance) and the ratios, the coverage "
-        "of IdentifiedModel.flutter's 2-std "
-        "interval, its median std, the median time of identification plus uncertainty, the "
-        "cases without flutter (failed ones included), those the turbulence branch ran and "
-        "those whose closed-loop fit has the fourth-order buffeting model.",
+        "of the 2-std interval (FlutterUncertainty.interval: symmetric in the log of the "
+        "distance beyond the highest speed the releases show stable) and, last, of the "
+        "estimate +- 2 std, the median std, the median time of identification plus "
+        "uncertainty, the cases without flutter (failed ones included), those the "
+        "turbulence branch ran and those whose closed-loop fit has the fourth-order "
+        "buffeting model.",
         columns, table, formats={"median error (%)": ".2f",
                                  "median error at the bound (%)": ".2f",
                                  "error / bound": ".2f",
                                  "sampled median error at the bound (%)": ".2f",
                                  "error / sampled bound": ".2f", "p90 error (%)": ".2f",
                                  "2-std coverage (%)": ".0f", "median std (%)": ".2f",
-                                 "median time (s)": ".2f"})
+                                 "median time (s)": ".2f", "+- 2 std coverage (%)": ".0f"})
 
 
 #: The ablation's variants: (name, window of each release in s, holds used).

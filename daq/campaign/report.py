@@ -1,7 +1,8 @@
 """The campaign's report: DIR/campaign.json, PNG plots and a short Markdown page.
 
 Responsibility: :func:`write_report` writes what a :class:`~daq.campaign.runner.CampaignOutcome`
-holds into the output directory: ``campaign.json`` (``flutter_speed``, ``flutter_speed_std`` (m/s),
+holds into the output directory: ``campaign.json`` (``flutter_speed``, ``flutter_speed_std`` and
+``flutter_speed_interval`` (m/s, the 2-std interval),
 ``speeds`` (m/s, in the order tested), ``wind_on_s``, ``stopped_because``, with a simulated rig
 ``truth_flutter_speed``; the std after each speed, the adaptive decisions, the E2RFC analysis, and
 ``warnings``: the run files' and the analysis's caveats), ``campaign_std_history.png`` (the flutter
@@ -69,6 +70,9 @@ def report_dict(outcome: CampaignOutcome) -> dict[str, Any]:
         "flutter_speed": _number(U_F),
         "flutter_speed_std": _number(std),
         "flutter_speed_std_relative": (None if U_F is None or std is None else std / U_F),
+        "flutter_speed_interval": (
+            None if outcome.analysis is None or outcome.analysis.flutter_interval is None
+            else [_number(v) for v in outcome.analysis.flutter_interval]),
         "speeds": [s.U for s in outcome.steps],
         "wind_on_s": outcome.wind_on_s,
         "wall_s": outcome.wall_s,

@@ -144,6 +144,11 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
         if u.cross_check:
             parts.append(f"other estimator {u.cross_check:.3f}")
         print("  its std (m/s): " + ", ".join(parts))
+        low, high = u.interval()
+        print(f"  2-std interval {low:.3f} to {high:.3f} m/s"
+              + ("" if u.floor is None else
+                 f" (drawn beyond {u.floor:.3g} m/s, the highest wind speed the releases show "
+                 "stable: longer above)"))
     for label, speed, speed_std in zip(spread.labels[1:], spread.speeds[1:], spread.stds[1:],
                                        strict=True):
         print(f"  also within one SE: {label}: " + (
@@ -167,6 +172,7 @@ def run_identify(files: Sequence[Path], *, json_path: Path | None = None,
             "flutter_speed": result.speed,
             "flutter_speed_std": analysis.flutter_std,
             "flutter_speed_std_parts": summary["flutter_std_parts"],
+            "flutter_speed_interval": summary["flutter_interval"],
             "flutter_speed_structures": summary["flutter_structures"],
             "flutter_frequency": result.frequency,
             "critical_mode": result.critical_mode,

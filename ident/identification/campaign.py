@@ -97,6 +97,11 @@ class CampaignAnalysis:
         return None if self.flutter.speed is None else float(self.uncertainty.total)
 
     @property
+    def flutter_interval(self) -> tuple[float, float] | None:
+        """Its 2-std interval, m/s: longer above (:meth:`FlutterUncertainty.interval`)."""
+        return None if self.flutter.speed is None else self.uncertainty.interval()
+
+    @property
     def flutter_frequency(self) -> float | None:
         """Flutter frequency, Hz."""
         return None if self.flutter.frequency is None else float(self.flutter.frequency)
@@ -123,8 +128,9 @@ class CampaignAnalysis:
         frequency = "" if self.flutter_frequency is None else f" at {self.flutter_frequency:.2f} Hz"
         spread = ("" if len(self.structures.labels) == 1
                   else f"; {self.structures.summary()}")
-        return (f"flutter speed {self.flutter_speed:.2f} +- {self.flutter_std:.2f} m/s"
-                f"{frequency} ({model}; {data}{spread})")
+        low, high = self.uncertainty.interval()
+        return (f"flutter speed {self.flutter_speed:.2f} +- {self.flutter_std:.2f} m/s "
+                f"(2-std interval {low:.2f} to {high:.2f}){frequency} ({model}; {data}{spread})")
 
     def to_dict(self) -> dict[str, Any]:
         """Return a JSON-ready summary (numbers, lists and strings)."""
@@ -138,6 +144,8 @@ class CampaignAnalysis:
             "model": self.model.to_dict(),
             "flutter_speed": self.flutter_speed,
             "flutter_std": self.flutter_std,
+            "flutter_interval": (None if self.flutter_interval is None
+                                 else list(self.flutter_interval)),
             "flutter_frequency": self.flutter_frequency,
             "flutter_std_parts": None if self.flutter_speed is None else u.parts(),
             "flutter_structures": dict(zip(self.structures.labels, self.structures.speeds,

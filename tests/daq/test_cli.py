@@ -201,6 +201,10 @@ def test_identify_reads_run_files_and_prints_the_flutter_speed(tmp_path, capsys)
     truth = flutter.analyze(FLAT_PLATE, flat_plate.jones_model())
     # Noise-free records (4 s at 200 Hz): E2RFC is exact up to solver tolerances.
     assert result["flutter_speed"] == pytest.approx(truth.speed, rel=1e-4)
+    # The 2-std interval, printed and written: around the estimate, beyond the stable speeds.
+    low, high = result["flutter_speed_interval"]
+    assert low <= result["flutter_speed"] <= high
+    assert f"2-std interval {low:.3f} to {high:.3f} m/s" in out
 
 
 def test_identify_names_a_bad_file(tmp_path, capsys):

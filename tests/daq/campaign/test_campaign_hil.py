@@ -92,9 +92,11 @@ def test_adaptive_campaign_reaches_its_target_near_the_truth(tmp_path, capsys):
     U_F, std = report["flutter_speed"], report["flutter_speed_std"]
     assert std <= 0.02 * U_F
     assert abs(U_F - truth) <= 2 * std, printed
+    speeds = report["speeds"]
+    low, high = report["flutter_speed_interval"]  # drawn beyond the top speed: longer above
+    assert max(speeds) < low <= truth <= high and high - U_F > U_F - low
     # The first two speeds are the plan's; the later ones chosen below the safety bound: a new
     # speed while fewer than three are covered (the best predicted of those), then the best.
-    speeds = report["speeds"]
     assert speeds[:2] == [6.0, 8.0] and 3 <= len(speeds) <= 6
     for k, (choice, U) in enumerate(zip(report["choices"], speeds[2:], strict=False), start=2):
         assert choice["speed"] == U and U <= choice["bound"] < truth

@@ -511,9 +511,14 @@ def test_e2rfc_runs_the_closed_loop_branch_in_the_tunnel_s_turbulence():
     top = max(r.U for r in releases)
     assert model.diagnostics.bounded_at == top and model.diagnostics.decayed_at == top
     assert u.below_decay == 0.0
+    # The interval is drawn beyond that speed: longer above the estimate than below.
+    lower, upper = u.interval()
+    assert u.floor == top and top < lower <= U_F <= upper
+    assert upper - u.speed > u.speed - lower
     low = IdentifiedModel(model.A, model.d, replace(model.diagnostics, bounded_at=1.5 * u.speed))
     widened = low.uncertainty(PLATE)
     assert widened.below_decay == pytest.approx(0.5 * u.speed)
+    assert widened.floor is None  # the speed lies below the stable one: speed +- 2 std
     assert any("no release grew" in w for w in widened.warnings)
     # Had the fit failed its checks, the cross-check's distance would join the std: a second
     # route whose aerodynamic forces are a fifth stronger flutters lower, and the systematic

@@ -134,6 +134,33 @@ def test_releases_needed_scale_the_statistical_part_only():
     assert u.releases_needed(1.0) == 6  # met already
 
 
+def test_the_interval_is_symmetric_in_the_log_of_the_distance_beyond_the_floor():
+    """Closed form: ``floor + d exp(+-2 total / d)``; symmetric without a floor.
+
+    The benchmark's case that made it (plate, Iw 1 %, seed 5 without holds, in units of U_F):
+    an estimate 8 % low, std 3.2 %, releases up to 0.8. Symmetric, the interval ends at 0.984
+    and misses the truth; in the log of the distance its upper end is 1.005, its lower end
+    0.870 (not 0.856): longer above than below, never below the stable speed.
+    """
+    u = FlutterUncertainty(speed=0.920, parametric=0.0322, structure=0.0, extrapolation=0.0,
+                           refinement=0.0, turbulence=0.0, n_releases=6, floor=0.8)
+    low, high = u.interval()
+    assert (low, high) == pytest.approx((0.8 + 0.12 * math.exp(-0.0644 / 0.12),
+                                         0.8 + 0.12 * math.exp(0.0644 / 0.12)), rel=1e-12)
+    assert high > 1.0 > 0.920 + 2 * 0.0322 and low == pytest.approx(0.870, abs=5e-4)
+    assert high - u.speed > u.speed - low and low > u.floor
+    assert u.interval(1.0)[1] < high  # k std of log d
+    # Without a floor (no release seen stable, or the speed below one): speed +- k total.
+    free = FlutterUncertainty(speed=0.920, parametric=0.0322, structure=0.0, extrapolation=0.0,
+                              refinement=0.0, turbulence=0.0, n_releases=6)
+    assert free.interval() == pytest.approx((0.920 - 0.0644, 0.920 + 0.0644), rel=1e-12)
+    # A std many times the distance: no upper end, and no overflow either.
+    wide = FlutterUncertainty(speed=0.81, parametric=50.0, structure=0.0, extrapolation=0.0,
+                              refinement=0.0, turbulence=0.0, n_releases=6, floor=0.8)
+    assert wide.interval()[1] > 1e250 and wide.interval()[0] >= 0.8
+    assert "2-std interval 0.870 to 1.005" in u.summary()
+
+
 def test_a_systematic_misfit_is_reported_as_residuals_that_are_not_white():
     """Coulomb friction the model lacks: the force residuals are correlated, and said so."""
     from simulators.campaigns import REALISTIC, SECTION, simulated_campaign
