@@ -156,6 +156,9 @@ def _summary(result: Any, truth: Any, rows: list[dict[str, Any]],
         "identified_flutter_speed_std_parts": (
             None if result.analysis is None
             else result.analysis.to_dict()["flutter_std_parts"]),
+        "identified_flutter_speed_interval": (
+            None if result.analysis is None or result.analysis.flutter_interval is None
+            else list(result.analysis.flutter_interval)),
         "warnings": result.warnings,
         "identification_error": result.identification_error,
         "releases": rows,

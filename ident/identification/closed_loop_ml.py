@@ -119,12 +119,15 @@ WHITE_LIMIT = 4.0
 #: lacks; 6 of 8 searches did not converge either); 0.95 on a rig campaign whose records were
 #: decimated by the wrong factor (a rate a rounding short of 500 Hz), fitted at -33 %.
 GROSS_WHITENESS = 0.5
-#: A shared buffeting filter's fitted exponents (frequencies as ``U^a``, level as ``U^b``) are
-#: warned of when either lies further than this from gusts of fixed intensity and scale (1 and
-#: 1.5) and further than three of its own standard deviations. On the benchmark's tunnel rows
-#: (plate and bluff deck, 1-3 % turbulence, Davenport's admittance, eight releases per speed)
-#: they came out 0.92-1.03 and 1.47-1.60: the limit is three times that spread.
-EXPONENT_TOLERANCE = 0.3
+#: A shared buffeting filter of two sections or more: its fitted exponents (frequencies as
+#: ``U^a``, level as ``U^b``) are warned of when either lies further than this from gusts of
+#: fixed intensity and scale (1 and 1.5) and further than three of its own standard deviations.
+#: On the benchmark's tunnel rows (fourth-order filter): the plate 0.92-1.03 and 1.47-1.60 (1-3 %
+#: turbulence, Davenport's admittance, eight releases per speed), the bluff deck 0.88-1.15 and
+#: 1.28-1.66 (seeds 0-3 at 1 and 3 %, with and without holds). One section is not checked: it
+#: cannot follow the gusts' spectral shape, and its exponents absorb that misfit (the same
+#: deck releases: 0.44-0.56 and 1.84-2.03).
+EXPONENT_TOLERANCE = 0.4
 
 
 @dataclass(frozen=True)
@@ -357,7 +360,8 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
         a, b = (float(v) for v in theta[layout.exponents])
         exponents = (a, b)
         std = np.sqrt(np.maximum(np.diag(inverse)[layout.exponents], 0.0))
-        warnings.extend(exponent_warning(exponents, (float(std[0]), float(std[1]))))
+        if shaping_sections >= 2:  # one section's exponents absorb its shape misfit
+            warnings.extend(exponent_warning(exponents, (float(std[0]), float(std[1]))))
     if not converged:
         warnings.append(f"the likelihood search stopped after {iterations} iterations without "
                         "converging: the estimate and its covariance are approximate")
@@ -393,9 +397,10 @@ def exponent_warning(exponents: tuple[float, float], std: tuple[float, float]) -
 
     Gusts of fixed intensity and integral scale carried past the deck at ``U`` (Taylor) give a
     buffeting force whose spectrum is ``rho^2 U^3`` times a function of ``f / U``, whatever the
-    admittance and span coherence: corners as ``U^1``, level as ``U^1.5``. Fitted exponents far
-    from these (:data:`EXPONENT_TOLERANCE`, and three of their std) mean turbulence that
-    changes with the fan speed, or releases whose wind speed or air density is wrong.
+    admittance and span coherence: corners as ``U^1``, level as ``U^1.5``. A filter of two
+    sections or more whose fitted exponents lie far from these (:data:`EXPONENT_TOLERANCE`, and
+    three of their std) means turbulence that changes with the fan speed, or releases whose
+    wind speed or air density is wrong.
 
     Parameters
     ----------

@@ -51,6 +51,8 @@ def test_demo_campaign_identifies_the_flutter_speed_within_3_percent(tmp_path, c
             or min(structures) - 0.01 <= truth <= max(structures) + 0.01), printed
     std = summary["identified_flutter_speed_std"]
     assert abs(speed - truth) < 2 * std and std < 0.05 * truth, printed
+    low, high = summary["identified_flutter_speed_interval"]  # longer above than below
+    assert low <= truth <= high and high - speed >= speed - low, printed
     # Three run files, two releases each, read back as `windrig identify` reads them.
     files = [Path(p) for p in summary["files"]]
     assert len(files) == 3
