@@ -85,8 +85,7 @@ from ident.model.section import SectionModel
 from ident.numerics.threads import single_threaded_blas
 from ident.records.release import Release
 
-__all__ = ["EXPONENT_TOLERANCE", "ClosedLoopFit", "MAX_ITERATIONS", "exponent_warning",
-           "fit_closed_loop"]
+__all__ = ["ClosedLoopFit", "MAX_ITERATIONS", "fit_closed_loop"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -119,15 +118,6 @@ WHITE_LIMIT = 4.0
 #: lacks; 6 of 8 searches did not converge either); 0.95 on a rig campaign whose records were
 #: decimated by the wrong factor (a rate a rounding short of 500 Hz), fitted at -33 %.
 GROSS_WHITENESS = 0.5
-#: A shared buffeting filter of two sections or more: its fitted exponents (frequencies as
-#: ``U^a``, level as ``U^b``) are warned of when either lies further than this from gusts of
-#: fixed intensity and scale (1 and 1.5) and further than three of its own standard deviations.
-#: On the benchmark's tunnel rows (fourth-order filter): the plate 0.92-1.03 and 1.47-1.60 (1-3 %
-#: turbulence, Davenport's admittance, eight releases per speed), the bluff deck 0.88-1.15 and
-#: 1.28-1.66 (seeds 0-3 at 1 and 3 %, with and without holds). One section is not checked: it
-#: cannot follow the gusts' spectral shape, and its exponents absorb that misfit (the same
-#: deck releases: 0.44-0.56 and 1.84-2.03).
-EXPONENT_TOLERANCE = 0.4
 
 
 @dataclass(frozen=True)
@@ -361,7 +351,7 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
         exponents = (a, b)
         std = np.sqrt(np.maximum(np.diag(inverse)[layout.exponents], 0.0))
         if shaping_sections >= 2:  # one section's exponents absorb its shape misfit
-            warnings.extend(exponent_warning(exponents, (float(std[0]), float(std[1]))))
+            warnings.extend(setup.exponent_warning(exponents, (float(std[0]), float(std[1]))))
     if not converged:
         warnings.append(f"the likelihood search stopped after {iterations} iterations without "
                         "converging: the estimate and its covariance are approximate")
@@ -390,37 +380,6 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
         n_initial_states=sum(c.shape[1] - 4 for c in current.columns),
         n_samples=sum(record.y.size for record in records), warnings=tuple(warnings),
         shaping_exponents=exponents)
-
-
-def exponent_warning(exponents: tuple[float, float], std: tuple[float, float]) -> list[str]:
-    """Warn of a shared buffeting filter that does not scale as frozen gusts do (or nothing).
-
-    Gusts of fixed intensity and integral scale carried past the deck at ``U`` (Taylor) give a
-    buffeting force whose spectrum is ``rho^2 U^3`` times a function of ``f / U``, whatever the
-    admittance and span coherence: corners as ``U^1``, level as ``U^1.5``. A filter of two
-    sections or more whose fitted exponents lie far from these (:data:`EXPONENT_TOLERANCE`, and
-    three of their std) means turbulence that changes with the fan speed, or releases whose
-    wind speed or air density is wrong.
-
-    Parameters
-    ----------
-    exponents : (float, float)
-        The fitted exponents of ``U`` in the filter's frequencies and its white-noise level.
-    std : (float, float)
-        Their standard deviations (inverse Fisher information).
-    """
-    far = [abs(value - expected) > max(EXPONENT_TOLERANCE, 3.0 * spread)
-           for value, expected, spread in zip(exponents, setup.QUASI_STEADY_EXPONENTS, std,
-                                              strict=True)]
-    if not any(far):
-        return []
-    (a, b), (sa, sb) = exponents, std
-    return [f"the buffeting filter shared by the wind speeds scales as U^{a:.2f} (std {sa:.2f}) "
-            f"in frequency and U^{b:.2f} (std {sb:.2f}) in level, where gusts of fixed "
-            "intensity and scale give U^1 and U^1.5: the turbulence changes with the wind speed "
-            "(an active grid, a generator at fixed frequencies), or a release's wind speed or "
-            "air density is wrong; if the buffeting follows no power law of U, "
-            "closed_loop_buffeting='fourth-order-per-speed' fits a filter per speed"]
 
 
 def _maximise(objective: _Objective, layout: Layout, theta: FloatArray, current: _Evaluation

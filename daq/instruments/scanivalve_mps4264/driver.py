@@ -422,8 +422,7 @@ class ScanivalveMps4264:
 
         Anything else (a timeout, a protocol error) needs no recovery: the next read goes on.
         """
-        # read_block already retried its data connections (bounded, logged); a TransportError
-        # here means they stayed away: start over with fresh connections and a new scan.
+        # read_block retried its data connections already: they stayed away. Start afresh.
         if isinstance(error, TransportError) and not isinstance(error, TransportTimeout):
             log.warning("scanner: restarting the scan after: %s", error)
             self.close()
@@ -434,8 +433,7 @@ class ScanivalveMps4264:
     def recent_pressure_mean(self) -> tuple[np.ndarray[Any, np.dtype[np.float64]], int]:
         """Mean pressure per channel over the last 0.5 s of frames read, Pa, and their number.
 
-        NaN rows (a missing module) are left out per channel; before any frame: an empty
-        array and 0.
+        NaN rows (a missing module) are left out per channel; before any frame: empty, 0.
         """
         return self._continuity.recent_pressure_mean(self._rate_hz)
 
@@ -490,12 +488,11 @@ class ScanivalveMps4264:
             if len(buf) > 4096:
                 raise ProtocolError(f"{self.transport.url}: no line end within 4096 bytes: "
                                     f"{bytes(buf[:64]).hex(' ')} ...")
-            remaining = deadline - time.monotonic()
-            try:
-                if remaining <= 0:
-                    raise TransportTimeout("the command timeout passed")
+            try:  # a timeout names the command's, not the last read's remaining slice
+                if (remaining := deadline - time.monotonic()) <= 0:
+                    raise TransportTimeout("past the command's deadline")
                 buf += self.transport.read(4096, remaining)
-            except TransportTimeout as exc:  # say the command's timeout, not the last slice's
+            except TransportTimeout as exc:
                 raise TransportTimeout(f"{self.transport.url}: no reply line within "
                                        f"{self.settings.command_timeout_s:g} s (received "
                                        f"{bytes(buf)!r})") from exc

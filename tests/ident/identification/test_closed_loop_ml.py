@@ -421,13 +421,13 @@ def test_one_shaping_filter_shared_by_the_speeds_fits_the_buffeting_s_scaling():
 
 def test_the_shared_filter_s_exponents_are_warned_of_only_far_from_frozen_gusts():
     """Beyond the tolerance and three std either exponent warns; within either, none."""
-    tol = closed_loop_ml.EXPONENT_TOLERANCE
-    assert closed_loop_ml.exponent_warning((1.0, 1.5), (0.05, 0.05)) == []
-    assert closed_loop_ml.exponent_warning((1.0 + 0.9 * tol, 1.5 - 0.9 * tol), (0.01, 0.01)) == []
-    assert closed_loop_ml.exponent_warning((1.0, 1.5 + 1.1 * tol), (0.01, 0.01))
-    assert closed_loop_ml.exponent_warning((1.0 - 1.1 * tol, 1.5), (0.01, 0.01))
+    tol, warn = _closed_loop_parameters.EXPONENT_TOLERANCE, _closed_loop_parameters.exponent_warning
+    assert warn((1.0, 1.5), (0.05, 0.05)) == []
+    assert warn((1.0 + 0.9 * tol, 1.5 - 0.9 * tol), (0.01, 0.01)) == []
+    assert warn((1.0, 1.5 + 1.1 * tol), (0.01, 0.01))
+    assert warn((1.0 - 1.1 * tol, 1.5), (0.01, 0.01))
     # Far, but within three of a large std (short records): the data do not say it.
-    assert closed_loop_ml.exponent_warning((1.0, 1.5 + 2.0 * tol), (tol, tol)) == []
+    assert warn((1.0, 1.5 + 2.0 * tol), (tol, tol)) == []
 
 
 def test_the_refit_without_the_top_speed_starts_from_the_full_fit_s_nuisance():
