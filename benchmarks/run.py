@@ -56,7 +56,7 @@ FULL_EXTRA = {
         ("--part", "tunnel", "--rows", "variants", "--tunnel-mode", "both",
          "--turbulent-estimator", "ml", "--closed-loop-buffeting", "second-order",
          "--seeds", "20"),
-        ("--part", "ablation", "--seeds", "10"),
+        ("--part", "ablation", "--seeds", "20"),
     ),
     "flutter_crb": (("--deck", "bluff"),),
     "ident_speed_compare": (("--flow", "turbulent"),),

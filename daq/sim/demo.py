@@ -139,6 +139,7 @@ def _release_rows(result: Any, truth: Any) -> list[dict[str, Any]]:
 
 def _summary(result: Any, truth: Any, rows: list[dict[str, Any]],
              wall_s: float) -> dict[str, Any]:
+    analysis = {} if result.analysis is None else result.analysis.to_dict()
     return {
         "files": [str(p) for p in result.files],
         "wind_speeds": result.wind_speeds,
@@ -153,12 +154,8 @@ def _summary(result: Any, truth: Any, rows: list[dict[str, Any]],
         "target_relative_error": TARGET_RELATIVE_ERROR,
         "model": None if result.model is None else result.model.to_dict(),
         "structure": None if result.model is None else result.model.diagnostics.reason,
-        "identified_flutter_speed_std_parts": (
-            None if result.analysis is None
-            else result.analysis.to_dict()["flutter_std_parts"]),
-        "identified_flutter_speed_interval": (
-            None if result.analysis is None or result.analysis.flutter_interval is None
-            else list(result.analysis.flutter_interval)),
+        "identified_flutter_speed_std_parts": analysis.get("flutter_std_parts"),
+        "identified_flutter_speed_interval": analysis.get("flutter_interval"),
         "warnings": result.warnings,
         "identification_error": result.identification_error,
         "releases": rows,

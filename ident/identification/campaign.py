@@ -134,7 +134,7 @@ class CampaignAnalysis:
 
     def to_dict(self) -> dict[str, Any]:
         """Return a JSON-ready summary (numbers, lists and strings)."""
-        u = self.uncertainty
+        u, interval = self.uncertainty, self.flutter_interval
         return {
             "n_releases": self.n_releases,
             "wind_speeds": list(self.wind_speeds),
@@ -144,8 +144,7 @@ class CampaignAnalysis:
             "model": self.model.to_dict(),
             "flutter_speed": self.flutter_speed,
             "flutter_std": self.flutter_std,
-            "flutter_interval": (None if self.flutter_interval is None
-                                 else list(self.flutter_interval)),
+            "flutter_interval": None if interval is None else list(interval),
             "flutter_frequency": self.flutter_frequency,
             "flutter_std_parts": None if self.flutter_speed is None else u.parts(),
             "flutter_structures": dict(zip(self.structures.labels, self.structures.speeds,
