@@ -46,9 +46,11 @@ FULL_EXTRA = {
          "--turbulent-estimator", "ml", "--seeds", "20"),
         ("--part", "tunnel", "--rows", "turbulent", "--tunnel-mode", "both",
          "--turbulent-estimator", "ml", "--seeds", "40"),
-        *(("--part", "tunnel", "--rows", "turbulent", "--tunnel-mode", "both",
-           "--turbulent-estimator", "ml", "--closed-loop-buffeting", model, "--seeds", "20")
-          for model in ("fourth-order", "second-order")),
+        # The fourth-order model alone is the default's on these rows (the evidence takes it
+        # on every seed): only the second-order one has a table of its own.
+        ("--part", "tunnel", "--rows", "turbulent", "--tunnel-mode", "both",
+         "--turbulent-estimator", "ml", "--closed-loop-buffeting", "second-order",
+         "--seeds", "20"),
         ("--part", "tunnel", "--rows", "variants", "--tunnel-mode", "both",
          "--turbulent-estimator", "ml", "--seeds", "20"),
         ("--part", "tunnel", "--rows", "variants", "--turbulent-estimator", "ml",
