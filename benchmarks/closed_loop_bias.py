@@ -136,7 +136,7 @@ def run(args):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=None, help="seeds per case (10; --quick 1)")
-    parser.add_argument("--workers", type=int, default=2)
+    result_files.add_workers(parser)
     result_files.add_arguments(parser)
     args = parser.parse_args()
     seeds = args.seeds if args.seeds is not None else (1 if args.quick else 10)

@@ -690,7 +690,7 @@ def result_name(args):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=None, help="seeds per row (20; --quick: 1)")
-    parser.add_argument("--workers", type=int, default=2)
+    result_files.add_workers(parser)
     parser.add_argument("--part", choices=("all", "classic", "tunnel", "timing", "ablation"),
                         default="all")
     parser.add_argument("--repeats", type=int, default=None,

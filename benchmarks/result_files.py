@@ -86,6 +86,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="also write DIR/<name>.json and DIR/<name>.md")
 
 
+def add_workers(parser: argparse.ArgumentParser, default: int = 2) -> None:
+    """Add ``--workers N``, the worker processes of a benchmark's pool (an integer >= 1)."""
+    parser.add_argument("--workers", type=_at_least_one, default=default,
+                        help=f"worker processes ({default})")
+
+
+def _at_least_one(text: str) -> int:
+    """``argparse`` type: an integer >= 1, else argparse's one ``error:`` line."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"an integer is needed, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"at least 1 is needed, got {value}")
+    return value
+
+
 def number_list(parser: argparse.ArgumentParser, option: str, text: str, low: float,
                 high: float, hint: str = "") -> list[float]:
     """Return ``text``'s comma-separated numbers, each in ``(low, high)``, or exit with one line.

@@ -38,6 +38,28 @@ def test_number_list_refuses_bad_input_with_one_error_line(capsys, text, expecte
     assert not any("Traceback" in line for line in lines)
 
 
+@pytest.mark.parametrize(("text", "expected"), [
+    ("0", "argument --workers: at least 1 is needed, got 0"),
+    ("-2", "argument --workers: at least 1 is needed, got -2"),
+    ("two", "argument --workers: an integer is needed, got 'two'"),
+])
+def test_workers_refuses_bad_input_with_one_error_line(capsys, text, expected):
+    parser = argparse.ArgumentParser(prog="bench")
+    result_files.add_workers(parser)
+    with pytest.raises(SystemExit) as exit_:
+        parser.parse_args(["--workers", text])
+    assert exit_.value.code == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert lines[-1] == f"bench: error: {expected}"
+
+
+def test_workers_defaults_and_parses():
+    parser = argparse.ArgumentParser(prog="bench")
+    result_files.add_workers(parser, default=3)
+    assert parser.parse_args([]).workers == 3
+    assert parser.parse_args(["--workers", "1"]).workers == 1
+
+
 def test_number_list_returns_the_numbers_in_order():
     parser = argparse.ArgumentParser(prog="bench")
     assert result_files.number_list(parser, "--speeds", "0.4, 0.6,0.8", 0.0, 1.0) == [0.4, 0.6,
