@@ -106,7 +106,7 @@ def _build_parser() -> argparse.ArgumentParser:
     p_id.add_argument("--reduced-velocities", default=None, metavar="START:STOP:STEP",
                       help="rows of --table, U/(f B) (default: the releases' span)")
     p_id.add_argument("--turbulent-estimator", choices=("iv", "ml"),
-                      help="in turbulence: closed-loop ML (default; 2-DOF) or refined IV")
+                      help="in turbulence: closed-loop ML (default) or refined IV")
     p_id.add_argument("--closed-loop-buffeting",
                       choices=("second-order", "fourth-order", "second-order-per-speed",
                                "fourth-order-per-speed", "by-evidence"),

@@ -25,11 +25,11 @@ from ident.identification.uncertainty import DISTINCT_U_RTOL, nearest_wind_speed
 from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel
 from ident.numerics.sampling import RATE_RTOL, decimation_factor
-from ident.records.release import Release
+from ident.records.release import Release, ReleaseHold
 
 __all__ = ["EXPONENT_TOLERANCE", "NOISE_FLOOR", "TARGET_FACTOR", "ZERO_START", "Layout",
-           "Record", "block_size", "decimate", "exponent_warning", "initial", "log_lag_range",
-           "noise_floor", "records", "with_lags"]
+           "Record", "block_size", "channels", "decimate", "exponent_warning", "force_columns",
+           "initial", "log_lag_range", "noise_floor", "records", "with_lags"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -47,8 +47,9 @@ TARGET_FACTOR = 25.0
 #: noise.
 NOISE_FLOOR = 5e-3
 
-#: Least ratio L11 / L00 of a shaping filter's Cholesky factor (the search's bound, and the
-#: floor a warm start writes): the moment's own gust, never quite none.
+#: Least ratio L11 / L00 (and with sway L22 / L00) of a shaping filter's Cholesky factor (the
+#: search's bound, and the floor a warm start writes): the moment's (drag's) own gust, never
+#: quite none.
 L11_RATIO_MIN = 1e-4
 #: The exponents of the wind speed in a shared buffeting filter's frequencies and white-noise
 #: level (:meth:`Layout.shaping`) where gusts of a fixed intensity and integral scale act
@@ -75,7 +76,7 @@ ZERO_START = 0.5
 class Record:
     """One record's decimated channels and what it depends on."""
 
-    y: FloatArray          # (n, 4): h, alpha, lift, moment
+    y: FloatArray          # (n, n_y): h, alpha, lift, moment (, p, drag)
     fs: float              # decimated rate, Hz
     factor: int            # samples per block mean
     U: float
@@ -97,8 +98,13 @@ class Layout:
         self.n_A, self.n_lags, self.n_dof = len(self.index), n_lags, n_dof
         self.n_aero = self.n_A + n_lags
         self.sections = sections
+        #: Channels of a record (``[h, alpha, lift, moment]``, with sway ``[.., p, drag]``).
+        self.n_y = 2 * n_dof
+        #: Entries of the shaping filter's Cholesky factor, in :meth:`shaping`'s order.
+        self.L_entries = tuple((i, j) for i in range(n_dof) for j in range(i + 1))
         #: Parameters of a wind speed's shaping filter (:meth:`shaping`).
-        self.n_shaping = 3 + 4 * sections + (2 * sections if sections > 1 else 0)
+        self.n_shaping = (len(self.L_entries) + 2 * n_dof * sections
+                          + (n_dof * sections if sections > 1 else 0))
         self.shaping0 = self.n_aero
         #: Per wind speed, ``log(U / U_ref)`` and ``log(rho / rho_ref)`` of one filter shared by
         #: every speed (:meth:`shaping`); None: a filter per speed.
@@ -114,9 +120,9 @@ class Layout:
         #: filter per speed.
         self.exponents = (None if scaled is None
                           else slice(self.shaping0 + self.n_shaping, self.noise0))
-        self.size = self.noise0 + 4 * n_releases
+        self.size = self.noise0 + self.n_y * n_releases
         #: log of each channel's least noise std (:data:`NOISE_FLOOR`; :func:`noise_floor`).
-        self.noise_floor = np.full(4 * n_releases, -np.inf)
+        self.noise_floor = np.full(self.n_y * n_releases, -np.inf)
         #: log of the least and largest lag root (``d``, reduced; :func:`log_lag_range`).
         self.log_lag_range = (-math.inf, math.inf)
 
@@ -130,6 +136,8 @@ class Layout:
     def shaping(self, theta: FloatArray, group: int) -> ShapingFilter:
         """``[log f (2 S), log zeta (2 S), log L00, L10 / L00, log(L11 / L00), tau w (2 S)]``.
 
+        With sway (three forces) ``3 S`` frequencies, damping ratios and zeros, and after
+        ``log(L11 / L00)`` the drag's row ``L20 / L00, L21 / L00, log(L22 / L00)``.
         ``S`` sections per force, lift's first; the zeros (``tau w``, :class:`ShapingFilter`)
         only with more than one section: with one, the likelihood drove a zero to nothing
         (docs/development/e2rfc_turbulence.md). ``L11`` in log: the likelihood depends on its
@@ -143,13 +151,16 @@ class Layout:
         correlation are the block's.
         """
         p = self._block(theta, group)
-        k = 2 * self.sections
-        f = np.exp(p[0:k]).reshape(2, self.sections)
+        n, k, n_L = self.n_dof, self.n_dof * self.sections, len(self.L_entries)
+        f = np.exp(p[0:k]).reshape(n, self.sections)
         L00 = math.exp(p[2 * k])
-        L = [[L00, 0.0], [p[2 * k + 1] * L00, math.exp(p[2 * k + 2]) * L00]]
-        zeros = (p[2 * k + 3:3 * k + 3].reshape(2, self.sections) / (2.0 * math.pi * f)
+        L = np.zeros((n, n))
+        for value, (i, j) in zip(p[2 * k:2 * k + n_L], self.L_entries, strict=True):
+            L[i, j] = L00 * (math.exp(value) if i == j else value)
+        L[0, 0] = L00
+        zeros = (p[2 * k + n_L:3 * k + n_L].reshape(n, self.sections) / (2.0 * math.pi * f)
                  if self.sections > 1 else None)
-        return ShapingFilter(f, np.exp(p[k:2 * k]).reshape(2, self.sections), L, zeros)
+        return ShapingFilter(f, np.exp(p[k:2 * k]).reshape(n, self.sections), L, zeros)
 
     def _block(self, theta: FloatArray, group: int) -> FloatArray:
         """Return wind speed ``group``'s shaping parameters (:meth:`shaping`'s layout)."""
@@ -159,7 +170,7 @@ class Layout:
         p = theta[self.shaping0:self.shaping0 + self.n_shaping].copy()
         a, b = theta[self.exponents]
         log_U, log_rho = self.scaled[group]
-        k = 2 * self.sections
+        k = self.n_dof * self.sections
         p[0:k] += a * log_U
         p[2 * k] += b * log_U + log_rho
         return p
@@ -176,21 +187,23 @@ class Layout:
         ``shaping`` at the exponents already in ``theta``.
         """
         f, zeta, L = shaping.frequencies, shaping.damping, shaping.L
-        if f.shape != (2, self.sections):
+        if f.shape != (self.n_dof, self.sections):
             raise ValueError(f"a shaping filter of {f.shape[1]} section(s) per force cannot "
                              f"start one of {self.sections}")
-        p0, k = self.shaping_offset(group), 2 * self.sections
+        p0, k, n_L = self.shaping_offset(group), self.n_dof * self.sections, len(self.L_entries)
         a = b = log_U = log_rho = 0.0
         if self.scaled is not None:
             a, b = theta[self.exponents]
             log_U, log_rho = self.scaled[group]
         theta[p0:p0 + k] = np.log(f).ravel() - a * log_U
         theta[p0 + k:p0 + 2 * k] = np.log(zeta).ravel()
+        for at, (i, j) in enumerate(self.L_entries, start=p0 + 2 * k):
+            theta[at] = (L[i, j] / L[0, 0] if i != j
+                         else math.log(max(abs(L[i, i]) / L[0, 0], L11_RATIO_MIN)))
         theta[p0 + 2 * k] = math.log(L[0, 0]) - b * log_U - log_rho
-        theta[p0 + 2 * k + 1] = L[1, 0] / L[0, 0]
-        theta[p0 + 2 * k + 2] = math.log(max(abs(L[1, 1]) / L[0, 0], L11_RATIO_MIN))
         if self.sections > 1:
-            theta[p0 + 2 * k + 3:p0 + 3 * k + 3] = (shaping.zeros * 2.0 * math.pi * f).ravel()
+            theta[p0 + 2 * k + n_L:p0 + 3 * k + n_L] = (shaping.zeros * 2.0 * math.pi
+                                                        * f).ravel()
 
     def step_limits(self, theta: FloatArray) -> FloatArray:
         """Return the largest move of each parameter in one step.
@@ -213,15 +226,17 @@ class Layout:
         """
         lower, upper = np.full(self.size, -np.inf), np.full(self.size, np.inf)
         lower[self.n_A:self.n_aero], upper[self.n_A:self.n_aero] = self.log_lag_range
-        L11 = 4 * self.sections + 2
-        lower[[self.shaping_offset(g) + L11 for g in range(self.n_shaping_blocks)]] = math.log(
-            L11_RATIO_MIN)
+        diagonal = [2 * self.n_dof * self.sections + at
+                    for at, (i, j) in enumerate(self.L_entries) if i == j and i > 0]
+        lower[[self.shaping_offset(g) + d for g in range(self.n_shaping_blocks)
+               for d in diagonal]] = math.log(L11_RATIO_MIN)
         lower[self.noise0:] = np.maximum(theta[self.noise0:] - math.log(1e3), self.noise_floor)
         return lower, upper
 
     def noise(self, theta: FloatArray, release: int) -> FloatArray:
-        """Return a release's four noise standard deviations (m, rad, N/m, N m/m)."""
-        return np.exp(theta[self.noise0 + 4 * release: self.noise0 + 4 * release + 4])
+        """Return a release's noise standard deviations (m, rad, N/m, N m/m; m, N/m)."""
+        at = self.noise0 + self.n_y * release
+        return np.exp(theta[at:at + self.n_y])
 
     def affecting(self, record: Record) -> list[int]:
         """Return the parameters a record's likelihood depends on."""
@@ -229,8 +244,8 @@ class Layout:
         p0 = self.shaping_offset(record.group)
         shaping = list(range(p0, p0 + (self.n_shaping if self.scaled is None
                                        else self.shaping_size)))
-        noise = list(range(self.noise0 + 4 * record.release,
-                           self.noise0 + 4 * record.release + 4))
+        noise = list(range(self.noise0 + self.n_y * record.release,
+                           self.noise0 + self.n_y * (record.release + 1)))
         return aero + shaping + noise
 
 
@@ -238,9 +253,10 @@ def with_lags(model: RationalFunctionModel, n_lags: int) -> RationalFunctionMode
     """Return ``model`` with ``n_lags`` lags: missing ones added with zero coefficients."""
     if n_lags == model.n_lags:
         return model
-    A = np.zeros((3 + n_lags, 2, 2))
+    n_dof = model.n_dof
+    A = np.zeros((3 + n_lags, n_dof, n_dof))
     keep = min(n_lags, model.n_lags)
-    A[:3 + keep] = model.A[:3 + keep, :2, :2]
+    A[:3 + keep] = model.A[:3 + keep]
     spread = np.geomspace(0.1, 1.0, n_lags) if n_lags else np.zeros(0)
     d = np.concatenate([model.d[:keep], spread[keep:]])
     return RationalFunctionModel(A, d)
@@ -281,7 +297,7 @@ def records(releases: Sequence[Release], section: SectionModel, speeds: list[flo
         fs = r.fs / factor
         fs = next((seen for seen in rates if abs(fs - seen) <= RATE_RTOL * seen), fs)
         rates.append(fs)
-        y = np.column_stack([r.h, r.alpha, r.lift, r.moment])
+        y = channels(r)
         t = r.t
         if window is not None:
             kept = (r.t >= window[0]) & (r.t < window[1])
@@ -298,10 +314,29 @@ def records(releases: Sequence[Release], section: SectionModel, speeds: list[flo
         records.append(Record(decimate(y, factor), fs, factor, r.U, rho, group, index,
                               False, from_rest))
         if use_holds and r.hold is not None and r.hold.t.size > 50 * factor:
-            hold = np.column_stack([r.hold.h, r.hold.alpha, r.hold.lift, r.hold.moment])
+            hold = channels(r.hold)
             records.append(Record(decimate(hold, factor), fs, factor, r.U, rho, group, index,
                                    True))
     return records
+
+
+def channels(record: Release | ReleaseHold) -> FloatArray:
+    """Return a release's (or hold's) channels as columns.
+
+    ``h, alpha, lift, moment`` (m, rad, N/m, N m/m), with sway then ``p, drag`` (m, N/m).
+    """
+    names = ["h", "alpha", "lift", "moment"] + (["p", "drag"] if record.p is not None else [])
+    return np.column_stack([getattr(record, name) for name in names])
+
+
+def force_columns(n_dof: int) -> slice | list[int]:
+    """Return the columns of the forces (lift, moment, and drag) in :func:`channels`.
+
+    Two degrees of freedom: a slice, so that the forces are a view and their statistics are
+    summed in the same order as the records' other statistics (an index list copies them,
+    which moves the search's start in the last bit).
+    """
+    return slice(2, 4) if n_dof == 2 else [2, 3, 5]
 
 
 def log_lag_range(section: SectionModel, speeds: list[float]) -> tuple[float, float]:
@@ -313,7 +348,7 @@ def log_lag_range(section: SectionModel, speeds: list[float]) -> tuple[float, fl
     cover 0.3-1.6, friction in 1 % turbulence) had a stiff state that made its Fisher
     information meaningless (a flutter-speed std of 0.004 %).
     """
-    f = [section.fh, section.fa]
+    f = [section.fh, section.fa] + ([section.fp] if section.fp is not None else [])
     K_lo = 2.0 * math.pi * min(f) * section.B / max(speeds)
     K_hi = 2.0 * math.pi * max(f) * section.B / min(speeds)
     return math.log(K_lo / 20.0), math.log(20.0 * K_hi)
@@ -321,11 +356,12 @@ def log_lag_range(section: SectionModel, speeds: list[float]) -> tuple[float, fl
 
 def noise_floor(records: list[Record], n_releases: int) -> FloatArray:
     """Return the log of each release's least channel noise std (:data:`NOISE_FLOOR`)."""
-    floor = np.empty(4 * n_releases)
+    n_y = records[0].y.shape[1]
+    floor = np.empty(n_y * n_releases)
     for r in range(n_releases):
         released = np.vstack([rec.y for rec in records if rec.release == r and not rec.held])
-        floor[4 * r: 4 * r + 4] = np.log(np.maximum(NOISE_FLOOR * np.std(released, axis=0),
-                                                    1e-300))
+        floor[n_y * r: n_y * (r + 1)] = np.log(np.maximum(
+            NOISE_FLOOR * np.std(released, axis=0), 1e-300))
     return floor
 
 
@@ -343,9 +379,10 @@ def initial(records: list[Record], layout: Layout, start: RationalFunctionModel,
         # Noise from third differences (the signals' part is small at 25 x f_max).
         d3 = np.diff(np.vstack([rec.y for rec in own if not rec.held]), n=3, axis=0)
         std = np.std(d3, axis=0) / math.sqrt(20.0)
-        theta[layout.noise0 + 4 * r: layout.noise0 + 4 * r + 4] = np.maximum(np.log(
+        at = slice(layout.n_y * r, layout.n_y * (r + 1))
+        theta[layout.noise0:][at] = np.maximum(np.log(
             np.maximum(std, 1e-12 * np.maximum(np.std(y, axis=0), 1e-300))),
-            layout.noise_floor[4 * r: 4 * r + 4])
+            layout.noise_floor[at])
     blocks = np.zeros((layout.n_groups, layout.n_shaping))
     for g in present:
         own = [rec for rec in records if rec.group == g]
@@ -353,37 +390,40 @@ def initial(records: list[Record], layout: Layout, start: RationalFunctionModel,
         # second half of the releases (mostly random response).
         pieces = ([rec.y for rec in own if rec.held]
                   or [rec.y[rec.y.shape[0] // 2:] for rec in own])
-        force = np.vstack([p - p.mean(axis=0) for p in pieces])[:, 2:] * [section.B, 1.0]
+        columns = force_columns(layout.n_dof)
+        scale = [section.B, 1.0, section.B][:layout.n_dof]
+        force = np.vstack([p - p.mean(axis=0) for p in pieces])[:, columns] * scale
         fs = float(np.mean([rec.fs for rec in own]))  # a start: rates differ by little if at all
         rate = np.std(np.diff(force, axis=0), axis=0) * fs / np.maximum(
             np.std(force, axis=0), 1e-300)
         fc = np.clip(rate / (2.0 * math.pi), 0.5 * f_max, 5.0 * f_max)
         # Later sections an octave apart above the first, each with a zero an octave above
         # its own natural frequency.
-        S = layout.sections
+        S, n = layout.sections, layout.n_dof
         f = fc[:, None] * 2.0 ** np.arange(S)[None, :]
         zeros = ZERO_START / (2.0 * math.pi * f) if S > 1 else None
-        base = ShapingFilter(f, np.full((2, S), 0.7), np.eye(2), zeros)
+        base = ShapingFilter(f, np.full((n, S), 0.7), np.eye(n), zeros)
         P = base.stationary_covariance()
         _, _, C_b = base.matrices()
         unit = np.sqrt(np.diag(C_b @ P @ C_b.T))
         cov = np.cov(force.T) / np.outer(unit, unit)
-        L = np.linalg.cholesky(cov + 1e-9 * np.trace(cov) * np.eye(2))
-        k = 2 * S
+        L = np.linalg.cholesky(cov + 1e-9 * np.trace(cov) * np.eye(n))
+        k, n_L = n * S, len(layout.L_entries)
         blocks[g, :k] = np.log(f).ravel()
         blocks[g, k:2 * k] = math.log(0.7)
+        for column, (i, j) in enumerate(layout.L_entries, start=2 * k):
+            blocks[g, column] = (L[i, j] / L[0, 0] if i != j
+                                 else math.log(max(L[i, i] / L[0, 0], 1e-3)))
         blocks[g, 2 * k] = math.log(L[0, 0])
-        blocks[g, 2 * k + 1] = L[1, 0] / L[0, 0]
-        blocks[g, 2 * k + 2] = math.log(max(L[1, 1] / L[0, 0], 1e-3))
         if S > 1:
-            blocks[g, 2 * k + 3:3 * k + 3] = ZERO_START
+            blocks[g, 2 * k + n_L:3 * k + n_L] = ZERO_START
     if layout.scaled is None:
         theta[layout.shaping0:layout.noise0] = blocks.ravel()
         return theta
     # One filter for every speed: each speed's start scaled back to the reference by the
     # quasi-steady exponents, and averaged.
     a, b = QUASI_STEADY_EXPONENTS
-    k = 2 * layout.sections
+    k = layout.n_dof * layout.sections
     blocks[:, :k] -= a * layout.scaled[:, :1]
     blocks[:, 2 * k] -= b * layout.scaled[:, 0] + layout.scaled[:, 1]
     theta[layout.shaping0:layout.shaping0 + layout.n_shaping] = blocks[present].mean(axis=0)
@@ -406,9 +446,9 @@ def warm_nuisance(theta: FloatArray, layout: Layout, speeds: Sequence[float],
     speeds (:attr:`Layout.scaled`), ``exponents`` (the other fit's, when it shared one too)
     start its two exponents, and the filter of the speed nearest the reference its block.
     """
-    if len(noise) != (layout.size - layout.noise0) // 4:
+    if len(noise) != (layout.size - layout.noise0) // layout.n_y:
         raise ValueError(f"{len(noise)} releases' noise for a fit of "
-                         f"{(layout.size - layout.noise0) // 4}")
+                         f"{(layout.size - layout.noise0) // layout.n_y}")
     known = [U for U, _ in shaping]
     groups: Sequence[int] = range(len(speeds))
     if layout.scaled is not None:
@@ -421,9 +461,9 @@ def warm_nuisance(theta: FloatArray, layout: Layout, speeds: Sequence[float],
         if nearest >= 0 and abs(known[nearest] - U) <= DISTINCT_U_RTOL * U:
             layout.set_shaping(theta, group, shaping[nearest][1])
     for release, std in enumerate(noise):
-        at = slice(layout.noise0 + 4 * release, layout.noise0 + 4 * release + 4)
-        theta[at] = np.maximum(np.log(np.maximum(np.asarray(std, dtype=float), 1e-300)),
-                               layout.noise_floor[4 * release: 4 * release + 4])
+        at = slice(layout.n_y * release, layout.n_y * (release + 1))
+        theta[layout.noise0:][at] = np.maximum(
+            np.log(np.maximum(np.asarray(std, dtype=float), 1e-300)), layout.noise_floor[at])
 
 
 def exponent_warning(exponents: tuple[float, float], std: tuple[float, float]) -> list[str]:

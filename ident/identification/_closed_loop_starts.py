@@ -31,6 +31,8 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+import numpy as np
+
 from ident.identification.closed_loop_ml import ClosedLoopFit
 from ident.model import flat_plate
 from ident.model import flutter as _flutter
@@ -73,7 +75,7 @@ def search_again(fit: ClosedLoopFit, section: SectionModel, bounded_at: float | 
     found: list[tuple[ClosedLoopFit, float | None]] = [(fit, first)]  # each with its flutter
     failed = []
     for name, start in (("its own maximum", fit.model),
-                        ("the flat plate's aerodynamics", flat_plate.jones_model())):
+                        ("the flat plate's aerodynamics", _plate_start(fit.model))):
         try:
             other = refit(start)
         except ValueError as exc:
@@ -99,6 +101,22 @@ def search_again(fit: ClosedLoopFit, section: SectionModel, bounded_at: float | 
         + (f" (could not start from {'; '.join(failed)})" if failed else "")
         + (f": kept {kept}, the best the releases allow" if allowed
            else f": every maximum is refuted, kept {kept}"))
+
+
+def _plate_start(found: RationalFunctionModel) -> RationalFunctionModel:
+    """Return Jones's plate as a start, in ``found``'s degrees of freedom.
+
+    With sway the plate has no drag of its own: the sway rows and columns of ``A1``-``A3`` are
+    ``found``'s (its lag terms there zero), heave and pitch the plate's.
+    """
+    plate = flat_plate.jones_model()
+    if found.n_dof == 2:
+        return plate
+    A = np.zeros((plate.A.shape[0], 3, 3))
+    A[:, :2, :2] = plate.A
+    A[:3, 2, :] = found.A[:3, 2, :]
+    A[:3, :, 2] = found.A[:3, :, 2]
+    return RationalFunctionModel(A, plate.d)
 
 
 def refuted(fit: ClosedLoopFit, section: SectionModel, bounded_at: float | None) -> bool:

@@ -100,20 +100,15 @@ def turbulence_branch(model: IdentifiedModel, releases: list[Release], section: 
     """
     if not model.diagnostics.turbulent:
         return model
-    if estimator == "ml" and section.n_dof == 2:
-        return _closed_loop(model, releases, section, buffeting, a3_rule)
     if estimator == "ml":
-        note = ("closed-loop maximum likelihood identifies 2-DOF sections only: the refined-IV "
-                "estimator ran on these 3-DOF releases")
-        model = IdentifiedModel(model.A, model.d, replace(
-            model.diagnostics, warnings=(*model.diagnostics.warnings, note)))
+        return _closed_loop(model, releases, section, buffeting, a3_rule)
     if not _turbulent_fit.holds_suffice(releases):
         held = [r.hold.duration for r in releases if r.hold is not None]
         have = (f"the shortest hold here is {min(held):.3g} s" if len(held) == len(releases)
                 else f"{len(releases) - len(held)} of {len(releases)} releases have none")
         note = (f"turbulence needs a hold of >= {_turbulent_fit.MIN_HOLD_S:g} s before each "
                 f"release (the model held in the wind; {have}): with it the refined-IV "
-                "estimator runs, without it today's, biased low in turbulence")
+                "estimator runs, without it today's, biased in turbulence (low or high)")
         diagnostics = replace(model.diagnostics, warnings=(*model.diagnostics.warnings, note))
         return IdentifiedModel(model.A, model.d, diagnostics)
     return _turbulent_model(model, releases, section, n_lags, with_A3, a3_rule)
@@ -209,7 +204,7 @@ def _closed_loop(model: IdentifiedModel, releases: list[Release], section: Secti
         fit, restarted = _searched(model, releases, section, first, stable_to)
     except ValueError as exc:
         note = (f"turbulence: the closed-loop likelihood could not start from E2RFC's estimate "
-                f"({exc}); E2RFC's own, biased low in turbulence, is kept")
+                f"({exc}); E2RFC's own, biased in turbulence (low or high), is kept")
         return IdentifiedModel(model.A, model.d,
                                replace(base, warnings=(*base.warnings, note)))
     chosen, evidence = first, ""
@@ -277,7 +272,8 @@ def _closed_loop(model: IdentifiedModel, releases: list[Release], section: Secti
 #: The force channels whose sign :func:`_refuse_flipped_force` tries: name, row of ``Q``, and
 #: windrig's convention for it.
 FORCE_SIGNS = (("lift", 0, "positive downward, along h"),
-               ("moment", 1, "positive nose-up, along alpha"))
+               ("moment", 1, "positive nose-up, along alpha"),
+               ("drag", 2, "positive downwind, along p"))
 
 
 def _refuse_flipped_force(start: IdentifiedModel, releases: list[Release],
@@ -300,7 +296,7 @@ def _refuse_flipped_force(start: IdentifiedModel, releases: list[Release],
     PlausibilityError
         A force whose negated fit passes every check and is higher in log L.
     """
-    for name, row, convention in FORCE_SIGNS:
+    for name, row, convention in FORCE_SIGNS[:section.n_dof]:
         data = [_negated(r, name) for r in releases]
         A = np.array(start.A, dtype=float)
         A[:, row, :] *= -1.0

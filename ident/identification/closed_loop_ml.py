@@ -11,7 +11,7 @@ Gaussian likelihood of every release at every wind speed together, over
   force (or several in cascade, ``shaping_sections``) with the lift-moment correlation
   (:class:`~ident.identification.innovations.ShapingFilter`); or one filter for every speed,
   scaled to each as buffeting scales with the speed (``shared_buffeting``);
-- per release, the four channels' sensor-noise standard deviations;
+- per release, the channels' sensor-noise standard deviations (four; six with sway);
 - per record, concentrated out by generalised least squares: the channels' constant offsets
   (mean wind load, static deflection, zero drift) and the initial state, but for a release's
   lag states, which are zero at the release (it starts from rest).
@@ -29,7 +29,9 @@ likelihood is that of the steady-state Kalman predictor ``x_{k+1} = Phi x_k + K_
 ``K_p = Phi P C^T S^-1`` with ``P`` from the discrete Riccati equation (:func:`riccati`): with
 the innovations ``e_k`` and their covariance ``S``,
 
-    -log L = sum_records [ n/2 (4 log 2 pi + log det S) + 1/2 sum_k e_k^T S^-1 e_k ].
+    -log L = sum_records [ n/2 (n_y log 2 pi + log det S) + 1/2 sum_k e_k^T S^-1 e_k ]
+
+with ``n_y`` channels (four; six with sway).
 
 It maximises it by Fisher scoring with Levenberg-Marquardt damping. The derivatives of
 ``e_k`` and ``S`` come from forward differences of the model's matrices, carried through the
@@ -143,7 +145,7 @@ class ClosedLoopFit:
         (quasi-steady buffeting in gusts of fixed intensity and scale: 1 and 1.5); else None.
     wind_speeds : tuple of float
         The distinct wind speeds, m/s.
-    noise_std : ndarray, shape (n_releases, 4)
+    noise_std : ndarray, shape (n_releases, n_y)
         Sensor-noise standard deviations at the decimated rate (m, rad, N/m, N m/m).
     neg_log_likelihood : float
         At the maximum.
@@ -155,7 +157,7 @@ class ClosedLoopFit:
     fs : float
         The lowest decimated rate of the records, Hz (each record is discretised at its own;
         they differ only when the releases were recorded at different rates).
-    whiteness : ndarray, shape (n_records, 4)
+    whiteness : ndarray, shape (n_records, n_y)
         Largest autocorrelation of each record's standardised innovations over lags 1-20, per
         channel (about 2/sqrt(n) if the model is right).
     n_parameters : int
@@ -167,7 +169,7 @@ class ClosedLoopFit:
         first samples after the release, whatever the length.
     n_samples : int
         Scalar samples of every record together (block means times channels).
-    portmanteau : ndarray, shape (4,)
+    portmanteau : ndarray, shape (n_y,)
         Per channel, ``N sum_l rho_l^2`` over lags ``l`` of 1-20, with ``rho_l`` the
         autocorrelation of the standardised innovations pooled over every record and ``N``
         their number of samples (``innovation_checks.pooled_portmanteau``): chi-square with
@@ -222,7 +224,8 @@ class ClosedLoopFit:
         failed = []
         if not self.converged:
             failed.append(f"its search did not converge in {self.iterations} iterations")
-        worst = float(self.whiteness[:, 2:].max()) if self.whiteness.size else 0.0
+        forces = setup.force_columns(self.whiteness.shape[1] // 2)
+        worst = float(self.whiteness[:, forces].max()) if self.whiteness.size else 0.0
         if worst > GROSS_WHITENESS:
             failed.append(f"its force innovations are far from white (autocorrelation "
                           f"{worst:.2f} at a lag of 1-20 samples)")
@@ -254,10 +257,11 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
     Parameters
     ----------
     releases : sequence of Release
-        Two-degree-of-freedom releases in turbulence at two or more wind speeds; a hold before a
+        Releases in turbulence at two or more wind speeds, of the section's degrees of
+        freedom (with sway, the sway and drag channels join the four); a hold before a
         release is used as extra data when ``use_holds``.
     section : SectionModel
-        The structure (two degrees of freedom).
+        The structure (two or three degrees of freedom).
     start : RationalFunctionModel
         The starting estimate (E2RFC's or the refined-IV branch's); its structure (number of
         lags) is kept.
@@ -303,17 +307,19 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
     Raises
     ------
     ValueError
-        On a 3-DOF section or releases, fewer than two wind speeds, or a start at which the
-        likelihood cannot be evaluated (no stabilising Riccati solution). (A :class:`Release`
-        holds no NaN: it refuses them itself.) Releases may be sampled at different rates: each
-        record is discretised at its own.
+        On releases whose degrees of freedom are not the section's, fewer than two wind
+        speeds, or a start at which the likelihood cannot be evaluated (no stabilising Riccati
+        solution). (A :class:`Release` holds no NaN: it refuses them itself.) Releases may be
+        sampled at different rates: each record is discretised at its own.
     """
-    if section.n_dof != 2 or any(r.n_dof != 2 for r in releases):
-        raise ValueError("the closed-loop estimator is for two degrees of freedom (heave, pitch)")
+    if any(r.n_dof != section.n_dof for r in releases):
+        raise ValueError(f"the releases and the section differ in their degrees of freedom "
+                         f"(the section has {section.n_dof}; a release with sway carries p and "
+                         "drag)")
     speeds = distinct_wind_speeds([r.U for r in releases])
     if len(speeds) < 2:
         raise ValueError("the closed-loop estimator needs releases at two or more wind speeds")
-    f_max = max(section.fh, section.fa)
+    f_max = max(section.fh, section.fa, section.fp or 0.0)
     records = setup.records(releases, section, speeds, f_max, use_holds, window)
     start = setup.with_lags(start, start.n_lags if n_lags is None else n_lags)
     if not isinstance(shaping_sections, int) or shaping_sections < 1:
@@ -325,8 +331,8 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
                for g in range(len(speeds))]
         scaled = np.column_stack([np.log(np.asarray(speeds) / U_ref),
                                   np.log(np.asarray(rho) / section.rho)])
-    layout = Layout(2, start.n_lags, with_A3, len(speeds), len(releases), shaping_sections,
-                    scaled)
+    layout = Layout(section.n_dof, start.n_lags, with_A3, len(speeds), len(releases),
+                    shaping_sections, scaled)
     layout.noise_floor = setup.noise_floor(records, len(releases))
     layout.log_lag_range = setup.log_lag_range(section, speeds)
     objective = _Objective(records, section, layout, exact_block_means)
@@ -376,8 +382,8 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
         neg_log_likelihood=current.nll, iterations=iterations, converged=converged,
         fs=min(record.fs for record in records),
         whiteness=whiteness, portmanteau=portmanteau,
-        n_parameters=layout.size + 4 * len(records),
-        n_initial_states=sum(c.shape[1] - 4 for c in current.columns),
+        n_parameters=layout.size + layout.n_y * len(records),
+        n_initial_states=sum(c.shape[1] - layout.n_y for c in current.columns),
         n_samples=sum(record.y.size for record in records), warnings=tuple(warnings),
         shaping_exponents=exponents)
 
@@ -572,8 +578,11 @@ def _hold_matrices(shaping: ShapingFilter, B: float, fs: float
     """Return ``(Phi, Qd, C)`` of a hold at ``fs``: the buffeting alone on the force channels."""
     A_b, B_b, C_b = shaping.matrices()
     Phi, Qd = discretise(A_b, B_b, 1.0 / fs)
-    C = np.zeros((4, A_b.shape[0]))
+    n_f = C_b.shape[0]
+    C = np.zeros((2 * n_f, A_b.shape[0]))
     C[2], C[3] = C_b[0] / B, C_b[1]
+    if n_f == 3:
+        C[5] = C_b[2] / B
     return Phi, Qd, C
 
 

@@ -37,8 +37,8 @@ PORTMANTEAU_LAGS = 20
 #: 167-170 (3 x 2) and 575-598 (3 x 8) higher in log L for 24 more parameters and four more
 #: initial states per record.
 PORTMANTEAU_LEVEL = 1e-3
-#: The channels of a record, in their order.
-CHANNELS = ("heave", "pitch", "lift", "moment")
+#: The channels of a record, in their order (with sway, then ``sway, drag``).
+CHANNELS = ("heave", "pitch", "lift", "moment", "sway", "drag")
 
 
 def pooled_portmanteau(innovations: Sequence[FloatArray], covariances: Sequence[FloatArray],
@@ -74,9 +74,12 @@ def pooled_portmanteau(innovations: Sequence[FloatArray], covariances: Sequence[
     return np.asarray(samples * np.sum((products / power) ** 2, axis=0), dtype=float)
 
 
-def portmanteau_limit() -> float:
-    """Return the pooled portmanteau statistic's limit (:data:`PORTMANTEAU_LEVEL`, 4 channels)."""
-    return float(scipy.stats.chi2.isf(PORTMANTEAU_LEVEL / len(CHANNELS), PORTMANTEAU_LAGS))
+def portmanteau_limit(n_channels: int = 4) -> float:
+    """Return the pooled portmanteau statistic's limit (:data:`PORTMANTEAU_LEVEL`).
+
+    The level is shared by the ``n_channels`` channels (four; six with sway).
+    """
+    return float(scipy.stats.chi2.isf(PORTMANTEAU_LEVEL / n_channels, PORTMANTEAU_LAGS))
 
 
 def portmanteau_warning(portmanteau: FloatArray, n_records: int,
@@ -88,11 +91,11 @@ def portmanteau_warning(portmanteau: FloatArray, n_records: int,
     does not follow pulls the flutter speed most (docs/development/e2rfc_turbulence.md): the
     warning then says that holds are the remedy too.
     """
-    limit = portmanteau_limit()
+    limit = portmanteau_limit(len(portmanteau))
     if not np.any(portmanteau > limit):
         return []
-    channels = ", ".join(f"{name} {q:.0f}" for name, q in zip(CHANNELS, portmanteau,
-                                                              strict=True) if q > limit)
+    named = zip(CHANNELS[:len(portmanteau)], portmanteau, strict=True)
+    channels = ", ".join(f"{name} {q:.0f}" for name, q in named if q > limit)
     remedy = ("; one section per force follows a gust spectrum too loosely: the fourth-order "
               "buffeting model (closed_loop_buffeting='fourth-order', "
               "--closed-loop-buffeting fourth-order) removes most of that bias at about twice "

@@ -25,7 +25,9 @@ delta(t - s)``). The augmented state ``x = [z, x_b]`` obeys ``x' = Ac x + G w`` 
 ``Ac = [[A, E C_b], [0, A_b]]`` and ``G = [0; B_b]``, and the outputs ``y = C x + v`` are
 ``[h, alpha, lift, moment]`` = ``[B q_h, alpha, (F z + Ms Meff^-1 C_b x_b)_0 / B,
 (F z + Ms Meff^-1 C_b x_b)_1]`` (m, rad, N/m, N m/m) with sensor noise ``v ~ N(0, R)``,
-``R = diag(sigma^2)``.
+``R = diag(sigma^2)``. With sway (three degrees of freedom) ``q = [h/B, alpha, p/B]``, the
+buffeting force is ``[L_b B, M_b, D_b B]`` and the outputs gain ``[B q_p, (.)_2 / B]`` (m,
+N/m): sway and drag.
 
 The exact discretisation at the sampling interval ``T = 1/fs``: ``Phi = expm(Ac T)`` and
 ``Qd = int_0^T expm(Ac s) G G^T expm(Ac s)^T ds``, both from one matrix exponential (Van Loan
@@ -80,15 +82,19 @@ class ShapingFilter:
     span-averaged von Karman force's slower fall around the corner (about ``f^-8/3``) to within
     a few per cent from 0 to 25 Hz, where one is 10-25 % low near 2-4 Hz.
 
+    With sway (three degrees of freedom) the drag ``D B`` is a third force with its own
+    sections, after the moment; the forces' correlations are all in ``L``.
+
     Parameters
     ----------
-    frequencies : array_like, shape (2,) or (2, S)
-        Natural frequencies of each force's sections, Hz, > 0 (lift first).
+    frequencies : array_like, shape (n_f,) or (n_f, S)
+        Natural frequencies of each force's sections, Hz, > 0 (lift first); ``n_f`` is 2
+        (lift, moment) or 3 (and drag).
     damping : array_like, same shape
         Damping ratios of the sections, > 0 (a stationary force needs a stable filter).
-    L : array_like, shape (2, 2)
+    L : array_like, shape (n_f, n_f)
         Lower-triangular Cholesky factor of the white noise's intensity, N m/m s^0.5. Its
-        off-diagonal entry sets the lift-moment correlation; zero is allowed (no buffeting).
+        off-diagonal entries set the forces' correlations; zero is allowed (no buffeting).
     zeros : array_like, same shape as ``frequencies``, optional
         Time constants ``tau`` of the sections' zeros, s, finite. Default: none (all 0).
 
@@ -96,7 +102,7 @@ class ShapingFilter:
     ------
     ValueError
         On a non-positive or non-finite frequency or damping ratio, shapes that do not match,
-        or an ``L`` that is not a finite lower-triangular 2x2 matrix.
+        or an ``L`` that is not a finite lower-triangular ``n_f`` x ``n_f`` matrix.
     """
 
     frequencies: Any
@@ -109,34 +115,43 @@ class ShapingFilter:
         z = v.positive_array("damping", self.damping)
         tau = np.zeros_like(f) if self.zeros is None else v.finite_array("zeros", self.zeros)
         L = v.finite_array("L", self.L, ndim=2)
-        if f.ndim not in (1, 2) or f.shape[0] != 2 or z.shape != f.shape or tau.shape != f.shape:
+        n_f = f.shape[0] if f.ndim else 0
+        if (f.ndim not in (1, 2) or n_f not in (2, 3) or z.shape != f.shape
+                or tau.shape != f.shape):
             raise ValueError(f"frequencies, damping and zeros need one row per force (lift, "
-                             f"moment) and one column per section, got shapes {f.shape}, "
-                             f"{z.shape} and {tau.shape}")
-        if L.shape != (2, 2) or L[0, 1] != 0.0:
-            raise ValueError(f"L must be a lower-triangular 2x2 matrix, got {L.tolist()}")
+                             f"moment, and drag with sway) and one column per section, got "
+                             f"shapes {f.shape}, {z.shape} and {tau.shape}")
+        if L.shape != (n_f, n_f) or np.any(np.triu(L, 1) != 0.0):
+            raise ValueError(f"L must be a lower-triangular {n_f}x{n_f} matrix (one row per "
+                             f"force), got {L.tolist()}")
         for name, arr in (("frequencies", f), ("damping", z), ("zeros", tau), ("L", L)):
-            arr = arr.reshape(2, -1) if name != "L" else arr
+            arr = arr.reshape(n_f, -1) if name != "L" else arr
             arr.flags.writeable = False
             object.__setattr__(self, name, arr)
 
     @property
+    def n_forces(self) -> int:
+        """Number of forces: 2 (lift, moment) or 3 (and drag)."""
+        return int(self.frequencies.shape[0])
+
+    @property
     def n_states(self) -> int:
         """Number of states: two per section per force."""
-        return int(4 * self.frequencies.shape[1])
+        return int(2 * self.n_forces * self.frequencies.shape[1])
 
     def matrices(self) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Return ``(A_b, B_b, C_b)``: ``x_b' = A_b x_b + B_b xi``, ``[L B, M] = C_b x_b``.
 
         The state is, per force, each section's output and its rate (N m/m and N m/(m s)),
-        lift's sections first; shapes (n, n), (n, 2), (2, n) with ``n`` :attr:`n_states`;
-        ``A_b`` in 1/s, ``B_b`` in N m/m s^-1.5.
+        lift's sections first; shapes (n, n), (n, n_f), (n_f, n) with ``n`` :attr:`n_states`
+        and ``n_f`` :attr:`n_forces` (with drag, ``[L B, M, D B] = C_b x_b``); ``A_b`` in
+        1/s, ``B_b`` in N m/m s^-1.5.
         """
-        n_sections = self.frequencies.shape[1]
+        n_sections, n_f = self.frequencies.shape[1], self.n_forces
         n = self.n_states
         w = 2.0 * math.pi * self.frequencies
-        A_b, B0, C_b = np.zeros((n, n)), np.zeros((n, 2)), np.zeros((2, n))
-        for i in range(2):
+        A_b, B0, C_b = np.zeros((n, n)), np.zeros((n, n_f)), np.zeros((n_f, n))
+        for i in range(n_f):
             for j in range(n_sections):
                 a = 2 * (i * n_sections + j)  # this section's output; a + 1 its rate
                 A_b[a, a + 1] = 1.0
@@ -161,10 +176,10 @@ class ShapingFilter:
         return np.asarray(0.5 * (P + P.T), dtype=float)
 
     def spectrum(self, f: Any) -> npt.NDArray[np.complex128]:
-        """Two-sided cross-spectral density of ``[L B, M]`` at frequencies ``f`` (Hz).
+        """Two-sided cross-spectral density of ``[L B, M]`` (and ``D B``) at ``f`` (Hz).
 
         ``S(f) = H(i 2 pi f) H(i 2 pi f)^H`` with ``H(s) = C_b (s I - A_b)^-1 B_b``; shape
-        (len(f), 2, 2), (N m/m)^2/Hz. Its integral over all f is ``C_b P C_b^T``.
+        (len(f), n_f, n_f), (N m/m)^2/Hz. Its integral over all f is ``C_b P C_b^T``.
         """
         A_b, B_b, C_b = self.matrices()
         s = 2j * math.pi * np.atleast_1d(v.finite_array("f", f))
@@ -174,24 +189,30 @@ class ShapingFilter:
 
 @dataclass(frozen=True, eq=False)
 class ReleaseModel:
-    """A 2-DOF section released in turbulence, discretised exactly at ``fs``.
+    """A section released in turbulence, discretised exactly at ``fs``.
+
+    With two degrees of freedom the channels are ``[h, alpha, lift, moment]``; with sway,
+    ``[h, alpha, lift, moment, p, drag]`` (the order of a 3-DOF release's channels; the
+    shaping filter then of three forces).
 
     Parameters
     ----------
     section : SectionModel
-        The structure (two degrees of freedom).
+        The structure (two or three degrees of freedom).
     model : RationalFunctionModel
-        The self-excited forces (a 3-DOF model acts through its heave-pitch block).
+        The self-excited forces (a 3-DOF model acts on a 2-DOF section through its heave-pitch
+        block).
     U : float
         Mean wind speed, m/s, >= 0.
     fs : float
         Sampling rate, Hz, > 0.
     shaping : ShapingFilter
         The buffeting force.
-    noise_std : array_like, shape (4,)
+    noise_std : array_like, shape (2 n_dof,)
         Sensor-noise standard deviations of ``h`` (m), ``alpha`` (rad), ``lift`` (N/m) and
-        ``moment`` (N m/m), each >= 0 (the filter needs the innovation covariance to be
-        positive definite: zero only where the state is uncertain).
+        ``moment`` (N m/m) (and ``p``, m, and ``drag``, N/m), each >= 0 (the filter needs the
+        innovation covariance to be positive definite: zero only where the state is
+        uncertain).
     rho : float, optional
         Air density, kg/m^3; replaces the section's own when given.
 
@@ -199,8 +220,8 @@ class ReleaseModel:
     ----------
     Phi, Qd : ndarray, shape (n_x, n_x)
         Transition matrix and process-noise covariance over one sample.
-    C : ndarray, shape (4, n_x)
-        Output matrix; ``R`` (4, 4): sensor-noise covariance.
+    C : ndarray, shape (2 n_dof, n_x)
+        Output matrix; ``R`` (2 n_dof, 2 n_dof): sensor-noise covariance.
     """
 
     section: SectionModel
@@ -219,15 +240,17 @@ class ReleaseModel:
         section = self.section
         if self.rho is not None and self.rho != section.rho:  # a copy costs the fit's loop
             section = section.replace(rho=v.positive("rho", self.rho))
-        if section.n_dof != 2:
-            raise ValueError("ReleaseModel is for a section with two degrees of freedom "
-                             "(heave, pitch); this one has a lateral spring")
+        if self.shaping.n_forces != section.n_dof:
+            raise ValueError(f"the shaping filter has {self.shaping.n_forces} forces for a "
+                             f"section of {section.n_dof} degrees of freedom")
         object.__setattr__(self, "section", section)
         object.__setattr__(self, "fs", v.positive("fs", self.fs))
         std = v.finite_array("noise_std", self.noise_std, ndim=1)
-        if std.shape != (4,) or np.any(std < 0.0):
-            raise ValueError(f"noise_std must be 4 values >= 0 (h m, alpha rad, lift N/m, moment "
-                             f"N m/m), got {std.tolist()}")
+        n_y = 2 * section.n_dof
+        if std.shape != (n_y,) or np.any(std < 0.0):
+            raise ValueError(f"noise_std must be {n_y} values >= 0 (h m, alpha rad, lift N/m, "
+                             f"moment N m/m{', p m, drag N/m' if n_y == 6 else ''}), got "
+                             f"{std.tolist()}")
         object.__setattr__(self, "noise_std", std)
         object.__setattr__(self, "U", AeroelasticSystem(section, self.model, self.U).U)
         Ac, G, C = self.continuous_matrices()
@@ -246,19 +269,21 @@ class ReleaseModel:
         A_b, B_b, C_b = self.shaping.matrices()
         A = system.matrix()
         F = system.force_matrix(A)
-        nz, nb, k, B = system.n_states, A_b.shape[0], 2, self.section.B
+        nz, nb, k, B = system.n_states, A_b.shape[0], system.n_dof, self.section.B
         Meff_inv = np.linalg.inv(system.effective_mass())
         Ac = np.zeros((nz + nb, nz + nb))
         Ac[:nz, :nz] = A
         Ac[k : 2 * k, nz:] = Meff_inv @ C_b  # the buffeting force in the q'' rows
         Ac[nz:, nz:] = A_b
-        G = np.zeros((nz + nb, 2))
+        G = np.zeros((nz + nb, k))
         G[nz:] = B_b
         # Recorded force = self-excited (its added mass sees the buffeting-driven q'') + buffeting.
         force = np.hstack([F, self.section.mass_matrix() @ Meff_inv @ C_b])
-        C = np.zeros((4, nz + nb))
+        C = np.zeros((2 * k, nz + nb))
         C[0, 0], C[1, 1] = B, 1.0
         C[2], C[3] = force[0] / B, force[1]
+        if k == 3:  # sway p = B q_p and drag = (D B) / B
+            C[4, 2], C[5] = B, force[2] / B
         return Ac, G, C
 
     @property
@@ -266,11 +291,16 @@ class ReleaseModel:
         """Number of states: the aeroelastic ones and the shaping filter's."""
         return int(self.Phi.shape[0])
 
-    def initial_state(self, h0: float, alpha0: float) -> FloatArray:
-        """Mean state at a release from rest at ``h0`` (m), ``alpha0`` (rad): lags and ``x_b`` 0."""
+    def initial_state(self, h0: float, alpha0: float, p0: float = 0.0) -> FloatArray:
+        """Mean state at a release from rest at ``h0`` (m), ``alpha0`` (rad) (and ``p0``, m).
+
+        The lag states and ``x_b`` are zero.
+        """
         x0 = np.zeros(self.n_states)
         x0[0] = v.finite("h0", h0) / self.section.B
         x0[1] = v.finite("alpha0", alpha0)
+        if self.section.n_dof == 3:
+            x0[2] = v.finite("p0", p0) / self.section.B
         return x0
 
     def initial_covariance(self, extra: Any = None) -> FloatArray:
@@ -288,15 +318,16 @@ class ReleaseModel:
         return P0
 
     def sample(self, x0: Any, P0: Any, n: int, rng: np.random.Generator) -> FloatArray:
-        """Draw a record ``y`` (n, 4) from the discrete model itself, ``x(0) ~ N(x0, P0)``."""
+        """Draw a record ``y`` (n, 2 n_dof) from the discrete model, ``x(0) ~ N(x0, P0)``."""
         x = rng.multivariate_normal(_vector("x0", x0, self.n_states),
                                     _covariance("P0", P0, self.n_states), method="eigh")
         w = rng.multivariate_normal(np.zeros(self.n_states), self.Qd, size=n, method="eigh")
-        y = np.empty((n, 4))
+        n_y = self.C.shape[0]
+        y = np.empty((n, n_y))
         for k in range(n):
             y[k] = self.C @ x
             x = self.Phi @ x + w[k]
-        return y + rng.standard_normal((n, 4)) * self.noise_std
+        return y + rng.standard_normal((n, n_y)) * self.noise_std
 
 
 def discretise(Ac: FloatArray, G: FloatArray, T: float) -> tuple[FloatArray, FloatArray]:
@@ -370,12 +401,12 @@ class InnovationsResult:
     ----------
     log_likelihood : float
         Exact Gaussian log-likelihood of the observed samples.
-    innovations : ndarray, shape (n, 4)
+    innovations : ndarray, shape (n, n_y)
         ``e_k = y_k - C x_{k|k-1}`` in the channels' units; NaN where a sample is missing.
-    standardized : ndarray, shape (n, 4)
+    standardized : ndarray, shape (n, n_y)
         ``chol(S_k)^-1 e_k`` over the observed channels (white, unit variance if the model is
         right: for a whiteness check); NaN where missing.
-    predictions : ndarray, shape (n, 4)
+    predictions : ndarray, shape (n, n_y)
         One-step predictions ``C x_{k|k-1}`` of every channel.
     """
 
@@ -400,8 +431,9 @@ def kalman_filter(model: ReleaseModel, y: Any, x0: Any, P0: Any = None, *,
     ----------
     model : ReleaseModel
         The discrete model; ``y`` is on its sample grid.
-    y : array_like, shape (n, 4)
-        ``[h, alpha, lift, moment]`` (m, rad, N/m, N m/m), the first row at the release. NaN marks
+    y : array_like, shape (n, n_y)
+        ``[h, alpha, lift, moment]`` (m, rad, N/m, N m/m), with sway then ``[p, drag]`` (m,
+        N/m); the first row at the release. NaN marks
         a missing sample: that channel's update is skipped at that sample.
     x0 : array_like, shape (n_x,)
         Mean state at the first sample (:meth:`ReleaseModel.initial_state`).
@@ -426,8 +458,10 @@ def kalman_filter(model: ReleaseModel, y: Any, x0: Any, P0: Any = None, *,
         state determines exactly).
     """
     y_arr = np.asarray(y, dtype=float)
-    if y_arr.ndim != 2 or y_arr.shape[1] != 4 or y_arr.shape[0] < 1:
-        raise ValueError(f"y must have shape (n, 4) (h, alpha, lift, moment), got {y_arr.shape}")
+    n_y = model.C.shape[0]
+    if y_arr.ndim != 2 or y_arr.shape[1] != n_y or y_arr.shape[0] < 1:
+        names = "h, alpha, lift, moment" + (", p, drag" if n_y == 6 else "")
+        raise ValueError(f"y must have shape (n, {n_y}) ({names}), got {y_arr.shape}")
     if np.any(np.isinf(y_arr)):
         raise ValueError("y contains infinite values (NaN marks a missing sample; inf is an error)")
     steady_tol = v.finite("steady_tol", steady_tol)
@@ -438,9 +472,9 @@ def kalman_filter(model: ReleaseModel, y: Any, x0: Any, P0: Any = None, *,
     observed = ~np.isnan(y_arr)
     full_rows = observed.all(axis=1)
     n = y_arr.shape[0]
-    innovations = np.full((n, 4), np.nan)
-    standardized = np.full((n, 4), np.nan)
-    predictions = np.empty((n, 4))
+    innovations = np.full((n, n_y), np.nan)
+    standardized = np.full((n, n_y), np.nan)
+    predictions = np.empty((n, n_y))
     eye = np.eye(n_x)
     log_l = 0.0
     held: tuple[FloatArray, FloatArray, float] | None = None  # gain, chol(S)^-1, log det S

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from ident import Release
-from ident.identification import e2rfc
+from ident.identification import e2rfc, results
 from ident.identification.results import RANDOM_RESPONSE_LIMIT
 from ident.identification.uncertainty import FlutterUncertainty
 from ident.model import flat_plate
@@ -228,3 +228,17 @@ def test_the_extrapolation_part_takes_the_refits_statistical_scatter_off():
     assert extrapolation(1.0) == pytest.approx(whole, rel=1e-12)
     parts = [extrapolation(scale) for scale in (3.0, 10.0, 1e3)]
     assert whole > parts[0] > parts[1] > parts[2] == 0.0
+
+
+@pytest.mark.parametrize(("random_response", "held_load", "turbulent"), [
+    ([12.0, 9.0, 11.0], [], True),            # the decays alone: median 11 > 10
+    ([9.0, 8.0, 9.5], [], False),             # weak, no holds: the rule of 10 alone
+    ([9.0, 8.0, 9.5], [5.0, 4.8, 5.2], True),  # weak, and the holds show the wind's load
+    ([9.0, 8.0, 9.5], [1.01, 1.0, 1.02], False),  # weak, the holds at their noise (a floor)
+    ([1.0, 1.02, 1.01], [24.0, 23.0, 25.0], False),  # vortex shedding in smooth flow
+    ([], [5.0], False),                       # nothing to judge
+])
+def test_releases_count_as_turbulent_by_their_decays_or_weakly_with_loaded_holds(
+        random_response, held_load, turbulent):
+    """The rule of :func:`results.is_turbulent`, at the measured values its limits sit between."""
+    assert results.is_turbulent(random_response, held_load) is turbulent
