@@ -60,6 +60,7 @@ FULL_EXTRA = {
          "--seeds", "20"),
         ("--part", "ablation", "--seeds", "20"),
     ),
+    "ident_accuracy_3dof": (("--part", "turbulent", "--seeds", "20"),),
     "flutter_crb": (("--deck", "bluff"),),
     "ident_speed_compare": (("--flow", "turbulent"),),
 }
