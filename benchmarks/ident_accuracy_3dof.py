@@ -16,8 +16,9 @@ the plots show it), and the median identification time (one core).
 
 ``--part turbulent`` releases the same deck in vertical gusts (von Karman, 0.3 m scale, as
 ``ident_accuracy.py``'s tunnel rows; the lift, moment and drag buffeting from the static
-coefficients its drag terms come from, ``BLUFF_DECK_3DOF_STATIC``) at Iw 1 % and 3 %, with a
-10 s hold before each release and without, noise 2 %, and prints per row how many campaigns
+coefficients its drag terms come from, ``BLUFF_DECK_3DOF_STATIC``) at Iw 1 % and 3 %, and with
+along-wind gusts of 2 % (1 m scale) beside 1 % vertical ones, with a 10 s hold before each
+release and without, noise 2 %, and prints per row how many campaigns
 the turbulence branch took as turbulent, the flutter speed's median and mean error, p90, the
 coverage of ``FlutterUncertainty.interval`` (structure and extrapolation parts included), the
 median std and time, for the closed-loop likelihood (the default) and, where the holds allow
@@ -88,23 +89,30 @@ def one_case(args: tuple[float, int]) -> dict[str, float]:
             "fd_wide": _fd_coverage(model, truth, wide), "time": elapsed}
 
 
-#: The turbulent part's rows: name -> (Iw, seconds of hold before each release).
-TURBULENT_ROWS = {"Iw 1 %, holds": (0.01, 10.0), "Iw 1 %, no holds": (0.01, 0.0),
-                  "Iw 3 %, holds": (0.03, 10.0), "Iw 3 %, no holds": (0.03, 0.0)}
+#: The turbulent part's rows: name -> (Iu, Iw, seconds of hold before each release). The last
+#: two add along-wind gusts of twice the vertical intensity, which dominate this deck's drag
+#: buffeting (``2 C_D u`` against ``(dC_D + C_L) w``) with a spectrum of their own (1 m scale):
+#: a force spectrum that one filter shape per force follows only in part.
+TURBULENT_ROWS = {"Iw 1 %, holds": (0.0, 0.01, 10.0), "Iw 1 %, no holds": (0.0, 0.01, 0.0),
+                  "Iw 3 %, holds": (0.0, 0.03, 10.0), "Iw 3 %, no holds": (0.0, 0.03, 0.0),
+                  "Iu 2 %, Iw 1 %, holds": (0.02, 0.01, 10.0),
+                  "Iu 2 %, Iw 1 %, no holds": (0.02, 0.01, 0.0)}
 
 
 def turbulent_case(args: tuple[str, int, str]) -> dict[str, float]:
     """Identify one seeded turbulent campaign with ``estimator``; return error, std, time."""
     row, seed, estimator = args
-    Iw, hold_s = TURBULENT_ROWS[row]
+    Iu, Iw, hold_s = TURBULENT_ROWS[row]
     e2rfc.TURBULENT_ESTIMATOR = estimator  # set in each worker
     section, truth = BLUFF_DECK_3DOF, bluff_deck_3dof_model()
     U_F = float(fl.analyze(section, truth).speed)  # type: ignore[arg-type]
-    gusts = TurbulenceSpec(Iu=0.0, Iw=Iw, Lux=1.0, Lwx=0.3, Cuy=10.0, Cwy=8.0)
+    gusts = TurbulenceSpec(Iu=Iu, Iw=Iw, Lux=1.0, Lwx=0.3, Cuy=10.0, Cwy=8.0)
+    # The vertical-gust rows' draws do not depend on Iu (their seeds came first).
+    draws = (int(1000 * Iw),) if not Iu else (int(1000 * Iw), int(1000 * Iu))
     releases = [
         Release.from_simulation(simulate_release(
             section, truth, f * U_F, h0, a0, p0=p0, duration=20.0, fs=500.0, noise=0.02,
-            rng=(seed, i, j, int(1000 * Iw)), static=BLUFF_DECK_3DOF_STATIC, turbulence=gusts,
+            rng=(seed, i, j, *draws), static=BLUFF_DECK_3DOF_STATIC, turbulence=gusts,
             span=1.0, pre_s=hold_s))
         for i, f in enumerate(FRACTIONS) for j, (h0, a0, p0) in enumerate(HOLDS)]
     start = time.process_time()
@@ -126,13 +134,13 @@ def turbulent_case(args: tuple[str, int, str]) -> dict[str, float]:
 
 def turbulent_part(seeds: int, workers: int) -> tuple[list[tuple[object, ...]], int]:
     """Run and print the turbulent rows; return the table and the count without flutter."""
-    print(f"{'row':<18} {'estimator':<26} {'n':>3} {'ran':>3} {'|err| med %':>11} "
+    print(f"{'row':<24} {'estimator':<26} {'n':>3} {'ran':>3} {'|err| med %':>11} "
           f"{'mean %':>7} {'p90 %':>7} {'cov':>5} {'std med %':>9} {'time s':>6} "
           f"{'where ran: |err| med %':>22} {'cov':>5}")
     table: list[tuple[object, ...]] = []
     no_flutter = 0
     with ProcessPoolExecutor(workers) as pool:
-        for row, (_, hold_s) in TURBULENT_ROWS.items():
+        for row, (_, _, hold_s) in TURBULENT_ROWS.items():
             estimators = [("ml", "closed-loop likelihood")]
             if hold_s:  # refined IV needs the holds
                 estimators.append(("iv", "refined IV (earlier)"))
@@ -150,7 +158,7 @@ def turbulent_part(seeds: int, workers: int) -> tuple[list[tuple[object, ...]], 
                         np.median([abs(r["error"]) for r in ran]) if ran else np.nan,
                         np.mean([r["covered"] for r in ran]) if ran else np.nan)
                 table.append(line)
-                print(f"{row:<18} {label:<26} {line[2]:3d} {line[3]:3d} {line[4]:11.2f} "
+                print(f"{row:<24} {label:<26} {line[2]:3d} {line[3]:3d} {line[4]:11.2f} "
                       f"{line[5]:+7.2f} {line[6]:7.2f} {line[7]:5.2f} {line[8]:9.2f} "
                       f"{line[9]:6.1f} {line[10]:22.2f} {line[11]:5.2f}", flush=True)
     return table, no_flutter
@@ -234,8 +242,9 @@ def write_turbulent(args: argparse.Namespace, seeds: int) -> None:
         "ident_accuracy_3dof_turbulent",
         "E2RFC with three degrees of freedom in turbulence (3-DOF bluff deck)",
         [result_files.Table(
-            "The 3-DOF bluff deck in vertical gusts, 3 speeds (0.45/0.65/0.8 U_F) x 2 "
-            "releases of 20 s at 500 Hz, noise 2 %, seeded campaigns: the flutter speed's "
+            "The 3-DOF bluff deck in gusts (vertical; along-wind too in the last rows), 3 "
+            "speeds (0.45/0.65/0.8 U_F) x 2 releases of 20 s at 500 Hz, noise 2 %, seeded "
+            "campaigns: the flutter speed's "
             "absolute error (median, 90th percentile), its mean signed error, the coverage of "
             "the reported interval (fraction), the median std and the median time of the "
             "identification with its uncertainty; then the median error and the coverage "
@@ -248,8 +257,8 @@ def write_turbulent(args: argparse.Namespace, seeds: int) -> None:
                      "where it ran: coverage": ".2f"})],
         results=args.results, quick=args.quick, script="ident_accuracy_3dof",
         parameters={"part": "turbulent", "seeds": seeds, "workers": args.workers,
-                    "rows": {name: {"Iw": Iw, "hold (s)": hold}
-                             for name, (Iw, hold) in TURBULENT_ROWS.items()},
+                    "rows": {name: {"Iu": Iu, "Iw": Iw, "hold (s)": hold}
+                             for name, (Iu, Iw, hold) in TURBULENT_ROWS.items()},
                     "fractions of U_F": list(FRACTIONS), "duration (s)": 20.0,
                     "fs (Hz)": 500.0, "noise": 0.02},
         notes=["Times are the process CPU time of the identification and its uncertainty, "

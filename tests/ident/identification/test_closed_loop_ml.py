@@ -935,7 +935,7 @@ def test_the_estimator_is_chosen_by_name_and_runs_on_a_3dof_section():
     1 % vertical gusts, short releases at 200 Hz with 3 s holds: the closed-loop likelihood
     runs (sway and drag among its channels) and its interval covers the truth. On the
     benchmark's 3-DOF bluff deck (``ident_accuracy_3dof.py --part turbulent``, 20 seeds of
-    20 s releases) the interval covered 18-20 of 20 on each row (76 of 80), so one seed
+    20 s releases) the interval covered 18-20 of 20 on each row (114 of 120), so one seed
     missing it would be a one-in-twenty event; this seed's error is well inside (-2.1 %,
     std 6.3 %).
     """
