@@ -25,6 +25,7 @@ from ident.identification.uncertainty import DISTINCT_U_RTOL, nearest_wind_speed
 from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel
 from ident.numerics.sampling import RATE_RTOL, decimation_factor
+from ident.numerics.stats import white_noise_std
 from ident.records.release import Release, ReleaseHold
 
 __all__ = ["EXPONENT_TOLERANCE", "NOISE_FLOOR", "TARGET_FACTOR", "ZERO_START", "Layout",
@@ -377,8 +378,7 @@ def initial(records: list[Record], layout: Layout, start: RationalFunctionModel,
         own = [rec for rec in records if rec.release == r]
         y = np.vstack([rec.y for rec in own])
         # Noise from third differences (the signals' part is small at 25 x f_max).
-        d3 = np.diff(np.vstack([rec.y for rec in own if not rec.held]), n=3, axis=0)
-        std = np.std(d3, axis=0) / math.sqrt(20.0)
+        std = white_noise_std(np.vstack([rec.y for rec in own if not rec.held]))
         at = slice(layout.n_y * r, layout.n_y * (r + 1))
         theta[layout.noise0:][at] = np.maximum(np.log(
             np.maximum(std, 1e-12 * np.maximum(np.std(y, axis=0), 1e-300))),

@@ -56,6 +56,7 @@ from scipy.signal import butter, lfilter, savgol_filter, sosfiltfilt
 from ident.model.section import SectionModel
 from ident.numerics.sampling import decimation_factor
 from ident.numerics.selection import Candidate, select_one_se
+from ident.numerics.stats import white_noise_std
 from ident.records.release import Release
 
 __all__ = ["MIN_HOLD_S", "TurbulentFit", "TurbulentResult", "fit_turbulent", "holds_suffice"]
@@ -293,8 +294,8 @@ def smoothed_motion(q: FloatArray, forces: FloatArray, section: SectionModel, dt
     G0 = G1 - G2  # x[k+1] = A x[k] + G0 u[k] + G2 u[k+1]
     # White-noise levels from third differences (20 sigma^2 for white noise; the motion's and
     # the buffeting's own share is (2 pi f dt)^3 small at these rates).
-    sig_f = np.std(np.diff(forces, 3, axis=0), axis=0) / math.sqrt(20.0)
-    sig_q = np.std(np.diff(q, 3, axis=0), axis=0) / math.sqrt(20.0)
+    sig_f = white_noise_std(forces)
+    sig_q = white_noise_std(q)
     S_f = np.diag(sig_f**2)
     Q = G0 @ S_f @ G0.T + G2 @ S_f @ G2.T
     R = np.diag(np.maximum(sig_q, 1e-12 * np.max(np.abs(q)) + 1e-300) ** 2)

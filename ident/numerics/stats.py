@@ -2,12 +2,25 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["autocorrelation_inflation"]
+__all__ = ["autocorrelation_inflation", "white_noise_std"]
 
 FloatArray = npt.NDArray[np.float64]
+
+
+def white_noise_std(x: npt.ArrayLike) -> FloatArray:
+    """Return the std of the white noise in ``x``, per column, from its third differences.
+
+    Third differences of white noise of variance ``s^2`` have variance ``20 s^2``; a signal
+    slow against the sampling rate reaches them only as ``(2 pi f dt)^3`` of its size, so the
+    noise of a record sampled well above its content is read without a model of the rest.
+    ``x`` has samples along its first axis (at least four).
+    """
+    return np.asarray(np.std(np.diff(x, 3, axis=0), axis=0) / math.sqrt(20.0), dtype=float)
 
 
 def autocorrelation_inflation(residuals: list[FloatArray]) -> float:

@@ -16,6 +16,7 @@ import numpy.typing as npt
 
 from ident.errors import InsufficientDataError, NonUniformSamplingError
 from ident.numerics import validate as v
+from ident.numerics.stats import white_noise_std
 
 __all__ = ["Release", "ReleaseHold", "SAMPLING_RTOL", "MIN_PERIODS"]
 
@@ -138,7 +139,7 @@ class ReleaseHold(_Record):
         forces = [self.lift, self.moment] + ([self.drag] if self.drag is not None else [])
         ratios = []
         for x in forces:
-            noise = float(np.std(np.diff(x, n=3))) / math.sqrt(20.0) if x.size > 3 else 0.0
+            noise = float(white_noise_std(x)) if x.size > 3 else 0.0
             spread = float(np.std(x))
             ratios.append(spread / noise if noise > 0.0 else (math.inf if spread else 1.0))
         return max(ratios)
