@@ -20,7 +20,12 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from ident.identification.innovations import ShapingFilter
+from ident.identification.innovations import (
+    CHANNELS,
+    ShapingFilter,
+    coordinate_scales,
+    force_channels,
+)
 from ident.identification.uncertainty import DISTINCT_U_RTOL, nearest_wind_speed
 from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel
@@ -29,7 +34,7 @@ from ident.numerics.stats import white_noise_std
 from ident.records.release import Release, ReleaseHold
 
 __all__ = ["EXPONENT_TOLERANCE", "NOISE_FLOOR", "TARGET_FACTOR", "ZERO_START", "Layout",
-           "Record", "block_size", "channels", "decimate", "exponent_warning", "force_columns",
+           "Record", "block_size", "channels", "decimate", "exponent_warning",
            "initial", "log_lag_range", "noise_floor", "records", "with_lags"]
 
 FloatArray = npt.NDArray[np.float64]
@@ -326,18 +331,8 @@ def channels(record: Release | ReleaseHold) -> FloatArray:
 
     ``h, alpha, lift, moment`` (m, rad, N/m, N m/m), with sway then ``p, drag`` (m, N/m).
     """
-    names = ["h", "alpha", "lift", "moment"] + (["p", "drag"] if record.p is not None else [])
-    return np.column_stack([getattr(record, name) for name in names])
-
-
-def force_columns(n_dof: int) -> slice | list[int]:
-    """Return the columns of the forces (lift, moment, and drag) in :func:`channels`.
-
-    Two degrees of freedom: a slice, so that the forces are a view and their statistics are
-    summed in the same order as the records' other statistics (an index list copies them,
-    which moves the search's start in the last bit).
-    """
-    return slice(2, 4) if n_dof == 2 else [2, 3, 5]
+    n_dof = 2 if record.p is None else 3
+    return np.column_stack([getattr(record, name) for name in CHANNELS[:2 * n_dof]])
 
 
 def log_lag_range(section: SectionModel, speeds: list[float]) -> tuple[float, float]:
@@ -390,9 +385,8 @@ def initial(records: list[Record], layout: Layout, start: RationalFunctionModel,
         # second half of the releases (mostly random response).
         pieces = ([rec.y for rec in own if rec.held]
                   or [rec.y[rec.y.shape[0] // 2:] for rec in own])
-        columns = force_columns(layout.n_dof)
-        scale = [section.B, 1.0, section.B][:layout.n_dof]
-        force = np.vstack([p - p.mean(axis=0) for p in pieces])[:, columns] * scale
+        force = (np.vstack([p - p.mean(axis=0) for p in pieces])[:, force_channels(layout.n_dof)]
+                 * coordinate_scales(layout.n_dof, section.B))
         fs = float(np.mean([rec.fs for rec in own]))  # a start: rates differ by little if at all
         rate = np.std(np.diff(force, axis=0), axis=0) * fs / np.maximum(
             np.std(force, axis=0), 1e-300)

@@ -75,7 +75,14 @@ import numpy.typing as npt
 from ident.identification import _closed_loop_parameters as setup
 from ident.identification._closed_loop_parameters import Layout, Record
 from ident.identification.innovation_checks import pooled_portmanteau, portmanteau_warning
-from ident.identification.innovations import ReleaseModel, ShapingFilter, block_means, discretise
+from ident.identification.innovations import (
+    ReleaseModel,
+    ShapingFilter,
+    block_means,
+    coordinate_scales,
+    discretise,
+    force_channels,
+)
 from ident.identification.results import distinct_wind_speeds
 from ident.identification.steady_predictor import (
     SteadyPredictor,
@@ -224,7 +231,7 @@ class ClosedLoopFit:
         failed = []
         if not self.converged:
             failed.append(f"its search did not converge in {self.iterations} iterations")
-        forces = setup.force_columns(self.whiteness.shape[1] // 2)
+        forces = force_channels(self.whiteness.shape[1] // 2)
         worst = float(self.whiteness[:, forces].max()) if self.whiteness.size else 0.0
         if worst > GROSS_WHITENESS:
             failed.append(f"its force innovations are far from white (autocorrelation "
@@ -580,9 +587,7 @@ def _hold_matrices(shaping: ShapingFilter, B: float, fs: float
     Phi, Qd = discretise(A_b, B_b, 1.0 / fs)
     n_f = C_b.shape[0]
     C = np.zeros((2 * n_f, A_b.shape[0]))
-    C[2], C[3] = C_b[0] / B, C_b[1]
-    if n_f == 3:
-        C[5] = C_b[2] / B
+    C[force_channels(n_f)] = C_b / coordinate_scales(n_f, B)[:, None]
     return Phi, Qd, C
 
 

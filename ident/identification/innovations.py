@@ -61,12 +61,41 @@ from ident.model.section import SectionModel
 from ident.model.statespace import AeroelasticSystem
 from ident.numerics import validate as v
 
-__all__ = ["InnovationsResult", "ReleaseModel", "ShapingFilter", "block_means", "discretise",
+__all__ = ["CHANNELS", "InnovationsResult", "ReleaseModel", "ShapingFilter", "block_means",
+           "coordinate_scales", "discretise", "displacement_channels", "force_channels",
            "kalman_filter", "log_likelihood"]
 
 FloatArray = npt.NDArray[np.float64]
 
 LOG_2PI = math.log(2.0 * math.pi)
+
+#: The model's outputs in order, as :class:`~ident.records.release.Release` names them: the
+#: planar four, then sway and drag with three degrees of freedom.
+CHANNELS = ("h", "alpha", "lift", "moment", "p", "drag")
+
+
+def displacement_channels(n_dof: int) -> slice | list[int]:
+    """Return the columns of the displacements ``h, alpha(, p)`` among :data:`CHANNELS`."""
+    return slice(0, 2) if n_dof == 2 else [0, 1, 4]
+
+
+def force_channels(n_dof: int) -> slice | list[int]:
+    """Return the columns of the forces ``lift, moment(, drag)`` among :data:`CHANNELS`.
+
+    Two degrees of freedom: a slice, so that a record's forces are a view whose statistics sum
+    in the same order as its other columns' (an index list copies them, which moves a
+    closed-loop fit's start in the last bit).
+    """
+    return slice(2, 4) if n_dof == 2 else [2, 3, 5]
+
+
+def coordinate_scales(n_dof: int, B: float) -> FloatArray:
+    """Return each generalised coordinate's channel per unit: ``[B, 1(, B)]``.
+
+    ``h = B q_h``, ``alpha = q_alpha``, ``p = B q_p`` (m, rad, m); a force channel is its
+    generalised force over the same (``lift = (L B) / B``, N/m; ``moment``, N m/m).
+    """
+    return np.array([B, 1.0, B][:n_dof])
 
 
 @dataclass(frozen=True, eq=False)
@@ -269,7 +298,7 @@ class ReleaseModel:
         A_b, B_b, C_b = self.shaping.matrices()
         A = system.matrix()
         F = system.force_matrix(A)
-        nz, nb, k, B = system.n_states, A_b.shape[0], system.n_dof, self.section.B
+        nz, nb, k = system.n_states, A_b.shape[0], system.n_dof
         Meff_inv = np.linalg.inv(system.effective_mass())
         Ac = np.zeros((nz + nb, nz + nb))
         Ac[:nz, :nz] = A
@@ -279,11 +308,10 @@ class ReleaseModel:
         G[nz:] = B_b
         # Recorded force = self-excited (its added mass sees the buffeting-driven q'') + buffeting.
         force = np.hstack([F, self.section.mass_matrix() @ Meff_inv @ C_b])
+        scale = coordinate_scales(k, self.section.B)
         C = np.zeros((2 * k, nz + nb))
-        C[0, 0], C[1, 1] = B, 1.0
-        C[2], C[3] = force[0] / B, force[1]
-        if k == 3:  # sway p = B q_p and drag = (D B) / B
-            C[4, 2], C[5] = B, force[2] / B
+        C[displacement_channels(k), :k] = np.diag(scale)
+        C[force_channels(k)] = force / scale[:, None]
         return Ac, G, C
 
     @property

@@ -7,6 +7,7 @@ is a specific exception (a ``ValueError`` subclass) whose message names the prob
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -124,7 +125,7 @@ class ReleaseHold(_Record):
         """Length of the hold, s: its samples times the sampling interval."""
         return float(self.t.size * self.dt)
 
-    @property
+    @functools.cached_property
     def random_load(self) -> float:
         """The force channels' fluctuation over their white noise, largest channel.
 
@@ -134,7 +135,7 @@ class ReleaseHold(_Record):
         loads the held model at random (buffeting) or periodically (vortex shedding).
         Measured with 2 % noise: 1.00-1.02 in smooth flow, with or without friction, a base
         vibration or a channel delay; 1.7-1.9 at 0.3 % turbulence and 4-5 at 1 % on the 3-DOF
-        bluff deck; 24 with vortex shedding.
+        bluff deck; 24 with vortex shedding. Computed once (the channels are read-only).
         """
         forces = [self.lift, self.moment] + ([self.drag] if self.drag is not None else [])
         ratios = []
