@@ -4,7 +4,7 @@ What can the data tell at best? For releases simulated as ``ident_accuracy.py``'
 (a section model, a rational aerodynamic model, 2 % white noise on every channel, buffeting by
 quasi-steady vertical gusts), the Fisher information of the model's coefficients is computed in
 the frequency domain (Whittle), per release, from the recorded channels ``[h, alpha, lift,
-moment]``:
+moment]`` (with sway ``p`` and ``drag`` too, the section's third degree of freedom):
 
 - the deterministic decay ``mu(t)`` (its DFT, in the noise of the random response), from the
   held displacement to the static deflection of the wind's mean load;
@@ -16,9 +16,9 @@ moment]``:
 
     F_ij = sum_k [2 Re(dM_k^H S_k^-1 dM_k) + tr(S_k^-1 dS_i S_k^-1 dS_j)]
 
-with derivatives by central differences. The buffeting spectrum's level (a 2 x 2 matrix) and
-shape (a polynomial in log frequency, ``--shape`` terms) and the displacement the model was
-held at are nuisance parameters per release: an estimator does not know them (the lasers
+with derivatives by central differences. The buffeting spectrum's level (a 2 x 2 matrix, 3 x 3
+with sway) and shape (a polynomial in log frequency, ``--shape`` terms) and the displacement the
+model was held at are nuisance parameters per release: an estimator does not know them (the lasers
 read the displacement during a hold; without one only the record itself tells it). The
 release from rest (zero velocity, the aerodynamic lag states at zero) is known physics. The
 bound on the flutter speed's standard deviation is ``g^T F^-1 g`` with ``g`` its gradient
@@ -71,6 +71,12 @@ from pathlib import Path
 import numpy as np
 
 from ident import SectionModel
+from ident.identification.innovations import (
+    CHANNELS,
+    coordinate_scales,
+    displacement_channels,
+    force_channels,
+)
 from ident.model import flat_plate
 from ident.model import flutter as fl
 from ident.model.quasi_steady import StaticCoefficients
@@ -102,10 +108,10 @@ FAR_SHARE = 0.1
 SAMPLE_GRID = 150
 #: Draws with ``--quick`` (CI): enough to exercise the path.
 QUICK_SAMPLES = 40
-#: The release's held displacement ``(h0, alpha0)``: a nuisance per release. Without a hold an
-#: estimator knows it only from the record itself; a hold measures it. (The release from
-#: rest, zero velocity and aerodynamic lag states, is physics the bound knows.)
-N_HELD = 2
+#: The release's held displacement ``(h0, alpha0)`` (with sway ``p0`` too): a nuisance per
+#: release, one per degree of freedom. Without a hold an estimator knows it only from the
+#: record itself; a hold measures it. (The release from rest, zero velocity and aerodynamic
+#: lag states, is physics the bound knows.)
 #: Rows of the deck's flutter-derivative table its two-lag approximant is fitted to.
 APPROXIMANT_ROWS = 30
 #: Gust draws whose clean records set each channel's noise level (:func:`_recorded_rms`): one
@@ -114,18 +120,20 @@ APPROXIMANT_ROWS = 30
 RMS_DRAWS = 4
 
 
-def two_lag_approximant() -> RationalFunctionModel:
-    """Return the bluff deck's model in the closed-loop fit's own class: two lags and A3.
+def two_lag_approximant(truth: RationalFunctionModel | None = None,
+                        K_range: tuple[float, float] = (0.25, 2.24)) -> RationalFunctionModel:
+    """Return a deck's model in the closed-loop fit's own class: two lags and A3.
 
-    Roger's form fitted by least squares to the deck's flutter derivatives over the reduced
-    frequencies of the benchmark's releases (``0.25 <= K <= 2.24``,
-    :func:`ident.tables.roger_table.fit_table`); its flutter speed is 0.2 % above the deck's.
-    With every coefficient unknown, its bound is that of an efficient estimator of the very
-    parameters the closed-loop fit estimates, where the deck's own (ten lags, its zeros known)
-    is that of one that knows the deck's structure.
+    Roger's form fitted by least squares to ``truth``'s flutter derivatives (default: the
+    bluff deck's, :func:`simulators.decks.bluff_deck_model`) over ``K_range``, the reduced
+    frequencies of the benchmark's releases (still air at the top and bottom speed, widened by
+    a fifth; :func:`ident.tables.roger_table.fit_table`); the bluff deck's approximant
+    flutters 0.2 % above the deck. With every coefficient unknown, its bound is that of an
+    efficient estimator of the very parameters the closed-loop fit estimates, where the
+    deck's own (ten lags, its zeros known) is that of one that knows the deck's structure.
     """
-    truth = bluff_deck_model()
-    table = FlutterDerivativeTable.from_model(truth, np.linspace(0.25, 2.24, APPROXIMANT_ROWS))
+    truth = bluff_deck_model() if truth is None else truth
+    table = FlutterDerivativeTable.from_model(truth, np.linspace(*K_range, APPROXIMANT_ROWS))
     return roger_table.fit_table(table, n_lags=2, with_A3=True).model
 
 
@@ -136,8 +144,12 @@ def vertical_gusts(Iw: float) -> TurbulenceSpec:
 
 def _transfer(section: SectionModel, model: RationalFunctionModel, U: float, f: np.ndarray
               ) -> np.ndarray:
-    """``T(f)``, shape (K, 4, 2): generalised buffeting force -> ``[h, alpha, lift, moment]``."""
-    B = section.B
+    """``T(f)``, shape (K, 2 n_dof, n_dof): generalised buffeting force -> the channels.
+
+    The channels in :data:`~ident.identification.innovations.CHANNELS`' order: ``[h, alpha,
+    lift, moment]``, with sway ``p`` and ``drag`` after them.
+    """
+    B, n_dof = section.B, section.n_dof
     w = 2 * np.pi * f
     qd = 0.5 * section.rho * U**2
     Q = model.Q(1j * B * w / U)
@@ -145,11 +157,27 @@ def _transfer(section: SectionModel, model: RationalFunctionModel, U: float, f: 
          + 1j * w[:, None, None] * section.damping_matrix() + section.stiffness_matrix()
          - qd * B**2 * Q)
     H = np.linalg.inv(D)
-    forces = qd * B**2 * Q @ H + np.eye(2)
-    return np.stack([B * H[:, 0], H[:, 1], forces[:, 0] / B, forces[:, 1]], axis=1)
+    forces = qd * B**2 * Q @ H + np.eye(n_dof)
+    scale = coordinate_scales(n_dof, B)[:, None]
+    T = np.zeros((f.size, 2 * n_dof, n_dof), dtype=complex)
+    T[:, displacement_channels(n_dof)] = scale * H
+    T[:, force_channels(n_dof)] = forces / scale
+    return T
 
 
-def _decay(section: SectionModel, model: RationalFunctionModel, U: float, hold: tuple[float, float],
+def _channels(r, n_dof: int) -> np.ndarray:
+    """Return a simulated release's channels as columns, in ``CHANNELS``' order."""
+    return np.column_stack([getattr(r, name) for name in CHANNELS[:2 * n_dof]])
+
+
+def _released(section: SectionModel, model: RationalFunctionModel, U: float,
+              hold: tuple[float, ...], **kwargs):
+    """``simulate_release`` from the held displacement ``(h0, alpha0)`` or ``(h0, alpha0, p0)``."""
+    sway = {"p0": hold[2]} if len(hold) == 3 else {}
+    return simulate_release(section, model, U, hold[0], hold[1], **sway, **kwargs)
+
+
+def _decay(section: SectionModel, model: RationalFunctionModel, U: float, hold: tuple[float, ...],
            n: int, fs: float, static: StaticCoefficients) -> np.ndarray:
     """DFT of the noise-free decay in smooth flow (bins 1..n/2-1).
 
@@ -157,12 +185,12 @@ def _decay(section: SectionModel, model: RationalFunctionModel, U: float, hold: 
     deflection the load causes, not to zero, so the decay's amplitude is the hold's distance
     from it (on the bluff deck at 0.8 U_F the pitch decays from 0.012 rad by 0.0076 rad).
     """
-    r = simulate_release(section, model, U, *hold, duration=n / fs, fs=fs, static=static)
-    return np.fft.rfft(np.column_stack([r.h, r.alpha, r.lift, r.moment]), axis=0)[1:-1]
+    r = _released(section, model, U, hold, duration=n / fs, fs=fs, static=static)
+    return np.fft.rfft(_channels(r, section.n_dof), axis=0)[1:-1]
 
 
 def _recorded_rms(section: SectionModel, model: RationalFunctionModel, U: float,
-                  hold: tuple[float, float], n: int, fs: float, spec: TurbulenceSpec,
+                  hold: tuple[float, ...], n: int, fs: float, spec: TurbulenceSpec,
                   static: StaticCoefficients, span: float, n_hold: int) -> np.ndarray:
     """RMS of each clean channel of the release as simulated, the scale of its noise.
 
@@ -174,13 +202,12 @@ def _recorded_rms(section: SectionModel, model: RationalFunctionModel, U: float,
     benchmark's rows from a half to a thirtieth, channel by channel). Averaged over
     :data:`RMS_DRAWS` gust draws.
     """
-    mean_square = np.zeros(4)
+    names = CHANNELS[:2 * section.n_dof]
+    mean_square = np.zeros(len(names))
     for draw in range(RMS_DRAWS):
-        r = simulate_release(section, model, U, *hold, duration=n / fs, fs=fs,
-                             rng=(draw, 7919), static=static, turbulence=spec, span=span,
-                             pre_s=n_hold / fs)
-        mean_square += np.array([noise_scale(r.clean[name])
-                                 for name in ("h", "alpha", "lift", "moment")])**2 / RMS_DRAWS
+        r = _released(section, model, U, hold, duration=n / fs, fs=fs, rng=(draw, 7919),
+                      static=static, turbulence=spec, span=span, pre_s=n_hold / fs)
+        mean_square += np.array([noise_scale(r.clean[name]) for name in names])**2 / RMS_DRAWS
     return np.sqrt(mean_square)
 
 
@@ -214,10 +241,10 @@ class FlutterBound:
 
 
 def _hold_transfer(section: SectionModel, n_freq: int) -> np.ndarray:
-    """``T``, shape (K, 4, 2), of a held model: the taps read the buffeting force itself."""
-    T = np.zeros((n_freq, 4, 2))
-    T[:, 2, 0] = 1.0 / section.B
-    T[:, 3, 1] = 1.0
+    """``T``, shape (K, 2 n_dof, n_dof), of a held model: the taps read the buffeting force."""
+    n_dof = section.n_dof
+    T = np.zeros((n_freq, 2 * n_dof, n_dof))
+    T[:, force_channels(n_dof)] = np.diag(1.0 / coordinate_scales(n_dof, section.B))
     return T
 
 
@@ -242,8 +269,9 @@ def coefficients(section: SectionModel, model: RationalFunctionModel, known_zero
     own: each lag acts on its entry alone). The lag roots enter as their logarithms. ``g`` is
     ``dU_F/dtheta`` at the flutter point ``(U_F m/s, frequency Hz)``.
     """
-    index = [(k, i, j) for k in range(model.A.shape[0]) for i in range(2) for j in range(2)
-             if not known_zeros or model.A[k, i, j] != 0.0]
+    n_dof = model.A.shape[1]
+    index = [(k, i, j) for k in range(model.A.shape[0]) for i in range(n_dof)
+             for j in range(n_dof) if not known_zeros or model.A[k, i, j] != 0.0]
     theta0 = np.concatenate([[model.A[a] for a in index], np.log(model.d)])
 
     def with_theta(theta: np.ndarray) -> RationalFunctionModel:
@@ -275,9 +303,10 @@ def flutter_speed_bound(section: SectionModel, model: RationalFunctionModel, Iw:
         Static coefficients of the quasi-steady buffeting.
     fractions : sequence of float
         Wind speeds as fractions of the flutter speed.
-    holds : sequence of (float, float)
-        Each release's initial ``(h0 m, alpha0 rad)`` at every speed: a hold listed twice is two
-        releases (their Fisher information is computed once).
+    holds : sequence of tuple of float
+        Each release's initial ``(h0 m, alpha0 rad)`` at every speed, ``(h0, alpha0, p0 m)``
+        with sway: a hold listed twice is two releases (their Fisher information is computed
+        once).
     duration, fs, noise, span : float
         Release length (s), sample rate (Hz), white noise as a share of each channel's RMS, span
         of the section model (m).
@@ -318,7 +347,9 @@ def flutter_speed_bound(section: SectionModel, model: RationalFunctionModel, Iw:
         return (np.log(freq / f.mean()) - log_mean) / log_std
 
     spec = gusts if gusts is not None else vertical_gusts(Iw)
-    n_nuisance = 3 + n_shape + N_HELD
+    n_dof = section.n_dof
+    # The level's symmetric n_dof x n_dof entries, the shape's terms, the held displacement.
+    n_nuisance = n_dof * (n_dof + 1) // 2 + n_shape + n_dof
     n_releases = len(fractions) * len(holds)
     size = n_theta + n_nuisance * n_releases
     F_full = np.zeros((size, size))
@@ -328,7 +359,7 @@ def flutter_speed_bound(section: SectionModel, model: RationalFunctionModel, Iw:
     r = 0
     for fraction in fractions:
         U = fraction * U_F
-        cached: dict[tuple[float, float], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        cached: dict[tuple[float, ...], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         for hold in holds:
             if hold not in cached:
                 cached[hold] = _release_information(
@@ -408,19 +439,24 @@ def sampled_median(section: SectionModel, with_theta, theta0: np.ndarray, cov: n
 def _release_information(section, model, with_theta, theta0, spec, static, U, hold, f, shape_x,
                          *, n, fs, noise, span, n_shape, n_hold):
     """Fisher information of one release: full, the decay's alone, and its hold's (nuisance)."""
-    n_theta = theta0.size
+    n_theta, n_dof = theta0.size, section.n_dof
+    # The level's symmetric entries, (0, 0), (0, 1), (1, 1) planar, row by row.
+    levels = []
+    for i in range(n_dof):
+        for j in range(i, n_dof):
+            E = np.zeros((n_dof, n_dof))
+            E[i, j] = E[j, i] = 1.0
+            levels.append(E)
 
     def spectrum(freq: np.ndarray, length: int) -> np.ndarray:
         Sb = buffeting_force_spectrum(spec, static, freq, U=U, B=section.B, span=span,
-                                      rho=section.rho)[:, :2, :2] * length * fs / 2
-        return Sb + 1e-6 * np.trace(Sb, axis1=1, axis2=2)[:, None, None] * np.eye(2)
+                                      rho=section.rho)[:, :n_dof, :n_dof] * length * fs / 2
+        return Sb + 1e-6 * np.trace(Sb, axis1=1, axis2=2)[:, None, None] * np.eye(n_dof)
 
     def nuisance_dS(T: np.ndarray, Sb: np.ndarray, x: np.ndarray) -> list[np.ndarray]:
-        """Spectral derivatives in the level (symmetric 2 x 2) and shape exp(sum c_j x^j)."""
+        """Spectral derivatives in the level (symmetric) and the shape ``exp(sum c_j x^j)``."""
         TH = np.conj(np.swapaxes(T, 1, 2))
-        dS = [T @ (0.5 * (E @ Sb + Sb @ E)) @ TH
-              for E in (np.array([[1, 0], [0, 0]]), np.array([[0, 1], [1, 0]]),
-                        np.array([[0, 0], [0, 1]]))]
+        dS = [T @ (0.5 * (E @ Sb + Sb @ E)) @ TH for E in levels]
         return dS + [T @ (Sb * (x**j)[:, None, None]) @ TH for j in range(1, n_shape + 1)]
 
     Sb = spectrum(f, n)
@@ -443,17 +479,17 @@ def _release_information(section, model, with_theta, theta0, spec, static, U, ho
     # The displacement the model was held at: the decay is affine in it, so a finite difference
     # of any step is exact. The spectrum does not depend on it.
     at_hold = _decay(section, model, U, hold, n, fs, static)[:f.size]
-    d_held = [(_decay(section, model, U, (hold[0] + 1e-3 * (a == 0), hold[1] + 1e-3 * (a == 1)),
-                      n, fs, static)[:f.size] - at_hold) / 1e-3 for a in range(N_HELD)]
+    d_held = [(_decay(section, model, U, tuple(x + 1e-3 * (a == b) for b, x in enumerate(hold)),
+                      n, fs, static)[:f.size] - at_hold) / 1e-3 for a in range(n_dof)]
     zero_M, zero_S = np.zeros_like(at_hold), np.zeros_like(S)
     S_inv = np.linalg.inv(S)
-    F = _spectral_information(np.array(dS + nuisance + [zero_S] * N_HELD), S_inv)
+    F = _spectral_information(np.array(dS + nuisance + [zero_S] * n_dof), S_inv)
     F += _mean_information(np.array(dM + [zero_M] * len(nuisance) + d_held), S_inv)
     # The decay's alone, the displacement unknown: its Schur complement on the coefficients.
     F_decay = _mean_information(np.array(dM + d_held), S_inv)
     F_m = F_decay[:n_theta, :n_theta] - F_decay[:n_theta, n_theta:] @ np.linalg.solve(
         F_decay[n_theta:, n_theta:], F_decay[n_theta:, :n_theta])
-    F_hold = np.zeros((len(nuisance) + N_HELD, len(nuisance) + N_HELD))
+    F_hold = np.zeros((len(nuisance) + n_dof, len(nuisance) + n_dof))
     if n_hold > 2:
         f_hold = np.fft.rfftfreq(n_hold, 1 / fs)[1:-1]
         f_hold = f_hold[f_hold <= f[-1]]
@@ -465,7 +501,8 @@ def _release_information(section, model, with_theta, theta0, spec, static, U, ho
         F_hold[:len(nuisance), :len(nuisance)] = _spectral_information(dS_hold,
                                                                       np.linalg.inv(S_hold))
         # The lasers read the held displacement in every sample of the hold.
-        F_hold[len(nuisance):, len(nuisance):] = np.diag(n_hold / (noise * rms[:N_HELD]) ** 2)
+        lasers = rms[displacement_channels(n_dof)]
+        F_hold[len(nuisance):, len(nuisance):] = np.diag(n_hold / (noise * lasers) ** 2)
     return F, F_m, F_hold
 
 
