@@ -98,12 +98,15 @@ class Layout:
 
     def __init__(self, n_dof: int, n_lags: int, with_A3: bool, n_groups: int,
                  n_releases: int, sections: int = 1,
-                 scaled: FloatArray | None = None) -> None:
+                 scaled: FloatArray | None = None, mixed_after: bool = False) -> None:
         terms = ([0, 1, 2] if with_A3 else [0, 1]) + [3 + m for m in range(n_lags)]
         self.index = tuple((k, i, j) for i in range(n_dof) for k in terms for j in range(n_dof))
         self.n_A, self.n_lags, self.n_dof = len(self.index), n_lags, n_dof
         self.n_aero = self.n_A + n_lags
         self.sections = sections
+        #: The shaping filters' sources mixed into the forces after their sections
+        #: (:class:`ShapingFilter`'s ``mixed_after``).
+        self.mixed_after = mixed_after
         #: Channels of a record (``[h, alpha, lift, moment]``, with sway ``[.., p, drag]``).
         self.n_y = 2 * n_dof
         #: Entries of the shaping filter's Cholesky factor, in :meth:`shaping`'s order.
@@ -166,7 +169,8 @@ class Layout:
         L[0, 0] = L00
         zeros = (p[2 * k + n_L:3 * k + n_L].reshape(n, self.sections) / (2.0 * math.pi * f)
                  if self.sections > 1 else None)
-        return ShapingFilter(f, np.exp(p[k:2 * k]).reshape(n, self.sections), L, zeros)
+        return ShapingFilter(f, np.exp(p[k:2 * k]).reshape(n, self.sections), L, zeros,
+                             self.mixed_after)
 
     def _block(self, theta: FloatArray, group: int) -> FloatArray:
         """Return wind speed ``group``'s shaping parameters (:meth:`shaping`'s layout)."""
@@ -400,8 +404,12 @@ def initial(records: list[Record], layout: Layout, start: RationalFunctionModel,
         P = base.stationary_covariance()
         _, _, C_b = base.matrices()
         unit = np.sqrt(np.diag(C_b @ P @ C_b.T))
-        cov = np.cov(force.T) / np.outer(unit, unit)
-        L = np.linalg.cholesky(cov + 1e-9 * np.trace(cov) * np.eye(n))
+        if layout.mixed_after:  # forces L s, independent sources of variance unit^2
+            cov = np.cov(force.T)
+            L = np.linalg.cholesky(cov + 1e-9 * np.trace(cov) * np.eye(n)) / unit[None, :]
+        else:
+            cov = np.cov(force.T) / np.outer(unit, unit)
+            L = np.linalg.cholesky(cov + 1e-9 * np.trace(cov) * np.eye(n))
         k, n_L = n * S, len(layout.L_entries)
         blocks[g, :k] = np.log(f).ravel()
         blocks[g, k:2 * k] = math.log(0.7)

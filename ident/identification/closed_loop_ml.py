@@ -257,6 +257,7 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
                     n_lags: int | None = None, use_holds: bool = True,
                     window: tuple[float, float] | None = None, shaping_sections: int = 1,
                     exact_block_means: bool = False, shared_buffeting: bool = False,
+                    mixed_buffeting: bool = False,
                     nuisance_from: tuple[ClosedLoopFit, Sequence[int]] | None = None
                     ) -> ClosedLoopFit:
     """Maximise the likelihood of every release (and hold) together, from ``start``.
@@ -300,6 +301,11 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
         white-noise level as ``rho U^b``, both exponents fitted (quasi-steady: 1 and 1.5).
         A filter per speed (default False) has three times the buffeting parameters with
         three speeds, each told by that speed's releases alone.
+    mixed_buffeting : bool, optional
+        Independent sources, each through its own sections, mixed into the forces
+        (:class:`ShapingFilter`'s ``mixed_after``): gusts with spectra of their own, as
+        along-wind and vertical ones are. Default False: each force filtered of mixed white
+        noise.
     nuisance_from : (ClosedLoopFit, sequence of int), optional
         A fit of a superset of ``releases`` with the same buffeting model, and the index there
         of each release here: its shaping filters (by wind speed) and noise stds (by release)
@@ -339,7 +345,7 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
         scaled = np.column_stack([np.log(np.asarray(speeds) / U_ref),
                                   np.log(np.asarray(rho) / section.rho)])
     layout = Layout(section.n_dof, start.n_lags, with_A3, len(speeds), len(releases),
-                    shaping_sections, scaled)
+                    shaping_sections, scaled, mixed_buffeting)
     layout.noise_floor = setup.noise_floor(records, len(releases))
     layout.log_lag_range = setup.log_lag_range(section, speeds)
     objective = _Objective(records, section, layout, exact_block_means)
@@ -375,7 +381,8 @@ def fit_closed_loop(releases: Sequence[Release], section: SectionModel,
             f"the innovations of {int(np.sum(np.any(whiteness > bound, axis=1)))} of "
             f"{len(records)} records are not white (largest autocorrelation at lags 1-20 "
             f"{float(whiteness.max()):.2f}, chance stays below {bound:.2f}): the buffeting "
-            f"model ({shaping_sections} second-order section(s) per force) or the aerodynamic "
+            f"model ({shaping_sections} second-order section(s) per "
+            f"{'source' if mixed_buffeting else 'force'}) or the aerodynamic "
             "one misses part of the data; the Fisher covariance may understate the error")
     portmanteau = pooled_portmanteau(current.e, current.S)
     warnings.extend(portmanteau_warning(portmanteau, len(records), shaping_sections,

@@ -114,6 +114,14 @@ class ShapingFilter:
     With sway (three degrees of freedom) the drag ``D B`` is a third force with its own
     sections, after the moment; the forces' correlations are all in ``L``.
 
+    Mixed after the sections (``mixed_after``), row ``i`` is instead the filter of an
+    independent source ``s_i`` (unit white noise through its sections) and the forces are
+    ``L s``: source 0 drives every force, source 1 the moment (and drag), source 2 the drag
+    alone. This is quasi-steady buffeting's own form, each force a fixed mix of gusts that
+    have spectra of their own: the forces' coherence then changes with frequency (a drag
+    driven mostly by along-wind gusts, the lift by vertical ones), where filtering each
+    force after the mix holds it constant.
+
     Parameters
     ----------
     frequencies : array_like, shape (n_f,) or (n_f, S)
@@ -126,6 +134,9 @@ class ShapingFilter:
         off-diagonal entries set the forces' correlations; zero is allowed (no buffeting).
     zeros : array_like, same shape as ``frequencies``, optional
         Time constants ``tau`` of the sections' zeros, s, finite. Default: none (all 0).
+    mixed_after : bool, optional
+        Mix independent sources' filters into the forces by ``L`` (above) rather than filter
+        each force of the mixed white noise. Default False.
 
     Raises
     ------
@@ -138,8 +149,11 @@ class ShapingFilter:
     damping: Any
     L: Any
     zeros: Any = None
+    mixed_after: bool = False
 
     def __post_init__(self) -> None:
+        if not isinstance(self.mixed_after, bool):
+            raise ValueError(f"mixed_after must be True or False, got {self.mixed_after!r}")
         f = v.positive_array("frequencies", self.frequencies)
         z = v.positive_array("damping", self.damping)
         tau = np.zeros_like(f) if self.zeros is None else v.finite_array("zeros", self.zeros)
@@ -174,7 +188,9 @@ class ShapingFilter:
         The state is, per force, each section's output and its rate (N m/m and N m/(m s)),
         lift's sections first; shapes (n, n), (n, n_f), (n_f, n) with ``n`` :attr:`n_states`
         and ``n_f`` :attr:`n_forces` (with drag, ``[L B, M, D B] = C_b x_b``); ``A_b`` in
-        1/s, ``B_b`` in N m/m s^-1.5.
+        1/s, ``B_b`` in N m/m s^-1.5. Mixed after the sections (:attr:`mixed_after`) the
+        state is per source (s^-0.5 and s^-1.5, source 0's first), ``B_b`` in s^-2, and
+        ``C_b`` carries ``L``.
         """
         n_sections, n_f = self.frequencies.shape[1], self.n_forces
         n = self.n_states
@@ -193,6 +209,8 @@ class ShapingFilter:
                     A_b[a + 1, a - 1] = w[i, j] ** 2 * self.zeros[i, j - 1]
             last = 2 * (i * n_sections + n_sections - 1)
             C_b[i, last], C_b[i, last + 1] = 1.0, self.zeros[i, -1]
+        if self.mixed_after:
+            return A_b, B0, np.asarray(self.L) @ C_b
         return A_b, B0 @ np.asarray(self.L), C_b
 
     def stationary_covariance(self) -> FloatArray:

@@ -289,6 +289,46 @@ def test_two_sections_give_the_product_of_their_transfers():
     assert var == pytest.approx((C_b @ P @ C_b.T)[1, 1], rel=1e-8)
 
 
+def test_sources_mixed_after_their_sections_give_a_coherence_that_changes_with_frequency():
+    """Mixed after the sections, the forces are ``L`` times independent filtered sources.
+
+    The closed form ``S(f) = L diag(|H_i|^2) L^T`` with each source's cascade ``H_i`` (the
+    same sections as above, zeros included) against the matrices' evaluation: round-off
+    only. Quasi-steady buffeting's drag, mostly the along-wind gust's (source 2) and partly
+    the vertical one's (source 0), is coherent with the lift in a measure that changes with
+    frequency, which the forces filtered after the mix cannot give: there the coherence is
+    ``(L L^T)_ij^2 / ((L L^T)_ii (L L^T)_jj)`` at every frequency (to round-off).
+    """
+    L = np.array([[0.02, 0.0, 0.0], [0.004, 0.006, 0.0], [0.003, 0.0, 0.01]])
+    freq = np.array([[3.0, 9.0], [4.0, 12.0], [1.0, 3.0]])
+    zeta = np.array([[0.7, 0.5], [1.5, 0.8], [0.9, 1.2]])
+    tau = np.array([[0.02, 0.01], [0.05, -0.004], [0.03, 0.02]])
+    mixed = ShapingFilter(freq, zeta, L, tau, mixed_after=True)
+    f = np.linspace(-40.0, 40.0, 401)
+    s = 2j * np.pi * f[:, None, None]
+    w = 2 * np.pi * freq
+    H = (w**2 * (1 + tau * s) / (s**2 + 2 * zeta * w * s + w**2)).prod(axis=2)
+    closed = np.einsum("ik,fk,jk->fij", L, np.abs(H) ** 2, L)
+    np.testing.assert_allclose(mixed.spectrum(f), closed, rtol=1e-11, atol=1e-18)
+    P = mixed.stationary_covariance()
+    _, _, C_b = mixed.matrices()
+    var, _ = scipy.integrate.quad(lambda x: mixed.spectrum([x])[0, 2, 2].real,
+                                  -np.inf, np.inf, epsabs=0.0, epsrel=1e-10, limit=400)
+    assert var == pytest.approx((C_b @ P @ C_b.T)[2, 2], rel=1e-8)
+
+    def coherence(shaping: ShapingFilter) -> np.ndarray:
+        S = shaping.spectrum([0.5, 3.0, 20.0])
+        return np.abs(S[:, 0, 2]) ** 2 / (S[:, 0, 0].real * S[:, 2, 2].real)
+
+    # Lift and drag share source 0 alone: their coherence is its share of the drag, 0.12 at
+    # 0.5 Hz (the drag's own source, cornering at 1 Hz, dominates there) and 0.99 at 20 Hz.
+    assert np.ptp(coherence(mixed)) > 0.5
+    per_force = ShapingFilter(freq, zeta, L, tau)
+    Q = L @ L.T
+    np.testing.assert_allclose(coherence(per_force), Q[0, 2] ** 2 / (Q[0, 0] * Q[2, 2]),
+                               rtol=1e-10)
+
+
 def test_block_means_model_has_the_block_means_exact_covariances():
     """Against the stationary covariances of the fine-grid model, summed term by term."""
     model = release_model()
@@ -387,6 +427,8 @@ def test_likelihood_peaks_at_the_true_buffeting_level_and_wind_speed():
          "one row per force"),
         (lambda m, x0: ShapingFilter([3.0, 3.0], [0.7, 0.7], L_TRUE, [0.01, np.nan]),
          "zeros contains"),
+        (lambda m, x0: ShapingFilter([3.0, 3.0], [0.7, 0.7], L_TRUE, mixed_after=1),
+         "mixed_after must be True or False"),
         (lambda m, x0: kalman_filter(release_model(noise=np.zeros(4), L=np.zeros((2, 2))),
                                      np.zeros((3, 4)), x0), "not positive definite"),
     ],
