@@ -71,7 +71,7 @@ from pathlib import Path
 import numpy as np
 
 from ident import SectionModel
-from ident.identification.innovations import (
+from ident.identification.channels import (
     CHANNELS,
     coordinate_scales,
     displacement_channels,
@@ -146,7 +146,7 @@ def _transfer(section: SectionModel, model: RationalFunctionModel, U: float, f: 
               ) -> np.ndarray:
     """``T(f)``, shape (K, 2 n_dof, n_dof): generalised buffeting force -> the channels.
 
-    The channels in :data:`~ident.identification.innovations.CHANNELS`' order: ``[h, alpha,
+    The channels in :data:`~ident.identification.channels.CHANNELS`' order: ``[h, alpha,
     lift, moment]``, with sway ``p`` and ``drag`` after them.
     """
     B, n_dof = section.B, section.n_dof

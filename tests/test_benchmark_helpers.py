@@ -139,7 +139,7 @@ def test_bounds_transfer_is_the_state_space_models(three_dof):
     Meff^-1 f_b``. Both are exact: 1e-9 of each entry's scale is rounding, a channel out of
     place or a missing scale misses by order one.
     """
-    from ident.identification.innovations import (
+    from ident.identification.channels import (
         coordinate_scales,
         displacement_channels,
         force_channels,

@@ -10,6 +10,8 @@
 - :mod:`~ident.identification.innovations`: a release in turbulence as a discrete state-space
   model (buffeting through a shaping filter, sensor noise) and its exact likelihood from a
   Kalman filter's innovations;
+- :mod:`~ident.identification.channels`: a release's channels in the order the closed-loop
+  model reads them, and their scales to the generalised coordinates and forces;
 - :mod:`~ident.identification.steady_predictor`: the steady-state Kalman predictor, its
   likelihood and its first-order changes;
 - :mod:`~ident.identification.closed_loop_ml`: closed-loop maximum likelihood of releases in

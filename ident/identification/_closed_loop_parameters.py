@@ -20,12 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from ident.identification.innovations import (
-    CHANNELS,
-    ShapingFilter,
-    coordinate_scales,
-    force_channels,
-)
+from ident.identification.channels import CHANNELS, coordinate_scales, force_channels
+from ident.identification.innovations import ShapingFilter
 from ident.identification.uncertainty import DISTINCT_U_RTOL, nearest_wind_speed
 from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel

@@ -74,15 +74,9 @@ import numpy.typing as npt
 
 from ident.identification import _closed_loop_parameters as setup
 from ident.identification._closed_loop_parameters import Layout, Record
+from ident.identification.channels import coordinate_scales, force_channels
 from ident.identification.innovation_checks import pooled_portmanteau, portmanteau_warning
-from ident.identification.innovations import (
-    ReleaseModel,
-    ShapingFilter,
-    block_means,
-    coordinate_scales,
-    discretise,
-    force_channels,
-)
+from ident.identification.innovations import ReleaseModel, ShapingFilter, block_means, discretise
 from ident.identification.results import distinct_wind_speeds
 from ident.identification.steady_predictor import (
     SteadyPredictor,

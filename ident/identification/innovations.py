@@ -56,47 +56,22 @@ import numpy as np
 import numpy.typing as npt
 import scipy.linalg
 
+from ident.identification.channels import (
+    coordinate_scales,
+    displacement_channels,
+    force_channels,
+)
 from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel
 from ident.model.statespace import AeroelasticSystem
 from ident.numerics import validate as v
 
-__all__ = ["CHANNELS", "InnovationsResult", "ReleaseModel", "ShapingFilter", "block_means",
-           "coordinate_scales", "discretise", "displacement_channels", "force_channels",
+__all__ = ["InnovationsResult", "ReleaseModel", "ShapingFilter", "block_means", "discretise",
            "kalman_filter", "log_likelihood"]
 
 FloatArray = npt.NDArray[np.float64]
 
 LOG_2PI = math.log(2.0 * math.pi)
-
-#: The model's outputs in order, as :class:`~ident.records.release.Release` names them: the
-#: planar four, then sway and drag with three degrees of freedom.
-CHANNELS = ("h", "alpha", "lift", "moment", "p", "drag")
-
-
-def displacement_channels(n_dof: int) -> slice | list[int]:
-    """Return the columns of the displacements ``h, alpha(, p)`` among :data:`CHANNELS`."""
-    return slice(0, 2) if n_dof == 2 else [0, 1, 4]
-
-
-def force_channels(n_dof: int) -> slice | list[int]:
-    """Return the columns of the forces ``lift, moment(, drag)`` among :data:`CHANNELS`.
-
-    Two degrees of freedom: a slice, so that a record's forces are a view whose statistics sum
-    in the same order as its other columns' (an index list copies them, which moves a
-    closed-loop fit's start in the last bit).
-    """
-    return slice(2, 4) if n_dof == 2 else [2, 3, 5]
-
-
-def coordinate_scales(n_dof: int, B: float) -> FloatArray:
-    """Return each generalised coordinate's channel per unit: ``[B, 1(, B)]``.
-
-    ``h = B q_h``, ``alpha = q_alpha``, ``p = B q_p`` (m, rad, m); a force channel is its
-    generalised force over the same (``lift = (L B) / B``, N/m; ``moment``, N m/m).
-    """
-    return np.array([B, 1.0, B][:n_dof])
-
 
 @dataclass(frozen=True, eq=False)
 class ShapingFilter:
