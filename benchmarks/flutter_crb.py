@@ -72,7 +72,7 @@ import numpy as np
 
 from ident import SectionModel
 from ident.identification.channels import (
-    CHANNELS,
+    columns,
     coordinate_scales,
     displacement_channels,
     force_channels,
@@ -82,6 +82,7 @@ from ident.model import flutter as fl
 from ident.model.quasi_steady import StaticCoefficients
 from ident.model.rfc import RationalFunctionModel
 from ident.physics.turbulence import TurbulenceSpec, buffeting_force_spectrum
+from ident.simulation.decay import channels as channel_names
 from ident.tables import roger_table
 from ident.tables.fd_table import FlutterDerivativeTable
 from simulators import simulate_release
@@ -146,7 +147,7 @@ def _transfer(section: SectionModel, model: RationalFunctionModel, U: float, f: 
               ) -> np.ndarray:
     """``T(f)``, shape (K, 2 n_dof, n_dof): generalised buffeting force -> the channels.
 
-    The channels in :data:`~ident.identification.channels.CHANNELS`' order: ``[h, alpha,
+    The channels in :func:`~ident.identification.channels.columns`' order: ``[h, alpha,
     lift, moment]``, with sway ``p`` and ``drag`` after them.
     """
     B, n_dof = section.B, section.n_dof
@@ -165,11 +166,6 @@ def _transfer(section: SectionModel, model: RationalFunctionModel, U: float, f: 
     return T
 
 
-def _channels(r, n_dof: int) -> np.ndarray:
-    """Return a simulated release's channels as columns, in ``CHANNELS``' order."""
-    return np.column_stack([getattr(r, name) for name in CHANNELS[:2 * n_dof]])
-
-
 def _released(section: SectionModel, model: RationalFunctionModel, U: float,
               hold: tuple[float, ...], **kwargs):
     """``simulate_release`` from the held displacement ``(h0, alpha0)`` or ``(h0, alpha0, p0)``."""
@@ -186,7 +182,7 @@ def _decay(section: SectionModel, model: RationalFunctionModel, U: float, hold: 
     from it (on the bluff deck at 0.8 U_F the pitch decays from 0.012 rad by 0.0076 rad).
     """
     r = _released(section, model, U, hold, duration=n / fs, fs=fs, static=static)
-    return np.fft.rfft(_channels(r, section.n_dof), axis=0)[1:-1]
+    return np.fft.rfft(columns(r), axis=0)[1:-1]
 
 
 def _recorded_rms(section: SectionModel, model: RationalFunctionModel, U: float,
@@ -202,7 +198,7 @@ def _recorded_rms(section: SectionModel, model: RationalFunctionModel, U: float,
     benchmark's rows from a half to a thirtieth, channel by channel). Averaged over
     :data:`RMS_DRAWS` gust draws.
     """
-    names = CHANNELS[:2 * section.n_dof]
+    names = channel_names(section.n_dof)
     mean_square = np.zeros(len(names))
     for draw in range(RMS_DRAWS):
         r = _released(section, model, U, hold, duration=n / fs, fs=fs, rng=(draw, 7919),

@@ -20,17 +20,17 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from ident.identification.channels import CHANNELS, coordinate_scales, force_channels
+from ident.identification.channels import columns, coordinate_scales, force_channels
 from ident.identification.innovations import ShapingFilter
 from ident.identification.uncertainty import DISTINCT_U_RTOL, nearest_wind_speed
 from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel
 from ident.numerics.sampling import RATE_RTOL, decimation_factor
 from ident.numerics.stats import white_noise_std
-from ident.records.release import Release, ReleaseHold
+from ident.records.release import Release
 
 __all__ = ["EXPONENT_TOLERANCE", "NOISE_FLOOR", "TARGET_FACTOR", "ZERO_START", "Layout",
-           "Record", "block_size", "channels", "decimate", "exponent_warning",
+           "Record", "block_size", "decimate", "exponent_warning",
            "initial", "log_lag_range", "noise_floor", "records", "with_lags"]
 
 FloatArray = npt.NDArray[np.float64]
@@ -303,7 +303,7 @@ def records(releases: Sequence[Release], section: SectionModel, speeds: list[flo
         fs = r.fs / factor
         fs = next((seen for seen in rates if abs(fs - seen) <= RATE_RTOL * seen), fs)
         rates.append(fs)
-        y = channels(r)
+        y = columns(r)
         t = r.t
         if window is not None:
             kept = (r.t >= window[0]) & (r.t < window[1])
@@ -320,19 +320,10 @@ def records(releases: Sequence[Release], section: SectionModel, speeds: list[flo
         records.append(Record(decimate(y, factor), fs, factor, r.U, rho, group, index,
                               False, from_rest))
         if use_holds and r.hold is not None and r.hold.t.size > 50 * factor:
-            hold = channels(r.hold)
+            hold = columns(r.hold)
             records.append(Record(decimate(hold, factor), fs, factor, r.U, rho, group, index,
                                    True))
     return records
-
-
-def channels(record: Release | ReleaseHold) -> FloatArray:
-    """Return a release's (or hold's) channels as columns.
-
-    ``h, alpha, lift, moment`` (m, rad, N/m, N m/m), with sway then ``p, drag`` (m, N/m).
-    """
-    n_dof = 2 if record.p is None else 3
-    return np.column_stack([getattr(record, name) for name in CHANNELS[:2 * n_dof]])
 
 
 def log_lag_range(section: SectionModel, speeds: list[float]) -> tuple[float, float]:

@@ -404,15 +404,14 @@ def _fourth_order(start: IdentifiedModel, releases: list[Release], section: Sect
         return found, restarted, name, (f"; the other form could not start ({failures[0]})"
                                          if failures else "")
 
-    def rank(name: str) -> tuple[bool, float]:
-        found = fits[name][0]
-        return (_closed_loop_starts.refuted(found, section, stable_to)
-                if stable_to is not None else False, found.neg_log_likelihood)
-
-    best, other = sorted(fits, key=rank)
+    # Unrefuted first, then the higher likelihood (each flutter analysis done once).
+    rank = {name: (stable_to is not None and _closed_loop_starts.refuted(found, section,
+                                                                          stable_to),
+                   found.neg_log_likelihood) for name, (found, _) in fits.items()}
+    best, other = sorted(fits, key=rank.__getitem__)
     form = ("its sources mixed into the forces after their filters"
             if best == "fourth-order-mixed" else "each force filtered after the mix")
-    if rank(best)[0] != rank(other)[0]:
+    if rank[best][0] != rank[other][0]:
         why = (f"every maximum of the other form found flutters below {stable_to:.3g} m/s, "
                "where no release grew")
     else:

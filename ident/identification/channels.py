@@ -9,25 +9,36 @@ force divided by it.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["CHANNELS", "coordinate_scales", "displacement_channels", "force_channels"]
+from ident.simulation.decay import channels as channel_names
+
+__all__ = ["columns", "coordinate_scales", "displacement_channels", "force_channels"]
 
 FloatArray = npt.NDArray[np.float64]
 
-#: The channels in order, as :class:`~ident.records.release.Release` names them: the planar
-#: four, then sway and drag with three degrees of freedom.
-CHANNELS = ("h", "alpha", "lift", "moment", "p", "drag")
+
+def columns(record: Any) -> FloatArray:
+    """Return a record's channels as columns, shape (n, 2 n_dof).
+
+    In the order :func:`ident.simulation.decay.channels` names them; ``record`` is anything
+    with ``h, alpha, lift, moment`` and ``p, drag`` (None without sway): a
+    :class:`~ident.records.release.Release`, its hold, a simulated release.
+    """
+    n_dof = 2 if record.p is None else 3
+    return np.column_stack([getattr(record, name) for name in channel_names(n_dof)])
 
 
 def displacement_channels(n_dof: int) -> slice | list[int]:
-    """Return the columns of the displacements ``h, alpha(, p)`` among :data:`CHANNELS`."""
+    """Return the columns of the displacements ``h, alpha(, p)`` among :func:`columns`."""
     return slice(0, 2) if n_dof == 2 else [0, 1, 4]
 
 
 def force_channels(n_dof: int) -> slice | list[int]:
-    """Return the columns of the forces ``lift, moment(, drag)`` among :data:`CHANNELS`.
+    """Return the columns of the forces ``lift, moment(, drag)`` among :func:`columns`.
 
     Two degrees of freedom: a slice, so that a record's forces are a view whose statistics sum
     in the same order as its other columns' (an index list copies them, which moves a
