@@ -265,6 +265,17 @@ def test_shaping_filter_spectrum_is_a_second_order_low_pass():
     assert cross == pytest.approx((C_b @ P @ C_b.T)[0, 1], rel=1e-8)
 
 
+def cascades(freq: np.ndarray, zeta: np.ndarray, tau: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """Return each row's sections in cascade in closed form, ``prod_j w^2 (1 + tau s) / (...)``.
+
+    Shape (len(f), rows): the transfer :class:`ShapingFilter` documents, written out apart
+    from its state-space matrices.
+    """
+    s = 2j * np.pi * f[:, None, None]
+    w = 2 * np.pi * freq
+    return (w**2 * (1 + tau * s) / (s**2 + 2 * zeta * w * s + w**2)).prod(axis=2)
+
+
 def test_two_sections_give_the_product_of_their_transfers():
     """Each force's cascade is the product of its sections, the zeros' numerators included."""
     L = np.array([[0.02, 0.0], [0.004, 0.006]])
@@ -274,10 +285,7 @@ def test_two_sections_give_the_product_of_their_transfers():
     shaping = ShapingFilter(freq, zeta, L, tau)
     assert shaping.n_states == 8
     f = np.linspace(-40.0, 40.0, 401)
-    s = 2j * np.pi * f[:, None, None]
-    w = 2 * np.pi * freq
-    sections = w**2 * (1 + tau * s) / (s**2 + 2 * zeta * w * s + w**2)  # (f, force, section)
-    H = sections.prod(axis=2)
+    H = cascades(freq, zeta, tau, f)
     closed = H[:, :, None] * (L @ L.T) * np.conj(H[:, None, :])
     # Same rational function evaluated two ways: only round-off differs.
     np.testing.assert_allclose(shaping.spectrum(f), closed, rtol=1e-11, atol=1e-18)
@@ -305,9 +313,7 @@ def test_sources_mixed_after_their_sections_give_a_coherence_that_changes_with_f
     tau = np.array([[0.02, 0.01], [0.05, -0.004], [0.03, 0.02]])
     mixed = ShapingFilter(freq, zeta, L, tau, mixed_after=True)
     f = np.linspace(-40.0, 40.0, 401)
-    s = 2j * np.pi * f[:, None, None]
-    w = 2 * np.pi * freq
-    H = (w**2 * (1 + tau * s) / (s**2 + 2 * zeta * w * s + w**2)).prod(axis=2)
+    H = cascades(freq, zeta, tau, f)
     closed = np.einsum("ik,fk,jk->fij", L, np.abs(H) ** 2, L)
     np.testing.assert_allclose(mixed.spectrum(f), closed, rtol=1e-11, atol=1e-18)
     P = mixed.stationary_covariance()
