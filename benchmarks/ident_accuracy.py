@@ -84,6 +84,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import argparse  # noqa: E402
 import dataclasses  # noqa: E402
 import math  # noqa: E402
+import re  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from concurrent.futures import ProcessPoolExecutor  # noqa: E402
@@ -391,7 +392,8 @@ def _tunnel_run(args):
     branch = model.diagnostics.estimator in (e2rfc.ESTIMATOR_TURBULENT,
                                              e2rfc.ESTIMATOR_CLOSED_LOOP)
     # The closed-loop branch's note names its buffeting model (chosen by evidence or not).
-    fourth = "fourth-order buffeting model" in model.diagnostics.reason
+    fourth = re.search(r"fourth-order[-a-z]* buffeting model",
+                       model.diagnostics.reason) is not None
     if uncertainty.speed is None:
         return row, mode, np.inf, np.nan, elapsed, branch, seed, fourth, (np.nan, np.nan)
     low, high = uncertainty.interval()

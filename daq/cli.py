@@ -109,11 +109,13 @@ def _build_parser() -> argparse.ArgumentParser:
                       help="in turbulence: closed-loop ML (default) or refined IV")
     p_id.add_argument("--closed-loop-buffeting",
                       choices=("second-order", "fourth-order", "second-order-per-speed",
-                               "fourth-order-per-speed", "fourth-order-mixed", "by-evidence"),
+                               "fourth-order-per-speed", "fourth-order-mixed",
+                               "fourth-order-mixed-per-speed", "by-evidence"),
                       help="closed-loop ML's buffeting model: by-evidence (default: "
                            "fourth-order where the second-order one's innovations pooled "
                            "over the records are not white; with sway the better of its two "
-                           "forms), second-order or fourth-order "
+                           "forms; with six releases or more at every speed, one filter per "
+                           "speed), second-order or fourth-order "
                            "(less biased, about twice the time); one filter for every speed, "
                            "scaled with it, or with -per-speed one per speed (turbulence "
                            "that does not scale with the speed); fourth-order-mixed: "

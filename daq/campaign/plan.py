@@ -101,7 +101,8 @@ TURBULENT_ESTIMATORS = ("iv", "ml")
 #: The closed-loop estimator's buffeting models, or the evidence's choice between them
 #: (``e2rfc.CLOSED_LOOP_BUFFETING_CHOICES``).
 CLOSED_LOOP_BUFFETINGS = ("second-order", "fourth-order", "second-order-per-speed",
-                          "fourth-order-per-speed", "fourth-order-mixed", "by-evidence")
+                          "fourth-order-per-speed", "fourth-order-mixed",
+                          "fourth-order-mixed-per-speed", "by-evidence")
 #: Fewest wind speeds the displacement-only route identifies from (its known weakness).
 DISPLACEMENT_MIN_SPEEDS = 3
 MAX_RELEASES_PER_SPEED = 20
