@@ -83,7 +83,8 @@ CLOSED_LOOP_BUFFETING_MODELS: dict[str, dict[str, Any]] = {
 #: 28 extra parameters), so the rule is the measured crossover: the plate at Iw 1 % with holds
 #: (20 seeds; median |error| and RMS, shared against per speed) two releases per speed 2.32,
 #: 4.1 against 3.36, 4.0 %; four 1.15, 2.29 against 1.67, 2.47 %; six 1.22, 2.17 against 0.85,
-#: 1.63 %; eight 1.57, 1.83 against 1.14, 1.58 % (docs/development/e2rfc_turbulence.md).
+#: 1.63 %; eight 1.57, 1.83 against 1.14, 1.58 %. The bluff deck (ten seeds) crosses over
+#: between four and six too (docs/development/e2rfc_turbulence.md).
 PER_SPEED_FROM = 6
 #: Level of the likelihood-ratio test that takes the fourth-order buffeting model where the
 #: second-order one's innovations pass as white: the chance of taking it when the second-order
