@@ -944,7 +944,8 @@ def test_the_estimator_is_chosen_by_name_and_runs_on_a_3dof_section():
         e2rfc.identify(releases, PLATE, turbulent_estimator="kalman")
     with pytest.raises(ValueError, match=r"closed_loop_buffeting must be one of "
                        r"\('second-order', 'fourth-order', 'second-order-per-speed', "
-                       r"'fourth-order-per-speed', 'fourth-order-mixed', 'by-evidence'\), "
+                       r"'fourth-order-per-speed', 'fourth-order-mixed', "
+                       r"'fourth-order-mixed-per-speed', 'by-evidence'\), "
                        r"got 'sixth-order'"):
         e2rfc.identify(releases, PLATE, closed_loop_buffeting="sixth-order")
     sway = PLATE.replace(fp=1.3, zeta_p=0.004)
