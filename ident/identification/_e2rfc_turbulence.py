@@ -216,7 +216,8 @@ def _closed_loop(model: IdentifiedModel, releases: list[Release], section: Secti
     """
     base = model.diagnostics
     stable_to = bounded_at(releases)
-    fewest = _releases_per_speed(releases)
+    speeds = distinct_wind_speeds([r.U for r in releases])
+    fewest = _releases_per_speed(releases, speeds)
     per_speed = buffeting == BY_EVIDENCE and fewest >= PER_SPEED_FROM
     suffix = "-per-speed" if per_speed else ""
     first = f"second-order{suffix}" if buffeting == BY_EVIDENCE else buffeting
@@ -236,7 +237,6 @@ def _closed_loop(model: IdentifiedModel, releases: list[Release], section: Secti
                          f"(from {PER_SPEED_FROM}, one filter shape for every speed leans "
                          "more than a filter per speed scatters)")
     options = CLOSED_LOOP_BUFFETING_MODELS[chosen]
-    speeds = distinct_wind_speeds([r.U for r in releases])
     kept = [i for i, r in enumerate(releases) if r.U < speeds[-1] / (1 + DISTINCT_U_RTOL)]
 
     @cache
@@ -387,21 +387,22 @@ def _by_evidence(start: IdentifiedModel, releases: list[Release], section: Secti
     The reason ends the note.
     """
     fit, restarted = second
+    lower = f"second-order{suffix}"  # the second-order fit's model
     limit = innovation_checks.portmanteau_limit()
     white = not np.any(fit.portmanteau > limit)
     try:
         richer, richer_restarted, fourth, form = _fourth_order(start, releases, section,
                                                                stable_to, suffix)
     except ValueError as exc:
-        return fit, restarted, f"second-order{suffix}", (
+        return fit, restarted, lower, (
             f", chosen by evidence: the fourth-order likelihood could not start ({exc})")
     chosen = _fourth_and_second(fit, restarted, richer, richer_restarted, fourth, section,
-                                stable_to, white, limit, f"second-order{suffix}")
+                                stable_to, white, limit, lower)
     return (*chosen[:3], chosen[3] + (form if chosen[2] == fourth else ""))
 
 
 def _fourth_order(start: IdentifiedModel, releases: list[Release], section: SectionModel,
-                  stable_to: float | None, suffix: str = ""
+                  stable_to: float | None, suffix: str
                   ) -> tuple[closed_loop_ml.ClosedLoopFit, str | None, str, str]:
     """Return the fourth-order fit, its restart note, its model's name and a note on its form.
 
@@ -449,7 +450,7 @@ def _fourth_order(start: IdentifiedModel, releases: list[Release], section: Sect
 def _fourth_and_second(fit: closed_loop_ml.ClosedLoopFit, restarted: str | None,
                        richer: closed_loop_ml.ClosedLoopFit, richer_restarted: str | None,
                        fourth: str, section: SectionModel, stable_to: float | None,
-                       white: bool, limit: float, second: str = "second-order"
+                       white: bool, limit: float, second: str
                        ) -> tuple[closed_loop_ml.ClosedLoopFit, str | None, str, str]:
     """Choose between the second-order fit and the fourth-order one (:func:`_by_evidence`).
 
@@ -507,9 +508,8 @@ def _with_reason(found: _turbulent_fit.TurbulentResult,
     return replace(found, reason=f"{why}: {found.reason}")
 
 
-def _releases_per_speed(releases: list[Release]) -> int:
-    """Return the fewest releases at any of the releases' distinct wind speeds."""
-    speeds = distinct_wind_speeds([r.U for r in releases])
+def _releases_per_speed(releases: list[Release], speeds: list[float]) -> int:
+    """Return the fewest releases at any of ``speeds``, the releases' distinct wind speeds."""
     counts = [0] * len(speeds)
     for r in releases:
         counts[nearest_wind_speed(r.U, speeds)] += 1

@@ -276,6 +276,17 @@ def cascades(freq: np.ndarray, zeta: np.ndarray, tau: np.ndarray, f: np.ndarray)
     return (w**2 * (1 + tau * s) / (s**2 + 2 * zeta * w * s + w**2)).prod(axis=2)
 
 
+def variances(shaping: ShapingFilter, force: int) -> tuple[float, float]:
+    """Return a force's variance two ways: its spectrum integrated, and the Lyapunov solution's.
+
+    The quadrature is asked for a relative error of 1e-10.
+    """
+    integrated, _ = scipy.integrate.quad(lambda x: shaping.spectrum([x])[0, force, force].real,
+                                         -np.inf, np.inf, epsabs=0.0, epsrel=1e-10, limit=400)
+    _, _, C_b = shaping.matrices()
+    return integrated, float((C_b @ shaping.stationary_covariance() @ C_b.T)[force, force])
+
+
 def test_two_sections_give_the_product_of_their_transfers():
     """Each force's cascade is the product of its sections, the zeros' numerators included."""
     L = np.array([[0.02, 0.0], [0.004, 0.006]])
@@ -289,12 +300,9 @@ def test_two_sections_give_the_product_of_their_transfers():
     closed = H[:, :, None] * (L @ L.T) * np.conj(H[:, None, :])
     # Same rational function evaluated two ways: only round-off differs.
     np.testing.assert_allclose(shaping.spectrum(f), closed, rtol=1e-11, atol=1e-18)
-    P = shaping.stationary_covariance()
-    _, _, C_b = shaping.matrices()
     # The force's variance is the integral of its spectrum (quadrature asked for 1e-10).
-    var, _ = scipy.integrate.quad(lambda x: shaping.spectrum([x])[0, 1, 1].real,
-                                  -np.inf, np.inf, epsabs=0.0, epsrel=1e-10, limit=400)
-    assert var == pytest.approx((C_b @ P @ C_b.T)[1, 1], rel=1e-8)
+    integrated, lyapunov = variances(shaping, 1)
+    assert integrated == pytest.approx(lyapunov, rel=1e-8)
 
 
 def test_sources_mixed_after_their_sections_give_a_coherence_that_changes_with_frequency():
@@ -316,11 +324,8 @@ def test_sources_mixed_after_their_sections_give_a_coherence_that_changes_with_f
     H = cascades(freq, zeta, tau, f)
     closed = np.einsum("ik,fk,jk->fij", L, np.abs(H) ** 2, L)
     np.testing.assert_allclose(mixed.spectrum(f), closed, rtol=1e-11, atol=1e-18)
-    P = mixed.stationary_covariance()
-    _, _, C_b = mixed.matrices()
-    var, _ = scipy.integrate.quad(lambda x: mixed.spectrum([x])[0, 2, 2].real,
-                                  -np.inf, np.inf, epsabs=0.0, epsrel=1e-10, limit=400)
-    assert var == pytest.approx((C_b @ P @ C_b.T)[2, 2], rel=1e-8)
+    integrated, lyapunov = variances(mixed, 2)
+    assert integrated == pytest.approx(lyapunov, rel=1e-8)
 
     def coherence(shaping: ShapingFilter) -> np.ndarray:
         S = shaping.spectrum([0.5, 3.0, 20.0])
