@@ -217,8 +217,8 @@ def _closed_loop(model: IdentifiedModel, releases: list[Release], section: Secti
     base = model.diagnostics
     stable_to = bounded_at(releases)
     speeds = distinct_wind_speeds([r.U for r in releases])
-    fewest = _releases_per_speed(releases, speeds)
-    per_speed = buffeting == BY_EVIDENCE and fewest >= PER_SPEED_FROM
+    per_speed, filters = _filters_by_count(_releases_per_speed(releases, speeds), speeds)
+    per_speed = per_speed and buffeting == BY_EVIDENCE
     suffix = "-per-speed" if per_speed else ""
     first = f"second-order{suffix}" if buffeting == BY_EVIDENCE else buffeting
     try:
@@ -232,10 +232,7 @@ def _closed_loop(model: IdentifiedModel, releases: list[Release], section: Secti
     if buffeting == BY_EVIDENCE:
         fit, restarted, chosen, evidence = _by_evidence(model, releases, section, stable_to,
                                                         (fit, restarted), suffix)
-        if per_speed:
-            evidence += (f"; a filter per wind speed, with {fewest} or more releases at each "
-                         f"(from {PER_SPEED_FROM}, one filter shape for every speed leans "
-                         "more than a filter per speed scatters)")
+        evidence += filters
     options = CLOSED_LOOP_BUFFETING_MODELS[chosen]
     kept = [i for i, r in enumerate(releases) if r.U < speeds[-1] / (1 + DISTINCT_U_RTOL)]
 
@@ -508,12 +505,33 @@ def _with_reason(found: _turbulent_fit.TurbulentResult,
     return replace(found, reason=f"{why}: {found.reason}")
 
 
-def _releases_per_speed(releases: list[Release], speeds: list[float]) -> int:
-    """Return the fewest releases at any of ``speeds``, the releases' distinct wind speeds."""
+def _releases_per_speed(releases: list[Release], speeds: list[float]) -> list[int]:
+    """Return the count of releases at each of ``speeds``, the releases' distinct wind speeds."""
     counts = [0] * len(speeds)
     for r in releases:
         counts[nearest_wind_speed(r.U, speeds)] += 1
-    return min(counts)
+    return counts
+
+
+def _filters_by_count(counts: list[int], speeds: list[float]) -> tuple[bool, str]:
+    """Return whether the evidence weighs a buffeting filter per speed, and the note's words.
+
+    ``counts`` are the releases at each of ``speeds`` (m/s). A filter per speed needs
+    :data:`PER_SPEED_FROM` releases at every speed; where some speeds have that many and
+    others not, the note names the speed that keeps the shared filter, so that a user who
+    took many releases at one speed knows why they did not buy a filter of its own.
+    """
+    fewest = min(counts)
+    if fewest >= PER_SPEED_FROM:
+        return True, (f"; a filter per wind speed, with {fewest} or more releases at each "
+                      f"(from {PER_SPEED_FROM}, one filter shape for every speed leans more "
+                      "than a filter per speed scatters)")
+    if max(counts) >= PER_SPEED_FROM:
+        short = speeds[counts.index(fewest)]
+        return False, (f"; one filter shape for every wind speed: a filter per speed needs "
+                       f"{PER_SPEED_FROM} releases at every speed, and {short:.3g} m/s has "
+                       f"{fewest}")
+    return False, ""
 
 
 def bounded_at(releases: list[Release]) -> float | None:

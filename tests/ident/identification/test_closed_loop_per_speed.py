@@ -9,11 +9,13 @@ benchmark's plate at Iw 1 % with six releases per speed and their holds
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from ident import Release
 from ident.identification import e2rfc
-from ident.identification._e2rfc_turbulence import PER_SPEED_FROM
+from ident.identification._e2rfc_turbulence import PER_SPEED_FROM, _filters_by_count
 from ident.model import flat_plate
 from ident.model import flutter as fl
 from ident.model.quasi_steady import StaticCoefficients
@@ -57,3 +59,16 @@ def test_six_releases_per_speed_take_a_buffeting_filter_per_speed():
     assert abs(u.speed / U_F - 1.0) < 0.04
     low, high = u.interval()
     assert low <= U_F <= high
+
+
+@pytest.mark.parametrize(("counts", "per_speed", "words"), [
+    ([6, 7, 6], True, r"a filter per wind speed, with 6 or more releases at each"),
+    ([8, 2, 8], False, r"a filter per speed needs 6 releases at every speed, and 6 m/s has 2"),
+    ([2, 2, 2], False, r"^$"),
+])
+def test_the_note_says_why_the_filter_is_shared_or_per_speed(counts, per_speed, words):
+    # Many releases at some speeds and few at another keep the shared filter: the note names
+    # the speed that keeps it, so the user knows which releases would buy a filter per speed.
+    chosen, note = _filters_by_count(counts, [4.0, 6.0, 8.0])
+    assert chosen is per_speed
+    assert re.search(words, note), note
