@@ -1,4 +1,4 @@
-"""Parts of the benchmarks: their command-line lists, the bound's inverse, its exact check.
+"""Parts of the benchmarks: command-line lists, the bound's inverse and exact check, its medians.
 
 The benchmarks are scripts, not a package; these are the parts whose failure would be silent
 (a wrong figure in a table) or a traceback for a user's typing.
@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.stats import norm
 
 from ident.model import flat_plate
 from ident.model import flutter as fl
@@ -21,6 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
 import flutter_crb  # noqa: E402 - benchmarks/ is not a package
 import flutter_crb_exact as exact  # noqa: E402
+import ident_accuracy  # noqa: E402
 import result_files  # noqa: E402
 
 
@@ -191,3 +193,18 @@ def test_bound_takes_sway_and_its_parts_order_as_information_does():
     assert 0.0 < bound.std < np.inf
     assert bound.std_with_holds <= bound.std
     assert bound.deterministic >= bound.std
+
+
+def test_median_ratio_scatter_is_the_sample_medians_asymptotic_law():
+    # The median of n half-normal errors is asymptotically normal about the half-normal's
+    # median m with std 1 / (2 f(m) sqrt(n)), f = 2 phi the half-normal density: an
+    # independent closed form for the simulated band and tail that bound_note prints. At 80
+    # errors the law's skew moves the band's edges by under 0.02, and at 20 the tail's share
+    # by under 0.03 (the simulation's own scatter, 100 000 or 20 000 draws, is a tenth of that).
+    m = ident_accuracy.HALF_NORMAL_MEDIAN
+    for n, edge_tol, tail_tol in ((80, 0.02, 0.03), (20, 0.05, 0.03)):
+        sd = 1.0 / (2 * 2 * norm.pdf(m) * np.sqrt(n)) / m  # in units of the median
+        low, high, above = ident_accuracy._median_ratio_scatter(n)
+        assert abs(low - (1 - norm.ppf(0.9) * sd)) < edge_tol
+        assert abs(high - (1 + norm.ppf(0.9) * sd)) < edge_tol
+        assert abs(above - norm.sf(0.2 / sd)) < tail_tol
