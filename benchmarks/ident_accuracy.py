@@ -33,8 +33,10 @@ The turbulence rows' releases are recorded with a hold of ``TUNNEL_HOLD_S`` (10 
 (a real release always has one: the operator holds the model in the wind before letting go);
 E2RFC then runs its turbulence branch (refined IV with the holds' noise model,
 ``ident.identification._turbulent_fit``). ``--tunnel-mode before`` identifies the same releases with
-their holds taken away (today's estimator), ``both`` prints the two; ``--rows turbulent|clean`` runs
-a subset;
+their holds taken away (today's estimator), ``both`` prints the two; ``--rows turbulent|clean``
+runs a subset, ``--rows variants`` the turbulence rows changed in one thing (:data:`VARIANT_ROWS`)
+and ``--rows sections`` those on sections the closed-loop branch was not developed on
+(:data:`SECTION_ROWS`);
 ``--turbulent-motion filter|smoother|smoother-sg`` selects how the branch builds its regressors'
 motion (``ident.identification._turbulent_fit.MOTION``; docs/development/e2rfc_turbulence.md
 measures the three); ``--turbulent-estimator ml`` runs the closed-loop maximum-likelihood branch
@@ -335,11 +337,28 @@ VARIANT_ROWS = {
 }
 
 
+#: A section of lower frequencies and a wider chord than the plate's (mu 25, fa/fh 2.2).
+LOW_FREQUENCY = SectionModel(B=0.45, m=6.0, I=0.1, fh=1.2, fa=2.6, zeta_h=0.004, zeta_a=0.004)
+
+#: Turbulence rows on sections the closed-loop branch was not developed on (``--rows
+#: sections``): the plate's aerodynamics (Jones) and gusts on the smooth rows' deck and on
+#: :data:`LOW_FREQUENCY`, whose modes sit elsewhere against the gusts' spectrum and whose
+#: releases hold fewer cycles. ``section`` and ``Iw`` replace the row's own.
+SECTION_ROWS = {
+    "deck (mu 41), Iw 1 %": ("plate, Jones, Iw 1 %", {"section": DECK}),
+    "deck (mu 41), Iw 3 %": ("plate, Jones, Iw 3 %", {"section": DECK}),
+    "low-frequency, Iw 2 %": ("plate, Jones, Iw 1 %", {"section": LOW_FREQUENCY, "Iw": 0.02}),
+}
+
+
 def row_spec(row):
     """Return the row's section, model maker, static coefficients, Iw, truth and change."""
-    if row in VARIANT_ROWS:
-        base, change = VARIANT_ROWS[row]
-        return (*TUNNEL_ROWS[base], change)
+    for changed in (VARIANT_ROWS, SECTION_ROWS):
+        if row in changed:
+            base, change = changed[row]
+            section, make_model, static, Iw, truth = TUNNEL_ROWS[base]
+            return (change.get("section", section), make_model, static,
+                    change.get("Iw", Iw), truth, change)
     return (*TUNNEL_ROWS[row], {})
 
 
@@ -476,10 +495,11 @@ def _median_ratio_scatter(count):
 
 def tunnel_rows(which="all", quick=False):
     """Return the names of the tunnel rows ``which`` asks (``quick``: one clean, one turbulent)."""
-    names = (list(VARIANT_ROWS) if which == "variants" else
+    names = (list(VARIANT_ROWS) if which == "variants" else list(SECTION_ROWS)
+             if which == "sections" else
              [row for row in TUNNEL_ROWS
               if which == "all" or (which == "turbulent") == (TUNNEL_ROWS[row][3] > 0)])
-    if quick and which != "variants":
+    if quick and which not in ("variants", "sections"):
         clean = [row for row in names if TUNNEL_ROWS[row][3] == 0]
         turbulent = [row for row in names if TUNNEL_ROWS[row][3] > 0]
         names = clean[:1] + turbulent[:1]
@@ -733,11 +753,12 @@ def main():
                         help="timed runs of the timing table (9; --quick: 1)")
     parser.add_argument("--tunnel-mode", choices=("after", "before", "both"), default="after",
                         help="tunnel rows: as shipped, with the holds taken away, or both")
-    parser.add_argument("--rows", choices=("all", "turbulent", "clean", "variants"),
+    parser.add_argument("--rows", choices=("all", "turbulent", "clean", "variants",
+                                           "sections"),
                         default=None,
                         help="which tunnel rows to run (variants: the turbulence rows changed "
-                             "in one thing, VARIANT_ROWS; default all, --quick: one clean and "
-                             "one turbulent)")
+                             "in one thing, VARIANT_ROWS; sections: on other sections, "
+                             "SECTION_ROWS; default all, --quick: one clean and one turbulent)")
     parser.add_argument("--first-seed", type=int, default=0,
                         help="tunnel rows: the first seed (more seeds in another run)")
     parser.add_argument("--turbulent-a3", choices=("fitted-or-zero", "fitted", "choose", "e2rfc"),

@@ -208,3 +208,16 @@ def test_median_ratio_scatter_is_the_sample_medians_asymptotic_law():
         assert abs(low - (1 - norm.ppf(0.9) * sd)) < edge_tol
         assert abs(high - (1 + norm.ppf(0.9) * sd)) < edge_tol
         assert abs(above - norm.sf(0.2 / sd)) < tail_tol
+
+
+def test_section_rows_replace_the_section_and_intensity_everywhere_the_row_is_read():
+    # The releases, the truth and the bound all read row_spec: a row that kept the plate's
+    # section or intensity anywhere would compare the identification with another truth.
+    names = ident_accuracy.tunnel_rows("sections")
+    assert names == list(ident_accuracy.SECTION_ROWS)
+    section, make_model, _, Iw, _, _ = ident_accuracy.row_spec("low-frequency, Iw 2 %")
+    assert section is ident_accuracy.LOW_FREQUENCY and Iw == 0.02
+    assert make_model is flat_plate.jones_model
+    section, _, _, Iw, _, _ = ident_accuracy.row_spec("deck (mu 41), Iw 3 %")
+    assert section is ident_accuracy.DECK and Iw == 0.03
+    assert ident_accuracy.row_spec("plate, Jones, Iw 1 %")[0] is ident_accuracy.PLATE
