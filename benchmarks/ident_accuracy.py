@@ -593,9 +593,8 @@ def _tunnel_table(results, names, seeds, mode, bounds):
     pooled_ratio = float(np.median(pooled)) if pooled else None
     if pooled_ratio is not None:
         print(f"the median of every error over its row's bound median: {pooled_ratio:.2f}")
-    table.append(("all rows", None, None, pooled_ratio, None, None, None,
-                  100 * covered / total, None,
-                  None, sum(r[10] for r in table), sum(r[11] for r in table),
+    table.append(("all rows", None, None, pooled_ratio, None, None, None, 100 * covered / total,
+                  None, None, sum(r[10] for r in table), sum(r[11] for r in table),
                   sum(r[12] for r in table), sum(r[13] for r in table), covered, total,
                   100 * symmetric / total))
     columns = ("case", "median error (%)", "median error at the bound (%)", "error / bound",
