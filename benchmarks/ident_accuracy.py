@@ -350,10 +350,13 @@ SECTION_ROWS = {
     "low-frequency, Iw 2 %": ("plate, Jones, Iw 1 %", {"section": LOW_FREQUENCY, "Iw": 0.02}),
 }
 
+#: The ``--rows`` choices whose rows change a turbulence row: choice -> its rows.
+CHANGED_ROWS = {"variants": VARIANT_ROWS, "sections": SECTION_ROWS}
+
 
 def row_spec(row):
     """Return the row's section, model maker, static coefficients, Iw, truth and change."""
-    for changed in (VARIANT_ROWS, SECTION_ROWS):
+    for changed in CHANGED_ROWS.values():
         if row in changed:
             base, change = changed[row]
             section, make_model, static, Iw, truth = TUNNEL_ROWS[base]
@@ -495,11 +498,10 @@ def _median_ratio_scatter(count):
 
 def tunnel_rows(which="all", quick=False):
     """Return the names of the tunnel rows ``which`` asks (``quick``: one clean, one turbulent)."""
-    names = (list(VARIANT_ROWS) if which == "variants" else list(SECTION_ROWS)
-             if which == "sections" else
+    names = (list(CHANGED_ROWS[which]) if which in CHANGED_ROWS else
              [row for row in TUNNEL_ROWS
               if which == "all" or (which == "turbulent") == (TUNNEL_ROWS[row][3] > 0)])
-    if quick and which not in ("variants", "sections"):
+    if quick and which not in CHANGED_ROWS:
         clean = [row for row in names if TUNNEL_ROWS[row][3] == 0]
         turbulent = [row for row in names if TUNNEL_ROWS[row][3] > 0]
         names = clean[:1] + turbulent[:1]
@@ -752,8 +754,7 @@ def main():
                         help="timed runs of the timing table (9; --quick: 1)")
     parser.add_argument("--tunnel-mode", choices=("after", "before", "both"), default="after",
                         help="tunnel rows: as shipped, with the holds taken away, or both")
-    parser.add_argument("--rows", choices=("all", "turbulent", "clean", "variants",
-                                           "sections"),
+    parser.add_argument("--rows", choices=("all", "turbulent", "clean", *CHANGED_ROWS),
                         default=None,
                         help="which tunnel rows to run (variants: the turbulence rows changed "
                              "in one thing, VARIANT_ROWS; sections: on other sections, "
@@ -783,6 +784,8 @@ def main():
     repeats = args.repeats if args.repeats is not None else (1 if args.quick else 9)
     if seeds < 1 or repeats < 1:
         parser.error("--seeds and --repeats must be at least 1")
+    if args.first_seed < 0:
+        parser.error(f"--first-seed must be 0 or more (a seed), got {args.first_seed}")
     name = result_name(args)
     bounded_rows = None  # the tunnel rows with a bound, once known
     parameters = {"part": args.part, "seeds": seeds, "workers": args.workers}

@@ -198,9 +198,10 @@ def test_bound_takes_sway_and_its_parts_order_as_information_does():
 def test_median_ratio_scatter_is_the_sample_medians_asymptotic_law():
     # The median of n half-normal errors is asymptotically normal about the half-normal's
     # median m with std 1 / (2 f(m) sqrt(n)), f = 2 phi the half-normal density: an
-    # independent closed form for the simulated band and tail that bound_note prints. At 80
-    # errors the law's skew moves the band's edges by under 0.02, and at 20 the tail's share
-    # by under 0.03 (the simulation's own scatter, 100 000 or 20 000 draws, is a tenth of that).
+    # independent closed form for the simulated band and tail that bound_note prints. The
+    # law's skew moves the band's edges by under 0.02 at 80 errors and under 0.05 at 20 (the
+    # lower edge most), the tail's share by under 0.03 (the simulation's own scatter, 100 000
+    # or 20 000 draws, is a tenth of that).
     m = ident_accuracy.HALF_NORMAL_MEDIAN
     for n, edge_tol, tail_tol in ((80, 0.02, 0.03), (20, 0.05, 0.03)):
         sd = 1.0 / (2 * 2 * norm.pdf(m) * np.sqrt(n)) / m  # in units of the median
