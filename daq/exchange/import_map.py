@@ -314,7 +314,7 @@ def _channel(name: str, raw: Any, where: str) -> ChannelSpec:
     sign = 1.0
     if signs:
         text = raw["sign"]
-        if text not in signs:
+        if not isinstance(text, str) or text not in signs:  # a list or table: not a key
             raise UsageError(f"{where} sign = {text!r}; allowed for {name}: {sorted(signs)} "
                              "(windrig's own is " + next(iter(signs)) + ")")
         sign = signs[text]
@@ -459,7 +459,7 @@ def parse_import_map(path: str | Path) -> ImportMap:
     _keys(data, where, {"config", "time", "channels", "wind", "releases"},
           {"format", "span", "groups", "taps"})
     fmt = data.get("format")
-    if fmt is not None and fmt not in set(FORMATS.values()):
+    if fmt is not None and (not isinstance(fmt, str) or fmt not in set(FORMATS.values())):
         raise UsageError(f"{where} format = {fmt!r}; allowed: {sorted(set(FORMATS.values()))}")
     groups = data.get("groups", [])
     if not isinstance(groups, list) or not all(isinstance(g, str) and g for g in groups):

@@ -191,9 +191,26 @@ def _time_base(imap: ImportMap, table: SourceTable, n: int) -> FloatArray:
         if column not in table.increments:
             raise UsageError(f"{table.name}: channel {column!r} has no wf_increment property "
                              f"([time] waveform = true); give [time] rate or column instead")
-        return np.arange(n, dtype=np.float64) * table.increments[column]
+        step = table.increments[column]
+        # Channels of one length at other rates would be read as simultaneous: refused.
+        others = {spec.column: table.increments[spec.column] for spec in imap.channels.values()
+                  if spec.column in table.increments}
+        odd = {c: inc for c, inc in others.items() if abs(inc - step) > TIME_STEP_RTOL * step}
+        if odd:
+            raise UsageError(f"{table.name}: the mapped channels' wf_increment differ ({column!r}"
+                             f" {step:.6g} s, {odd}); a run file holds one sampling rate")
+        # LabVIEW's waveform time is wf_start_offset + i * wf_increment (a pre-trigger makes the
+        # offset negative): the instants a lab lists are on that axis, as npTDMS's time_track.
+        start = parse_number(table.properties.get(column, {}).get("wf_start_offset", 0.0),
+                             f"{table.name}: channel {column!r} property 'wf_start_offset'")
+        return start + np.arange(n, dtype=np.float64) * step
     assert spec.column is not None
     t = table.column(spec.column, f"{imap.path} [time] column") * UNITS["time"][spec.unit]
+    missing = np.flatnonzero(~np.isfinite(t))
+    if missing.size:  # else named as "does not increase", which sends the lab to its clock
+        raise UsageError(f"{table.name}: time column {spec.column!r} has no time in "
+                         f"{missing.size} row(s), the first at row {missing[0] + 1} of "
+                         f"{t.size} (an empty cell, or NaN)")
     steps = np.diff(t)
     dt = float(np.mean(steps)) if steps.size else 0.0
     if not dt > 0 or np.any(steps <= 0):
@@ -270,6 +287,10 @@ def table_releases(imap: ImportMap, table: SourceTable, config: RigConfig
     if len(set(lengths.values())) != 1:
         raise UsageError(f"{table.name}: the mapped channels differ in length: {lengths}")
     n = next(iter(lengths.values()))
+    if n < 2:  # no time base to speak of (an empty vector, a file cut short before its data)
+        raise UsageError(f"{table.name}: the mapped channels hold {n} sample(s)"
+                         + "".join(f"; {note}" for note in table.notes))
+    warnings += [f"{table.name}: {note}" for note in table.notes]
     t = _time_base(imap, table, n)
     pressures = None
     if imap.taps is not None:
