@@ -59,6 +59,8 @@ from daq.exchange.import_map import (
 from daq.exchange.sources import SourceTable, read_source, source_format
 from daq.recording.synthetic import write_release_run
 from daq.sync.conversions import wind_speed
+from ident.errors import PlausibilityError
+from ident.records.plausibility import check_units
 from ident.records.release_onset import CATCH_GUARD_S, find_releases, still_start_before
 
 __all__ = ["ImportedRelease", "ImportedRun", "import_sources", "table_releases"]
@@ -292,6 +294,13 @@ def table_releases(imap: ImportMap, table: SourceTable, config: RigConfig
                          + "".join(f"; {note}" for note in table.notes))
     warnings += [f"{table.name}: {note}" for note in table.notes]
     t = _time_base(imap, table, n)
+    # A unit the map gets wrong (mm declared m, degrees declared rad, ms declared s) converts
+    # without a word and is only refused when the run is identified: said here, at the map.
+    try:
+        check_units(table.name, (n - 1) / float(t[-1] - t[0]), data["h"], data["alpha"],
+                    data.get("p"), config.section)
+    except PlausibilityError as exc:
+        raise UsageError(f"{exc}; or give the file's unit in {imap.path}") from exc
     pressures = None
     if imap.taps is not None:
         pressures = _tap_pressures(imap.taps, table, config)

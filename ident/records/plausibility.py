@@ -17,16 +17,17 @@ fh = 2 Hz, fa = 4 Hz, Jones's aerodynamics, releases from 4 mm and 0.02 rad at 0
   filled with zeros) is refused, naming it: unguarded, a constant force broke the least
   squares with a linear-algebra error, and a stuck pitch identified a model whose warnings
   named every cause but the channel.
-- **Sampling** (:func:`check_release`). A record whose Nyquist frequency lies below a
-  :data:`FREQUENCY_FACTOR`-th of the section's lowest still-air frequency cannot hold a mode:
-  refused, naming a time axis in milliseconds when the factor says so (unguarded: "no flutter",
-  with warnings about the release instant). Where the displacements' spectra peak is not
-  checked: large-scale turbulence puts the peak below the modes.
-- **Amplitudes** (:func:`check_release`, before identification). A pitch oscillating over
-  more than :data:`ALPHA_AMPLITUDE_MAX` (0.3 rad, 17 degrees) about its mean is no section
-  model's: a pitch in degrees (holds of 2-10 degrees read as radians) is refused. So is a
-  heave amplitude over :data:`HEAVE_AMPLITUDE_MAX` of the deck width (millimetres read as
-  metres), and a sway likewise.
+- **Sampling** (:func:`check_release`, and :func:`check_units` on bare channels, which
+  ``windrig import`` runs on every record it converts). A record whose Nyquist frequency lies
+  below a :data:`FREQUENCY_FACTOR`-th of the section's lowest still-air frequency cannot hold
+  a mode: refused, naming a time axis in milliseconds when the factor says so (unguarded: "no
+  flutter", with warnings about the release instant). Where the displacements' spectra peak
+  is not checked: large-scale turbulence puts the peak below the modes.
+- **Amplitudes** (:func:`check_release` and :func:`check_units`, before identification). A
+  pitch oscillating over more than :data:`ALPHA_AMPLITUDE_MAX` (0.3 rad, 17 degrees) about
+  its mean is no section model's: a pitch in degrees (holds of 2-10 degrees read as radians)
+  is refused. So is a heave amplitude over :data:`HEAVE_AMPLITUDE_MAX` of the deck width
+  (millimetres read as metres), and a sway likewise.
 - **Force magnitude** (:func:`check_release`). The rms force per unit span, over
   ``qd B`` (lift, drag) or ``qd B^2`` (moment), cannot exceed the rms of the motion ``q``
   times :data:`FORCE_BOUND_FACTOR` times the largest entry of a flat plate's ``|Q(iK)|`` at
@@ -66,7 +67,7 @@ from ident.records.release_onset import locate_release
 
 __all__ = ["AIR_DENSITY_RANGE", "ALPHA_AMPLITUDE_MAX", "FORCE_BOUND_FACTOR", "FREQUENCY_FACTOR",
            "HEAVE_AMPLITUDE_MAX", "START_OFFSET_WARN_S", "check_air_density", "check_channels",
-           "check_release", "check_start", "start_offset"]
+           "check_release", "check_start", "check_units", "start_offset"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -104,8 +105,13 @@ START_VELOCITY_MAX = 0.1
 
 
 def _amplitude(x: FloatArray) -> float:
-    """Half the 0.5-99.5 percentile range of a channel (robust to a few noise spikes)."""
-    low, high = np.percentile(x, [0.5, 99.5])
+    """Half the 0.5-99.5 percentile range of a channel (robust to a few noise spikes; gaps out).
+
+    A channel of gaps only has no amplitude to judge: zero.
+    """
+    if not np.any(np.isfinite(x)):
+        return 0.0
+    low, high = np.nanpercentile(x, [0.5, 99.5])
     return float(high - low) / 2.0
 
 
@@ -132,17 +138,49 @@ def check_release(release: Release, section: SectionModel) -> list[str]:
         sway amplitude over :data:`HEAVE_AMPLITUDE_MAX` deck widths ("looks like millimetres").
     """
     check_channels(release)
-    name = _name(release)
-    _check_sampling(release, section, name)
-    alpha = _amplitude(release.alpha)
-    if alpha > ALPHA_AMPLITUDE_MAX:
+    check_units(_name(release), release.fs, release.h, release.alpha, release.p, section)
+    return _force_magnitude(release, section)
+
+
+def check_units(name: str, fs: float, h: FloatArray, alpha: FloatArray, p: FloatArray | None,
+                section: SectionModel) -> None:
+    """Refuse a record whose time, pitch or heave unit no section model's motion allows.
+
+    The sampling, amplitude and unit part of :func:`check_release`, on bare channels, so that
+    a conversion (``windrig import``'s map) can run it before a release exists. Gaps (NaN) are
+    left out of the amplitudes.
+
+    Parameters
+    ----------
+    name : str
+        The record, for the messages.
+    fs : float
+        Sampling rate, Hz.
+    h, alpha : ndarray
+        Heave (m) and pitch (rad).
+    p : ndarray or None
+        Sway (m), if the section has it.
+    section : SectionModel
+        Its width ``B`` (m) and still-air frequencies (Hz).
+
+    Raises
+    ------
+    PlausibilityError
+        A record sampled too slowly for any mode (:data:`FREQUENCY_FACTOR`; "t looks like
+        milliseconds"), a pitch amplitude over :data:`ALPHA_AMPLITUDE_MAX` ("alpha looks like
+        degrees"), a heave or sway amplitude over :data:`HEAVE_AMPLITUDE_MAX` deck widths
+        ("looks like millimetres").
+    """
+    _check_sampling(fs, section, name)
+    alpha_amplitude = _amplitude(alpha)
+    if alpha_amplitude > ALPHA_AMPLITUDE_MAX:
         raise PlausibilityError(
-            f"{name}: alpha looks like degrees: it oscillates by {alpha:.3g} rad "
-            f"({math.degrees(alpha):.0f} degrees) about its mean, no section model's motion "
-            f"(at most {ALPHA_AMPLITUDE_MAX:g} rad); convert the pitch to radians "
-            f"(x pi/180: {math.radians(alpha):.3g} rad)")
+            f"{name}: alpha looks like degrees: it oscillates by {alpha_amplitude:.3g} rad "
+            f"({math.degrees(alpha_amplitude):.0f} degrees) about its mean, no section model's "
+            f"motion (at most {ALPHA_AMPLITUDE_MAX:g} rad); convert the pitch to radians "
+            f"(x pi/180: {math.radians(alpha_amplitude):.3g} rad)")
     B = section.B
-    for channel, values in (("h", release.h), ("p", release.p)):
+    for channel, values in (("h", h), ("p", p)):
         if values is None:
             continue
         amplitude = _amplitude(values)
@@ -151,7 +189,6 @@ def check_release(release: Release, section: SectionModel) -> list[str]:
                 f"{name}: {channel} looks like millimetres: it oscillates by {amplitude:.3g} m, "
                 f"{amplitude / B:.3g} deck widths (B = {B:g} m; at most {HEAVE_AMPLITUDE_MAX:g} "
                 f"B); convert it to metres (/1000: {amplitude / 1000:.3g} m)")
-    return _force_magnitude(release, section)
 
 
 def check_air_density(releases: Sequence[Release], section: SectionModel) -> list[str]:
@@ -216,7 +253,7 @@ def check_channels(release: Release, channels: Sequence[str] = tuple(_CHANNEL_UN
                    "displacement) reads the lasers alone" if force else ""))
 
 
-def _check_sampling(release: Release, section: SectionModel, name: str) -> None:
+def _check_sampling(fs: float, section: SectionModel, name: str) -> None:
     """Raise PlausibilityError when the record is sampled too slowly to hold any of the modes.
 
     Only that: where the displacements' spectra peak is no test of the section's frequencies,
@@ -224,16 +261,16 @@ def _check_sampling(release: Release, section: SectionModel, name: str) -> None:
     0.3 m plate at Iw 10 %: the peak at 0.1 Hz, a third of the heave's power in the modes' band).
     """
     still_air = [f for f in (section.fh, section.fa, section.fp) if f is not None]
-    nyquist = 0.5 * release.fs
+    nyquist = 0.5 * fs
     if nyquist * FREQUENCY_FACTOR >= min(still_air):
         return
     if nyquist * 1e3 >= min(still_air):
         why = ("t looks like milliseconds: give it in seconds (/1000; the record would then "
-               f"be sampled at {release.fs * 1e3:.4g} Hz)")
+               f"be sampled at {fs * 1e3:.4g} Hz)")
     else:
         why = "the time axis's unit, or the section's frequencies, are not this record's"
     raise PlausibilityError(
-        f"{name}: sampled at {release.fs:.4g} Hz, the record holds nothing above "
+        f"{name}: sampled at {fs:.4g} Hz, the record holds nothing above "
         f"{nyquist:.4g} Hz, but the section's still-air frequencies are "
         f"{', '.join(f'{f:g}' for f in still_air)} Hz: {why}")
 

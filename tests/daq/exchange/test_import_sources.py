@@ -114,6 +114,24 @@ def test_a_spreadsheets_trailing_rows_of_empty_cells_are_no_samples(tmp_path, ca
     assert np.array_equal(got["h"], cols["h"])
 
 
+@pytest.mark.parametrize(("column", "factor", "named"), [
+    ("h", 1e3, "h looks like millimetres"),
+    ("alpha", 180.0 / np.pi, "alpha looks like degrees"),
+    ("t", 1e3, "t looks like milliseconds"),
+], ids=["heave in mm", "pitch in degrees", "time in ms"])
+def test_a_unit_the_map_gets_wrong_is_refused_at_the_import(tmp_path, capsys, column, factor,
+                                                            named):
+    # The file in mm, degrees or ms, the map saying m, rad or s: converted without a word
+    # before, a run file of impossible motion that only `windrig identify` refused.
+    cols = columns()
+    cols[column] = cols[column] * factor
+    (tmp_path / "lab.csv").write_text(csv_text(cols))
+    map_text = MAP.replace("times = [1.0]", "times = [1000.0]") if column == "t" else MAP
+    code, _, err = run_import(tmp_path, map_text, tmp_path / "lab.csv", capsys=capsys)
+    one_error(code, err, "lab.csv", named, "map.toml")
+    assert not (tmp_path / "runs").exists()
+
+
 def test_an_empty_time_cell_is_named_by_its_row(tmp_path, capsys):
     cols = columns()
     cols["t"] = cols["t"].copy()
