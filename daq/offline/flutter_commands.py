@@ -346,6 +346,16 @@ def _table_fit(path: Path, convention: str, section: Any, out: dict[str, Any],
                          "has a lateral spring (fp): give all 18 (H1..H6, A1..A6, P1..P6)")
     if table.filled:
         print(f"note: {path} gives no {', '.join(table.filled)}: taken as zero")
+    if table.n_dof > section.n_dof:
+        # The section cannot sway, so these act on nothing; but a section file that left out
+        # its lateral spring by mistake would lose the sway coupling without a word.
+        from ident.model.conventions import FLUTTER_DERIVATIVE_NAMES
+
+        sway = [n for n in table.values if n not in FLUTTER_DERIVATIVE_NAMES + table.filled]
+        warnings.append(f"{path} gives the sway and drag derivatives {', '.join(sway)}, but the "
+                        "section has no lateral spring (fp): they are left out and the "
+                        "analysis is of heave and pitch alone; give fp and zeta_p in the "
+                        "section for three degrees of freedom")
     if table.K.size < 4:
         raise UsageError(f"{path}: {table.K.size} row(s); a flutter analysis from a table "
                          "needs at least 4 reduced frequencies")

@@ -7,6 +7,8 @@ flutter and buffeting"):
 - :mod:`~ident.bridge.model`: :class:`~ident.bridge.model.BridgeModel`, the bridge model file
   (deck nodes, modes, static coefficients), its validation, and the integrals of mode-shape
   products along the deck that give the modal aerodynamic matrices;
+- :mod:`~ident.bridge.mode_checks`: the modes' plausibility (masses and damping no deck has,
+  named by the unit slip that explains them);
 - :mod:`~ident.bridge.statespace`: the modal state-space model with modal lag states, whose
   matrix depends explicitly on U;
 - :mod:`~ident.bridge.flutter`: multimode flutter without iteration (state space), the

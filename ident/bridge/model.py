@@ -28,12 +28,11 @@ need not be orthogonal; :meth:`BridgeModel.notes` mentions it, nothing refuses i
 **Inputs checked.** A value the file leaves out and that has a default (``rho``, a mode's
 ``damping`` or ``generalised_mass``) is taken and recorded in :attr:`BridgeModel.defaults`, one
 line naming the file, the mode, the key and the value taken, for the command to print and write.
-Implausible inputs are recorded in :attr:`BridgeModel.warnings`: a mode's equivalent deck mass
-per metre, ``M / int (h^2 + (alpha B/2)^2 + p^2) dx``, more than :data:`MASS_SPREAD` times from
-the median of the other modes' (the example bridge's six modes lie within a factor 2.2 of each
-other: 10 281 kg/m in torsion, I / (B/2)^2, to 22 740 kg/m), or below :data:`LIGHTEST_DECK`
-kg/m (lighter than any deck: shapes normalised to a unit modal mass with the mass left at its
-default). A mode that does not move
+Implausible inputs are recorded in :attr:`BridgeModel.warnings` (:mod:`ident.bridge.mode_checks`):
+a mode's equivalent deck mass per metre far from the other modes' or lighter than any deck, the
+modes' common deck mass ratio no deck's (masses in tonnes, mass-normalised shapes with the
+finite-element program's modal mass, shapes in mm), a damping ratio of
+:data:`IMPLAUSIBLE_DAMPING` or more (a percentage written as a ratio). A mode that does not move
 the deck at all is an error: the wind cannot act on it, and a table's zero column or a shape
 in the wrong file is the likely cause.
 
@@ -54,10 +53,18 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from ident.bridge.mode_checks import (
+    IMPLAUSIBLE_DAMPING,
+    LIGHTEST_DECK,
+    MASS_SPREAD,
+    damping_warning,
+    deck_mass_ratio_warning,
+    mass_warnings,
+)
 from ident.model.quasi_steady import StaticCoefficients
 
-__all__ = ["DEFAULT_DAMPING", "DEFAULT_RHO", "LIGHTEST_DECK", "MASS_SPREAD", "BridgeModel", "Mode",
-           "SHAPE_NAMES"]
+__all__ = ["DEFAULT_DAMPING", "DEFAULT_RHO", "IMPLAUSIBLE_DAMPING", "LIGHTEST_DECK", "MASS_SPREAD",
+           "BridgeModel", "Mode", "SHAPE_NAMES"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -76,11 +83,6 @@ DEFAULT_RHO = 1.225
 DEFAULT_DAMPING = 0.003
 #: Generalised mass taken when a mode gives none, kg (shapes normalised to a unit modal mass).
 DEFAULT_MASS = 1.0
-#: A mode's equivalent deck mass per metre this many times from the others' median is flagged.
-MASS_SPREAD = 100.0
-#: An equivalent deck mass per metre below this, kg/m, is lighter than any deck (a 1:300
-#: aeroelastic model of a 20 t/m deck weighs 0.2 kg/m).
-LIGHTEST_DECK = 0.1
 
 
 @dataclass(frozen=True, eq=False)
@@ -432,10 +434,12 @@ follows 1
             raise ValueError(f"{len(mode_sources)} mode sources for {len(modes_data)} modes")
         labels = [mode_sources[r] if mode_sources is not None else f"{where}modes[{r}]"
                   for r in range(len(modes_data))]
+        warnings: list[str] = []
         modes = tuple(_mode(f"modes[{r}]" if mode_sources is None else mode_sources[r], entry,
-                            x.size, labels[r], defaults)
+                            x.size, labels[r], defaults, warnings)
                       for r, entry in enumerate(modes_data))
-        warnings = _mass_warnings(modes, labels, B, x, defaults)
+        warnings += mass_warnings(modes, labels, B, x, defaults)
+        warnings += deck_mass_ratio_warning(modes, B, rho, x, where)
         static = None
         if data.get("static") is not None:
             static = _static(data["static"])
@@ -459,11 +463,12 @@ def _vector(key: str, value: Any) -> FloatArray:
     return np.array([_number(f"{key}[{i}]", item) for i, item in enumerate(value)], dtype=float)
 
 
-def _mode(key: str, entry: Any, n_nodes: int, label: str, defaults: list[str]) -> Mode:
+def _mode(key: str, entry: Any, n_nodes: int, label: str, defaults: list[str],
+          warnings: list[str]) -> Mode:
     """Validate one mode; append a line to ``defaults`` for each default taken.
 
     ``key`` prefixes errors (``modes[2]``, or a mode table's file); ``label`` names the mode in
-    the defaults (with the bridge file).
+    the defaults and in ``warnings`` (an implausible damping ratio), with the bridge file.
     """
     if not isinstance(entry, Mapping):
         raise ValueError(f"{key} must be an object with frequency, damping and h/alpha/p")
@@ -490,6 +495,7 @@ def _mode(key: str, entry: Any, n_nodes: int, label: str, defaults: list[str]) -
         hint = (f" (a percentage? {damping:g} % is {damping / 100:g})" if damping >= 1.0 else "")
         raise ValueError(f"{key}.damping = {damping:g}: the damping ratio must be in [0, 1)"
                          f"{hint}")
+    warnings += damping_warning(label, damping)
     if "generalised_mass" not in entry:
         defaults.append(f"{label}: no generalised_mass: taken as {DEFAULT_MASS:g} kg (shapes "
                         "normalised to a unit modal mass)")
@@ -516,46 +522,6 @@ def _mode(key: str, entry: Any, n_nodes: int, label: str, defaults: list[str]) -
                          "(remove it, or check its shape columns)")
     return Mode(frequency=frequency, damping=damping, generalised_mass=mass, name=name,
                 **shapes)
-
-
-def _mass_warnings(modes: tuple[Mode, ...], labels: list[str], B: float, x: FloatArray,
-                   defaults: list[str]) -> list[str]:
-    """Generalised masses that cannot belong with their shapes or with the other modes'.
-
-    The equivalent deck mass per metre ``M / int (h^2 + (alpha B/2)^2 + p^2) dx`` (kg/m) puts
-    every mode on one scale whatever its normalisation; a mode's that is :data:`MASS_SPREAD`
-    times from the median of the others' (or lighter than :data:`LIGHTEST_DECK`) is named with
-    its generalised mass. A tower's or a cable's mode with little deck motion is heavy per deck
-    metre for a reason: the warning says so.
-    """
-    w = np.zeros(x.size)
-    w[:-1] += np.diff(x) / 2.0
-    w[1:] += np.diff(x) / 2.0
-    per_metre = np.array([m.generalised_mass / float(w @ (m.h**2 + (m.alpha * B / 2.0) ** 2
-                                                          + m.p**2)) for m in modes])
-    out = []
-    for r, mode in enumerate(modes):
-        label = f"{labels[r]} ({mode.name})" if mode.name else labels[r]
-        default = (" (the default: give the mode's generalised_mass)"
-                   if any(d.startswith(f"{label}: no generalised_mass") for d in defaults)
-                   else "")
-        if per_metre[r] < LIGHTEST_DECK:
-            out.append(f"{label}: generalised_mass = {mode.generalised_mass:g} kg{default} gives "
-                       f"an equivalent deck mass of {per_metre[r]:.3g} kg/m, lighter than any "
-                       f"deck ({LIGHTEST_DECK:g} kg/m): the mass and the shapes in different "
-                       "normalisations?")
-            continue
-        if len(modes) < 2:
-            continue
-        others = float(np.median(np.delete(per_metre, r)))
-        ratio = per_metre[r] / others
-        if ratio > MASS_SPREAD or ratio < 1.0 / MASS_SPREAD:
-            out.append(f"{label}: generalised_mass = {mode.generalised_mass:g} kg{default} gives "
-                       f"an equivalent deck mass of {per_metre[r]:.3g} kg/m, {ratio:.3g} times "
-                       f"the median of the other modes' ({others:.3g} kg/m): a mass in other "
-                       "units or normalisation, or a mode with little deck motion (a tower's or "
-                       "a cable's)?")
-    return out
 
 
 def _static(value: Any) -> StaticCoefficients:

@@ -22,7 +22,12 @@ from ident.bridge import flutter as bridge_flutter
 from ident.bridge.aero import BridgeAero, with_model
 from ident.bridge.model import BridgeModel
 from ident.model.rfc import RationalFunctionModel
-from ident.tables.flutter_routes import RouteComparison, compare_routes, next_structure_if_below
+from ident.tables.flutter_routes import (
+    RouteComparison,
+    compare_routes,
+    frequency_domain_failure,
+    next_structure_if_below,
+)
 
 __all__ = ["BridgeFlutter", "FAST_ABOVE_MODES", "METHODS", "bridge_flutter_routes"]
 
@@ -77,7 +82,10 @@ def bridge_flutter_routes(bridge: BridgeModel, aero: BridgeAero,
     analyze = fast_flutter.analyze if fast else bridge_flutter.analyze
     ss = analyze(bridge, aero.model, U_max=U_max)
     check = fast_flutter_fd.frequency_domain if fast else bridge_flutter.frequency_domain
-    fd = check(bridge, aero.flutter_derivatives, aero.K_range, U_max=ss.U_max)
+    try:
+        fd = check(bridge, aero.flutter_derivatives, aero.K_range, U_max=ss.U_max)
+    except ValueError as exc:
+        raise ValueError(frequency_domain_failure(aero.source, exc)) from exc
     notes: list[str] = []
     for route in (ss, fd):
         if route.certification is not None and "not certified" in route.certification:

@@ -200,9 +200,11 @@ class FlutterDerivativeTable:
         ----------
         path : path-like
             The CSV file: a header row, then one row per reduced frequency. Blank lines and
-            lines starting with ``#`` are skipped. Header names are case-insensitive and may
-            carry Scanlan's star (``H1*``). A column ``<name>_std`` (``H1_std``, ``H1*_std``)
-            is the std of that derivative, which the file must also give.
+            lines starting with ``#`` are skipped. ``K``, ``Ur`` and ``_std`` may be in either
+            case; the derivatives are Scanlan's capitals and may carry his star (``H1*``): lower
+            case (``h1*``) is Politecnico di Milano's notation and is refused, not guessed. A
+            column ``<name>_std`` (``H1_std``, ``H1*_std``) is the std of that derivative,
+            which the file must also give.
         convention : str
             One of :data:`CONVENTIONS`: the signs the file's derivatives are written in.
         n_dof : int, optional
@@ -213,7 +215,8 @@ class FlutterDerivativeTable:
         ------
         ValueError
             One line naming the file and what is wrong: no K or Ur column, an unknown column, a
-            value that is not a number (with its line), an unknown convention.
+            derivative headed in lower case (Milan's notation), a value that is not a number
+            (with its line), an unknown convention.
         """
         source = os.fspath(path)
         if convention not in CONVENTIONS:
@@ -229,6 +232,16 @@ class FlutterDerivativeTable:
         if unknown:
             raise ValueError(f"{source}: unknown column(s) {unknown}; allowed: K or Ur, then "
                              f"{', '.join(FLUTTER_DERIVATIVE_NAMES_3DOF)}")
+        polimi = [h for h in header[1:] if h.strip()[:1] in ("h", "a", "p")]
+        if polimi:
+            # Lower case is Politecnico di Milano's notation (h1*..a4*, p1*..p6*), whose
+            # normalisation and signs differ from Scanlan's: read as H1*.., every derivative
+            # would be silently wrong, and no convention here converts it.
+            raise ValueError(f"{source}: column(s) {polimi} are in lower case, the notation of "
+                             "Politecnico di Milano's derivatives (h1*..a4*, p1*..p6*), which "
+                             "differ from Scanlan's in normalisation and signs and are not "
+                             "converted; head Scanlan's derivatives in capitals (H1..A6, "
+                             "P1..P6), or convert a Milan table to them first")
         repeated = sorted({c for c in columns if columns.count(c) > 1})
         if repeated:
             raise ValueError(f"{source}: column(s) {repeated} appear twice")

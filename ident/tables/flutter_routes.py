@@ -47,8 +47,8 @@ from ident.tables.fd_table import FlutterDerivativeTable
 from ident.tables.roger_table import TableFit, fit_table
 
 __all__ = ["ROUTE_TOLERANCE", "RouteComparison", "SectionFlutter", "UNITS", "below_table",
-           "compare_routes", "next_structure_if_below", "section_flutter", "table_U_max",
-           "table_divergence_speed"]
+           "compare_routes", "frequency_domain_failure", "next_structure_if_below",
+           "section_flutter", "table_U_max", "table_divergence_speed"]
 
 #: Largest relative difference between the routes' flutter speeds taken as agreement.
 ROUTE_TOLERANCE = 0.005
@@ -394,7 +394,10 @@ def section_flutter(section: SectionModel, *, model: RationalFunctionModel | Non
     fit = fit_table(table) if fit is None else fit
     K_range = (float(table.K[0]), float(table.K[-1]))
     U_top = table_U_max(section, K_range[0]) if U_max is None else U_max
-    fd = flutter.frequency_domain(section, table.interpolator(), K_range)
+    try:
+        fd = flutter.frequency_domain(section, table.interpolator(), K_range)
+    except ValueError as exc:
+        raise ValueError(frequency_domain_failure(table.source, exc)) from exc
     model_used = fit.model if n == 3 else fit.model.planar()
     ss = flutter.analyze(section, model_used, U_top)
     fit_model = fit.model
@@ -425,6 +428,35 @@ def section_flutter(section: SectionModel, *, model: RationalFunctionModel | Non
                                 divergence_table_edge=table_divergence_speed(section, table),
                                 notes=tuple(notes))
     return SectionFlutter(comparison, ss, fd, model_used, fit)
+
+
+def frequency_domain_failure(source: str, exc: Exception) -> str:
+    """Say why the frequency-domain route stopped on a table, naming the table and the causes.
+
+    The route follows each still-air mode's root as K falls; it stops when a root is no longer
+    oscillatory (``expected 2 oscillatory roots at K = 0.48, found 1``): at that reduced
+    frequency the table's aerodynamic stiffness (``H4*``, ``A3*``, over ``K^2``) overcomes a
+    mode's spring. Alone, that message names neither the file nor a cause; the flat plate's
+    table with its H and A columns swapped stops so.
+
+    Parameters
+    ----------
+    source : str
+        The table's file (or the aerodynamics' source), for the message.
+    exc : Exception
+        What the route raised.
+
+    Returns
+    -------
+    str
+        One line for the error the caller raises from ``exc``.
+    """
+    where = f"{source}: " if source else ""
+    return (f"{where}the frequency-domain route (the flutter derivatives themselves) cannot "
+            f"follow the modes: {exc}: there the aerodynamic stiffness (H4*, A3*) overcomes "
+            "a mode's spring; a static divergence inside the table's reduced frequencies, or "
+            "derivatives in the wrong columns (H and A swapped?) or scaled (per degree, "
+            "times 2 pi)? Check the table's columns and units")
 
 
 def below_table(result: Any, K_high: float) -> bool:

@@ -35,6 +35,15 @@ The checks, and why each can be trusted:
   are not used. Only the signs are compared, on rows where both sides are clearly non-zero: a
   column whose sign is the opposite over most of them contradicts the other column (lift or
   heave positive upward, i.e. the ``z_up`` convention read as Scanlan's, flips exactly H3* and A1*).
+- **The size of H1* against K H3*** (:func:`_relation_scale`): on the rows where both are
+  clearly non-zero the median of ``|H1*| / |K H3*|`` is 0.90 to 1.0 on the exact flat plate
+  (K 0.1 to 4) and on the shipped bluff deck (quasi-steady, ``H1* = -(dC_L + C_D) / K`` against
+  ``H3* = -dC_L / K^2``, with a deck's drag a small part of its lift slope). A first column
+  that is not ``B omega / U`` moves it by the column's factor, and pitch derivatives per degree
+  by 180 / pi, so a median outside :data:`_SCALE_RANGE` is reported, with the slip its size
+  matches: K on the half-width ``b = B / 2`` (2), ``f B / U`` with f in Hz (2 pi), ``H2* H3*
+  A2* A3*`` per degree (57.3), K twice windrig's (1/2). A common factor on every derivative
+  (2 pi) leaves it alone and is not seen.
 - **A reduced velocity headed K** (:func:`_reduced_velocity_as_k`). Against K the derivatives
   that quasi-steady aerodynamics dominates fall as ``1 / K`` (H1*, A1*) and ``1 / K^2`` (H3*,
   A3*): fitted as powers of K over the table, -1.1 to -1.2 and -1.8 to -2.2 on the exact flat
@@ -120,6 +129,19 @@ _RELATIONS = (("H1", "H3"), ("A1", "A3"))
 _FALLING = ("H1", "H3", "A1", "A3")
 _RISING_POWER = 0.5
 _POWER_SPAN = 2.0
+#: Median ``|H1*| / |K H3*|`` outside which the table's K or pitch unit is doubted (0.90 to 1.0 on
+#: the flat plate and the shipped bluff deck; a slip moves it by 2 or more).
+_SCALE_RANGE = (0.62, 1.6)
+#: Slips the median ``|H1*| / |K H3*|`` names: its range, and what to change.
+_SCALE_SLIPS: tuple[tuple[float, float, str], ...] = (
+    (0.38, 0.62, "the first column looks like twice K = B omega / U: halve it"),
+    (1.6, 2.6, "the first column looks like a reduced frequency on the half-width, b omega / U "
+               "with b = B/2 (Theodorsen's k): double it (windrig's K = B omega / U has the "
+               "full width B)"),
+    (4.5, 9.0, "the first column looks like f B / U with f in Hz: multiply it by 2 pi"),
+    (30.0, 110.0, "the pitch derivatives (H2*, H3*, A2*, A3*) look given per degree: multiply "
+                  "them by 180/pi = 57.3"),
+)
 
 
 def check_table(table: FlutterDerivativeTable, path: str | os.PathLike[str] | None = None
@@ -177,6 +199,8 @@ def check_table(table: FlutterDerivativeTable, path: str | os.PathLike[str] | No
     for x_name, y_name in _RELATIONS:
         if x_name in given and y_name in given:
             out.extend(where + text for text in _relation_signs(table, x_name, y_name, rows))
+    if not headed_k and "H1" in given and "H3" in given:
+        out.extend(where + text for text in _relation_scale(table))
     if scatter and table.K.size >= SPARSE_ROWS:
         level = float(np.median(scatter))
         if level > NOISE_REPORTED:
@@ -413,6 +437,36 @@ def _shifted_damping(table: FlutterDerivativeTable, name: str,
             f"to {K_top[-1]:.3g}, where it is {y[0]:.4g} to {y[-1]:.4g}, fitted with a/K + b/K^2 "
             "+ s): a damping derivative vanishes as the reduced velocity goes to zero (still "
             f"air gives no aerodynamic damping); the column shifted by about {s:+.3g}?"]
+
+
+def _relation_scale(table: FlutterDerivativeTable) -> list[str]:
+    """``|H1*| ~ |K H3*|`` in size: a K column or a pitch unit off by a factor.
+
+    Parameters
+    ----------
+    table : FlutterDerivativeTable
+        The table, in windrig's signs (the sizes do not depend on them).
+
+    Returns
+    -------
+    list of str
+        Empty, or one line with the median ratio and the slip it matches, if one.
+    """
+    x = np.abs(np.asarray(table.values["H1"], dtype=float))
+    y = np.abs(np.asarray(table.K * table.values["H3"], dtype=float))
+    clear = (x > _FLOOR * np.max(x)) & (y > _FLOOR * np.max(y))
+    if np.count_nonzero(clear) < 3:
+        return []
+    ratio = float(np.median(x[clear] / y[clear]))
+    if _SCALE_RANGE[0] <= ratio <= _SCALE_RANGE[1]:
+        return []
+    causes = [text for low, high, text in _SCALE_SLIPS if low <= ratio <= high]
+    cause = (causes[0] if causes else "a first column other than K = B omega / U, or H1* or H3* "
+             "scaled by a factor?")
+    return [f"|H1*| is {ratio:.3g} times |K H3*| (median over {np.count_nonzero(clear)} rows), "
+            "where they are about equal (0.9 to 1 on the flat plate and the shipped bluff deck; "
+            f"Scanlan, Jones and Singh 1997): {cause}; unless this deck's lift slope is small "
+            "against its drag, every result from this table is wrong"]
 
 
 def _relation_signs(table: FlutterDerivativeTable, x_name: str, y_name: str,

@@ -5,10 +5,12 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from daq.cli import main
 from ident.model import flat_plate
+from ident.tables.fd_table import FlutterDerivativeTable
 
 from support.configs import BRIDGES
 
@@ -174,3 +176,21 @@ def test_the_fast_method_gives_the_dense_answer(tmp_path):
         assert fast[key] == pytest.approx(dense[key], rel=1e-9)
     assert fast["divergence_speed"] == pytest.approx(dense["divergence_speed"], rel=1e-6)
     assert fast["result"]["basis"] == dense["result"]["basis"] == "state-space"
+
+
+def test_a_table_with_h_and_a_swapped_is_one_error_line_naming_it(tmp_path, capsys):
+    """The plate's lift and moment columns swapped: the frequency domain loses a mode's root.
+
+    It ended the command with "error: expected 6 oscillatory roots at K = 0.5013, found 5",
+    without the file or a cause.
+    """
+    K = np.geomspace(0.2, 3.0, 40)
+    values = flat_plate.flutter_derivatives(K)
+    swapped = tmp_path / "swapped.csv"
+    FlutterDerivativeTable(K, {("A" if n[0] == "H" else "H") + n[1]: v
+                               for n, v in values.items()}).to_csv(swapped)
+    assert main(["bridge", str(BRIDGE), "--aero", str(swapped)]) == 1
+    lines = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert len(lines) == 1, lines
+    assert lines[0].startswith(f"error: {swapped}: the frequency-domain route"), lines[0]
+    assert "expected 6 oscillatory roots" in lines[0] and "H and A swapped?" in lines[0]

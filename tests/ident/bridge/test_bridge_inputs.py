@@ -7,6 +7,7 @@ Each awkward bridge is the shipped example bridge (six modes, 800 m span; equiva
 from __future__ import annotations
 
 import json
+import math
 import shutil
 from pathlib import Path
 
@@ -162,3 +163,76 @@ def test_windrig_bridge_warns_of_a_shifted_table_column(tmp_path: Path, capsys):
     # The table's warnings join the others of the result (the routes', the fit's).
     assert [w.split(", not")[0] for w in result["warnings"]
             if w.startswith(f"{table}: ")] == [f"{table}: A2* tends to +0.194"]
+
+
+def _mass_ratio_of_the_example() -> float:
+    """Return the example deck's mass ratio m / (rho B^2) (the guide's 22 740 kg/m)."""
+    return 22740.0 / (1.22 * 31.0**2)
+
+
+@pytest.mark.parametrize(("change", "cause"), [
+    ("tonnes", "the generalised masses look given in tonnes"),
+    ("mass-normalised", "the shapes look mass-normalised (generalised mass 1 kg) while "
+                        "generalised_mass gives the finite-element program's modal mass"),
+    ("mm", "h and p look given in mm (shapes in m, generalised masses in kg)"),
+])
+def test_a_slip_made_in_every_mode_is_named_by_the_deck_mass_ratio(tmp_path: Path, change,
+                                                                   cause):
+    """Every mode's mass in tonnes, or shapes mass-normalised with the FE's modal mass kept.
+
+    The modes then agree with each other, so the spread between modes saw nothing, and the
+    example bridge flutters at 77.13 m/s with the flat plate but gave "no flutter" without a
+    word. The median equivalent deck mass over rho B^2 is the deck's mass ratio, 19.4 for
+    the example (22 740 kg/m, B = 31 m, rho = 1.22); undoing the slip gives it back.
+    """
+    def slip(data):
+        for mode in data["modes"]:
+            scale = 1.0 / math.sqrt(mode["generalised_mass"])
+            if change == "tonnes":
+                mode["generalised_mass"] /= 1e3
+            for key in ("h", "alpha", "p") if change == "mass-normalised" else ("h", "p"):
+                if key in mode and change != "tonnes":
+                    factor = scale if change == "mass-normalised" else 1e3
+                    mode[key] = [factor * value for value in mode[key]]
+
+    path = _example_with(tmp_path, slip)
+    bridge = BridgeModel.from_json(path)
+    (found,) = [w for w in bridge.warnings if "mass ratio" in w]
+    assert found.startswith(f"{path}: the modes' equivalent deck mass per metre (median ")
+    assert f"{cause}, which undone gives {_mass_ratio_of_the_example():.3g}" in found, found
+
+
+def test_the_deck_mass_ratio_spares_the_example_and_one_heavy_mode(tmp_path: Path):
+    """One mode's slip is the spread check's (above), not the deck's: the median holds."""
+    assert BridgeModel.from_json(BRIDGE).warnings == ()
+    path = _example_with(tmp_path, lambda d: d["modes"][5].update(
+        generalised_mass=d["modes"][5]["generalised_mass"] * 1e3))
+    assert not any("mass ratio" in w for w in BridgeModel.from_json(path).warnings)
+
+
+def test_a_damping_percentage_given_as_a_ratio_is_warned_of(tmp_path: Path):
+    """0.5 meant as 0.5 %: 50 % of critical hid the example's flutter (no flutter below U_max)."""
+    def percent(data):
+        data["modes"][4]["damping"] = 0.5
+
+    path = _example_with(tmp_path, percent)
+    bridge = BridgeModel.from_json(path)
+    assert bridge.modes[4].damping == 0.5
+    assert bridge.warnings == (
+        f"{path}: modes[4] (T1S): damping = 0.5 is 50 % of critical, far above a bridge mode's "
+        "structural damping (0.2 % to 2 %): a percentage given as a ratio? 0.5 % is 0.005",)
+
+
+def test_the_bridge_command_prints_and_records_a_deck_mass_slip(tmp_path: Path, capsys):
+    """Tonnes in every mode: the warning printed and in the JSON's warnings."""
+    def tonnes(data):
+        for mode in data["modes"]:
+            mode["generalised_mass"] /= 1e3
+
+    path = _example_with(tmp_path, tonnes)
+    model = tmp_path / "model.json"
+    model.write_text(json.dumps(flat_plate.jones_model().to_dict()))
+    out = tmp_path / "result.json"
+    assert main(["bridge", str(path), "--aero", str(model), "--json", str(out)]) == 0
+    assert "look given in tonnes" in capsys.readouterr().out
+    assert any("look given in tonnes" in w for w in json.loads(out.read_text())["warnings"])

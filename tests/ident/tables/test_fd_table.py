@@ -87,7 +87,10 @@ def test_z_up_convention_is_the_same_physics_with_h_and_L_upward(tmp_path: Path)
     ("K,H1\n1,nan\n", "H1 is not finite at K = 1"),
     ("K,H1\n-1,2\n", "every K must be finite and > 0"),
     ("K,H1\n", "no rows below the header"),
-    ("K,H1,h1\n1,2,3\n", "appear twice"),
+    ("K,H1,H1*\n1,2,3\n", "appear twice"),
+    # Milan's notation, never read as Scanlan's capitals: a lower-case column is refused.
+    ("Ur,h1*,h4*,a1*,a4*\n5,1,2,3,4\n", "['h1*', 'h4*', 'a1*', 'a4*'] are in lower case"),
+    ("k,H1,a2\n1,2,3\n", "['a2'] are in lower case"),
 ])
 def test_bad_tables_get_one_clear_error(tmp_path: Path, text: str, message: str):
     path = tmp_path / "bad.csv"

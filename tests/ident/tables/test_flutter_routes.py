@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from ident.model import flutter
+from ident.model import flat_plate, flutter
 from ident.model.flat_plate import plate_model
 from ident.model.section import SectionModel
 from ident.tables.fd_table import FlutterDerivativeTable
@@ -211,3 +211,22 @@ def test_a_wide_3dof_table_of_a_bluff_deck_agrees_within_half_a_percent():
     assert routes.fit is not None and routes.fit.meets_accuracy, routes.fit.summary()
     assert abs(c.difference) < ROUTE_TOLERANCE
     assert c.speed == pytest.approx(flutter.analyze(section, truth).speed, rel=ROUTE_TOLERANCE)
+
+
+def test_a_table_with_its_h_and_a_columns_swapped_is_named_not_a_bare_root_count(tmp_path):
+    """The flat plate's table with the lift's and the moment's columns swapped.
+
+    The frequency domain loses a root where the swapped "A3*" (the lift's -132 at K = 0.2)
+    overcomes the pitch spring; it stopped the command with "expected 2 oscillatory roots at
+    K = 0.4825, found 1", naming neither the file nor a cause.
+    """
+    K = np.geomspace(0.2, 3.0, 40)
+    plate = FlutterDerivativeTable(K, flat_plate.flutter_derivatives(K))
+    swapped = {("A" if n[0] == "H" else "H") + n[1]: v for n, v in plate.values.items()}
+    path = tmp_path / "swapped.csv"
+    FlutterDerivativeTable(K, swapped).to_csv(path)
+    table = FlutterDerivativeTable.from_csv(path)
+    with pytest.raises(ValueError, match=r"swapped\.csv: the frequency-domain route .* cannot "
+                                         r"follow the modes: expected 2 oscillatory roots") as err:
+        section_flutter(FLAT_PLATE, table=table)
+    assert "H and A swapped?" in str(err.value)

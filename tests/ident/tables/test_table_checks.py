@@ -251,3 +251,61 @@ def test_a_table_that_stops_short_of_the_flutter_K():
     assert check_flutter_range(short, None) == []
     # Seven rows: the table is also sparse.
     assert check_table(short)[0].startswith("short.csv: sparse: 7 rows")
+
+
+def _theodorsen_table(K: np.ndarray) -> dict[str, np.ndarray]:
+    """Return the flat plate's eight derivatives by Theodorsen's closed form, written here.
+
+    Independent of :mod:`ident.model.flat_plate`: C(k) = H1(k) / (H1(k) + i H0(k)) with Hankel
+    functions of the second kind, k = K / 2, and Scanlan's forms (DESIGN, conventions).
+    """
+    from scipy.special import hankel2
+
+    k = K / 2.0
+    C = hankel2(1, k) / (hankel2(1, k) + 1j * hankel2(0, k))
+    F, G, pi = C.real, C.imag, math.pi
+    return {"H1": -2 * pi * F / K, "H2": -(pi / (2 * K)) * (1 + F + 4 * G / K),
+            "H3": -(2 * pi / K**2) * (F - K * G / 4), "H4": (pi / 2) * (1 + 4 * G / K),
+            "A1": pi * F / (2 * K), "A2": -(pi / (8 * K)) * (1 - F - 4 * G / K),
+            "A3": (pi / (2 * K**2)) * (K**2 / 32 + F - K * G / 4), "A4": -pi * G / (2 * K)}
+
+
+def _ratio(found: str) -> float:
+    """Return the median |H1*| / |K H3*| a scale warning states."""
+    return float(found.split("|H1*| is ")[1].split(" times")[0])
+
+
+@pytest.mark.parametrize(("factor", "pitch", "cause"), [
+    (0.5, 1.0, "reduced frequency on the half-width, b omega / U"),
+    (2.0, 1.0, "looks like twice K = B omega / U"),
+    (1 / (2 * math.pi), 1.0, "f B / U with f in Hz"),
+    (1.0, math.pi / 180, "pitch derivatives (H2*, H3*, A2*, A3*) look given per degree"),
+])
+def test_a_k_column_or_pitch_unit_off_by_a_factor_is_named(factor, pitch, cause):
+    """The flat plate with its K column scaled, or its pitch derivatives per degree.
+
+    Each gave a flutter speed with no warning (Theodorsen's plate on the test rig, 11.85 m/s:
+    23.70 with K on the half-width, 5.93 with K doubled, 27.5 per degree). The clean
+    plate's median |H1*| / |K H3*| is 0.9 to 1 (Theodorsen, written out above); the slip moves
+    it by the factor, which the warning states.
+    """
+    K = np.geomspace(0.2, 3.0, 40)
+    exact = _theodorsen_table(K)
+    clean_ratio = float(np.median(np.abs(exact["H1"] / (K * exact["H3"]))))
+    assert 0.9 < clean_ratio < 1.0
+    assert check_table(FlutterDerivativeTable(K, exact)) == []
+    values = {n: v * pitch if n in ("H2", "H3", "A2", "A3") else v for n, v in exact.items()}
+    (found,) = check_table(FlutterDerivativeTable(K * factor, values, source="deck.csv"))
+    assert found.startswith("deck.csv: |H1*| is ") and cause in found, found
+    expected = clean_ratio / factor / pitch
+    assert _ratio(found) == pytest.approx(expected, rel=0.03)
+
+
+def test_the_scale_check_spares_clean_and_noisy_tables_and_the_bluff_decks():
+    """No scale warning on the bluff decks (0.90-0.99) or under 5 % noise (ten seeds)."""
+    tables = [_example(), _plate(60, (0.1, 4.0)),
+              FlutterDerivativeTable.from_model(bluff_deck_3dof_model(), np.geomspace(0.05, 3, 60))]
+    for table in tables:
+        assert check_table(table) == []
+        for seed in range(10):
+            assert not any("|H1*|" in w for w in check_table(_noisy(table, 0.05, seed)))
