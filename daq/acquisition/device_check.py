@@ -53,9 +53,9 @@ import numpy as np
 from daq.acquisition.device_inspections import INSPECT, CheckLimits, Findings
 from daq.acquisition.drivers import ROLE_KINDS
 from daq.config import InstrumentConfig, RigConfig
-from daq.errors import DaqError, DeviceCheckError
+from daq.errors import DaqError, DeviceCheckError, PluginError
 from daq.instruments.build import build_driver
-from daq.instruments.reading import Reading
+from daq.instruments.reading import Reading, stream_breaches
 
 __all__ = ["CheckLimits", "CheckResult", "check_rig", "failure_lines", "format_table",
            "require_devices_ok"]
@@ -237,6 +237,7 @@ class _DeviceCheck:
         self._gave_up = False  # the device's own thread ended its check on an exception
         self._start = time.monotonic()
         self._elapsed = 0.0
+        self._last_counter: int | None = None  # of the readings checked so far (_checked)
         self.thread = threading.Thread(target=self._run, name=f"windrig-check-{inst.name}",
                                        daemon=True)
 
@@ -318,7 +319,7 @@ class _DeviceCheck:
         end = time.monotonic() + self.window_s
         while (left := end - time.monotonic()) > 0 and self._abandoned is None:
             try:
-                readings.append(read(min(left, 0.2)))
+                readings.append(self._checked(read(min(left, 0.2))))
             except TimeoutError:  # TransportTimeout: nothing within the slice, go on
                 continue
         return readings
@@ -332,13 +333,37 @@ class _DeviceCheck:
             if self._abandoned is not None:
                 break
             sent = time.monotonic()
-            readings.append(read())
+            readings.append(self._checked(read()))
             trips.append(time.monotonic() - sent)
             wait = start + (i + 1) * self.window_s / n - time.monotonic()
             if i + 1 < n and wait > 0:
                 time.sleep(wait)
         self.found.poll_s = float(np.median(trips)) if trips else None
         return readings
+
+    def _checked(self, reading: Reading) -> Reading:
+        """Return ``reading`` if the engine would record it, else raise what breaks it.
+
+        The engine checks every reading the same way (``stream_breaches``) and stops reading a
+        device whose driver breaks the contract; the check says so before a run, rather than
+        judge a reading of the wrong shape (the first of two values read as the pressure).
+
+        Raises
+        ------
+        PluginError
+            The reading differs from the driver's ``describe()``, or its counter goes back.
+        """
+        describe = getattr(self.driver, "describe", None)
+        described = dict(describe()) if callable(describe) else None
+        problems = stream_breaches(described, reading, self._last_counter)
+        if problems:
+            kind = type(self.driver)
+            raise PluginError(f"its driver {kind.__module__}.{kind.__qualname__} delivered a "
+                              "reading that breaks the reading contract (docs/guides/"
+                              f"drivers.md): {'; '.join(problems)}")
+        if len(reading):
+            self._last_counter = int(reading.counter[-1])
+        return reading
 
 
 def _why(exc: BaseException) -> str:

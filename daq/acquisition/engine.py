@@ -56,6 +56,7 @@ from daq.acquisition.dispatch import Dispatcher, Subscriber
 from daq.acquisition.fan_watch import FanWatch
 from daq.acquisition.reader import DeviceReader
 from daq.acquisition.records import DeviceStats, Event
+from daq.errors import DaqError
 
 __all__ = ["Acquisition"]
 
@@ -238,7 +239,8 @@ class Acquisition:
             ``reason``, ``duration_s``, ``devices`` (per-device :class:`DeviceStats` as dicts),
             ``overflows`` and ``overflow_samples`` (totals), ``faults``, ``events_dropped``,
             ``subscriber_errors``, ``releases`` (their events), ``errors`` (failures while
-            stopping), ``threads_alive`` (threads that did not finish: should be empty).
+            stopping, and every device whose reader a driver's bug stopped), ``threads_alive``
+            (threads that did not finish: should be empty).
         """
         if self._dispatch.on_own_thread():
             raise RuntimeError("stop() called from a subscriber: it would wait for itself")
@@ -274,6 +276,15 @@ class Acquisition:
                 msg = f"reader {reader.name} did not finish within the join timeout"
                 log.error(msg)
                 self._errors.append(msg)
+        if "failed" not in self._stop_done:
+            # A reader stopped by a driver's bug read nothing more for the rest of the run: a
+            # fault event says when, and the summary's errors say it at the end too (``windrig
+            # acquire`` prints them and exits 1), rather than a run that ends as if complete.
+            for reader in readers:
+                if reader.failed is not None:
+                    self._errors.append(f"{reader.name}: read no more after its driver failed: "
+                                        f"{_one_line(reader.failed)}")
+            self._stop_done.add("failed")
         if not self._dispatch.finish(self._join_timeout_s):
             msg = "dispatcher did not finish (a subscriber blocks?)"
             log.error(msg)
@@ -597,6 +608,12 @@ class Acquisition:
             "errors": list(self._errors),
             "threads_alive": alive,
         }
+
+
+def _one_line(exc: BaseException) -> str:
+    """Say an exception in one line: a windrig error's message, else its type and message."""
+    text = " ".join(str(exc).split())
+    return text if isinstance(exc, DaqError) and text else f"{type(exc).__name__}: {text}"
 
 
 def _describe(driver: Any) -> dict[str, Any]:

@@ -62,8 +62,8 @@ from daq.acquisition.records import (
     FloatArray,
     StreamBlock,
 )
-from daq.errors import DaqError, TransportError, TransportTimeout
-from daq.instruments.reading import Gap, Reading
+from daq.errors import DaqError, PluginError, TransportError, TransportTimeout
+from daq.instruments.reading import Gap, Reading, stream_breaches
 
 __all__ = ["DeviceReader"]
 
@@ -190,6 +190,11 @@ class DeviceReader:
         self._drops: list[DropRun] = []
         self._next_drop_log = 0.0
         self.failed: BaseException | None = None
+        # What every reading is checked against (_breach): the driver's describe(), taken at
+        # the first reading (after open(): some drivers learn their channels there), and the
+        # last counter queued.
+        self._described: dict[str, Any] | None = None
+        self._last_counter: int | None = None
 
     # -- life cycle (called by the Acquisition) --------------------------------------------------
     def open_device(self) -> None:
@@ -270,6 +275,9 @@ class DeviceReader:
         self._check_paused_scanner("drain()")
         readings = self.driver.drain(timeout_s)
         for r in readings:
+            breach = self._breach(r)
+            if breach is not None:
+                raise breach
             self._offer(r)
         return len(readings)
 
@@ -419,6 +427,12 @@ class DeviceReader:
                     self._recovered(consecutive)
                     consecutive, stalled, error, reconnected_ns = 0, False, None, None
                     delay = self._backoff[0]
+                breach = self._breach(reading)
+                if breach is not None:  # a driver's bug: named once, never recorded
+                    log.error("%s: %s", self.name, breach)
+                    self.failed = breach
+                    self._fault(breach, consecutive + 1, fatal=True)
+                    break
                 self._offer(reading)
         except Exception as exc:  # a bug, not a device fault: reported as fatal, never retried
             log.exception("%s: reader failed; it reads no more", self.name)
@@ -444,6 +458,22 @@ class DeviceReader:
         self._on_event(Event(kind="recovered", host_time_ns=time.monotonic_ns(),
                              device=self.name, text=f"data again after {faults} fault(s)",
                              data={"faults": faults}))
+
+    def _breach(self, reading: Reading) -> PluginError | None:
+        """Check a reading before it is queued; return the error naming its breaches, if any."""
+        if self._described is None:
+            describe = getattr(self.driver, "describe", None)
+            self._described = dict(describe()) if callable(describe) else {}
+        problems = stream_breaches(self._described or None, reading, self._last_counter)
+        if problems:
+            driver = type(self.driver)
+            return PluginError(
+                f"its driver {driver.__module__}.{driver.__qualname__} delivered "
+                f"a reading that breaks the reading contract (docs/guides/drivers.md): "
+                f"{'; '.join(problems)}; not recorded, and this device is read no more")
+        if len(reading):
+            self._last_counter = int(reading.counter[-1])
+        return None
 
     def _offer(self, reading: Reading) -> None:
         block = StreamBlock.of(self.name, self.kind, self._seq, reading)

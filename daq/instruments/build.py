@@ -8,7 +8,10 @@ byte transport with the driver's line defaults (a ``serial://`` query overrides 
 drive always receives the rig's fan-speed limit. A polled driver (fan, PLC, barometer) whose
 settings set ``poll_interval_s`` must keep them as its ``settings`` attribute, where the engine
 reads the period (:func:`daq.acquisition.adapters.make_adapter`): one that does not is refused
-here rather than polled at the default period without a word.
+here rather than polled at the default period without a word. The driver's own code (its
+``validate``, ``link`` and ``factory``) is called through
+:func:`daq.instruments.registry.call_driver_code`: an exception that is not windrig's is a
+PluginError naming the driver and its distribution, not a traceback.
 """
 
 from __future__ import annotations
@@ -40,16 +43,20 @@ def build_driver(inst: InstrumentConfig, limits: Limits) -> Any:
         raise ConfigError(f"instrument {inst.name!r} has url = 'auto': start the simulated rig "
                           "(windrig simulate) or give the instrument's real URL")
     entry = registry.driver_entry(inst.driver)
-    settings = entry.validate(inst.settings, f"instrument {inst.name!r}")
+    where = f"instrument {inst.name!r}"
+    settings = registry.call_driver_code(entry, f"validate of {where}", entry.validate,
+                                         inst.settings, where)
     link: Any
     if entry.link is not None:
-        link = entry.link(inst.url)
+        link = registry.call_driver_code(entry, f"link({inst.url!r}) of {where}", entry.link,
+                                         inst.url)
     elif inst.url.startswith("modbus+"):
         link = ModbusBus(inst.url)
     else:
         link = open_transport(inst.url, **dict(entry.transport_defaults))
     extra = {"limit_rpm": limits.max_fan_rpm} if inst.role == "fan" else {}
-    driver = entry.factory(link, settings, **extra)
+    driver = registry.call_driver_code(entry, f"factory of {where}", entry.factory, link,
+                                       settings, **extra)
     problem = poll_settings_problem(inst.role, driver, settings)
     if problem is not None:
         raise PluginError(f"driver {entry.name!r} of instrument {inst.name!r}: {problem}")

@@ -4,7 +4,8 @@ Responsibility: :class:`Reading`, one read of one driver (a block of rows: the c
 host arrival times, the device times, the unwrapped counters, the gaps and per-read facts), the
 one :class:`Gap` type of every stream (drivers, the engine's dropped blocks, counter unwrapping
 in :mod:`daq.sync.counters`), :class:`PollSequence` (the poll numbers and gaps of the polled
-drivers) and :func:`describe_mismatches` (a ``describe()`` checked against a reading).
+drivers), :func:`describe_mismatches` (a ``describe()`` checked against a reading) and
+:func:`stream_breaches` (what the engine checks of every reading before it records it).
 
 The contract, for every driver alike:
 
@@ -31,7 +32,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["GAP_KINDS", "Gap", "PollSequence", "Reading", "describe_mismatches"]
+__all__ = ["GAP_KINDS", "Gap", "PollSequence", "Reading", "describe_mismatches",
+           "stream_breaches"]
 
 IntArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
@@ -179,4 +181,48 @@ def describe_mismatches(described: Mapping[str, Mapping[str, Any]], reading: Rea
     t = reading.device_time
     if t is not None and (t.shape != (n,) or t.dtype != np.float64):
         out.append(f"device_time: {t.dtype} {t.shape}, expected float64 ({n},)")
+    return out
+
+
+def stream_breaches(described: Mapping[str, Mapping[str, Any]] | None, reading: Any,
+                    last_counter: int | None) -> list[str]:
+    """List how one reading of a stream breaks the contract the recorder relies on.
+
+    The engine checks every reading with this before it queues it: a reading that is not a
+    :class:`Reading`, that differs from the driver's ``describe()`` (the run file's datasets are
+    laid out from it, so a wrong shape stops the writer and with it the whole run), or whose
+    counter does not increase (within the reading, and after ``last_counter``, the last one of
+    the stream: rows recorded out of order, or twice, without a word) is a driver's bug, found
+    here and named rather than recorded or crashing downstream.
+
+    Parameters
+    ----------
+    described : mapping or None
+        The driver's ``describe()``; None when the driver has none (its channels are then not
+        checked).
+    reading : object
+        What the driver's ``read()`` (or ``drain()``) returned.
+    last_counter : int or None
+        The counter of the stream's last row delivered before, None before the first.
+
+    Returns
+    -------
+    list of str
+        The breaches, empty when the reading may be recorded.
+    """
+    if not isinstance(reading, Reading):
+        return [f"read() returned a {type(reading).__name__}, not a "
+                "daq.instruments.reading.Reading"]
+    stamps = reading.host_time_ns
+    if not (isinstance(stamps, np.ndarray) and stamps.ndim == 1):  # len(reading) needs it
+        return [f"host_time_ns is a {type(stamps).__name__} of shape "
+                f"{getattr(stamps, 'shape', '?')}, expected an int64 array (n,)"]
+    out = [] if described is None else describe_mismatches(described, reading)
+    counter = np.asarray(reading.counter)
+    if out or counter.ndim != 1 or counter.size == 0:
+        return out  # the counters' shapes are in ``out`` already, or there are no rows
+    if counter.size > 1 and np.any(np.diff(counter) < 1):
+        out.append("counter does not increase within the reading")
+    if last_counter is not None and int(counter[0]) <= last_counter:
+        out.append(f"counter goes back: {int(counter[0])} after {last_counter}")
     return out

@@ -11,7 +11,9 @@ refused.
 
 A broken plugin is one :class:`~daq.errors.PluginError` line naming its distribution and entry
 point: an import that fails, an object that is not a ``DriverEntry``, an entry that names
-another driver or a role windrig does not have, two distributions giving the same name.
+another driver or a role windrig does not have, two distributions giving the same name, and a
+driver's own code (its ``validate``, ``link`` or ``factory``, :func:`call_driver_code`) raising
+anything but windrig's own exceptions.
 
 The rig config asks the registry to validate an instrument table (:func:`validate_settings`),
 :func:`daq.instruments.build.build_driver` asks it for the factory, and ``windrig drivers``
@@ -26,11 +28,11 @@ from dataclasses import dataclass
 from importlib.metadata import EntryPoint, entry_points
 from typing import Any
 
-from daq.errors import ConfigError, PluginError
+from daq.errors import ConfigError, DaqError, PluginError
 from daq.instruments.entry import ROLES, DriverEntry
 
-__all__ = ["GROUP", "DriverInfo", "available_drivers", "driver_entry", "register",
-           "scanner_layout", "unregister", "validate_settings"]
+__all__ = ["GROUP", "DriverInfo", "available_drivers", "call_driver_code", "driver_entry",
+           "driver_origin", "register", "scanner_layout", "unregister", "validate_settings"]
 
 #: The entry-point group through which distributions contribute drivers.
 GROUP = "windrig.drivers"
@@ -39,6 +41,8 @@ GROUP = "windrig.drivers"
 _REGISTERED: dict[str, DriverEntry] = {}
 #: Entries loaded from entry points, by name (each loaded once per process).
 _LOADED: dict[str, DriverEntry] = {}
+#: Where each loaded entry comes from (distribution and entry point), for messages.
+_ORIGINS: dict[str, str] = {}
 _LOCK = threading.RLock()  # the device check builds drivers on several threads at once
 
 
@@ -121,7 +125,51 @@ def driver_entry(name: str) -> DriverEntry:
                               f"distribution adds drivers through the entry-point group "
                               f"{GROUP!r}: windrig drivers lists them)")
         _LOADED[name] = _load(found)
+        _ORIGINS[name] = _where(found[0])
         return _LOADED[name]
+
+
+def driver_origin(name: str) -> str:
+    """Say where the loaded driver ``name`` comes from: its distribution and entry point.
+
+    ``"registered in code"`` for :func:`register`; ``"not loaded"`` for a name not loaded yet.
+    """
+    with _LOCK:
+        if name in _REGISTERED:
+            return "registered in code"
+        return _ORIGINS.get(name, "not loaded")
+
+
+def call_driver_code(entry: DriverEntry, what: str, func: Any, *args: Any, **kwargs: Any) -> Any:
+    """Call a driver's own code (``validate``, ``link``, ``factory``, ``describe``) for windrig.
+
+    A driver raises windrig's exceptions (:mod:`daq.errors`: a ``ConfigError`` for a bad table);
+    those pass unchanged. Anything else (a plugin's ``KeyError``, ``AttributeError``) is a bug
+    of that driver, and without this it would reach the user as a traceback from the rig
+    config's loading, or as a bare message naming neither the driver nor its plugin. It becomes
+    one :class:`~daq.errors.PluginError` line naming the driver, its distribution, the call and
+    the exception (chained: ``windrig --debug`` shows the driver's traceback).
+
+    Parameters
+    ----------
+    entry : DriverEntry
+        The driver whose code is called.
+    what : str
+        The call and what it was for, for the message (``"validate of rig.toml [barometer]"``).
+    func : callable
+        The driver's code; called with ``args`` and ``kwargs``.
+    """
+    try:
+        return func(*args, **kwargs)
+    except DaqError:
+        raise
+    except Exception as exc:
+        text = " ".join(str(exc).split())
+        raise PluginError(
+            f"driver {entry.name!r} ({driver_origin(entry.name)}): its {what} raised "
+            f"{type(exc).__name__}{': ' + text if text else ''} (a driver raises the exceptions "
+            "of daq.errors, a ConfigError for a bad setting: this is a bug of the driver)",
+        ) from exc
 
 
 def validate_settings(driver: str, role: str, settings: Mapping[str, Any], where: str) -> Any:
@@ -132,7 +180,7 @@ def validate_settings(driver: str, role: str, settings: Mapping[str, Any], where
         raise ConfigError(f"{where}: {exc}") from exc
     if entry.role != role:
         raise ConfigError(f"{where}: driver {driver!r} is a {entry.role} driver, not a {role}")
-    return entry.validate(settings, where)
+    return call_driver_code(entry, f"validate of {where}", entry.validate, settings, where)
 
 
 class _NoLink:
@@ -152,8 +200,10 @@ def scanner_layout(driver: str, settings: Mapping[str, Any], where: str) -> tupl
     (construction and ``describe()`` do no I/O) and thrown away.
     """
     entry = driver_entry(driver)
-    built = entry.factory(_NoLink(), entry.validate(settings, where))
-    described = built.describe()
+    validated = call_driver_code(entry, f"validate of {where}", entry.validate, settings, where)
+    built = call_driver_code(entry, f"factory (built without I/O for {where})", entry.factory,
+                             _NoLink(), validated)
+    described = call_driver_code(entry, f"describe() (for {where})", built.describe)
     try:
         channels = int(tuple(described["pressure"]["shape"])[0])
         modules = int(tuple(described["module_status"]["shape"])[0])

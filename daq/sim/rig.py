@@ -20,6 +20,11 @@ Pitot's dynamic pressure); their URLs keep the task's channels and get the simul
 registers (:func:`daq.instruments.ni_daqmx.runtime.register_standin`). Their simulation
 settings are the first instrument's table of each device.
 
+Simulators bind to loopback only, a plugin's as much as windrig's own: a simulator whose URL
+names another host, or whose ports answer on one of this host's other addresses (bound to
+``0.0.0.0``), is stopped and refused (:func:`_refuse_exposed`): a simulated release PLC or fan
+drive must not be reachable from the lab's network.
+
 Per-instrument simulation settings come from ``[simulation.devices.<name>]``: ``clock_offset_s``,
 ``clock_drift_ppm`` and ``seed`` (with the instrument's place in the config: equal seeds give
 different instruments different noise) for every device, and any further keyword the device's
@@ -30,15 +35,18 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import ipaddress
 import logging
 import math
+import socket
+import urllib.parse
 from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
 from daq.config import InstrumentConfig, RigConfig
-from daq.errors import ConfigError
+from daq.errors import ConfigError, PluginError
 from daq.instruments.ni_daqmx.address import TaskAddress
 from daq.instruments.ni_daqmx.runtime import register_standin
 from daq.instruments.ni_daqmx.settings import (
@@ -164,6 +172,7 @@ def start_simulated_rig(
             rig.urls[inst.name] = url
             settings = dict(simulator_entry(inst.driver, config.source).settings(
                 inst.settings, simulator))
+            _refuse_exposed(inst, url, settings, config.source)
             resolved.append(dataclasses.replace(inst, url=url, settings=settings))
     except BaseException:
         rig.close()
@@ -247,6 +256,77 @@ def _sensor_errors(config: RigConfig, inst: InstrumentConfig) -> dict[str, Any]:
         return {"reading_error": (laser.gain, 1e3 * laser.offset_m,
                                   math.degrees(laser.angle_rad))}
     return {}
+
+
+def _refuse_exposed(inst: InstrumentConfig, url: str, settings: Mapping[str, Any],
+                    source: str) -> None:
+    """Refuse a started simulator that can be reached from outside this host.
+
+    Two checks, for a URL with a network host (``tcp://``, ``socket://``, ``modbus+tcp://``;
+    a pty's ``serial://`` has none): the host must be a loopback address, and neither the URL's
+    port nor a ``*_port`` of the driver's settings (the scanner's ``data_port``) may accept a
+    connection on this host's own outward address, which a listener bound to ``0.0.0.0`` does
+    whatever URL it returns. The probe connects to that address only: a simulator bound to
+    127.0.0.1 refuses it at once and never sees it. A host without an outward address exposes
+    nothing, so there is nothing to probe.
+
+    Raises
+    ------
+    PluginError
+        The simulator is exposed (the caller stops every simulator started).
+    """
+    parts = urllib.parse.urlsplit(url)
+    if parts.hostname is None:
+        return
+    what = (f"{source}: the simulator of instrument {inst.name!r} (driver {inst.driver!r}) "
+            f"serves {url}")
+    rule = ("simulators bind to loopback only, so that a simulated instrument (a release PLC, a "
+            "fan drive) cannot be reached from the lab's network: bind ('127.0.0.1', port) and "
+            "return that URL")
+    if not _is_loopback(parts.hostname):
+        raise PluginError(f"{what}, not a loopback address: {rule}")
+    outward = _outward_address()
+    if outward is None:
+        return
+    ports = [parts.port] + [v for k, v in settings.items()
+                            if k.endswith("_port") and isinstance(v, int)]
+    for port in ports:
+        if port is not None and _accepts(outward, port):
+            raise PluginError(f"{what}, but its port {port} also accepts connections on this "
+                              f"host's address {outward} (bound to every interface): {rule}")
+
+
+def _is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:  # a host name: not loopback unless it is "localhost"
+        return False
+
+
+def _outward_address() -> str | None:
+    """Return this host's address towards other hosts (None: it has none but loopback).
+
+    A UDP socket "connected" to a documentation address (RFC 5737) takes the address the
+    routing table would send from; no packet is sent.
+    """
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        try:
+            probe.connect(("192.0.2.1", 9))
+        except OSError:  # no route at all: only loopback
+            return None
+        address = str(probe.getsockname()[0])
+    return None if ipaddress.ip_address(address).is_loopback else address
+
+
+def _accepts(address: str, port: int) -> bool:
+    """Tell whether ``address:port`` accepts a TCP connection (closed again at once)."""
+    try:
+        with socket.create_connection((address, port), timeout=0.5):
+            return True
+    except OSError:  # refused (or no answer): not listening there
+        return False
 
 
 def _build(inst: InstrumentConfig, tunnel: VirtualTunnel, options: Mapping[str, Any],

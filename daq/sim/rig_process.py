@@ -19,6 +19,7 @@ Not responsible for: the simulators (:mod:`simulators`), checking a run (:mod:`d
 
 from __future__ import annotations
 
+import logging
 import multiprocessing
 from typing import Any
 
@@ -26,10 +27,13 @@ import numpy as np
 import numpy.typing as npt
 
 from daq.config import RigConfig
+from daq.errors import DaqError
 
 __all__ = ["RigProcess", "start_rig_process"]
 
 FloatArray = npt.NDArray[np.float64]
+
+log = logging.getLogger(__name__)
 
 
 class RigProcess:
@@ -136,8 +140,11 @@ def start_rig_process(config: RigConfig, *, start_timeout_s: float = 30.0) -> Ri
 
     Raises
     ------
+    DaqError
+        The child's own error when it is windrig's (a ConfigError of the rig config, a
+        PluginError of a simulator plugin), raised here as it is.
     RuntimeError
-        The child failed to start the rig (its error is in the message).
+        The child failed to start the rig otherwise (its error is in the message).
     TimeoutError
         It did not answer within ``start_timeout_s``.
     """
@@ -152,6 +159,8 @@ def start_rig_process(config: RigConfig, *, start_timeout_s: float = 30.0) -> Ri
             raise TimeoutError(f"the simulated rig process did not start within "
                                f"{start_timeout_s:g} s")
         kind, payload = conn.recv()
+        if kind == "error" and isinstance(payload, DaqError):
+            raise payload  # the rig config's or a plugin's error, as it would be in-process
         if kind == "error":
             raise RuntimeError(f"simulated rig process: {payload}")
     except BaseException:
@@ -181,6 +190,18 @@ def _serve(conn: Any, config_text: str, source: str) -> None:
 
     try:
         rig = start_simulated_rig(parse_rig_config(config_text, source))
+    except DaqError as exc:
+        # windrig's own errors (a ConfigError of [simulation.devices], a PluginError of a
+        # simulator) are messages for the user: the parent raises them as they are, one
+        # `error:` line, not a RuntimeError's traceback. Sent as a new one of the same type:
+        # the chained traceback does not cross the pipe (it stays in this process's log).
+        log.debug("the simulated rig did not start", exc_info=True)
+        try:
+            error: Any = type(exc)(str(exc))
+        except Exception:  # a subclass with another constructor: its text, as for the others
+            error = f"{type(exc).__name__}: {exc}"
+        conn.send(("error", error))
+        return
     except Exception as exc:  # reported to the parent, which raises it
         conn.send(("error", f"{type(exc).__name__}: {exc}"))
         return

@@ -191,3 +191,69 @@ def test_a_simulator_option_windrig_passes_itself_is_refused_in_the_config(tmp_p
     with pytest.raises(ConfigError, match=rf"\[simulation.devices.barometer\]: unknown key\(s\) "
                        rf"\['{key}'\]"):
         start_simulated_rig(load_rig_config(config))
+
+
+#: A barometer plugin whose validate has a bug: it raises a KeyError, not a ConfigError.
+BUGGY_VALIDATE_MODULE = """
+from daq.instruments.entry import DriverEntry
+from daq.instruments.vaisala_ptb330.driver import VaisalaPtb330
+
+def validate(table, where):
+    return {"address": table["address"]}  # a KeyError when the table has none
+
+DRIVER = DriverEntry(name="buggy_validate", role="barometer", factory=VaisalaPtb330,
+                     validate=validate)
+"""
+
+
+def test_a_plugin_validate_that_raises_a_bug_is_one_line_naming_the_plugin(
+        tmp_path, monkeypatch, capsys):
+    """Before: the rig config's loading let the KeyError through, a traceback."""
+    install(tmp_path / "site", "lab-buggy", "buggy_validate_plugin", BUGGY_VALIDATE_MODULE,
+            {"buggy_validate": "buggy_validate_plugin:DRIVER"}, monkeypatch)
+    from daq.config import load_rig_config
+
+    config = tmp_path / "rig.toml"
+    config.write_text((TESTS / "minimal_rig.toml").read_text()
+                      + '\n[barometer]\ndriver = "buggy_validate"\nurl = "loop://"\n')
+    with pytest.raises(PluginError) as info:
+        load_rig_config(config)
+    assert str(info.value) == (
+        "driver 'buggy_validate' (distribution lab-buggy 1.2, entry point buggy_validate = "
+        f"buggy_validate_plugin:DRIVER): its validate of {config} [barometer] raised KeyError: "
+        "'address' (a driver raises the exceptions of daq.errors, a ConfigError for a bad "
+        "setting: this is a bug of the driver)")
+    assert isinstance(info.value.__cause__, KeyError)  # chained: --debug shows where
+    assert main(["check", "--config", str(config)]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("error: driver 'buggy_validate' (")
+    assert "Traceback" not in err
+
+
+class _BuggyFactory:
+    """A barometer driver whose constructor has a bug (an AttributeError)."""
+
+    def __init__(self, link: object, settings: object) -> None:
+        self.port = link.no_such_attribute  # type: ignore[attr-defined]
+
+
+def test_a_driver_factory_that_raises_a_bug_is_a_plugin_error_naming_the_instrument(tmp_path):
+    """Before: build_driver let the AttributeError through (acquire --skip-check: a traceback)."""
+    from daq.config import load_rig_config
+    from daq.instruments.build import build_driver
+    from daq.instruments.entry import DriverEntry
+
+    from support.drivers_in_code import rigs_with_drivers
+
+    entry = DriverEntry(name="buggy_factory", role="barometer", factory=_BuggyFactory,
+                        validate=lambda table, where: dict(table))
+    table = '\n[barometer]\ndriver = "buggy_factory"\nurl = "loop://"\n'
+    with rigs_with_drivers(tmp_path, {"buggy": (entry, table)}) as configs:
+        config = load_rig_config(configs["buggy"])
+        with pytest.raises(PluginError) as info:
+            build_driver(config.instrument("barometer"), config.limits)
+    assert str(info.value).startswith(
+        "driver 'buggy_factory' (registered in code): its factory of instrument 'barometer' "
+        "raised AttributeError: ")
+    assert "no_such_attribute" in str(info.value)
+    assert isinstance(info.value.__cause__, AttributeError)
