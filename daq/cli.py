@@ -410,15 +410,17 @@ def _reprocess(args: argparse.Namespace) -> int:
     for c in summary.campaigns:
         if "error" in c:
             print(f"{c.get('name')}: {len(c.get('files', []))} file(s): {c['error']}")
-            continue
-        speed = c.get("flutter_speed")
-        flutter_text = ("no flutter found" if speed is None
-                        else f"U_F = {speed:.3f} +- {c.get('flutter_std') or 0.0:.3f} m/s")
-        low, high = c.get("flutter_speed_low"), c.get("flutter_speed_high")
-        if speed is not None and low is not None and high is not None and low < high:
-            flutter_text += f" ({low:.3f}-{high:.3f} over the structures within one SE)"
-        print(f"{c.get('name')}: {len(c['files'])} file(s), {c['n_releases']} releases at "
-              f"{c['wind_speeds']} m/s: {flutter_text}; effect: {c.get('effect')}")
+        else:
+            speed = c.get("flutter_speed")
+            flutter_text = ("no flutter found" if speed is None
+                            else f"U_F = {speed:.3f} +- {c.get('flutter_std') or 0.0:.3f} m/s")
+            low, high = c.get("flutter_speed_low"), c.get("flutter_speed_high")
+            if speed is not None and low is not None and high is not None and low < high:
+                flutter_text += f" ({low:.3f}-{high:.3f} over the structures within one SE)"
+            print(f"{c.get('name')}: {len(c['files'])} file(s), {c['n_releases']} releases at "
+                  f"{c['wind_speeds']} m/s: {flutter_text}; effect: {c.get('effect')}")
+        for text in c.get("warnings", []):  # as `windrig identify` prints its own
+            print(f"warning: {c.get('name')}: {text}")
     print("wall time " + ", ".join(f"{k} {v:.1f} s" for k, v in summary.timings.items()))
     print(f"report: {summary.outputs['report']}")
     return 0

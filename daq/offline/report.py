@@ -2,7 +2,8 @@
 
 Responsibility: :func:`write_outputs` turns the per-file and per-campaign results of a
 reprocessing run (:class:`ReprocessSummary`) into the output directory: ``releases.csv`` and
-``campaigns.csv``, ``summary.json`` (the same rows and each campaign's model), two plots per
+``campaigns.csv``, ``summary.json`` (the same rows, each campaign's model and its
+``warnings``, and every campaign's ``warnings`` led by its name), two plots per
 campaign (the model's flutter derivatives; the modes' frequency and damping against the wind
 speed, the model's curves with each release's fit) and a static ``report.html`` linking them.
 Only the client process writes.
@@ -54,6 +55,16 @@ class ReprocessSummary:
     outputs: dict[str, Path] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
 
+    @property
+    def warnings(self) -> list[str]:
+        """Every campaign's warnings, each led by the campaign's name, in campaign order.
+
+        A campaign's own: its files' recording warnings and reading notes, then the
+        identification's.
+        """
+        return [f"{c.get('name')}: {text}" for c in self.campaigns
+                for text in c.get("warnings", [])]
+
 
 _RELEASE_FIELDS = ("file", "release", "U", "f_h", "zeta_h", "f_a", "zeta_a", "campaign")
 
@@ -101,10 +112,15 @@ def write_outputs(out: Path, results: dict[str, dict[str, Any]],
             writer.writerows(rows)
         outputs[f"{name}_csv"] = csv_path
     summary_json = out / "summary.json"
+    # The JSON's campaigns carry their warnings (the CSV's one line per campaign does not):
+    # a km/h wind speed or an extrapolated flutter speed is said where the number is.
     summary_json.write_text(json.dumps({
         "files": summary.files, "failed": summary.failed, "reused": summary.reused,
-        "releases": release_rows, "campaigns": campaign_rows,
+        "releases": release_rows,
+        "campaigns": [{**row, "warnings": list(c.get("warnings", []))}
+                      for row, c in zip(campaign_rows, summary.campaigns, strict=True)],
         "models": {names[id(c)]: c.get("model") for c in summary.campaigns},
+        "warnings": summary.warnings,
     }, indent=2, default=_json_default))
     outputs["summary_json"] = summary_json
     plots = {names[id(c)]: _campaign_plots(out, names[id(c)], c, results)
@@ -208,6 +224,10 @@ def _html_report(out: Path, summary: ReprocessSummary, campaigns: list[dict[str,
         parts.append("<tr>" + "".join(f"<td>{cell(row[f])}</td>" for f in _CAMPAIGN_FIELDS)
                      + "</tr>")
     parts.append("</table>")
+    if summary.warnings:
+        parts.append("<h2>Warnings</h2><ul>")
+        parts.extend(f"<li>{html.escape(text)}</li>" for text in summary.warnings)
+        parts.append("</ul>")
     for c in summary.campaigns:  # the diagnosis: the sequence, and a residual left unexplained
         if c.get("effects") is None:
             continue

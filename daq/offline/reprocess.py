@@ -47,13 +47,18 @@ from ident.identification.modal import fit_release_modes
 from ident.model.section import SectionModel
 from ident.records.release import Release
 from ident.records.run_file import read_run
-from ident.records.run_set import recording_notes
+from ident.records.run_set import recording_notes, section_difference
 
 __all__ = ["ReprocessSettings", "expand_paths", "load_reprocess_config",
            "process_campaign", "process_file", "reprocess"]
 
+#: A campaign whose section differs from another's in at most this many stored parameters is
+#: warned of: more likely one model with a slip in one file's config than another model.
+NEAR_SECTION_PARAMETERS = 2
+
 #: Bumped when the per-file results change meaning: old cache entries are then not reused.
-CACHE_VERSION = 3  # 2: a file result has the section depth; 3: its recording warnings
+CACHE_VERSION = 4  # 2: a file result has the section depth; 3: its recording warnings;
+# 4: its reading notes (a default air density, sway not read) among them
 
 
 @dataclass(frozen=True)
@@ -240,7 +245,8 @@ def process_campaign(name: str, files: list[dict[str, Any]],
         ``files``, ``n_releases``, ``wind_speeds``, and ``model`` (dict), ``structure``,
         ``flutter_speed``, ``flutter_std`` (all parts:
         :class:`ident.identification.uncertainty.FlutterUncertainty`),
-        ``flutter_std_parts``, ``warnings``, ``flutter_frequency``, ``flutter_structures`` (the
+        ``flutter_std_parts``, ``warnings`` (the files' recording warnings and reading notes,
+        also when E2RFC fails, then E2RFC's), ``flutter_frequency``, ``flutter_structures`` (the
         flutter speed of every structure within one standard error of the best, by label, None
         for no flutter), ``effect`` and the gaps (with ``diagnose``: ``effects``, the named
         effects in the order added with the gap after each, ``explained`` and ``unexplained``,
@@ -249,7 +255,9 @@ def process_campaign(name: str, files: list[dict[str, Any]],
     """
     files = sorted(files, key=lambda f: f["path"])
     sections = [SectionModel.from_dict(f["section"]) for f in files]
-    out: dict[str, Any] = {"name": name, "files": [f["path"] for f in files]}
+    # The files' own warnings are kept even when the campaign cannot be identified.
+    out: dict[str, Any] = {"name": name, "files": [f["path"] for f in files],
+                           "warnings": [w for f in files for w in f["recording_warnings"]]}
     for f, s in zip(files[1:], sections[1:], strict=True):
         if s.replace(rho=sections[0].rho) != sections[0]:
             out["error"] = (f"{f['path']}: its section model differs from that of "
@@ -277,8 +285,7 @@ def process_campaign(name: str, files: list[dict[str, Any]],
                flutter_speed_low=summary["flutter_speed_low"],
                flutter_speed_high=summary["flutter_speed_high"],
                flutter_std_parts=summary["flutter_std_parts"],
-               warnings=[*(w for f in files for w in f["recording_warnings"]),
-                         *summary["warnings"]],
+               warnings=[*out["warnings"], *summary["warnings"]],
                K=analysis.K, derivatives=analysis.derivatives,
                curves={"U": result.U, "frequencies": result.frequencies,
                        "damping": result.damping, "mode_names": list(result.mode_names)})
@@ -410,6 +417,7 @@ def reprocess(paths: Sequence[str | os.PathLike[str]], out: str | os.PathLike[st
         labels = {key: key if named else f"campaign_{i + 1}" for i, key in enumerate(groups)}
         campaign_futures = [client.submit(process_campaign, labels[key], group, settings,
                                           pure=False) for key, group in groups.items()]
+        near = {} if named else _near_sections(groups, labels)
         for key, future in zip(groups, campaign_futures, strict=True):
             try:
                 summary.campaigns.append(future.result())
@@ -417,6 +425,8 @@ def reprocess(paths: Sequence[str | os.PathLike[str]], out: str | os.PathLike[st
                 summary.campaigns.append({"name": labels[key],
                                           "files": [f["path"] for f in groups[key]],
                                           "error": f"{type(exc).__name__}: {exc}"})
+            campaign = summary.campaigns[-1]
+            campaign["warnings"] = [*near.get(key, []), *campaign.get("warnings", [])]
         summary.timings["campaigns"] = time.monotonic() - t1
 
     t2 = time.monotonic()
@@ -424,6 +434,33 @@ def reprocess(paths: Sequence[str | os.PathLike[str]], out: str | os.PathLike[st
     summary.timings["outputs"] = time.monotonic() - t2
     summary.timings["total"] = time.monotonic() - started
     return summary
+
+
+def _near_sections(groups: Mapping[str, list[dict[str, Any]]],
+                   labels: Mapping[str, str]) -> dict[str, list[str]]:
+    """Return warnings for campaigns whose sections differ from an earlier one's only slightly.
+
+    Files are grouped by their stored section: two files of one campaign whose configs differ
+    by a typo (``fh = 2.1`` for ``2.0``) become two campaigns, each with fewer wind speeds,
+    and nothing else would say why. Sections that differ in at most
+    :data:`NEAR_SECTION_PARAMETERS` parameters (air density aside) are named.
+    """
+    sections = {key: SectionModel.from_dict(group[0]["section"]).replace(rho=1.0)
+                for key, group in groups.items()}
+    out: dict[str, list[str]] = {}
+    keys = list(groups)
+    for j, key in enumerate(keys):
+        mine = sections[key].to_dict()
+        for other in keys[:j]:
+            theirs = sections[other].to_dict()
+            differing = {name for name in {*mine, *theirs} if mine.get(name) != theirs.get(name)}
+            if 0 < len(differing) <= NEAR_SECTION_PARAMETERS:
+                out.setdefault(key, []).append(
+                    f"its files' section differs from {labels[other]}'s only in "
+                    f"{section_difference(sections[key], sections[other])}: one section model "
+                    "with a slip in one file's config? (files are grouped by their stored "
+                    "section; a reprocessing config's [campaigns] groups them by name)")
+    return out
 
 
 # -- cache ------------------------------------------------------------------------------------

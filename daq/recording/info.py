@@ -34,6 +34,7 @@ from daq.recording.layout import (
     per_device_attrs,
 )
 from daq.recording.recover import holders, read_superblock
+from ident.records.run_layout import release_table_problem, shared_rows_problem
 
 __all__ = ["format_info", "run_info"]
 
@@ -152,7 +153,9 @@ def run_info(path: str | os.PathLike[str]) -> dict[str, Any]:
         ``imported`` (where ``windrig import`` read it from: ``source``, ``sha256``, ``test``,
         ``format``, ``map_file``, ``map``; or None) and ``warnings`` (the texts of the
         file's ``warning`` events: the device check's notes, a fan target not reached, clocks
-        no trigger pulse anchored). NaN is None.
+        no trigger pulse anchored; then ``release_problems``). ``release_problems``: the
+        release rows the readers refuse or leave out, one sentence each (listed twice,
+        sharing rows, outside the sync view, without rows, a wind speed not > 0). NaN is None.
 
     Raises
     ------
@@ -197,6 +200,8 @@ def _describe(path: Path, f: h5py.File) -> dict[str, Any]:
     columns = [sync[name] for name in (*SYNC_COLUMNS, *SWAY_COLUMNS) if name in sync]
     for ds in columns:
         ds.refresh()
+        if ds.dtype.kind not in "biuf":  # text written by another program: said, not summed
+            raise NotARunFileError(f"{path}: {ds.name} holds {ds.dtype} values, not numbers")
     shortest = min((ds.shape[0] for ds in columns), default=0)
     time = sync["time"][:shortest] if "time" in sync else np.zeros(0)
     # Rows whose size reached the file but whose data did not (a crash) read as NaN times.
@@ -213,15 +218,23 @@ def _describe(path: Path, f: h5py.File) -> dict[str, Any]:
                for name, group in (entry["instrument"].items() if "instrument" in entry else ())
                if isinstance(group, h5py.Group)}
     releases = []
+    row_warnings: list[str] = []
     if "releases" in entry:
         entry["releases"].refresh()
-        for row in entry["releases"][:]:
+        table = entry["releases"][:]
+        problem = release_table_problem(table)
+        if problem is not None:  # a table another program wrote in another layout
+            raise NotARunFileError(f"{path}: {problem}")
+        fields = table.dtype.names or ()
+        for row in table:
             start, stop = int(row["start_index"]), int(row["stop_index"])
+            # h0 and alpha0 are shown, not needed: a file without them shows NaN (None).
             releases.append({"time_s": float(row["release_time"]), "U": float(row["U"]),
-                             "h0": float(row["h0"]), "alpha0": float(row["alpha0"]),
-                             **({"p0": float(row["p0"])} if "p0" in (row.dtype.names or ())
-                                else {}),
+                             **{name: float(row[name]) if name in fields else np.nan
+                                for name in ("h0", "alpha0")},
+                             **({"p0": float(row["p0"])} if "p0" in fields else {}),
                              "decay_s": (stop - start) / rate if rate else None})
+        row_warnings = _release_warnings(path, table, n)
     events: list[dict[str, Any]] = []
     counts: Counter[str] = Counter()
     if "events" in entry:
@@ -266,8 +279,33 @@ def _describe(path: Path, f: h5py.File) -> dict[str, Any]:
         # `windrig import`'s provenance (daq.exchange.importing): source, sha256, test, format,
         # map_file and the map's text; None for a recorded run.
         "imported": _plain(metadata["import"]) if "import" in metadata else None,
-        "warnings": [e["text"] for e in events if e["kind"] == "warning"],
+        "release_problems": row_warnings,
+        "warnings": [e["text"] for e in events if e["kind"] == "warning"] + row_warnings,
     })
+
+
+def _release_warnings(path: Path, table: np.ndarray, rows: int) -> list[str]:
+    """Return what ``windrig identify`` would refuse or leave out of the release rows.
+
+    ``info`` describes a file as it is; these say beforehand which rows the readers
+    (:func:`ident.records.run_file.read_run`) refuse or leave out: a release listed twice or
+    sharing rows with another (:func:`ident.records.run_layout.shared_rows_problem`), rows
+    outside the ``rows`` of the sync view or none, a wind speed that is not > 0.
+    """
+    shared = shared_rows_problem(table)
+    out = [] if shared is None else [f"{path}: {shared}"]
+    for i, row in enumerate(table):
+        start, stop, U = int(row["start_index"]), int(row["stop_index"]), float(row["U"])
+        if start == stop:  # the recorder's U of such a row is NaN: no more to say
+            out.append(f"{path}: release {i} holds no rows of /entry/sync (released as the "
+                       "recording ended?): identify leaves it out")
+            continue
+        if not 0 <= start < stop <= rows:
+            out.append(f"{path}: release {i} rows {start}..{stop} are not within the {rows} "
+                       "rows of /entry/sync")
+        if not U > 0.0:  # NaN too
+            out.append(f"{path}: release {i} has U = {U:g} m/s: a wind speed must be > 0 m/s")
+    return out
 
 
 def _finite_or_none(value: Any) -> Any:
@@ -338,6 +376,7 @@ def format_info(info: dict[str, Any]) -> str:
         lines.append(f"  #{i}  t = {_fmt(r['time_s'], '8.3f')} s  U = {_fmt(r['U'], '6.3f')} m/s"
                      f"  h0 = {_fmt(r['h0'], '+7.3f', 1e3)} mm  alpha0 = "
                      f"{_fmt(r['alpha0'], '+7.3f', 180 / np.pi)} deg{sway}{decay}")
+    lines += [f"  warning: {text}" for text in info.get("release_problems", [])]
     counts = info["events"]["counts"]
     lines += ["", "events     " + (", ".join(f"{k} {v}" for k, v in counts.items()) or "none")]
     for e in info["events"]["list"]:

@@ -2,6 +2,8 @@
 
 - :mod:`~ident.records.release`: one free-vibration release (``Release``), validated;
 - :mod:`~ident.records.run_file`: the one thin module through which ident reads run files;
+- :mod:`~ident.records.run_layout`: what it has read against the layout the readers need (a
+  column of text, a release table of plain numbers, a release listed twice), named in one line;
 - :mod:`~ident.records.run_set`: what a campaign's files say together (their one section model,
   their tubing correction, the warnings they were recorded with);
 - :mod:`~ident.records.release_onset`: the release instant found in the displacements alone

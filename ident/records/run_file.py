@@ -8,7 +8,17 @@ writer has them open, so a run still being written, or one left by a crash, can 
 finished one.
 
 Errors are specific: a missing file or dataset, a truncated file, or a release whose rows hold
-gaps (NaN) raises :class:`FileFormatError` (a ``ValueError``) naming the file and what is wrong.
+gaps (NaN) raises :class:`FileFormatError` (a ``ValueError``) naming the file and what is wrong;
+a part another program wrote in another layout (a column of text, a release table of plain
+numbers, a release listed twice, a release time that is not at its first row) is named by
+:mod:`ident.records.run_layout`. What the reader takes in place of a missing part (an
+air density never measured) or leaves out (a release row without rows, sway a 2-DOF section
+does not read) is said in :attr:`RunFile.reading_notes`.
+
+Longer than 600 lines: one read of one open file feeds the releases, their holds and the
+tubing correction of both from the same arrays (the hold's rows depend on the release rows and
+the arm events, the correction on both); the checks of the parts against the layout are
+already apart, in :mod:`ident.records.run_layout`.
 
 Pneumatic tubing: ``/entry/sync/lift`` and ``moment`` are the forces of the pressures as
 measured at the scanner. When the file records its taps' tubing (``/entry/metadata/tubing``),
@@ -61,6 +71,12 @@ from ident.physics.taps import TapLayout
 from ident.physics.tubing import Air, TubingSet, force_correction, from_description
 from ident.records.release import Release, ReleaseHold
 from ident.records.release_onset import ReleaseOnset, find_releases
+from ident.records.run_layout import (
+    column_problem,
+    release_table_problem,
+    release_time_problem,
+    shared_rows_problem,
+)
 
 __all__ = ["FileFormatError", "HOLD_GUARD_S", "HOLD_SETTLE_S", "HOLD_U_RTOL", "RunFile",
            "TUBING_LEAD_S", "forces_recorded", "read_run"]
@@ -127,6 +143,10 @@ class RunFile:
         (``/entry/metadata/acquisition_summary/warnings``: a device whose clock no trigger
         pulse anchored, its samples then late by its transport latency); empty for a file
         without (an older or imported one).
+    reading_notes : tuple of str
+        What the reader found missing or left unread, and took instead, one sentence each
+        (an air density never measured, sway columns a 2-DOF section does not read, a
+        release row without rows left out); empty for a complete file.
     """
 
     path: str
@@ -140,6 +160,7 @@ class RunFile:
     has_forces: bool = True
     detected: tuple[ReleaseOnset, ...] = ()
     recording_warnings: tuple[str, ...] = ()
+    reading_notes: tuple[str, ...] = ()
 
 
 #: With ``cut_at_gaps``, a release cut before a gap is kept when at least this many periods of
@@ -205,12 +226,14 @@ def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True,
             sync = {}
             for name in ("time", "h", "alpha", "lift", "moment", "U", "rho"):
                 part = f"/entry/sync/{name}"
-                sync[name] = np.asarray(f[part][()], dtype=float)
+                sync[name] = _column(f[part], part, path)
             for name in _SWAY_COLUMNS:  # a 3-DOF rig's file has both
                 if f"entry/sync/{name}" in f:
-                    sync[name] = np.asarray(f[f"entry/sync/{name}"][()], dtype=float)
+                    part = f"/entry/sync/{name}"
+                    sync[name] = _column(f[part], part, path)
             part = "/entry/releases"
             table = f["entry/releases"][()]
+            _refuse(path, release_table_problem(table))
             rig_name = _text(f["entry"].attrs.get("rig_name", ""))
             part = "/entry/metadata/tubing"
             tubing_meta = (_group_dict(f[part]) if part in f else None)
@@ -238,6 +261,8 @@ def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True,
         except KeyError as exc:
             raise FileFormatError(f"{path}: has no {part}: not a windrig run file (or an "
                                   "incomplete one)") from exc
+        except FileFormatError:
+            raise  # already says what is wrong with which part
         except (OSError, RuntimeError, ValueError) as exc:
             # h5py's errors on a truncated or damaged file (OSError on reading data,
             # RuntimeError on following a link, ValueError on a bad type)
@@ -246,7 +271,16 @@ def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True,
     if section.n_dof == 3 and not all(name in sync for name in _SWAY_COLUMNS):
         raise FileFormatError(f"{path}: its [section] has fp (3 DOF) but /entry/sync has no "
                               "p and drag: a 2-DOF recording of a 3-DOF section")
+    notes = []
+    if not np.isfinite(sync["rho"]).any():
+        notes.append(f"/entry/sync/rho holds no air density (all NaN): the default "
+                     f"{section.rho} kg/m^3 is used (the flutter speed does not depend on it; "
+                     "the flutter derivatives scale with its inverse)")
     if section.n_dof == 2:  # releases of a 2-DOF section have no sway, whatever the file holds
+        if all(name in sync for name in _SWAY_COLUMNS) and np.isfinite(sync["p"]).any():
+            # A 3-DOF rig's file whose [section] lost fp: its sway is not read, so say so.
+            notes.append("/entry/sync has sway p and drag, but its [section] has no fp: read "
+                         "as 2-DOF, the sway left out (a 3-DOF section needs fp, zeta_p)")
         for name in _SWAY_COLUMNS:
             sync.pop(name, None)
     has_forces = bool(np.isfinite(sync["lift"]).any() and np.isfinite(sync["moment"]).any())
@@ -261,6 +295,7 @@ def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True,
         table, detected = _detected_table(sync, section, table.dtype)
         # Each detected hold starts where the model was first still (as an arm would).
         arms = np.array([onset.hold_start - HOLD_SETTLE_S for onset in detected])
+    _refuse(path, shared_rows_problem(table))
     holds = _hold_rows(sync, table, arms)
     tubing = None
     if tubing_meta is not None:
@@ -274,6 +309,13 @@ def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True,
     min_s = MIN_CUT_PERIODS / min(section.fh, section.fa)
     releases = []
     for i, row in enumerate(table):
+        if int(row["start_index"]) == int(row["stop_index"]):
+            # The recorder writes a release commanded as the recording ended with no rows
+            # (daq.recording.releases): nothing to identify, and nothing that invalidates the
+            # file's other releases; left out, and said.
+            notes.append(f"release {i} holds no rows of /entry/sync (released as the "
+                         "recording ended?): left out")
+            continue
         stop = _gap_free_stop(sync, row) if cut_at_gaps else int(row["stop_index"])
         start = int(row["start_index"])
         if stop < int(row["stop_index"]):
@@ -294,7 +336,7 @@ def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True,
                    depth=depth, tubing=tubing,
                    tubing_corrected=tubing is not None and tubing_correction, cuts=tuple(cuts),
                    has_forces=has_forces, detected=detected,
-                   recording_warnings=recording_warnings)
+                   recording_warnings=recording_warnings, reading_notes=tuple(notes))
 
 
 def _detected_table(sync: dict[str, np.ndarray], section: SectionModel,
@@ -474,6 +516,18 @@ def _hold_rows(sync: dict[str, np.ndarray], table: Any, arms: np.ndarray) -> lis
     return holds
 
 
+def _column(dataset: Any, part: str, path: str) -> np.ndarray:
+    """Return a column of ``/entry/sync`` as float64, once checked 1-D and numeric."""
+    _refuse(path, column_problem(dataset.dtype, dataset.shape, part))
+    return np.asarray(dataset[()], dtype=float)
+
+
+def _refuse(path: str, problem: str | None) -> None:
+    """Raise a problem :mod:`ident.records.run_layout` found (None: none) as the file's."""
+    if problem is not None:
+        raise FileFormatError(f"{path}: {problem}")
+
+
 def _open(path: str) -> h5py.File:
     """Open read-only: plainly, or as a SWMR reader when a writer has the file (or had: a crash).
 
@@ -532,11 +586,24 @@ def _release(sync: dict[str, np.ndarray], row: Any, path: str, index: int,
              hold_rows: slice | None = None) -> Release:
     start, stop = int(row["start_index"]), int(row["stop_index"])
     n = sync["time"].size
+    if stop < start:
+        raise FileFormatError(f"{path}: release {index} rows {start}..{stop} run backwards: "
+                              "its stop_index must exceed its start_index")
     if not 0 <= start < stop <= n:
         raise FileFormatError(f"{path}: release {index} rows {start}..{stop} are outside the "
                               f"{n} rows of /entry/sync (truncated run?)")
+    names = _release_channels(sync)
+    # A crash can leave one column a flush shorter than the others: only the rows a release
+    # reads must exist in every column it reads.
+    short = [name for name in names if sync[name].size < stop]
+    if short:
+        raise FileFormatError(
+            f"{path}: release {index} rows {start}..{stop} run past the end of /entry/sync/"
+            f"{short[0]} ({sync[short[0]].size} rows; /entry/sync/time has {n}): the columns "
+            "of /entry/sync must be equally long")
+    _refuse(path, release_time_problem(sync["time"], row, index))
     rows = slice(start, stop)
-    channels = {name: sync[name][rows] for name in _release_channels(sync)}
+    channels = {name: sync[name][rows] for name in names}
     for name, values in channels.items():
         bad = int(np.count_nonzero(~np.isfinite(values)))
         if bad:
