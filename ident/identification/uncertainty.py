@@ -78,7 +78,7 @@ __all__ = ["CEILING_WARN", "DISTINCT_U_RTOL", "EXTRAPOLATION_WARN", "REFIT_GRID"
            "UNUSUAL_REDUCED_VELOCITY", "FlutterUncertainty", "UncertaintySources",
            "ceiling_warnings", "distinct_wind_speeds", "flutter_derivative_std",
            "flutter_uncertainty", "jackknife_std", "nearest_wind_speed", "no_flutter_warnings",
-           "parametric"]
+           "parametric", "reduced_velocity_warnings"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -427,6 +427,7 @@ def flutter_uncertainty(section: SectionModel, result: _flutter.FlutterResult, p
                  f"puts the flutter speed at {moved:.3g} m/s ({100 * (moved / speed - 1):+.0f} %)")
         warnings.append(f"{name} on the same releases {found}; the deviation includes the "
                         "difference")
+    warnings.extend(reduced_velocity_warnings(section, speed))
     return FlutterUncertainty(speed=speed, parametric=parametric, structure=structure,
                               extrapolation=extrapolation, refinement=refinement,
                               turbulence=turbulence,
@@ -462,6 +463,39 @@ def no_flutter_warnings(section: SectionModel, sources: UncertaintySources, U_ma
             f"no flutter below {U_max:.3g} m/s, but {len(speeds)} of {len(diag.jackknife)} "
             f"refits with one release left out flutter at {min(speeds):.3g}-"
             f"{max(speeds):.3g} m/s: these releases do not determine the flutter speed")
+
+
+def reduced_velocity_warnings(section: SectionModel, speed: float) -> tuple[str, ...]:
+    """Warn of a flutter speed whose reduced velocity no deck's flutter point has.
+
+    Identification is self-similar in the wind speed's unit: releases whose speeds are all a
+    factor off (km/h, mph read as m/s) identify a model that flutters at the same factor times
+    the truth, with no misfit to show for it (the flat plate of the tests at 11.75 m/s, its
+    speeds in mph: 26.3 m/s, warned only of an extrapolation). The flutter point's reduced
+    velocity is what betrays it.
+
+    Parameters
+    ----------
+    section : SectionModel
+        Its width ``B`` (m) and still-air frequencies (Hz).
+    speed : float
+        The flutter speed, m/s.
+
+    Returns
+    -------
+    tuple of str
+        One warning when ``speed / (f B)``, ``f`` the faster of heave and pitch, exceeds
+        :data:`UNUSUAL_REDUCED_VELOCITY`, naming km/h and mph; else none.
+    """
+    f_fast = max(section.fh, section.fa)
+    reduced_velocity = speed / (f_fast * section.B)
+    if reduced_velocity <= UNUSUAL_REDUCED_VELOCITY:
+        return ()
+    return (f"the flutter speed {speed:.3g} m/s is a reduced velocity U / (f B) of "
+            f"{reduced_velocity:.3g} for the {f_fast:g} Hz mode, beyond most decks' flutter "
+            f"point (5 to {UNUSUAL_REDUCED_VELOCITY:g}): if the wind speeds are in km/h or mph, "
+            "convert them to m/s (/3.6, /2.237) and identify again; the flutter speed scales "
+            "with their unit",)
 
 
 def ceiling_warnings(section: SectionModel, speeds: npt.ArrayLike, U_max: float

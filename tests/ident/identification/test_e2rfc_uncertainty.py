@@ -10,6 +10,7 @@ and a bluff deck whose entries have lags of their own. Each asserts the error an
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -242,3 +243,18 @@ def test_releases_count_as_turbulent_by_their_decays_or_weakly_with_loaded_holds
         random_response, held_load, turbulent):
     """The rule of :func:`results.is_turbulent`, at the measured values its limits sit between."""
     assert results.is_turbulent(random_response, held_load) is turbulent
+
+
+@pytest.mark.parametrize("factor", [1.0, 2.237], ids=["m/s", "mph read as m/s"])
+def test_wind_speeds_in_another_unit_scale_the_flutter_speed_and_are_named(factor):
+    # Identification is self-similar in the speed's unit: the releases' speeds all a factor
+    # off give the flutter speed times that factor, with no misfit; only the flutter point's
+    # reduced velocity (the plate's 9.8, in mph 22, against decks' 5-15) can tell.
+    releases = [dataclasses.replace(r, U=r.U * factor)
+                for r in campaign(FLAT_PLATE, flat_plate.jones_model(), seed=3, duration=6.0)]
+    u = e2rfc.identify(releases, FLAT_PLATE).uncertainty(FLAT_PLATE)
+    truth = fl.analyze(FLAT_PLATE, flat_plate.jones_model()).speed
+    # 2 % noise on six 6 s decays: the plate's estimate lies within 1 % of the truth.
+    assert u.speed == pytest.approx(factor * truth, rel=0.01)
+    named = [w for w in u.warnings if "km/h or mph" in w]
+    assert len(named) == (0 if factor == 1.0 else 1), u.warnings
