@@ -73,12 +73,13 @@ from ident.model import flutter as _flutter
 from ident.model.conventions import derivative_layout, reduced_frequency
 from ident.model.rfc import RationalFunctionModel
 from ident.model.section import SectionModel
+from ident.records.plausibility import UNUSUAL_REDUCED_VELOCITY, reduced_velocity_warnings
 
 __all__ = ["CEILING_WARN", "DISTINCT_U_RTOL", "EXTRAPOLATION_WARN", "REFIT_GRID",
-           "UNUSUAL_REDUCED_VELOCITY", "FlutterUncertainty", "UncertaintySources",
+           "FlutterUncertainty", "UncertaintySources",
            "ceiling_warnings", "distinct_wind_speeds", "flutter_derivative_std",
            "flutter_uncertainty", "jackknife_std", "nearest_wind_speed", "no_flutter_warnings",
-           "parametric", "reduced_velocity_warnings"]
+           "parametric"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -97,9 +98,6 @@ EXTRAPOLATION_WARN = 1.1
 #: "no flutter" then rests on little room above the data. Campaigns reach 0.2-0.3 of it; wind
 #: speeds in km/h (x 3.6) or mph (x 2.24) put them at 0.6-0.9.
 CEILING_WARN = 0.5
-#: Reduced velocity ``U / (f B)`` (the faster of heave and pitch) beyond the flutter point of
-#: most decks (full bridges' are about 5-15) and of the section models built for them.
-UNUSUAL_REDUCED_VELOCITY = 15.0
 
 
 class UncertaintySources(Protocol):
@@ -465,39 +463,6 @@ def no_flutter_warnings(section: SectionModel, sources: UncertaintySources, U_ma
             f"{max(speeds):.3g} m/s: these releases do not determine the flutter speed")
 
 
-def reduced_velocity_warnings(section: SectionModel, speed: float) -> tuple[str, ...]:
-    """Warn of a flutter speed whose reduced velocity no deck's flutter point has.
-
-    Identification is self-similar in the wind speed's unit: releases whose speeds are all a
-    factor off (km/h, mph read as m/s) identify a model that flutters at the same factor times
-    the truth, with no misfit to show for it (the flat plate of the tests at 11.75 m/s, its
-    speeds in mph: 26.3 m/s, warned only of an extrapolation). The flutter point's reduced
-    velocity is what betrays it.
-
-    Parameters
-    ----------
-    section : SectionModel
-        Its width ``B`` (m) and still-air frequencies (Hz).
-    speed : float
-        The flutter speed, m/s.
-
-    Returns
-    -------
-    tuple of str
-        One warning when ``speed / (f B)``, ``f`` the faster of heave and pitch, exceeds
-        :data:`UNUSUAL_REDUCED_VELOCITY`, naming km/h and mph; else none.
-    """
-    f_fast = max(section.fh, section.fa)
-    reduced_velocity = speed / (f_fast * section.B)
-    if reduced_velocity <= UNUSUAL_REDUCED_VELOCITY:
-        return ()
-    return (f"the flutter speed {speed:.3g} m/s is a reduced velocity U / (f B) of "
-            f"{reduced_velocity:.3g} for the {f_fast:g} Hz mode, beyond most decks' flutter "
-            f"point (5 to {UNUSUAL_REDUCED_VELOCITY:g}): if the wind speeds are in km/h or mph, "
-            "convert them to m/s (/3.6, /2.237) and identify again; the flutter speed scales "
-            "with their unit",)
-
-
 def ceiling_warnings(section: SectionModel, speeds: npt.ArrayLike, U_max: float
                      ) -> tuple[str, ...]:
     """Warn of "no flutter below U_max" from releases close to ``U_max`` (:data:`CEILING_WARN`).
@@ -514,7 +479,7 @@ def ceiling_warnings(section: SectionModel, speeds: npt.ArrayLike, U_max: float
     -------
     tuple of str
         One warning when the releases reach :data:`CEILING_WARN` of ``U_max`` (naming km/h and
-        mph beyond :data:`UNUSUAL_REDUCED_VELOCITY`), else none.
+        mph beyond :data:`~ident.records.plausibility.UNUSUAL_REDUCED_VELOCITY`), else none.
     """
     top = float(np.max(speeds)) if np.size(speeds) else 0.0
     if top < CEILING_WARN * U_max:

@@ -35,6 +35,11 @@ fh = 2 Hz, fa = 4 Hz, Jones's aerodynamics, releases from 4 mm and 0.02 rad at 0
   ten times): a force in a wrong unit, or total over a long span, is warned of. A total force
   over a span near 1 m (0.9x) is far inside any such bound: the forces against the motion
   (:mod:`ident.records.decay_checks`) find it.
+- **The wind speed's unit** (:func:`reduced_velocity_warnings`, after identification). The
+  identification is self-similar in the speed's unit: speeds all a factor off give a flutter
+  speed that factor off, with no misfit. A flutter point beyond a reduced velocity ``U / (f B)``
+  of :data:`UNUSUAL_REDUCED_VELOCITY` for the faster mode (decks' lie at about 5-15; the
+  plate here 9.8, in mph 22) is warned of, naming km/h and mph.
 - **Release instant** (:func:`check_start`). A release from rest starts with zero velocity in
   every coordinate. The instant where the decay's velocity vanishes, found from the modal
   fit extrapolated backwards (:func:`start_offset`) or, with a still hold before the release,
@@ -66,11 +71,15 @@ from ident.records.release import Release
 from ident.records.release_onset import locate_release
 
 __all__ = ["AIR_DENSITY_RANGE", "ALPHA_AMPLITUDE_MAX", "FORCE_BOUND_FACTOR", "FREQUENCY_FACTOR",
-           "HEAVE_AMPLITUDE_MAX", "START_OFFSET_WARN_S", "check_air_density", "check_channels",
-           "check_release", "check_start", "check_units", "start_offset"]
+           "HEAVE_AMPLITUDE_MAX", "START_OFFSET_WARN_S", "UNUSUAL_REDUCED_VELOCITY",
+           "check_air_density", "check_channels", "check_release", "check_start", "check_units",
+           "reduced_velocity_warnings", "start_offset"]
 
 FloatArray = npt.NDArray[np.float64]
 
+#: Reduced velocity ``U / (f B)`` (the faster of heave and pitch) beyond the flutter point of
+#: most decks (full bridges' are about 5-15) and of the section models built for them.
+UNUSUAL_REDUCED_VELOCITY = 15.0
 #: Largest pitch amplitude (half the peak-to-peak about the mean) of a section model, rad.
 #: Holds are 0.01-0.1 rad; 0.3 rad (17 degrees) is beyond any rig's, and a hold of 0.3
 #: degrees or more left in degrees exceeds it.
@@ -411,3 +420,36 @@ def check_start(release: Release, section: SectionModel,
             f"the decay starts at t = {1e3 * offset:+.1f} ms ({how}); the lag states start at "
             "zero at t = 0, so the model is fitted to a release that did not happen then: "
             "give the instant the model was let go"]
+
+
+def reduced_velocity_warnings(section: SectionModel, speed: float) -> tuple[str, ...]:
+    """Warn of a flutter speed whose reduced velocity no deck's flutter point has.
+
+    Identification is self-similar in the wind speed's unit: releases whose speeds are all a
+    factor off (km/h, mph read as m/s) identify a model that flutters at the same factor times
+    the truth, with no misfit to show for it (the flat plate of the tests at 11.75 m/s, its
+    speeds in mph: 26.3 m/s, warned only of an extrapolation). The flutter point's reduced
+    velocity is what betrays it.
+
+    Parameters
+    ----------
+    section : SectionModel
+        Its width ``B`` (m) and still-air frequencies (Hz).
+    speed : float
+        The flutter speed, m/s.
+
+    Returns
+    -------
+    tuple of str
+        One warning when ``speed / (f B)``, ``f`` the faster of heave and pitch, exceeds
+        :data:`UNUSUAL_REDUCED_VELOCITY`, naming km/h and mph; else none.
+    """
+    f_fast = max(section.fh, section.fa)
+    reduced_velocity = speed / (f_fast * section.B)
+    if reduced_velocity <= UNUSUAL_REDUCED_VELOCITY:
+        return ()
+    return (f"the flutter speed {speed:.3g} m/s is a reduced velocity U / (f B) of "
+            f"{reduced_velocity:.3g} for the {f_fast:g} Hz mode, beyond most decks' flutter "
+            f"point (5 to {UNUSUAL_REDUCED_VELOCITY:g}): if the wind speeds are in km/h or mph, "
+            "convert them to m/s (/3.6, /2.237) and identify again; the flutter speed scales "
+            "with their unit",)
