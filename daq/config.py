@@ -269,10 +269,13 @@ def parse_rig_config(text: str, source: str = "<string>") -> RigConfig:
             f"below max_fan_rpm {limits.max_fan_rpm} at {wind_per_rpm} (m/s)/rpm"
         )
     instruments = _instruments(data, source)
+    _check_fan_full_scale(limits, instruments, source)
     _check_sway(section, instruments, source)
     simulation = (_simulation(data["simulation"], f"{source} [simulation]", instruments,
                               data["section"])
                   if "simulation" in data else None)
+    if simulation is not None:
+        _check_hold_in_range(simulation, instruments, source)
     if simulation is not None and simulation.tubing and not tubing:
         raise ConfigError(f"{source} [simulation] tubing = true needs [[taps.tubing]] tables")
     return RigConfig(name=str(data["rig"]["name"]), section=section, depth=depth, taps=taps,
@@ -301,6 +304,84 @@ def _section(table: Mapping[str, Any], where: str) -> tuple[SectionModel, float]
         raise ConfigError(f"{where}: {exc}") from exc
     depth = number(table, "depth", where, lo=0.0, hi=section.B, lo_open=True)
     return section, depth
+
+
+def _check_fan_full_scale(limits: Limits, instruments: tuple[InstrumentConfig, ...],
+                          source: str) -> None:
+    """Refuse a ``max_fan_rpm`` above the fan drive's own full-scale speed (``max_rpm``).
+
+    Parameters
+    ----------
+    limits : Limits
+        The rig's limits; ``max_fan_rpm`` in rpm.
+    instruments : tuple of InstrumentConfig
+        The validated instruments; a fan whose settings give ``max_rpm`` (rpm, the speed at
+        full-scale reference, as the ``abb_acs580`` driver's do) is checked, a plugin drive
+        without that key is left to its driver.
+    source : str
+        The config's name, for the message.
+
+    Raises
+    ------
+    ConfigError
+        Naming both keys: every front end (a campaign's plan check, the console's set-point
+        range) lets the operator ask for up to ``max_fan_rpm``, which the drive would then
+        refuse halfway through a test instead of the config being refused before it starts.
+    """
+    for inst in instruments:
+        full_scale = inst.settings.get("max_rpm") if inst.role == "fan" else None
+        if isinstance(full_scale, (int, float)) and limits.max_fan_rpm > full_scale:
+            raise ConfigError(
+                f"{source} [limits] max_fan_rpm = {limits.max_fan_rpm:g} is above [fan] max_rpm "
+                f"= {full_scale:g}, the drive's full-scale speed (rpm), which it can never "
+                f"be sent; allowed: max_fan_rpm <= {full_scale:g}")
+
+
+def _check_hold_in_range(simulation: SimulationConfig,
+                         instruments: tuple[InstrumentConfig, ...], source: str) -> None:
+    """Refuse a simulated hold that puts a laser's spot beyond its measuring range.
+
+    A vertical laser at chord position ``x`` (m) reads ``standoff + 1000 (h + x alpha)`` mm, a
+    sway laser at height ``z`` reads ``standoff - 1000 (p - z alpha)`` mm; a release swings
+    the model about its rest position to about the hold's displacement on the other side, so
+    both ``standoff -+ deviation`` must lie in ``0..range_mm``. Without this check the
+    simulated model was held where every laser reads an error value: the device check failed
+    on the lasers without naming the hold, and with ``--skip-check`` no release was usable.
+
+    Parameters
+    ----------
+    simulation : SimulationConfig
+        Its ``hold_h`` (m), ``hold_alpha`` (rad) and ``hold_p`` (m).
+    instruments : tuple of InstrumentConfig
+        Lasers with ``range_mm`` and ``standoff_mm`` (mm) and ``x`` or ``z`` (m) are checked.
+    source : str
+        The config's name, for the message.
+
+    Raises
+    ------
+    ConfigError
+        Naming the hold keys, the laser and its range.
+    """
+    for inst in instruments:
+        settings = inst.settings
+        if inst.role != "lasers" or not all(isinstance(settings.get(key), (int, float))
+                                             for key in ("range_mm", "standoff_mm")):
+            continue
+        if is_sway_laser(inst):
+            keys = "hold_p, hold_alpha"
+            deviation = simulation.hold_p - float(settings.get("z", 0.0)) * simulation.hold_alpha
+        else:
+            keys = "hold_h, hold_alpha"
+            deviation = simulation.hold_h + float(settings.get("x", 0.0)) * simulation.hold_alpha
+        swing_mm = 1000.0 * abs(deviation)
+        range_mm, standoff_mm = float(settings["range_mm"]), float(settings["standoff_mm"])
+        room_mm = min(standoff_mm, range_mm - standoff_mm)
+        if swing_mm > room_mm:
+            raise ConfigError(
+                f"{source} [simulation] {keys}: the hold moves {inst.name}'s reading "
+                f"{swing_mm:.3g} mm from its standoff {standoff_mm:g} mm, and the decay as far "
+                f"the other way, beyond its measuring range 0..{range_mm:g} mm; allowed: at "
+                f"most {room_mm:g} mm")
 
 
 def _check_sway(section: SectionModel, instruments: tuple[InstrumentConfig, ...],

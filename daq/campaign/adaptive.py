@@ -63,8 +63,10 @@ releases, so offering fewer never stops a campaign sooner). Few releases at a ne
 buy its extrapolation gain cheaply; many pay off where the overhead of a speed is large
 against a release. Without options every speed gets ``releases_per_speed``, as before.
 
-Safety: :func:`safety_bound` is ``fraction * (U_F - 3 std)`` of the current estimate (infinite
-without one: the first speeds are the plan's); the runner also applies the rig's limits.
+Safety: :func:`safety_bound` is ``fraction * (U_F - 3 std)`` of the current estimate; without
+one (the first speeds, or an E2RFC that gave no flutter speed) ``fraction`` times the still-air
+prediction, the flutter speed of a flat plate of the section's structure
+(:func:`still_air_flutter_speed`); the runner also applies the rig's limits.
 
 Not responsible for: recording (:mod:`daq.campaign.runner`) or the identification itself
 (:mod:`ident.identification.e2rfc`).
@@ -91,7 +93,7 @@ from ident.records.release import Release
 from ident.simulation.decay import simulate_decay
 
 __all__ = ["MIN_GAIN", "MIN_SPEEDS", "TIE_RTOL", "Choice", "choose_next", "predicted_std",
-           "safety_bound"]
+           "safety_bound", "still_air_flutter_speed"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -141,14 +143,15 @@ class Choice:
                 f"candidates <= {self.bound:.2f} m/s: {table or 'none'}]")
 
 
-def safety_bound(analysis: CampaignAnalysis | None, fraction: float, held: float = 0.0
-                 ) -> float:
+def safety_bound(analysis: CampaignAnalysis | None, fraction: float, held: float = 0.0,
+                 prior: float | None = None) -> float:
     """Highest wind speed allowed now, m/s.
 
-    ``fraction * (U_F - 3 std)`` of the current estimate (inf without one), but never below
-    ``held``: the highest speed at which releases were just seen to decay, which the wind may
-    always go back to however wide the estimate's std (a std near U_F / 3 puts the estimate's
-    own bound at zero, below speeds the model has just shown to be stable).
+    ``fraction * (U_F - 3 std)`` of the current estimate; without one, ``fraction * prior``
+    (inf without a prior either), but never below ``held``: the highest speed at which releases
+    were just seen to decay, which the wind may always go back to however wide the estimate's
+    std (a std near U_F / 3 puts the estimate's own bound at zero, below speeds the model has
+    just shown to be stable).
 
     Parameters
     ----------
@@ -158,11 +161,43 @@ def safety_bound(analysis: CampaignAnalysis | None, fraction: float, held: float
         Safety fraction, (0, 1].
     held : float
         Highest wind speed held with decaying releases so far, m/s (0: none).
+    prior : float or None
+        The still-air prediction of the flutter speed, m/s (:func:`still_air_flutter_speed`),
+        the bound before anything is measured; None: none.
     """
     if analysis is None or analysis.flutter_speed is None or analysis.flutter_std is None:
-        return math.inf
+        return math.inf if prior is None else max(fraction * prior, held)
     std = analysis.flutter_std if math.isfinite(analysis.flutter_std) else analysis.flutter_speed
     return max(fraction * (analysis.flutter_speed - 3.0 * std), 0.0, held)
+
+
+@functools.lru_cache(maxsize=8)
+def still_air_flutter_speed(section: SectionModel) -> float | None:
+    """Flutter speed a thin flat plate of the section's structure would have, m/s.
+
+    The prior before anything is measured: Theodorsen's plate (R.T. Jones's Roger form,
+    :func:`ident.model.flat_plate.jones_model`) on the section's still-air masses,
+    frequencies, damping and air density, in heave and pitch (a lateral spring is left out:
+    the plate has no drag terms). Bridge decks mostly flutter below it, bluff ones well below
+    (some slotted twin boxes above), so it bounds only the speeds a campaign sets blind; once
+    E2RFC has an estimate, that bounds the speeds instead, and a growing decay is caught
+    whatever the bound.
+
+    Parameters
+    ----------
+    section : SectionModel
+        The rig's section model (still-air structure, SI units).
+
+    Returns
+    -------
+    float or None
+        The flat plate's flutter speed, m/s; None when it has none below the flutter search's
+        ceiling (:func:`ident.model.flutter.default_U_max`).
+    """
+    from ident.model.flat_plate import jones_model  # the prior's model only
+
+    speed = flutter.analyze(section.planar(), jones_model()).speed
+    return None if speed is None else float(speed)
 
 
 def _gradient(model: IdentifiedModel, section: SectionModel, result: flutter.FlutterResult

@@ -58,10 +58,14 @@ The plan (units SI; the example plans are ``rig_configs/plans/*.toml``)::
 In adaptive mode the listed speeds are the first ones (two at least: E2RFC needs two wind
 speeds before it says anything); the next are chosen by :mod:`daq.campaign.adaptive`.
 
-Before the fan turns (:meth:`CampaignPlan.check_rig`, with the speeds' check): the rig must be
-able to release (a PLC, or releases by hand, which need lasers) and to identify (a pressure
-scanner for E2RFC, or the displacement-only route named); anything else is refused in one
-line.
+Before the fan turns (:meth:`CampaignPlan.check_against`): the listed speeds and the adaptive
+candidates within the rig's limits, and the speeds set before any E2RFC estimate
+(:meth:`CampaignPlan.blind_speeds`) below the safety fraction of the still-air prediction
+(:func:`daq.campaign.adaptive.still_air_flutter_speed`); (:meth:`CampaignPlan.check_rig`) the
+rig must be able to release (a PLC, or releases by hand, which need lasers) and to identify (a
+pressure scanner for E2RFC, or the displacement-only route named); anything else is refused in
+one line. :meth:`CampaignPlan.defaults_taken` names the defaults the plan took, which the
+runner says before it starts.
 
 Not supported: a hold displacement per release. The release PLC of these rigs switches a
 magnet on and off; the hold position is set by the rig's mechanics (on a simulated rig by
@@ -82,7 +86,7 @@ from typing import Any
 
 from daq.config import RigConfig
 from daq.errors import ConfigError
-from daq.procedure import HOLD_S
+from daq.procedure import HOLD_S, MIN_DECAY_PERIODS, default_decay_s
 from daq.validation import check_keys, number
 
 __all__ = ["AdaptiveSettings", "CampaignPlan", "load_plan", "parse_plan"]
@@ -107,6 +111,11 @@ CLOSED_LOOP_BUFFETINGS = ("second-order", "fourth-order", "second-order-per-spee
 DISPLACEMENT_MIN_SPEEDS = 3
 MAX_RELEASES_PER_SPEED = 20
 MAX_SPEEDS = 50
+#: Safety fraction of a fixed plan (an adaptive plan gives its own).
+FIXED_SAFETY_FRACTION = 0.9
+#: The fan drive's ramp rate a campaign assumes when the rig's ``[fan]`` gives none, rpm/s
+#: (docs/guides/drivers.md, "fan": the drivers' own default).
+DEFAULT_RAMP_RPM_PER_S = 100.0
 
 
 @dataclass(frozen=True)
@@ -194,6 +203,9 @@ class CampaignPlan:
     closed_loop_buffeting : str
         The closed-loop estimator's buffeting model, ``"by-evidence"`` (default),
         ``"second-order"`` or ``"fourth-order"`` (:func:`ident.identification.e2rfc.identify`).
+    given : frozenset of str
+        The keys the plan's ``[campaign]`` and ``[adaptive]`` tables gave; the others took
+        their defaults, which :meth:`defaults_taken` names.
     """
 
     mode: str
@@ -215,6 +227,50 @@ class CampaignPlan:
     identification: str = "e2rfc"
     turbulent_estimator: str = "ml"
     closed_loop_buffeting: str = "by-evidence"
+    given: frozenset[str] = frozenset()
+
+    def defaults_taken(self, config: RigConfig) -> list[str]:
+        """Return ``key = value`` for each optional key the plan left to its default.
+
+        Said before the campaign starts (no default is taken silently), with the values as
+        resolved on ``config``: the decay from the section's slower mode, ``release = "auto"``
+        as the PLC or the hand, and the fan drive's ramp rate when its ``[fan]`` gives none.
+
+        Parameters
+        ----------
+        config : RigConfig
+            The rig the plan runs on.
+
+        Returns
+        -------
+        list of str
+            One phrase per default, units in SI (s, m/s, rpm/s); empty when none was taken.
+        """
+        values: dict[str, str] = {
+            "releases_per_speed": str(self.releases_per_speed),
+            "decay_s": (f"{default_decay_s(config.section):.3g} s ({MIN_DECAY_PERIODS:g} "
+                        "periods of the slower mode)"),
+            "decay_end": repr(self.decay_end), "settle_s": f"{self.settle_s:g} s",
+            "steady_tolerance": f"{self.steady_tolerance:g}", "pause_s": f"{self.pause_s:g} s",
+            "hold_s": f"{self.hold_s:g} s", "calz_start": str(self.calz_start).lower(),
+            "calz_end": str(self.calz_end).lower(), "files": repr(self.files),
+            "release": f"'auto' (here: {self.release_method(config)})",
+            "identification": repr(self.identification),
+            "turbulent_estimator": repr(self.turbulent_estimator),
+            "closed_loop_buffeting": repr(self.closed_loop_buffeting),
+        }
+        if self.adaptive is not None:
+            a = self.adaptive
+            values.update({"safety_fraction": f"{a.safety_fraction:g}",
+                           "candidate_step": f"{a.candidate_step:g} m/s",
+                           "max_speeds": str(a.max_speeds),
+                           "max_releases_per_speed": "none (releases_per_speed at every speed)"})
+        out = [f"{key} = {value}" for key, value in values.items() if key not in self.given]
+        for fan in config.by_role("fan"):  # the campaign waits out the ramp at this rate
+            if "ramp_rpm_per_s" not in fan.settings:
+                out.append(f"[{fan.name}] ramp_rpm_per_s = {DEFAULT_RAMP_RPM_PER_S:g} rpm/s "
+                           f"(not in {config.source})")
+        return out
 
     def release_method(self, config: RigConfig) -> str:
         """Return how this plan releases on ``config``: ``"plc"`` or ``"manual"``."""
@@ -260,21 +316,69 @@ class CampaignPlan:
         assert self.fan_rpm is not None
         return [rpm * wind_per_rpm for rpm in self.fan_rpm]
 
+    @property
+    def safety_fraction(self) -> float:
+        """The fraction of the flutter speed the campaign stays below (an adaptive plan's own)."""
+        return self.adaptive.safety_fraction if self.adaptive else FIXED_SAFETY_FRACTION
+
+    def blind_speeds(self, wind_per_rpm: float) -> list[float]:
+        """Return the listed speeds set before any E2RFC estimate can bound them, m/s.
+
+        E2RFC gives its first flutter speed after the second distinct wind speed, so the
+        listed speeds up to and including that one are set blind; with the displacement-only
+        route nothing is identified between speeds, so every listed speed is.
+        """
+        # Imported here: parsing a plan needs no numerics, only checking it against a rig.
+        from ident.identification.uncertainty import distinct_wind_speeds
+
+        listed = self.listed_speeds(wind_per_rpm)
+        if self.identification == "displacement":
+            return listed
+        for k in range(len(listed)):
+            if len(distinct_wind_speeds(listed[:k + 1])) >= 2:  # as E2RFC counts them
+                return listed[:k + 1]
+        return listed
+
     def check_against(self, config: RigConfig) -> None:
         """Raise ConfigError when a listed or candidate speed breaks the rig's limits.
 
         A plan is checked as a whole before the fan starts: a speed the drive would refuse
-        halfway through a campaign is a mistake of the plan, not of the tunnel.
+        halfway through a campaign is a mistake of the plan, not of the tunnel. So is an
+        adaptive candidate range above the limits (km/h for m/s, say), and a speed set before
+        any flutter estimate (:meth:`blind_speeds`) above the safety fraction of the flutter
+        speed a flat plate of the section's structure would have
+        (:func:`daq.campaign.adaptive.still_air_flutter_speed`): nothing measured would bound
+        it, and only the decay monitor would stand between the model and flutter.
         """
         limit = min(config.limits.max_wind_speed, config.limits.max_fan_rpm * config.wind_per_rpm)
         where = f"{self.source} [speeds]"
+        limits = (f"({config.source}: max_wind_speed {config.limits.max_wind_speed:g} m/s, "
+                  f"max_fan_rpm {config.limits.max_fan_rpm:g} x wind_per_rpm "
+                  f"{config.wind_per_rpm:g})")
         for U in self.listed_speeds(config.wind_per_rpm):
             if U > limit + 1e-9:
+                raise ConfigError(f"{where}: {U:.3g} m/s is above the rig's limit {limit:.3g} m/s "
+                                  f"{limits}")
+        if self.adaptive is not None and self.adaptive.candidate_max > limit + 1e-9:
+            raise ConfigError(
+                f"{self.source} [adaptive] candidate_max = {self.adaptive.candidate_max:g} m/s "
+                f"is above the rig's limit {limit:.3g} m/s {limits}; allowed: candidate_max "
+                f"<= {limit:.3g} (candidates are wind speeds in m/s)")
+        # Imported here: parsing a plan needs no numerics, only checking it against a rig.
+        from daq.campaign.adaptive import still_air_flutter_speed
+
+        prior = still_air_flutter_speed(config.section)
+        if prior is None:
+            return
+        bound = self.safety_fraction * prior
+        for U in self.blind_speeds(config.wind_per_rpm):
+            if U > bound + 1e-9:
                 raise ConfigError(
-                    f"{where}: {U:.3g} m/s is above the rig's limit {limit:.3g} m/s "
-                    f"({config.source}: max_wind_speed {config.limits.max_wind_speed:g} m/s, "
-                    f"max_fan_rpm {config.limits.max_fan_rpm:g} x wind_per_rpm "
-                    f"{config.wind_per_rpm:g})")
+                    f"{where}: {U:.3g} m/s is set before any flutter estimate and is above "
+                    f"{self.safety_fraction:g} x {prior:.3g} m/s = {bound:.3g} m/s, the still-air "
+                    f"prediction (the flutter speed of a flat plate of {config.source}'s "
+                    "[section]); start lower: the speeds after the first estimate are bounded "
+                    "by it instead")
 
 
 def _bool(table: Mapping[str, Any], key: str, where: str, default: bool) -> bool:
@@ -303,8 +407,9 @@ def _speed_list(table: Mapping[str, Any], key: str, where: str, lo_open: float, 
         raise ConfigError(f"{where} {key} must be a non-empty list of numbers ({unit})")
     out = []
     for i, x in enumerate(value):
-        if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) \
-                or not lo_open < x <= hi:
+        if isinstance(x, bool) or not isinstance(x, (int, float)):
+            raise ConfigError(f"{where} {key}[{i}] must be a number ({unit}), got {x!r}")
+        if not math.isfinite(x) or not lo_open < x <= hi:
             raise ConfigError(f"{where} {key}[{i}] = {x!r} is outside the allowed range "
                               f"({lo_open:g}, {hi:g}] {unit}")
         out.append(float(x))
@@ -422,7 +527,8 @@ def parse_plan(text: str, source: str = "<string>") -> CampaignPlan:
                         pause_s=pause_s, calz_start=calz_start, calz_end=calz_end,
                         adaptive=adaptive, source=source, files=files, decay_end=decay_end,
                         hold_s=hold_s, release=release, identification=identification,
-                        turbulent_estimator=estimator, closed_loop_buffeting=buffeting)
+                        turbulent_estimator=estimator, closed_loop_buffeting=buffeting,
+                        given=frozenset(c) | frozenset(data.get("adaptive", {})))
 
 
 def load_plan(path: str | Path) -> CampaignPlan:

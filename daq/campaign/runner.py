@@ -17,11 +17,12 @@ written to ``campaign.json`` as ``stopped_because``:
   estimate to choose from (adaptive mode, :mod:`daq.campaign.adaptive`), or ``max_speeds`` is
   reached;
 - the next speed is above the safety bound ``fraction * (U_F - 3 std)`` of the current
-  estimate (both modes; fixed plans use 0.9) or the rig's limits: it is never set. A speed
-  not above one this session has already held with decaying releases is allowed whatever the
-  estimate (a wide std can put the bound below speeds just shown to be stable: an FD-style
-  plan going down from its highest speed would otherwise stop, and an adaptive one could not
-  repeat its top speed to average the noise down);
+  estimate (both modes; fixed plans use 0.9; without an estimate ``fraction`` times the
+  still-air prediction, :func:`~daq.campaign.adaptive.still_air_flutter_speed`) or the rig's
+  limits: it is never set. A speed not above one this session has already held with decaying
+  releases is allowed whatever the estimate (a wide std can put the bound below speeds just
+  shown to be stable: an FD-style plan going down from its highest speed would otherwise stop,
+  and an adaptive one could not repeat its top speed to average the noise down);
 - a decay grows (:class:`~daq.campaign.monitor.DecayMonitor`): the model is caught (re-armed)
   and the fan stopped at once;
 - Ctrl-C: the run file in progress is finished and kept as ``*.interrupted.h5`` (with one
@@ -72,11 +73,11 @@ from typing import Any
 
 from daq.acquisition.device_check import require_devices_ok
 from daq.acquisition.engine import Acquisition
-from daq.campaign.adaptive import MIN_SPEEDS, choose_next, safety_bound
+from daq.campaign.adaptive import MIN_SPEEDS, choose_next, safety_bound, still_air_flutter_speed
 from daq.campaign.files import interrupted_name, read_back, run_file_name
 from daq.campaign.monitor import DecayMonitor
 from daq.campaign.outcome import CampaignOutcome, SpeedStep
-from daq.campaign.plan import CampaignPlan
+from daq.campaign.plan import FIXED_SAFETY_FRACTION, CampaignPlan
 from daq.campaign.releasing import ManualReleases, PlcReleases, releaser
 from daq.campaign.wind import STEADY_TIMEOUT_S, ramp_rate, wait_steady
 from daq.config import RigConfig
@@ -93,12 +94,10 @@ from ident.records.release import Release
 from ident.records.run_file import RunFile, read_run
 from ident.records.run_set import campaign_section
 
-__all__ = ["CHECK_FAILED", "CampaignOutcome", "SpeedStep", "run_plan"]
+__all__ = ["CHECK_FAILED", "FIXED_SAFETY_FRACTION", "CampaignOutcome", "SpeedStep", "run_plan"]
 
 log = logging.getLogger(__name__)
 
-#: Safety fraction of a fixed plan (an adaptive plan gives its own).
-FIXED_SAFETY_FRACTION = 0.9
 #: Distinct wind speeds before an adaptive campaign may call its target met (see _loop).
 MIN_SPEEDS_FOR_TARGET = MIN_SPEEDS
 #: Wind-on seconds a new speed takes besides its settle time and analysis: the ramp and the
@@ -275,6 +274,9 @@ def run_plan(plan: CampaignPlan, config: RigConfig, out_dir: str | Path, *,
                 + "".join(f"\n  note: {note}" for note in notes))
         out.mkdir(parents=True, exist_ok=True)  # after the check: a failed one leaves nothing
         session = _Session(plan, live, out, say)
+        defaults = plan.defaults_taken(live)
+        if defaults:  # no default is taken silently
+            say("plan defaults: " + "; ".join(defaults))
         session.releases = releaser(plan.release_method(live), rig=rig, ask=ask, say=say)
         if session.releases.manual:
             say("releases by hand: the operator is prompted before each hold and release")
@@ -332,7 +334,13 @@ def _on_sigint(abort: threading.Event) -> Callable[[], None]:
 def _loop(session: _Session, outcome: CampaignOutcome) -> None:
     plan, config, say = session.plan, session.config, session.say
     listed = plan.listed_speeds(config.wind_per_rpm)
-    fraction = plan.adaptive.safety_fraction if plan.adaptive else FIXED_SAFETY_FRACTION
+    fraction = plan.safety_fraction
+    # The bound before E2RFC has an estimate (plan.check_against refused blind speeds above it).
+    prior = still_air_flutter_speed(config.section)
+    if prior is not None:
+        say(f"safety: until E2RFC has an estimate, no speed above {fraction * prior:.2f} m/s "
+            f"({fraction:g} x {prior:.2f} m/s, the still-air prediction: a flat plate of the "
+            "section)")
     rig_limit = min(config.limits.max_wind_speed, config.limits.max_fan_rpm * config.wind_per_rpm)
     decay_s = plan.decay_s if plan.decay_s is not None else default_decay_s(config.section)
 
@@ -371,7 +379,7 @@ def _loop(session: _Session, outcome: CampaignOutcome) -> None:
         # campaign: every step of it decayed). The adaptive choice offers a held speed as a
         # candidate too: its prediction counts a repeat's gain on the statistical part only.
         held = max((s.U for s in outcome.steps if not s.resumed), default=0.0)
-        bound = min(rig_limit, safety_bound(analysis, fraction, held))
+        bound = min(rig_limit, safety_bound(analysis, fraction, held, prior))
         n_releases = plan.releases_per_speed
         if k < len(listed):
             U, why = listed[k], "listed in the plan"
@@ -398,10 +406,14 @@ def _loop(session: _Session, outcome: CampaignOutcome) -> None:
             U, why = choice.speed, choice.reason
             n_releases = choice.releases or plan.releases_per_speed
         if U > bound + 1e-9:
+            estimated = analysis is not None and analysis.flutter_speed is not None
+            basis = (f"{fraction:g} x (U_F - 3 std) of the current estimate" if estimated else
+                     "no E2RFC estimate yet: " + (f"{fraction:g} x {prior:.2f} m/s, the still-air "
+                                                  "prediction" if prior else "no prediction"))
             outcome.stopped_because = (
                 f"safety stop: the next speed {U:.2f} m/s is above the bound {bound:.2f} m/s "
-                f"({fraction:g} x (U_F - 3 std) of the current estimate, the highest speed "
-                f"held so far, or the rig's limit {rig_limit:.3g} m/s); it was not set")
+                f"({basis}, the highest speed held so far, or the rig's limit "
+                f"{rig_limit:.3g} m/s); it was not set")
             say(outcome.stopped_because)
             return
         step = _record_speed(session, outcome, k + 1, U, why, decay_s, n_releases)

@@ -13,6 +13,7 @@ import threading
 import time
 from typing import Any
 
+from daq.campaign.plan import DEFAULT_RAMP_RPM_PER_S
 from daq.config import RigConfig
 from daq.errors import DeviceError
 
@@ -24,7 +25,7 @@ STEADY_TIMEOUT_S = 30.0
 
 def ramp_rate(config: RigConfig, fan_name: str) -> float:
     """Return the drive's configured ramp rate, rpm/s (its settings' default otherwise)."""
-    rate = config.instrument(fan_name).settings.get("ramp_rpm_per_s", 100.0)
+    rate = config.instrument(fan_name).settings.get("ramp_rpm_per_s", DEFAULT_RAMP_RPM_PER_S)
     return float(rate)
 
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from daq.config import parse_rig_config
+from daq.config import SHIPPED_CONFIGS, parse_rig_config
 from daq.errors import ConfigError
 
 #: A minimal simulated rig (tests/daq/minimal_rig.toml, shared with the other config tests).
@@ -122,3 +122,33 @@ def test_bad_turbulence_tables_name_the_key(old, new, match):
     assert old in TURBULENT
     with pytest.raises(ConfigError, match=match):
         parse_rig_config(TURBULENT.replace(old, new, 1), "bad.toml")
+
+
+def test_max_fan_rpm_may_not_exceed_the_drives_full_scale():
+    """A rig limit the fan drive can never be sent is the config's mistake, named on loading."""
+    text = (SHIPPED_CONFIGS / "sim_flat_plate.toml").read_text(encoding="utf-8")
+    assert "max_fan_rpm = 1300.0" in text and "max_rpm = 1500.0" in text
+    with pytest.raises(ConfigError, match=r"rig.toml \[limits\] max_fan_rpm = 1600 is above "
+                                          r"\[fan\] max_rpm = 1500.*max_fan_rpm <= 1500"):
+        parse_rig_config(text.replace("max_fan_rpm = 1300.0", "max_fan_rpm = 1600.0"), "rig.toml")
+    rig = parse_rig_config(text.replace("max_fan_rpm = 1300.0", "max_fan_rpm = 1500.0"))
+    assert rig.limits.max_fan_rpm == 1500.0  # up to the full scale itself
+
+
+@pytest.mark.parametrize("old, new, laser, swing", [
+    ("hold_h = 0.008", "hold_h = 0.045", "laser_front", "41"),  # 45 mm - 0.1 m x 0.04 rad
+    ("hold_h = 0.008", "hold_h = -0.03", "laser_front", "34"),  # the other side: -30 - 4 mm
+])
+def test_a_simulated_hold_beyond_the_lasers_range_is_refused(old, new, laser, swing):
+    """The hold (and the decay's swing the other way) must stay in every laser's range.
+
+    Before, the simulated model was held where the lasers read error values: the device check
+    failed on three lasers without naming the hold, and ``--skip-check`` recorded no release.
+    """
+    text = (SHIPPED_CONFIGS / "sim_flat_plate.toml").read_text(encoding="utf-8")
+    assert old in text and "standoff_mm = 25.0" in text and "range_mm = 50" in text
+    with pytest.raises(ConfigError, match=rf"rig.toml \[simulation\] hold_h, hold_alpha: the hold "
+                                          rf"moves {laser}'s reading {swing} mm from its standoff "
+                                          r"25 mm.*0..50 mm; allowed: at most 25 mm"):
+        parse_rig_config(text.replace(old, new), "rig.toml")
+    parse_rig_config(text.replace(old, "hold_h = 0.02"), "rig.toml")  # 24 mm at most: fine

@@ -14,9 +14,11 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from daq.campaign.adaptive import choose_next, predicted_std, safety_bound
+from daq.campaign.adaptive import choose_next, predicted_std, safety_bound, still_air_flutter_speed
 from daq.campaign.monitor import DecayMonitor
 from ident.identification.campaign import analyze_campaign
+from ident.model import flutter
+from ident.model.flat_plate import jones_model
 from simulators.campaigns import SECTION, simulated_campaign
 
 
@@ -69,6 +71,24 @@ def test_no_candidate_above_the_bound_is_ever_chosen(two_speeds):
 def test_safety_bound_is_infinite_without_an_estimate():
     assert safety_bound(None, 0.9) == math.inf
     assert safety_bound(None, 0.9, held=5.0) == math.inf
+
+
+def test_without_an_estimate_the_still_air_prediction_bounds_the_speed():
+    """Before E2RFC has a flutter speed, fraction x the flat plate of the section's structure.
+
+    Before, the bound was infinite then: a fixed plan whose first two speeds gave no estimate
+    went on to any later speed below the rig's limits.
+    """
+    prior = still_air_flutter_speed(SECTION)
+    # The simulated flat plate: its own flutter speed (air density aside), 11.8 m/s.
+    assert prior == pytest.approx(flutter.analyze(SECTION, jones_model()).speed)
+    assert 11.0 < prior < 12.5
+    assert safety_bound(None, 0.9, prior=prior) == pytest.approx(0.9 * prior)
+    no_flutter = SimpleNamespace(flutter_speed=None, flutter_std=None)
+    assert safety_bound(no_flutter, 0.9, prior=prior) == pytest.approx(0.9 * prior)
+    assert safety_bound(None, 0.9, held=11.0, prior=prior) == 11.0  # a held speed stays allowed
+    # A 3-DOF section: the plate in heave and pitch (it has no drag terms).
+    assert still_air_flutter_speed(SECTION.replace(fp=1.0, zeta_p=0.01)) == pytest.approx(prior)
 
 
 def test_a_speed_already_held_stays_allowed_when_the_std_is_wide(two_speeds):

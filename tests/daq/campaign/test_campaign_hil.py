@@ -20,11 +20,13 @@ import h5py
 import numpy as np
 import pytest
 
+from daq.campaign.adaptive import still_air_flutter_speed
 from daq.campaign.plan import parse_plan
 from daq.campaign.report import write_report
 from daq.campaign.runner import run_plan
 from daq.cli import main
 from daq.config import parse_rig_config
+from ident.model.flat_plate import jones_model
 
 from support.configs import REPO, SIM_FLAT_PLATE
 
@@ -36,6 +38,19 @@ SOFT_RIG_TEXT = (RIG_TEXT.replace("fa = 4.0         # Hz", "fa = 3.0         # H
                  .replace("max_wind_speed = 11.0", "max_wind_speed = 14.0")
                  .replace("max_fan_rpm = 1300.0", "max_fan_rpm = 1450.0"))
 SOFT_TRUTH = 7.838
+
+
+def _stronger_forces(rig_text: str, factor: float) -> str:
+    """Return the rig with its simulated flat plate's Roger matrices times ``factor``.
+
+    Stronger self-excited forces than the flat plate's, as a bluff section has: the rig then
+    flutters below its still-air prediction (``factor`` 1.6 on the soft rig: 6.37 m/s against
+    the plate's 7.78 m/s).
+    """
+    model = jones_model().to_dict()
+    A = (factor * np.asarray(model["A"])).tolist()
+    return (rig_text.replace('aerodynamics = "flat_plate_jones"', 'aerodynamics = "rfc"')
+            + f"\n[simulation.rfc]\nA = {A!r}\nd = {list(model['d'])!r}\n")
 
 pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
@@ -152,13 +167,21 @@ def test_fixed_plan_beyond_flutter_stops_at_the_safety_bound(tmp_path):
 
 
 def test_a_growing_decay_is_caught_and_the_campaign_stops(tmp_path):
-    # The first speed (no estimate yet, so no bound) is beyond this rig's flutter speed.
-    config = parse_rig_config(SOFT_RIG_TEXT + FAST_FAN, "soft.toml")
-    plan = parse_plan(_fixed([8.5, 5.0], releases=2, decay_s=6.0), "plan.toml")
+    # The first speed (no estimate yet) is beyond this rig's flutter speed, yet below the
+    # bound of its still-air prediction: the section flutters earlier than a flat plate of its
+    # structure, as a bluff deck does, which only the decay monitor can see.
+    config = parse_rig_config(_stronger_forces(SOFT_RIG_TEXT, 1.6) + FAST_FAN, "soft.toml")
+    assert 6.9 < 0.9 * still_air_flutter_speed(config.section)  # the plan check lets it by
+    plan = parse_plan(_fixed([6.9, 5.0], releases=2, decay_s=6.0), "plan.toml")
     lines: list[str] = []
     outcome = run_plan(plan, config, tmp_path, simulate=True, say=lines.append)
 
-    assert "a decay grew at 8.50 m/s" in outcome.stopped_because, lines
+    assert "a decay grew at 6.90 m/s" in outcome.stopped_because, lines
+    # The defaults the plan took are said, and the bound before the first estimate.
+    assert any(line.startswith("plan defaults: ") and "hold_s = 0.5 s" in line
+               and "release = 'auto' (here: plc)" in line for line in lines), lines
+    assert any(line.startswith("safety: until E2RFC has an estimate, no speed above 7.00 m/s")
+               for line in lines), lines
     assert len(outcome.steps) == 1  # the second speed was never set
     assert any("GROWS" in line and "model caught, fan stopped" in line for line in lines)
     path = outcome.steps[0].path
