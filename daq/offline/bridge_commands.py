@@ -163,7 +163,8 @@ def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: 
                          "length > 0 s")
     _check_uncertainty_options(uncertainty, samples, seed, workers, scheduler)
     bridge = _read_bridge(bridge_path, mode_tables)
-    spec = _read_wind(wind) if buffeting is not None and wind is not None else None
+    spec, wind_lines = (_read_wind(wind) if buffeting is not None and wind is not None
+                        else (None, []))
     print(f"{bridge_path}: {bridge.name}: {bridge.n_modes} modes, {bridge.n_nodes} deck nodes "
           f"over {bridge.nodes_x[-1] - bridge.nodes_x[0]:.4g} m, B = {bridge.B:g} m, "
           f"rho = {bridge.rho:g} kg/m^3")
@@ -199,7 +200,7 @@ def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: 
         print(f"  {label}: {100 * share:.1f} % of the flutter mode's strain energy")
     if comparison.divergence_speed is not None:
         print(f"divergence: {comparison.divergence_speed:.4g} m/s ({comparison.divergence_basis})")
-    warnings = [*aero.notes, *comparison.warnings]
+    warnings = [*aero.notes, *comparison.warnings, *wind_lines]
     for warning in comparison.warnings:
         print(f"warning: {warning}")
 
@@ -239,7 +240,10 @@ def run_bridge(bridge_path: Path, *, aero_path: Path | None = None, convention: 
             seed=0 if seed is None else seed)
         summary["warnings"].extend(summary["uncertainty"]["warnings"])
     if buffeting is not None:
-        summary.update(_buffeting(bridge, aero.model, buffeting, spec, time_domain, out))
+        buffeted, buffeting_warnings = _buffeting(bridge, aero, buffeting, spec, time_domain,
+                                                  out)
+        summary.update(buffeted)
+        summary["warnings"].extend(buffeting_warnings)
     if out is not None:
         from daq.offline.design_report import write_bridge_report
 
@@ -409,36 +413,47 @@ def _write_curves(out: Path, result: Any, check: Any,
     print(f"wrote {table} and {plot}")
 
 
-def _read_wind(path: Path) -> Any:
-    from ident.bridge.wind import read_wind
+def _read_wind(path: Path) -> tuple[Any, list[str]]:
+    """Read WIND.toml; return the wind and its warnings (printed here, for the JSON too)."""
+    from ident.bridge.wind import read_wind, wind_warnings
 
     try:
-        return read_wind(path)
+        spec = read_wind(path)
     except ValueError as exc:
         raise UsageError(str(exc)) from exc
+    lines = wind_warnings(spec, source=str(path))
+    for line in lines:
+        print(f"warning: {line}")
+    return spec, lines
 
 
 def _none_for_nan(values: Any) -> list[float | None]:
     return [None if v != v else float(v) for v in values]  # JSON has no NaN
 
 
-def _buffeting(bridge: Any, model: Any, speeds: tuple[float, ...], spec: Any,
-               time_domain: float | None, out: Path | None) -> dict[str, Any]:
+def _buffeting(bridge: Any, aero: Any, speeds: tuple[float, ...], spec: Any,
+               time_domain: float | None, out: Path | None
+               ) -> tuple[dict[str, Any], list[str]]:
     """Buffeting at every speed (:mod:`ident.bridge.buffeting`), JSON entries, plots in ``out``.
 
     The time-domain record is seeded (0); its RMS is compared with the frequency domain at the
     node of largest RMS heave, against the stated relative standard deviation
-    ``0.5 sqrt(T_c / T)`` of an RMS from a record of length T.
+    ``0.5 sqrt(T_c / T)`` of an RMS from a record of length T. With a table's aerodynamics
+    (``aero.K_range``), each speed's entry lists in ``extrapolated_modes`` the modes that
+    resonate outside the table's reduced frequencies, each with a warning. Returns the JSON
+    entries and the warnings (also printed).
     """
     import numpy as np
     from tqdm import tqdm
 
+    from ident.bridge.aero import extrapolated_modes
     from ident.bridge.buffeting import frequency_domain
     from ident.bridge.buffeting_time import simulate
     from ident.bridge.statespace import BridgeStateSpace
 
-    ss = BridgeStateSpace(bridge, model)
+    ss = BridgeStateSpace(bridge, aero.model)
     result: dict[str, Any] = {"buffeting": []}
+    warnings = _static_warnings(bridge)
     if time_domain is not None:
         result["time_domain"] = []
     responses, simulations = [], []
@@ -448,7 +463,12 @@ def _buffeting(bridge: Any, model: Any, speeds: tuple[float, ...], spec: Any,
         except ValueError as exc:
             raise UsageError(f"--buffeting {U:g}: {exc}") from exc
         responses.append(response)
-        result["buffeting"].append(response.to_dict())
+        entry = response.to_dict()
+        if aero.K_range is not None:
+            outside = extrapolated_modes(bridge, aero.model, U, aero.K_range)
+            entry["extrapolated_modes"] = outside
+            warnings.extend(_extrapolation_warning(U, row, aero.K_range) for row in outside)
+        result["buffeting"].append(entry)
         print(f"buffeting at U = {U:g} m/s (frequency domain): largest RMS h "
               f"{response.rms_h.max():.4g} m, alpha {response.rms_alpha.max():.4g} rad, "
               f"p {response.rms_p.max():.4g} m")
@@ -484,4 +504,31 @@ def _buffeting(bridge: Any, model: Any, speeds: tuple[float, ...], spec: Any,
 
         written = write_buffeting_outputs(out, responses, simulations)
         print("wrote " + ", ".join(str(p) for p in written))
-    return result
+    return result, warnings
+
+
+def _extrapolation_warning(U: float, row: dict[str, Any], K_range: tuple[float, float]) -> str:
+    """One sentence for a mode that resonates at ``U`` outside the table's ``K_range``."""
+    line = (f"buffeting at U = {U:g} m/s: {row['mode']} resonates at {row['frequency']:.4g} Hz, "
+            f"K = {row['K']:.3g}, outside the table's K {K_range[0]:.3g} to {K_range[1]:.3g}: "
+            "its aerodynamic damping there is the Roger fit's extrapolation, not the table's")
+    print(f"warning: {line}")
+    return line
+
+
+def _static_warnings(bridge: Any) -> list[str]:
+    """Warn (printed, returned for the JSON) of static coefficients a buffeting result rests on.
+
+    A positive lift slope is what a source with lift positive upward gives: in windrig's signs
+    (lift down) a deck's ``dC_L`` is negative, and the slope sets the vertical gust's lift
+    ``(dC_L - C_D) w / U``, so the mistake changes the buffeting forces and their correlation
+    with the moment. The flutter side only notes it; here it is a warning in the JSON.
+    """
+    static = bridge.static
+    if static is None or not static.dC_L > 0.0:
+        return []
+    line = (f"static dC_L = {static.dC_L:g} > 0 drives the buffeting lift (dC_L - C_D) w/U: "
+            "windrig's lift is positive downward, so a deck's dC_L is negative; from a source "
+            "with lift positive upward? then flip the signs of C_L and dC_L")
+    print(f"warning: {line}")
+    return [line]

@@ -13,6 +13,9 @@ heave and pitch only (2 DOF), the drag and sway terms are taken quasi-steady fro
 static coefficients (:func:`ident.model.quasi_steady.quasi_steady_model`) if it has them; otherwise
 the deck's sway feels no air, and a note says so.
 
+**Where a table holds.** :func:`extrapolated_modes` names the modes that resonate at a wind
+speed outside the table's reduced frequencies (the buffeting response marks them).
+
 Not responsible for: reading the model or table files (:mod:`ident.tables.fd_table`, the command
 line), the fit itself (:mod:`ident.tables.roger_table`).
 """
@@ -27,6 +30,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from ident.bridge.flutter import in_wind_modes
 from ident.bridge.model import BridgeModel
 from ident.model.conventions import FLUTTER_DERIVATIVE_NAMES
 from ident.model.quasi_steady import quasi_steady_derivatives, quasi_steady_model
@@ -34,7 +38,7 @@ from ident.model.rfc import RationalFunctionModel
 from ident.tables.fd_table import FlutterDerivativeTable
 from ident.tables.roger_table import TableFit, fit_table
 
-__all__ = ["BridgeAero", "aero_from_model", "aero_from_table", "with_model"]
+__all__ = ["BridgeAero", "aero_from_model", "aero_from_table", "extrapolated_modes", "with_model"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -149,3 +153,41 @@ def with_model(bridge: BridgeModel, aero: BridgeAero, model: RationalFunctionMod
     """
     full, _ = _with_sway(bridge, model, aero.flutter_derivatives, aero.source, [])
     return dataclasses.replace(aero, model=full)
+
+
+def extrapolated_modes(bridge: BridgeModel, model: RationalFunctionModel, U: float,
+                       K_range: tuple[float, float]) -> list[dict[str, Any]]:
+    """Return the modes whose resonance at ``U`` lies outside the reduced frequencies known.
+
+    A flutter-derivative table holds the self-excited forces between its lowest and highest
+    reduced frequency ``K = 2 pi f B / U`` only; the Roger fit the state space uses is an
+    extrapolation outside. A mode's resonant buffeting response is set by its aerodynamic
+    damping at its in-wind frequency, so a mode resonating outside the table gives a result the
+    table does not support (as U grows every K falls: the lowest modes leave the table first).
+    The in-wind frequencies are :func:`ident.bridge.flutter.in_wind_modes`'s branches.
+
+    Parameters
+    ----------
+    bridge : BridgeModel
+    model : RationalFunctionModel
+        The section's self-excited forces (a table's Roger fit: ``BridgeAero.model``).
+    U : float
+        Mean wind speed, m/s, > 0.
+    K_range : (float, float)
+        The lowest and highest reduced frequency of the table (``BridgeAero.K_range``).
+
+    Returns
+    -------
+    list of dict
+        ``{"mode": label, "frequency": Hz (in wind), "K": reduced frequency}`` for each mode
+        outside ``K_range``, in mode order; empty when every mode resonates inside it.
+    """
+    if not (np.isfinite(U) and U > 0.0):
+        raise ValueError(f"U must be > 0 m/s, got {U!r}")
+    frequencies, _ = in_wind_modes(bridge, model, [U])
+    out = []
+    for label, f in zip(bridge.mode_labels(), frequencies[0], strict=True):
+        K = 2.0 * np.pi * float(f) * bridge.B / U
+        if not K_range[0] <= K <= K_range[1]:
+            out.append({"mode": label, "frequency": float(f), "K": K})
+    return out

@@ -18,6 +18,10 @@ and
 ``docs/reference/conventions.md`` state the forms). This module adds what a bridge needs beyond a
 section: the coherence of the gusts at two deck nodes ``dx`` apart, ``coh(f) = exp(-C f |dx| / U)``.
 
+A wind file's slips are caught by name: an intensity of 1 or more (``Iu = 15`` meant as 15 %) is
+an error, a length scale under 1 m (given in km) or ``Lux < Lwx`` (swapped) a warning
+(:func:`wind_warnings`).
+
 Not responsible for: the buffeting forces on the modes and the response
 (:mod:`ident.bridge.buffeting`).
 """
@@ -34,17 +38,22 @@ import numpy.typing as npt
 
 from ident.physics.turbulence import ADMITTANCES, TurbulenceSpec
 
-__all__ = ["WIND_KEYS", "coherence", "read_wind", "wind_from_dict"]
+__all__ = ["WIND_KEYS", "coherence", "read_wind", "wind_from_dict", "wind_warnings"]
 
 #: The numeric keys of a WIND.toml (all required), with what each is.
 WIND_KEYS: dict[str, str] = {
-    "Iu": "turbulence intensity of u, sigma_u / U, >= 0",
-    "Iw": "turbulence intensity of w, sigma_w / U, >= 0",
+    "Iu": "turbulence intensity of u, sigma_u / U, a fraction, 0 <= Iu < 1",
+    "Iw": "turbulence intensity of w, sigma_w / U, a fraction, 0 <= Iw < 1",
     "Lux": "integral length scale of u, m, > 0",
     "Lwx": "integral length scale of w, m, > 0",
     "Cuy": "span-wise coherence decay constant of u, >= 0",
     "Cwy": "span-wise coherence decay constant of w, >= 0",
 }
+
+#: Shortest integral length scale (m) taken without a warning. Atmospheric scales at deck level
+#: are tens to hundreds of metres (``Lwx`` about 10 to 60 m, ``Lux`` 50 to 300 m), while the same
+#: scales written in km are 0.01 to 0.3: everything below 1 m is a unit slip, not a wind.
+MIN_PLAUSIBLE_LENGTH = 1.0
 
 
 def coherence(f: Any, dx: Any, U: float, C: float) -> npt.NDArray[np.float64]:
@@ -122,11 +131,56 @@ def wind_from_dict(data: dict[str, Any], *, source: str = "wind") -> TurbulenceS
                 or not math.isfinite(value):
             raise ValueError(f"{source}: key {key} = {value!r} is not a finite number ({meaning})")
         values[key] = float(value)
+    for key in ("Iu", "Iw"):
+        # sigma / U of 1 or more is no wind a linearised (quasi-steady) buffeting theory can
+        # take, and it is what a percentage looks like: refuse it with the likely slip.
+        if values[key] >= 1.0:
+            raise ValueError(f"{source}: key {key} = {values[key]:g} is sigma / U, a fraction "
+                             f"< 1 (a percentage? {values[key]:g} % is "
+                             f"{values[key] / 100.0:g})")
     kind, decay = _admittance(data.get("admittance", "none"), source)
     try:
         return TurbulenceSpec(**values, admittance=kind, decay=decay)
     except ValueError as exc:  # a range check of TurbulenceSpec: name the file too
         raise ValueError(f"{source}: {exc}") from exc
+
+
+def wind_warnings(spec: TurbulenceSpec, *, source: str = "wind") -> list[str]:
+    """Return a sentence for each implausible value of a wind that is otherwise valid.
+
+    Parameters
+    ----------
+    spec : TurbulenceSpec
+        The wind (:func:`read_wind`).
+    source : str
+        Name of the file, for the sentences.
+
+    Returns
+    -------
+    list of str
+        One sentence per slip, naming the file, the key and the likely mistake: a length scale
+        ``Lux`` or ``Lwx`` under :data:`MIN_PLAUSIBLE_LENGTH` m (given in km?), ``Lux < Lwx``
+        (the along-wind scale of u is several times that of w in the atmosphere: swapped?).
+        Empty for a plausible wind. A gust of intensity 0 is not looked at (its scale does
+        not act).
+
+    Examples
+    --------
+    >>> spec = TurbulenceSpec(Iu=0.1, Iw=0.05, Lux=0.15, Lwx=25.0, Cuy=10.0, Cwy=8.0)
+    >>> [line.split("): ")[1] for line in wind_warnings(spec, source="w.toml")]
+    ['given in km? 0.15 km is 150 m']
+    """
+    out = []
+    for key, intensity in (("Lux", spec.Iu), ("Lwx", spec.Iw)):
+        value = float(getattr(spec, key))
+        if intensity > 0.0 and value < MIN_PLAUSIBLE_LENGTH:
+            out.append(f"{source}: {key} = {value:g} m is no atmospheric length scale (tens to "
+                       f"hundreds of m at a deck): given in km? {value:g} km is "
+                       f"{1000.0 * value:g} m")
+    if not out and spec.Iu > 0.0 and spec.Iw > 0.0 and spec.Lux < spec.Lwx:
+        out.append(f"{source}: Lux = {spec.Lux:g} m < Lwx = {spec.Lwx:g} m: the length scale "
+                   f"of u is several times that of w in the atmosphere; swapped?")
+    return out
 
 
 def _admittance(value: Any, source: str) -> tuple[str, float]:

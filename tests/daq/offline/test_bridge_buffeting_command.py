@@ -78,3 +78,53 @@ def test_buffeting_errors_are_one_line(tmp_path: Path, model: Path, capsys,
     lines = [line for line in err.splitlines() if line.startswith("error:")]
     assert len(lines) == 1 and message in lines[0], err
     assert "Traceback" not in err
+
+
+def test_an_intensity_in_per_cent_is_one_error_line(tmp_path: Path, model: Path,
+                                                    capsys) -> None:
+    """``Iu = 15`` (15 %) had been taken as sigma_u = 15 U: a sway RMS of 35 m, exit 0."""
+    wind = tmp_path / "wind.toml"
+    wind.write_text(WIND.read_text(encoding="utf-8").replace("Iu = 0.10", "Iu = 15"),
+                    encoding="utf-8")
+    code = main(["bridge", str(BRIDGE), "--aero", str(model), "--wind", str(wind),
+                 "--buffeting", "30"])
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if line.startswith("error:")]
+    assert code == 2 and "Traceback" not in err
+    assert lines == [f"error: {wind}: key Iu = 15 is sigma / U, a fraction < 1 (a percentage? "
+                     "15 % is 0.15)"]
+
+
+def test_slips_and_extrapolation_are_warnings_in_the_json(tmp_path: Path, capsys) -> None:
+    """A length scale in km, a lift slope of the source's sign and a table left behind.
+
+    The bridge's ``dC_L = +5`` (lift up) and ``Lux = 0.15`` (km) are warnings; with the table
+    (K 0.314 to 3.14), at 45 m/s the lateral mode L1S (0.052 Hz) resonates at K = 2 pi f B / U
+    = 0.225: its entry names it in ``extrapolated_modes``, with a warning; at 30 m/s every mode
+    is inside (K of L1S 0.337, of T1A 2.37).
+    """
+    data = json.loads(BRIDGE.read_text(encoding="utf-8"))
+    data["static"]["dC_L"] = 5.0
+    bridge = tmp_path / "bridge.json"
+    bridge.write_text(json.dumps(data), encoding="utf-8")
+    wind = tmp_path / "wind.toml"
+    wind.write_text(WIND.read_text(encoding="utf-8").replace("Lux = 150.0", "Lux = 0.15"),
+                    encoding="utf-8")
+    out = tmp_path / "result.json"
+    assert main(["bridge", str(bridge), "--aero", str(BRIDGES / "example_deck_table.csv"),
+                 "--buffeting", "30,45", "--wind", str(wind), "--json", str(out)]) == 0
+    printed = capsys.readouterr().out
+    result = json.loads(out.read_text())
+    warnings = result["warnings"]
+    assert f"{wind}: Lux = 0.15 m is no atmospheric length scale (tens to hundreds of m at a " \
+           "deck): given in km? 0.15 km is 150 m" in warnings
+    assert any(line.startswith("static dC_L = 5 > 0 drives the buffeting lift") for line in
+               warnings)
+    at30, at45 = result["buffeting"]
+    assert at30["extrapolated_modes"] == []
+    [row] = at45["extrapolated_modes"]
+    assert row["mode"].startswith("L1S") and row["K"] == pytest.approx(
+        2 * math.pi * row["frequency"] * 31.0 / 45.0, rel=1e-12)
+    assert row["K"] == pytest.approx(0.225, abs=0.001)
+    line = next(w for w in warnings if w.startswith("buffeting at U = 45 m/s: L1S"))
+    assert "outside the table's K 0.314 to 3.14" in line and f"warning: {line}" in printed

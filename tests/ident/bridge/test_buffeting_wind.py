@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ident.bridge.wind import coherence, read_wind
+from ident.bridge.wind import coherence, read_wind, wind_warnings
 from ident.physics.turbulence import davenport_function
 
 GOOD = """Iu = 0.10
@@ -76,3 +76,41 @@ def test_coherence_is_exponential_in_reduced_separation() -> None:
     assert np.all(coherence(f, 100.0, 20.0, 0.0) == 1.0)  # C = 0: fully coherent
     with pytest.raises(ValueError, match="U must be > 0"):
         coherence(f, 1.0, 0.0, 8.0)
+
+
+@pytest.mark.parametrize(("key", "value", "hint"), [
+    ("Iu", "15", "key Iu = 15 is sigma / U, a fraction < 1 (a percentage? 15 % is 0.15)"),
+    ("Iw", "5", "key Iw = 5 is sigma / U, a fraction < 1 (a percentage? 5 % is 0.05)"),
+    ("Iu", "1.0", "key Iu = 1 is sigma / U"),
+])
+def test_an_intensity_of_one_or_more_is_refused_as_a_percentage(tmp_path: Path, key: str,
+                                                                 value: str, hint: str) -> None:
+    """``Iu = 15`` meant as 15 % had given the example bridge a sway RMS of 35 m without a word."""
+    old = {"Iu": "Iu = 0.10", "Iw": "Iw = 0.05"}[key]
+    path = _write(tmp_path, GOOD.replace(old, f"{key} = {value}"))
+    with pytest.raises(ValueError) as info:
+        read_wind(path)
+    text = str(info.value)
+    assert text.startswith(str(path)) and hint in text and "\n" not in text
+
+
+def test_length_scales_in_km_or_swapped_are_warned(tmp_path: Path) -> None:
+    """A scale under 1 m is one in km; Lux < Lwx is a swap; a plausible wind has no warning."""
+    assert wind_warnings(read_wind(_write(tmp_path, GOOD))) == []
+    km = read_wind(_write(tmp_path, GOOD.replace("Lux = 150.0", "Lux = 0.15")
+                          .replace("Lwx = 20.0", "Lwx = 0.02")))
+    lines = wind_warnings(km, source="WIND.toml")
+    assert lines == [
+        "WIND.toml: Lux = 0.15 m is no atmospheric length scale (tens to hundreds of m at a "
+        "deck): given in km? 0.15 km is 150 m",
+        "WIND.toml: Lwx = 0.02 m is no atmospheric length scale (tens to hundreds of m at a "
+        "deck): given in km? 0.02 km is 20 m"]
+    swapped = read_wind(_write(tmp_path, GOOD.replace("Lux = 150.0", "Lux = 20.0")
+                               .replace("Lwx = 20.0", "Lwx = 150.0")))
+    assert wind_warnings(swapped, source="w") == [
+        "w: Lux = 20 m < Lwx = 150 m: the length scale of u is several times that of w in the "
+        "atmosphere; swapped?"]
+    # A gust that is absent (intensity 0) has a scale that does not act: nothing to say.
+    no_u = read_wind(_write(tmp_path, GOOD.replace("Iu = 0.10", "Iu = 0.0")
+                            .replace("Lux = 150.0", "Lux = 0.5")))
+    assert wind_warnings(no_u) == []
