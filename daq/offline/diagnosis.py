@@ -50,7 +50,8 @@ def run_diagnose(files: Sequence[Path], out: Path, *, depth: float | None = None
         Directory of the plots (created).
     depth : float, optional
         Section depth, m, for the Strouhal number of a shedding line; default the ``depth`` of
-        the first file's stored rig config.
+        the first file's stored rig config (neither: a named shedding line's ``strouhal`` is
+        per metre of depth, and a warning says so).
     json_path : Path, optional
         Write the report's numbers there.
 
@@ -75,6 +76,12 @@ def run_diagnose(files: Sequence[Path], out: Path, *, depth: float | None = None
     # A file whose clocks had no trigger anchor holds motion and forces a latency apart,
     # which a channel delay found here may be: say so before any effect is believed.
     notes = recording_notes(runs)
+    if depth is None and any(step.name == "vortex_shedding" for step in report.effects):
+        # Without a depth the workflow reports St = k * 1 m (k the line's Hz per m/s): a
+        # number that reads as a Strouhal number and is not one; say so, not silently.
+        notes.append("no section depth (--depth, or depth in the stored config's [section]): "
+                     "the shedding line's strouhal is its frequency per wind speed times 1 m "
+                     "(Hz per m/s), not a Strouhal number")
     for note in notes:
         print(f"warning: {note}")
     out.mkdir(parents=True, exist_ok=True)

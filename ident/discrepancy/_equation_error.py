@@ -245,6 +245,14 @@ def _crosstalk(sig: DecaySignals, section: SectionModel) -> list[FloatArray]:
     return cols
 
 
+def _viscous(sig: DecaySignals, section: SectionModel) -> list[FloatArray]:
+    # Linear in the motion, so it commutes with the filter: the filtered velocity serves.
+    B = section.B
+    zero = np.zeros(sig.t.size)
+    return [np.column_stack([-sig.q1[:, 0] * B * B, zero]),
+            np.column_stack([zero, -sig.q1[:, 1]])]
+
+
 @dataclass(frozen=True)
 class CandidateSpec:
     """A structural candidate: its parameters (names, units) and regressor builder."""
@@ -268,6 +276,11 @@ STRUCTURAL_CANDIDATES: tuple[CandidateSpec, ...] = (
     # (ident.discrepancy.effect_selection converts).
     CandidateSpec("tubing_distortion", ("a1", "a2"), ("s", "s^2"), _tubing),
 )
+#: Not a named effect: the reference friction and drag (named by how their damping changes
+#: with the amplitude) are judged against, a linear damping the section's still-air damping
+#: misses (a wrong ``Cs``, outside the library): ``[-c_h h' B, -c_a alpha']``, N m/m.
+LINEAR_DAMPING = CandidateSpec("linear_damping", ("c_h", "c_a"), ("N s/m^2", "N m s/m"),
+                               _viscous)
 
 
 @dataclass(frozen=True)
@@ -358,7 +371,13 @@ def fit_linear(y: Sequence[FloatArray], X: Sequence[FloatArray],
         Rows per fold chunk, per release.
     """
     Y, Xall = np.concatenate(y), np.vstack(X)
-    theta, *_ = np.linalg.lstsq(Xall, Y, rcond=None)
+    # Unit-norm columns: they span ten orders of magnitude (h^3 beside a friction's sign), past
+    # what pinv of the normal matrix resolves (a cubic spring beside friction: std 2e-14).
+    norms = np.linalg.norm(Xall, axis=0)
+    norms[norms == 0.0] = 1.0
+    Xs = Xall / norms
+    theta_s, *_ = np.linalg.lstsq(Xs, Y, rcond=None)
+    theta = theta_s / norms
     chunk_id, _ = chunk_ids(y, chunks)
     ratio, se = compare_held_out(np.asarray(Y**2, dtype=float), held_out_sse(y, X, chunks),
                                  chunk_id)
@@ -366,7 +385,7 @@ def fit_linear(y: Sequence[FloatArray], X: Sequence[FloatArray],
     dof = max(Y.size - theta.size, 1)
     sigma2 = float(sum(float(r @ r) for r in residuals)) / dof
     sigma2 *= autocorrelation_inflation([r[:, None] for r in residuals])
-    cov = sigma2 * np.linalg.pinv(Xall.T @ Xall)
+    cov = sigma2 * np.linalg.pinv(Xs.T @ Xs) / np.outer(norms, norms)
     return LinearFit(theta=np.asarray(theta, dtype=float),
                      std=np.sqrt(np.maximum(np.diag(cov), 0.0)), cv_ratio=ratio, cv_ratio_se=se)
 
@@ -381,7 +400,8 @@ class StructuralProblem:
         Per release, the residual ``Ms q'' + Cs q' + Ks q - f`` with each equation (heave,
         pitch) divided by its RMS over all releases (so that neither dominates by its units).
     X : dict of str to list of ndarray, shape (2 n_i, p)
-        Per candidate name, per release, its regressors whitened alike.
+        Per candidate name, per release, its regressors whitened alike (and those of
+        :data:`LINEAR_DAMPING`, the reference of the damping candidates).
     chunks : list of int
         Rows per held-out chunk, per release.
     scale : ndarray, shape (2,)
@@ -405,15 +425,52 @@ class StructuralProblem:
 def structural_problem(signals: Sequence[DecaySignals], section: SectionModel,
                        specs: Sequence[CandidateSpec] = STRUCTURAL_CANDIDATES
                        ) -> StructuralProblem:
-    """Build the whitened structural residuals and the candidates' regressors."""
+    """Build the whitened residuals and the candidates' (and :data:`LINEAR_DAMPING`'s) columns."""
     residuals = [structural_residual(sig, section) for sig in signals]
     scale = np.sqrt(np.mean(np.vstack(residuals) ** 2, axis=0))
     scale[scale == 0.0] = 1.0
     y = [(r / scale).ravel() for r in residuals]
     X = {spec.name: [np.column_stack([(c / scale).ravel() for c in spec.regressors(sig, section)])
-                     for sig in signals] for spec in specs}
+                     for sig in signals] for spec in (*specs, LINEAR_DAMPING)}
     return StructuralProblem(y=y, X=X, chunks=[2 * sig.chunk for sig in signals], scale=scale,
                              t=[sig.t for sig in signals])
+
+
+def beside_linear_damping(problem: StructuralProblem, base: Sequence[str], name: str,
+                          section: SectionModel) -> tuple[float, float, FloatArray]:
+    """Score a damping candidate beside a linear damping of the structure (:data:`LINEAR_DAMPING`).
+
+    Parameters
+    ----------
+    problem : StructuralProblem
+        The structural residuals and columns.
+    base : sequence of str
+        The structural effects already chosen (fitted in both fits).
+    name : str
+        The candidate.
+    section : SectionModel
+        The structure (its still-air modes turn the damping into damping ratios).
+
+    Returns
+    -------
+    ratio, se : float
+        Held-out residual with ``name`` over that without it, both beside ``base`` and the
+        linear damping, and its standard error.
+    zeta : ndarray, shape (4,)
+        The linear damping fitted beside ``base`` as the damping ratios it adds,
+        ``c_h / (2 m w_h)``, ``c_a / (2 I w_a)`` (``c_h`` N s/m^2, ``c_a`` N m s/m), and their
+        standard deviations.
+    """
+    ids, _ = chunk_ids(problem.y, problem.chunks)
+    columns = [*base, LINEAR_DAMPING.name]
+    without = held_out_sse(problem.y, problem.design(columns), problem.chunks)
+    ratio, se = compare_held_out(without, held_out_sse(
+        problem.y, problem.design([*columns, name]), problem.chunks), ids)
+    fit = fit_linear(problem.y, problem.design(columns), problem.chunks)
+    to_zeta = 1.0 / np.array([2 * section.m * 2 * math.pi * section.fh,
+                              2 * section.I * 2 * math.pi * section.fa])
+    zeta = np.concatenate([fit.theta[-2:] * to_zeta, fit.std[-2:] * to_zeta])
+    return ratio, se, zeta
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,8 @@ model one at a time, in rounds:
    (:func:`ident.discrepancy.residual_check.systematic_left`) (a base vibration
    also needs a line that stands out, :data:`ident.discrepancy._base_fit.MIN_PROMINENCE`; a
    candidate that contains another, a tube containing a delay, must be clear of that one fitted
-   exactly; and the parameters must be in range, a tube needs a resonance).
+   exactly; friction and drag must be clear of a linear damping of the structure, which is not
+   in the library; and the parameters must be in range, a tube needs a resonance).
 3. **Gap**: the best qualifying candidate is added: all chosen effects take the joint fit's
    parameters, the measurement effects are taken out of the data, the aerodynamic model is
    identified again by E2RFC (when the data changed, and beside the effects that bend the
@@ -77,6 +78,7 @@ from ident.discrepancy._equation_error import (
     STRUCTURAL_CANDIDATES,
     StructuralProblem,
     VortexFit,
+    beside_linear_damping,
     chunk_ids,
     compare_held_out,
     decay_signals,
@@ -132,6 +134,10 @@ _TUBING = "tubing_distortion"
 #: A candidate that contains another (a second-order tube far below its resonance is a delay)
 #: must also be clear of it, in the same round, to be chosen.
 _CONTAINS = {_TUBING: "channel_delay"}
+#: Named by how their damping changes with the amplitude, so each must be clear of a linear
+#: damping (:data:`ident.discrepancy._equation_error.LINEAR_DAMPING`, outside the library):
+#: else an unknown viscous damping was named drag, and beside a friction "explained".
+_AMPLITUDE_DAMPING = frozenset({"coulomb_friction", "quadratic_damping"})
 _UNITS = {spec.name: dict(zip(spec.parameters, spec.units, strict=True))
           for spec in STRUCTURAL_CANDIDATES}
 _UNITS[_VORTEX] = {"strouhal": "1", "cl": "1", "cm": "1", "phase": "rad"}
@@ -326,7 +332,8 @@ class _Search:
                 if name in excluded:
                     verdicts[name] = excluded[name]
                     continue
-                reason = self._gate(name, ratio, se, chosen, remaining, aero, sigmas)
+                reason = self._gate(name, ratio, se, chosen, remaining, aero, sigmas,
+                                    problem)
                 if reason is None:
                     accepted = self._try_alone(name, chosen, state, aero, verdicts, trials,
                                                undone, len(rounds) + 1,
@@ -393,10 +400,20 @@ class _Search:
         return sorted(scored, key=lambda item: item[1])
 
     def _gate(self, name: str, ratio: float, se: float, chosen: list[str],
-              remaining: list[str], aero: AerodynamicFit, sigmas: float) -> str | None:
+              remaining: list[str], aero: AerodynamicFit, sigmas: float,
+              problem: StructuralProblem) -> str | None:
         """Return why a candidate is not tried: "" when not clear, None when it is tried."""
         if not _clear(ratio, se, sigmas):
             return ""
+        if name in _AMPLITUDE_DAMPING:
+            # Significance only (no NONE_RATIO): half a realistic drag explains 0.4-0.7 % beside it.
+            beside, beside_se, zeta = beside_linear_damping(problem, _structural(chosen), name,
+                                                            self.section)
+            if not (1.0 - beside) > sigmas * beside_se:
+                return (f"rejected: not clear of a linear damping of the structure, which is "
+                        f"not in the library ({beside:.4f} +- {beside_se:.4f} of the held-out "
+                        f"residual beside it; fitted, it adds {zeta[0]:+.2g} +- {zeta[2]:.1g} "
+                        f"to zeta_h and {zeta[1]:+.2g} +- {zeta[3]:.1g} to zeta_a)")
         if name == _BASE and self.line.prominence < MIN_PROMINENCE:
             return (f"rejected: no line stands out in the heave residual (peak "
                     f"{self.line.prominence:.3g} x the median, needs {MIN_PROMINENCE:g})")

@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 from pathlib import Path
 
+import h5py
 import pytest
 
 from daq.cli import main
@@ -95,3 +97,32 @@ def test_diagnose_locates_a_residual_it_cannot_explain(tmp_path, capsys):
     assert data["warnings"] == data["unexplained"]
     png = out / "diagnose_residual.png"
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_shedding_line_without_a_section_depth_is_not_passed_off_as_a_strouhal_number(
+        tmp_path, capsys):
+    # A run file whose stored config has no [section] depth (an older or imported one) and
+    # no --depth: the workflow gives the line's frequency per wind speed times 1 m, 4 Hz per
+    # m/s here (St 0.12 at 0.03 m); printed as "strouhal = 4" without a word before the fix.
+    config = parse_rig_config(SIM_FLAT_PLATE.read_text(), "sim_flat_plate.toml")
+    releases = simulated_campaign(REALISTIC["vortex_shedding"], seed=104, duration=3.0,
+                                  fractions=(0.5, 0.8))
+    path = tmp_path / "no_depth.h5"
+    write_release_run(path, config, releases)
+    with h5py.File(path, "r+") as f:
+        stored = f["entry/config"]
+        text = stored[()].decode()
+        attrs = dict(stored.attrs)
+        del f["entry/config"]
+        f["entry/config"] = re.sub(r"(?m)^depth\s*=.*\n", "", text)
+        f["entry/config"].attrs.update(attrs)
+    report = tmp_path / "report.json"
+    assert main(["diagnose", str(path), "--out", str(tmp_path / "p"),
+                 "--json", str(report)]) == 0
+    printed = capsys.readouterr().out
+    data = json.loads(report.read_text())
+    assert data["effect"] == "vortex_shedding", printed
+    assert data["parameters"]["strouhal"] == pytest.approx(4.0, rel=0.01)
+    assert any("no section depth" in w and "not a Strouhal number" in w
+               for w in data["warnings"]), data["warnings"]
+    assert "warning: no section depth" in printed
