@@ -124,6 +124,27 @@ def imported_deviation(path: object, record: LabRecord) -> dict[str, float]:
     return out
 
 
+#: The map of a lab record's columns by their own names (t, h, alpha, lift, moment, U: SI,
+#: windrig's signs), one release listed at 1 s after a 1 s hold: the import tests' CSV layout.
+MAP = """\
+config = "sim_flat_plate"
+[time]
+column = "t"
+unit = "s"
+[channels]
+h = { column = "h", unit = "m", sign = "down" }
+alpha = { column = "alpha", unit = "rad", sign = "nose_up" }
+lift = { column = "lift", unit = "N/m", sign = "down" }
+moment = { column = "moment", unit = "N m/m", sign = "nose_up" }
+[wind]
+U = { column = "U", unit = "m/s" }
+rho = 1.225
+[releases]
+times = [1.0]
+hold = 1.0
+"""
+
+
 #: The map of the MATLAB v5 records :func:`write_mat_v5` writes (listed release instants).
 MAP_V5 = """\
 config = "sim_flat_plate"

@@ -19,25 +19,7 @@ from daq.cli import main
 from daq.errors import UsageError
 from daq.exchange.import_map import parse_number
 
-from support.lab_data import FS, MAGNET_ON, lab_record
-
-MAP = """\
-config = "sim_flat_plate"
-[time]
-column = "t"
-unit = "s"
-[channels]
-h = { column = "h", unit = "m", sign = "down" }
-alpha = { column = "alpha", unit = "rad", sign = "nose_up" }
-lift = { column = "lift", unit = "N/m", sign = "down" }
-moment = { column = "moment", unit = "N m/m", sign = "nose_up" }
-[wind]
-U = { column = "U", unit = "m/s" }
-rho = 1.225
-[releases]
-times = [1.0]
-hold = 1.0
-"""
+from support.lab_data import FS, MAGNET_ON, MAP, lab_record
 
 
 def write_csv(path, *, rows: slice = slice(0, 4250), U_ramp: float = 0.0,

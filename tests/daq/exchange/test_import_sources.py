@@ -18,28 +18,11 @@ from nptdms import ChannelObject, GroupObject, RootObject, TdmsWriter
 
 from daq.cli import main
 
-from support.lab_data import FS, lab_record
+from support.lab_data import FS, MAP, lab_record
 
 N = 4250  # the first release of the 5.88 m/s record: 1 s held, 7.5 s of decay
 CHANNELS = ("h", "alpha", "lift", "moment")
 
-MAP = """\
-config = "sim_flat_plate"
-[time]
-column = "t"
-unit = "s"
-[channels]
-h = { column = "h", unit = "m", sign = "down" }
-alpha = { column = "alpha", unit = "rad", sign = "nose_up" }
-lift = { column = "lift", unit = "N/m", sign = "down" }
-moment = { column = "moment", unit = "N m/m", sign = "nose_up" }
-[wind]
-U = { column = "U", unit = "m/s" }
-rho = 1.225
-[releases]
-times = [1.0]
-hold = 1.0
-"""
 RATE_MAP = MAP.replace('[time]\ncolumn = "t"\nunit = "s"', "[time]\nrate = 500.0")
 TDMS_MAP = (MAP.replace('[time]\ncolumn = "t"\nunit = "s"', "[time]\nwaveform = true")
             .replace('U = { column = "U", unit = "m/s" }', "U = 5.88"))
