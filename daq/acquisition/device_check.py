@@ -55,7 +55,7 @@ from daq.acquisition.drivers import ROLE_KINDS
 from daq.config import InstrumentConfig, RigConfig
 from daq.errors import DaqError, DeviceCheckError, PluginError
 from daq.instruments.build import build_driver
-from daq.instruments.reading import Reading, stream_breaches
+from daq.instruments.reading import Reading, ReadingContract
 
 __all__ = ["CheckLimits", "CheckResult", "check_rig", "failure_lines", "format_table",
            "require_devices_ok"]
@@ -232,12 +232,12 @@ class _DeviceCheck:
         self.window_s = window_s
         self.found = Findings()
         self.driver: Any = None
+        self._contract: ReadingContract  # once the driver is built (_run)
         self._lock = threading.Lock()
         self._abandoned: str | None = None
         self._gave_up = False  # the device's own thread ended its check on an exception
         self._start = time.monotonic()
         self._elapsed = 0.0
-        self._last_counter: int | None = None  # of the readings checked so far (_checked)
         self.thread = threading.Thread(target=self._run, name=f"windrig-check-{inst.name}",
                                        daemon=True)
 
@@ -280,6 +280,7 @@ class _DeviceCheck:
         except Exception as exc:
             self._failed("cannot build the driver", exc)
             return self._done()
+        self._contract = ReadingContract(self.driver)
         try:
             try:
                 self.driver.open()
@@ -344,25 +345,19 @@ class _DeviceCheck:
     def _checked(self, reading: Reading) -> Reading:
         """Return ``reading`` if the engine would record it, else raise what breaks it.
 
-        The engine checks every reading the same way (``stream_breaches``) and stops reading a
-        device whose driver breaks the contract; the check says so before a run, rather than
-        judge a reading of the wrong shape (the first of two values read as the pressure).
+        The engine checks every reading the same way (:class:`ReadingContract`) and stops
+        reading a device whose driver breaks the contract; the check says so before a run,
+        rather than judge a reading of the wrong shape (the first of two values read as the
+        pressure).
 
         Raises
         ------
         PluginError
             The reading differs from the driver's ``describe()``, or its counter goes back.
         """
-        describe = getattr(self.driver, "describe", None)
-        described = dict(describe()) if callable(describe) else None
-        problems = stream_breaches(described, reading, self._last_counter)
-        if problems:
-            kind = type(self.driver)
-            raise PluginError(f"its driver {kind.__module__}.{kind.__qualname__} delivered a "
-                              "reading that breaks the reading contract (docs/guides/"
-                              f"drivers.md): {'; '.join(problems)}")
-        if len(reading):
-            self._last_counter = int(reading.counter[-1])
+        breach = self._contract.breach(reading)
+        if breach is not None:
+            raise PluginError(breach)
         return reading
 
 

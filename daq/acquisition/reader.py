@@ -63,7 +63,7 @@ from daq.acquisition.records import (
     StreamBlock,
 )
 from daq.errors import DaqError, PluginError, TransportError, TransportTimeout
-from daq.instruments.reading import Gap, Reading, stream_breaches
+from daq.instruments.reading import Gap, Reading, ReadingContract
 
 __all__ = ["DeviceReader"]
 
@@ -190,11 +190,8 @@ class DeviceReader:
         self._drops: list[DropRun] = []
         self._next_drop_log = 0.0
         self.failed: BaseException | None = None
-        # What every reading is checked against (_breach): the driver's describe(), taken at
-        # the first reading (after open(): some drivers learn their channels there), and the
-        # last counter queued.
-        self._described: dict[str, Any] | None = None
-        self._last_counter: int | None = None
+        # Every reading is checked before it is queued (_breach).
+        self._contract = ReadingContract(driver)
 
     # -- life cycle (called by the Acquisition) --------------------------------------------------
     def open_device(self) -> None:
@@ -461,19 +458,10 @@ class DeviceReader:
 
     def _breach(self, reading: Reading) -> PluginError | None:
         """Check a reading before it is queued; return the error naming its breaches, if any."""
-        if self._described is None:
-            describe = getattr(self.driver, "describe", None)
-            self._described = dict(describe()) if callable(describe) else {}
-        problems = stream_breaches(self._described or None, reading, self._last_counter)
-        if problems:
-            driver = type(self.driver)
-            return PluginError(
-                f"its driver {driver.__module__}.{driver.__qualname__} delivered "
-                f"a reading that breaks the reading contract (docs/guides/drivers.md): "
-                f"{'; '.join(problems)}; not recorded, and this device is read no more")
-        if len(reading):
-            self._last_counter = int(reading.counter[-1])
-        return None
+        breach = self._contract.breach(reading)
+        if breach is None:
+            return None
+        return PluginError(f"{breach}; not recorded, and this device is read no more")
 
     def _offer(self, reading: Reading) -> None:
         block = StreamBlock.of(self.name, self.kind, self._seq, reading)

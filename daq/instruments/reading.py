@@ -4,8 +4,10 @@ Responsibility: :class:`Reading`, one read of one driver (a block of rows: the c
 host arrival times, the device times, the unwrapped counters, the gaps and per-read facts), the
 one :class:`Gap` type of every stream (drivers, the engine's dropped blocks, counter unwrapping
 in :mod:`daq.sync.counters`), :class:`PollSequence` (the poll numbers and gaps of the polled
-drivers), :func:`describe_mismatches` (a ``describe()`` checked against a reading) and
-:func:`stream_breaches` (what the engine checks of every reading before it records it).
+drivers), :func:`describe_mismatches` (a ``describe()`` checked against a reading),
+:func:`stream_breaches` (what the engine checks of every reading before it records it) and
+:class:`ReadingContract` (those checks over one driver's stream, for the engine's readers and
+the device check alike).
 
 The contract, for every driver alike:
 
@@ -32,8 +34,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["GAP_KINDS", "Gap", "PollSequence", "Reading", "describe_mismatches",
-           "stream_breaches"]
+__all__ = ["GAP_KINDS", "Gap", "PollSequence", "Reading", "ReadingContract",
+           "describe_mismatches", "stream_breaches"]
 
 IntArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
@@ -226,3 +228,42 @@ def stream_breaches(described: Mapping[str, Mapping[str, Any]] | None, reading: 
     if last_counter is not None and int(counter[0]) <= last_counter:
         out.append(f"counter goes back: {int(counter[0])} after {last_counter}")
     return out
+
+
+class ReadingContract:
+    """One driver's stream checked reading by reading (:func:`stream_breaches`).
+
+    The driver's ``describe()`` is taken at the first reading (after ``open()``: some drivers
+    learn their channels there), and the last counter of every reading that passed is kept, so
+    that a counter going back across readings is found too.
+
+    Parameters
+    ----------
+    driver : object
+        The driver whose readings are checked (its class names it in the message).
+    """
+
+    def __init__(self, driver: Any) -> None:
+        self._driver = driver
+        self._described: dict[str, Any] | None = None
+        self._taken = False
+        self._last_counter: int | None = None
+
+    def breach(self, reading: Any) -> str | None:
+        """Return what breaks the contract in ``reading`` (None: it may be recorded).
+
+        The text names the driver's class and every breach, for the caller's error.
+        """
+        if not self._taken:
+            describe = getattr(self._driver, "describe", None)
+            self._described = dict(describe()) if callable(describe) else None
+            self._taken = True
+        problems = stream_breaches(self._described, reading, self._last_counter)
+        if problems:
+            kind = type(self._driver)
+            return (f"its driver {kind.__module__}.{kind.__qualname__} delivered a reading "
+                    "that breaks the reading contract (docs/guides/drivers.md): "
+                    f"{'; '.join(problems)}")
+        if len(reading):
+            self._last_counter = int(reading.counter[-1])
+        return None
