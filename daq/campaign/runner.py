@@ -77,7 +77,7 @@ from daq.campaign.adaptive import MIN_SPEEDS, choose_next, safety_bound, still_a
 from daq.campaign.files import interrupted_name, read_back, run_file_name
 from daq.campaign.monitor import DecayMonitor
 from daq.campaign.outcome import CampaignOutcome, SpeedStep
-from daq.campaign.plan import FIXED_SAFETY_FRACTION, CampaignPlan
+from daq.campaign.plan import CampaignPlan
 from daq.campaign.releasing import ManualReleases, PlcReleases, releaser
 from daq.campaign.wind import STEADY_TIMEOUT_S, ramp_rate, wait_steady
 from daq.config import RigConfig
@@ -94,7 +94,7 @@ from ident.records.release import Release
 from ident.records.run_file import RunFile, read_run
 from ident.records.run_set import campaign_section
 
-__all__ = ["CHECK_FAILED", "FIXED_SAFETY_FRACTION", "CampaignOutcome", "SpeedStep", "run_plan"]
+__all__ = ["CHECK_FAILED", "CampaignOutcome", "SpeedStep", "run_plan"]
 
 log = logging.getLogger(__name__)
 
