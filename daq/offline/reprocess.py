@@ -47,7 +47,7 @@ from ident.identification.modal import fit_release_modes
 from ident.model.section import SectionModel
 from ident.records.release import Release
 from ident.records.run_file import read_run
-from ident.records.run_set import recording_notes, section_difference
+from ident.records.run_set import differing_parameters, recording_notes, section_difference
 
 __all__ = ["ReprocessSettings", "expand_paths", "load_reprocess_config",
            "process_campaign", "process_file", "reprocess"]
@@ -445,15 +445,12 @@ def _near_sections(groups: Mapping[str, list[dict[str, Any]]],
     and nothing else would say why. Sections that differ in at most
     :data:`NEAR_SECTION_PARAMETERS` parameters (air density aside) are named.
     """
-    sections = {key: SectionModel.from_dict(group[0]["section"]).replace(rho=1.0)
-                for key, group in groups.items()}
+    sections = {key: SectionModel.from_dict(group[0]["section"]) for key, group in groups.items()}
     out: dict[str, list[str]] = {}
     keys = list(groups)
     for j, key in enumerate(keys):
-        mine = sections[key].to_dict()
         for other in keys[:j]:
-            theirs = sections[other].to_dict()
-            differing = {name for name in {*mine, *theirs} if mine.get(name) != theirs.get(name)}
+            differing = differing_parameters(sections[key], sections[other])
             if 0 < len(differing) <= NEAR_SECTION_PARAMETERS:
                 out.setdefault(key, []).append(
                     f"its files' section differs from {labels[other]}'s only in "

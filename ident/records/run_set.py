@@ -17,7 +17,8 @@ import numpy as np
 from ident.model.section import SectionModel
 from ident.records.run_file import FileFormatError, RunFile
 
-__all__ = ["campaign_section", "recording_notes", "section_difference", "tubing_note"]
+__all__ = ["campaign_section", "differing_parameters", "recording_notes", "section_difference",
+           "tubing_note"]
 
 
 def campaign_section(runs: Sequence[RunFile]) -> SectionModel:
@@ -72,11 +73,23 @@ def section_difference(section: SectionModel, reference: SectionModel) -> str:
     """
     mine, theirs = section.to_dict(), reference.to_dict()
     parts = [f"{name} = {_value(mine.get(name))} against {_value(theirs.get(name))}"
-             for name in dict.fromkeys([*theirs, *mine])
-             if name != "rho" and mine.get(name) != theirs.get(name)]
+             for name in differing_parameters(section, reference)]
     if section.n_dof != reference.n_dof:
         parts.append(f"{section.n_dof} DOF against {reference.n_dof}")
     return "; ".join(parts) or "in no stored parameter"
+
+
+def differing_parameters(section: SectionModel, reference: SectionModel) -> list[str]:
+    """Return the stored parameters (air density aside) in which two sections differ.
+
+    Returns
+    -------
+    list of str
+        Their names (``SectionModel.to_dict``'s keys), the reference's order first.
+    """
+    mine, theirs = section.to_dict(), reference.to_dict()
+    return [name for name in dict.fromkeys([*theirs, *mine])
+            if name != "rho" and mine.get(name) != theirs.get(name)]
 
 
 def _value(value: object) -> str:
