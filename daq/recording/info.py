@@ -34,7 +34,12 @@ from daq.recording.layout import (
     per_device_attrs,
 )
 from daq.recording.recover import holders, read_superblock
-from ident.records.run_layout import release_table_problem, shared_rows_problem
+from ident.records.run_layout import (
+    empty_release,
+    release_rows_problem,
+    release_table_problem,
+    shared_rows_problem,
+)
 
 __all__ = ["format_info", "run_info"]
 
@@ -297,12 +302,11 @@ def _release_warnings(path: Path, table: np.ndarray, rows: int) -> list[str]:
     for i, row in enumerate(table):
         start, stop, U = int(row["start_index"]), int(row["stop_index"]), float(row["U"])
         if start == stop:  # the recorder's U of such a row is NaN: no more to say
-            out.append(f"{path}: release {i} holds no rows of /entry/sync (released as the "
-                       "recording ended?): identify leaves it out")
+            out.append(f"{path}: {empty_release(i)}: identify leaves it out")
             continue
-        if not 0 <= start < stop <= rows:
-            out.append(f"{path}: release {i} rows {start}..{stop} are not within the {rows} "
-                       "rows of /entry/sync")
+        problem = release_rows_problem(start, stop, rows, i)
+        if problem is not None:
+            out.append(f"{path}: {problem}")
         if not U > 0.0:  # NaN too
             out.append(f"{path}: release {i} has U = {U:g} m/s: a wind speed must be > 0 m/s")
     return out

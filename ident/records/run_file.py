@@ -73,6 +73,8 @@ from ident.records.release import Release, ReleaseHold
 from ident.records.release_onset import ReleaseOnset, find_releases
 from ident.records.run_layout import (
     column_problem,
+    empty_release,
+    release_rows_problem,
     release_table_problem,
     release_time_problem,
     shared_rows_problem,
@@ -313,8 +315,7 @@ def read_run(path: str | os.PathLike[str], *, tubing_correction: bool = True,
             # The recorder writes a release commanded as the recording ended with no rows
             # (daq.recording.releases): nothing to identify, and nothing that invalidates the
             # file's other releases; left out, and said.
-            notes.append(f"release {i} holds no rows of /entry/sync (released as the "
-                         "recording ended?): left out")
+            notes.append(f"{empty_release(i)}: left out")
             continue
         stop = _gap_free_stop(sync, row) if cut_at_gaps else int(row["stop_index"])
         start = int(row["start_index"])
@@ -586,12 +587,7 @@ def _release(sync: dict[str, np.ndarray], row: Any, path: str, index: int,
              hold_rows: slice | None = None) -> Release:
     start, stop = int(row["start_index"]), int(row["stop_index"])
     n = sync["time"].size
-    if stop < start:
-        raise FileFormatError(f"{path}: release {index} rows {start}..{stop} run backwards: "
-                              "its stop_index must exceed its start_index")
-    if not 0 <= start < stop <= n:
-        raise FileFormatError(f"{path}: release {index} rows {start}..{stop} are outside the "
-                              f"{n} rows of /entry/sync (truncated run?)")
+    _refuse(path, release_rows_problem(start, stop, n, index))
     names = _release_channels(sync)
     # A crash can leave one column a flush shorter than the others: only the rows a release
     # reads must exist in every column it reads.

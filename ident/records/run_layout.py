@@ -22,8 +22,8 @@ import numpy as np
 
 from ident.records.release import START_MAX_S
 
-__all__ = ["RELEASE_FIELDS", "column_problem", "release_table_problem", "release_time_problem",
-           "shared_rows_problem"]
+__all__ = ["RELEASE_FIELDS", "column_problem", "empty_release", "release_rows_problem",
+           "release_table_problem", "release_time_problem", "shared_rows_problem"]
 
 #: Fields of ``/entry/releases`` every reader uses (docs/reference/file_format.md; ``h0`` and
 #: ``alpha0`` are shown by ``windrig info`` but not needed to identify).
@@ -76,6 +76,37 @@ def release_table_problem(table: np.ndarray) -> str | None:
     if missing:
         return (f"/entry/releases has no field {', '.join(missing)} (it has "
                 f"{', '.join(names)}); its rows need {', '.join(RELEASE_FIELDS)}")
+    return None
+
+
+def empty_release(index: int) -> str:
+    """Say that release row ``index`` holds no rows (``start_index == stop_index``).
+
+    The recorder writes such a row for a release commanded as the recording ended
+    (:mod:`daq.recording.releases`): the readers leave it out, and say so.
+    """
+    return (f"release {index} holds no rows of /entry/sync (released as the recording "
+            "ended?)")
+
+
+def release_rows_problem(start: int, stop: int, rows: int, index: int) -> str | None:
+    """Return what is wrong with a release's rows ``start..stop`` of ``rows`` (None: nothing).
+
+    Parameters
+    ----------
+    start, stop : int
+        Its ``start_index`` and ``stop_index``, not equal (:func:`empty_release` says that).
+    rows : int
+        The rows of ``/entry/sync``.
+    index : int
+        The release's row, for the message.
+    """
+    if stop < start:
+        return (f"release {index} rows {start}..{stop} run backwards: its stop_index must "
+                "exceed its start_index")
+    if not 0 <= start < stop <= rows:
+        return (f"release {index} rows {start}..{stop} are outside the {rows} rows of "
+                "/entry/sync (truncated run?)")
     return None
 
 
