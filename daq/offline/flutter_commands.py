@@ -333,6 +333,7 @@ def _table_fit(path: Path, convention: str, section: Any, out: dict[str, Any],
     """Read, check and fit a table; record its range, fit errors and checks in ``out``."""
     from daq.offline.derivative_table import table_std_report
     from ident.errors import IdentError
+    from ident.model.conventions import FLUTTER_DERIVATIVE_NAMES
     from ident.tables.fd_table import FlutterDerivativeTable
     from ident.tables.roger_table import fit_table
     from ident.tables.table_checks import check_table
@@ -349,8 +350,6 @@ def _table_fit(path: Path, convention: str, section: Any, out: dict[str, Any],
     if table.n_dof > section.n_dof:
         # The section cannot sway, so these act on nothing; but a section file that left out
         # its lateral spring by mistake would lose the sway coupling without a word.
-        from ident.model.conventions import FLUTTER_DERIVATIVE_NAMES
-
         sway = [n for n in table.values if n not in FLUTTER_DERIVATIVE_NAMES + table.filled]
         warnings.append(f"{path} gives the sway and drag derivatives {', '.join(sway)}, but the "
                         "section has no lateral spring (fp): they are left out and the "

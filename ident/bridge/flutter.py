@@ -42,6 +42,7 @@ from scipy.optimize import brentq, linear_sum_assignment
 from ident.bridge.model import BridgeModel
 from ident.bridge.statespace import BridgeStateSpace
 from ident.model.conventions import Q_from_flutter_derivatives
+from ident.model.flutter import LostModeError
 from ident.model.rfc import RationalFunctionModel
 from ident.numerics import validate as v
 from ident.numerics.threads import single_threaded_blas
@@ -361,7 +362,8 @@ def _frequency_roots(bridge: BridgeModel, fd: FlutterDerivativeFunction, K: floa
     omega = -1j * lam  # lambda = i omega
     keep = omega.real > 0.0
     if int(keep.sum()) != n:
-        raise ValueError(f"expected {n} oscillatory roots at K = {K:.4g}, found {int(keep.sum())}")
+        raise LostModeError(f"expected {n} oscillatory roots at K = {K:.4g}, found "
+                            f"{int(keep.sum())}")
     return (np.asarray(omega[keep], dtype=complex),
             None if vec is None else np.asarray(vec[:n, keep], dtype=complex))
 

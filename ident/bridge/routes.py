@@ -21,6 +21,7 @@ from ident.bridge import fast_flutter, fast_flutter_fd
 from ident.bridge import flutter as bridge_flutter
 from ident.bridge.aero import BridgeAero, with_model
 from ident.bridge.model import BridgeModel
+from ident.model.flutter import LostModeError
 from ident.model.rfc import RationalFunctionModel
 from ident.tables.flutter_routes import (
     RouteComparison,
@@ -84,7 +85,7 @@ def bridge_flutter_routes(bridge: BridgeModel, aero: BridgeAero,
     check = fast_flutter_fd.frequency_domain if fast else bridge_flutter.frequency_domain
     try:
         fd = check(bridge, aero.flutter_derivatives, aero.K_range, U_max=ss.U_max)
-    except ValueError as exc:
+    except LostModeError as exc:
         raise ValueError(frequency_domain_failure(aero.source, exc)) from exc
     notes: list[str] = []
     for route in (ss, fd):

@@ -27,8 +27,8 @@ from ident.model.section import SectionModel
 from ident.model.statespace import AeroelasticSystem
 from ident.numerics import validate as v
 
-__all__ = ["FlutterResult", "StillAirModesError", "analyze", "default_U_max", "frequency_domain",
-           "speed_sensitivity"]
+__all__ = ["FlutterResult", "LostModeError", "StillAirModesError", "analyze", "default_U_max",
+           "frequency_domain", "speed_sensitivity"]
 
 #: Branch names, in the order of the coordinates (a 2-DOF section has the first two).
 MODE_NAMES: tuple[str, ...] = ("heave", "pitch", "sway")
@@ -137,6 +137,15 @@ def _follow(
     out = np.empty_like(previous)
     out[rows] = candidates[cols]
     return out
+
+
+class LostModeError(ValueError):
+    """A frequency-domain search lost a mode: at some K a root is no longer oscillatory.
+
+    Where the aerodynamic stiffness (``H4*``, ``A3*`` over ``K^2``) overcomes a mode's spring:
+    a static divergence within the derivatives' reduced frequencies, or derivatives in the
+    wrong columns or units (:func:`ident.tables.flutter_routes.frequency_domain_failure`).
+    """
 
 
 class StillAirModesError(ValueError):
@@ -363,7 +372,8 @@ def frequency_domain(
     def roots(k: float) -> npt.NDArray[np.complex128]:
         omega = _frequency_roots(section, flutter_derivatives, k)
         if omega.size != n:
-            raise ValueError(f"expected {n} oscillatory roots at K = {k:.4g}, found {omega.size}")
+            raise LostModeError(f"expected {n} oscillatory roots at K = {k:.4g}, found "
+                                f"{omega.size}")
         return omega
 
     branches = np.empty((n_points, n), dtype=complex)

@@ -396,7 +396,7 @@ def section_flutter(section: SectionModel, *, model: RationalFunctionModel | Non
     U_top = table_U_max(section, K_range[0]) if U_max is None else U_max
     try:
         fd = flutter.frequency_domain(section, table.interpolator(), K_range)
-    except ValueError as exc:
+    except flutter.LostModeError as exc:
         raise ValueError(frequency_domain_failure(table.source, exc)) from exc
     model_used = fit.model if n == 3 else fit.model.planar()
     ss = flutter.analyze(section, model_used, U_top)
@@ -444,7 +444,7 @@ def frequency_domain_failure(source: str, exc: Exception) -> str:
     source : str
         The table's file (or the aerodynamics' source), for the message.
     exc : Exception
-        What the route raised.
+        What the route raised (a :class:`~ident.model.flutter.LostModeError`).
 
     Returns
     -------
