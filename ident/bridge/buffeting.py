@@ -80,6 +80,7 @@ from ident.bridge.model import BridgeModel
 from ident.bridge.statespace import BridgeStateSpace
 from ident.model.quasi_steady import StaticCoefficients
 from ident.numerics import validate as v
+from ident.numerics.quadrature import trapezoid_weights
 from ident.numerics.threads import single_threaded_blas
 from ident.physics.turbulence import TurbulenceSpec, buffeting_gain
 
@@ -441,7 +442,7 @@ def frequency_domain(ss: BridgeStateSpace, spec: TurbulenceSpec, U: float, *,
     # modal coordinate).
     phys = physical_shapes(bridge)  # (nodes, 3, n)
     sel_rows = np.ascontiguousarray(phys[nodes].reshape(-1, n))  # (s 3, n): node-major rows
-    weights = _trapezoid_weights(f_arr)
+    weights = trapezoid_weights(f_arr)
     result = None
     if vec is not None:
         result = _eigen_route(ss, spec, U, lam, vec, f_arr, weights,
@@ -588,12 +589,3 @@ def physical_shapes(bridge: BridgeModel) -> FloatArray:
     Shape (nodes, 3, n_modes).
     """
     return bridge.shapes() * np.array([bridge.B, 1.0, bridge.B])[None, :, None]
-
-
-def _trapezoid_weights(f: FloatArray) -> FloatArray:
-    """Weights ``w`` with ``sum w S = trapezoid(S, f)``."""
-    w = np.zeros_like(f)
-    d = np.diff(f)
-    w[:-1] += 0.5 * d
-    w[1:] += 0.5 * d
-    return w

@@ -27,6 +27,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ident.model.section import MASS_RATIO_RANGE
+from ident.numerics.quadrature import trapezoid_weights
 
 __all__ = ["IMPLAUSIBLE_DAMPING", "LIGHTEST_DECK", "MASS_SPREAD", "damping_warning",
            "deck_mass_ratio_warning", "equivalent_masses", "mass_warnings"]
@@ -145,9 +146,7 @@ def equivalent_masses(modes: Sequence[Mode], B: float, x: FloatArray,
     ndarray, shape (n_modes,)
         kg/m.
     """
-    w = np.zeros(x.size)
-    w[:-1] += np.diff(x) / 2.0
-    w[1:] += np.diff(x) / 2.0
+    w = trapezoid_weights(x)
     out = []
     for m in modes:
         mass = 1.0 if mass_factor is None else mass_factor * m.generalised_mass

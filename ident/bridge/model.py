@@ -62,6 +62,7 @@ from ident.bridge.mode_checks import (
     mass_warnings,
 )
 from ident.model.quasi_steady import StaticCoefficients
+from ident.numerics.quadrature import trapezoid_weights
 
 __all__ = ["DEFAULT_DAMPING", "DEFAULT_RHO", "IMPLAUSIBLE_DAMPING", "LIGHTEST_DECK", "MASS_SPREAD",
            "BridgeModel", "Mode", "SHAPE_NAMES"]
@@ -215,12 +216,7 @@ follows 1
 
     def quadrature_weights(self) -> FloatArray:
         """Trapezoid weights of the deck nodes, m, shape (n_nodes,): ``int g dx = w @ g``."""
-        x = self.nodes_x
-        w = np.zeros(x.size)
-        dx = np.diff(x)
-        w[:-1] += dx / 2.0
-        w[1:] += dx / 2.0
-        return w
+        return trapezoid_weights(self.nodes_x)
 
     def shape_integrals(self) -> FloatArray:
         """``G[i, j] = int Phi_i^T Phi_j dx``, shape (3, 3, n_modes, n_modes), m.
