@@ -439,6 +439,19 @@ def _shifted_damping(table: FlutterDerivativeTable, name: str,
             f"air gives no aerodynamic damping); the column shifted by about {s:+.3g}?"]
 
 
+def _related(x_name: str, y_name: str, table: FlutterDerivativeTable
+             ) -> tuple[FloatArray, FloatArray, npt.NDArray[np.bool_]] | None:
+    """Return ``X*``, ``K Y*`` and the rows where both are clearly non-zero (None: under 3).
+
+    The inter-relations ``X* ~ K Y*`` (Scanlan, Jones and Singh 1997) are judged on those rows
+    only: near a zero crossing either side's sign and size are noise.
+    """
+    x = np.asarray(table.values[x_name], dtype=float)
+    y = np.asarray(table.K * table.values[y_name], dtype=float)
+    clear = (np.abs(x) > _FLOOR * np.max(np.abs(x))) & (np.abs(y) > _FLOOR * np.max(np.abs(y)))
+    return (x, y, clear) if np.count_nonzero(clear) >= 3 else None
+
+
 def _relation_scale(table: FlutterDerivativeTable) -> list[str]:
     """``|H1*| ~ |K H3*|`` in size: a K column or a pitch unit off by a factor.
 
@@ -452,12 +465,11 @@ def _relation_scale(table: FlutterDerivativeTable) -> list[str]:
     list of str
         Empty, or one line with the median ratio and the slip it matches, if one.
     """
-    x = np.abs(np.asarray(table.values["H1"], dtype=float))
-    y = np.abs(np.asarray(table.K * table.values["H3"], dtype=float))
-    clear = (x > _FLOOR * np.max(x)) & (y > _FLOOR * np.max(y))
-    if np.count_nonzero(clear) < 3:
+    pair = _related("H1", "H3", table)
+    if pair is None:
         return []
-    ratio = float(np.median(x[clear] / y[clear]))
+    x, y, clear = pair
+    ratio = float(np.median(np.abs(x[clear] / y[clear])))
     if _SCALE_RANGE[0] <= ratio <= _SCALE_RANGE[1]:
         return []
     causes = [text for low, high, text in _SCALE_SLIPS if low <= ratio <= high]
@@ -472,11 +484,10 @@ def _relation_scale(table: FlutterDerivativeTable) -> list[str]:
 def _relation_signs(table: FlutterDerivativeTable, x_name: str, y_name: str,
                     rows: list[int]) -> list[str]:
     """``X* ~ K Y*`` in sign on most rows where both are clearly non-zero."""
-    x = np.asarray(table.values[x_name], dtype=float)
-    y = np.asarray(table.K * table.values[y_name], dtype=float)
-    clear = (np.abs(x) > _FLOOR * np.max(np.abs(x))) & (np.abs(y) > _FLOOR * np.max(np.abs(y)))
-    if np.count_nonzero(clear) < 3:
+    pair = _related(x_name, y_name, table)
+    if pair is None:
         return []
+    x, y, clear = pair
     against = clear & (np.sign(x) != np.sign(y))
     if np.count_nonzero(against) <= np.count_nonzero(clear) / 2:
         return []
